@@ -1,0 +1,437 @@
+"""Structured configuration: dataclass schemas, range checks, and the interpretation register.
+
+Every number the pipeline uses lives in one of these dataclasses. Hydra composes YAML files in
+``conf/`` onto them (each YAML names its schema in ``defaults``); ``OmegaConf.to_object`` then
+builds the dataclasses, whose ``__post_init__`` checks ranges and raises :class:`ConfigError`
+naming the key, the value and what is allowed.
+
+Only the entry points call :func:`register_configs`; stages receive the typed dataclasses.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import math
+from dataclasses import asdict, dataclass, field
+from typing import Any, List, Optional
+
+from omegaconf import MISSING
+
+
+class ConfigError(ValueError):
+    """An invalid configuration value.
+
+    Parameters
+    ----------
+    key : str
+        Dotted config key, e.g. ``controller.horizon``.
+    value : Any
+        The offending value.
+    allowed : str
+        Human-readable description of the allowed values.
+    """
+
+    def __init__(self, key: str, value: Any, allowed: str) -> None:
+        self.key = key
+        self.value = value
+        self.allowed = allowed
+        super().__init__(f"config error: {key}={value!r} is invalid; allowed: {allowed}")
+
+
+def _finite(key: str, value: Any) -> float:
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        raise ConfigError(key, value, "a finite number")
+    if not math.isfinite(float(value)):
+        raise ConfigError(key, value, "a finite number (not NaN or inf)")
+    return float(value)
+
+
+def _at_least(key: str, value: Any, low: float, inclusive: bool = True) -> None:
+    v = _finite(key, value)
+    if (v < low) if inclusive else (v <= low):
+        raise ConfigError(key, value, f"{'>=' if inclusive else '>'} {low}")
+
+
+def _between(key: str, value: Any, low: float, high: float) -> None:
+    v = _finite(key, value)
+    if not low <= v <= high:
+        raise ConfigError(key, value, f"a number in [{low}, {high}]")
+
+
+def _choice(key: str, value: Any, options: tuple) -> None:
+    if value not in options:
+        raise ConfigError(key, value, "one of " + ", ".join(str(o) for o in options))
+
+
+def _pair(key: str, value: Any) -> None:
+    if len(value) != 2:
+        raise ConfigError(key, list(value), "a list of two finite numbers [x_m, y_m]")
+    for i, v in enumerate(value):
+        _finite(f"{key}[{i}]", v)
+
+
+@dataclass
+class VehicleConfig:
+    """Vehicle parameters for the lateral model and the nonlinear plant (SI units)."""
+
+    name: str = MISSING
+    source: str = MISSING
+    mass_kg: float = 1500.0
+    yaw_inertia_kg_m2: float = 2500.0
+    cg_to_front_m: float = 1.2
+    cg_to_rear_m: float = 1.3
+    cornering_stiffness_front_n_per_rad: float = 60000.0
+    cornering_stiffness_rear_n_per_rad: float = 60000.0
+    tire_friction: float = 0.9
+    footprint_radius_m: float = 1.0
+    steering_max_rad: float = 0.4
+    steering_rate_max_rad_s: float = 1.0
+    min_model_speed_mps: float = 1.0
+    speed_time_constant_s: float = 0.5
+    accel_max_mps2: float = 3.0
+
+    def __post_init__(self) -> None:
+        for key in ("mass_kg", "yaw_inertia_kg_m2", "cg_to_front_m", "cg_to_rear_m",
+                    "cornering_stiffness_front_n_per_rad", "cornering_stiffness_rear_n_per_rad",
+                    "tire_friction", "steering_max_rad", "steering_rate_max_rad_s",
+                    "min_model_speed_mps", "speed_time_constant_s", "accel_max_mps2"):
+            _at_least(f"vehicle.{key}", getattr(self, key), 0.0, inclusive=False)
+        _at_least("vehicle.footprint_radius_m", self.footprint_radius_m, 0.0)
+        _between("vehicle.steering_max_rad", self.steering_max_rad, 1e-3, 1.2)
+
+    @property
+    def wheelbase_m(self) -> float:
+        return self.cg_to_front_m + self.cg_to_rear_m
+
+
+@dataclass
+class PlannerConfig:
+    """APF rollout settings. ``baseline`` and ``improved`` are two presets of these switches."""
+
+    name: str = MISSING
+    step_size: float = 0.1
+    normalize_step: bool = True
+    h_max: float = 50.0
+    beta: float = 1.0
+    rho_p_m: float = 6.0
+    rho0_m: float = 4.0
+    repulsion_law: str = "polynomial"
+    k_rep_source: str = "adaptive_h"
+    k_rep_constant: float = 25.0
+    alpha_e: float = 2.0
+    step_min_m: float = 0.0
+    step_max_m: Optional[float] = None
+    rho_floor_m: float = 0.05
+    obstacle_prediction: str = "current"
+    closing_speed_gain_s_per_m: float = 0.0
+
+    def __post_init__(self) -> None:
+        _at_least("planner.step_size", self.step_size, 0.0, inclusive=False)
+        _at_least("planner.h_max", self.h_max, 0.0)
+        _at_least("planner.beta", self.beta, 0.0)
+        _at_least("planner.rho_p_m", self.rho_p_m, 0.0, inclusive=False)
+        _at_least("planner.rho0_m", self.rho0_m, 0.0, inclusive=False)
+        _choice("planner.repulsion_law", self.repulsion_law, ("polynomial", "exponential"))
+        _choice("planner.k_rep_source", self.k_rep_source, ("adaptive_h", "constant"))
+        _at_least("planner.k_rep_constant", self.k_rep_constant, 0.0)
+        _between("planner.alpha_e", self.alpha_e, 0.0, 50.0)
+        _at_least("planner.step_min_m", self.step_min_m, 0.0)
+        if self.step_max_m is not None:
+            _at_least("planner.step_max_m", self.step_max_m, 0.0, inclusive=False)
+            if self.step_max_m < self.step_min_m:
+                raise ConfigError("planner.step_max_m", self.step_max_m,
+                                  f">= planner.step_min_m ({self.step_min_m}) or null")
+        _at_least("planner.rho_floor_m", self.rho_floor_m, 0.0, inclusive=False)
+        _choice("planner.obstacle_prediction", self.obstacle_prediction,
+                ("current", "constant_velocity"))
+        _at_least("planner.closing_speed_gain_s_per_m", self.closing_speed_gain_s_per_m, 0.0)
+
+
+@dataclass
+class ControllerConfig:
+    """Lateral MPC settings (CVXPY + Clarabel)."""
+
+    name: str = MISSING
+    horizon: int = 10
+    control_horizon: int = 3
+    input_hold: str = "hold_last"
+    q_lateral: float = 10.0
+    q_heading: float = 5.0
+    q_yaw_rate: float = 0.1
+    q_steering: float = 0.5
+    r_steering_rate: float = 1.0
+    slack_weight_linear: float = 1.0e4
+    slack_weight_quadratic: float = 1.0e3
+    safety_margin_m: float = 0.2
+    constraint_activation_m: float = 12.0
+    max_obstacles: int = 3
+    heading_reference: str = "path_slope"
+    heading_ref_max_rad: float = 0.5
+    yaw_rate_ref_max_rad_s: float = 0.6
+    path_beyond_end: str = "extend"
+    b2_heading_entry: float = -1.0
+    solver_max_iter: int = 200
+    velocity_planning: bool = False
+    braking_decel_mps2: float = 2.0
+    stop_margin_m: float = 1.0
+    speed_floor_mps: float = 1.0
+    speed_grid_mps: float = 0.1
+    validity_heading_rad: float = 0.35
+
+    def __post_init__(self) -> None:
+        for key in ("horizon", "control_horizon", "max_obstacles", "solver_max_iter"):
+            value = getattr(self, key)
+            if isinstance(value, bool) or not isinstance(value, int):
+                raise ConfigError(f"controller.{key}", value, "an integer")
+        if self.horizon < 1:
+            raise ConfigError("controller.horizon", self.horizon, "an integer >= 1")
+        if not 1 <= self.control_horizon <= self.horizon:
+            raise ConfigError("controller.control_horizon", self.control_horizon,
+                              f"an integer in [1, controller.horizon={self.horizon}]")
+        if self.max_obstacles < 1:
+            raise ConfigError("controller.max_obstacles", self.max_obstacles, "an integer >= 1")
+        if self.solver_max_iter < 1:
+            raise ConfigError("controller.solver_max_iter", self.solver_max_iter, "an integer >= 1")
+        _choice("controller.input_hold", self.input_hold, ("hold_last", "zero_rate"))
+        for key in ("q_lateral", "q_heading", "q_yaw_rate", "q_steering", "r_steering_rate",
+                    "slack_weight_linear", "slack_weight_quadratic", "safety_margin_m",
+                    "constraint_activation_m"):
+            _at_least(f"controller.{key}", getattr(self, key), 0.0)
+        _at_least("controller.r_steering_rate", self.r_steering_rate, 0.0, inclusive=False)
+        _choice("controller.heading_reference", self.heading_reference,
+                ("path_slope", "apf_force"))
+        _between("controller.heading_ref_max_rad", self.heading_ref_max_rad, 0.0, math.pi / 2)
+        _at_least("controller.yaw_rate_ref_max_rad_s", self.yaw_rate_ref_max_rad_s, 0.0,
+                  inclusive=False)
+        _choice("controller.path_beyond_end", self.path_beyond_end, ("extend", "hold"))
+        _choice("controller.b2_heading_entry", self.b2_heading_entry, (-1.0, 1.0))
+        _at_least("controller.braking_decel_mps2", self.braking_decel_mps2, 0.0, inclusive=False)
+        _at_least("controller.stop_margin_m", self.stop_margin_m, 0.0)
+        _at_least("controller.speed_floor_mps", self.speed_floor_mps, 0.0, inclusive=False)
+        _at_least("controller.speed_grid_mps", self.speed_grid_mps, 0.0, inclusive=False)
+        _between("controller.validity_heading_rad", self.validity_heading_rad, 0.0, math.pi)
+
+
+@dataclass
+class ObstacleConfig:
+    """One circular obstacle, invisible before ``appear_time_s``, then moving at constant velocity."""
+
+    x_m: float = MISSING
+    y_m: float = MISSING
+    vx_mps: float = 0.0
+    vy_mps: float = 0.0
+    radius_m: float = 0.5
+    appear_time_s: float = 0.0
+
+
+@dataclass
+class ScenarioConfig:
+    """Start, goal, speed, run length and obstacles of one closed-loop run."""
+
+    name: str = MISSING
+    start_xy_m: List[float] = field(default_factory=lambda: [0.0, 0.0])
+    start_heading_rad: float = 0.0
+    goal_xy_m: List[float] = field(default_factory=lambda: [30.0, 0.0])
+    goal_tolerance_m: float = 0.5
+    speed_mps: float = 3.0
+    sample_time_s: float = 0.1
+    n_steps: int = 130
+    plant_substeps: int = 10
+    obstacles: List[ObstacleConfig] = field(default_factory=list)
+
+    def __post_init__(self) -> None:
+        _pair("scenario.start_xy_m", self.start_xy_m)
+        _pair("scenario.goal_xy_m", self.goal_xy_m)
+        _finite("scenario.start_heading_rad", self.start_heading_rad)
+        gap = math.dist(self.start_xy_m, self.goal_xy_m)
+        if gap <= self.goal_tolerance_m:
+            raise ConfigError("scenario.goal_xy_m", list(self.goal_xy_m),
+                              f"a goal farther than goal_tolerance_m={self.goal_tolerance_m} "
+                              f"from start_xy_m={list(self.start_xy_m)}")
+        _at_least("scenario.goal_tolerance_m", self.goal_tolerance_m, 0.0, inclusive=False)
+        _between("scenario.speed_mps", self.speed_mps, 0.1, 40.0)
+        _at_least("scenario.sample_time_s", self.sample_time_s, 0.0, inclusive=False)
+        for key in ("n_steps", "plant_substeps"):
+            value = getattr(self, key)
+            if isinstance(value, bool) or not isinstance(value, int) or value < 1:
+                raise ConfigError(f"scenario.{key}", value, "an integer >= 1")
+        if self.n_steps < 2:
+            raise ConfigError("scenario.n_steps", self.n_steps,
+                              "an integer >= 2 (the simulated time must exceed sample_time_s)")
+        seen = set()
+        for i, obs in enumerate(self.obstacles):
+            key = f"scenario.obstacles[{i}]"
+            for attr in ("x_m", "y_m", "vx_mps", "vy_mps", "radius_m", "appear_time_s"):
+                _finite(f"{key}.{attr}", getattr(obs, attr))
+            _at_least(f"{key}.radius_m", obs.radius_m, 0.0)
+            _at_least(f"{key}.appear_time_s", obs.appear_time_s, 0.0)
+            signature = (obs.x_m, obs.y_m, obs.vx_mps, obs.vy_mps, obs.radius_m, obs.appear_time_s)
+            if signature in seen:
+                raise ConfigError(f"{key}", signature, "obstacles that are not exact duplicates")
+            seen.add(signature)
+
+
+@dataclass
+class RunConfig:
+    """Bookkeeping of one run."""
+
+    seed: int = 0
+    write_figures: bool = False
+
+
+@dataclass
+class ExperimentConfig:
+    """The composed configuration of one closed-loop run."""
+
+    vehicle: VehicleConfig = MISSING
+    planner: PlannerConfig = MISSING
+    controller: ControllerConfig = MISSING
+    scenario: ScenarioConfig = MISSING
+    run: RunConfig = field(default_factory=RunConfig)
+
+    def __post_init__(self) -> None:
+        # cross-group checks need the whole config
+        for i, obs in enumerate(self.scenario.obstacles):
+            gap = math.dist(self.scenario.start_xy_m, (obs.x_m, obs.y_m))
+            if obs.appear_time_s == 0.0 and gap < obs.radius_m + self.vehicle.footprint_radius_m:
+                raise ConfigError(f"scenario.obstacles[{i}]", [obs.x_m, obs.y_m],
+                                  "an obstacle that does not overlap the vehicle at the start "
+                                  f"(centre distance >= {obs.radius_m + self.vehicle.footprint_radius_m} m)")
+        if len(self.scenario.obstacles) > self.controller.max_obstacles:
+            raise ConfigError("controller.max_obstacles", self.controller.max_obstacles,
+                              f">= the number of obstacles ({len(self.scenario.obstacles)})")
+        if self.controller.speed_floor_mps < self.vehicle.min_model_speed_mps:
+            raise ConfigError("controller.speed_floor_mps", self.controller.speed_floor_mps,
+                              f">= vehicle.min_model_speed_mps ({self.vehicle.min_model_speed_mps})")
+
+    def to_dict(self) -> dict:
+        return asdict(self)
+
+    def config_hash(self) -> str:
+        """Stable SHA-256 (first 16 hex digits) of the resolved configuration."""
+        text = json.dumps(self.to_dict(), sort_keys=True, default=str)
+        return hashlib.sha256(text.encode()).hexdigest()[:16]
+
+
+@dataclass(frozen=True)
+class RegisterEntry:
+    """One reading of an ambiguous passage of the paper."""
+
+    topic: str
+    paper_says: str
+    default: str
+    alternatives: str
+    config_key: str
+
+
+INTERPRETATION_REGISTER: tuple[RegisterEntry, ...] = (
+    RegisterEntry(
+        "Sign of B2", "B2 printed as [0 0 0 1 0]^T (minus signs lost in extraction)",
+        "B2 = [0, 0, -1, 0, 0]^T: d(psi - psi_d)/dt = r - r_d",
+        "+1 (literal placement of a positive entry in the heading row)",
+        "controller.b2_heading_entry"),
+    RegisterEntry(
+        "Adaptive gain k_rep of the exponential law",
+        "k_rep e^{alpha(1 - d/d0)} d/|d|^2, k_rep not given",
+        "k_rep = H_i (the adaptive coefficient, so C3's distance gating carries over)",
+        "a constant k_rep (planner.k_rep_constant)", "planner.k_rep_source"),
+    RegisterEntry(
+        "Two different 'alpha'", "alpha is both the APF step size and the exponent's slope",
+        "two parameters: planner.step_size (step) and planner.alpha_e (exponent)",
+        "-", "planner.step_size, planner.alpha_e"),
+    RegisterEntry(
+        "Step cap of the unnormalized rollout",
+        "improved step is alpha*F without normalization",
+        "each rollout step is capped at planner.step_max_m = 0.5 m (improved preset); without it "
+        "the first step is alpha*|g - p|, i.e. metres, and explodes near an obstacle",
+        "null: no cap (literal)", "planner.step_max_m"),
+    RegisterEntry(
+        "Minimum movement threshold",
+        "'If F_total is too small, the system may be forced to push'",
+        "a step shorter than planner.step_min_m is lengthened to step_min_m along F "
+        "(along the goal direction when F = 0)",
+        "0: off", "planner.step_min_m"),
+    RegisterEntry(
+        "Value of beta in H_i (improved)", "'use exp(beta (s - s0)^2) to adjust sensitivity', no value",
+        "beta = 0.25 (wider longitudinal support than the baseline's beta = 1)",
+        "any beta >= 0", "planner.beta"),
+    RegisterEntry(
+        "Distance in the repulsion laws", "rho = |p - p_obs|",
+        "centre-to-centre distance, floored at planner.rho_floor_m so an obstacle at p gives a "
+        "finite force (direction: away from the goal line's left normal when p = o)",
+        "-", "planner.rho_floor_m"),
+    RegisterEntry(
+        "Obstacle positions inside the APF rollout",
+        "the APF uses the obstacle list O, no time index inside the rollout",
+        "current (measured) positions, held over the rollout; the MPC constraints still predict "
+        "obstacle motion at constant velocity",
+        "constant_velocity prediction (velocity-aware variant)", "planner.obstacle_prediction"),
+    RegisterEntry(
+        "Velocity/acceleration sensitivity coefficient",
+        "introduction promises repulsion scaled by relative velocity; never defined",
+        "off in baseline and improved; the velocity_aware preset scales repulsion by "
+        "1 + gain * closing speed", "gain > 0", "planner.closing_speed_gain_s_per_m"),
+    RegisterEntry(
+        "APF path to lateral MPC reference",
+        "Section 3.1: y_ref from the rollout; psi_apf = atan2(F_y, F_x), omega_ref = sat(...)",
+        "lateral reference = rollout interpolated at the MPC's predicted stations; heading "
+        "reference = path slope, saturated at controller.heading_ref_max_rad",
+        "apf_force: heading ramps toward psi_apf at the saturated rate omega_max",
+        "controller.heading_reference"),
+    RegisterEntry(
+        "Reference beyond the end of the rollout",
+        "the baseline rollout covers only Np * 0.1 m = 1 m, the MPC looks vx * Np * Ts ahead",
+        "extend the last rollout segment linearly (slope saturated)",
+        "hold: keep the last lateral position", "controller.path_beyond_end"),
+    RegisterEntry(
+        "Inputs after the control horizon",
+        "Nc = 3 (Appendix A, MATLAB: manipulated variable held after Nc)",
+        "hold_last: steering rate held at its Nc-th value", "zero_rate: steering angle held",
+        "controller.input_hold"),
+    RegisterEntry(
+        "Collision-avoidance constraints 'from APF'",
+        "'Collision avoidance constraints from APF' (no formula)",
+        "one soft half-plane per obstacle and horizon step: n . (p_k - o_k) >= r_o + r_v + margin, "
+        "n = unit vector from the predicted obstacle to the APF reference point",
+        "-", "controller.safety_margin_m, controller.slack_weight_linear"),
+    RegisterEntry(
+        "Run length", "100 steps of 0.1 s (Appendix A)",
+        "130 steps: at 3 m/s a 100-step run ends at the goal line before the vehicle can settle; "
+        "the run stops early once the goal line is reached",
+        "100 (literal)", "scenario.n_steps"),
+)
+
+
+def register_configs() -> None:
+    """Register the schemas in Hydra's ConfigStore (called by entry points and tests)."""
+    from hydra.core.config_store import ConfigStore
+
+    store = ConfigStore.instance()
+    store.store(name="experiment_schema", node=ExperimentConfig)
+    store.store(group="vehicle", name="vehicle_schema", node=VehicleConfig)
+    store.store(group="planner", name="planner_schema", node=PlannerConfig)
+    store.store(group="controller", name="controller_schema", node=ControllerConfig)
+    store.store(group="scenario", name="scenario_schema", node=ScenarioConfig)
+
+
+def to_experiment_config(cfg: Any) -> ExperimentConfig:
+    """Build the typed config from a composed Hydra/OmegaConf config, running every range check.
+
+    Parameters
+    ----------
+    cfg : omegaconf.DictConfig
+        Composed config (``hydra`` node, if present, is ignored).
+
+    Returns
+    -------
+    ExperimentConfig
+    """
+    from omegaconf import OmegaConf
+
+    data = OmegaConf.to_container(cfg, resolve=True)
+    data.pop("hydra", None)
+    data.pop("experiment", None)
+    schema = OmegaConf.structured(ExperimentConfig)
+    merged = OmegaConf.merge(schema, data)
+    return OmegaConf.to_object(merged)

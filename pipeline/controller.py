@@ -1,0 +1,284 @@
+"""Controller stage: the lateral MPC (CVXPY, solved by Clarabel) and its APF-derived inputs.
+
+The QP over ``N`` steps, built once per run with ``cp.Parameter``s (DPP)::
+
+    min  sum_k q_y (y_k - y_ref,k)^2 + q_psi (epsi_k - psi_ref,k)^2 + q_r r_k^2 + q_d delta_k^2
+         + r_u u_k^2 + w1 sum(s) + w2 sum(s^2)
+    s.t. x_{k+1} = Ad x_k + Bd u_k + Ed d_k,  x_0 = measured state
+         |u_k| <= delta_dot_max,  |delta_k| <= delta_max,
+         u_k = U[min(k, Nc - 1)] (hold_last) or 0 for k >= Nc (zero_rate)
+         G_kj y_k + s_kj >= h_kj,  s >= 0   (soft half-plane per obstacle j and step k)
+
+A failed solve never raises: the controller falls back to the shifted previous plan, then to a
+bounded input that brings the steering back to zero, and says which in the result.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+
+import cvxpy as cp
+import numpy as np
+
+from pipeline.config import ControllerConfig, VehicleConfig
+from pipeline.model import LateralModel
+from pipeline.planner import ApfRollout
+from pipeline.scenario import ObstacleSnapshot
+
+OPTIMAL_STATUSES = (cp.OPTIMAL, cp.OPTIMAL_INACCURATE)
+
+
+@dataclass(frozen=True)
+class MpcInputs:
+    """Per-step data of the QP (everything that is a ``cp.Parameter``)."""
+
+    x0: np.ndarray
+    model: LateralModel
+    y_ref_m: np.ndarray
+    psi_ref_rad: np.ndarray
+    constraint_gain: np.ndarray
+    constraint_bound: np.ndarray
+    disturbance_rad_s: np.ndarray
+
+
+@dataclass(frozen=True)
+class MpcStep:
+    """Result of one controller step.
+
+    Attributes
+    ----------
+    steering_rate_rad_s : float
+        Input applied now.
+    planned_rates_rad_s : ndarray, shape (N,)
+        Input sequence of the plan that was applied (after fallback, if any).
+    predicted_states : ndarray, shape (5, N + 1) or None
+    status : str
+        Solver status, or ``"not_solved"`` when the state was not finite.
+    iterations : int
+    solve_time_s : float
+        Wall time of ``problem.solve`` (s).
+    fallback : str
+        ``"none"``, ``"shifted_plan"`` or ``"safe_input"``.
+    max_slack_m : float
+    """
+
+    steering_rate_rad_s: float
+    planned_rates_rad_s: np.ndarray
+    predicted_states: np.ndarray | None
+    status: str
+    iterations: int
+    solve_time_s: float
+    fallback: str
+    max_slack_m: float
+
+
+def blocking_matrix(horizon: int, control_horizon: int, input_hold: str) -> np.ndarray:
+    """Matrix ``T`` (Nc x N) with ``u_seq = U @ T`` for the move-blocking rule."""
+    T = np.zeros((control_horizon, horizon))
+    for k in range(horizon):
+        if k < control_horizon:
+            T[k, k] = 1.0
+        elif input_hold == "hold_last":
+            T[control_horizon - 1, k] = 1.0
+    return T
+
+
+class LateralMpc:
+    """The lateral MPC problem, compiled once and re-solved with new parameter values.
+
+    Parameters
+    ----------
+    controller : ControllerConfig
+    vehicle : VehicleConfig
+    """
+
+    def __init__(self, controller: ControllerConfig, vehicle: VehicleConfig) -> None:
+        self.cfg = controller
+        self.vehicle = vehicle
+        N, Nc, M = controller.horizon, controller.control_horizon, controller.max_obstacles
+        self.horizon = N
+        self.blocking = blocking_matrix(N, Nc, controller.input_hold)
+        self.x0 = cp.Parameter(5, name="x0")
+        self.Ad = cp.Parameter((5, 5), name="Ad")
+        self.Bd = cp.Parameter((5, 1), name="Bd")
+        self.disturbance = cp.Parameter((5, N), name="Ed_times_d")
+        self.y_ref = cp.Parameter(N, name="y_ref")
+        self.psi_ref = cp.Parameter(N, name="psi_ref")
+        self.G = cp.Parameter((N, M), name="halfplane_gain")
+        self.h = cp.Parameter((N, M), name="halfplane_bound")
+        self.X = cp.Variable((5, N + 1), name="X")
+        self.U = cp.Variable(Nc, name="U")
+        self.S = cp.Variable((N, M), nonneg=True, name="slack")
+        u_seq = self.U @ self.blocking
+        self.u_seq = u_seq
+        c = controller
+        cost = (c.q_lateral * cp.sum_squares(self.X[0, 1:] - self.y_ref)
+                + c.q_heading * cp.sum_squares(self.X[2, 1:] - self.psi_ref)
+                + c.q_yaw_rate * cp.sum_squares(self.X[3, 1:])
+                + c.q_steering * cp.sum_squares(self.X[4, 1:])
+                + c.r_steering_rate * cp.sum_squares(u_seq)
+                + c.slack_weight_linear * cp.sum(self.S)
+                + c.slack_weight_quadratic * cp.sum_squares(self.S))
+        lateral = cp.reshape(self.X[0, 1:], (N, 1), order="F") @ np.ones((1, M))
+        constraints = [
+            self.X[:, 0] == self.x0,
+            self.X[:, 1:] == self.Ad @ self.X[:, :-1]
+            + self.Bd @ cp.reshape(u_seq, (1, N), order="F") + self.disturbance,
+            cp.abs(self.U) <= vehicle.steering_rate_max_rad_s,
+            cp.abs(self.X[4, 1:]) <= vehicle.steering_max_rad,
+            cp.multiply(self.G, lateral) + self.S >= self.h,
+        ]
+        self.problem = cp.Problem(cp.Minimize(cost), constraints)
+        if not self.problem.is_dcp(dpp=True):
+            raise RuntimeError("lateral MPC is not DPP; it would recompile every step")
+        self.compile_count = 0
+        self.compile_time_s = 0.0
+        self._compiled_program = None
+        self._last_plan: np.ndarray | None = None
+        self._plan_age = 0
+
+    def set_parameters(self, inputs: MpcInputs) -> None:
+        """Write one step's data into the parameters (no recompilation)."""
+        self.x0.value = inputs.x0
+        self.Ad.value = inputs.model.Ad
+        self.Bd.value = inputs.model.Bd
+        self.disturbance.value = inputs.model.Ed @ inputs.disturbance_rad_s[None, :]
+        self.y_ref.value = inputs.y_ref_m
+        self.psi_ref.value = inputs.psi_ref_rad
+        self.G.value = inputs.constraint_gain
+        self.h.value = inputs.constraint_bound
+
+    def _solve_raw(self) -> tuple[str, int, float]:
+        start = time.perf_counter()
+        self.problem.solve(solver=cp.CLARABEL, max_iter=self.cfg.solver_max_iter)
+        elapsed = time.perf_counter() - start
+        program = getattr(self.problem._cache, "param_prog", None)
+        if program is not self._compiled_program:
+            self.compile_count += 1
+            self.compile_time_s = float(getattr(self.problem, "compilation_time", 0.0) or 0.0)
+            self._compiled_program = program
+        stats = self.problem.solver_stats
+        iterations = int(stats.num_iters) if stats is not None and stats.num_iters is not None else -1
+        return str(self.problem.status), iterations, elapsed
+
+    def step(self, inputs: MpcInputs) -> MpcStep:
+        """Solve for the current step, falling back safely on any failure."""
+        status, iterations, elapsed = "not_solved", -1, 0.0
+        if np.all(np.isfinite(inputs.x0)):
+            self.set_parameters(inputs)
+            try:
+                status, iterations, elapsed = self._solve_raw()
+            except (cp.error.SolverError, ValueError, ArithmeticError) as exc:
+                status = f"error:{type(exc).__name__}"
+            if status in OPTIMAL_STATUSES and self.U.value is not None:
+                plan = np.asarray(self.u_seq.value, dtype=float).reshape(-1)
+                if np.all(np.isfinite(plan)):
+                    self._last_plan, self._plan_age = plan, 0
+                    return MpcStep(float(plan[0]), plan, np.asarray(self.X.value), status,
+                                   iterations, elapsed, "none", float(np.max(self.S.value,
+                                                                             initial=0.0)))
+        return self._fallback(inputs, status, iterations, elapsed)
+
+    def _fallback(self, inputs: MpcInputs, status: str, iterations: int,
+                  elapsed: float) -> MpcStep:
+        if self._last_plan is not None and self._plan_age + 1 < self.horizon:
+            self._plan_age += 1
+            shifted = np.concatenate([self._last_plan[self._plan_age:],
+                                      np.repeat(self._last_plan[-1], self._plan_age)])
+            return MpcStep(float(shifted[0]), shifted, None, status, iterations, elapsed,
+                           "shifted_plan", float("nan"))
+        delta = inputs.x0[4] if np.isfinite(inputs.x0[4]) else 0.0
+        rate_max = self.vehicle.steering_rate_max_rad_s
+        safe = float(np.clip(-delta / inputs.model.sample_time_s, -rate_max, rate_max))
+        return MpcStep(safe, np.full(self.horizon, safe), None, status, iterations, elapsed,
+                       "safe_input", float("nan"))
+
+
+def lateral_reference(path_line_m: np.ndarray, stations_m: np.ndarray,
+                      controller: ControllerConfig) -> tuple[np.ndarray, np.ndarray]:
+    """Lateral and heading references at the MPC's predicted stations.
+
+    The APF path (line frame) is made monotone in x (points that do not advance are dropped),
+    interpolated at ``stations_m``, and beyond its end either extended along its last segment
+    (slope saturated at ``heading_ref_max_rad``) or held. The heading reference is the
+    saturated slope of that curve.
+
+    Returns
+    -------
+    y_ref_m, psi_ref_rad : ndarray, shape (len(stations_m),)
+    """
+    xs, ys = [path_line_m[0, 0]], [path_line_m[0, 1]]
+    for x, y in path_line_m[1:]:
+        if x > xs[-1] + 1e-9:
+            xs.append(x)
+            ys.append(y)
+    xs_a, ys_a = np.asarray(xs), np.asarray(ys)
+    max_slope = np.tan(controller.heading_ref_max_rad)
+    if xs_a.size < 2:
+        # the rollout does not advance: hold its last lateral position
+        y_end = path_line_m[-1, 1]
+        return np.full(stations_m.shape, y_end), np.zeros(stations_m.shape)
+    seg_slopes = np.clip(np.diff(ys_a) / np.diff(xs_a), -max_slope, max_slope)
+    end_slope = seg_slopes[-1] if controller.path_beyond_end == "extend" else 0.0
+    y_ref = np.interp(stations_m, xs_a, ys_a)
+    beyond = stations_m > xs_a[-1]
+    y_ref[beyond] = ys_a[-1] + end_slope * (stations_m[beyond] - xs_a[-1])
+    idx = np.clip(np.searchsorted(xs_a, stations_m, side="right") - 1, 0, seg_slopes.size - 1)
+    slope = np.where(beyond, end_slope, seg_slopes[idx])
+    return y_ref, np.arctan(slope)
+
+
+def force_heading_reference(total_force_line: np.ndarray, heading_line_rad: float,
+                            n_steps: int, sample_time_s: float,
+                            controller: ControllerConfig) -> np.ndarray:
+    """Heading reference of Section 3.1: ramp toward ``psi_apf = atan2(F_y, F_x)`` at the
+    saturated rate ``omega_ref = sat((psi_apf - theta)/Ts)``."""
+    psi_apf = np.arctan2(total_force_line[1], total_force_line[0])
+    error = np.arctan2(np.sin(psi_apf - heading_line_rad), np.cos(psi_apf - heading_line_rad))
+    omega_ref = np.clip(error / sample_time_s, -controller.yaw_rate_ref_max_rad_s,
+                        controller.yaw_rate_ref_max_rad_s)
+    k = np.arange(1, n_steps + 1)
+    ramp = np.clip(omega_ref * k * sample_time_s, -abs(error), abs(error))
+    return np.clip(heading_line_rad + ramp, -controller.heading_ref_max_rad,
+                   controller.heading_ref_max_rad)
+
+
+def collision_halfplanes(stations_m: np.ndarray, y_ref_m: np.ndarray, vehicle_line_m: np.ndarray,
+                         predicted_obstacles_line_m: np.ndarray, radii_m: np.ndarray,
+                         vehicle: VehicleConfig, controller: ControllerConfig
+                         ) -> tuple[np.ndarray, np.ndarray]:
+    """Soft half-plane data ``G y_k + s >= h`` for each horizon step and obstacle.
+
+    The plane at step k for obstacle j has normal ``n`` = unit vector from the predicted
+    obstacle centre to the APF reference point ``(station_k, y_ref_k)`` and asks
+    ``n . (p_k - o_k) >= r_o + r_v + margin``; with the station fixed this is linear in ``y_k``.
+    Obstacles farther than ``constraint_activation_m`` from the vehicle get an empty row.
+
+    Parameters
+    ----------
+    predicted_obstacles_line_m : ndarray, shape (N, n, 2)
+        Obstacle centres at the horizon's steps, line frame.
+
+    Returns
+    -------
+    G, h : ndarray, shape (N, max_obstacles)
+    """
+    N, M = stations_m.shape[0], controller.max_obstacles
+    G, h = np.zeros((N, M)), np.zeros((N, M))
+    n_obs = predicted_obstacles_line_m.shape[1] if predicted_obstacles_line_m.ndim == 3 else 0
+    for j in range(min(n_obs, M)):
+        current = predicted_obstacles_line_m[0, j]
+        if np.linalg.norm(current - vehicle_line_m) > controller.constraint_activation_m:
+            continue
+        obstacle = predicted_obstacles_line_m[:, j, :]
+        ref = np.stack([stations_m, y_ref_m], axis=1)
+        normal = ref - obstacle
+        dist = np.linalg.norm(normal, axis=1)
+        side = np.sign(vehicle_line_m[1] - current[1]) or 1.0
+        normal = np.where(dist[:, None] > 1e-6, normal / np.maximum(dist, 1e-6)[:, None],
+                          np.array([0.0, side])[None, :])
+        reach = radii_m[j] + vehicle.footprint_radius_m + controller.safety_margin_m
+        G[:, j] = normal[:, 1]
+        h[:, j] = reach - normal[:, 0] * (stations_m - obstacle[:, 0]) + normal[:, 1] * obstacle[:, 1]
+    return G, h

@@ -1,0 +1,189 @@
+"""Model stage: the MPC's lateral linear model and the nonlinear single-track plant.
+
+The lateral model (paper Section 2, DESIGN.md section 2) has state
+``x = [y, vy, epsi, r, delta]`` (lateral position m, lateral velocity m/s, heading error rad,
+yaw rate rad/s, steering angle rad), input ``u = delta_dot`` (rad/s) and disturbance
+``d = r_d`` (rad/s). It is built with python-control and discretized zero-order-hold.
+
+The plant is a different, nonlinear model: a single-track vehicle in global coordinates with
+saturating (tanh) tyre forces, a first-order speed loop and an integrating steering actuator,
+integrated with RK4 substeps.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import control
+import numpy as np
+
+from pipeline.config import VehicleConfig
+
+GRAVITY_MPS2 = 9.81
+
+#: Plant state layout (global frame).
+PLANT_STATE_NAMES = ("X_m", "Y_m", "psi_rad", "vx_mps", "vy_mps", "r_rad_s", "delta_rad")
+LATERAL_STATE_NAMES = ("y_m", "vy_mps", "epsi_rad", "r_rad_s", "delta_rad")
+
+
+@dataclass(frozen=True)
+class LateralModel:
+    """Continuous and zero-order-hold discrete lateral model at one speed.
+
+    Attributes
+    ----------
+    A, B1, B2 : ndarray
+        Continuous matrices, shapes (5, 5), (5, 1), (5, 1).
+    Ad, Bd, Ed : ndarray
+        Discrete matrices for input and disturbance.
+    speed_mps, sample_time_s : float
+    """
+
+    A: np.ndarray
+    B1: np.ndarray
+    B2: np.ndarray
+    Ad: np.ndarray
+    Bd: np.ndarray
+    Ed: np.ndarray
+    speed_mps: float
+    sample_time_s: float
+
+    def to_json(self) -> dict:
+        return {
+            "state": list(LATERAL_STATE_NAMES),
+            "input": "delta_dot_rad_s",
+            "disturbance": "r_d_rad_s",
+            "speed_mps": self.speed_mps,
+            "sample_time_s": self.sample_time_s,
+            "discretization": "zoh (control.c2d)",
+            "continuous": {"A": self.A.tolist(), "B1": self.B1.tolist(), "B2": self.B2.tolist()},
+            "discrete": {"Ad": self.Ad.tolist(), "Bd": self.Bd.tolist(), "Ed": self.Ed.tolist()},
+        }
+
+
+def lateral_matrices(vehicle: VehicleConfig, speed_mps: float,
+                     b2_heading_entry: float = -1.0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Continuous-time ``A, B1, B2`` of the lateral model (DESIGN.md section 2).
+
+    Parameters
+    ----------
+    vehicle : VehicleConfig
+    speed_mps : float
+        Longitudinal speed vx (> 0); the matrix has 1/vx terms.
+    b2_heading_entry : float
+        Entry of B2 in the heading-error row (-1 by default; see the interpretation register).
+    """
+    if not np.isfinite(speed_mps) or speed_mps <= 0.0:
+        raise ValueError(f"lateral model needs a positive finite speed, got {speed_mps!r}")
+    m, iz = vehicle.mass_kg, vehicle.yaw_inertia_kg_m2
+    a, b = vehicle.cg_to_front_m, vehicle.cg_to_rear_m
+    caf, car = vehicle.cornering_stiffness_front_n_per_rad, vehicle.cornering_stiffness_rear_n_per_rad
+    vx = float(speed_mps)
+    A = np.array([
+        [0.0, 1.0, vx, 0.0, 0.0],
+        [0.0, -(caf + car) / (m * vx), 0.0, (b * car - a * caf) / (m * vx) - vx, caf / m],
+        [0.0, 0.0, 0.0, 1.0, 0.0],
+        [0.0, (b * car - a * caf) / (iz * vx), 0.0, -(a**2 * caf + b**2 * car) / (iz * vx),
+         a * caf / iz],
+        [0.0, 0.0, 0.0, 0.0, 0.0],
+    ])
+    B1 = np.array([[0.0], [0.0], [0.0], [0.0], [1.0]])
+    B2 = np.array([[0.0], [0.0], [float(b2_heading_entry)], [0.0], [0.0]])
+    return A, B1, B2
+
+
+def build_lateral_model(vehicle: VehicleConfig, speed_mps: float, sample_time_s: float,
+                        b2_heading_entry: float = -1.0) -> LateralModel:
+    """Build the lateral model with python-control and discretize it (zero-order hold).
+
+    The speed is floored at ``vehicle.min_model_speed_mps`` because the model has 1/vx terms.
+    """
+    speed = max(float(speed_mps), vehicle.min_model_speed_mps)
+    A, B1, B2 = lateral_matrices(vehicle, speed, b2_heading_entry)
+    sys_c = control.ss(A, np.hstack([B1, B2]), np.eye(5), np.zeros((5, 2)))
+    sys_d = control.c2d(sys_c, sample_time_s, method="zoh")
+    Bd_all = np.asarray(sys_d.B)
+    return LateralModel(A=A, B1=B1, B2=B2, Ad=np.asarray(sys_d.A), Bd=Bd_all[:, :1],
+                        Ed=Bd_all[:, 1:], speed_mps=speed, sample_time_s=float(sample_time_s))
+
+
+@dataclass
+class LateralModelCache:
+    """Discretized lateral models keyed by speed rounded to ``grid_mps`` (for velocity planning)."""
+
+    vehicle: VehicleConfig
+    sample_time_s: float
+    b2_heading_entry: float
+    grid_mps: float
+    models: dict = field(default_factory=dict)
+
+    def at_speed(self, speed_mps: float) -> LateralModel:
+        floor = self.vehicle.min_model_speed_mps
+        key = round(max(speed_mps, floor) / self.grid_mps) * self.grid_mps
+        key = round(max(key, floor), 6)
+        if key not in self.models:
+            self.models[key] = build_lateral_model(self.vehicle, key, self.sample_time_s,
+                                                   self.b2_heading_entry)
+        return self.models[key]
+
+
+def plant_derivative(state: np.ndarray, steering_rate_rad_s: float, speed_target_mps: float,
+                     vehicle: VehicleConfig) -> np.ndarray:
+    """Time derivative of the nonlinear single-track plant.
+
+    Parameters
+    ----------
+    state : ndarray, shape (7,)
+        ``[X, Y, psi, vx, vy, r, delta]`` (m, m, rad, m/s, m/s, rad/s, rad).
+    steering_rate_rad_s : float
+        Commanded steering rate (already saturated by the caller).
+    speed_target_mps : float
+        Target of the first-order speed loop.
+    vehicle : VehicleConfig
+    """
+    X, Y, psi, vx, vy, r, delta = state
+    m, iz = vehicle.mass_kg, vehicle.yaw_inertia_kg_m2
+    a, b = vehicle.cg_to_front_m, vehicle.cg_to_rear_m
+    L = a + b
+    mu = vehicle.tire_friction
+    fz_front = m * GRAVITY_MPS2 * b / L
+    fz_rear = m * GRAVITY_MPS2 * a / L
+    vx_safe = max(vx, 0.1)
+    slip_front = delta - np.arctan2(vy + a * r, vx_safe)
+    slip_rear = -np.arctan2(vy - b * r, vx_safe)
+    cf, cr = vehicle.cornering_stiffness_front_n_per_rad, vehicle.cornering_stiffness_rear_n_per_rad
+    # tanh saturation: slope C at zero slip, limit mu * Fz
+    fy_front = mu * fz_front * np.tanh(cf * slip_front / (mu * fz_front))
+    fy_rear = mu * fz_rear * np.tanh(cr * slip_rear / (mu * fz_rear))
+    accel = np.clip((speed_target_mps - vx) / vehicle.speed_time_constant_s,
+                    -vehicle.accel_max_mps2, vehicle.accel_max_mps2)
+    rate = steering_rate_rad_s
+    if (delta >= vehicle.steering_max_rad and rate > 0) or (delta <= -vehicle.steering_max_rad
+                                                           and rate < 0):
+        rate = 0.0
+    return np.array([
+        vx * np.cos(psi) - vy * np.sin(psi),
+        vx * np.sin(psi) + vy * np.cos(psi),
+        r,
+        accel + vy * r,
+        (fy_front * np.cos(delta) + fy_rear) / m - vx * r,
+        (a * fy_front * np.cos(delta) - b * fy_rear) / iz,
+        rate,
+    ])
+
+
+def step_plant(state: np.ndarray, steering_rate_rad_s: float, speed_target_mps: float,
+               vehicle: VehicleConfig, dt_s: float, substeps: int) -> np.ndarray:
+    """Advance the plant by ``dt_s`` with ``substeps`` RK4 steps; the input is held (ZOH)."""
+    rate = float(np.clip(steering_rate_rad_s, -vehicle.steering_rate_max_rad_s,
+                         vehicle.steering_rate_max_rad_s))
+    h = dt_s / substeps
+    x = np.asarray(state, dtype=float).copy()
+    for _ in range(substeps):
+        k1 = plant_derivative(x, rate, speed_target_mps, vehicle)
+        k2 = plant_derivative(x + 0.5 * h * k1, rate, speed_target_mps, vehicle)
+        k3 = plant_derivative(x + 0.5 * h * k2, rate, speed_target_mps, vehicle)
+        k4 = plant_derivative(x + h * k3, rate, speed_target_mps, vehicle)
+        x = x + h / 6.0 * (k1 + 2 * k2 + 2 * k3 + k4)
+        x[6] = np.clip(x[6], -vehicle.steering_max_rad, vehicle.steering_max_rad)
+    return x

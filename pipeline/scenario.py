@@ -1,0 +1,132 @@
+"""Scenario stage: start, goal, obstacles over time, and the straight start-to-goal line frame.
+
+Obstacles are circles that are invisible until their appearance time and then move at constant
+velocity from the position at which they appear.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from pipeline.config import ScenarioConfig
+
+
+@dataclass(frozen=True)
+class ObstacleSnapshot:
+    """Obstacle states at one instant (arrays over obstacles, global frame).
+
+    Attributes
+    ----------
+    positions_m : ndarray, shape (n, 2)
+    velocities_mps : ndarray, shape (n, 2)
+    radii_m : ndarray, shape (n,)
+    visible : ndarray of bool, shape (n,)
+    """
+
+    positions_m: np.ndarray
+    velocities_mps: np.ndarray
+    radii_m: np.ndarray
+    visible: np.ndarray
+
+    def only_visible(self) -> "ObstacleSnapshot":
+        keep = self.visible
+        return ObstacleSnapshot(self.positions_m[keep], self.velocities_mps[keep],
+                                self.radii_m[keep], self.visible[keep])
+
+    def predicted_positions(self, times_ahead_s: np.ndarray) -> np.ndarray:
+        """Constant-velocity prediction, shape (len(times_ahead_s), n, 2)."""
+        t = np.asarray(times_ahead_s, dtype=float)[:, None, None]
+        return self.positions_m[None, :, :] + t * self.velocities_mps[None, :, :]
+
+
+@dataclass(frozen=True)
+class LineFrame:
+    """Frame whose x axis runs from the start to the goal (the lateral model's reference line)."""
+
+    origin_m: np.ndarray
+    heading_rad: float
+
+    def to_line(self, points_m: np.ndarray) -> np.ndarray:
+        c, s = np.cos(self.heading_rad), np.sin(self.heading_rad)
+        d = np.asarray(points_m, dtype=float) - self.origin_m
+        return np.stack([c * d[..., 0] + s * d[..., 1], -s * d[..., 0] + c * d[..., 1]], axis=-1)
+
+    def vectors_to_line(self, vectors: np.ndarray) -> np.ndarray:
+        c, s = np.cos(self.heading_rad), np.sin(self.heading_rad)
+        v = np.asarray(vectors, dtype=float)
+        return np.stack([c * v[..., 0] + s * v[..., 1], -s * v[..., 0] + c * v[..., 1]], axis=-1)
+
+    def to_global(self, points_line_m: np.ndarray) -> np.ndarray:
+        c, s = np.cos(self.heading_rad), np.sin(self.heading_rad)
+        p = np.asarray(points_line_m, dtype=float)
+        return np.stack([c * p[..., 0] - s * p[..., 1], s * p[..., 0] + c * p[..., 1]],
+                        axis=-1) + self.origin_m
+
+
+@dataclass(frozen=True)
+class Scenario:
+    """A closed-loop scenario built from :class:`ScenarioConfig`."""
+
+    name: str
+    start_m: np.ndarray
+    start_heading_rad: float
+    goal_m: np.ndarray
+    goal_tolerance_m: float
+    speed_mps: float
+    sample_time_s: float
+    n_steps: int
+    plant_substeps: int
+    obstacle_start_m: np.ndarray
+    obstacle_velocity_mps: np.ndarray
+    obstacle_radius_m: np.ndarray
+    obstacle_appear_s: np.ndarray
+
+    @property
+    def n_obstacles(self) -> int:
+        return int(self.obstacle_radius_m.shape[0])
+
+    @property
+    def line_frame(self) -> LineFrame:
+        d = self.goal_m - self.start_m
+        return LineFrame(self.start_m.copy(), float(np.arctan2(d[1], d[0])))
+
+    def obstacles_at(self, time_s: float) -> ObstacleSnapshot:
+        """Obstacle positions at ``time_s``; before appearance an obstacle sits where it will appear."""
+        elapsed = np.maximum(time_s - self.obstacle_appear_s, 0.0)[:, None]
+        positions = self.obstacle_start_m + elapsed * self.obstacle_velocity_mps
+        # a small tolerance so that an obstacle appearing at t = 3.0 s is seen at step 30
+        visible = time_s + 1e-9 >= self.obstacle_appear_s
+        return ObstacleSnapshot(positions, self.obstacle_velocity_mps.copy(),
+                                self.obstacle_radius_m.copy(), visible)
+
+
+def build_scenario(cfg: ScenarioConfig) -> Scenario:
+    """Turn the scenario config into arrays.
+
+    Parameters
+    ----------
+    cfg : ScenarioConfig
+
+    Returns
+    -------
+    Scenario
+    """
+    obs = cfg.obstacles
+    return Scenario(
+        name=cfg.name,
+        start_m=np.asarray(cfg.start_xy_m, dtype=float),
+        start_heading_rad=float(cfg.start_heading_rad),
+        goal_m=np.asarray(cfg.goal_xy_m, dtype=float),
+        goal_tolerance_m=float(cfg.goal_tolerance_m),
+        speed_mps=float(cfg.speed_mps),
+        sample_time_s=float(cfg.sample_time_s),
+        n_steps=int(cfg.n_steps),
+        plant_substeps=int(cfg.plant_substeps),
+        obstacle_start_m=np.array([[o.x_m, o.y_m] for o in obs], dtype=float).reshape(-1, 2),
+        obstacle_velocity_mps=np.array([[o.vx_mps, o.vy_mps] for o in obs],
+                                       dtype=float).reshape(-1, 2),
+        obstacle_radius_m=np.array([o.radius_m for o in obs], dtype=float),
+        obstacle_appear_s=np.array([o.appear_time_s for o in obs], dtype=float),
+    )

@@ -1,0 +1,163 @@
+"""Simulation stage: the closed loop APF -> MPC -> nonlinear plant, logged step by step.
+
+Each step k (time ``t = k Ts``): visible obstacles are read from the scenario; the velocity
+planner picks ``V_r``; the APF rolls a path out from the vehicle's position; the path becomes the
+MPC's lateral and heading references at its predicted stations and its avoidance vectors orient
+the soft half-planes; the MPC's first steering rate drives the nonlinear plant for ``Ts``.
+The run ends after ``n_steps`` or when the vehicle reaches the goal line.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import pandas as pd
+
+from pipeline.config import ExperimentConfig
+from pipeline.controller import (LateralMpc, MpcInputs, collision_halfplanes,
+                                 force_heading_reference, lateral_reference)
+from pipeline.model import LateralModelCache, step_plant
+from pipeline.planner import apf_rollout, plan_speed
+from pipeline.scenario import Scenario
+
+
+@dataclass(frozen=True)
+class SimulationResult:
+    """Logged closed-loop run.
+
+    Attributes
+    ----------
+    trajectory : pandas.DataFrame
+        One row per step (see :func:`simulate` for the columns).
+    solve_times_s : ndarray
+        Wall time of each QP solve (not part of the deterministic log).
+    compile_count : int
+        Number of times CVXPY compiled the problem (1 expected).
+    compile_time_s : float
+    goal_reached : bool
+    termination : str
+        ``"goal_line"``, ``"max_steps"`` or ``"non_finite_state"``.
+    """
+
+    trajectory: pd.DataFrame
+    solve_times_s: np.ndarray
+    compile_count: int
+    compile_time_s: float
+    goal_reached: bool
+    termination: str
+
+
+def _wrap(angle_rad: float) -> float:
+    return float(np.arctan2(np.sin(angle_rad), np.cos(angle_rad)))
+
+
+def simulate(cfg: ExperimentConfig, scenario: Scenario) -> SimulationResult:
+    """Run the closed loop once.
+
+    Parameters
+    ----------
+    cfg : ExperimentConfig
+    scenario : Scenario
+
+    Returns
+    -------
+    SimulationResult
+        The trajectory has columns ``time_s``, plant states (``X_m, Y_m, psi_rad, vx_mps,
+        vy_mps, r_rad_s, delta_rad``), line-frame errors (``e_y_m, e_psi_rad``), the applied input
+        ``steering_rate_rad_s``, ``speed_ref_mps``, the references (``y_ref_m, psi_ref_rad``),
+        the APF's next point and forces at the vehicle (``apf_*``), per-obstacle columns
+        (``obs{j}_x_m, obs{j}_y_m, obs{j}_radius_m, obs{j}_visible``), ``clearance_m`` (smallest
+        centre distance minus both radii over visible obstacles) and solver columns
+        (``solver_status, solver_iterations, fallback, max_slack_m``).
+    """
+    vehicle, planner, ctrl = cfg.vehicle, cfg.planner, cfg.controller
+    ts = scenario.sample_time_s
+    N = ctrl.horizon
+    frame = scenario.line_frame
+    goal_line_x = float(frame.to_line(scenario.goal_m)[0])
+    cache = LateralModelCache(vehicle, ts, ctrl.b2_heading_entry, ctrl.speed_grid_mps)
+    mpc = LateralMpc(ctrl, vehicle)
+    state = np.array([scenario.start_m[0], scenario.start_m[1], scenario.start_heading_rad,
+                      scenario.speed_mps, 0.0, 0.0, 0.0])
+    rows: list[dict] = []
+    solve_times: list[float] = []
+    termination = "max_steps"
+    steps_ahead_s = np.arange(1, N + 1) * ts
+    n_obs = scenario.n_obstacles
+
+    def obstacle_columns(time_s: float) -> tuple[dict, float]:
+        snap = scenario.obstacles_at(time_s)
+        cols: dict = {}
+        clearance = np.inf
+        for j in range(n_obs):
+            cols[f"obs{j}_x_m"] = snap.positions_m[j, 0]
+            cols[f"obs{j}_y_m"] = snap.positions_m[j, 1]
+            cols[f"obs{j}_radius_m"] = snap.radii_m[j]
+            cols[f"obs{j}_visible"] = bool(snap.visible[j])
+            if snap.visible[j]:
+                gap = (np.linalg.norm(state[:2] - snap.positions_m[j]) - snap.radii_m[j]
+                       - vehicle.footprint_radius_m)
+                clearance = min(clearance, gap)
+        return cols, (float(clearance) if np.isfinite(clearance) else np.nan)
+
+    for k in range(scenario.n_steps + 1):
+        time_s = k * ts
+        position = state[:2].copy()
+        line_pos = frame.to_line(position)
+        e_psi = _wrap(state[2] - frame.heading_rad)
+        obs_cols, clearance = obstacle_columns(time_s)
+        row = {"time_s": time_s, "X_m": state[0], "Y_m": state[1], "psi_rad": state[2],
+               "vx_mps": state[3], "vy_mps": state[4], "r_rad_s": state[5],
+               "delta_rad": state[6], "e_y_m": line_pos[1], "e_psi_rad": e_psi}
+        finished = k == scenario.n_steps
+        if not np.all(np.isfinite(state)):
+            termination, finished = "non_finite_state", True
+        elif line_pos[0] >= goal_line_x - scenario.goal_tolerance_m:
+            termination, finished = "goal_line", True
+        if finished:
+            rows.append({**row, **obs_cols, "clearance_m": clearance, "fallback": "end",
+                         "solver_status": "end"})
+            break
+        visible = scenario.obstacles_at(time_s).only_visible()
+        velocity = np.array([state[3] * np.cos(state[2]) - state[4] * np.sin(state[2]),
+                             state[3] * np.sin(state[2]) + state[4] * np.cos(state[2])])
+        speed_ref = plan_speed(position, state[2], visible, scenario.speed_mps,
+                               vehicle.footprint_radius_m, ctrl)
+        rollout = apf_rollout(position, scenario.goal_m, visible, planner, N, ts, velocity)
+        model = cache.at_speed(speed_ref)
+        stations = line_pos[0] + model.speed_mps * steps_ahead_s
+        path_line = frame.to_line(rollout.path_m)
+        y_ref, psi_ref = lateral_reference(path_line, stations, ctrl)
+        force_line = frame.vectors_to_line(rollout.attraction[0] + rollout.repulsion[0]) \
+            if N > 1 else np.array([1.0, 0.0])
+        if ctrl.heading_reference == "apf_force":
+            psi_ref = force_heading_reference(force_line, e_psi, N, ts, ctrl)
+        predicted = frame.to_line(visible.predicted_positions(np.concatenate([[0.0],
+                                                                              steps_ahead_s])))
+        G, h = collision_halfplanes(stations, y_ref, line_pos, predicted[1:], visible.radii_m,
+                                    vehicle, ctrl)
+        x0 = np.array([line_pos[1], state[4], e_psi, state[5], state[6]])
+        step = mpc.step(MpcInputs(x0, model, y_ref, psi_ref, G, h, np.zeros(N)))
+        solve_times.append(step.solve_time_s)
+        f_att = rollout.attraction[0] if N > 1 else np.zeros(2)
+        f_rep = rollout.repulsion[0] if N > 1 else np.zeros(2)
+        next_point = rollout.path_m[1] if N > 1 else rollout.path_m[0]
+        rows.append({**row, "steering_rate_rad_s": step.steering_rate_rad_s,
+                     "speed_ref_mps": speed_ref, "y_ref_m": y_ref[0], "psi_ref_rad": psi_ref[0],
+                     "apf_next_x_m": next_point[0], "apf_next_y_m": next_point[1],
+                     "apf_end_x_m": rollout.path_m[-1, 0], "apf_end_y_m": rollout.path_m[-1, 1],
+                     "apf_att_x": f_att[0], "apf_att_y": f_att[1],
+                     "apf_rep_x": f_rep[0], "apf_rep_y": f_rep[1],
+                     "apf_rep_norm": float(np.linalg.norm(f_rep)),
+                     "apf_step_capped": bool(rollout.step_cap_active.any()),
+                     "apf_step_min_used": bool(rollout.step_min_active.any()),
+                     **obs_cols, "clearance_m": clearance,
+                     "solver_status": step.status, "solver_iterations": step.iterations,
+                     "fallback": step.fallback, "max_slack_m": step.max_slack_m})
+        state = step_plant(state, step.steering_rate_rad_s, speed_ref, vehicle, ts,
+                           scenario.plant_substeps)
+
+    trajectory = pd.DataFrame(rows)
+    return SimulationResult(trajectory, np.asarray(solve_times), mpc.compile_count,
+                            mpc.compile_time_s, termination == "goal_line", termination)
