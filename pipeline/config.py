@@ -273,11 +273,30 @@ class ScenarioConfig:
 
 
 @dataclass
+class MetricsConfig:
+    """Thresholds of the Table 1 metrics (see :mod:`pipeline.metrics` for the definitions)."""
+
+    reaction_steering_band_rad: float = 0.01
+    reaction_lateral_band_m: float = 0.05
+    threat_clearance_m: float = 2.0
+    recovery_lateral_band_m: float = 0.25
+    recovery_heading_band_rad: float = 0.05
+    lateral_sign_band_m: float = 0.05
+    yaw_rate_sign_band_rad_s: float = 0.02
+    goal_tolerance_m: float = 0.5
+
+    def __post_init__(self) -> None:
+        for key in ("reaction_steering_band_rad", "reaction_lateral_band_m", "threat_clearance_m",
+                    "recovery_lateral_band_m", "recovery_heading_band_rad",
+                    "lateral_sign_band_m", "yaw_rate_sign_band_rad_s", "goal_tolerance_m"):
+            _at_least(f"metrics.{key}", getattr(self, key), 0.0, inclusive=False)
+
+
+@dataclass
 class RunConfig:
     """Bookkeeping of one run."""
 
     seed: int = 0
-    write_figures: bool = False
 
 
 @dataclass
@@ -288,6 +307,7 @@ class ExperimentConfig:
     planner: PlannerConfig = MISSING
     controller: ControllerConfig = MISSING
     scenario: ScenarioConfig = MISSING
+    metrics: MetricsConfig = field(default_factory=MetricsConfig)
     run: RunConfig = field(default_factory=RunConfig)
 
     def __post_init__(self) -> None:

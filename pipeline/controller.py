@@ -23,8 +23,6 @@ import numpy as np
 
 from pipeline.config import ControllerConfig, VehicleConfig
 from pipeline.model import LateralModel
-from pipeline.planner import ApfRollout
-from pipeline.scenario import ObstacleSnapshot
 
 OPTIMAL_STATUSES = (cp.OPTIMAL, cp.OPTIMAL_INACCURATE)
 

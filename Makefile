@@ -1,0 +1,40 @@
+# One place for paths and commands. `make help` lists the targets.
+PYTHON_BOOT ?= $(shell command -v python3.11 || command -v python3)
+VENV        := .venv
+PY          := $(VENV)/bin/python
+STAMP       := $(VENV)/.installed
+RUNS        ?= outputs/paper
+REPORT      ?= reports/latest
+PYTEST_ARGS ?=
+
+.PHONY: help install reproduce experiment report test test-all clean
+
+help:  ## list the targets
+	@grep -E '^[a-zA-Z_-]+:.*## ' $(MAKEFILE_LIST) | awk -F':.*## ' '{printf "  %-12s %s\n", $$1, $$2}'
+
+$(STAMP): pyproject.toml constraints.txt
+	$(PYTHON_BOOT) -m venv $(VENV)
+	$(PY) -m pip install --quiet --upgrade pip
+	$(PY) -m pip install --quiet -c constraints.txt -e ".[test]"
+	touch $(STAMP)
+
+install: $(STAMP)  ## create .venv and install the project with pinned versions
+
+experiment: $(STAMP)  ## run the paper scenario for every method into $(RUNS)
+	rm -rf $(RUNS)  # code may have changed since: never reuse old runs here
+	$(PY) -m pipeline.run experiment=paper hydra.sweep.dir=$(RUNS)
+
+report: $(STAMP)  ## rebuild the HTML report from existing run folders (no simulation)
+	$(PY) -m pipeline.report $(RUNS) --out $(REPORT) --command "make reproduce"
+
+reproduce: experiment report  ## set up, run the experiment and write reports/latest/index.html
+	@echo "Report: $(abspath $(REPORT))/index.html"
+
+test: $(STAMP)  ## run the test suite (excludes tests marked slow)
+	$(PY) -m pytest -m "not slow" $(PYTEST_ARGS)
+
+test-all: $(STAMP)  ## run every test, slow ones included
+	$(PY) -m pytest $(PYTEST_ARGS)
+
+clean:  ## remove generated output (keeps .venv)
+	rm -rf outputs multirun $(REPORT)

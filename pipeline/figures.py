@@ -1,0 +1,159 @@
+"""Figures stage: matplotlib figures from logged runs (never shown on screen).
+
+Each ``*_figure`` function takes run data and returns a ``matplotlib.figure.Figure``;
+:func:`save_figure` writes it as SVG and PNG. Nothing here simulates.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import matplotlib
+
+matplotlib.use("Agg")  # files only, no display
+
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+import pandas as pd  # noqa: E402
+from matplotlib.figure import Figure  # noqa: E402
+from matplotlib.patches import Circle  # noqa: E402
+
+METHOD_COLORS = {"baseline": "#d62728", "improved": "#1f77b4", "velocity_aware": "#2ca02c",
+                 "mpc_no_apf": "#9467bd", "apf_pursuit": "#8c564b"}
+
+
+def method_color(method: str) -> str:
+    return METHOD_COLORS.get(method, "#7f7f7f")
+
+
+def _obstacle_indices(trajectory: pd.DataFrame) -> list[int]:
+    j, out = 0, []
+    while f"obs{j}_x_m" in trajectory.columns:
+        out.append(j)
+        j += 1
+    return out
+
+
+def trajectory_figure(trajectory: pd.DataFrame, method: str, goal_xy_m: tuple[float, float],
+                      vehicle_radius_m: float, snapshot_times_s: tuple[float, ...] = (3.0, 4.0,
+                                                                                      5.0, 6.0),
+                      title: str | None = None, limits: tuple | None = None) -> Figure:
+    """Figure 2/3 analogue: vehicle path, obstacle where it was at several times, start, goal.
+
+    Parameters
+    ----------
+    trajectory : DataFrame
+        A run's ``trajectory.csv``.
+    method : str
+    goal_xy_m : tuple
+    vehicle_radius_m : float
+        Drawn as the vehicle's footprint at the snapshot times.
+    snapshot_times_s : tuple of float
+        Times at which obstacle and vehicle are drawn (only while the obstacle is visible).
+    limits : tuple, optional
+        ``(xmin, xmax, ymin, ymax)`` so that several panels share axes.
+    """
+    fig, ax = plt.subplots(figsize=(7.0, 3.6), layout="constrained")
+    t = trajectory["time_s"].to_numpy(float)
+    color = method_color(method)
+    ax.plot(trajectory["X_m"], trajectory["Y_m"], color=color, lw=2, label=f"{method} path")
+    cmap = plt.get_cmap("Greys")
+    for n, ts in enumerate(snapshot_times_s):
+        k = int(np.argmin(np.abs(t - ts)))
+        if abs(t[k] - ts) > 0.051:
+            continue
+        shade = 0.35 + 0.6 * n / max(len(snapshot_times_s) - 1, 1)
+        ax.add_patch(Circle((trajectory["X_m"].iloc[k], trajectory["Y_m"].iloc[k]),
+                            vehicle_radius_m, fill=False, ls=":", color=color, alpha=0.8))
+        for j in _obstacle_indices(trajectory):
+            if not bool(trajectory[f"obs{j}_visible"].iloc[k]):
+                continue
+            centre = (trajectory[f"obs{j}_x_m"].iloc[k], trajectory[f"obs{j}_y_m"].iloc[k])
+            ax.add_patch(Circle(centre, trajectory[f"obs{j}_radius_m"].iloc[k],
+                                color=cmap(shade), alpha=0.9))
+            ax.annotate(f"{t[k]:.1f} s", centre, textcoords="offset points", xytext=(10, 0),
+                        fontsize=7)
+    ax.plot(trajectory["X_m"].iloc[0], trajectory["Y_m"].iloc[0], "ko", label="start")
+    ax.plot(*goal_xy_m, marker="*", color="gold", mec="k", ms=14, ls="none", label="goal")
+    ax.axhline(0.0, color="k", lw=0.5, ls="--")
+    ax.set_aspect("equal", adjustable="box" if limits is not None else "datalim")
+    if limits is not None:
+        ax.set_xlim(limits[0], limits[1])
+        ax.set_ylim(limits[2], limits[3])
+    ax.set_xlabel("X [m]")
+    ax.set_ylabel("Y [m]")
+    ax.set_title(title or f"{method}: path and obstacle (grey, darker = later)")
+    ax.grid(True, alpha=0.3)
+    ax.legend(loc="lower left", fontsize=8)
+    return fig
+
+
+def overlay_figure(runs: dict[str, pd.DataFrame], goal_xy_m: tuple[float, float]) -> Figure:
+    """All methods' paths on one axes, with the obstacle's track."""
+    fig, ax = plt.subplots(figsize=(7.0, 3.6), layout="constrained")
+    for method, tr in runs.items():
+        ax.plot(tr["X_m"], tr["Y_m"], color=method_color(method), lw=2, label=method)
+    first = next(iter(runs.values()))
+    for j in _obstacle_indices(first):
+        vis = first[f"obs{j}_visible"].astype(bool)
+        ax.plot(first.loc[vis, f"obs{j}_x_m"], first.loc[vis, f"obs{j}_y_m"], color="0.4",
+                lw=6, alpha=0.35, solid_capstyle="round", label="obstacle track" if j == 0 else None)
+    ax.plot(*goal_xy_m, marker="*", color="gold", mec="k", ms=14, ls="none", label="goal")
+    ax.set_aspect("equal", adjustable="datalim")
+    ax.set_xlabel("X [m]")
+    ax.set_ylabel("Y [m]")
+    ax.set_title("Paths of all methods")
+    ax.grid(True, alpha=0.3)
+    ax.legend(fontsize=8)
+    return fig
+
+
+def timeseries_figure(runs: dict[str, pd.DataFrame], appear_time_s: float | None) -> Figure:
+    """Steering angle, steering rate, heading and lateral deviation over time."""
+    panels = [("delta_rad", "steering angle [rad]"),
+              ("steering_rate_rad_s", "steering rate [rad/s]"),
+              ("psi_rad", "heading [rad]"), ("e_y_m", "lateral deviation [m]")]
+    fig, axes = plt.subplots(len(panels), 1, figsize=(7.0, 7.5), sharex=True,
+                             layout="constrained")
+    for ax, (column, label) in zip(axes, panels):
+        for method, tr in runs.items():
+            if column in tr:
+                ax.plot(tr["time_s"], tr[column], color=method_color(method), lw=1.5,
+                        label=method)
+        if appear_time_s is not None and np.isfinite(appear_time_s):
+            ax.axvline(appear_time_s, color="k", ls=":", lw=1)
+        ax.set_ylabel(label)
+        ax.grid(True, alpha=0.3)
+    axes[0].legend(fontsize=8, ncols=3)
+    axes[-1].set_xlabel("time [s] (dotted: obstacle appears)")
+    return fig
+
+
+def apf_force_figure(runs: dict[str, pd.DataFrame]) -> Figure:
+    """Magnitudes of the APF's attractive and repulsive forces at the vehicle over time."""
+    fig, axes = plt.subplots(2, 1, figsize=(7.0, 4.5), sharex=True, layout="constrained")
+    for method, tr in runs.items():
+        if "apf_rep_norm" not in tr:
+            continue
+        att = np.hypot(tr["apf_att_x"], tr["apf_att_y"])
+        axes[0].plot(tr["time_s"], tr["apf_rep_norm"], color=method_color(method), label=method)
+        axes[1].plot(tr["time_s"], att, color=method_color(method), label=method)
+    axes[0].set_ylabel("|F_rep| at vehicle")
+    axes[1].set_ylabel("|F_att| at vehicle")
+    axes[1].set_xlabel("time [s]")
+    for ax in axes:
+        ax.grid(True, alpha=0.3)
+    axes[0].legend(fontsize=8)
+    return fig
+
+
+def save_figure(fig: Figure, out_dir: Path, stem: str) -> dict[str, Path]:
+    """Write ``stem.svg`` and ``stem.png`` into ``out_dir`` and close the figure."""
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    paths = {"svg": out_dir / f"{stem}.svg", "png": out_dir / f"{stem}.png"}
+    # fixed metadata so that identical data give identical files
+    fig.savefig(paths["svg"], metadata={"Date": None})
+    fig.savefig(paths["png"], dpi=130, metadata={"Software": None})
+    plt.close(fig)
+    return paths

@@ -1,0 +1,251 @@
+"""Report stage: gather run folders into tables, figures and one self-contained HTML page.
+
+``python -m pipeline.report RUNS_DIR [--out reports/latest]`` reads every complete run folder
+under ``RUNS_DIR`` (it never simulates), writes ``index.html`` with figures inlined, and puts the
+SVG/PNG figures and CSV tables beside it.
+"""
+
+from __future__ import annotations
+
+import argparse
+import base64
+import datetime as dt
+import html
+import importlib.metadata
+import os
+import platform
+import subprocess
+import sys
+from pathlib import Path
+
+import jinja2
+import numpy as np
+import pandas as pd
+import yaml
+
+from pipeline.artifacts import find_run_dirs, read_run, write_text_atomic
+from pipeline.claims import CLAIMS, VERDICT_RULE_SINGLE, claims_table
+from pipeline.config import INTERPRETATION_REGISTER
+from pipeline.figures import (apf_force_figure, overlay_figure, save_figure, timeseries_figure,
+                              trajectory_figure)
+
+PACKAGES = ("numpy", "scipy", "pandas", "matplotlib", "control", "cvxpy", "clarabel",
+            "hydra-core", "omegaconf", "jinja2")
+METHOD_ORDER = ("baseline", "improved", "velocity_aware", "mpc_no_apf", "apf_pursuit")
+
+
+def _git(*args: str) -> str:
+    try:
+        return subprocess.run(["git", *args], capture_output=True, text=True, check=True,
+                              cwd=Path(__file__).resolve().parent).stdout.strip()
+    except (OSError, subprocess.CalledProcessError):
+        return "unknown"
+
+
+def provenance(command: str) -> dict:
+    """Command, git commit and dirty flag, package versions, date and machine."""
+    versions = {}
+    for name in PACKAGES:
+        try:
+            versions[name] = importlib.metadata.version(name)
+        except importlib.metadata.PackageNotFoundError:
+            versions[name] = "not installed"
+    status = _git("status", "--porcelain")
+    return {
+        "command": command,
+        "git_commit": _git("rev-parse", "HEAD"),
+        "git_dirty": bool(status) and status != "unknown",
+        "python": sys.version.split()[0],
+        "packages": versions,
+        "date_utc": dt.datetime.now(dt.timezone.utc).strftime("%Y-%m-%d %H:%M:%S UTC"),
+        "machine": f"{platform.system()} {platform.machine()}, {os.cpu_count()} cores",
+    }
+
+
+def _lookup(config: dict, dotted: str):
+    node = config
+    for part in dotted.split("."):
+        if not isinstance(node, dict) or part not in node:
+            return None
+        node = node[part]
+    return node
+
+
+def register_rows(configs_by_method: dict[str, dict]) -> list[dict]:
+    """Interpretation register with the value each method's run used."""
+    rows = []
+    for entry in INTERPRETATION_REGISTER:
+        keys = [k.strip() for k in entry.config_key.split(",")]
+        used = {}
+        for method, config in configs_by_method.items():
+            used[method] = "; ".join(f"{_lookup(config, k)!s}" for k in keys)
+        rows.append({"topic": entry.topic, "paper says": entry.paper_says,
+                     "default reading": entry.default, "alternatives": entry.alternatives,
+                     "config key": entry.config_key, "used": used})
+    return rows
+
+
+def _png_data_uri(path: Path) -> str:
+    return "data:image/png;base64," + base64.b64encode(Path(path).read_bytes()).decode()
+
+
+def _fmt(value) -> str:
+    if value is None:
+        return "—"
+    if isinstance(value, (bool, np.bool_)):
+        return "yes" if value else "no"
+    if isinstance(value, (int, np.integer)):
+        return str(int(value))
+    if isinstance(value, (float, np.floating)):
+        if not np.isfinite(value):
+            return "—"
+        return f"{value:.3g}" if abs(value) >= 1e-3 or value == 0 else f"{value:.2e}"
+    return html.escape(str(value))
+
+
+def load_runs(run_root: Path) -> list[dict]:
+    runs = [read_run(d) for d in find_run_dirs(run_root)]
+    if not runs:
+        raise FileNotFoundError(f"no complete run folders (with metrics.json) under {run_root}")
+    return runs
+
+
+def build_report(run_root: Path, out_dir: Path, command: str) -> Path:
+    """Write ``out_dir/index.html`` (plus figures/ and tables/) from the runs under ``run_root``.
+
+    Returns
+    -------
+    Path
+        The HTML file.
+    """
+    out_dir = Path(out_dir)
+    fig_dir, table_dir = out_dir / "figures", out_dir / "tables"
+    table_dir.mkdir(parents=True, exist_ok=True)
+    runs = load_runs(run_root)
+    scenario = "paper_sudden_obstacle"
+    paper_runs = [r for r in runs if r["metrics"]["scenario"] == scenario] or runs
+    scenario = paper_runs[0]["metrics"]["scenario"]
+    by_method = {r["metrics"]["method"]: r for r in paper_runs}
+    order = [m for m in METHOD_ORDER if m in by_method] + sorted(set(by_method) - set(METHOD_ORDER))
+    by_method = {m: by_method[m] for m in order}
+    first_cfg = next(iter(by_method.values()))["config"]
+    goal = tuple(first_cfg["scenario"]["goal_xy_m"])
+    radius = first_cfg["vehicle"]["footprint_radius_m"]
+    appear = next(iter(by_method.values()))["metrics"].get("obstacle_appear_time_s")
+
+    # shared axes for the Figure 2/3 analogues
+    xs = np.concatenate([r["trajectory"]["X_m"].to_numpy() for r in by_method.values()])
+    ys = np.concatenate([r["trajectory"]["Y_m"].to_numpy() for r in by_method.values()])
+    limits = (min(xs.min(), 0) - 1.5, max(xs.max(), goal[0]) + 1.5, ys.min() - 2.0,
+              ys.max() + 2.5)
+    figures = []
+    snap = tuple(float(appear) + d for d in (0.0, 1.0, 2.0, 3.0)) if appear is not None \
+        else (3.0, 4.0, 5.0, 6.0)
+    for method, run in by_method.items():
+        label = {"baseline": "Figure 2 analogue", "improved": "Figure 3 analogue"}.get(
+            method, "Variant")
+        paths = save_figure(trajectory_figure(run["trajectory"], method, goal, radius, snap,
+                                              title=f"{label}: {method}", limits=limits),
+                            fig_dir, f"trajectory_{method}")
+        figures.append({"id": f"trajectory_{method}", "group": "paths", "paths": paths,
+                        "caption": f"{label} — {method} APF-MPC on {scenario}: vehicle path, "
+                                   f"footprint (dotted) and obstacle (grey, darker is later) at "
+                                   f"{', '.join(f'{s:.0f}' for s in snap)} s.",
+                        "alt": f"Path of the vehicle with the {method} planner around the "
+                               f"moving obstacle"})
+    tr_by_method = {m: r["trajectory"] for m, r in by_method.items()}
+    for stem, fig, caption, alt in (
+            ("overlay", overlay_figure(tr_by_method, goal),
+             "All methods' paths on the same axes; the grey band is the obstacle's track "
+             "while visible.", "Paths of all methods overlaid"),
+            ("timeseries", timeseries_figure(tr_by_method, appear),
+             "Steering angle, steering rate (the MPC input), heading and lateral deviation "
+             "over time.", "Time series of steering, heading and lateral deviation"),
+            ("apf_forces", apf_force_figure(tr_by_method),
+             "Magnitude of the APF's repulsive and attractive forces at the vehicle's position "
+             "(first rollout point).", "APF force magnitudes over time")):
+        figures.append({"id": stem, "group": "series", "paths": save_figure(fig, fig_dir, stem),
+                        "caption": caption, "alt": alt})
+    for f in figures:
+        f["src"] = _png_data_uri(f["paths"]["png"])
+        f["svg"] = os.path.relpath(f["paths"]["svg"], out_dir)
+
+    metrics_by_method = {m: r["metrics"] for m, r in by_method.items()}
+    metrics_frame = pd.DataFrame(metrics_by_method)
+    metrics_frame.index.name = "metric"
+    metrics_frame.to_csv(table_dir / "metrics_paper_scenario.csv")
+    skip = {"method", "scenario", "config_hash"}
+    metric_rows = [{"metric": k, "values": [_fmt(metrics_by_method[m].get(k)) for m in order]}
+                   for k in metrics_frame.index if k not in skip]
+    timing_rows = [{"method": m,
+                    "median_ms": _fmt(1e3 * r["timing"]["solve_time_median_s"]),
+                    "p95_ms": _fmt(1e3 * r["timing"]["solve_time_p95_s"]),
+                    "max_ms": _fmt(1e3 * r["timing"]["solve_time_max_s"]),
+                    "compile_s": _fmt(r["timing"]["compile_time_s"]),
+                    "compiles": _fmt(r["metrics"].get("compile_count"))}
+                   for m, r in by_method.items()]
+    claims = claims_table(metrics_by_method)
+    pd.DataFrame(claims).to_csv(table_dir / "claims_paper_scenario.csv", index=False)
+    for row in claims:
+        row["values"] = [_fmt(row.get(m)) for m in order]
+    claim_secondary = {c.claim_id: ", ".join(c.secondary_metrics) for c in CLAIMS}
+
+    env = jinja2.Environment(loader=jinja2.PackageLoader("pipeline", "templates"),
+                             autoescape=jinja2.select_autoescape(["html", "j2"]),
+                             undefined=jinja2.StrictUndefined)
+    page = env.get_template("report.html.j2").render(
+        scenario=scenario, methods=order, figures=figures, metric_rows=metric_rows,
+        timing_rows=timing_rows, claims=claims, claim_secondary=claim_secondary,
+        verdict_rule=VERDICT_RULE_SINGLE,
+        register=register_rows({m: r["config"] for m, r in by_method.items()}),
+        configs={m: yaml.safe_dump(r["config"], sort_keys=False) for m, r in by_method.items()},
+        hashes={m: r["metrics"]["config_hash"] for m, r in by_method.items()},
+        run_dirs={m: str(r["dir"]) for m, r in by_method.items()},
+        metrics_doc=_metrics_doc(), prov=provenance(command))
+    path = out_dir / "index.html"
+    write_text_atomic(path, page)
+    return path
+
+
+def _metrics_doc() -> list[str]:
+    """Bullet paragraphs of the metric definitions (from :mod:`pipeline.metrics`)."""
+    import pipeline.metrics as metrics_module
+
+    doc = metrics_module.__doc__ or ""
+    bullets, current = [], []
+    for line in doc.splitlines():
+        if line.startswith("* "):
+            if current:
+                bullets.append(" ".join(current))
+            current = [line[2:].strip()]
+        elif current and line.strip():
+            current.append(line.strip())
+        elif current:
+            bullets.append(" ".join(current))
+            current = []
+    if current:
+        bullets.append(" ".join(current))
+    return [b.replace("``", "") for b in bullets]
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog="python -m pipeline.report",
+                                     description="Build the HTML report from run folders.")
+    parser.add_argument("runs", type=Path, help="folder holding run folders (e.g. outputs/paper)")
+    parser.add_argument("--out", type=Path, default=Path("reports/latest"),
+                        help="output folder (default: reports/latest)")
+    parser.add_argument("--command", default=None,
+                        help="command to show under provenance (default: this command line)")
+    args = parser.parse_args(argv)
+    command = args.command or "python -m pipeline.report " + " ".join(argv or sys.argv[1:])
+    try:
+        path = build_report(args.runs, args.out, command)
+    except FileNotFoundError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    print(f"report written to {path.resolve()}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

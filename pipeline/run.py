@@ -1,0 +1,178 @@
+"""Entry point of one closed-loop run: ``python -m pipeline.run [hydra overrides]``.
+
+``run_experiment`` is the plain function (tests call it); ``main`` wraps it with Hydra and turns
+configuration errors into one line on stderr and exit code 2 (set ``HYDRA_FULL_ERROR=1`` for the
+full traceback).
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+import sys
+from dataclasses import dataclass
+from pathlib import Path
+
+import hydra
+import numpy as np
+from omegaconf import DictConfig, OmegaConf
+
+from pipeline.artifacts import (is_complete, write_csv_atomic, write_json_atomic,
+                                write_text_atomic)
+from pipeline.config import (ConfigError, ExperimentConfig, register_configs,
+                             to_experiment_config)
+from pipeline.metrics import TrajectoryContext, compute_metrics
+from pipeline.model import build_lateral_model
+from pipeline.scenario import build_scenario
+from pipeline.simulate import simulate
+
+log = logging.getLogger(__name__)
+CONF_DIR = Path(__file__).resolve().parent.parent / "conf"
+
+# Hydra composes configs in worker processes too (joblib, submitit), which import this module
+register_configs()
+
+
+@dataclass(frozen=True)
+class RunSummary:
+    """What one run produced."""
+
+    out_dir: Path
+    metrics: dict
+    skipped: bool
+
+
+def run_experiment(cfg: ExperimentConfig, out_dir: Path, resume: bool = True) -> RunSummary:
+    """Simulate one configuration and write its run folder.
+
+    Parameters
+    ----------
+    cfg : ExperimentConfig
+    out_dir : Path
+        Folder that receives ``config.yaml``, ``model.json``, ``trajectory.csv``,
+        ``timing.json`` and ``metrics.json`` (written last, atomically).
+    resume : bool
+        Skip the simulation when ``out_dir`` already holds complete results of the same config
+        hash.
+
+    Returns
+    -------
+    RunSummary
+    """
+    import json
+
+    out_dir = Path(out_dir)
+    config_hash = cfg.config_hash()
+    if resume and is_complete(out_dir):
+        previous = json.loads((out_dir / "metrics.json").read_text())
+        if previous.get("config_hash") == config_hash:
+            return RunSummary(out_dir, previous, skipped=True)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    (out_dir / "metrics.json").unlink(missing_ok=True)
+
+    scenario = build_scenario(cfg.scenario)
+    model = build_lateral_model(cfg.vehicle, cfg.scenario.speed_mps, cfg.scenario.sample_time_s,
+                                cfg.controller.b2_heading_entry)
+    result = simulate(cfg, scenario)
+    context = TrajectoryContext(tuple(cfg.scenario.start_xy_m), tuple(cfg.scenario.goal_xy_m),
+                                cfg.vehicle.footprint_radius_m,
+                                cfg.controller.validity_heading_rad)
+    metrics = compute_metrics(result.trajectory, context, cfg.metrics)
+    metrics.update(method=cfg.planner.name, scenario=cfg.scenario.name,
+                   config_hash=config_hash, termination=result.termination,
+                   compile_count=result.compile_count)
+    times = result.solve_times_s
+    timing = {
+        "solve_time_median_s": float(np.median(times)) if times.size else None,
+        "solve_time_p95_s": float(np.percentile(times, 95)) if times.size else None,
+        "solve_time_max_s": float(np.max(times)) if times.size else None,
+        "compile_time_s": result.compile_time_s,
+        "solve_times_s": [float(x) for x in times],
+    }
+    write_text_atomic(out_dir / "config.yaml",
+                      OmegaConf.to_yaml(OmegaConf.structured(cfg), sort_keys=False))
+    write_json_atomic(out_dir / "model.json", model.to_json())
+    write_csv_atomic(out_dir / "trajectory.csv", result.trajectory)
+    write_json_atomic(out_dir / "timing.json", timing)
+    write_json_atomic(out_dir / "metrics.json", metrics)
+    return RunSummary(out_dir, metrics, skipped=False)
+
+
+@hydra.main(version_base="1.3", config_path="../conf", config_name="config")
+def hydra_main(cfg: DictConfig) -> None:
+    """Hydra task: validate, run, log where the results are."""
+    from hydra.core.hydra_config import HydraConfig
+
+    try:
+        experiment = to_experiment_config(cfg)
+    except ConfigError as exc:
+        if os.environ.get("PIPELINE_USER_FULL_ERROR") == "1":
+            raise
+        # SystemExit passes Hydra's job wrapper untouched: one line, exit code 2
+        print(str(exc), file=sys.stderr)
+        raise SystemExit(2) from None
+    out_dir = Path(HydraConfig.get().runtime.output_dir)
+    summary = run_experiment(experiment, out_dir)
+    m = summary.metrics
+    log.info("%s%s on %s: min clearance %.3f m, collision %s, time to goal %s s -> %s",
+             "skipped (complete) " if summary.skipped else "", m["method"], m["scenario"],
+             m["min_clearance_m"] if m["min_clearance_m"] is not None else float("nan"),
+             m["collision"], m["time_to_goal_s"], out_dir)
+
+
+def describe_config_error(exc: BaseException) -> str | None:
+    """One line for a configuration error, or None if ``exc`` is not one."""
+    from hydra.errors import (ConfigCompositionException, MissingConfigException,
+                              OverrideParseException)
+    from omegaconf.errors import OmegaConfBaseException
+
+    chain = []
+    current: BaseException | None = exc
+    while current is not None and current not in chain:
+        chain.append(current)
+        current = current.__cause__ or current.__context__
+    for err in chain:
+        if isinstance(err, ConfigError):
+            return str(err)
+    for err in chain:
+        if isinstance(err, MissingConfigException):
+            missing = err.missing_cfg_file or ""
+            group, _, name = missing.rpartition("/")
+            options = ", ".join(o for o in (err.options or []) if not o.endswith("_schema"))
+            options = options or "see conf/" + group
+            if group:
+                return (f"config error: {group}={name!r} is not a known option; allowed: "
+                        f"{options}")
+            return "config error: " + str(err).splitlines()[0]
+    for err in chain:
+        if isinstance(err, OmegaConfBaseException):
+            key = getattr(err, "full_key", None) or "?"
+            message = str(getattr(err, "msg", err)).splitlines()[0]
+            return f"config error: {key}: {message}"
+    for err in chain:
+        if isinstance(err, (OverrideParseException, ConfigCompositionException)):
+            return "config error: " + " ".join(str(err).split())
+    return None
+
+
+def main() -> None:
+    """Console entry: run Hydra; configuration errors exit 2 with one line on stderr."""
+    user_wants_trace = os.environ.get("HYDRA_FULL_ERROR") == "1"
+    os.environ["PIPELINE_USER_FULL_ERROR"] = "1" if user_wants_trace else "0"
+    os.environ["HYDRA_FULL_ERROR"] = "1"  # let exceptions reach us instead of Hydra's printer
+    try:
+        hydra_main()
+    except Exception as exc:  # noqa: BLE001 - turned into a message and an exit code
+        if user_wants_trace:
+            raise
+        message = describe_config_error(exc)
+        if message is not None:
+            print(message, file=sys.stderr)
+            sys.exit(2)
+        print(f"error: {type(exc).__name__}: {exc} (set HYDRA_FULL_ERROR=1 for the traceback)",
+              file=sys.stderr)
+        sys.exit(1)
+
+
+if __name__ == "__main__":
+    main()

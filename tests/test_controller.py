@@ -1,0 +1,166 @@
+"""Lateral MPC against independent formulations: a closed-form condensed QP (numpy) and SciPy's
+SLSQP on the same condensed problem; DPP, recompilation and fallbacks."""
+
+from __future__ import annotations
+
+import cvxpy as cp
+import numpy as np
+import pytest
+from scipy.optimize import minimize
+
+from pipeline.controller import LateralMpc, MpcInputs, blocking_matrix, collision_halfplanes
+from pipeline.model import build_lateral_model
+
+
+def condensed(model, cfg, x0, y_ref, psi_ref):
+    """Prediction X = Phi x0 + Gamma u and the quadratic cost in U (independent of cvxpy)."""
+    N, Nc = cfg.horizon, cfg.control_horizon
+    Phi = np.vstack([np.linalg.matrix_power(model.Ad, k) for k in range(1, N + 1)])
+    Gamma = np.zeros((5 * N, N))
+    for k in range(1, N + 1):
+        for i in range(k):
+            Gamma[5 * (k - 1):5 * k, i] = (np.linalg.matrix_power(model.Ad, k - 1 - i)
+                                           @ model.Bd).ravel()
+    T = blocking_matrix(N, Nc, cfg.input_hold)
+    Q = np.kron(np.eye(N), np.diag([cfg.q_lateral, 0.0, cfg.q_heading, cfg.q_yaw_rate,
+                                    cfg.q_steering]))
+    x_ref = np.zeros(5 * N)
+    x_ref[0::5], x_ref[2::5] = y_ref, psi_ref
+    M = Gamma @ T.T
+    H = M.T @ Q @ M + cfg.r_steering_rate * T @ T.T
+    g = M.T @ Q @ (Phi @ x0 - x_ref)
+    return H, g, Phi, M, T
+
+
+def make_inputs(model, cfg, x0, y_ref, psi_ref, G=None, h=None):
+    N, M = cfg.horizon, cfg.max_obstacles
+    return MpcInputs(x0, model, y_ref, psi_ref, np.zeros((N, M)) if G is None else G,
+                     np.zeros((N, M)) if h is None else h, np.zeros(N))
+
+
+@pytest.fixture()
+def setup(make_config):
+    cfg = make_config()
+    model = build_lateral_model(cfg.vehicle, 3.0, 0.1)
+    return cfg, model
+
+
+def test_problem_is_dpp(setup):
+    cfg, _ = setup
+    mpc = LateralMpc(cfg.controller, cfg.vehicle)
+    assert mpc.problem.is_dcp(dpp=True)
+
+
+@pytest.mark.parametrize("input_hold", ["hold_last", "zero_rate"])
+def test_first_input_matches_closed_form_condensed_qp(make_config, input_hold):
+    cfg = make_config([f"controller.input_hold={input_hold}"])
+    model = build_lateral_model(cfg.vehicle, 3.0, 0.1)
+    ctrl = cfg.controller
+    x0 = np.array([0.05, 0.02, -0.01, 0.01, 0.02])
+    y_ref = np.linspace(0.0, 0.15, ctrl.horizon)
+    psi_ref = np.full(ctrl.horizon, 0.03)
+    H, g, Phi, M, T = condensed(model, ctrl, x0, y_ref, psi_ref)
+    U_star = np.linalg.solve(H, -g)
+    states = Phi @ x0 + M @ U_star
+    # the oracle is the unconstrained optimum: check that no bound is active there
+    assert np.max(np.abs(U_star)) < cfg.vehicle.steering_rate_max_rad_s
+    assert np.max(np.abs(states[4::5])) < cfg.vehicle.steering_max_rad
+    step = LateralMpc(ctrl, cfg.vehicle).step(make_inputs(model, ctrl, x0, y_ref, psi_ref))
+    assert step.fallback == "none"
+    assert step.steering_rate_rad_s == pytest.approx(U_star[0], abs=1e-4)
+    np.testing.assert_allclose(step.planned_rates_rad_s, T.T @ U_star, atol=1e-4)
+
+
+def test_first_input_matches_scipy_slsqp_with_active_bounds(setup):
+    cfg, model = setup
+    ctrl, veh = cfg.controller, cfg.vehicle
+    x0 = np.array([0.0, 0.0, 0.0, 0.0, 0.1])
+    y_ref = np.full(ctrl.horizon, 2.0)  # far reference: rate and angle bounds become active
+    psi_ref = np.full(ctrl.horizon, 0.4)
+    H, g, Phi, M, T = condensed(model, ctrl, x0, y_ref, psi_ref)
+    delta_rows = M[4::5]
+    delta_free = (Phi @ x0)[4::5]
+    cons = [{"type": "ineq", "fun": lambda U: veh.steering_max_rad - (delta_free + delta_rows @ U),
+             "jac": lambda U: -delta_rows},
+            {"type": "ineq", "fun": lambda U: veh.steering_max_rad + (delta_free + delta_rows @ U),
+             "jac": lambda U: delta_rows}]
+    res = minimize(lambda U: 0.5 * U @ H @ U + g @ U, np.zeros(ctrl.control_horizon),
+                   jac=lambda U: H @ U + g, method="SLSQP", constraints=cons,
+                   bounds=[(-veh.steering_rate_max_rad_s, veh.steering_rate_max_rad_s)]
+                   * ctrl.control_horizon, options={"ftol": 1e-14, "maxiter": 500})
+    assert res.success
+    step = LateralMpc(ctrl, veh).step(make_inputs(model, ctrl, x0, y_ref, psi_ref))
+    assert step.steering_rate_rad_s == pytest.approx(res.x[0], abs=1e-4)
+    states = step.predicted_states
+    # constraints hold at the solution (Clarabel's tolerance)
+    assert np.max(np.abs(states[4, 1:])) <= veh.steering_max_rad + 1e-6
+    assert np.max(np.abs(step.planned_rates_rad_s)) <= veh.steering_rate_max_rad_s + 1e-6
+    assert np.max(np.abs(states[4, 1:])) == pytest.approx(veh.steering_max_rad, abs=1e-5)
+
+
+def test_halfplane_constraint_holds_without_slack_when_reachable(setup):
+    cfg, model = setup
+    ctrl, veh = cfg.controller, cfg.vehicle
+    N = ctrl.horizon
+    stations = 0.3 * np.arange(1, N + 1)
+    obstacles = np.tile(np.array([[2.9, 1.3]]), (N, 1, 1))  # static, ahead and to the left
+    y_ref = np.zeros(N)
+    G, h = collision_halfplanes(stations, y_ref, np.zeros(2), obstacles, np.array([0.2]), veh,
+                                ctrl)
+    step = LateralMpc(ctrl, veh).step(make_inputs(model, ctrl, np.zeros(5), y_ref, np.zeros(N),
+                                                  G, h))
+    y = step.predicted_states[0, 1:]
+    # every half-plane is satisfied by the predicted lateral positions, slack ~ 0
+    assert np.all(G[:, 0] * y >= h[:, 0] - 1e-5)
+    assert step.max_slack_m < 1e-5
+    assert np.any(h[:, 0] > 0)  # the constraint was really binding somewhere
+    assert y[-1] < -0.09  # pushed to the right: the last plane asks y <= -0.097 m
+
+
+def test_parameter_changes_do_not_recompile(setup):
+    cfg, model = setup
+    ctrl = cfg.controller
+    mpc = LateralMpc(ctrl, cfg.vehicle)
+    rng = np.random.default_rng(0)
+    for speed in (2.0, 3.0, 5.0):
+        m = build_lateral_model(cfg.vehicle, speed, 0.1)
+        for _ in range(3):
+            step = mpc.step(make_inputs(m, ctrl, rng.normal(0, 0.05, 5),
+                                        rng.normal(0, 0.3, ctrl.horizon),
+                                        rng.normal(0, 0.05, ctrl.horizon)))
+            assert step.fallback == "none"
+    assert mpc.compile_count == 1
+
+
+def test_infeasible_qp_falls_back_to_safe_input_then_shifted_plan(setup):
+    cfg, model = setup
+    ctrl, veh = cfg.controller, cfg.vehicle
+    N = ctrl.horizon
+    mpc = LateralMpc(ctrl, veh)
+    bad = np.array([0.0, 0.0, 0.0, 0.0, 2.0])  # steering far beyond its bound: infeasible
+    first = mpc.step(make_inputs(model, ctrl, bad, np.zeros(N), np.zeros(N)))
+    assert first.fallback == "safe_input"
+    assert first.status in ("infeasible", "infeasible_inaccurate")
+    assert abs(first.steering_rate_rad_s) == pytest.approx(veh.steering_rate_max_rad_s)
+    ok = mpc.step(make_inputs(model, ctrl, np.zeros(5), np.full(N, 0.3), np.zeros(N)))
+    assert ok.fallback == "none"
+    second = mpc.step(make_inputs(model, ctrl, bad, np.zeros(N), np.zeros(N)))
+    assert second.fallback == "shifted_plan"
+    assert second.steering_rate_rad_s == pytest.approx(ok.planned_rates_rad_s[1])
+    nan_state = mpc.step(make_inputs(model, ctrl, np.full(5, np.nan), np.zeros(N), np.zeros(N)))
+    assert nan_state.status == "not_solved" and nan_state.fallback == "shifted_plan"
+
+
+def test_solver_exception_is_a_fallback_not_a_crash(setup, monkeypatch):
+    cfg, model = setup
+    ctrl = cfg.controller
+    mpc = LateralMpc(ctrl, cfg.vehicle)
+
+    def boom(*args, **kwargs):
+        raise cp.error.SolverError("injected")
+
+    monkeypatch.setattr(mpc.problem, "solve", boom)
+    step = mpc.step(make_inputs(model, ctrl, np.zeros(5), np.zeros(ctrl.horizon),
+                                np.zeros(ctrl.horizon)))
+    assert step.status == "error:SolverError" and step.fallback == "safe_input"
+    assert step.steering_rate_rad_s == 0.0
