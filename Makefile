@@ -3,7 +3,8 @@ PYTHON_BOOT ?= $(shell command -v python3.11 || command -v python3)
 VENV        := .venv
 PY          := $(VENV)/bin/python
 STAMP       := $(VENV)/.installed
-RUNS        ?= outputs/paper
+RUNS        ?= outputs
+FAMILY_SIZE ?= 200
 REPORT      ?= reports/latest
 PYTEST_ARGS ?=
 
@@ -20,9 +21,10 @@ $(STAMP): pyproject.toml constraints.txt
 
 install: $(STAMP)  ## create .venv and install the project with pinned versions
 
-experiment: $(STAMP)  ## run the paper scenario for every method into $(RUNS)
-	rm -rf $(RUNS)  # code may have changed since: never reuse old runs here
-	$(PY) -m pipeline.run experiment=paper hydra.sweep.dir=$(RUNS)
+experiment: $(STAMP)  ## run every method on the paper scenario and on the scenario family
+	rm -rf $(RUNS)/paper $(RUNS)/family  # code may have changed since: never reuse old runs here
+	$(PY) -m pipeline.run experiment=paper hydra.sweep.dir=$(RUNS)/paper
+	$(PY) -m pipeline.run experiment=family hydra.sweep.dir=$(RUNS)/family scenario.family.size=$(FAMILY_SIZE)
 
 report: $(STAMP)  ## rebuild the HTML report from existing run folders (no simulation)
 	$(PY) -m pipeline.report $(RUNS) --out $(REPORT) --command "make reproduce"

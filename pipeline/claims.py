@@ -7,9 +7,11 @@ metric with a stated tolerance; statistics over a scenario family build on the s
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
-import math
+import numpy as np
+import pandas as pd
 
 
 @dataclass(frozen=True)
@@ -87,4 +89,118 @@ def claims_table(metrics_by_method: dict[str, dict], baseline: str = "baseline",
         else:
             row["verdict"] = "n/a"
         rows.append(row)
+    return rows
+
+
+VERDICT_RULE_FAMILY = (
+    "over the family, d = improved - baseline per scenario (sign flipped where higher is "
+    "better, so d < 0 is an improvement; a missing value counts as the worst value, i.e. "
+    "d = +inf if only improved lacks it and -inf if only baseline does); the median of d and its "
+    "95 % percentile-bootstrap interval (2000 resamples, seeded): 'supported' if the whole "
+    "interval lies below 0, 'not supported' if it lies at or above 0, 'mixed' if it contains 0. "
+    "'holds in' is the share of scenarios with d < -tolerance")
+
+
+def paired_differences(improved: pd.DataFrame, baseline: pd.DataFrame, claim: Claim
+                       ) -> np.ndarray:
+    """Per-scenario ``d = improved - baseline`` on the claim's primary metric (paired by the
+    ``scenario`` column), signed so that ``d < 0`` is an improvement; NaN handled as worst."""
+    key = claim.primary_metric
+    merged = improved[["scenario", key]].merge(baseline[["scenario", key]], on="scenario",
+                                               suffixes=("_i", "_b"))
+    i = merged[f"{key}_i"].to_numpy(float)
+    b = merged[f"{key}_b"].to_numpy(float)
+    sign = 1.0 if claim.lower_is_better else -1.0
+    with np.errstate(invalid="ignore"):
+        d = sign * (i - b)
+    d = np.where(np.isnan(i) & ~np.isnan(b), np.inf, d)
+    d = np.where(~np.isnan(i) & np.isnan(b), -np.inf, d)
+    d = np.where(np.isnan(i) & np.isnan(b), 0.0, d)
+    return d
+
+
+def median_of(values: np.ndarray, axis=None):
+    """Median as an element of the data (``inverted_cdf``), well defined with infinities."""
+    return np.quantile(values, 0.5, axis=axis, method="inverted_cdf")
+
+
+def bootstrap_median_ci(values: np.ndarray, rng: np.random.Generator,
+                        n_resamples: int = 2000, level: float = 0.95) -> tuple[float, float]:
+    """Percentile-bootstrap interval of the median."""
+    values = np.asarray(values, dtype=float)
+    if values.size == 0:
+        return float("nan"), float("nan")
+    idx = rng.integers(0, values.size, size=(n_resamples, values.size))
+    medians = median_of(values[idx], axis=1)
+    tail = (1.0 - level) / 2.0
+    return (float(np.quantile(medians, tail, method="inverted_cdf")),
+            float(np.quantile(medians, 1.0 - tail, method="inverted_cdf")))
+
+
+def family_verdict(low: float, high: float) -> str:
+    """Verdict from the interval of the median paired difference (see VERDICT_RULE_FAMILY)."""
+    if high < 0.0:
+        return "supported"
+    if low >= 0.0:
+        return "not supported"
+    return "mixed"
+
+
+def family_ledger(tables: dict[str, pd.DataFrame], paper_metrics: dict[str, dict] | None = None,
+                  baseline: str = "baseline", improved: str = "improved", seed: int = 0
+                  ) -> tuple[list[dict], dict[str, np.ndarray]]:
+    """Claims ledger over a scenario family.
+
+    Parameters
+    ----------
+    tables : dict of method -> DataFrame
+        Per-scenario metrics (``family_metrics.csv``) of each method, with a ``scenario`` column.
+    paper_metrics : dict of method -> metrics, optional
+        The paper scenario's values, shown beside the family statistics.
+    seed : int
+        Seed of the bootstrap.
+
+    Returns
+    -------
+    rows : list of dict
+    differences : dict of claim id -> ndarray
+        The paired differences, for plotting.
+    """
+    rng = np.random.default_rng(seed)
+    rows, differences = [], {}
+    for claim in CLAIMS:
+        d = paired_differences(tables[improved], tables[baseline], claim)
+        low, high = bootstrap_median_ci(d, rng)
+        row = {"claim": claim.claim_id, "paper says": claim.text, "metric": claim.primary_metric,
+               "better": "lower" if claim.lower_is_better else "higher",
+               "n_pairs": int(d.size), "median_difference": float(median_of(d)) if d.size else
+               float("nan"), "ci_low": low, "ci_high": high,
+               "holds_share": float(np.mean(d < -claim.tolerance)) if d.size else float("nan"),
+               "verdict": family_verdict(low, high)}
+        if paper_metrics:
+            row["paper_scenario"] = {m: metrics.get(claim.primary_metric)
+                                     for m, metrics in paper_metrics.items()}
+            if baseline in paper_metrics and improved in paper_metrics:
+                row["paper_verdict"] = single_scenario_verdict(claim, paper_metrics[baseline],
+                                                               paper_metrics[improved])
+        rows.append(row)
+        differences[claim.claim_id] = d
+    return rows, differences
+
+
+def outcome_counts(tables: dict[str, pd.DataFrame]) -> list[dict]:
+    """Collisions, failures and fallbacks per method; nothing is dropped from the statistics."""
+    rows = []
+    for method, t in tables.items():
+        rows.append({
+            "method": method, "scenarios": int(len(t)),
+            "collisions": int(t["collision"].astype(bool).sum()),
+            "not_recovered": int((~t["recovered"].astype(bool)).sum()),
+            "no_reaction": int((~t["reacted"].astype(bool)).sum()),
+            "goal_not_reached": int((~t["goal_reached"].astype(bool)).sum()),
+            "heading_validity_exceeded": int(t["heading_validity_exceeded"].astype(bool).sum()),
+            "fallback_steps": int(t["fallback_count"].fillna(0).sum())
+            if "fallback_count" in t else 0,
+            "min_clearance_median_m": float(t["min_clearance_m"].median()),
+        })
     return rows

@@ -132,7 +132,7 @@ class PlannerConfig:
         _at_least("planner.beta", self.beta, 0.0)
         _at_least("planner.rho_p_m", self.rho_p_m, 0.0, inclusive=False)
         _at_least("planner.rho0_m", self.rho0_m, 0.0, inclusive=False)
-        _choice("planner.repulsion_law", self.repulsion_law, ("polynomial", "exponential"))
+        _choice("planner.repulsion_law", self.repulsion_law, ("polynomial", "exponential", "none"))
         _choice("planner.k_rep_source", self.k_rep_source, ("adaptive_h", "constant"))
         _at_least("planner.k_rep_constant", self.k_rep_constant, 0.0)
         _between("planner.alpha_e", self.alpha_e, 0.0, 50.0)
@@ -153,6 +153,7 @@ class ControllerConfig:
     """Lateral MPC settings (CVXPY + Clarabel)."""
 
     name: str = MISSING
+    kind: str = "mpc"
     horizon: int = 10
     control_horizon: int = 3
     input_hold: str = "hold_last"
@@ -165,6 +166,7 @@ class ControllerConfig:
     slack_weight_quadratic: float = 1.0e3
     safety_margin_m: float = 0.2
     constraint_activation_m: float = 12.0
+    halfplane_normal: str = "lateral_side"
     max_obstacles: int = 3
     heading_reference: str = "path_slope"
     heading_ref_max_rad: float = 0.5
@@ -178,8 +180,13 @@ class ControllerConfig:
     speed_floor_mps: float = 1.0
     speed_grid_mps: float = 0.1
     validity_heading_rad: float = 0.35
+    lookahead_min_m: float = 2.0
+    lookahead_time_s: float = 0.8
 
     def __post_init__(self) -> None:
+        _choice("controller.kind", self.kind, ("mpc", "pure_pursuit"))
+        _at_least("controller.lookahead_min_m", self.lookahead_min_m, 0.0, inclusive=False)
+        _at_least("controller.lookahead_time_s", self.lookahead_time_s, 0.0)
         for key in ("horizon", "control_horizon", "max_obstacles", "solver_max_iter"):
             value = getattr(self, key)
             if isinstance(value, bool) or not isinstance(value, int):
@@ -194,6 +201,7 @@ class ControllerConfig:
         if self.solver_max_iter < 1:
             raise ConfigError("controller.solver_max_iter", self.solver_max_iter, "an integer >= 1")
         _choice("controller.input_hold", self.input_hold, ("hold_last", "zero_rate"))
+        _choice("controller.halfplane_normal", self.halfplane_normal, ("lateral_side", "radial"))
         for key in ("q_lateral", "q_heading", "q_yaw_rate", "q_steering", "r_steering_rate",
                     "slack_weight_linear", "slack_weight_quadratic", "safety_margin_m",
                     "constraint_activation_m"):
@@ -226,6 +234,64 @@ class ObstacleConfig:
 
 
 @dataclass
+class FamilyConfig:
+    """Seeded random draws of obstacles around a base scenario.
+
+    Member ``i`` of seed ``s`` is drawn from ``numpy.random.default_rng([s, i])`` alone, so it is
+    the same on every machine and does not depend on the family size. Ranges are ``[low, high]``.
+    """
+
+    seed: int = 0
+    size: int = 200
+    n_jobs: int = 2
+    appear_time_s: List[float] = field(default_factory=lambda: [2.0, 4.0])
+    ahead_m: List[float] = field(default_factory=lambda: [4.0, 8.0])
+    lateral_m: List[float] = field(default_factory=lambda: [-2.0, 2.0])
+    radius_m: List[float] = field(default_factory=lambda: [0.3, 0.7])
+    crossing_speed_mps: List[float] = field(default_factory=lambda: [0.2, 0.8])
+    oncoming_speed_mps: List[float] = field(default_factory=lambda: [0.3, 1.0])
+    static_probability: float = 0.25
+    oncoming_probability: float = 0.25
+    obstacle_count_probabilities: List[float] = field(default_factory=lambda: [0.5, 0.3, 0.2])
+    extra_x_m: List[float] = field(default_factory=lambda: [8.0, 26.0])
+    extra_y_m: List[float] = field(default_factory=lambda: [-3.0, 3.0])
+    extra_appear_time_s: List[float] = field(default_factory=lambda: [0.0, 6.0])
+
+    def __post_init__(self) -> None:
+        for key in ("seed", "size", "n_jobs"):
+            value = getattr(self, key)
+            if isinstance(value, bool) or not isinstance(value, int):
+                raise ConfigError(f"scenario.family.{key}", value, "an integer")
+        if self.seed < 0:
+            raise ConfigError("scenario.family.seed", self.seed, "an integer >= 0")
+        if self.size < 1:
+            raise ConfigError("scenario.family.size", self.size, "an integer >= 1")
+        if self.n_jobs < 1:
+            raise ConfigError("scenario.family.n_jobs", self.n_jobs, "an integer >= 1")
+        for key in ("appear_time_s", "ahead_m", "lateral_m", "radius_m", "crossing_speed_mps",
+                    "oncoming_speed_mps", "extra_x_m", "extra_y_m", "extra_appear_time_s"):
+            value = getattr(self, key)
+            _pair(f"scenario.family.{key}", value)
+            if value[0] > value[1]:
+                raise ConfigError(f"scenario.family.{key}", list(value), "[low, high] with low <= high")
+        for key in ("radius_m", "appear_time_s", "extra_appear_time_s", "crossing_speed_mps",
+                    "oncoming_speed_mps"):
+            if getattr(self, key)[0] < 0:
+                raise ConfigError(f"scenario.family.{key}", list(getattr(self, key)),
+                                  "a range of non-negative numbers")
+        _between("scenario.family.static_probability", self.static_probability, 0.0, 1.0)
+        _between("scenario.family.oncoming_probability", self.oncoming_probability, 0.0, 1.0)
+        if self.static_probability + self.oncoming_probability > 1.0:
+            raise ConfigError("scenario.family.oncoming_probability", self.oncoming_probability,
+                              f"<= 1 - static_probability ({1.0 - self.static_probability})")
+        probs = self.obstacle_count_probabilities
+        if not 1 <= len(probs) <= 3 or any(not math.isfinite(p) or p < 0 for p in probs) \
+                or not math.isclose(sum(probs), 1.0, abs_tol=1e-9):
+            raise ConfigError("scenario.family.obstacle_count_probabilities", list(probs),
+                              "1 to 3 non-negative numbers (for 1, 2, 3 obstacles) summing to 1")
+
+
+@dataclass
 class ScenarioConfig:
     """Start, goal, speed, run length and obstacles of one closed-loop run."""
 
@@ -239,6 +305,7 @@ class ScenarioConfig:
     n_steps: int = 130
     plant_substeps: int = 10
     obstacles: List[ObstacleConfig] = field(default_factory=list)
+    family: Optional[FamilyConfig] = None
 
     def __post_init__(self) -> None:
         _pair("scenario.start_xy_m", self.start_xy_m)
@@ -281,6 +348,7 @@ class MetricsConfig:
     threat_clearance_m: float = 2.0
     recovery_lateral_band_m: float = 0.25
     recovery_heading_band_rad: float = 0.05
+    recovery_heading_stop_m: float = 3.0
     lateral_sign_band_m: float = 0.05
     yaw_rate_sign_band_rad_s: float = 0.02
     goal_tolerance_m: float = 0.5
@@ -288,6 +356,7 @@ class MetricsConfig:
     def __post_init__(self) -> None:
         for key in ("reaction_steering_band_rad", "reaction_lateral_band_m", "threat_clearance_m",
                     "recovery_lateral_band_m", "recovery_heading_band_rad",
+                    "recovery_heading_stop_m",
                     "lateral_sign_band_m", "yaw_rate_sign_band_rad_s", "goal_tolerance_m"):
             _at_least(f"metrics.{key}", getattr(self, key), 0.0, inclusive=False)
 
@@ -297,6 +366,7 @@ class RunConfig:
     """Bookkeeping of one run."""
 
     seed: int = 0
+    method: str = ""
 
 
 @dataclass
@@ -324,6 +394,11 @@ class ExperimentConfig:
         if self.controller.speed_floor_mps < self.vehicle.min_model_speed_mps:
             raise ConfigError("controller.speed_floor_mps", self.controller.speed_floor_mps,
                               f">= vehicle.min_model_speed_mps ({self.vehicle.min_model_speed_mps})")
+
+    @property
+    def method_name(self) -> str:
+        """Label of the compared method (``run.method``, else the planner's name)."""
+        return self.run.method or self.planner.name
 
     def to_dict(self) -> dict:
         return asdict(self)
@@ -412,9 +487,12 @@ INTERPRETATION_REGISTER: tuple[RegisterEntry, ...] = (
     RegisterEntry(
         "Collision-avoidance constraints 'from APF'",
         "'Collision avoidance constraints from APF' (no formula)",
-        "one soft half-plane per obstacle and horizon step: n . (p_k - o_k) >= r_o + r_v + margin, "
-        "n = unit vector from the predicted obstacle to the APF reference point",
-        "-", "controller.safety_margin_m, controller.slack_weight_linear"),
+        "one soft half-plane per obstacle and horizon step, side chosen by the APF reference: "
+        "sigma (y_k - o_y) >= sqrt(R^2 - (x_k - o_x)^2), sigma = sign(y_ref,k - o_y), "
+        "R = r_o + r_v + margin (exact for the disk at the MPC's fixed station x_k)",
+        "radial: n . (p_k - o_k) >= R, n from the predicted obstacle toward the APF reference "
+        "point (tangent plane; mostly longitudinal, so a lateral MPC can meet it only with slack)",
+        "controller.halfplane_normal"),
     RegisterEntry(
         "Run length", "100 steps of 0.1 s (Appendix A)",
         "130 steps: at 3 m/s a 100-step run ends at the goal line before the vehicle can settle; "

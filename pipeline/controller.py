@@ -248,10 +248,16 @@ def collision_halfplanes(stations_m: np.ndarray, y_ref_m: np.ndarray, vehicle_li
                          ) -> tuple[np.ndarray, np.ndarray]:
     """Soft half-plane data ``G y_k + s >= h`` for each horizon step and obstacle.
 
-    The plane at step k for obstacle j has normal ``n`` = unit vector from the predicted
-    obstacle centre to the APF reference point ``(station_k, y_ref_k)`` and asks
-    ``n . (p_k - o_k) >= r_o + r_v + margin``; with the station fixed this is linear in ``y_k``.
-    Obstacles farther than ``constraint_activation_m`` from the vehicle get an empty row.
+    With ``R = r_o + r_v + margin`` and the APF reference point ``q_k = (station_k, y_ref_k)``:
+
+    * ``halfplane_normal = lateral_side`` (default): at station ``x_k`` the keep-out disk covers
+      ``|y - o_y| < w_k = sqrt(R^2 - (x_k - o_x)^2)``; the APF chooses the side
+      ``sigma = sign(y_ref_k - o_y)`` and the plane is ``sigma (y_k - o_y) >= w_k`` (exact for the
+      disk at that station; empty where ``|x_k - o_x| >= R``).
+    * ``halfplane_normal = radial``: ``n . (p_k - o_k) >= R`` with ``n`` the unit vector from the
+      predicted obstacle to ``q_k`` (the tangent plane of the disk facing the reference point).
+
+    Obstacles farther than ``constraint_activation_m`` from the vehicle get empty rows.
 
     Parameters
     ----------
@@ -270,13 +276,55 @@ def collision_halfplanes(stations_m: np.ndarray, y_ref_m: np.ndarray, vehicle_li
         if np.linalg.norm(current - vehicle_line_m) > controller.constraint_activation_m:
             continue
         obstacle = predicted_obstacles_line_m[:, j, :]
+        reach = radii_m[j] + vehicle.footprint_radius_m + controller.safety_margin_m
+        fallback_side = np.sign(vehicle_line_m[1] - current[1]) or 1.0
+        if controller.halfplane_normal == "lateral_side":
+            dx = stations_m - obstacle[:, 0]
+            inside = np.abs(dx) < reach
+            half_width = np.sqrt(np.maximum(reach**2 - dx**2, 0.0))
+            side = np.sign(y_ref_m - obstacle[:, 1])
+            side = np.where(side == 0.0, fallback_side, side)
+            G[:, j] = np.where(inside, side, 0.0)
+            h[:, j] = np.where(inside, side * obstacle[:, 1] + half_width, 0.0)
+            continue
         ref = np.stack([stations_m, y_ref_m], axis=1)
         normal = ref - obstacle
         dist = np.linalg.norm(normal, axis=1)
-        side = np.sign(vehicle_line_m[1] - current[1]) or 1.0
         normal = np.where(dist[:, None] > 1e-6, normal / np.maximum(dist, 1e-6)[:, None],
-                          np.array([0.0, side])[None, :])
-        reach = radii_m[j] + vehicle.footprint_radius_m + controller.safety_margin_m
+                          np.array([0.0, fallback_side])[None, :])
         G[:, j] = normal[:, 1]
         h[:, j] = reach - normal[:, 0] * (stations_m - obstacle[:, 0]) + normal[:, 1] * obstacle[:, 1]
     return G, h
+
+
+def pure_pursuit_steering_rate(path_line_m: np.ndarray, position_line_m: np.ndarray,
+                               heading_line_rad: float, steering_rad: float, speed_mps: float,
+                               vehicle: VehicleConfig, controller: ControllerConfig,
+                               sample_time_s: float) -> float:
+    """Peer without MPC: pure pursuit of the APF path, steering rate toward the pursuit angle.
+
+    The look-ahead point lies on the path (extended along its last segment) at
+    ``max(lookahead_min_m, lookahead_time_s * speed)`` from the vehicle; the pursuit steering
+    angle is ``atan(2 L sin(alpha) / L_d)`` (``alpha``: bearing of the point in the vehicle
+    frame), saturated; the rate that reaches it in one step is saturated at the rate bound.
+    """
+    lookahead = max(controller.lookahead_min_m, controller.lookahead_time_s * speed_mps)
+    rel = path_line_m - position_line_m[None, :]
+    dist = np.linalg.norm(rel, axis=1)
+    beyond = np.nonzero(dist >= lookahead)[0]
+    if beyond.size:
+        target = path_line_m[beyond[0]]
+    else:
+        end, prev = path_line_m[-1], path_line_m[-2] if len(path_line_m) > 1 else position_line_m
+        direction = end - prev
+        norm = np.linalg.norm(direction)
+        direction = direction / norm if norm > 1e-9 else np.array([1.0, 0.0])
+        # extend from the end so that the point is at the look-ahead distance (or beyond)
+        target = end + direction * max(lookahead - float(dist[-1]), 0.0)
+    bearing = np.arctan2(target[1] - position_line_m[1], target[0] - position_line_m[0])
+    alpha = np.arctan2(np.sin(bearing - heading_line_rad), np.cos(bearing - heading_line_rad))
+    distance = max(float(np.linalg.norm(target - position_line_m)), 1e-3)
+    desired = np.arctan(2.0 * vehicle.wheelbase_m * np.sin(alpha) / distance)
+    desired = float(np.clip(desired, -vehicle.steering_max_rad, vehicle.steering_max_rad))
+    return float(np.clip((desired - steering_rad) / sample_time_s,
+                         -vehicle.steering_rate_max_rad_s, vehicle.steering_rate_max_rad_s))

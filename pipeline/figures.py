@@ -157,3 +157,58 @@ def save_figure(fig: Figure, out_dir: Path, stem: str) -> dict[str, Path]:
     fig.savefig(paths["png"], dpi=130, metadata={"Software": None})
     plt.close(fig)
     return paths
+
+
+def claim_differences_figure(differences: dict[str, np.ndarray], metric_names: dict[str, str],
+                             intervals: dict[str, tuple[float, float]]) -> Figure:
+    """Per-scenario paired differences (improved - baseline, < 0 is better), one panel a claim.
+
+    Infinite differences (one method without a value) are drawn at the panel's edge and counted
+    in the title.
+    """
+    claims = list(differences)
+    fig, axes = plt.subplots(1, len(claims), figsize=(2.3 * len(claims), 3.6),
+                             layout="constrained", squeeze=False)
+    rng = np.random.default_rng(0)  # jitter only
+    for ax, claim in zip(axes[0], claims):
+        d = np.asarray(differences[claim], dtype=float)
+        finite = d[np.isfinite(d)]
+        span = max(np.max(np.abs(finite)) if finite.size else 1.0, 1e-9) * 1.15
+        shown = np.clip(np.where(np.isfinite(d), d, np.sign(d) * span), -span, span)
+        ax.scatter(rng.uniform(-0.25, 0.25, d.size), shown, s=8, alpha=0.45, color="#1f77b4")
+        ax.axhline(0.0, color="k", lw=0.8)
+        low, high = intervals[claim]
+        med = float(np.quantile(d, 0.5, method="inverted_cdf")) if d.size else np.nan
+        ax.errorbar([0.45], [np.clip(med, -span, span)],
+                    yerr=[[np.clip(med, -span, span) - np.clip(low, -span, span)],
+                          [np.clip(high, -span, span) - np.clip(med, -span, span)]],
+                    fmt="D", color="#d62728", capsize=4, label="median, 95% CI")
+        n_inf = int(np.count_nonzero(~np.isfinite(d)))
+        ax.set_title(f"{claim}" + (f" ({n_inf} at edge)" if n_inf else ""), fontsize=9)
+        ax.set_xlabel(metric_names[claim], fontsize=7)
+        ax.set_xticks([])
+        ax.set_xlim(-0.6, 0.7)
+        ax.tick_params(axis="y", labelsize=7)
+        ax.grid(True, axis="y", alpha=0.3)
+    axes[0][0].set_ylabel("improved - baseline per scenario\n(< 0: improved better)")
+    axes[0][0].legend(fontsize=7, loc="lower left")
+    return fig
+
+
+def family_distribution_figure(tables: dict[str, pd.DataFrame], metrics: list[str]) -> Figure:
+    """Box plots of metrics per method over the scenario family."""
+    fig, axes = plt.subplots(1, len(metrics), figsize=(2.6 * len(metrics), 3.8),
+                             layout="constrained", squeeze=False)
+    methods = list(tables)
+    for ax, metric in zip(axes[0], metrics):
+        data = [tables[m][metric].astype(float).dropna().to_numpy() for m in methods]
+        parts = ax.boxplot(data, tick_labels=methods, showfliers=True, patch_artist=True,
+                           flierprops={"markersize": 2})
+        for patch, method in zip(parts["boxes"], methods):
+            patch.set_facecolor(method_color(method))
+            patch.set_alpha(0.5)
+        ax.set_title(metric, fontsize=8)
+        ax.tick_params(axis="x", labelrotation=60, labelsize=7)
+        ax.tick_params(axis="y", labelsize=7)
+        ax.grid(True, axis="y", alpha=0.3)
+    return fig

@@ -14,12 +14,15 @@ in the report):
 * **Repulsion modulation** (C3): repulsive impulse ``sum |F_rep| Ts``; share of it applied while
   the obstacle's clearance exceeds ``threat_clearance_m``; peak ``|F_rep|``; clearance at which
   repulsion first switched on.
-* **Goal-direction recovery** (C4, s): from the moment the obstacle is passed (the vehicle's
-  longitudinal position exceeds the obstacle's by both radii), the settling time of the lateral
-  error and of the heading error to the bearing of the goal, each computed with python-control's
+* **Goal-direction recovery** (C4, s): from the moment every obstacle is passed (the vehicle's
+  longitudinal position exceeds each obstacle's by both radii, for good), the settling time of
+  the lateral error to the original start-goal line, computed with python-control's
   ``step_info`` on the mirrored signal ``e0 - e(t)`` (a step from 0 to ``e0``) with an absolute
-  band: ``SettlingTimeThreshold = band / |e0|``. The recovery time is the larger of the two; NaN
-  plus ``recovered = False`` if either error is outside its band at the end of the run.
+  band: ``SettlingTimeThreshold = recovery_lateral_band_m / |e0|``; NaN plus
+  ``recovered = False`` if the error is outside the band at the end of the run. Secondary: the
+  same settling time of the heading error to the bearing of the goal
+  (``recovery_heading_band_rad``), judged until ``recovery_heading_stop_m`` before the goal
+  line, where that bearing turns fast.
 * **Path stability** (C5): overshoot past the start-goal line on the side opposite the detour
   after the obstacle is passed (m); sign changes of the lateral error (outside
   ``lateral_sign_band_m``) and of the yaw rate (outside ``yaw_rate_sign_band_rad_s``), and their
@@ -196,12 +199,19 @@ def compute_metrics(trajectory: pd.DataFrame, context: TrajectoryContext,
     xy = tr[["X_m", "Y_m"]].to_numpy(float)
     along = (xy - start) @ line
     lateral = (xy - start) @ normal
-    psi = tr["psi_rad"].to_numpy(float)
-    speed = np.hypot(tr["vx_mps"].to_numpy(float), tr["vy_mps"].to_numpy(float)) \
-        if "vy_mps" in tr else tr["vx_mps"].to_numpy(float)
+    # optional columns are derived from the path when a scored trajectory lacks them
+    if "psi_rad" in tr:
+        psi = tr["psi_rad"].to_numpy(float)
+    else:
+        psi = np.unwrap(np.arctan2(time_derivative(xy[:, 1], t), time_derivative(xy[:, 0], t)))
+    if "vx_mps" in tr:
+        speed = np.hypot(tr["vx_mps"].to_numpy(float), tr["vy_mps"].to_numpy(float)) \
+            if "vy_mps" in tr else tr["vx_mps"].to_numpy(float)
+    else:
+        speed = np.hypot(time_derivative(xy[:, 0], t), time_derivative(xy[:, 1], t))
     yaw_rate = tr["r_rad_s"].to_numpy(float) if "r_rad_s" in tr \
         else time_derivative(np.unwrap(psi), t)
-    delta = tr["delta_rad"].to_numpy(float)
+    delta = tr["delta_rad"].to_numpy(float) if "delta_rad" in tr else np.full(len(tr), np.nan)
     steer_rate = tr["steering_rate_rad_s"].to_numpy(float) if "steering_rate_rad_s" in tr \
         else time_derivative(delta, t)
     heading_error = np.arctan2(np.sin(psi - np.arctan2(line[1], line[0])),
@@ -241,7 +251,8 @@ def compute_metrics(trajectory: pd.DataFrame, context: TrajectoryContext,
 
     # --- C1 reaction
     if np.isfinite(appear_time):
-        delay = first_exit_time(t, delta, appear_time, thresholds.reaction_steering_band_rad)
+        delay = first_exit_time(t, delta, appear_time, thresholds.reaction_steering_band_rad) \
+            if np.any(np.isfinite(delta)) else float("nan")
         out["reaction_delay_s"] = delay
         out["reacted"] = bool(np.isfinite(delay))
         out["reaction_delay_lateral_s"] = first_exit_time(t, lateral, appear_time,
@@ -277,14 +288,17 @@ def compute_metrics(trajectory: pd.DataFrame, context: TrajectoryContext,
     if np.isfinite(passed_time):
         after = t >= passed_time - 1e-9
         lat_settle = settling_time(t[after], lateral[after], thresholds.recovery_lateral_band_m)
-        head_settle = settling_time(t[after], bearing_error[after],
-                                    thresholds.recovery_heading_band_rad)
+        # the bearing to the goal turns fast right before the goal: judge heading until
+        # recovery_heading_stop_m before the goal line
+        goal_along = float((goal - start) @ line)
+        heading_window = after & (along <= goal_along - thresholds.recovery_heading_stop_m)
+        head_settle = settling_time(t[heading_window], bearing_error[heading_window],
+                                    thresholds.recovery_heading_band_rad) \
+            if np.count_nonzero(heading_window) > 1 else float("nan")
         out["recovery_lateral_s"] = lat_settle
         out["recovery_heading_s"] = head_settle
-        both = max(lat_settle, head_settle) if np.isfinite(lat_settle) and np.isfinite(head_settle) \
-            else float("nan")
-        out["recovery_time_s"] = both
-        out["recovered"] = bool(np.isfinite(both))
+        out["recovery_time_s"] = lat_settle
+        out["recovered"] = bool(np.isfinite(lat_settle))
         # --- C5 overshoot past the line, on the side opposite the detour
         before = (t >= appear_time - 1e-9) & ~after
         detour_side = np.sign(lateral[before][np.argmax(np.abs(lateral[before]))]) \

@@ -80,7 +80,7 @@ def repulsive_force(position_m: np.ndarray, goal_m: np.ndarray,
     position_m, goal_m : ndarray, shape (2,)
     obstacle_positions_m : ndarray, shape (n, 2)
     params : PlannerConfig
-        ``repulsion_law``, ``rho0_m``, ``alpha_e``, ``k_rep_source`` and the H_i constants.
+        ``repulsion_law`` (``none`` turns repulsion off: the no-APF peer), ``rho0_m``, ``alpha_e``, ``k_rep_source`` and the H_i constants.
     closing_speed_mps : ndarray, shape (n,), optional
         Rate at which each obstacle's distance shrinks; with
         ``closing_speed_gain_s_per_m > 0`` repulsion is scaled by ``1 + gain * max(0, closing)``.
@@ -90,7 +90,7 @@ def repulsive_force(position_m: np.ndarray, goal_m: np.ndarray,
     ndarray, shape (2,)
     """
     obstacles = np.asarray(obstacle_positions_m, dtype=float).reshape(-1, 2)
-    if obstacles.shape[0] == 0:
+    if obstacles.shape[0] == 0 or params.repulsion_law == "none":
         return np.zeros(2)
     diff = position_m[None, :] - obstacles
     rho = np.linalg.norm(diff, axis=1)

@@ -24,10 +24,12 @@ import pandas as pd
 import yaml
 
 from pipeline.artifacts import find_run_dirs, read_run, write_text_atomic
-from pipeline.claims import CLAIMS, VERDICT_RULE_SINGLE, claims_table
+from pipeline.claims import (CLAIMS, VERDICT_RULE_FAMILY, VERDICT_RULE_SINGLE, claims_table,
+                             family_ledger, outcome_counts)
 from pipeline.config import INTERPRETATION_REGISTER
-from pipeline.figures import (apf_force_figure, overlay_figure, save_figure, timeseries_figure,
-                              trajectory_figure)
+from pipeline.figures import (apf_force_figure, claim_differences_figure,
+                              family_distribution_figure, overlay_figure, save_figure,
+                              timeseries_figure, trajectory_figure)
 
 PACKAGES = ("numpy", "scipy", "pandas", "matplotlib", "control", "cvxpy", "clarabel",
             "hydra-core", "omegaconf", "jinja2")
@@ -103,11 +105,39 @@ def _fmt(value) -> str:
     return html.escape(str(value))
 
 
-def load_runs(run_root: Path) -> list[dict]:
-    runs = [read_run(d) for d in find_run_dirs(run_root)]
-    if not runs:
+def load_runs(run_root: Path) -> tuple[list[dict], dict[str, pd.DataFrame], dict[str, dict]]:
+    """Single runs (outside family folders) and per-method family tables under ``run_root``.
+
+    Returns
+    -------
+    runs : list of dict
+        :func:`pipeline.artifacts.read_run` of each complete single-run folder.
+    family_tables : dict of method -> DataFrame
+        ``family_metrics.csv`` of each family folder.
+    family_info : dict of method -> dict
+        ``family.json`` of each family folder.
+    """
+    import json
+
+    run_root = Path(run_root)
+    family_dirs = sorted(p.parent for p in run_root.rglob("family_metrics.csv")
+                         if (p.parent / "family.json").is_file())
+    family_tables, family_info = {}, {}
+    for folder in family_dirs:
+        info = json.loads((folder / "family.json").read_text())
+        family_tables[info["method"]] = pd.read_csv(folder / "family_metrics.csv")
+        family_info[info["method"]] = {**info, "dir": str(folder)}
+    inside = set(family_dirs)
+    runs = [read_run(d) for d in find_run_dirs(run_root)
+            if not any(parent in inside for parent in d.parents)]
+    if not runs and not family_tables:
         raise FileNotFoundError(f"no complete run folders (with metrics.json) under {run_root}")
-    return runs
+    return runs, family_tables, family_info
+
+
+def _ordered(methods) -> list[str]:
+    methods = list(methods)
+    return [m for m in METHOD_ORDER if m in methods] + sorted(set(methods) - set(METHOD_ORDER))
 
 
 def build_report(run_root: Path, out_dir: Path, command: str) -> Path:
@@ -121,54 +151,20 @@ def build_report(run_root: Path, out_dir: Path, command: str) -> Path:
     out_dir = Path(out_dir)
     fig_dir, table_dir = out_dir / "figures", out_dir / "tables"
     table_dir.mkdir(parents=True, exist_ok=True)
-    runs = load_runs(run_root)
+    runs, family_tables, family_info = load_runs(run_root)
+    if not runs:
+        raise FileNotFoundError(f"no single runs (the paper scenario) under {run_root}")
     scenario = "paper_sudden_obstacle"
     paper_runs = [r for r in runs if r["metrics"]["scenario"] == scenario] or runs
     scenario = paper_runs[0]["metrics"]["scenario"]
     by_method = {r["metrics"]["method"]: r for r in paper_runs}
-    order = [m for m in METHOD_ORDER if m in by_method] + sorted(set(by_method) - set(METHOD_ORDER))
+    order = _ordered(by_method)
     by_method = {m: by_method[m] for m in order}
     first_cfg = next(iter(by_method.values()))["config"]
     goal = tuple(first_cfg["scenario"]["goal_xy_m"])
     radius = first_cfg["vehicle"]["footprint_radius_m"]
     appear = next(iter(by_method.values()))["metrics"].get("obstacle_appear_time_s")
-
-    # shared axes for the Figure 2/3 analogues
-    xs = np.concatenate([r["trajectory"]["X_m"].to_numpy() for r in by_method.values()])
-    ys = np.concatenate([r["trajectory"]["Y_m"].to_numpy() for r in by_method.values()])
-    limits = (min(xs.min(), 0) - 1.5, max(xs.max(), goal[0]) + 1.5, ys.min() - 2.0,
-              ys.max() + 2.5)
-    figures = []
-    snap = tuple(float(appear) + d for d in (0.0, 1.0, 2.0, 3.0)) if appear is not None \
-        else (3.0, 4.0, 5.0, 6.0)
-    for method, run in by_method.items():
-        label = {"baseline": "Figure 2 analogue", "improved": "Figure 3 analogue"}.get(
-            method, "Variant")
-        paths = save_figure(trajectory_figure(run["trajectory"], method, goal, radius, snap,
-                                              title=f"{label}: {method}", limits=limits),
-                            fig_dir, f"trajectory_{method}")
-        figures.append({"id": f"trajectory_{method}", "group": "paths", "paths": paths,
-                        "caption": f"{label} — {method} APF-MPC on {scenario}: vehicle path, "
-                                   f"footprint (dotted) and obstacle (grey, darker is later) at "
-                                   f"{', '.join(f'{s:.0f}' for s in snap)} s.",
-                        "alt": f"Path of the vehicle with the {method} planner around the "
-                               f"moving obstacle"})
-    tr_by_method = {m: r["trajectory"] for m, r in by_method.items()}
-    for stem, fig, caption, alt in (
-            ("overlay", overlay_figure(tr_by_method, goal),
-             "All methods' paths on the same axes; the grey band is the obstacle's track "
-             "while visible.", "Paths of all methods overlaid"),
-            ("timeseries", timeseries_figure(tr_by_method, appear),
-             "Steering angle, steering rate (the MPC input), heading and lateral deviation "
-             "over time.", "Time series of steering, heading and lateral deviation"),
-            ("apf_forces", apf_force_figure(tr_by_method),
-             "Magnitude of the APF's repulsive and attractive forces at the vehicle's position "
-             "(first rollout point).", "APF force magnitudes over time")):
-        figures.append({"id": stem, "group": "series", "paths": save_figure(fig, fig_dir, stem),
-                        "caption": caption, "alt": alt})
-    for f in figures:
-        f["src"] = _png_data_uri(f["paths"]["png"])
-        f["svg"] = os.path.relpath(f["paths"]["svg"], out_dir)
+    figures = _paper_figures(by_method, scenario, goal, radius, appear, fig_dir)
 
     metrics_by_method = {m: r["metrics"] for m, r in by_method.items()}
     metrics_frame = pd.DataFrame(metrics_by_method)
@@ -178,9 +174,9 @@ def build_report(run_root: Path, out_dir: Path, command: str) -> Path:
     metric_rows = [{"metric": k, "values": [_fmt(metrics_by_method[m].get(k)) for m in order]}
                    for k in metrics_frame.index if k not in skip]
     timing_rows = [{"method": m,
-                    "median_ms": _fmt(1e3 * r["timing"]["solve_time_median_s"]),
-                    "p95_ms": _fmt(1e3 * r["timing"]["solve_time_p95_s"]),
-                    "max_ms": _fmt(1e3 * r["timing"]["solve_time_max_s"]),
+                    "median_ms": _fmt(_ms(r["timing"]["solve_time_median_s"])),
+                    "p95_ms": _fmt(_ms(r["timing"]["solve_time_p95_s"])),
+                    "max_ms": _fmt(_ms(r["timing"]["solve_time_max_s"])),
                     "compile_s": _fmt(r["timing"]["compile_time_s"]),
                     "compiles": _fmt(r["metrics"].get("compile_count"))}
                    for m, r in by_method.items()]
@@ -190,13 +186,23 @@ def build_report(run_root: Path, out_dir: Path, command: str) -> Path:
         row["values"] = [_fmt(row.get(m)) for m in order]
     claim_secondary = {c.claim_id: ", ".join(c.secondary_metrics) for c in CLAIMS}
 
+    family = None
+    if "baseline" in family_tables and "improved" in family_tables:
+        family = _family_section(family_tables, family_info, metrics_by_method, fig_dir,
+                                 table_dir)
+        for f in family["figures"]:
+            figures.append(f)
+    for f in figures:
+        f["src"] = _png_data_uri(f["paths"]["png"])
+        f["svg"] = os.path.relpath(f["paths"]["svg"], out_dir)
+
     env = jinja2.Environment(loader=jinja2.PackageLoader("pipeline", "templates"),
                              autoescape=jinja2.select_autoescape(["html", "j2"]),
                              undefined=jinja2.StrictUndefined)
     page = env.get_template("report.html.j2").render(
         scenario=scenario, methods=order, figures=figures, metric_rows=metric_rows,
         timing_rows=timing_rows, claims=claims, claim_secondary=claim_secondary,
-        verdict_rule=VERDICT_RULE_SINGLE,
+        verdict_rule=VERDICT_RULE_SINGLE, family=family, family_rule=VERDICT_RULE_FAMILY,
         register=register_rows({m: r["config"] for m, r in by_method.items()}),
         configs={m: yaml.safe_dump(r["config"], sort_keys=False) for m, r in by_method.items()},
         hashes={m: r["metrics"]["config_hash"] for m, r in by_method.items()},
@@ -205,6 +211,90 @@ def build_report(run_root: Path, out_dir: Path, command: str) -> Path:
     path = out_dir / "index.html"
     write_text_atomic(path, page)
     return path
+
+
+def _ms(seconds) -> float | None:
+    return None if seconds is None else 1e3 * seconds
+
+
+def _paper_figures(by_method: dict, scenario: str, goal: tuple, radius: float, appear,
+                   fig_dir: Path) -> list[dict]:
+    """Figure 2/3 analogues (shared axes), overlay, time series and APF forces."""
+    xs = np.concatenate([r["trajectory"]["X_m"].to_numpy() for r in by_method.values()])
+    ys = np.concatenate([r["trajectory"]["Y_m"].to_numpy() for r in by_method.values()])
+    limits = (min(xs.min(), 0) - 1.5, max(xs.max(), goal[0]) + 1.5, ys.min() - 2.0,
+              ys.max() + 2.5)
+    snap = tuple(float(appear) + d for d in (0.0, 1.0, 2.0, 3.0)) if appear is not None \
+        else (3.0, 4.0, 5.0, 6.0)
+    figures = []
+    for method, run in by_method.items():
+        label = {"baseline": "Figure 2 analogue", "improved": "Figure 3 analogue"}.get(
+            method, "Variant")
+        paths = save_figure(trajectory_figure(run["trajectory"], method, goal, radius, snap,
+                                              title=f"{label}: {method}", limits=limits),
+                            fig_dir, f"trajectory_{method}")
+        figures.append({"id": f"trajectory_{method}", "group": "paths", "paths": paths,
+                        "caption": f"{label} — {method} on {scenario}: vehicle path, "
+                                   f"footprint (dotted) and obstacle (grey, darker is later) at "
+                                   f"{', '.join(f'{s:.0f}' for s in snap)} s.",
+                        "alt": f"Path of the vehicle with the {method} method around the "
+                               f"moving obstacle"})
+    tr_by_method = {m: r["trajectory"] for m, r in by_method.items()}
+    for stem, fig, caption, alt in (
+            ("overlay", overlay_figure(tr_by_method, goal),
+             "All methods' paths on the same axes; the grey band is the obstacle's track "
+             "while visible.", "Paths of all methods overlaid"),
+            ("timeseries", timeseries_figure(tr_by_method, appear),
+             "Steering angle, steering rate (the input), heading and lateral deviation "
+             "over time.", "Time series of steering, heading and lateral deviation"),
+            ("apf_forces", apf_force_figure(tr_by_method),
+             "Magnitude of the APF's repulsive and attractive forces at the vehicle's position "
+             "(first rollout point).", "APF force magnitudes over time")):
+        figures.append({"id": stem, "group": "series", "paths": save_figure(fig, fig_dir, stem),
+                        "caption": caption, "alt": alt})
+    return figures
+
+
+def _family_section(tables: dict, info: dict, paper_metrics: dict, fig_dir: Path,
+                    table_dir: Path) -> dict:
+    """Claims ledger over the family, outcome counts and distribution plots."""
+    order = _ordered(tables)
+    tables = {m: tables[m] for m in order}
+    ledger, differences = family_ledger(tables, paper_metrics)
+    pd.DataFrame([{k: v for k, v in r.items() if k != "paper_scenario"} for r in ledger]).to_csv(
+        table_dir / "claims_ledger.csv", index=False)
+    counts = outcome_counts(tables)
+    pd.DataFrame(counts).to_csv(table_dir / "family_outcomes.csv", index=False)
+    for row in ledger:
+        row["paper_values"] = [_fmt((row.get("paper_scenario") or {}).get(m))
+                               for m in ("baseline", "improved")]
+        row["median_fmt"] = _fmt(row["median_difference"])
+        row["ci_fmt"] = f"[{_fmt(row['ci_low'])}, {_fmt(row['ci_high'])}]"
+        row["holds_fmt"] = f"{100 * row['holds_share']:.0f} %"
+    intervals = {r["claim"]: (r["ci_low"], r["ci_high"]) for r in ledger}
+    names = {c.claim_id: c.primary_metric for c in CLAIMS}
+    figures = [
+        {"id": "claim_differences", "group": "claims",
+         "paths": save_figure(claim_differences_figure(differences, names, intervals), fig_dir,
+                              "claim_differences"),
+         "caption": "Per-scenario paired differences improved − baseline on each claim's "
+                    "primary metric (below zero: improved better), with the median and its 95 % "
+                    "bootstrap interval.",
+         "alt": "Scatter of paired differences per claim with median and confidence interval"},
+        {"id": "family_distributions", "group": "family",
+         "paths": save_figure(family_distribution_figure(tables, [c.primary_metric
+                                                                  for c in CLAIMS]
+                                                         + ["min_clearance_m"]),
+                              fig_dir, "family_distributions"),
+         "caption": "Distribution of each claim's metric and of the minimum clearance per method "
+                    "over the scenario family (missing values, e.g. never recovered, are "
+                    "left out of the boxes and counted in the outcomes table).",
+         "alt": "Box plots of metrics per method over the scenario family"},
+    ]
+    first = next(iter(info.values()))
+    return {"ledger": ledger, "counts": [{k: _fmt(v) for k, v in c.items()} for c in counts],
+            "figures": figures, "seed": first["seed"], "size": first["size"],
+            "methods": order}
 
 
 def _metrics_doc() -> list[str]:

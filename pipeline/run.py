@@ -15,6 +15,7 @@ from pathlib import Path
 
 import hydra
 import numpy as np
+import pandas as pd
 from omegaconf import DictConfig, OmegaConf
 
 from pipeline.artifacts import (is_complete, write_csv_atomic, write_json_atomic,
@@ -23,7 +24,7 @@ from pipeline.config import (ConfigError, ExperimentConfig, register_configs,
                              to_experiment_config)
 from pipeline.metrics import TrajectoryContext, compute_metrics
 from pipeline.model import build_lateral_model
-from pipeline.scenario import build_scenario
+from pipeline.scenario import build_scenario, family_members
 from pipeline.simulate import simulate
 
 log = logging.getLogger(__name__)
@@ -78,7 +79,7 @@ def run_experiment(cfg: ExperimentConfig, out_dir: Path, resume: bool = True) ->
                                 cfg.vehicle.footprint_radius_m,
                                 cfg.controller.validity_heading_rad)
     metrics = compute_metrics(result.trajectory, context, cfg.metrics)
-    metrics.update(method=cfg.planner.name, scenario=cfg.scenario.name,
+    metrics.update(method=cfg.method_name, scenario=cfg.scenario.name,
                    config_hash=config_hash, termination=result.termination,
                    compile_count=result.compile_count)
     times = result.solve_times_s
@@ -98,6 +99,52 @@ def run_experiment(cfg: ExperimentConfig, out_dir: Path, resume: bool = True) ->
     return RunSummary(out_dir, metrics, skipped=False)
 
 
+def _run_member(cfg: ExperimentConfig, out_dir: Path) -> dict:
+    return run_experiment(cfg, out_dir).metrics
+
+
+def run_family(cfg: ExperimentConfig, out_dir: Path, progress: bool = True) -> pd.DataFrame:
+    """Run every member of ``cfg.scenario.family`` (in parallel with joblib) for one method.
+
+    Each member gets a complete run folder ``member_<index>/``; the family folder receives
+    ``family_metrics.csv`` (one row per member) and ``family.json`` (counts, config hash).
+    Members already complete with the same config hash are not simulated again.
+
+    Returns
+    -------
+    pandas.DataFrame
+        The per-member metrics table.
+    """
+    import dataclasses
+
+    from joblib import Parallel, delayed
+    from tqdm import tqdm
+
+    out_dir = Path(out_dir)
+    family = cfg.scenario.family
+    members = family_members(cfg.scenario, cfg.vehicle.footprint_radius_m)
+    jobs = [(dataclasses.replace(cfg, scenario=member), out_dir / f"member_{i:04d}")
+            for i, member in enumerate(members)]
+    results = Parallel(n_jobs=family.n_jobs, return_as="generator")(
+        delayed(_run_member)(member_cfg, folder) for member_cfg, folder in jobs)
+    rows = []
+    for i, metrics in enumerate(tqdm(results, total=len(jobs), disable=not progress,
+                                     desc=f"{cfg.method_name} family", unit="scenario")):
+        rows.append({"member": i, **metrics})
+    table = pd.DataFrame(rows)
+    write_csv_atomic(out_dir / "family_metrics.csv", table)
+    summary = {
+        "method": cfg.method_name, "scenario": cfg.scenario.name, "seed": family.seed,
+        "size": family.size, "config_hash": cfg.config_hash(),
+        "collisions": int(table["collision"].sum()),
+        "not_recovered": int((~table["recovered"].astype(bool)).sum()),
+        "goal_not_reached": int((~table["goal_reached"].astype(bool)).sum()),
+        "fallback_steps": int(table["fallback_count"].sum()) if "fallback_count" in table else 0,
+    }
+    write_json_atomic(out_dir / "family.json", summary)
+    return table
+
+
 @hydra.main(version_base="1.3", config_path="../conf", config_name="config")
 def hydra_main(cfg: DictConfig) -> None:
     """Hydra task: validate, run, log where the results are."""
@@ -112,6 +159,13 @@ def hydra_main(cfg: DictConfig) -> None:
         print(str(exc), file=sys.stderr)
         raise SystemExit(2) from None
     out_dir = Path(HydraConfig.get().runtime.output_dir)
+    if experiment.scenario.family is not None:
+        table = run_family(experiment, out_dir)
+        log.info("%s on %s (%d scenarios): %d collisions, %d not recovered -> %s",
+                 experiment.method_name, experiment.scenario.name, len(table),
+                 int(table["collision"].sum()), int((~table["recovered"].astype(bool)).sum()),
+                 out_dir)
+        return
     summary = run_experiment(experiment, out_dir)
     m = summary.metrics
     log.info("%s%s on %s: min clearance %.3f m, collision %s, time to goal %s s -> %s",

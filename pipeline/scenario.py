@@ -130,3 +130,92 @@ def build_scenario(cfg: ScenarioConfig) -> Scenario:
         obstacle_radius_m=np.array([o.radius_m for o in obs], dtype=float),
         obstacle_appear_s=np.array([o.appear_time_s for o in obs], dtype=float),
     )
+
+
+def _uniform(rng: np.random.Generator, bounds) -> float:
+    return float(rng.uniform(bounds[0], bounds[1]))
+
+
+def draw_family_member(base: ScenarioConfig, index: int,
+                       vehicle_radius_m: float = 1.0) -> ScenarioConfig:
+    """Scenario ``index`` of the family described by ``base.family``.
+
+    The first obstacle is the "sudden" one of the paper: it appears at a random time, a random
+    distance ahead of where the vehicle would be at that time and a random lateral offset, and it
+    is static, crossing the path (moving toward and over the start-goal line) or oncoming. Up to
+    two further obstacles (static or slowly moving) are scattered along the route; draws that
+    would sit on the vehicle when they appear are redrawn. Every draw comes from
+    ``numpy.random.default_rng([seed, index])``.
+
+    Parameters
+    ----------
+    base : ScenarioConfig
+        Start, goal, speed, timing and ``family`` ranges.
+    index : int
+        Member number (>= 0).
+    vehicle_radius_m : float
+        Footprint used to keep further obstacles off the vehicle when they appear.
+
+    Returns
+    -------
+    ScenarioConfig
+        A plain scenario (``family = None``) named ``<base name>_s<seed>_i<index>``.
+    """
+    from dataclasses import replace
+
+    from pipeline.config import ObstacleConfig
+
+    fam = base.family
+    rng = np.random.default_rng([fam.seed, index])
+    start, goal = np.asarray(base.start_xy_m, float), np.asarray(base.goal_xy_m, float)
+    e1 = (goal - start) / np.linalg.norm(goal - start)
+    e2 = np.array([-e1[1], e1[0]])
+    counts = np.arange(1, len(fam.obstacle_count_probabilities) + 1)
+    n_obstacles = int(rng.choice(counts, p=np.asarray(fam.obstacle_count_probabilities)))
+
+    def to_global(along: float, lateral: float) -> np.ndarray:
+        return start + along * e1 + lateral * e2
+
+    obstacles = []
+    appear = _uniform(rng, fam.appear_time_s)
+    along = base.speed_mps * appear + _uniform(rng, fam.ahead_m)
+    lateral = _uniform(rng, fam.lateral_m)
+    radius = _uniform(rng, fam.radius_m)
+    kind = rng.uniform()
+    if kind < fam.static_probability:
+        vel = np.zeros(2)
+    elif kind < fam.static_probability + fam.oncoming_probability:
+        vel = -_uniform(rng, fam.oncoming_speed_mps) * e1
+    else:
+        toward = -np.sign(lateral) if lateral != 0.0 else (1.0 if rng.uniform() < 0.5 else -1.0)
+        vel = toward * _uniform(rng, fam.crossing_speed_mps) * e2
+    pos = to_global(along, lateral)
+    obstacles.append(ObstacleConfig(x_m=float(pos[0]), y_m=float(pos[1]), vx_mps=float(vel[0]),
+                                    vy_mps=float(vel[1]), radius_m=radius,
+                                    appear_time_s=appear))
+    for _ in range(n_obstacles - 1):
+        for _attempt in range(50):
+            appear_k = _uniform(rng, fam.extra_appear_time_s)
+            along_k, lateral_k = _uniform(rng, fam.extra_x_m), _uniform(rng, fam.extra_y_m)
+            radius_k = _uniform(rng, fam.radius_m)
+            moving = rng.uniform() < 0.5
+            heading = rng.uniform(-np.pi, np.pi)
+            speed_k = rng.uniform(0.0, 0.5) if moving else 0.0
+            vel_k = speed_k * np.array([np.cos(heading), np.sin(heading)])
+            nominal = to_global(base.speed_mps * appear_k, 0.0)
+            pos_k = to_global(along_k, lateral_k)
+            clear = radius_k + vehicle_radius_m + 1.5
+            if np.linalg.norm(pos_k - nominal) > clear and np.linalg.norm(pos_k - goal) > clear:
+                break
+        obstacles.append(ObstacleConfig(x_m=float(pos_k[0]), y_m=float(pos_k[1]),
+                                        vx_mps=float(vel_k[0]), vy_mps=float(vel_k[1]),
+                                        radius_m=radius_k, appear_time_s=appear_k))
+    return replace(base, name=f"{base.name}_s{fam.seed}_i{index:04d}", obstacles=obstacles,
+                   family=None)
+
+
+def family_members(base: ScenarioConfig, vehicle_radius_m: float = 1.0) -> list[ScenarioConfig]:
+    """All ``base.family.size`` members, in index order."""
+    if base.family is None:
+        raise ValueError("scenario has no family block")
+    return [draw_family_member(base, i, vehicle_radius_m) for i in range(base.family.size)]

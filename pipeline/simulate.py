@@ -15,8 +15,9 @@ import numpy as np
 import pandas as pd
 
 from pipeline.config import ExperimentConfig
-from pipeline.controller import (LateralMpc, MpcInputs, collision_halfplanes,
-                                 force_heading_reference, lateral_reference)
+from pipeline.controller import (LateralMpc, MpcInputs, MpcStep, collision_halfplanes,
+                                 force_heading_reference, lateral_reference,
+                                 pure_pursuit_steering_rate)
 from pipeline.model import LateralModelCache, step_plant
 from pipeline.planner import apf_rollout, plan_speed
 from pipeline.scenario import Scenario
@@ -77,7 +78,7 @@ def simulate(cfg: ExperimentConfig, scenario: Scenario) -> SimulationResult:
     frame = scenario.line_frame
     goal_line_x = float(frame.to_line(scenario.goal_m)[0])
     cache = LateralModelCache(vehicle, ts, ctrl.b2_heading_entry, ctrl.speed_grid_mps)
-    mpc = LateralMpc(ctrl, vehicle)
+    mpc = LateralMpc(ctrl, vehicle) if ctrl.kind == "mpc" else None
     state = np.array([scenario.start_m[0], scenario.start_m[1], scenario.start_heading_rad,
                       scenario.speed_mps, 0.0, 0.0, 0.0])
     rows: list[dict] = []
@@ -138,8 +139,13 @@ def simulate(cfg: ExperimentConfig, scenario: Scenario) -> SimulationResult:
         G, h = collision_halfplanes(stations, y_ref, line_pos, predicted[1:], visible.radii_m,
                                     vehicle, ctrl)
         x0 = np.array([line_pos[1], state[4], e_psi, state[5], state[6]])
-        step = mpc.step(MpcInputs(x0, model, y_ref, psi_ref, G, h, np.zeros(N)))
-        solve_times.append(step.solve_time_s)
+        if mpc is not None:
+            step = mpc.step(MpcInputs(x0, model, y_ref, psi_ref, G, h, np.zeros(N)))
+            solve_times.append(step.solve_time_s)
+        else:
+            rate = pure_pursuit_steering_rate(path_line, line_pos, e_psi, state[6], state[3],
+                                              vehicle, ctrl, ts)
+            step = MpcStep(rate, np.full(N, rate), None, "pure_pursuit", 0, 0.0, "none", 0.0)
         f_att = rollout.attraction[0] if N > 1 else np.zeros(2)
         f_rep = rollout.repulsion[0] if N > 1 else np.zeros(2)
         next_point = rollout.path_m[1] if N > 1 else rollout.path_m[0]
@@ -159,5 +165,7 @@ def simulate(cfg: ExperimentConfig, scenario: Scenario) -> SimulationResult:
                            scenario.plant_substeps)
 
     trajectory = pd.DataFrame(rows)
-    return SimulationResult(trajectory, np.asarray(solve_times), mpc.compile_count,
-                            mpc.compile_time_s, termination == "goal_line", termination)
+    return SimulationResult(trajectory, np.asarray(solve_times),
+                            mpc.compile_count if mpc is not None else 0,
+                            mpc.compile_time_s if mpc is not None else 0.0,
+                            termination == "goal_line", termination)

@@ -1,0 +1,103 @@
+"""Scenario family: seeded, machine-independent draws; family runs; the claims ledger."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from pipeline.claims import (CLAIMS, bootstrap_median_ci, family_ledger, family_verdict,
+                             outcome_counts, paired_differences)
+from pipeline.run import run_family
+from pipeline.scenario import draw_family_member, family_members
+
+
+def test_member_depends_only_on_seed_and_index(make_config):
+    small = make_config(["scenario=family", "scenario.family.size=4"]).scenario
+    large = make_config(["scenario=family", "scenario.family.size=40"]).scenario
+    assert family_members(small)[3] == family_members(large)[3]
+    other_seed = make_config(["scenario=family", "scenario.family.seed=1"]).scenario
+    assert draw_family_member(other_seed, 3) != draw_family_member(large, 3)
+
+
+def test_member_zero_of_seed_zero_is_pinned(make_config):
+    """PCG64 streams are platform-independent: these numbers are the same on every machine."""
+    member = draw_family_member(make_config(["scenario=family"]).scenario, 0)
+    first = member.obstacles[0]
+    assert member.name == "family_s0_i0000"
+    rng = np.random.default_rng([0, 0])
+    rng.choice([1, 2, 3], p=[0.5, 0.3, 0.2])
+    appear = rng.uniform(2.0, 4.0)
+    assert first.appear_time_s == pytest.approx(appear, abs=1e-12)
+    assert first.x_m == pytest.approx(3.0 * appear + rng.uniform(4.0, 8.0), abs=1e-12)
+    assert first.y_m == pytest.approx(rng.uniform(-2.0, 2.0), abs=1e-12)
+
+
+def test_family_draws_cover_the_stated_ranges(make_config):
+    base = make_config(["scenario=family", "scenario.family.size=200"]).scenario
+    members = family_members(base)
+    counts = np.bincount([len(m.obstacles) for m in members], minlength=4)[1:]
+    assert counts.sum() == 200 and np.all(counts > 20)
+    first = [m.obstacles[0] for m in members]
+    static = sum(o.vx_mps == 0 and o.vy_mps == 0 for o in first)
+    oncoming = sum(o.vx_mps < 0 and o.vy_mps == 0 for o in first)
+    crossing = sum(o.vy_mps != 0 for o in first)
+    assert static > 20 and oncoming > 20 and crossing > 60
+    for m in members:
+        for o in m.obstacles:
+            assert 0.3 <= o.radius_m <= 0.7
+        o = m.obstacles[0]
+        assert 2.0 <= o.appear_time_s <= 4.0
+        assert 4.0 <= o.x_m - 3.0 * o.appear_time_s <= 8.0
+
+
+def test_bootstrap_ci_and_verdict_rules():
+    rng = np.random.default_rng(0)
+    assert bootstrap_median_ci(np.full(50, -1.0), rng) == (-1.0, -1.0)
+    assert family_verdict(*bootstrap_median_ci(np.full(50, -1.0), rng)) == "supported"
+    assert family_verdict(*bootstrap_median_ci(np.full(50, 0.0), rng)) == "not supported"
+    symmetric = np.concatenate([np.full(25, -1.0), np.full(25, 1.0)])
+    assert family_verdict(*bootstrap_median_ci(symmetric, rng)) == "mixed"
+    # a normal sample: the interval brackets the true median 0.5 for this seed
+    low, high = bootstrap_median_ci(rng.normal(0.5, 1.0, 400), np.random.default_rng(1))
+    assert low < 0.5 < high and high - low < 0.4
+
+
+def test_missing_values_count_as_worst_in_paired_differences():
+    claim = next(c for c in CLAIMS if c.claim_id == "C4")
+    improved = pd.DataFrame({"scenario": ["a", "b", "c", "d"],
+                             claim.primary_metric: [1.0, np.nan, 2.0, np.nan]})
+    baseline = pd.DataFrame({"scenario": ["d", "c", "b", "a"],
+                             claim.primary_metric: [np.nan, np.nan, 3.0, 3.0]})
+    d = paired_differences(improved, baseline, claim)
+    assert d.tolist() == [-2.0, math.inf, -math.inf, 0.0]
+
+
+@pytest.fixture(scope="module")
+def small_family(tmp_path_factory, make_config):
+    tables = {}
+    for method in ("baseline", "improved"):
+        cfg = make_config([f"method={method}", "scenario=family", "scenario.family.size=4",
+                           "scenario.family.n_jobs=2"])
+        tables[method] = run_family(cfg, tmp_path_factory.mktemp(method), progress=False)
+    return tables
+
+
+def test_family_run_writes_a_row_and_a_run_folder_per_member(small_family):
+    for method, table in small_family.items():
+        assert table["member"].tolist() == [0, 1, 2, 3]
+        assert (table["method"] == method).all()
+        assert table["scenario"].tolist() == [f"family_s0_i{i:04d}" for i in range(4)]
+
+
+def test_ledger_over_a_small_family(small_family):
+    rows, differences = family_ledger(small_family)
+    assert [r["claim"] for r in rows] == ["C1", "C2", "C3", "C4", "C5"]
+    for row in rows:
+        assert row["n_pairs"] == 4 and len(differences[row["claim"]]) == 4
+        assert row["verdict"] in ("supported", "not supported", "mixed")
+        assert row["ci_low"] <= row["median_difference"] <= row["ci_high"]
+    counts = outcome_counts(small_family)
+    assert [c["scenarios"] for c in counts] == [4, 4]
