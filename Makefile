@@ -22,8 +22,9 @@ $(STAMP): pyproject.toml constraints.txt
 install: $(STAMP)  ## create .venv and install the project with pinned versions
 
 experiment: $(STAMP)  ## run every method on the paper scenario and on the scenario family
-	rm -rf $(RUNS)/paper $(RUNS)/family  # code may have changed since: never reuse old runs here
+	rm -rf $(RUNS)/paper $(RUNS)/kinematic $(RUNS)/family  # code may have changed: no reuse here
 	$(PY) -m pipeline.run experiment=paper hydra.sweep.dir=$(RUNS)/paper
+	$(PY) -m pipeline.run experiment=kinematic hydra.sweep.dir=$(RUNS)/kinematic
 	$(PY) -m pipeline.run experiment=family hydra.sweep.dir=$(RUNS)/family scenario.family.size=$(FAMILY_SIZE)
 
 report: $(STAMP)  ## rebuild the HTML report from existing run folders (no simulation)

@@ -182,9 +182,29 @@ class ControllerConfig:
     validity_heading_rad: float = 0.35
     lookahead_min_m: float = 2.0
     lookahead_time_s: float = 0.8
+    output_weights: List[float] = field(default_factory=lambda: [1.0, 1.0])
+    input_weights: List[float] = field(default_factory=lambda: [0.1, 0.1])
+    input_rate_weights: List[float] = field(default_factory=lambda: [0.01, 0.01])
+    accel_bounds_mps2: List[float] = field(default_factory=lambda: [-3.0, 3.0])
+    ltv_iterations: int = 1
+    reference_alignment: str = "literal"
 
     def __post_init__(self) -> None:
-        _choice("controller.kind", self.kind, ("mpc", "pure_pursuit"))
+        _choice("controller.kind", self.kind, ("mpc", "pure_pursuit", "kinematic_mpc"))
+        for key in ("output_weights", "input_weights", "input_rate_weights"):
+            _pair(f"controller.{key}", getattr(self, key))
+            for i, w in enumerate(getattr(self, key)):
+                _at_least(f"controller.{key}[{i}]", w, 0.0)
+        _pair("controller.accel_bounds_mps2", self.accel_bounds_mps2)
+        if not self.accel_bounds_mps2[0] < self.accel_bounds_mps2[1]:
+            raise ConfigError("controller.accel_bounds_mps2", list(self.accel_bounds_mps2),
+                              "[low, high] with low < high")
+        if isinstance(self.ltv_iterations, bool) or not isinstance(self.ltv_iterations, int) \
+                or not 1 <= self.ltv_iterations <= 50:
+            raise ConfigError("controller.ltv_iterations", self.ltv_iterations,
+                              "an integer in [1, 50]")
+        _choice("controller.reference_alignment", self.reference_alignment,
+                ("literal", "shifted"))
         _at_least("controller.lookahead_min_m", self.lookahead_min_m, 0.0, inclusive=False)
         _at_least("controller.lookahead_time_s", self.lookahead_time_s, 0.0)
         for key in ("horizon", "control_horizon", "max_obstacles", "solver_max_iter"):
@@ -304,6 +324,7 @@ class ScenarioConfig:
     sample_time_s: float = 0.1
     n_steps: int = 130
     plant_substeps: int = 10
+    initial_speed_mps: Optional[float] = None
     obstacles: List[ObstacleConfig] = field(default_factory=list)
     family: Optional[FamilyConfig] = None
 
@@ -319,6 +340,8 @@ class ScenarioConfig:
         _at_least("scenario.goal_tolerance_m", self.goal_tolerance_m, 0.0, inclusive=False)
         _between("scenario.speed_mps", self.speed_mps, 0.1, 40.0)
         _at_least("scenario.sample_time_s", self.sample_time_s, 0.0, inclusive=False)
+        if self.initial_speed_mps is not None:
+            _between("scenario.initial_speed_mps", self.initial_speed_mps, 0.0, 40.0)
         for key in ("n_steps", "plant_substeps"):
             value = getattr(self, key)
             if isinstance(value, bool) or not isinstance(value, int) or value < 1:
@@ -493,6 +516,17 @@ INTERPRETATION_REGISTER: tuple[RegisterEntry, ...] = (
         "radial: n . (p_k - o_k) >= R, n from the predicted obstacle toward the APF reference "
         "point (tangent plane; mostly longitudinal, so a lateral MPC can meet it only with slack)",
         "controller.halfplane_normal"),
+    RegisterEntry(
+        "Time alignment of y_ref in nlmpcmove (kinematic track)",
+        "y_ref = [p_1; ...; p_Np] with p_1 the current position, passed to nlmpcmove",
+        "literal: row i is the reference of predicted step i, as nlmpcmove reads it (so step 1 "
+        "tracks the current position)", "shifted: row i + 1 for step i",
+        "controller.reference_alignment"),
+    RegisterEntry(
+        "Discretization of the kinematic prediction model",
+        "Appendix A advances x(k+1) = x(k) + f(x, u) Ts; nlmpc's own discretization is not given",
+        "forward Euler for the MPC's prediction (as Appendix A's loop); the plant integrates the "
+        "same ODE exactly with RK4 substeps", "-", "scenario.plant_substeps"),
     RegisterEntry(
         "Run length", "100 steps of 0.1 s (Appendix A)",
         "130 steps: at 3 m/s a 100-step run ends at the goal line before the vehicle can settle; "

@@ -71,6 +71,35 @@ class MpcStep:
     max_slack_m: float
 
 
+class CompiledQp:
+    """A CVXPY problem solved repeatedly by Clarabel, counting its compilations.
+
+    Subclasses set ``self.problem`` and ``self.cfg`` (a :class:`ControllerConfig`).
+    """
+
+    problem: cp.Problem
+    cfg: ControllerConfig
+    compile_count: int = 0
+    compile_time_s: float = 0.0
+    _compiled_program: object = None
+
+    def _solve_raw(self) -> tuple[str, int, float]:
+        """Solve once; return status, Clarabel's iteration count and the wall time (s)."""
+        start = time.perf_counter()
+        self.problem.solve(solver=cp.CLARABEL, max_iter=self.cfg.solver_max_iter)
+        elapsed = time.perf_counter() - start
+        # DPP: CVXPY keeps the parameter-to-data map after the first solve; a new one means
+        # the problem was compiled again
+        program = getattr(self.problem._cache, "param_prog", None)
+        if program is not self._compiled_program:
+            self.compile_count += 1
+            self.compile_time_s = float(getattr(self.problem, "compilation_time", 0.0) or 0.0)
+            self._compiled_program = program
+        stats = self.problem.solver_stats
+        iterations = int(stats.num_iters) if stats is not None and stats.num_iters is not None else -1
+        return str(self.problem.status), iterations, elapsed
+
+
 def blocking_matrix(horizon: int, control_horizon: int, input_hold: str) -> np.ndarray:
     """Matrix ``T`` (Nc x N) with ``u_seq = U @ T`` for the move-blocking rule."""
     T = np.zeros((control_horizon, horizon))
@@ -82,7 +111,7 @@ def blocking_matrix(horizon: int, control_horizon: int, input_hold: str) -> np.n
     return T
 
 
-class LateralMpc:
+class LateralMpc(CompiledQp):
     """The lateral MPC problem, compiled once and re-solved with new parameter values.
 
     Parameters
@@ -130,9 +159,6 @@ class LateralMpc:
         self.problem = cp.Problem(cp.Minimize(cost), constraints)
         if not self.problem.is_dcp(dpp=True):
             raise RuntimeError("lateral MPC is not DPP; it would recompile every step")
-        self.compile_count = 0
-        self.compile_time_s = 0.0
-        self._compiled_program = None
         self._last_plan: np.ndarray | None = None
         self._plan_age = 0
 
@@ -146,19 +172,6 @@ class LateralMpc:
         self.psi_ref.value = inputs.psi_ref_rad
         self.G.value = inputs.constraint_gain
         self.h.value = inputs.constraint_bound
-
-    def _solve_raw(self) -> tuple[str, int, float]:
-        start = time.perf_counter()
-        self.problem.solve(solver=cp.CLARABEL, max_iter=self.cfg.solver_max_iter)
-        elapsed = time.perf_counter() - start
-        program = getattr(self.problem._cache, "param_prog", None)
-        if program is not self._compiled_program:
-            self.compile_count += 1
-            self.compile_time_s = float(getattr(self.problem, "compilation_time", 0.0) or 0.0)
-            self._compiled_program = program
-        stats = self.problem.solver_stats
-        iterations = int(stats.num_iters) if stats is not None and stats.num_iters is not None else -1
-        return str(self.problem.status), iterations, elapsed
 
     def step(self, inputs: MpcInputs) -> MpcStep:
         """Solve for the current step, falling back safely on any failure."""
@@ -328,3 +341,211 @@ def pure_pursuit_steering_rate(path_line_m: np.ndarray, position_line_m: np.ndar
     desired = float(np.clip(desired, -vehicle.steering_max_rad, vehicle.steering_max_rad))
     return float(np.clip((desired - steering_rad) / sample_time_s,
                          -vehicle.steering_rate_max_rad_s, vehicle.steering_rate_max_rad_s))
+
+
+@dataclass(frozen=True)
+class KinematicStep:
+    """Result of one step of the kinematic LTV-MPC.
+
+    Attributes
+    ----------
+    control_input : ndarray, shape (2,)
+        ``[a (m/s^2), delta (rad)]`` applied now.
+    planned_inputs : ndarray, shape (2, N)
+    predicted_states : ndarray, shape (4, N + 1) or None
+    status : str
+    iterations : int
+        Clarabel iterations summed over the linearization passes.
+    solve_time_s : float
+    fallback : str
+    max_slack_m : float
+    ltv_passes : int
+        Linearization passes done this step.
+    ltv_change : float
+        Max-norm change of the input plan in the last pass (convergence indicator).
+    """
+
+    control_input: np.ndarray
+    planned_inputs: np.ndarray
+    predicted_states: np.ndarray | None
+    status: str
+    iterations: int
+    solve_time_s: float
+    fallback: str
+    max_slack_m: float
+    ltv_passes: int
+    ltv_change: float
+
+
+class KinematicLtvMpc(CompiledQp):
+    """Appendix A's ``nlmpc`` as a linear-time-varying QP (CVXPY + Clarabel, DPP).
+
+    Each step linearizes the Euler-discretized kinematic bicycle about a trajectory rolled out
+    from the measured state with the previous plan (shifted), solves the QP, and optionally
+    repeats the linearization about the new plan (``ltv_iterations`` passes). Cost as MATLAB
+    writes it, weights squared: ``sum |w_y (y_k - y_ref,k)|^2 + |w_u u_k|^2 + |w_du (u_k -
+    u_{k-1})|^2``; inputs held after ``Nc``; soft half-plane per obstacle and step with normal
+    from the predicted obstacle toward the APF reference point.
+
+    Parameters
+    ----------
+    controller : ControllerConfig
+    vehicle : VehicleConfig
+    sample_time_s : float
+    """
+
+    def __init__(self, controller: ControllerConfig, vehicle: VehicleConfig,
+                 sample_time_s: float) -> None:
+        self.cfg, self.vehicle, self.ts = controller, vehicle, float(sample_time_s)
+        N, Nc, M = controller.horizon, controller.control_horizon, controller.max_obstacles
+        self.horizon = N
+        self.blocking = blocking_matrix(N, Nc, controller.input_hold)
+        self.A = [cp.Parameter((4, 4), name=f"A{k}") for k in range(N)]
+        self.B = [cp.Parameter((4, 2), name=f"B{k}") for k in range(N)]
+        self.c = cp.Parameter((4, N), name="c")
+        self.x0 = cp.Parameter(4, name="x0")
+        self.ref = cp.Parameter((2, N), name="y_ref")
+        self.u_prev = cp.Parameter(2, name="u_prev")
+        self.Gx = cp.Parameter((N, M), name="halfplane_nx")
+        self.Gy = cp.Parameter((N, M), name="halfplane_ny")
+        self.h = cp.Parameter((N, M), name="halfplane_bound")
+        self.X = cp.Variable((4, N + 1), name="X")
+        self.U = cp.Variable((2, Nc), name="U")
+        self.S = cp.Variable((N, M), nonneg=True, name="slack")
+        u_seq = self.U @ self.blocking
+        self.u_seq = u_seq
+        wy = np.asarray(controller.output_weights, float)[:, None]
+        wu = np.asarray(controller.input_weights, float)[:, None]
+        wdu = np.asarray(controller.input_rate_weights, float)[:, None]
+        rates = cp.hstack([cp.reshape(u_seq[:, 0] - self.u_prev, (2, 1), order="F"),
+                           u_seq[:, 1:] - u_seq[:, :-1]])
+        ones = np.ones((1, M))
+        px = cp.reshape(self.X[0, 1:], (N, 1), order="F") @ ones
+        py = cp.reshape(self.X[1, 1:], (N, 1), order="F") @ ones
+        cost = (cp.sum_squares(cp.multiply(wy, self.X[0:2, 1:] - self.ref))
+                + cp.sum_squares(cp.multiply(wu, u_seq))
+                + cp.sum_squares(cp.multiply(wdu, rates))
+                + controller.slack_weight_linear * cp.sum(self.S)
+                + controller.slack_weight_quadratic * cp.sum_squares(self.S))
+        a_lo, a_hi = controller.accel_bounds_mps2
+        constraints = [self.X[:, 0] == self.x0,
+                       self.U[0, :] >= a_lo, self.U[0, :] <= a_hi,
+                       cp.abs(self.U[1, :]) <= vehicle.steering_max_rad,
+                       cp.multiply(self.Gx, px) + cp.multiply(self.Gy, py) + self.S >= self.h]
+        constraints += [self.X[:, k + 1] == self.A[k] @ self.X[:, k] + self.B[k] @ u_seq[:, k]
+                        + self.c[:, k] for k in range(N)]
+        self.problem = cp.Problem(cp.Minimize(cost), constraints)
+        if not self.problem.is_dcp(dpp=True):
+            raise RuntimeError("kinematic LTV-MPC is not DPP; it would recompile every step")
+        self._last_plan: np.ndarray | None = None
+        self._plan_age = 0
+
+    def rollout(self, x0: np.ndarray, plan: np.ndarray) -> np.ndarray:
+        """States of the Euler model from ``x0`` under ``plan`` (2 x N), shape (4, N + 1)."""
+        from pipeline.model import kinematic_euler_step
+
+        states = np.zeros((4, self.horizon + 1))
+        states[:, 0] = x0
+        for k in range(self.horizon):
+            states[:, k + 1] = kinematic_euler_step(states[:, k], plan[:, k],
+                                                    self.vehicle.wheelbase_m, self.ts)
+        return states
+
+    def _linearize(self, x0: np.ndarray, plan: np.ndarray) -> np.ndarray:
+        from pipeline.model import kinematic_jacobians
+
+        states = self.rollout(x0, plan)
+        offsets = np.zeros((4, self.horizon))
+        for k in range(self.horizon):
+            A, B, c = kinematic_jacobians(states[:, k], plan[:, k], self.vehicle.wheelbase_m,
+                                          self.ts)
+            self.A[k].value, self.B[k].value = A, B
+            offsets[:, k] = c
+        self.c.value = offsets
+        return states
+
+    def _halfplanes(self, states: np.ndarray, reference: np.ndarray,
+                    predicted_obstacles: np.ndarray, radii: np.ndarray) -> None:
+        N, M = self.horizon, self.cfg.max_obstacles
+        Gx, Gy, h = np.zeros((N, M)), np.zeros((N, M)), np.zeros((N, M))
+        n_obs = predicted_obstacles.shape[1] if predicted_obstacles.ndim == 3 else 0
+        for j in range(min(n_obs, M)):
+            obstacle = predicted_obstacles[:, j, :]
+            if np.linalg.norm(obstacle[0] - states[:2, 0]) > self.cfg.constraint_activation_m:
+                continue
+            normal = reference.T - obstacle
+            dist = np.linalg.norm(normal, axis=1)
+            backup = states[:2, 1:].T - obstacle
+            backup_dist = np.linalg.norm(backup, axis=1)
+            normal = np.where(dist[:, None] > 1e-6, normal / np.maximum(dist, 1e-6)[:, None],
+                              np.where(backup_dist[:, None] > 1e-6,
+                                       backup / np.maximum(backup_dist, 1e-6)[:, None],
+                                       np.array([0.0, 1.0])[None, :]))
+            reach = radii[j] + self.vehicle.footprint_radius_m + self.cfg.safety_margin_m
+            Gx[:, j], Gy[:, j] = normal[:, 0], normal[:, 1]
+            h[:, j] = np.sum(normal * obstacle, axis=1) + reach
+        self.Gx.value, self.Gy.value, self.h.value = Gx, Gy, h
+
+    def step(self, x0: np.ndarray, u_prev: np.ndarray, reference: np.ndarray,
+             predicted_obstacles: np.ndarray, radii: np.ndarray,
+             passes: int | None = None) -> KinematicStep:
+        """Solve one step.
+
+        Parameters
+        ----------
+        x0 : ndarray, shape (4,)
+        u_prev : ndarray, shape (2,)
+            Input applied at the previous step (for the rate penalty).
+        reference : ndarray, shape (2, N)
+            Reference position for predicted steps 1..N.
+        predicted_obstacles : ndarray, shape (N, n, 2)
+        radii : ndarray, shape (n,)
+        passes : int, optional
+            Linearization passes (default ``ltv_iterations``).
+        """
+        N = self.horizon
+        passes = self.cfg.ltv_iterations if passes is None else passes
+        if self._last_plan is not None:
+            plan = np.hstack([self._last_plan[:, 1:], self._last_plan[:, -1:]])
+        else:
+            plan = np.zeros((2, N))
+        status, total_iters, total_time, change = "not_solved", 0, 0.0, float("nan")
+        states = None
+        done = 0
+        if np.all(np.isfinite(x0)) and np.all(np.isfinite(u_prev)):
+            self.x0.value, self.u_prev.value, self.ref.value = x0, u_prev, reference
+            for _ in range(max(passes, 1)):
+                states = self._linearize(x0, plan)
+                self._halfplanes(states, reference, predicted_obstacles, radii)
+                try:
+                    status, iters, elapsed = self._solve_raw()
+                except (cp.error.SolverError, ValueError, ArithmeticError) as exc:
+                    status, iters, elapsed = f"error:{type(exc).__name__}", -1, 0.0
+                total_iters += max(iters, 0)
+                total_time += elapsed
+                done += 1
+                if status not in OPTIMAL_STATUSES or self.U.value is None:
+                    break
+                new_plan = np.asarray(self.u_seq.value, dtype=float)
+                if not np.all(np.isfinite(new_plan)):
+                    status = "non_finite_solution"
+                    break
+                change = float(np.max(np.abs(new_plan - plan)))
+                plan = new_plan
+            if status in OPTIMAL_STATUSES and np.all(np.isfinite(plan)):
+                self._last_plan, self._plan_age = plan, 0
+                return KinematicStep(plan[:, 0].copy(), plan, np.asarray(self.X.value), status,
+                                     total_iters, total_time, "none",
+                                     float(np.max(self.S.value, initial=0.0)), done, change)
+        # fallback: shifted previous plan, then a bounded safe input (straight wheels, braking)
+        if self._last_plan is not None and self._plan_age + 1 < N:
+            self._plan_age += 1
+            shifted = np.hstack([self._last_plan[:, self._plan_age:],
+                                 np.repeat(self._last_plan[:, -1:], self._plan_age, axis=1)])
+            return KinematicStep(shifted[:, 0].copy(), shifted, None, status, total_iters,
+                                 total_time, "shifted_plan", float("nan"), done, change)
+        speed = x0[3] if np.isfinite(x0[3]) else 0.0
+        a_lo, a_hi = self.cfg.accel_bounds_mps2
+        safe = np.array([float(np.clip(-speed / self.ts, a_lo, a_hi)), 0.0])
+        return KinematicStep(safe, np.repeat(safe[:, None], N, axis=1), None, status,
+                             total_iters, total_time, "safe_input", float("nan"), done, change)

@@ -187,3 +187,67 @@ def step_plant(state: np.ndarray, steering_rate_rad_s: float, speed_target_mps: 
         x = x + h / 6.0 * (k1 + 2 * k2 + 2 * k3 + k4)
         x[6] = np.clip(x[6], -vehicle.steering_max_rad, vehicle.steering_max_rad)
     return x
+
+
+#: Kinematic bicycle (paper Appendix A): state [x, y, theta, v], input [a, delta].
+KINEMATIC_STATE_NAMES = ("X_m", "Y_m", "psi_rad", "v_mps")
+
+
+def kinematic_derivative(state: np.ndarray, control_input: np.ndarray,
+                         wheelbase_m: float) -> np.ndarray:
+    """``f(x, u)`` of Appendix A: ``[v cos th, v sin th, v/L tan delta, a]``."""
+    _, _, theta, v = state
+    accel, delta = control_input
+    return np.array([v * np.cos(theta), v * np.sin(theta), v / wheelbase_m * np.tan(delta),
+                     accel])
+
+
+def kinematic_euler_step(state: np.ndarray, control_input: np.ndarray, wheelbase_m: float,
+                         dt_s: float) -> np.ndarray:
+    """The MPC's prediction model: one forward-Euler step ``x + Ts f(x, u)`` (as Appendix A's
+    loop advances its state)."""
+    return np.asarray(state, float) + dt_s * kinematic_derivative(state, control_input,
+                                                                  wheelbase_m)
+
+
+def kinematic_jacobians(state: np.ndarray, control_input: np.ndarray, wheelbase_m: float,
+                        dt_s: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Linearization of :func:`kinematic_euler_step` about ``(state, control_input)``.
+
+    Returns
+    -------
+    A : ndarray, shape (4, 4)
+    B : ndarray, shape (4, 2)
+    c : ndarray, shape (4,)
+        Offset so that ``x+ ~= A x + B u + c`` near the point.
+    """
+    _, _, theta, v = state
+    accel, delta = control_input
+    L = wheelbase_m
+    A = np.eye(4)
+    A[0, 2] = -dt_s * v * np.sin(theta)
+    A[0, 3] = dt_s * np.cos(theta)
+    A[1, 2] = dt_s * v * np.cos(theta)
+    A[1, 3] = dt_s * np.sin(theta)
+    A[2, 3] = dt_s * np.tan(delta) / L
+    B = np.zeros((4, 2))
+    B[2, 1] = dt_s * v / (L * np.cos(delta) ** 2)
+    B[3, 0] = dt_s
+    c = kinematic_euler_step(state, control_input, L, dt_s) - A @ state - B @ control_input
+    return A, B, c
+
+
+def kinematic_plant_step(state: np.ndarray, control_input: np.ndarray, wheelbase_m: float,
+                         dt_s: float, substeps: int) -> np.ndarray:
+    """The plant of the kinematic track: the exact nonlinear model, RK4 with substeps, input
+    held over the step."""
+    h = dt_s / substeps
+    x = np.asarray(state, dtype=float).copy()
+    u = np.asarray(control_input, dtype=float)
+    for _ in range(substeps):
+        k1 = kinematic_derivative(x, u, wheelbase_m)
+        k2 = kinematic_derivative(x + 0.5 * h * k1, u, wheelbase_m)
+        k3 = kinematic_derivative(x + 0.5 * h * k2, u, wheelbase_m)
+        k4 = kinematic_derivative(x + h * k3, u, wheelbase_m)
+        x = x + h / 6.0 * (k1 + 2 * k2 + 2 * k3 + k4)
+    return x

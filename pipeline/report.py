@@ -155,6 +155,8 @@ def build_report(run_root: Path, out_dir: Path, command: str) -> Path:
     if not runs:
         raise FileNotFoundError(f"no single runs (the paper scenario) under {run_root}")
     scenario = "paper_sudden_obstacle"
+    kinematic_runs = [r for r in runs if r["metrics"].get("track") == "kinematic"]
+    runs = [r for r in runs if r["metrics"].get("track", "lateral") == "lateral"] or runs
     paper_runs = [r for r in runs if r["metrics"]["scenario"] == scenario] or runs
     scenario = paper_runs[0]["metrics"]["scenario"]
     by_method = {r["metrics"]["method"]: r for r in paper_runs}
@@ -170,7 +172,7 @@ def build_report(run_root: Path, out_dir: Path, command: str) -> Path:
     metrics_frame = pd.DataFrame(metrics_by_method)
     metrics_frame.index.name = "metric"
     metrics_frame.to_csv(table_dir / "metrics_paper_scenario.csv")
-    skip = {"method", "scenario", "config_hash"}
+    skip = {"method", "scenario", "config_hash", "track"}
     metric_rows = [{"metric": k, "values": [_fmt(metrics_by_method[m].get(k)) for m in order]}
                    for k in metrics_frame.index if k not in skip]
     timing_rows = [{"method": m,
@@ -185,6 +187,11 @@ def build_report(run_root: Path, out_dir: Path, command: str) -> Path:
     for row in claims:
         row["values"] = [_fmt(row.get(m)) for m in order]
     claim_secondary = {c.claim_id: ", ".join(c.secondary_metrics) for c in CLAIMS}
+
+    kinematic = None
+    if kinematic_runs:
+        kinematic = _track_section(kinematic_runs, "kinematic", fig_dir, table_dir, claims)
+        figures.extend(kinematic["figures"])
 
     family = None
     if "baseline" in family_tables and "improved" in family_tables:
@@ -203,6 +210,7 @@ def build_report(run_root: Path, out_dir: Path, command: str) -> Path:
         scenario=scenario, methods=order, figures=figures, metric_rows=metric_rows,
         timing_rows=timing_rows, claims=claims, claim_secondary=claim_secondary,
         verdict_rule=VERDICT_RULE_SINGLE, family=family, family_rule=VERDICT_RULE_FAMILY,
+        kinematic=kinematic,
         register=register_rows({m: r["config"] for m, r in by_method.items()}),
         configs={m: yaml.safe_dump(r["config"], sort_keys=False) for m, r in by_method.items()},
         hashes={m: r["metrics"]["config_hash"] for m, r in by_method.items()},
@@ -217,8 +225,41 @@ def _ms(seconds) -> float | None:
     return None if seconds is None else 1e3 * seconds
 
 
+def _track_section(runs: list[dict], track: str, fig_dir: Path, table_dir: Path,
+                   lateral_claims: list[dict]) -> dict:
+    """Figures, metrics and claims of a second track, and how its verdicts compare."""
+    by_method = {r["metrics"]["method"]: r for r in runs}
+    order = _ordered(by_method)
+    by_method = {m: by_method[m] for m in order}
+    first = next(iter(by_method.values()))
+    cfg = first["config"]
+    figures = _paper_figures(by_method, first["metrics"]["scenario"],
+                             tuple(cfg["scenario"]["goal_xy_m"]),
+                             cfg["vehicle"]["footprint_radius_m"],
+                             first["metrics"].get("obstacle_appear_time_s"), fig_dir,
+                             prefix=f"{track}_", group_prefix=f"{track}_")
+    metrics_by_method = {m: r["metrics"] for m, r in by_method.items()}
+    frame = pd.DataFrame(metrics_by_method)
+    frame.index.name = "metric"
+    frame.to_csv(table_dir / f"metrics_{track}_track.csv")
+    skip = {"method", "scenario", "config_hash", "track"}
+    metric_rows = [{"metric": k, "values": [_fmt(metrics_by_method[m].get(k)) for m in order]}
+                   for k in frame.index if k not in skip]
+    claims = claims_table(metrics_by_method)
+    for row in claims:
+        row["values"] = [_fmt(row.get(m)) for m in order]
+    lateral = {r["claim"]: r["verdict"] for r in lateral_claims}
+    comparison = [{"claim": r["claim"], "lateral": lateral.get(r["claim"], "n/a"),
+                   "other": r["verdict"], "agree": lateral.get(r["claim"]) == r["verdict"]}
+                  for r in claims]
+    return {"methods": order, "figures": figures, "metric_rows": metric_rows, "claims": claims,
+            "comparison": comparison,
+            "n_steps": cfg["scenario"]["n_steps"],
+            "initial_speed": cfg["scenario"].get("initial_speed_mps")}
+
+
 def _paper_figures(by_method: dict, scenario: str, goal: tuple, radius: float, appear,
-                   fig_dir: Path) -> list[dict]:
+                   fig_dir: Path, prefix: str = "", group_prefix: str = "") -> list[dict]:
     """Figure 2/3 analogues (shared axes), overlay, time series and APF forces."""
     xs = np.concatenate([r["trajectory"]["X_m"].to_numpy() for r in by_method.values()])
     ys = np.concatenate([r["trajectory"]["Y_m"].to_numpy() for r in by_method.values()])
@@ -232,8 +273,9 @@ def _paper_figures(by_method: dict, scenario: str, goal: tuple, radius: float, a
             method, "Variant")
         paths = save_figure(trajectory_figure(run["trajectory"], method, goal, radius, snap,
                                               title=f"{label}: {method}", limits=limits),
-                            fig_dir, f"trajectory_{method}")
-        figures.append({"id": f"trajectory_{method}", "group": "paths", "paths": paths,
+                            fig_dir, f"{prefix}trajectory_{method}")
+        figures.append({"id": f"{prefix}trajectory_{method}", "group": f"{group_prefix}paths",
+                        "paths": paths,
                         "caption": f"{label} — {method} on {scenario}: vehicle path, "
                                    f"footprint (dotted) and obstacle (grey, darker is later) at "
                                    f"{', '.join(f'{s:.0f}' for s in snap)} s.",
@@ -250,7 +292,8 @@ def _paper_figures(by_method: dict, scenario: str, goal: tuple, radius: float, a
             ("apf_forces", apf_force_figure(tr_by_method),
              "Magnitude of the APF's repulsive and attractive forces at the vehicle's position "
              "(first rollout point).", "APF force magnitudes over time")):
-        figures.append({"id": stem, "group": "series", "paths": save_figure(fig, fig_dir, stem),
+        figures.append({"id": prefix + stem, "group": f"{group_prefix}series",
+                        "paths": save_figure(fig, fig_dir, prefix + stem),
                         "caption": caption, "alt": alt})
     return figures
 

@@ -79,7 +79,8 @@ def run_experiment(cfg: ExperimentConfig, out_dir: Path, resume: bool = True) ->
                                 cfg.vehicle.footprint_radius_m,
                                 cfg.controller.validity_heading_rad)
     metrics = compute_metrics(result.trajectory, context, cfg.metrics)
-    metrics.update(method=cfg.method_name, scenario=cfg.scenario.name,
+    track = "kinematic" if cfg.controller.kind == "kinematic_mpc" else "lateral"
+    metrics.update(method=cfg.method_name, scenario=cfg.scenario.name, track=track,
                    config_hash=config_hash, termination=result.termination,
                    compile_count=result.compile_count)
     times = result.solve_times_s

@@ -75,6 +75,7 @@ class Scenario:
     goal_m: np.ndarray
     goal_tolerance_m: float
     speed_mps: float
+    initial_speed_mps: float
     sample_time_s: float
     n_steps: int
     plant_substeps: int
@@ -121,6 +122,8 @@ def build_scenario(cfg: ScenarioConfig) -> Scenario:
         goal_m=np.asarray(cfg.goal_xy_m, dtype=float),
         goal_tolerance_m=float(cfg.goal_tolerance_m),
         speed_mps=float(cfg.speed_mps),
+        initial_speed_mps=float(cfg.speed_mps if cfg.initial_speed_mps is None
+                                else cfg.initial_speed_mps),
         sample_time_s=float(cfg.sample_time_s),
         n_steps=int(cfg.n_steps),
         plant_substeps=int(cfg.plant_substeps),
