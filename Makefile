@@ -8,7 +8,10 @@ FAMILY_SIZE ?= 200
 REPORT      ?= reports/latest
 PYTEST_ARGS ?=
 
-.PHONY: help install reproduce experiment report test test-all clean
+SWEEP       ?= obstacle_speed
+LAUNCHER    ?= basic
+
+.PHONY: help install reproduce experiment report sweep test test-all clean
 
 help:  ## list the targets
 	@grep -E '^[a-zA-Z_-]+:.*## ' $(MAKEFILE_LIST) | awk -F':.*## ' '{printf "  %-12s %s\n", $$1, $$2}'
@@ -32,6 +35,10 @@ report: $(STAMP)  ## rebuild the HTML report from existing run folders (no simul
 
 reproduce: experiment report  ## set up, run the experiment and write reports/latest/index.html
 	@echo "Report: $(abspath $(REPORT))/index.html"
+
+sweep: $(STAMP)  ## run a sweep preset (SWEEP=sensitivity|horizon|obstacle_speed, LAUNCHER=basic|local_cores)
+	$(PY) -m pipeline.run sweep=$(SWEEP) hydra/launcher=$(LAUNCHER)
+	$(PY) -m pipeline.report $(RUNS) --sweep $(RUNS)/sweeps/$(SWEEP) --out $(REPORT) --command "make sweep SWEEP=$(SWEEP)"
 
 test: $(STAMP)  ## run the test suite (excludes tests marked slow)
 	$(PY) -m pytest -m "not slow" $(PYTEST_ARGS)

@@ -212,3 +212,62 @@ def family_distribution_figure(tables: dict[str, pd.DataFrame], metrics: list[st
         ax.tick_params(axis="y", labelsize=7)
         ax.grid(True, axis="y", alpha=0.3)
     return fig
+
+
+SWEEP_METRICS = ("reaction_delay_s", "lateral_jerk_rms_mps3", "repulsive_impulse_far_share",
+                 "recovery_time_s", "oscillation_count", "min_clearance_m")
+
+
+def _sortable(values: pd.Series) -> pd.Series:
+    numeric = pd.to_numeric(values, errors="coerce")
+    return numeric if numeric.notna().all() else values.astype(str)
+
+
+def sweep_figure(summary: pd.DataFrame, swept: list[str]) -> list[tuple[Figure, str]]:
+    """Metric versus swept parameter: lines per method (band over family seeds) for one swept
+    key, heatmaps for two. Returns ``(figure, file stem)`` pairs (none for other cases)."""
+    params = [k for k in swept if k not in ("method", "run.method", "planner",
+                                            "scenario.family.seed")]
+    metrics = [m for m in SWEEP_METRICS if m in summary]
+    methods = list(summary["method"].unique()) if "method" in summary else ["all"]
+    out = []
+    if len(params) == 1 and metrics:
+        key = params[0]
+        fig, axes = plt.subplots(1, len(metrics), figsize=(2.8 * len(metrics), 3.2),
+                                 layout="constrained", squeeze=False)
+        for ax, metric in zip(axes[0], metrics):
+            for method in methods:
+                part = summary if method == "all" else summary[summary["method"] == method]
+                x = _sortable(part[key])
+                grouped = part.assign(_x=x).groupby("_x")[metric]
+                centre = grouped.median()
+                ax.plot(centre.index, centre.values, marker="o", color=method_color(method),
+                        label=method)
+                if "scenario.family.seed" in swept:
+                    ax.fill_between(centre.index, grouped.min().values, grouped.max().values,
+                                    color=method_color(method), alpha=0.2)
+            ax.set_xlabel(key, fontsize=8)
+            ax.set_title(metric, fontsize=8)
+            ax.tick_params(labelsize=7)
+            ax.grid(True, alpha=0.3)
+        axes[0][0].legend(fontsize=7)
+        out.append((fig, "sweep_lines"))
+    elif len(params) == 2 and metrics:
+        for method in methods:
+            part = summary if method == "all" else summary[summary["method"] == method]
+            fig, axes = plt.subplots(1, len(metrics), figsize=(3.0 * len(metrics), 3.0),
+                                     layout="constrained", squeeze=False)
+            for ax, metric in zip(axes[0], metrics):
+                grid = part.assign(_a=_sortable(part[params[0]]), _b=_sortable(part[params[1]])) \
+                    .pivot_table(index="_a", columns="_b", values=metric, aggfunc="median")
+                image = ax.imshow(grid.to_numpy(float), origin="lower", aspect="auto",
+                                  cmap="viridis")
+                ax.set_xticks(range(grid.shape[1]), [str(v) for v in grid.columns], fontsize=7)
+                ax.set_yticks(range(grid.shape[0]), [str(v) for v in grid.index], fontsize=7)
+                ax.set_xlabel(params[1], fontsize=8)
+                ax.set_ylabel(params[0], fontsize=8)
+                ax.set_title(f"{metric}", fontsize=8)
+                fig.colorbar(image, ax=ax, shrink=0.8)
+            fig.suptitle(f"method: {method}", fontsize=9)
+            out.append((fig, f"sweep_heatmap_{method}"))
+    return out

@@ -120,8 +120,13 @@ def load_runs(run_root: Path) -> tuple[list[dict], dict[str, pd.DataFrame], dict
     import json
 
     run_root = Path(run_root)
+
+    def outside_sweeps(path: Path) -> bool:
+        # parameter sweeps live under a "sweeps" folder and get their own report section
+        return "sweeps" not in path.relative_to(run_root).parts
+
     family_dirs = sorted(p.parent for p in run_root.rglob("family_metrics.csv")
-                         if (p.parent / "family.json").is_file())
+                         if (p.parent / "family.json").is_file() and outside_sweeps(p.parent))
     family_tables, family_info = {}, {}
     for folder in family_dirs:
         info = json.loads((folder / "family.json").read_text())
@@ -129,7 +134,7 @@ def load_runs(run_root: Path) -> tuple[list[dict], dict[str, pd.DataFrame], dict
         family_info[info["method"]] = {**info, "dir": str(folder)}
     inside = set(family_dirs)
     runs = [read_run(d) for d in find_run_dirs(run_root)
-            if not any(parent in inside for parent in d.parents)]
+            if outside_sweeps(d) and not any(parent in inside for parent in d.parents)]
     if not runs and not family_tables:
         raise FileNotFoundError(f"no complete run folders (with metrics.json) under {run_root}")
     return runs, family_tables, family_info
@@ -140,8 +145,28 @@ def _ordered(methods) -> list[str]:
     return [m for m in METHOD_ORDER if m in methods] + sorted(set(methods) - set(METHOD_ORDER))
 
 
-def build_report(run_root: Path, out_dir: Path, command: str) -> Path:
+def is_sweep_folder(folder: Path) -> bool:
+    """A multirun folder whose swept keys go beyond the method (a parameter sweep)."""
+    import json
+
+    path = Path(folder) / "swept_keys.json"
+    if not path.is_file():
+        return False
+    swept = set(json.loads(path.read_text())["swept_keys"])
+    return bool(swept - {"method", "run.method", "planner"})
+
+
+def build_report(run_root: Path, out_dir: Path, command: str,
+                 sweep_dirs: tuple[Path, ...] = ()) -> Path:
     """Write ``out_dir/index.html`` (plus figures/ and tables/) from the runs under ``run_root``.
+
+    Parameters
+    ----------
+    run_root : Path
+        Folder with the paper, kinematic and family runs (``make reproduce``'s ``outputs``), or a
+        parameter-sweep folder on its own.
+    sweep_dirs : tuple of Path
+        Aggregated sweep folders (``summary.csv``) to add as Sweep sections.
 
     Returns
     -------
@@ -151,9 +176,27 @@ def build_report(run_root: Path, out_dir: Path, command: str) -> Path:
     out_dir = Path(out_dir)
     fig_dir, table_dir = out_dir / "figures", out_dir / "tables"
     table_dir.mkdir(parents=True, exist_ok=True)
-    runs, family_tables, family_info = load_runs(run_root)
+    sweep_dirs = tuple(Path(d) for d in sweep_dirs)
+    if is_sweep_folder(run_root):
+        sweep_dirs, runs, family_tables, family_info = (Path(run_root),) + sweep_dirs, [], {}, {}
+    else:
+        runs, family_tables, family_info = load_runs(run_root)
+    sweeps = [_sweep_section(d, fig_dir, table_dir) for d in sweep_dirs]
+    env = jinja2.Environment(loader=jinja2.PackageLoader("pipeline", "templates"),
+                             autoescape=jinja2.select_autoescape(["html", "j2"]),
+                             undefined=jinja2.StrictUndefined)
     if not runs:
-        raise FileNotFoundError(f"no single runs (the paper scenario) under {run_root}")
+        if not sweeps:
+            raise FileNotFoundError(f"no single runs (the paper scenario) under {run_root}")
+        figures = [f for sw in sweeps for f in sw["figures"]]
+        _inline(figures, out_dir)
+        page = env.get_template("report.html.j2").render(
+            paper=False, sweeps=sweeps, figures=figures, family=None, kinematic=None,
+            methods=[], scenario="(sweep only)", prov=provenance(command),
+            register=register_rows({}), metrics_doc=_metrics_doc())
+        path = out_dir / "index.html"
+        write_text_atomic(path, page)
+        return path
     scenario = "paper_sudden_obstacle"
     kinematic_runs = [r for r in runs if r["metrics"].get("track") == "kinematic"]
     runs = [r for r in runs if r["metrics"].get("track", "lateral") == "lateral"] or runs
@@ -199,15 +242,11 @@ def build_report(run_root: Path, out_dir: Path, command: str) -> Path:
                                  table_dir)
         for f in family["figures"]:
             figures.append(f)
-    for f in figures:
-        f["src"] = _png_data_uri(f["paths"]["png"])
-        f["svg"] = os.path.relpath(f["paths"]["svg"], out_dir)
-
-    env = jinja2.Environment(loader=jinja2.PackageLoader("pipeline", "templates"),
-                             autoescape=jinja2.select_autoescape(["html", "j2"]),
-                             undefined=jinja2.StrictUndefined)
+    for sw in sweeps:
+        figures.extend(sw["figures"])
+    _inline(figures, out_dir)
     page = env.get_template("report.html.j2").render(
-        scenario=scenario, methods=order, figures=figures, metric_rows=metric_rows,
+        paper=True, sweeps=sweeps, scenario=scenario, methods=order, figures=figures, metric_rows=metric_rows,
         timing_rows=timing_rows, claims=claims, claim_secondary=claim_secondary,
         verdict_rule=VERDICT_RULE_SINGLE, family=family, family_rule=VERDICT_RULE_FAMILY,
         kinematic=kinematic,
@@ -219,6 +258,70 @@ def build_report(run_root: Path, out_dir: Path, command: str) -> Path:
     path = out_dir / "index.html"
     write_text_atomic(path, page)
     return path
+
+
+def _inline(figures: list[dict], out_dir: Path) -> None:
+    for f in figures:
+        f["src"] = _png_data_uri(f["paths"]["png"])
+        f["svg"] = os.path.relpath(f["paths"]["svg"], out_dir)
+
+
+def _sweep_section(sweep_dir: Path, fig_dir: Path, table_dir: Path) -> dict:
+    """Summary table, metric-vs-parameter figures and verdicts per swept value of a sweep."""
+    import json
+    import shutil
+
+    from pipeline.aggregate import aggregate
+
+    sweep_dir = Path(sweep_dir)
+    if not (sweep_dir / "summary.csv").is_file():
+        aggregate(sweep_dir, progress=False)
+    summary = pd.read_csv(sweep_dir / "summary.csv")
+    keys = json.loads((sweep_dir / "swept_keys.json").read_text())
+    swept = keys["swept_keys"]
+    name = sweep_dir.name
+    shown = [k for k in swept if k in summary] + [c for c in ("method", "kind", "collisions",
+                                                              "reaction_delay_s",
+                                                              "lateral_jerk_rms_mps3",
+                                                              "repulsive_impulse_far_share",
+                                                              "recovery_time_s",
+                                                              "oscillation_count",
+                                                              "min_clearance_m")
+                                                  if c in summary and c not in swept]
+    table = summary[shown]
+    table.to_csv(table_dir / f"sweep_{name}_summary.csv", index=False)
+    figures = []
+    for png in sorted((sweep_dir / "figures").glob("*.png")):
+        svg = png.with_suffix(".svg")
+        fig_dir.mkdir(parents=True, exist_ok=True)
+        target_png, target_svg = fig_dir / f"{name}_{png.name}", fig_dir / f"{name}_{svg.name}"
+        shutil.copyfile(png, target_png)
+        if svg.is_file():
+            shutil.copyfile(svg, target_svg)
+        figures.append({"id": f"{name}_{png.stem}", "group": f"sweep_{name}",
+                        "paths": {"png": target_png, "svg": target_svg},
+                        "caption": f"Sweep {name}: claim metrics versus "
+                                   f"{', '.join(k for k in swept if k != 'method')} "
+                                   "(lines: median per method, band: range over family seeds; "
+                                   "heatmaps: median per cell).",
+                        "alt": f"Metrics versus swept parameters of sweep {name}"})
+    verdict_rows, verdict_cols = [], []
+    if (sweep_dir / "verdicts.csv").is_file():
+        verdicts = pd.read_csv(sweep_dir / "verdicts.csv")
+        value_keys = [k for k in swept if k in verdicts and k != "method"]
+        verdicts["setting"] = verdicts[value_keys].astype(str).agg(", ".join, axis=1) \
+            if value_keys else verdicts["job"]
+        pivot = verdicts.pivot_table(index="setting", columns="claim", values="verdict",
+                                     aggfunc="first")
+        verdict_cols = list(pivot.columns)
+        verdict_rows = [{"setting": idx, "verdicts": [str(v) for v in row.values],
+                         "basis": verdicts.loc[verdicts["setting"] == idx, "basis"].iloc[0]}
+                        for idx, row in pivot.iterrows()]
+        verdicts.to_csv(table_dir / f"sweep_{name}_verdicts.csv", index=False)
+    return {"name": name, "dir": str(sweep_dir), "swept": swept, "columns": shown,
+            "rows": [[_fmt(v) for v in r] for r in table.itertuples(index=False)],
+            "figures": figures, "verdict_cols": verdict_cols, "verdict_rows": verdict_rows,
+            "value_keys": ", ".join(k for k in swept if k != "method")}
 
 
 def _ms(seconds) -> float | None:
@@ -358,7 +461,13 @@ def _metrics_doc() -> list[str]:
             current = []
     if current:
         bullets.append(" ".join(current))
-    return [b.replace("``", "") for b in bullets]
+    import re
+
+    from markupsafe import Markup, escape
+
+    # the docstring's **Name** becomes bold; everything else is escaped text
+    return [Markup(re.sub(r"\*\*(.+?)\*\*", r"<strong>\1</strong>",
+                          str(escape(b.replace("``", ""))))) for b in bullets]
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -367,12 +476,14 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("runs", type=Path, help="folder holding run folders (e.g. outputs/paper)")
     parser.add_argument("--out", type=Path, default=Path("reports/latest"),
                         help="output folder (default: reports/latest)")
+    parser.add_argument("--sweep", type=Path, action="append", default=[],
+                        help="aggregated sweep folder to add as a Sweep section (repeatable)")
     parser.add_argument("--command", default=None,
                         help="command to show under provenance (default: this command line)")
     args = parser.parse_args(argv)
     command = args.command or "python -m pipeline.report " + " ".join(argv or sys.argv[1:])
     try:
-        path = build_report(args.runs, args.out, command)
+        path = build_report(args.runs, args.out, command, tuple(args.sweep))
     except FileNotFoundError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2

@@ -1,0 +1,246 @@
+"""Aggregate a Hydra sweep folder into one table: ``python -m pipeline.aggregate SWEEP_DIR``.
+
+Every job folder (a single run with ``metrics.json``, or a family run with ``family.json`` and
+``family_metrics.csv``) becomes one row of ``summary.csv`` with one column per override key
+(``swept_keys.json`` says which of them vary) and the job's metrics (medians over the family for
+family jobs, plus counts). When improved and baseline jobs can be paired (same values of every
+swept key outside ``planner.*`` and the method), ``verdicts.csv`` holds the claim verdicts per
+swept value. Figures of metric versus parameter land in ``figures/``. A Hydra callback
+(:class:`AggregateCallback`) runs this at the end of every multirun.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pandas as pd
+import yaml
+from hydra.experimental.callback import Callback
+
+from pipeline.artifacts import write_csv_atomic, write_json_atomic
+from pipeline.claims import CLAIMS, family_ledger, single_scenario_verdict
+
+METHOD_KEYS = ("method", "run.method", "planner")
+IGNORED_KEYS = ("sweep", "experiment", "hydra", "hydra.sweep.dir")
+
+
+@dataclass(frozen=True)
+class Job:
+    """One job folder of a sweep."""
+
+    folder: Path
+    overrides: dict
+    kind: str  # "single" or "family"
+
+
+def _parse_value(text: str) -> Any:
+    try:
+        return yaml.safe_load(text)
+    except yaml.YAMLError:
+        return text
+
+
+def read_overrides(folder: Path) -> dict:
+    """``key=value`` overrides of a job from ``.hydra/overrides.yaml`` (values parsed as YAML)."""
+    path = folder / ".hydra" / "overrides.yaml"
+    if not path.is_file():
+        return {}
+    result = {}
+    for item in yaml.safe_load(path.read_text()) or []:
+        key, sep, value = str(item).partition("=")
+        key = key.lstrip("+~")
+        if sep and key not in IGNORED_KEYS and not key.startswith("hydra"):
+            result[key] = _parse_value(value)
+    return result
+
+
+def find_jobs(sweep_dir: Path) -> list[Job]:
+    """Complete job folders directly or one level below ``sweep_dir`` (family members excluded)."""
+    sweep_dir = Path(sweep_dir)
+    jobs = []
+    for folder in sorted(p for p in sweep_dir.iterdir() if p.is_dir()) if sweep_dir.is_dir() else []:
+        if (folder / "family.json").is_file() and (folder / "family_metrics.csv").is_file():
+            jobs.append(Job(folder, read_overrides(folder), "family"))
+        elif (folder / "metrics.json").is_file():
+            jobs.append(Job(folder, read_overrides(folder), "single"))
+    return jobs
+
+
+def _job_row(job: Job) -> tuple[dict, pd.DataFrame | None]:
+    if job.kind == "single":
+        metrics = json.loads((job.folder / "metrics.json").read_text())
+        return {"job": job.folder.name, "kind": "single", **job.overrides, **metrics}, None
+    info = json.loads((job.folder / "family.json").read_text())
+    table = pd.read_csv(job.folder / "family_metrics.csv")
+    numeric = table.select_dtypes(include=["number", "bool"]).drop(columns=["member"],
+                                                                    errors="ignore")
+    medians = {f"{k}": float(v) for k, v in numeric.astype(float).median().items()}
+    row = {"job": job.folder.name, "kind": "family", **job.overrides, **medians,
+           "method": info["method"], "scenario": info["scenario"], "family_seed": info["seed"],
+           "family_size": info["size"], "collisions": info["collisions"],
+           "not_recovered": info["not_recovered"], "config_hash": info["config_hash"]}
+    return row, table
+
+
+def aggregate(sweep_dir: Path, baseline_dir: Path | None = None, progress: bool = True,
+              figures: bool = True) -> pd.DataFrame:
+    """Gather the sweep into ``summary.csv`` (and ``verdicts.csv``, figures) in ``sweep_dir``.
+
+    Parameters
+    ----------
+    sweep_dir : Path
+    baseline_dir : Path, optional
+        A baseline job folder (single or family) used to pair improved jobs that have no baseline
+        partner inside the sweep (e.g. a sweep over the improved APF's own parameters).
+    progress : bool
+        Show a tqdm progress bar.
+    figures : bool
+        Draw metric-vs-parameter figures.
+
+    Returns
+    -------
+    pandas.DataFrame
+        The summary table, one row per job.
+    """
+    from tqdm import tqdm
+
+    sweep_dir = Path(sweep_dir)
+    jobs = find_jobs(sweep_dir)
+    if not jobs:
+        raise FileNotFoundError(f"no complete job folders in {sweep_dir}")
+    rows, tables = [], {}
+    for job in tqdm(jobs, desc="aggregate", unit="job", disable=not progress):
+        row, table = _job_row(job)
+        rows.append(row)
+        if table is not None:
+            tables[job.folder.name] = table
+    summary = pd.DataFrame(rows)
+    override_keys = sorted({k for job in jobs for k in job.overrides})
+    swept = [k for k in override_keys if k in summary and summary[k].astype(str).nunique() > 1]
+    front = ["job", "kind"] + override_keys
+    summary = summary[front + [c for c in summary.columns if c not in front]]
+    write_csv_atomic(sweep_dir / "summary.csv", summary)
+    write_json_atomic(sweep_dir / "swept_keys.json", {"override_keys": override_keys,
+                                                      "swept_keys": swept})
+    verdicts = sweep_verdicts(summary, tables, swept, baseline_dir)
+    if verdicts is not None:
+        write_csv_atomic(sweep_dir / "verdicts.csv", verdicts)
+    if figures:
+        from pipeline.figures import save_figure, sweep_figure
+
+        for fig, stem in sweep_figure(summary, swept):
+            save_figure(fig, sweep_dir / "figures", stem)
+    return summary
+
+
+def _group_keys(swept: list[str]) -> list[str]:
+    return [k for k in swept if k not in METHOD_KEYS and not k.startswith("planner.")
+            and k != "scenario.family.seed"]
+
+
+def sweep_verdicts(summary: pd.DataFrame, tables: dict, swept: list[str],
+                   baseline_dir: Path | None) -> pd.DataFrame | None:
+    """Claim verdicts of each improved job against its baseline partner.
+
+    Partners share every swept key outside ``planner.*`` and the method; failing that, the job
+    in ``baseline_dir``.
+    """
+    if "method" not in summary:
+        return None
+    improved = summary[summary["method"] == "improved"]
+    baseline = summary[summary["method"] == "baseline"]
+    external_row, external_table = None, None
+    if baseline_dir is not None and Path(baseline_dir).is_dir():
+        kind = "family" if (Path(baseline_dir) / "family.json").is_file() else "single"
+        external_row, external_table = _job_row(Job(Path(baseline_dir), {}, kind))
+    keys = _group_keys(swept) + (["scenario.family.seed"] if "scenario.family.seed" in swept
+                                 else [])
+    # index the baseline jobs by their values of the pairing keys (first job wins)
+    partners: dict[tuple, dict] = {}
+    for record in baseline.to_dict("records"):
+        partners.setdefault(tuple(str(record.get(k)) for k in keys), record)
+    rows = []
+    for imp in improved.to_dict("records"):
+        base_row = partners.get(tuple(str(imp.get(k)) for k in keys))
+        if base_row is not None:
+            base_table = tables.get(base_row["job"])
+        elif external_row is not None:
+            base_row, base_table = external_row, external_table
+        else:
+            continue
+        imp_table = tables.get(imp["job"])
+        swept_values = {k: imp[k] for k in swept if k not in METHOD_KEYS}
+        if imp_table is not None and base_table is not None:
+            ledger, _ = family_ledger({"improved": imp_table, "baseline": base_table})
+            for r in ledger:
+                rows.append({**swept_values, "job": imp["job"], "claim": r["claim"],
+                             "metric": r["metric"], "median_difference": r["median_difference"],
+                             "ci_low": r["ci_low"], "ci_high": r["ci_high"],
+                             "holds_share": r["holds_share"], "verdict": r["verdict"],
+                             "basis": f"family of {r['n_pairs']}"})
+        else:
+            for claim in CLAIMS:
+                rows.append({**swept_values, "job": imp["job"], "claim": claim.claim_id,
+                             "metric": claim.primary_metric,
+                             "median_difference": _diff(imp, base_row, claim.primary_metric),
+                             "ci_low": np.nan, "ci_high": np.nan, "holds_share": np.nan,
+                             "verdict": single_scenario_verdict(claim, base_row, imp),
+                             "basis": "single scenario"})
+    return pd.DataFrame(rows) if rows else None
+
+
+def _diff(improved: dict, baseline: dict, key: str) -> float:
+    try:
+        return float(improved[key]) - float(baseline[key])
+    except (TypeError, ValueError, KeyError):
+        return float("nan")
+
+
+class AggregateCallback(Callback):
+    """Hydra callback: aggregate the sweep folder when a multirun ends.
+
+    Configured in ``conf/config.yaml`` under ``hydra.callbacks.aggregate``.
+    """
+
+    def __init__(self, baseline_dir: str | None = None, figures: bool = True) -> None:
+        self.baseline_dir = baseline_dir
+        self.figures = figures
+
+    def on_multirun_end(self, config, **kwargs) -> None:
+        import logging
+
+        sweep_dir = Path(config.hydra.sweep.dir)
+        log = logging.getLogger(__name__)
+        try:
+            aggregate(sweep_dir, Path(self.baseline_dir) if self.baseline_dir else None,
+                      progress=False, figures=self.figures)
+            log.info("aggregated %s -> %s", sweep_dir, sweep_dir / "summary.csv")
+        except FileNotFoundError as exc:
+            log.warning("aggregate skipped: %s", exc)
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog="python -m pipeline.aggregate",
+                                     description="Gather a sweep folder into summary.csv.")
+    parser.add_argument("sweep_dir", type=Path)
+    parser.add_argument("--baseline", type=Path, default=None,
+                        help="baseline job folder for improved jobs without a partner")
+    parser.add_argument("--no-figures", action="store_true", help="skip the figures")
+    args = parser.parse_args(argv)
+    try:
+        summary = aggregate(args.sweep_dir, args.baseline, figures=not args.no_figures)
+    except FileNotFoundError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    print(f"{len(summary)} jobs -> {args.sweep_dir / 'summary.csv'}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
