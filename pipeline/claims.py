@@ -24,23 +24,70 @@ class Claim:
     lower_is_better: bool
     tolerance: float
     secondary_metrics: tuple[str, ...]
+    criterion: str = ""
+    paper_description: str = ""
+    paper_indicator: str = ""
+    paper_improved: str = ""
+    paper_original: str = ""
+    definition: str = ""
 
 
 CLAIMS: tuple[Claim, ...] = (
     Claim("C1", "faster obstacle-avoidance response after a sudden obstacle appears",
-          "reaction_delay_s", True, 0.05, ("reaction_delay_lateral_s",)),
+          "reaction_delay_s", True, 0.05, ("reaction_delay_lateral_s",),
+          criterion="Obstacle Avoidance Response",
+          paper_description="How quickly and effectively the system reacts to a suddenly "
+                            "appearing obstacle.",
+          paper_indicator="Fast and smooth detour around the obstacle.",
+          paper_improved="Fast and smooth avoidance",
+          paper_original="Slow and aggressive curved avoidance",
+          definition="Time (s) from the obstacle's appearance until the steering angle first "
+                     "leaves a band of reaction_steering_band_rad around its value then."),
     Claim("C2", "smoother steering path (no sharp turns or jerks after avoidance)",
           "lateral_jerk_rms_mps3", True, 0.02,
-          ("steering_rate_rms_rad_s", "curvature_rate_rms_1_per_ms", "lateral_jerk_max_mps3")),
+          ("steering_rate_rms_rad_s", "curvature_rate_rms_1_per_ms", "lateral_jerk_max_mps3"),
+          criterion="Smoothness of Steering Path",
+          paper_description="How natural or jerky the steering path is.",
+          paper_indicator="Smooth curvature and gradual turns.",
+          paper_improved="Smooth and stable path after avoidance",
+          paper_original="Sharp turns after avoidance (jerky)",
+          definition="RMS over the run of the lateral jerk d(v r)/dt (m/s^3), v r = v^2 kappa "
+                     "the lateral acceleration, by central differences."),
     Claim("C3", "repulsion applied only where needed (little force when far)",
           "repulsive_impulse_far_share", True, 0.01,
-          ("repulsion_onset_clearance_m", "repulsive_force_peak", "repulsive_impulse")),
+          ("repulsion_onset_clearance_m", "repulsive_force_peak", "repulsive_impulse"),
+          criterion="Repulsive Force Modulation",
+          paper_description="How well the repulsive force from the APF is applied.",
+          paper_indicator="Adaptive, distance-based repulsion that avoids unnecessary forces.",
+          paper_improved="H_k is activated smoothly based on distance; strong repulsion only "
+                         "when needed",
+          paper_original="exp((s - s0)^2) causes low sensitivity for far distances",
+          definition="Share (0-1) of the repulsive impulse sum |F_rep| Ts at the vehicle that "
+                     "is applied while the nearest obstacle's clearance exceeds "
+                     "threat_clearance_m."),
     Claim("C4", "faster, smoother goal-direction recovery after avoidance",
           "recovery_time_s", True, 0.05, ("recovery_lateral_s", "recovery_heading_s",
-                                          "overshoot_m")),
+                                          "overshoot_m"),
+          criterion="Goal Direction Recovery",
+          paper_description="Whether the system can return to the goal path after avoidance.",
+          paper_indicator="Smooth convergence back to the original trajectory.",
+          paper_improved="Returns smoothly to goal direction after avoiding obstacles",
+          paper_original="Recovery is slow and inconsistent",
+          definition="Settling time (s, python-control step_info convention, absolute band "
+                     "recovery_lateral_band_m) of the lateral error to the start-goal line "
+                     "after every obstacle is passed; missing if it never settles."),
     Claim("C5", "more stable path (no sharp drops, minimal oscillation)",
           "oscillation_count", True, 0.5, ("heading_step_max_rad", "overshoot_m",
-                                           "max_lateral_deviation_m")),
+                                           "max_lateral_deviation_m"),
+          criterion="Path Stability",
+          paper_description="The overall stability of the path (oscillations, abrupt dips, "
+                            "etc.).",
+          paper_indicator="Stable trajectory with no sharp drops or oscillations.",
+          paper_improved="Globally stable with minimal oscillation",
+          paper_original="Unstable - drops sharply and reacts suddenly",
+          definition="Number of sign changes of the lateral error (outside "
+                     "lateral_sign_band_m) plus those of the yaw rate (outside "
+                     "yaw_rate_sign_band_rad_s)."),
 )
 
 VERDICT_RULE_SINGLE = (

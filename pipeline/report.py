@@ -193,7 +193,7 @@ def build_report(run_root: Path, out_dir: Path, command: str,
         page = env.get_template("report.html.j2").render(
             paper=False, sweeps=sweeps, figures=figures, family=None, kinematic=None,
             methods=[], scenario="(sweep only)", prov=provenance(command),
-            register=register_rows({}), metrics_doc=_metrics_doc())
+            register=register_rows({}), metrics_doc=_metrics_doc(), claim_defs=CLAIMS)
         path = out_dir / "index.html"
         write_text_atomic(path, page)
         return path
@@ -254,7 +254,7 @@ def build_report(run_root: Path, out_dir: Path, command: str,
         configs={m: yaml.safe_dump(r["config"], sort_keys=False) for m, r in by_method.items()},
         hashes={m: r["metrics"]["config_hash"] for m, r in by_method.items()},
         run_dirs={m: str(r["dir"]) for m, r in by_method.items()},
-        metrics_doc=_metrics_doc(), prov=provenance(command))
+        metrics_doc=_metrics_doc(), prov=provenance(command), claim_defs=CLAIMS)
     path = out_dir / "index.html"
     write_text_atomic(path, page)
     return path
