@@ -326,6 +326,7 @@ class ScenarioConfig:
     plant_substeps: int = 10
     initial_speed_mps: Optional[float] = None
     obstacles: List[ObstacleConfig] = field(default_factory=list)
+    allow_no_obstacles: bool = False
     family: Optional[FamilyConfig] = None
 
     def __post_init__(self) -> None:
@@ -349,6 +350,9 @@ class ScenarioConfig:
         if self.n_steps < 2:
             raise ConfigError("scenario.n_steps", self.n_steps,
                               "an integer >= 2 (the simulated time must exceed sample_time_s)")
+        if not self.obstacles and self.family is None and not self.allow_no_obstacles:
+            raise ConfigError("scenario.obstacles", [], "a non-empty obstacle list (or "
+                              "scenario.allow_no_obstacles=true for an obstacle-free run)")
         seen = set()
         for i, obs in enumerate(self.obstacles):
             key = f"scenario.obstacles[{i}]"

@@ -146,18 +146,19 @@ def run_family(cfg: ExperimentConfig, out_dir: Path, progress: bool = True) -> p
     return table
 
 
-@hydra.main(version_base="1.3", config_path="../conf", config_name="config")
+@hydra.main(version_base="1.3", config_path=str(CONF_DIR), config_name="config")
 def hydra_main(cfg: DictConfig) -> None:
     """Hydra task: validate, run, log where the results are."""
     from hydra.core.hydra_config import HydraConfig
 
     try:
         experiment = to_experiment_config(cfg)
-    except ConfigError as exc:
-        if os.environ.get("PIPELINE_USER_FULL_ERROR") == "1":
+    except Exception as exc:  # noqa: BLE001 - config errors become one line; others re-raise
+        message = describe_config_error(exc)
+        if message is None or os.environ.get("PIPELINE_USER_FULL_ERROR") == "1":
             raise
         # SystemExit passes Hydra's job wrapper untouched: one line, exit code 2
-        print(str(exc), file=sys.stderr)
+        print(message, file=sys.stderr)
         raise SystemExit(2) from None
     out_dir = Path(HydraConfig.get().runtime.output_dir)
     if experiment.scenario.family is not None:
@@ -179,7 +180,7 @@ def describe_config_error(exc: BaseException) -> str | None:
     """One line for a configuration error, or None if ``exc`` is not one."""
     from hydra.errors import (ConfigCompositionException, MissingConfigException,
                               OverrideParseException)
-    from omegaconf.errors import OmegaConfBaseException
+    from omegaconf.errors import MissingMandatoryValue, OmegaConfBaseException
 
     chain = []
     current: BaseException | None = exc
@@ -200,6 +201,9 @@ def describe_config_error(exc: BaseException) -> str | None:
                         f"{options}")
             return "config error: " + str(err).splitlines()[0]
     for err in chain:
+        if isinstance(err, MissingMandatoryValue):
+            key = getattr(err, "full_key", None) or "?"
+            return f"config error: {key} is missing; allowed: a value (required, set {key}=...)"
         if isinstance(err, OmegaConfBaseException):
             key = getattr(err, "full_key", None) or "?"
             message = str(getattr(err, "msg", err)).splitlines()[0]
@@ -212,7 +216,8 @@ def describe_config_error(exc: BaseException) -> str | None:
 
 def main() -> None:
     """Console entry: run Hydra; configuration errors exit 2 with one line on stderr."""
-    user_wants_trace = os.environ.get("HYDRA_FULL_ERROR") == "1"
+    original = os.environ.get("HYDRA_FULL_ERROR")
+    user_wants_trace = original == "1"
     os.environ["PIPELINE_USER_FULL_ERROR"] = "1" if user_wants_trace else "0"
     os.environ["HYDRA_FULL_ERROR"] = "1"  # let exceptions reach us instead of Hydra's printer
     try:
@@ -227,6 +232,11 @@ def main() -> None:
         print(f"error: {type(exc).__name__}: {exc} (set HYDRA_FULL_ERROR=1 for the traceback)",
               file=sys.stderr)
         sys.exit(1)
+    finally:
+        if original is None:
+            os.environ.pop("HYDRA_FULL_ERROR", None)
+        else:
+            os.environ["HYDRA_FULL_ERROR"] = original
 
 
 if __name__ == "__main__":

@@ -83,6 +83,7 @@ def test_ltv_qp_agrees_with_nonlinear_solve_at_convergence(make_config):
 
 def test_kinematic_closed_loop_reaches_goal_without_obstacles(make_config, tmp_path):
     cfg = make_config(["controller=kinematic", "planner=improved", "scenario.obstacles=[]",
+                       "scenario.allow_no_obstacles=true",
                        "scenario.initial_speed_mps=0.0", "scenario.n_steps=100"])
     summary = run_experiment(cfg, tmp_path)
     m = summary.metrics

@@ -1,0 +1,76 @@
+"""Bad configuration: every case exits 2 with one line naming the key, the value and what is
+allowed, and no traceback (the entry point run in-process, as `python -m pipeline.run`)."""
+
+from __future__ import annotations
+
+import sys
+
+import pytest
+
+from pipeline.run import main
+
+CASES = [
+    (["controller.horizon=0"], "controller.horizon=0", "integer >= 1"),
+    (["controller.horizon=-3"], "controller.horizon=-3", "integer >= 1"),
+    (["controller.horizon=ten"], "controller.horizon", "'ten'"),
+    (["controller.control_horizon=11"], "controller.control_horizon=11", "[1, controller.horizon"),
+    (["scenario.sample_time_s=0"], "scenario.sample_time_s=0.0", "> 0.0"),
+    (["scenario.sample_time_s=-0.1"], "scenario.sample_time_s=-0.1", "> 0.0"),
+    (["scenario.n_steps=1"], "scenario.n_steps=1", "must exceed sample_time_s"),
+    (["scenario.obstacles.0.radius_m=-0.5"], "scenario.obstacles[0].radius_m=-0.5", ">= 0.0"),
+    (["scenario.obstacles.0.radius_m=nan"], "scenario.obstacles[0].radius_m=nan", "finite"),
+    (["planner.beta=inf"], "planner.beta=inf", "finite"),
+    (["planner.step_size=0"], "planner.step_size=0.0", "> 0.0"),
+    (["vehicle.mass_kg=-1"], "vehicle.mass_kg=-1.0", "> 0.0"),
+    (["vehicle.steering_max_rad=0"], "vehicle.steering_max_rad=0.0", "> 0.0"),
+    (["scenario.speed_mps=nan"], "scenario.speed_mps=nan", "finite"),
+    (["planner.repulsion_law=cubic"], "planner.repulsion_law='cubic'", "polynomial, exponential"),
+    (["controller.q_lateral=-1"], "controller.q_lateral=-1.0", ">= 0.0"),
+    (["metrics.threat_clearance_m=-1"], "metrics.threat_clearance_m=-1.0", "> 0.0"),
+    (["scenario=unknown_scenario"], "scenario='unknown_scenario'", "paper_sudden_obstacle"),
+    (["planner=unknown"], "planner='unknown'", "baseline"),
+    (["vehicle=unknown"], "vehicle='unknown'", "compact_car"),
+    (["controller=unknown"], "controller='unknown'", "lateral_mpc"),
+    (["method=unknown"], "method='unknown'", "apf_pursuit"),
+    (["scenario.name=???"], "scenario.name is missing", "required"),
+    (["scenario.goal_xy_m=[0.0,0.0]"], "scenario.goal_xy_m=[0.0, 0.0]", "farther than"),
+    (["scenario.obstacles.0.x_m=0.5", "scenario.obstacles.0.y_m=0.0",
+      "scenario.obstacles.0.appear_time_s=0.0"], "scenario.obstacles[0]=[0.5, 0.0]",
+     "does not overlap the vehicle"),
+    (["controller.accel_bounds_mps2=[3.0,-3.0]"], "controller.accel_bounds_mps2=[3.0, -3.0]",
+     "low < high"),
+    (["scenario.obstacles=[]"], "scenario.obstacles=[]", "non-empty obstacle list"),
+    (["scenario.obstacles=[{x_m:14.0,y_m:1.5},{x_m:14.0,y_m:1.5}]"], "scenario.obstacles[1]",
+     "not exact duplicates"),
+    (["scenario=family", "scenario.family.size=0"], "scenario.family.size=0", "integer >= 1"),
+    (["scenario=family", "scenario.family.radius_m=[0.7,0.3]"], "scenario.family.radius_m",
+     "low <= high"),
+    (["+nonsense=1"], "nonsense", "not in"),
+]
+
+
+@pytest.mark.parametrize("overrides, key_and_value, allowed", CASES,
+                         ids=[" ".join(c[0]) for c in CASES])
+def test_bad_config_exits_2_with_one_line(monkeypatch, capsys, tmp_path, overrides,
+                                          key_and_value, allowed):
+    monkeypatch.setattr(sys, "argv", ["pipeline.run", *overrides, f"hydra.run.dir={tmp_path}"])
+    monkeypatch.delenv("HYDRA_FULL_ERROR", raising=False)
+    with pytest.raises(SystemExit) as exit_info:
+        main()
+    assert exit_info.value.code == 2
+    err = capsys.readouterr().err
+    lines = [line for line in err.splitlines() if line.strip()]
+    assert len(lines) == 1, err
+    assert lines[0].startswith("config error: ")
+    assert key_and_value in lines[0] and allowed in lines[0], lines[0]
+    assert "Traceback" not in err
+    assert not (tmp_path / "metrics.json").exists()
+
+
+def test_full_traceback_on_request(monkeypatch, tmp_path):
+    monkeypatch.setattr(sys, "argv", ["pipeline.run", "controller.horizon=0",
+                                      f"hydra.run.dir={tmp_path}"])
+    monkeypatch.setenv("HYDRA_FULL_ERROR", "1")
+    with pytest.raises(Exception) as info:
+        main()
+    assert "controller.horizon" in str(info.value)
