@@ -11,7 +11,7 @@ PYTEST_ARGS ?=
 SWEEP       ?= obstacle_speed
 LAUNCHER    ?= basic
 
-.PHONY: help install reproduce experiment report sweep test test-all clean
+.PHONY: help install reproduce experiment report sweep verify test test-all bench clean
 
 help:  ## list the targets
 	@grep -E '^[a-zA-Z_-]+:.*## ' $(MAKEFILE_LIST) | awk -F':.*## ' '{printf "  %-12s %s\n", $$1, $$2}'
@@ -39,6 +39,9 @@ reproduce: experiment report  ## set up, run the experiment and write reports/la
 sweep: $(STAMP)  ## run a sweep preset (SWEEP=sensitivity|horizon|obstacle_speed, LAUNCHER=basic|local_cores)
 	$(PY) -m pipeline.run sweep=$(SWEEP) hydra/launcher=$(LAUNCHER)
 	$(PY) -m pipeline.report $(RUNS) --sweep $(RUNS)/sweeps/$(SWEEP) --out $(REPORT) --command "make sweep SWEEP=$(SWEEP)"
+
+verify: reproduce  ## rerun `make reproduce` and compare with reports/reference/ (tolerances in pipeline/verify.py)
+	$(PY) -m pipeline.verify $(RUNS) reports/reference
 
 test: $(STAMP)  ## run the test suite (excludes tests marked slow)
 	$(PY) -m pytest -m "not slow" $(PYTEST_ARGS)

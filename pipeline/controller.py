@@ -16,6 +16,7 @@ bounded input that brings the steering back to zero, and says which in the resul
 from __future__ import annotations
 
 import time
+import warnings
 from dataclasses import dataclass
 
 import cvxpy as cp
@@ -86,7 +87,10 @@ class CompiledQp:
     def _solve_raw(self) -> tuple[str, int, float]:
         """Solve once; return status, Clarabel's iteration count and the wall time (s)."""
         start = time.perf_counter()
-        self.problem.solve(solver=cp.CLARABEL, max_iter=self.cfg.solver_max_iter)
+        with warnings.catch_warnings():
+            # "solution may be inaccurate": the status says so and is logged per step
+            warnings.simplefilter("ignore", UserWarning)
+            self.problem.solve(solver=cp.CLARABEL, max_iter=self.cfg.solver_max_iter)
         elapsed = time.perf_counter() - start
         # DPP: CVXPY keeps the parameter-to-data map after the first solve; a new one means
         # the problem was compiled again

@@ -133,6 +133,8 @@ def run_family(cfg: ExperimentConfig, out_dir: Path, progress: bool = True) -> p
                                      desc=f"{cfg.method_name} family", unit="scenario")):
         rows.append({"member": i, **metrics})
     table = pd.DataFrame(rows)
+    # fixed column order: fresh and resumed (read back from metrics.json) members agree
+    table = table[["member"] + sorted(c for c in table.columns if c != "member")]
     write_csv_atomic(out_dir / "family_metrics.csv", table)
     summary = {
         "method": cfg.method_name, "scenario": cfg.scenario.name, "seed": family.seed,

@@ -1,0 +1,54 @@
+"""Reference results: the paper-scenario numbers of every method and track match
+reports/reference/ (the default `make reproduce`); the full check with the family is slow."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from pipeline.run import run_experiment, run_family
+from pipeline.verify import verify
+
+REFERENCE = Path(__file__).resolve().parent.parent / "reports" / "reference"
+METHODS = ("baseline", "improved", "velocity_aware", "mpc_no_apf", "apf_pursuit")
+
+
+def paper_runs(root: Path, make_config) -> None:
+    for method in METHODS:
+        run_experiment(make_config([f"method={method}"]), root / "paper" / method)
+    for planner in ("baseline", "improved", "velocity_aware"):
+        run_experiment(make_config(["experiment=kinematic", f"planner={planner}"]),
+                       root / "kinematic" / planner)
+
+
+def test_paper_scenario_matches_reference(tmp_path, make_config):
+    paper_runs(tmp_path, make_config)
+    assert verify(tmp_path, REFERENCE) == []
+
+
+def test_verify_reports_a_changed_number(tmp_path, make_config):
+    paper_runs(tmp_path, make_config)
+    reference = tmp_path / "ref"
+    reference.mkdir()
+    text = (REFERENCE / "paper_metrics.csv").read_text().splitlines()
+    header = text[0].split(",")
+    row = text[1].split(",")
+    column = header.index("min_clearance_m")
+    row[column] = str(float(row[column]) + 0.01)
+    (reference / "paper_metrics.csv").write_text("\n".join([text[0], ",".join(row)]
+                                                           + text[2:]) + "\n")
+    problems = verify(tmp_path, reference)
+    assert len(problems) == 1 and "min_clearance_m" in problems[0]
+
+
+@pytest.mark.slow
+def test_full_reproduction_matches_reference(tmp_path, make_config):
+    paper_runs(tmp_path, make_config)
+    for method in METHODS:
+        run_family(make_config([f"method={method}", "scenario=family"]),
+                   tmp_path / "family" / method, progress=False)
+    assert verify(tmp_path, REFERENCE) == []
+    assert (REFERENCE / "claims_ledger.csv").is_file()

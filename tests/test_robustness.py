@@ -1,0 +1,124 @@
+"""Solver faults in the closed loop, numerical edge cases, interrupted sweeps."""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+
+import cvxpy as cp
+import numpy as np
+import pandas as pd
+import pytest
+
+from pipeline.controller import LateralMpc, MpcInputs
+from pipeline.model import build_lateral_model
+from pipeline.planner import apf_rollout
+from pipeline.run import run_experiment
+from pipeline.scenario import ObstacleSnapshot
+
+
+def test_injected_solver_faults_fall_back_and_the_run_completes(make_config, tmp_path,
+                                                               monkeypatch):
+    """Steps 35-37 infeasible, 45 raising, 55 at the iteration limit: every one falls back,
+    is logged in trajectory.csv and counted in metrics.json, and the run still ends at the goal."""
+    original = LateralMpc._solve_raw
+    calls = {"n": 0}
+
+    def faulty(self):
+        k = calls["n"]
+        calls["n"] += 1
+        if k in (35, 36, 37):
+            return "infeasible", 7, 0.001
+        if k == 45:
+            raise cp.error.SolverError("injected")
+        if k == 55:
+            return "user_limit", self.cfg.solver_max_iter, 0.001
+        return original(self)
+
+    monkeypatch.setattr(LateralMpc, "_solve_raw", faulty)
+    m = run_experiment(make_config(["method=baseline"]), tmp_path).metrics
+    tr = pd.read_csv(tmp_path / "trajectory.csv")
+    assert m["fallback_count"] == 5 and m["goal_reached"]
+    assert tr.loc[35:37, "fallback"].tolist() == ["shifted_plan"] * 3
+    assert tr.loc[45, "solver_status"] == "error:SolverError"
+    assert tr.loc[55, "fallback"] == "shifted_plan"
+    assert tr[["X_m", "Y_m", "delta_rad"]].notna().all().all()
+
+
+def test_real_iteration_limit_is_a_recorded_fallback(make_config):
+    cfg = make_config(["controller.solver_max_iter=1"])
+    model = build_lateral_model(cfg.vehicle, 3.0, 0.1)
+    N, M = cfg.controller.horizon, cfg.controller.max_obstacles
+    step = LateralMpc(cfg.controller, cfg.vehicle).step(
+        MpcInputs(np.array([0.5, 0.0, 0.1, 0.0, 0.0]), model, np.full(N, -1.0), np.zeros(N),
+                  np.zeros((N, M)), np.zeros((N, M)), np.zeros(N)))
+    assert step.fallback == "safe_input" and step.status != "optimal"
+    assert np.isfinite(step.steering_rate_rad_s)
+
+
+@pytest.mark.parametrize("obstacle", [[30.0, 0.0], [0.0, 0.0], [29.9, 0.05]])
+def test_apf_finite_with_obstacle_on_the_goal_or_the_vehicle(make_config, obstacle):
+    for name in ("baseline", "improved"):
+        params = make_config([f"planner={name}"]).planner
+        snap = ObstacleSnapshot(np.array([obstacle]), np.zeros((1, 2)), np.array([0.5]),
+                                np.array([True]))
+        for start in ([0.0, 0.0], [29.95, 0.0], [30.0, 0.0]):
+            rollout = apf_rollout(np.array(start), np.array([30.0, 0.0]), snap, params, 10, 0.1)
+            assert np.all(np.isfinite(rollout.path_m))
+            assert np.all(np.isfinite(rollout.repulsion))
+
+
+@pytest.mark.parametrize("overrides", [
+    ["scenario.goal_xy_m=[-30.0,0.0]"],                        # goal behind the vehicle
+    ["scenario.obstacles.0.x_m=1000.0", "scenario.obstacles.0.y_m=1000.0"],  # far away
+    ["scenario.speed_mps=0.1"],                                 # near-zero speed
+])
+def test_edge_case_runs_stay_finite(make_config, tmp_path, overrides):
+    m = run_experiment(make_config(overrides), tmp_path).metrics
+    tr = pd.read_csv(tmp_path / "trajectory.csv")
+    numeric = tr.select_dtypes("number").drop(columns=["clearance_m"], errors="ignore")
+    assert np.isfinite(numeric.fillna(0.0).to_numpy()).all()
+    assert m["termination"] in ("goal_line", "max_steps")
+    model = json.loads((tmp_path / "model.json").read_text())
+    assert np.all(np.isfinite(model["discrete"]["Ad"]))
+
+
+def test_far_obstacle_adds_no_constraint_and_no_repulsion(make_config, tmp_path):
+    run_experiment(make_config(["scenario.obstacles.0.x_m=1000.0",
+                                "scenario.obstacles.0.y_m=1000.0"]), tmp_path)
+    tr = pd.read_csv(tmp_path / "trajectory.csv")
+    assert (tr["apf_rep_norm"].fillna(0) == 0).all()
+    assert tr["e_y_m"].abs().max() < 1e-6
+
+
+SWEEP = ["-m", "method=baseline,improved", "scenario=family", "scenario.family.size=2",
+         "scenario.family.n_jobs=1", "scenario.family.seed=0,1"]
+
+
+def test_sweep_killed_with_sigkill_then_resumed_equals_an_uninterrupted_one(tmp_path):
+    clean, broken = tmp_path / "clean", tmp_path / "broken"
+    command = [sys.executable, "-m", "pipeline.run", *SWEEP]
+    subprocess.run(command + [f"hydra.sweep.dir={clean}"], check=True, capture_output=True,
+                   timeout=600)
+    proc = subprocess.Popen(command + [f"hydra.sweep.dir={broken}"], stdout=subprocess.DEVNULL,
+                            stderr=subprocess.DEVNULL, start_new_session=True)
+    deadline = time.time() + 300
+    while time.time() < deadline and not list(broken.glob("*/family.json")):
+        time.sleep(0.05)
+    os.killpg(proc.pid, signal.SIGKILL)
+    proc.wait()
+    finished_before = len(list(broken.glob("*/family.json")))
+    assert 1 <= finished_before < 4, "the kill did not land half-way"
+    subprocess.run(command + [f"hydra.sweep.dir={broken}"], check=True, capture_output=True,
+                   timeout=600)
+    assert not list(broken.rglob("*.tmp")), "a half-written file survived"
+    assert len(list(broken.glob("*/family.json"))) == 4
+    for job in sorted(clean.glob("*/family_metrics.csv")):
+        twin = broken / job.parent.name / "family_metrics.csv"
+        assert twin.read_bytes() == job.read_bytes(), job.parent.name
+    a, b = pd.read_csv(clean / "summary.csv"), pd.read_csv(broken / "summary.csv")
+    pd.testing.assert_frame_equal(a, b)
