@@ -40,6 +40,10 @@ sweep: $(STAMP)  ## run a sweep preset (SWEEP=sensitivity|horizon|obstacle_speed
 	$(PY) -m pipeline.run sweep=$(SWEEP) hydra/launcher=$(LAUNCHER)
 	$(PY) -m pipeline.report $(RUNS) --sweep $(RUNS)/sweeps/$(SWEEP) --out $(REPORT) --command "make sweep SWEEP=$(SWEEP)"
 
+bench: $(STAMP)  ## benchmark the controller step vs the Clarabel floor and the peers -> reports/bench/
+	$(PY) -m pipeline.bench --out reports/bench
+	$(PY) benchmarks/bench_aggregate.py 10000
+
 verify: reproduce  ## rerun `make reproduce` and compare with reports/reference/ (tolerances in pipeline/verify.py)
 	$(PY) -m pipeline.verify $(RUNS) reports/reference
 

@@ -154,6 +154,7 @@ class ControllerConfig:
 
     name: str = MISSING
     kind: str = "mpc"
+    backend: str = "clarabel_direct"
     horizon: int = 10
     control_horizon: int = 3
     input_hold: str = "hold_last"
@@ -191,6 +192,7 @@ class ControllerConfig:
 
     def __post_init__(self) -> None:
         _choice("controller.kind", self.kind, ("mpc", "pure_pursuit", "kinematic_mpc"))
+        _choice("controller.backend", self.backend, ("cvxpy", "clarabel_direct"))
         for key in ("output_weights", "input_weights", "input_rate_weights"):
             _pair(f"controller.{key}", getattr(self, key))
             for i, w in enumerate(getattr(self, key)):

@@ -104,6 +104,106 @@ class CompiledQp:
         return str(self.problem.status), iterations, elapsed
 
 
+class ClarabelDirect:
+    """Backend ``clarabel_direct``: CVXPY's canonicalization once, then Clarabel directly.
+
+    At the first call the problem is compiled by CVXPY (``get_problem_data``) and its
+    parameter-to-data map is read off once: the QP data ``(q, A, b)`` is affine in the stacked
+    parameter vector ``theta``, so applying the map (``apply_parameters``, zeros kept so the
+    sparsity never changes) at ``theta = 0`` and at each unit vector gives the exact affine map.
+    Every step then costs three small matrix-vector products and an in-place update of the kept
+    Clarabel solver (``q``, ``A`` values, ``b``); the primal solution is read back through
+    CVXPY's variable offsets. Same QP, same solver, without CVXPY's per-call overhead.
+    """
+
+    STATUS = {"Solved": cp.OPTIMAL, "AlmostSolved": cp.OPTIMAL_INACCURATE,
+              "PrimalInfeasible": cp.INFEASIBLE, "AlmostPrimalInfeasible": cp.INFEASIBLE_INACCURATE,
+              "DualInfeasible": cp.UNBOUNDED, "AlmostDualInfeasible": cp.UNBOUNDED_INACCURATE,
+              "MaxIterations": cp.USER_LIMIT, "MaxTime": cp.USER_LIMIT}
+
+    def __init__(self) -> None:
+        self.maps = None
+        self.solver = None
+
+    @staticmethod
+    def _data(param_prog) -> tuple:
+        import scipy.sparse as sp
+
+        P, q, _, A, b = param_prog.apply_parameters(keep_zeros=True, quad_obj=True)
+        A = sp.csc_matrix(-A)
+        A.sort_indices()
+        return sp.triu(P).tocsc(), np.asarray(q, float), A, np.asarray(b, float)
+
+    def _compile(self, owner) -> None:
+        import clarabel
+        from cvxpy.reductions.solvers.conic_solvers.clarabel_conif import dims_to_solver_cones
+
+        start = time.perf_counter()
+        data, _, inverse = owner.problem.get_problem_data(cp.CLARABEL)
+        param_prog = data["param_prob"]
+        stuffing = next(inv for inv in inverse if getattr(inv, "var_offsets", None)
+                        and owner.X.id in inv.var_offsets and owner.U.id in inv.var_offsets
+                        and len(inv.var_offsets) > 3)
+        params = owner.parameter_list()
+        sizes = [p.size for p in params]
+        saved = [p.value for p in params]
+
+        def assign(theta: np.ndarray) -> None:
+            for param, chunk in zip(params, np.split(theta, np.cumsum(sizes)[:-1])):
+                param.value = chunk.reshape(param.shape, order="F")
+
+        n_theta = int(sum(sizes))
+        assign(np.zeros(n_theta))
+        P, q0, A0, b0 = self._data(param_prog)
+        Tq = np.zeros((q0.size, n_theta))
+        TA = np.zeros((A0.data.size, n_theta))
+        Tb = np.zeros((b0.size, n_theta))
+        for i in range(n_theta):
+            unit = np.zeros(n_theta)
+            unit[i] = 1.0
+            assign(unit)
+            _, q, A, b = self._data(param_prog)
+            if not (np.array_equal(A.indices, A0.indices) and np.array_equal(A.indptr, A0.indptr)):
+                raise RuntimeError("sparsity of A changed with the parameters")
+            Tq[:, i], TA[:, i], Tb[:, i] = q - q0, A.data - A0.data, b - b0
+        for param, value in zip(params, saved):
+            param.value = value
+        settings = clarabel.DefaultSettings()
+        settings.verbose = False
+        settings.presolve_enable = False  # keeps in-place data updates allowed
+        settings.max_iter = owner.cfg.solver_max_iter
+        self.maps = {"P": P, "A": A0, "q0": q0, "a0": A0.data.copy(), "b0": b0, "Tq": Tq,
+                     "TA": TA, "Tb": Tb, "cones": dims_to_solver_cones(data["dims"]),
+                     "settings": settings, "offsets": stuffing.var_offsets}
+        owner.compile_count += 1
+        owner.compile_time_s = time.perf_counter() - start
+
+    def solve(self, owner, theta: np.ndarray) -> tuple[str, int, float, np.ndarray, np.ndarray]:
+        """Status, iterations, wall time (s) of map + solve, X (5 x N+1) and U (Nc,)."""
+        import clarabel
+        import scipy.sparse as sp
+
+        if self.maps is None:
+            self._compile(owner)
+        m = self.maps
+        start = time.perf_counter()
+        q = m["q0"] + m["Tq"] @ theta
+        A = sp.csc_matrix((m["a0"] + m["TA"] @ theta, m["A"].indices, m["A"].indptr),
+                          shape=m["A"].shape)
+        b = m["b0"] + m["Tb"] @ theta
+        if self.solver is None:
+            self.solver = clarabel.DefaultSolver(m["P"], q, A, b, m["cones"], m["settings"])
+        else:
+            self.solver.update(q=q, A=A, b=b)
+        solution = self.solver.solve()
+        elapsed = time.perf_counter() - start
+        status = self.STATUS.get(str(solution.status).split(".")[-1], cp.SOLVER_ERROR)
+        x = np.asarray(solution.x)
+        ox, ou = m["offsets"][owner.X.id], m["offsets"][owner.U.id]
+        states = x[ox:ox + owner.X.size].reshape(owner.X.shape, order="F")
+        return status, int(solution.iterations), elapsed, states, x[ou:ou + owner.U.size]
+
+
 def blocking_matrix(horizon: int, control_horizon: int, input_hold: str) -> np.ndarray:
     """Matrix ``T`` (Nc x N) with ``u_seq = U @ T`` for the move-blocking rule."""
     T = np.zeros((control_horizon, horizon))
@@ -163,8 +263,22 @@ class LateralMpc(CompiledQp):
         self.problem = cp.Problem(cp.Minimize(cost), constraints)
         if not self.problem.is_dcp(dpp=True):
             raise RuntimeError("lateral MPC is not DPP; it would recompile every step")
+        self._direct = ClarabelDirect()
         self._last_plan: np.ndarray | None = None
         self._plan_age = 0
+
+    def parameter_list(self) -> list:
+        """The parameters in the order of :meth:`parameter_vector`."""
+        return [self.x0, self.Ad, self.Bd, self.disturbance, self.y_ref, self.psi_ref, self.G,
+                self.h]
+
+    @staticmethod
+    def parameter_vector(inputs: MpcInputs) -> np.ndarray:
+        """One step's parameter values stacked (column-major), for the direct backend."""
+        disturbance = inputs.model.Ed @ inputs.disturbance_rad_s[None, :]
+        parts = (inputs.x0, inputs.model.Ad, inputs.model.Bd, disturbance, inputs.y_ref_m,
+                 inputs.psi_ref_rad, inputs.constraint_gain, inputs.constraint_bound)
+        return np.concatenate([np.asarray(v, float).ravel(order="F") for v in parts])
 
     def set_parameters(self, inputs: MpcInputs) -> None:
         """Write one step's data into the parameters (no recompilation)."""
@@ -181,18 +295,30 @@ class LateralMpc(CompiledQp):
         """Solve for the current step, falling back safely on any failure."""
         status, iterations, elapsed = "not_solved", -1, 0.0
         if np.all(np.isfinite(inputs.x0)):
-            self.set_parameters(inputs)
             try:
-                status, iterations, elapsed = self._solve_raw()
+                if self.cfg.backend == "clarabel_direct":
+                    if self._direct.maps is None:
+                        self.set_parameters(inputs)  # the first call compiles
+                    status, iterations, elapsed, states, u_blocked = self._direct.solve(
+                        self, self.parameter_vector(inputs))
+                else:
+                    self.set_parameters(inputs)
+                    status, iterations, elapsed = self._solve_raw()
+                    states = self.X.value
+                    u_blocked = self.U.value
             except (cp.error.SolverError, ValueError, ArithmeticError) as exc:
-                status = f"error:{type(exc).__name__}"
-            if status in OPTIMAL_STATUSES and self.U.value is not None:
-                plan = np.asarray(self.u_seq.value, dtype=float).reshape(-1)
+                status, states, u_blocked = f"error:{type(exc).__name__}", None, None
+            if status in OPTIMAL_STATUSES and u_blocked is not None:
+                plan = np.asarray(u_blocked, dtype=float).reshape(-1) @ self.blocking
                 if np.all(np.isfinite(plan)):
                     self._last_plan, self._plan_age = plan, 0
-                    return MpcStep(float(plan[0]), plan, np.asarray(self.X.value), status,
-                                   iterations, elapsed, "none", float(np.max(self.S.value,
-                                                                             initial=0.0)))
+                    states = np.asarray(states, dtype=float)
+                    # slack needed by the optimal plan (what the QP's slack variable holds)
+                    lateral = states[0, 1:][:, None]
+                    slack = np.max(inputs.constraint_bound - inputs.constraint_gain * lateral,
+                                   initial=0.0)
+                    return MpcStep(float(plan[0]), plan, states, status, iterations, elapsed,
+                                   "none", float(max(slack, 0.0)))
         return self._fallback(inputs, status, iterations, elapsed)
 
     def _fallback(self, inputs: MpcInputs, status: str, iterations: int,

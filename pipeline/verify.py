@@ -35,7 +35,9 @@ def paper_metrics_table(runs_root: Path) -> pd.DataFrame:
         metrics = read_run(folder)["metrics"]
         if metrics.get("scenario") != "paper_sudden_obstacle":
             continue
-        rows.append({k: v for k, v in metrics.items() if k != "compile_count"})
+        # the config hash is provenance (it changes with any new config key), not a result
+        rows.append({k: v for k, v in metrics.items() if k not in ("compile_count",
+                                                                   "config_hash")})
     if not rows:
         raise FileNotFoundError(f"no paper-scenario runs under {runs_root}")
     table = pd.DataFrame(rows).sort_values(["track", "method"]).reset_index(drop=True)

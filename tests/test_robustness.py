@@ -40,7 +40,8 @@ def test_injected_solver_faults_fall_back_and_the_run_completes(make_config, tmp
         return original(self)
 
     monkeypatch.setattr(LateralMpc, "_solve_raw", faulty)
-    m = run_experiment(make_config(["method=baseline"]), tmp_path).metrics
+    m = run_experiment(make_config(["method=baseline", "controller.backend=cvxpy"]),
+                       tmp_path).metrics
     tr = pd.read_csv(tmp_path / "trajectory.csv")
     assert m["fallback_count"] == 5 and m["goal_reached"]
     assert tr.loc[35:37, "fallback"].tolist() == ["shifted_plan"] * 3
@@ -50,7 +51,7 @@ def test_injected_solver_faults_fall_back_and_the_run_completes(make_config, tmp
 
 
 def test_real_iteration_limit_is_a_recorded_fallback(make_config):
-    cfg = make_config(["controller.solver_max_iter=1"])
+    cfg = make_config(["controller.solver_max_iter=1", "controller.backend=cvxpy"])
     model = build_lateral_model(cfg.vehicle, 3.0, 0.1)
     N, M = cfg.controller.horizon, cfg.controller.max_obstacles
     step = LateralMpc(cfg.controller, cfg.vehicle).step(
@@ -122,3 +123,13 @@ def test_sweep_killed_with_sigkill_then_resumed_equals_an_uninterrupted_one(tmp_
         assert twin.read_bytes() == job.read_bytes(), job.parent.name
     a, b = pd.read_csv(clean / "summary.csv"), pd.read_csv(broken / "summary.csv")
     pd.testing.assert_frame_equal(a, b)
+
+
+def test_real_iteration_limit_with_the_direct_backend(make_config):
+    cfg = make_config(["controller.solver_max_iter=1", "controller.backend=clarabel_direct"])
+    model = build_lateral_model(cfg.vehicle, 3.0, 0.1)
+    N, M = cfg.controller.horizon, cfg.controller.max_obstacles
+    step = LateralMpc(cfg.controller, cfg.vehicle).step(
+        MpcInputs(np.array([0.5, 0.0, 0.1, 0.0, 0.0]), model, np.full(N, -1.0), np.zeros(N),
+                  np.zeros((N, M)), np.zeros((N, M)), np.zeros(N)))
+    assert step.status == "user_limit" and step.fallback == "safe_input"
