@@ -11,7 +11,7 @@ PYTEST_ARGS ?=
 SWEEP       ?= obstacle_speed
 LAUNCHER    ?= basic
 
-.PHONY: help install reproduce experiment report sweep verify test test-all bench clean
+.PHONY: help install reproduce experiment report sweep verify ablation test test-all bench clean
 
 help:  ## list the targets
 	@grep -E '^[a-zA-Z_-]+:.*## ' $(MAKEFILE_LIST) | awk -F':.*## ' '{printf "  %-12s %s\n", $$1, $$2}'
@@ -39,6 +39,12 @@ reproduce: experiment report  ## set up, run the experiment and write reports/la
 sweep: $(STAMP)  ## run a sweep preset (SWEEP=sensitivity|horizon|obstacle_speed, LAUNCHER=basic|local_cores)
 	$(PY) -m pipeline.run sweep=$(SWEEP) hydra/launcher=$(LAUNCHER)
 	$(PY) -m pipeline.report $(RUNS) --sweep $(RUNS)/sweeps/$(SWEEP) --out $(REPORT) --command "make sweep SWEEP=$(SWEEP)"
+
+ablation: $(STAMP)  ## which revision does what: ablations + interpretation variants on the family
+	rm -rf $(RUNS)/ablation $(RUNS)/interpretations
+	$(PY) -m pipeline.run experiment=ablation hydra.sweep.dir=$(RUNS)/ablation scenario.family.size=$(FAMILY_SIZE)
+	$(PY) -m pipeline.run experiment=interpretations hydra.sweep.dir=$(RUNS)/interpretations
+	$(MAKE) report
 
 bench: $(STAMP)  ## benchmark the controller step vs the Clarabel floor and the peers -> reports/bench/
 	$(PY) -m pipeline.bench --out reports/bench

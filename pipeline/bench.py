@@ -171,7 +171,8 @@ def bench_peers(n_steps: int) -> list[dict]:
             t0 = time.perf_counter()
             u_kept = kept.step(flat).steering_rate_rad_s
             t1 = time.perf_counter()
-            rebuilt = LateralMpc(ctrl, veh).step(flat).steering_rate_rad_s
+            # PythonRobotics style: a new CVXPY problem every step, solved through CVXPY
+            rebuilt = LateralMpc(replace(ctrl, backend="cvxpy"), veh).step(flat).steering_rate_rad_s
             t2 = time.perf_counter()
             x_ref = np.array([y_ref, 0.0, psi_ref, 0.0, 0.0])
             result = opt.solve_ocp(sys_d, np.arange(N + 1) * 0.1, flat.x0,

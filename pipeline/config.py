@@ -396,6 +396,7 @@ class RunConfig:
 
     seed: int = 0
     method: str = ""
+    variant: str = "default"
 
 
 @dataclass
@@ -452,7 +453,8 @@ class RegisterEntry:
 INTERPRETATION_REGISTER: tuple[RegisterEntry, ...] = (
     RegisterEntry(
         "Sign of B2", "B2 printed as [0 0 0 1 0]^T (minus signs lost in extraction)",
-        "B2 = [0, 0, -1, 0, 0]^T: d(psi - psi_d)/dt = r - r_d",
+        "B2 = [0, 0, -1, 0, 0]^T: d(psi - psi_d)/dt = r - r_d (no effect on these runs: the "
+        "reference line is straight, so r_d = 0)",
         "+1 (literal placement of a positive entry in the heading row)",
         "controller.b2_heading_entry"),
     RegisterEntry(

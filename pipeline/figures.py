@@ -271,3 +271,33 @@ def sweep_figure(summary: pd.DataFrame, swept: list[str]) -> list[tuple[Figure, 
             fig.suptitle(f"method: {method}", fontsize=9)
             out.append((fig, f"sweep_heatmap_{method}"))
     return out
+
+
+def ablation_forest_figure(effects: pd.DataFrame) -> Figure:
+    """Forest plot: median paired effect versus baseline (95 % CI) of each configuration, one
+    panel per claim; left of zero is the paper's claimed direction."""
+    claims = list(dict.fromkeys(effects["claim"]))
+    configs = list(dict.fromkeys(effects["configuration"]))
+    fig, axes = plt.subplots(1, len(claims), figsize=(2.6 * len(claims), 0.32 * len(configs) + 1.6),
+                             layout="constrained", sharey=True, squeeze=False)
+    y = np.arange(len(configs))[::-1]
+    colors = ["#1f77b4" if c == "improved" else "#2ca02c" if c.startswith("baseline+")
+              else "#ff7f0e" for c in configs]
+    for ax, claim in zip(axes[0], claims):
+        part = effects[effects["claim"] == claim].set_index("configuration").reindex(configs)
+        med = part["median_effect"].to_numpy(float)
+        low, high = part["ci_low"].to_numpy(float), part["ci_high"].to_numpy(float)
+        finite = np.concatenate([v[np.isfinite(v)] for v in (med, low, high)])
+        span = max(np.max(np.abs(finite)) if finite.size else 1.0, 1e-9) * 1.1
+        med, low, high = (np.clip(v, -span, span) for v in (med, low, high))
+        for yi, m, lo, hi, color in zip(y, med, low, high, colors):
+            ax.plot([lo, hi], [yi, yi], color=color, lw=2)
+            ax.plot([m], [yi], "o", color=color, ms=5)
+        ax.axvline(0.0, color="k", lw=0.8)
+        ax.set_title(f"{claim}: {part['metric'].iloc[0]}", fontsize=8)
+        ax.tick_params(labelsize=7)
+        ax.grid(True, axis="x", alpha=0.3)
+    axes[0][0].set_yticks(y, configs, fontsize=7)
+    fig.supxlabel("median paired effect vs baseline (95 % CI); < 0 = the claimed improvement",
+                  fontsize=8)
+    return fig

@@ -122,8 +122,8 @@ def load_runs(run_root: Path) -> tuple[list[dict], dict[str, pd.DataFrame], dict
     run_root = Path(run_root)
 
     def outside_sweeps(path: Path) -> bool:
-        # parameter sweeps live under a "sweeps" folder and get their own report section
-        return "sweeps" not in path.relative_to(run_root).parts
+        # sweeps, ablations and interpretation variants get their own report sections
+        return not {"sweeps", "ablation", "interpretations"} & set(path.relative_to(run_root).parts)
 
     family_dirs = sorted(p.parent for p in run_root.rglob("family_metrics.csv")
                          if (p.parent / "family.json").is_file() and outside_sweeps(p.parent))
@@ -156,8 +156,78 @@ def is_sweep_folder(folder: Path) -> bool:
     return bool(swept - {"method", "run.method", "planner"})
 
 
+def _ablation_section(run_root: Path, fig_dir: Path, table_dir: Path) -> dict | None:
+    """Effects of each revision alone and left out, attribution sentences, interpretation flips."""
+    from pipeline.ablation import (ablation_effects, attribution_sentences, interpretation_flips,
+                                   load_family_jobs)
+    from pipeline.figures import ablation_forest_figure
+
+    run_root = Path(run_root)
+    tables = load_family_jobs(run_root / "ablation") if (run_root / "ablation").is_dir() else {}
+    flips = interpretation_flips(run_root / "interpretations")
+    if "baseline" not in tables and flips is None:
+        return None
+    section = {"effects": [], "sentences": {}, "figures": [], "counts": [], "flips": []}
+    if "baseline" in tables and "improved" in tables:
+        effects = ablation_effects(tables)
+        effects.to_csv(table_dir / "ablation_effects.csv", index=False)
+        section["sentences"] = attribution_sentences(effects)
+        section["effects"] = [{**{k: _fmt(v) for k, v in r.items()},
+                               "ci": f"[{_fmt(r['ci_low'])}, {_fmt(r['ci_high'])}]"}
+                              for r in effects.to_dict("records")]
+        section["counts"] = [{"configuration": label,
+                              "collisions": int(t["collision"].astype(bool).sum()),
+                              "not_recovered": int((~t["recovered"].astype(bool)).sum()),
+                              "scenarios": len(t)} for label, t in tables.items()]
+        section["figures"].append({
+            "id": "ablation_forest", "group": "ablation",
+            "paths": save_figure(ablation_forest_figure(effects), fig_dir, "ablation_forest"),
+            "caption": "Median paired effect versus the baseline with its 95 % bootstrap "
+                       "interval, per claim: the improved bundle (blue), each revision added "
+                       "alone to the baseline (green), the bundle without each revision (orange).",
+            "alt": "Forest plot of ablation effects per claim"})
+    if flips is not None:
+        flips.to_csv(table_dir / "interpretation_flips.csv", index=False)
+        section["flips"] = flips.to_dict("records")
+    return section
+
+
+def _performance_section(bench_dir: Path | None, fig_dir: Path) -> dict | None:
+    """The benchmark's summary (``make bench``), if it was run."""
+    import json
+    import shutil
+
+    if bench_dir is None or not (Path(bench_dir) / "bench_summary.json").is_file():
+        return None
+    summary = json.loads((Path(bench_dir) / "bench_summary.json").read_text())
+    figures = []
+    png = Path(bench_dir) / "scaling.png"
+    if png.is_file():
+        fig_dir.mkdir(parents=True, exist_ok=True)
+        shutil.copyfile(png, fig_dir / "bench_scaling.png")
+        svg = Path(bench_dir) / "scaling.svg"
+        if svg.is_file():
+            shutil.copyfile(svg, fig_dir / "bench_scaling.svg")
+        figures.append({"id": "bench_scaling", "group": "performance",
+                        "paths": {"png": fig_dir / "bench_scaling.png",
+                                  "svg": fig_dir / "bench_scaling.svg"},
+                        "caption": "Median controller step (APF rollout + QP) of both backends "
+                                   "and the Clarabel floor versus the horizon N, per obstacle "
+                                   "count.", "alt": "Step time versus horizon"})
+    rows = [{k: _fmt(v) for k, v in r.items()} for r in summary["lateral"]]
+    peers = [{"N": p["N"], "kept": _fmt(p["kept_cvxpy"]["median_ms"]),
+              "rebuild": _fmt(p["rebuild_cvxpy"]["median_ms"]),
+              "python_control": _fmt(p["python_control"]["median_ms"]),
+              "ratio": _fmt(p["python_control_over_kept"]),
+              "diff": _fmt(p["max_u0_diff_python_control"])} for p in summary["peers"]]
+    return {"rows": rows, "peers": peers, "figures": figures,
+            "pipeline": {k: _fmt(v) for k, v in summary["pipeline"].items()},
+            "kinematic": {k: _fmt(v) for k, v in summary["kinematic"].items()},
+            "n50": _fmt(summary.get("n50_over_n10_direct"))}
+
+
 def build_report(run_root: Path, out_dir: Path, command: str,
-                 sweep_dirs: tuple[Path, ...] = ()) -> Path:
+                 sweep_dirs: tuple[Path, ...] = (), bench_dir: Path | None = None) -> Path:
     """Write ``out_dir/index.html`` (plus figures/ and tables/) from the runs under ``run_root``.
 
     Parameters
@@ -182,6 +252,7 @@ def build_report(run_root: Path, out_dir: Path, command: str,
     else:
         runs, family_tables, family_info = load_runs(run_root)
     sweeps = [_sweep_section(d, fig_dir, table_dir) for d in sweep_dirs]
+    performance = _performance_section(bench_dir, fig_dir)
     env = jinja2.Environment(loader=jinja2.PackageLoader("pipeline", "templates"),
                              autoescape=jinja2.select_autoescape(["html", "j2"]),
                              undefined=jinja2.StrictUndefined)
@@ -189,9 +260,10 @@ def build_report(run_root: Path, out_dir: Path, command: str,
         if not sweeps:
             raise FileNotFoundError(f"no single runs (the paper scenario) under {run_root}")
         figures = [f for sw in sweeps for f in sw["figures"]]
+        figures += performance["figures"] if performance else []
         _inline(figures, out_dir)
         page = env.get_template("report.html.j2").render(
-            paper=False, sweeps=sweeps, figures=figures, family=None, kinematic=None,
+            paper=False, sweeps=sweeps, performance=performance, ablation=None, figures=figures, family=None, kinematic=None,
             methods=[], scenario="(sweep only)", prov=provenance(command),
             register=register_rows({}), metrics_doc=_metrics_doc(), claim_defs=CLAIMS)
         path = out_dir / "index.html"
@@ -231,6 +303,10 @@ def build_report(run_root: Path, out_dir: Path, command: str,
         row["values"] = [_fmt(row.get(m)) for m in order]
     claim_secondary = {c.claim_id: ", ".join(c.secondary_metrics) for c in CLAIMS}
 
+    ablation = _ablation_section(run_root, fig_dir, table_dir)
+    if ablation:
+        figures.extend(ablation["figures"])
+
     kinematic = None
     if kinematic_runs:
         kinematic = _track_section(kinematic_runs, "kinematic", fig_dir, table_dir, claims)
@@ -244,9 +320,10 @@ def build_report(run_root: Path, out_dir: Path, command: str,
             figures.append(f)
     for sw in sweeps:
         figures.extend(sw["figures"])
+    figures += performance["figures"] if performance else []
     _inline(figures, out_dir)
     page = env.get_template("report.html.j2").render(
-        paper=True, sweeps=sweeps, scenario=scenario, methods=order, figures=figures, metric_rows=metric_rows,
+        paper=True, sweeps=sweeps, performance=performance, scenario=scenario, ablation=ablation, methods=order, figures=figures, metric_rows=metric_rows,
         timing_rows=timing_rows, claims=claims, claim_secondary=claim_secondary,
         verdict_rule=VERDICT_RULE_SINGLE, family=family, family_rule=VERDICT_RULE_FAMILY,
         kinematic=kinematic,
@@ -478,12 +555,14 @@ def main(argv: list[str] | None = None) -> int:
                         help="output folder (default: reports/latest)")
     parser.add_argument("--sweep", type=Path, action="append", default=[],
                         help="aggregated sweep folder to add as a Sweep section (repeatable)")
+    parser.add_argument("--bench", type=Path, default=Path("reports/bench"),
+                        help="benchmark folder to add as the Performance section, if present")
     parser.add_argument("--command", default=None,
                         help="command to show under provenance (default: this command line)")
     args = parser.parse_args(argv)
     command = args.command or "python -m pipeline.report " + " ".join(argv or sys.argv[1:])
     try:
-        path = build_report(args.runs, args.out, command, tuple(args.sweep))
+        path = build_report(args.runs, args.out, command, tuple(args.sweep), args.bench)
     except FileNotFoundError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
