@@ -12,8 +12,8 @@ in the report):
   acceleration ``a_y = v^2 kappa = v r``; RMS and max lateral jerk ``d a_y / dt`` (m/s^3, central
   differences); RMS curvature rate ``d kappa / dt`` with ``kappa = r / v`` (1/(m s)).
 * **Repulsion modulation** (C3): repulsive impulse ``sum |F_rep| Ts``; share of it applied while
-  the obstacle's clearance exceeds ``threat_clearance_m``; peak ``|F_rep|``; clearance at which
-  repulsion first switched on.
+  the obstacle's clearance exceeds ``threat_clearance_m`` (0 when no repulsion was applied at
+  all); peak ``|F_rep|``; clearance at which repulsion first switched on.
 * **Goal-direction recovery** (C4, s): from the moment every obstacle is passed (the vehicle's
   longitudinal position exceeds each obstacle's by both radii, for good), the settling time of
   the lateral error to the original start-goal line, computed with python-control's
@@ -279,8 +279,9 @@ def compute_metrics(trajectory: pd.DataFrame, context: TrajectoryContext,
         impulse = float(np.sum(rep) * dt)
         far = np.nan_to_num(clearance, nan=np.inf) > thresholds.threat_clearance_m
         out["repulsive_impulse"] = impulse
+        # no repulsion at all means no unnecessary repulsion either: share 0, not missing
         out["repulsive_impulse_far_share"] = float(np.sum(rep[far]) * dt / impulse) \
-            if impulse > 0 else float("nan")
+            if impulse > 0 else 0.0
         out["repulsive_force_peak"] = float(np.max(rep)) if rep.size else float("nan")
         on = np.nonzero(rep > 1e-9)[0]
         out["repulsion_onset_clearance_m"] = float(clearance[on[0]]) if on.size else float("nan")

@@ -91,3 +91,16 @@ def test_collision_flag_and_no_reaction():
     m = compute_metrics(frame, CTX, MetricsConfig())
     assert m["collision"] and m["min_clearance_m"] == pytest.approx(0.3 - 1.5, abs=1e-9)
     assert m["reaction_delay_s"] is None and m["reacted"] is False
+
+
+def test_repulsion_share_closed_form_and_zero_when_never_repelled():
+    t = np.arange(0.0, 10.0, 0.1)
+    frame = synthetic(t, 3.0 * t, np.full(t.size, -2.0), obstacle=(15.0, 0.0, 0.5), appear=0.0)
+    # clearance = hypot(x - 15, 2) - 1.5 > 2 m (far) until |x - 15| < sqrt(3.5^2 - 4)
+    frame["apf_rep_norm"] = 1.0
+    m = compute_metrics(frame, CTX, MetricsConfig())
+    far = np.hypot(3.0 * t - 15.0, 2.0) - 1.5 > 2.0
+    assert m["repulsive_impulse_far_share"] == pytest.approx(far.mean())
+    assert m["repulsive_impulse"] == pytest.approx(t.size * 0.1)
+    frame["apf_rep_norm"] = 0.0
+    assert compute_metrics(frame, CTX, MetricsConfig())["repulsive_impulse_far_share"] == 0.0
