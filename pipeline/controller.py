@@ -136,6 +136,7 @@ class ClarabelDirect:
 
     def _compile(self, owner) -> None:
         import clarabel
+        import scipy.sparse as sp
         from cvxpy.reductions.solvers.conic_solvers.clarabel_conif import dims_to_solver_cones
 
         start = time.perf_counter()
@@ -172,8 +173,9 @@ class ClarabelDirect:
         settings.verbose = False
         settings.presolve_enable = False  # keeps in-place data updates allowed
         settings.max_iter = owner.cfg.solver_max_iter
-        self.maps = {"P": P, "A": A0, "q0": q0, "a0": A0.data.copy(), "b0": b0, "Tq": Tq,
-                     "TA": TA, "Tb": Tb, "cones": dims_to_solver_cones(data["dims"]),
+        # the maps are mostly zeros (each entry depends on a few parameters): keep them sparse
+        self.maps = {"P": P, "A": A0, "q0": q0, "a0": A0.data.copy(), "b0": b0,
+                     "Tq": sp.csr_matrix(Tq), "TA": sp.csr_matrix(TA), "Tb": sp.csr_matrix(Tb), "cones": dims_to_solver_cones(data["dims"]),
                      "settings": settings, "offsets": stuffing.var_offsets}
         owner.compile_count += 1
         owner.compile_time_s = time.perf_counter() - start
