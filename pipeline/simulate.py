@@ -21,7 +21,7 @@ from pipeline.controller import (KinematicLtvMpc, LateralMpc, MpcInputs, MpcStep
                                  pure_pursuit_steering_rate)
 from pipeline.model import LateralModelCache, kinematic_plant_step, step_plant
 from pipeline.planner import apf_rollout, plan_speed
-from pipeline.scenario import Scenario
+from pipeline.scenario import ObstacleSnapshot, Scenario
 
 
 @dataclass(frozen=True)
@@ -54,13 +54,12 @@ def _wrap(angle_rad: float) -> float:
     return float(np.arctan2(np.sin(angle_rad), np.cos(angle_rad)))
 
 
-def obstacle_columns(scenario: Scenario, time_s: float, position_m: np.ndarray,
+def obstacle_columns(snap: ObstacleSnapshot, position_m: np.ndarray,
                      vehicle_radius_m: float) -> tuple[dict, float]:
-    """Per-obstacle log columns at ``time_s`` and the clearance to the nearest visible one."""
-    snap = scenario.obstacles_at(time_s)
+    """Per-obstacle log columns of a snapshot and the clearance to the nearest visible one."""
     cols: dict = {}
     clearance = np.inf
-    for j in range(scenario.n_obstacles):
+    for j in range(snap.radii_m.shape[0]):
         cols[f"obs{j}_x_m"] = snap.positions_m[j, 0]
         cols[f"obs{j}_y_m"] = snap.positions_m[j, 1]
         cols[f"obs{j}_radius_m"] = snap.radii_m[j]
@@ -137,8 +136,8 @@ def simulate(cfg: ExperimentConfig, scenario: Scenario) -> SimulationResult:
         position = state[:2].copy()
         line_pos = frame.to_line(position)
         e_psi = _wrap(state[2] - frame.heading_rad)
-        obs_cols, clearance = obstacle_columns(scenario, time_s, state[:2],
-                                               vehicle.footprint_radius_m)
+        snapshot = scenario.obstacles_at(time_s)
+        obs_cols, clearance = obstacle_columns(snapshot, state[:2], vehicle.footprint_radius_m)
         row = {"time_s": time_s, "X_m": state[0], "Y_m": state[1], "psi_rad": state[2],
                "vx_mps": state[3], "vy_mps": state[4], "r_rad_s": state[5],
                "delta_rad": state[6], "e_y_m": line_pos[1], "e_psi_rad": e_psi}
@@ -148,7 +147,7 @@ def simulate(cfg: ExperimentConfig, scenario: Scenario) -> SimulationResult:
             rows.append({**row, **obs_cols, "clearance_m": clearance, "fallback": "end",
                          "solver_status": "end"})
             break
-        visible = scenario.obstacles_at(time_s).only_visible()
+        visible = snapshot.only_visible()
         velocity = np.array([state[3] * np.cos(state[2]) - state[4] * np.sin(state[2]),
                              state[3] * np.sin(state[2]) + state[4] * np.cos(state[2])])
         speed_ref = plan_speed(position, state[2], visible, scenario.speed_mps,
@@ -215,8 +214,8 @@ def simulate_kinematic(cfg: ExperimentConfig, scenario: Scenario) -> SimulationR
         position = state[:2].copy()
         line_pos = frame.to_line(position)
         e_psi = _wrap(state[2] - frame.heading_rad)
-        obs_cols, clearance = obstacle_columns(scenario, time_s, position,
-                                               vehicle.footprint_radius_m)
+        snapshot = scenario.obstacles_at(time_s)
+        obs_cols, clearance = obstacle_columns(snapshot, position, vehicle.footprint_radius_m)
         row = {"time_s": time_s, "X_m": state[0], "Y_m": state[1], "psi_rad": state[2],
                "vx_mps": state[3], "vy_mps": 0.0, "e_y_m": line_pos[1], "e_psi_rad": e_psi}
         ending = _termination(state, line_pos[0], goal_line_x, scenario, k)
@@ -226,7 +225,7 @@ def simulate_kinematic(cfg: ExperimentConfig, scenario: Scenario) -> SimulationR
                          "r_rad_s": state[3] * np.tan(u_prev[1]) / L, **obs_cols,
                          "clearance_m": clearance, "fallback": "end", "solver_status": "end"})
             break
-        visible = scenario.obstacles_at(time_s).only_visible()
+        visible = snapshot.only_visible()
         velocity = state[3] * np.array([np.cos(state[2]), np.sin(state[2])])
         rollout = apf_rollout(position, scenario.goal_m, visible, planner, N, ts, velocity)
         rows_index = np.arange(N) if ctrl.reference_alignment == "literal" \
