@@ -75,11 +75,43 @@ def step_inputs(cfg, n_obstacles: int, n_steps: int, seed: int = 0) -> list:
     return out
 
 
+def _floor_solver(qp_map, max_iter: int):
+    """A kept Clarabel solver on a compiled map's data: the floor every backend is held to."""
+    import clarabel
+
+    settings = clarabel.DefaultSettings()
+    settings.verbose = False
+    settings.presolve_enable = False
+    settings.max_iter = max_iter
+    return settings
+
+
+def floor_times(qp_map, thetas: list, max_iter: int) -> tuple[np.ndarray, list]:
+    """Wall time of ``update + solve`` of a kept Clarabel solver for each parameter vector
+    (the data are computed outside the timed region), and the solutions."""
+    import clarabel
+
+    settings = _floor_solver(qp_map, max_iter)
+    solver = None
+    times, solutions = [], []
+    for theta in thetas:
+        q, a, b = qp_map.data(theta)
+        if solver is None:
+            solver = clarabel.DefaultSolver(qp_map.P, q, qp_map.matrix_A(a), b, qp_map.cones(),
+                                            settings)
+            start = time.perf_counter()
+            solution = solver.solve()
+        else:
+            start = time.perf_counter()
+            solver.update(q=q, A=a, b=b)
+            solution = solver.solve()
+        times.append(time.perf_counter() - start)
+        solutions.append(np.asarray(solution.x))
+    return np.asarray(times), solutions
+
+
 def bench_lateral(horizons, obstacle_counts, n_steps: int, repeats: int) -> list[dict]:
     """Per-step times of the two backends and the floor, interleaved on identical inputs."""
-    import clarabel
-    import scipy.sparse as sp
-
     from pipeline.controller import LateralMpc
 
     rows = []
@@ -87,51 +119,88 @@ def bench_lateral(horizons, obstacle_counts, n_steps: int, repeats: int) -> list
         for n_obs in obstacle_counts:
             cfg = _config(["method=improved", f"controller.horizon={N}",
                            f"controller.max_obstacles={max(n_obs, 1)}"])
-            mpc_cvxpy = LateralMpc(cfg.controller, cfg.vehicle)
-            direct_cfg = replace(cfg.controller, backend="clarabel_direct")
-            mpc_direct = LateralMpc(direct_cfg, cfg.vehicle)
+            mpc_cvxpy = LateralMpc(replace(cfg.controller, backend="cvxpy"), cfg.vehicle)
+            mpc_direct = LateralMpc(replace(cfg.controller, backend="clarabel_direct"),
+                                    cfg.vehicle)
             steps = step_inputs(cfg, n_obs, n_steps)
-            floor_solver = None
+            qp_map = mpc_direct.qp.map
+            offset_u = qp_map.variables["U"][0]
+            thetas = [mpc_direct.parameter_vector(inputs) for inputs, _ in steps]
             for rep in range(repeats):
+                floor_s, floor_x = floor_times(qp_map, thetas, cfg.controller.solver_max_iter)
                 for k, (inputs, apf_s) in enumerate(steps):
+                    theta = thetas[k]
                     t0 = time.perf_counter()
-                    mpc_cvxpy.set_parameters(inputs)
+                    solution = mpc_cvxpy.qp.solve(theta)
                     t1 = time.perf_counter()
-                    status, iters, solve_s = mpc_cvxpy._solve_raw()
-                    t2 = time.perf_counter()
-                    u_cvxpy = float(np.asarray(mpc_cvxpy.U.value).ravel()[0])
-                    t3 = time.perf_counter()
-                    clarabel_s = float(mpc_cvxpy.problem.solver_stats.solve_time or np.nan)
+                    clarabel_s = float(mpc_cvxpy.qp.problem.solver_stats.solve_time or np.nan)
+                    u_cvxpy = float(np.asarray(solution.values["U"]).ravel()[0]) \
+                        if solution.values is not None else np.nan
                     d0 = time.perf_counter()
-                    direct = mpc_direct.step(inputs)
+                    direct = mpc_direct.solve(inputs)
                     d1 = time.perf_counter()
-                    # the floor: identical data, kept solver, only update + solve timed
-                    m = mpc_direct._direct.maps
-                    theta = mpc_direct.parameter_vector(inputs)
-                    q, b = m["q0"] + m["Tq"] @ theta, m["b0"] + m["Tb"] @ theta
-                    A = sp.csc_matrix((m["a0"] + m["TA"] @ theta, m["A"].indices, m["A"].indptr),
-                                      shape=m["A"].shape)
-                    if floor_solver is None:
-                        floor_solver = clarabel.DefaultSolver(m["P"], q, A, b, m["cones"],
-                                                              m["settings"])
-                    f0 = time.perf_counter()
-                    floor_solver.update(q=q, A=A, b=b)
-                    floor = floor_solver.solve()
-                    f1 = time.perf_counter()
                     rows.append({
                         "section": "lateral", "N": N, "obstacles": n_obs, "repeat": rep, "step": k,
-                        "apf_s": apf_s, "cvxpy_update_s": t1 - t0, "cvxpy_solve_s": t2 - t1,
-                        "cvxpy_unpack_s": t3 - t2, "cvxpy_clarabel_s": clarabel_s,
-                        "cvxpy_iterations": iters, "cvxpy_step_s": apf_s + (t3 - t0),
+                        "apf_s": apf_s, "cvxpy_solve_s": t1 - t0, "cvxpy_clarabel_s": clarabel_s,
+                        "cvxpy_iterations": solution.iterations,
+                        "cvxpy_step_s": apf_s + (t1 - t0),
                         "direct_s": d1 - d0, "direct_step_s": apf_s + (d1 - d0),
-                        "floor_s": f1 - f0, "floor_iterations": int(floor.iterations),
+                        "floor_s": floor_s[k],
                         "u0_cvxpy": u_cvxpy, "u0_direct": direct.steering_rate_rad_s,
-                        "u0_floor": float(np.asarray(floor.x)[m["offsets"][mpc_direct.U.id]]),
-                        "cvxpy_status": status, "compiles_cvxpy": mpc_cvxpy.compile_count,
+                        "u0_floor": float(floor_x[k][offset_u]),
+                        "cvxpy_status": solution.status,
+                        "compiles_cvxpy": mpc_cvxpy.qp.compile_count,
                         "compiles_direct": mpc_direct.compile_count,
-                        "compile_time_cvxpy_s": mpc_cvxpy.compile_time_s,
                         "compile_time_direct_s": mpc_direct.compile_time_s})
     return rows
+
+
+class _RecordingMap:
+    """A compiled map that remembers every parameter vector it is applied to (the bench's way
+    to hand the floor solver exactly the QPs of a closed-loop run)."""
+
+    def __init__(self, qp_map) -> None:
+        self._map = qp_map
+        self.recorded: list[np.ndarray] = []
+
+    def data(self, theta):
+        self.recorded.append(np.array(theta, copy=True))
+        return self._map.data(theta)
+
+    def __getattr__(self, name):
+        return getattr(self._map, name)
+
+
+def bench_closed_loop(repeats: int = 5) -> dict:
+    """One complete paper-scenario run of the improved method in this process (the QP compiled
+    inside the timed region, a fresh cache each time), over the floor of the same QPs."""
+    from pipeline.controller import QpCache
+    from pipeline.controller.lateral import LateralQpStructure
+    from pipeline.scenario import build_scenario
+    from pipeline.simulate import simulate
+
+    cfg = _config(["method=improved"])
+    scenario = build_scenario(cfg.scenario)
+    walls, compile_s = [], []
+    for _ in range(repeats):
+        start = time.perf_counter()
+        result = simulate(cfg, scenario, QpCache())
+        walls.append(time.perf_counter() - start)
+        compile_s.append(result.compile_time_s)
+    # the same run again, recording its QPs (deterministic: the same parameter vectors)
+    cache = QpCache()
+    simulate(cfg, scenario, cache)
+    key = ("lateral", "map", LateralQpStructure.of(cfg.controller, cfg.vehicle))
+    recorder = _RecordingMap(cache.entries[key])
+    cache.entries[key] = recorder
+    simulate(cfg, scenario, cache)
+    floors = [floor_times(recorder._map, recorder.recorded, cfg.controller.solver_max_iter)[0]
+              for _ in range(repeats)]
+    floor_sum = float(np.median([f.sum() for f in floors]))
+    wall = float(np.median(walls))
+    return {"closed_loop_wall_s": wall, "closed_loop_compile_s": float(np.median(compile_s)),
+            "closed_loop_qps": len(recorder.recorded), "floor_sum_s": floor_sum,
+            "closed_loop_over_floor": wall / floor_sum}
 
 
 def bench_peers(n_steps: int) -> list[dict]:
@@ -169,10 +238,10 @@ def bench_peers(n_steps: int) -> list[dict]:
                            constraint_gain=np.zeros_like(inputs.constraint_gain),
                            constraint_bound=np.zeros_like(inputs.constraint_bound))
             t0 = time.perf_counter()
-            u_kept = kept.step(flat).steering_rate_rad_s
+            u_kept = kept.solve(flat).steering_rate_rad_s
             t1 = time.perf_counter()
             # PythonRobotics style: a new CVXPY problem every step, solved through CVXPY
-            rebuilt = LateralMpc(replace(ctrl, backend="cvxpy"), veh).step(flat).steering_rate_rad_s
+            rebuilt = LateralMpc(replace(ctrl, backend="cvxpy"), veh).solve(flat).steering_rate_rad_s
             t2 = time.perf_counter()
             x_ref = np.array([y_ref, 0.0, psi_ref, 0.0, 0.0])
             result = opt.solve_ocp(sys_d, np.arange(N + 1) * 0.1, flat.x0,
@@ -199,7 +268,7 @@ def bench_kinematic(n_steps: int) -> list[dict]:
         reference = np.vstack([state[0] + 0.3 * np.arange(1, 11), 0.2 * np.sin(0.1 * k)
                                * np.ones(10)])
         t0 = time.perf_counter()
-        step = mpc.step(state, np.zeros(2), reference, empty, np.zeros(0))
+        step = mpc.solve(state, np.zeros(2), reference, empty, np.zeros(0))
         rows.append({"section": "kinematic", "N": 10, "step": k,
                      "kinematic_step_s": time.perf_counter() - t0,
                      "kinematic_compiles": mpc.compile_count, "status": step.status})
@@ -207,8 +276,9 @@ def bench_kinematic(n_steps: int) -> list[dict]:
     return rows
 
 
-def bench_pipeline(family_size: int) -> dict:
-    """Import time, one paper-scenario run, a family's throughput, peak memory."""
+def bench_pipeline(family_size: int, compile_family_size: int = 40) -> dict:
+    """Import time, one paper-scenario run (with its files), compilations over a family, a
+    family's throughput on two workers (worker start included), peak memory."""
     import tempfile
 
     from pipeline.run import run_experiment, run_family
@@ -220,6 +290,10 @@ def bench_pipeline(family_size: int) -> dict:
         start = time.perf_counter()
         run_experiment(_config(["method=improved"]), Path(tmp) / "one", resume=False)
         one_run = time.perf_counter() - start
+        run_family(_config(["method=improved", "scenario=family",
+                            f"scenario.family.size={compile_family_size}",
+                            "scenario.family.n_jobs=2"]), Path(tmp) / "compiles", progress=False)
+        compiles = json.loads((Path(tmp) / "compiles" / "family.json").read_text())["compiles"]
         start = time.perf_counter()
         run_family(_config(["method=improved", "scenario=family",
                             f"scenario.family.size={family_size}", "scenario.family.n_jobs=2"]),
@@ -227,11 +301,12 @@ def bench_pipeline(family_size: int) -> dict:
         family = time.perf_counter() - start
     return {"import_s": imports, "one_paper_run_s": one_run, "family_size": family_size,
             "family_wall_s": family, "family_scenarios_per_s": family_size / family,
+            "compile_family_size": compile_family_size, "compiles_per_family": int(compiles),
             "peak_rss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0}
 
 
 def summarize(lateral: pd.DataFrame, peers: pd.DataFrame, kinematic: pd.DataFrame,
-              pipeline_figures: dict) -> dict:
+              pipeline_figures: dict, closed_loop: dict) -> dict:
     def stats(values) -> dict:
         v = np.asarray(values, float) * 1e3
         return {"min_ms": float(v.min()), "median_ms": float(np.median(v)),
@@ -240,8 +315,8 @@ def summarize(lateral: pd.DataFrame, peers: pd.DataFrame, kinematic: pd.DataFram
     table = []
     for (N, n_obs), part in lateral.groupby(["N", "obstacles"]):
         row = {"N": int(N), "obstacles": int(n_obs)}
-        for key in ("apf_s", "cvxpy_update_s", "cvxpy_solve_s", "cvxpy_unpack_s",
-                    "cvxpy_clarabel_s", "cvxpy_step_s", "direct_s", "direct_step_s", "floor_s"):
+        for key in ("apf_s", "cvxpy_solve_s", "cvxpy_clarabel_s", "cvxpy_step_s", "direct_s",
+                    "direct_step_s", "floor_s"):
             row[key[:-2] + "_median_ms"] = float(np.median(part[key]) * 1e3)
         row["cvxpy_step_over_floor"] = row["cvxpy_step_median_ms"] / row["floor_median_ms"]
         row["direct_step_over_floor"] = row["direct_step_median_ms"] / row["floor_median_ms"]
@@ -252,7 +327,6 @@ def summarize(lateral: pd.DataFrame, peers: pd.DataFrame, kinematic: pd.DataFram
                                                                 - part["u0_cvxpy"])))
         row["recompiles"] = int(part["compiles_cvxpy"].max() - 1 + part["compiles_direct"].max()
                                 - 1)
-        row["compile_time_cvxpy_s"] = float(part["compile_time_cvxpy_s"].max())
         row["compile_time_direct_s"] = float(part["compile_time_direct_s"].max())
         table.append(row)
     per_n = {int(r["N"]): r for r in table if r["obstacles"] == 1}
@@ -267,7 +341,16 @@ def summarize(lateral: pd.DataFrame, peers: pd.DataFrame, kinematic: pd.DataFram
                               part["u0_python_control"] - part["u0_kept"]))),
                           "max_u0_diff_rebuild": float(np.max(np.abs(part["u0_rebuild"]
                                                                      - part["u0_kept"])))})
-    return {"lateral": table, "peers": peer_rows,
+    head = per_n.get(10) or table[0]
+    return {"closed_loop_over_floor": closed_loop["closed_loop_over_floor"],
+            "step_over_floor": head["direct_step_over_floor"],
+            "compiles_per_family": pipeline_figures["compiles_per_family"],
+            "family_scenarios_per_s": pipeline_figures["family_scenarios_per_s"],
+            "goals": {"closed_loop_over_floor": "<= 2.0", "step_over_floor": "<= 1.3 (N=10, "
+                      "1 obstacle)", "compiles_per_family": "1 (40 members, 2 workers)",
+                      "family_scenarios_per_s": ">= 20 (200 members, 2 workers)"},
+            "closed_loop": closed_loop,
+            "lateral": table, "peers": peer_rows,
             "kinematic": stats(kinematic["kinematic_step_s"]),
             "kinematic_recompiles": int(kinematic["kinematic_compiles"].max() - 1),
             "n50_over_n10_direct": per_n[50]["direct_step_median_ms"]
@@ -303,15 +386,17 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--steps", type=int, default=40, help="inputs per configuration")
     parser.add_argument("--repeats", type=int, default=3)
     parser.add_argument("--quick", action="store_true", help="N=10 and 1 obstacle only")
-    parser.add_argument("--family-size", type=int, default=40)
+    parser.add_argument("--family-size", type=int, default=200)
     args = parser.parse_args(argv)
     horizons = (10,) if args.quick else (10, 20, 30, 50)
     counts = (1,) if args.quick else (1, 3, 5)
     lateral = pd.DataFrame(bench_lateral(horizons, counts, args.steps, args.repeats))
     peers = pd.DataFrame(bench_peers(10 if args.quick else 20))
     kinematic = pd.DataFrame(bench_kinematic(args.steps))
-    pipeline_figures = bench_pipeline(8 if args.quick else args.family_size)
-    summary = summarize(lateral, peers, kinematic, pipeline_figures)
+    closed_loop = bench_closed_loop(3 if args.quick else 7)
+    pipeline_figures = bench_pipeline(8 if args.quick else args.family_size,
+                                      8 if args.quick else 40)
+    summary = summarize(lateral, peers, kinematic, pipeline_figures, closed_loop)
     args.out.mkdir(parents=True, exist_ok=True)
     write_csv_atomic(args.out / "bench.csv", pd.concat([lateral, peers, kinematic],
                                                        ignore_index=True))
@@ -319,6 +404,9 @@ def main(argv: list[str] | None = None) -> int:
     from pipeline.figures import save_figure
 
     save_figure(scaling_figure(lateral), args.out, "scaling")
+    print(json.dumps({key: summary[key] for key in ("closed_loop_over_floor", "step_over_floor",
+                                                    "compiles_per_family",
+                                                    "family_scenarios_per_s")}, indent=1))
     print(json.dumps({"lateral_N10_1obs": summary["lateral"][0], "peers": summary["peers"],
                       "pipeline": pipeline_figures, "n50_over_n10": summary["n50_over_n10_direct"]},
                      indent=1))

@@ -125,8 +125,16 @@ class PlannerConfig:
     rho_floor_m: float = 0.05
     obstacle_prediction: str = "current"
     closing_speed_gain_s_per_m: float = 0.0
+    # velocity planning V_r = f_v(obstacles) (DESIGN.md section 3): off for the paper scenario
+    velocity_planning: bool = False
+    braking_decel_mps2: float = 2.0
+    stop_margin_m: float = 1.0
+    speed_floor_mps: float = 1.0
 
     def __post_init__(self) -> None:
+        _at_least("planner.braking_decel_mps2", self.braking_decel_mps2, 0.0, inclusive=False)
+        _at_least("planner.stop_margin_m", self.stop_margin_m, 0.0)
+        _at_least("planner.speed_floor_mps", self.speed_floor_mps, 0.0, inclusive=False)
         _at_least("planner.step_size", self.step_size, 0.0, inclusive=False)
         _at_least("planner.h_max", self.h_max, 0.0)
         _at_least("planner.beta", self.beta, 0.0)
@@ -146,6 +154,20 @@ class PlannerConfig:
         _choice("planner.obstacle_prediction", self.obstacle_prediction,
                 ("current", "constant_velocity"))
         _at_least("planner.closing_speed_gain_s_per_m", self.closing_speed_gain_s_per_m, 0.0)
+
+
+@dataclass
+class ModelConfig:
+    """Settings of the MPC's lateral prediction model (DESIGN.md section 2)."""
+
+    b2_heading_entry: float = -1.0
+    speed_grid_mps: float = 0.1
+    validity_heading_rad: float = 0.35
+
+    def __post_init__(self) -> None:
+        _choice("model.b2_heading_entry", self.b2_heading_entry, (-1.0, 1.0))
+        _at_least("model.speed_grid_mps", self.speed_grid_mps, 0.0, inclusive=False)
+        _between("model.validity_heading_rad", self.validity_heading_rad, 0.0, math.pi)
 
 
 @dataclass
@@ -173,14 +195,7 @@ class ControllerConfig:
     heading_ref_max_rad: float = 0.5
     yaw_rate_ref_max_rad_s: float = 0.6
     path_beyond_end: str = "extend"
-    b2_heading_entry: float = -1.0
     solver_max_iter: int = 200
-    velocity_planning: bool = False
-    braking_decel_mps2: float = 2.0
-    stop_margin_m: float = 1.0
-    speed_floor_mps: float = 1.0
-    speed_grid_mps: float = 0.1
-    validity_heading_rad: float = 0.35
     lookahead_min_m: float = 2.0
     lookahead_time_s: float = 0.8
     output_weights: List[float] = field(default_factory=lambda: [1.0, 1.0])
@@ -235,12 +250,6 @@ class ControllerConfig:
         _at_least("controller.yaw_rate_ref_max_rad_s", self.yaw_rate_ref_max_rad_s, 0.0,
                   inclusive=False)
         _choice("controller.path_beyond_end", self.path_beyond_end, ("extend", "hold"))
-        _choice("controller.b2_heading_entry", self.b2_heading_entry, (-1.0, 1.0))
-        _at_least("controller.braking_decel_mps2", self.braking_decel_mps2, 0.0, inclusive=False)
-        _at_least("controller.stop_margin_m", self.stop_margin_m, 0.0)
-        _at_least("controller.speed_floor_mps", self.speed_floor_mps, 0.0, inclusive=False)
-        _at_least("controller.speed_grid_mps", self.speed_grid_mps, 0.0, inclusive=False)
-        _between("controller.validity_heading_rad", self.validity_heading_rad, 0.0, math.pi)
 
 
 @dataclass
@@ -407,6 +416,7 @@ class ExperimentConfig:
     planner: PlannerConfig = MISSING
     controller: ControllerConfig = MISSING
     scenario: ScenarioConfig = MISSING
+    model: ModelConfig = field(default_factory=ModelConfig)
     metrics: MetricsConfig = field(default_factory=MetricsConfig)
     run: RunConfig = field(default_factory=RunConfig)
 
@@ -421,8 +431,8 @@ class ExperimentConfig:
         if len(self.scenario.obstacles) > self.controller.max_obstacles:
             raise ConfigError("controller.max_obstacles", self.controller.max_obstacles,
                               f">= the number of obstacles ({len(self.scenario.obstacles)})")
-        if self.controller.speed_floor_mps < self.vehicle.min_model_speed_mps:
-            raise ConfigError("controller.speed_floor_mps", self.controller.speed_floor_mps,
+        if self.planner.speed_floor_mps < self.vehicle.min_model_speed_mps:
+            raise ConfigError("planner.speed_floor_mps", self.planner.speed_floor_mps,
                               f">= vehicle.min_model_speed_mps ({self.vehicle.min_model_speed_mps})")
 
     @property
@@ -456,7 +466,7 @@ INTERPRETATION_REGISTER: tuple[RegisterEntry, ...] = (
         "B2 = [0, 0, -1, 0, 0]^T: d(psi - psi_d)/dt = r - r_d (no effect on these runs: the "
         "reference line is straight, so r_d = 0)",
         "+1 (literal placement of a positive entry in the heading row)",
-        "controller.b2_heading_entry"),
+        "model.b2_heading_entry"),
     RegisterEntry(
         "Adaptive gain k_rep of the exponential law",
         "k_rep e^{alpha(1 - d/d0)} d/|d|^2, k_rep not given",

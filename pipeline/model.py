@@ -14,6 +14,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
+from math import atan2, cos, sin, tan, tanh
+
 import control
 import numpy as np
 
@@ -107,6 +109,12 @@ def build_lateral_model(vehicle: VehicleConfig, speed_mps: float, sample_time_s:
                         Ed=Bd_all[:, 1:], speed_mps=speed, sample_time_s=float(sample_time_s))
 
 
+def model_speed_mps(speed_mps: float, floor_mps: float, grid_mps: float) -> float:
+    """Speed at which the lateral model is built: floored, rounded to the grid (m/s)."""
+    key = round(max(speed_mps, floor_mps) / grid_mps) * grid_mps
+    return round(max(key, floor_mps), 6)
+
+
 @dataclass
 class LateralModelCache:
     """Discretized lateral models keyed by speed rounded to ``grid_mps`` (for velocity planning)."""
@@ -118,13 +126,24 @@ class LateralModelCache:
     models: dict = field(default_factory=dict)
 
     def at_speed(self, speed_mps: float) -> LateralModel:
-        floor = self.vehicle.min_model_speed_mps
-        key = round(max(speed_mps, floor) / self.grid_mps) * self.grid_mps
-        key = round(max(key, floor), 6)
+        key = model_speed_mps(speed_mps, self.vehicle.min_model_speed_mps, self.grid_mps)
         if key not in self.models:
             self.models[key] = build_lateral_model(self.vehicle, key, self.sample_time_s,
                                                    self.b2_heading_entry)
         return self.models[key]
+
+
+def _single_track_constants(vehicle: VehicleConfig) -> tuple[float, ...]:
+    """Mass, yaw inertia, axle distances, cornering stiffnesses and the tyre force limits
+    ``mu Fz`` (static axle loads) of the single-track plant."""
+    m, iz = vehicle.mass_kg, vehicle.yaw_inertia_kg_m2
+    a, b = vehicle.cg_to_front_m, vehicle.cg_to_rear_m
+    L = a + b
+    mu = vehicle.tire_friction
+    fz_front = m * GRAVITY_MPS2 * b / L
+    fz_rear = m * GRAVITY_MPS2 * a / L
+    return (m, iz, a, b, vehicle.cornering_stiffness_front_n_per_rad,
+            vehicle.cornering_stiffness_rear_n_per_rad, mu * fz_front, mu * fz_rear)
 
 
 def plant_derivative(state: np.ndarray, steering_rate_rad_s: float, speed_target_mps: float,
@@ -142,19 +161,13 @@ def plant_derivative(state: np.ndarray, steering_rate_rad_s: float, speed_target
     vehicle : VehicleConfig
     """
     X, Y, psi, vx, vy, r, delta = state
-    m, iz = vehicle.mass_kg, vehicle.yaw_inertia_kg_m2
-    a, b = vehicle.cg_to_front_m, vehicle.cg_to_rear_m
-    L = a + b
-    mu = vehicle.tire_friction
-    fz_front = m * GRAVITY_MPS2 * b / L
-    fz_rear = m * GRAVITY_MPS2 * a / L
+    m, iz, a, b, cf, cr, lim_f, lim_r = _single_track_constants(vehicle)
     vx_safe = max(vx, 0.1)
     slip_front = delta - np.arctan2(vy + a * r, vx_safe)
     slip_rear = -np.arctan2(vy - b * r, vx_safe)
-    cf, cr = vehicle.cornering_stiffness_front_n_per_rad, vehicle.cornering_stiffness_rear_n_per_rad
     # tanh saturation: slope C at zero slip, limit mu * Fz
-    fy_front = mu * fz_front * np.tanh(cf * slip_front / (mu * fz_front))
-    fy_rear = mu * fz_rear * np.tanh(cr * slip_rear / (mu * fz_rear))
+    fy_front = lim_f * np.tanh(cf * slip_front / lim_f)
+    fy_rear = lim_r * np.tanh(cr * slip_rear / lim_r)
     accel = np.clip((speed_target_mps - vx) / vehicle.speed_time_constant_s,
                     -vehicle.accel_max_mps2, vehicle.accel_max_mps2)
     rate = steering_rate_rad_s
@@ -174,19 +187,54 @@ def plant_derivative(state: np.ndarray, steering_rate_rad_s: float, speed_target
 
 def step_plant(state: np.ndarray, steering_rate_rad_s: float, speed_target_mps: float,
                vehicle: VehicleConfig, dt_s: float, substeps: int) -> np.ndarray:
-    """Advance the plant by ``dt_s`` with ``substeps`` RK4 steps; the input is held (ZOH)."""
-    rate = float(np.clip(steering_rate_rad_s, -vehicle.steering_rate_max_rad_s,
-                         vehicle.steering_rate_max_rad_s))
+    """Advance the plant by ``dt_s`` with ``substeps`` RK4 steps; the input is held (ZOH).
+
+    The same equations as :func:`plant_derivative`, evaluated on plain floats with the
+    vehicle's constants hoisted out of the substeps (seven states, forty derivative calls per
+    step: numpy's per-call overhead would cost more than the arithmetic). The tests hold the two
+    together.
+    """
+    rate_max = vehicle.steering_rate_max_rad_s
+    rate_cmd = min(max(float(steering_rate_rad_s), -rate_max), rate_max)
+    m, iz, a, b, cf, cr, lim_f, lim_r = _single_track_constants(vehicle)
+    tau, acc_max = vehicle.speed_time_constant_s, vehicle.accel_max_mps2
+    d_max = vehicle.steering_max_rad
+    target = float(speed_target_mps)
+
+    def rates(psi, vx, vy, r, delta):
+        vx_safe = max(vx, 0.1)
+        fy_front = lim_f * tanh(cf * (delta - atan2(vy + a * r, vx_safe)) / lim_f)
+        fy_rear = lim_r * tanh(cr * -atan2(vy - b * r, vx_safe) / lim_r)
+        accel = min(max((target - vx) / tau, -acc_max), acc_max)
+        rate = rate_cmd
+        if (delta >= d_max and rate > 0) or (delta <= -d_max and rate < 0):
+            rate = 0.0
+        cos_d = cos(delta)
+        c_psi, s_psi = cos(psi), sin(psi)
+        return (vx * c_psi - vy * s_psi, vx * s_psi + vy * c_psi, r, accel + vy * r,
+                (fy_front * cos_d + fy_rear) / m - vx * r,
+                (a * fy_front * cos_d - b * fy_rear) / iz, rate)
+
     h = dt_s / substeps
-    x = np.asarray(state, dtype=float).copy()
+    half, sixth = 0.5 * h, h / 6.0
+    X, Y, psi, vx, vy, r, delta = (float(v) for v in state)
     for _ in range(substeps):
-        k1 = plant_derivative(x, rate, speed_target_mps, vehicle)
-        k2 = plant_derivative(x + 0.5 * h * k1, rate, speed_target_mps, vehicle)
-        k3 = plant_derivative(x + 0.5 * h * k2, rate, speed_target_mps, vehicle)
-        k4 = plant_derivative(x + h * k3, rate, speed_target_mps, vehicle)
-        x = x + h / 6.0 * (k1 + 2 * k2 + 2 * k3 + k4)
-        x[6] = np.clip(x[6], -vehicle.steering_max_rad, vehicle.steering_max_rad)
-    return x
+        # classic RK4, unrolled over the seven states (X and Y do not feed back)
+        a0, a1, a2, a3, a4, a5, a6 = rates(psi, vx, vy, r, delta)
+        b0, b1, b2, b3, b4, b5, b6 = rates(psi + half * a2, vx + half * a3, vy + half * a4,
+                                           r + half * a5, delta + half * a6)
+        c0, c1, c2, c3, c4, c5, c6 = rates(psi + half * b2, vx + half * b3, vy + half * b4,
+                                           r + half * b5, delta + half * b6)
+        d0, d1, d2, d3, d4, d5, d6 = rates(psi + h * c2, vx + h * c3, vy + h * c4,
+                                           r + h * c5, delta + h * c6)
+        X = X + sixth * (a0 + 2 * b0 + 2 * c0 + d0)
+        Y = Y + sixth * (a1 + 2 * b1 + 2 * c1 + d1)
+        psi = psi + sixth * (a2 + 2 * b2 + 2 * c2 + d2)
+        vx = vx + sixth * (a3 + 2 * b3 + 2 * c3 + d3)
+        vy = vy + sixth * (a4 + 2 * b4 + 2 * c4 + d4)
+        r = r + sixth * (a5 + 2 * b5 + 2 * c5 + d5)
+        delta = min(max(delta + sixth * (a6 + 2 * b6 + 2 * c6 + d6), -d_max), d_max)
+    return np.array([X, Y, psi, vx, vy, r, delta])
 
 
 #: Kinematic bicycle (paper Appendix A): state [x, y, theta, v], input [a, delta].
@@ -240,14 +288,20 @@ def kinematic_jacobians(state: np.ndarray, control_input: np.ndarray, wheelbase_
 def kinematic_plant_step(state: np.ndarray, control_input: np.ndarray, wheelbase_m: float,
                          dt_s: float, substeps: int) -> np.ndarray:
     """The plant of the kinematic track: the exact nonlinear model, RK4 with substeps, input
-    held over the step."""
+    held over the step (plain floats; the same equations as :func:`kinematic_derivative`)."""
     h = dt_s / substeps
-    x = np.asarray(state, dtype=float).copy()
-    u = np.asarray(control_input, dtype=float)
+    half, sixth = 0.5 * h, h / 6.0
+    accel, delta = float(control_input[0]), float(control_input[1])
+
+    def rates(X, Y, theta, v):
+        return (v * cos(theta), v * sin(theta), v / wheelbase_m * tan(delta), accel)
+
+    x = [float(v) for v in state]
     for _ in range(substeps):
-        k1 = kinematic_derivative(x, u, wheelbase_m)
-        k2 = kinematic_derivative(x + 0.5 * h * k1, u, wheelbase_m)
-        k3 = kinematic_derivative(x + 0.5 * h * k2, u, wheelbase_m)
-        k4 = kinematic_derivative(x + h * k3, u, wheelbase_m)
-        x = x + h / 6.0 * (k1 + 2 * k2 + 2 * k3 + k4)
-    return x
+        k1 = rates(*x)
+        k2 = rates(*[xi + half * ki for xi, ki in zip(x, k1)])
+        k3 = rates(*[xi + half * ki for xi, ki in zip(x, k2)])
+        k4 = rates(*[xi + h * ki for xi, ki in zip(x, k3)])
+        x = [xi + sixth * (a1 + 2 * a2 + 2 * a3 + a4)
+             for xi, a1, a2, a3, a4 in zip(x, k1, k2, k3, k4)]
+    return np.array(x)

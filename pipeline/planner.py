@@ -17,9 +17,11 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+from math import exp, sqrt
+
 import numpy as np
 
-from pipeline.config import ControllerConfig, PlannerConfig
+from pipeline.config import PlannerConfig
 from pipeline.scenario import ObstacleSnapshot
 
 _TINY = 1e-12
@@ -154,6 +156,10 @@ def apf_rollout(position_m: np.ndarray, goal_m: np.ndarray, obstacles: ObstacleS
     """Roll the APF out over the horizon: ``p_1`` = vehicle position, ``p_2 .. p_Np`` by
     :func:`apf_step`.
 
+    The rollout runs on plain floats (a handful of obstacles, ``Np - 1`` sequential steps:
+    numpy's per-call overhead would dominate); :func:`apf_step` is the vectorized statement of
+    the same update and the tests hold the two together.
+
     Parameters
     ----------
     position_m, goal_m : ndarray, shape (2,)
@@ -168,29 +174,95 @@ def apf_rollout(position_m: np.ndarray, goal_m: np.ndarray, obstacles: ObstacleS
         For the closing-speed scaling of the velocity-aware variant.
     """
     n = horizon
-    path = np.zeros((n, 2))
-    path[0] = np.asarray(position_m, dtype=float)
-    attraction = np.zeros((max(n - 1, 0), 2))
-    repulsion = np.zeros((max(n - 1, 0), 2))
-    cap = np.zeros(max(n - 1, 0), dtype=bool)
-    low = np.zeros(max(n - 1, 0), dtype=bool)
-    predicted = obstacles.predicted_positions(np.arange(n) * sample_time_s)
+    px, py = float(position_m[0]), float(position_m[1])
+    gx, gy = float(goal_m[0]), float(goal_m[1])
+    centres = obstacles.positions_m.tolist()
+    velocities = obstacles.velocities_mps.tolist()
+    predict = params.obstacle_prediction == "constant_velocity"
+    closing_on = vehicle_velocity_mps is not None and params.closing_speed_gain_s_per_m > 0.0
+    vvx, vvy = (float(vehicle_velocity_mps[0]), float(vehicle_velocity_mps[1])) \
+        if vehicle_velocity_mps is not None else (0.0, 0.0)
+    law = params.repulsion_law
+    polynomial, constant_k = law == "polynomial", params.k_rep_source != "adaptive_h"
+    h_max, beta, rho_p, rho0 = params.h_max, params.beta, params.rho_p_m, params.rho0_m
+    alpha_e, k_const, floor = params.alpha_e, params.k_rep_constant, params.rho_floor_m
+    gain, step_size, normalize = params.closing_speed_gain_s_per_m, params.step_size, \
+        params.normalize_step
+    step_min, step_max = params.step_min_m, params.step_max_m
+    path = [(px, py)]
+    att_rows, rep_rows, cap, low = [], [], [], []
     for t in range(n - 1):
-        obs_now = predicted[t] if params.obstacle_prediction == "constant_velocity" else predicted[0]
-        closing = None
-        if vehicle_velocity_mps is not None and obs_now.shape[0] > 0:
-            los = obs_now - path[t][None, :]
-            dist = np.maximum(np.linalg.norm(los, axis=1), _TINY)
-            relative = np.asarray(vehicle_velocity_mps)[None, :] - obstacles.velocities_mps
-            closing = np.sum(relative * los, axis=1) / dist
-        path[t + 1], attraction[t], repulsion[t], cap[t], low[t] = apf_step(
-            path[t], goal_m, obs_now, params, closing)
-    return ApfRollout(path, attraction, repulsion, cap, low)
+        ax, ay = gx - px, gy - py
+        rx = ry = 0.0
+        if centres and law != "none":
+            # direction away from an obstacle sitting exactly at p: left normal of the goal
+            nlen = sqrt(ay * ay + ax * ax)
+            nx, ny = ((-ay / nlen, ax / nlen) if nlen > _TINY else (0.0, 1.0))
+            for (ox, oy), (ovx, ovy) in zip(centres, velocities):
+                if predict:
+                    ox, oy = ox + t * sample_time_s * ovx, oy + t * sample_time_s * ovy
+                dx, dy = px - ox, py - oy
+                rho = sqrt(dx * dx + dy * dy)
+                if rho >= rho0:
+                    continue
+                ux, uy = ((dx / max(rho, _TINY), dy / max(rho, _TINY)) if rho > _TINY
+                          else (nx, ny))
+                rho_eff = max(rho, floor)
+                h = 0.0
+                if rho <= rho_p:
+                    try:
+                        h = h_max / (1.0 + exp(beta * (dx * dx)))
+                    except OverflowError:  # 1 / (1 + inf) = 0 is the right limit
+                        h = 0.0
+                if polynomial:
+                    magnitude = h * (1.0 / rho_eff - 1.0 / rho0) / rho_eff**2
+                else:
+                    k_rep = k_const if constant_k else h
+                    magnitude = k_rep * exp(alpha_e * (1.0 - rho_eff / rho0)) / rho_eff
+                if closing_on:
+                    lx, ly = -dx, -dy
+                    dist = max(rho, _TINY)
+                    closing = ((vvx - ovx) * lx + (vvy - ovy) * ly) / dist
+                    magnitude = magnitude * (1.0 + gain * max(closing, 0.0))
+                rx += magnitude * ux
+                ry += magnitude * uy
+        fx, fy = ax + rx, ay + ry
+        norm = sqrt(fx * fx + fy * fy)
+        if normalize:
+            sx, sy = ((step_size * fx / norm, step_size * fy / norm) if norm > _TINY
+                      else (0.0, 0.0))
+        else:
+            sx, sy = step_size * fx, step_size * fy
+        length = sqrt(sx * sx + sy * sy)
+        is_low = is_cap = False
+        if step_min > 0.0 and length < step_min:
+            if norm > _TINY:
+                dirx, diry = fx / norm, fy / norm
+            else:
+                goal_dist = sqrt(ax * ax + ay * ay)
+                dirx, diry = (ax / goal_dist, ay / goal_dist) if goal_dist > _TINY else (0.0, 0.0)
+            sx, sy = step_min * dirx, step_min * diry
+            is_low = True
+        elif step_max is not None and length > step_max:
+            scale = step_max / length
+            sx, sy = sx * scale, sy * scale
+            is_cap = True
+        px, py = px + sx, py + sy
+        path.append((px, py))
+        att_rows.append((ax, ay))
+        rep_rows.append((rx, ry))
+        cap.append(is_cap)
+        low.append(is_low)
+    shape = (max(n - 1, 0), 2)
+    return ApfRollout(np.array(path[:max(n, 1)]).reshape(-1, 2),
+                      np.array(att_rows, dtype=float).reshape(shape),
+                      np.array(rep_rows, dtype=float).reshape(shape),
+                      np.array(cap, dtype=bool), np.array(low, dtype=bool))
 
 
 def plan_speed(position_m: np.ndarray, heading_rad: float, obstacles: ObstacleSnapshot,
                nominal_speed_mps: float, vehicle_radius_m: float,
-               controller: ControllerConfig) -> float:
+               params: PlannerConfig) -> float:
     """Velocity planning ``V_r = f_v(obstacles)`` from a stopping-distance rule.
 
     An obstacle counts when it lies ahead of the vehicle inside a corridor as wide as both radii
@@ -203,17 +275,17 @@ def plan_speed(position_m: np.ndarray, heading_rad: float, obstacles: ObstacleSn
     float
         Planned speed (m/s).
     """
-    if not controller.velocity_planning or obstacles.positions_m.shape[0] == 0:
+    if not params.velocity_planning or obstacles.positions_m.shape[0] == 0:
         return float(nominal_speed_mps)
     forward = np.array([np.cos(heading_rad), np.sin(heading_rad)])
     left = np.array([-forward[1], forward[0]])
     rel = obstacles.positions_m - position_m[None, :]
     ahead = rel @ forward
     lateral = np.abs(rel @ left)
-    corridor = obstacles.radii_m + vehicle_radius_m + controller.stop_margin_m
+    corridor = obstacles.radii_m + vehicle_radius_m + params.stop_margin_m
     relevant = (ahead > 0.0) & (lateral < corridor)
     if not np.any(relevant):
         return float(nominal_speed_mps)
     gap = float(np.min(ahead[relevant] - obstacles.radii_m[relevant])) - vehicle_radius_m
-    allowed = np.sqrt(2.0 * controller.braking_decel_mps2 * max(gap - controller.stop_margin_m, 0.0))
-    return float(np.clip(allowed, controller.speed_floor_mps, nominal_speed_mps))
+    allowed = np.sqrt(2.0 * params.braking_decel_mps2 * max(gap - params.stop_margin_m, 0.0))
+    return float(np.clip(allowed, params.speed_floor_mps, nominal_speed_mps))

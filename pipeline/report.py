@@ -223,7 +223,10 @@ def _performance_section(bench_dir: Path | None, fig_dir: Path) -> dict | None:
     return {"rows": rows, "peers": peers, "figures": figures,
             "pipeline": {k: _fmt(v) for k, v in summary["pipeline"].items()},
             "kinematic": {k: _fmt(v) for k, v in summary["kinematic"].items()},
-            "n50": _fmt(summary.get("n50_over_n10_direct"))}
+            "n50": _fmt(summary.get("n50_over_n10_direct")),
+            "headline": {k: _fmt(summary.get(k)) for k in (
+                "closed_loop_over_floor", "step_over_floor", "compiles_per_family",
+                "family_scenarios_per_s")}}
 
 
 def build_report(run_root: Path, out_dir: Path, command: str,

@@ -22,6 +22,7 @@ from pipeline.artifacts import (is_complete, write_csv_atomic, write_json_atomic
                                 write_text_atomic)
 from pipeline.config import (ConfigError, ExperimentConfig, register_configs,
                              to_experiment_config)
+from pipeline.controller import QpCache
 from pipeline.metrics import TrajectoryContext, compute_metrics
 from pipeline.model import build_lateral_model
 from pipeline.scenario import build_scenario, family_members
@@ -43,7 +44,8 @@ class RunSummary:
     skipped: bool
 
 
-def run_experiment(cfg: ExperimentConfig, out_dir: Path, resume: bool = True) -> RunSummary:
+def run_experiment(cfg: ExperimentConfig, out_dir: Path, resume: bool = True,
+                   qp_cache: QpCache | None = None) -> RunSummary:
     """Simulate one configuration and write its run folder.
 
     Parameters
@@ -55,6 +57,8 @@ def run_experiment(cfg: ExperimentConfig, out_dir: Path, resume: bool = True) ->
     resume : bool
         Skip the simulation when ``out_dir`` already holds complete results of the same config
         hash.
+    qp_cache : QpCache, optional
+        Compiled QPs shared with other runs of this process (or shipped to a worker).
 
     Returns
     -------
@@ -73,11 +77,11 @@ def run_experiment(cfg: ExperimentConfig, out_dir: Path, resume: bool = True) ->
 
     scenario = build_scenario(cfg.scenario)
     model = build_lateral_model(cfg.vehicle, cfg.scenario.speed_mps, cfg.scenario.sample_time_s,
-                                cfg.controller.b2_heading_entry)
-    result = simulate(cfg, scenario)
+                                cfg.model.b2_heading_entry)
+    result = simulate(cfg, scenario, qp_cache)
     context = TrajectoryContext(tuple(cfg.scenario.start_xy_m), tuple(cfg.scenario.goal_xy_m),
                                 cfg.vehicle.footprint_radius_m,
-                                cfg.controller.validity_heading_rad)
+                                cfg.model.validity_heading_rad)
     metrics = compute_metrics(result.trajectory, context, cfg.metrics)
     track = "kinematic" if cfg.controller.kind == "kinematic_mpc" else "lateral"
     metrics.update(method=cfg.method_name, scenario=cfg.scenario.name, track=track,
@@ -91,8 +95,7 @@ def run_experiment(cfg: ExperimentConfig, out_dir: Path, resume: bool = True) ->
         "compile_time_s": result.compile_time_s,
         "solve_times_s": [float(x) for x in times],
     }
-    write_text_atomic(out_dir / "config.yaml",
-                      OmegaConf.to_yaml(OmegaConf.structured(cfg), sort_keys=False))
+    write_text_atomic(out_dir / "config.yaml", config_yaml(cfg))
     write_json_atomic(out_dir / "model.json", model.to_json())
     write_csv_atomic(out_dir / "trajectory.csv", result.trajectory)
     write_json_atomic(out_dir / "timing.json", timing)
@@ -100,16 +103,41 @@ def run_experiment(cfg: ExperimentConfig, out_dir: Path, resume: bool = True) ->
     return RunSummary(out_dir, metrics, skipped=False)
 
 
-def _run_member(cfg: ExperimentConfig, out_dir: Path) -> dict:
-    return run_experiment(cfg, out_dir).metrics
+def config_yaml(cfg: ExperimentConfig) -> str:
+    """The resolved configuration as YAML (keys in schema order). PyYAML's C dumper: the
+    OmegaConf round trip cost more than a member's whole simulation."""
+    import yaml
+
+    dumper = getattr(yaml, "CSafeDumper", yaml.SafeDumper)
+    return yaml.dump(cfg.to_dict(), Dumper=dumper, sort_keys=False, default_flow_style=False,
+                     allow_unicode=True)
 
 
-def run_family(cfg: ExperimentConfig, out_dir: Path, progress: bool = True) -> pd.DataFrame:
+def _run_chunk(jobs: list[tuple[int, ExperimentConfig, Path]], qp_cache: QpCache
+               ) -> list[tuple[int, dict]]:
+    """Run a few family members in one worker, all with the compiled QP shipped in
+    ``qp_cache`` (so a worker compiles nothing)."""
+    return [(index, run_experiment(member_cfg, folder, qp_cache=qp_cache).metrics)
+            for index, member_cfg, folder in jobs]
+
+
+def _chunks(items: list, n_workers: int, per_worker: int = 4) -> list[list]:
+    """Split ``items`` into about ``per_worker`` chunks per worker, interleaved so that every
+    chunk holds early and late members alike (balanced load)."""
+    n = max(1, min(len(items), n_workers * per_worker))
+    return [items[i::n] for i in range(n) if items[i::n]]
+
+
+def run_family(cfg: ExperimentConfig, out_dir: Path, progress: bool = True,
+               qp_cache: QpCache | None = None) -> pd.DataFrame:
     """Run every member of ``cfg.scenario.family`` (in parallel with joblib) for one method.
 
-    Each member gets a complete run folder ``member_<index>/``; the family folder receives
-    ``family_metrics.csv`` (one row per member) and ``family.json`` (counts, config hash).
-    Members already complete with the same config hash are not simulated again.
+    The QP is compiled once, here, and handed to the workers with their members (chunks of
+    members per task, so a worker's process start and imports are paid once per family, and
+    loky keeps its workers for the next family of the same process). Each member gets a
+    complete run folder ``member_<index>/``; the family folder receives ``family_metrics.csv``
+    (one row per member) and ``family.json`` (counts, compilations, config hash). Members
+    already complete with the same config hash are not simulated again.
 
     Returns
     -------
@@ -117,25 +145,47 @@ def run_family(cfg: ExperimentConfig, out_dir: Path, progress: bool = True) -> p
         The per-member metrics table.
     """
     import dataclasses
+    import json
 
     from joblib import Parallel, delayed
     from tqdm import tqdm
 
+    from pipeline.controller import make_controller
+
     out_dir = Path(out_dir)
     family = cfg.scenario.family
     members = family_members(cfg.scenario, cfg.vehicle.footprint_radius_m)
-    jobs = [(dataclasses.replace(cfg, scenario=member), out_dir / f"member_{i:04d}")
-            for i, member in enumerate(members)]
-    results = Parallel(n_jobs=family.n_jobs, return_as="generator")(
-        delayed(_run_member)(member_cfg, folder) for member_cfg, folder in jobs)
-    rows = []
-    for i, metrics in enumerate(tqdm(results, total=len(jobs), disable=not progress,
-                                     desc=f"{cfg.method_name} family", unit="scenario")):
-        rows.append({"member": i, **metrics})
+    cache = qp_cache if qp_cache is not None else QpCache()
+    compiles_before = cache.compile_count
+    metrics_by_index: dict[int, dict] = {}
+    pending = []
+    for i, member in enumerate(members):
+        member_cfg = dataclasses.replace(cfg, scenario=member)
+        folder = out_dir / f"member_{i:04d}"
+        if is_complete(folder):
+            previous = json.loads((folder / "metrics.json").read_text())
+            if previous.get("config_hash") == member_cfg.config_hash():
+                metrics_by_index[i] = previous
+                continue
+        pending.append((i, member_cfg, folder))
+    if pending:
+        make_controller(cfg, cfg.scenario.sample_time_s, cache)  # compile once, in the parent
+    chunks = _chunks(pending, family.n_jobs)
+    results = Parallel(n_jobs=family.n_jobs, return_as="generator_unordered")(
+        delayed(_run_chunk)(chunk, cache) for chunk in chunks)
+    with tqdm(total=len(members), initial=len(metrics_by_index), disable=not progress,
+              desc=f"{cfg.method_name} family", unit="scenario") as bar:
+        for done in results:
+            for index, metrics in done:
+                metrics_by_index[index] = metrics
+            bar.update(len(done))
+    rows = [{"member": i, **metrics_by_index[i]} for i in range(len(members))]
     table = pd.DataFrame(rows)
     # fixed column order: fresh and resumed (read back from metrics.json) members agree
     table = table[["member"] + sorted(c for c in table.columns if c != "member")]
     write_csv_atomic(out_dir / "family_metrics.csv", table)
+    member_compiles = int(table["compile_count"].fillna(0).sum()) if "compile_count" in table \
+        else 0
     summary = {
         "method": cfg.method_name, "scenario": cfg.scenario.name, "seed": family.seed,
         "size": family.size, "config_hash": cfg.config_hash(),
@@ -143,6 +193,7 @@ def run_family(cfg: ExperimentConfig, out_dir: Path, progress: bool = True) -> p
         "not_recovered": int((~table["recovered"].astype(bool)).sum()),
         "goal_not_reached": int((~table["goal_reached"].astype(bool)).sum()),
         "fallback_steps": int(table["fallback_count"].sum()) if "fallback_count" in table else 0,
+        "compiles": cache.compile_count - compiles_before + member_compiles,
     }
     write_json_atomic(out_dir / "family.json", summary)
     return table

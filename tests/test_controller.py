@@ -8,7 +8,9 @@ import numpy as np
 import pytest
 from scipy.optimize import minimize
 
-from pipeline.controller import LateralMpc, MpcInputs, blocking_matrix, collision_halfplanes
+from pipeline.controller import (LateralMpc, MpcInputs, QpCache, blocking_matrix,
+                                 collision_halfplanes)
+from pipeline.controller.lateral import LateralQpStructure, build_lateral_problem
 from pipeline.model import build_lateral_model
 
 
@@ -47,8 +49,8 @@ def setup(make_config):
 
 def test_problem_is_dpp(setup):
     cfg, _ = setup
-    mpc = LateralMpc(cfg.controller, cfg.vehicle)
-    assert mpc.problem.is_dcp(dpp=True)
+    problem, _, _ = build_lateral_problem(LateralQpStructure.of(cfg.controller, cfg.vehicle))
+    assert problem.is_dcp(dpp=True)
 
 
 @pytest.mark.parametrize("input_hold", ["hold_last", "zero_rate"])
@@ -65,7 +67,7 @@ def test_first_input_matches_closed_form_condensed_qp(make_config, input_hold):
     # the oracle is the unconstrained optimum: check that no bound is active there
     assert np.max(np.abs(U_star)) < cfg.vehicle.steering_rate_max_rad_s
     assert np.max(np.abs(states[4::5])) < cfg.vehicle.steering_max_rad
-    step = LateralMpc(ctrl, cfg.vehicle).step(make_inputs(model, ctrl, x0, y_ref, psi_ref))
+    step = LateralMpc(ctrl, cfg.vehicle).solve(make_inputs(model, ctrl, x0, y_ref, psi_ref))
     assert step.fallback == "none"
     assert step.steering_rate_rad_s == pytest.approx(U_star[0], abs=1e-4)
     np.testing.assert_allclose(step.planned_rates_rad_s, T.T @ U_star, atol=1e-4)
@@ -89,7 +91,7 @@ def test_first_input_matches_scipy_slsqp_with_active_bounds(setup):
                    bounds=[(-veh.steering_rate_max_rad_s, veh.steering_rate_max_rad_s)]
                    * ctrl.control_horizon, options={"ftol": 1e-14, "maxiter": 500})
     assert res.success
-    step = LateralMpc(ctrl, veh).step(make_inputs(model, ctrl, x0, y_ref, psi_ref))
+    step = LateralMpc(ctrl, veh).solve(make_inputs(model, ctrl, x0, y_ref, psi_ref))
     assert step.steering_rate_rad_s == pytest.approx(res.x[0], abs=1e-4)
     states = step.predicted_states
     # constraints hold at the solution (Clarabel's tolerance)
@@ -107,7 +109,7 @@ def test_halfplane_constraint_holds_without_slack_when_reachable(setup):
     y_ref = np.zeros(N)
     G, h = collision_halfplanes(stations, y_ref, np.zeros(2), obstacles, np.array([0.2]), veh,
                                 ctrl)
-    step = LateralMpc(ctrl, veh).step(make_inputs(model, ctrl, np.zeros(5), y_ref, np.zeros(N),
+    step = LateralMpc(ctrl, veh).solve(make_inputs(model, ctrl, np.zeros(5), y_ref, np.zeros(N),
                                                   G, h))
     y = step.predicted_states[0, 1:]
     # every half-plane is satisfied by the predicted lateral positions, slack ~ 0
@@ -125,11 +127,37 @@ def test_parameter_changes_do_not_recompile(setup):
     for speed in (2.0, 3.0, 5.0):
         m = build_lateral_model(cfg.vehicle, speed, 0.1)
         for _ in range(3):
-            step = mpc.step(make_inputs(m, ctrl, rng.normal(0, 0.05, 5),
+            step = mpc.solve(make_inputs(m, ctrl, rng.normal(0, 0.05, 5),
                                         rng.normal(0, 0.3, ctrl.horizon),
                                         rng.normal(0, 0.05, ctrl.horizon)))
             assert step.fallback == "none"
     assert mpc.compile_count == 1
+
+
+@pytest.mark.parametrize("backend", ["cvxpy", "clarabel_direct"])
+def test_one_compilation_serves_every_controller_of_a_structure(make_config, backend):
+    """A shared QpCache compiles a structure once; a new structure compiles again."""
+    cfg = make_config([f"controller.backend={backend}"])
+    cache = QpCache()
+    first = LateralMpc(cfg.controller, cfg.vehicle, qp_cache=cache)
+    second = LateralMpc(cfg.controller, cfg.vehicle, qp_cache=cache)
+    assert (first.compile_count, second.compile_count, cache.compile_count) == (1, 0, 1)
+    assert first.qp is second.qp or first.qp.map is second.qp.map
+    other = make_config([f"controller.backend={backend}", "controller.horizon=12"])
+    assert LateralMpc(other.controller, other.vehicle, qp_cache=cache).compile_count == 1
+    # the affine map travels to worker processes, CVXPY problems do not
+    import pickle
+
+    copied = pickle.loads(pickle.dumps(cache))
+    assert len(copied.entries) == (2 if backend == "clarabel_direct" else 0)
+
+
+def test_code_error_inside_the_qp_is_raised_not_recorded_as_fallback(setup):
+    """A parameter vector of the wrong shape is a bug: it raises, it is not a solver failure."""
+    cfg, model = setup
+    mpc = LateralMpc(cfg.controller, cfg.vehicle)
+    with pytest.raises(ValueError, match="parameter vector"):
+        mpc.qp.solve(np.zeros(3))
 
 
 def test_infeasible_qp_falls_back_to_safe_input_then_shifted_plan(setup):
@@ -138,16 +166,16 @@ def test_infeasible_qp_falls_back_to_safe_input_then_shifted_plan(setup):
     N = ctrl.horizon
     mpc = LateralMpc(ctrl, veh)
     bad = np.array([0.0, 0.0, 0.0, 0.0, 2.0])  # steering far beyond its bound: infeasible
-    first = mpc.step(make_inputs(model, ctrl, bad, np.zeros(N), np.zeros(N)))
+    first = mpc.solve(make_inputs(model, ctrl, bad, np.zeros(N), np.zeros(N)))
     assert first.fallback == "safe_input"
     assert first.status in ("infeasible", "infeasible_inaccurate")
     assert abs(first.steering_rate_rad_s) == pytest.approx(veh.steering_rate_max_rad_s)
-    ok = mpc.step(make_inputs(model, ctrl, np.zeros(5), np.full(N, 0.3), np.zeros(N)))
+    ok = mpc.solve(make_inputs(model, ctrl, np.zeros(5), np.full(N, 0.3), np.zeros(N)))
     assert ok.fallback == "none"
-    second = mpc.step(make_inputs(model, ctrl, bad, np.zeros(N), np.zeros(N)))
+    second = mpc.solve(make_inputs(model, ctrl, bad, np.zeros(N), np.zeros(N)))
     assert second.fallback == "shifted_plan"
     assert second.steering_rate_rad_s == pytest.approx(ok.planned_rates_rad_s[1])
-    nan_state = mpc.step(make_inputs(model, ctrl, np.full(5, np.nan), np.zeros(N), np.zeros(N)))
+    nan_state = mpc.solve(make_inputs(model, ctrl, np.full(5, np.nan), np.zeros(N), np.zeros(N)))
     assert nan_state.status == "not_solved" and nan_state.fallback == "shifted_plan"
 
 
@@ -161,9 +189,12 @@ def test_solver_exception_is_a_fallback_not_a_crash(make_config, monkeypatch, ba
     def boom(*args, **kwargs):
         raise cp.error.SolverError("injected")
 
-    monkeypatch.setattr(mpc.problem, "solve", boom)
-    monkeypatch.setattr(mpc._direct, "solve", boom)
-    step = mpc.step(make_inputs(model, ctrl, np.zeros(5), np.zeros(ctrl.horizon),
+    if backend == "cvxpy":
+        monkeypatch.setattr(mpc.qp.problem, "solve", boom)
+    else:
+        monkeypatch.setattr(mpc.qp, "_solver", type("Boom", (), {"solve": boom,
+                                                                 "update": boom})())
+    step = mpc.solve(make_inputs(model, ctrl, np.zeros(5), np.zeros(ctrl.horizon),
                                 np.zeros(ctrl.horizon)))
     assert step.status == "error:SolverError" and step.fallback == "safe_input"
     assert step.steering_rate_rad_s == 0.0

@@ -74,10 +74,10 @@ def test_ltv_qp_agrees_with_nonlinear_solve_at_convergence(make_config):
     reference = np.vstack([0.3 * k, 0.02 * k**2])  # a bending reference, 3 m/s
     mpc = KinematicLtvMpc(ctrl, vehicle, TS)
     empty = np.zeros((ctrl.horizon, 0, 2))
-    step = mpc.step(x0, u_prev, reference, empty, np.zeros(0), passes=25)
-    assert step.fallback == "none" and step.ltv_change < 1e-7
+    step = mpc.solve(x0, u_prev, reference, empty, np.zeros(0), passes=25)
+    assert step.fallback == "none" and step.log["ltv_change"] < 1e-7
     expected = nonlinear_first_input(ctrl, vehicle, x0, u_prev, reference)
-    np.testing.assert_allclose(step.control_input, expected, atol=2e-3)
+    np.testing.assert_allclose(step.command, expected, atol=2e-3)
     assert mpc.compile_count == 1  # 25 passes, one compilation
 
 

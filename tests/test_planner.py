@@ -119,14 +119,14 @@ def test_adaptive_coefficient_closed_form():
 
 
 def test_velocity_planning_slows_for_obstacle_ahead_and_respects_floor(make_config):
-    cfg = make_config(["controller.velocity_planning=true"])
-    ctrl, radius = cfg.controller, cfg.vehicle.footprint_radius_m
+    cfg = make_config(["planner.velocity_planning=true"])
+    ctrl, radius = cfg.planner, cfg.vehicle.footprint_radius_m
     far = plan_speed(np.zeros(2), 0.0, snapshot([[30.0, 0.0]]), 3.0, radius, ctrl)
     assert far == 3.0
-    gap_obstacle = 0.5 + radius + ctrl.stop_margin_m + 1.0  # free gap beyond the margin: 1 m
+    gap_obstacle = 0.5 + radius + cfg.planner.stop_margin_m + 1.0  # free gap beyond the margin: 1 m
     near = plan_speed(np.zeros(2), 0.0, snapshot([[gap_obstacle, 0.0]]), 3.0, radius, ctrl)
-    assert near == pytest.approx(np.sqrt(2 * ctrl.braking_decel_mps2 * 1.0))
+    assert near == pytest.approx(np.sqrt(2 * cfg.planner.braking_decel_mps2 * 1.0))
     touching = plan_speed(np.zeros(2), 0.0, snapshot([[1.6, 0.0]]), 3.0, radius, ctrl)
-    assert touching == ctrl.speed_floor_mps
-    off = make_config().controller
+    assert touching == cfg.planner.speed_floor_mps
+    off = make_config().planner
     assert plan_speed(np.zeros(2), 0.0, snapshot([[1.6, 0.0]]), 3.0, radius, off) == 3.0

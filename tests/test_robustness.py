@@ -14,7 +14,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from pipeline.controller import LateralMpc, MpcInputs
+from pipeline.controller import LateralMpc, MpcInputs, QpSolution
 from pipeline.model import build_lateral_model
 from pipeline.planner import apf_rollout
 from pipeline.run import run_experiment
@@ -25,21 +25,28 @@ def test_injected_solver_faults_fall_back_and_the_run_completes(make_config, tmp
                                                                monkeypatch):
     """Steps 35-37 infeasible, 45 raising, 55 at the iteration limit: every one falls back,
     is logged in trajectory.csv and counted in metrics.json, and the run still ends at the goal."""
-    original = LateralMpc._solve_raw
+    from pipeline.controller.qp import CvxpyQp
+
+    original = CvxpyQp.solve
     calls = {"n": 0}
 
-    def faulty(self):
+    def faulty(self, theta):
         k = calls["n"]
         calls["n"] += 1
         if k in (35, 36, 37):
-            return "infeasible", 7, 0.001
+            return QpSolution("infeasible", 7, 0.001, None)
         if k == 45:
-            raise cp.error.SolverError("injected")
+            self.problem.solve = lambda *a, **kw: (_ for _ in ()).throw(
+                cp.error.SolverError("injected"))
+            try:
+                return original(self, theta)
+            finally:
+                del self.problem.solve
         if k == 55:
-            return "user_limit", self.cfg.solver_max_iter, 0.001
-        return original(self)
+            return QpSolution("user_limit", self.max_iter, 0.001, None)
+        return original(self, theta)
 
-    monkeypatch.setattr(LateralMpc, "_solve_raw", faulty)
+    monkeypatch.setattr(CvxpyQp, "solve", faulty)
     m = run_experiment(make_config(["method=baseline", "controller.backend=cvxpy"]),
                        tmp_path).metrics
     tr = pd.read_csv(tmp_path / "trajectory.csv")
@@ -55,7 +62,7 @@ def test_real_iteration_limit_is_a_recorded_fallback(make_config, backend):
     cfg = make_config(["controller.solver_max_iter=1", f"controller.backend={backend}"])
     model = build_lateral_model(cfg.vehicle, 3.0, 0.1)
     N, M = cfg.controller.horizon, cfg.controller.max_obstacles
-    step = LateralMpc(cfg.controller, cfg.vehicle).step(
+    step = LateralMpc(cfg.controller, cfg.vehicle).solve(
         MpcInputs(np.array([0.5, 0.0, 0.1, 0.0, 0.0]), model, np.full(N, -1.0), np.zeros(N),
                   np.zeros((N, M)), np.zeros((N, M)), np.zeros(N)))
     assert step.fallback == "safe_input" and step.status != "optimal"

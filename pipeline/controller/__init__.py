@@ -1,0 +1,40 @@
+"""Controller stage: every controller behind one ``step(observation) -> ControlStep``.
+
+* :mod:`~pipeline.controller.qp`: QP plumbing (compile once, affine parameter-to-data map,
+  kept Clarabel solver, CVXPY reference backend, the cache of compiled structures);
+* :mod:`~pipeline.controller.base`: observation, result type, the fallback written once;
+* :mod:`~pipeline.controller.references`: APF path to references and half-planes;
+* :mod:`~pipeline.controller.lateral`: the paper's lateral MPC;
+* :mod:`~pipeline.controller.kinematic`: Appendix A's kinematic LTV-MPC;
+* :mod:`~pipeline.controller.pursuit`: the pure-pursuit peer.
+
+:func:`make_controller` picks one from the configuration.
+"""
+
+from __future__ import annotations
+
+from pipeline.config import ExperimentConfig
+from pipeline.controller.base import ControlStep, Controller, Observation, PlanFallback
+from pipeline.controller.kinematic import KinematicLtvMpc
+from pipeline.controller.lateral import LateralMpc, MpcInputs, blocking_matrix
+from pipeline.controller.pursuit import PurePursuit, pure_pursuit_steering_rate
+from pipeline.controller.qp import OPTIMAL_STATUSES, QpCache, QpSolution
+from pipeline.controller.references import (collision_halfplanes, force_heading_reference,
+                                            kinematic_halfplanes, lateral_reference)
+
+__all__ = ["ControlStep", "Controller", "Observation", "PlanFallback", "KinematicLtvMpc",
+           "LateralMpc", "MpcInputs", "blocking_matrix", "PurePursuit",
+           "pure_pursuit_steering_rate", "OPTIMAL_STATUSES", "QpCache", "QpSolution",
+           "collision_halfplanes", "force_heading_reference", "kinematic_halfplanes",
+           "lateral_reference", "make_controller"]
+
+
+def make_controller(cfg: ExperimentConfig, sample_time_s: float,
+                    qp_cache: QpCache | None = None) -> Controller:
+    """The controller named by ``cfg.controller.kind``, its QP taken from ``qp_cache``."""
+    kind = cfg.controller.kind
+    if kind == "kinematic_mpc":
+        return KinematicLtvMpc(cfg.controller, cfg.vehicle, sample_time_s, qp_cache)
+    if kind == "pure_pursuit":
+        return PurePursuit(cfg.controller, cfg.vehicle, sample_time_s, cfg.model.speed_grid_mps)
+    return LateralMpc(cfg.controller, cfg.vehicle, cfg.model, sample_time_s, qp_cache)

@@ -1,0 +1,214 @@
+"""The lateral MPC (paper Section 3): a DPP QP compiled once per structure, solved by Clarabel.
+
+The QP over ``N`` steps::
+
+    min  sum_k q_y (y_k - y_ref,k)^2 + q_psi (epsi_k - psi_ref,k)^2 + q_r r_k^2 + q_d delta_k^2
+         + r_u u_k^2 + w1 sum(s) + w2 sum(s^2)
+    s.t. x_{k+1} = Ad x_k + Bd u_k + Ed d_k,  x_0 = measured state
+         |u_k| <= delta_dot_max,  |delta_k| <= delta_max,
+         u_k = U[min(k, Nc - 1)] (hold_last) or 0 for k >= Nc (zero_rate)
+         G_kj y_k + s_kj >= h_kj,  s >= 0   (soft half-plane per obstacle slot j and step k)
+
+The model matrices are parameters, so one compiled problem serves every speed (velocity
+planning) and every scenario; unused obstacle slots get rows that cannot bind. A failed solve
+never raises: the controller takes :class:`~pipeline.controller.base.PlanFallback`.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import cvxpy as cp
+import numpy as np
+
+from pipeline.config import ControllerConfig, ModelConfig, VehicleConfig
+from pipeline.controller.base import ControlStep, Observation, PlanFallback
+from pipeline.controller.qp import QpCache, QpSolution, compiled_backend
+from pipeline.controller.references import (collision_halfplanes, force_heading_reference,
+                                            lateral_reference)
+from pipeline.model import LateralModel, LateralModelCache
+
+
+@dataclass(frozen=True)
+class MpcInputs:
+    """Per-step data of the lateral QP (everything that is a ``cp.Parameter``)."""
+
+    x0: np.ndarray
+    model: LateralModel
+    y_ref_m: np.ndarray
+    psi_ref_rad: np.ndarray
+    constraint_gain: np.ndarray
+    constraint_bound: np.ndarray
+    disturbance_rad_s: np.ndarray
+
+
+@dataclass(frozen=True)
+class LateralQpStructure:
+    """Everything that enters the lateral QP as a constant: the cache key of a compilation."""
+
+    horizon: int
+    control_horizon: int
+    max_obstacles: int
+    input_hold: str
+    weights: tuple
+    steering_rate_max_rad_s: float
+    steering_max_rad: float
+
+    @classmethod
+    def of(cls, controller: ControllerConfig, vehicle: VehicleConfig) -> "LateralQpStructure":
+        c = controller
+        return cls(c.horizon, c.control_horizon, c.max_obstacles, c.input_hold,
+                   (c.q_lateral, c.q_heading, c.q_yaw_rate, c.q_steering, c.r_steering_rate,
+                    c.slack_weight_linear, c.slack_weight_quadratic),
+                   vehicle.steering_rate_max_rad_s, vehicle.steering_max_rad)
+
+
+def blocking_matrix(horizon: int, control_horizon: int, input_hold: str) -> np.ndarray:
+    """Matrix ``T`` (Nc x N) with ``u_seq = U @ T`` for the move-blocking rule."""
+    T = np.zeros((control_horizon, horizon))
+    for k in range(horizon):
+        if k < control_horizon:
+            T[k, k] = 1.0
+        elif input_hold == "hold_last":
+            T[control_horizon - 1, k] = 1.0
+    return T
+
+
+def build_lateral_problem(s: LateralQpStructure) -> tuple[cp.Problem, list, dict]:
+    """The lateral QP in CVXPY: problem, parameters in ``theta`` order, variables to read."""
+    N, Nc, M = s.horizon, s.control_horizon, s.max_obstacles
+    q_y, q_psi, q_r, q_d, r_u, w1, w2 = s.weights
+    blocking = blocking_matrix(N, Nc, s.input_hold)
+    x0 = cp.Parameter(5, name="x0")
+    Ad = cp.Parameter((5, 5), name="Ad")
+    Bd = cp.Parameter((5, 1), name="Bd")
+    disturbance = cp.Parameter((5, N), name="Ed_times_d")
+    y_ref = cp.Parameter(N, name="y_ref")
+    psi_ref = cp.Parameter(N, name="psi_ref")
+    G = cp.Parameter((N, M), name="halfplane_gain")
+    h = cp.Parameter((N, M), name="halfplane_bound")
+    X = cp.Variable((5, N + 1), name="X")
+    U = cp.Variable(Nc, name="U")
+    S = cp.Variable((N, M), nonneg=True, name="slack")
+    u_seq = U @ blocking
+    cost = (q_y * cp.sum_squares(X[0, 1:] - y_ref) + q_psi * cp.sum_squares(X[2, 1:] - psi_ref)
+            + q_r * cp.sum_squares(X[3, 1:]) + q_d * cp.sum_squares(X[4, 1:])
+            + r_u * cp.sum_squares(u_seq) + w1 * cp.sum(S) + w2 * cp.sum_squares(S))
+    lateral = cp.reshape(X[0, 1:], (N, 1), order="F") @ np.ones((1, M))
+    constraints = [
+        X[:, 0] == x0,
+        X[:, 1:] == Ad @ X[:, :-1] + Bd @ cp.reshape(u_seq, (1, N), order="F") + disturbance,
+        cp.abs(U) <= s.steering_rate_max_rad_s,
+        cp.abs(X[4, 1:]) <= s.steering_max_rad,
+        cp.multiply(G, lateral) + S >= h,
+    ]
+    problem = cp.Problem(cp.Minimize(cost), constraints)
+    if not problem.is_dcp(dpp=True):
+        raise RuntimeError("lateral MPC is not DPP; it would recompile every step")
+    return problem, [x0, Ad, Bd, disturbance, y_ref, psi_ref, G, h], {"X": X, "U": U}
+
+
+class LateralMpc:
+    """The lateral MPC: one compiled QP (from ``qp_cache``), a kept solver, the fallback.
+
+    Parameters
+    ----------
+    controller : ControllerConfig
+    vehicle : VehicleConfig
+    model : ModelConfig
+        The lateral model's settings (B2 entry, speed grid).
+    sample_time_s : float
+    qp_cache : QpCache, optional
+        Compiled problems shared across runs; a private one when omitted.
+
+    Attributes
+    ----------
+    compile_count : int
+        Compilations this controller caused (0 when the cache already held its structure).
+    compile_time_s : float
+    """
+
+    def __init__(self, controller: ControllerConfig, vehicle: VehicleConfig,
+                 model: ModelConfig | None = None, sample_time_s: float = 0.1,
+                 qp_cache: QpCache | None = None) -> None:
+        self.cfg, self.vehicle = controller, vehicle
+        self.model_cfg = model if model is not None else ModelConfig()
+        self.horizon = controller.horizon
+        self.sample_time_s = float(sample_time_s)
+        self.blocking = blocking_matrix(controller.horizon, controller.control_horizon,
+                                        controller.input_hold)
+        self.models = LateralModelCache(vehicle, self.sample_time_s,
+                                        self.model_cfg.b2_heading_entry,
+                                        self.model_cfg.speed_grid_mps)
+        structure = LateralQpStructure.of(controller, vehicle)
+        self.qp, self.compile_count, self.compile_time_s = compiled_backend(
+            qp_cache, "lateral", structure, lambda: build_lateral_problem(structure),
+            controller.backend, controller.solver_max_iter)
+        self.fallback = PlanFallback(controller.horizon)
+        self._steps_ahead_s = np.arange(1, controller.horizon + 1) * self.sample_time_s
+        self._times_s = np.concatenate([[0.0], self._steps_ahead_s])
+
+    @staticmethod
+    def parameter_vector(inputs: MpcInputs) -> np.ndarray:
+        """One step's parameter values stacked (column-major) in ``theta`` order."""
+        disturbance = inputs.model.Ed @ inputs.disturbance_rad_s[None, :]
+        return np.concatenate([
+            inputs.x0, inputs.model.Ad.ravel(order="F"), inputs.model.Bd.ravel(order="F"),
+            disturbance.ravel(order="F"), inputs.y_ref_m, inputs.psi_ref_rad,
+            inputs.constraint_gain.ravel(order="F"), inputs.constraint_bound.ravel(order="F")])
+
+    def solve(self, inputs: MpcInputs, log: dict | None = None) -> ControlStep:
+        """Solve the QP for one step's data, falling back safely on any failure."""
+        solution = QpSolution("not_solved", -1, 0.0, None)
+        if np.all(np.isfinite(inputs.x0)):
+            solution = self.qp.solve(self.parameter_vector(inputs))
+        if solution.ok:
+            plan = (np.asarray(solution.values["U"], dtype=float).reshape(-1) @ self.blocking)
+            if np.all(np.isfinite(plan)):
+                plan = plan[None, :]
+                self.fallback.accept(plan)
+                states = np.asarray(solution.values["X"], dtype=float)
+                # slack needed by the optimal plan (what the QP's slack variable holds)
+                lateral = states[0, 1:][:, None]
+                slack = np.max(inputs.constraint_bound - inputs.constraint_gain * lateral,
+                               initial=0.0)
+                return ControlStep(plan[:, 0].copy(), plan, states, solution.status,
+                                   solution.iterations, solution.solve_time_s, "none",
+                                   float(max(slack, 0.0)), log or {})
+        delta = inputs.x0[4] if np.isfinite(inputs.x0[4]) else 0.0
+        rate_max = self.vehicle.steering_rate_max_rad_s
+        ts = inputs.model.sample_time_s
+        return self.fallback.step(
+            solution.status, solution.iterations, solution.solve_time_s,
+            lambda: np.array([float(np.clip(-delta / ts, -rate_max, rate_max))]), log)
+
+    def inputs_from(self, obs: Observation) -> tuple[MpcInputs, dict]:
+        """The QP data of one observation: references from the APF path, half-planes, model."""
+        ctrl, N = self.cfg, self.horizon
+        model = self.models.at_speed(obs.speed_ref_mps)
+        line_pos = obs.position_line_m
+        stations = line_pos[0] + model.speed_mps * self._steps_ahead_s
+        path_line = obs.frame.to_line(obs.rollout.path_m)
+        y_ref, psi_ref = lateral_reference(path_line, stations, ctrl)
+        if ctrl.heading_reference == "apf_force":
+            rollout = obs.rollout
+            force_line = obs.frame.vectors_to_line(rollout.attraction[0] + rollout.repulsion[0]) \
+                if N > 1 else np.array([1.0, 0.0])
+            psi_ref = force_heading_reference(force_line, obs.heading_line_rad, N,
+                                              self.sample_time_s, ctrl)
+        visible = obs.obstacles
+        if visible.radii_m.shape[0]:
+            predicted = obs.frame.to_line(visible.predicted_positions(self._times_s))[1:]
+        else:
+            predicted = np.zeros((N, 0, 2))
+        G, h = collision_halfplanes(stations, y_ref, line_pos, predicted, visible.radii_m,
+                                    self.vehicle, ctrl)
+        s = obs.plant_state
+        x0 = np.array([line_pos[1], s[4], obs.heading_line_rad, s[5], s[6]])
+        log = {"y_ref_m": y_ref[0], "psi_ref_rad": psi_ref[0]}
+        return MpcInputs(x0, model, y_ref, psi_ref, G, h, np.zeros(N)), log
+
+    def step(self, obs: Observation) -> ControlStep:
+        """One closed-loop step."""
+        inputs, log = self.inputs_from(obs)
+        return self.solve(inputs, log)

@@ -1,0 +1,164 @@
+"""The fast paths against their references: the scalar APF rollout against the vectorized
+``apf_step``, the scalar RK4 plants against the numpy derivatives and SciPy's ``solve_ivp`` (and
+a circle in closed form), the affine parameter-to-data map against CVXPY's own
+``apply_parameters`` and against the CVXPY backend, and one compilation per family."""
+
+from __future__ import annotations
+
+import json
+
+import cvxpy as cp
+import numpy as np
+import pytest
+from scipy.integrate import solve_ivp
+
+from pipeline.controller import KinematicLtvMpc, LateralMpc, QpCache
+from pipeline.controller.kinematic import KinematicQpStructure, build_kinematic_problem
+from pipeline.controller.lateral import LateralQpStructure, build_lateral_problem
+from pipeline.controller.qp import compile_affine_map
+from pipeline.model import (kinematic_derivative, kinematic_plant_step, plant_derivative,
+                            step_plant)
+from pipeline.planner import apf_rollout, apf_step
+from pipeline.scenario import ObstacleSnapshot
+
+
+def reference_rollout(position, goal, snap, params, horizon, ts, velocity):
+    """The rollout written with the vectorized ``apf_step`` (the statement of the equations)."""
+    path = [np.asarray(position, float)]
+    for t in range(horizon - 1):
+        obs = snap.positions_m + (t * ts * snap.velocities_mps
+                                  if params.obstacle_prediction == "constant_velocity" else 0.0)
+        closing = None
+        if velocity is not None and obs.shape[0]:
+            los = obs - path[-1]
+            dist = np.maximum(np.linalg.norm(los, axis=1), 1e-12)
+            closing = np.sum((velocity - snap.velocities_mps) * los, axis=1) / dist
+        path.append(apf_step(path[-1], goal, obs, params, closing)[0])
+    return np.array(path)
+
+
+@pytest.mark.parametrize("planner", ["baseline", "improved", "velocity_aware"])
+@pytest.mark.parametrize("obstacles", [[], [[12.0, 1.0]], [[12.0, 1.0], [13.0, -1.0], [10.0, 0.3]]])
+def test_scalar_rollout_equals_vectorized_apf_step(make_config, planner, obstacles):
+    params = make_config([f"planner={planner}"]).planner
+    positions = np.array(obstacles, float).reshape(-1, 2)
+    n = positions.shape[0]
+    snap = ObstacleSnapshot(positions, np.tile([[0.1, -0.4]], (n, 1)), np.full(n, 0.5),
+                            np.ones(n, bool))
+    start, goal, velocity = np.array([10.0, 0.3]), np.array([30.0, 0.0]), np.array([3.0, 0.1])
+    fast = apf_rollout(start, goal, snap, params, 10, 0.1, velocity)
+    slow = reference_rollout(start, goal, snap, params, 10, 0.1, velocity)
+    np.testing.assert_allclose(fast.path_m, slow, rtol=0, atol=1e-12)
+    assert fast.path_m.shape == (10, 2) and fast.step_cap_active.shape == (9,)
+
+
+def rk4_reference(derivative, state, dt, substeps):
+    h = dt / substeps
+    x = np.asarray(state, float)
+    for _ in range(substeps):
+        k1 = derivative(x)
+        k2 = derivative(x + 0.5 * h * k1)
+        k3 = derivative(x + 0.5 * h * k2)
+        k4 = derivative(x + h * k3)
+        x = x + h / 6.0 * (k1 + 2 * k2 + 2 * k3 + k4)
+    return x
+
+
+@pytest.mark.parametrize("rate", [0.0, 0.3, -1.0])
+def test_scalar_single_track_step_equals_numpy_rk4_and_solve_ivp(make_config, rate):
+    vehicle = make_config().vehicle
+    state = np.array([5.0, 0.1, 0.05, 2.8, 0.05, 0.1, 0.05])
+    fast = step_plant(state, rate, 3.0, vehicle, 0.1, 10)
+    slow = rk4_reference(lambda x: plant_derivative(x, rate, 3.0, vehicle), state, 0.1, 10)
+    np.testing.assert_allclose(fast, slow, rtol=0, atol=1e-13)
+    exact = solve_ivp(lambda _, x: plant_derivative(x, rate, 3.0, vehicle), (0.0, 0.1), state,
+                      rtol=1e-11, atol=1e-12).y[:, -1]
+    # RK4's truncation error at h = 0.01 s on the stiff tyre modes, and its fourth order
+    error_10 = np.max(np.abs(fast - exact))
+    error_20 = np.max(np.abs(step_plant(state, rate, 3.0, vehicle, 0.1, 20) - exact))
+    assert error_10 < 1e-5 and error_20 < error_10 / 10.0
+
+
+def test_kinematic_plant_follows_the_closed_form_circle():
+    """Constant speed and steering: a circle of radius L / tan(delta), exactly."""
+    L, v, delta, T = 2.5, 2.0, 0.2, 0.1
+    state = np.array([0.0, 0.0, 0.3, v])
+    for _ in range(30):
+        state = kinematic_plant_step(state, np.array([0.0, delta]), L, T, 5)
+    omega = v * np.tan(delta) / L
+    radius = L / np.tan(delta)
+    theta = 0.3 + omega * 3.0
+    expected = np.array([radius * (np.sin(theta) - np.sin(0.3)),
+                         -radius * (np.cos(theta) - np.cos(0.3)), theta, v])
+    np.testing.assert_allclose(state, expected, atol=1e-9)
+    ref = rk4_reference(lambda x: kinematic_derivative(x, np.array([0.5, 0.1]), L),
+                        np.array([1.0, 2.0, 0.1, 1.0]), 0.1, 7)
+    np.testing.assert_allclose(kinematic_plant_step(np.array([1.0, 2.0, 0.1, 1.0]),
+                                                    np.array([0.5, 0.1]), L, 0.1, 7), ref,
+                               atol=1e-14)
+
+
+@pytest.mark.parametrize("overrides", [[], ["controller.horizon=5", "controller.max_obstacles=2",
+                                            "controller.input_hold=zero_rate"]])
+def test_affine_map_equals_cvxpy_apply_parameters(make_config, overrides):
+    cfg = make_config(overrides)
+    problem, params, variables = build_lateral_problem(
+        LateralQpStructure.of(cfg.controller, cfg.vehicle))
+    qp_map = compile_affine_map(problem, params, variables)
+    prog = problem.get_problem_data(cp.CLARABEL)[0]["param_prob"]
+    rng = np.random.default_rng(3)
+    for _ in range(3):
+        values = {p.id: rng.standard_normal(p.shape) for p in params}
+        theta = np.concatenate([values[p.id].ravel(order="F") for p in params])
+        P, q, _, A, b = prog.apply_parameters(values, keep_zeros=True, quad_obj=True)
+        q_map, a_map, b_map = qp_map.data(theta)
+        np.testing.assert_allclose(q_map, q, atol=1e-12)
+        np.testing.assert_allclose(b_map, b, atol=1e-12)
+        np.testing.assert_allclose(qp_map.matrix_A(a_map).toarray(), -A.toarray(), atol=1e-12)
+
+
+def test_kinematic_backends_agree(make_config):
+    cfg = make_config(["controller=kinematic"])
+    x0, u_prev = np.array([0.0, 0.0, 0.1, 2.0]), np.array([0.5, 0.05])
+    k = np.arange(1, cfg.controller.horizon + 1)
+    reference = np.vstack([0.3 * k, 0.02 * k**2])
+    obstacles = np.tile(np.array([[[2.0, 0.6]]]), (cfg.controller.horizon, 1, 1))
+    steps = {}
+    for backend in ("cvxpy", "clarabel_direct"):
+        ctrl = make_config(["controller=kinematic", f"controller.backend={backend}"]).controller
+        steps[backend] = KinematicLtvMpc(ctrl, cfg.vehicle, 0.1).solve(
+            x0, u_prev, reference, obstacles, np.array([0.4]), passes=3)
+    np.testing.assert_allclose(steps["cvxpy"].planned, steps["clarabel_direct"].planned,
+                               atol=1e-7)
+    assert steps["cvxpy"].max_slack_m == pytest.approx(steps["clarabel_direct"].max_slack_m,
+                                                       abs=1e-7)
+
+
+def test_unused_obstacle_slots_do_not_change_the_solution(make_config):
+    """One compiled problem serves 1-3 obstacles: a run with one obstacle on a 3-slot problem
+    equals the same run on a 1-slot problem."""
+    from pipeline.scenario import build_scenario
+    from pipeline.simulate import simulate
+
+    runs = {}
+    for slots in (1, 3):
+        cfg = make_config(["method=improved", f"controller.max_obstacles={slots}"])
+        runs[slots] = simulate(cfg, build_scenario(cfg.scenario)).trajectory
+    # equal to the interior-point tolerance (the idle slots change Clarabel's iterates only)
+    np.testing.assert_allclose(runs[1]["steering_rate_rad_s"].fillna(0),
+                               runs[3]["steering_rate_rad_s"].fillna(0), rtol=0, atol=1e-6)
+    np.testing.assert_allclose(runs[1]["Y_m"], runs[3]["Y_m"], rtol=0, atol=1e-7)
+
+
+def test_family_compiles_once_on_two_workers(make_config, tmp_path):
+    from pipeline.run import run_family
+
+    cfg = make_config(["method=improved", "scenario=family", "scenario.family.size=6",
+                       "scenario.family.n_jobs=2"])
+    cache = QpCache()
+    table = run_family(cfg, tmp_path / "fam", progress=False, qp_cache=cache)
+    summary = json.loads((tmp_path / "fam" / "family.json").read_text())
+    assert summary["compiles"] == 1 and cache.compile_count == 1
+    assert table["compile_count"].sum() == 0  # every member reused the parent's compilation
+    # the same structure in this process again: nothing to compile
+    assert LateralMpc(cfg.controller, cfg.vehicle, qp_cache=cache).compile_count == 0
