@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from pipeline.claims import CLAIMS, bootstrap_median_ci, family_ledger, median_of, paired_differences
+from pipeline.claims import ALL_CLAIMS, CLAIMS, compare, decide, family_ledger
 
 REVISIONS = ("normalize", "step", "beta", "exponential", "step_min")
 REVISION_TEXT = {
@@ -36,87 +36,108 @@ def load_family_jobs(root: Path) -> dict[str, pd.DataFrame]:
     return tables
 
 
-def ablation_effects(tables: dict[str, pd.DataFrame], seed: int = 0) -> pd.DataFrame:
-    """Paired effect of every configuration versus the baseline, per claim.
+def ablation_effects(tables: dict[str, pd.DataFrame], cfg) -> pd.DataFrame:
+    """Paired effect of every configuration versus the baseline, per claim, computed as the
+    claims ledger does (:func:`pipeline.claims.compare`: pairs where neither collided, missing
+    values apart, Hodges-Lehmann estimate, bootstrap interval, unadjusted test).
 
     Returns
     -------
     DataFrame
-        Rows ``(configuration, claim)`` with the median paired difference (configuration -
-        baseline, signed so that < 0 is the claimed improvement), its 95 % bootstrap interval and
-        the share of scenarios where it holds; plus collision and non-recovery counts.
+        Rows ``(configuration, claim)``: ``effect`` (configuration - baseline, < 0 is the
+        claimed improvement), ``ci_low``, ``ci_high``, ``outcome`` against the claim's margin,
+        counts; plus collision and non-recovery counts of the configuration.
     """
     baseline = tables["baseline"]
-    rng = np.random.default_rng(seed)
-    order = (["improved"] + [f"baseline+{r}" for r in REVISIONS]
+    order = (["improved", "baseline_matched"] + [f"baseline+{r}" for r in REVISIONS]
              + [f"improved-{r}" for r in REVISIONS])
     rows = []
     for label in [o for o in order if o in tables]:
         table = tables[label]
         for claim in CLAIMS:
-            d = paired_differences(table, baseline, claim)
-            low, high = bootstrap_median_ci(d, rng)
+            result = compare(table, baseline, claim, cfg)
+            outcome, _ = decide(result["ci_low"], result["ci_high"], result["p_value"],
+                                cfg.margins[claim.claim_id], result["n_pairs"], cfg,
+                                result["pi_low"], result["pi_high"])
             rows.append({"configuration": label, "claim": claim.claim_id,
-                         "metric": claim.primary_metric,
-                         "median_effect": float(median_of(d)) if d.size else np.nan,
-                         "ci_low": low, "ci_high": high,
-                         "holds_share": float(np.mean(d < -claim.tolerance)) if d.size else np.nan,
-                         "n_pairs": int(d.size),
+                         "metric": claim.primary_metric, "effect": result["estimate"],
+                         "ci_low": result["ci_low"], "ci_high": result["ci_high"],
+                         "outcome": outcome, "n_pairs": result["n_pairs"],
                          "collisions": int(table["collision"].astype(bool).sum()),
                          "not_recovered": int((~table["recovered"].astype(bool)).sum())})
     return pd.DataFrame(rows)
 
 
-def attribution_sentences(effects: pd.DataFrame) -> dict[str, str]:
-    """One sentence per claim naming the revision that accounts for most of the effect.
+def _clear(row) -> bool:
+    return bool(row["ci_high"] < 0 or row["ci_low"] > 0)
 
-    Rule: take the improved bundle's median effect on the claim. Among the revisions added alone
-    to the baseline, the one whose median effect has the same sign and the largest size accounts
-    for most of it if its interval excludes zero; the leave-one-out row of that revision (the
-    improved bundle without it) is quoted beside it. Otherwise no single revision does.
+
+def attribution_sentences(effects: pd.DataFrame, tables: dict[str, pd.DataFrame] | None = None,
+                          cfg=None) -> dict[str, str]:
+    """One sentence per claim naming the revision that accounts for most of the effect, checked
+    against the look-ahead-matched control.
+
+    Rule: take the improved bundle's effect on the claim. Among the revisions added alone to the
+    baseline, the one whose effect has the same sign and the largest size accounts for most of
+    it if its interval excludes zero; the leave-one-out row of that revision is quoted beside
+    it. Otherwise no single revision does. When the improved rollout's step cap binds on at
+    least ``cfg.cap_binding_share`` of its steps, the sentence says that 'no normalization' and
+    'a larger step' are inactive there, and quotes ``baseline_matched`` (the baseline with the
+    cap's normalized step): an effect that ``baseline_matched`` shares is look-ahead length, not
+    the other revisions.
     """
     sentences = {}
+    cap_share = None
+    if tables is not None and "improved" in tables \
+            and "step_cap_binding_share" in tables["improved"]:
+        cap_share = float(tables["improved"]["step_cap_binding_share"].mean())
+    binding = cap_share is not None and cfg is not None and cap_share >= cfg.cap_binding_share
     for claim in CLAIMS:
         part = effects[effects["claim"] == claim.claim_id].set_index("configuration")
         if "improved" not in part.index:
             continue
-        total = part.loc["improved", "median_effect"]
+        total = part.loc["improved", "effect"]
         direction = "improves" if total < 0 else ("worsens" if total > 0 else "does not change")
-        singles = part.loc[[f"baseline+{r}" for r in REVISIONS if f"baseline+{r}" in part.index]]
-        same_sign = singles[np.sign(singles["median_effect"]) == np.sign(total)] if total != 0 \
-            else singles.iloc[0:0]
-        significant = same_sign[(same_sign["ci_high"] < 0) | (same_sign["ci_low"] > 0)]
         text = (f"{claim.claim_id} ({claim.primary_metric}): the improved bundle {direction} it "
-                f"(median effect {total:+.3g}).")
+                f"(effect {total:+.3g}, {part.loc['improved', 'outcome']}).")
+        singles = part.loc[[f"baseline+{r}" for r in REVISIONS if f"baseline+{r}" in part.index]]
+        if binding:
+            # the cap makes these two revisions inactive: do not credit them
+            singles = singles.drop(index=[i for i in ("baseline+normalize", "baseline+step")
+                                          if i in singles.index])
+        same_sign = singles[np.sign(singles["effect"]) == np.sign(total)] if total != 0 \
+            else singles.iloc[0:0]
+        significant = same_sign[same_sign.apply(_clear, axis=1)] if len(same_sign) else same_sign
+        if "baseline_matched" in part.index:
+            matched = part.loc["baseline_matched"]
+            shares = np.sign(matched["effect"]) == np.sign(total) and _clear(matched) \
+                and total != 0
+            text += (f" The look-ahead-matched baseline alone {'shares' if shares else 'does not share'}"
+                     f" it (effect {matched['effect']:+.3g}, {matched['outcome']})"
+                     + (": the effect is look-ahead length, not the other revisions." if shares
+                        and abs(matched["effect"]) >= 0.5 * abs(total) else "."))
         if len(significant):
-            best = significant["median_effect"].abs().idxmax()
+            best = significant["effect"].abs().idxmax()
             revision = best.split("+", 1)[1]
             row = significant.loc[best]
             text += (f" Alone, '{REVISION_TEXT[revision]}' accounts for most of it "
-                     f"({row['median_effect']:+.3g} [{row['ci_low']:.3g}, {row['ci_high']:.3g}])")
+                     f"({row['effect']:+.3g} [{row['ci_low']:.3g}, {row['ci_high']:.3g}])")
             loo = f"improved-{revision}"
             if loo in part.index:
-                text += f"; without it the bundle's effect is {part.loc[loo, 'median_effect']:+.3g}"
+                text += f"; without it the bundle's effect is {part.loc[loo, 'effect']:+.3g}"
             text += "."
         else:
-            text += " No single revision accounts for it (no revision alone has an effect of " \
+            text += " No single active revision accounts for it (none alone has an effect of " \
                     "the same sign whose interval excludes zero)."
-            if total != 0:
-                # which revisions the effect needs: leaving one out removes the effect
-                needed = [r for r in REVISIONS if f"improved-{r}" in part.index
-                          and not (np.sign(part.loc[f"improved-{r}", "median_effect"])
-                                   == np.sign(total)
-                                   and (part.loc[f"improved-{r}", "ci_high"] < 0
-                                        or part.loc[f"improved-{r}", "ci_low"] > 0))]
-                if needed:
-                    text += (" It needs the revisions together: leaving out any of "
-                             + ", ".join(f"'{REVISION_TEXT[r]}'" for r in needed)
-                             + " removes it.")
+        if binding:
+            text += (f" The step cap binds on {100 * cap_share:.0f} % of improved's rollout "
+                     "steps, so 'no normalization' and 'a larger step' are inactive there and "
+                     "are not credited.")
         sentences[claim.claim_id] = text
     return sentences
 
 
-def interpretation_flips(root: Path) -> pd.DataFrame | None:
+def interpretation_flips(root: Path, cfg) -> pd.DataFrame | None:
     """Family verdicts of every interpretation variant and whether they differ from the default.
 
     ``root`` holds ``<variant>/<method>/family.json`` for methods baseline and improved.
@@ -127,8 +148,8 @@ def interpretation_flips(root: Path) -> pd.DataFrame | None:
     for variant in variants:
         tables = load_family_jobs(root / variant)
         if "baseline" in tables and "improved" in tables:
-            ledger, _ = family_ledger(tables)
-            verdicts[variant] = {r["claim"]: r["verdict"] for r in ledger}
+            ledger, _ = family_ledger(tables, cfg, comparisons=("baseline",))
+            verdicts[variant] = {r["claim"]: r["outcome"] for r in ledger}
             verdicts[variant]["collisions_improved"] = int(tables["improved"]["collision"].sum())
     if "default" not in verdicts:
         return None
@@ -136,7 +157,7 @@ def interpretation_flips(root: Path) -> pd.DataFrame | None:
     for variant, result in verdicts.items():
         row = {"variant": variant}
         flipped = []
-        for claim in CLAIMS:
+        for claim in ALL_CLAIMS:
             row[claim.claim_id] = result[claim.claim_id]
             if result[claim.claim_id] != verdicts["default"][claim.claim_id]:
                 flipped.append(claim.claim_id)

@@ -24,7 +24,8 @@ import yaml
 from hydra.experimental.callback import Callback
 
 from pipeline.artifacts import write_csv_atomic, write_json_atomic
-from pipeline.claims import CLAIMS, family_ledger, single_scenario_verdict
+from pipeline.claims import ALL_CLAIMS, family_ledger, single_scenario_outcome
+from pipeline.config import ClaimsConfig
 
 METHOD_KEYS = ("method", "run.method", "planner")
 IGNORED_KEYS = ("sweep", "experiment", "hydra", "hydra.sweep.dir")
@@ -128,7 +129,11 @@ def aggregate(sweep_dir: Path, baseline_dir: Path | None = None, progress: bool 
     write_csv_atomic(sweep_dir / "summary.csv", summary)
     write_json_atomic(sweep_dir / "swept_keys.json", {"override_keys": override_keys,
                                                       "swept_keys": swept})
-    verdicts = sweep_verdicts(summary, tables, swept, baseline_dir)
+    # a multirun over methods alone (make reproduce's families) has no swept value to judge
+    # verdicts per; the report's claims ledger covers it
+    parameter_keys = [k for k in swept if k not in METHOD_KEYS]
+    verdicts = sweep_verdicts(summary, tables, swept, baseline_dir) \
+        if parameter_keys or baseline_dir is not None else None
     if verdicts is not None:
         write_csv_atomic(sweep_dir / "verdicts.csv", verdicts)
     if figures:
@@ -145,14 +150,17 @@ def _group_keys(swept: list[str]) -> list[str]:
 
 
 def sweep_verdicts(summary: pd.DataFrame, tables: dict, swept: list[str],
-                   baseline_dir: Path | None) -> pd.DataFrame | None:
-    """Claim verdicts of each improved job against its baseline partner.
+                   baseline_dir: Path | None, cfg: ClaimsConfig | None = None
+                   ) -> pd.DataFrame | None:
+    """Claim outcomes of each improved job against its baseline partner (the four-outcome rule
+    of :mod:`pipeline.claims`; single scenarios: better / worse / within margin).
 
     Partners share every swept key outside ``planner.*`` and the method; failing that, the job
     in ``baseline_dir``.
     """
     if "method" not in summary:
         return None
+    cfg = cfg if cfg is not None else ClaimsConfig()
     improved = summary[summary["method"] == "improved"]
     baseline = summary[summary["method"] == "baseline"]
     external_row, external_table = None, None
@@ -177,20 +185,22 @@ def sweep_verdicts(summary: pd.DataFrame, tables: dict, swept: list[str],
         imp_table = tables.get(imp["job"])
         swept_values = {k: imp[k] for k in swept if k not in METHOD_KEYS}
         if imp_table is not None and base_table is not None:
-            ledger, _ = family_ledger({"improved": imp_table, "baseline": base_table})
+            ledger, _ = family_ledger({"improved": imp_table, "baseline": base_table}, cfg,
+                                      comparisons=("baseline",))
             for r in ledger:
                 rows.append({**swept_values, "job": imp["job"], "claim": r["claim"],
-                             "metric": r["metric"], "median_difference": r["median_difference"],
+                             "metric": r["metric"], "estimate": r["estimate"],
                              "ci_low": r["ci_low"], "ci_high": r["ci_high"],
-                             "holds_share": r["holds_share"], "verdict": r["verdict"],
+                             "p_holm": r["p_holm"], "verdict": r["outcome"],
                              "basis": f"family of {r['n_pairs']}"})
         else:
-            for claim in CLAIMS:
+            for claim in ALL_CLAIMS:
                 rows.append({**swept_values, "job": imp["job"], "claim": claim.claim_id,
                              "metric": claim.primary_metric,
-                             "median_difference": _diff(imp, base_row, claim.primary_metric),
-                             "ci_low": np.nan, "ci_high": np.nan, "holds_share": np.nan,
-                             "verdict": single_scenario_verdict(claim, base_row, imp),
+                             "estimate": _diff(imp, base_row, claim.primary_metric),
+                             "ci_low": np.nan, "ci_high": np.nan, "p_holm": np.nan,
+                             "verdict": single_scenario_outcome(claim, base_row, imp,
+                                                                cfg.margins[claim.claim_id]),
                              "basis": "single scenario"})
     return pd.DataFrame(rows) if rows else None
 

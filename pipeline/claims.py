@@ -1,8 +1,14 @@
-"""Claims stage: the paper's claims C1-C5 mapped to metrics, and their verdicts on given runs.
+"""Claims stage: the paper's claims mapped to metrics, and four-outcome verdicts on given runs.
 
-Each claim names one primary metric (the verdict is taken on it) and secondary metrics shown
-beside it. On a single scenario the verdict compares improved with baseline on the primary
-metric with a stated tolerance; statistics over a scenario family build on the same table.
+Each claim names one primary metric (the outcome is taken on it) and secondary metrics shown
+beside it; C0 (safety: collisions) comes first. Over a scenario family a claim is judged on the
+paired differences ``d = improved - comparison`` (``d < 0`` is the claimed improvement) as
+*supported*, *contradicted*, *equivalent* or *inconclusive* (:data:`OUTCOME_RULE`); on the single
+paper scenario the words are *better*, *worse* or *within margin*. Statistics come from
+``scipy.stats``: the paired bootstrap interval (``bootstrap``, BCa where defined), the Wilcoxon
+signed-rank or sign test (``wilcoxon``, ``binomtest``), McNemar's exact test on discordant
+collision pairs (``binomtest``); Holm's adjustment over the six claims is written out (SciPy has
+none).
 """
 
 from __future__ import annotations
@@ -22,7 +28,6 @@ class Claim:
     text: str
     primary_metric: str
     lower_is_better: bool
-    tolerance: float
     secondary_metrics: tuple[str, ...]
     criterion: str = ""
     paper_description: str = ""
@@ -34,28 +39,35 @@ class Claim:
 
 CLAIMS: tuple[Claim, ...] = (
     Claim("C1", "faster obstacle-avoidance response after a sudden obstacle appears",
-          "reaction_delay_s", True, 0.05, ("reaction_delay_lateral_s",),
+          "reaction_delay_s", True, ("reaction_delay_lateral_s",
+                                     "reaction_delay_first_visible_s"),
           criterion="Obstacle Avoidance Response",
           paper_description="How quickly and effectively the system reacts to a suddenly "
                             "appearing obstacle.",
           paper_indicator="Fast and smooth detour around the obstacle.",
           paper_improved="Fast and smooth avoidance",
           paper_original="Slow and aggressive curved avoidance",
-          definition="Time (s) from the obstacle's appearance until the steering angle first "
-                     "leaves a band of reaction_steering_band_rad around its value then."),
+          definition="Time (s) from the appearance of the first obstacle that threatens the "
+                     "vehicle's straight continuation (within both radii + threat_margin_m, "
+                     "threat_horizon_s ahead) until the steering angle first leaves a band of "
+                     "reaction_steering_band_rad around its value then, the crossing "
+                     "interpolated between samples; missing when nothing threatens."),
     Claim("C2", "smoother steering path (no sharp turns or jerks after avoidance)",
-          "lateral_jerk_rms_mps3", True, 0.02,
-          ("steering_rate_rms_rad_s", "curvature_rate_rms_1_per_ms", "lateral_jerk_max_mps3"),
+          "lateral_jerk_rms_mps3", True,
+          ("lateral_jerk_rms_run_mps3", "lateral_jerk_max_window_mps3",
+           "steering_rate_rms_window_rad_s", "curvature_rate_rms_1_per_ms"),
           criterion="Smoothness of Steering Path",
           paper_description="How natural or jerky the steering path is.",
           paper_indicator="Smooth curvature and gradual turns.",
           paper_improved="Smooth and stable path after avoidance",
           paper_original="Sharp turns after avoidance (jerky)",
-          definition="RMS over the run of the lateral jerk d(v r)/dt (m/s^3), v r = v^2 kappa "
-                     "the lateral acceleration, by central differences."),
+          definition="RMS of the lateral jerk d(a_y)/dt (m/s^3) with a_y = vy_dot + vx r, by "
+                     "central differences, over the avoidance window (appearance of the threat "
+                     "to recovery, or run end)."),
     Claim("C3", "repulsion applied only where needed (little force when far)",
-          "repulsive_impulse_far_share", True, 0.01,
-          ("repulsion_onset_clearance_m", "repulsive_force_peak", "repulsive_impulse"),
+          "repulsion_unneeded_share", True,
+          ("repulsion_onset_ttc_s", "repulsion_unneeded_impulse", "repulsive_impulse_far_share",
+           "repulsive_force_peak"),
           criterion="Repulsive Force Modulation",
           paper_description="How well the repulsive force from the APF is applied.",
           paper_indicator="Adaptive, distance-based repulsion that avoids unnecessary forces.",
@@ -63,11 +75,12 @@ CLAIMS: tuple[Claim, ...] = (
                          "when needed",
           paper_original="exp((s - s0)^2) causes low sensitivity for far distances",
           definition="Share (0-1) of the repulsive impulse sum |F_rep| Ts at the vehicle that "
-                     "is applied while the nearest obstacle's clearance exceeds "
-                     "threat_clearance_m."),
+                     "is applied while no obstacle threatens the straight continuation of the "
+                     "current motion (0 when no repulsion was applied); secondary: time to "
+                     "contact at the onset of significant repulsion (higher = earlier)."),
     Claim("C4", "faster, smoother goal-direction recovery after avoidance",
-          "recovery_time_s", True, 0.05, ("recovery_lateral_s", "recovery_heading_s",
-                                          "overshoot_m"),
+          "recovery_time_s", True, ("recovery_lateral_s", "recovery_heading_s",
+                                    "overshoot_m"),
           criterion="Goal Direction Recovery",
           paper_description="Whether the system can return to the goal path after avoidance.",
           paper_indicator="Smooth convergence back to the original trajectory.",
@@ -75,179 +88,402 @@ CLAIMS: tuple[Claim, ...] = (
           paper_original="Recovery is slow and inconsistent",
           definition="Settling time (s, python-control step_info convention, absolute band "
                      "recovery_lateral_band_m) of the lateral error to the start-goal line "
-                     "after every obstacle is passed; missing if it never settles."),
+                     "after every threatening obstacle is passed; missing if it never "
+                     "settles."),
     Claim("C5", "more stable path (no sharp drops, minimal oscillation)",
-          "oscillation_count", True, 0.5, ("heading_step_max_rad", "overshoot_m",
-                                           "max_lateral_deviation_m"),
+          "oscillation_count", True, ("oscillation_whole_run_count", "heading_step_max_rad",
+                                      "overshoot_m", "max_lateral_deviation_m"),
           criterion="Path Stability",
           paper_description="The overall stability of the path (oscillations, abrupt dips, "
                             "etc.).",
           paper_indicator="Stable trajectory with no sharp drops or oscillations.",
           paper_improved="Globally stable with minimal oscillation",
           paper_original="Unstable - drops sharply and reacts suddenly",
-          definition="Number of sign changes of the lateral error (outside "
-                     "lateral_sign_band_m) plus those of the yaw rate (outside "
-                     "yaw_rate_sign_band_rad_s)."),
+          definition="After the obstacle is passed, reversals of the lateral error's "
+                     "direction (hysteresis lateral_sign_band_m), net of the manoeuvre: an apex "
+                     "of the detour after the pass is not counted, so one out-and-back scores "
+                     "0 and an overshoot with its return 1."),
 )
 
-VERDICT_RULE_SINGLE = (
-    "single scenario: 'supported' if improved beats baseline on the primary metric by more than "
-    "the tolerance, 'not supported' if it is worse by more than the tolerance, 'no difference' "
-    "otherwise; a missing value (no reaction, not recovered) counts as the worst value")
+SAFETY = Claim(
+    "C0", "no less safe (collision rate)", "collision", True,
+    ("collision_avoidable", "min_clearance_m"),
+    criterion="Safety (not a row of Table 1; judged first)",
+    paper_description="Implied throughout: avoidance must avoid.",
+    paper_indicator="No collision.",
+    definition="Collision from a continuous check (vehicle and obstacles interpolated between "
+               "log rows, closest approach in closed form); each collision labelled avoidable "
+               "or unavoidable by a sampled reachability check from the state at the obstacle's "
+               "appearance.")
+
+#: Every claim in the order the report shows them: safety first.
+ALL_CLAIMS: tuple[Claim, ...] = (SAFETY,) + CLAIMS
+
+
+OUTCOMES = ("supported", "contradicted", "equivalent", "inconclusive")
+
+OUTCOME_RULE = (
+    "per claim, d = improved - comparison on each scenario (d < 0 is the claimed improvement); "
+    "C1-C5 on pairs where neither method collided (all pairs as a sensitivity), pairs with a "
+    "missing value counted apart. Estimate: Hodges-Lehmann of d (claims.estimator) with a paired "
+    "bootstrap interval (scipy.stats.bootstrap, BCa where defined, claims.n_resamples, seeded); "
+    "test: Wilcoxon signed-rank (Pratt's zeros) or sign test, C0 McNemar's exact test on "
+    "discordant pairs, Holm-adjusted over C0-C5; probability of improvement "
+    "PI = P(d < 0) + P(d = 0)/2 with a percentile bootstrap interval. 'equivalent' when the "
+    "estimate's whole interval lies inside (-margin, +margin); otherwise 'supported' when the "
+    "adjusted p < alpha and PI's interval lies above 1/2 (improved better in most pairs), "
+    "'contradicted' when the adjusted p < alpha and PI's interval lies below 1/2, "
+    "'inconclusive' else (also with fewer than claims.min_pairs pairs). A significant "
+    "difference inside the margin is a real but small effect: the note says so")
+
+SINGLE_RULE = (
+    "paper scenario: 'better' if improved beats the comparison on the primary metric by at "
+    "least the claim's margin, 'worse' if it trails by at least the margin, 'within margin' "
+    "otherwise, 'missing' when either value is missing")
 
 
 def _value(metrics: dict, key: str) -> float:
     value = metrics.get(key)
+    if isinstance(value, (bool, np.bool_)):
+        return float(value)
     return float(value) if value is not None else math.nan
 
 
-def single_scenario_verdict(claim: Claim, baseline: dict, improved: dict) -> str:
-    """Verdict of one claim from two runs' metrics (see :data:`VERDICT_RULE_SINGLE`)."""
-    b, i = _value(baseline, claim.primary_metric), _value(improved, claim.primary_metric)
-    worst = math.inf if claim.lower_is_better else -math.inf
-    b = worst if math.isnan(b) else b
-    i = worst if math.isnan(i) else i
-    if b == i:
-        return "no difference"
-    gain = (b - i) if claim.lower_is_better else (i - b)
-    if math.isinf(gain):
-        return "supported" if gain > 0 else "not supported"
-    if gain > claim.tolerance:
-        return "supported"
-    if gain < -claim.tolerance:
-        return "not supported"
-    return "no difference"
+def single_scenario_outcome(claim: Claim, comparison: dict, improved: dict,
+                            margin: float) -> str:
+    """Outcome of one claim on one scenario (see :data:`SINGLE_RULE`)."""
+    b, i = _value(comparison, claim.primary_metric), _value(improved, claim.primary_metric)
+    if math.isnan(b) or math.isnan(i):
+        return "missing"
+    d = (i - b) if claim.lower_is_better else (b - i)
+    if d <= -margin and d < 0:
+        return "better"
+    if d >= margin and d > 0:
+        return "worse"
+    return "within margin"
 
 
-def claims_table(metrics_by_method: dict[str, dict], baseline: str = "baseline",
+def claims_table(metrics_by_method: dict[str, dict], margins: dict[str, float],
+                 comparisons: tuple[str, ...] = ("baseline", "baseline_matched"),
                  improved: str = "improved") -> list[dict]:
-    """One row per claim: primary metric, its value per method, the verdict."""
+    """One row per claim on one scenario: primary metric per method, outcome per comparison."""
     rows = []
-    for claim in CLAIMS:
+    for claim in ALL_CLAIMS:
         row = {"claim": claim.claim_id, "paper says": claim.text,
                "metric": claim.primary_metric,
                "better": "lower" if claim.lower_is_better else "higher",
-               "tolerance": claim.tolerance}
+               "margin": margins[claim.claim_id]}
         for method, metrics in metrics_by_method.items():
             row[method] = metrics.get(claim.primary_metric)
-        if baseline in metrics_by_method and improved in metrics_by_method:
-            row["verdict"] = single_scenario_verdict(claim, metrics_by_method[baseline],
-                                                     metrics_by_method[improved])
-        else:
-            row["verdict"] = "n/a"
+        for comparison in comparisons:
+            if comparison in metrics_by_method and improved in metrics_by_method:
+                row[f"vs {comparison}"] = single_scenario_outcome(
+                    claim, metrics_by_method[comparison], metrics_by_method[improved],
+                    margins[claim.claim_id])
         rows.append(row)
     return rows
 
 
-VERDICT_RULE_FAMILY = (
-    "over the family, d = improved - baseline per scenario (sign flipped where higher is "
-    "better, so d < 0 is an improvement; a missing value counts as the worst value, i.e. "
-    "d = +inf if only improved lacks it and -inf if only baseline does); the median of d and its "
-    "95 % percentile-bootstrap interval (2000 resamples, seeded): 'supported' if the whole "
-    "interval lies below 0, 'not supported' if it lies at or above 0, 'mixed' if it contains 0. "
-    "'holds in' is the share of scenarios with d < -tolerance")
+def hodges_lehmann(values: np.ndarray, axis: int = -1) -> np.ndarray:
+    """One-sample Hodges-Lehmann estimate: the median of the Walsh averages
+    ``(d_i + d_j) / 2, i <= j`` along ``axis`` (vectorized over the other axes)."""
+    x = np.moveaxis(np.asarray(values, dtype=float), axis, -1)
+    i, j = np.triu_indices(x.shape[-1])
+    return np.median((x[..., i] + x[..., j]) / 2.0, axis=-1)
 
 
-def paired_differences(improved: pd.DataFrame, baseline: pd.DataFrame, claim: Claim
-                       ) -> np.ndarray:
-    """Per-scenario ``d = improved - baseline`` on the claim's primary metric (paired by the
-    ``scenario`` column), signed so that ``d < 0`` is an improvement; NaN handled as worst."""
+def hodges_lehmann_on(sample: np.ndarray):
+    """:func:`hodges_lehmann` specialised to resamples of ``sample`` (as a bootstrap draws them).
+
+    A resample holds the sample's distinct values ``u`` with counts ``c``; its Walsh averages
+    are the sorted Walsh averages of ``u`` with weights ``c_a c_b`` (``c_a (c_a + 1) / 2`` on the
+    diagonal), so its median is a weighted median found by a cumulative sum instead of a
+    partition of ``n (n + 1) / 2`` numbers per resample. Same numbers, several times faster;
+    values outside ``sample`` fall back to the direct computation.
+    """
+    u = np.unique(np.asarray(sample, dtype=float))
+    a, b = np.triu_indices(u.size)
+    walsh = (u[a] + u[b]) / 2.0
+    order = np.argsort(walsh, kind="stable")
+    walsh, a, b = walsh[order], a[order], b[order]
+    diagonal = a == b
+
+    def statistic(x, axis=-1):
+        x = np.moveaxis(np.asarray(x, dtype=float), axis, -1)
+        batch_shape, n = x.shape[:-1], x.shape[-1]
+        flat = x.reshape(-1, n)
+        index = np.clip(np.searchsorted(u, flat), 0, u.size - 1)
+        if u.size == 0 or not np.array_equal(u[index], flat):
+            return hodges_lehmann(x, axis=-1)
+        rows = flat.shape[0]
+        counts = np.bincount((index + u.size * np.arange(rows)[:, None]).ravel(),
+                             minlength=rows * u.size).reshape(rows, u.size).astype(np.int64)
+        weights = counts[:, a] * counts[:, b]
+        on_diagonal = counts[:, a[diagonal]]
+        weights[:, diagonal] = on_diagonal * (on_diagonal + 1) // 2
+        cumulative = np.cumsum(weights, axis=1)
+        total = n * (n + 1) // 2
+        low = np.argmax(cumulative > (total - 1) // 2, axis=1)
+        high = np.argmax(cumulative > total // 2, axis=1)
+        return ((walsh[low] + walsh[high]) / 2.0).reshape(batch_shape)
+
+    return statistic
+
+
+def _estimator(name: str, sample: np.ndarray | None = None):
+    if name == "median":
+        return lambda x, axis=-1: np.median(x, axis=axis)
+    return hodges_lehmann_on(sample) if sample is not None else hodges_lehmann
+
+
+def bootstrap_interval(d: np.ndarray, statistic, cfg, level: float = 0.95
+                       ) -> tuple[float, float, str]:
+    """Paired bootstrap interval of ``statistic`` over the differences (BCa where defined,
+    percentile otherwise); a constant sample has the degenerate interval at its value."""
+    from scipy import stats
+
+    d = np.asarray(d, dtype=float)
+    if d.size == 0:
+        return float("nan"), float("nan"), "none"
+    if np.ptp(d) == 0.0:
+        return float(d[0]), float(d[0]), "degenerate"
+    for method in ("BCa", "percentile"):
+        with np.errstate(all="ignore"):
+            import warnings
+
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")
+                result = stats.bootstrap((d,), statistic, n_resamples=cfg.n_resamples,
+                                         confidence_level=level, method=method, vectorized=True,
+                                         axis=-1, batch=200,
+                                         random_state=np.random.default_rng(cfg.seed))
+        low, high = result.confidence_interval
+        if np.isfinite(low) and np.isfinite(high):
+            return float(low), float(high), method
+    return float("nan"), float("nan"), "failed"
+
+
+def probability_of_improvement(d: np.ndarray, cfg) -> tuple[float, float, float]:
+    """``P(d < 0) + P(d = 0) / 2`` (ties within ``tie_tolerance``) and its percentile bootstrap
+    interval."""
+    from scipy import stats
+
+    d = np.asarray(d, dtype=float)
+    if d.size == 0:
+        return float("nan"), float("nan"), float("nan")
+    tie = cfg.tie_tolerance
+    score = np.where(d < -tie, 1.0, np.where(d > tie, 0.0, 0.5))
+    value = float(score.mean())
+    if np.ptp(score) == 0.0:
+        return value, value, value
+    result = stats.bootstrap((score,), np.mean, n_resamples=cfg.n_resamples, method="percentile",
+                             vectorized=True, axis=-1,
+                             random_state=np.random.default_rng(cfg.seed + 1))
+    low, high = result.confidence_interval
+    return value, float(low), float(high)
+
+
+def paired_test(d: np.ndarray, cfg) -> float:
+    """Two-sided p-value of the paired test on ``d`` (1 when every pair ties)."""
+    from scipy import stats
+
+    d = np.asarray(d, dtype=float)
+    tie = cfg.tie_tolerance
+    better, worse = int(np.sum(d < -tie)), int(np.sum(d > tie))
+    if better + worse == 0:
+        return 1.0
+    if cfg.test == "sign":
+        return float(stats.binomtest(better, better + worse, 0.5).pvalue)
+    cleaned = np.where(np.abs(d) <= tie, 0.0, d)
+    return float(stats.wilcoxon(cleaned, zero_method="pratt").pvalue)
+
+
+def holm(p_values: list[float]) -> list[float]:
+    """Holm's step-down adjustment (monotone, capped at 1); NaN stays NaN."""
+    p = np.asarray(p_values, dtype=float)
+    finite = np.nonzero(np.isfinite(p))[0]
+    adjusted = np.full(p.shape, np.nan)
+    order = finite[np.argsort(p[finite], kind="stable")]
+    m, running = len(order), 0.0
+    for rank, index in enumerate(order):
+        running = max(running, min(1.0, (m - rank) * p[index]))
+        adjusted[index] = running
+    return adjusted.tolist()
+
+
+def decide(low: float, high: float, p_adjusted: float, margin: float, n_pairs: int, cfg,
+           pi_low: float = float("nan"), pi_high: float = float("nan")) -> tuple[str, str]:
+    """Outcome and note (:data:`OUTCOME_RULE`).
+
+    Equivalence is read off the estimate's interval and the margin; the direction of a
+    significant difference off the probability of improvement's interval (robust where the
+    estimate lives on a lattice, e.g. counts with many ties); significance off the adjusted p.
+    Without a probability-of-improvement interval the estimate's interval gives the direction.
+    """
+    if n_pairs < cfg.min_pairs or not (np.isfinite(low) and np.isfinite(high)):
+        return "inconclusive", f"too few pairs ({n_pairs} < {cfg.min_pairs})"
+    significant = bool(np.isfinite(p_adjusted) and p_adjusted < cfg.alpha)
+    if np.isfinite(pi_low) and np.isfinite(pi_high):
+        better, worse = pi_low > 0.5, pi_high < 0.5
+    else:
+        better, worse = high < 0, low > 0
+    if -margin < low and high < margin:
+        if significant and better:
+            return "equivalent", "improved better, by less than the margin"
+        if significant and worse:
+            return "equivalent", "improved worse, by less than the margin"
+        return "equivalent", ""
+    if significant and better:
+        return "supported", ""
+    if significant and worse:
+        return "contradicted", ""
+    return "inconclusive", ""
+
+
+def paired_differences(improved: pd.DataFrame, comparison: pd.DataFrame, claim: Claim
+                       ) -> pd.DataFrame:
+    """Pairs by ``scenario``: the claim's primary metric of both, ``d`` (NaN when either is
+    missing, signed so that ``d < 0`` is the claimed improvement) and both collision flags."""
     key = claim.primary_metric
-    merged = improved[["scenario", key]].merge(baseline[["scenario", key]], on="scenario",
-                                               suffixes=("_i", "_b"))
-    i = merged[f"{key}_i"].to_numpy(float)
-    b = merged[f"{key}_b"].to_numpy(float)
+    cols = ["scenario", key] + (["collision"] if key != "collision" else [])
+    merged = improved[cols].merge(comparison[cols], on="scenario", suffixes=("_i", "_c"))
+    i = pd.to_numeric(merged[f"{key}_i"], errors="coerce").to_numpy(float)
+    c = pd.to_numeric(merged[f"{key}_c"], errors="coerce").to_numpy(float)
     sign = 1.0 if claim.lower_is_better else -1.0
-    with np.errstate(invalid="ignore"):
-        d = sign * (i - b)
-    d = np.where(np.isnan(i) & ~np.isnan(b), np.inf, d)
-    d = np.where(~np.isnan(i) & np.isnan(b), -np.inf, d)
-    d = np.where(np.isnan(i) & np.isnan(b), 0.0, d)
-    return d
+    merged["d"] = sign * (i - c)
+    if key == "collision":
+        merged["collision_i"], merged["collision_c"] = i.astype(bool), c.astype(bool)
+    else:
+        merged["collision_i"] = merged["collision_i"].astype(bool)
+        merged["collision_c"] = merged["collision_c"].astype(bool)
+    return merged
 
 
-def median_of(values: np.ndarray, axis=None):
-    """Median as an element of the data (``inverted_cdf``), well defined with infinities."""
-    return np.quantile(values, 0.5, axis=axis, method="inverted_cdf")
+def compare(improved: pd.DataFrame, comparison: pd.DataFrame, claim: Claim, cfg,
+            pairs: str | None = None) -> dict:
+    """One claim, one comparison: estimate, interval, test, probability of improvement,
+    counts (before the Holm adjustment and the outcome)."""
+    merged = paired_differences(improved, comparison, claim)
+    pairs = cfg.pairs if pairs is None else pairs
+    if claim.claim_id != "C0" and pairs == "neither_collided":
+        merged = merged[~(merged["collision_i"] | merged["collision_c"])]
+    d_all = merged["d"].to_numpy(float)
+    d = d_all[np.isfinite(d_all)]
+    tie = cfg.tie_tolerance
+    row = {"n_pairs": int(d.size), "n_missing": int(d_all.size - d.size),
+           "n_better": int(np.sum(d < -tie)), "n_tied": int(np.sum(np.abs(d) <= tie)),
+           "n_worse": int(np.sum(d > tie))}
+    if claim.claim_id == "C0":
+        # collision rates: the mean of d is the rate difference; McNemar on discordant pairs
+        estimate = float(d.mean()) if d.size else float("nan")
+        low, high, method = bootstrap_interval(d, lambda x, axis=-1: np.mean(x, axis=axis), cfg)
+        from scipy import stats
+
+        discordant = row["n_better"] + row["n_worse"]
+        p_value = float(stats.binomtest(row["n_worse"], discordant, 0.5).pvalue) \
+            if discordant else 1.0
+    else:
+        statistic = _estimator(cfg.estimator, d)
+        estimate = float(_estimator(cfg.estimator)(d)) if d.size else float("nan")
+        low, high, method = bootstrap_interval(d, statistic, cfg)
+        p_value = paired_test(d, cfg) if d.size else float("nan")
+    pi, pi_low, pi_high = probability_of_improvement(d, cfg)
+    row.update(estimate=estimate, ci_low=low, ci_high=high, interval_method=method,
+               p_value=p_value, prob_improvement=pi, pi_low=pi_low, pi_high=pi_high)
+    return row
 
 
-def bootstrap_median_ci(values: np.ndarray, rng: np.random.Generator,
-                        n_resamples: int = 2000, level: float = 0.95) -> tuple[float, float]:
-    """Percentile-bootstrap interval of the median."""
-    values = np.asarray(values, dtype=float)
-    if values.size == 0:
-        return float("nan"), float("nan")
-    idx = rng.integers(0, values.size, size=(n_resamples, values.size))
-    medians = median_of(values[idx], axis=1)
-    tail = (1.0 - level) / 2.0
-    return (float(np.quantile(medians, tail, method="inverted_cdf")),
-            float(np.quantile(medians, 1.0 - tail, method="inverted_cdf")))
+LEDGER_COLUMNS = ["claim", "comparison", "metric", "outcome", "estimate", "ci_low", "ci_high",
+                  "p_value", "p_holm", "prob_improvement", "pi_low", "pi_high", "n_better",
+                  "n_tied", "n_worse", "n_missing", "n_pairs", "margin", "note",
+                  "outcome_all_pairs", "estimate_all_pairs", "paper_scenario"]
 
 
-def family_verdict(low: float, high: float) -> str:
-    """Verdict from the interval of the median paired difference (see VERDICT_RULE_FAMILY)."""
-    if high < 0.0:
-        return "supported"
-    if low >= 0.0:
-        return "not supported"
-    return "mixed"
-
-
-def family_ledger(tables: dict[str, pd.DataFrame], paper_metrics: dict[str, dict] | None = None,
-                  baseline: str = "baseline", improved: str = "improved", seed: int = 0
+def family_ledger(tables: dict[str, pd.DataFrame], cfg, paper_metrics: dict[str, dict] | None
+                  = None, improved: str = "improved",
+                  comparisons: tuple[str, ...] = ("baseline", "baseline_matched")
                   ) -> tuple[list[dict], dict[str, np.ndarray]]:
-    """Claims ledger over a scenario family.
+    """Claims ledger over a scenario family: C0-C5 against each comparison present.
 
     Parameters
     ----------
     tables : dict of method -> DataFrame
         Per-scenario metrics (``family_metrics.csv``) of each method, with a ``scenario`` column.
+    cfg : ClaimsConfig
     paper_metrics : dict of method -> metrics, optional
-        The paper scenario's values, shown beside the family statistics.
-    seed : int
-        Seed of the bootstrap.
+        The paper scenario's values: its better / worse / within-margin word per claim.
 
     Returns
     -------
     rows : list of dict
-    differences : dict of claim id -> ndarray
-        The paired differences, for plotting.
+        :data:`LEDGER_COLUMNS` plus ``margin_reason`` and ``paper says``.
+    differences : dict of ``"<claim> vs <comparison>"`` -> ndarray
+        The paired differences the outcome was taken on, for plotting.
     """
-    rng = np.random.default_rng(seed)
     rows, differences = [], {}
-    for claim in CLAIMS:
-        d = paired_differences(tables[improved], tables[baseline], claim)
-        low, high = bootstrap_median_ci(d, rng)
-        row = {"claim": claim.claim_id, "paper says": claim.text, "metric": claim.primary_metric,
-               "better": "lower" if claim.lower_is_better else "higher",
-               "n_pairs": int(d.size), "median_difference": float(median_of(d)) if d.size else
-               float("nan"), "ci_low": low, "ci_high": high,
-               "holds_share": float(np.mean(d < -claim.tolerance)) if d.size else float("nan"),
-               "verdict": family_verdict(low, high)}
-        if paper_metrics:
-            row["paper_scenario"] = {m: metrics.get(claim.primary_metric)
-                                     for m, metrics in paper_metrics.items()}
-            if baseline in paper_metrics and improved in paper_metrics:
-                row["paper_verdict"] = single_scenario_verdict(claim, paper_metrics[baseline],
-                                                               paper_metrics[improved])
-        rows.append(row)
-        differences[claim.claim_id] = d
+    if improved not in tables:
+        return rows, differences
+    for comparison in [c for c in comparisons if c in tables]:
+        block = []
+        for claim in ALL_CLAIMS:
+            result = compare(tables[improved], tables[comparison], claim, cfg)
+            merged = paired_differences(tables[improved], tables[comparison], claim)
+            if claim.claim_id != "C0" and cfg.pairs == "neither_collided":
+                merged = merged[~(merged["collision_i"] | merged["collision_c"])]
+            differences[f"{claim.claim_id} vs {comparison}"] = \
+                merged["d"].to_numpy(float)[np.isfinite(merged["d"].to_numpy(float))]
+            block.append((claim, result))
+        adjusted = holm([r["p_value"] for _, r in block])
+        for (claim, result), p_holm in zip(block, adjusted):
+            margin = float(cfg.margins[claim.claim_id])
+            outcome, note = decide(result["ci_low"], result["ci_high"], p_holm, margin,
+                                   result["n_pairs"], cfg, result["pi_low"], result["pi_high"])
+            row = {"claim": claim.claim_id, "comparison": comparison,
+                   "metric": claim.primary_metric, "outcome": outcome, **result,
+                   "p_holm": p_holm, "margin": margin, "note": note,
+                   "margin_reason": cfg.margin_reasons[claim.claim_id],
+                   "paper says": claim.text}
+            if claim.claim_id != "C0":
+                other = "all" if cfg.pairs == "neither_collided" else "neither_collided"
+                sens = compare(tables[improved], tables[comparison], claim, cfg, pairs=other)
+                # the sensitivity keeps its own unadjusted test: it is a check, not a claim
+                row["outcome_all_pairs"], _ = decide(sens["ci_low"], sens["ci_high"],
+                                                     sens["p_value"], margin, sens["n_pairs"],
+                                                     cfg, sens["pi_low"], sens["pi_high"])
+                row["estimate_all_pairs"] = sens["estimate"]
+            else:
+                row["outcome_all_pairs"], row["estimate_all_pairs"] = outcome, result["estimate"]
+            if paper_metrics and comparison in paper_metrics and improved in paper_metrics:
+                row["paper_scenario"] = single_scenario_outcome(
+                    claim, paper_metrics[comparison], paper_metrics[improved], margin)
+            rows.append(row)
     return rows, differences
 
 
 def outcome_counts(tables: dict[str, pd.DataFrame]) -> list[dict]:
-    """Collisions, failures and fallbacks per method; nothing is dropped from the statistics."""
+    """Collisions (avoidable / unavoidable), failures and fallbacks per method; how often the
+    APF's step cap binds."""
     rows = []
     for method, t in tables.items():
+        collided = t["collision"].astype(bool)
+        avoidable = t["collision_avoidable"] if "collision_avoidable" in t \
+            else pd.Series([None] * len(t))
+        avoidable = avoidable.map(lambda v: v if isinstance(v, (bool, np.bool_)) else
+                                  (str(v).lower() == "true" if str(v).lower() in ("true", "false")
+                                   else None))
         rows.append({
             "method": method, "scenarios": int(len(t)),
-            "collisions": int(t["collision"].astype(bool).sum()),
+            "collisions": int(collided.sum()),
+            "collisions_avoidable": int((collided & (avoidable == True)).sum()),  # noqa: E712
+            "collisions_unavoidable": int((collided & (avoidable == False)).sum()),  # noqa: E712
             "not_recovered": int((~t["recovered"].astype(bool)).sum()),
-            "no_reaction": int((~t["reacted"].astype(bool)).sum()),
+            "no_threat": int((~t["threatened"].astype(bool)).sum()) if "threatened" in t else 0,
             "goal_not_reached": int((~t["goal_reached"].astype(bool)).sum()),
             "heading_validity_exceeded": int(t["heading_validity_exceeded"].astype(bool).sum()),
             "fallback_steps": int(t["fallback_count"].fillna(0).sum())
             if "fallback_count" in t else 0,
+            "step_cap_binding_share": float(t["step_cap_binding_share"].mean())
+            if "step_cap_binding_share" in t else float("nan"),
             "min_clearance_median_m": float(t["min_clearance_m"].median()),
         })
     return rows

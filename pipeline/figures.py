@@ -160,37 +160,45 @@ def save_figure(fig: Figure, out_dir: Path, stem: str) -> dict[str, Path]:
 
 
 def claim_differences_figure(differences: dict[str, np.ndarray], metric_names: dict[str, str],
-                             intervals: dict[str, tuple[float, float]]) -> Figure:
-    """Per-scenario paired differences (improved - baseline, < 0 is better), one panel a claim.
+                             intervals: dict[str, tuple[float, float, float]]) -> Figure:
+    """Per-scenario paired differences (improved - comparison, < 0 is better): one row per
+    comparison, one panel per claim, with the estimate and its interval.
 
-    Infinite differences (one method without a value) are drawn at the panel's edge and counted
-    in the title.
+    Keys of ``differences`` and ``intervals`` are ``"<claim> vs <comparison>"``; intervals are
+    ``(low, high, estimate)``.
     """
-    claims = list(differences)
-    fig, axes = plt.subplots(1, len(claims), figsize=(2.3 * len(claims), 3.6),
+    keys = list(differences)
+    claims = list(dict.fromkeys(k.split(" vs ")[0] for k in keys))
+    comparisons = list(dict.fromkeys(k.split(" vs ")[1] for k in keys))
+    fig, axes = plt.subplots(len(comparisons), len(claims),
+                             figsize=(1.9 * len(claims) + 0.8, 2.9 * len(comparisons)),
                              layout="constrained", squeeze=False)
     rng = np.random.default_rng(0)  # jitter only
-    for ax, claim in zip(axes[0], claims):
-        d = np.asarray(differences[claim], dtype=float)
-        finite = d[np.isfinite(d)]
-        span = max(np.max(np.abs(finite)) if finite.size else 1.0, 1e-9) * 1.15
-        shown = np.clip(np.where(np.isfinite(d), d, np.sign(d) * span), -span, span)
-        ax.scatter(rng.uniform(-0.25, 0.25, d.size), shown, s=8, alpha=0.45, color="#1f77b4")
-        ax.axhline(0.0, color="k", lw=0.8)
-        low, high = intervals[claim]
-        med = float(np.quantile(d, 0.5, method="inverted_cdf")) if d.size else np.nan
-        ax.errorbar([0.45], [np.clip(med, -span, span)],
-                    yerr=[[np.clip(med, -span, span) - np.clip(low, -span, span)],
-                          [np.clip(high, -span, span) - np.clip(med, -span, span)]],
-                    fmt="D", color="#d62728", capsize=4, label="median, 95% CI")
-        n_inf = int(np.count_nonzero(~np.isfinite(d)))
-        ax.set_title(f"{claim}" + (f" ({n_inf} at edge)" if n_inf else ""), fontsize=9)
-        ax.set_xlabel(metric_names[claim], fontsize=7)
-        ax.set_xticks([])
-        ax.set_xlim(-0.6, 0.7)
-        ax.tick_params(axis="y", labelsize=7)
-        ax.grid(True, axis="y", alpha=0.3)
-    axes[0][0].set_ylabel("improved - baseline per scenario\n(< 0: improved better)")
+    for r, comparison in enumerate(comparisons):
+        for c, claim in enumerate(claims):
+            ax = axes[r][c]
+            key = f"{claim} vs {comparison}"
+            if key not in differences:
+                ax.set_visible(False)
+                continue
+            d = np.asarray(differences[key], dtype=float)
+            span = max(np.max(np.abs(d)) if d.size else 1.0, 1e-9) * 1.15
+            ax.scatter(rng.uniform(-0.25, 0.25, d.size), d, s=7, alpha=0.4, color="#1f77b4")
+            ax.axhline(0.0, color="k", lw=0.8)
+            low, high, estimate = intervals[key]
+            if np.isfinite(estimate):
+                ax.errorbar([0.45], [estimate],
+                            yerr=[[max(estimate - low, 0.0)], [max(high - estimate, 0.0)]],
+                            fmt="D", color="#d62728", capsize=4, label="estimate, 95% CI")
+            ax.set_ylim(-span, span)
+            ax.set_title(f"{claim} vs {comparison}", fontsize=8)
+            if r == len(comparisons) - 1:
+                ax.set_xlabel(metric_names.get(claim, claim), fontsize=7)
+            ax.set_xticks([])
+            ax.set_xlim(-0.6, 0.7)
+            ax.tick_params(axis="y", labelsize=7)
+            ax.grid(True, axis="y", alpha=0.3)
+        axes[r][0].set_ylabel(f"improved - {comparison}\n(< 0: improved better)", fontsize=8)
     axes[0][0].legend(fontsize=7, loc="lower left")
     return fig
 
@@ -274,7 +282,7 @@ def sweep_figure(summary: pd.DataFrame, swept: list[str]) -> list[tuple[Figure, 
 
 
 def ablation_forest_figure(effects: pd.DataFrame) -> Figure:
-    """Forest plot: median paired effect versus baseline (95 % CI) of each configuration, one
+    """Forest plot: paired effect versus baseline (95 % CI) of each configuration, one
     panel per claim; left of zero is the paper's claimed direction."""
     claims = list(dict.fromkeys(effects["claim"]))
     configs = list(dict.fromkeys(effects["configuration"]))
@@ -285,7 +293,7 @@ def ablation_forest_figure(effects: pd.DataFrame) -> Figure:
               else "#ff7f0e" for c in configs]
     for ax, claim in zip(axes[0], claims):
         part = effects[effects["claim"] == claim].set_index("configuration").reindex(configs)
-        med = part["median_effect"].to_numpy(float)
+        med = part["effect"].to_numpy(float)
         low, high = part["ci_low"].to_numpy(float), part["ci_high"].to_numpy(float)
         finite = np.concatenate([v[np.isfinite(v)] for v in (med, low, high)])
         span = max(np.max(np.abs(finite)) if finite.size else 1.0, 1e-9) * 1.1

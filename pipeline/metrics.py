@@ -1,38 +1,45 @@
 """Metrics stage: Table 1 of the paper as numbers, pure functions of a logged trajectory.
 
 Every function takes arrays (or the trajectory table) and thresholds from
-:class:`pipeline.config.MetricsConfig`; none of them runs a simulation. Definitions (also shown
-in the report):
+:class:`pipeline.config.MetricsConfig`; none of them runs a simulation. A *threat* is an obstacle
+whose constant-velocity motion comes within both radii plus ``threat_margin_m`` of the straight
+continuation of the vehicle's current motion within ``threat_horizon_s`` (closed form, see
+:func:`straight_line_time_to_contact`). Definitions (also in the report's Methods section):
 
-* **Reaction delay** (C1, s): first time at or after the obstacle appears at which the steering
-  angle differs from its value at appearance by more than ``reaction_steering_band_rad``, minus the
-  appearance time. A second variant uses the lateral deviation (band ``reaction_lateral_band_m``).
-  NaN plus ``reacted = False`` when the band is never left.
-* **Smoothness** (C2): RMS and max of the steering rate (rad/s, the applied input); lateral
-  acceleration ``a_y = v^2 kappa = v r``; RMS and max lateral jerk ``d a_y / dt`` (m/s^3, central
-  differences); RMS curvature rate ``d kappa / dt`` with ``kappa = r / v`` (1/(m s)).
-* **Repulsion modulation** (C3): repulsive impulse ``sum |F_rep| Ts``; share of it applied while
-  the obstacle's clearance exceeds ``threat_clearance_m`` (0 when no repulsion was applied at
-  all); peak ``|F_rep|``; clearance at which repulsion first switched on.
-* **Goal-direction recovery** (C4, s): from the moment every obstacle is passed (the vehicle's
-  longitudinal position exceeds each obstacle's by both radii, for good), the settling time of
-  the lateral error to the original start-goal line, computed with python-control's
-  ``step_info`` on the mirrored signal ``e0 - e(t)`` (a step from 0 to ``e0``) with an absolute
-  band: ``SettlingTimeThreshold = recovery_lateral_band_m / |e0|``; NaN plus
-  ``recovered = False`` if the error is outside the band at the end of the run. Secondary: the
-  same settling time of the heading error to the bearing of the goal
-  (``recovery_heading_band_rad``), judged until ``recovery_heading_stop_m`` before the goal
-  line, where that bearing turns fast.
-* **Path stability** (C5): overshoot past the start-goal line on the side opposite the detour
-  after the obstacle is passed (m); sign changes of the lateral error (outside
-  ``lateral_sign_band_m``) and of the yaw rate (outside ``yaw_rate_sign_band_rad_s``), and their
-  sum ``oscillation_count``; largest
-  per-step heading change (rad).
-* **Safety**: minimum clearance (centre distance minus both radii, m), collision flag (clearance
-  < 0), minimum time to collision (clearance / closing speed while closing, s).
+* **Reaction delay** (C1, s): from the appearance of the first obstacle that threatens the
+  vehicle when it appears (``reaction_obstacle = threatening``; the older reading takes the first
+  visible obstacle, harmless or not) until the applied steering angle first leaves a band of
+  ``reaction_steering_band_rad`` around its value then, the crossing interpolated between samples
+  (exact: the steering angle is piecewise linear under a held steering rate). NaN, with
+  ``threatened = False``, when no obstacle threatens.
+* **Smoothness** (C2): lateral acceleration ``a_y = vy_dot + vx r`` (``lateral_accel``; the older
+  reading drops ``vy_dot``), lateral jerk ``d a_y / dt`` by central differences; RMS and max over
+  the avoidance window (appearance of the threat to recovery, or run end) and over the whole run.
+  Steering rate and curvature rate as secondaries.
+* **Repulsion modulation** (C3): the repulsive impulse ``sum |F_rep| Ts`` applied while no
+  obstacle threatens (unneeded repulsion), absolute and as a share of all repulsion (0 when none
+  was applied); time to contact at the onset of significant repulsion (``|F_rep| >
+  repulsion_onset_force``) when an obstacle does threaten (higher = earlier). The older
+  reading counts repulsion beyond ``threat_clearance_m`` of clearance as unneeded.
+* **Goal-direction recovery** (C4, s): from the moment every obstacle that ever threatened is
+  passed (the vehicle ahead of it by both radii for good; every obstacle when none threatened),
+  the settling time of the lateral error (python-control ``step_info`` convention, absolute band
+  ``recovery_lateral_band_m``); NaN with ``recovered = False`` when it does not settle.
+* **Path stability** (C5): after the obstacle is passed, reversals of the lateral error's
+  direction beyond a hysteresis of ``lateral_sign_band_m``, net of the manoeuvre itself (an apex
+  of the detour after the pass is not counted): one out-and-back scores 0, an overshoot and
+  return 1. The older reading counts sign changes of lateral error and yaw rate over the run.
+  Overshoot past the line and the largest per-step heading change as secondaries.
+* **Safety**: minimum clearance and collision from a continuous check (vehicle and obstacles
+  interpolated linearly between log rows, closest approach in closed form), so a fast obstacle
+  cannot pass through the vehicle between two rows; each collision is classified
+  ``collision_avoidable`` by a reachability check from the state at the obstacle's appearance:
+  steering targets across ``[-delta_max, delta_max]`` reached at the steering-rate limit, each
+  with and without full braking, on the kinematic bicycle; avoidable when any of them keeps a
+  non-negative clearance to every obstacle. Minimum time to collision.
 * **Progress**: time to reach the goal line (NaN if not reached), path length (m).
 * **Solver**: median and p95 of Clarabel's iteration count, fallback count, largest heading
-  error against the model's validity bound.
+  error against the model's validity bound, share of rollout steps where the step cap bound.
 """
 
 from __future__ import annotations
@@ -49,12 +56,19 @@ from pipeline.config import MetricsConfig
 
 @dataclass(frozen=True)
 class TrajectoryContext:
-    """What the metrics need besides the table: geometry of the run (SI units)."""
+    """What the metrics need besides the table: geometry and limits of the run (SI units).
+
+    The limits feed the collision attribution (defaults: the compact car of ``conf/vehicle``).
+    """
 
     start_m: tuple[float, float]
     goal_m: tuple[float, float]
     vehicle_radius_m: float
     validity_heading_rad: float = math.inf
+    wheelbase_m: float = 2.5
+    steering_max_rad: float = 0.4
+    steering_rate_max_rad_s: float = 1.0
+    braking_mps2: float = 3.0
 
 
 def _nan_to_none(value):
@@ -174,6 +188,208 @@ def min_time_to_collision(trajectory: pd.DataFrame, vehicle_radius_m: float) -> 
     return float(best) if np.isfinite(best) else float("nan")
 
 
+def band_exit_time(time_s: np.ndarray, values: np.ndarray, start_time_s: float, band: float,
+                   interpolate: bool = True) -> float:
+    """Time from ``start_time_s`` until ``|values - values(start)|`` first exceeds ``band``.
+
+    With ``interpolate`` the crossing is placed by linear interpolation between the last sample
+    inside the band and the first outside (exact for a piecewise-linear signal); otherwise at the
+    first sample outside. NaN if the band is never left.
+    """
+    t = np.asarray(time_s, dtype=float)
+    v = np.asarray(values, dtype=float)
+    after = np.nonzero(t >= start_time_s - 1e-9)[0]
+    if after.size == 0:
+        return float("nan")
+    deviation = np.abs(v[after] - v[after[0]])
+    exits = np.nonzero(deviation > band)[0]
+    if exits.size == 0:
+        return float("nan")
+    i = exits[0]
+    if not interpolate or i == 0:
+        return float(t[after[i]] - start_time_s)
+    d0, d1 = deviation[i - 1], deviation[i]
+    t0, t1 = t[after[i - 1]], t[after[i]]
+    return float(t0 + (band - d0) / (d1 - d0) * (t1 - t0) - start_time_s)
+
+
+def straight_line_time_to_contact(p: np.ndarray, v: np.ndarray, o: np.ndarray, ov: np.ndarray,
+                                  reach_m: np.ndarray, horizon_s: float) -> np.ndarray:
+    """First time in ``[0, horizon_s]`` at which ``|(o + ov t) - (p + v t)| <= reach`` (inf if
+    none): the vehicle continuing straight at its current velocity, the obstacle at constant
+    velocity. Closed form (a quadratic in t); arrays broadcast over rows.
+    """
+    r0 = np.asarray(o, float) - np.asarray(p, float)
+    dv = np.asarray(ov, float) - np.asarray(v, float)
+    a = np.sum(dv * dv, axis=-1)
+    b = 2.0 * np.sum(r0 * dv, axis=-1)
+    c = np.sum(r0 * r0, axis=-1) - np.asarray(reach_m, float) ** 2
+    with np.errstate(invalid="ignore", divide="ignore"):
+        disc = b * b - 4.0 * a * c
+        first = (-b - np.sqrt(np.maximum(disc, 0.0))) / (2.0 * a)
+    hit = (disc >= 0.0) & (a > 1e-12) & (first >= 0.0) & (first <= horizon_s)
+    return np.where(c <= 0.0, 0.0, np.where(hit, first, np.inf))
+
+
+def reversal_count(values: np.ndarray, band: float) -> tuple[int, int]:
+    """Direction reversals of a signal with a hysteresis of ``band``, and the first direction.
+
+    The direction is set by the first move of more than ``band`` from the start; a reversal is
+    counted each time the signal retreats from its running extreme by more than ``band``.
+
+    Returns
+    -------
+    count : int
+    first_direction : int
+        +1, -1, or 0 when the signal never moved by more than ``band``.
+    """
+    v = np.asarray(values, dtype=float)
+    v = v[np.isfinite(v)]
+    if v.size < 2:
+        return 0, 0
+    start = extreme = float(v[0])
+    direction = first = count = 0
+    for x in v[1:].tolist():
+        if direction == 0:
+            if x - start > band or start - x > band:
+                direction = first = 1 if x > start else -1
+                extreme = x
+        elif direction == 1:
+            if x > extreme:
+                extreme = x
+            elif extreme - x > band:
+                count, direction, extreme = count + 1, -1, x
+        else:
+            if x < extreme:
+                extreme = x
+            elif x - extreme > band:
+                count, direction, extreme = count + 1, 1, x
+    return count, first
+
+
+def obstacle_tracks(trajectory: pd.DataFrame) -> list[dict]:
+    """Per obstacle: positions (n, 2), forward-difference velocities (n, 2), radii (n,),
+    visibility (n,) and the first visible row (-1 if never visible)."""
+    t = trajectory["time_s"].to_numpy(float)
+    tracks = []
+    for j in range(obstacle_count(trajectory)):
+        pos = trajectory[[f"obs{j}_x_m", f"obs{j}_y_m"]].to_numpy(float)
+        vel = np.zeros_like(pos)
+        if len(t) > 1:
+            vel[:-1] = np.diff(pos, axis=0) / np.diff(t)[:, None]
+            vel[-1] = vel[-2]
+        visible = trajectory[f"obs{j}_visible"].to_numpy(bool)
+        tracks.append({"position": pos, "velocity": vel,
+                       "radius": trajectory[f"obs{j}_radius_m"].to_numpy(float),
+                       "visible": visible,
+                       "appear": int(np.argmax(visible)) if visible.any() else -1})
+    return tracks
+
+
+def continuous_clearance(time_s: np.ndarray, xy: np.ndarray, tracks: list[dict],
+                         vehicle_radius_m: float) -> tuple[float, int, float]:
+    """Smallest clearance with vehicle and obstacles moving linearly between log rows.
+
+    Over each interval where the obstacle is visible at both ends the closest approach of the
+    relative position is found in closed form; single visible rows count as well.
+
+    Returns
+    -------
+    min_clearance_m : float
+        NaN when no obstacle is ever visible.
+    contact_obstacle : int
+        Index of the obstacle of the first contact (clearance < 0), -1 if none.
+    contact_time_s : float
+        Time of that first contact (the interval's closest approach), NaN if none.
+    """
+    best, contact_j, contact_t = np.inf, -1, np.inf
+    for j, track in enumerate(tracks):
+        rel = xy - track["position"]
+        vis = track["visible"]
+        reach = track["radius"] + vehicle_radius_m
+        gaps = np.where(vis, np.linalg.norm(rel, axis=1) - reach, np.inf)
+        times = np.asarray(time_s, float).copy()
+        if len(rel) > 1:
+            p0, d = rel[:-1], np.diff(rel, axis=0)
+            dd = np.sum(d * d, axis=1)
+            with np.errstate(invalid="ignore", divide="ignore"):
+                s = np.clip(np.where(dd > 0, -np.sum(p0 * d, axis=1) / dd, 0.0), 0.0, 1.0)
+            closest = np.linalg.norm(p0 + s[:, None] * d, axis=1) - reach[1:]
+            both = vis[:-1] & vis[1:]
+            interval_gaps = np.where(both, closest, np.inf)
+            interval_times = time_s[:-1] + s * np.diff(time_s)
+            gaps = np.concatenate([gaps, interval_gaps])
+            times = np.concatenate([times, interval_times])
+        if np.isfinite(gaps).any():
+            best = min(best, float(np.min(gaps)))
+            touching = np.nonzero(gaps < 0.0)[0]
+            if touching.size:
+                first = float(np.min(times[touching]))
+                if first < contact_t:
+                    contact_j, contact_t = j, first
+    return (float(best) if np.isfinite(best) else float("nan"), contact_j,
+            float(contact_t) if np.isfinite(contact_t) else float("nan"))
+
+
+def collision_is_avoidable(time_s: np.ndarray, pose: np.ndarray, tracks: list[dict],
+                           contact_obstacle: int, contact_time_s: float,
+                           context: TrajectoryContext, thresholds: MetricsConfig) -> bool:
+    """Whether any admissible manoeuvre from the state at the colliding obstacle's appearance
+    keeps a non-negative clearance to every obstacle (a sampled reachability check).
+
+    Manoeuvres: steering targets ``linspace(-delta_max, delta_max, attribution_steering_samples)``
+    reached at the steering-rate limit and held, each at constant speed and under full braking
+    (``context.braking_mps2``, down to standstill), integrated on the kinematic bicycle
+    (``context.wheelbase_m``) in steps of 0.02 s from the appearance until the contact time plus
+    ``attribution_extra_s``. Obstacles follow their logged tracks (extrapolated at their last
+    velocity), each from its own appearance on.
+
+    Parameters
+    ----------
+    time_s : ndarray, shape (n,)
+    pose : ndarray, shape (n, 5)
+        ``X, Y, psi, speed, delta`` per log row (delta NaN when unknown: taken as 0).
+    """
+    t = np.asarray(time_s, float)
+    track = tracks[contact_obstacle]
+    a = track["appear"]
+    if a < 0:
+        return True
+    x0, y0, psi0, v0, delta0 = (float(v) for v in pose[a])
+    delta0 = delta0 if np.isfinite(delta0) else 0.0
+    if not all(np.isfinite([x0, y0, psi0, v0])):
+        return False
+    dt = 0.02
+    end = contact_time_s + thresholds.attribution_extra_s
+    steps = max(int(np.ceil((end - t[a]) / dt)), 1)
+    targets = np.linspace(-context.steering_max_rad, context.steering_max_rad,
+                          thresholds.attribution_steering_samples)
+    brake = np.array([0.0, context.braking_mps2])
+    target, decel = (g.ravel() for g in np.meshgrid(targets, brake))
+    X, Y = np.full(target.size, x0), np.full(target.size, y0)
+    psi, v, delta = np.full(target.size, psi0), np.full(target.size, v0), \
+        np.full(target.size, delta0)
+    ok = np.ones(target.size, dtype=bool)
+    rate = context.steering_rate_max_rad_s * dt
+    for k in range(1, steps + 1):
+        delta = delta + np.clip(target - delta, -rate, rate)
+        X = X + dt * v * np.cos(psi)
+        Y = Y + dt * v * np.sin(psi)
+        psi = psi + dt * v * np.tan(delta) / context.wheelbase_m
+        v = np.maximum(v - decel * dt, 0.0)
+        now = t[a] + k * dt
+        for other in tracks:
+            if other["appear"] < 0 or now < t[other["appear"]] - 1e-9:
+                continue
+            i = min(int(np.searchsorted(t, now, side="right")) - 1, len(t) - 1)
+            centre = other["position"][i] + other["velocity"][i] * (now - t[i])
+            reach = other["radius"][i] + context.vehicle_radius_m
+            ok &= np.hypot(X - centre[0], Y - centre[1]) >= reach
+        if not ok.any():
+            return False
+    return bool(ok.any())
+
+
 def compute_metrics(trajectory: pd.DataFrame, context: TrajectoryContext,
                     thresholds: MetricsConfig) -> dict:
     """All Table 1 metrics of one logged run.
@@ -205,10 +421,15 @@ def compute_metrics(trajectory: pd.DataFrame, context: TrajectoryContext,
     else:
         psi = np.unwrap(np.arctan2(time_derivative(xy[:, 1], t), time_derivative(xy[:, 0], t)))
     if "vx_mps" in tr:
-        speed = np.hypot(tr["vx_mps"].to_numpy(float), tr["vy_mps"].to_numpy(float)) \
-            if "vy_mps" in tr else tr["vx_mps"].to_numpy(float)
+        vx = tr["vx_mps"].to_numpy(float)
+        vy = tr["vy_mps"].to_numpy(float) if "vy_mps" in tr else np.zeros(len(tr))
+        speed = np.hypot(vx, vy)
+        velocity = np.column_stack([vx * np.cos(psi) - vy * np.sin(psi),
+                                    vx * np.sin(psi) + vy * np.cos(psi)])
     else:
-        speed = np.hypot(time_derivative(xy[:, 0], t), time_derivative(xy[:, 1], t))
+        velocity = np.column_stack([time_derivative(xy[:, 0], t), time_derivative(xy[:, 1], t)])
+        speed = np.hypot(velocity[:, 0], velocity[:, 1])
+        vx, vy = speed, None
     yaw_rate = tr["r_rad_s"].to_numpy(float) if "r_rad_s" in tr \
         else time_derivative(np.unwrap(psi), t)
     delta = tr["delta_rad"].to_numpy(float) if "delta_rad" in tr else np.full(len(tr), np.nan)
@@ -222,70 +443,68 @@ def compute_metrics(trajectory: pd.DataFrame, context: TrajectoryContext,
 
     out: dict = {"n_steps_logged": int(len(tr)), "duration_s": float(t[-1] - t[0]) if t.size else 0.0}
 
-    # --- which obstacle matters: the first to appear (ties: the closest at its appearance)
-    n_obs = obstacle_count(tr)
-    appear_time = float("nan")
+    # --- threats: straight continuation of the current motion against each visible obstacle
+    tracks = obstacle_tracks(tr)
+    n_obs = len(tracks)
+    ttc = np.full((len(tr), n_obs), np.inf)
+    for j, track in enumerate(tracks):
+        reach = track["radius"] + context.vehicle_radius_m + thresholds.threat_margin_m
+        ttc[:, j] = np.where(track["visible"], straight_line_time_to_contact(
+            xy, velocity, track["position"], track["velocity"], reach,
+            thresholds.threat_horizon_s), np.inf)
+    threat_now = np.isfinite(ttc)
+    appear = [t[track["appear"]] if track["appear"] >= 0 else np.inf for track in tracks]
+    threat_at_appearance = [bool(track["appear"] >= 0 and threat_now[track["appear"], j])
+                            for j, track in enumerate(tracks)]
+    order = sorted(range(n_obs), key=lambda j: (appear[j], j))
+    first_visible = next((j for j in order if np.isfinite(appear[j])), None)
+    threatening = next((j for j in order if threat_at_appearance[j]), None)
+    out["threatened"] = threatening is not None
+    out["obstacle_appear_time_s"] = appear[first_visible] if first_visible is not None \
+        else float("nan")
+    out["threat_appear_time_s"] = appear[threatening] if threatening is not None \
+        else float("nan")
+
+    # obstacle passed: ahead of every obstacle that ever threatened (every visible one when none
+    # did) by both radii, for good
+    ever = [j for j in range(n_obs) if threat_now[:, j].any()] or \
+        [j for j in range(n_obs) if np.isfinite(appear[j])]
     passed_time = float("nan")
-    if n_obs:
-        appear = []
-        for j in range(n_obs):
-            vis = tr[f"obs{j}_visible"].to_numpy(bool)
-            appear.append(t[np.argmax(vis)] if vis.any() else np.inf)
-        j0 = int(np.argmin(appear))
-        if np.isfinite(appear[j0]):
-            appear_time = float(appear[j0])
-            # obstacle "passed": vehicle ahead of every obstacle's centre by both radii, for good
-            behind = np.ones(len(tr), dtype=bool)
-            for j in range(n_obs):
-                ox = (tr[[f"obs{j}_x_m", f"obs{j}_y_m"]].to_numpy(float) - start) @ line
-                reach = tr[f"obs{j}_radius_m"].to_numpy(float) + context.vehicle_radius_m
-                vis = tr[f"obs{j}_visible"].to_numpy(bool)
-                behind &= (~vis & (t < appear[j])) | (along - ox > reach)
-            not_behind = np.nonzero(~behind & (t >= appear_time))[0]
-            if not_behind.size and not_behind[-1] + 1 < len(tr):
-                passed_time = float(t[not_behind[-1] + 1])
-            elif not_behind.size == 0:
-                passed_time = appear_time
-    out["obstacle_appear_time_s"] = appear_time
+    if ever:
+        behind = np.ones(len(tr), dtype=bool)
+        for j in ever:
+            ox = (tracks[j]["position"] - start) @ line
+            reach = tracks[j]["radius"] + context.vehicle_radius_m
+            behind &= (~tracks[j]["visible"] & (t < appear[j])) | (along - ox > reach)
+        first_appear = min(appear[j] for j in ever)
+        not_behind = np.nonzero(~behind & (t >= first_appear))[0]
+        if not_behind.size and not_behind[-1] + 1 < len(tr):
+            passed_time = float(t[not_behind[-1] + 1])
+        elif not_behind.size == 0:
+            passed_time = first_appear
     out["obstacle_passed_time_s"] = passed_time
 
     # --- C1 reaction
-    if np.isfinite(appear_time):
-        delay = first_exit_time(t, delta, appear_time, thresholds.reaction_steering_band_rad) \
-            if np.any(np.isfinite(delta)) else float("nan")
-        out["reaction_delay_s"] = delay
-        out["reacted"] = bool(np.isfinite(delay))
-        out["reaction_delay_lateral_s"] = first_exit_time(t, lateral, appear_time,
-                                                          thresholds.reaction_lateral_band_m)
-    else:
-        out.update(reaction_delay_s=float("nan"), reacted=False,
-                   reaction_delay_lateral_s=float("nan"))
+    interpolate = thresholds.reaction_interpolation == "linear"
+    has_delta = bool(np.any(np.isfinite(delta)))
 
-    # --- C2 smoothness
-    lat_acc = speed * yaw_rate
-    jerk = time_derivative(lat_acc, t)
-    curvature = yaw_rate / np.maximum(speed, 1e-3)
-    out["steering_rate_rms_rad_s"] = rms(steer_rate)
-    out["steering_rate_max_rad_s"] = max_abs(steer_rate)
-    out["lateral_accel_max_mps2"] = max_abs(lat_acc)
-    out["lateral_jerk_rms_mps3"] = rms(jerk)
-    out["lateral_jerk_max_mps3"] = max_abs(jerk)
-    out["curvature_rate_rms_1_per_ms"] = rms(time_derivative(curvature, t))
+    def reaction(j):
+        if j is None or not has_delta:
+            return float("nan")
+        return band_exit_time(t, delta, appear[j], thresholds.reaction_steering_band_rad,
+                              interpolate)
 
-    # --- C3 repulsion modulation
-    clearance = clearance_series(tr, context.vehicle_radius_m)
-    if "apf_rep_norm" in tr:
-        rep = np.nan_to_num(tr["apf_rep_norm"].to_numpy(float))
-        impulse = float(np.sum(rep) * dt)
-        far = np.nan_to_num(clearance, nan=np.inf) > thresholds.threat_clearance_m
-        out["repulsive_impulse"] = impulse
-        # no repulsion at all means no unnecessary repulsion either: share 0, not missing
-        out["repulsive_impulse_far_share"] = float(np.sum(rep[far]) * dt / impulse) \
-            if impulse > 0 else 0.0
-        out["repulsive_force_peak"] = float(np.max(rep)) if rep.size else float("nan")
-        on = np.nonzero(rep > 1e-9)[0]
-        out["repulsion_onset_clearance_m"] = float(clearance[on[0]]) if on.size else float("nan")
-    # --- C4 recovery
+    out["reaction_delay_threat_s"] = reaction(threatening)
+    out["reaction_delay_first_visible_s"] = reaction(first_visible)
+    chosen = threatening if thresholds.reaction_obstacle == "threatening" else first_visible
+    out["reaction_delay_s"] = out["reaction_delay_threat_s"] if chosen is threatening \
+        else out["reaction_delay_first_visible_s"]
+    out["reacted"] = bool(np.isfinite(out["reaction_delay_s"]))
+    out["reaction_delay_lateral_s"] = band_exit_time(
+        t, lateral, appear[chosen], thresholds.reaction_lateral_band_m, interpolate) \
+        if chosen is not None else float("nan")
+
+    # --- C4 recovery (its end bounds C2's avoidance window)
     if np.isfinite(passed_time):
         after = t >= passed_time - 1e-9
         lat_settle = settling_time(t[after], lateral[after], thresholds.recovery_lateral_band_m)
@@ -300,27 +519,107 @@ def compute_metrics(trajectory: pd.DataFrame, context: TrajectoryContext,
         out["recovery_heading_s"] = head_settle
         out["recovery_time_s"] = lat_settle
         out["recovered"] = bool(np.isfinite(lat_settle))
-        # --- C5 overshoot past the line, on the side opposite the detour
-        before = (t >= appear_time - 1e-9) & ~after
+    else:
+        after = np.zeros(len(tr), dtype=bool)
+        out.update(recovery_lateral_s=float("nan"), recovery_heading_s=float("nan"),
+                   recovery_time_s=float("nan"), recovered=False)
+
+    # --- C2 smoothness: a_y = vy_dot + vx r (or v r), jerk, over the avoidance window and run
+    lat_acc_old = speed * yaw_rate
+    lat_acc = time_derivative(vy, t) + vx * yaw_rate if vy is not None else lat_acc_old
+    if thresholds.lateral_accel == "vx_r":
+        lat_acc = lat_acc_old
+    jerk = time_derivative(lat_acc, t)
+    window_start = out["threat_appear_time_s"] if threatening is not None \
+        else out["obstacle_appear_time_s"]
+    window_end = passed_time + out["recovery_time_s"] if out["recovered"] else t[-1]
+    window = (t >= window_start - 1e-9) & (t <= window_end + 1e-9) \
+        if np.isfinite(window_start) else np.zeros(len(tr), dtype=bool)
+    curvature = yaw_rate / np.maximum(speed, 1e-3)
+    out["steering_rate_rms_rad_s"] = rms(steer_rate)
+    out["steering_rate_max_rad_s"] = max_abs(steer_rate)
+    out["steering_rate_rms_window_rad_s"] = rms(steer_rate[window])
+    out["lateral_accel_max_mps2"] = max_abs(lat_acc)
+    out["lateral_jerk_rms_run_mps3"] = rms(jerk)
+    out["lateral_jerk_max_mps3"] = max_abs(jerk)
+    out["lateral_jerk_rms_window_mps3"] = rms(jerk[window])
+    out["lateral_jerk_max_window_mps3"] = max_abs(jerk[window])
+    out["lateral_jerk_rms_vx_r_mps3"] = rms(time_derivative(lat_acc_old, t))
+    out["lateral_jerk_rms_mps3"] = out["lateral_jerk_rms_window_mps3"] \
+        if thresholds.smoothness_window == "avoidance" else out["lateral_jerk_rms_run_mps3"]
+    out["curvature_rate_rms_1_per_ms"] = rms(time_derivative(curvature, t))
+
+    # --- C3 repulsion modulation
+    clearance = clearance_series(tr, context.vehicle_radius_m)
+    if "apf_rep_norm" in tr:
+        rep = np.nan_to_num(tr["apf_rep_norm"].to_numpy(float))
+        impulse = float(np.sum(rep) * dt)
+        needed_threat = threat_now.any(axis=1)
+        needed_band = np.nan_to_num(clearance, nan=np.inf) <= thresholds.threat_clearance_m
+        needed = needed_threat if thresholds.repulsion_need == "threat" else needed_band
+        out["repulsive_impulse"] = impulse
+        # no repulsion at all means no unnecessary repulsion either: share 0, not missing
+        out["repulsion_unneeded_impulse"] = float(np.sum(rep[~needed]) * dt)
+        out["repulsion_unneeded_share"] = out["repulsion_unneeded_impulse"] / impulse \
+            if impulse > 0 else 0.0
+        out["repulsion_unneeded_share_threat"] = float(np.sum(rep[~needed_threat]) * dt / impulse) \
+            if impulse > 0 else 0.0
+        out["repulsive_impulse_far_share"] = float(np.sum(rep[~needed_band]) * dt / impulse) \
+            if impulse > 0 else 0.0
+        out["repulsive_force_peak"] = float(np.max(rep)) if rep.size else float("nan")
+        on = np.nonzero(rep > 1e-9)[0]
+        out["repulsion_onset_clearance_m"] = float(clearance[on[0]]) if on.size else float("nan")
+        onset = np.nonzero(needed_threat & (rep > thresholds.repulsion_onset_force))[0]
+        out["repulsion_onset_ttc_s"] = float(np.min(ttc[onset[0]])) if onset.size \
+            else float("nan")
+    if "apf_step_cap_share" in tr:
+        out["step_cap_binding_share"] = float(np.nanmean(tr["apf_step_cap_share"]
+                                                         .to_numpy(float)))
+
+    # --- C5 stability after the pass, net of the manoeuvre
+    sign_lat = sign_changes(lateral, thresholds.lateral_sign_band_m)
+    sign_yaw = sign_changes(yaw_rate, thresholds.yaw_rate_sign_band_rad_s)
+    out["lateral_sign_changes"] = sign_lat
+    out["yaw_rate_sign_changes"] = sign_yaw
+    out["oscillation_whole_run_count"] = sign_lat + sign_yaw
+    if np.isfinite(passed_time):
+        count, first = reversal_count(lateral[after], thresholds.lateral_sign_band_m)
+        away = first != 0 and np.sign(lateral[after][0]) == first
+        out["oscillation_after_pass_count"] = max(count - (1 if away else 0), 0)
+        out["yaw_rate_sign_changes_after_pass"] = sign_changes(
+            yaw_rate[after], thresholds.yaw_rate_sign_band_rad_s)
+        before = (t >= out["obstacle_appear_time_s"] - 1e-9) & ~after
         detour_side = np.sign(lateral[before][np.argmax(np.abs(lateral[before]))]) \
             if np.any(before) else 0.0
         out["overshoot_m"] = float(max(0.0, np.max(-detour_side * lateral[after]))) \
             if detour_side != 0 else 0.0
     else:
-        out.update(recovery_lateral_s=float("nan"), recovery_heading_s=float("nan"),
-                   recovery_time_s=float("nan"), recovered=False, overshoot_m=float("nan"))
-    out["lateral_sign_changes"] = sign_changes(lateral, thresholds.lateral_sign_band_m)
-    out["yaw_rate_sign_changes"] = sign_changes(yaw_rate, thresholds.yaw_rate_sign_band_rad_s)
-    out["oscillation_count"] = out["lateral_sign_changes"] + out["yaw_rate_sign_changes"]
+        out.update(oscillation_after_pass_count=float("nan"), overshoot_m=float("nan"),
+                   yaw_rate_sign_changes_after_pass=float("nan"))
+    out["oscillation_count"] = out["oscillation_after_pass_count"] \
+        if thresholds.oscillation == "net_reversals_after_pass" \
+        else out["oscillation_whole_run_count"]
     dpsi = np.abs(np.diff(np.unwrap(psi)))
     out["heading_step_max_rad"] = float(np.max(dpsi)) if dpsi.size else float("nan")
     out["max_lateral_deviation_m"] = max_abs(lateral)
 
-    # --- safety and progress
-    out["min_clearance_m"] = float(np.nanmin(clearance)) if np.any(np.isfinite(clearance)) \
-        else float("nan")
-    out["collision"] = bool(np.nanmin(clearance) < 0.0) if np.any(np.isfinite(clearance)) \
-        else False
+    # --- safety: continuous check, sampled as the older reading; attribution of a collision
+    sampled = float(np.nanmin(clearance)) if np.any(np.isfinite(clearance)) else float("nan")
+    continuous, contact_j, contact_t = continuous_clearance(t, xy, tracks,
+                                                           context.vehicle_radius_m)
+    out["min_clearance_sampled_m"] = sampled
+    out["min_clearance_continuous_m"] = continuous
+    use_continuous = thresholds.collision_check == "continuous"
+    out["min_clearance_m"] = continuous if use_continuous else sampled
+    out["collision"] = bool(np.isfinite(out["min_clearance_m"]) and out["min_clearance_m"] < 0.0)
+    if out["collision"] and not use_continuous:
+        contact_j = int(np.argmin([np.nanmin(np.where(tr_["visible"], np.linalg.norm(
+            xy - tr_["position"], axis=1) - tr_["radius"], np.inf)) for tr_ in tracks]))
+        contact_t = float(t[np.nanargmin(clearance)])
+    pose = np.column_stack([xy, psi, speed, delta])
+    out["collision_avoidable"] = collision_is_avoidable(t, pose, tracks, contact_j, contact_t,
+                                                        context, thresholds) \
+        if out["collision"] and contact_j >= 0 else None
     out["min_time_to_collision_s"] = min_time_to_collision(tr, context.vehicle_radius_m)
     reached = np.nonzero(along >= (goal - start) @ line - thresholds.goal_tolerance_m)[0]
     out["goal_reached"] = bool(reached.size)

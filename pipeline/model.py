@@ -1,6 +1,6 @@
 """Model stage: the MPC's lateral linear model and the nonlinear single-track plant.
 
-The lateral model (paper Section 2, DESIGN.md section 2) has state
+The lateral model (paper Section 2) has state
 ``x = [y, vy, epsi, r, delta]`` (lateral position m, lateral velocity m/s, heading error rad,
 yaw rate rad/s, steering angle rad), input ``u = delta_dot`` (rad/s) and disturbance
 ``d = r_d`` (rad/s). It is built with python-control and discretized zero-order-hold.
@@ -65,7 +65,7 @@ class LateralModel:
 
 def lateral_matrices(vehicle: VehicleConfig, speed_mps: float,
                      b2_heading_entry: float = -1.0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Continuous-time ``A, B1, B2`` of the lateral model (DESIGN.md section 2).
+    """Continuous-time ``A, B1, B2`` of the lateral model.
 
     Parameters
     ----------

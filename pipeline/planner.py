@@ -1,7 +1,7 @@
 """Planner stage: the APF rollout (baseline and improved as presets of one switch space) and the
 velocity planner ``V_r = f_v(obstacles)``.
 
-Equations (DESIGN.md section 3, paper Section 2)::
+Equations (paper Section 2)::
 
     F_att(p) = g - p
     H_i      = H_max / (1 + exp(beta (s - s_o)^2))      if rho_i <= rho_p else 0

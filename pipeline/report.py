@@ -24,16 +24,35 @@ import pandas as pd
 import yaml
 
 from pipeline.artifacts import find_run_dirs, read_run, write_text_atomic
-from pipeline.claims import (CLAIMS, VERDICT_RULE_FAMILY, VERDICT_RULE_SINGLE, claims_table,
+from pipeline.claims import (ALL_CLAIMS, OUTCOME_RULE, SINGLE_RULE, claims_table,
                              family_ledger, outcome_counts)
-from pipeline.config import INTERPRETATION_REGISTER
+from pipeline.config import INTERPRETATION_REGISTER, ClaimsConfig
 from pipeline.figures import (apf_force_figure, claim_differences_figure,
                               family_distribution_figure, overlay_figure, save_figure,
                               timeseries_figure, trajectory_figure)
 
 PACKAGES = ("numpy", "scipy", "pandas", "matplotlib", "control", "cvxpy", "clarabel",
             "hydra-core", "omegaconf", "jinja2")
-METHOD_ORDER = ("baseline", "improved", "velocity_aware", "mpc_no_apf", "apf_pursuit")
+METHOD_ORDER = ("baseline", "baseline_matched", "improved", "velocity_aware", "mpc_no_apf",
+                "apf_pursuit")
+COMPARISONS = ("baseline", "baseline_matched")
+
+
+def claims_config(config: dict | None) -> ClaimsConfig:
+    """The ``claims`` settings a run was made with (defaults for older run folders)."""
+    block = (config or {}).get("claims") or {}
+    try:
+        return ClaimsConfig(**block)
+    except TypeError:
+        return ClaimsConfig()
+
+
+def _rules(cfg: ClaimsConfig) -> dict:
+    """Template values shared by every page: the rules and the margins with their reasons."""
+    return {"family_rule": OUTCOME_RULE, "verdict_rule": SINGLE_RULE,
+            "margins": [{"claim": c.claim_id, "margin": _fmt(cfg.margins[c.claim_id]),
+                         "reason": cfg.margin_reasons[c.claim_id]} for c in ALL_CLAIMS],
+            "claim_defs": ALL_CLAIMS}
 
 
 def _git(*args: str) -> str:
@@ -156,7 +175,8 @@ def is_sweep_folder(folder: Path) -> bool:
     return bool(swept - {"method", "run.method", "planner"})
 
 
-def _ablation_section(run_root: Path, fig_dir: Path, table_dir: Path) -> dict | None:
+def _ablation_section(run_root: Path, fig_dir: Path, table_dir: Path,
+                      cfg: ClaimsConfig) -> dict | None:
     """Effects of each revision alone and left out, attribution sentences, interpretation flips."""
     from pipeline.ablation import (ablation_effects, attribution_sentences, interpretation_flips,
                                    load_family_jobs)
@@ -164,14 +184,14 @@ def _ablation_section(run_root: Path, fig_dir: Path, table_dir: Path) -> dict | 
 
     run_root = Path(run_root)
     tables = load_family_jobs(run_root / "ablation") if (run_root / "ablation").is_dir() else {}
-    flips = interpretation_flips(run_root / "interpretations")
+    flips = interpretation_flips(run_root / "interpretations", cfg)
     if "baseline" not in tables and flips is None:
         return None
     section = {"effects": [], "sentences": {}, "figures": [], "counts": [], "flips": []}
     if "baseline" in tables and "improved" in tables:
-        effects = ablation_effects(tables)
+        effects = ablation_effects(tables, cfg)
         effects.to_csv(table_dir / "ablation_effects.csv", index=False)
-        section["sentences"] = attribution_sentences(effects)
+        section["sentences"] = attribution_sentences(effects, tables, cfg)
         section["effects"] = [{**{k: _fmt(v) for k, v in r.items()},
                                "ci": f"[{_fmt(r['ci_low'])}, {_fmt(r['ci_high'])}]"}
                               for r in effects.to_dict("records")]
@@ -268,7 +288,7 @@ def build_report(run_root: Path, out_dir: Path, command: str,
         page = env.get_template("report.html.j2").render(
             paper=False, sweeps=sweeps, performance=performance, ablation=None, figures=figures, family=None, kinematic=None,
             methods=[], scenario="(sweep only)", prov=provenance(command),
-            register=register_rows({}), metrics_doc=_metrics_doc(), claim_defs=CLAIMS)
+            register=register_rows({}), metrics_doc=_metrics_doc(), **_rules(ClaimsConfig()))
         path = out_dir / "index.html"
         write_text_atomic(path, page)
         return path
@@ -300,25 +320,28 @@ def build_report(run_root: Path, out_dir: Path, command: str,
                     "compile_s": _fmt(r["timing"]["compile_time_s"]),
                     "compiles": _fmt(r["metrics"].get("compile_count"))}
                    for m, r in by_method.items()]
-    claims = claims_table(metrics_by_method)
+    cfg_claims = claims_config(first_cfg)
+    comparisons = tuple(c for c in COMPARISONS if c in by_method)
+    claims = claims_table(metrics_by_method, cfg_claims.margins, comparisons)
     pd.DataFrame(claims).to_csv(table_dir / "claims_paper_scenario.csv", index=False)
     for row in claims:
         row["values"] = [_fmt(row.get(m)) for m in order]
-    claim_secondary = {c.claim_id: ", ".join(c.secondary_metrics) for c in CLAIMS}
+    claim_secondary = {c.claim_id: ", ".join(c.secondary_metrics) for c in ALL_CLAIMS}
 
-    ablation = _ablation_section(run_root, fig_dir, table_dir)
+    ablation = _ablation_section(run_root, fig_dir, table_dir, cfg_claims)
     if ablation:
         figures.extend(ablation["figures"])
 
     kinematic = None
     if kinematic_runs:
-        kinematic = _track_section(kinematic_runs, "kinematic", fig_dir, table_dir, claims)
+        kinematic = _track_section(kinematic_runs, "kinematic", fig_dir, table_dir, claims,
+                                   cfg_claims)
         figures.extend(kinematic["figures"])
 
     family = None
     if "baseline" in family_tables and "improved" in family_tables:
         family = _family_section(family_tables, family_info, metrics_by_method, fig_dir,
-                                 table_dir)
+                                 table_dir, cfg_claims)
         for f in family["figures"]:
             figures.append(f)
     for sw in sweeps:
@@ -328,13 +351,12 @@ def build_report(run_root: Path, out_dir: Path, command: str,
     page = env.get_template("report.html.j2").render(
         paper=True, sweeps=sweeps, performance=performance, scenario=scenario, ablation=ablation, methods=order, figures=figures, metric_rows=metric_rows,
         timing_rows=timing_rows, claims=claims, claim_secondary=claim_secondary,
-        verdict_rule=VERDICT_RULE_SINGLE, family=family, family_rule=VERDICT_RULE_FAMILY,
-        kinematic=kinematic,
+        comparisons=comparisons, family=family, kinematic=kinematic,
         register=register_rows({m: r["config"] for m, r in by_method.items()}),
         configs={m: yaml.safe_dump(r["config"], sort_keys=False) for m, r in by_method.items()},
         hashes={m: r["metrics"]["config_hash"] for m, r in by_method.items()},
         run_dirs={m: str(r["dir"]) for m, r in by_method.items()},
-        metrics_doc=_metrics_doc(), prov=provenance(command), claim_defs=CLAIMS)
+        metrics_doc=_metrics_doc(), prov=provenance(command), **_rules(cfg_claims))
     path = out_dir / "index.html"
     write_text_atomic(path, page)
     return path
@@ -409,16 +431,20 @@ def _ms(seconds) -> float | None:
 
 
 def _track_section(runs: list[dict], track: str, fig_dir: Path, table_dir: Path,
-                   lateral_claims: list[dict]) -> dict:
-    """Figures, metrics and claims of a second track, and how its verdicts compare."""
+                   lateral_claims: list[dict], cfg: ClaimsConfig) -> dict:
+    """Figures, metrics and claims of a second track, and how its outcomes compare.
+
+    A comparison is made only when both methods come within ``cfg.comparable_clearance_m`` of
+    the obstacle: otherwise they did not meet the same threat and the claim is "not comparable".
+    """
     by_method = {r["metrics"]["method"]: r for r in runs}
     order = _ordered(by_method)
     by_method = {m: by_method[m] for m in order}
     first = next(iter(by_method.values()))
-    cfg = first["config"]
+    config = first["config"]
     figures = _paper_figures(by_method, first["metrics"]["scenario"],
-                             tuple(cfg["scenario"]["goal_xy_m"]),
-                             cfg["vehicle"]["footprint_radius_m"],
+                             tuple(config["scenario"]["goal_xy_m"]),
+                             config["vehicle"]["footprint_radius_m"],
                              first["metrics"].get("obstacle_appear_time_s"), fig_dir,
                              prefix=f"{track}_", group_prefix=f"{track}_")
     metrics_by_method = {m: r["metrics"] for m, r in by_method.items()}
@@ -428,17 +454,41 @@ def _track_section(runs: list[dict], track: str, fig_dir: Path, table_dir: Path,
     skip = {"method", "scenario", "config_hash", "track"}
     metric_rows = [{"metric": k, "values": [_fmt(metrics_by_method[m].get(k)) for m in order]}
                    for k in frame.index if k not in skip]
-    claims = claims_table(metrics_by_method)
+    comparisons = tuple(c for c in COMPARISONS if c in by_method)
+    claims = claims_table(metrics_by_method, cfg.margins, comparisons)
+
+    def met(method: str) -> bool:
+        clearance = metrics_by_method.get(method, {}).get("min_clearance_m")
+        return clearance is not None and clearance <= cfg.comparable_clearance_m
+
+    comparability = []
+    for comparison in comparisons:
+        if not (met(comparison) and met("improved")):
+            far = [m for m in (comparison, "improved") if not met(m)]
+            comparability.append(f"vs {comparison}: not comparable ({', '.join(far)} never "
+                                 f"came within {cfg.comparable_clearance_m:g} m).")
+            for row in claims:
+                if row["claim"] != "C0":
+                    row[f"vs {comparison}"] = "not comparable"
+        else:
+            comparability.append(f"vs {comparison}: comparable.")
     for row in claims:
         row["values"] = [_fmt(row.get(m)) for m in order]
-    lateral = {r["claim"]: r["verdict"] for r in lateral_claims}
-    comparison = [{"claim": r["claim"], "lateral": lateral.get(r["claim"], "n/a"),
-                   "other": r["verdict"], "agree": lateral.get(r["claim"]) == r["verdict"]}
-                  for r in claims]
+    lateral = {r["claim"]: r.get("vs baseline", "n/a") for r in lateral_claims}
+    comparison_rows = []
+    for r in claims:
+        ours = r.get("vs baseline", "n/a")
+        agree = "n/a" if ours == "not comparable" else ("yes" if lateral.get(r["claim"]) == ours
+                                                        else "no")
+        comparison_rows.append({"claim": r["claim"], "lateral": lateral.get(r["claim"], "n/a"),
+                                "other": ours, "agree": agree})
+    pd.DataFrame(claims).drop(columns=["values"]).to_csv(table_dir / f"claims_{track}_track.csv",
+                                                          index=False)
     return {"methods": order, "figures": figures, "metric_rows": metric_rows, "claims": claims,
-            "comparison": comparison,
-            "n_steps": cfg["scenario"]["n_steps"],
-            "initial_speed": cfg["scenario"].get("initial_speed_mps")}
+            "comparison": comparison_rows, "comparability": comparability,
+            "comparable_clearance": _fmt(cfg.comparable_clearance_m),
+            "n_steps": config["scenario"]["n_steps"],
+            "initial_speed": config["scenario"].get("initial_speed_mps")}
 
 
 def _paper_figures(by_method: dict, scenario: str, goal: tuple, radius: float, appear,
@@ -482,34 +532,63 @@ def _paper_figures(by_method: dict, scenario: str, goal: tuple, radius: float, a
 
 
 def _family_section(tables: dict, info: dict, paper_metrics: dict, fig_dir: Path,
-                    table_dir: Path) -> dict:
-    """Claims ledger over the family, outcome counts and distribution plots."""
+                    table_dir: Path, cfg: ClaimsConfig) -> dict:
+    """Claims ledger over the family (C0-C5 against each comparison), outcome counts,
+    distribution plots and what the step cap does."""
+    from pipeline.claims import LEDGER_COLUMNS
+
     order = _ordered(tables)
     tables = {m: tables[m] for m in order}
-    ledger, differences = family_ledger(tables, paper_metrics)
-    pd.DataFrame([{k: v for k, v in r.items() if k != "paper_scenario"} for r in ledger]).to_csv(
-        table_dir / "claims_ledger.csv", index=False)
+    ledger, differences = family_ledger(tables, cfg, paper_metrics)
+    pd.DataFrame(ledger).reindex(columns=LEDGER_COLUMNS + ["interval_method", "margin_reason"]
+                                 ).to_csv(table_dir / "claims_ledger.csv", index=False)
     counts = outcome_counts(tables)
     pd.DataFrame(counts).to_csv(table_dir / "family_outcomes.csv", index=False)
     for row in ledger:
-        row["paper_values"] = [_fmt((row.get("paper_scenario") or {}).get(m))
-                               for m in ("baseline", "improved")]
-        row["median_fmt"] = _fmt(row["median_difference"])
+        row["estimate_fmt"] = _fmt(row["estimate"])
         row["ci_fmt"] = f"[{_fmt(row['ci_low'])}, {_fmt(row['ci_high'])}]"
-        row["holds_fmt"] = f"{100 * row['holds_share']:.0f} %"
-    intervals = {r["claim"]: (r["ci_low"], r["ci_high"]) for r in ledger}
-    names = {c.claim_id: c.primary_metric for c in CLAIMS}
+        row["p_fmt"] = _fmt(row["p_holm"])
+        row["pi_fmt"] = (f"{_fmt(row['prob_improvement'])} [{_fmt(row['pi_low'])}, "
+                         f"{_fmt(row['pi_high'])}]")
+        row["counts_fmt"] = (f"{row['n_better']} / {row['n_tied']} / {row['n_worse']} / "
+                             f"{row['n_missing']}")
+        row["margin_fmt"] = _fmt(row["margin"])
+    # group the rows by claim for the table (one row group per claim)
+    by_claim_rows = {}
+    for row in ledger:
+        by_claim_rows.setdefault(row["claim"], []).append(row)
+    grouped = []
+    for claim_rows in by_claim_rows.values():
+        for i, row in enumerate(claim_rows):
+            row["first"], row["span"] = i == 0, len(claim_rows)
+            grouped.append(row)
+    comparisons = [{"name": c, "rows": [r for r in ledger if r["comparison"] == c]}
+                   for c in COMPARISONS if any(r["comparison"] == c for r in ledger)]
+    cap = {c["method"]: c["step_cap_binding_share"] for c in counts}
+    cap_note = ""
+    share = cap.get("improved")
+    if share is not None and np.isfinite(share):
+        cap_note = (f"The improved rollout's step cap binds on {100 * share:.0f} % of its steps "
+                    f"over the family.")
+        if share >= cfg.cap_binding_share:
+            cap_note += (" On those steps two of the paper's revisions are inactive: 'no "
+                         "normalization' and 'a larger step' change nothing, and the rollout is a "
+                         "normalized step of the cap's length; the comparison with "
+                         "baseline_matched isolates the remaining revisions.")
+    intervals = {k: next((r["ci_low"], r["ci_high"], r["estimate"]) for r in ledger
+                         if f"{r['claim']} vs {r['comparison']}" == k) for k in differences}
+    names = {c.claim_id: c.primary_metric for c in ALL_CLAIMS}
     figures = [
         {"id": "claim_differences", "group": "claims",
          "paths": save_figure(claim_differences_figure(differences, names, intervals), fig_dir,
                               "claim_differences"),
-         "caption": "Per-scenario paired differences improved − baseline on each claim's "
-                    "primary metric (below zero: improved better), with the median and its 95 % "
-                    "bootstrap interval.",
-         "alt": "Scatter of paired differences per claim with median and confidence interval"},
+         "caption": "Per-scenario paired differences improved − comparison on each claim's "
+                    "primary metric (below zero: improved better), with the estimate's 95 % "
+                    "bootstrap interval, against each comparison.",
+         "alt": "Scatter of paired differences per claim with estimate and confidence interval"},
         {"id": "family_distributions", "group": "family",
          "paths": save_figure(family_distribution_figure(tables, [c.primary_metric
-                                                                  for c in CLAIMS]
+                                                                  for c in ALL_CLAIMS[1:]]
                                                          + ["min_clearance_m"]),
                               fig_dir, "family_distributions"),
          "caption": "Distribution of each claim's metric and of the minimum clearance per method "
@@ -518,9 +597,11 @@ def _family_section(tables: dict, info: dict, paper_metrics: dict, fig_dir: Path
          "alt": "Box plots of metrics per method over the scenario family"},
     ]
     first = next(iter(info.values()))
-    return {"ledger": ledger, "counts": [{k: _fmt(v) for k, v in c.items()} for c in counts],
-            "figures": figures, "seed": first["seed"], "size": first["size"],
-            "methods": order}
+    return {"ledger": grouped, "comparisons": comparisons,
+            "by_claim": {r["claim"]: r for r in ledger if r["comparison"] == "baseline"},
+            "counts": [{k: _fmt(v) for k, v in c.items()} for c in counts],
+            "cap_note": cap_note, "figures": figures, "seed": first["seed"],
+            "size": first["size"], "methods": order}
 
 
 def _metrics_doc() -> list[str]:

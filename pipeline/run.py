@@ -79,9 +79,7 @@ def run_experiment(cfg: ExperimentConfig, out_dir: Path, resume: bool = True,
     model = build_lateral_model(cfg.vehicle, cfg.scenario.speed_mps, cfg.scenario.sample_time_s,
                                 cfg.model.b2_heading_entry)
     result = simulate(cfg, scenario, qp_cache)
-    context = TrajectoryContext(tuple(cfg.scenario.start_xy_m), tuple(cfg.scenario.goal_xy_m),
-                                cfg.vehicle.footprint_radius_m,
-                                cfg.model.validity_heading_rad)
+    context = trajectory_context(cfg)
     metrics = compute_metrics(result.trajectory, context, cfg.metrics)
     track = "kinematic" if cfg.controller.kind == "kinematic_mpc" else "lateral"
     metrics.update(method=cfg.method_name, scenario=cfg.scenario.name, track=track,
@@ -101,6 +99,16 @@ def run_experiment(cfg: ExperimentConfig, out_dir: Path, resume: bool = True,
     write_json_atomic(out_dir / "timing.json", timing)
     write_json_atomic(out_dir / "metrics.json", metrics)
     return RunSummary(out_dir, metrics, skipped=False)
+
+
+def trajectory_context(cfg: ExperimentConfig) -> TrajectoryContext:
+    """Geometry and vehicle limits the metrics need, from the run's configuration."""
+    v = cfg.vehicle
+    return TrajectoryContext(tuple(cfg.scenario.start_xy_m), tuple(cfg.scenario.goal_xy_m),
+                             v.footprint_radius_m, cfg.model.validity_heading_rad,
+                             wheelbase_m=v.wheelbase_m, steering_max_rad=v.steering_max_rad,
+                             steering_rate_max_rad_s=v.steering_rate_max_rad_s,
+                             braking_mps2=v.accel_max_mps2)
 
 
 def config_yaml(cfg: ExperimentConfig) -> str:

@@ -22,8 +22,9 @@ REL_TOL = 1e-6
 ABS_TOL = 1e-6
 PAPER_FILE = "paper_metrics.csv"
 LEDGER_FILE = "claims_ledger.csv"
-LEDGER_COLUMNS = ["claim", "metric", "n_pairs", "median_difference", "ci_low", "ci_high",
-                  "holds_share", "verdict", "paper_verdict"]
+LEDGER_COLUMNS = ["claim", "comparison", "metric", "outcome", "estimate", "ci_low", "ci_high",
+                  "p_holm", "prob_improvement", "n_better", "n_tied", "n_worse", "n_missing",
+                  "n_pairs", "outcome_all_pairs", "paper_scenario"]
 
 
 def paper_metrics_table(runs_root: Path) -> pd.DataFrame:
@@ -48,9 +49,9 @@ def paper_metrics_table(runs_root: Path) -> pd.DataFrame:
 def ledger_table(runs_root: Path) -> pd.DataFrame | None:
     """The family claims ledger, if the family was run."""
     from pipeline.claims import family_ledger
-    from pipeline.report import load_runs
+    from pipeline.report import claims_config, load_runs
 
-    _, tables, _ = load_runs(runs_root)
+    runs, tables, _ = load_runs(runs_root)
     if "baseline" not in tables or "improved" not in tables:
         return None
     paper = {}
@@ -59,7 +60,8 @@ def ledger_table(runs_root: Path) -> pd.DataFrame | None:
         paper = {r["method"]: r for r in frame[frame["track"] == "lateral"].to_dict("records")}
     except FileNotFoundError:
         pass
-    rows, _ = family_ledger(tables, paper or None)
+    cfg = claims_config(runs[0]["config"] if runs else None)
+    rows, _ = family_ledger(tables, cfg, paper or None)
     return pd.DataFrame(rows).reindex(columns=LEDGER_COLUMNS)
 
 

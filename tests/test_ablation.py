@@ -10,6 +10,9 @@ import pandas as pd
 from pipeline.ablation import (REVISIONS, ablation_effects, attribution_sentences,
                                interpretation_flips)
 from pipeline.claims import CLAIMS
+from pipeline.config import ClaimsConfig
+
+CFG = ClaimsConfig(n_resamples=199)
 
 
 def family_table(shift: dict[str, float], n: int = 60, seed: int = 0) -> pd.DataFrame:
@@ -40,19 +43,39 @@ def tables_with_known_cause() -> dict[str, pd.DataFrame]:
 
 
 def test_effects_recover_the_planted_shifts():
-    effects = ablation_effects(tables_with_known_cause()).set_index(["configuration", "claim"])
-    assert effects.loc[("improved", "C1"), "median_effect"] == -0.5
+    effects = ablation_effects(tables_with_known_cause(), CFG).set_index(["configuration",
+                                                                         "claim"])
+    assert effects.loc[("improved", "C1"), "effect"] == -0.5
+    assert effects.loc[("improved", "C1"), "outcome"] == "supported"
     assert effects.loc[("baseline+step", "C1"), "ci_high"] < 0
-    assert effects.loc[("baseline+beta", "C1"), "median_effect"] == 0.0
-    assert effects.loc[("improved-step", "C1"), "median_effect"] == 0.0
+    assert effects.loc[("baseline+beta", "C1"), "effect"] == 0.0
+    assert effects.loc[("improved-step", "C1"), "effect"] == 0.0
     assert effects.loc[("baseline+exponential", "C2"), "ci_low"] > 0
+    assert effects.loc[("baseline+exponential", "C2"), "outcome"] == "contradicted"
 
 
 def test_attribution_names_the_planted_revision():
-    sentences = attribution_sentences(ablation_effects(tables_with_known_cause()))
+    tables = tables_with_known_cause()
+    sentences = attribution_sentences(ablation_effects(tables, CFG), tables, CFG)
     assert "larger step" in sentences["C1"] and "improves" in sentences["C1"]
     assert "exponential repulsion" in sentences["C2"] and "worsens" in sentences["C2"]
-    assert "No single revision" in sentences["C3"]
+    assert "No single active revision" in sentences["C3"]
+
+
+def test_attribution_agrees_with_the_look_ahead_control_when_the_cap_binds():
+    """When the cap binds on most steps, the step revisions are not credited and an effect the
+    look-ahead-matched baseline shares is called look-ahead length."""
+    tables = tables_with_known_cause()
+    tables["improved"]["step_cap_binding_share"] = 0.9
+    tables["baseline_matched"] = family_table({"C1": -0.5})
+    sentences = attribution_sentences(ablation_effects(tables, CFG), tables, CFG)
+    assert "larger step" not in sentences["C1"].split("binds")[0].split("No single")[0] \
+        .replace("'a larger step'", "")
+    assert "look-ahead length" in sentences["C1"] and "binds on 90 %" in sentences["C1"]
+    # without a binding cap the larger step is credited again
+    tables["improved"]["step_cap_binding_share"] = 0.1
+    assert "Alone, 'larger step" in attribution_sentences(ablation_effects(tables, CFG), tables,
+                                                           CFG)["C1"]
 
 
 def test_interpretation_flips(tmp_path):
@@ -62,6 +85,6 @@ def test_interpretation_flips(tmp_path):
             folder.mkdir(parents=True)
             family_table(shift).to_csv(folder / "family_metrics.csv", index=False)
             (folder / "family.json").write_text(json.dumps({"method": method}))
-    flips = interpretation_flips(tmp_path).set_index("variant")
+    flips = interpretation_flips(tmp_path, CFG).set_index("variant")
     assert flips.loc["default", "C1"] == "supported" and flips.loc["default", "flips"] == "none"
-    assert flips.loc["alt", "C1"] == "not supported" and flips.loc["alt", "flips"] == "C1"
+    assert flips.loc["alt", "C1"] == "contradicted" and flips.loc["alt", "flips"] == "C1"

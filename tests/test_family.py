@@ -8,8 +8,8 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from pipeline.claims import (CLAIMS, bootstrap_median_ci, family_ledger, family_verdict,
-                             outcome_counts, paired_differences)
+from pipeline.claims import CLAIMS, OUTCOMES, family_ledger, outcome_counts, paired_differences
+from pipeline.config import ClaimsConfig
 from pipeline.run import run_family
 from pipeline.scenario import draw_family_member, family_members
 
@@ -53,26 +53,14 @@ def test_family_draws_cover_the_stated_ranges(make_config):
         assert 4.0 <= o.x_m - 3.0 * o.appear_time_s <= 8.0
 
 
-def test_bootstrap_ci_and_verdict_rules():
-    rng = np.random.default_rng(0)
-    assert bootstrap_median_ci(np.full(50, -1.0), rng) == (-1.0, -1.0)
-    assert family_verdict(*bootstrap_median_ci(np.full(50, -1.0), rng)) == "supported"
-    assert family_verdict(*bootstrap_median_ci(np.full(50, 0.0), rng)) == "not supported"
-    symmetric = np.concatenate([np.full(25, -1.0), np.full(25, 1.0)])
-    assert family_verdict(*bootstrap_median_ci(symmetric, rng)) == "mixed"
-    # a normal sample: the interval brackets the true median 0.5 for this seed
-    low, high = bootstrap_median_ci(rng.normal(0.5, 1.0, 400), np.random.default_rng(1))
-    assert low < 0.5 < high and high - low < 0.4
-
-
-def test_missing_values_count_as_worst_in_paired_differences():
+def test_missing_values_are_counted_apart_in_paired_differences():
     claim = next(c for c in CLAIMS if c.claim_id == "C4")
-    improved = pd.DataFrame({"scenario": ["a", "b", "c", "d"],
+    improved = pd.DataFrame({"scenario": ["a", "b", "c", "d"], "collision": [False] * 4,
                              claim.primary_metric: [1.0, np.nan, 2.0, np.nan]})
-    baseline = pd.DataFrame({"scenario": ["d", "c", "b", "a"],
+    baseline = pd.DataFrame({"scenario": ["d", "c", "b", "a"], "collision": [False] * 4,
                              claim.primary_metric: [np.nan, np.nan, 3.0, 3.0]})
-    d = paired_differences(improved, baseline, claim)
-    assert d.tolist() == [-2.0, math.inf, -math.inf, 0.0]
+    d = paired_differences(improved, baseline, claim)["d"].to_numpy()
+    assert d[0] == -2.0 and np.isnan(d[1:]).all()
 
 
 @pytest.fixture(scope="module")
@@ -93,11 +81,16 @@ def test_family_run_writes_a_row_and_a_run_folder_per_member(small_family):
 
 
 def test_ledger_over_a_small_family(small_family):
-    rows, differences = family_ledger(small_family)
-    assert [r["claim"] for r in rows] == ["C1", "C2", "C3", "C4", "C5"]
+    cfg = ClaimsConfig(min_pairs=2, n_resamples=199)
+    rows, differences = family_ledger(small_family, cfg)
+    assert [r["claim"] for r in rows] == ["C0", "C1", "C2", "C3", "C4", "C5"]
+    assert {r["comparison"] for r in rows} == {"baseline"}  # no baseline_matched table given
     for row in rows:
-        assert row["n_pairs"] == 4 and len(differences[row["claim"]]) == 4
-        assert row["verdict"] in ("supported", "not supported", "mixed")
-        assert row["ci_low"] <= row["median_difference"] <= row["ci_high"]
+        assert row["n_pairs"] + row["n_missing"] <= 4
+        assert row["n_better"] + row["n_tied"] + row["n_worse"] == row["n_pairs"]
+        assert row["outcome"] in OUTCOMES
+        if row["n_pairs"]:
+            assert row["ci_low"] - 1e-12 <= row["estimate"] <= row["ci_high"] + 1e-12
+        assert len(differences[f"{row['claim']} vs baseline"]) == row["n_pairs"]
     counts = outcome_counts(small_family)
     assert [c["scenarios"] for c in counts] == [4, 4]

@@ -6,7 +6,7 @@ import dataclasses
 
 import numpy as np
 import pandas as pd
-from hypothesis import HealthCheck, given, settings
+from hypothesis import HealthCheck, assume, given, settings
 from hypothesis import strategies as st
 
 from pipeline.config import MetricsConfig, PlannerConfig
@@ -65,13 +65,16 @@ def scripted(offset_y: float, bump: float, obstacle_y: float, start: float) -> p
 
 
 CTX = TrajectoryContext((0.0, 0.0), (30.0, 0.0), 1.0)
-TIME_KEYS = {"obstacle_appear_time_s", "obstacle_passed_time_s"}
+TIME_KEYS = {"obstacle_appear_time_s", "obstacle_passed_time_s", "threat_appear_time_s"}
 
 
 @SETTINGS
 @given(bump=st.floats(-3.0, 3.0), obstacle_y=st.floats(-3.0, 3.0),
        shift=st.floats(-100.0, 100.0))
 def test_metrics_invariant_to_time_origin_and_mirroring(bump, obstacle_y, shift):
+    # an obstacle exactly tangent to the straight path's threat corridor (|y| = both radii +
+    # threat margin = 2 m) sits on a knife edge that rounding may tip either way
+    assume(abs(abs(obstacle_y) - 2.0) > 1e-6)
     base = compute_metrics(scripted(0.0, bump, obstacle_y, 0.0), CTX, MetricsConfig())
     shifted = compute_metrics(scripted(0.0, bump, obstacle_y, round(shift, 1)), CTX,
                               MetricsConfig())

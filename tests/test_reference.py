@@ -13,13 +13,14 @@ from pipeline.run import run_experiment, run_family
 from pipeline.verify import verify
 
 REFERENCE = Path(__file__).resolve().parent.parent / "reports" / "reference"
-METHODS = ("baseline", "improved", "velocity_aware", "mpc_no_apf", "apf_pursuit")
+METHODS = ("baseline", "baseline_matched", "improved", "velocity_aware", "mpc_no_apf",
+           "apf_pursuit")
 
 
 def paper_runs(root: Path, make_config) -> None:
     for method in METHODS:
         run_experiment(make_config([f"method={method}"]), root / "paper" / method)
-    for planner in ("baseline", "improved", "velocity_aware"):
+    for planner in ("baseline", "baseline_matched", "improved", "velocity_aware"):
         run_experiment(make_config(["experiment=kinematic", f"planner={planner}"]),
                        root / "kinematic" / planner)
 

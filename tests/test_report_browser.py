@@ -30,7 +30,7 @@ if CHROMIUM is None:
 @pytest.fixture(scope="module")
 def report(tmp_path_factory, make_config):
     root = tmp_path_factory.mktemp("outputs")
-    for method in ("baseline", "improved"):
+    for method in ("baseline", "baseline_matched", "improved"):
         run_experiment(make_config([f"method={method}"]), root / "paper" / method)
         run_experiment(make_config(["experiment=kinematic", f"planner={method}"]),
                        root / "kinematic" / method)

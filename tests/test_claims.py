@@ -1,0 +1,159 @@
+"""Statistics v2 against planted effects and closed forms: four outcomes, Holm, McNemar, the
+probability of improvement, Hodges-Lehmann, and the four-word outcomes on one scenario."""
+
+from __future__ import annotations
+
+import numpy as np
+import pandas as pd
+import pytest
+from scipy import stats
+
+from pipeline.claims import (ALL_CLAIMS, CLAIMS, SAFETY, claims_table, compare, decide,
+                             family_ledger, hodges_lehmann, holm, probability_of_improvement,
+                             single_scenario_outcome)
+from pipeline.config import ClaimsConfig
+
+CFG = ClaimsConfig(n_resamples=999)
+C1 = CLAIMS[0]
+
+
+def tables_with(d: np.ndarray, metric: str = "reaction_delay_s", collided=None):
+    """Improved and baseline tables whose paired differences on ``metric`` are ``d``."""
+    n = d.size
+    base = np.full(n, 1.0)
+    collided = np.zeros(n, bool) if collided is None else collided
+    scen = [f"s{i}" for i in range(n)]
+    improved = pd.DataFrame({"scenario": scen, metric: base + d, "collision": collided})
+    baseline = pd.DataFrame({"scenario": scen, metric: base, "collision": np.zeros(n, bool)})
+    return improved, baseline
+
+
+@pytest.mark.parametrize("shift, expected", [(-0.3, "supported"), (0.3, "contradicted"),
+                                             (0.0, "equivalent")])
+def test_planted_shift_gives_the_planted_outcome(shift, expected):
+    rng = np.random.default_rng(5)
+    d = shift + rng.normal(0.0, 0.005 if shift == 0.0 else 0.1, 200)
+    improved, baseline = tables_with(d)
+    row = compare(improved, baseline, C1, CFG)
+    outcome, _ = decide(row["ci_low"], row["ci_high"], row["p_value"], 0.05, row["n_pairs"], CFG,
+                         row["pi_low"], row["pi_high"])
+    assert outcome == expected
+    assert row["ci_low"] < shift + 0.05 and row["ci_high"] > shift - 0.05
+
+
+def test_noise_without_effect_wider_than_the_margin_is_inconclusive():
+    d = np.random.default_rng(2).normal(0.0, 1.0, 60)
+    row = compare(*tables_with(d), C1, CFG)
+    assert decide(row["ci_low"], row["ci_high"], row["p_value"], 0.05, row["n_pairs"],
+                  CFG, row["pi_low"], row["pi_high"])[0] == "inconclusive"
+
+
+def test_real_effect_inside_the_margin_is_equivalent_and_says_so():
+    d = -0.02 + np.random.default_rng(3).normal(0.0, 0.002, 200)
+    row = compare(*tables_with(d), C1, CFG)
+    outcome, note = decide(row["ci_low"], row["ci_high"], row["p_value"], 0.05, row["n_pairs"],
+                           CFG, row["pi_low"], row["pi_high"])
+    assert outcome == "equivalent" and "less than the margin" in note
+
+
+def test_discrete_split_with_many_ties_is_a_contradiction_not_a_zero():
+    """68 worse, 117 tied, 15 better (the C5 split of the issue): Hodges-Lehmann moves off zero,
+    the signed-rank test and the probability of improvement see it."""
+    d = np.concatenate([np.ones(68), np.zeros(117), -np.ones(15)])
+    row = compare(*tables_with(d, "oscillation_count"), CLAIMS[4], CFG)
+    assert (row["n_better"], row["n_tied"], row["n_worse"]) == (15, 117, 68)
+    assert row["estimate"] == 0.5 and row["p_value"] < 1e-6
+    assert row["prob_improvement"] == pytest.approx((15 + 117 / 2) / 200)
+    assert row["pi_high"] < 0.5
+    outcome, _ = decide(row["ci_low"], row["ci_high"], row["p_value"], 0.25, row["n_pairs"], CFG,
+                        row["pi_low"], row["pi_high"])
+    assert outcome == "contradicted"
+
+
+def test_hodges_lehmann_equals_the_walsh_median_by_brute_force():
+    x = np.random.default_rng(4).normal(size=31)
+    walsh = [(x[i] + x[j]) / 2 for i in range(31) for j in range(i, 31)]
+    assert hodges_lehmann(x) == pytest.approx(np.median(walsh))
+    batch = np.stack([x, -x])
+    np.testing.assert_allclose(hodges_lehmann(batch), [np.median(walsh), -np.median(walsh)])
+
+
+def test_fast_hodges_lehmann_on_resamples_equals_the_direct_one():
+    from pipeline.claims import hodges_lehmann_on
+
+    rng = np.random.default_rng(8)
+    sample = np.round(rng.normal(size=57), 1)  # ties, as metrics on a lattice have
+    resamples = rng.choice(sample, size=(40, 57))
+    np.testing.assert_array_equal(hodges_lehmann_on(sample)(resamples), hodges_lehmann(resamples))
+    leave_one_out = np.delete(sample, 3)
+    assert hodges_lehmann_on(sample)(leave_one_out) == hodges_lehmann(leave_one_out)
+    other = rng.normal(size=(3, 10))  # not drawn from the sample: the direct computation
+    np.testing.assert_array_equal(hodges_lehmann_on(sample)(other), hodges_lehmann(other))
+
+
+def test_holm_matches_the_step_down_formula():
+    p = [0.01, 0.04, 0.03, 0.5]
+    # sorted 0.01, 0.03, 0.04, 0.5 -> 4*0.01, max(., 3*0.03), max(., 2*0.04), max(., 0.5)
+    assert holm(p) == pytest.approx([0.04, 0.09, 0.09, 0.5])
+    assert np.isnan(holm([np.nan, 0.2])[0]) and holm([np.nan, 0.2])[1] == pytest.approx(0.2)
+
+
+def test_mcnemar_on_discordant_collision_pairs():
+    n = 200
+    base = np.zeros(n, bool)
+    imp = np.zeros(n, bool)
+    base[:20] = True          # 20 baseline-only collisions
+    imp[20:24] = True         # 4 improved-only
+    improved = pd.DataFrame({"scenario": range(n), "collision": imp})
+    baseline = pd.DataFrame({"scenario": range(n), "collision": base})
+    row = compare(improved, baseline, SAFETY, CFG)
+    assert (row["n_better"], row["n_worse"]) == (20, 4)
+    assert row["p_value"] == pytest.approx(stats.binomtest(4, 24, 0.5).pvalue)
+    assert row["estimate"] == pytest.approx((4 - 20) / n)
+
+
+def test_probability_of_improvement_counts_ties_as_half():
+    value, low, high = probability_of_improvement(np.array([-1.0, 0.0, 1.0, -2.0]), CFG)
+    assert value == pytest.approx(0.625) and low <= value <= high
+
+
+def test_colliding_pairs_leave_c1_to_c5_but_stay_in_the_sensitivity():
+    d = np.full(40, -0.3)
+    d[:10] = 5.0  # the colliding pairs are much worse
+    collided = np.zeros(40, bool)
+    collided[:10] = True
+    improved, baseline = tables_with(d, collided=collided)
+    filtered = compare(improved, baseline, C1, CFG)
+    every = compare(improved, baseline, C1, CFG, pairs="all")
+    assert filtered["n_pairs"] == 30 and every["n_pairs"] == 40
+    assert filtered["estimate"] == pytest.approx(-0.3) and filtered["n_worse"] == 0
+    assert every["n_worse"] == 10 and every["prob_improvement"] == pytest.approx(0.75)
+
+
+def test_ledger_has_c0_first_and_both_comparisons():
+    d = -0.3 + np.random.default_rng(9).normal(0.0, 0.05, 50)
+    improved, baseline = tables_with(d)
+    matched = baseline.copy()
+    rows, _ = family_ledger({"improved": improved.assign(
+        **{c.primary_metric: improved["reaction_delay_s"] for c in CLAIMS[1:]}),
+        "baseline": baseline.assign(**{c.primary_metric: 1.0 for c in CLAIMS[1:]}),
+        "baseline_matched": matched.assign(**{c.primary_metric: 1.0 for c in CLAIMS[1:]})}, CFG)
+    assert [(r["claim"], r["comparison"]) for r in rows][:2] == [("C0", "baseline"),
+                                                                 ("C1", "baseline")]
+    assert len(rows) == 12 and rows[6]["comparison"] == "baseline_matched"
+    # a 0.3 gain beats C1-C4's margins; C5's margin is half a reversal: within it
+    assert all(r["outcome"] == "supported" for r in rows if r["claim"] in ("C1", "C2", "C3",
+                                                                          "C4"))
+    assert all(r["outcome"] == "equivalent" for r in rows if r["claim"] == "C5")
+
+
+@pytest.mark.parametrize("improved, expected", [(0.3, "better"), (0.98, "within margin"),
+                                                (1.2, "worse"), (None, "missing")])
+def test_single_scenario_words(improved, expected):
+    assert single_scenario_outcome(C1, {"reaction_delay_s": 1.0},
+                                   {"reaction_delay_s": improved}, 0.05) == expected
+    rows = claims_table({"baseline": {"reaction_delay_s": 1.0},
+                         "improved": {"reaction_delay_s": improved}}, CFG.margins,
+                        ("baseline",))
+    assert [r["claim"] for r in rows] == [c.claim_id for c in ALL_CLAIMS]
+    assert rows[1]["vs baseline"] == expected
