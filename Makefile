@@ -9,9 +9,10 @@ REPORT      ?= reports/latest
 PYTEST_ARGS ?=
 
 SWEEP       ?= obstacle_speed
+MULTIVERSE  ?= default
 LAUNCHER    ?= basic
 
-.PHONY: help install reproduce experiment report sweep verify ablation test test-all bench clean
+.PHONY: help install reproduce experiment report sweep verify ablation multiverse test test-all bench clean
 
 help:  ## list the targets
 	@grep -E '^[a-zA-Z_-]+:.*## ' $(MAKEFILE_LIST) | awk -F':.*## ' '{printf "  %-12s %s\n", $$1, $$2}'
@@ -44,6 +45,10 @@ ablation: $(STAMP)  ## which revision does what: ablations + interpretation vari
 	rm -rf $(RUNS)/ablation $(RUNS)/interpretations
 	$(PY) -m pipeline.run experiment=ablation hydra.sweep.dir=$(RUNS)/ablation scenario.family.size=$(FAMILY_SIZE)
 	$(PY) -m pipeline.run experiment=interpretations hydra.sweep.dir=$(RUNS)/interpretations
+	$(MAKE) report
+
+multiverse: $(STAMP)  ## how robust is each verdict: the multiverse (MULTIVERSE=default|quick), then the report
+	$(PY) -m pipeline.multiverse --space $(MULTIVERSE) --out $(RUNS)/multiverse
 	$(MAKE) report
 
 bench: $(STAMP)  ## benchmark the controller step vs the Clarabel floor and the peers -> reports/bench/

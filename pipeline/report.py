@@ -212,6 +212,74 @@ def _ablation_section(run_root: Path, fig_dir: Path, table_dir: Path,
     return section
 
 
+def _robustness_section(multiverse_dir: Path | None, fig_dir: Path,
+                        table_dir: Path) -> dict | None:
+    """The multiverse (``make multiverse``), if it was run: per claim the default outcome, its
+    robustness and the choice that moves it most; specification curves; per-dimension effects."""
+    import json
+    import shutil
+
+    if multiverse_dir is None or not (Path(multiverse_dir) / "robustness.csv").is_file():
+        return None
+    folder = Path(multiverse_dir)
+    robust = pd.read_csv(folder / "robustness.csv")
+    info = json.loads((folder / "space.json").read_text()) \
+        if (folder / "space.json").is_file() else {}
+    dims = pd.read_csv(folder / "dimensions.csv") if (folder / "dimensions.csv").is_file() \
+        else pd.DataFrame()
+    robust.to_csv(table_dir / "multiverse_robustness.csv", index=False)
+    rows = {}
+    for r in robust.to_dict("records"):
+        entry = rows.setdefault(r["claim"], {"claim": r["claim"], "cells": {}})
+        if r["influence"] > 0:
+            moved = (f"{r['most_influential']}"
+                     + (f" = {r['flipping_values']}" if isinstance(r["flipping_values"], str)
+                        and r["flipping_values"] else "")
+                     + f" (flips {100 * r['influence']:.0f} % of its specifications)")
+        else:
+            moved = f"nothing flips it; largest shift: {r['most_influential']}"
+        entry["cells"][r["comparison"]] = {
+            "outcome": r["default_outcome"], "label": r["label"],
+            "agree": f"{100 * r['agree_share']:.0f} %", "moved": moved,
+            "shares": ", ".join(f"{o} {100 * r[f'share_{o}']:.0f} %"
+                                for o in ("supported", "contradicted", "equivalent",
+                                          "inconclusive") if r[f"share_{o}"] > 0)}
+    figures = []
+    for claim in ALL_CLAIMS:
+        png = folder / "figures" / f"specification_curve_{claim.claim_id}.png"
+        if not png.is_file():
+            continue
+        fig_dir.mkdir(parents=True, exist_ok=True)
+        stem = f"specification_curve_{claim.claim_id}"
+        shutil.copyfile(png, fig_dir / f"{stem}.png")
+        svg = folder / "figures" / f"{stem}.svg"
+        if svg.is_file():
+            shutil.copyfile(svg, fig_dir / f"{stem}.svg")
+        figures.append({"id": stem, "group": "robustness",
+                        "paths": {"png": fig_dir / f"{stem}.png", "svg": fig_dir / f"{stem}.svg"},
+                        "caption": f"{claim.claim_id} ({claim.text}): the estimate with its 95 % "
+                                   "interval in every specification, sorted, coloured by outcome, "
+                                   "against each comparison; below, which choices each "
+                                   "specification changes from the default.",
+                        "alt": f"Specification curve of {claim.claim_id}"})
+    dim_rows = []
+    if len(dims):
+        for (claim, comparison), part in dims.groupby(["claim", "comparison"], sort=False):
+            if comparison != "baseline":
+                continue
+            for r in part.to_dict("records"):
+                if r["default"] or r["flipped_share"] < 0.5:
+                    continue
+                dim_rows.append({"claim": claim, "dimension": r["dimension"],
+                                 "value": r["value"], "flipped": f"{100 * r['flipped_share']:.0f} %",
+                                 "outcome": r["modal_outcome"],
+                                 "estimate": _fmt(r["median_estimate"])})
+    return {"rows": list(rows.values()), "figures": figures, "dims": dim_rows,
+            "n": info.get("n_specifications"), "n_sim": info.get("n_simulation_configurations"),
+            "size": info.get("family_size"), "name": info.get("name"),
+            "rule": info.get("rule", ""), "dimensions": info.get("dimensions", [])}
+
+
 def _performance_section(bench_dir: Path | None, fig_dir: Path) -> dict | None:
     """The benchmark's summary (``make bench``), if it was run."""
     import json
@@ -250,7 +318,8 @@ def _performance_section(bench_dir: Path | None, fig_dir: Path) -> dict | None:
 
 
 def build_report(run_root: Path, out_dir: Path, command: str,
-                 sweep_dirs: tuple[Path, ...] = (), bench_dir: Path | None = None) -> Path:
+                 sweep_dirs: tuple[Path, ...] = (), bench_dir: Path | None = None,
+                 multiverse_dir: Path | None = None) -> Path:
     """Write ``out_dir/index.html`` (plus figures/ and tables/) from the runs under ``run_root``.
 
     Parameters
@@ -276,6 +345,9 @@ def build_report(run_root: Path, out_dir: Path, command: str,
         runs, family_tables, family_info = load_runs(run_root)
     sweeps = [_sweep_section(d, fig_dir, table_dir) for d in sweep_dirs]
     performance = _performance_section(bench_dir, fig_dir)
+    if multiverse_dir is None and (Path(run_root) / "multiverse" / "robustness.csv").is_file():
+        multiverse_dir = Path(run_root) / "multiverse"
+    robustness = _robustness_section(multiverse_dir, fig_dir, table_dir)
     env = jinja2.Environment(loader=jinja2.PackageLoader("pipeline", "templates"),
                              autoescape=jinja2.select_autoescape(["html", "j2"]),
                              undefined=jinja2.StrictUndefined)
@@ -286,7 +358,7 @@ def build_report(run_root: Path, out_dir: Path, command: str,
         figures += performance["figures"] if performance else []
         _inline(figures, out_dir)
         page = env.get_template("report.html.j2").render(
-            paper=False, sweeps=sweeps, performance=performance, ablation=None, figures=figures, family=None, kinematic=None,
+            paper=False, sweeps=sweeps, performance=performance, robustness=None, ablation=None, figures=figures, family=None, kinematic=None,
             methods=[], scenario="(sweep only)", prov=provenance(command),
             register=register_rows({}), metrics_doc=_metrics_doc(), **_rules(ClaimsConfig()))
         path = out_dir / "index.html"
@@ -347,9 +419,10 @@ def build_report(run_root: Path, out_dir: Path, command: str,
     for sw in sweeps:
         figures.extend(sw["figures"])
     figures += performance["figures"] if performance else []
+    figures += robustness["figures"] if robustness else []
     _inline(figures, out_dir)
     page = env.get_template("report.html.j2").render(
-        paper=True, sweeps=sweeps, performance=performance, scenario=scenario, ablation=ablation, methods=order, figures=figures, metric_rows=metric_rows,
+        paper=True, sweeps=sweeps, performance=performance, robustness=robustness, scenario=scenario, ablation=ablation, methods=order, figures=figures, metric_rows=metric_rows,
         timing_rows=timing_rows, claims=claims, claim_secondary=claim_secondary,
         comparisons=comparisons, family=family, kinematic=kinematic,
         register=register_rows({m: r["config"] for m, r in by_method.items()}),
@@ -641,12 +714,15 @@ def main(argv: list[str] | None = None) -> int:
                         help="aggregated sweep folder to add as a Sweep section (repeatable)")
     parser.add_argument("--bench", type=Path, default=Path("reports/bench"),
                         help="benchmark folder to add as the Performance section, if present")
+    parser.add_argument("--multiverse", type=Path, default=None,
+                        help="multiverse folder (default: RUNS/multiverse, if present)")
     parser.add_argument("--command", default=None,
                         help="command to show under provenance (default: this command line)")
     args = parser.parse_args(argv)
     command = args.command or "python -m pipeline.report " + " ".join(argv or sys.argv[1:])
     try:
-        path = build_report(args.runs, args.out, command, tuple(args.sweep), args.bench)
+        path = build_report(args.runs, args.out, command, tuple(args.sweep), args.bench,
+                            args.multiverse)
     except FileNotFoundError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2

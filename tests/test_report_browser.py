@@ -36,7 +36,22 @@ def report(tmp_path_factory, make_config):
                        root / "kinematic" / method)
         run_family(make_config([f"method={method}", "scenario=family", "scenario.family.size=6"]),
                    root / "family" / method, progress=False)
+    from pipeline.multiverse import main as multiverse_main
+
+    assert multiverse_main(["--space", "quick", "--out", str(root / "multiverse")]) == 0
     return build_report(root, tmp_path_factory.mktemp("report"), "pytest")
+
+
+TABLE_FIT = """() => Array.from(document.querySelectorAll('table')).map(t => {
+    const box = t.parentElement;
+    const cell = t.querySelector('tr:first-child > :last-child');
+    box.scrollLeft = box.scrollWidth;
+    const right = cell.getBoundingClientRect().right, edge = box.getBoundingClientRect().right;
+    return {head: (t.querySelector('caption, th') || {}).textContent.slice(0, 40),
+            fits: t.scrollWidth <= box.clientWidth + 1,
+            scrolls: ['auto', 'scroll'].includes(getComputedStyle(box).overflowX),
+            last_visible: right <= edge + 1};
+})"""
 
 
 def test_report_in_headless_chromium(report):
@@ -58,9 +73,13 @@ def test_report_in_headless_chromium(report):
         SCREENSHOT.mkdir(parents=True, exist_ok=True)
         page.screenshot(path=str(SCREENSHOT / "report_full.png"), full_page=True)
         page.screenshot(path=str(SCREENSHOT / "report_top.png"))
+        wide_tables = page.evaluate(TABLE_FIT)
+        robustness_box = page.locator("#robustness-summary").bounding_box()
+        trajectory_width = page.locator("#fig-trajectory_baseline img").bounding_box()["width"]
         narrow = browser.new_page(viewport={"width": 420, "height": 900})
         narrow.goto(report.as_uri())
         overflow = narrow.evaluate("document.documentElement.scrollWidth")
+        narrow_tables = narrow.evaluate(TABLE_FIT)
         browser.close()
     assert len(images) >= 10
     assert all(complete and width > 0 and alt for complete, width, alt in images), images
@@ -70,3 +89,11 @@ def test_report_in_headless_chromium(report):
     assert claims_top < 900 and verdict_cell is not None and verdict_cell["y"] < 900
     # a narrow window does not scroll sideways (wide tables scroll inside their box)
     assert overflow <= 430
+    # at 1280 px no table hides a column; narrow, every table's last column is reachable in
+    # its own scrolling box
+    assert [t["head"] for t in wide_tables if not t["fits"]] == []
+    assert [t["head"] for t in narrow_tables
+            if not (t["fits"] or (t["scrolls"] and t["last_visible"]))] == []
+    # the first screen holds the robustness summary; the Figure 2/3 analogues are large
+    assert robustness_box is not None and robustness_box["y"] < 900
+    assert trajectory_width >= 540

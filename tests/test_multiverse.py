@@ -1,0 +1,123 @@
+"""The multiverse: design, a planted verdict that flips under exactly one dimension, the quick
+space end to end (resume without recomputation), and bad space files."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from pipeline.config import ConfigError
+from pipeline.multiverse import (CONF_DIR, Dimension, Space, build_design, load_space,
+                                 robustness, simulation_overrides)
+
+SPACE = Space("planted", (
+    Dimension("planner.beta", "simulation", (0.25, 0.5, 1.0), ("improved",)),
+    Dimension("planner.step_max_m", "simulation", (0.5, 0.3), ("improved",), cap=True),
+    Dimension("metrics.lateral_accel", "analysis", ("vy_dot_plus_vx_r", "vx_r")),
+    Dimension("claims.margin_scale", "analysis", (1.0, 2.0, 0.5)),
+), n_specifications=20, simulation_pool=4)
+
+
+def test_design_has_default_every_one_at_a_time_change_and_a_seeded_sample():
+    design = build_design(SPACE)
+    assert len(design) == 20 and design["kind"].iloc[0] == "default"
+    assert (design["kind"] == "one_at_a_time").sum() == 2 + 1 + 1 + 2
+    assert design.drop(columns="spec_id").duplicated().sum() == 0
+    sampled = design[design["kind"] == "sampled"]
+    assert len(sampled[["planner.beta", "planner.step_max_m"]].drop_duplicates()) <= 4
+    pd.testing.assert_frame_equal(design, build_design(SPACE))
+
+
+def test_cap_sets_the_matched_baseline_step_and_improved_only_keys_stay_off_the_baselines():
+    row = {"planner.beta": 1.0, "planner.step_max_m": 0.3}
+    assert "planner.beta=1.0" in simulation_overrides(row, SPACE, "improved")
+    assert "planner.step_max_m=0.3" in simulation_overrides(row, SPACE, "improved")
+    matched = simulation_overrides(row, SPACE, "baseline_matched")
+    assert "planner.step_size=0.3" in matched and not any("beta" in o for o in matched)
+    assert not any("planner" in o for o in simulation_overrides(row, SPACE, "baseline"))
+
+
+def test_a_verdict_that_flips_under_one_dimension_is_attributed_to_it():
+    design = build_design(SPACE)
+    rows = []
+    for spec in design.to_dict("records"):
+        flipped = spec["metrics.lateral_accel"] == "vx_r"
+        for claim in ("C1", "C2"):
+            outcome = "contradicted" if (claim == "C2" and flipped) else "supported"
+            estimate = 0.3 if outcome == "contradicted" else -0.3 + 0.01 * spec["planner.beta"]
+            rows.append({"spec_id": spec["spec_id"], "claim": claim, "comparison": "baseline",
+                         "estimate": estimate, "outcome": outcome})
+    robust, dims = robustness(pd.DataFrame(rows), design, SPACE)
+    c2 = robust.set_index("claim").loc["C2"]
+    assert c2["most_influential"] == "metrics.lateral_accel"
+    assert c2["flipping_values"] == "vx_r" and c2["influence"] == 1.0
+    assert c2["label"] in ("sensitive", "fragile")
+    c1 = robust.set_index("claim").loc["C1"]
+    assert c1["label"] == "robust" and c1["influence"] == 0.0 and c1["agree_share"] == 1.0
+    flips = dims[(dims["claim"] == "C2") & (dims["flipped_share"] == 1.0)]
+    assert flips[["dimension", "value"]].values.tolist() == [["metrics.lateral_accel", "vx_r"]]
+
+
+def test_quick_space_end_to_end_and_resume(tmp_path):
+    from pipeline.multiverse import main
+
+    out = tmp_path / "mv"
+    assert main(["--space", "quick", "--out", str(out), "scenario.family.n_jobs=1"]) == 0
+    specs = pd.read_csv(out / "specifications.csv")
+    robust = pd.read_csv(out / "robustness.csv")
+    space = load_space(CONF_DIR / "multiverse" / "quick.yaml")
+    assert specs["spec_id"].nunique() == space.n_specifications
+    assert set(specs["claim"]) == {"C0", "C1", "C2", "C3", "C4", "C5"}
+    assert set(specs["comparison"]) == {"baseline", "baseline_matched"}
+    assert {"estimate", "ci_low", "ci_high", "outcome", "planner.beta"} <= set(specs.columns)
+    assert len(robust) == 12 and set(robust["label"]) <= {"robust", "sensitive", "fragile"}
+    assert (out / "figures" / "specification_curve_C1.png").is_file()
+    info = json.loads((out / "space.json").read_text())
+    # runs are shared: two simulation choices with two values, the baselines shared by both
+    # betas -> fewer family folders than specifications x methods
+    folders = list((out / "runs").glob("*/*/family.json"))
+    assert len(folders) < 3 * info["n_simulation_configurations"]
+    stamps = {p: p.stat().st_mtime_ns for p in folders}
+    assert main(["--space", "quick", "--out", str(out), "scenario.family.n_jobs=1"]) == 0
+    assert {p: p.stat().st_mtime_ns for p in folders} == stamps  # nothing re-simulated
+    pd.testing.assert_frame_equal(pd.read_csv(out / "specifications.csv"), specs)
+    # the report built after it leads with robustness and has a curve per claim
+    from pipeline.report import build_report
+    from pipeline.run import run_experiment
+    from hydra import compose, initialize_config_dir
+
+    from pipeline.config import to_experiment_config
+
+    for method in ("baseline", "improved"):
+        with initialize_config_dir(config_dir=str(CONF_DIR), version_base="1.3"):
+            cfg = to_experiment_config(compose(config_name="config",
+                                               overrides=[f"method={method}"]))
+        run_experiment(cfg, tmp_path / "runs" / "paper" / method)
+    page = build_report(tmp_path / "runs", tmp_path / "report", "pytest",
+                        multiverse_dir=out).read_text()
+    assert 'id="robustness"' in page and 'id="robustness-summary"' in page
+    assert page.index('id="robustness-summary"') < page.index('id="paths"')
+    assert page.count('id="fig-specification_curve_C') == 6
+
+
+@pytest.mark.parametrize("text, match", [
+    ("dimensions: []", "at least one dimension"),
+    ("dimensions: [{key: planner.beta, stage: later, values: [1, 2]}]", "simulation or analysis"),
+    ("dimensions: [{key: planner.beta, stage: simulation, values: [1]}]", "two or more"),
+    ("dimensions: [{key: planner.beta, stage: analysis, values: [1, 2]}]", "metrics"),
+    ("dimensions: [", "valid YAML")])
+def test_bad_space_files_are_one_line_errors(tmp_path, text, match):
+    path = tmp_path / "space.yaml"
+    path.write_text(text)
+    with pytest.raises(ConfigError, match=match):
+        load_space(path)
+
+
+def test_unknown_space_exits_2(capsys):
+    from pipeline.multiverse import main
+
+    assert main(["--space", "no_such_space"]) == 2
+    assert "conf/multiverse" in capsys.readouterr().err
