@@ -11,19 +11,24 @@ import tempfile
 import time
 from pathlib import Path
 
+import pandas as pd
+
 from pipeline.aggregate import aggregate
+from pipeline.runs import write_run
 
 
 def make_jobs(root: Path, n: int) -> None:
+    """Complete run records (manifest included) with a two-row trajectory each."""
     metrics = json.loads((Path(__file__).parent / "sample_metrics.json").read_text())
+    trajectory = pd.DataFrame({"time_s": [0.0, 0.1], "X_m": [0.0, 0.3], "Y_m": [0.0, 0.0]})
     for i in range(n):
         job = root / f"method={'baseline' if i % 2 else 'improved'},controller.horizon={i // 2}"
         (job / ".hydra").mkdir(parents=True)
         (job / ".hydra" / "overrides.yaml").write_text(
             f"- method={'baseline' if i % 2 else 'improved'}\n- controller.horizon={i // 2}\n")
-        (job / "metrics.json").write_text(json.dumps({**metrics, "min_clearance_m": i * 1e-4,
-                                                      "method": "baseline" if i % 2
-                                                      else "improved"}))
+        write_run(job, config_text="{}\n", model={}, trajectory=trajectory, timing={},
+                  metrics={**metrics, "min_clearance_m": i * 1e-4,
+                           "method": "baseline" if i % 2 else "improved"}, config_hash=str(i))
 
 
 def main() -> None:

@@ -9,7 +9,6 @@ and improved inside). Pure functions over tables; the report draws and prints th
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
 import numpy as np
@@ -28,11 +27,23 @@ REVISION_TEXT = {
 
 
 def load_family_jobs(root: Path) -> dict[str, pd.DataFrame]:
-    """``{label: family_metrics}`` of every family job below ``root`` (label = its method)."""
+    """``{label: family_metrics}`` of every trusted family job below ``root`` (label = its
+    method); untrusted folders are named on stderr and left out."""
+    import sys
+
+    from pipeline.runs import RunFolderError, discover, read_family
+
     tables = {}
-    for info_path in sorted(Path(root).rglob("family.json")):
-        info = json.loads(info_path.read_text())
-        tables[info["method"]] = pd.read_csv(info_path.parent / "family_metrics.csv")
+    found = discover(Path(root))
+    for item in found.skipped:
+        print(f"ablation: skipped {item.folder}: {item.reason}", file=sys.stderr)
+    for folder in found.families:
+        try:
+            family = read_family(folder)
+        except RunFolderError as exc:
+            print(f"ablation: skipped {exc}", file=sys.stderr)
+            continue
+        tables[family.info["method"]] = family.table
     return tables
 
 

@@ -23,7 +23,7 @@ import pandas as pd
 import yaml
 from hydra.experimental.callback import Callback
 
-from pipeline.artifacts import write_csv_atomic, write_json_atomic
+from pipeline.runs import write_csv_atomic, write_json_atomic
 from pipeline.claims import ALL_CLAIMS, family_ledger, single_scenario_outcome
 from pipeline.config import ClaimsConfig
 
@@ -61,28 +61,55 @@ def read_overrides(folder: Path) -> dict:
     return result
 
 
-def find_jobs(sweep_dir: Path) -> list[Job]:
-    """Complete job folders directly or one level below ``sweep_dir`` (family members excluded)."""
+def find_jobs(sweep_dir: Path) -> tuple[list[Job], list[dict]]:
+    """Trusted job folders of the sweep in ``sweep_dir`` (any depth, family members excluded),
+    and every folder passed over with its reason.
+
+    A job whose ``.hydra/hydra.yaml`` is older than the sweep's ``multirun.yaml`` was written by
+    an earlier sweep into the same folder and is not launched by this one: it is flagged stale,
+    not mixed in.
+    """
+    from pipeline.runs import discover
+
     sweep_dir = Path(sweep_dir)
-    jobs = []
-    for folder in sorted(p for p in sweep_dir.iterdir() if p.is_dir()) if sweep_dir.is_dir() else []:
-        if (folder / "family.json").is_file() and (folder / "family_metrics.csv").is_file():
-            jobs.append(Job(folder, read_overrides(folder), "family"))
-        elif (folder / "metrics.json").is_file():
-            jobs.append(Job(folder, read_overrides(folder), "single"))
-    return jobs
+    found = discover(sweep_dir)
+    multirun = sweep_dir / "multirun.yaml"
+    started = multirun.stat().st_mtime if multirun.is_file() else None
+    jobs, skipped = [], []
+
+    def name(folder: Path) -> str:
+        return str(folder.relative_to(sweep_dir))
+
+    for item in found.skipped:
+        skipped.append({"job": name(item.folder), "status": "skipped", "reason": item.reason,
+                        **read_overrides(item.folder)})
+    for kind, folders in (("family", found.families), ("single", found.runs)):
+        for folder in folders:
+            stamp = folder / ".hydra" / "hydra.yaml"
+            if started is not None and stamp.is_file() and stamp.stat().st_mtime < started - 1.0:
+                skipped.append({"job": name(folder), "status": "stale",
+                                "reason": "written by an earlier sweep into this folder; not "
+                                          "part of the sweep in multirun.yaml",
+                                **read_overrides(folder)})
+                continue
+            jobs.append(Job(folder, read_overrides(folder), kind))
+    jobs.sort(key=lambda j: name(j.folder))
+    return jobs, skipped
 
 
-def _job_row(job: Job) -> tuple[dict, pd.DataFrame | None]:
+def _job_row(job: Job, sweep_dir: Path) -> tuple[dict, pd.DataFrame | None]:
+    from pipeline.runs import read_family, read_run
+
+    label = str(job.folder.relative_to(sweep_dir))
     if job.kind == "single":
-        metrics = json.loads((job.folder / "metrics.json").read_text())
-        return {"job": job.folder.name, "kind": "single", **job.overrides, **metrics}, None
-    info = json.loads((job.folder / "family.json").read_text())
-    table = pd.read_csv(job.folder / "family_metrics.csv")
+        metrics = read_run(job.folder).metrics
+        return {"job": label, "kind": "single", "status": "ok", **job.overrides, **metrics}, None
+    family = read_family(job.folder)
+    info, table = family.info, family.table
     numeric = table.select_dtypes(include=["number", "bool"]).drop(columns=["member"],
                                                                     errors="ignore")
     medians = {f"{k}": float(v) for k, v in numeric.astype(float).median().items()}
-    row = {"job": job.folder.name, "kind": "family", **job.overrides, **medians,
+    row = {"job": label, "kind": "family", "status": "ok", **job.overrides, **medians,
            "method": info["method"], "scenario": info["scenario"], "family_seed": info["seed"],
            "family_size": info["size"], "collisions": info["collisions"],
            "not_recovered": info["not_recovered"], "config_hash": info["config_hash"]}
@@ -111,20 +138,37 @@ def aggregate(sweep_dir: Path, baseline_dir: Path | None = None, progress: bool 
     """
     from tqdm import tqdm
 
+    from pipeline.runs import RunFolderError
+
     sweep_dir = Path(sweep_dir)
-    jobs = find_jobs(sweep_dir)
+    jobs, skipped = find_jobs(sweep_dir)
+    for item in skipped:
+        print(f"aggregate: {item['status']} {item['job']}: {item['reason']}", file=sys.stderr)
     if not jobs:
-        raise FileNotFoundError(f"no complete job folders in {sweep_dir}")
+        raise FileNotFoundError(f"no complete job folders in {sweep_dir}"
+                                + (f" ({len(skipped)} passed over: see above)" if skipped
+                                   else ""))
     rows, tables = [], {}
     for job in tqdm(jobs, desc="aggregate", unit="job", disable=not progress):
-        row, table = _job_row(job)
+        try:
+            row, table = _job_row(job, sweep_dir)
+        except RunFolderError as exc:
+            skipped.append({"job": str(job.folder.relative_to(sweep_dir)), "status": "skipped",
+                            "reason": str(exc).split(": ", 1)[-1], **job.overrides})
+            continue
         rows.append(row)
         if table is not None:
-            tables[job.folder.name] = table
-    summary = pd.DataFrame(rows)
+            tables[row["job"]] = table
+    # the jobs passed over stand in the summary next to the good ones, with their reason
+    summary = pd.DataFrame(rows + skipped)
+    write_csv_atomic(sweep_dir / "skipped.csv",
+                     pd.DataFrame(skipped, columns=["job", "status", "reason"]
+                                  + sorted({k for r in skipped for k in r}
+                                           - {"job", "status", "reason"})))
     override_keys = sorted({k for job in jobs for k in job.overrides})
     swept = [k for k in override_keys if k in summary and summary[k].astype(str).nunique() > 1]
-    front = ["job", "kind"] + override_keys
+    front = ["job", "kind", "status"] + override_keys + (["reason"] if "reason" in summary
+                                                         else [])
     summary = summary[front + [c for c in summary.columns if c not in front]]
     write_csv_atomic(sweep_dir / "summary.csv", summary)
     write_json_atomic(sweep_dir / "swept_keys.json", {"override_keys": override_keys,
@@ -132,14 +176,15 @@ def aggregate(sweep_dir: Path, baseline_dir: Path | None = None, progress: bool 
     # a multirun over methods alone (make reproduce's families) has no swept value to judge
     # verdicts per; the report's claims ledger covers it
     parameter_keys = [k for k in swept if k not in METHOD_KEYS]
-    verdicts = sweep_verdicts(summary, tables, swept, baseline_dir) \
+    good = summary[summary["status"] == "ok"]
+    verdicts = sweep_verdicts(good, tables, swept, baseline_dir) \
         if parameter_keys or baseline_dir is not None else None
     if verdicts is not None:
         write_csv_atomic(sweep_dir / "verdicts.csv", verdicts)
     if figures:
         from pipeline.figures import save_figure, sweep_figure
 
-        for fig, stem in sweep_figure(summary, swept):
+        for fig, stem in sweep_figure(good, swept):
             save_figure(fig, sweep_dir / "figures", stem)
     return summary
 
@@ -166,7 +211,8 @@ def sweep_verdicts(summary: pd.DataFrame, tables: dict, swept: list[str],
     external_row, external_table = None, None
     if baseline_dir is not None and Path(baseline_dir).is_dir():
         kind = "family" if (Path(baseline_dir) / "family.json").is_file() else "single"
-        external_row, external_table = _job_row(Job(Path(baseline_dir), {}, kind))
+        external_row, external_table = _job_row(Job(Path(baseline_dir), {}, kind),
+                                                Path(baseline_dir).parent)
     keys = _group_keys(swept) + (["scenario.family.seed"] if "scenario.family.seed" in swept
                                  else [])
     # index the baseline jobs by their values of the pairing keys (first job wins)

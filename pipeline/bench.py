@@ -30,7 +30,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from pipeline.artifacts import write_csv_atomic, write_json_atomic
+from pipeline.runs import write_csv_atomic, write_json_atomic
 
 
 def _config(overrides: list[str]):

@@ -19,6 +19,16 @@ from typing import Any, Dict, List, Optional
 from omegaconf import MISSING
 
 
+MAX_HORIZON = 200
+
+
+def _qp_memory_gib(horizon: float, obstacles: float) -> float:
+    """Rough memory of compiling the lateral QP: CVXPY's canonicalization grows with N^2, about
+    1.4 kB N^2 (12 GiB at N = 3000, measured order of magnitude)."""
+    n = float(horizon)
+    return 1440.0 * n * n * (1.0 + float(obstacles) / 30.0) / 2**30
+
+
 class ConfigError(ValueError):
     """An invalid configuration value.
 
@@ -64,6 +74,18 @@ def _choice(key: str, value: Any, options: tuple) -> None:
         raise ConfigError(key, value, "one of " + ", ".join(str(o) for o in options))
 
 
+def _safe_name(key: str, value: Any) -> None:
+    """A name that becomes a folder name: letters, digits and ``_ - . + = ,`` only."""
+    import re
+
+    if value is MISSING or value is None:
+        return
+    text = str(value)
+    if not text or text in (".", "..") or not re.fullmatch(r"[A-Za-z0-9_.+=,-]{1,100}", text):
+        raise ConfigError(key, value, "a name of 1-100 letters, digits or _ - . + = , "
+                          "(it becomes a folder name; no '/' or '..')")
+
+
 def _pair(key: str, value: Any) -> None:
     if len(value) != 2:
         raise ConfigError(key, list(value), "a list of two finite numbers [x_m, y_m]")
@@ -91,14 +113,20 @@ class VehicleConfig:
     speed_time_constant_s: float = 0.5
     accel_max_mps2: float = 3.0
 
+    #: Physical range of each parameter (a road vehicle, from a cart to a truck).
+    BOUNDS = {"mass_kg": (10.0, 1e5), "yaw_inertia_kg_m2": (1.0, 1e7),
+              "cg_to_front_m": (0.05, 20.0), "cg_to_rear_m": (0.05, 20.0),
+              "cornering_stiffness_front_n_per_rad": (10.0, 1e7),
+              "cornering_stiffness_rear_n_per_rad": (10.0, 1e7), "tire_friction": (0.01, 3.0),
+              "footprint_radius_m": (0.0, 20.0), "steering_rate_max_rad_s": (1e-3, 20.0),
+              "min_model_speed_mps": (0.05, 20.0), "speed_time_constant_s": (1e-3, 100.0),
+              "accel_max_mps2": (1e-3, 50.0)}
+
     def __post_init__(self) -> None:
-        for key in ("mass_kg", "yaw_inertia_kg_m2", "cg_to_front_m", "cg_to_rear_m",
-                    "cornering_stiffness_front_n_per_rad", "cornering_stiffness_rear_n_per_rad",
-                    "tire_friction", "steering_max_rad", "steering_rate_max_rad_s",
-                    "min_model_speed_mps", "speed_time_constant_s", "accel_max_mps2"):
-            _at_least(f"vehicle.{key}", getattr(self, key), 0.0, inclusive=False)
-        _at_least("vehicle.footprint_radius_m", self.footprint_radius_m, 0.0)
+        for key, (low, high) in self.BOUNDS.items():
+            _between(f"vehicle.{key}", getattr(self, key), low, high)
         _between("vehicle.steering_max_rad", self.steering_max_rad, 1e-3, 1.2)
+        _safe_name("vehicle.name", self.name)
 
     @property
     def wheelbase_m(self) -> float:
@@ -132,6 +160,7 @@ class PlannerConfig:
     speed_floor_mps: float = 1.0
 
     def __post_init__(self) -> None:
+        _safe_name("planner.name", self.name)
         _at_least("planner.braking_decel_mps2", self.braking_decel_mps2, 0.0, inclusive=False)
         _at_least("planner.stop_margin_m", self.stop_margin_m, 0.0)
         _at_least("planner.speed_floor_mps", self.speed_floor_mps, 0.0, inclusive=False)
@@ -228,13 +257,22 @@ class ControllerConfig:
             value = getattr(self, key)
             if isinstance(value, bool) or not isinstance(value, int):
                 raise ConfigError(f"controller.{key}", value, "an integer")
-        if self.horizon < 1:
-            raise ConfigError("controller.horizon", self.horizon, "an integer >= 1")
+        if not 1 <= self.horizon <= MAX_HORIZON:
+            memory = (f" (the compiled QP grows with N: N = {self.horizon} would need about "
+                      f"{_qp_memory_gib(self.horizon, self.max_obstacles):.3g} GiB)"
+                      if self.horizon > MAX_HORIZON else "")
+            raise ConfigError("controller.horizon", self.horizon,
+                              f"an integer in [1, {MAX_HORIZON}]{memory}")
         if not 1 <= self.control_horizon <= self.horizon:
             raise ConfigError("controller.control_horizon", self.control_horizon,
                               f"an integer in [1, controller.horizon={self.horizon}]")
-        if self.max_obstacles < 1:
-            raise ConfigError("controller.max_obstacles", self.max_obstacles, "an integer >= 1")
+        if not 1 <= self.max_obstacles <= 50:
+            raise ConfigError("controller.max_obstacles", self.max_obstacles,
+                              "an integer in [1, 50]")
+        if self.solver_max_iter > 100000:
+            raise ConfigError("controller.solver_max_iter", self.solver_max_iter,
+                              "an integer in [1, 100000]")
+        _safe_name("controller.name", self.name)
         if self.solver_max_iter < 1:
             raise ConfigError("controller.solver_max_iter", self.solver_max_iter, "an integer >= 1")
         _choice("controller.input_hold", self.input_hold, ("hold_last", "zero_rate"))
@@ -349,18 +387,29 @@ class ScenarioConfig:
             raise ConfigError("scenario.goal_xy_m", list(self.goal_xy_m),
                               f"a goal farther than goal_tolerance_m={self.goal_tolerance_m} "
                               f"from start_xy_m={list(self.start_xy_m)}")
-        _at_least("scenario.goal_tolerance_m", self.goal_tolerance_m, 0.0, inclusive=False)
+        _between("scenario.goal_tolerance_m", self.goal_tolerance_m, 1e-3, 100.0)
+        for i, v in enumerate(list(self.start_xy_m) + list(self.goal_xy_m)):
+            key = f"scenario.{'start' if i < 2 else 'goal'}_xy_m[{i % 2}]"
+            _between(key, v, -1e5, 1e5)
+        if gap > 10_000.0:
+            raise ConfigError("scenario.goal_xy_m", list(self.goal_xy_m),
+                              "a goal within 10 km of the start")
         _between("scenario.speed_mps", self.speed_mps, 0.1, 40.0)
-        _at_least("scenario.sample_time_s", self.sample_time_s, 0.0, inclusive=False)
+        _between("scenario.sample_time_s", self.sample_time_s, 1e-3, 1.0)
+        _safe_name("scenario.name", self.name)
         if self.initial_speed_mps is not None:
             _between("scenario.initial_speed_mps", self.initial_speed_mps, 0.0, 40.0)
         for key in ("n_steps", "plant_substeps"):
             value = getattr(self, key)
             if isinstance(value, bool) or not isinstance(value, int) or value < 1:
                 raise ConfigError(f"scenario.{key}", value, "an integer >= 1")
-        if self.n_steps < 2:
+        if not 2 <= self.n_steps <= 100_000:
             raise ConfigError("scenario.n_steps", self.n_steps,
-                              "an integer >= 2 (the simulated time must exceed sample_time_s)")
+                              "an integer in [2, 100000] (the simulated time must exceed "
+                              "sample_time_s)")
+        if self.plant_substeps > 1000:
+            raise ConfigError("scenario.plant_substeps", self.plant_substeps,
+                              "an integer in [1, 1000]")
         if not self.obstacles and self.family is None and not self.allow_no_obstacles:
             raise ConfigError("scenario.obstacles", [], "a non-empty obstacle list (or "
                               "scenario.allow_no_obstacles=true for an obstacle-free run)")
@@ -369,8 +418,12 @@ class ScenarioConfig:
             key = f"scenario.obstacles[{i}]"
             for attr in ("x_m", "y_m", "vx_mps", "vy_mps", "radius_m", "appear_time_s"):
                 _finite(f"{key}.{attr}", getattr(obs, attr))
-            _at_least(f"{key}.radius_m", obs.radius_m, 0.0)
+            _between(f"{key}.radius_m", obs.radius_m, 1e-3, 100.0)
             _at_least(f"{key}.appear_time_s", obs.appear_time_s, 0.0)
+            for attr in ("x_m", "y_m"):
+                _between(f"{key}.{attr}", getattr(obs, attr), -1e5, 1e5)
+            for attr in ("vx_mps", "vy_mps"):
+                _between(f"{key}.{attr}", getattr(obs, attr), -1000.0, 1000.0)
             signature = (obs.x_m, obs.y_m, obs.vx_mps, obs.vy_mps, obs.radius_m, obs.appear_time_s)
             if signature in seen:
                 raise ConfigError(f"{key}", signature, "obstacles that are not exact duplicates")
@@ -405,15 +458,17 @@ class MetricsConfig:
     collision_check: str = "continuous"
     attribution_steering_samples: int = 9
     attribution_extra_s: float = 2.0
-    goal_tolerance_m: float = 0.5
+    goal_tolerance_m: Optional[float] = None
 
     def __post_init__(self) -> None:
         for key in ("reaction_steering_band_rad", "reaction_lateral_band_m", "threat_clearance_m",
                     "threat_horizon_s", "repulsion_onset_force",
                     "recovery_lateral_band_m", "recovery_heading_band_rad",
                     "recovery_heading_stop_m", "attribution_extra_s",
-                    "lateral_sign_band_m", "yaw_rate_sign_band_rad_s", "goal_tolerance_m"):
+                    "lateral_sign_band_m", "yaw_rate_sign_band_rad_s"):
             _at_least(f"metrics.{key}", getattr(self, key), 0.0, inclusive=False)
+        if self.goal_tolerance_m is not None:
+            _at_least("metrics.goal_tolerance_m", self.goal_tolerance_m, 0.0, inclusive=False)
         _at_least("metrics.threat_margin_m", self.threat_margin_m, 0.0)
         _choice("metrics.reaction_obstacle", self.reaction_obstacle,
                 ("threatening", "first_visible"))
@@ -500,6 +555,11 @@ class RunConfig:
     method: str = ""
     variant: str = "default"
 
+    def __post_init__(self) -> None:
+        if self.method:
+            _safe_name("run.method", self.method)
+        _safe_name("run.variant", self.variant)
+
 
 @dataclass
 class ExperimentConfig:
@@ -522,6 +582,14 @@ class ExperimentConfig:
                 raise ConfigError(f"scenario.obstacles[{i}]", [obs.x_m, obs.y_m],
                                   "an obstacle that does not overlap the vehicle at the start "
                                   f"(centre distance >= {obs.radius_m + self.vehicle.footprint_radius_m} m)")
+        goal_tol = self.metrics.goal_tolerance_m
+        if goal_tol is None:
+            self.metrics.goal_tolerance_m = self.scenario.goal_tolerance_m
+        elif not math.isclose(goal_tol, self.scenario.goal_tolerance_m):
+            raise ConfigError("metrics.goal_tolerance_m", goal_tol,
+                              f"equal to scenario.goal_tolerance_m "
+                              f"({self.scenario.goal_tolerance_m}) or null (follows it): the run "
+                              "stops at one, the metrics judge with the other")
         if len(self.scenario.obstacles) > self.controller.max_obstacles:
             raise ConfigError("controller.max_obstacles", self.controller.max_obstacles,
                               f">= the number of obstacles ({len(self.scenario.obstacles)})")

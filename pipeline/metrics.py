@@ -621,7 +621,9 @@ def compute_metrics(trajectory: pd.DataFrame, context: TrajectoryContext,
                                                         context, thresholds) \
         if out["collision"] and contact_j >= 0 else None
     out["min_time_to_collision_s"] = min_time_to_collision(tr, context.vehicle_radius_m)
-    reached = np.nonzero(along >= (goal - start) @ line - thresholds.goal_tolerance_m)[0]
+    goal_tolerance = thresholds.goal_tolerance_m if thresholds.goal_tolerance_m is not None \
+        else 0.5
+    reached = np.nonzero(along >= (goal - start) @ line - goal_tolerance)[0]
     out["goal_reached"] = bool(reached.size)
     out["time_to_goal_s"] = float(t[reached[0]] - t[0]) if reached.size else float("nan")
     out["path_length_m"] = float(np.sum(np.linalg.norm(np.diff(xy, axis=0), axis=1)))

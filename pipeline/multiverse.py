@@ -39,7 +39,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from pipeline.artifacts import write_csv_atomic, write_json_atomic
+from pipeline.runs import check, write_csv_atomic, write_json_atomic
 from pipeline.claims import ALL_CLAIMS, OUTCOMES, family_ledger
 from pipeline.config import ClaimsConfig, ConfigError, MetricsConfig
 
@@ -242,9 +242,7 @@ def run_simulations(design: pd.DataFrame, space: Space, out_dir: Path, compose,
         for method in METHODS:
             cfg = compose(simulation_overrides(row, space, method))
             folder = out_dir / "runs" / method / cfg.config_hash()
-            complete = (folder / "family.json").is_file() and json.loads(
-                (folder / "family.json").read_text()).get("config_hash") == cfg.config_hash()
-            if not complete:
+            if check(folder, "family", cfg.config_hash(), members=False) is not None:
                 run_family(cfg, folder, progress=False, qp_cache=cache)
             folders[key][method] = folder
         log(f"simulations {n}/{len(unique)} ready")

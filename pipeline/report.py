@@ -23,7 +23,7 @@ import numpy as np
 import pandas as pd
 import yaml
 
-from pipeline.artifacts import find_run_dirs, read_run, write_text_atomic
+from pipeline.runs import RunFolderError, Skipped, discover, read_family, read_run, write_text_atomic
 from pipeline.claims import (ALL_CLAIMS, OUTCOME_RULE, SINGLE_RULE, claims_table,
                              family_ledger, outcome_counts)
 from pipeline.config import INTERPRETATION_REGISTER, ClaimsConfig
@@ -124,44 +124,172 @@ def _fmt(value) -> str:
     return html.escape(str(value))
 
 
-def load_runs(run_root: Path) -> tuple[list[dict], dict[str, pd.DataFrame], dict[str, dict]]:
+EXCLUDED_SECTIONS = ("sweeps", "ablation", "interpretations", "multiverse")
+
+
+def _flatten(config: dict, prefix: str = "") -> dict:
+    flat = {}
+    for key, value in (config or {}).items():
+        name = f"{prefix}{key}"
+        if isinstance(value, dict):
+            flat.update(_flatten(value, name + "."))
+        else:
+            flat[name] = value
+    return flat
+
+
+def label_by_difference(configs: list[dict], method: str, skip: tuple[str, ...] = (
+        "run.", "scenario.name")) -> list[str]:
+    """Labels for several runs of one method: the method plus the config values that differ
+    between them (at most three, the rest counted)."""
+    if len(configs) < 2:
+        return [method] * len(configs)
+    flats = [_flatten(c) for c in configs]
+    keys = sorted({k for f in flats for k in f})
+    differing = [k for k in keys if not k.startswith(skip)
+                 and len({repr(f.get(k)) for f in flats}) > 1]
+    labels = []
+    for f in flats:
+        parts = [f"{k}={f.get(k)}" for k in differing[:3]]
+        more = f", +{len(differing) - 3} more" if len(differing) > 3 else ""
+        labels.append(f"{method} ({', '.join(parts)}{more})" if parts else method)
+    # identical configs: number them so that no run hides another
+    seen: dict[str, int] = {}
+    for i, label in enumerate(labels):
+        if labels.count(label) > 1:
+            seen[label] = seen.get(label, 0) + 1
+            labels[i] = f"{label} #{seen[label]}"
+    return labels
+
+
+def load_runs(run_root: Path, skipped: list[Skipped] | None = None
+              ) -> tuple[list[dict], dict[str, pd.DataFrame], dict[str, dict]]:
     """Single runs (outside family folders) and per-method family tables under ``run_root``.
+
+    Every folder is read through :mod:`pipeline.runs`; folders that cannot be trusted are
+    appended to ``skipped`` with their reason. Several runs of one method on one track are all
+    kept, labelled by what differs between them (``metrics["label"]``).
 
     Returns
     -------
     runs : list of dict
-        :func:`pipeline.artifacts.read_run` of each complete single-run folder.
-    family_tables : dict of method -> DataFrame
-        ``family_metrics.csv`` of each family folder.
-    family_info : dict of method -> dict
-        ``family.json`` of each family folder.
+        :meth:`pipeline.runs.RunRecord.as_dict` of each trusted single-run folder.
+    family_tables : dict of label -> DataFrame
+        ``family_metrics.csv`` of each trusted family folder.
+    family_info : dict of label -> dict
+        ``family.json`` of each family folder (with ``dir``).
     """
-    import json
-
     run_root = Path(run_root)
-
-    def outside_sweeps(path: Path) -> bool:
-        # sweeps, ablations and interpretation variants get their own report sections
-        return not {"sweeps", "ablation", "interpretations"} & set(path.relative_to(run_root).parts)
-
-    family_dirs = sorted(p.parent for p in run_root.rglob("family_metrics.csv")
-                         if (p.parent / "family.json").is_file() and outside_sweeps(p.parent))
-    family_tables, family_info = {}, {}
-    for folder in family_dirs:
-        info = json.loads((folder / "family.json").read_text())
-        family_tables[info["method"]] = pd.read_csv(folder / "family_metrics.csv")
-        family_info[info["method"]] = {**info, "dir": str(folder)}
-    inside = set(family_dirs)
-    runs = [read_run(d) for d in find_run_dirs(run_root)
-            if outside_sweeps(d) and not any(parent in inside for parent in d.parents)]
-    if not runs and not family_tables:
+    skipped = skipped if skipped is not None else []
+    if not run_root.is_dir():
+        raise FileNotFoundError(f"no complete run folders under {run_root} (no such folder)")
+    found = discover(run_root, exclude=EXCLUDED_SECTIONS)
+    skipped.extend(found.skipped)
+    families = []
+    for folder in found.families:
+        try:
+            families.append(read_family(folder))
+        except RunFolderError as exc:
+            skipped.append(Skipped(folder, str(exc).split(": ", 1)[-1]))
+    runs = []
+    for folder in found.runs:
+        try:
+            runs.append(read_run(folder).as_dict())
+        except RunFolderError as exc:
+            skipped.append(Skipped(folder, str(exc).split(": ", 1)[-1]))
+    if not runs and not families:
+        if skipped:
+            raise FileNotFoundError(f"no trusted run folders under {run_root} ("
+                                    f"{len(skipped)} skipped, e.g. {skipped[0].folder}: "
+                                    f"{skipped[0].reason})")
         raise FileNotFoundError(f"no complete run folders (with metrics.json) under {run_root}")
+    # label runs of the same method and track by what differs between them
+    groups: dict[tuple, list[dict]] = {}
+    for run in runs:
+        key = (run["metrics"].get("track", "lateral"), run["metrics"].get("method", ""))
+        groups.setdefault(key, []).append(run)
+    for (_, method), group in groups.items():
+        for run, label in zip(group, label_by_difference([r["config"] for r in group], method)):
+            run["metrics"] = {**run["metrics"], "label": label}
+    family_tables, family_info = {}, {}
+    by_method: dict[str, list] = {}
+    for family in families:
+        by_method.setdefault(family.info.get("method", ""), []).append(family)
+    for method, group in by_method.items():
+        import yaml
+
+        configs = []
+        for family in group:
+            member = family.folder / "member_0000" / "config.yaml"
+            configs.append(yaml.safe_load(member.read_text()) if member.is_file() else {})
+        for family, label in zip(group, label_by_difference(configs, method)):
+            family_tables[label] = family.table
+            family_info[label] = {**family.info, "dir": str(family.folder)}
     return runs, family_tables, family_info
 
 
 def _ordered(methods) -> list[str]:
-    methods = list(methods)
-    return [m for m in METHOD_ORDER if m in methods] + sorted(set(methods) - set(METHOD_ORDER))
+    """Known methods first in their order, labelled variants right after their method."""
+    def rank(label: str) -> tuple:
+        base = label.split(" (")[0].split(" #")[0]
+        return (METHOD_ORDER.index(base) if base in METHOD_ORDER else len(METHOD_ORDER),
+                base, label != base, label)
+
+    return sorted(dict.fromkeys(methods), key=rank)
+
+
+def _label(run: dict) -> str:
+    return run["metrics"].get("label") or run["metrics"].get("method", "")
+
+
+def _choose_per_method(items: dict, method_of, kind: str, use: str
+                       ) -> tuple[dict, list[str]]:
+    """One item per method (the one labelled with the bare method name, else the first) and a
+    note for every method given more than once."""
+    groups: dict[str, list[str]] = {}
+    for label, item in items.items():
+        groups.setdefault(method_of(label, item), []).append(label)
+    chosen, notes = {}, []
+    for method, labels in groups.items():
+        pick = method if method in labels else labels[0]
+        chosen[method] = items[pick]
+        if len(labels) > 1:
+            notes.append(f"{len(labels)} {kind} of {method} were given ({'; '.join(labels)}); "
+                         f"{use} '{pick}', the other tables show all of them.")
+    return chosen, notes
+
+
+def _primary_tables(tables: dict[str, pd.DataFrame], info: dict[str, dict]
+                    ) -> tuple[dict[str, pd.DataFrame], list[str]]:
+    """One family table per method for the ledger."""
+    return _choose_per_method(tables, lambda label, _: info.get(label, {}).get("method", label),
+                              "families", "the ledger uses")
+
+
+def _skipped_rows(skipped: list[Skipped], root: Path) -> list[dict]:
+    rows = []
+    for item in skipped:
+        try:
+            where = str(Path(item.folder).relative_to(root))
+        except ValueError:
+            where = str(item.folder)
+        rows.append({"folder": where, "reason": item.reason})
+    return rows
+
+
+def _other_rows(runs: list[dict]) -> list[dict]:
+    keys = ("collision", "min_clearance_m", "reaction_delay_s", "recovery_time_s",
+            "time_to_goal_s")
+    return [{"label": _label(r), "scenario": r["metrics"].get("scenario"),
+             "track": r["metrics"].get("track"), "folder": str(r["dir"]),
+             "values": [_fmt(r["metrics"].get(k)) for k in keys]} for r in runs]
+
+
+def _primary(runs_by_label: dict[str, dict]) -> tuple[dict[str, dict], list[str]]:
+    """One run per method for the claims."""
+    return _choose_per_method(runs_by_label,
+                              lambda label, run: run["metrics"].get("method", label), "runs",
+                              "the claims use")
 
 
 def is_sweep_folder(folder: Path) -> bool:
@@ -319,7 +447,8 @@ def _performance_section(bench_dir: Path | None, fig_dir: Path) -> dict | None:
 
 def build_report(run_root: Path, out_dir: Path, command: str,
                  sweep_dirs: tuple[Path, ...] = (), bench_dir: Path | None = None,
-                 multiverse_dir: Path | None = None) -> Path:
+                 multiverse_dir: Path | None = None,
+                 skipped: list[Skipped] | None = None) -> Path:
     """Write ``out_dir/index.html`` (plus figures/ and tables/) from the runs under ``run_root``.
 
     Parameters
@@ -329,6 +458,9 @@ def build_report(run_root: Path, out_dir: Path, command: str,
         parameter-sweep folder on its own.
     sweep_dirs : tuple of Path
         Aggregated sweep folders (``summary.csv``) to add as Sweep sections.
+    skipped : list, optional
+        Receives every folder passed over (:class:`pipeline.runs.Skipped`); they are also listed
+        in the page and on stderr.
 
     Returns
     -------
@@ -339,10 +471,13 @@ def build_report(run_root: Path, out_dir: Path, command: str,
     fig_dir, table_dir = out_dir / "figures", out_dir / "tables"
     table_dir.mkdir(parents=True, exist_ok=True)
     sweep_dirs = tuple(Path(d) for d in sweep_dirs)
+    skipped = skipped if skipped is not None else []
     if is_sweep_folder(run_root):
         sweep_dirs, runs, family_tables, family_info = (Path(run_root),) + sweep_dirs, [], {}, {}
     else:
-        runs, family_tables, family_info = load_runs(run_root)
+        runs, family_tables, family_info = load_runs(run_root, skipped)
+    for item in skipped:
+        print(f"skipped {item.folder}: {item.reason}", file=sys.stderr)
     sweeps = [_sweep_section(d, fig_dir, table_dir) for d in sweep_dirs]
     performance = _performance_section(bench_dir, fig_dir)
     if multiverse_dir is None and (Path(run_root) / "multiverse" / "robustness.csv").is_file():
@@ -359,6 +494,7 @@ def build_report(run_root: Path, out_dir: Path, command: str,
         _inline(figures, out_dir)
         page = env.get_template("report.html.j2").render(
             paper=False, sweeps=sweeps, performance=performance, robustness=None, ablation=None, figures=figures, family=None, kinematic=None,
+            skipped=_skipped_rows(skipped, run_root), other_runs=[], run_notes=[],
             methods=[], scenario="(sweep only)", prov=provenance(command),
             register=register_rows({}), metrics_doc=_metrics_doc(), **_rules(ClaimsConfig()))
         path = out_dir / "index.html"
@@ -369,9 +505,11 @@ def build_report(run_root: Path, out_dir: Path, command: str,
     runs = [r for r in runs if r["metrics"].get("track", "lateral") == "lateral"] or runs
     paper_runs = [r for r in runs if r["metrics"]["scenario"] == scenario] or runs
     scenario = paper_runs[0]["metrics"]["scenario"]
-    by_method = {r["metrics"]["method"]: r for r in paper_runs}
-    order = _ordered(by_method)
-    by_method = {m: by_method[m] for m in order}
+    other_runs = [r for r in runs if r["metrics"]["scenario"] != scenario]
+    by_label = {_label(r): r for r in paper_runs}
+    order = _ordered(by_label)
+    by_method = {m: by_label[m] for m in order}
+    primary, run_notes = _primary(by_method)
     first_cfg = next(iter(by_method.values()))["config"]
     goal = tuple(first_cfg["scenario"]["goal_xy_m"])
     radius = first_cfg["vehicle"]["footprint_radius_m"]
@@ -393,8 +531,9 @@ def build_report(run_root: Path, out_dir: Path, command: str,
                     "compiles": _fmt(r["metrics"].get("compile_count"))}
                    for m, r in by_method.items()]
     cfg_claims = claims_config(first_cfg)
-    comparisons = tuple(c for c in COMPARISONS if c in by_method)
-    claims = claims_table(metrics_by_method, cfg_claims.margins, comparisons)
+    comparisons = tuple(c for c in COMPARISONS if c in primary)
+    claim_metrics = {**metrics_by_method, **{m: r["metrics"] for m, r in primary.items()}}
+    claims = claims_table(claim_metrics, cfg_claims.margins, comparisons)
     pd.DataFrame(claims).to_csv(table_dir / "claims_paper_scenario.csv", index=False)
     for row in claims:
         row["values"] = [_fmt(row.get(m)) for m in order]
@@ -411,9 +550,11 @@ def build_report(run_root: Path, out_dir: Path, command: str,
         figures.extend(kinematic["figures"])
 
     family = None
-    if "baseline" in family_tables and "improved" in family_tables:
-        family = _family_section(family_tables, family_info, metrics_by_method, fig_dir,
-                                 table_dir, cfg_claims)
+    family_primary, family_notes = _primary_tables(family_tables, family_info)
+    run_notes += family_notes
+    if "baseline" in family_primary and "improved" in family_primary:
+        family = _family_section(family_primary, family_info, claim_metrics, fig_dir,
+                                 table_dir, cfg_claims, all_tables=family_tables)
         for f in family["figures"]:
             figures.append(f)
     for sw in sweeps:
@@ -429,7 +570,9 @@ def build_report(run_root: Path, out_dir: Path, command: str,
         configs={m: yaml.safe_dump(r["config"], sort_keys=False) for m, r in by_method.items()},
         hashes={m: r["metrics"]["config_hash"] for m, r in by_method.items()},
         run_dirs={m: str(r["dir"]) for m, r in by_method.items()},
-        metrics_doc=_metrics_doc(), prov=provenance(command), **_rules(cfg_claims))
+        metrics_doc=_metrics_doc(), prov=provenance(command),
+        skipped=_skipped_rows(skipped, run_root), other_runs=_other_rows(other_runs),
+        run_notes=run_notes, **_rules(cfg_claims))
     path = out_dir / "index.html"
     write_text_atomic(path, page)
     return path
@@ -510,9 +653,10 @@ def _track_section(runs: list[dict], track: str, fig_dir: Path, table_dir: Path,
     A comparison is made only when both methods come within ``cfg.comparable_clearance_m`` of
     the obstacle: otherwise they did not meet the same threat and the claim is "not comparable".
     """
-    by_method = {r["metrics"]["method"]: r for r in runs}
-    order = _ordered(by_method)
-    by_method = {m: by_method[m] for m in order}
+    by_label = {_label(r): r for r in runs}
+    order = _ordered(by_label)
+    by_method = {m: by_label[m] for m in order}
+    primary, _ = _primary(by_method)
     first = next(iter(by_method.values()))
     config = first["config"]
     figures = _paper_figures(by_method, first["metrics"]["scenario"],
@@ -527,11 +671,12 @@ def _track_section(runs: list[dict], track: str, fig_dir: Path, table_dir: Path,
     skip = {"method", "scenario", "config_hash", "track"}
     metric_rows = [{"metric": k, "values": [_fmt(metrics_by_method[m].get(k)) for m in order]}
                    for k in frame.index if k not in skip]
-    comparisons = tuple(c for c in COMPARISONS if c in by_method)
-    claims = claims_table(metrics_by_method, cfg.margins, comparisons)
+    comparisons = tuple(c for c in COMPARISONS if c in primary)
+    claim_metrics = {**metrics_by_method, **{m: r["metrics"] for m, r in primary.items()}}
+    claims = claims_table(claim_metrics, cfg.margins, comparisons)
 
     def met(method: str) -> bool:
-        clearance = metrics_by_method.get(method, {}).get("min_clearance_m")
+        clearance = claim_metrics.get(method, {}).get("min_clearance_m")
         return clearance is not None and clearance <= cfg.comparable_clearance_m
 
     comparability = []
@@ -605,7 +750,7 @@ def _paper_figures(by_method: dict, scenario: str, goal: tuple, radius: float, a
 
 
 def _family_section(tables: dict, info: dict, paper_metrics: dict, fig_dir: Path,
-                    table_dir: Path, cfg: ClaimsConfig) -> dict:
+                    table_dir: Path, cfg: ClaimsConfig, all_tables: dict | None = None) -> dict:
     """Claims ledger over the family (C0-C5 against each comparison), outcome counts,
     distribution plots and what the step cap does."""
     from pipeline.claims import LEDGER_COLUMNS
@@ -615,7 +760,8 @@ def _family_section(tables: dict, info: dict, paper_metrics: dict, fig_dir: Path
     ledger, differences = family_ledger(tables, cfg, paper_metrics)
     pd.DataFrame(ledger).reindex(columns=LEDGER_COLUMNS + ["interval_method", "margin_reason"]
                                  ).to_csv(table_dir / "claims_ledger.csv", index=False)
-    counts = outcome_counts(tables)
+    counts = outcome_counts({m: all_tables[m] for m in _ordered(all_tables)}
+                            if all_tables else tables)
     pd.DataFrame(counts).to_csv(table_dir / "family_outcomes.csv", index=False)
     for row in ledger:
         row["estimate_fmt"] = _fmt(row["estimate"])
@@ -669,7 +815,8 @@ def _family_section(tables: dict, info: dict, paper_metrics: dict, fig_dir: Path
                     "left out of the boxes and counted in the outcomes table).",
          "alt": "Box plots of metrics per method over the scenario family"},
     ]
-    first = next(iter(info.values()))
+    first = next(iter(info.values())) if info else {"seed": "?", "size": len(
+        next(iter(tables.values())))}
     return {"ledger": grouped, "comparisons": comparisons,
             "by_claim": {r["claim"]: r for r in ledger if r["comparison"] == "baseline"},
             "counts": [{k: _fmt(v) for k, v in c.items()} for c in counts],
@@ -716,17 +863,24 @@ def main(argv: list[str] | None = None) -> int:
                         help="benchmark folder to add as the Performance section, if present")
     parser.add_argument("--multiverse", type=Path, default=None,
                         help="multiverse folder (default: RUNS/multiverse, if present)")
+    parser.add_argument("--strict", action="store_true",
+                        help="exit 1 when any folder was skipped (after writing the report)")
     parser.add_argument("--command", default=None,
                         help="command to show under provenance (default: this command line)")
     args = parser.parse_args(argv)
     command = args.command or "python -m pipeline.report " + " ".join(argv or sys.argv[1:])
+    skipped: list[Skipped] = []
     try:
         path = build_report(args.runs, args.out, command, tuple(args.sweep), args.bench,
-                            args.multiverse)
+                            args.multiverse, skipped)
     except FileNotFoundError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
-    print(f"report written to {path.resolve()}")
+    print(f"report written to {path.resolve()}"
+          + (f" ({len(skipped)} folder(s) skipped, listed in the report)" if skipped else ""))
+    if args.strict and skipped:
+        print(f"error: --strict: {len(skipped)} folder(s) skipped", file=sys.stderr)
+        return 1
     return 0
 
 

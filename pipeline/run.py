@@ -18,13 +18,13 @@ import numpy as np
 import pandas as pd
 from omegaconf import DictConfig, OmegaConf
 
-from pipeline.artifacts import (is_complete, write_csv_atomic, write_json_atomic,
-                                write_text_atomic)
 from pipeline.config import (ConfigError, ExperimentConfig, register_configs,
                              to_experiment_config)
 from pipeline.controller import QpCache
 from pipeline.metrics import TrajectoryContext, compute_metrics
 from pipeline.model import build_lateral_model
+from pipeline.runs import (NonFiniteResultError, check, clean_leftovers, write_family,
+                           write_run)
 from pipeline.scenario import build_scenario, family_members
 from pipeline.simulate import simulate
 
@@ -68,12 +68,14 @@ def run_experiment(cfg: ExperimentConfig, out_dir: Path, resume: bool = True,
 
     out_dir = Path(out_dir)
     config_hash = cfg.config_hash()
-    if resume and is_complete(out_dir):
-        previous = json.loads((out_dir / "metrics.json").read_text())
-        if previous.get("config_hash") == config_hash:
+    if resume:
+        reason = check(out_dir, "run", config_hash)
+        if reason is None:
+            clean_leftovers(out_dir)  # temporaries of a write killed after the manifest
+            previous = json.loads((out_dir / "metrics.json").read_text())
             return RunSummary(out_dir, previous, skipped=True)
-    out_dir.mkdir(parents=True, exist_ok=True)
-    (out_dir / "metrics.json").unlink(missing_ok=True)
+        if reason not in ("not a folder", "empty folder"):
+            log.warning("re-running %s: %s", out_dir, reason)
 
     scenario = build_scenario(cfg.scenario)
     model = build_lateral_model(cfg.vehicle, cfg.scenario.speed_mps, cfg.scenario.sample_time_s,
@@ -93,11 +95,9 @@ def run_experiment(cfg: ExperimentConfig, out_dir: Path, resume: bool = True,
         "compile_time_s": result.compile_time_s,
         "solve_times_s": [float(x) for x in times],
     }
-    write_text_atomic(out_dir / "config.yaml", config_yaml(cfg))
-    write_json_atomic(out_dir / "model.json", model.to_json())
-    write_csv_atomic(out_dir / "trajectory.csv", result.trajectory)
-    write_json_atomic(out_dir / "timing.json", timing)
-    write_json_atomic(out_dir / "metrics.json", metrics)
+    write_run(out_dir, config_text=config_yaml(cfg), model=model.to_json(),
+              trajectory=result.trajectory, timing=timing, metrics=metrics,
+              config_hash=config_hash)
     return RunSummary(out_dir, metrics, skipped=False)
 
 
@@ -170,11 +170,12 @@ def run_family(cfg: ExperimentConfig, out_dir: Path, progress: bool = True,
     for i, member in enumerate(members):
         member_cfg = dataclasses.replace(cfg, scenario=member)
         folder = out_dir / f"member_{i:04d}"
-        if is_complete(folder):
-            previous = json.loads((folder / "metrics.json").read_text())
-            if previous.get("config_hash") == member_cfg.config_hash():
-                metrics_by_index[i] = previous
-                continue
+        reason = check(folder, "run", member_cfg.config_hash())
+        if reason is None:
+            metrics_by_index[i] = json.loads((folder / "metrics.json").read_text())
+            continue
+        if reason not in ("not a folder", "empty folder"):
+            log.warning("re-running %s: %s", folder, reason)
         pending.append((i, member_cfg, folder))
     if pending:
         make_controller(cfg, cfg.scenario.sample_time_s, cache)  # compile once, in the parent
@@ -191,7 +192,6 @@ def run_family(cfg: ExperimentConfig, out_dir: Path, progress: bool = True,
     table = pd.DataFrame(rows)
     # fixed column order: fresh and resumed (read back from metrics.json) members agree
     table = table[["member"] + sorted(c for c in table.columns if c != "member")]
-    write_csv_atomic(out_dir / "family_metrics.csv", table)
     member_compiles = int(table["compile_count"].fillna(0).sum()) if "compile_count" in table \
         else 0
     summary = {
@@ -203,7 +203,8 @@ def run_family(cfg: ExperimentConfig, out_dir: Path, progress: bool = True,
         "fallback_steps": int(table["fallback_count"].sum()) if "fallback_count" in table else 0,
         "compiles": cache.compile_count - compiles_before + member_compiles,
     }
-    write_json_atomic(out_dir / "family.json", summary)
+    write_family(out_dir, table, summary, cfg.config_hash(),
+                 [out_dir / f"member_{i:04d}" for i in range(len(members))])
     return table
 
 
@@ -249,7 +250,7 @@ def describe_config_error(exc: BaseException) -> str | None:
         chain.append(current)
         current = current.__cause__ or current.__context__
     for err in chain:
-        if isinstance(err, ConfigError):
+        if isinstance(err, (ConfigError, NonFiniteResultError)):
             return str(err)
     for err in chain:
         if isinstance(err, MissingConfigException):

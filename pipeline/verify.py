@@ -16,7 +16,7 @@ from pathlib import Path
 
 import pandas as pd
 
-from pipeline.artifacts import find_run_dirs, read_run, write_csv_atomic
+from pipeline.runs import RunFolderError, discover, read_run, write_csv_atomic
 
 REL_TOL = 1e-6
 ABS_TOL = 1e-6
@@ -28,17 +28,24 @@ LEDGER_COLUMNS = ["claim", "comparison", "metric", "outcome", "estimate", "ci_lo
 
 
 def paper_metrics_table(runs_root: Path) -> pd.DataFrame:
-    """One row per (track, method) on the paper scenario, from the runs under ``runs_root``."""
+    """One row per (track, method) on the paper scenario, from the trusted runs under
+    ``runs_root`` (family members and the sweep, ablation and multiverse sections excluded)."""
     rows = []
-    for folder in find_run_dirs(runs_root):
-        if "member_" in folder.name or "sweeps" in folder.parts:
+    found = discover(runs_root, exclude=("sweeps", "ablation", "interpretations",
+                                         "multiverse"))
+    for item in found.skipped:
+        print(f"verify: skipped {item.folder}: {item.reason}", file=sys.stderr)
+    for folder in found.runs:
+        try:
+            metrics = read_run(folder).metrics
+        except RunFolderError as exc:
+            print(f"verify: skipped {exc}", file=sys.stderr)
             continue
-        metrics = read_run(folder)["metrics"]
         if metrics.get("scenario") != "paper_sudden_obstacle":
             continue
         # the config hash is provenance (it changes with any new config key), not a result
         rows.append({k: v for k, v in metrics.items() if k not in ("compile_count",
-                                                                   "config_hash")})
+                                                                   "config_hash", "label")})
     if not rows:
         raise FileNotFoundError(f"no paper-scenario runs under {runs_root}")
     table = pd.DataFrame(rows).sort_values(["track", "method"]).reset_index(drop=True)

@@ -2,14 +2,13 @@
 
 from __future__ import annotations
 
-import json
-
 import numpy as np
 import pandas as pd
 
 from pipeline.ablation import (REVISIONS, ablation_effects, attribution_sentences,
                                interpretation_flips)
 from pipeline.claims import CLAIMS
+from pipeline.runs import write_family
 from pipeline.config import ClaimsConfig
 
 CFG = ClaimsConfig(n_resamples=199)
@@ -81,10 +80,8 @@ def test_attribution_agrees_with_the_look_ahead_control_when_the_cap_binds():
 def test_interpretation_flips(tmp_path):
     for variant, improved_shift in (("default", {"C1": -0.5}), ("alt", {"C1": +0.5})):
         for method, shift in (("baseline", {}), ("improved", improved_shift)):
-            folder = tmp_path / variant / method
-            folder.mkdir(parents=True)
-            family_table(shift).to_csv(folder / "family_metrics.csv", index=False)
-            (folder / "family.json").write_text(json.dumps({"method": method}))
+            write_family(tmp_path / variant / method, family_table(shift), {"method": method},
+                         "synthetic", [])
     flips = interpretation_flips(tmp_path, CFG).set_index("variant")
     assert flips.loc["default", "C1"] == "supported" and flips.loc["default", "flips"] == "none"
     assert flips.loc["alt", "C1"] == "contradicted" and flips.loc["alt", "flips"] == "C1"
