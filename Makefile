@@ -10,9 +10,10 @@ PYTEST_ARGS ?=
 
 SWEEP       ?= obstacle_speed
 MULTIVERSE  ?= default
+export SLURM_CI_DIR ?= /tmp/slurm-ci
 LAUNCHER    ?= basic
 
-.PHONY: help install reproduce experiment report sweep verify ablation multiverse test test-all bench clean
+.PHONY: help install reproduce experiment report sweep verify ablation multiverse test test-slurm test-all bench clean
 
 help:  ## list the targets
 	@grep -E '^[a-zA-Z_-]+:.*## ' $(MAKEFILE_LIST) | awk -F':.*## ' '{printf "  %-12s %s\n", $$1, $$2}'
@@ -58,11 +59,16 @@ bench: $(STAMP)  ## benchmark the controller step vs the Clarabel floor and the 
 verify: reproduce  ## rerun `make reproduce` and compare with reports/reference/ (tolerances in pipeline/verify.py)
 	$(PY) -m pipeline.verify $(RUNS) reports/reference
 
-test: $(STAMP)  ## run the test suite (excludes tests marked slow)
-	$(PY) -m pytest -m "not slow" $(PYTEST_ARGS)
+test: $(STAMP)  ## run the test suite (excludes tests marked slow or slurm)
+	$(PY) -m pytest -m "not slow and not slurm" $(PYTEST_ARGS)
 
-test-all: $(STAMP)  ## run every test, slow ones included
-	$(PY) -m pytest $(PYTEST_ARGS)
+test-slurm: $(STAMP)  ## start a single-node SLURM cluster (.ci/slurm-cluster), run the SLURM tests, stop it
+	.ci/slurm-cluster start
+	SLURM_CONF=$(SLURM_CI_DIR)/slurm.conf $(PY) -m pytest -m slurm -p no:cacheprovider $(PYTEST_ARGS); \
+	  status=$$?; .ci/slurm-cluster stop; exit $$status
+
+test-all: $(STAMP)  ## run every test, slow ones included (SLURM ones: make test-slurm)
+	$(PY) -m pytest -m "not slurm" $(PYTEST_ARGS)
 
 clean:  ## remove generated output (keeps .venv)
 	rm -rf outputs multirun $(REPORT)

@@ -61,20 +61,46 @@ def read_overrides(folder: Path) -> dict:
     return result
 
 
+def _override_list(path: Path) -> list[str]:
+    return [str(item) for item in (yaml.safe_load(path.read_text()) or [])]
+
+
+def current_sweep_jobs(sweep_dir: Path) -> set[frozenset] | None:
+    """The override sets of every job of the sweep recorded in ``multirun.yaml`` (its sweeper
+    parameters and command-line overrides, expanded as Hydra's basic sweeper expands them), or
+    None when that cannot be told."""
+    from hydra._internal.core_plugins.basic_sweeper import BasicSweeper
+    from hydra.core.override_parser.overrides_parser import OverridesParser
+    from omegaconf import OmegaConf
+
+    path = Path(sweep_dir) / "multirun.yaml"
+    if not path.is_file():
+        return None
+    try:
+        config = OmegaConf.load(path)
+        params = OmegaConf.select(config, "hydra.sweeper.params") or {}
+        task = list(OmegaConf.select(config, "hydra.overrides.task") or [])
+        arguments = [f"{k}={v}" for k, v in params.items()] + [str(t) for t in task]
+        overrides = OverridesParser.create().parse_overrides(arguments)
+        batches = BasicSweeper.split_arguments(overrides, None)
+    except Exception:  # noqa: BLE001 - another sweeper or an unreadable file: no stale check
+        return None
+    return {frozenset(job) for batch in batches for job in batch}
+
+
 def find_jobs(sweep_dir: Path) -> tuple[list[Job], list[dict]]:
     """Trusted job folders of the sweep in ``sweep_dir`` (any depth, family members excluded),
     and every folder passed over with its reason.
 
-    A job whose ``.hydra/hydra.yaml`` is older than the sweep's ``multirun.yaml`` was written by
-    an earlier sweep into the same folder and is not launched by this one: it is flagged stale,
-    not mixed in.
+    A job whose recorded overrides (``.hydra/overrides.yaml``) are not among the jobs of the
+    sweep in ``multirun.yaml`` was written by an earlier sweep into the same folder: it is
+    flagged stale, not mixed in.
     """
     from pipeline.runs import discover
 
     sweep_dir = Path(sweep_dir)
     found = discover(sweep_dir)
-    multirun = sweep_dir / "multirun.yaml"
-    started = multirun.stat().st_mtime if multirun.is_file() else None
+    members = current_sweep_jobs(sweep_dir)
     jobs, skipped = [], []
 
     def name(folder: Path) -> str:
@@ -85,8 +111,9 @@ def find_jobs(sweep_dir: Path) -> tuple[list[Job], list[dict]]:
                         **read_overrides(item.folder)})
     for kind, folders in (("family", found.families), ("single", found.runs)):
         for folder in folders:
-            stamp = folder / ".hydra" / "hydra.yaml"
-            if started is not None and stamp.is_file() and stamp.stat().st_mtime < started - 1.0:
+            recorded = folder / ".hydra" / "overrides.yaml"
+            if members is not None and recorded.is_file() \
+                    and frozenset(_override_list(recorded)) not in members:
                 skipped.append({"job": name(folder), "status": "stale",
                                 "reason": "written by an earlier sweep into this folder; not "
                                           "part of the sweep in multirun.yaml",

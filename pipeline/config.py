@@ -774,6 +774,12 @@ def register_configs() -> None:
     store.store(group="planner", name="planner_schema", node=PlannerConfig)
     store.store(group="controller", name="controller_schema", node=ControllerConfig)
     store.store(group="scenario", name="scenario_schema", node=ScenarioConfig)
+    try:
+        from pipeline.slurm import RobustSlurmConf
+    except ImportError:  # hydra-submitit-launcher not installed: no SLURM launcher
+        return
+    store.store(group="hydra/launcher", name="robust_slurm", node=RobustSlurmConf,
+                provider="pipeline")
 
 
 def to_experiment_config(cfg: Any) -> ExperimentConfig:
@@ -790,6 +796,9 @@ def to_experiment_config(cfg: Any) -> ExperimentConfig:
     """
     from omegaconf import OmegaConf
 
+    # the hydra node is Hydra's own (some of its values exist only inside a running job)
+    if "hydra" in cfg:
+        cfg = OmegaConf.masked_copy(cfg, [k for k in cfg.keys() if k != "hydra"])
     data = OmegaConf.to_container(cfg, resolve=True)
     data.pop("hydra", None)
     data.pop("experiment", None)

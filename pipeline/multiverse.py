@@ -220,9 +220,18 @@ def _metrics_hash(metrics: MetricsConfig) -> str:
     return hashlib.sha256(text.encode()).hexdigest()[:12]
 
 
+def _family_task(cfg, folder: str) -> str:
+    """One family run on a cluster node (resumes by config hash like a local run)."""
+    from pipeline.run import run_family
+
+    run_family(cfg, Path(folder), progress=False)
+    return folder
+
+
 def run_simulations(design: pd.DataFrame, space: Space, out_dir: Path, compose,
-                    log=print) -> dict[tuple, dict[str, Path]]:
-    """Run every distinct simulation configuration's families (resumed by config hash).
+                    log=print, launcher: dict | None = None) -> dict[tuple, dict[str, Path]]:
+    """Run every distinct simulation configuration's families (resumed by config hash): here,
+    or as a SLURM array when ``launcher`` holds ``hydra/launcher=slurm`` settings.
 
     Returns
     -------
@@ -234,19 +243,51 @@ def run_simulations(design: pd.DataFrame, space: Space, out_dir: Path, compose,
 
     cache = QpCache()
     folders: dict[tuple, dict[str, Path]] = {}
+    todo = []
     unique = {}
     for row in design.to_dict("records"):
         unique.setdefault(simulation_key(row, space), row)
-    for n, (key, row) in enumerate(unique.items(), 1):
+    for key, row in unique.items():
         folders[key] = {}
         for method in METHODS:
             cfg = compose(simulation_overrides(row, space, method))
             folder = out_dir / "runs" / method / cfg.config_hash()
-            if check(folder, "family", cfg.config_hash(), members=False) is not None:
-                run_family(cfg, folder, progress=False, qp_cache=cache)
+            if check(folder, "family", cfg.config_hash(), members=False) is not None \
+                    and all(folder != f for _, f in todo):
+                todo.append((cfg, folder))
             folders[key][method] = folder
-        log(f"simulations {n}/{len(unique)} ready")
+    log(f"{len(unique)} simulation configurations, {len(todo)} family runs to do "
+        f"({3 * len(unique) - len(todo)} shared or complete)")
+    if launcher is not None and todo:
+        _run_on_slurm(todo, launcher, out_dir, log)
+        return folders
+    for n, (cfg, folder) in enumerate(todo, 1):
+        run_family(cfg, folder, progress=False, qp_cache=cache)
+        log(f"family runs {n}/{len(todo)} done")
     return folders
+
+
+def _run_on_slurm(todo: list, launcher: dict, out_dir: Path, log) -> None:
+    """Submit the family runs as one SLURM array and wait (bounded, see pipeline.slurm)."""
+    from pipeline.slurm import (IncompleteSweepError, executor_for, resume_command,
+                                wait_for_tasks)
+
+    executor = executor_for(launcher, out_dir / ".submitit" / "%j")
+    jobs = executor.map_array(_family_task, [c for c, _ in todo], [str(f) for _, f in todo])
+    log(f"submitted {len(jobs)} family runs to SLURM (array {jobs[0].job_id.split('_')[0]})")
+    poll = float(launcher.get("poll_s") or 5.0)
+    lost = float(launcher.get("lost_after_s") or 30.0)
+    wait = launcher.get("max_wait_min")
+    timeouts = int(launcher.get("max_num_timeout") or 0) + 1
+    max_wait = 60.0 * (float(wait) if wait is not None
+                       else float(launcher.get("timeout_min") or 60) * timeouts + 10.0)
+    _, failed = wait_for_tasks(jobs, poll, lost, max_wait)
+    if failed:
+        lines = [f"error: {len(failed)} of {len(jobs)} family runs did not finish:"]
+        lines += [f"  {todo[i][1]}: {reason}" for i, reason in sorted(failed.items())]
+        lines.append(f"resume with the same command (complete runs are not redone):\n  "
+                     f"{resume_command()}")
+        raise IncompleteSweepError("\n".join(lines))
 
 
 def family_table(folder: Path, metrics: MetricsConfig, out_dir: Path) -> pd.DataFrame:
@@ -435,11 +476,11 @@ def run_multiverse(space: Space, out_dir: Path, overrides: list[str] | None = No
     out_dir.mkdir(parents=True, exist_ok=True)
     design = build_design(space)
     write_csv_atomic(out_dir / "design.csv", design)
-    compose = _composer(list(overrides or []))
+    compose, launcher = _composer(list(overrides or []))
     # validate every composition before anything runs: a bad value stops here
     for row in design.to_dict("records"):
         analysis_settings(row, space)
-    folders = run_simulations(design, space, out_dir, compose, log)
+    folders = run_simulations(design, space, out_dir, compose, log, launcher)
     jobs = [(row, folders[simulation_key(row, space)]) for row in design.to_dict("records")]
     results = Parallel(n_jobs=n_jobs)(
         delayed(analyse_specification)(row, f, space, out_dir) for row, f in jobs)
@@ -464,18 +505,27 @@ def run_multiverse(space: Space, out_dir: Path, overrides: list[str] | None = No
 
 
 def _composer(extra: list[str]):
+    """A function composing one run's config (with ``extra`` overrides), and the SLURM
+    launcher's settings when ``extra`` selects ``hydra/launcher=slurm`` (else None)."""
     from hydra import compose, initialize_config_dir
+    from omegaconf import OmegaConf
 
     from pipeline.config import register_configs, to_experiment_config
 
     register_configs()
+    run_overrides = [o for o in extra if not o.startswith(("hydra/", "hydra."))]
+    launcher = None
+    if any(o.startswith("hydra/launcher=slurm") for o in extra):
+        with initialize_config_dir(config_dir=str(CONF_DIR), version_base="1.3"):
+            full = compose(config_name="config", overrides=extra, return_hydra_config=True)
+        launcher = OmegaConf.to_container(full.hydra.launcher, resolve=False)
 
     def make(overrides: list[str]):
         with initialize_config_dir(config_dir=str(CONF_DIR), version_base="1.3"):
             return to_experiment_config(compose(config_name="config",
-                                                overrides=overrides + extra))
+                                                overrides=overrides + run_overrides))
 
-    return make
+    return make, launcher
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -495,6 +545,13 @@ def main(argv: list[str] | None = None) -> int:
         robust = run_multiverse(space, args.out, args.overrides, args.jobs,
                                 log=lambda m: print(m, file=sys.stderr))
     except ConfigError as exc:
+        print(str(exc), file=sys.stderr)
+        return 2
+    except RuntimeError as exc:
+        from pipeline.slurm import IncompleteSweepError
+
+        if not isinstance(exc, IncompleteSweepError):
+            raise
         print(str(exc), file=sys.stderr)
         return 2
     except Exception as exc:  # noqa: BLE001 - composition errors become one line

@@ -249,8 +249,10 @@ def describe_config_error(exc: BaseException) -> str | None:
     while current is not None and current not in chain:
         chain.append(current)
         current = current.__cause__ or current.__context__
+    from pipeline.slurm import IncompleteSweepError
+
     for err in chain:
-        if isinstance(err, (ConfigError, NonFiniteResultError)):
+        if isinstance(err, (ConfigError, NonFiniteResultError, IncompleteSweepError)):
             return str(err)
     for err in chain:
         if isinstance(err, MissingConfigException):

@@ -6,7 +6,6 @@ from __future__ import annotations
 import json
 import os
 import shutil
-import time
 
 import numpy as np
 import pandas as pd
@@ -149,13 +148,14 @@ def test_aggregate_lists_failed_and_stale_jobs_next_to_the_good_ones(tmp_path, m
     (stale / ".hydra").mkdir()
     (stale / ".hydra" / "overrides.yaml").write_text("- method=velocity_aware\n")
     (stale / ".hydra" / "hydra.yaml").write_text("hydra: {}\n")
-    old = time.time() - 3600
-    os.utime(stale / ".hydra" / "hydra.yaml", (old, old))
     failed = sweep / "method=mpc_no_apf"
     (failed / ".hydra").mkdir(parents=True)
     (failed / ".hydra" / "overrides.yaml").write_text("- method=mpc_no_apf\n")
     (failed / "config.yaml").write_text("{}\n")
-    (sweep / "multirun.yaml").write_text("hydra: {}\n")
+    # the sweep in this folder now: baseline and improved (and the job that failed)
+    (sweep / "multirun.yaml").write_text(
+        "hydra:\n  sweeper:\n    params:\n      method: baseline,improved,mpc_no_apf\n"
+        "  overrides:\n    task: []\n")
     summary = aggregate(sweep, progress=False, figures=False)
     status = dict(zip(summary["job"], summary["status"]))
     assert status == {"method=baseline": "ok", "method=improved": "ok",
