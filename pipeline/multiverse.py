@@ -55,7 +55,8 @@ ROBUSTNESS_RULE = (
     "'sensitive' in between. A dimension's influence is the largest share, over its values, of "
     "the specifications with that value whose outcome differs from the default's; the most "
     "influential dimension is the one with the largest influence (ties: the larger spread of "
-    "median estimates across its values)")
+    "median estimates across its values), named with the values that flip most of their "
+    "specifications (or the one value that flips the most)")
 
 
 @dataclass(frozen=True)
@@ -389,6 +390,9 @@ def robustness(results: pd.DataFrame, design: pd.DataFrame, space: Space
             spread = (max(estimates) - min(estimates)) if estimates else 0.0
             if (influence, spread) > best_key:
                 flips = [str(v[0]) for v in per_value if v[1] >= 0.5 and v[0] != dim.default]
+                if not flips and influence > 0:
+                    # no value flips most of its specifications: name the one that flips most
+                    flips = [str(max(per_value, key=lambda v: v[1])[0])]
                 best, best_key = (dim.key, flips, spread), (influence, spread)
         rows.append({"claim": claim, "comparison": comparison,
                      "default_outcome": default_outcome, "agree_share": agree, "label": label,
