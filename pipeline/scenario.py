@@ -51,7 +51,10 @@ class LineFrame:
     def to_line(self, points_m: np.ndarray) -> np.ndarray:
         c, s = np.cos(self.heading_rad), np.sin(self.heading_rad)
         d = np.asarray(points_m, dtype=float) - self.origin_m
-        return np.stack([c * d[..., 0] + s * d[..., 1], -s * d[..., 0] + c * d[..., 1]], axis=-1)
+        out = np.empty(d.shape)
+        out[..., 0] = c * d[..., 0] + s * d[..., 1]
+        out[..., 1] = -s * d[..., 0] + c * d[..., 1]
+        return out
 
     def vectors_to_line(self, vectors: np.ndarray) -> np.ndarray:
         c, s = np.cos(self.heading_rad), np.sin(self.heading_rad)

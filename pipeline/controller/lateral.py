@@ -167,11 +167,14 @@ class LateralMpc:
             if np.all(np.isfinite(plan)):
                 plan = plan[None, :]
                 self.fallback.accept(plan)
-                states = np.asarray(solution.values["X"], dtype=float)
-                # slack needed by the optimal plan (what the QP's slack variable holds)
-                lateral = states[0, 1:][:, None]
-                slack = np.max(inputs.constraint_bound - inputs.constraint_gain * lateral,
-                               initial=0.0)
+                states = solution.values["X"]
+                # slack needed by the optimal plan (what the QP's slack variable holds); rows
+                # of idle slots and far obstacles are 0 y + s >= 0 and need none
+                slack = 0.0
+                if inputs.constraint_gain.any() or inputs.constraint_bound.any():
+                    lateral = states[0, 1:][:, None]
+                    slack = np.max(inputs.constraint_bound - inputs.constraint_gain * lateral,
+                                   initial=0.0)
                 return ControlStep(plan[:, 0].copy(), plan, states, solution.status,
                                    solution.iterations, solution.solve_time_s, "none",
                                    float(max(slack, 0.0)), log or {})

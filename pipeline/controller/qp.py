@@ -116,8 +116,11 @@ class AffineQpMap:
 
     def unpack(self, x: np.ndarray) -> dict:
         """Named variable values from Clarabel's primal vector."""
-        return {name: x[off:off + int(np.prod(shape))].reshape(shape, order="F")
-                for name, (off, shape) in self.variables.items()}
+        out = {}
+        for name, (off, shape) in self.variables.items():
+            size = shape[0] * shape[1] if len(shape) == 2 else (shape[0] if shape else 1)
+            out[name] = x[off:off + size].reshape(shape, order="F")
+        return out
 
 
 def _column_ranges(param_prog, parameters: list) -> np.ndarray:
@@ -259,9 +262,9 @@ class DirectQp:
         if theta.shape != (m.n_theta,):
             raise ValueError(f"QP parameter vector has shape {theta.shape}, the compiled "
                              f"problem takes ({m.n_theta},)")
-        q, a, b = m.data(theta)
-        if not (np.isfinite(q).all() and np.isfinite(a).all() and np.isfinite(b).all()):
+        if not np.isfinite(theta).all():  # finite parameters give finite data (a linear map)
             return QpSolution(NON_FINITE_DATA, -1, time.perf_counter() - start, None)
+        q, a, b = m.data(theta)
         try:
             if self._solver is None:
                 self._solver = clarabel.DefaultSolver(m.P, q, m.matrix_A(a), b, m.cones(),
