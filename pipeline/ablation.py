@@ -127,10 +127,14 @@ def attribution_sentences(effects: pd.DataFrame, tables: dict[str, pd.DataFrame]
                      f" it (effect {matched['effect']:+.3g}, {matched['outcome']})"
                      + (": the effect is look-ahead length, not the other revisions." if shares
                         and abs(matched["effect"]) >= 0.5 * abs(total) else "."))
-        if len(significant):
-            best = significant["effect"].abs().idxmax()
+        # a revision accounts for most of the effect only when, alone, it has at least half
+        # of the bundle's effect (same sign, interval clear of zero)
+        large = significant[significant["effect"].abs() >= 0.5 * abs(total)] \
+            if len(significant) else significant
+        if len(large):
+            best = large["effect"].abs().idxmax()
             revision = best.split("+", 1)[1]
-            row = significant.loc[best]
+            row = large.loc[best]
             text += (f" Alone, '{REVISION_TEXT[revision]}' accounts for most of it "
                      f"({row['effect']:+.3g} [{row['ci_low']:.3g}, {row['ci_high']:.3g}])")
             loo = f"improved-{revision}"
@@ -138,8 +142,18 @@ def attribution_sentences(effects: pd.DataFrame, tables: dict[str, pd.DataFrame]
                 text += f"; without it the bundle's effect is {part.loc[loo, 'effect']:+.3g}"
             text += "."
         else:
-            text += " No single active revision accounts for it (none alone has an effect of " \
-                    "the same sign whose interval excludes zero)."
+            text += (" No single active revision accounts for it (none alone has at least half "
+                     "of the effect, of the same sign, with an interval clear of zero).")
+            if total != 0:
+                needed = [r for r in REVISIONS if f"improved-{r}" in part.index
+                          and not (binding and r in ("normalize", "step"))
+                          and abs(part.loc[f"improved-{r}", "effect"]) < 0.5 * abs(total)]
+                if needed:
+                    text += (" It needs the revisions together: without "
+                             + ", or without ".join(
+                                 f"'{REVISION_TEXT[r]}' the bundle's effect is "
+                                 f"{part.loc[f'improved-{r}', 'effect']:+.3g}" for r in needed)
+                             + ".")
         if binding:
             text += (f" The step cap binds on {100 * cap_share:.0f} % of improved's rollout "
                      "steps, so 'no normalization' and 'a larger step' are inactive there and "

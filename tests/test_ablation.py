@@ -61,6 +61,23 @@ def test_attribution_names_the_planted_revision():
     assert "No single active revision" in sentences["C3"]
 
 
+def test_a_tiny_effect_is_not_credited_and_an_interaction_is_named():
+    """C1 improves by 0.5 only with beta and the exponential law together: each alone moves it
+    by a hair (clear of zero but far below half), leaving either out removes it."""
+    tables = tables_with_known_cause()
+    base = family_table({})
+    tables["improved"] = family_table({"C1": -0.5})
+    tables["baseline+beta"] = family_table({"C1": -0.001})
+    tables["baseline+exponential"] = family_table({"C1": -0.002})
+    tables["baseline+step"] = base.copy()
+    tables["improved-beta"] = family_table({"C1": -0.01})
+    tables["improved-exponential"] = family_table({"C1": -0.01})
+    sentences = attribution_sentences(ablation_effects(tables, CFG), tables, CFG)
+    assert "accounts for most" not in sentences["C1"]
+    assert "needs the revisions together" in sentences["C1"]
+    assert "'beta sensitivity of H_i' the bundle's effect is -0.01" in sentences["C1"]
+
+
 def test_attribution_agrees_with_the_look_ahead_control_when_the_cap_binds():
     """When the cap binds on most steps, the step revisions are not credited and an effect the
     look-ahead-matched baseline shares is called look-ahead length."""
