@@ -39,7 +39,8 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from pipeline.runs import check, write_csv_atomic, write_json_atomic
+from pipeline.runs import (MULTIVERSE_FILES, check, write_csv_atomic, write_json_atomic,
+                           write_manifest)
 from pipeline.claims import ALL_CLAIMS, OUTCOMES, family_ledger
 from pipeline.config import ClaimsConfig, ConfigError, MetricsConfig
 
@@ -478,6 +479,7 @@ def run_multiverse(space: Space, out_dir: Path, overrides: list[str] | None = No
 
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
+    (out_dir / "manifest.json").unlink(missing_ok=True)  # tables being rewritten: not trusted
     design = build_design(space)
     write_csv_atomic(out_dir / "design.csv", design)
     compose, launcher = _composer(list(overrides or []))
@@ -505,6 +507,8 @@ def run_multiverse(space: Space, out_dir: Path, overrides: list[str] | None = No
     for claim in ALL_CLAIMS:
         fig = specification_curve_figure(pd.DataFrame(rows), design, space, claim.claim_id)
         save_figure(fig, out_dir / "figures", f"specification_curve_{claim.claim_id}")
+    # written last: the report trusts these tables only when they match it
+    write_manifest(out_dir, "multiverse", MULTIVERSE_FILES, space.name)
     return robust
 
 

@@ -23,7 +23,8 @@ import numpy as np
 import pandas as pd
 import yaml
 
-from pipeline.runs import RunFolderError, Skipped, discover, read_family, read_run, write_text_atomic
+from pipeline.runs import (RunFolderError, Skipped, check, discover, read_family, read_run,
+                           write_text_atomic)
 from pipeline.claims import (ALL_CLAIMS, OUTCOME_RULE, SINGLE_RULE, claims_table,
                              family_ledger, outcome_counts)
 from pipeline.config import INTERPRETATION_REGISTER, ClaimsConfig
@@ -350,6 +351,9 @@ def _robustness_section(multiverse_dir: Path | None, fig_dir: Path,
     if multiverse_dir is None or not (Path(multiverse_dir) / "robustness.csv").is_file():
         return None
     folder = Path(multiverse_dir)
+    reason = check(folder, "multiverse")
+    if reason:
+        raise ValueError(f"multiverse tables not trusted: {reason}")
     robust = pd.read_csv(folder / "robustness.csv")
     info = json.loads((folder / "space.json").read_text()) \
         if (folder / "space.json").is_file() else {}
@@ -478,11 +482,25 @@ def build_report(run_root: Path, out_dir: Path, command: str,
         runs, family_tables, family_info = load_runs(run_root, skipped)
     for item in skipped:
         print(f"skipped {item.folder}: {item.reason}", file=sys.stderr)
-    sweeps = [_sweep_section(d, fig_dir, table_dir) for d in sweep_dirs]
-    performance = _performance_section(bench_dir, fig_dir)
+    def optional(section, folder, *args):
+        """An optional section whose files are broken is left out and listed, not a crash."""
+        try:
+            return section(folder, *args)
+        except (OSError, ValueError, KeyError, TypeError, IndexError,
+                pd.errors.ParserError) as exc:
+            reason = f"{section.__name__.strip('_').replace('_', ' ')} left out " \
+                     f"({type(exc).__name__}: {str(exc).splitlines()[0][:120] if str(exc) else ''})"
+            skipped.append(Skipped(Path(folder), reason))
+            print(f"skipped {folder}: {reason}", file=sys.stderr)
+            return None
+
+    sweeps = [sw for sw in (optional(_sweep_section, d, fig_dir, table_dir) for d in sweep_dirs)
+              if sw is not None]
+    performance = optional(_performance_section, bench_dir, fig_dir) if bench_dir else None
     if multiverse_dir is None and (Path(run_root) / "multiverse" / "robustness.csv").is_file():
         multiverse_dir = Path(run_root) / "multiverse"
-    robustness = _robustness_section(multiverse_dir, fig_dir, table_dir)
+    robustness = optional(_robustness_section, multiverse_dir, fig_dir, table_dir) \
+        if multiverse_dir else None
     env = jinja2.Environment(loader=jinja2.PackageLoader("pipeline", "templates"),
                              autoescape=jinja2.select_autoescape(["html", "j2"]),
                              undefined=jinja2.StrictUndefined)
@@ -875,6 +893,10 @@ def main(argv: list[str] | None = None) -> int:
                             args.multiverse, skipped)
     except FileNotFoundError as exc:
         print(f"error: {exc}", file=sys.stderr)
+        return 2
+    except OSError as exc:
+        print(f"error: --out {args.out}: cannot write the report ({exc.strerror or exc}: "
+              f"{exc.filename or args.out})", file=sys.stderr)
         return 2
     print(f"report written to {path.resolve()}"
           + (f" ({len(skipped)} folder(s) skipped, listed in the report)" if skipped else ""))

@@ -293,6 +293,13 @@ def main() -> None:
         if message is not None:
             print(message, file=sys.stderr)
             sys.exit(2)
+        if isinstance(exc, OSError) and exc.filename:
+            # an output folder that cannot be made or written (a file in the way, no
+            # permission, a full disk): the run wrote nothing half-way
+            print(f"error: cannot write {exc.filename}: {exc.strerror or exc} (choose another "
+                  "output folder with hydra.run.dir=... or hydra.sweep.dir=...)",
+                  file=sys.stderr)
+            sys.exit(2)
         print(f"error: {type(exc).__name__}: {exc} (set HYDRA_FULL_ERROR=1 for the traceback)",
               file=sys.stderr)
         sys.exit(1)

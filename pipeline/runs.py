@@ -28,6 +28,9 @@ import pandas as pd
 
 RUN_FILES = ("config.yaml", "model.json", "trajectory.csv", "timing.json", "metrics.json")
 FAMILY_FILES = ("family_metrics.csv", "family.json")
+MULTIVERSE_FILES = ("design.csv", "specifications.csv", "robustness.csv", "dimensions.csv",
+                    "space.json")
+REQUIRED = {"run": RUN_FILES, "family": FAMILY_FILES, "multiverse": MULTIVERSE_FILES}
 MANIFEST = "manifest.json"
 SCHEMA = 1
 #: Folder names that are Hydra's or submitit's bookkeeping, never runs.
@@ -188,6 +191,12 @@ def _file_entry(path: Path) -> dict:
     return {"bytes": len(data), "sha256": hashlib.sha256(data).hexdigest()}
 
 
+def write_manifest(folder: Path, kind: str, files: tuple[str, ...], config_hash: str,
+                   extra: dict | None = None) -> dict:
+    """Write ``manifest.json`` for files already in ``folder`` (last, atomically)."""
+    return _write_manifest(Path(folder), kind, files, config_hash, extra)
+
+
 def _write_manifest(folder: Path, kind: str, files: tuple[str, ...], config_hash: str,
                     extra: dict | None = None) -> dict:
     manifest = {"schema": SCHEMA, "kind": kind, "config_hash": config_hash,
@@ -239,7 +248,7 @@ def write_family(folder: Path, table: pd.DataFrame, info: dict, config_hash: str
 
 def _load_manifest(folder: Path, kind: str) -> tuple[dict | None, str | None]:
     path = folder / MANIFEST
-    present = [n for n in (RUN_FILES if kind == "run" else FAMILY_FILES) if (folder / n).exists()]
+    present = [n for n in REQUIRED[kind] if (folder / n).exists()]
     if not path.is_file():
         if present:
             return None, (f"no {MANIFEST}: incomplete (killed or failed) or written by an older "
@@ -261,7 +270,7 @@ def check(folder: Path, kind: str = "run", expected_hash: str | None = None,
 
     Parameters
     ----------
-    kind : {"run", "family"}
+    kind : {"run", "family", "multiverse"}
     expected_hash : str, optional
         The config hash the folder must carry (resume).
     members : bool
@@ -273,8 +282,7 @@ def check(folder: Path, kind: str = "run", expected_hash: str | None = None,
     manifest, reason = _load_manifest(folder, kind)
     if reason:
         return reason
-    required = RUN_FILES if kind == "run" else FAMILY_FILES
-    missing = [n for n in required if n not in manifest["files"]]
+    missing = [n for n in REQUIRED[kind] if n not in manifest["files"]]
     if missing:
         return f"{MANIFEST} does not list {', '.join(missing)}"
     for name, entry in manifest["files"].items():

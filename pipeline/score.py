@@ -67,6 +67,8 @@ def _separator(text: str, source: str) -> str:
     """The field separator of the header line: comma, semicolon or tab."""
     header = next((line for line in text.splitlines() if line.strip()
                    and not line.lstrip().startswith("#")), "")
+    if not header:
+        raise TrajectoryFileError(f"{source}: no header line (only comments or blank lines)")
     counts = {sep: header.count(sep) for sep in (",", ";", "\t")}
     best = max(counts, key=counts.get)
     if counts[best] == 0:
@@ -75,6 +77,9 @@ def _separator(text: str, source: str) -> str:
     return best
 
 
+#: Magnitudes beyond these are not a vehicle trajectory (and overflow the metrics).
+PLAUSIBLE = {"time_s": 1e7, "X_m": 1e7, "Y_m": 1e7}
+PLAUSIBLE_DEFAULT = 1e6
 BOOLEAN_WORDS = {"true": True, "false": False, "1": True, "0": False, "1.0": True, "0.0": False}
 OBSTACLE_COLUMN = re.compile(r"obs(\d+)_(x_m|y_m|radius_m|visible)")
 
@@ -114,6 +119,13 @@ def load_trajectory(path: Path | str, columns: dict[str, str] | None = None,
     if not text.strip():
         raise TrajectoryFileError(f"{source}: the file is empty")
     sep = _separator(text, source)
+    header = next(line for line in text.splitlines() if line.strip()
+                  and not line.lstrip().startswith("#"))
+    names = [n.strip().strip('"') for n in header.split(sep)]
+    repeated = sorted({n for n in names if names.count(n) > 1})
+    if repeated:
+        raise TrajectoryFileError(f"{source}: column(s) {repeated} appear more than once in the "
+                                  "header")
     try:
         frame = pd.read_csv(io.StringIO(text), sep=sep, comment="#", skipinitialspace=True)
     except pd.errors.EmptyDataError:
@@ -169,6 +181,13 @@ def load_trajectory(path: Path | str, columns: dict[str, str] | None = None,
         if bad.any():
             row = int(np.argmax(bad.to_numpy()))
             raise _bad_cell(source, column, row, raw.iloc[row])
+        limit = PLAUSIBLE.get(column, PLAUSIBLE_DEFAULT)
+        outside = values.abs() > limit
+        if outside.any():
+            row = int(np.argmax(outside.to_numpy()))
+            raise TrajectoryFileError(f"{source}: column {column!r}, data row {row + 1}: "
+                                      f"{raw.iloc[row]!r} is outside the plausible range "
+                                      f"[-{limit:g}, {limit:g}]")
         frame[column] = values
     for j in obstacle_ids:
         radius = frame[f"obs{j}_radius_m"]
@@ -182,8 +201,9 @@ def load_trajectory(path: Path | str, columns: dict[str, str] | None = None,
             bad = ~words.isin(list(BOOLEAN_WORDS))
             if bad.any():
                 row = int(np.argmax(bad.to_numpy()))
+                cell = frame[column].iloc[row]
                 raise TrajectoryFileError(f"{source}: column {column!r}, data row {row + 1}: "
-                                          f"{frame[column].iloc[row]!r} is not a boolean "
+                                          f"{'' if pd.isna(cell) else cell!r} is not a boolean "
                                           "(allowed: true, false, 1, 0)")
             frame[column] = words.map(BOOLEAN_WORDS).astype(bool)
         else:
