@@ -222,7 +222,7 @@ def family_distribution_figure(tables: dict[str, pd.DataFrame], metrics: list[st
     return fig
 
 
-SWEEP_METRICS = ("reaction_delay_s", "lateral_jerk_rms_mps3", "repulsive_impulse_far_share",
+SWEEP_METRICS = ("reaction_delay_s", "lateral_jerk_rms_mps3", "repulsion_unneeded_share",
                  "recovery_time_s", "oscillation_count", "min_clearance_m")
 
 

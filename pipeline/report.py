@@ -616,13 +616,15 @@ def _sweep_section(sweep_dir: Path, fig_dir: Path, table_dir: Path) -> dict:
     keys = json.loads((sweep_dir / "swept_keys.json").read_text())
     swept = keys["swept_keys"]
     name = sweep_dir.name
-    shown = [k for k in swept if k in summary] + [c for c in ("method", "kind", "collisions",
+    # the claims' primary metrics and safety; the full table is summary.csv
+    shown = [k for k in swept if k in summary] + [c for c in ("method", "kind", "status",
+                                                              "collisions",
                                                               "reaction_delay_s",
                                                               "lateral_jerk_rms_mps3",
-                                                              "repulsive_impulse_far_share",
+                                                              "repulsion_unneeded_share",
                                                               "recovery_time_s",
                                                               "oscillation_count",
-                                                              "min_clearance_m")
+                                                              "min_clearance_m", "reason")
                                                   if c in summary and c not in swept]
     table = summary[shown]
     table.to_csv(table_dir / f"sweep_{name}_summary.csv", index=False)
