@@ -12,7 +12,6 @@ swept value. Figures of metric versus parameter land in ``figures/``. A Hydra ca
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 from dataclasses import dataclass
 from pathlib import Path

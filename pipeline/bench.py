@@ -75,23 +75,14 @@ def step_inputs(cfg, n_obstacles: int, n_steps: int, seed: int = 0) -> list:
     return out
 
 
-def _floor_solver(qp_map, max_iter: int):
-    """A kept Clarabel solver on a compiled map's data: the floor every backend is held to."""
-    import clarabel
-
-    settings = clarabel.DefaultSettings()
-    settings.verbose = False
-    settings.presolve_enable = False
-    settings.max_iter = max_iter
-    return settings
-
-
 def floor_times(qp_map, thetas: list, max_iter: int) -> tuple[np.ndarray, list]:
     """Wall time of ``update + solve`` of a kept Clarabel solver for each parameter vector
     (the data are computed outside the timed region), and the solutions."""
     import clarabel
 
-    settings = _floor_solver(qp_map, max_iter)
+    from pipeline.controller.qp import clarabel_settings
+
+    settings = clarabel_settings(max_iter)
     solver = None
     times, solutions = [], []
     for theta in thetas:

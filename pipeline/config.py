@@ -774,12 +774,6 @@ def register_configs() -> None:
     store.store(group="planner", name="planner_schema", node=PlannerConfig)
     store.store(group="controller", name="controller_schema", node=ControllerConfig)
     store.store(group="scenario", name="scenario_schema", node=ScenarioConfig)
-    try:
-        from pipeline.slurm import RobustSlurmConf
-    except ImportError:  # hydra-submitit-launcher not installed: no SLURM launcher
-        return
-    store.store(group="hydra/launcher", name="robust_slurm", node=RobustSlurmConf,
-                provider="pipeline")
 
 
 def to_experiment_config(cfg: Any) -> ExperimentConfig:

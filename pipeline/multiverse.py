@@ -272,18 +272,12 @@ def run_simulations(design: pd.DataFrame, space: Space, out_dir: Path, compose,
 def _run_on_slurm(todo: list, launcher: dict, out_dir: Path, log) -> None:
     """Submit the family runs as one SLURM array and wait (bounded, see pipeline.slurm)."""
     from pipeline.slurm import (IncompleteSweepError, executor_for, resume_command,
-                                wait_for_tasks)
+                                wait_for_tasks, wait_policy)
 
     executor = executor_for(launcher, out_dir / ".submitit" / "%j")
     jobs = executor.map_array(_family_task, [c for c, _ in todo], [str(f) for _, f in todo])
     log(f"submitted {len(jobs)} family runs to SLURM (array {jobs[0].job_id.split('_')[0]})")
-    poll = float(launcher.get("poll_s") or 5.0)
-    lost = float(launcher.get("lost_after_s") or 30.0)
-    wait = launcher.get("max_wait_min")
-    timeouts = int(launcher.get("max_num_timeout") or 0) + 1
-    max_wait = 60.0 * (float(wait) if wait is not None
-                       else float(launcher.get("timeout_min") or 60) * timeouts + 10.0)
-    _, failed = wait_for_tasks(jobs, poll, lost, max_wait)
+    _, failed = wait_for_tasks(jobs, *wait_policy(launcher))
     if failed:
         lines = [f"error: {len(failed)} of {len(jobs)} family runs did not finish:"]
         lines += [f"  {todo[i][1]}: {reason}" for i, reason in sorted(failed.items())]
@@ -297,18 +291,17 @@ def family_table(folder: Path, metrics: MetricsConfig, out_dir: Path) -> pd.Data
     other metric settings (cached)."""
     import yaml
 
-    from pipeline.config import ExperimentConfig  # noqa: F401 - for the type of the context
     from pipeline.metrics import compute_metrics
 
     table = pd.read_csv(folder / "family_metrics.csv")
     first = folder / "member_0000" / "config.yaml"
-    run_metrics = yaml.safe_load(first.read_text())["metrics"] if first.is_file() else {}
-    if run_metrics == dataclasses.asdict(metrics):
+    member_config = yaml.safe_load(first.read_text()) if first.is_file() else {}
+    if member_config.get("metrics") == dataclasses.asdict(metrics):
         return table
     cached = out_dir / "rescored" / f"{folder.parent.name}_{folder.name}_{_metrics_hash(metrics)}.csv"
     if cached.is_file():
         return pd.read_csv(cached)
-    context = _context(yaml.safe_load(first.read_text()))
+    context = _context(member_config)
     rows = []
     for member in sorted(folder.glob("member_*")):
         trajectory = pd.read_csv(member / "trajectory.csv")
@@ -519,8 +512,10 @@ def _composer(extra: list[str]):
     from omegaconf import OmegaConf
 
     from pipeline.config import register_configs, to_experiment_config
+    from pipeline.slurm import register_launcher
 
     register_configs()
+    register_launcher()
     run_overrides = [o for o in extra if not o.startswith(("hydra/", "hydra."))]
     launcher = None
     if any(o.startswith("hydra/launcher=slurm") for o in extra):

@@ -217,8 +217,6 @@ def load_runs(run_root: Path, skipped: list[Skipped] | None = None
     for family in families:
         by_method.setdefault(family.info.get("method", ""), []).append(family)
     for method, group in by_method.items():
-        import yaml
-
         configs = []
         for family in group:
             member = family.folder / "member_0000" / "config.yaml"

@@ -16,7 +16,7 @@ from pathlib import Path
 import hydra
 import numpy as np
 import pandas as pd
-from omegaconf import DictConfig, OmegaConf
+from omegaconf import DictConfig
 
 from pipeline.config import (ConfigError, ExperimentConfig, register_configs,
                              to_experiment_config)
@@ -27,12 +27,14 @@ from pipeline.runs import (NonFiniteResultError, check, clean_leftovers, write_f
                            write_run)
 from pipeline.scenario import build_scenario, family_members
 from pipeline.simulate import simulate
+from pipeline.slurm import register_launcher
 
 log = logging.getLogger(__name__)
 CONF_DIR = Path(__file__).resolve().parent.parent / "conf"
 
 # Hydra composes configs in worker processes too (joblib, submitit), which import this module
 register_configs()
+register_launcher()
 
 
 @dataclass(frozen=True)

@@ -54,6 +54,15 @@ class RobustSlurmConf(SlurmQueueConf):
     max_wait_min: Optional[float] = None
 
 
+def register_launcher() -> None:
+    """Register ``hydra/launcher=robust_slurm`` (the schema of ``conf/hydra/launcher/slurm``)
+    in Hydra's ConfigStore; entry points call it beside ``register_configs``."""
+    from hydra.core.config_store import ConfigStore
+
+    ConfigStore.instance().store(group="hydra/launcher", name="robust_slurm",
+                                 node=RobustSlurmConf, provider="pipeline")
+
+
 class SweepConfigError(ConfigError):
     """A job of a sweep has an invalid configuration (nothing was submitted)."""
 
@@ -144,6 +153,18 @@ def wait_for_tasks(jobs: list, poll_s: float, lost_after_s: float, max_wait_s: f
     return results, failed
 
 
+def wait_policy(params: dict) -> tuple[float, float, float]:
+    """``poll_s``, ``lost_after_s`` and the longest wait in seconds (``max_wait_min``, default
+    ``timeout_min`` x (``max_num_timeout`` + 1) + 10 minutes) of launcher settings."""
+    poll = float(params.get("poll_s") or 5.0)
+    lost = float(params.get("lost_after_s") or 30.0)
+    wait = params.get("max_wait_min")
+    timeouts = int(params.get("max_num_timeout") or 0) + 1
+    minutes = float(wait) if wait is not None \
+        else float(params.get("timeout_min") or 60) * timeouts + 10.0
+    return poll, lost, 60.0 * minutes
+
+
 def resume_command() -> str:
     """The command line of this process, to rerun it."""
     executable = os.path.relpath(sys.executable) if sys.executable.startswith(os.getcwd()) \
@@ -174,19 +195,15 @@ class RobustSlurmLauncherBase(SlurmLauncher):
     """See the module docstring. Parameters are those of :class:`RobustSlurmConf`."""
 
     def __init__(self, **params: Any) -> None:
-        self.poll_s = float(params.pop("poll_s", 5.0))
-        self.lost_after_s = float(params.pop("lost_after_s", 30.0))
-        max_wait = params.pop("max_wait_min", None)
         timeout = params.get("timeout_min")
         if timeout is not None and float(timeout) < 3:
             raise SweepConfigError(
                 f"config error: hydra.launcher.timeout_min={timeout} is invalid; allowed: >= 3 "
                 "(SLURM signals a task 120 s before its limit: a shorter limit kills it at once)")
+        self.poll_s, self.lost_after_s, self.max_wait_s = wait_policy(params)
+        for key in ("poll_s", "lost_after_s", "max_wait_min"):
+            params.pop(key, None)
         super().__init__(**params)
-        timeouts = int(self.params.get("max_num_timeout") or 0) + 1
-        self.max_wait_s = 60.0 * (float(max_wait) if max_wait is not None
-                                  else float(self.params.get("timeout_min") or 60) * timeouts
-                                  + 10.0)
 
     # --- before submission -------------------------------------------------------------------
     def _prepare(self, job_overrides: Sequence[Sequence[str]], initial_job_idx: int
@@ -236,27 +253,15 @@ class RobustSlurmLauncherBase(SlurmLauncher):
     # --- submission and the bounded wait -------------------------------------------------------
     def launch(self, job_overrides: Sequence[Sequence[str]], initial_job_idx: int
                ) -> Sequence[Any]:
-        import submitit
         from hydra.core.singleton import Singleton
         from hydra.core.utils import filter_overrides
-        from hydra_plugins.hydra_submitit_launcher.config import BaseQueueConf
-        from omegaconf import OmegaConf
 
         to_submit, done = self._prepare(job_overrides, initial_job_idx)
         log.info("submitting %d of %d jobs (%d complete already, not resubmitted)",
                  len(to_submit), len(job_overrides), len(done))
         if not to_submit:
             return done
-        params = dict(self.params)
-        init_params = {"folder": params["submitit_folder"]}
-        specific = {"max_num_timeout"}
-        init_params.update(**{f"{self._EXECUTOR}_{k}": v for k, v in params.items()
-                              if k in specific})
-        executor = submitit.AutoExecutor(cluster=self._EXECUTOR, **init_params)
-        base = set(OmegaConf.structured(BaseQueueConf).keys())
-        executor.update_parameters(**{k if k in base else f"{self._EXECUTOR}_{k}": v
-                                      for k, v in params.items()
-                                      if k not in specific | {"submitit_folder"}})
+        executor = executor_for(self.params, Path(str(self.params["submitit_folder"])))
         sweep_dir = Path(str(self.config.hydra.sweep.dir))
         sweep_dir.mkdir(parents=True, exist_ok=True)
         job_params = []

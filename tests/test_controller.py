@@ -202,7 +202,6 @@ def test_solver_exception_is_a_fallback_not_a_crash(make_config, monkeypatch, ba
 
 def test_backends_agree_in_closed_loop_and_never_recompile(make_config, tmp_path):
     """The clarabel_direct backend solves the same QP as CVXPY: the closed loops coincide."""
-    from pipeline.run import run_experiment
     from pipeline.scenario import build_scenario
     from pipeline.simulate import simulate
 

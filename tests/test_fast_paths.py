@@ -13,7 +13,6 @@ import pytest
 from scipy.integrate import solve_ivp
 
 from pipeline.controller import KinematicLtvMpc, LateralMpc, QpCache
-from pipeline.controller.kinematic import KinematicQpStructure, build_kinematic_problem
 from pipeline.controller.lateral import LateralQpStructure, build_lateral_problem
 from pipeline.controller.qp import compile_affine_map
 from pipeline.model import (kinematic_derivative, kinematic_plant_step, plant_derivative,

@@ -3,8 +3,6 @@ reports/reference/ (the default `make reproduce`); the full check with the famil
 
 from __future__ import annotations
 
-import subprocess
-import sys
 from pathlib import Path
 
 import pytest

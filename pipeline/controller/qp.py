@@ -229,6 +229,18 @@ def _check_map(qp_map: AffineQpMap, prog, parameters: list) -> None:
         raise RuntimeError(f"parameter-to-data map disagrees with CVXPY's ({error:.3g})")
 
 
+def clarabel_settings(max_iter: int):
+    """Clarabel's settings for a kept solver: quiet, presolve off (it would forbid in-place data
+    updates), the iteration limit."""
+    import clarabel
+
+    settings = clarabel.DefaultSettings()
+    settings.verbose = False
+    settings.presolve_enable = False
+    settings.max_iter = int(max_iter)
+    return settings
+
+
 class DirectQp:
     """Backend ``clarabel_direct``: a kept Clarabel solver fed by an :class:`AffineQpMap`.
 
@@ -243,15 +255,6 @@ class DirectQp:
         self.map = qp_map
         self.max_iter = int(max_iter)
         self._solver = None
-
-    def _settings(self):
-        import clarabel
-
-        settings = clarabel.DefaultSettings()
-        settings.verbose = False
-        settings.presolve_enable = False  # keeps in-place data updates allowed
-        settings.max_iter = self.max_iter
-        return settings
 
     def solve(self, theta: np.ndarray) -> QpSolution:
         """Solve at ``theta``; never raises on solver trouble (the status says it)."""
@@ -268,7 +271,7 @@ class DirectQp:
         try:
             if self._solver is None:
                 self._solver = clarabel.DefaultSolver(m.P, q, m.matrix_A(a), b, m.cones(),
-                                                      self._settings())
+                                                      clarabel_settings(self.max_iter))
             else:
                 self._solver.update(q=q, A=a, b=b)
             solution = self._solver.solve()
