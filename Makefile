@@ -56,7 +56,7 @@ bench: $(STAMP)  ## benchmark the controller step vs the Clarabel floor and the 
 	$(PY) -m pipeline.bench --out reports/bench
 	$(PY) benchmarks/bench_aggregate.py 10000
 
-verify: reproduce  ## rerun `make reproduce` and compare with reports/reference/ (tolerances in pipeline/verify.py)
+verify: reproduce  ## rerun `make reproduce` and compare with reports/reference/ (tolerances in pipeline/studies/verify.py)
 	$(PY) -m pipeline.verify $(RUNS) reports/reference
 
 test: $(STAMP)  ## run the test suite (excludes tests marked slow or slurm)

@@ -13,8 +13,8 @@ from pathlib import Path
 
 import pandas as pd
 
-from pipeline.aggregate import aggregate
-from pipeline.runs import write_run
+from pipeline.studies.aggregate import aggregate
+from pipeline.store.runs import write_run
 
 
 def make_jobs(root: Path, n: int) -> None:

@@ -5,10 +5,10 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 
-from pipeline.ablation import (REVISIONS, ablation_effects, attribution_sentences,
+from pipeline.studies.ablation import (REVISIONS, ablation_effects, attribution_sentences,
                                interpretation_flips)
-from pipeline.claims import CLAIMS
-from pipeline.runs import write_family
+from pipeline.analysis.claims import CLAIMS
+from pipeline.store.runs import write_family
 from pipeline.config import ClaimsConfig
 
 CFG = ClaimsConfig(n_resamples=199)

@@ -8,7 +8,7 @@ import pandas as pd
 import pytest
 from scipy import stats
 
-from pipeline.claims import (ALL_CLAIMS, CLAIMS, SAFETY, claims_table, compare, decide,
+from pipeline.analysis.claims import (ALL_CLAIMS, CLAIMS, SAFETY, claims_table, compare, decide,
                              family_ledger, hodges_lehmann, holm, probability_of_improvement,
                              single_scenario_outcome)
 from pipeline.config import ClaimsConfig
@@ -79,7 +79,7 @@ def test_hodges_lehmann_equals_the_walsh_median_by_brute_force():
 
 
 def test_fast_hodges_lehmann_on_resamples_equals_the_direct_one():
-    from pipeline.claims import hodges_lehmann_on
+    from pipeline.analysis.claims import hodges_lehmann_on
 
     rng = np.random.default_rng(8)
     sample = np.round(rng.normal(size=57), 1)  # ties, as metrics on a lattice have

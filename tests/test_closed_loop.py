@@ -8,7 +8,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from pipeline.run import run_experiment
+from pipeline.studies.experiment import run_experiment
 
 STATE_COLUMNS = ["time_s", "X_m", "Y_m", "psi_rad", "vx_mps", "vy_mps", "r_rad_s", "delta_rad"]
 

@@ -8,10 +8,10 @@ import numpy as np
 import pytest
 from scipy.optimize import minimize
 
-from pipeline.controller import (LateralMpc, MpcInputs, QpCache, blocking_matrix,
+from pipeline.loop.controller import (LateralMpc, MpcInputs, QpCache, blocking_matrix,
                                  collision_halfplanes)
-from pipeline.controller.lateral import LateralQpStructure, build_lateral_problem
-from pipeline.model import build_lateral_model
+from pipeline.loop.controller.lateral import LateralQpStructure, build_lateral_problem
+from pipeline.loop.model import build_lateral_model
 
 
 def condensed(model, cfg, x0, y_ref, psi_ref):
@@ -202,8 +202,8 @@ def test_solver_exception_is_a_fallback_not_a_crash(make_config, monkeypatch, ba
 
 def test_backends_agree_in_closed_loop_and_never_recompile(make_config, tmp_path):
     """The clarabel_direct backend solves the same QP as CVXPY: the closed loops coincide."""
-    from pipeline.scenario import build_scenario
-    from pipeline.simulate import simulate
+    from pipeline.loop.scenario import build_scenario
+    from pipeline.loop.simulate import simulate
 
     results = {}
     for backend in ("cvxpy", "clarabel_direct"):

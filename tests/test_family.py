@@ -7,10 +7,10 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from pipeline.claims import CLAIMS, OUTCOMES, family_ledger, outcome_counts, paired_differences
+from pipeline.analysis.claims import CLAIMS, OUTCOMES, family_ledger, outcome_counts, paired_differences
 from pipeline.config import ClaimsConfig
-from pipeline.run import run_family
-from pipeline.scenario import draw_family_member, family_members
+from pipeline.studies.experiment import run_family
+from pipeline.loop.scenario import draw_family_member, family_members
 
 
 def test_member_depends_only_on_seed_and_index(make_config):

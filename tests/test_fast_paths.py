@@ -12,13 +12,13 @@ import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
 
-from pipeline.controller import KinematicLtvMpc, LateralMpc, QpCache
-from pipeline.controller.lateral import LateralQpStructure, build_lateral_problem
-from pipeline.controller.qp import compile_affine_map
-from pipeline.model import (kinematic_derivative, kinematic_plant_step, plant_derivative,
+from pipeline.loop.controller import KinematicLtvMpc, LateralMpc, QpCache
+from pipeline.loop.controller.lateral import LateralQpStructure, build_lateral_problem
+from pipeline.loop.controller.qp import compile_affine_map
+from pipeline.loop.model import (kinematic_derivative, kinematic_plant_step, plant_derivative,
                             step_plant)
-from pipeline.planner import apf_rollout, apf_step
-from pipeline.scenario import ObstacleSnapshot
+from pipeline.loop.planner import apf_rollout, apf_step
+from pipeline.loop.scenario import ObstacleSnapshot
 
 
 def reference_rollout(position, goal, snap, params, horizon, ts, velocity):
@@ -136,8 +136,8 @@ def test_kinematic_backends_agree(make_config):
 def test_unused_obstacle_slots_do_not_change_the_solution(make_config):
     """One compiled problem serves 1-3 obstacles: a run with one obstacle on a 3-slot problem
     equals the same run on a 1-slot problem."""
-    from pipeline.scenario import build_scenario
-    from pipeline.simulate import simulate
+    from pipeline.loop.scenario import build_scenario
+    from pipeline.loop.simulate import simulate
 
     runs = {}
     for slots in (1, 3):
@@ -150,7 +150,7 @@ def test_unused_obstacle_slots_do_not_change_the_solution(make_config):
 
 
 def test_family_compiles_once_on_two_workers(make_config, tmp_path):
-    from pipeline.run import run_family
+    from pipeline.studies.experiment import run_family
 
     cfg = make_config(["method=improved", "scenario=family", "scenario.family.size=6",
                        "scenario.family.n_jobs=2"])

@@ -7,9 +7,9 @@ import numpy as np
 import pytest
 from scipy.optimize import minimize
 
-from pipeline.controller import KinematicLtvMpc, blocking_matrix
-from pipeline.model import kinematic_euler_step, kinematic_jacobians
-from pipeline.run import run_experiment
+from pipeline.loop.controller import KinematicLtvMpc, blocking_matrix
+from pipeline.loop.model import kinematic_euler_step, kinematic_jacobians
+from pipeline.studies.experiment import run_experiment
 
 L, TS = 2.5, 0.1
 

@@ -9,7 +9,7 @@ import pandas as pd
 import pytest
 
 from pipeline.config import MetricsConfig
-from pipeline.metrics import (TrajectoryContext, compute_metrics, settling_time, sign_changes)
+from pipeline.analysis.metrics import (TrajectoryContext, compute_metrics, settling_time, sign_changes)
 
 CTX = TrajectoryContext(start_m=(0.0, 0.0), goal_m=(30.0, 0.0), vehicle_radius_m=1.0)
 

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from scipy.linalg import expm
 
-from pipeline.model import build_lateral_model, lateral_matrices, plant_derivative
+from pipeline.loop.model import build_lateral_model, lateral_matrices, plant_derivative
 
 
 @pytest.mark.parametrize("speed_mps", [1.5, 3.0, 12.0])

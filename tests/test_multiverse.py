@@ -9,7 +9,7 @@ import pandas as pd
 import pytest
 
 from pipeline.config import ConfigError
-from pipeline.multiverse import (CONF_DIR, Dimension, Space, build_design, load_space,
+from pipeline.studies.multiverse import (CONF_DIR, Dimension, Space, build_design, load_space,
                                  robustness, simulation_overrides)
 
 SPACE = Space("planted", (
@@ -61,7 +61,7 @@ def test_a_verdict_that_flips_under_one_dimension_is_attributed_to_it():
 
 
 def test_quick_space_end_to_end_and_resume(tmp_path):
-    from pipeline.multiverse import main
+    from pipeline.studies.multiverse import main
 
     out = tmp_path / "mv"
     assert main(["--space", "quick", "--out", str(out), "scenario.family.n_jobs=1"]) == 0
@@ -84,8 +84,8 @@ def test_quick_space_end_to_end_and_resume(tmp_path):
     assert {p: p.stat().st_mtime_ns for p in folders} == stamps  # nothing re-simulated
     pd.testing.assert_frame_equal(pd.read_csv(out / "specifications.csv"), specs)
     # the report built after it leads with robustness and has a curve per claim
-    from pipeline.report import build_report
-    from pipeline.run import run_experiment
+    from pipeline.reporting.page import build_report
+    from pipeline.studies.experiment import run_experiment
     from hydra import compose, initialize_config_dir
 
     from pipeline.config import to_experiment_config
@@ -116,7 +116,7 @@ def test_bad_space_files_are_one_line_errors(tmp_path, text, match):
 
 
 def test_unknown_space_exits_2(capsys):
-    from pipeline.multiverse import main
+    from pipeline.studies.multiverse import main
 
     assert main(["--space", "no_such_space"]) == 2
     assert "conf/multiverse" in capsys.readouterr().err

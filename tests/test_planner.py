@@ -7,9 +7,9 @@ import dataclasses
 import numpy as np
 import pytest
 
-from pipeline.planner import (adaptive_coefficient, apf_rollout, apf_step, plan_speed,
+from pipeline.loop.planner import (adaptive_coefficient, apf_rollout, apf_step, plan_speed,
                               repulsive_force)
-from pipeline.scenario import ObstacleSnapshot
+from pipeline.loop.scenario import ObstacleSnapshot
 
 GOAL = np.array([30.0, 0.0])
 

@@ -10,8 +10,8 @@ from hypothesis import HealthCheck, assume, given, settings
 from hypothesis import strategies as st
 
 from pipeline.config import MetricsConfig, PlannerConfig
-from pipeline.metrics import TrajectoryContext, clearance_series, compute_metrics
-from pipeline.planner import apf_step, repulsive_force
+from pipeline.analysis.metrics import TrajectoryContext, clearance_series, compute_metrics
+from pipeline.loop.planner import apf_step, repulsive_force
 
 coordinate = st.floats(min_value=-1e3, max_value=1e3, allow_nan=False, allow_infinity=False)
 point = st.tuples(coordinate, coordinate).map(np.array)

@@ -7,8 +7,8 @@ from pathlib import Path
 
 import pytest
 
-from pipeline.run import run_experiment, run_family
-from pipeline.verify import verify
+from pipeline.studies.experiment import run_experiment, run_family
+from pipeline.studies.verify import verify
 
 REFERENCE = Path(__file__).resolve().parent.parent / "reports" / "reference"
 METHODS = ("baseline", "baseline_matched", "improved", "velocity_aware", "mpc_no_apf",

@@ -14,12 +14,12 @@ import pandas as pd
 import pytest
 
 from pipeline.config import INTERPRETATION_REGISTER
-from pipeline.controller import (LateralMpc, Observation, blocking_matrix, collision_halfplanes,
+from pipeline.loop.controller import (LateralMpc, Observation, blocking_matrix, collision_halfplanes,
                                  force_heading_reference, lateral_reference)
-from pipeline.controller.kinematic import KinematicLtvMpc
-from pipeline.model import build_lateral_model, step_plant
-from pipeline.planner import adaptive_coefficient, apf_rollout, apf_step, repulsive_force
-from pipeline.scenario import LineFrame, ObstacleSnapshot
+from pipeline.loop.controller.kinematic import KinematicLtvMpc
+from pipeline.loop.model import build_lateral_model, step_plant
+from pipeline.loop.planner import adaptive_coefficient, apf_rollout, apf_step, repulsive_force
+from pipeline.loop.scenario import LineFrame, ObstacleSnapshot
 
 GOAL = np.array([30.0, 0.0])
 
@@ -214,8 +214,8 @@ def test_plant_substeps_and_run_length(make_config, tmp_path):
     state = np.array([0.0, 0.0, 0.0, 3.0, 0.3, 0.5, 0.2])
     assert not np.allclose(step_plant(state, 1.0, 3.0, cfg.vehicle, 0.1, 1),
                            step_plant(state, 1.0, 3.0, cfg.vehicle, 0.1, 10), atol=1e-6)
-    from pipeline.scenario import build_scenario
-    from pipeline.simulate import simulate
+    from pipeline.loop.scenario import build_scenario
+    from pipeline.loop.simulate import simulate
 
     short = make_config(["scenario.n_steps=20"])
     assert len(simulate(short, build_scenario(short.scenario)).trajectory) == 21
@@ -223,7 +223,7 @@ def test_plant_substeps_and_run_length(make_config, tmp_path):
 
 def test_threat_margin_and_horizon_decide_what_threatens():
     from pipeline.config import MetricsConfig
-    from pipeline.metrics import TrajectoryContext, compute_metrics
+    from pipeline.analysis.metrics import TrajectoryContext, compute_metrics
     from tests.test_metrics import synthetic
 
     t = np.round(np.arange(0.0, 8.0 + 1e-9, 0.1), 10)
@@ -241,7 +241,7 @@ def test_threat_margin_and_horizon_decide_what_threatens():
 
 def test_smoothness_window_selects_the_primary_jerk():
     from pipeline.config import MetricsConfig
-    from pipeline.metrics import TrajectoryContext, compute_metrics
+    from pipeline.analysis.metrics import TrajectoryContext, compute_metrics
     from tests.test_metrics import out_and_back
 
     frame = out_and_back(0.4)
@@ -258,7 +258,7 @@ def test_attribution_samples_decide_between_a_narrow_gap_and_none():
     swerve clears it, so the count of samples is what the check depends on; with the default
     nine it is avoidable too, and an obstacle appearing on the vehicle never is."""
     from pipeline.config import MetricsConfig
-    from pipeline.metrics import TrajectoryContext, compute_metrics
+    from pipeline.analysis.metrics import TrajectoryContext, compute_metrics
     from tests.test_metrics import synthetic
 
     t = np.round(np.arange(0.0, 8.0 + 1e-9, 0.1), 10)
@@ -274,7 +274,7 @@ def test_attribution_samples_decide_between_a_narrow_gap_and_none():
 
 
 def test_estimator_test_and_margins_change_the_outcome():
-    from pipeline.claims import CLAIMS, compare, decide
+    from pipeline.analysis.claims import CLAIMS, compare, decide
     from pipeline.config import ClaimsConfig
 
     rng = np.random.default_rng(0)
@@ -299,7 +299,7 @@ def test_estimator_test_and_margins_change_the_outcome():
 
 def test_comparable_clearance_marks_the_kinematic_comparison(tmp_path, make_config):
     from pipeline.config import ClaimsConfig
-    from pipeline.report import _track_section
+    from pipeline.reporting.page import _track_section
 
     runs = []
     for method, clearance in (("baseline", 4.5), ("improved", 0.5)):

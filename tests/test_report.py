@@ -5,8 +5,8 @@ from __future__ import annotations
 import re
 
 from pipeline.config import INTERPRETATION_REGISTER
-from pipeline.report import build_report, main as report_main
-from pipeline.run import run_experiment
+from pipeline.reporting.page import build_report, main as report_main
+from pipeline.studies.experiment import run_experiment
 
 
 def test_report_from_runs(tmp_path, make_config):

@@ -12,8 +12,8 @@ from pathlib import Path
 
 import pytest
 
-from pipeline.report import build_report
-from pipeline.run import run_experiment, run_family
+from pipeline.reporting.page import build_report
+from pipeline.studies.experiment import run_experiment, run_family
 
 CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")
 CHROMIUM_ARGS = ["--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
@@ -36,7 +36,7 @@ def report(tmp_path_factory, make_config):
                        root / "kinematic" / method)
         run_family(make_config([f"method={method}", "scenario=family", "scenario.family.size=6"]),
                    root / "family" / method, progress=False)
-    from pipeline.multiverse import main as multiverse_main
+    from pipeline.studies.multiverse import main as multiverse_main
 
     assert multiverse_main(["--space", "quick", "--out", str(root / "multiverse")]) == 0
     return build_report(root, tmp_path_factory.mktemp("report"), "pytest")

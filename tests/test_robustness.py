@@ -14,18 +14,18 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from pipeline.controller import LateralMpc, MpcInputs, QpSolution
-from pipeline.model import build_lateral_model
-from pipeline.planner import apf_rollout
-from pipeline.run import run_experiment
-from pipeline.scenario import ObstacleSnapshot
+from pipeline.loop.controller import LateralMpc, MpcInputs, QpSolution
+from pipeline.loop.model import build_lateral_model
+from pipeline.loop.planner import apf_rollout
+from pipeline.studies.experiment import run_experiment
+from pipeline.loop.scenario import ObstacleSnapshot
 
 
 def test_injected_solver_faults_fall_back_and_the_run_completes(make_config, tmp_path,
                                                                monkeypatch):
     """Steps 35-37 infeasible, 45 raising, 55 at the iteration limit: every one falls back,
     is logged in trajectory.csv and counted in metrics.json, and the run still ends at the goal."""
-    from pipeline.controller.qp import CvxpyQp
+    from pipeline.loop.controller.qp import CvxpyQp
 
     original = CvxpyQp.solve
     calls = {"n": 0}

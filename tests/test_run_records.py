@@ -11,10 +11,10 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from pipeline.report import build_report
-from pipeline.report import main as report_main
-from pipeline.run import run_experiment, run_family
-from pipeline.runs import (MANIFEST, NonFiniteResultError, RunFolderError, check, discover,
+from pipeline.reporting.page import build_report
+from pipeline.reporting.page import main as report_main
+from pipeline.studies.experiment import run_experiment, run_family
+from pipeline.store.runs import (MANIFEST, NonFiniteResultError, RunFolderError, check, discover,
                            read_run, write_run)
 
 
@@ -139,7 +139,7 @@ def sweep_with_jobs(tmp_path, make_config):
 
 def test_aggregate_lists_failed_and_stale_jobs_next_to_the_good_ones(tmp_path, make_config,
                                                                      capsys):
-    from pipeline.aggregate import aggregate
+    from pipeline.studies.aggregate import aggregate
 
     sweep = sweep_with_jobs(tmp_path, make_config)
     # a job of an earlier sweep into the same folder, and a failed (incomplete) job
@@ -166,7 +166,7 @@ def test_aggregate_lists_failed_and_stale_jobs_next_to_the_good_ones(tmp_path, m
 
 
 def test_nested_job_folders_are_found(tmp_path, make_config):
-    from pipeline.aggregate import aggregate
+    from pipeline.studies.aggregate import aggregate
 
     sweep = sweep_with_jobs(tmp_path, make_config)
     nested = sweep / "deeper" / "method=improved"
@@ -177,7 +177,7 @@ def test_nested_job_folders_are_found(tmp_path, make_config):
 
 
 def test_verify_and_report_survive_every_broken_folder(paper, capsys):
-    from pipeline.verify import main as verify_main
+    from pipeline.studies.verify import main as verify_main
 
     (paper / "paper" / "improved" / "metrics.json").write_text("{")
     broken = paper / "paper" / "weird"

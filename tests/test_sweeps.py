@@ -10,7 +10,7 @@ import sys
 import pandas as pd
 import pytest
 
-from pipeline.aggregate import aggregate
+from pipeline.studies.aggregate import aggregate
 
 SWEEP = ["method=baseline,improved", "scenario.obstacles.0.vy_mps=-0.4,-0.8"]
 

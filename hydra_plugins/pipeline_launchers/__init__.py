@@ -1,8 +1,8 @@
 """Hydra discovers launchers in the ``hydra_plugins`` namespace (and only there): this defines
-the project's SLURM launcher there; the implementation is :mod:`pipeline.slurm`."""
+the project's SLURM launcher there; the implementation is :mod:`pipeline.studies.slurm`."""
 
-import pipeline.slurm as _impl
+import pipeline.studies.slurm as _impl
 
 
 class RobustSlurmLauncher(_impl.RobustSlurmLauncherBase):
-    """``hydra/launcher=slurm``: see :mod:`pipeline.slurm`."""
+    """``hydra/launcher=slurm``: see :mod:`pipeline.studies.slurm`."""

@@ -21,12 +21,12 @@ from dataclasses import dataclass
 import cvxpy as cp
 import numpy as np
 
-from pipeline.config import ControllerConfig, ModelConfig, VehicleConfig
-from pipeline.controller.base import ControlStep, Observation, PlanFallback
-from pipeline.controller.qp import QpCache, QpSolution, compiled_backend
-from pipeline.controller.references import (collision_halfplanes, force_heading_reference,
+from pipeline.loop.settings import ControllerConfig, ModelConfig, VehicleConfig
+from pipeline.loop.controller.base import ControlStep, Observation, PlanFallback
+from pipeline.loop.controller.qp import QpCache, QpSolution, compiled_backend
+from pipeline.loop.controller.references import (collision_halfplanes, force_heading_reference,
                                             lateral_reference)
-from pipeline.model import LateralModel, LateralModelCache
+from pipeline.loop.model import LateralModel, LateralModelCache
 
 
 @dataclass(frozen=True)

@@ -21,8 +21,8 @@ from math import exp, sqrt
 
 import numpy as np
 
-from pipeline.config import PlannerConfig
-from pipeline.scenario import ObstacleSnapshot
+from pipeline.loop.settings import PlannerConfig
+from pipeline.loop.scenario import ObstacleSnapshot
 
 _TINY = 1e-12
 

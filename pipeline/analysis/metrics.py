@@ -51,7 +51,7 @@ import control
 import numpy as np
 import pandas as pd
 
-from pipeline.config import MetricsConfig
+from pipeline.analysis.settings import MetricsConfig
 
 
 @dataclass(frozen=True)

@@ -35,7 +35,7 @@ from typing import Any, Optional, Sequence
 from hydra_plugins.hydra_submitit_launcher.config import SlurmQueueConf
 from hydra_plugins.hydra_submitit_launcher.submitit_launcher import SlurmLauncher
 
-from pipeline.config import ConfigError
+from pipeline.errors import ConfigError, IncompleteSweepError, SweepConfigError, describe_config_error
 
 log = logging.getLogger(__name__)
 
@@ -61,21 +61,6 @@ def register_launcher() -> None:
 
     ConfigStore.instance().store(group="hydra/launcher", name="robust_slurm",
                                  node=RobustSlurmConf, provider="pipeline")
-
-
-class SweepConfigError(ConfigError):
-    """A job of a sweep has an invalid configuration (nothing was submitted)."""
-
-    def __init__(self, message: str) -> None:  # noqa: D107 - the message is the whole story
-        ValueError.__init__(self, message)
-        self.key, self.value, self.allowed = "", None, ""
-
-    def __str__(self) -> str:
-        return str(self.args[0])
-
-
-class IncompleteSweepError(RuntimeError):
-    """Some tasks of a sweep did not finish; the message lists them and how to resume."""
 
 
 def _job_folder(sweep_config) -> Path:
@@ -225,8 +210,7 @@ class RobustSlurmLauncherBase(SlurmLauncher):
         from hydra.core.utils import JobReturn, JobStatus, filter_overrides
 
         from pipeline.config import to_experiment_config
-        from pipeline.run import describe_config_error
-        from pipeline.runs import check
+        from pipeline.store.runs import check
 
         for offset, overrides in enumerate(job_overrides):
             idx = initial_job_idx + offset
@@ -285,7 +269,7 @@ class RobustSlurmLauncherBase(SlurmLauncher):
     def _report_incomplete(self, sweep_dir: Path, unfinished: list, total: int) -> None:
         from hydra.core.utils import filter_overrides
 
-        from pipeline.aggregate import aggregate
+        from pipeline.studies.aggregate import aggregate
 
         try:
             aggregate(sweep_dir, progress=False, figures=False)

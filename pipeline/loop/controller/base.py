@@ -12,8 +12,8 @@ from typing import Callable, Protocol
 
 import numpy as np
 
-from pipeline.planner import ApfRollout
-from pipeline.scenario import LineFrame, ObstacleSnapshot
+from pipeline.loop.planner import ApfRollout
+from pipeline.loop.scenario import LineFrame, ObstacleSnapshot
 
 
 @dataclass(frozen=True)

@@ -13,13 +13,13 @@
 
 from __future__ import annotations
 
-from pipeline.config import ExperimentConfig
-from pipeline.controller.base import ControlStep, Controller, Observation, PlanFallback
-from pipeline.controller.kinematic import KinematicLtvMpc
-from pipeline.controller.lateral import LateralMpc, MpcInputs, blocking_matrix
-from pipeline.controller.pursuit import PurePursuit, pure_pursuit_steering_rate
-from pipeline.controller.qp import OPTIMAL_STATUSES, QpCache, QpSolution
-from pipeline.controller.references import (collision_halfplanes, force_heading_reference,
+from pipeline.loop.settings import LoopSettings
+from pipeline.loop.controller.base import ControlStep, Controller, Observation, PlanFallback
+from pipeline.loop.controller.kinematic import KinematicLtvMpc
+from pipeline.loop.controller.lateral import LateralMpc, MpcInputs, blocking_matrix
+from pipeline.loop.controller.pursuit import PurePursuit, pure_pursuit_steering_rate
+from pipeline.loop.controller.qp import OPTIMAL_STATUSES, QpCache, QpSolution
+from pipeline.loop.controller.references import (collision_halfplanes, force_heading_reference,
                                             kinematic_halfplanes, lateral_reference)
 
 __all__ = ["ControlStep", "Controller", "Observation", "PlanFallback", "KinematicLtvMpc",
@@ -29,7 +29,7 @@ __all__ = ["ControlStep", "Controller", "Observation", "PlanFallback", "Kinemati
            "lateral_reference", "make_controller"]
 
 
-def make_controller(cfg: ExperimentConfig, sample_time_s: float,
+def make_controller(cfg: LoopSettings, sample_time_s: float,
                     qp_cache: QpCache | None = None) -> Controller:
     """The controller named by ``cfg.controller.kind``, its QP taken from ``qp_cache``."""
     kind = cfg.controller.kind

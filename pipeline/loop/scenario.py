@@ -10,7 +10,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from pipeline.config import ScenarioConfig
+from pipeline.loop.settings import ScenarioConfig
 
 
 @dataclass(frozen=True)
@@ -169,7 +169,7 @@ def draw_family_member(base: ScenarioConfig, index: int,
     """
     from dataclasses import replace
 
-    from pipeline.config import ObstacleConfig
+    from pipeline.loop.settings import ObstacleConfig
 
     fam = base.family
     rng = np.random.default_rng([fam.seed, index])

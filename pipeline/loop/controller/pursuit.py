@@ -4,10 +4,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from pipeline.config import ControllerConfig, VehicleConfig
-from pipeline.controller.base import ControlStep, Observation
-from pipeline.controller.references import lateral_reference
-from pipeline.model import model_speed_mps
+from pipeline.loop.settings import ControllerConfig, VehicleConfig
+from pipeline.loop.controller.base import ControlStep, Observation
+from pipeline.loop.controller.references import lateral_reference
+from pipeline.loop.model import model_speed_mps
 
 
 def pure_pursuit_steering_rate(path_line_m: np.ndarray, position_line_m: np.ndarray,

@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from pipeline.claims import ALL_CLAIMS, CLAIMS, compare, decide, family_ledger
+from pipeline.analysis.claims import ALL_CLAIMS, CLAIMS, compare, decide, family_ledger
 
 REVISIONS = ("normalize", "step", "beta", "exponential", "step_min")
 REVISION_TEXT = {
@@ -31,7 +31,7 @@ def load_family_jobs(root: Path) -> dict[str, pd.DataFrame]:
     method); untrusted folders are named on stderr and left out."""
     import sys
 
-    from pipeline.runs import RunFolderError, discover, read_family
+    from pipeline.store.runs import RunFolderError, discover, read_family
 
     tables = {}
     found = discover(Path(root))

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from pipeline.config import ControllerConfig, VehicleConfig
+from pipeline.loop.settings import ControllerConfig, VehicleConfig
 
 _NORMAL_EPS_M = 1e-6
 

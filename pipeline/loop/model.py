@@ -19,7 +19,7 @@ from math import atan2, cos, sin, tan, tanh
 import control
 import numpy as np
 
-from pipeline.config import VehicleConfig
+from pipeline.loop.settings import VehicleConfig
 
 GRAVITY_MPS2 = 9.81
 

@@ -15,12 +15,12 @@ from dataclasses import dataclass
 import cvxpy as cp
 import numpy as np
 
-from pipeline.config import ControllerConfig, VehicleConfig
-from pipeline.controller.base import ControlStep, Observation, PlanFallback
-from pipeline.controller.lateral import blocking_matrix
-from pipeline.controller.qp import QpCache, compiled_backend
-from pipeline.controller.references import kinematic_halfplanes
-from pipeline.model import kinematic_euler_step, kinematic_jacobians
+from pipeline.loop.settings import ControllerConfig, VehicleConfig
+from pipeline.loop.controller.base import ControlStep, Observation, PlanFallback
+from pipeline.loop.controller.lateral import blocking_matrix
+from pipeline.loop.controller.qp import QpCache, compiled_backend
+from pipeline.loop.controller.references import kinematic_halfplanes
+from pipeline.loop.model import kinematic_euler_step, kinematic_jacobians
 
 
 @dataclass(frozen=True)

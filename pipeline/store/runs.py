@@ -26,6 +26,8 @@ from pathlib import Path
 
 import pandas as pd
 
+from pipeline.errors import NonFiniteResultError, RunFolderError
+
 RUN_FILES = ("config.yaml", "model.json", "trajectory.csv", "timing.json", "metrics.json")
 FAMILY_FILES = ("family_metrics.csv", "family.json")
 MULTIVERSE_FILES = ("design.csv", "specifications.csv", "robustness.csv", "dimensions.csv",
@@ -35,15 +37,6 @@ MANIFEST = "manifest.json"
 SCHEMA = 1
 #: Folder names that are Hydra's or submitit's bookkeeping, never runs.
 BOOKKEEPING = (".hydra", ".submitit")
-
-
-class RunFolderError(ValueError):
-    """A run or family folder that cannot be trusted; the message says why."""
-
-
-class NonFiniteResultError(ValueError):
-    """A run produced a non-finite number where the record needs a finite one (the run folder
-    is not written). The message names the file (stage) and the key."""
 
 
 def _non_finite_key(data, path: str = "") -> str | None:
@@ -178,7 +171,7 @@ def clean_leftovers(folder: Path) -> list[Path]:
 def code_version() -> str:
     """SHA-256 (first 16 hex digits) of the package's source files: which code wrote a run."""
     digest = hashlib.sha256()
-    root = Path(__file__).resolve().parent
+    root = Path(__file__).resolve().parents[1]  # the package
     for path in sorted(root.rglob("*")):
         if path.suffix in (".py", ".j2") and "__pycache__" not in path.parts:
             digest.update(str(path.relative_to(root)).encode())

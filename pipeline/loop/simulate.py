@@ -20,11 +20,11 @@ from math import atan2, cos, hypot, sin, sqrt
 import numpy as np
 import pandas as pd
 
-from pipeline.config import ExperimentConfig
-from pipeline.controller import ControlStep, Observation, QpCache, make_controller
-from pipeline.model import kinematic_plant_step, step_plant
-from pipeline.planner import ApfRollout, apf_rollout, plan_speed
-from pipeline.scenario import Scenario
+from pipeline.loop.settings import LoopSettings
+from pipeline.loop.controller import ControlStep, Observation, QpCache, make_controller
+from pipeline.loop.model import kinematic_plant_step, step_plant
+from pipeline.loop.planner import ApfRollout, apf_rollout, plan_speed
+from pipeline.loop.scenario import Scenario
 
 
 @dataclass(frozen=True)
@@ -56,7 +56,7 @@ class SimulationResult:
 class SingleTrackPlant:
     """The nonlinear single-track plant of the lateral track; command ``[steering rate]``."""
 
-    def __init__(self, cfg: ExperimentConfig, scenario: Scenario) -> None:
+    def __init__(self, cfg: LoopSettings, scenario: Scenario) -> None:
         self.vehicle, self.ts, self.substeps = cfg.vehicle, scenario.sample_time_s, \
             scenario.plant_substeps
 
@@ -84,7 +84,7 @@ class SingleTrackPlant:
 class KinematicPlant:
     """Appendix A's kinematic bicycle, integrated exactly; command ``[a, delta]``."""
 
-    def __init__(self, cfg: ExperimentConfig, scenario: Scenario) -> None:
+    def __init__(self, cfg: LoopSettings, scenario: Scenario) -> None:
         self.L, self.ts, self.substeps = cfg.vehicle.wheelbase_m, scenario.sample_time_s, \
             scenario.plant_substeps
 
@@ -174,13 +174,13 @@ TAIL_COLUMNS = ["clearance_m", "solver_status", "solver_iterations", "fallback",
                 "ltv_passes", "ltv_change"]
 
 
-def simulate(cfg: ExperimentConfig, scenario: Scenario,
+def simulate(cfg: LoopSettings, scenario: Scenario,
              qp_cache: QpCache | None = None) -> SimulationResult:
     """Run the closed loop once.
 
     Parameters
     ----------
-    cfg : ExperimentConfig
+    cfg : LoopSettings
     scenario : Scenario
     qp_cache : QpCache, optional
         Compiled QPs shared with other runs (a private cache when omitted).
