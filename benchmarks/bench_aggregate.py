@@ -13,22 +13,37 @@ from pathlib import Path
 
 import pandas as pd
 
+from pipeline.analysis.metrics import RunMetrics
+from pipeline.store.runs import RunInfo, write_run
 from pipeline.studies.aggregate import aggregate
-from pipeline.store.runs import write_run
+from pipeline.studies.experiment import config_yaml
+
+
+def default_config_text() -> str:
+    """The default configuration's ``config.yaml`` (every job carries readable settings)."""
+    from hydra import compose, initialize_config_dir
+
+    from pipeline.config import CONF_DIR, register_configs, to_experiment_config
+
+    register_configs()
+    with initialize_config_dir(config_dir=str(CONF_DIR), version_base="1.3"):
+        return config_yaml(to_experiment_config(compose(config_name="config")))
 
 
 def make_jobs(root: Path, n: int) -> None:
     """Complete run records (manifest included) with a two-row trajectory each."""
     metrics = json.loads((Path(__file__).parent / "sample_metrics.json").read_text())
     trajectory = pd.DataFrame({"time_s": [0.0, 0.1], "X_m": [0.0, 0.3], "Y_m": [0.0, 0.0]})
+    config_text = default_config_text()
     for i in range(n):
         job = root / f"method={'baseline' if i % 2 else 'improved'},controller.horizon={i // 2}"
         (job / ".hydra").mkdir(parents=True)
         (job / ".hydra" / "overrides.yaml").write_text(
             f"- method={'baseline' if i % 2 else 'improved'}\n- controller.horizon={i // 2}\n")
-        write_run(job, config_text="{}\n", model={}, trajectory=trajectory, timing={},
-                  metrics={**metrics, "min_clearance_m": i * 1e-4,
-                           "method": "baseline" if i % 2 else "improved"}, config_hash=str(i))
+        flat = {**metrics, "min_clearance_m": i * 1e-4,
+                "method": "baseline" if i % 2 else "improved", "config_hash": str(i)}
+        write_run(job, config_text=config_text, model={}, trajectory=trajectory, timing={},
+                  metrics=RunMetrics.from_json(flat), info=RunInfo.from_json(flat))
 
 
 def main() -> None:

@@ -28,7 +28,7 @@ from pipeline.validation import safe_name
 __all__ = ["CONF_DIR", "ClaimsConfig", "ConfigError", "ControllerConfig", "ExperimentConfig", "FamilyConfig",
            "INTERPRETATION_REGISTER", "MAX_HORIZON", "MetricsConfig", "ModelConfig",
            "ObstacleConfig", "PlannerConfig", "RegisterEntry", "RunConfig", "ScenarioConfig",
-           "VehicleConfig", "register_configs", "to_experiment_config"]
+           "VehicleConfig", "experiment_config_from_data", "register_configs", "to_experiment_config"]
 
 #: The Hydra config folder (``conf/``) the entry points compose from.
 CONF_DIR = Path(__file__).resolve().parent.parent / "conf"
@@ -112,6 +112,63 @@ def register_configs() -> None:
     store.store(group="planner", name="planner_schema", node=PlannerConfig)
     store.store(group="controller", name="controller_schema", node=ControllerConfig)
     store.store(group="scenario", name="scenario_schema", node=ScenarioConfig)
+
+
+def experiment_config_from_data(data: dict) -> ExperimentConfig:
+    """Build the typed config from a plain mapping (a run folder's ``config.yaml``), with the
+    same range checks as a fresh configuration (each schema's ``__post_init__``).
+
+    Built directly from the schemas' type hints (about 1 ms; OmegaConf's structured merge takes
+    about 60 ms, which an aggregate over thousands of jobs cannot afford). Unknown keys and
+    values of the wrong shape raise :class:`ConfigError` naming the full key path.
+    """
+    return _build(ExperimentConfig, data, "")
+
+
+def _build(schema, data: Any, path: str):
+    """An instance of the dataclass ``schema`` from the mapping ``data`` (recursively)."""
+    import dataclasses
+    import typing
+
+    if not isinstance(data, dict):
+        raise ConfigError(path or "config", data, f"a mapping for {schema.__name__}")
+    hints = typing.get_type_hints(schema)
+    names = {f.name for f in dataclasses.fields(schema)}
+    unknown = sorted(set(data) - names)
+    if unknown:
+        key = f"{path}.{unknown[0]}" if path else unknown[0]
+        raise ConfigError(key, data[unknown[0]], f"a key of {schema.__name__}: "
+                          + ", ".join(sorted(names)))
+    values = {name: _coerce(hints[name], value, f"{path}.{name}" if path else name)
+              for name, value in data.items()}
+    return schema(**values)
+
+
+def _coerce(hint, value: Any, path: str):
+    """``value`` as the annotated type: nested schemas built, lists element-wise, ints as
+    floats where a float is declared."""
+    import dataclasses
+    import typing
+
+    origin, args = typing.get_origin(hint), typing.get_args(hint)
+    if origin is typing.Union:
+        if value is None and type(None) in args:
+            return None
+        hint = next(a for a in args if a is not type(None))
+        origin, args = typing.get_origin(hint), typing.get_args(hint)
+    if dataclasses.is_dataclass(hint):
+        return _build(hint, value, path)
+    if origin in (list, typing.List) and args:
+        if not isinstance(value, (list, tuple)):
+            raise ConfigError(path, value, "a list")
+        return [_coerce(args[0], v, f"{path}[{i}]") for i, v in enumerate(value)]
+    if origin in (dict, typing.Dict):
+        if not isinstance(value, dict):
+            raise ConfigError(path, value, "a mapping")
+        return {k: _coerce(args[1], v, f"{path}.{k}") if args else v for k, v in value.items()}
+    if hint is float and isinstance(value, int) and not isinstance(value, bool):
+        return float(value)
+    return value
 
 
 def to_experiment_config(cfg: Any) -> ExperimentConfig:

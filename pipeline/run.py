@@ -16,6 +16,7 @@ from pathlib import Path
 import hydra
 from omegaconf import DictConfig
 
+from pipeline.analysis.tally import Tally
 from pipeline.config import CONF_DIR, register_configs, to_experiment_config
 from pipeline.errors import describe_config_error
 from pipeline.studies.experiment import RunSummary, run_experiment, run_family
@@ -46,14 +47,13 @@ def hydra_main(cfg: DictConfig) -> None:
         raise SystemExit(2) from None
     out_dir = Path(HydraConfig.get().runtime.output_dir)
     if experiment.scenario.family is not None:
-        table = run_family(experiment, out_dir)
+        tally = Tally.of(run_family(experiment, out_dir))
         log.info("%s on %s (%d scenarios): %d collisions, %d not recovered -> %s",
-                 experiment.method_name, experiment.scenario.name, len(table),
-                 int(table["collision"].sum()), int((~table["recovered"].astype(bool)).sum()),
-                 out_dir)
+                 experiment.method_name, experiment.scenario.name, tally.scenarios,
+                 tally.collisions, tally.not_recovered, out_dir)
         return
     summary = run_experiment(experiment, out_dir)
-    m = summary.metrics
+    m = summary.flat()
     log.info("%s%s on %s: min clearance %.3f m, collision %s, time to goal %s s -> %s",
              "skipped (complete) " if summary.skipped else "", m["method"], m["scenario"],
              m["min_clearance_m"] if m["min_clearance_m"] is not None else float("nan"),

@@ -35,24 +35,24 @@ def test_planted_shift_gives_the_planted_outcome(shift, expected):
     d = shift + rng.normal(0.0, 0.005 if shift == 0.0 else 0.1, 200)
     improved, baseline = tables_with(d)
     row = compare(improved, baseline, C1, CFG)
-    outcome, _ = decide(row["ci_low"], row["ci_high"], row["p_value"], 0.05, row["n_pairs"], CFG,
-                         row["pi_low"], row["pi_high"])
+    outcome, _ = decide(row.ci_low, row.ci_high, row.p_value, 0.05, row.n_pairs, CFG,
+                         row.pi_low, row.pi_high)
     assert outcome == expected
-    assert row["ci_low"] < shift + 0.05 and row["ci_high"] > shift - 0.05
+    assert row.ci_low < shift + 0.05 and row.ci_high > shift - 0.05
 
 
 def test_noise_without_effect_wider_than_the_margin_is_inconclusive():
     d = np.random.default_rng(2).normal(0.0, 1.0, 60)
     row = compare(*tables_with(d), C1, CFG)
-    assert decide(row["ci_low"], row["ci_high"], row["p_value"], 0.05, row["n_pairs"],
-                  CFG, row["pi_low"], row["pi_high"])[0] == "inconclusive"
+    assert decide(row.ci_low, row.ci_high, row.p_value, 0.05, row.n_pairs,
+                  CFG, row.pi_low, row.pi_high)[0] == "inconclusive"
 
 
 def test_real_effect_inside_the_margin_is_equivalent_and_says_so():
     d = -0.02 + np.random.default_rng(3).normal(0.0, 0.002, 200)
     row = compare(*tables_with(d), C1, CFG)
-    outcome, note = decide(row["ci_low"], row["ci_high"], row["p_value"], 0.05, row["n_pairs"],
-                           CFG, row["pi_low"], row["pi_high"])
+    outcome, note = decide(row.ci_low, row.ci_high, row.p_value, 0.05, row.n_pairs,
+                           CFG, row.pi_low, row.pi_high)
     assert outcome == "equivalent" and "less than the margin" in note
 
 
@@ -61,12 +61,12 @@ def test_discrete_split_with_many_ties_is_a_contradiction_not_a_zero():
     the signed-rank test and the probability of improvement see it."""
     d = np.concatenate([np.ones(68), np.zeros(117), -np.ones(15)])
     row = compare(*tables_with(d, "oscillation_count"), CLAIMS[4], CFG)
-    assert (row["n_better"], row["n_tied"], row["n_worse"]) == (15, 117, 68)
-    assert row["estimate"] == 0.5 and row["p_value"] < 1e-6
-    assert row["prob_improvement"] == pytest.approx((15 + 117 / 2) / 200)
-    assert row["pi_high"] < 0.5
-    outcome, _ = decide(row["ci_low"], row["ci_high"], row["p_value"], 0.25, row["n_pairs"], CFG,
-                        row["pi_low"], row["pi_high"])
+    assert (row.n_better, row.n_tied, row.n_worse) == (15, 117, 68)
+    assert row.estimate == 0.5 and row.p_value < 1e-6
+    assert row.prob_improvement == pytest.approx((15 + 117 / 2) / 200)
+    assert row.pi_high < 0.5
+    outcome, _ = decide(row.ci_low, row.ci_high, row.p_value, 0.25, row.n_pairs, CFG,
+                        row.pi_low, row.pi_high)
     assert outcome == "contradicted"
 
 
@@ -107,9 +107,9 @@ def test_mcnemar_on_discordant_collision_pairs():
     improved = pd.DataFrame({"scenario": range(n), "collision": imp})
     baseline = pd.DataFrame({"scenario": range(n), "collision": base})
     row = compare(improved, baseline, SAFETY, CFG)
-    assert (row["n_better"], row["n_worse"]) == (20, 4)
-    assert row["p_value"] == pytest.approx(stats.binomtest(4, 24, 0.5).pvalue)
-    assert row["estimate"] == pytest.approx((4 - 20) / n)
+    assert (row.n_better, row.n_worse) == (20, 4)
+    assert row.p_value == pytest.approx(stats.binomtest(4, 24, 0.5).pvalue)
+    assert row.estimate == pytest.approx((4 - 20) / n)
 
 
 def test_probability_of_improvement_counts_ties_as_half():
@@ -125,19 +125,20 @@ def test_colliding_pairs_leave_c1_to_c5_but_stay_in_the_sensitivity():
     improved, baseline = tables_with(d, collided=collided)
     filtered = compare(improved, baseline, C1, CFG)
     every = compare(improved, baseline, C1, CFG, pairs="all")
-    assert filtered["n_pairs"] == 30 and every["n_pairs"] == 40
-    assert filtered["estimate"] == pytest.approx(-0.3) and filtered["n_worse"] == 0
-    assert every["n_worse"] == 10 and every["prob_improvement"] == pytest.approx(0.75)
+    assert filtered.n_pairs == 30 and every.n_pairs == 40
+    assert filtered.estimate == pytest.approx(-0.3) and filtered.n_worse == 0
+    assert every.n_worse == 10 and every.prob_improvement == pytest.approx(0.75)
 
 
 def test_ledger_has_c0_first_and_both_comparisons():
     d = -0.3 + np.random.default_rng(9).normal(0.0, 0.05, 50)
     improved, baseline = tables_with(d)
     matched = baseline.copy()
-    rows, _ = family_ledger({"improved": improved.assign(
+    rows = family_ledger({"improved": improved.assign(
         **{c.primary_metric: improved["reaction_delay_s"] for c in CLAIMS[1:]}),
         "baseline": baseline.assign(**{c.primary_metric: 1.0 for c in CLAIMS[1:]}),
-        "baseline_matched": matched.assign(**{c.primary_metric: 1.0 for c in CLAIMS[1:]})}, CFG)
+        "baseline_matched": matched.assign(**{c.primary_metric: 1.0 for c in CLAIMS[1:]})},
+        CFG).records()
     assert [(r["claim"], r["comparison"]) for r in rows][:2] == [("C0", "baseline"),
                                                                  ("C1", "baseline")]
     assert len(rows) == 12 and rows[6]["comparison"] == "baseline_matched"

@@ -81,7 +81,8 @@ def test_family_run_writes_a_row_and_a_run_folder_per_member(small_family):
 
 def test_ledger_over_a_small_family(small_family):
     cfg = ClaimsConfig(min_pairs=2, n_resamples=199)
-    rows, differences = family_ledger(small_family, cfg)
+    ledger = family_ledger(small_family, cfg)
+    rows, differences = ledger.records(), ledger.differences
     assert [r["claim"] for r in rows] == ["C0", "C1", "C2", "C3", "C4", "C5"]
     assert {r["comparison"] for r in rows} == {"baseline"}  # no baseline_matched table given
     for row in rows:
@@ -90,6 +91,6 @@ def test_ledger_over_a_small_family(small_family):
         assert row["outcome"] in OUTCOMES
         if row["n_pairs"]:
             assert row["ci_low"] - 1e-12 <= row["estimate"] <= row["ci_high"] + 1e-12
-        assert len(differences[f"{row['claim']} vs baseline"]) == row["n_pairs"]
+        assert len(differences[(row["claim"], "baseline")]) == row["n_pairs"]
     counts = outcome_counts(small_family)
     assert [c["scenarios"] for c in counts] == [4, 4]

@@ -86,7 +86,7 @@ def test_kinematic_closed_loop_reaches_goal_without_obstacles(make_config, tmp_p
                        "scenario.allow_no_obstacles=true",
                        "scenario.initial_speed_mps=0.0", "scenario.n_steps=100"])
     summary = run_experiment(cfg, tmp_path)
-    m = summary.metrics
+    m = summary.flat()
     assert m["goal_reached"] and m["track"] == "kinematic"
     assert m["max_lateral_deviation_m"] < 0.05 and m["fallback_count"] == 0
 
@@ -96,7 +96,7 @@ def test_kinematic_paper_scenario_baseline_reference_moves_at_one_metre_per_seco
     """Normalized steps of 0.1 m per 0.1 s row: the baseline reference moves at 1 m/s, so the
     vehicle cannot reach the goal 30 m away in 100 steps (the paper's run length)."""
     cfg = make_config(["experiment=kinematic", "planner=baseline"])
-    m = run_experiment(cfg, tmp_path).metrics
+    m = run_experiment(cfg, tmp_path).flat()
     assert not m["goal_reached"] and not m["collision"]
     import pandas as pd
 

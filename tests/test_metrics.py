@@ -9,7 +9,13 @@ import pandas as pd
 import pytest
 
 from pipeline.config import MetricsConfig
-from pipeline.analysis.metrics import (TrajectoryContext, compute_metrics, settling_time, sign_changes)
+from pipeline.analysis.metrics import (TrajectoryContext, compute_metrics, settling_time,
+                                       sign_changes)
+
+
+def metrics_json(*args):
+    """The flat ``metrics.json`` mapping of :func:`compute_metrics`."""
+    return compute_metrics(*args).to_json()
 
 CTX = TrajectoryContext(start_m=(0.0, 0.0), goal_m=(30.0, 0.0), vehicle_radius_m=1.0)
 
@@ -56,12 +62,14 @@ def test_constant_curvature_arc_has_zero_jerk_and_curvature_rate():
     theta = v * t / radius
     frame = synthetic(t, radius * np.sin(theta), radius * (1 - np.cos(theta)), psi=theta,
                       r=np.full(t.size, v / radius), v=v)
-    m = compute_metrics(frame, CTX, MetricsConfig())
+    m = metrics_json(frame, CTX, MetricsConfig())
     assert m["lateral_jerk_rms_run_mps3"] == pytest.approx(0.0, abs=1e-12)
     assert m["lateral_jerk_rms_mps3"] is None  # no obstacle: no avoidance window
     assert m["curvature_rate_rms_1_per_ms"] == pytest.approx(0.0, abs=1e-12)
     assert m["lateral_accel_max_mps2"] == pytest.approx(v**2 / radius)
     assert m["path_length_m"] == pytest.approx(v * t[-1], rel=1e-3)
+
+
 
 
 def test_reaction_delay_clearance_and_recovery_on_a_scripted_avoidance():
@@ -73,10 +81,10 @@ def test_reaction_delay_clearance_and_recovery_on_a_scripted_avoidance():
     delta = np.where(t >= 3.4 - 1e-9, 0.05, 0.0)
     psi = np.arctan(np.gradient(y, x))
     frame = synthetic(t, x, y, psi=psi, delta=delta, obstacle=(15.0, 0.0, 0.5), appear=3.0)
-    m = compute_metrics(frame, CTX, MetricsConfig())
+    m = metrics_json(frame, CTX, MetricsConfig())
     # the scripted detour is already 2 m aside when the obstacle appears: no threat, no clock
     assert m["threatened"] is False and m["reaction_delay_s"] is None
-    old = compute_metrics(frame, CTX, MetricsConfig(reaction_obstacle="first_visible",
+    old = metrics_json(frame, CTX, MetricsConfig(reaction_obstacle="first_visible",
                                                     reaction_interpolation="sample"))
     assert old["reaction_delay_s"] == pytest.approx(0.4, abs=1e-9)
     # closest approach at y = -2 right beside the obstacle: 2 - 0.5 - 1.0
@@ -93,7 +101,7 @@ def test_reaction_delay_clearance_and_recovery_on_a_scripted_avoidance():
 def test_collision_flag_and_no_reaction():
     t = np.arange(0.0, 8.0, 0.1)
     frame = synthetic(t, 3.0 * t, np.zeros(t.size), obstacle=(15.0, 0.3, 0.5), appear=2.0)
-    m = compute_metrics(frame, CTX, MetricsConfig())
+    m = metrics_json(frame, CTX, MetricsConfig())
     assert m["collision"] and m["min_clearance_m"] == pytest.approx(0.3 - 1.5, abs=1e-9)
     assert m["reaction_delay_s"] is None and m["reacted"] is False
 
@@ -103,12 +111,12 @@ def test_repulsion_share_closed_form_and_zero_when_never_repelled():
     frame = synthetic(t, 3.0 * t, np.full(t.size, -2.0), obstacle=(15.0, 0.0, 0.5), appear=0.0)
     # clearance = hypot(x - 15, 2) - 1.5 > 2 m (far) until |x - 15| < sqrt(3.5^2 - 4)
     frame["apf_rep_norm"] = 1.0
-    m = compute_metrics(frame, CTX, MetricsConfig())
+    m = metrics_json(frame, CTX, MetricsConfig())
     far = np.hypot(3.0 * t - 15.0, 2.0) - 1.5 > 2.0
     assert m["repulsive_impulse_far_share"] == pytest.approx(far.mean())
     assert m["repulsive_impulse"] == pytest.approx(t.size * 0.1)
     frame["apf_rep_norm"] = 0.0
-    assert compute_metrics(frame, CTX, MetricsConfig())["repulsive_impulse_far_share"] == 0.0
+    assert metrics_json(frame, CTX, MetricsConfig())["repulsive_impulse_far_share"] == 0.0
 
 
 def two_obstacle_run(steer_from_s: float) -> pd.DataFrame:
@@ -127,11 +135,11 @@ def two_obstacle_run(steer_from_s: float) -> pd.DataFrame:
 def test_reaction_clock_starts_at_the_threatening_obstacle_and_interpolates():
     """Steering leaves the 0.01 rad band 0.02 s after it starts moving at 3.1 s (0.5 rad/s
     ramp): 0.12 s after the threat appears, not 2.62 s after the harmless obstacle."""
-    m = compute_metrics(two_obstacle_run(3.1), CTX, MetricsConfig())
+    m = metrics_json(two_obstacle_run(3.1), CTX, MetricsConfig())
     assert m["threatened"] and m["threat_appear_time_s"] == pytest.approx(3.0)
     assert m["reaction_delay_s"] == pytest.approx(0.12, abs=1e-9)
     assert m["reaction_delay_first_visible_s"] == pytest.approx(2.62, abs=1e-9)
-    old = compute_metrics(two_obstacle_run(3.1), CTX,
+    old = metrics_json(two_obstacle_run(3.1), CTX,
                           MetricsConfig(reaction_obstacle="first_visible",
                                         reaction_interpolation="sample"))
     assert old["reaction_delay_s"] == pytest.approx(2.7, abs=1e-9)
@@ -141,7 +149,7 @@ def test_an_obstacle_that_threatens_nothing_gives_no_reaction():
     frame = two_obstacle_run(3.1).drop(columns=[c for c in synthetic(np.zeros(2), 0, 0).columns
                                                 if False])
     frame["obs1_y_m"] = 9.0  # far off the path as well
-    m = compute_metrics(frame, CTX, MetricsConfig())
+    m = metrics_json(frame, CTX, MetricsConfig())
     assert m["threatened"] is False and m["reaction_delay_s"] is None
 
 
@@ -153,10 +161,10 @@ def test_fast_obstacle_crossing_between_two_rows_is_a_collision():
     frame["obs0_x_m"] = 3.0 * 2.05  # where the vehicle is halfway between rows 20 and 21
     frame["obs0_y_m"] = 5.0 - 100.0 * np.clip(t - 2.0, 0.0, None)
     frame["obs0_radius_m"], frame["obs0_visible"] = 0.5, (t >= 2.0 - 1e-9) & (t <= 2.1 + 1e-9)
-    m = compute_metrics(frame, CTX, MetricsConfig())
+    m = metrics_json(frame, CTX, MetricsConfig())
     assert m["min_clearance_sampled_m"] == pytest.approx(np.hypot(0.15, 5.0) - 1.5, abs=1e-9)
     assert m["collision"] and m["min_clearance_m"] < 0
-    sampled = compute_metrics(frame, CTX, MetricsConfig(collision_check="sampled"))
+    sampled = metrics_json(frame, CTX, MetricsConfig(collision_check="sampled"))
     assert not sampled["collision"]
 
 
@@ -167,10 +175,10 @@ def test_sinusoidal_sideslip_has_the_closed_form_jerk():
     t = np.round(np.arange(0.0, 8.0 + 1e-9, 0.001), 10)
     frame = synthetic(t, 3.0 * t, A * np.sin(w * t))
     frame["vy_mps"] = A * w * np.cos(w * t)
-    m = compute_metrics(frame, CTX, MetricsConfig())
+    m = metrics_json(frame, CTX, MetricsConfig())
     assert m["lateral_jerk_rms_run_mps3"] == pytest.approx(A * w**3 / np.sqrt(2), rel=1e-3)
     assert m["lateral_jerk_rms_vx_r_mps3"] == pytest.approx(0.0, abs=1e-12)
-    old = compute_metrics(frame, CTX, MetricsConfig(lateral_accel="vx_r"))
+    old = metrics_json(frame, CTX, MetricsConfig(lateral_accel="vx_r"))
     assert old["lateral_jerk_rms_run_mps3"] == pytest.approx(0.0, abs=1e-12)
 
 
@@ -192,10 +200,10 @@ def out_and_back(overshoot: float, swings: int = 0) -> pd.DataFrame:
 @pytest.mark.parametrize("overshoot, swings, expected", [(0.0, 0, 0), (0.4, 0, 1), (0.4, 3, 4)])
 def test_oscillation_counts_reversals_after_the_pass_net_of_the_manoeuvre(overshoot, swings,
                                                                          expected):
-    m = compute_metrics(out_and_back(overshoot, swings), CTX, MetricsConfig())
+    m = metrics_json(out_and_back(overshoot, swings), CTX, MetricsConfig())
     assert m["oscillation_count"] == expected
     # the older reading counts the out-and-back's own sign changes of yaw rate as well
-    old = compute_metrics(out_and_back(overshoot, swings), CTX,
+    old = metrics_json(out_and_back(overshoot, swings), CTX,
                           MetricsConfig(oscillation="sign_changes_whole_run"))
     assert old["oscillation_count"] == old["oscillation_whole_run_count"]
 
@@ -206,15 +214,15 @@ def test_repulsion_while_nothing_threatens_is_unneeded():
     t = np.arange(0.0, 10.0, 0.1)
     frame = synthetic(t, 3.0 * t, np.full(t.size, -3.0), obstacle=(15.0, 0.0, 0.5), appear=0.0)
     frame["apf_rep_norm"] = 1.0
-    m = compute_metrics(frame, CTX, MetricsConfig())
+    m = metrics_json(frame, CTX, MetricsConfig())
     assert m["repulsion_unneeded_share"] == pytest.approx(1.0)
     assert m["repulsive_impulse_far_share"] < 1.0
-    band = compute_metrics(frame, CTX, MetricsConfig(repulsion_need="clearance_band"))
+    band = metrics_json(frame, CTX, MetricsConfig(repulsion_need="clearance_band"))
     assert band["repulsion_unneeded_share"] == pytest.approx(m["repulsive_impulse_far_share"])
     # on the obstacle's line the straight path is threatened until it is passed
     ahead = synthetic(t, 3.0 * t, np.zeros(t.size), obstacle=(15.0, 0.0, 0.5), appear=0.0)
     ahead["apf_rep_norm"] = 1.0
-    share = compute_metrics(ahead, CTX, MetricsConfig())["repulsion_unneeded_share"]
+    share = metrics_json(ahead, CTX, MetricsConfig())["repulsion_unneeded_share"]
     # threatened while 15 - x within 3 s at 3 m/s (x > 6 - reach... ) and until the contact
     assert 0.0 < share < 1.0
 
@@ -223,11 +231,11 @@ def test_collision_attribution_separates_unavoidable_from_avoidable():
     t = np.round(np.arange(0.0, 8.0 + 1e-9, 0.1), 10)
     # appears on top of the vehicle: nothing avoids it
     on_top = synthetic(t, 3.0 * t, np.zeros(t.size), obstacle=(9.3, 0.0, 0.5), appear=3.0)
-    m = compute_metrics(on_top, CTX, MetricsConfig())
+    m = metrics_json(on_top, CTX, MetricsConfig())
     assert m["collision"] and m["collision_avoidable"] is False
     # appears 12 m ahead, static: a vehicle that never steers hits it, a swerve would not
     ahead = synthetic(t, 3.0 * t, np.zeros(t.size), obstacle=(21.0, 0.0, 0.5), appear=3.0)
-    m = compute_metrics(ahead, CTX, MetricsConfig())
+    m = metrics_json(ahead, CTX, MetricsConfig())
     assert m["collision"] and m["collision_avoidable"] is True
     clear = synthetic(t, 3.0 * t, np.zeros(t.size), obstacle=(21.0, 4.0, 0.5), appear=3.0)
-    assert compute_metrics(clear, CTX, MetricsConfig())["collision_avoidable"] is None
+    assert metrics_json(clear, CTX, MetricsConfig())["collision_avoidable"] is None

@@ -13,6 +13,11 @@ from pipeline.config import MetricsConfig, PlannerConfig
 from pipeline.analysis.metrics import TrajectoryContext, clearance_series, compute_metrics
 from pipeline.loop.planner import apf_step, repulsive_force
 
+
+def metrics_json(*args):
+    """The flat ``metrics.json`` mapping of :func:`compute_metrics`."""
+    return compute_metrics(*args).to_json()
+
 coordinate = st.floats(min_value=-1e3, max_value=1e3, allow_nan=False, allow_infinity=False)
 point = st.tuples(coordinate, coordinate).map(np.array)
 BASELINE = PlannerConfig(name="baseline")
@@ -26,6 +31,8 @@ SETTINGS = settings(max_examples=200, deadline=None,
 @SETTINGS
 @given(p=point, goal=point, obstacles=st.lists(point, min_size=0, max_size=4),
        improved=st.booleans())
+
+
 def test_apf_step_is_finite_for_any_finite_positions(p, goal, obstacles, improved):
     params = IMPROVED if improved else BASELINE
     nxt, att, rep, *_ = apf_step(p, goal, np.array(obstacles).reshape(-1, 2), params)
@@ -75,13 +82,13 @@ def test_metrics_invariant_to_time_origin_and_mirroring(bump, obstacle_y, shift)
     # an obstacle exactly tangent to the straight path's threat corridor (|y| = both radii +
     # threat margin = 2 m) sits on a knife edge that rounding may tip either way
     assume(abs(abs(obstacle_y) - 2.0) > 1e-6)
-    base = compute_metrics(scripted(0.0, bump, obstacle_y, 0.0), CTX, MetricsConfig())
-    shifted = compute_metrics(scripted(0.0, bump, obstacle_y, round(shift, 1)), CTX,
+    base = metrics_json(scripted(0.0, bump, obstacle_y, 0.0), CTX, MetricsConfig())
+    shifted = metrics_json(scripted(0.0, bump, obstacle_y, round(shift, 1)), CTX,
                               MetricsConfig())
     mirrored_frame = scripted(0.0, bump, obstacle_y, 0.0)
     for column in ("Y_m", "psi_rad", "r_rad_s", "delta_rad", "obs0_y_m"):
         mirrored_frame[column] = -mirrored_frame[column]
-    mirrored = compute_metrics(mirrored_frame, CTX, MetricsConfig())
+    mirrored = metrics_json(mirrored_frame, CTX, MetricsConfig())
     for key, value in base.items():
         other = shifted[key]
         if key in TIME_KEYS and value is not None:

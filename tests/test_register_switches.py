@@ -19,7 +19,13 @@ from pipeline.loop.controller import (LateralMpc, Observation, blocking_matrix, 
 from pipeline.loop.controller.kinematic import KinematicLtvMpc
 from pipeline.loop.model import build_lateral_model, step_plant
 from pipeline.loop.planner import adaptive_coefficient, apf_rollout, apf_step, repulsive_force
+from pipeline.analysis.metrics import compute_metrics
 from pipeline.loop.scenario import LineFrame, ObstacleSnapshot
+
+
+def metrics_json(*args):
+    """The flat ``metrics.json`` mapping of :func:`compute_metrics`."""
+    return compute_metrics(*args).to_json()
 
 GOAL = np.array([30.0, 0.0])
 
@@ -39,6 +45,8 @@ SWITCH_TESTS = {
     "metrics.collision_check": "test_metrics", "metrics.attribution_steering_samples": "here",
     "claims.estimator": "here", "claims.test": "here", "claims.pairs": "test_claims",
     "claims.margins": "here", "claims.comparable_clearance_m": "here",
+
+
 }
 
 
@@ -231,12 +239,12 @@ def test_threat_margin_and_horizon_decide_what_threatens():
     frame = synthetic(t, 3.0 * t, np.zeros(t.size), delta=np.maximum(t - 3.2, 0.0),
                       obstacle=(16.0, 2.3, 0.5), appear=3.0)
     ctx = TrajectoryContext((0.0, 0.0), (30.0, 0.0), 1.0)
-    assert compute_metrics(frame, ctx, MetricsConfig())["threatened"] is False
-    assert compute_metrics(frame, ctx, MetricsConfig(threat_margin_m=1.0))["threatened"]
+    assert metrics_json(frame, ctx, MetricsConfig())["threatened"] is False
+    assert metrics_json(frame, ctx, MetricsConfig(threat_margin_m=1.0))["threatened"]
     # 7 m ahead at 3 m/s: inside a 3 s horizon, outside a 1 s one
     ahead = synthetic(t, 3.0 * t, np.zeros(t.size), obstacle=(16.0, 0.5, 0.5), appear=3.0)
-    assert compute_metrics(ahead, ctx, MetricsConfig())["threatened"]
-    assert not compute_metrics(ahead, ctx, MetricsConfig(threat_horizon_s=1.0))["threatened"]
+    assert metrics_json(ahead, ctx, MetricsConfig())["threatened"]
+    assert not metrics_json(ahead, ctx, MetricsConfig(threat_horizon_s=1.0))["threatened"]
 
 
 def test_smoothness_window_selects_the_primary_jerk():
@@ -246,8 +254,8 @@ def test_smoothness_window_selects_the_primary_jerk():
 
     frame = out_and_back(0.4)
     ctx = TrajectoryContext((0.0, 0.0), (30.0, 0.0), 1.0)
-    window = compute_metrics(frame, ctx, MetricsConfig())
-    run = compute_metrics(frame, ctx, MetricsConfig(smoothness_window="whole_run"))
+    window = metrics_json(frame, ctx, MetricsConfig())
+    run = metrics_json(frame, ctx, MetricsConfig(smoothness_window="whole_run"))
     assert window["lateral_jerk_rms_mps3"] == window["lateral_jerk_rms_window_mps3"]
     assert run["lateral_jerk_rms_mps3"] == run["lateral_jerk_rms_run_mps3"]
     assert window["lateral_jerk_rms_mps3"] != run["lateral_jerk_rms_mps3"]
@@ -264,13 +272,13 @@ def test_attribution_samples_decide_between_a_narrow_gap_and_none():
     t = np.round(np.arange(0.0, 8.0 + 1e-9, 0.1), 10)
     ctx = TrajectoryContext((0.0, 0.0), (30.0, 0.0), 1.0)
     frame = synthetic(t, 3.0 * t, np.zeros(t.size), obstacle=(17.0, 0.0, 0.5), appear=3.0)
-    assert compute_metrics(frame, ctx, MetricsConfig(attribution_steering_samples=2))[
+    assert metrics_json(frame, ctx, MetricsConfig(attribution_steering_samples=2))[
         "collision_avoidable"] is True
     # a straight-only set (both samples at zero steering is impossible: the range is symmetric)
     # -> with a steering limit of zero nothing can swerve: unavoidable
     stiff = TrajectoryContext((0.0, 0.0), (30.0, 0.0), 1.0, steering_max_rad=1e-6,
                               braking_mps2=1e-6)
-    assert compute_metrics(frame, stiff, MetricsConfig())["collision_avoidable"] is False
+    assert metrics_json(frame, stiff, MetricsConfig())["collision_avoidable"] is False
 
 
 def test_estimator_test_and_margins_change_the_outcome():
@@ -286,12 +294,12 @@ def test_estimator_test_and_margins_change_the_outcome():
     hl = compare(improved, baseline, CLAIMS[0], ClaimsConfig(n_resamples=199))
     med = compare(improved, baseline, CLAIMS[0], ClaimsConfig(n_resamples=199,
                                                               estimator="median"))
-    assert med["estimate"] == pytest.approx(np.median(d)) and hl["estimate"] != med["estimate"]
+    assert med.estimate == pytest.approx(np.median(d)) and hl.estimate != med.estimate
     sign = compare(improved, baseline, CLAIMS[0], ClaimsConfig(n_resamples=199, test="sign"))
-    assert sign["p_value"] != hl["p_value"]
+    assert sign.p_value != hl.p_value
     row = compare(improved, baseline, CLAIMS[0], ClaimsConfig(n_resamples=199))
-    args = (row["ci_low"], row["ci_high"], 0.0, None, row["n_pairs"],
-            ClaimsConfig(n_resamples=199), row["pi_low"], row["pi_high"])
+    args = (row.ci_low, row.ci_high, 0.0, None, row.n_pairs,
+            ClaimsConfig(n_resamples=199), row.pi_low, row.pi_high)
     wide = decide(args[0], args[1], args[2], 10.0, *args[4:])[0]
     narrow = decide(args[0], args[1], args[2], 1e-3, *args[4:])[0]
     assert wide == "equivalent" and narrow != "equivalent"

@@ -48,7 +48,7 @@ def test_injected_solver_faults_fall_back_and_the_run_completes(make_config, tmp
 
     monkeypatch.setattr(CvxpyQp, "solve", faulty)
     m = run_experiment(make_config(["method=baseline", "controller.backend=cvxpy"]),
-                       tmp_path).metrics
+                       tmp_path).flat()
     tr = pd.read_csv(tmp_path / "trajectory.csv")
     assert m["fallback_count"] == 5 and m["goal_reached"]
     assert tr.loc[35:37, "fallback"].tolist() == ["shifted_plan"] * 3
@@ -89,7 +89,7 @@ def test_apf_finite_with_obstacle_on_the_goal_or_the_vehicle(make_config, obstac
     ["scenario.speed_mps=0.1"],                                 # near-zero speed
 ])
 def test_edge_case_runs_stay_finite(make_config, tmp_path, overrides):
-    m = run_experiment(make_config(overrides), tmp_path).metrics
+    m = run_experiment(make_config(overrides), tmp_path).flat()
     tr = pd.read_csv(tmp_path / "trajectory.csv")
     numeric = tr.select_dtypes("number").drop(columns=["clearance_m"], errors="ignore")
     assert np.isfinite(numeric.fillna(0.0).to_numpy()).all()

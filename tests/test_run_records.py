@@ -14,7 +14,8 @@ import pytest
 from pipeline.reporting.page import build_report
 from pipeline.reporting.page import main as report_main
 from pipeline.studies.experiment import run_experiment, run_family
-from pipeline.store.runs import (MANIFEST, NonFiniteResultError, RunFolderError, check, discover,
+from pipeline.analysis.metrics import RunMetrics
+from pipeline.store.runs import (MANIFEST, RunInfo, NonFiniteResultError, RunFolderError, check, discover,
                            read_run, write_run)
 
 
@@ -118,8 +119,8 @@ def test_a_non_finite_result_writes_no_folder(tmp_path):
     folder = tmp_path / "run"
     with pytest.raises(NonFiniteResultError, match=r"model.json at discrete.Ad\[0\]\[1\]"):
         write_run(folder, config_text="{}\n", model={"discrete": {"Ad": [[0.0, float("inf")]]}},
-                  trajectory=pd.DataFrame({"time_s": [0.0]}), timing={}, metrics={},
-                  config_hash="h")
+                  trajectory=pd.DataFrame({"time_s": [0.0]}), timing={},
+                  metrics=RunMetrics.from_json({}), info=RunInfo.from_json({"config_hash": "h"}))
     assert not folder.exists()
     with pytest.raises(RunFolderError):
         read_run(folder)

@@ -14,10 +14,13 @@ none).
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import asdict, dataclass, field
+from enum import StrEnum
 
 import numpy as np
 import pandas as pd
+
+from pipeline.analysis.tally import Tally
 
 
 @dataclass(frozen=True)
@@ -35,6 +38,12 @@ class Claim:
     paper_improved: str = ""
     paper_original: str = ""
     definition: str = ""
+    #: "paired" (a paired difference of a metric) or "rate" (a rate of events, e.g. C0)
+    kind: str = "paired"
+
+    @property
+    def is_rate(self) -> bool:
+        return self.kind == "rate"
 
 
 CLAIMS: tuple[Claim, ...] = (
@@ -114,13 +123,23 @@ SAFETY = Claim(
     definition="Collision from a continuous check (vehicle and obstacles interpolated between "
                "log rows, closest approach in closed form); each collision labelled avoidable "
                "or unavoidable by a sampled reachability check from the state at the obstacle's "
-               "appearance.")
+               "appearance.",
+    kind="rate")
 
 #: Every claim in the order the report shows them: safety first.
 ALL_CLAIMS: tuple[Claim, ...] = (SAFETY,) + CLAIMS
 
 
-OUTCOMES = ("supported", "contradicted", "equivalent", "inconclusive")
+class Outcome(StrEnum):
+    """The four outcomes of a claim over a family (:data:`OUTCOME_RULE`)."""
+
+    SUPPORTED = "supported"
+    CONTRADICTED = "contradicted"
+    EQUIVALENT = "equivalent"
+    INCONCLUSIVE = "inconclusive"
+
+
+OUTCOMES = tuple(o.value for o in Outcome)
 
 OUTCOME_RULE = (
     "per claim, d = improved - comparison on each scenario (d < 0 is the claimed improvement); "
@@ -312,7 +331,7 @@ def holm(p_values: list[float]) -> list[float]:
 
 
 def decide(low: float, high: float, p_adjusted: float, margin: float, n_pairs: int, cfg,
-           pi_low: float = float("nan"), pi_high: float = float("nan")) -> tuple[str, str]:
+           pi_low: float = float("nan"), pi_high: float = float("nan")) -> tuple[Outcome, str]:
     """Outcome and note (:data:`OUTCOME_RULE`).
 
     Equivalence is read off the estimate's interval and the margin; the direction of a
@@ -321,7 +340,7 @@ def decide(low: float, high: float, p_adjusted: float, margin: float, n_pairs: i
     Without a probability-of-improvement interval the estimate's interval gives the direction.
     """
     if n_pairs < cfg.min_pairs or not (np.isfinite(low) and np.isfinite(high)):
-        return "inconclusive", f"too few pairs ({n_pairs} < {cfg.min_pairs})"
+        return Outcome.INCONCLUSIVE, f"too few pairs ({n_pairs} < {cfg.min_pairs})"
     significant = bool(np.isfinite(p_adjusted) and p_adjusted < cfg.alpha)
     if np.isfinite(pi_low) and np.isfinite(pi_high):
         better, worse = pi_low > 0.5, pi_high < 0.5
@@ -329,21 +348,28 @@ def decide(low: float, high: float, p_adjusted: float, margin: float, n_pairs: i
         better, worse = high < 0, low > 0
     if -margin < low and high < margin:
         if significant and better:
-            return "equivalent", "improved better, by less than the margin"
+            return Outcome.EQUIVALENT, "improved better, by less than the margin"
         if significant and worse:
-            return "equivalent", "improved worse, by less than the margin"
-        return "equivalent", ""
+            return Outcome.EQUIVALENT, "improved worse, by less than the margin"
+        return Outcome.EQUIVALENT, ""
     if significant and better:
-        return "supported", ""
+        return Outcome.SUPPORTED, ""
     if significant and worse:
-        return "contradicted", ""
-    return "inconclusive", ""
+        return Outcome.CONTRADICTED, ""
+    return Outcome.INCONCLUSIVE, ""
 
 
-def paired_differences(improved: pd.DataFrame, comparison: pd.DataFrame, claim: Claim
-                       ) -> pd.DataFrame:
+PAIRS = ("neither_collided", "all")
+
+
+def paired_differences(improved: pd.DataFrame, comparison: pd.DataFrame, claim: Claim,
+                       pairs: str = "all") -> pd.DataFrame:
     """Pairs by ``scenario``: the claim's primary metric of both, ``d`` (NaN when either is
-    missing, signed so that ``d < 0`` is the claimed improvement) and both collision flags."""
+    missing, signed so that ``d < 0`` is the claimed improvement) and both collision flags.
+
+    ``pairs="neither_collided"`` keeps, for a paired claim, the pairs where neither method
+    collided (a rate claim always keeps every pair): the one place this filter is applied.
+    """
     key = claim.primary_metric
     cols = ["scenario", key] + (["collision"] if key != "collision" else [])
     merged = improved[cols].merge(comparison[cols], on="scenario", suffixes=("_i", "_c"))
@@ -356,41 +382,58 @@ def paired_differences(improved: pd.DataFrame, comparison: pd.DataFrame, claim: 
     else:
         merged["collision_i"] = merged["collision_i"].astype(bool)
         merged["collision_c"] = merged["collision_c"].astype(bool)
+    if pairs == "neither_collided" and not claim.is_rate:
+        merged = merged[~(merged["collision_i"] | merged["collision_c"])]
     return merged
 
 
+@dataclass(frozen=True)
+class PairedResult:
+    """One claim, one comparison, before the Holm adjustment and the outcome."""
+
+    n_pairs: int
+    n_missing: int
+    n_better: int
+    n_tied: int
+    n_worse: int
+    estimate: float
+    ci_low: float
+    ci_high: float
+    interval_method: str
+    p_value: float
+    prob_improvement: float
+    pi_low: float
+    pi_high: float
+    #: the finite paired differences the estimate was taken on (for plots)
+    differences: np.ndarray = field(repr=False, compare=False, default=None)
+
+
 def compare(improved: pd.DataFrame, comparison: pd.DataFrame, claim: Claim, cfg,
-            pairs: str | None = None) -> dict:
+            pairs: str | None = None) -> PairedResult:
     """One claim, one comparison: estimate, interval, test, probability of improvement,
     counts (before the Holm adjustment and the outcome)."""
-    merged = paired_differences(improved, comparison, claim)
-    pairs = cfg.pairs if pairs is None else pairs
-    if claim.claim_id != "C0" and pairs == "neither_collided":
-        merged = merged[~(merged["collision_i"] | merged["collision_c"])]
+    from scipy import stats
+
+    merged = paired_differences(improved, comparison, claim, cfg.pairs if pairs is None
+                                else pairs)
     d_all = merged["d"].to_numpy(float)
     d = d_all[np.isfinite(d_all)]
     tie = cfg.tie_tolerance
-    row = {"n_pairs": int(d.size), "n_missing": int(d_all.size - d.size),
-           "n_better": int(np.sum(d < -tie)), "n_tied": int(np.sum(np.abs(d) <= tie)),
-           "n_worse": int(np.sum(d > tie))}
-    if claim.claim_id == "C0":
-        # collision rates: the mean of d is the rate difference; McNemar on discordant pairs
+    better, tied, worse = int(np.sum(d < -tie)), int(np.sum(np.abs(d) <= tie)), \
+        int(np.sum(d > tie))
+    if claim.is_rate:
+        # rates: the mean of d is the rate difference; McNemar on discordant pairs
         estimate = float(d.mean()) if d.size else float("nan")
         low, high, method = bootstrap_interval(d, lambda x, axis=-1: np.mean(x, axis=axis), cfg)
-        from scipy import stats
-
-        discordant = row["n_better"] + row["n_worse"]
-        p_value = float(stats.binomtest(row["n_worse"], discordant, 0.5).pvalue) \
-            if discordant else 1.0
+        discordant = better + worse
+        p_value = float(stats.binomtest(worse, discordant, 0.5).pvalue) if discordant else 1.0
     else:
-        statistic = _estimator(cfg.estimator, d)
         estimate = float(_estimator(cfg.estimator)(d)) if d.size else float("nan")
-        low, high, method = bootstrap_interval(d, statistic, cfg)
+        low, high, method = bootstrap_interval(d, _estimator(cfg.estimator, d), cfg)
         p_value = paired_test(d, cfg) if d.size else float("nan")
     pi, pi_low, pi_high = probability_of_improvement(d, cfg)
-    row.update(estimate=estimate, ci_low=low, ci_high=high, interval_method=method,
-               p_value=p_value, prob_improvement=pi, pi_low=pi_low, pi_high=pi_high)
-    return row
+    return PairedResult(int(d.size), int(d_all.size - d.size), better, tied, worse, estimate,
+                        low, high, method, p_value, pi, pi_low, pi_high, d)
 
 
 LEDGER_COLUMNS = ["claim", "comparison", "metric", "outcome", "estimate", "ci_low", "ci_high",
@@ -399,10 +442,92 @@ LEDGER_COLUMNS = ["claim", "comparison", "metric", "outcome", "estimate", "ci_lo
                   "outcome_all_pairs", "estimate_all_pairs", "paper_scenario"]
 
 
+@dataclass(frozen=True)
+class LedgerRow:
+    """The verdict on one claim against one comparison."""
+
+    claim: Claim
+    comparison: str
+    outcome: Outcome
+    result: PairedResult
+    p_holm: float
+    margin: float
+    note: str
+    margin_reason: str
+    outcome_all_pairs: Outcome | None = None
+    estimate_all_pairs: float | None = None
+    paper_scenario: str | None = None
+
+    @property
+    def claim_id(self) -> str:
+        return self.claim.claim_id
+
+    @property
+    def key(self) -> tuple[str, str]:
+        return (self.claim.claim_id, self.comparison)
+
+    def to_dict(self) -> dict:
+        """The row as the ledger table writes it (:data:`LEDGER_COLUMNS` and more)."""
+        r = self.result
+        return {"claim": self.claim.claim_id, "comparison": self.comparison,
+                "metric": self.claim.primary_metric, "outcome": str(self.outcome),
+                "n_pairs": r.n_pairs, "n_missing": r.n_missing, "n_better": r.n_better,
+                "n_tied": r.n_tied, "n_worse": r.n_worse, "estimate": r.estimate,
+                "ci_low": r.ci_low, "ci_high": r.ci_high, "interval_method": r.interval_method,
+                "p_value": r.p_value, "prob_improvement": r.prob_improvement,
+                "pi_low": r.pi_low, "pi_high": r.pi_high, "p_holm": self.p_holm,
+                "margin": self.margin, "note": self.note, "margin_reason": self.margin_reason,
+                "paper says": self.claim.text,
+                "outcome_all_pairs": None if self.outcome_all_pairs is None
+                else str(self.outcome_all_pairs),
+                "estimate_all_pairs": self.estimate_all_pairs,
+                "paper_scenario": self.paper_scenario}
+
+
+@dataclass(frozen=True)
+class Ledger:
+    """Verdicts on every claim against every comparison, keyed by ``(claim_id, comparison)``."""
+
+    rows: tuple[LedgerRow, ...] = ()
+    treatment: str = "improved"
+
+    def __iter__(self):
+        return iter(self.rows)
+
+    def __len__(self) -> int:
+        return len(self.rows)
+
+    def __getitem__(self, key: tuple[str, str]) -> LedgerRow:
+        for row in self.rows:
+            if row.key == key:
+                return row
+        raise KeyError(key)
+
+    def get(self, key: tuple[str, str]) -> LedgerRow | None:
+        return next((row for row in self.rows if row.key == key), None)
+
+    @property
+    def comparisons(self) -> tuple[str, ...]:
+        return tuple(dict.fromkeys(row.comparison for row in self.rows))
+
+    @property
+    def differences(self) -> dict[tuple[str, str], np.ndarray]:
+        """The paired differences each outcome was taken on, for plotting."""
+        return {row.key: row.result.differences for row in self.rows}
+
+    def records(self) -> list[dict]:
+        return [row.to_dict() for row in self.rows]
+
+    def to_frame(self) -> pd.DataFrame:
+        """The ledger table (``claims_ledger.csv``)."""
+        return pd.DataFrame(self.records()).reindex(
+            columns=LEDGER_COLUMNS + ["interval_method", "margin_reason"])
+
+
 def family_ledger(tables: dict[str, pd.DataFrame], cfg, paper_metrics: dict[str, dict] | None
                   = None, improved: str = "improved",
                   comparisons: tuple[str, ...] = ("baseline", "baseline_matched"),
-                  sensitivity: bool = True) -> tuple[list[dict], dict[str, np.ndarray]]:
+                  sensitivity: bool = True) -> Ledger:
     """Claims ledger over a scenario family: C0-C5 against each comparison present.
 
     Parameters
@@ -412,81 +537,54 @@ def family_ledger(tables: dict[str, pd.DataFrame], cfg, paper_metrics: dict[str,
     cfg : ClaimsConfig
     paper_metrics : dict of method -> metrics, optional
         The paper scenario's values: its better / worse / within-margin word per claim.
+    improved : str
+        The treatment; ``comparisons`` are its controls.
     sensitivity : bool
         Also judge C1-C5 on the other set of pairs (all pairs when the ledger uses those where
         neither collided).
 
     Returns
     -------
-    rows : list of dict
-        :data:`LEDGER_COLUMNS` plus ``margin_reason`` and ``paper says``.
-    differences : dict of ``"<claim> vs <comparison>"`` -> ndarray
-        The paired differences the outcome was taken on, for plotting.
+    Ledger
     """
-    rows, differences = [], {}
+    rows: list[LedgerRow] = []
     if improved not in tables:
-        return rows, differences
+        return Ledger((), improved)
     for comparison in [c for c in comparisons if c in tables]:
-        block = []
-        for claim in ALL_CLAIMS:
-            result = compare(tables[improved], tables[comparison], claim, cfg)
-            merged = paired_differences(tables[improved], tables[comparison], claim)
-            if claim.claim_id != "C0" and cfg.pairs == "neither_collided":
-                merged = merged[~(merged["collision_i"] | merged["collision_c"])]
-            differences[f"{claim.claim_id} vs {comparison}"] = \
-                merged["d"].to_numpy(float)[np.isfinite(merged["d"].to_numpy(float))]
-            block.append((claim, result))
-        adjusted = holm([r["p_value"] for _, r in block])
+        block = [(claim, compare(tables[improved], tables[comparison], claim, cfg))
+                 for claim in ALL_CLAIMS]
+        adjusted = holm([r.p_value for _, r in block])
         for (claim, result), p_holm in zip(block, adjusted):
-            margin = float(cfg.margins[claim.claim_id])
-            outcome, note = decide(result["ci_low"], result["ci_high"], p_holm, margin,
-                                   result["n_pairs"], cfg, result["pi_low"], result["pi_high"])
-            row = {"claim": claim.claim_id, "comparison": comparison,
-                   "metric": claim.primary_metric, "outcome": outcome, **result,
-                   "p_holm": p_holm, "margin": margin, "note": note,
-                   "margin_reason": cfg.margin_reasons[claim.claim_id],
-                   "paper says": claim.text}
-            if claim.claim_id != "C0" and sensitivity:
-                other = "all" if cfg.pairs == "neither_collided" else "neither_collided"
-                sens = compare(tables[improved], tables[comparison], claim, cfg, pairs=other)
-                # the sensitivity keeps its own unadjusted test: it is a check, not a claim
-                row["outcome_all_pairs"], _ = decide(sens["ci_low"], sens["ci_high"],
-                                                     sens["p_value"], margin, sens["n_pairs"],
-                                                     cfg, sens["pi_low"], sens["pi_high"])
-                row["estimate_all_pairs"] = sens["estimate"]
-            elif claim.claim_id == "C0":
-                row["outcome_all_pairs"], row["estimate_all_pairs"] = outcome, result["estimate"]
-            if paper_metrics and comparison in paper_metrics and improved in paper_metrics:
-                row["paper_scenario"] = single_scenario_outcome(
-                    claim, paper_metrics[comparison], paper_metrics[improved], margin)
-            rows.append(row)
-    return rows, differences
+            rows.append(_ledger_row(claim, comparison, result, p_holm, tables, cfg,
+                                    paper_metrics, improved, sensitivity))
+    return Ledger(tuple(rows), improved)
+
+
+def _ledger_row(claim: Claim, comparison: str, result: PairedResult, p_holm: float,
+                tables: dict[str, pd.DataFrame], cfg, paper_metrics: dict | None,
+                improved: str, sensitivity: bool) -> LedgerRow:
+    margin = float(cfg.margins[claim.claim_id])
+    outcome, note = decide(result.ci_low, result.ci_high, p_holm, margin, result.n_pairs, cfg,
+                           result.pi_low, result.pi_high)
+    all_pairs, estimate_all = None, None
+    if claim.is_rate:
+        all_pairs, estimate_all = outcome, result.estimate
+    elif sensitivity:
+        other = "all" if cfg.pairs == "neither_collided" else "neither_collided"
+        sens = compare(tables[improved], tables[comparison], claim, cfg, pairs=other)
+        # the sensitivity keeps its own unadjusted test: it is a check, not a claim
+        all_pairs, _ = decide(sens.ci_low, sens.ci_high, sens.p_value, margin, sens.n_pairs,
+                              cfg, sens.pi_low, sens.pi_high)
+        estimate_all = sens.estimate
+    paper = None
+    if paper_metrics and comparison in paper_metrics and improved in paper_metrics:
+        paper = single_scenario_outcome(claim, paper_metrics[comparison],
+                                        paper_metrics[improved], margin)
+    return LedgerRow(claim, comparison, outcome, result, p_holm, margin, note,
+                     cfg.margin_reasons[claim.claim_id], all_pairs, estimate_all, paper)
 
 
 def outcome_counts(tables: dict[str, pd.DataFrame]) -> list[dict]:
     """Collisions (avoidable / unavoidable), failures and fallbacks per method; how often the
-    APF's step cap binds."""
-    rows = []
-    for method, t in tables.items():
-        collided = t["collision"].astype(bool)
-        avoidable = t["collision_avoidable"] if "collision_avoidable" in t \
-            else pd.Series([None] * len(t))
-        avoidable = avoidable.map(lambda v: v if isinstance(v, (bool, np.bool_)) else
-                                  (str(v).lower() == "true" if str(v).lower() in ("true", "false")
-                                   else None))
-        rows.append({
-            "method": method, "scenarios": int(len(t)),
-            "collisions": int(collided.sum()),
-            "collisions_avoidable": int((collided & (avoidable == True)).sum()),  # noqa: E712
-            "collisions_unavoidable": int((collided & (avoidable == False)).sum()),  # noqa: E712
-            "not_recovered": int((~t["recovered"].astype(bool)).sum()),
-            "no_threat": int((~t["threatened"].astype(bool)).sum()) if "threatened" in t else 0,
-            "goal_not_reached": int((~t["goal_reached"].astype(bool)).sum()),
-            "heading_validity_exceeded": int(t["heading_validity_exceeded"].astype(bool).sum()),
-            "fallback_steps": int(t["fallback_count"].fillna(0).sum())
-            if "fallback_count" in t else 0,
-            "step_cap_binding_share": float(t["step_cap_binding_share"].mean())
-            if "step_cap_binding_share" in t else float("nan"),
-            "min_clearance_median_m": float(t["min_clearance_m"].median()),
-        })
-    return rows
+    APF's step cap binds (:class:`pipeline.analysis.tally.Tally`)."""
+    return [{"method": method, **Tally.of(t).to_dict()} for method, t in tables.items()]

@@ -45,13 +45,14 @@ continuation of the vehicle's current motion within ``threat_horizon_s`` (closed
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 
 import control
 import numpy as np
 import pandas as pd
 
 from pipeline.analysis.settings import MetricsConfig
+from pipeline.loop.trajectory import obstacle_indices
 
 
 @dataclass(frozen=True)
@@ -107,19 +108,6 @@ def time_derivative(values: np.ndarray, time_s: np.ndarray) -> np.ndarray:
     return np.gradient(v, np.asarray(time_s, dtype=float))
 
 
-def first_exit_time(time_s: np.ndarray, values: np.ndarray, start_time_s: float,
-                    band: float) -> float:
-    """Time from ``start_time_s`` until ``|values - values(start)|`` first exceeds ``band``."""
-    t = np.asarray(time_s, dtype=float)
-    v = np.asarray(values, dtype=float)
-    after = np.nonzero(t >= start_time_s - 1e-9)[0]
-    if after.size == 0:
-        return float("nan")
-    ref = v[after[0]]
-    exits = after[np.abs(v[after] - ref) > band]
-    return float(t[exits[0]] - start_time_s) if exits.size else float("nan")
-
-
 def settling_time(time_s: np.ndarray, error: np.ndarray, band: float) -> float:
     """Time after ``time_s[0]`` from which ``|error|`` stays within ``band`` (NaN if it ends
     outside).
@@ -151,17 +139,15 @@ def settling_time(time_s: np.ndarray, error: np.ndarray, band: float) -> float:
 
 
 def obstacle_count(trajectory: pd.DataFrame) -> int:
-    j = 0
-    while f"obs{j}_x_m" in trajectory.columns:
-        j += 1
-    return j
+    """How many obstacles the table carries (their indices may have gaps)."""
+    return len(obstacle_indices(trajectory.columns))
 
 
 def clearance_series(trajectory: pd.DataFrame, vehicle_radius_m: float) -> np.ndarray:
     """Per-step clearance to the nearest visible obstacle (NaN while none is visible)."""
     xy = trajectory[["X_m", "Y_m"]].to_numpy(float)
     result = np.full(len(trajectory), np.inf)
-    for j in range(obstacle_count(trajectory)):
+    for j in obstacle_indices(trajectory.columns):
         centre = trajectory[[f"obs{j}_x_m", f"obs{j}_y_m"]].to_numpy(float)
         gap = (np.linalg.norm(xy - centre, axis=1) - trajectory[f"obs{j}_radius_m"].to_numpy(float)
                - vehicle_radius_m)
@@ -175,7 +161,7 @@ def min_time_to_collision(trajectory: pd.DataFrame, vehicle_radius_m: float) -> 
     t = trajectory["time_s"].to_numpy(float)
     xy = trajectory[["X_m", "Y_m"]].to_numpy(float)
     best = np.inf
-    for j in range(obstacle_count(trajectory)):
+    for j in obstacle_indices(trajectory.columns):
         centre = trajectory[[f"obs{j}_x_m", f"obs{j}_y_m"]].to_numpy(float)
         dist = np.linalg.norm(xy - centre, axis=1)
         closing = -time_derivative(dist, t)
@@ -267,26 +253,35 @@ def reversal_count(values: np.ndarray, band: float) -> tuple[int, int]:
     return count, first
 
 
-def obstacle_tracks(trajectory: pd.DataFrame) -> list[dict]:
-    """Per obstacle: positions (n, 2), forward-difference velocities (n, 2), radii (n,),
-    visibility (n,) and the first visible row (-1 if never visible)."""
+@dataclass(frozen=True)
+class ObstacleTrack:
+    """One obstacle as logged: positions (n, 2), forward-difference velocities (n, 2), radii
+    (n,), visibility (n,) and the first visible row (-1 if never visible)."""
+
+    position: np.ndarray
+    velocity: np.ndarray
+    radius: np.ndarray
+    visible: np.ndarray
+    appear: int
+
+
+def obstacle_tracks(trajectory: pd.DataFrame) -> list[ObstacleTrack]:
+    """Every obstacle of the table as an :class:`ObstacleTrack`."""
     t = trajectory["time_s"].to_numpy(float)
     tracks = []
-    for j in range(obstacle_count(trajectory)):
+    for j in obstacle_indices(trajectory.columns):
         pos = trajectory[[f"obs{j}_x_m", f"obs{j}_y_m"]].to_numpy(float)
         vel = np.zeros_like(pos)
         if len(t) > 1:
             vel[:-1] = np.diff(pos, axis=0) / np.diff(t)[:, None]
             vel[-1] = vel[-2]
         visible = trajectory[f"obs{j}_visible"].to_numpy(bool)
-        tracks.append({"position": pos, "velocity": vel,
-                       "radius": trajectory[f"obs{j}_radius_m"].to_numpy(float),
-                       "visible": visible,
-                       "appear": int(np.argmax(visible)) if visible.any() else -1})
+        tracks.append(ObstacleTrack(pos, vel, trajectory[f"obs{j}_radius_m"].to_numpy(float),
+                                    visible, int(np.argmax(visible)) if visible.any() else -1))
     return tracks
 
 
-def continuous_clearance(time_s: np.ndarray, xy: np.ndarray, tracks: list[dict],
+def continuous_clearance(time_s: np.ndarray, xy: np.ndarray, tracks: list[ObstacleTrack],
                          vehicle_radius_m: float) -> tuple[float, int, float]:
     """Smallest clearance with vehicle and obstacles moving linearly between log rows.
 
@@ -304,9 +299,9 @@ def continuous_clearance(time_s: np.ndarray, xy: np.ndarray, tracks: list[dict],
     """
     best, contact_j, contact_t = np.inf, -1, np.inf
     for j, track in enumerate(tracks):
-        rel = xy - track["position"]
-        vis = track["visible"]
-        reach = track["radius"] + vehicle_radius_m
+        rel = xy - track.position
+        vis = track.visible
+        reach = track.radius + vehicle_radius_m
         gaps = np.where(vis, np.linalg.norm(rel, axis=1) - reach, np.inf)
         times = np.asarray(time_s, float).copy()
         if len(rel) > 1:
@@ -331,7 +326,7 @@ def continuous_clearance(time_s: np.ndarray, xy: np.ndarray, tracks: list[dict],
             float(contact_t) if np.isfinite(contact_t) else float("nan"))
 
 
-def collision_is_avoidable(time_s: np.ndarray, pose: np.ndarray, tracks: list[dict],
+def collision_is_avoidable(time_s: np.ndarray, pose: np.ndarray, tracks: list[ObstacleTrack],
                            contact_obstacle: int, contact_time_s: float,
                            context: TrajectoryContext, thresholds: MetricsConfig) -> bool:
     """Whether any admissible manoeuvre from the state at the colliding obstacle's appearance
@@ -352,7 +347,7 @@ def collision_is_avoidable(time_s: np.ndarray, pose: np.ndarray, tracks: list[di
     """
     t = np.asarray(time_s, float)
     track = tracks[contact_obstacle]
-    a = track["appear"]
+    a = track.appear
     if a < 0:
         return True
     x0, y0, psi0, v0, delta0 = (float(v) for v in pose[a])
@@ -379,43 +374,261 @@ def collision_is_avoidable(time_s: np.ndarray, pose: np.ndarray, tracks: list[di
         v = np.maximum(v - decel * dt, 0.0)
         now = t[a] + k * dt
         for other in tracks:
-            if other["appear"] < 0 or now < t[other["appear"]] - 1e-9:
+            if other.appear < 0 or now < t[other.appear] - 1e-9:
                 continue
             i = min(int(np.searchsorted(t, now, side="right")) - 1, len(t) - 1)
-            centre = other["position"][i] + other["velocity"][i] * (now - t[i])
-            reach = other["radius"][i] + context.vehicle_radius_m
+            centre = other.position[i] + other.velocity[i] * (now - t[i])
+            reach = other.radius[i] + context.vehicle_radius_m
             ok &= np.hypot(X - centre[0], Y - centre[1]) >= reach
         if not ok.any():
             return False
     return bool(ok.any())
 
 
-def compute_metrics(trajectory: pd.DataFrame, context: TrajectoryContext,
-                    thresholds: MetricsConfig) -> dict:
-    """All Table 1 metrics of one logged run.
+# --- result objects: one block per Table 1 criterion ------------------------------------------
 
-    Parameters
-    ----------
-    trajectory : pandas.DataFrame
-        The simulation log (or a scored external trajectory with the same columns).
-    context : TrajectoryContext
-    thresholds : MetricsConfig
+class _Block:
+    """A frozen block of metrics; its fields are the ``metrics.json`` keys it owns."""
 
-    Returns
-    -------
-    dict
-        Flat mapping of metric name to value; NaN is returned as ``None`` so JSON stays valid.
+    def to_json(self) -> dict:
+        """The block's keys and values, NaN as ``None`` and numpy scalars as Python ones."""
+        return {f.name: _nan_to_none(getattr(self, f.name)) for f in fields(self)}
+
+    @classmethod
+    def from_json(cls, data: dict):
+        """The block read back from ``metrics.json`` (``None`` for its keys when absent)."""
+        return cls(**{f.name: _none_to_nan(data.get(f.name)) for f in fields(cls)})
+
+    @classmethod
+    def keys(cls) -> tuple[str, ...]:
+        return tuple(f.name for f in fields(cls))
+
+
+@dataclass(frozen=True)
+class Threat(_Block):
+    """Which obstacle threatened and when (s); when every threat was passed (s)."""
+
+    threatened: bool
+    obstacle_appear_time_s: float
+    threat_appear_time_s: float
+    obstacle_passed_time_s: float
+
+
+@dataclass(frozen=True)
+class Reaction(_Block):
+    """C1: reaction delays (s) from the threat's (or the first visible obstacle's) appearance."""
+
+    reaction_delay_threat_s: float
+    reaction_delay_first_visible_s: float
+    reaction_delay_s: float
+    reacted: bool
+    reaction_delay_lateral_s: float
+
+
+@dataclass(frozen=True)
+class Smoothness(_Block):
+    """C2: steering rate (rad/s), lateral acceleration (m/s^2), jerk (m/s^3), curvature rate."""
+
+    steering_rate_rms_rad_s: float
+    steering_rate_max_rad_s: float
+    steering_rate_rms_window_rad_s: float
+    lateral_accel_max_mps2: float
+    lateral_jerk_rms_run_mps3: float
+    lateral_jerk_max_mps3: float
+    lateral_jerk_rms_window_mps3: float
+    lateral_jerk_max_window_mps3: float
+    lateral_jerk_rms_vx_r_mps3: float
+    lateral_jerk_rms_mps3: float
+    curvature_rate_rms_1_per_ms: float
+
+
+@dataclass(frozen=True)
+class Repulsion(_Block):
+    """C3: repulsive impulse at the vehicle (force x s), its unneeded share, onset."""
+
+    repulsive_impulse: float
+    repulsion_unneeded_impulse: float
+    repulsion_unneeded_share: float
+    repulsion_unneeded_share_threat: float
+    repulsive_impulse_far_share: float
+    repulsive_force_peak: float
+    repulsion_onset_clearance_m: float
+    repulsion_onset_ttc_s: float
+
+
+@dataclass(frozen=True)
+class StepCap(_Block):
+    """Share of rollout steps on which the APF's step cap bound."""
+
+    step_cap_binding_share: float
+
+
+@dataclass(frozen=True)
+class Recovery(_Block):
+    """C4: settling times (s) after every threat is passed."""
+
+    recovery_lateral_s: float
+    recovery_heading_s: float
+    recovery_time_s: float
+    recovered: bool
+
+
+@dataclass(frozen=True)
+class Stability(_Block):
+    """C5: reversals and sign changes (counts), overshoot (m), largest heading step (rad)."""
+
+    lateral_sign_changes: int
+    yaw_rate_sign_changes: int
+    oscillation_whole_run_count: int
+    oscillation_after_pass_count: float
+    yaw_rate_sign_changes_after_pass: float
+    overshoot_m: float
+    oscillation_count: float
+    heading_step_max_rad: float
+    max_lateral_deviation_m: float
+
+
+@dataclass(frozen=True)
+class Safety(_Block):
+    """Clearance (m, sampled and continuous), collision and its attribution, time to collision."""
+
+    min_clearance_sampled_m: float
+    min_clearance_continuous_m: float
+    min_clearance_m: float
+    collision: bool
+    collision_avoidable: bool | None
+    min_time_to_collision_s: float
+
+
+@dataclass(frozen=True)
+class Progress(_Block):
+    """Log length, goal reached and when (s), path length (m), heading against validity."""
+
+    n_steps_logged: int
+    duration_s: float
+    goal_reached: bool
+    time_to_goal_s: float
+    path_length_m: float
+    max_abs_heading_error_rad: float
+    heading_validity_exceeded: bool
+
+
+@dataclass(frozen=True)
+class SolverIterations(_Block):
+    """Median and 95th percentile of the QP solver's iteration count."""
+
+    solver_iterations_median: float
+    solver_iterations_p95: float
+
+
+@dataclass(frozen=True)
+class Fallbacks(_Block):
+    """Steps on which the controller fell back (shifted plan or safe input)."""
+
+    fallback_count: int
+    fallback_safe_input_count: int
+
+
+@dataclass(frozen=True)
+class RunMetrics:
+    """Every Table 1 metric of one run, one block per criterion (python-control style).
+
+    Blocks that need a column the trajectory lacks (APF forces, solver columns) are ``None``
+    and their keys are absent from :meth:`to_json`.
     """
-    tr = trajectory
+
+    threat: Threat
+    reaction: Reaction
+    smoothness: Smoothness
+    recovery: Recovery
+    stability: Stability
+    safety: Safety
+    progress: Progress
+    repulsion: Repulsion | None = None
+    step_cap: StepCap | None = None
+    iterations: SolverIterations | None = None
+    fallbacks: Fallbacks | None = None
+
+    def blocks(self) -> tuple[_Block, ...]:
+        """The blocks present, in Table 1 order."""
+        return tuple(b for b in (self.threat, self.reaction, self.smoothness, self.repulsion,
+                                 self.step_cap, self.recovery, self.stability, self.safety,
+                                 self.progress, self.iterations, self.fallbacks)
+                     if b is not None)
+
+    def to_json(self) -> dict:
+        """Flat mapping of metric name to value (``metrics.json``); NaN as ``None``."""
+        out: dict = {}
+        for block in self.blocks():
+            out.update(block.to_json())
+        return out
+
+    def value(self, name: str) -> float:
+        """One metric by its name as a float (booleans as 0/1; NaN when missing or absent)."""
+        for block in self.blocks():
+            if name in block.keys():
+                v = getattr(block, name)
+                return float(v) if v is not None else math.nan
+        return math.nan
+
+    @classmethod
+    def from_json(cls, data: dict) -> "RunMetrics":
+        """Read back what :meth:`to_json` wrote (keys of other records are ignored)."""
+        def optional(block):
+            return block.from_json(data) if any(k in data for k in block.keys()) else None
+
+        return cls(Threat.from_json(data), Reaction.from_json(data),
+                   Smoothness.from_json(data), Recovery.from_json(data),
+                   Stability.from_json(data), Safety.from_json(data), Progress.from_json(data),
+                   optional(Repulsion), optional(StepCap), optional(SolverIterations),
+                   optional(Fallbacks))
+
+
+#: Every key :meth:`RunMetrics.to_json` can write.
+METRIC_KEYS: tuple[str, ...] = tuple(k for block in (
+    Threat, Reaction, Smoothness, Repulsion, StepCap, Recovery, Stability, Safety, Progress,
+    SolverIterations, Fallbacks) for k in block.keys())
+
+
+def _none_to_nan(value):
+    return math.nan if value is None else value
+
+
+# --- the computation: one short function per criterion -----------------------------------------
+
+@dataclass(frozen=True)
+class Signals:
+    """The trajectory's signals in the goal-line frame; optional columns derived from the path
+    when a scored trajectory lacks them (``vy`` is None then)."""
+
+    t: np.ndarray
+    dt: float
+    start: np.ndarray
+    goal: np.ndarray
+    line: np.ndarray
+    xy: np.ndarray
+    along: np.ndarray
+    lateral: np.ndarray
+    psi: np.ndarray
+    velocity: np.ndarray
+    speed: np.ndarray
+    vx: np.ndarray
+    vy: np.ndarray | None
+    yaw_rate: np.ndarray
+    delta: np.ndarray
+    steer_rate: np.ndarray
+    heading_error: np.ndarray
+    bearing_error: np.ndarray
+
+
+def trajectory_signals(tr: pd.DataFrame, context: TrajectoryContext) -> Signals:
+    """The signals every criterion reads, from the table's columns (or the path)."""
     t = tr["time_s"].to_numpy(float)
     dt = float(np.median(np.diff(t))) if t.size > 1 else float("nan")
     start, goal = np.asarray(context.start_m, float), np.asarray(context.goal_m, float)
     line = (goal - start) / np.linalg.norm(goal - start)
     normal = np.array([-line[1], line[0]])
     xy = tr[["X_m", "Y_m"]].to_numpy(float)
-    along = (xy - start) @ line
-    lateral = (xy - start) @ normal
-    # optional columns are derived from the path when a scored trajectory lacks them
     if "psi_rad" in tr:
         psi = tr["psi_rad"].to_numpy(float)
     else:
@@ -435,210 +648,289 @@ def compute_metrics(trajectory: pd.DataFrame, context: TrajectoryContext,
     delta = tr["delta_rad"].to_numpy(float) if "delta_rad" in tr else np.full(len(tr), np.nan)
     steer_rate = tr["steering_rate_rad_s"].to_numpy(float) if "steering_rate_rad_s" in tr \
         else time_derivative(delta, t)
-    heading_error = np.arctan2(np.sin(psi - np.arctan2(line[1], line[0])),
-                               np.cos(psi - np.arctan2(line[1], line[0])))
+    line_heading = np.arctan2(line[1], line[0])
+    heading_error = np.arctan2(np.sin(psi - line_heading), np.cos(psi - line_heading))
     to_goal = goal - xy
     bearing = np.arctan2(to_goal[:, 1], to_goal[:, 0])
     bearing_error = np.arctan2(np.sin(psi - bearing), np.cos(psi - bearing))
+    return Signals(t, dt, start, goal, line, xy, (xy - start) @ line, (xy - start) @ normal, psi,
+                   velocity, speed, vx, vy, yaw_rate, delta, steer_rate, heading_error,
+                   bearing_error)
 
-    out: dict = {"n_steps_logged": int(len(tr)), "duration_s": float(t[-1] - t[0]) if t.size else 0.0}
 
-    # --- threats: straight continuation of the current motion against each visible obstacle
-    tracks = obstacle_tracks(tr)
-    n_obs = len(tracks)
-    ttc = np.full((len(tr), n_obs), np.inf)
+@dataclass(frozen=True)
+class ThreatGeometry:
+    """What the threat analysis found, for the other criteria: per-row time to contact with
+    each obstacle (inf: no threat), appearance times, and the obstacles that matter."""
+
+    ttc: np.ndarray
+    threat_now: np.ndarray
+    appear: list[float]
+    first_visible: int | None
+    threatening: int | None
+    passed_time_s: float
+
+
+def threat_block(sig: Signals, tracks: list[ObstacleTrack], context: TrajectoryContext,
+                 thresholds: MetricsConfig) -> tuple[Threat, ThreatGeometry]:
+    """Threats: the straight continuation of the current motion against each visible obstacle;
+    the obstacle is passed when the vehicle is ahead of every obstacle that ever threatened
+    (every visible one when none did) by both radii, for good."""
+    t, n = sig.t, len(sig.t)
+    ttc = np.full((n, len(tracks)), np.inf)
     for j, track in enumerate(tracks):
-        reach = track["radius"] + context.vehicle_radius_m + thresholds.threat_margin_m
-        ttc[:, j] = np.where(track["visible"], straight_line_time_to_contact(
-            xy, velocity, track["position"], track["velocity"], reach,
+        reach = track.radius + context.vehicle_radius_m + thresholds.threat_margin_m
+        ttc[:, j] = np.where(track.visible, straight_line_time_to_contact(
+            sig.xy, sig.velocity, track.position, track.velocity, reach,
             thresholds.threat_horizon_s), np.inf)
     threat_now = np.isfinite(ttc)
-    appear = [t[track["appear"]] if track["appear"] >= 0 else np.inf for track in tracks]
-    threat_at_appearance = [bool(track["appear"] >= 0 and threat_now[track["appear"], j])
-                            for j, track in enumerate(tracks)]
-    order = sorted(range(n_obs), key=lambda j: (appear[j], j))
+    appear = [t[track.appear] if track.appear >= 0 else np.inf for track in tracks]
+    at_appearance = [bool(track.appear >= 0 and threat_now[track.appear, j])
+                     for j, track in enumerate(tracks)]
+    order = sorted(range(len(tracks)), key=lambda j: (appear[j], j))
     first_visible = next((j for j in order if np.isfinite(appear[j])), None)
-    threatening = next((j for j in order if threat_at_appearance[j]), None)
-    out["threatened"] = threatening is not None
-    out["obstacle_appear_time_s"] = appear[first_visible] if first_visible is not None \
-        else float("nan")
-    out["threat_appear_time_s"] = appear[threatening] if threatening is not None \
-        else float("nan")
-
-    # obstacle passed: ahead of every obstacle that ever threatened (every visible one when none
-    # did) by both radii, for good
-    ever = [j for j in range(n_obs) if threat_now[:, j].any()] or \
-        [j for j in range(n_obs) if np.isfinite(appear[j])]
+    threatening = next((j for j in order if at_appearance[j]), None)
+    ever = [j for j in range(len(tracks)) if threat_now[:, j].any()] or \
+        [j for j in range(len(tracks)) if np.isfinite(appear[j])]
     passed_time = float("nan")
     if ever:
-        behind = np.ones(len(tr), dtype=bool)
+        behind = np.ones(n, dtype=bool)
         for j in ever:
-            ox = (tracks[j]["position"] - start) @ line
-            reach = tracks[j]["radius"] + context.vehicle_radius_m
-            behind &= (~tracks[j]["visible"] & (t < appear[j])) | (along - ox > reach)
+            ox = (tracks[j].position - sig.start) @ sig.line
+            reach = tracks[j].radius + context.vehicle_radius_m
+            behind &= (~tracks[j].visible & (t < appear[j])) | (sig.along - ox > reach)
         first_appear = min(appear[j] for j in ever)
         not_behind = np.nonzero(~behind & (t >= first_appear))[0]
-        if not_behind.size and not_behind[-1] + 1 < len(tr):
+        if not_behind.size and not_behind[-1] + 1 < n:
             passed_time = float(t[not_behind[-1] + 1])
         elif not_behind.size == 0:
             passed_time = first_appear
-    out["obstacle_passed_time_s"] = passed_time
+    block = Threat(threatened=threatening is not None,
+                   obstacle_appear_time_s=appear[first_visible] if first_visible is not None
+                   else float("nan"),
+                   threat_appear_time_s=appear[threatening] if threatening is not None
+                   else float("nan"),
+                   obstacle_passed_time_s=passed_time)
+    return block, ThreatGeometry(ttc, threat_now, appear, first_visible, threatening,
+                                 passed_time)
 
-    # --- C1 reaction
+
+def reaction_block(sig: Signals, geo: ThreatGeometry, thresholds: MetricsConfig) -> Reaction:
+    """C1: when the steering angle first leaves its band after the obstacle's appearance."""
     interpolate = thresholds.reaction_interpolation == "linear"
-    has_delta = bool(np.any(np.isfinite(delta)))
+    has_delta = bool(np.any(np.isfinite(sig.delta)))
 
-    def reaction(j):
+    def delay(j):
         if j is None or not has_delta:
             return float("nan")
-        return band_exit_time(t, delta, appear[j], thresholds.reaction_steering_band_rad,
-                              interpolate)
+        return band_exit_time(sig.t, sig.delta, geo.appear[j],
+                              thresholds.reaction_steering_band_rad, interpolate)
 
-    out["reaction_delay_threat_s"] = reaction(threatening)
-    out["reaction_delay_first_visible_s"] = reaction(first_visible)
-    chosen = threatening if thresholds.reaction_obstacle == "threatening" else first_visible
-    out["reaction_delay_s"] = out["reaction_delay_threat_s"] if chosen is threatening \
-        else out["reaction_delay_first_visible_s"]
-    out["reacted"] = bool(np.isfinite(out["reaction_delay_s"]))
-    out["reaction_delay_lateral_s"] = band_exit_time(
-        t, lateral, appear[chosen], thresholds.reaction_lateral_band_m, interpolate) \
+    threat, first = delay(geo.threatening), delay(geo.first_visible)
+    chosen = geo.threatening if thresholds.reaction_obstacle == "threatening" \
+        else geo.first_visible
+    value = threat if chosen is geo.threatening else first
+    lateral = band_exit_time(sig.t, sig.lateral, geo.appear[chosen],
+                             thresholds.reaction_lateral_band_m, interpolate) \
         if chosen is not None else float("nan")
+    return Reaction(threat, first, value, bool(np.isfinite(value)), lateral)
 
-    # --- C4 recovery (its end bounds C2's avoidance window)
-    if np.isfinite(passed_time):
-        after = t >= passed_time - 1e-9
-        lat_settle = settling_time(t[after], lateral[after], thresholds.recovery_lateral_band_m)
-        # the bearing to the goal turns fast right before the goal: judge heading until
-        # recovery_heading_stop_m before the goal line
-        goal_along = float((goal - start) @ line)
-        heading_window = after & (along <= goal_along - thresholds.recovery_heading_stop_m)
-        head_settle = settling_time(t[heading_window], bearing_error[heading_window],
-                                    thresholds.recovery_heading_band_rad) \
-            if np.count_nonzero(heading_window) > 1 else float("nan")
-        out["recovery_lateral_s"] = lat_settle
-        out["recovery_heading_s"] = head_settle
-        out["recovery_time_s"] = lat_settle
-        out["recovered"] = bool(np.isfinite(lat_settle))
-    else:
-        after = np.zeros(len(tr), dtype=bool)
-        out.update(recovery_lateral_s=float("nan"), recovery_heading_s=float("nan"),
-                   recovery_time_s=float("nan"), recovered=False)
 
-    # --- C2 smoothness: a_y = vy_dot + vx r (or v r), jerk, over the avoidance window and run
-    lat_acc_old = speed * yaw_rate
-    lat_acc = time_derivative(vy, t) + vx * yaw_rate if vy is not None else lat_acc_old
+def _after_pass(sig: Signals, geo: ThreatGeometry) -> np.ndarray:
+    """Rows from the moment every threat is passed on (none when it never is)."""
+    if not np.isfinite(geo.passed_time_s):
+        return np.zeros(len(sig.t), dtype=bool)
+    return sig.t >= geo.passed_time_s - 1e-9
+
+
+def recovery_block(sig: Signals, geo: ThreatGeometry, thresholds: MetricsConfig) -> Recovery:
+    """C4: settling of the lateral error (and of the heading to the goal) after the pass."""
+    if not np.isfinite(geo.passed_time_s):
+        return Recovery(float("nan"), float("nan"), float("nan"), False)
+    after = _after_pass(sig, geo)
+    lateral = settling_time(sig.t[after], sig.lateral[after], thresholds.recovery_lateral_band_m)
+    # the bearing to the goal turns fast right before the goal: judge heading until
+    # recovery_heading_stop_m before the goal line
+    goal_along = float((sig.goal - sig.start) @ sig.line)
+    window = after & (sig.along <= goal_along - thresholds.recovery_heading_stop_m)
+    heading = settling_time(sig.t[window], sig.bearing_error[window],
+                            thresholds.recovery_heading_band_rad) \
+        if np.count_nonzero(window) > 1 else float("nan")
+    return Recovery(lateral, heading, lateral, bool(np.isfinite(lateral)))
+
+
+def smoothness_block(sig: Signals, threat: Threat, geo: ThreatGeometry, recovery: Recovery,
+                     thresholds: MetricsConfig) -> Smoothness:
+    """C2: a_y = vy_dot + vx r (or v r), its jerk, over the avoidance window and the run."""
+    t = sig.t
+    lat_acc_old = sig.speed * sig.yaw_rate
+    lat_acc = time_derivative(sig.vy, t) + sig.vx * sig.yaw_rate if sig.vy is not None \
+        else lat_acc_old
     if thresholds.lateral_accel == "vx_r":
         lat_acc = lat_acc_old
     jerk = time_derivative(lat_acc, t)
-    window_start = out["threat_appear_time_s"] if threatening is not None \
-        else out["obstacle_appear_time_s"]
-    window_end = passed_time + out["recovery_time_s"] if out["recovered"] else t[-1]
-    window = (t >= window_start - 1e-9) & (t <= window_end + 1e-9) \
-        if np.isfinite(window_start) else np.zeros(len(tr), dtype=bool)
-    curvature = yaw_rate / np.maximum(speed, 1e-3)
-    out["steering_rate_rms_rad_s"] = rms(steer_rate)
-    out["steering_rate_max_rad_s"] = max_abs(steer_rate)
-    out["steering_rate_rms_window_rad_s"] = rms(steer_rate[window])
-    out["lateral_accel_max_mps2"] = max_abs(lat_acc)
-    out["lateral_jerk_rms_run_mps3"] = rms(jerk)
-    out["lateral_jerk_max_mps3"] = max_abs(jerk)
-    out["lateral_jerk_rms_window_mps3"] = rms(jerk[window])
-    out["lateral_jerk_max_window_mps3"] = max_abs(jerk[window])
-    out["lateral_jerk_rms_vx_r_mps3"] = rms(time_derivative(lat_acc_old, t))
-    out["lateral_jerk_rms_mps3"] = out["lateral_jerk_rms_window_mps3"] \
-        if thresholds.smoothness_window == "avoidance" else out["lateral_jerk_rms_run_mps3"]
-    out["curvature_rate_rms_1_per_ms"] = rms(time_derivative(curvature, t))
+    start = threat.threat_appear_time_s if geo.threatening is not None \
+        else threat.obstacle_appear_time_s
+    end = geo.passed_time_s + recovery.recovery_time_s if recovery.recovered else t[-1]
+    window = (t >= start - 1e-9) & (t <= end + 1e-9) if np.isfinite(start) \
+        else np.zeros(len(t), dtype=bool)
+    curvature = sig.yaw_rate / np.maximum(sig.speed, 1e-3)
+    jerk_window, jerk_run = rms(jerk[window]), rms(jerk)
+    return Smoothness(
+        steering_rate_rms_rad_s=rms(sig.steer_rate), steering_rate_max_rad_s=max_abs(sig.steer_rate),
+        steering_rate_rms_window_rad_s=rms(sig.steer_rate[window]),
+        lateral_accel_max_mps2=max_abs(lat_acc), lateral_jerk_rms_run_mps3=jerk_run,
+        lateral_jerk_max_mps3=max_abs(jerk), lateral_jerk_rms_window_mps3=jerk_window,
+        lateral_jerk_max_window_mps3=max_abs(jerk[window]),
+        lateral_jerk_rms_vx_r_mps3=rms(time_derivative(lat_acc_old, t)),
+        lateral_jerk_rms_mps3=jerk_window if thresholds.smoothness_window == "avoidance"
+        else jerk_run,
+        curvature_rate_rms_1_per_ms=rms(time_derivative(curvature, t)))
 
-    # --- C3 repulsion modulation
-    clearance = clearance_series(tr, context.vehicle_radius_m)
-    if "apf_rep_norm" in tr:
-        rep = np.nan_to_num(tr["apf_rep_norm"].to_numpy(float))
-        impulse = float(np.sum(rep) * dt)
-        needed_threat = threat_now.any(axis=1)
-        needed_band = np.nan_to_num(clearance, nan=np.inf) <= thresholds.threat_clearance_m
-        needed = needed_threat if thresholds.repulsion_need == "threat" else needed_band
-        out["repulsive_impulse"] = impulse
-        # no repulsion at all means no unnecessary repulsion either: share 0, not missing
-        out["repulsion_unneeded_impulse"] = float(np.sum(rep[~needed]) * dt)
-        out["repulsion_unneeded_share"] = out["repulsion_unneeded_impulse"] / impulse \
-            if impulse > 0 else 0.0
-        out["repulsion_unneeded_share_threat"] = float(np.sum(rep[~needed_threat]) * dt / impulse) \
-            if impulse > 0 else 0.0
-        out["repulsive_impulse_far_share"] = float(np.sum(rep[~needed_band]) * dt / impulse) \
-            if impulse > 0 else 0.0
-        out["repulsive_force_peak"] = float(np.max(rep)) if rep.size else float("nan")
-        on = np.nonzero(rep > 1e-9)[0]
-        out["repulsion_onset_clearance_m"] = float(clearance[on[0]]) if on.size else float("nan")
-        onset = np.nonzero(needed_threat & (rep > thresholds.repulsion_onset_force))[0]
-        out["repulsion_onset_ttc_s"] = float(np.min(ttc[onset[0]])) if onset.size \
-            else float("nan")
-    if "apf_step_cap_share" in tr:
-        out["step_cap_binding_share"] = float(np.nanmean(tr["apf_step_cap_share"]
-                                                         .to_numpy(float)))
 
-    # --- C5 stability after the pass, net of the manoeuvre
-    sign_lat = sign_changes(lateral, thresholds.lateral_sign_band_m)
-    sign_yaw = sign_changes(yaw_rate, thresholds.yaw_rate_sign_band_rad_s)
-    out["lateral_sign_changes"] = sign_lat
-    out["yaw_rate_sign_changes"] = sign_yaw
-    out["oscillation_whole_run_count"] = sign_lat + sign_yaw
-    if np.isfinite(passed_time):
-        count, first = reversal_count(lateral[after], thresholds.lateral_sign_band_m)
-        away = first != 0 and np.sign(lateral[after][0]) == first
-        out["oscillation_after_pass_count"] = max(count - (1 if away else 0), 0)
-        out["yaw_rate_sign_changes_after_pass"] = sign_changes(
-            yaw_rate[after], thresholds.yaw_rate_sign_band_rad_s)
-        before = (t >= out["obstacle_appear_time_s"] - 1e-9) & ~after
-        detour_side = np.sign(lateral[before][np.argmax(np.abs(lateral[before]))]) \
+def repulsion_block(tr: pd.DataFrame, sig: Signals, geo: ThreatGeometry, clearance: np.ndarray,
+                    thresholds: MetricsConfig) -> Repulsion | None:
+    """C3: repulsive impulse applied while nothing threatens (or beyond the clearance band);
+    time to contact at the onset of significant repulsion. None without APF force columns."""
+    if "apf_rep_norm" not in tr:
+        return None
+    rep = np.nan_to_num(tr["apf_rep_norm"].to_numpy(float))
+    impulse = float(np.sum(rep) * sig.dt)
+    needed_threat = geo.threat_now.any(axis=1)
+    needed_band = np.nan_to_num(clearance, nan=np.inf) <= thresholds.threat_clearance_m
+    needed = needed_threat if thresholds.repulsion_need == "threat" else needed_band
+    unneeded = float(np.sum(rep[~needed]) * sig.dt)
+
+    def share(mask):  # no repulsion at all means no unnecessary repulsion either: 0
+        return float(np.sum(rep[mask]) * sig.dt / impulse) if impulse > 0 else 0.0
+
+    on = np.nonzero(rep > 1e-9)[0]
+    onset = np.nonzero(needed_threat & (rep > thresholds.repulsion_onset_force))[0]
+    return Repulsion(
+        repulsive_impulse=impulse, repulsion_unneeded_impulse=unneeded,
+        repulsion_unneeded_share=unneeded / impulse if impulse > 0 else 0.0,
+        repulsion_unneeded_share_threat=share(~needed_threat),
+        repulsive_impulse_far_share=share(~needed_band),
+        repulsive_force_peak=float(np.max(rep)) if rep.size else float("nan"),
+        repulsion_onset_clearance_m=float(clearance[on[0]]) if on.size else float("nan"),
+        repulsion_onset_ttc_s=float(np.min(geo.ttc[onset[0]])) if onset.size
+        else float("nan"))
+
+
+def stability_block(sig: Signals, threat: Threat, geo: ThreatGeometry,
+                    thresholds: MetricsConfig) -> Stability:
+    """C5: reversals after the pass net of the manoeuvre; sign changes over the run."""
+    sign_lat = sign_changes(sig.lateral, thresholds.lateral_sign_band_m)
+    sign_yaw = sign_changes(sig.yaw_rate, thresholds.yaw_rate_sign_band_rad_s)
+    after_pass, yaw_after, overshoot = float("nan"), float("nan"), float("nan")
+    if np.isfinite(geo.passed_time_s):
+        after = _after_pass(sig, geo)
+        lateral = sig.lateral[after]
+        count, first = reversal_count(lateral, thresholds.lateral_sign_band_m)
+        away = first != 0 and np.sign(lateral[0]) == first
+        after_pass = max(count - (1 if away else 0), 0)
+        yaw_after = sign_changes(sig.yaw_rate[after], thresholds.yaw_rate_sign_band_rad_s)
+        before = (sig.t >= threat.obstacle_appear_time_s - 1e-9) & ~after
+        side = np.sign(sig.lateral[before][np.argmax(np.abs(sig.lateral[before]))]) \
             if np.any(before) else 0.0
-        out["overshoot_m"] = float(max(0.0, np.max(-detour_side * lateral[after]))) \
-            if detour_side != 0 else 0.0
-    else:
-        out.update(oscillation_after_pass_count=float("nan"), overshoot_m=float("nan"),
-                   yaw_rate_sign_changes_after_pass=float("nan"))
-    out["oscillation_count"] = out["oscillation_after_pass_count"] \
-        if thresholds.oscillation == "net_reversals_after_pass" \
-        else out["oscillation_whole_run_count"]
-    dpsi = np.abs(np.diff(np.unwrap(psi)))
-    out["heading_step_max_rad"] = float(np.max(dpsi)) if dpsi.size else float("nan")
-    out["max_lateral_deviation_m"] = max_abs(lateral)
+        overshoot = float(max(0.0, np.max(-side * lateral))) if side != 0 else 0.0
+    dpsi = np.abs(np.diff(np.unwrap(sig.psi)))
+    return Stability(
+        lateral_sign_changes=sign_lat, yaw_rate_sign_changes=sign_yaw,
+        oscillation_whole_run_count=sign_lat + sign_yaw,
+        oscillation_after_pass_count=after_pass, yaw_rate_sign_changes_after_pass=yaw_after,
+        overshoot_m=overshoot,
+        oscillation_count=after_pass if thresholds.oscillation == "net_reversals_after_pass"
+        else sign_lat + sign_yaw,
+        heading_step_max_rad=float(np.max(dpsi)) if dpsi.size else float("nan"),
+        max_lateral_deviation_m=max_abs(sig.lateral))
 
-    # --- safety: continuous check, sampled as the older reading; attribution of a collision
+
+def safety_block(tr: pd.DataFrame, sig: Signals, tracks: list[ObstacleTrack],
+                 clearance: np.ndarray, context: TrajectoryContext,
+                 thresholds: MetricsConfig) -> Safety:
+    """Clearance from the continuous check (sampled as the older reading), collision and
+    whether it was avoidable, minimum time to collision."""
     sampled = float(np.nanmin(clearance)) if np.any(np.isfinite(clearance)) else float("nan")
-    continuous, contact_j, contact_t = continuous_clearance(t, xy, tracks,
+    continuous, contact_j, contact_t = continuous_clearance(sig.t, sig.xy, tracks,
                                                            context.vehicle_radius_m)
-    out["min_clearance_sampled_m"] = sampled
-    out["min_clearance_continuous_m"] = continuous
     use_continuous = thresholds.collision_check == "continuous"
-    out["min_clearance_m"] = continuous if use_continuous else sampled
-    out["collision"] = bool(np.isfinite(out["min_clearance_m"]) and out["min_clearance_m"] < 0.0)
-    if out["collision"] and not use_continuous:
-        contact_j = int(np.argmin([np.nanmin(np.where(tr_["visible"], np.linalg.norm(
-            xy - tr_["position"], axis=1) - tr_["radius"], np.inf)) for tr_ in tracks]))
-        contact_t = float(t[np.nanargmin(clearance)])
-    pose = np.column_stack([xy, psi, speed, delta])
-    out["collision_avoidable"] = collision_is_avoidable(t, pose, tracks, contact_j, contact_t,
-                                                        context, thresholds) \
-        if out["collision"] and contact_j >= 0 else None
-    out["min_time_to_collision_s"] = min_time_to_collision(tr, context.vehicle_radius_m)
-    goal_tolerance = thresholds.goal_tolerance_m if thresholds.goal_tolerance_m is not None \
-        else 0.5
-    reached = np.nonzero(along >= (goal - start) @ line - goal_tolerance)[0]
-    out["goal_reached"] = bool(reached.size)
-    out["time_to_goal_s"] = float(t[reached[0]] - t[0]) if reached.size else float("nan")
-    out["path_length_m"] = float(np.sum(np.linalg.norm(np.diff(xy, axis=0), axis=1)))
-    out["max_abs_heading_error_rad"] = max_abs(heading_error)
-    out["heading_validity_exceeded"] = bool(out["max_abs_heading_error_rad"]
-                                            > context.validity_heading_rad)
+    chosen = continuous if use_continuous else sampled
+    collision = bool(np.isfinite(chosen) and chosen < 0.0)
+    if collision and not use_continuous:
+        contact_j = int(np.argmin([np.nanmin(np.where(track.visible, np.linalg.norm(
+            sig.xy - track.position, axis=1) - track.radius, np.inf)) for track in tracks]))
+        contact_t = float(sig.t[np.nanargmin(clearance)])
+    pose = np.column_stack([sig.xy, sig.psi, sig.speed, sig.delta])
+    avoidable = collision_is_avoidable(sig.t, pose, tracks, contact_j, contact_t, context,
+                                       thresholds) if collision and contact_j >= 0 else None
+    return Safety(sampled, continuous, chosen, collision, avoidable,
+                  min_time_to_collision(tr, context.vehicle_radius_m))
 
-    # --- solver (deterministic parts only; wall-clock times live in timing.json)
+
+def progress_block(sig: Signals, context: TrajectoryContext,
+                   thresholds: MetricsConfig) -> Progress:
+    """Goal line reached (within the goal tolerance) and when; path length; heading error
+    against the model's validity bound."""
+    t = sig.t
+    tolerance = thresholds.goal_tolerance_m if thresholds.goal_tolerance_m is not None else 0.5
+    reached = np.nonzero(sig.along >= (sig.goal - sig.start) @ sig.line - tolerance)[0]
+    heading = max_abs(sig.heading_error)
+    return Progress(
+        n_steps_logged=int(len(t)), duration_s=float(t[-1] - t[0]) if t.size else 0.0,
+        goal_reached=bool(reached.size),
+        time_to_goal_s=float(t[reached[0]] - t[0]) if reached.size else float("nan"),
+        path_length_m=float(np.sum(np.linalg.norm(np.diff(sig.xy, axis=0), axis=1))),
+        max_abs_heading_error_rad=heading,
+        heading_validity_exceeded=bool(heading > context.validity_heading_rad))
+
+
+def solver_blocks(tr: pd.DataFrame) -> tuple[SolverIterations | None, Fallbacks | None]:
+    """Solver iterations and fallbacks (deterministic parts only; wall-clock times live in
+    ``timing.json``); None without the columns."""
+    iterations = fallbacks = None
     if "solver_iterations" in tr:
         it = tr["solver_iterations"].to_numpy(float)
         it = it[np.isfinite(it) & (it >= 0)]
-        out["solver_iterations_median"] = float(np.median(it)) if it.size else float("nan")
-        out["solver_iterations_p95"] = float(np.percentile(it, 95)) if it.size else float("nan")
+        iterations = SolverIterations(
+            float(np.median(it)) if it.size else float("nan"),
+            float(np.percentile(it, 95)) if it.size else float("nan"))
     if "fallback" in tr:
         fb = tr["fallback"].astype(str)
-        out["fallback_count"] = int(fb.isin(["shifted_plan", "safe_input"]).sum())
-        out["fallback_safe_input_count"] = int((fb == "safe_input").sum())
-    return {k: _nan_to_none(v) for k, v in out.items()}
+        fallbacks = Fallbacks(int(fb.isin(["shifted_plan", "safe_input"]).sum()),
+                              int((fb == "safe_input").sum()))
+    return iterations, fallbacks
+
+
+def compute_metrics(trajectory: pd.DataFrame, context: TrajectoryContext,
+                    thresholds: MetricsConfig) -> RunMetrics:
+    """All Table 1 metrics of one logged run.
+
+    Parameters
+    ----------
+    trajectory : pandas.DataFrame
+        The simulation log (or a scored external trajectory with the same columns).
+    context : TrajectoryContext
+    thresholds : MetricsConfig
+
+    Returns
+    -------
+    RunMetrics
+        One block per criterion; ``to_json()`` gives the flat ``metrics.json`` mapping.
+    """
+    sig = trajectory_signals(trajectory, context)
+    tracks = obstacle_tracks(trajectory)
+    threat, geo = threat_block(sig, tracks, context, thresholds)
+    recovery = recovery_block(sig, geo, thresholds)
+    clearance = clearance_series(trajectory, context.vehicle_radius_m)
+    step_cap = StepCap(float(np.nanmean(trajectory["apf_step_cap_share"].to_numpy(float)))) \
+        if "apf_step_cap_share" in trajectory else None
+    iterations, fallbacks = solver_blocks(trajectory)
+    return RunMetrics(
+        threat=threat, reaction=reaction_block(sig, geo, thresholds),
+        smoothness=smoothness_block(sig, threat, geo, recovery, thresholds),
+        recovery=recovery, stability=stability_block(sig, threat, geo, thresholds),
+        safety=safety_block(trajectory, sig, tracks, clearance, context, thresholds),
+        progress=progress_block(sig, context, thresholds),
+        repulsion=repulsion_block(trajectory, sig, geo, clearance, thresholds),
+        step_cap=step_cap, iterations=iterations, fallbacks=fallbacks)

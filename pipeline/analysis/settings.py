@@ -12,7 +12,7 @@ from pipeline.validation import at_least, between, choice, finite, pair, safe_na
 
 @dataclass
 class MetricsConfig:
-    """Thresholds and readings of the Table 1 metrics (definitions: :mod:`pipeline.metrics`).
+    """Thresholds and readings of the Table 1 metrics (definitions: :mod:`pipeline.analysis.metrics`).
 
     The ``*_definition``-like string switches select which reading a claim's primary metric
     uses; every reading is computed and logged under its own key as well (register entries).

@@ -15,7 +15,7 @@ into preallocated arrays and becomes one DataFrame at the end.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from math import atan2, cos, hypot, sin, sqrt
+from math import atan2, cos, sin, sqrt
 
 import numpy as np
 import pandas as pd
@@ -25,6 +25,7 @@ from pipeline.loop.controller import ControlStep, Observation, QpCache, make_con
 from pipeline.loop.model import kinematic_plant_step, step_plant
 from pipeline.loop.planner import ApfRollout, apf_rollout, plan_speed
 from pipeline.loop.scenario import Scenario
+from pipeline.loop.trajectory import HEAD, OBSTACLE_FIELDS, TAIL, obstacle_column
 
 
 @dataclass(frozen=True)
@@ -164,16 +165,6 @@ def _apf_columns(rollout: ApfRollout) -> dict:
             if rollout.step_cap_active.size else 0.0}
 
 
-#: Column order of the trajectory table (obstacle columns follow the APF columns).
-COLUMN_ORDER = ["time_s", "X_m", "Y_m", "psi_rad", "vx_mps", "vy_mps", "r_rad_s", "delta_rad",
-                "e_y_m", "e_psi_rad", "steering_rate_rad_s", "accel_mps2", "speed_ref_mps",
-                "y_ref_m", "psi_ref_rad", "apf_next_x_m", "apf_next_y_m", "apf_end_x_m",
-                "apf_end_y_m", "apf_att_x", "apf_att_y", "apf_rep_x", "apf_rep_y",
-                "apf_rep_norm", "apf_step_capped", "apf_step_min_used", "apf_step_cap_share"]
-TAIL_COLUMNS = ["clearance_m", "solver_status", "solver_iterations", "fallback", "max_slack_m",
-                "ltv_passes", "ltv_change"]
-
-
 def simulate(cfg: LoopSettings, scenario: Scenario,
              qp_cache: QpCache | None = None) -> SimulationResult:
     """Run the closed loop once.
@@ -193,8 +184,7 @@ def simulate(cfg: LoopSettings, scenario: Scenario,
         ``steering_rate_rad_s`` (and ``accel_mps2`` on the kinematic track), ``speed_ref_mps``,
         the references (``y_ref_m, psi_ref_rad``), the APF's next point and forces at the vehicle
         and whether its step cap bound (``apf_*``), per-obstacle columns (``obs{j}_x_m,
-        obs{j}_y_m, obs{j}_radius_m, obs{j}_visible``), ``clearance_m`` (smallest centre distance
-        minus both radii over visible obstacles) and solver columns (``solver_status,
+        obs{j}_y_m, obs{j}_radius_m, obs{j}_visible``) and solver columns (``solver_status,
         solver_iterations, fallback, max_slack_m``; ``ltv_passes, ltv_change`` on the kinematic
         track).
     """
@@ -207,7 +197,8 @@ def simulate(cfg: LoopSettings, scenario: Scenario,
     origin_x, origin_y = frame.origin_m.tolist()
     c_line, s_line = cos(frame.heading_rad), sin(frame.heading_rad)
     goal_line_x = float(frame.to_line(scenario.goal_m)[0])
-    n_obs = scenario.n_obstacles
+    obstacle_names = [tuple(obstacle_column(j, f) for f in OBSTACLE_FIELDS)
+                      for j in range(scenario.n_obstacles)]
     log = TrajectoryLog(scenario.n_steps + 1)
     solve_times = np.zeros(scenario.n_steps + 1)
     n_solves = 0
@@ -223,15 +214,11 @@ def simulate(cfg: LoopSettings, scenario: Scenario,
         snapshot = scenario.obstacles_at(time_s)
         row = {"time_s": time_s, "X_m": X, "Y_m": Y, "psi_rad": psi, "e_y_m": lateral,
                "e_psi_rad": e_psi}
-        clearance = np.inf
         for j, ((ox, oy), radius, seen) in enumerate(zip(snapshot.positions_m.tolist(),
                                                          snapshot.radii_m.tolist(),
                                                          snapshot.visible.tolist())):
-            row[f"obs{j}_x_m"], row[f"obs{j}_y_m"] = ox, oy
-            row[f"obs{j}_radius_m"], row[f"obs{j}_visible"] = radius, seen
-            if seen:
-                clearance = min(clearance, hypot(X - ox, Y - oy) - radius - vehicle_radius)
-        row["clearance_m"] = clearance if np.isfinite(clearance) else np.nan
+            names = obstacle_names[j]
+            row[names[0]], row[names[1]], row[names[2]], row[names[3]] = ox, oy, radius, seen
         ending = _termination(state, along, goal_line_x, scenario, k)
         if ending is not None:
             termination = ending
@@ -263,9 +250,8 @@ def simulate(cfg: LoopSettings, scenario: Scenario,
         log.put(k, row)
         command = step.command
         state = plant.step(state, command, speed_ref)
-    obstacle_columns = [f"obs{j}_{name}" for j in range(n_obs)
-                        for name in ("x_m", "y_m", "radius_m", "visible")]
-    trajectory = log.frame(COLUMN_ORDER + obstacle_columns + TAIL_COLUMNS)
+    trajectory = log.frame(list(HEAD) + [c for names in obstacle_names for c in names]
+                           + list(TAIL))
     return SimulationResult(trajectory, solve_times[:n_solves], controller.compile_count,
                             controller.compile_time_s, termination == "goal_line", termination)
 

@@ -159,17 +159,19 @@ def save_figure(fig: Figure, out_dir: Path, stem: str) -> dict[str, Path]:
     return paths
 
 
-def claim_differences_figure(differences: dict[str, np.ndarray], metric_names: dict[str, str],
-                             intervals: dict[str, tuple[float, float, float]]) -> Figure:
+def claim_differences_figure(differences: dict[tuple[str, str], np.ndarray],
+                             metric_names: dict[str, str],
+                             intervals: dict[tuple[str, str], tuple[float, float, float]]
+                             ) -> Figure:
     """Per-scenario paired differences (improved - comparison, < 0 is better): one row per
     comparison, one panel per claim, with the estimate and its interval.
 
-    Keys of ``differences`` and ``intervals`` are ``"<claim> vs <comparison>"``; intervals are
+    Keys of ``differences`` and ``intervals`` are ``(claim_id, comparison)``; intervals are
     ``(low, high, estimate)``.
     """
     keys = list(differences)
-    claims = list(dict.fromkeys(k.split(" vs ")[0] for k in keys))
-    comparisons = list(dict.fromkeys(k.split(" vs ")[1] for k in keys))
+    claims = list(dict.fromkeys(claim for claim, _ in keys))
+    comparisons = list(dict.fromkeys(comparison for _, comparison in keys))
     fig, axes = plt.subplots(len(comparisons), len(claims),
                              figsize=(1.9 * len(claims) + 0.8, 2.9 * len(comparisons)),
                              layout="constrained", squeeze=False)
@@ -177,7 +179,7 @@ def claim_differences_figure(differences: dict[str, np.ndarray], metric_names: d
     for r, comparison in enumerate(comparisons):
         for c, claim in enumerate(claims):
             ax = axes[r][c]
-            key = f"{claim} vs {comparison}"
+            key = (claim, comparison)
             if key not in differences:
                 ax.set_visible(False)
                 continue

@@ -23,10 +23,12 @@ import numpy as np
 import pandas as pd
 import yaml
 
+from pipeline.store.collection import RunCollection, load_runs
 from pipeline.store.runs import (RunFolderError, Skipped, check, discover, read_family, read_run,
                            write_text_atomic)
 from pipeline.analysis.claims import (ALL_CLAIMS, OUTCOME_RULE, SINGLE_RULE, claims_table,
                              family_ledger, outcome_counts)
+from pipeline.analysis.tally import Tally
 from pipeline.config import INTERPRETATION_REGISTER, ClaimsConfig
 from pipeline.reporting.figures import (apf_force_figure, claim_differences_figure,
                               family_distribution_figure, overlay_figure, save_figure,
@@ -39,20 +41,13 @@ METHOD_ORDER = ("baseline", "baseline_matched", "improved", "velocity_aware", "m
 COMPARISONS = ("baseline", "baseline_matched")
 
 
-def claims_config(config: dict | None) -> ClaimsConfig:
-    """The ``claims`` settings a run was made with (defaults for older run folders)."""
-    block = (config or {}).get("claims") or {}
-    try:
-        return ClaimsConfig(**block)
-    except TypeError:
-        return ClaimsConfig()
-
-
-def _rules(cfg: ClaimsConfig) -> dict:
-    """Template values shared by every page: the rules and the margins with their reasons."""
+def _rules(cfg: ClaimsConfig | None) -> dict:
+    """Template values shared by every page: the rules and the margins with their reasons
+    (none listed when no run carries claims settings, e.g. a sweep-only page)."""
     return {"family_rule": OUTCOME_RULE, "verdict_rule": SINGLE_RULE,
             "margins": [{"claim": c.claim_id, "margin": _fmt(cfg.margins[c.claim_id]),
-                         "reason": cfg.margin_reasons[c.claim_id]} for c in ALL_CLAIMS],
+                         "reason": cfg.margin_reasons[c.claim_id]} for c in ALL_CLAIMS]
+            if cfg is not None else [],
             "claim_defs": ALL_CLAIMS}
 
 
@@ -123,108 +118,6 @@ def _fmt(value) -> str:
             return "—"
         return f"{value:.3g}" if abs(value) >= 1e-3 or value == 0 else f"{value:.2e}"
     return html.escape(str(value))
-
-
-EXCLUDED_SECTIONS = ("sweeps", "ablation", "interpretations", "multiverse")
-
-
-def _flatten(config: dict, prefix: str = "") -> dict:
-    flat = {}
-    for key, value in (config or {}).items():
-        name = f"{prefix}{key}"
-        if isinstance(value, dict):
-            flat.update(_flatten(value, name + "."))
-        else:
-            flat[name] = value
-    return flat
-
-
-def label_by_difference(configs: list[dict], method: str, skip: tuple[str, ...] = (
-        "run.", "scenario.name")) -> list[str]:
-    """Labels for several runs of one method: the method plus the config values that differ
-    between them (at most three, the rest counted)."""
-    if len(configs) < 2:
-        return [method] * len(configs)
-    flats = [_flatten(c) for c in configs]
-    keys = sorted({k for f in flats for k in f})
-    differing = [k for k in keys if not k.startswith(skip)
-                 and len({repr(f.get(k)) for f in flats}) > 1]
-    labels = []
-    for f in flats:
-        parts = [f"{k}={f.get(k)}" for k in differing[:3]]
-        more = f", +{len(differing) - 3} more" if len(differing) > 3 else ""
-        labels.append(f"{method} ({', '.join(parts)}{more})" if parts else method)
-    # identical configs: number them so that no run hides another
-    seen: dict[str, int] = {}
-    for i, label in enumerate(labels):
-        if labels.count(label) > 1:
-            seen[label] = seen.get(label, 0) + 1
-            labels[i] = f"{label} #{seen[label]}"
-    return labels
-
-
-def load_runs(run_root: Path, skipped: list[Skipped] | None = None
-              ) -> tuple[list[dict], dict[str, pd.DataFrame], dict[str, dict]]:
-    """Single runs (outside family folders) and per-method family tables under ``run_root``.
-
-    Every folder is read through :mod:`pipeline.runs`; folders that cannot be trusted are
-    appended to ``skipped`` with their reason. Several runs of one method on one track are all
-    kept, labelled by what differs between them (``metrics["label"]``).
-
-    Returns
-    -------
-    runs : list of dict
-        :meth:`pipeline.runs.RunRecord.as_dict` of each trusted single-run folder.
-    family_tables : dict of label -> DataFrame
-        ``family_metrics.csv`` of each trusted family folder.
-    family_info : dict of label -> dict
-        ``family.json`` of each family folder (with ``dir``).
-    """
-    run_root = Path(run_root)
-    skipped = skipped if skipped is not None else []
-    if not run_root.is_dir():
-        raise FileNotFoundError(f"no complete run folders under {run_root} (no such folder)")
-    found = discover(run_root, exclude=EXCLUDED_SECTIONS)
-    skipped.extend(found.skipped)
-    families = []
-    for folder in found.families:
-        try:
-            families.append(read_family(folder))
-        except RunFolderError as exc:
-            skipped.append(Skipped(folder, str(exc).split(": ", 1)[-1]))
-    runs = []
-    for folder in found.runs:
-        try:
-            runs.append(read_run(folder).as_dict())
-        except RunFolderError as exc:
-            skipped.append(Skipped(folder, str(exc).split(": ", 1)[-1]))
-    if not runs and not families:
-        if skipped:
-            raise FileNotFoundError(f"no trusted run folders under {run_root} ("
-                                    f"{len(skipped)} skipped, e.g. {skipped[0].folder}: "
-                                    f"{skipped[0].reason})")
-        raise FileNotFoundError(f"no complete run folders (with metrics.json) under {run_root}")
-    # label runs of the same method and track by what differs between them
-    groups: dict[tuple, list[dict]] = {}
-    for run in runs:
-        key = (run["metrics"].get("track", "lateral"), run["metrics"].get("method", ""))
-        groups.setdefault(key, []).append(run)
-    for (_, method), group in groups.items():
-        for run, label in zip(group, label_by_difference([r["config"] for r in group], method)):
-            run["metrics"] = {**run["metrics"], "label": label}
-    family_tables, family_info = {}, {}
-    by_method: dict[str, list] = {}
-    for family in families:
-        by_method.setdefault(family.info.get("method", ""), []).append(family)
-    for method, group in by_method.items():
-        configs = []
-        for family in group:
-            member = family.folder / "member_0000" / "config.yaml"
-            configs.append(yaml.safe_load(member.read_text()) if member.is_file() else {})
-        for family, label in zip(group, label_by_difference(configs, method)):
-            family_tables[label] = family.table
-            family_info[label] = {**family.info, "dir": str(family.folder)}
-    return runs, family_tables, family_info
 
 
 def _ordered(methods) -> list[str]:
@@ -322,9 +215,8 @@ def _ablation_section(run_root: Path, fig_dir: Path, table_dir: Path,
         section["effects"] = [{**{k: _fmt(v) for k, v in r.items()},
                                "ci": f"[{_fmt(r['ci_low'])}, {_fmt(r['ci_high'])}]"}
                               for r in effects.to_dict("records")]
-        section["counts"] = [{"configuration": label,
-                              "collisions": int(t["collision"].astype(bool).sum()),
-                              "not_recovered": int((~t["recovered"].astype(bool)).sum()),
+        section["counts"] = [{"configuration": label, "collisions": Tally.of(t).collisions,
+                              "not_recovered": Tally.of(t).not_recovered,
                               "scenarios": len(t)} for label, t in tables.items()]
         section["figures"].append({
             "id": "ablation_forest", "group": "ablation",
@@ -461,7 +353,7 @@ def build_report(run_root: Path, out_dir: Path, command: str,
     sweep_dirs : tuple of Path
         Aggregated sweep folders (``summary.csv``) to add as Sweep sections.
     skipped : list, optional
-        Receives every folder passed over (:class:`pipeline.runs.Skipped`); they are also listed
+        Receives every folder passed over (:class:`pipeline.store.runs.Skipped`); they are also listed
         in the page and on stderr.
 
     Returns
@@ -475,9 +367,11 @@ def build_report(run_root: Path, out_dir: Path, command: str,
     sweep_dirs = tuple(Path(d) for d in sweep_dirs)
     skipped = skipped if skipped is not None else []
     if is_sweep_folder(run_root):
-        sweep_dirs, runs, family_tables, family_info = (Path(run_root),) + sweep_dirs, [], {}, {}
+        sweep_dirs, collection = (Path(run_root),) + sweep_dirs, RunCollection()
     else:
-        runs, family_tables, family_info = load_runs(run_root, skipped)
+        collection = load_runs(run_root, skipped)
+    runs, family_tables, family_info = (collection.runs, collection.family_tables,
+                                        collection.family_info)
     for item in skipped:
         print(f"skipped {item.folder}: {item.reason}", file=sys.stderr)
     def optional(section, folder, *args):
@@ -512,7 +406,7 @@ def build_report(run_root: Path, out_dir: Path, command: str,
             paper=False, sweeps=sweeps, performance=performance, robustness=None, ablation=None, figures=figures, family=None, kinematic=None,
             skipped=_skipped_rows(skipped, run_root), other_runs=[], run_notes=[],
             methods=[], scenario="(sweep only)", prov=provenance(command),
-            register=register_rows({}), metrics_doc=_metrics_doc(), **_rules(ClaimsConfig()))
+            register=register_rows({}), metrics_doc=_metrics_doc(), **_rules(None))
         path = out_dir / "index.html"
         write_text_atomic(path, page)
         return path
@@ -546,7 +440,8 @@ def build_report(run_root: Path, out_dir: Path, command: str,
                     "compile_s": _fmt(r["timing"]["compile_time_s"]),
                     "compiles": _fmt(r["metrics"].get("compile_count"))}
                    for m, r in by_method.items()]
-    cfg_claims = claims_config(first_cfg)
+    # the claims settings the runs were made with, never defaults rebuilt from text
+    cfg_claims = collection.claims_settings("improved")
     comparisons = tuple(c for c in COMPARISONS if c in primary)
     claim_metrics = {**metrics_by_method, **{m: r["metrics"] for m, r in primary.items()}}
     claims = claims_table(claim_metrics, cfg_claims.margins, comparisons)
@@ -703,8 +598,9 @@ def _track_section(runs: list[dict], track: str, fig_dir: Path, table_dir: Path,
             far = [m for m in (comparison, "improved") if not met(m)]
             comparability.append(f"vs {comparison}: not comparable ({', '.join(far)} never "
                                  f"came within {cfg.comparable_clearance_m:g} m).")
+            rates = {c.claim_id for c in ALL_CLAIMS if c.is_rate}
             for row in claims:
-                if row["claim"] != "C0":
+                if row["claim"] not in rates:
                     row[f"vs {comparison}"] = "not comparable"
         else:
             comparability.append(f"vs {comparison}: comparable.")
@@ -771,13 +667,11 @@ def _family_section(tables: dict, info: dict, paper_metrics: dict, fig_dir: Path
                     table_dir: Path, cfg: ClaimsConfig, all_tables: dict | None = None) -> dict:
     """Claims ledger over the family (C0-C5 against each comparison), outcome counts,
     distribution plots and what the step cap does."""
-    from pipeline.analysis.claims import LEDGER_COLUMNS
-
     order = _ordered(tables)
     tables = {m: tables[m] for m in order}
-    ledger, differences = family_ledger(tables, cfg, paper_metrics)
-    pd.DataFrame(ledger).reindex(columns=LEDGER_COLUMNS + ["interval_method", "margin_reason"]
-                                 ).to_csv(table_dir / "claims_ledger.csv", index=False)
+    typed = family_ledger(tables, cfg, paper_metrics)
+    typed.to_frame().to_csv(table_dir / "claims_ledger.csv", index=False)
+    ledger = typed.records()
     counts = outcome_counts({m: all_tables[m] for m in _ordered(all_tables)}
                             if all_tables else tables)
     pd.DataFrame(counts).to_csv(table_dir / "family_outcomes.csv", index=False)
@@ -812,8 +706,9 @@ def _family_section(tables: dict, info: dict, paper_metrics: dict, fig_dir: Path
                          "normalization' and 'a larger step' change nothing, and the rollout is a "
                          "normalized step of the cap's length; the comparison with "
                          "baseline_matched isolates the remaining revisions.")
-    intervals = {k: next((r["ci_low"], r["ci_high"], r["estimate"]) for r in ledger
-                         if f"{r['claim']} vs {r['comparison']}" == k) for k in differences}
+    differences = typed.differences
+    intervals = {row.key: (row.result.ci_low, row.result.ci_high, row.result.estimate)
+                 for row in typed}
     names = {c.claim_id: c.primary_metric for c in ALL_CLAIMS}
     figures = [
         {"id": "claim_differences", "group": "claims",
@@ -843,7 +738,7 @@ def _family_section(tables: dict, info: dict, paper_metrics: dict, fig_dir: Path
 
 
 def _metrics_doc() -> list[str]:
-    """Bullet paragraphs of the metric definitions (from :mod:`pipeline.metrics`)."""
+    """Bullet paragraphs of the metric definitions (from :mod:`pipeline.analysis.metrics`)."""
     import pipeline.analysis.metrics as metrics_module
 
     doc = metrics_module.__doc__ or ""

@@ -21,12 +21,14 @@ import hashlib
 import json
 import os
 import tempfile
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields
 from pathlib import Path
 
 import pandas as pd
 
-from pipeline.errors import NonFiniteResultError, RunFolderError
+from pipeline.analysis.metrics import RunMetrics
+from pipeline.config import ExperimentConfig, experiment_config_from_data
+from pipeline.errors import ConfigError, NonFiniteResultError, RunFolderError
 
 RUN_FILES = ("config.yaml", "model.json", "trajectory.csv", "timing.json", "metrics.json")
 FAMILY_FILES = ("family_metrics.csv", "family.json")
@@ -79,43 +81,81 @@ class Skipped:
 
 
 @dataclass(frozen=True)
+class RunInfo:
+    """What a run was (bookkeeping written beside its metrics in ``metrics.json``)."""
+
+    method: str
+    scenario: str
+    track: str
+    config_hash: str
+    termination: str
+    compile_count: int
+
+    def to_json(self) -> dict:
+        return {f.name: getattr(self, f.name) for f in fields(self)}
+
+    @classmethod
+    def from_json(cls, data: dict) -> "RunInfo":
+        return cls(str(data.get("method", "")), str(data.get("scenario", "")),
+                   str(data.get("track", "lateral")), str(data.get("config_hash", "")),
+                   str(data.get("termination", "")), int(data.get("compile_count") or 0))
+
+
+@dataclass(frozen=True)
 class RunRecord:
-    """One trusted run folder, read.
+    """One trusted run folder, read and typed.
 
     Attributes
     ----------
     folder : Path
-    config, metrics, timing, model, manifest : dict
-    trajectory : pandas.DataFrame
+    config : ExperimentConfig
+        The settings the run was made with (validated like a fresh configuration).
+    config_data : dict
+        The same, as the mapping in ``config.yaml`` (for labels and the register).
+    metrics : RunMetrics
+    info : RunInfo
+    timing, model, manifest : dict
+    trajectory : pandas.DataFrame or None
+        None when read with ``trajectory=False``.
     """
 
     folder: Path
-    config: dict
-    metrics: dict
+    config: ExperimentConfig
+    config_data: dict
+    metrics: RunMetrics
+    info: RunInfo
     timing: dict
     model: dict
     manifest: dict
-    trajectory: pd.DataFrame
+    trajectory: pd.DataFrame | None
 
     @property
     def method(self) -> str:
-        return str(self.metrics.get("method", ""))
+        return self.info.method
+
+    def flat_metrics(self) -> dict:
+        """``metrics.json`` as written: the metrics and the run's bookkeeping."""
+        return {**self.metrics.to_json(), **self.info.to_json()}
 
     def as_dict(self) -> dict:
-        """The mapping older callers use (``dir``, ``config``, ``metrics``, ``timing``,
-        ``trajectory``)."""
-        return {"dir": self.folder, "config": self.config, "metrics": self.metrics,
-                "timing": self.timing, "trajectory": self.trajectory}
+        """The report's view of the run (``dir``, ``config``, ``metrics``, ``timing``,
+        ``trajectory``, ``claims``: the claims settings the run was made with)."""
+        return {"dir": self.folder, "config": self.config_data, "metrics": self.flat_metrics(),
+                "timing": self.timing, "trajectory": self.trajectory,
+                "claims": self.config.claims}
 
 
 @dataclass(frozen=True)
 class FamilyRecord:
-    """One trusted family folder, read: ``family.json`` and the per-member table."""
+    """One trusted family folder, read: ``family.json``, the per-member table and the settings
+    the family was made with (its first member's configuration)."""
 
     folder: Path
     info: dict
     table: pd.DataFrame
     manifest: dict
+    config: ExperimentConfig | None
+    config_data: dict | None
 
 
 @dataclass
@@ -199,8 +239,24 @@ def _write_manifest(folder: Path, kind: str, files: tuple[str, ...], config_hash
     return manifest
 
 
+def untrust(folder: Path) -> None:
+    """Remove a folder's manifest: its files are being rewritten and must not be trusted until
+    a new manifest is written last."""
+    (Path(folder) / MANIFEST).unlink(missing_ok=True)
+
+
+def folder_kind(folder: Path) -> str | None:
+    """``"family"``, ``"run"`` or None: what kind of record a folder holds, by its files."""
+    folder = Path(folder)
+    if any((folder / name).is_file() for name in FAMILY_FILES):
+        return "family"
+    if any((folder / name).is_file() for name in RUN_FILES + (MANIFEST,)):
+        return "run"
+    return None
+
+
 def write_run(folder: Path, *, config_text: str, model: dict, trajectory: pd.DataFrame,
-              timing: dict, metrics: dict, config_hash: str) -> Path:
+              timing: dict, metrics: RunMetrics, info: RunInfo) -> Path:
     """Write a complete run folder: the files, then the manifest (last, atomically).
 
     An existing manifest is removed first, so a folder being rewritten is never trusted
@@ -212,13 +268,14 @@ def write_run(folder: Path, *, config_text: str, model: dict, trajectory: pd.Dat
              "trajectory.csv": trajectory.to_csv(index=False, float_format="%.10g",
                                                  lineterminator="\n"),
              "timing.json": _json_text("timing.json", timing),
-             "metrics.json": _json_text("metrics.json", metrics)}
+             "metrics.json": _json_text("metrics.json", {**metrics.to_json(),
+                                                         **info.to_json()})}
     folder.mkdir(parents=True, exist_ok=True)
     clean_leftovers(folder)
     (folder / MANIFEST).unlink(missing_ok=True)
     for name in RUN_FILES:
         write_text_atomic(folder / name, texts[name])
-    _write_manifest(folder, "run", RUN_FILES, config_hash)
+    _write_manifest(folder, "run", RUN_FILES, info.config_hash)
     return folder
 
 
@@ -303,38 +360,109 @@ def _read_json(path: Path) -> dict:
     return data
 
 
-def read_run(folder: Path) -> RunRecord:
-    """Read a trusted run folder; :class:`RunFolderError` (with the reason) otherwise."""
+def _settings(folder: Path, text: str) -> tuple[ExperimentConfig, dict]:
+    """The typed settings of a ``config.yaml``; :class:`RunFolderError` when they cannot be
+    read (never filled with defaults)."""
     import yaml
 
+    try:
+        # the C loader when PyYAML has it: the pure-Python one costs ~10 ms per config
+        data = yaml.load(text, Loader=getattr(yaml, "CSafeLoader", yaml.SafeLoader))
+        if not isinstance(data, dict):
+            raise ValueError("not a mapping")
+        return experiment_config_from_data(data), data
+    except (ValueError, TypeError, yaml.YAMLError, ConfigError) as exc:
+        message = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+        raise RunFolderError(f"{folder}: settings in config.yaml cannot be read ({message})"
+                             ) from None
+
+
+def read_metrics_json(folder: Path) -> dict:
+    """``metrics.json`` of a folder already checked (resume of a complete run)."""
+    return _read_json(Path(folder) / "metrics.json")
+
+
+def read_run(folder: Path, trajectory: bool = True) -> RunRecord:
+    """Read a trusted run folder; :class:`RunFolderError` (with the reason) otherwise.
+
+    Parameters
+    ----------
+    trajectory : bool
+        Also read ``trajectory.csv`` (False: ``RunRecord.trajectory`` is None).
+    """
     folder = Path(folder)
     reason = check(folder, "run")
     if reason:
         raise RunFolderError(f"{folder}: {reason}")
     try:
-        return RunRecord(folder=folder,
-                         config=yaml.safe_load((folder / "config.yaml").read_text()) or {},
-                         metrics=_read_json(folder / "metrics.json"),
+        config, data = _settings(folder, (folder / "config.yaml").read_text())
+        flat = _read_json(folder / "metrics.json")
+        return RunRecord(folder=folder, config=config, config_data=data,
+                         metrics=RunMetrics.from_json(flat), info=RunInfo.from_json(flat),
                          timing=_read_json(folder / "timing.json"),
                          model=_read_json(folder / "model.json"),
                          manifest=_read_json(folder / MANIFEST),
-                         trajectory=pd.read_csv(folder / "trajectory.csv"))
-    except (OSError, ValueError, yaml.YAMLError, pd.errors.ParserError) as exc:
+                         trajectory=pd.read_csv(folder / "trajectory.csv") if trajectory
+                         else None)
+    except (OSError, ValueError, pd.errors.ParserError) as exc:
+        if isinstance(exc, RunFolderError):
+            raise
         raise RunFolderError(f"{folder}: unreadable ({type(exc).__name__}: "
                              f"{str(exc).splitlines()[0] if str(exc) else ''})") from None
 
 
-def read_family(folder: Path, members: bool = True) -> FamilyRecord:
-    """Read a trusted family folder; :class:`RunFolderError` (with the reason) otherwise."""
+def member_folders(folder: Path) -> list[Path]:
+    """The member folders a family's manifest lists, in order."""
+    manifest, reason = _load_manifest(Path(folder), "family")
+    if reason:
+        raise RunFolderError(f"{folder}: {reason}")
+    return [Path(folder) / name for name in sorted(manifest.get("members") or {})]
+
+
+def member_trajectories(folder: Path):
+    """Each member of a trusted family as ``(index, trajectory, metrics.json mapping)``, every
+    member checked against its manifest first (:class:`RunFolderError` when one is not)."""
+    for member in member_folders(folder):
+        reason = check(member, "run")
+        if reason:
+            raise RunFolderError(f"{member}: {reason}")
+        try:
+            yield (int(member.name.split("_")[1]), pd.read_csv(member / "trajectory.csv"),
+                   _read_json(member / "metrics.json"))
+        except (OSError, ValueError, pd.errors.ParserError) as exc:
+            raise RunFolderError(f"{member}: unreadable ({type(exc).__name__})") from None
+
+
+def read_family(folder: Path, members: bool = True, settings: bool = True) -> FamilyRecord:
+    """Read a trusted family folder; :class:`RunFolderError` (with the reason) otherwise.
+
+    Parameters
+    ----------
+    members : bool
+        Also check each member's manifest against the family's.
+    settings : bool
+        Read the settings the family was made with (its first member's ``config.yaml``); a
+        family without readable settings is then an error. False: ``config`` is None, for a
+        caller that judges the table with settings of its own and says so.
+    """
     folder = Path(folder)
     reason = check(folder, "family", members=members)
     if reason:
         raise RunFolderError(f"{folder}: {reason}")
     try:
+        config = data = None
+        names = member_folders(folder)
+        if settings and (not names or not (names[0] / "config.yaml").is_file()):
+            raise RunFolderError(f"{folder}: settings cannot be read (no member config.yaml)")
+        if settings:
+            config, data = _settings(folder, (names[0] / "config.yaml").read_text())
         return FamilyRecord(folder=folder, info=_read_json(folder / "family.json"),
                             table=pd.read_csv(folder / "family_metrics.csv"),
-                            manifest=_read_json(folder / MANIFEST))
+                            manifest=_read_json(folder / MANIFEST), config=config,
+                            config_data=data)
     except (OSError, ValueError, pd.errors.ParserError) as exc:
+        if isinstance(exc, RunFolderError):
+            raise
         raise RunFolderError(f"{folder}: unreadable ({type(exc).__name__})") from None
 
 

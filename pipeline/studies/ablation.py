@@ -15,6 +15,7 @@ import numpy as np
 import pandas as pd
 
 from pipeline.analysis.claims import ALL_CLAIMS, CLAIMS, compare, decide, family_ledger
+from pipeline.analysis.tally import Tally
 
 REVISIONS = ("normalize", "step", "beta", "exponential", "step_min")
 REVISION_TEXT = {
@@ -28,7 +29,8 @@ REVISION_TEXT = {
 
 def load_family_jobs(root: Path) -> dict[str, pd.DataFrame]:
     """``{label: family_metrics}`` of every trusted family job below ``root`` (label = its
-    method); untrusted folders are named on stderr and left out."""
+    method); untrusted folders are named on stderr and left out. The tables are judged with
+    the claims settings the caller passes (the report's: those of its main runs)."""
     import sys
 
     from pipeline.store.runs import RunFolderError, discover, read_family
@@ -39,7 +41,7 @@ def load_family_jobs(root: Path) -> dict[str, pd.DataFrame]:
         print(f"ablation: skipped {item.folder}: {item.reason}", file=sys.stderr)
     for folder in found.families:
         try:
-            family = read_family(folder)
+            family = read_family(folder, settings=False)
         except RunFolderError as exc:
             print(f"ablation: skipped {exc}", file=sys.stderr)
             continue
@@ -49,7 +51,7 @@ def load_family_jobs(root: Path) -> dict[str, pd.DataFrame]:
 
 def ablation_effects(tables: dict[str, pd.DataFrame], cfg) -> pd.DataFrame:
     """Paired effect of every configuration versus the baseline, per claim, computed as the
-    claims ledger does (:func:`pipeline.claims.compare`: pairs where neither collided, missing
+    claims ledger does (:func:`pipeline.analysis.claims.compare`: pairs where neither collided, missing
     values apart, Hodges-Lehmann estimate, bootstrap interval, unadjusted test).
 
     Returns
@@ -67,15 +69,15 @@ def ablation_effects(tables: dict[str, pd.DataFrame], cfg) -> pd.DataFrame:
         table = tables[label]
         for claim in CLAIMS:
             result = compare(table, baseline, claim, cfg)
-            outcome, _ = decide(result["ci_low"], result["ci_high"], result["p_value"],
-                                cfg.margins[claim.claim_id], result["n_pairs"], cfg,
-                                result["pi_low"], result["pi_high"])
+            outcome, _ = decide(result.ci_low, result.ci_high, result.p_value,
+                                cfg.margins[claim.claim_id], result.n_pairs, cfg,
+                                result.pi_low, result.pi_high)
+            tally = Tally.of(table)
             rows.append({"configuration": label, "claim": claim.claim_id,
-                         "metric": claim.primary_metric, "effect": result["estimate"],
-                         "ci_low": result["ci_low"], "ci_high": result["ci_high"],
-                         "outcome": outcome, "n_pairs": result["n_pairs"],
-                         "collisions": int(table["collision"].astype(bool).sum()),
-                         "not_recovered": int((~table["recovered"].astype(bool)).sum())})
+                         "metric": claim.primary_metric, "effect": result.estimate,
+                         "ci_low": result.ci_low, "ci_high": result.ci_high,
+                         "outcome": str(outcome), "n_pairs": result.n_pairs,
+                         "collisions": tally.collisions, "not_recovered": tally.not_recovered})
     return pd.DataFrame(rows)
 
 
@@ -173,9 +175,9 @@ def interpretation_flips(root: Path, cfg) -> pd.DataFrame | None:
     for variant in variants:
         tables = load_family_jobs(root / variant)
         if "baseline" in tables and "improved" in tables:
-            ledger, _ = family_ledger(tables, cfg, comparisons=("baseline",))
-            verdicts[variant] = {r["claim"]: r["outcome"] for r in ledger}
-            verdicts[variant]["collisions_improved"] = int(tables["improved"]["collision"].sum())
+            ledger = family_ledger(tables, cfg, comparisons=("baseline",))
+            verdicts[variant] = {r.claim_id: str(r.outcome) for r in ledger}
+            verdicts[variant]["collisions_improved"] = Tally.of(tables["improved"]).collisions
     if "default" not in verdicts:
         return None
     rows = []

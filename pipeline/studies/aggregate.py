@@ -22,7 +22,7 @@ import pandas as pd
 import yaml
 from hydra.experimental.callback import Callback
 
-from pipeline.store.runs import write_csv_atomic, write_json_atomic
+from pipeline.store.runs import folder_kind, write_csv_atomic, write_json_atomic
 from pipeline.analysis.claims import ALL_CLAIMS, family_ledger, single_scenario_outcome
 from pipeline.config import ClaimsConfig
 
@@ -123,13 +123,16 @@ def find_jobs(sweep_dir: Path) -> tuple[list[Job], list[dict]]:
     return jobs, skipped
 
 
-def _job_row(job: Job, sweep_dir: Path) -> tuple[dict, pd.DataFrame | None]:
+def _job_row(job: Job, sweep_dir: Path) -> tuple[dict, pd.DataFrame | None, ClaimsConfig]:
+    """A job's summary row, its per-member table (families) and the claims settings it was
+    run with."""
     from pipeline.store.runs import read_family, read_run
 
     label = str(job.folder.relative_to(sweep_dir))
     if job.kind == "single":
-        metrics = read_run(job.folder).metrics
-        return {"job": label, "kind": "single", "status": "ok", **job.overrides, **metrics}, None
+        record = read_run(job.folder, trajectory=False)
+        return ({"job": label, "kind": "single", "status": "ok", **job.overrides,
+                 **record.flat_metrics()}, None, record.config.claims)
     family = read_family(job.folder)
     info, table = family.info, family.table
     numeric = table.select_dtypes(include=["number", "bool"]).drop(columns=["member"],
@@ -139,7 +142,7 @@ def _job_row(job: Job, sweep_dir: Path) -> tuple[dict, pd.DataFrame | None]:
            "method": info["method"], "scenario": info["scenario"], "family_seed": info["seed"],
            "family_size": info["size"], "collisions": info["collisions"],
            "not_recovered": info["not_recovered"], "config_hash": info["config_hash"]}
-    return row, table
+    return row, table, family.config.claims
 
 
 def aggregate(sweep_dir: Path, baseline_dir: Path | None = None, progress: bool = True,
@@ -174,10 +177,11 @@ def aggregate(sweep_dir: Path, baseline_dir: Path | None = None, progress: bool 
         raise FileNotFoundError(f"no complete job folders in {sweep_dir}"
                                 + (f" ({len(skipped)} passed over: see above)" if skipped
                                    else ""))
-    rows, tables = [], {}
+    rows, tables, settings = [], {}, {}
     for job in tqdm(jobs, desc="aggregate", unit="job", disable=not progress):
         try:
-            row, table = _job_row(job, sweep_dir)
+            row, table, settings[str(job.folder.relative_to(sweep_dir))] = \
+                _job_row(job, sweep_dir)
         except RunFolderError as exc:
             skipped.append({"job": str(job.folder.relative_to(sweep_dir)), "status": "skipped",
                             "reason": str(exc).split(": ", 1)[-1], **job.overrides})
@@ -203,7 +207,7 @@ def aggregate(sweep_dir: Path, baseline_dir: Path | None = None, progress: bool 
     # verdicts per; the report's claims ledger covers it
     parameter_keys = [k for k in swept if k not in METHOD_KEYS]
     good = summary[summary["status"] == "ok"]
-    verdicts = sweep_verdicts(good, tables, swept, baseline_dir) \
+    verdicts = sweep_verdicts(good, tables, swept, baseline_dir, settings) \
         if parameter_keys or baseline_dir is not None else None
     if verdicts is not None:
         write_csv_atomic(sweep_dir / "verdicts.csv", verdicts)
@@ -221,24 +225,25 @@ def _group_keys(swept: list[str]) -> list[str]:
 
 
 def sweep_verdicts(summary: pd.DataFrame, tables: dict, swept: list[str],
-                   baseline_dir: Path | None, cfg: ClaimsConfig | None = None
+                   baseline_dir: Path | None, settings: dict[str, ClaimsConfig]
                    ) -> pd.DataFrame | None:
     """Claim outcomes of each improved job against its baseline partner (the four-outcome rule
-    of :mod:`pipeline.claims`; single scenarios: better / worse / within margin).
+    of :mod:`pipeline.analysis.claims`; single scenarios: better / worse / within margin),
+    each judged with the claims settings its improved job was run with (``settings``: job
+    label -> ClaimsConfig).
 
     Partners share every swept key outside ``planner.*`` and the method; failing that, the job
     in ``baseline_dir``.
     """
     if "method" not in summary:
         return None
-    cfg = cfg if cfg is not None else ClaimsConfig()
     improved = summary[summary["method"] == "improved"]
     baseline = summary[summary["method"] == "baseline"]
     external_row, external_table = None, None
     if baseline_dir is not None and Path(baseline_dir).is_dir():
-        kind = "family" if (Path(baseline_dir) / "family.json").is_file() else "single"
-        external_row, external_table = _job_row(Job(Path(baseline_dir), {}, kind),
-                                                Path(baseline_dir).parent)
+        kind = "family" if folder_kind(baseline_dir) == "family" else "single"
+        external_row, external_table, _ = _job_row(Job(Path(baseline_dir), {}, kind),
+                                                   Path(baseline_dir).parent)
     keys = _group_keys(swept) + (["scenario.family.seed"] if "scenario.family.seed" in swept
                                  else [])
     # index the baseline jobs by their values of the pairing keys (first job wins)
@@ -255,16 +260,17 @@ def sweep_verdicts(summary: pd.DataFrame, tables: dict, swept: list[str],
         else:
             continue
         imp_table = tables.get(imp["job"])
+        cfg = settings[imp["job"]]
         swept_values = {k: imp[k] for k in swept if k not in METHOD_KEYS}
         if imp_table is not None and base_table is not None:
-            ledger, _ = family_ledger({"improved": imp_table, "baseline": base_table}, cfg,
-                                      comparisons=("baseline",))
+            ledger = family_ledger({"improved": imp_table, "baseline": base_table}, cfg,
+                                   comparisons=("baseline",))
             for r in ledger:
-                rows.append({**swept_values, "job": imp["job"], "claim": r["claim"],
-                             "metric": r["metric"], "estimate": r["estimate"],
-                             "ci_low": r["ci_low"], "ci_high": r["ci_high"],
-                             "p_holm": r["p_holm"], "verdict": r["outcome"],
-                             "basis": f"family of {r['n_pairs']}"})
+                rows.append({**swept_values, "job": imp["job"], "claim": r.claim_id,
+                             "metric": r.claim.primary_metric, "estimate": r.result.estimate,
+                             "ci_low": r.result.ci_low, "ci_high": r.result.ci_high,
+                             "p_holm": r.p_holm, "verdict": str(r.outcome),
+                             "basis": f"family of {r.result.n_pairs}"})
         else:
             for claim in ALL_CLAIMS:
                 rows.append({**swept_values, "job": imp["job"], "claim": claim.claim_id,

@@ -30,7 +30,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from pipeline.store.runs import write_csv_atomic, write_json_atomic
+from pipeline.store.runs import read_family, write_csv_atomic, write_json_atomic
 
 
 def _config(overrides: list[str]):
@@ -284,7 +284,7 @@ def bench_pipeline(family_size: int, compile_family_size: int = 40) -> dict:
         run_family(_config(["method=improved", "scenario=family",
                             f"scenario.family.size={compile_family_size}",
                             "scenario.family.n_jobs=2"]), Path(tmp) / "compiles", progress=False)
-        compiles = json.loads((Path(tmp) / "compiles" / "family.json").read_text())["compiles"]
+        compiles = read_family(Path(tmp) / "compiles", members=False).info["compiles"]
         start = time.perf_counter()
         run_family(_config(["method=improved", "scenario=family",
                             f"scenario.family.size={family_size}", "scenario.family.n_jobs=2"]),

@@ -14,24 +14,32 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from pipeline.analysis.metrics import TrajectoryContext, compute_metrics
+from pipeline.analysis.tally import Tally
+from pipeline.analysis.metrics import RunMetrics, TrajectoryContext, compute_metrics
 from pipeline.config import ExperimentConfig
 from pipeline.loop.controller import QpCache
 from pipeline.loop.model import build_lateral_model
 from pipeline.loop.scenario import build_scenario, family_members
 from pipeline.loop.simulate import simulate
-from pipeline.store.runs import check, clean_leftovers, write_family, write_run
+from pipeline.store.runs import (RunInfo, check, clean_leftovers, read_metrics_json,
+                                 write_family, write_run)
 
 log = logging.getLogger(__name__)
 
 
 @dataclass(frozen=True)
 class RunSummary:
-    """What one run produced."""
+    """What one run produced: its folder, metrics and bookkeeping, and whether it was already
+    complete (resume)."""
 
     out_dir: Path
-    metrics: dict
+    metrics: RunMetrics
+    info: RunInfo
     skipped: bool
+
+    def flat(self) -> dict:
+        """The run's ``metrics.json`` mapping (metrics and bookkeeping)."""
+        return {**self.metrics.to_json(), **self.info.to_json()}
 
 
 def run_experiment(cfg: ExperimentConfig, out_dir: Path, resume: bool = True,
@@ -54,16 +62,15 @@ def run_experiment(cfg: ExperimentConfig, out_dir: Path, resume: bool = True,
     -------
     RunSummary
     """
-    import json
-
     out_dir = Path(out_dir)
     config_hash = cfg.config_hash()
     if resume:
         reason = check(out_dir, "run", config_hash)
         if reason is None:
             clean_leftovers(out_dir)  # temporaries of a write killed after the manifest
-            previous = json.loads((out_dir / "metrics.json").read_text())
-            return RunSummary(out_dir, previous, skipped=True)
+            previous = read_metrics_json(out_dir)
+            return RunSummary(out_dir, RunMetrics.from_json(previous), RunInfo.from_json(previous),
+                              skipped=True)
         if reason not in ("not a folder", "empty folder"):
             log.warning("re-running %s: %s", out_dir, reason)
 
@@ -74,7 +81,7 @@ def run_experiment(cfg: ExperimentConfig, out_dir: Path, resume: bool = True,
     context = trajectory_context(cfg)
     metrics = compute_metrics(result.trajectory, context, cfg.metrics)
     track = "kinematic" if cfg.controller.kind == "kinematic_mpc" else "lateral"
-    metrics.update(method=cfg.method_name, scenario=cfg.scenario.name, track=track,
+    info = RunInfo(method=cfg.method_name, scenario=cfg.scenario.name, track=track,
                    config_hash=config_hash, termination=result.termination,
                    compile_count=result.compile_count)
     times = result.solve_times_s
@@ -86,9 +93,8 @@ def run_experiment(cfg: ExperimentConfig, out_dir: Path, resume: bool = True,
         "solve_times_s": [float(x) for x in times],
     }
     write_run(out_dir, config_text=config_yaml(cfg), model=model.to_json(),
-              trajectory=result.trajectory, timing=timing, metrics=metrics,
-              config_hash=config_hash)
-    return RunSummary(out_dir, metrics, skipped=False)
+              trajectory=result.trajectory, timing=timing, metrics=metrics, info=info)
+    return RunSummary(out_dir, metrics, info, skipped=False)
 
 
 def trajectory_context(cfg: ExperimentConfig) -> TrajectoryContext:
@@ -115,7 +121,7 @@ def _run_chunk(jobs: list[tuple[int, ExperimentConfig, Path]], qp_cache: QpCache
                ) -> list[tuple[int, dict]]:
     """Run a few family members in one worker, all with the compiled QP shipped in
     ``qp_cache`` (so a worker compiles nothing)."""
-    return [(index, run_experiment(member_cfg, folder, qp_cache=qp_cache).metrics)
+    return [(index, run_experiment(member_cfg, folder, qp_cache=qp_cache).flat())
             for index, member_cfg, folder in jobs]
 
 
@@ -162,7 +168,7 @@ def run_family(cfg: ExperimentConfig, out_dir: Path, progress: bool = True,
         folder = out_dir / f"member_{i:04d}"
         reason = check(folder, "run", member_cfg.config_hash())
         if reason is None:
-            metrics_by_index[i] = json.loads((folder / "metrics.json").read_text())
+            metrics_by_index[i] = read_metrics_json(folder)
             continue
         if reason not in ("not a folder", "empty folder"):
             log.warning("re-running %s: %s", folder, reason)
@@ -184,13 +190,12 @@ def run_family(cfg: ExperimentConfig, out_dir: Path, progress: bool = True,
     table = table[["member"] + sorted(c for c in table.columns if c != "member")]
     member_compiles = int(table["compile_count"].fillna(0).sum()) if "compile_count" in table \
         else 0
+    tally = Tally.of(table)
     summary = {
         "method": cfg.method_name, "scenario": cfg.scenario.name, "seed": family.seed,
         "size": family.size, "config_hash": cfg.config_hash(),
-        "collisions": int(table["collision"].sum()),
-        "not_recovered": int((~table["recovered"].astype(bool)).sum()),
-        "goal_not_reached": int((~table["goal_reached"].astype(bool)).sum()),
-        "fallback_steps": int(table["fallback_count"].sum()) if "fallback_count" in table else 0,
+        "collisions": tally.collisions, "not_recovered": tally.not_recovered,
+        "goal_not_reached": tally.goal_not_reached, "fallback_steps": tally.fallback_steps,
         "compiles": cache.compile_count - compiles_before + member_compiles,
     }
     write_family(out_dir, table, summary, cfg.config_hash(),

@@ -39,10 +39,11 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from pipeline.store.runs import (MULTIVERSE_FILES, check, write_csv_atomic, write_json_atomic,
-                           write_manifest)
+from pipeline.store.runs import (MULTIVERSE_FILES, check, member_trajectories, read_family, untrust,
+                                 write_csv_atomic, write_json_atomic, write_manifest)
+
 from pipeline.analysis.claims import ALL_CLAIMS, OUTCOMES, family_ledger
-from pipeline.config import CONF_DIR, ClaimsConfig, MetricsConfig
+from pipeline.config import CONF_DIR, ClaimsConfig, ExperimentConfig, MetricsConfig
 from pipeline.errors import ConfigError, IncompleteSweepError, describe_config_error
 
 METHODS = ("baseline", "baseline_matched", "improved")
@@ -199,8 +200,10 @@ def simulation_key(row: dict, space: Space) -> tuple:
     return tuple(str(row[d.key]) for d in space.of("simulation"))
 
 
-def analysis_settings(row: dict, space: Space) -> tuple[MetricsConfig, ClaimsConfig]:
-    """The metric and statistics settings of one specification."""
+def analysis_settings(row: dict, space: Space, base: ExperimentConfig
+                      ) -> tuple[MetricsConfig, ClaimsConfig]:
+    """The metric and statistics settings of one specification: the settings the runs were made
+    with (``base``, the user's configuration) with the specification's analysis choices."""
     metrics, claims, scale = {}, {}, 1.0
     for dim in space.of("analysis"):
         section, _, name = dim.key.partition(".")
@@ -210,11 +213,25 @@ def analysis_settings(row: dict, space: Space) -> tuple[MetricsConfig, ClaimsCon
             metrics[name] = row[dim.key]
         else:
             claims[name] = row[dim.key]
-    base = ClaimsConfig()
-    margins = {k: v * scale for k, v in base.margins.items()}
-    return (MetricsConfig(**metrics),
-            ClaimsConfig(**{**claims, "margins": margins, "n_resamples": space.n_resamples,
-                            "min_pairs": space.min_pairs}))
+    margins = {k: v * scale for k, v in base.claims.margins.items()}
+    return (dataclasses.replace(base.metrics, **metrics),
+            dataclasses.replace(base.claims, **{**claims, "margins": margins,
+                                                "n_resamples": space.n_resamples,
+                                                "min_pairs": space.min_pairs}))
+
+
+def with_user_defaults(space: Space, base: ExperimentConfig) -> Space:
+    """The space with each analysis dimension's default (its first value) set to the user's
+    configured value, so that the default specification is the user's configuration."""
+    dims = []
+    for dim in space.dimensions:
+        section, _, name = dim.key.partition(".")
+        if dim.stage == "analysis" and dim.key != "claims.margin_scale":
+            value = getattr(getattr(base, section), name)
+            dim = dataclasses.replace(dim, values=(value,) + tuple(
+                v for v in dim.values if str(v) != str(value)))
+        dims.append(dim)
+    return dataclasses.replace(space, dimensions=tuple(dims))
 
 
 def _metrics_hash(metrics: MetricsConfig) -> str:
@@ -270,7 +287,7 @@ def run_simulations(design: pd.DataFrame, space: Space, out_dir: Path, compose,
 
 
 def _run_on_slurm(todo: list, launcher: dict, out_dir: Path, log) -> None:
-    """Submit the family runs as one SLURM array and wait (bounded, see pipeline.slurm)."""
+    """Submit the family runs as one SLURM array and wait (bounded, see pipeline.studies.slurm)."""
     from pipeline.studies.slurm import (executor_for, resume_command,
                                 wait_for_tasks, wait_policy)
 
@@ -289,54 +306,38 @@ def _run_on_slurm(todo: list, launcher: dict, out_dir: Path, log) -> None:
 def family_table(folder: Path, metrics: MetricsConfig, out_dir: Path) -> pd.DataFrame:
     """A family's per-member metrics: as run, or re-scored from the stored trajectories with
     other metric settings (cached)."""
-    import yaml
-
     from pipeline.analysis.metrics import compute_metrics
+    from pipeline.studies.experiment import trajectory_context
 
-    table = pd.read_csv(folder / "family_metrics.csv")
-    first = folder / "member_0000" / "config.yaml"
-    member_config = yaml.safe_load(first.read_text()) if first.is_file() else {}
-    if member_config.get("metrics") == dataclasses.asdict(metrics):
-        return table
+    family = read_family(folder, members=False)
+    if family.config.metrics == metrics:
+        return family.table
     cached = out_dir / "rescored" / f"{folder.parent.name}_{folder.name}_{_metrics_hash(metrics)}.csv"
     if cached.is_file():
         return pd.read_csv(cached)
-    context = _context(member_config)
+    context = trajectory_context(family.config)
     rows = []
-    for member in sorted(folder.glob("member_*")):
-        trajectory = pd.read_csv(member / "trajectory.csv")
-        previous = json.loads((member / "metrics.json").read_text())
-        scored = compute_metrics(trajectory, context, metrics)
+    for index, trajectory, previous in member_trajectories(folder):
+        scored = compute_metrics(trajectory, context, metrics).to_json()
         keep = {k: previous.get(k) for k in ("method", "scenario", "track", "config_hash")}
-        rows.append({"member": int(member.name.split("_")[1]), **scored, **keep})
+        rows.append({"member": index, **scored, **keep})
     write_csv_atomic(cached, pd.DataFrame(rows))
     # read back: the same rounding as family_metrics.csv, so a resumed analysis is identical
     return pd.read_csv(cached)
 
 
-def _context(config: dict):
-    from pipeline.analysis.metrics import TrajectoryContext
-
-    v, s = config["vehicle"], config["scenario"]
-    return TrajectoryContext(tuple(s["start_xy_m"]), tuple(s["goal_xy_m"]),
-                             v["footprint_radius_m"], config["model"]["validity_heading_rad"],
-                             wheelbase_m=v["cg_to_front_m"] + v["cg_to_rear_m"],
-                             steering_max_rad=v["steering_max_rad"],
-                             steering_rate_max_rad_s=v["steering_rate_max_rad_s"],
-                             braking_mps2=v["accel_max_mps2"])
-
-
 def analyse_specification(row: dict, folders: dict[str, Path], space: Space,
                           out_dir: Path) -> list[dict]:
     """Ledger rows (C0-C5 against both comparisons) of one specification."""
-    metrics, claims = analysis_settings(row, space)
+    base = read_family(folders["improved"], members=False).config
+    metrics, claims = analysis_settings(row, space, base)
     tables = {m: family_table(folders[m], metrics, out_dir) for m in METHODS}
-    ledger, _ = family_ledger(tables, claims, sensitivity=False)
-    return [{"spec_id": row["spec_id"], "claim": r["claim"], "comparison": r["comparison"],
-             "metric": r["metric"], "estimate": r["estimate"], "ci_low": r["ci_low"],
-             "ci_high": r["ci_high"], "p_holm": r["p_holm"],
-             "prob_improvement": r["prob_improvement"], "n_pairs": r["n_pairs"],
-             "margin": r["margin"], "outcome": r["outcome"]} for r in ledger]
+    ledger = family_ledger(tables, claims, sensitivity=False)
+    return [{"spec_id": row["spec_id"], "claim": r.claim_id, "comparison": r.comparison,
+             "metric": r.claim.primary_metric, "estimate": r.result.estimate,
+             "ci_low": r.result.ci_low, "ci_high": r.result.ci_high, "p_holm": r.p_holm,
+             "prob_improvement": r.result.prob_improvement, "n_pairs": r.result.n_pairs,
+             "margin": r.margin, "outcome": str(r.outcome)} for r in ledger]
 
 
 def robustness(results: pd.DataFrame, design: pd.DataFrame, space: Space
@@ -472,13 +473,16 @@ def run_multiverse(space: Space, out_dir: Path, overrides: list[str] | None = No
 
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
-    (out_dir / "manifest.json").unlink(missing_ok=True)  # tables being rewritten: not trusted
+    untrust(out_dir)  # tables being rewritten: not trusted until the manifest is written last
+    compose, launcher = _composer(list(overrides or []))
+    # the default specification is the user's configuration (its analysis settings)
+    base = compose(["method=improved", "scenario=family"])
+    space = with_user_defaults(space, base)
     design = build_design(space)
     write_csv_atomic(out_dir / "design.csv", design)
-    compose, launcher = _composer(list(overrides or []))
     # validate every composition before anything runs: a bad value stops here
     for row in design.to_dict("records"):
-        analysis_settings(row, space)
+        analysis_settings(row, space, base)
     folders = run_simulations(design, space, out_dir, compose, log, launcher)
     jobs = [(row, folders[simulation_key(row, space)]) for row in design.to_dict("records")]
     results = Parallel(n_jobs=n_jobs)(

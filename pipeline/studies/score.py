@@ -22,10 +22,10 @@ import pandas as pd
 
 from pipeline.config import MetricsConfig
 from pipeline.analysis.metrics import TrajectoryContext, compute_metrics
+from pipeline.loop.trajectory import OBSTACLE_COLUMN, REQUIRED
+from pipeline.loop.trajectory import STATE as OPTIONAL
 from pipeline.store.runs import write_text_atomic
 
-REQUIRED = ("time_s", "X_m", "Y_m")
-OPTIONAL = ("psi_rad", "vx_mps", "vy_mps", "r_rad_s", "delta_rad", "steering_rate_rad_s")
 
 
 class TrajectoryFileError(ValueError):
@@ -81,7 +81,6 @@ def _separator(text: str, source: str) -> str:
 PLAUSIBLE = {"time_s": 1e7, "X_m": 1e7, "Y_m": 1e7}
 PLAUSIBLE_DEFAULT = 1e6
 BOOLEAN_WORDS = {"true": True, "false": False, "1": True, "0": False, "1.0": True, "0.0": False}
-OBSTACLE_COLUMN = re.compile(r"obs(\d+)_(x_m|y_m|radius_m|visible)")
 
 
 def _bad_cell(source: str, column: str, row: int, value) -> TrajectoryFileError:
@@ -260,7 +259,7 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     metrics = compute_metrics(frame, TrajectoryContext(tuple(start), tuple(goal),
                                                        args.vehicle_radius), MetricsConfig())
-    text = json.dumps(metrics, indent=2, sort_keys=True)
+    text = json.dumps(metrics.to_json(), indent=2, sort_keys=True)
     if args.out:
         try:
             # atomic: a failed write leaves an existing file as it was

@@ -6,7 +6,7 @@
   runs) before anything is submitted; an invalid one stops the sweep with exit code 2 and one
   line naming the job's overrides and the reason, and no array is submitted;
 * **resume without resubmitting**: a job whose output folder already holds a complete run or
-  family record of the same config hash (:func:`pipeline.runs.check`) is not submitted; a rerun
+  family record of the same config hash (:func:`pipeline.store.runs.check`) is not submitted; a rerun
   of a finished sweep submits nothing and returns in seconds;
 * **never hang**: instead of waiting on each task's result (which waits forever for a task that
   was cancelled while pending: it leaves no accounting record), the launcher polls every

@@ -37,7 +37,7 @@ def paper_metrics_table(runs_root: Path) -> pd.DataFrame:
         print(f"verify: skipped {item.folder}: {item.reason}", file=sys.stderr)
     for folder in found.runs:
         try:
-            metrics = read_run(folder).metrics
+            metrics = read_run(folder, trajectory=False).flat_metrics()
         except RunFolderError as exc:
             print(f"verify: skipped {exc}", file=sys.stderr)
             continue
@@ -56,9 +56,10 @@ def paper_metrics_table(runs_root: Path) -> pd.DataFrame:
 def ledger_table(runs_root: Path) -> pd.DataFrame | None:
     """The family claims ledger, if the family was run."""
     from pipeline.analysis.claims import family_ledger
-    from pipeline.reporting.page import claims_config, load_runs
+    from pipeline.store.collection import load_runs
 
-    runs, tables, _ = load_runs(runs_root)
+    collection = load_runs(runs_root)
+    tables = collection.family_tables
     if "baseline" not in tables or "improved" not in tables:
         return None
     paper = {}
@@ -67,9 +68,9 @@ def ledger_table(runs_root: Path) -> pd.DataFrame | None:
         paper = {r["method"]: r for r in frame[frame["track"] == "lateral"].to_dict("records")}
     except FileNotFoundError:
         pass
-    cfg = claims_config(runs[0]["config"] if runs else None)
-    rows, _ = family_ledger(tables, cfg, paper or None)
-    return pd.DataFrame(rows).reindex(columns=LEDGER_COLUMNS)
+    # the claims settings the runs were made with
+    cfg = collection.claims_settings("improved")
+    return family_ledger(tables, cfg, paper or None).to_frame().reindex(columns=LEDGER_COLUMNS)
 
 
 def compare_tables(fresh: pd.DataFrame, reference: pd.DataFrame, name: str) -> list[str]:

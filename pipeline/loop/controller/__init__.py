@@ -1,12 +1,12 @@
 """Controller stage: every controller behind one ``step(observation) -> ControlStep``.
 
-* :mod:`~pipeline.controller.qp`: QP plumbing (compile once, affine parameter-to-data map,
+* :mod:`~pipeline.loop.controller.qp`: QP plumbing (compile once, affine parameter-to-data map,
   kept Clarabel solver, CVXPY reference backend, the cache of compiled structures);
-* :mod:`~pipeline.controller.base`: observation, result type, the fallback written once;
-* :mod:`~pipeline.controller.references`: APF path to references and half-planes;
-* :mod:`~pipeline.controller.lateral`: the paper's lateral MPC;
-* :mod:`~pipeline.controller.kinematic`: Appendix A's kinematic LTV-MPC;
-* :mod:`~pipeline.controller.pursuit`: the pure-pursuit peer.
+* :mod:`~pipeline.loop.controller.base`: observation, result type, the fallback written once;
+* :mod:`~pipeline.loop.controller.references`: APF path to references and half-planes;
+* :mod:`~pipeline.loop.controller.lateral`: the paper's lateral MPC;
+* :mod:`~pipeline.loop.controller.kinematic`: Appendix A's kinematic LTV-MPC;
+* :mod:`~pipeline.loop.controller.pursuit`: the pure-pursuit peer.
 
 :func:`make_controller` picks one from the configuration.
 """

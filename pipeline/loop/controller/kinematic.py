@@ -5,7 +5,7 @@ the measured state with the previous plan (shifted), solves the QP, and optional
 linearization about the new plan (``ltv_iterations`` passes). Cost as MATLAB writes it, weights
 squared: ``sum |w_y (y_k - y_ref,k)|^2 + |w_u u_k|^2 + |w_du (u_k - u_{k-1})|^2``; inputs held
 after ``Nc``; soft half-plane per obstacle slot and step
-(:func:`~pipeline.controller.references.kinematic_halfplanes`).
+(:func:`~pipeline.loop.controller.references.kinematic_halfplanes`).
 """
 
 from __future__ import annotations

@@ -11,7 +11,7 @@ The QP over ``N`` steps::
 
 The model matrices are parameters, so one compiled problem serves every speed (velocity
 planning) and every scenario; unused obstacle slots get rows that cannot bind. A failed solve
-never raises: the controller takes :class:`~pipeline.controller.base.PlanFallback`.
+never raises: the controller takes :class:`~pipeline.loop.controller.base.PlanFallback`.
 """
 
 from __future__ import annotations

@@ -1,0 +1,128 @@
+"""The package reads in data-flow order: no module imports from a stage after it, there is no
+import circle, the analysis half has short functions, and only the store opens run folders."""
+
+from __future__ import annotations
+
+import ast
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+PACKAGE = Path(__file__).resolve().parent.parent / "pipeline"
+
+#: Stage order (lower first). The drawing library draws typed data and imports nothing of the
+#: pipeline, so the studies that save their own figures (sweeps, multiverse) may use it.
+LAYERS = (
+    ("pipeline", "pipeline.errors", "pipeline.validation"),
+    ("pipeline.loop",),
+    ("pipeline.analysis",),
+    ("pipeline.config", "pipeline.register"),
+    ("pipeline.store",),
+    ("pipeline.reporting.figures",),
+    ("pipeline.studies",),
+    ("pipeline.reporting",),
+    ("pipeline.run", "pipeline.report", "pipeline.aggregate", "pipeline.multiverse",
+     "pipeline.verify", "pipeline.bench", "pipeline.score"),
+)
+#: Files a run or family folder holds (its layout belongs to the store).
+RUN_FOLDER_FILES = ("config.yaml", "model.json", "trajectory.csv", "timing.json",
+                    "metrics.json", "family_metrics.csv", "family.json", "manifest.json")
+
+
+def module_name(path: Path) -> str:
+    parts = path.relative_to(PACKAGE.parent).with_suffix("").parts
+    return ".".join(parts[:-1] if parts[-1] == "__init__" else parts)
+
+
+def layer(name: str) -> int:
+    best, rank = -1, -1
+    for i, group in enumerate(LAYERS):
+        for prefix in group:
+            if (name == prefix or name.startswith(prefix + ".")) and len(prefix) > best:
+                best, rank = len(prefix), i
+    return rank
+
+
+def modules() -> dict[str, ast.Module]:
+    return {module_name(p): ast.parse(p.read_text(), str(p)) for p in PACKAGE.rglob("*.py")}
+
+
+def imports(tree: ast.AST, top_level_only: bool = False) -> set[str]:
+    found = set()
+    nodes = tree.body if top_level_only else ast.walk(tree)
+    for node in nodes:
+        if isinstance(node, ast.ImportFrom) and node.module and node.module.startswith("pipeline"):
+            found.add(node.module)
+        elif isinstance(node, ast.Import):
+            found.update(a.name for a in node.names if a.name.startswith("pipeline"))
+    return found
+
+
+def test_every_module_has_a_stage():
+    assert [name for name in modules() if layer(name) < 0] == []
+
+
+def test_no_module_imports_from_a_stage_after_it():
+    backwards = [f"{name} -> {target}" for name, tree in modules().items()
+                 for target in imports(tree) if layer(target) > layer(name)]
+    assert backwards == []
+
+
+def test_the_drawing_library_imports_nothing_of_the_pipeline():
+    tree = modules()["pipeline.reporting.figures"]
+    assert imports(tree) == set()
+
+
+def test_no_import_circle_between_modules():
+    graph = {name: {t for t in imports(tree, top_level_only=True) if t != name}
+             for name, tree in modules().items()}
+    state: dict[str, int] = {}
+    cycles = []
+
+    def visit(node, path):
+        state[node] = 1
+        for nxt in graph.get(node, ()):
+            if nxt not in graph:
+                continue
+            if state.get(nxt) == 1:
+                cycles.append(path[path.index(nxt):] + [nxt] if nxt in path else [node, nxt])
+            elif state.get(nxt) is None:
+                visit(nxt, path + [nxt])
+        state[node] = 2
+
+    for name in graph:
+        if state.get(name) is None:
+            visit(name, [name])
+    # a package's __init__ re-exporting its own modules is not a circle
+    cycles = [c for c in cycles if not all(n.startswith(c[0].rsplit(".", 1)[0]) for n in c)
+              or len({n.split(".")[1] if "." in n else n for n in c}) > 1]
+    assert cycles == []
+
+
+@pytest.mark.parametrize("name", sorted(n for n in modules() if n.startswith("pipeline.analysis")))
+def test_analysis_functions_are_short(name):
+    tree = modules()[name]
+    long = [f"{node.name}: {node.end_lineno - node.lineno + 1} lines"
+            for node in ast.walk(tree) if isinstance(node, (ast.FunctionDef,
+                                                            ast.AsyncFunctionDef))
+            and node.end_lineno - node.lineno + 1 > 80]
+    assert long == []
+
+
+def test_only_the_store_names_run_folder_files():
+    offenders = []
+    for name, tree in modules().items():
+        if layer(name) == layer("pipeline.store"):
+            continue
+        for node in ast.walk(tree):
+            if isinstance(node, ast.Constant) and node.value in RUN_FOLDER_FILES:
+                offenders.append(f"{name}:{node.lineno}: {node.value}")
+    assert offenders == []
+
+
+def test_the_package_is_a_regular_package():
+    out = subprocess.run([sys.executable, "-c", "import pipeline; print(pipeline.__file__)"],
+                         capture_output=True, text=True, check=True).stdout.strip()
+    assert out.endswith(str(Path("pipeline") / "__init__.py"))

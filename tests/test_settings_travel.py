@@ -1,0 +1,110 @@
+"""Settings travel with the runs they made (issue 20): a user's claims override changes the
+ledger, the report, the sweep verdicts and the multiverse's default specification alike, and a
+run folder whose settings cannot be read is skipped with its reason, never filled with
+defaults."""
+
+from __future__ import annotations
+
+import shutil
+from pathlib import Path
+
+import pandas as pd
+import pytest
+
+from pipeline.analysis.claims import family_ledger
+from pipeline.config import CONF_DIR
+from pipeline.reporting.page import build_report
+from pipeline.store.collection import load_runs
+from pipeline.studies.aggregate import aggregate
+from pipeline.studies.experiment import run_experiment, run_family
+from pipeline.studies.multiverse import (analyse_specification, analysis_settings, build_design,
+                                         load_space, with_user_defaults)
+
+#: a C2 margin far from the default (0.1), with the quick multiverse's statistics settings
+USER = ["claims.margins.C2=5.0", "claims.n_resamples=199", "claims.min_pairs=4"]
+METHODS = ("improved", "baseline", "baseline_matched")
+
+
+@pytest.fixture(scope="module")
+def user_runs(tmp_path_factory, make_config):
+    root = tmp_path_factory.mktemp("user_runs")
+    for method in METHODS:
+        run_experiment(make_config([f"method={method}"] + USER), root / "paper" / method)
+        run_family(make_config([f"method={method}", "scenario=family", "scenario.family.size=8",
+                                "scenario.family.n_jobs=1"] + USER),
+                   root / "family" / method, progress=False)
+    return root
+
+
+def c2(frame: pd.DataFrame, outcome_column: str = "outcome") -> str:
+    row = frame[(frame["claim"] == "C2") & (frame.get("comparison", "baseline") == "baseline")]
+    return str(row[outcome_column].iloc[0])
+
+
+def test_a_claims_override_reaches_the_ledger_report_sweep_and_multiverse(user_runs, tmp_path):
+    collection = load_runs(user_runs)
+    settings = collection.claims_settings("improved")
+    assert settings.margins["C2"] == 5.0 and settings.n_resamples == 199
+    ledger = family_ledger(collection.family_tables, settings)
+    expected = str(ledger[("C2", "baseline")].outcome)
+    assert ledger[("C2", "baseline")].margin == 5.0
+    # the report
+    build_report(user_runs, tmp_path / "report", "test", bench_dir=None)
+    table = pd.read_csv(tmp_path / "report" / "tables" / "claims_ledger.csv")
+    row = table[(table["claim"] == "C2") & (table["comparison"] == "baseline")].iloc[0]
+    assert row["margin"] == 5.0 and row["outcome"] == expected
+    # the sweep verdicts: the improved family as a sweep job, paired with the baseline family
+    sweep = tmp_path / "sweep"
+    shutil.copytree(user_runs / "family" / "improved", sweep / "0")
+    (sweep / "0" / ".hydra").mkdir()
+    (sweep / "0" / ".hydra" / "overrides.yaml").write_text("- method=improved\n")
+    aggregate(sweep, baseline_dir=user_runs / "family" / "baseline", progress=False,
+              figures=False)
+    verdicts = pd.read_csv(sweep / "verdicts.csv")
+    assert verdicts.loc[verdicts["claim"] == "C2", "verdict"].iloc[0] == expected
+    # the multiverse: its default specification is the user's configuration
+    space = load_space(CONF_DIR / "multiverse" / "quick.yaml")
+    base = collection.family_settings["improved"]
+    space = with_user_defaults(space, base)
+    default = build_design(space).to_dict("records")[0]
+    assert default["kind"] == "default"
+    _, claims = analysis_settings(default, space, base)
+    assert claims.margins["C2"] == 5.0
+    folders = {m: user_runs / "family" / m for m in METHODS}
+    rows = pd.DataFrame(analyse_specification(default, folders, space, tmp_path / "mv"))
+    assert c2(rows) == expected
+
+
+def test_unreadable_settings_are_skipped_with_their_reason(user_runs, tmp_path):
+    from pipeline.store.runs import RUN_FILES, write_manifest
+
+    broken = tmp_path / "runs" / "paper" / "baseline"
+    shutil.copytree(user_runs / "paper" / "baseline", broken)
+    shutil.copytree(user_runs / "paper" / "improved", tmp_path / "runs" / "paper" / "improved")
+    text = (broken / "config.yaml").read_text().replace("alpha: 0.05", "alpha: 7.0")
+    (broken / "config.yaml").write_text(text)
+    write_manifest(broken, "run", RUN_FILES, "x")  # a consistent folder, invalid settings
+    skipped = []
+    collection = load_runs(tmp_path / "runs", skipped)
+    assert [r["metrics"]["method"] for r in collection.runs] == ["improved"]
+    assert len(skipped) == 1 and "settings in config.yaml cannot be read" in skipped[0].reason
+    assert "claims.alpha" in skipped[0].reason
+
+
+def test_settings_read_back_equal_a_fresh_composition(user_runs):
+    """The store's fast reader gives the same typed settings (and hash) as OmegaConf's merge,
+    and names an unknown key with its full path."""
+    import yaml
+    from omegaconf import OmegaConf
+
+    from pipeline.config import ExperimentConfig, experiment_config_from_data
+    from pipeline.errors import ConfigError
+
+    data = yaml.safe_load((user_runs / "family" / "baseline" / "member_0003" / "config.yaml")
+                          .read_text())
+    fast = experiment_config_from_data(data)
+    slow = OmegaConf.to_object(OmegaConf.merge(OmegaConf.structured(ExperimentConfig), data))
+    assert fast == slow and fast.config_hash() == slow.config_hash()
+    data["scenario"]["obstacles"][0]["foo"] = 1
+    with pytest.raises(ConfigError, match=r"scenario\.obstacles\[0\]\.foo"):
+        experiment_config_from_data(data)
