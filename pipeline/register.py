@@ -112,20 +112,33 @@ INTERPRETATION_REGISTER: tuple[RegisterEntry, ...] = (
     RegisterEntry(
         "What threatens", "'sudden obstacle', 'collision risk' (no definition)",
         "an obstacle whose constant-velocity motion comes within both radii + 0.5 m of the "
-        "straight continuation of the vehicle's motion within 3 s",
-        "other margins and horizons", "metrics.threat_margin_m, metrics.threat_horizon_s"),
+        "straight continuation of the vehicle's motion at any time before the run ends; an "
+        "obstacle the vehicle collides with threatened by definition",
+        "a fixed look-ahead (threat_horizon_s = 3 s, the older reading: a threat that appears "
+        "later than that before contact goes unseen); other margins",
+        "metrics.threat_margin_m, metrics.threat_horizon_s"),
     RegisterEntry(
         "C2: lateral acceleration and window", "Table 1: 'smooth curvature and gradual turns'",
         "a_y = vy_dot + vx r; jerk over the avoidance window (threat to recovery)",
         "vx_r (drops vy_dot); whole_run", "metrics.lateral_accel, metrics.smoothness_window"),
     RegisterEntry(
-        "C3: when repulsion is needed",
+        "C3 as Table 2's two halves (C3a, C3b)",
         "Table 2: 'strong repulsion only when needed'; baseline: 'low sensitivity for far "
         "distances'",
-        "needed while an obstacle threatens the straight continuation; the score is the share "
-        "of repulsive impulse applied while none does",
-        "clearance_band: repulsion beyond threat_clearance_m of clearance is unneeded",
-        "metrics.repulsion_need"),
+        "C3a: the share of repulsive impulse applied while no obstacle threatens the straight "
+        "continuation and none is within near_field_m (force holding the vehicle off a near "
+        "obstacle is needed); C3b: time to contact at the onset of significant repulsion "
+        "during a threat (higher = earlier)",
+        "threat: only a threat makes repulsion needed (force while passing close counts as "
+        "waste); clearance_band: repulsion beyond threat_clearance_m of clearance is unneeded",
+        "metrics.repulsion_need, metrics.near_field_m, metrics.repulsion_onset_force"),
+    RegisterEntry(
+        "C4: which recovery", "Table 1: 'returns smoothly to goal direction'",
+        "settling time of the lateral error into recovery_lateral_band_m after every threat "
+        "is passed (the vehicle back on its line)",
+        "heading: settling of the heading error to the goal's bearing into "
+        "recovery_heading_band_rad ('goal direction' read as heading)",
+        "metrics.recovery_reading, metrics.recovery_lateral_band_m"),
     RegisterEntry(
         "C5: what counts as oscillation", "Table 1: 'no sharp drops or oscillations'",
         "reversals of the lateral error after the obstacle is passed, net of the manoeuvre",

@@ -58,7 +58,7 @@ def test_attribution_names_the_planted_revision():
     sentences = attribution_sentences(ablation_effects(tables, CFG), tables, CFG)
     assert "larger step" in sentences["C1"] and "improves" in sentences["C1"]
     assert "exponential repulsion" in sentences["C2"] and "worsens" in sentences["C2"]
-    assert "No single active revision" in sentences["C3"]
+    assert "No single active revision" in sentences["C3a"]
 
 
 def test_a_tiny_effect_is_not_credited_and_an_interaction_is_named():

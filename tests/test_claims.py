@@ -15,6 +15,7 @@ from pipeline.config import ClaimsConfig
 
 CFG = ClaimsConfig(n_resamples=999)
 C1 = CLAIMS[0]
+BY_ID = {c.claim_id: c for c in ALL_CLAIMS}
 
 
 def tables_with(d: np.ndarray, metric: str = "reaction_delay_s", collided=None):
@@ -60,7 +61,7 @@ def test_discrete_split_with_many_ties_is_a_contradiction_not_a_zero():
     """68 worse, 117 tied, 15 better (the C5 split of the issue): Hodges-Lehmann moves off zero,
     the signed-rank test and the probability of improvement see it."""
     d = np.concatenate([np.ones(68), np.zeros(117), -np.ones(15)])
-    row = compare(*tables_with(d, "oscillation_count"), CLAIMS[4], CFG)
+    row = compare(*tables_with(d, "oscillation_count"), BY_ID["C5"], CFG)
     assert (row.n_better, row.n_tied, row.n_worse) == (15, 117, 68)
     assert row.estimate == 0.5 and row.p_value < 1e-6
     assert row.prob_improvement == pytest.approx((15 + 117 / 2) / 200)
@@ -141,10 +142,12 @@ def test_ledger_has_c0_first_and_both_comparisons():
         CFG).records()
     assert [(r["claim"], r["comparison"]) for r in rows][:2] == [("C0", "baseline"),
                                                                  ("C1", "baseline")]
-    assert len(rows) == 12 and rows[6]["comparison"] == "baseline_matched"
+    assert len(rows) == 14 and rows[7]["comparison"] == "baseline_matched"
     # a 0.3 gain beats C1-C4's margins; C5's margin is half a reversal: within it
-    assert all(r["outcome"] == "supported" for r in rows if r["claim"] in ("C1", "C2", "C3",
+    assert all(r["outcome"] == "supported" for r in rows if r["claim"] in ("C1", "C2", "C3a",
                                                                           "C4"))
+    # C3b is higher-is-better: the same 0.3 lower value is a contradiction there
+    assert all(r["outcome"] == "contradicted" for r in rows if r["claim"] == "C3b")
     assert all(r["outcome"] == "equivalent" for r in rows if r["claim"] == "C5")
 
 
@@ -158,3 +161,90 @@ def test_single_scenario_words(improved, expected):
                         ("baseline",))
     assert [r["claim"] for r in rows] == [c.claim_id for c in ALL_CLAIMS]
     assert rows[1]["vs baseline"] == expected
+
+
+@pytest.mark.parametrize("small, large, pi_side", [(-0.05, +1.0, "better"),
+                                                   (+0.05, -1.0, "worse")])
+def test_estimate_and_probability_of_improvement_disagreeing_is_mixed(small, large, pi_side):
+    """60 % of pairs slightly one way, 40 % much the other: the typical difference and the
+    share of better pairs point opposite ways; never 'supported' or 'contradicted'."""
+    rng = np.random.default_rng(3)
+    d = np.concatenate([small + rng.normal(0, 0.005, 120), large + rng.normal(0, 0.05, 80)])
+    row = compare(*tables_with(d), C1, CFG)
+    assert (row.prob_improvement > 0.5) == (pi_side == "better")
+    assert (row.estimate > 0) == (pi_side == "better")
+    outcome, note = decide(row.ci_low, row.ci_high, row.p_value, 0.05, row.n_pairs, CFG,
+                           row.pi_low, row.pi_high, row.estimate, row.prob_improvement)
+    assert outcome == "mixed"
+    assert f"most pairs {pi_side}" in note and f"{row.prob_improvement:.2f}" in note
+
+
+def test_significant_estimate_beyond_the_margin_with_pi_at_one_half_is_a_direction():
+    """The family case: estimate +0.35 [0.23, 0.47], p tiny, PI's upper bound exactly 0.5:
+    both point worse, so it is a contradiction, not 'inconclusive'."""
+    outcome, _ = decide(0.23, 0.47, 9e-9, 0.1, 160, CFG, 0.40, 0.50, 0.35, 0.45)
+    assert outcome == "contradicted"
+
+
+def wilson(k: int, n: int, z: float = stats.norm.ppf(0.975)) -> tuple[float, float]:
+    """Wilson's score interval written out (an oracle independent of scipy's)."""
+    p = k / n
+    centre = (p + z * z / (2 * n)) / (1 + z * z / n)
+    half = z * np.sqrt(p * (1 - p) / n + z * z / (4 * n * n)) / (1 + z * z / n)
+    return centre - half, centre + half
+
+
+@pytest.mark.parametrize("a, b, c, n", [(0, 0, 0, 12), (0, 0, 0, 2000), (2, 5, 1, 40),
+                                        (10, 3, 9, 200)])
+def test_newcombe_paired_interval_matches_its_formula(a, b, c, n):
+    from pipeline.analysis.claims import newcombe_paired_interval
+
+    low, high = newcombe_paired_interval(a, b, c, n)
+    d = n - a - b - c
+    p1, p2 = (a + b) / n, (a + c) / n
+    (l1, u1), (l2, u2) = wilson(a + b, n), wilson(a + c, n)
+    den = (a + b) * (c + d) * (a + c) * (b + d)
+    phi = (a * d - b * c) / np.sqrt(den) if den else 0.0
+    delta = np.sqrt((p1 - l1) ** 2 - 2 * phi * (p1 - l1) * (u2 - p2) + (u2 - p2) ** 2)
+    eps = np.sqrt((u1 - p1) ** 2 - 2 * phi * (u1 - p1) * (p2 - l2) + (p2 - l2) ** 2)
+    assert (low, high) == pytest.approx((p1 - p2 - delta, p1 - p2 + eps), abs=1e-12)
+    if a + b + c == 0:  # no events: [-u, u], u = z^2 / (n + z^2)
+        z2 = stats.norm.ppf(0.975) ** 2
+        assert high == pytest.approx(z2 / (n + z2)) and low == pytest.approx(-high)
+
+
+@pytest.mark.parametrize("n, expected", [(12, "inconclusive"), (2000, "equivalent")])
+def test_zero_collisions_are_equivalent_only_with_enough_scenarios(n, expected):
+    """No collision in either method: 12 pairs cannot bound the rate difference within two
+    points (the interval is about +-0.24); 2,000 can (about +-0.002)."""
+    improved = pd.DataFrame({"scenario": range(n), "collision": np.zeros(n, bool)})
+    baseline = pd.DataFrame({"scenario": range(n), "collision": np.zeros(n, bool)})
+    cfg = ClaimsConfig(n_resamples=199, min_pairs=10)
+    ledger = family_ledger({"improved": improved.assign(**{c.primary_metric: 1.0
+                                                           for c in CLAIMS}),
+                            "baseline": baseline.assign(**{c.primary_metric: 1.0
+                                                           for c in CLAIMS})},
+                           cfg, comparisons=("baseline",))
+    row = ledger[("C0", "baseline")]
+    assert row.result.interval_method == "newcombe_paired_score"
+    assert row.outcome == expected
+
+
+def test_almost_every_pair_at_the_floor_says_neither_method_shows_it():
+    n = 100
+    values = np.zeros(n)
+    values[:3] = 1.0
+    improved = pd.DataFrame({"scenario": range(n), "oscillation_count": values,
+                             "collision": False})
+    baseline = pd.DataFrame({"scenario": range(n), "oscillation_count": np.zeros(n),
+                             "collision": False})
+    tables = {"improved": improved.assign(**{c.primary_metric: 0.0 for c in CLAIMS
+                                             if c.primary_metric != "oscillation_count"}),
+              "baseline": baseline.assign(**{c.primary_metric: 0.0 for c in CLAIMS
+                                             if c.primary_metric != "oscillation_count"})}
+    ledger = family_ledger(tables, ClaimsConfig(n_resamples=199), comparisons=("baseline",))
+    assert "neither method shows the behaviour in 97 of 100 pairs" in \
+        ledger[("C5", "baseline")].note
+    looser = family_ledger(tables, ClaimsConfig(n_resamples=199, floor_tie_share=0.99),
+                           comparisons=("baseline",))
+    assert "neither method" not in looser[("C5", "baseline")].note

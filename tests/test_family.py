@@ -83,7 +83,7 @@ def test_ledger_over_a_small_family(small_family):
     cfg = ClaimsConfig(min_pairs=2, n_resamples=199)
     ledger = family_ledger(small_family, cfg)
     rows, differences = ledger.records(), ledger.differences
-    assert [r["claim"] for r in rows] == ["C0", "C1", "C2", "C3", "C4", "C5"]
+    assert [r["claim"] for r in rows] == ["C0", "C1", "C2", "C3a", "C3b", "C4", "C5"]
     assert {r["comparison"] for r in rows} == {"baseline"}  # no baseline_matched table given
     for row in rows:
         assert row["n_pairs"] + row["n_missing"] <= 4

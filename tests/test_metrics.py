@@ -209,12 +209,13 @@ def test_oscillation_counts_reversals_after_the_pass_net_of_the_manoeuvre(oversh
 
 
 def test_repulsion_while_nothing_threatens_is_unneeded():
-    """Driving 3 m beside a static obstacle: it never threatens the straight path, so all the
-    repulsion is unneeded; the older clearance-band reading calls part of it needed."""
+    """Driving 3 m beside a static obstacle: it never threatens the straight path, so under the
+    threat-only reading all the repulsion is unneeded; the older clearance-band reading calls
+    part of it needed."""
     t = np.arange(0.0, 10.0, 0.1)
     frame = synthetic(t, 3.0 * t, np.full(t.size, -3.0), obstacle=(15.0, 0.0, 0.5), appear=0.0)
     frame["apf_rep_norm"] = 1.0
-    m = metrics_json(frame, CTX, MetricsConfig())
+    m = metrics_json(frame, CTX, MetricsConfig(repulsion_need="threat"))
     assert m["repulsion_unneeded_share"] == pytest.approx(1.0)
     assert m["repulsive_impulse_far_share"] < 1.0
     band = metrics_json(frame, CTX, MetricsConfig(repulsion_need="clearance_band"))
@@ -222,7 +223,8 @@ def test_repulsion_while_nothing_threatens_is_unneeded():
     # on the obstacle's line the straight path is threatened until it is passed
     ahead = synthetic(t, 3.0 * t, np.zeros(t.size), obstacle=(15.0, 0.0, 0.5), appear=0.0)
     ahead["apf_rep_norm"] = 1.0
-    share = metrics_json(ahead, CTX, MetricsConfig())["repulsion_unneeded_share"]
+    share = metrics_json(ahead, CTX, MetricsConfig(repulsion_need="threat",
+                                                   threat_horizon_s=3.0))["repulsion_unneeded_share"]
     # threatened while 15 - x within 3 s at 3 m/s (x > 6 - reach... ) and until the contact
     assert 0.0 < share < 1.0
 
@@ -239,3 +241,52 @@ def test_collision_attribution_separates_unavoidable_from_avoidable():
     assert m["collision"] and m["collision_avoidable"] is True
     clear = synthetic(t, 3.0 * t, np.zeros(t.size), obstacle=(21.0, 4.0, 0.5), appear=3.0)
     assert metrics_json(clear, CTX, MetricsConfig())["collision_avoidable"] is None
+
+
+def test_force_spent_passing_a_near_obstacle_counts_as_needed():
+    """C3a (Table 2's first half): 3 m beside a static obstacle the clearance is 1.5 m, inside
+    the 2 m near field while |x - 15| < sqrt(2.0+1.5)^2 - ... : the share of unneeded impulse is
+    exactly the share of rows outside the near field (closed form on the sampled rows)."""
+    t = np.round(np.arange(0.0, 10.0, 0.1), 10)
+    x, y = 3.0 * t, np.full(t.size, -3.0)
+    frame = synthetic(t, x, y, obstacle=(15.0, 0.0, 0.5), appear=0.0)
+    frame["apf_rep_norm"] = 1.0
+    m = metrics_json(frame, CTX, MetricsConfig())
+    clearance = np.hypot(x - 15.0, y) - 0.5 - 1.0
+    assert m["repulsion_unneeded_share"] == pytest.approx(np.mean(clearance > 2.0))
+    assert m["repulsion_unneeded_share"] < m["repulsion_unneeded_share_threat"] == 1.0
+    # a wider near field counts more of the force as needed
+    wide = metrics_json(frame, CTX, MetricsConfig(near_field_m=4.0))
+    assert wide["repulsion_unneeded_share"] == pytest.approx(np.mean(clearance > 4.0))
+
+
+def test_onset_of_repulsion_is_timed_by_the_time_to_contact():
+    """C3b (Table 2's second half): a static obstacle on the path, 3 m/s; repulsion exceeds the
+    onset force from x = 6 m on: the time to contact then is (15 - 6 - reach) / 3."""
+    t = np.round(np.arange(0.0, 10.0, 0.1), 10)
+    x = 3.0 * t
+    frame = synthetic(t, x, np.zeros(t.size), obstacle=(15.0, 0.0, 0.5), appear=0.0)
+    frame["apf_rep_norm"] = np.where(x >= 6.0 - 1e-9, 2.0, 0.5)
+    m = metrics_json(frame, CTX, MetricsConfig())
+    reach = 0.5 + 1.0 + 0.5
+    assert m["repulsion_onset_ttc_s"] == pytest.approx((15.0 - 6.0 - reach) / 3.0)
+    # a higher onset force: never significant, no onset
+    late = metrics_json(frame, CTX, MetricsConfig(repulsion_onset_force=5.0))
+    assert late["repulsion_onset_ttc_s"] is None
+
+
+def test_recovery_reading_switches_between_lateral_and_heading_settling():
+    frame = out_and_back(0.0, 0)
+    lateral = metrics_json(frame, CTX, MetricsConfig())
+    heading = metrics_json(frame, CTX, MetricsConfig(recovery_reading="heading"))
+    assert lateral["recovery_time_s"] == lateral["recovery_lateral_s"]
+    assert heading["recovery_time_s"] == heading["recovery_heading_s"]
+    assert heading["recovery_lateral_s"] == lateral["recovery_lateral_s"]
+    assert heading["recovery_time_s"] != lateral["recovery_time_s"]
+
+
+def test_a_wider_recovery_band_settles_sooner():
+    frame = out_and_back(0.4, 0)
+    narrow = metrics_json(frame, CTX, MetricsConfig(recovery_lateral_band_m=0.1))
+    wide = metrics_json(frame, CTX, MetricsConfig(recovery_lateral_band_m=0.5))
+    assert wide["recovery_time_s"] < narrow["recovery_time_s"]

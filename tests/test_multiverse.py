@@ -69,10 +69,11 @@ def test_quick_space_end_to_end_and_resume(tmp_path):
     robust = pd.read_csv(out / "robustness.csv")
     space = load_space(CONF_DIR / "multiverse" / "quick.yaml")
     assert specs["spec_id"].nunique() == space.n_specifications
-    assert set(specs["claim"]) == {"C0", "C1", "C2", "C3", "C4", "C5"}
+    assert set(specs["claim"]) == {"C0", "C1", "C2", "C3a", "C3b", "C4", "C5"}
     assert set(specs["comparison"]) == {"baseline", "baseline_matched"}
     assert {"estimate", "ci_low", "ci_high", "outcome", "planner.beta"} <= set(specs.columns)
-    assert len(robust) == 12 and set(robust["label"]) <= {"robust", "sensitive", "fragile"}
+    assert len(robust) == 14 and set(robust["label"]) <= {"robust", "sensitive", "fragile"}
+    assert "holds_with" in robust.columns
     assert (out / "figures" / "specification_curve_C1.png").is_file()
     info = json.loads((out / "space.json").read_text())
     # runs are shared: two simulation choices with two values, the baselines shared by both
@@ -99,7 +100,7 @@ def test_quick_space_end_to_end_and_resume(tmp_path):
                         multiverse_dir=out).read_text()
     assert 'id="robustness"' in page and 'id="robustness-summary"' in page
     assert page.index('id="robustness-summary"') < page.index('id="paths"')
-    assert page.count('id="fig-specification_curve_C') == 6
+    assert page.count('id="fig-specification_curve_C') == 7
 
 
 @pytest.mark.parametrize("text, match", [
@@ -120,3 +121,22 @@ def test_unknown_space_exits_2(capsys):
 
     assert main(["--space", "no_such_space"]) == 2
     assert "conf/multiverse" in capsys.readouterr().err
+
+
+def test_default_space_covers_every_free_parameter_of_both_apfs():
+    """k_rep's source and constant for the improved APF; the baseline's own step and rho0 as
+    dimensions of their own, set for the baseline alone."""
+    from pipeline.studies.multiverse import simulation_overrides
+
+    space = load_space(CONF_DIR / "multiverse" / "default.yaml")
+    keys = {d.key for d in space.dimensions}
+    assert {"planner.k_rep_source", "planner.k_rep_constant", "planner.beta", "planner.alpha_e",
+            "planner.rho0_m", "planner.step_max_m", "planner.step_size[baseline]",
+            "planner.rho0_m[baseline]"} <= keys
+    row = {d.key: d.default for d in space.dimensions}
+    row["planner.rho0_m[baseline]"] = 3.0
+    row["planner.rho0_m"] = 5.0
+    assert "planner.rho0_m=3.0" in simulation_overrides(row, space, "baseline")
+    assert "planner.rho0_m=5.0" not in simulation_overrides(row, space, "baseline")
+    assert "planner.rho0_m=5.0" in simulation_overrides(row, space, "improved")
+    assert "planner.rho0_m=3.0" not in simulation_overrides(row, space, "improved")

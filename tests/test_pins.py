@@ -3,6 +3,8 @@ hash, the bytes of paper-scenario ``metrics.json`` files and of a small family's
 
 A change to any of these numbers is a change of behaviour, never of layout: it must come with a
 reason in its commit (and, where ``make verify`` checks it, an updated ``reports/reference/``).
+Moved once since: verdicts v3 (issue 21: new metric defaults change the config hash, C3 split
+into C3a/C3b, the rate interval, the "mixed" outcome).
 """
 
 from __future__ import annotations
@@ -15,13 +17,13 @@ import pytest
 from pipeline.report import main as report_main
 from pipeline.run import run_experiment, run_family
 
-DEFAULT_CONFIG_HASH = "34dd7bbfed3003fc"
+DEFAULT_CONFIG_HASH = "1c93200c3a4abe3f"
 PAPER_METRICS_SHA256 = {
-    "improved": "b065a1f95199740f68553be24516c01d26bb18d1b81554db0b51d44ca4447896",
-    "baseline": "e4291ddc98266ed261defc8ce4d41bf555272f9b09f61651f7eb44b0f8af34d4",
+    "improved": "01f27b3f87e3ba4d5dd82e1f7d963d8e0903c6deeec08202e5de7c0460d15260",
+    "baseline": "5a794dfcf6fba7251e4130ebbb9e6841ab89a41de6b3216b7c105653bf20d45d",
 }
-FAMILY_METRICS_SHA256 = "9f31f57c475baf9d23c8e7766b16d941eb502d0e68c874e08c5d05c35811a2f6"
-LEDGER_SHA256 = "bb1d4d777b5b2c4178aa127304fc23662c7faa5866227316f8a406963d2da46e"
+FAMILY_METRICS_SHA256 = "2771267415cb721850c542f8dc5b3643d3a087890b0f3fb6253563bc00fe8719"
+LEDGER_SHA256 = "ef2a66a294987fcdc652177e4c75406ddfb4208e49f7a3f843003389d4babe0f"
 METHODS = ("improved", "baseline", "baseline_matched")
 
 

@@ -38,6 +38,8 @@ SWITCH_TESTS = {
     "controller.input_hold": "here", "controller.halfplane_normal": "here",
     "controller.reference_alignment": "here", "scenario.plant_substeps": "here",
     "scenario.n_steps": "here",
+    "metrics.near_field_m": "test_metrics", "metrics.repulsion_onset_force": "test_metrics",
+    "metrics.recovery_reading": "test_metrics", "metrics.recovery_lateral_band_m": "test_metrics",
     "metrics.reaction_obstacle": "test_metrics", "metrics.reaction_interpolation":
     "test_metrics", "metrics.threat_margin_m": "here", "metrics.threat_horizon_s": "here",
     "metrics.lateral_accel": "test_metrics", "metrics.smoothness_window": "here",
@@ -241,10 +243,29 @@ def test_threat_margin_and_horizon_decide_what_threatens():
     ctx = TrajectoryContext((0.0, 0.0), (30.0, 0.0), 1.0)
     assert metrics_json(frame, ctx, MetricsConfig())["threatened"] is False
     assert metrics_json(frame, ctx, MetricsConfig(threat_margin_m=1.0))["threatened"]
-    # 7 m ahead at 3 m/s: inside a 3 s horizon, outside a 1 s one
-    ahead = synthetic(t, 3.0 * t, np.zeros(t.size), obstacle=(16.0, 0.5, 0.5), appear=3.0)
+    # 7 m ahead at 3 m/s, passed at 1.8 m (no contact): a threat before the run ends (the
+    # default) and within 3 s, not within a 1 s horizon
+    ahead = synthetic(t, 3.0 * t, np.zeros(t.size), obstacle=(16.0, 1.8, 0.5), appear=3.0)
     assert metrics_json(ahead, ctx, MetricsConfig())["threatened"]
+    assert metrics_json(ahead, ctx, MetricsConfig(threat_horizon_s=3.0))["threatened"]
     assert not metrics_json(ahead, ctx, MetricsConfig(threat_horizon_s=1.0))["threatened"]
+
+
+def test_an_obstacle_that_collides_threatened_even_beyond_the_horizon():
+    """A threat later than the look-ahead that then collides: never "nothing threatened" with
+    a collision; the reaction clock starts at its appearance."""
+    from pipeline.config import MetricsConfig
+    from pipeline.analysis.metrics import TrajectoryContext
+    from tests.test_metrics import synthetic
+
+    t = np.round(np.arange(0.0, 8.0 + 1e-9, 0.1), 10)
+    frame = synthetic(t, 3.0 * t, np.zeros(t.size), delta=np.maximum(t - 3.5, 0.0),
+                      obstacle=(16.0, 0.5, 0.5), appear=3.0)
+    ctx = TrajectoryContext((0.0, 0.0), (30.0, 0.0), 1.0)
+    m = metrics_json(frame, ctx, MetricsConfig(threat_horizon_s=1.0))
+    assert m["collision"] and m["threatened"]
+    assert m["threat_appear_time_s"] == pytest.approx(3.0)
+    assert m["reaction_delay_s"] == pytest.approx(0.5 + 0.01, abs=1e-6)
 
 
 def test_smoothness_window_selects_the_primary_jerk():

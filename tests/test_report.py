@@ -22,8 +22,8 @@ def test_report_from_runs(tmp_path, make_config):
     for entry in INTERPRETATION_REGISTER:
         assert entry.config_key in page
     claims_part = page[page.index('id="claims"'):page.index('id="table2"')]
-    assert sorted(re.findall(r'<th scope="row">(C[0-5])</th>', claims_part)) == ["C0", "C1", "C2", "C3",
-                                                                                  "C4", "C5"]
+    assert sorted(re.findall(r'<th scope="row">(C[0-5][ab]?)</th>', claims_part)) == [
+        "C0", "C1", "C2", "C3a", "C3b", "C4", "C5"]
     assert 'id="table2"' in page and "Slow and aggressive curved avoidance" in page
     assert (tmp_path / "report" / "tables" / "metrics_paper_scenario.csv").is_file()
     assert (tmp_path / "report" / "figures" / "trajectory_baseline.svg").is_file()

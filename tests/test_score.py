@@ -108,3 +108,45 @@ def test_external_trajectory_with_mapping_and_obstacle(tmp_path):
     assert m["min_clearance_m"] == pytest.approx(2.0 - 1.5)
     assert m["goal_reached"] and m["time_to_goal_s"] == pytest.approx(9.9)
     assert m["reaction_delay_s"] is None  # no steering column
+
+
+def c3_known_answer_csv(path, onset_x_m: float = 6.0) -> None:
+    """3 m/s along y = -3 past a static obstacle at (15, 0), then a second run on its line:
+    here one file, beside the obstacle, repulsion 2.0 from x = onset_x_m on (0.5 before)."""
+    import numpy as np
+    import pandas as pd
+
+    t = np.round(np.arange(0.0, 10.0, 0.1), 10)
+    x = 3.0 * t
+    frame = pd.DataFrame({"time_s": t, "X_m": x, "Y_m": np.full(t.size, -3.0),
+                          "psi_rad": 0.0, "vx_mps": 3.0, "vy_mps": 0.0, "r_rad_s": 0.0,
+                          "delta_rad": 0.0, "steering_rate_rad_s": 0.0,
+                          "apf_rep_norm": np.where(x >= onset_x_m - 1e-9, 2.0, 0.5),
+                          "obs0_x_m": 15.0, "obs0_y_m": 0.0, "obs0_radius_m": 0.5,
+                          "obs0_visible": True})
+    frame.to_csv(path, index=False)
+
+
+def test_score_gives_the_known_answers_of_c3a_and_c3b(tmp_path, capsys):
+    """C3a through pipeline.score: beside the obstacle (clearance 1.5 m, inside the 2 m near
+    field while |x - 15| < sqrt(3.5^2 - 9)) the force is needed; the unneeded share is the
+    impulse outside the near field over all of it. C3b: on the obstacle's line the onset of
+    repulsion above 1.0 at x = 6 m comes (15 - 6 - 2) / 3 s before contact."""
+    import numpy as np
+
+    beside = tmp_path / "beside.csv"
+    c3_known_answer_csv(beside)
+    assert score_main([str(beside), "--vehicle-radius", "1.0"]) == 0
+    m = json.loads(capsys.readouterr().out)
+    t = np.round(np.arange(0.0, 10.0, 0.1), 10)
+    x = 3.0 * t
+    rep = np.where(x >= 6.0 - 1e-9, 2.0, 0.5)
+    far = np.hypot(x - 15.0, 3.0) - 1.5 > 2.0
+    assert m["repulsion_unneeded_share"] == pytest.approx(rep[far].sum() / rep.sum())
+    on_line = tmp_path / "on_line.csv"
+    c3_known_answer_csv(on_line)
+    text = on_line.read_text().replace(",-3.0,", ",0.0,")
+    on_line.write_text(text)
+    assert score_main([str(on_line), "--vehicle-radius", "1.0"]) == 0
+    m = json.loads(capsys.readouterr().out)
+    assert m["repulsion_onset_ttc_s"] == pytest.approx((15.0 - 6.0 - 2.0) / 3.0)

@@ -54,7 +54,7 @@ def test_callback_aggregated_the_sweep(basic_sweep):
     swept = json.loads((basic_sweep / "swept_keys.json").read_text())["swept_keys"]
     assert swept == ["method", "scenario.obstacles.0.vy_mps"]
     verdicts = pd.read_csv(basic_sweep / "verdicts.csv")
-    assert len(verdicts) == 2 * 6  # two speeds x six claims (C0-C5)
+    assert len(verdicts) == 2 * 7  # two speeds x seven claims (C0-C5, C3 as C3a and C3b)
     assert (basic_sweep / "figures" / "sweep_lines.png").is_file()
 
 

@@ -73,11 +73,11 @@ CLAIMS: tuple[Claim, ...] = (
           definition="RMS of the lateral jerk d(a_y)/dt (m/s^3) with a_y = vy_dot + vx r, by "
                      "central differences, over the avoidance window (appearance of the threat "
                      "to recovery, or run end)."),
-    Claim("C3", "repulsion applied only where needed (little force when far)",
+    Claim("C3a", "no repulsion while nothing is near (low sensitivity far away)",
           "repulsion_unneeded_share", True,
-          ("repulsion_onset_ttc_s", "repulsion_unneeded_impulse", "repulsive_impulse_far_share",
-           "repulsive_force_peak"),
-          criterion="Repulsive Force Modulation",
+          ("repulsion_unneeded_share_threat", "repulsive_impulse_far_share",
+           "repulsion_unneeded_impulse", "repulsive_force_peak"),
+          criterion="Repulsive Force Modulation (first half: only when needed)",
           paper_description="How well the repulsive force from the APF is applied.",
           paper_indicator="Adaptive, distance-based repulsion that avoids unnecessary forces.",
           paper_improved="H_k is activated smoothly based on distance; strong repulsion only "
@@ -85,8 +85,20 @@ CLAIMS: tuple[Claim, ...] = (
           paper_original="exp((s - s0)^2) causes low sensitivity for far distances",
           definition="Share (0-1) of the repulsive impulse sum |F_rep| Ts at the vehicle that "
                      "is applied while no obstacle threatens the straight continuation of the "
-                     "current motion (0 when no repulsion was applied); secondary: time to "
-                     "contact at the onset of significant repulsion (higher = earlier)."),
+                     "current motion and none is within near_field_m (0 when no repulsion was "
+                     "applied): force spent holding the vehicle off a near obstacle is needed."),
+    Claim("C3b", "early repulsion when a threat appears",
+          "repulsion_onset_ttc_s", False,
+          ("repulsion_onset_clearance_m", "repulsive_force_peak"),
+          criterion="Repulsive Force Modulation (second half: strong when needed)",
+          paper_description="How well the repulsive force from the APF is applied.",
+          paper_indicator="Adaptive, distance-based repulsion that avoids unnecessary forces.",
+          paper_improved="strong repulsion only when needed",
+          paper_original="low sensitivity for far distances",
+          definition="Time to contact (s) of the straight continuation at the first step on "
+                     "which the repulsion exceeds repulsion_onset_force while an obstacle "
+                     "threatens (higher = earlier); missing when the repulsion never becomes "
+                     "significant during a threat."),
     Claim("C4", "faster, smoother goal-direction recovery after avoidance",
           "recovery_time_s", True, ("recovery_lateral_s", "recovery_heading_s",
                                     "overshoot_m"),
@@ -137,6 +149,8 @@ class Outcome(StrEnum):
     CONTRADICTED = "contradicted"
     EQUIVALENT = "equivalent"
     INCONCLUSIVE = "inconclusive"
+    #: the estimate and the probability of improvement point opposite ways
+    MIXED = "mixed"
 
 
 OUTCOMES = tuple(o.value for o in Outcome)
@@ -146,14 +160,20 @@ OUTCOME_RULE = (
     "C1-C5 on pairs where neither method collided (all pairs as a sensitivity), pairs with a "
     "missing value counted apart. Estimate: Hodges-Lehmann of d (claims.estimator) with a paired "
     "bootstrap interval (scipy.stats.bootstrap, BCa where defined, claims.n_resamples, seeded); "
-    "test: Wilcoxon signed-rank (Pratt's zeros) or sign test, C0 McNemar's exact test on "
-    "discordant pairs, Holm-adjusted over C0-C5; probability of improvement "
-    "PI = P(d < 0) + P(d = 0)/2 with a percentile bootstrap interval. 'equivalent' when the "
-    "estimate's whole interval lies inside (-margin, +margin); otherwise 'supported' when the "
-    "adjusted p < alpha and PI's interval lies above 1/2 (improved better in most pairs), "
-    "'contradicted' when the adjusted p < alpha and PI's interval lies below 1/2, "
-    "'inconclusive' else (also with fewer than claims.min_pairs pairs). A significant "
-    "difference inside the margin is a real but small effect: the note says so")
+    "C0 (a rate): the difference of collision rates with Newcombe's hybrid score interval for "
+    "paired proportions (Wilson limits from scipy.stats, honest at zero events). Test: Wilcoxon "
+    "signed-rank (Pratt's zeros) or sign test, C0 McNemar's exact test on discordant pairs, "
+    "Holm-adjusted over the claims; probability of improvement PI = P(d < 0) + P(d = 0)/2 with "
+    "a percentile bootstrap interval. 'equivalent' when the estimate's whole interval lies "
+    "inside (-margin, +margin); otherwise, with the adjusted p < alpha: 'supported' when the "
+    "estimate's interval holds no worsening (at or below zero, not only zero) and PI is above "
+    "1/2 (both say improved is better), 'contradicted' when the interval holds no improvement "
+    "and PI is below 1/2, 'mixed' when they point "
+    "opposite ways (most pairs better but the typical difference worse, or the reverse; both "
+    "numbers in the note); 'inconclusive' else (also with fewer than claims.min_pairs pairs). "
+    "For C0 the interval alone gives the direction. A significant difference inside the margin "
+    "is a real but small effect: the note says so; a claim on which claims.floor_tie_share of "
+    "the pairs tie at the metric's floor notes that neither method shows the behaviour")
 
 SINGLE_RULE = (
     "paper scenario: 'better' if improved beats the comparison on the primary metric by at "
@@ -331,32 +351,74 @@ def holm(p_values: list[float]) -> list[float]:
 
 
 def decide(low: float, high: float, p_adjusted: float, margin: float, n_pairs: int, cfg,
-           pi_low: float = float("nan"), pi_high: float = float("nan")) -> tuple[Outcome, str]:
+           pi_low: float = float("nan"), pi_high: float = float("nan"),
+           estimate: float = float("nan"), pi: float = float("nan")) -> tuple[Outcome, str]:
     """Outcome and note (:data:`OUTCOME_RULE`).
 
-    Equivalence is read off the estimate's interval and the margin; the direction of a
-    significant difference off the probability of improvement's interval (robust where the
-    estimate lives on a lattice, e.g. counts with many ties); significance off the adjusted p.
-    Without a probability-of-improvement interval the estimate's interval gives the direction.
+    Equivalence is read off the estimate's interval and the margin; significance off the
+    adjusted p. A direction needs the estimate's interval (clear of zero) and the probability of
+    improvement (its point ``pi``, or its interval's middle) to agree; when they point opposite
+    ways the outcome is "mixed". Without a probability of improvement (rates) the interval alone
+    gives the direction.
     """
     if n_pairs < cfg.min_pairs or not (np.isfinite(low) and np.isfinite(high)):
         return Outcome.INCONCLUSIVE, f"too few pairs ({n_pairs} < {cfg.min_pairs})"
     significant = bool(np.isfinite(p_adjusted) and p_adjusted < cfg.alpha)
-    if np.isfinite(pi_low) and np.isfinite(pi_high):
-        better, worse = pi_low > 0.5, pi_high < 0.5
+    # the interval contains no improvement (or no worsening); a lattice interval may end at 0
+    est_better, est_worse = high <= 0 < -low, low >= 0 < high
+    if not np.isfinite(pi) and np.isfinite(pi_low) and np.isfinite(pi_high):
+        pi = (pi_low + pi_high) / 2.0
+    if np.isfinite(pi):
+        pi_better, pi_worse = pi > 0.5, pi < 0.5
     else:
-        better, worse = high < 0, low > 0
+        pi_better, pi_worse = est_better, est_worse
     if -margin < low and high < margin:
-        if significant and better:
+        if significant and est_better and pi_better:
             return Outcome.EQUIVALENT, "improved better, by less than the margin"
-        if significant and worse:
+        if significant and est_worse and pi_worse:
             return Outcome.EQUIVALENT, "improved worse, by less than the margin"
         return Outcome.EQUIVALENT, ""
-    if significant and better:
+    if significant and est_better and pi_better:
         return Outcome.SUPPORTED, ""
-    if significant and worse:
+    if significant and est_worse and pi_worse:
         return Outcome.CONTRADICTED, ""
+    if significant and ((est_better and pi_worse) or (est_worse and pi_better)):
+        value = estimate if np.isfinite(estimate) else (low + high) / 2.0
+        if pi_better:
+            words = (f"most pairs better (P(improvement) {pi:.2f}) but the typical difference "
+                     f"worse ({value:+.3g} [{low:.3g}, {high:.3g}])")
+        else:
+            words = (f"most pairs worse (P(improvement) {pi:.2f}) but the typical difference "
+                     f"better ({value:+.3g} [{low:.3g}, {high:.3g}])")
+        return Outcome.MIXED, words
     return Outcome.INCONCLUSIVE, ""
+
+
+def newcombe_paired_interval(n_both: int, n_first_only: int, n_second_only: int, n: int,
+                             level: float = 0.95) -> tuple[float, float]:
+    """Newcombe's hybrid score interval (his method 10, Stat. Med. 1998, 17: 2635-2650) for the
+    difference of two paired proportions ``p1 - p2``, ``p1 = (a + b) / n``, ``p2 = (a + c) / n``.
+
+    Built from the two Wilson score intervals (``scipy.stats.binomtest(...).proportion_ci``)
+    and the correlation ``phi`` of the paired table; unlike a bootstrap it is not degenerate at
+    zero events (with none in either, it is ``[-u, u]``, ``u = z^2 / (n + z^2)``).
+    """
+    from scipy import stats
+
+    a, b, c = n_both, n_first_only, n_second_only
+    d = n - a - b - c
+    if n <= 0 or d < 0:
+        return float("nan"), float("nan")
+    p1, p2 = (a + b) / n, (a + c) / n
+    ci1 = stats.binomtest(a + b, n).proportion_ci(confidence_level=level, method="wilson")
+    ci2 = stats.binomtest(a + c, n).proportion_ci(confidence_level=level, method="wilson")
+    l1, u1, l2, u2 = ci1.low, ci1.high, ci2.low, ci2.high
+    denominator = (a + b) * (c + d) * (a + c) * (b + d)
+    phi = (a * d - b * c) / math.sqrt(denominator) if denominator > 0 else 0.0
+    delta = math.sqrt(max((p1 - l1) ** 2 - 2 * phi * (p1 - l1) * (u2 - p2) + (u2 - p2) ** 2, 0.0))
+    epsilon = math.sqrt(max((u1 - p1) ** 2 - 2 * phi * (u1 - p1) * (p2 - l2) + (p2 - l2) ** 2,
+                            0.0))
+    return float(p1 - p2 - delta), float(p1 - p2 + epsilon)
 
 
 PAIRS = ("neither_collided", "all")
@@ -404,6 +466,9 @@ class PairedResult:
     prob_improvement: float
     pi_low: float
     pi_high: float
+    #: pairs where both methods sit at the metric's floor (the smallest value seen)
+    n_floor_ties: int = 0
+    floor_value: float = float("nan")
     #: the finite paired differences the estimate was taken on (for plots)
     differences: np.ndarray = field(repr=False, compare=False, default=None)
 
@@ -421,10 +486,22 @@ def compare(improved: pd.DataFrame, comparison: pd.DataFrame, claim: Claim, cfg,
     tie = cfg.tie_tolerance
     better, tied, worse = int(np.sum(d < -tie)), int(np.sum(np.abs(d) <= tie)), \
         int(np.sum(d > tie))
+    key = claim.primary_metric
+    ok = np.isfinite(d_all)
+    values_i = pd.to_numeric(merged[f"{key}_i"], errors="coerce").to_numpy(float)[ok]
+    values_c = pd.to_numeric(merged[f"{key}_c"], errors="coerce").to_numpy(float)[ok]
+    floor = float(min(values_i.min(), values_c.min())) if d.size else float("nan")
+    n_floor = int(np.sum((np.abs(values_i - floor) <= tie) & (np.abs(values_c - floor) <= tie))) \
+        if d.size else 0
     if claim.is_rate:
-        # rates: the mean of d is the rate difference; McNemar on discordant pairs
+        # rates: the difference of the two rates with Newcombe's paired score interval (honest
+        # at zero events); McNemar's exact test on the discordant pairs
         estimate = float(d.mean()) if d.size else float("nan")
-        low, high, method = bootstrap_interval(d, lambda x, axis=-1: np.mean(x, axis=axis), cfg)
+        events_i, events_c = values_i.astype(bool), values_c.astype(bool)
+        low, high = newcombe_paired_interval(int(np.sum(events_i & events_c)),
+                                             int(np.sum(events_i & ~events_c)),
+                                             int(np.sum(~events_i & events_c)), int(d.size))
+        method = "newcombe_paired_score"
         discordant = better + worse
         p_value = float(stats.binomtest(worse, discordant, 0.5).pvalue) if discordant else 1.0
     else:
@@ -433,7 +510,7 @@ def compare(improved: pd.DataFrame, comparison: pd.DataFrame, claim: Claim, cfg,
         p_value = paired_test(d, cfg) if d.size else float("nan")
     pi, pi_low, pi_high = probability_of_improvement(d, cfg)
     return PairedResult(int(d.size), int(d_all.size - d.size), better, tied, worse, estimate,
-                        low, high, method, p_value, pi, pi_low, pi_high, d)
+                        low, high, method, p_value, pi, pi_low, pi_high, n_floor, floor, d)
 
 
 LEDGER_COLUMNS = ["claim", "comparison", "metric", "outcome", "estimate", "ci_low", "ci_high",
@@ -560,12 +637,26 @@ def family_ledger(tables: dict[str, pd.DataFrame], cfg, paper_metrics: dict[str,
     return Ledger(tuple(rows), improved)
 
 
+def judge(result: PairedResult, p_value: float, margin: float, cfg, claim: Claim
+          ) -> tuple[Outcome, str]:
+    """:func:`decide` on one comparison's result (a rate's direction from its interval)."""
+    if claim.is_rate:
+        return decide(result.ci_low, result.ci_high, p_value, margin, result.n_pairs, cfg,
+                      estimate=result.estimate)
+    return decide(result.ci_low, result.ci_high, p_value, margin, result.n_pairs, cfg,
+                  result.pi_low, result.pi_high, result.estimate, result.prob_improvement)
+
+
 def _ledger_row(claim: Claim, comparison: str, result: PairedResult, p_holm: float,
                 tables: dict[str, pd.DataFrame], cfg, paper_metrics: dict | None,
                 improved: str, sensitivity: bool) -> LedgerRow:
     margin = float(cfg.margins[claim.claim_id])
-    outcome, note = decide(result.ci_low, result.ci_high, p_holm, margin, result.n_pairs, cfg,
-                           result.pi_low, result.pi_high)
+    outcome, note = judge(result, p_holm, margin, cfg, claim)
+    if not claim.is_rate and result.n_pairs and \
+            result.n_floor_ties >= cfg.floor_tie_share * result.n_pairs:
+        floor_note = (f"neither method shows the behaviour in {result.n_floor_ties} of "
+                      f"{result.n_pairs} pairs (both at {result.floor_value:.3g})")
+        note = f"{note}; {floor_note}" if note else floor_note
     all_pairs, estimate_all = None, None
     if claim.is_rate:
         all_pairs, estimate_all = outcome, result.estimate
@@ -573,8 +664,7 @@ def _ledger_row(claim: Claim, comparison: str, result: PairedResult, p_holm: flo
         other = "all" if cfg.pairs == "neither_collided" else "neither_collided"
         sens = compare(tables[improved], tables[comparison], claim, cfg, pairs=other)
         # the sensitivity keeps its own unadjusted test: it is a check, not a claim
-        all_pairs, _ = decide(sens.ci_low, sens.ci_high, sens.p_value, margin, sens.n_pairs,
-                              cfg, sens.pi_low, sens.pi_high)
+        all_pairs, _ = judge(sens, sens.p_value, margin, cfg, claim)
         estimate_all = sens.estimate
     paper = None
     if paper_metrics and comparison in paper_metrics and improved in paper_metrics:

@@ -3,8 +3,10 @@
 Every function takes arrays (or the trajectory table) and thresholds from
 :class:`pipeline.config.MetricsConfig`; none of them runs a simulation. A *threat* is an obstacle
 whose constant-velocity motion comes within both radii plus ``threat_margin_m`` of the straight
-continuation of the vehicle's current motion within ``threat_horizon_s`` (closed form, see
-:func:`straight_line_time_to_contact`). Definitions (also in the report's Methods section):
+continuation of the vehicle's current motion before the run ends (``threat_horizon_s = None``;
+the older reading looks a fixed number of seconds ahead), closed form, see
+:func:`straight_line_time_to_contact`; an obstacle the vehicle collides with threatened by
+definition. Definitions (also in the report's Methods section):
 
 * **Reaction delay** (C1, s): from the appearance of the first obstacle that threatens the
   vehicle when it appears (``reaction_obstacle = threatening``; the older reading takes the first
@@ -16,11 +18,13 @@ continuation of the vehicle's current motion within ``threat_horizon_s`` (closed
   reading drops ``vy_dot``), lateral jerk ``d a_y / dt`` by central differences; RMS and max over
   the avoidance window (appearance of the threat to recovery, or run end) and over the whole run.
   Steering rate and curvature rate as secondaries.
-* **Repulsion modulation** (C3): the repulsive impulse ``sum |F_rep| Ts`` applied while no
-  obstacle threatens (unneeded repulsion), absolute and as a share of all repulsion (0 when none
-  was applied); time to contact at the onset of significant repulsion (``|F_rep| >
-  repulsion_onset_force``) when an obstacle does threaten (higher = earlier). The older
-  reading counts repulsion beyond ``threat_clearance_m`` of clearance as unneeded.
+* **Repulsion modulation** (C3, Table 2's two halves). C3a: the repulsive impulse
+  ``sum |F_rep| Ts`` applied while no obstacle threatens and none is within ``near_field_m``
+  (unneeded repulsion; force holding the vehicle off a near obstacle is needed), absolute and as
+  a share of all repulsion (0 when none was applied); ``repulsion_need = threat`` counts only
+  threats as need, ``clearance_band`` only clearance within ``threat_clearance_m``. C3b: time to
+  contact at the onset of significant repulsion (``|F_rep| > repulsion_onset_force``) while an
+  obstacle threatens (higher = earlier).
 * **Goal-direction recovery** (C4, s): from the moment every obstacle that ever threatened is
   passed (the vehicle ahead of it by both radii for good; every obstacle when none threatened),
   the settling time of the lateral error (python-control ``step_info`` convention, absolute band
@@ -200,10 +204,11 @@ def band_exit_time(time_s: np.ndarray, values: np.ndarray, start_time_s: float, 
 
 
 def straight_line_time_to_contact(p: np.ndarray, v: np.ndarray, o: np.ndarray, ov: np.ndarray,
-                                  reach_m: np.ndarray, horizon_s: float) -> np.ndarray:
+                                  reach_m: np.ndarray, horizon_s) -> np.ndarray:
     """First time in ``[0, horizon_s]`` at which ``|(o + ov t) - (p + v t)| <= reach`` (inf if
     none): the vehicle continuing straight at its current velocity, the obstacle at constant
-    velocity. Closed form (a quadratic in t); arrays broadcast over rows.
+    velocity. Closed form (a quadratic in t); arrays broadcast over rows (``horizon_s`` too: a
+    per-row horizon such as the time left in the run).
     """
     r0 = np.asarray(o, float) - np.asarray(p, float)
     dv = np.asarray(ov, float) - np.asarray(v, float)
@@ -444,7 +449,7 @@ class Smoothness(_Block):
 
 @dataclass(frozen=True)
 class Repulsion(_Block):
-    """C3: repulsive impulse at the vehicle (force x s), its unneeded share, onset."""
+    """C3a: repulsive impulse at the vehicle (force x s) and its unneeded share; C3b: onset."""
 
     repulsive_impulse: float
     repulsion_unneeded_impulse: float
@@ -671,18 +676,29 @@ class ThreatGeometry:
     passed_time_s: float
 
 
+def threat_horizon(sig: Signals, thresholds: MetricsConfig):
+    """How far ahead the straight continuation is checked: until the run ends (per row), or a
+    fixed ``threat_horizon_s`` (the older reading)."""
+    if thresholds.threat_horizon_s is None:
+        return np.maximum(sig.t[-1] - sig.t, 0.0) if sig.t.size else 0.0
+    return thresholds.threat_horizon_s
+
+
 def threat_block(sig: Signals, tracks: list[ObstacleTrack], context: TrajectoryContext,
-                 thresholds: MetricsConfig) -> tuple[Threat, ThreatGeometry]:
-    """Threats: the straight continuation of the current motion against each visible obstacle;
-    the obstacle is passed when the vehicle is ahead of every obstacle that ever threatened
-    (every visible one when none did) by both radii, for good."""
+                 thresholds: MetricsConfig, colliding: int | None = None
+                 ) -> tuple[Threat, ThreatGeometry]:
+    """Threats: the straight continuation of the current motion against each visible obstacle
+    (:func:`threat_horizon`); an obstacle the vehicle collides with (``colliding``) threatened
+    by definition, so a collision never comes with "nothing threatened". The obstacle is passed
+    when the vehicle is ahead of every obstacle that ever threatened (every visible one when
+    none did) by both radii, for good."""
     t, n = sig.t, len(sig.t)
+    horizon = threat_horizon(sig, thresholds)
     ttc = np.full((n, len(tracks)), np.inf)
     for j, track in enumerate(tracks):
         reach = track.radius + context.vehicle_radius_m + thresholds.threat_margin_m
         ttc[:, j] = np.where(track.visible, straight_line_time_to_contact(
-            sig.xy, sig.velocity, track.position, track.velocity, reach,
-            thresholds.threat_horizon_s), np.inf)
+            sig.xy, sig.velocity, track.position, track.velocity, reach, horizon), np.inf)
     threat_now = np.isfinite(ttc)
     appear = [t[track.appear] if track.appear >= 0 else np.inf for track in tracks]
     at_appearance = [bool(track.appear >= 0 and threat_now[track.appear, j])
@@ -690,7 +706,9 @@ def threat_block(sig: Signals, tracks: list[ObstacleTrack], context: TrajectoryC
     order = sorted(range(len(tracks)), key=lambda j: (appear[j], j))
     first_visible = next((j for j in order if np.isfinite(appear[j])), None)
     threatening = next((j for j in order if at_appearance[j]), None)
-    ever = [j for j in range(len(tracks)) if threat_now[:, j].any()] or \
+    if threatening is None and colliding is not None and np.isfinite(appear[colliding]):
+        threatening = colliding
+    ever = [j for j in range(len(tracks)) if threat_now[:, j].any() or j == threatening] or \
         [j for j in range(len(tracks)) if np.isfinite(appear[j])]
     passed_time = float("nan")
     if ever:
@@ -756,7 +774,8 @@ def recovery_block(sig: Signals, geo: ThreatGeometry, thresholds: MetricsConfig)
     heading = settling_time(sig.t[window], sig.bearing_error[window],
                             thresholds.recovery_heading_band_rad) \
         if np.count_nonzero(window) > 1 else float("nan")
-    return Recovery(lateral, heading, lateral, bool(np.isfinite(lateral)))
+    chosen = heading if thresholds.recovery_reading == "heading" else lateral
+    return Recovery(lateral, heading, chosen, bool(np.isfinite(chosen)))
 
 
 def smoothness_block(sig: Signals, threat: Threat, geo: ThreatGeometry, recovery: Recovery,
@@ -790,15 +809,18 @@ def smoothness_block(sig: Signals, threat: Threat, geo: ThreatGeometry, recovery
 
 def repulsion_block(tr: pd.DataFrame, sig: Signals, geo: ThreatGeometry, clearance: np.ndarray,
                     thresholds: MetricsConfig) -> Repulsion | None:
-    """C3: repulsive impulse applied while nothing threatens (or beyond the clearance band);
-    time to contact at the onset of significant repulsion. None without APF force columns."""
+    """C3a: repulsive impulse applied while nothing threatens or is near (``repulsion_need``);
+    C3b: time to contact at the onset of significant repulsion. None without APF force
+    columns."""
     if "apf_rep_norm" not in tr:
         return None
     rep = np.nan_to_num(tr["apf_rep_norm"].to_numpy(float))
     impulse = float(np.sum(rep) * sig.dt)
     needed_threat = geo.threat_now.any(axis=1)
+    near = np.nan_to_num(clearance, nan=np.inf) <= thresholds.near_field_m
     needed_band = np.nan_to_num(clearance, nan=np.inf) <= thresholds.threat_clearance_m
-    needed = needed_threat if thresholds.repulsion_need == "threat" else needed_band
+    needed = {"threat_or_near": needed_threat | near, "threat": needed_threat,
+              "clearance_band": needed_band}[thresholds.repulsion_need]
     unneeded = float(np.sum(rep[~needed]) * sig.dt)
 
     def share(mask):  # no repulsion at all means no unnecessary repulsion either: 0
@@ -848,9 +870,10 @@ def stability_block(sig: Signals, threat: Threat, geo: ThreatGeometry,
 
 def safety_block(tr: pd.DataFrame, sig: Signals, tracks: list[ObstacleTrack],
                  clearance: np.ndarray, context: TrajectoryContext,
-                 thresholds: MetricsConfig) -> Safety:
+                 thresholds: MetricsConfig) -> tuple[Safety, int | None]:
     """Clearance from the continuous check (sampled as the older reading), collision and
-    whether it was avoidable, minimum time to collision."""
+    whether it was avoidable, minimum time to collision; and the obstacle collided with (None
+    without a collision)."""
     sampled = float(np.nanmin(clearance)) if np.any(np.isfinite(clearance)) else float("nan")
     continuous, contact_j, contact_t = continuous_clearance(sig.t, sig.xy, tracks,
                                                            context.vehicle_radius_m)
@@ -864,8 +887,9 @@ def safety_block(tr: pd.DataFrame, sig: Signals, tracks: list[ObstacleTrack],
     pose = np.column_stack([sig.xy, sig.psi, sig.speed, sig.delta])
     avoidable = collision_is_avoidable(sig.t, pose, tracks, contact_j, contact_t, context,
                                        thresholds) if collision and contact_j >= 0 else None
-    return Safety(sampled, continuous, chosen, collision, avoidable,
-                  min_time_to_collision(tr, context.vehicle_radius_m))
+    return (Safety(sampled, continuous, chosen, collision, avoidable,
+                   min_time_to_collision(tr, context.vehicle_radius_m)),
+            contact_j if collision and contact_j >= 0 else None)
 
 
 def progress_block(sig: Signals, context: TrajectoryContext,
@@ -920,9 +944,10 @@ def compute_metrics(trajectory: pd.DataFrame, context: TrajectoryContext,
     """
     sig = trajectory_signals(trajectory, context)
     tracks = obstacle_tracks(trajectory)
-    threat, geo = threat_block(sig, tracks, context, thresholds)
-    recovery = recovery_block(sig, geo, thresholds)
     clearance = clearance_series(trajectory, context.vehicle_radius_m)
+    safety, colliding = safety_block(trajectory, sig, tracks, clearance, context, thresholds)
+    threat, geo = threat_block(sig, tracks, context, thresholds, colliding)
+    recovery = recovery_block(sig, geo, thresholds)
     step_cap = StepCap(float(np.nanmean(trajectory["apf_step_cap_share"].to_numpy(float)))) \
         if "apf_step_cap_share" in trajectory else None
     iterations, fallbacks = solver_blocks(trajectory)
@@ -930,7 +955,7 @@ def compute_metrics(trajectory: pd.DataFrame, context: TrajectoryContext,
         threat=threat, reaction=reaction_block(sig, geo, thresholds),
         smoothness=smoothness_block(sig, threat, geo, recovery, thresholds),
         recovery=recovery, stability=stability_block(sig, threat, geo, thresholds),
-        safety=safety_block(trajectory, sig, tracks, clearance, context, thresholds),
+        safety=safety,
         progress=progress_block(sig, context, thresholds),
         repulsion=repulsion_block(trajectory, sig, geo, clearance, thresholds),
         step_cap=step_cap, iterations=iterations, fallbacks=fallbacks)

@@ -26,7 +26,7 @@ import yaml
 from pipeline.store.collection import RunCollection, load_runs
 from pipeline.store.runs import (RunFolderError, Skipped, check, discover, read_family, read_run,
                            write_text_atomic)
-from pipeline.analysis.claims import (ALL_CLAIMS, OUTCOME_RULE, SINGLE_RULE, claims_table,
+from pipeline.analysis.claims import (ALL_CLAIMS, OUTCOME_RULE, OUTCOMES, SINGLE_RULE, claims_table,
                              family_ledger, outcome_counts)
 from pipeline.analysis.tally import Tally
 from pipeline.config import INTERPRETATION_REGISTER, ClaimsConfig
@@ -264,8 +264,9 @@ def _robustness_section(multiverse_dir: Path | None, fig_dir: Path,
             "outcome": r["default_outcome"], "label": r["label"],
             "agree": f"{100 * r['agree_share']:.0f} %", "moved": moved,
             "shares": ", ".join(f"{o} {100 * r[f'share_{o}']:.0f} %"
-                                for o in ("supported", "contradicted", "equivalent",
-                                          "inconclusive") if r[f"share_{o}"] > 0)}
+                                for o in OUTCOMES if r.get(f"share_{o}", 0) > 0),
+            "holds_with": r["holds_with"] if isinstance(r.get("holds_with"), str)
+            and r["holds_with"] else "no single choice"}
     figures = []
     for claim in ALL_CLAIMS:
         png = folder / "figures" / f"specification_curve_{claim.claim_id}.png"

@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from pipeline.analysis.claims import ALL_CLAIMS, CLAIMS, compare, decide, family_ledger
+from pipeline.analysis.claims import ALL_CLAIMS, CLAIMS, compare, family_ledger, judge
 from pipeline.analysis.tally import Tally
 
 REVISIONS = ("normalize", "step", "beta", "exponential", "step_min")
@@ -69,9 +69,8 @@ def ablation_effects(tables: dict[str, pd.DataFrame], cfg) -> pd.DataFrame:
         table = tables[label]
         for claim in CLAIMS:
             result = compare(table, baseline, claim, cfg)
-            outcome, _ = decide(result.ci_low, result.ci_high, result.p_value,
-                                cfg.margins[claim.claim_id], result.n_pairs, cfg,
-                                result.pi_low, result.pi_high)
+            outcome, _ = judge(result, result.p_value, cfg.margins[claim.claim_id], cfg,
+                               claim)
             tally = Tally.of(table)
             rows.append({"configuration": label, "claim": claim.claim_id,
                          "metric": claim.primary_metric, "effect": result.estimate,

@@ -63,7 +63,12 @@ ROBUSTNESS_RULE = (
 
 @dataclass(frozen=True)
 class Dimension:
-    """One choice of the multiverse: a config key and its defensible values."""
+    """One choice of the multiverse: a config key and its defensible values.
+
+    ``key`` names the dimension (a column of the design); ``config_key`` is the Hydra key it
+    sets when that differs, e.g. the baseline's own ``planner.rho0_m`` beside the improved
+    APF's (``key: planner.rho0_m[baseline]``).
+    """
 
     key: str
     stage: str
@@ -71,6 +76,12 @@ class Dimension:
     applies_to: tuple | None = None
     cap: bool = False
     why: str = ""
+    config_key: str = ""
+
+    @property
+    def target(self) -> str:
+        """The config key the dimension sets."""
+        return self.config_key or self.key
 
     @property
     def default(self) -> Any:
@@ -111,7 +122,8 @@ def load_space(path: Path) -> Space:
         raise ConfigError("multiverse space", str(path), f"valid YAML ({str(exc).splitlines()[0]})")
     dims = []
     for i, item in enumerate(data.get("dimensions") or []):
-        key = str(item.get("key", ""))
+        key = str(item.get("name") or item.get("key", ""))
+        config_key = str(item.get("key", "")) if item.get("name") else ""
         stage = item.get("stage")
         values = tuple(item.get("values") or ())
         if stage not in STAGES:
@@ -119,12 +131,12 @@ def load_space(path: Path) -> Space:
         if len(values) < 2:
             raise ConfigError(f"dimensions[{i}].values", list(values), "two or more values, the "
                               "first the default")
-        if stage == "analysis" and not key.startswith(ANALYSIS_PREFIXES):
+        if stage == "analysis" and not (config_key or key).startswith(ANALYSIS_PREFIXES):
             raise ConfigError(f"dimensions[{i}].key", key, "a metrics.* or claims.* key for an "
                               "analysis dimension")
         applies = tuple(item["applies_to"]) if item.get("applies_to") else None
         dims.append(Dimension(key, stage, values, applies, bool(item.get("cap", False)),
-                              str(item.get("why", ""))))
+                              str(item.get("why", "")), config_key))
     if not dims:
         raise ConfigError("dimensions", [], "at least one dimension")
     if len({d.key for d in dims}) != len(dims):
@@ -175,7 +187,7 @@ def simulation_overrides(row: dict, space: Space, method: str) -> list[str]:
     """Hydra overrides of one method's family run for a specification's simulation choices."""
     overrides = [f"method={method}", "scenario=family",
                  f"scenario.family.size={space.family_size}"]
-    keys = {d.key for d in space.dimensions}
+    keys = {d.target for d in space.dimensions}
     if "scenario.family.seed" not in keys:
         overrides.append(f"scenario.family.seed={space.family_seed}")
     for dim in space.of("simulation"):
@@ -184,7 +196,7 @@ def simulation_overrides(row: dict, space: Space, method: str) -> list[str]:
             if dim.cap and method == "baseline_matched":
                 overrides.append(f"planner.step_size={_hydra_value(value)}")
             continue
-        overrides.append(f"{dim.key}={_hydra_value(value)}")
+        overrides.append(f"{dim.target}={_hydra_value(value)}")
     return overrides
 
 
@@ -194,6 +206,19 @@ def _hydra_value(value) -> str:
     if isinstance(value, bool):
         return "true" if value else "false"
     return str(value)
+
+
+def value_text(value) -> str:
+    """A dimension value as text, None and NaN alike as "null" (a design table turns None in a
+    column of numbers into NaN)."""
+    if value is None or (isinstance(value, float) and value != value):
+        return "null"
+    return str(value)
+
+
+def matches(column: pd.Series, value) -> pd.Series:
+    """Rows of a design column that hold ``value``."""
+    return column.map(value_text) == value_text(value)
 
 
 def simulation_key(row: dict, space: Space) -> tuple:
@@ -206,13 +231,14 @@ def analysis_settings(row: dict, space: Space, base: ExperimentConfig
     with (``base``, the user's configuration) with the specification's analysis choices."""
     metrics, claims, scale = {}, {}, 1.0
     for dim in space.of("analysis"):
-        section, _, name = dim.key.partition(".")
-        if dim.key == "claims.margin_scale":
-            scale = float(row[dim.key])
+        section, _, name = dim.target.partition(".")
+        value = None if value_text(row[dim.key]) == "null" else row[dim.key]
+        if dim.target == "claims.margin_scale":
+            scale = float(value)
         elif section == "metrics":
-            metrics[name] = row[dim.key]
+            metrics[name] = value
         else:
-            claims[name] = row[dim.key]
+            claims[name] = value
     margins = {k: v * scale for k, v in base.claims.margins.items()}
     return (dataclasses.replace(base.metrics, **metrics),
             dataclasses.replace(base.claims, **{**claims, "margins": margins,
@@ -225,8 +251,8 @@ def with_user_defaults(space: Space, base: ExperimentConfig) -> Space:
     configured value, so that the default specification is the user's configuration."""
     dims = []
     for dim in space.dimensions:
-        section, _, name = dim.key.partition(".")
-        if dim.stage == "analysis" and dim.key != "claims.margin_scale":
+        section, _, name = dim.target.partition(".")
+        if dim.stage == "analysis" and dim.target != "claims.margin_scale":
             value = getattr(getattr(base, section), name)
             dim = dataclasses.replace(dim, values=(value,) + tuple(
                 v for v in dim.values if str(v) != str(value)))
@@ -361,23 +387,27 @@ def robustness(results: pd.DataFrame, design: pd.DataFrame, space: Space
         agree = 1.0 - float(np.mean(flipped))
         label = "robust" if agree >= space.robust_share else (
             "fragile" if agree < space.fragile_share else "sensitive")
-        best, best_key = None, (-1.0, -1.0)
+        best, best_key, holds = None, (-1.0, -1.0), []
         for dim in space.dimensions:
             per_value = []
             for value in dim.values:
-                subset = part[part[dim.key].astype(str) == str(value)]
+                subset = part[matches(part[dim.key], value)]
                 if not len(subset):
                     continue
                 flip_share = float(np.mean(subset["outcome"] != default_outcome))
                 estimate = float(np.nanmedian(subset["estimate"])) if \
                     subset["estimate"].notna().any() else float("nan")
                 outcomes = subset["outcome"].value_counts()
+                supported = float(np.mean(subset["outcome"] == "supported"))
+                if supported >= 0.5:
+                    holds.append((supported, f"{dim.key}={value_text(value)}"))
                 per_value.append((value, flip_share, estimate))
                 dim_rows.append({"claim": claim, "comparison": comparison, "dimension": dim.key,
-                                 "value": str(value), "default": value == dim.default,
+                                 "value": value_text(value), "default": value == dim.default,
                                  "n_specifications": int(len(subset)),
                                  "flipped_share": flip_share, "median_estimate": estimate,
-                                 "modal_outcome": outcomes.index[0]})
+                                 "modal_outcome": outcomes.index[0],
+                                 "supported_share": supported})
             if not per_value:
                 continue
             influence = max(v[1] for v in per_value)
@@ -394,7 +424,10 @@ def robustness(results: pd.DataFrame, design: pd.DataFrame, space: Space
                      **shares, "n_specifications": int(len(part)),
                      "most_influential": best[0] if best else "",
                      "influence": best_key[0], "flipping_values": ", ".join(best[1]) if best
-                     else "", "estimate_spread": best[2] if best else float("nan")})
+                     else "", "estimate_spread": best[2] if best else float("nan"),
+                     # the choices under which most specifications support the claim
+                     "holds_with": "; ".join(f"{name} ({100 * share:.0f} %)" for share, name
+                                             in sorted(holds, reverse=True)[:6])})
     return pd.DataFrame(rows), pd.DataFrame(dim_rows)
 
 
@@ -408,7 +441,7 @@ def specification_curve_figure(results: pd.DataFrame, design: pd.DataFrame, spac
     import matplotlib.pyplot as plt
 
     colors = {"supported": "#2ca02c", "contradicted": "#d62728", "equivalent": "#7f7f9f",
-              "inconclusive": "#e0a000"}
+              "inconclusive": "#e0a000", "mixed": "#9467bd"}
     part = results[results["claim"] == claim].merge(design, on="spec_id")
     comparisons = [c for c in COMPARISONS if (part["comparison"] == c).any()]
     dims = [d for d in space.dimensions]
@@ -451,7 +484,7 @@ def specification_curve_figure(results: pd.DataFrame, design: pd.DataFrame, spac
     matrix = axes[-1, 0]
     spec_rows = design.set_index("spec_id").loc[order or []]
     for i, dim in enumerate(dims):
-        changed = spec_rows[dim.key].astype(str) != str(dim.default)
+        changed = ~matches(spec_rows[dim.key], dim.default)
         xs = np.nonzero(changed.to_numpy())[0]
         matrix.scatter(xs, np.full(xs.size, i), marker="|", s=40, color="#1f77b4")
     matrix.set_yticks(range(len(dims)))
@@ -498,7 +531,8 @@ def run_multiverse(space: Space, out_dir: Path, overrides: list[str] | None = No
         "n_simulation_configurations": len(folders), "family_size": space.family_size,
         "rule": ROBUSTNESS_RULE, "robust_share": space.robust_share,
         "fragile_share": space.fragile_share,
-        "dimensions": [{"key": d.key, "stage": d.stage, "values": [str(v) for v in d.values],
+        "dimensions": [{"key": d.key, "config_key": d.target, "stage": d.stage,
+                        "values": [str(v) for v in d.values],
                         "applies_to": list(d.applies_to or []), "why": d.why}
                        for d in space.dimensions]})
     for claim in ALL_CLAIMS:

@@ -22,8 +22,11 @@ import pandas as pd
 
 from pipeline.config import MetricsConfig
 from pipeline.analysis.metrics import TrajectoryContext, compute_metrics
-from pipeline.loop.trajectory import OBSTACLE_COLUMN, REQUIRED
-from pipeline.loop.trajectory import STATE as OPTIONAL
+from pipeline.loop.trajectory import OBSTACLE_COLUMN, REQUIRED, STATE
+
+#: Optional columns a scored file may carry: the state (else derived from the path) and the APF
+#: repulsion at the vehicle (C3a and C3b need it).
+OPTIONAL = STATE + ("apf_rep_norm",)
 from pipeline.store.runs import write_text_atomic
 
 
