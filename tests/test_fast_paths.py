@@ -161,3 +161,25 @@ def test_family_compiles_once_on_two_workers(make_config, tmp_path):
     assert table["compile_count"].sum() == 0  # every member reused the parent's compilation
     # the same structure in this process again: nothing to compile
     assert LateralMpc(cfg.controller, cfg.vehicle, qp_cache=cache).compile_count == 0
+
+
+def test_a_family_discretizes_each_model_once(tmp_path, make_config, monkeypatch):
+    """python-control's c2d runs once per (vehicle, speed, sample time) for a whole family, not
+    once per member: 6 members at one speed build the nominal model and the controller's model
+    once each (12 calls before the models were shared through the QpCache)."""
+    import pipeline.loop.model as model_module
+    import pipeline.studies.experiment as experiment_module
+    from pipeline.studies.experiment import run_family
+
+    calls = []
+    original = model_module.build_lateral_model
+
+    def counting(*args, **kwargs):
+        calls.append(args[1])
+        return original(*args, **kwargs)
+
+    monkeypatch.setattr(model_module, "build_lateral_model", counting)
+    monkeypatch.setattr(experiment_module, "build_lateral_model", counting)
+    run_family(make_config(["method=improved", "scenario=family", "scenario.family.size=6",
+                            "scenario.family.n_jobs=1"]), tmp_path / "family", progress=False)
+    assert len(calls) == 2

@@ -115,6 +115,13 @@ def model_speed_mps(speed_mps: float, floor_mps: float, grid_mps: float) -> floa
     return round(max(key, floor_mps), 6)
 
 
+def vehicle_key(vehicle: VehicleConfig) -> tuple:
+    """A hashable identity of the vehicle's parameters (for caches of its models)."""
+    from dataclasses import asdict
+
+    return tuple(sorted((k, repr(v)) for k, v in asdict(vehicle).items()))
+
+
 @dataclass
 class LateralModelCache:
     """Discretized lateral models keyed by speed rounded to ``grid_mps`` (for velocity planning)."""

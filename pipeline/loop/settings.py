@@ -133,6 +133,7 @@ class ControllerConfig:
     name: str = MISSING
     kind: str = "mpc"
     backend: str = "clarabel_direct"
+    formulation: str = "condensed"
     horizon: int = 10
     control_horizon: int = 3
     input_hold: str = "hold_last"
@@ -164,6 +165,7 @@ class ControllerConfig:
     def __post_init__(self) -> None:
         choice("controller.kind", self.kind, ("mpc", "pure_pursuit", "kinematic_mpc"))
         choice("controller.backend", self.backend, ("cvxpy", "clarabel_direct"))
+        choice("controller.formulation", self.formulation, ("condensed", "sparse"))
         for key in ("output_weights", "input_weights", "input_rate_weights"):
             pair(f"controller.{key}", getattr(self, key))
             for i, w in enumerate(getattr(self, key)):

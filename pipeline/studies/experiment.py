@@ -18,7 +18,7 @@ from pipeline.analysis.tally import Tally
 from pipeline.analysis.metrics import RunMetrics, TrajectoryContext, compute_metrics
 from pipeline.config import ExperimentConfig
 from pipeline.loop.controller import QpCache
-from pipeline.loop.model import build_lateral_model
+from pipeline.loop.model import build_lateral_model, vehicle_key
 from pipeline.loop.scenario import build_scenario, family_members
 from pipeline.loop.simulate import simulate
 from pipeline.store.runs import (RunInfo, check, clean_leftovers, read_metrics_json,
@@ -75,8 +75,13 @@ def run_experiment(cfg: ExperimentConfig, out_dir: Path, resume: bool = True,
             log.warning("re-running %s: %s", out_dir, reason)
 
     scenario = build_scenario(cfg.scenario)
-    model = build_lateral_model(cfg.vehicle, cfg.scenario.speed_mps, cfg.scenario.sample_time_s,
-                                cfg.model.b2_heading_entry)
+    qp_cache = qp_cache if qp_cache is not None else QpCache()
+    # the model of the nominal speed (model.json), built once per process for a family
+    model = qp_cache.memo(("model_json", vehicle_key(cfg.vehicle), cfg.scenario.speed_mps,
+                           cfg.scenario.sample_time_s, cfg.model.b2_heading_entry),
+                          lambda: build_lateral_model(cfg.vehicle, cfg.scenario.speed_mps,
+                                                      cfg.scenario.sample_time_s,
+                                                      cfg.model.b2_heading_entry))
     result = simulate(cfg, scenario, qp_cache)
     context = trajectory_context(cfg)
     metrics = compute_metrics(result.trajectory, context, cfg.metrics)

@@ -12,6 +12,14 @@ The QP over ``N`` steps::
 The model matrices are parameters, so one compiled problem serves every speed (velocity
 planning) and every scenario; unused obstacle slots get rows that cannot bind. A failed solve
 never raises: the controller takes :class:`~pipeline.loop.controller.base.PlanFallback`.
+
+``controller.formulation`` chooses how the same QP is stated. ``sparse`` keeps the states as
+variables with the dynamics as equality constraints (151 variables at N = 10, three obstacle
+slots). ``condensed`` (the default) eliminates them: ``X = free response + Gamma U`` with the
+prediction matrices of the model's speed (:class:`CondensedPrediction`, cached per speed) and
+the free response computed in numpy each step, so the QP carries only ``U`` and the slacks (33
+variables); its parameters are the weighted prediction rows and the half-planes folded onto
+``U``, so it stays DPP. Both give the same optimum (tests hold them to each other).
 """
 
 from __future__ import annotations
@@ -26,7 +34,7 @@ from pipeline.loop.controller.base import ControlStep, Observation, PlanFallback
 from pipeline.loop.controller.qp import QpCache, QpSolution, compiled_backend
 from pipeline.loop.controller.references import (collision_halfplanes, force_heading_reference,
                                             lateral_reference)
-from pipeline.loop.model import LateralModel, LateralModelCache
+from pipeline.loop.model import LateralModel, LateralModelCache, vehicle_key
 
 
 @dataclass(frozen=True)
@@ -53,6 +61,7 @@ class LateralQpStructure:
     weights: tuple
     steering_rate_max_rad_s: float
     steering_max_rad: float
+    formulation: str = "sparse"
 
     @classmethod
     def of(cls, controller: ControllerConfig, vehicle: VehicleConfig) -> "LateralQpStructure":
@@ -60,7 +69,7 @@ class LateralQpStructure:
         return cls(c.horizon, c.control_horizon, c.max_obstacles, c.input_hold,
                    (c.q_lateral, c.q_heading, c.q_yaw_rate, c.q_steering, c.r_steering_rate,
                     c.slack_weight_linear, c.slack_weight_quadratic),
-                   vehicle.steering_rate_max_rad_s, vehicle.steering_max_rad)
+                   vehicle.steering_rate_max_rad_s, vehicle.steering_max_rad, c.formulation)
 
 
 def blocking_matrix(horizon: int, control_horizon: int, input_hold: str) -> np.ndarray:
@@ -108,6 +117,98 @@ def build_lateral_problem(s: LateralQpStructure) -> tuple[cp.Problem, list, dict
     return problem, [x0, Ad, Bd, disturbance, y_ref, psi_ref, G, h], {"X": X, "U": U}
 
 
+#: Rows of the state that the cost weighs (y, epsi, r, delta) and their weight's index.
+COST_STATES = (0, 2, 3, 4)
+
+
+@dataclass(frozen=True)
+class CondensedPrediction:
+    """Prediction over the horizon for one model: ``X_k = A^k x0 + sum A^(k-1-i) (B u_i +
+    e_i)``, with the input sequence ``u = U T`` (move blocking).
+
+    Attributes
+    ----------
+    gamma : ndarray, shape (N, 5, Nc)
+        Response of each state at steps 1..N to the free moves ``U``.
+    """
+
+    model: LateralModel
+    gamma: np.ndarray
+
+    @classmethod
+    def of(cls, model: LateralModel, blocking: np.ndarray) -> "CondensedPrediction":
+        Ad, Bd = model.Ad, model.Bd[:, 0]
+        nc, n = blocking.shape
+        # response of x_k to a unit input at step i (k > i): A^(k-1-i) B
+        impulse = np.zeros((n, 5))
+        power = Bd.copy()
+        for lag in range(n):
+            impulse[lag] = power
+            power = Ad @ power
+        psi = np.zeros((n, 5, n))
+        for k in range(1, n + 1):
+            for i in range(k):
+                psi[k - 1, :, i] = impulse[k - 1 - i]
+        return cls(model, psi @ blocking.T)
+
+    def free_response(self, x0: np.ndarray, disturbance: np.ndarray) -> np.ndarray:
+        """States at steps 1..N with ``U = 0`` (shape (N, 5)); ``disturbance`` is (5, N)."""
+        Ad = self.model.Ad
+        out = np.empty((disturbance.shape[1], 5))
+        x = x0
+        for k in range(disturbance.shape[1]):
+            x = Ad @ x + disturbance[:, k]
+            out[k] = x
+        return out
+
+
+def build_condensed_lateral_problem(s: LateralQpStructure) -> tuple[cp.Problem, list, dict]:
+    """The same lateral QP with the states eliminated (see the module docstring)."""
+    N, Nc, M = s.horizon, s.control_horizon, s.max_obstacles
+    q_y, q_psi, q_r, q_d, r_u, w1, w2 = s.weights
+    blocking = blocking_matrix(N, Nc, s.input_hold)
+    gamma_w = cp.Parameter((4 * N, Nc), name="weighted_gamma")
+    free_w = cp.Parameter(4 * N, name="weighted_free_error")
+    gamma_d = cp.Parameter((N, Nc), name="steering_gamma")
+    free_d = cp.Parameter(N, name="steering_free")
+    gamma_h = cp.Parameter((N * M, Nc), name="halfplane_gamma")
+    bound_h = cp.Parameter(N * M, name="halfplane_free_bound")
+    U = cp.Variable(Nc, name="U")
+    S = cp.Variable(N * M, nonneg=True, name="slack")
+    cost = (cp.sum_squares(gamma_w @ U + free_w) + r_u * cp.sum_squares(U @ blocking)
+            + w1 * cp.sum(S) + w2 * cp.sum_squares(S))
+    constraints = [cp.abs(U) <= s.steering_rate_max_rad_s,
+                   cp.abs(gamma_d @ U + free_d) <= s.steering_max_rad,
+                   gamma_h @ U + S >= bound_h]
+    problem = cp.Problem(cp.Minimize(cost), constraints)
+    if not problem.is_dcp(dpp=True):
+        raise RuntimeError("condensed lateral MPC is not DPP; it would recompile every step")
+    return problem, [gamma_w, free_w, gamma_d, free_d, gamma_h, bound_h], {"U": U}
+
+
+def condensed_parameters(prediction: CondensedPrediction, inputs: "MpcInputs",
+                         weights: tuple) -> tuple[np.ndarray, np.ndarray]:
+    """The condensed QP's parameter vector (``theta`` order) and the free response (N, 5)."""
+    q_y, q_psi, q_r, q_d = weights[:4]
+    disturbance = inputs.model.Ed @ inputs.disturbance_rad_s[None, :]
+    free = prediction.free_response(inputs.x0, disturbance)
+    gamma = prediction.gamma
+    root = np.sqrt(np.array([q_y, q_psi, q_r, q_d]))
+    # rows ordered by cost term, then step: [y_1..y_N, epsi_1.., r_1.., delta_1..]
+    gamma_w = (root[:, None, None] * gamma[:, COST_STATES, :].transpose(1, 0, 2)
+               ).reshape(-1, gamma.shape[2])
+    target = np.stack([inputs.y_ref_m, inputs.psi_ref_rad, np.zeros_like(inputs.y_ref_m),
+                       np.zeros_like(inputs.y_ref_m)])
+    free_w = (root[:, None] * (free[:, COST_STATES].T - target)).ravel()
+    G, h = inputs.constraint_gain, inputs.constraint_bound  # (N, M)
+    # G_kj (y_free,k + gamma_y,k U) + s_kj >= h_kj, rows k-major as S is flattened (C order)
+    gamma_h = (G[:, :, None] * gamma[:, 0, None, :]).reshape(-1, gamma.shape[2])
+    bound_h = (h - G * free[:, 0, None]).ravel()
+    theta = np.concatenate([gamma_w.ravel(order="F"), free_w, gamma[:, 4, :].ravel(order="F"),
+                            free[:, 4], gamma_h.ravel(order="F"), bound_h])
+    return theta, free
+
+
 class LateralMpc:
     """The lateral MPC: one compiled QP (from ``qp_cache``), a kept solver, the fallback.
 
@@ -137,13 +238,22 @@ class LateralMpc:
         self.sample_time_s = float(sample_time_s)
         self.blocking = blocking_matrix(controller.horizon, controller.control_horizon,
                                         controller.input_hold)
+        # the discretized models by speed, shared by every run handed the same cache (python-
+        # control's c2d is paid once per speed, not once per family member)
+        shared = qp_cache.memo(("lateral_models", vehicle_key(vehicle), self.sample_time_s,
+                                self.model_cfg.b2_heading_entry, self.model_cfg.speed_grid_mps),
+                               dict) if qp_cache is not None else {}
         self.models = LateralModelCache(vehicle, self.sample_time_s,
                                         self.model_cfg.b2_heading_entry,
-                                        self.model_cfg.speed_grid_mps)
+                                        self.model_cfg.speed_grid_mps, shared)
         structure = LateralQpStructure.of(controller, vehicle)
+        self.condensed = controller.formulation == "condensed"
+        builder = build_condensed_lateral_problem if self.condensed else build_lateral_problem
+        self.weights = structure.weights
         self.qp, self.compile_count, self.compile_time_s = compiled_backend(
-            qp_cache, "lateral", structure, lambda: build_lateral_problem(structure),
+            qp_cache, "lateral", structure, lambda: builder(structure),
             controller.backend, controller.solver_max_iter)
+        self._predictions: dict[int, CondensedPrediction] = {}
         self.fallback = PlanFallback(controller.horizon)
         self._steps_ahead_s = np.arange(1, controller.horizon + 1) * self.sample_time_s
         self._times_s = np.concatenate([[0.0], self._steps_ahead_s])
@@ -157,17 +267,37 @@ class LateralMpc:
             disturbance.ravel(order="F"), inputs.y_ref_m, inputs.psi_ref_rad,
             inputs.constraint_gain.ravel(order="F"), inputs.constraint_bound.ravel(order="F")])
 
+    def prediction(self, model: LateralModel) -> CondensedPrediction:
+        """The condensed prediction of ``model`` (built once per model, i.e. per speed)."""
+        key = id(model)
+        entry = self._predictions.get(key)
+        if entry is None or entry.model is not model:
+            entry = self._predictions[key] = CondensedPrediction.of(model, self.blocking)
+        return entry
+
     def solve(self, inputs: MpcInputs, log: dict | None = None) -> ControlStep:
         """Solve the QP for one step's data, falling back safely on any failure."""
         solution = QpSolution("not_solved", -1, 0.0, None)
+        free = None
         if np.all(np.isfinite(inputs.x0)):
-            solution = self.qp.solve(self.parameter_vector(inputs))
+            if self.condensed:
+                prediction = self.prediction(inputs.model)
+                theta, free = condensed_parameters(prediction, inputs, self.weights)
+            else:
+                theta = self.parameter_vector(inputs)
+            solution = self.qp.solve(theta)
         if solution.ok:
-            plan = (np.asarray(solution.values["U"], dtype=float).reshape(-1) @ self.blocking)
+            U = np.asarray(solution.values["U"], dtype=float).reshape(-1)
+            plan = U @ self.blocking
             if np.all(np.isfinite(plan)):
                 plan = plan[None, :]
                 self.fallback.accept(plan)
-                states = solution.values["X"]
+                if self.condensed:
+                    # the eliminated states, for the log and the slack: X = free + Gamma U
+                    predicted = free + self.prediction(inputs.model).gamma @ U
+                    states = np.concatenate([inputs.x0[:, None], predicted.T], axis=1)
+                else:
+                    states = solution.values["X"]
                 # slack needed by the optimal plan (what the QP's slack variable holds); rows
                 # of idle slots and far obstacles are 0 y + s >= 0 and need none
                 slack = 0.0

@@ -360,6 +360,15 @@ class QpCache:
     entries: dict = field(default_factory=dict)
     compile_count: int = 0
     compile_time_s: float = 0.0
+    #: values worth keeping that are no compilation (discretized models by speed): shipped to
+    #: workers with the cache, never counted as compilations
+    memos: dict = field(default_factory=dict)
+
+    def memo(self, key: Hashable, build: Callable[[], Any]) -> Any:
+        """The value stored under ``key``, built once (not counted as a compilation)."""
+        if key not in self.memos:
+            self.memos[key] = build()
+        return self.memos[key]
 
     def get(self, key: Hashable, build: Callable[[], Any]) -> Any:
         if key not in self.entries:
@@ -371,7 +380,8 @@ class QpCache:
 
     def __getstate__(self) -> dict:
         portable = {k: v for k, v in self.entries.items() if isinstance(v, AffineQpMap)}
-        return {"entries": portable, "compile_count": 0, "compile_time_s": 0.0}
+        return {"entries": portable, "compile_count": 0, "compile_time_s": 0.0,
+                "memos": dict(self.memos)}
 
     def __setstate__(self, state: dict) -> None:
         self.__dict__.update(state)
