@@ -466,7 +466,8 @@ def build_report(run_root: Path, out_dir: Path, command: str,
     run_notes += family_notes
     if "baseline" in family_primary and "improved" in family_primary:
         family = _family_section(family_primary, family_info, claim_metrics, fig_dir,
-                                 table_dir, cfg_claims, all_tables=family_tables)
+                                 table_dir, cfg_claims, all_tables=family_tables,
+                                 settings=collection.family_settings)
         for f in family["figures"]:
             figures.append(f)
     for sw in sweeps:
@@ -665,7 +666,8 @@ def _paper_figures(by_method: dict, scenario: str, goal: tuple, radius: float, a
 
 
 def _family_section(tables: dict, info: dict, paper_metrics: dict, fig_dir: Path,
-                    table_dir: Path, cfg: ClaimsConfig, all_tables: dict | None = None) -> dict:
+                    table_dir: Path, cfg: ClaimsConfig, all_tables: dict | None = None,
+                    settings: dict | None = None) -> dict:
     """Claims ledger over the family (C0-C5 against each comparison), outcome counts,
     distribution plots and what the step cap does."""
     order = _ordered(tables)
@@ -731,7 +733,13 @@ def _family_section(tables: dict, info: dict, paper_metrics: dict, fig_dir: Path
     ]
     first = next(iter(info.values())) if info else {"seed": "?", "size": len(
         next(iter(tables.values())))}
-    return {"ledger": grouped, "comparisons": comparisons,
+    solvers = "; ".join(
+        f"{label}: {s.controller.kind}"
+        + (f" ({s.controller.formulation} QP, {s.controller.backend})"
+           if s.controller.kind == "mpc" else f" ({s.controller.backend})"
+           if s.controller.kind == "kinematic_mpc" else "")
+        for label, s in (settings or {}).items() if label in tables) or "not recorded"
+    return {"ledger": grouped, "comparisons": comparisons, "solvers": solvers,
             "by_claim": {r["claim"]: r for r in ledger if r["comparison"] == "baseline"},
             "counts": [{k: _fmt(v) for k, v in c.items()} for c in counts],
             "cap_note": cap_note, "figures": figures, "seed": first["seed"],

@@ -75,70 +75,101 @@ def step_inputs(cfg, n_obstacles: int, n_steps: int, seed: int = 0) -> list:
     return out
 
 
+class KeptClarabelFloor:
+    """The floor: a kept Clarabel solver handed a QP's data (computed outside the timed region),
+    timed on ``update + solve`` only, one QP at a time so that it interleaves with the step."""
+
+    def __init__(self, qp_map, max_iter: int) -> None:
+        from pipeline.loop.controller.qp import clarabel_settings
+
+        self.map, self.settings, self.solver = qp_map, clarabel_settings(max_iter), None
+
+    def time(self, theta: np.ndarray) -> tuple[float, float, np.ndarray]:
+        """Wall and CPU time (s) of one solve, and its primal solution."""
+        import clarabel
+
+        q, a, b = self.map.data(theta)
+        if self.solver is None:
+            self.solver = clarabel.DefaultSolver(self.map.P, q, self.map.matrix_A(a), b,
+                                                 self.map.cones(), self.settings)
+            wall, cpu = time.perf_counter(), time.process_time()
+        else:
+            wall, cpu = time.perf_counter(), time.process_time()
+            self.solver.update(q=q, A=a, b=b)
+        solution = self.solver.solve()
+        return time.perf_counter() - wall, time.process_time() - cpu, np.asarray(solution.x)
+
+
 def floor_times(qp_map, thetas: list, max_iter: int) -> tuple[np.ndarray, list]:
-    """Wall time of ``update + solve`` of a kept Clarabel solver for each parameter vector
-    (the data are computed outside the timed region), and the solutions."""
-    import clarabel
-
-    from pipeline.loop.controller.qp import clarabel_settings
-
-    settings = clarabel_settings(max_iter)
-    solver = None
+    """Wall time of the floor for each parameter vector in turn, and the solutions."""
+    floor = KeptClarabelFloor(qp_map, max_iter)
     times, solutions = [], []
     for theta in thetas:
-        q, a, b = qp_map.data(theta)
-        if solver is None:
-            solver = clarabel.DefaultSolver(qp_map.P, q, qp_map.matrix_A(a), b, qp_map.cones(),
-                                            settings)
-            start = time.perf_counter()
-            solution = solver.solve()
-        else:
-            start = time.perf_counter()
-            solver.update(q=q, A=a, b=b)
-            solution = solver.solve()
-        times.append(time.perf_counter() - start)
-        solutions.append(np.asarray(solution.x))
+        wall, _, x = floor.time(theta)
+        times.append(wall)
+        solutions.append(x)
     return np.asarray(times), solutions
 
 
+def _timed(call):
+    """``call()``'s result with its wall and CPU time (s)."""
+    wall, cpu = time.perf_counter(), time.process_time()
+    out = call()
+    return out, time.perf_counter() - wall, time.process_time() - cpu
+
+
 def bench_lateral(horizons, obstacle_counts, n_steps: int, repeats: int) -> list[dict]:
-    """Per-step times of the two backends and the floor, interleaved on identical inputs."""
+    """Per QP, interleaved on identical inputs in one process: the controller step of every
+    backend (default: condensed QP on a kept Clarabel; daqp; cvxpy on the sparse QP) and each
+    floor (the sparse QP and the condensed QP on a kept Clarabel), wall and CPU time."""
     from pipeline.loop.controller import LateralMpc
+    from pipeline.loop.controller.lateral import condensed_data
 
     rows = []
     for N in horizons:
         for n_obs in obstacle_counts:
             cfg = _config(["method=improved", f"controller.horizon={N}",
                            f"controller.max_obstacles={max(n_obs, 1)}"])
-            mpc_cvxpy = LateralMpc(replace(cfg.controller, backend="cvxpy"), cfg.vehicle)
-            mpc_direct = LateralMpc(replace(cfg.controller, backend="clarabel_direct"),
-                                    cfg.vehicle)
+            ctrl = cfg.controller
+            mpc_cvxpy = LateralMpc(replace(ctrl, backend="cvxpy", formulation="sparse"),
+                                   cfg.vehicle)
+            mpc_sparse = LateralMpc(replace(ctrl, backend="clarabel_direct",
+                                            formulation="sparse"), cfg.vehicle)
+            mpc_direct = LateralMpc(replace(ctrl, backend="clarabel_direct",
+                                            formulation="condensed"), cfg.vehicle)
+            mpc_daqp = LateralMpc(replace(ctrl, backend="daqp", formulation="condensed"),
+                                  cfg.vehicle)
             steps = step_inputs(cfg, n_obs, n_steps)
-            qp_map = mpc_direct.qp.map
-            offset_u = qp_map.variables["U"][0]
-            thetas = [mpc_direct.parameter_vector(inputs) for inputs, _ in steps]
+            sparse_thetas = [mpc_sparse.parameter_vector(inputs) for inputs, _ in steps]
+            condensed_thetas = [condensed_data(mpc_direct.prediction(inputs.model), inputs,
+                                               mpc_direct.weights).theta()
+                                for inputs, _ in steps]
+            offset_u = mpc_sparse.qp.map.variables["U"][0]
             for rep in range(repeats):
-                floor_s, floor_x = floor_times(qp_map, thetas, cfg.controller.solver_max_iter)
+                sparse_floor = KeptClarabelFloor(mpc_sparse.qp.map, ctrl.solver_max_iter)
+                condensed_floor = KeptClarabelFloor(mpc_direct.qp.map, ctrl.solver_max_iter)
                 for k, (inputs, apf_s) in enumerate(steps):
-                    theta = thetas[k]
-                    t0 = time.perf_counter()
-                    solution = mpc_cvxpy.qp.solve(theta)
-                    t1 = time.perf_counter()
+                    fs_wall, fs_cpu, fs_x = sparse_floor.time(sparse_thetas[k])
+                    fc_wall, fc_cpu, _ = condensed_floor.time(condensed_thetas[k])
+                    direct, d_wall, d_cpu = _timed(lambda: mpc_direct.solve(inputs))
+                    daqp, q_wall, q_cpu = _timed(lambda: mpc_daqp.solve(inputs))
+                    solution, c_wall, _ = _timed(lambda: mpc_cvxpy.qp.solve(sparse_thetas[k]))
                     clarabel_s = float(mpc_cvxpy.qp.problem.solver_stats.solve_time or np.nan)
                     u_cvxpy = float(np.asarray(solution.values["U"]).ravel()[0]) \
                         if solution.values is not None else np.nan
-                    d0 = time.perf_counter()
-                    direct = mpc_direct.solve(inputs)
-                    d1 = time.perf_counter()
                     rows.append({
                         "section": "lateral", "N": N, "obstacles": n_obs, "repeat": rep, "step": k,
-                        "apf_s": apf_s, "cvxpy_solve_s": t1 - t0, "cvxpy_clarabel_s": clarabel_s,
+                        "apf_s": apf_s, "cvxpy_solve_s": c_wall, "cvxpy_clarabel_s": clarabel_s,
                         "cvxpy_iterations": solution.iterations,
-                        "cvxpy_step_s": apf_s + (t1 - t0),
-                        "direct_s": d1 - d0, "direct_step_s": apf_s + (d1 - d0),
-                        "floor_s": floor_s[k],
+                        "cvxpy_step_s": apf_s + c_wall,
+                        "direct_s": d_wall, "direct_cpu_s": d_cpu,
+                        "direct_step_s": apf_s + d_wall,
+                        "daqp_s": q_wall, "daqp_cpu_s": q_cpu, "daqp_step_s": apf_s + q_wall,
+                        "floor_s": fs_wall, "floor_cpu_s": fs_cpu,
+                        "condensed_floor_s": fc_wall, "condensed_floor_cpu_s": fc_cpu,
                         "u0_cvxpy": u_cvxpy, "u0_direct": direct.steering_rate_rad_s,
-                        "u0_floor": float(floor_x[k][offset_u]),
+                        "u0_daqp": daqp.steering_rate_rad_s,
+                        "u0_floor": float(fs_x[offset_u]),
                         "cvxpy_status": solution.status,
                         "compiles_cvxpy": mpc_cvxpy.qp.compile_count,
                         "compiles_direct": mpc_direct.compile_count,
@@ -162,36 +193,47 @@ class _RecordingMap:
         return getattr(self._map, name)
 
 
-def bench_closed_loop(repeats: int = 5) -> dict:
+def bench_closed_loop(repeats: int = 5, backend: str = "clarabel_direct") -> dict:
     """One complete paper-scenario run of the improved method in this process (the QP compiled
-    inside the timed region, a fresh cache each time), over the floor of the same QPs."""
+    inside the timed region, a fresh cache each time), over the sparse floor of the same QPs
+    (the run's steps replayed as the sparse QP, recorded from a sparse run of the same
+    configuration: the same QPs to ~1e-7), and its time outside the QP per step."""
     from pipeline.loop.controller import QpCache
     from pipeline.loop.controller.lateral import LateralQpStructure
     from pipeline.loop.scenario import build_scenario
     from pipeline.loop.simulate import simulate
 
-    cfg = _config(["method=improved"])
+    cfg = _config(["method=improved", f"controller.backend={backend}"])
     scenario = build_scenario(cfg.scenario)
-    walls, compile_s = [], []
+    walls, cpus, compile_s, qp_s, steps = [], [], [], [], 0
     for _ in range(repeats):
-        start = time.perf_counter()
+        wall, cpu = time.perf_counter(), time.process_time()
         result = simulate(cfg, scenario, QpCache())
-        walls.append(time.perf_counter() - start)
+        walls.append(time.perf_counter() - wall)
+        cpus.append(time.process_time() - cpu)
         compile_s.append(result.compile_time_s)
-    # the same run again, recording its QPs (deterministic: the same parameter vectors)
+        qp_s.append(float(np.sum(result.solve_times_s)))
+        steps = len(result.solve_times_s)
+    sparse_cfg = replace(cfg, controller=replace(cfg.controller, backend="clarabel_direct",
+                                                 formulation="sparse"))
     cache = QpCache()
-    simulate(cfg, scenario, cache)
-    key = ("lateral", "map", LateralQpStructure.of(cfg.controller, cfg.vehicle))
+    simulate(sparse_cfg, scenario, cache)
+    key = ("lateral", "map", LateralQpStructure.of(sparse_cfg.controller, sparse_cfg.vehicle))
     recorder = _RecordingMap(cache.entries[key])
     cache.entries[key] = recorder
-    simulate(cfg, scenario, cache)
-    floors = [floor_times(recorder._map, recorder.recorded, cfg.controller.solver_max_iter)[0]
-              for _ in range(repeats)]
+    simulate(sparse_cfg, scenario, cache)
+    floors = [floor_times(recorder._map, recorder.recorded,
+                          cfg.controller.solver_max_iter)[0] for _ in range(repeats)]
     floor_sum = float(np.median([f.sum() for f in floors]))
-    wall = float(np.median(walls))
-    return {"closed_loop_wall_s": wall, "closed_loop_compile_s": float(np.median(compile_s)),
+    wall, qp = float(np.median(walls)), float(np.median(qp_s))
+    steps = max(steps, 1)
+    return {"backend": backend, "closed_loop_wall_s": wall,
+            "closed_loop_cpu_s": float(np.median(cpus)),
+            "closed_loop_compile_s": float(np.median(compile_s)),
             "closed_loop_qps": len(recorder.recorded), "floor_sum_s": floor_sum,
-            "closed_loop_over_floor": wall / floor_sum}
+            "closed_loop_over_floor": wall / floor_sum,
+            "qp_us_per_step": 1e6 * qp / steps,
+            "outside_qp_us_per_step": 1e6 * (wall - qp - float(np.median(compile_s))) / steps}
 
 
 def bench_peers(n_steps: int) -> list[dict]:
@@ -307,10 +349,21 @@ def summarize(lateral: pd.DataFrame, peers: pd.DataFrame, kinematic: pd.DataFram
     for (N, n_obs), part in lateral.groupby(["N", "obstacles"]):
         row = {"N": int(N), "obstacles": int(n_obs)}
         for key in ("apf_s", "cvxpy_solve_s", "cvxpy_clarabel_s", "cvxpy_step_s", "direct_s",
-                    "direct_step_s", "floor_s"):
+                    "direct_step_s", "floor_s", "daqp_s", "daqp_step_s", "condensed_floor_s",
+                    "direct_cpu_s", "daqp_cpu_s", "floor_cpu_s", "condensed_floor_cpu_s"):
             row[key[:-2] + "_median_ms"] = float(np.median(part[key]) * 1e3)
         row["cvxpy_step_over_floor"] = row["cvxpy_step_median_ms"] / row["floor_median_ms"]
         row["direct_step_over_floor"] = row["direct_step_median_ms"] / row["floor_median_ms"]
+        # per QP, interleaved: the median of the per-QP ratios (load cancels within a QP)
+        row["step_over_sparse_floor"] = float(np.median(part["direct_step_s"] / part["floor_s"]))
+        row["step_over_sparse_floor_daqp"] = float(np.median(part["daqp_step_s"]
+                                                             / part["floor_s"]))
+        row["condensed_floor_over_sparse_floor"] = float(np.median(part["condensed_floor_s"]
+                                                                   / part["floor_s"]))
+        row["step_over_sparse_floor_cpu"] = float(np.median(
+            (part["apf_s"] + part["direct_cpu_s"]) / part["floor_cpu_s"]))
+        row["max_u0_diff_daqp_vs_direct"] = float(np.max(np.abs(part["u0_daqp"]
+                                                                - part["u0_direct"])))
         row["iterations_median"] = float(np.median(part["cvxpy_iterations"]))
         row["max_u0_diff_direct_vs_cvxpy"] = float(np.max(np.abs(part["u0_direct"]
                                                                  - part["u0_cvxpy"])))
@@ -335,10 +388,17 @@ def summarize(lateral: pd.DataFrame, peers: pd.DataFrame, kinematic: pd.DataFram
     head = per_n.get(10) or table[0]
     return {"closed_loop_over_floor": closed_loop["closed_loop_over_floor"],
             "step_over_floor": head["direct_step_over_floor"],
+            "step_over_sparse_floor": head["step_over_sparse_floor"],
+            "step_over_sparse_floor_daqp": head["step_over_sparse_floor_daqp"],
+            "step_over_sparse_floor_cpu": head["step_over_sparse_floor_cpu"],
+            "outside_qp_us_per_step": closed_loop["outside_qp_us_per_step"],
+            "qp_us_per_step": closed_loop["qp_us_per_step"],
             "compiles_per_family": pipeline_figures["compiles_per_family"],
             "family_scenarios_per_s": pipeline_figures["family_scenarios_per_s"],
             "goals": {"closed_loop_over_floor": "<= 2.0", "step_over_floor": "<= 1.3 (N=10, "
-                      "1 obstacle)", "compiles_per_family": "1 (40 members, 2 workers)",
+                      "1 obstacle)", "step_over_sparse_floor": "<= 0.5 (default backend)",
+                      "step_over_sparse_floor_daqp": "<= 0.25",
+                      "outside_qp_over_qp": "<= 1.0", "compiles_per_family": "1 (40 members, 2 workers)",
                       "family_scenarios_per_s": ">= 20 (200 members, 2 workers)"},
             "closed_loop": closed_loop,
             "lateral": table, "peers": peer_rows,
@@ -385,9 +445,13 @@ def main(argv: list[str] | None = None) -> int:
     peers = pd.DataFrame(bench_peers(10 if args.quick else 20))
     kinematic = pd.DataFrame(bench_kinematic(args.steps))
     closed_loop = bench_closed_loop(3 if args.quick else 7)
+    closed_loop_daqp = bench_closed_loop(3 if args.quick else 7, backend="daqp")
     pipeline_figures = bench_pipeline(8 if args.quick else args.family_size,
                                       8 if args.quick else 40)
     summary = summarize(lateral, peers, kinematic, pipeline_figures, closed_loop)
+    summary["closed_loop_daqp"] = closed_loop_daqp
+    summary["outside_qp_over_qp"] = closed_loop["outside_qp_us_per_step"] \
+        / closed_loop["qp_us_per_step"]
     args.out.mkdir(parents=True, exist_ok=True)
     write_csv_atomic(args.out / "bench.csv", pd.concat([lateral, peers, kinematic],
                                                        ignore_index=True))
@@ -395,9 +459,11 @@ def main(argv: list[str] | None = None) -> int:
     from pipeline.reporting.figures import save_figure
 
     save_figure(scaling_figure(lateral), args.out, "scaling")
-    print(json.dumps({key: summary[key] for key in ("closed_loop_over_floor", "step_over_floor",
-                                                    "compiles_per_family",
-                                                    "family_scenarios_per_s")}, indent=1))
+    print(json.dumps({key: summary[key] for key in (
+        "closed_loop_over_floor", "step_over_floor", "step_over_sparse_floor",
+        "step_over_sparse_floor_daqp", "step_over_sparse_floor_cpu", "outside_qp_us_per_step",
+        "qp_us_per_step", "outside_qp_over_qp", "compiles_per_family",
+        "family_scenarios_per_s")}, indent=1))
     print(json.dumps({"lateral_N10_1obs": summary["lateral"][0], "peers": summary["peers"],
                       "pipeline": pipeline_figures, "n50_over_n10": summary["n50_over_n10_direct"]},
                      indent=1))

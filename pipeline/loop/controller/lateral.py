@@ -31,7 +31,7 @@ import numpy as np
 
 from pipeline.loop.settings import ControllerConfig, ModelConfig, VehicleConfig
 from pipeline.loop.controller.base import ControlStep, Observation, PlanFallback
-from pipeline.loop.controller.qp import QpCache, QpSolution, compiled_backend
+from pipeline.loop.controller.qp import NON_FINITE_DATA, QpCache, QpSolution, compiled_backend
 from pipeline.loop.controller.references import (collision_halfplanes, force_heading_reference,
                                             lateral_reference)
 from pipeline.loop.model import LateralModel, LateralModelCache, vehicle_key
@@ -186,9 +186,29 @@ def build_condensed_lateral_problem(s: LateralQpStructure) -> tuple[cp.Problem, 
     return problem, [gamma_w, free_w, gamma_d, free_d, gamma_h, bound_h], {"U": U}
 
 
-def condensed_parameters(prediction: CondensedPrediction, inputs: "MpcInputs",
-                         weights: tuple) -> tuple[np.ndarray, np.ndarray]:
-    """The condensed QP's parameter vector (``theta`` order) and the free response (N, 5)."""
+@dataclass(frozen=True)
+class CondensedData:
+    """One step's condensed QP data (the parameters of
+    :func:`build_condensed_lateral_problem`) and the free response they came from."""
+
+    gamma_w: np.ndarray     # (4N, Nc) weighted responses of y, epsi, r, delta to U
+    free_w: np.ndarray      # (4N,) weighted free errors
+    gamma_d: np.ndarray     # (N, Nc) steering angle's response to U
+    free_d: np.ndarray      # (N,) free steering angle
+    gamma_h: np.ndarray     # (N M, Nc) half-plane rows folded onto U
+    bound_h: np.ndarray     # (N M,) their bounds
+    free: np.ndarray        # (N, 5) free response
+
+    def theta(self) -> np.ndarray:
+        """The parameter vector in the compiled problem's order (column-major)."""
+        return np.concatenate([self.gamma_w.ravel(order="F"), self.free_w,
+                               self.gamma_d.ravel(order="F"), self.free_d,
+                               self.gamma_h.ravel(order="F"), self.bound_h])
+
+
+def condensed_data(prediction: CondensedPrediction, inputs: "MpcInputs",
+                   weights: tuple) -> CondensedData:
+    """The condensed QP's data for one step."""
     q_y, q_psi, q_r, q_d = weights[:4]
     disturbance = inputs.model.Ed @ inputs.disturbance_rad_s[None, :]
     free = prediction.free_response(inputs.x0, disturbance)
@@ -204,9 +224,62 @@ def condensed_parameters(prediction: CondensedPrediction, inputs: "MpcInputs",
     # G_kj (y_free,k + gamma_y,k U) + s_kj >= h_kj, rows k-major as S is flattened (C order)
     gamma_h = (G[:, :, None] * gamma[:, 0, None, :]).reshape(-1, gamma.shape[2])
     bound_h = (h - G * free[:, 0, None]).ravel()
-    theta = np.concatenate([gamma_w.ravel(order="F"), free_w, gamma[:, 4, :].ravel(order="F"),
-                            free[:, 4], gamma_h.ravel(order="F"), bound_h])
-    return theta, free
+    return CondensedData(gamma_w, free_w, gamma[:, 4, :], free[:, 4], gamma_h, bound_h, free)
+
+
+class DaqpCondensedQp:
+    """Backend ``daqp``: the condensed lateral QP with explicit slacks, solved by DAQP (a dual
+    active-set solver for small dense QPs): the same problem as the Clarabel backends.
+
+    Variables ``z = [U, S]``; cost ``|gamma_w U + free_w|^2 + r_u |U T|^2 + w1 sum S +
+    w2 |S|^2`` as ``0.5 z' H z + f' z``; simple bounds ``|U| <= rate max``, ``S >= 0``; rows
+    ``|gamma_d U + free_d| <= delta max`` and ``gamma_h U + S >= bound_h``.
+    """
+
+    #: DAQP exit flags mapped to the status words the log uses (CVXPY's)
+    STATUS = {1: "optimal", 2: "optimal", -1: "infeasible", -2: "solver_error",
+              -3: "unbounded", -4: "user_limit", -5: "solver_error", -6: "solver_error"}
+
+    def __init__(self, structure: LateralQpStructure, max_iter: int) -> None:
+        self.s = structure
+        N, Nc, M = structure.horizon, structure.control_horizon, structure.max_obstacles
+        self.n_u, self.n_s = Nc, N * M
+        blocking = blocking_matrix(N, Nc, structure.input_hold)
+        self.input_hessian = structure.weights[4] * blocking @ blocking.T
+        self.max_iter = int(max_iter)
+
+    def solve(self, data: CondensedData) -> QpSolution:
+        import time
+
+        import daqp
+
+        start = time.perf_counter()
+        n_u, n_s = self.n_u, self.n_s
+        w1, w2 = self.s.weights[5], self.s.weights[6]
+        n = n_u + n_s
+        H = np.zeros((n, n))
+        H[:n_u, :n_u] = 2.0 * (data.gamma_w.T @ data.gamma_w + self.input_hessian)
+        H[n_u:, n_u:] = 2.0 * w2 * np.eye(n_s)
+        f = np.concatenate([2.0 * data.gamma_w.T @ data.free_w, np.full(n_s, w1)])
+        A = np.zeros((data.gamma_d.shape[0] + n_s, n))
+        A[:data.gamma_d.shape[0], :n_u] = data.gamma_d
+        A[data.gamma_d.shape[0]:, :n_u] = data.gamma_h
+        A[data.gamma_d.shape[0]:, n_u:] = np.eye(n_s)
+        rate, dmax = self.s.steering_rate_max_rad_s, self.s.steering_max_rad
+        upper = np.concatenate([np.full(n_u, rate), np.full(n_s, 1e30), dmax - data.free_d,
+                                np.full(n_s, 1e30)])
+        lower = np.concatenate([np.full(n_u, -rate), np.zeros(n_s), -dmax - data.free_d,
+                                data.bound_h])
+        if not (np.isfinite(H).all() and np.isfinite(f).all() and np.isfinite(A).all()
+                and np.isfinite(lower).all()):
+            return QpSolution(NON_FINITE_DATA, -1, time.perf_counter() - start, None)
+        x, _, exitflag, info = daqp.solve(H, f, A, upper, lower, np.zeros(upper.size, np.intc),
+                                          iter_limit=self.max_iter)
+        status = self.STATUS.get(int(exitflag), "solver_error")
+        values = {"U": np.asarray(x[:n_u], float), "slack": np.asarray(x[n_u:], float)} \
+            if status == "optimal" else None
+        return QpSolution(status, int(info.get("iterations", -1)), time.perf_counter() - start,
+                          values)
 
 
 class LateralMpc:
@@ -250,9 +323,14 @@ class LateralMpc:
         self.condensed = controller.formulation == "condensed"
         builder = build_condensed_lateral_problem if self.condensed else build_lateral_problem
         self.weights = structure.weights
-        self.qp, self.compile_count, self.compile_time_s = compiled_backend(
-            qp_cache, "lateral", structure, lambda: builder(structure),
-            controller.backend, controller.solver_max_iter)
+        if controller.backend == "daqp":
+            # no compilation: the condensed data go to DAQP as dense matrices
+            self.qp, self.compile_count, self.compile_time_s = \
+                DaqpCondensedQp(structure, controller.solver_max_iter), 0, 0.0
+        else:
+            self.qp, self.compile_count, self.compile_time_s = compiled_backend(
+                qp_cache, "lateral", structure, lambda: builder(structure),
+                controller.backend, controller.solver_max_iter)
         self._predictions: dict[int, CondensedPrediction] = {}
         self.fallback = PlanFallback(controller.horizon)
         self._steps_ahead_s = np.arange(1, controller.horizon + 1) * self.sample_time_s
@@ -281,11 +359,12 @@ class LateralMpc:
         free = None
         if np.all(np.isfinite(inputs.x0)):
             if self.condensed:
-                prediction = self.prediction(inputs.model)
-                theta, free = condensed_parameters(prediction, inputs, self.weights)
+                data = condensed_data(self.prediction(inputs.model), inputs, self.weights)
+                free = data.free
+                solution = self.qp.solve(data if isinstance(self.qp, DaqpCondensedQp)
+                                         else data.theta())
             else:
-                theta = self.parameter_vector(inputs)
-            solution = self.qp.solve(theta)
+                solution = self.qp.solve(self.parameter_vector(inputs))
         if solution.ok:
             U = np.asarray(solution.values["U"], dtype=float).reshape(-1)
             plan = U @ self.blocking
