@@ -76,6 +76,8 @@ def test_quick_space_end_to_end_and_resume(tmp_path):
     assert "holds_with" in robust.columns
     assert (out / "figures" / "specification_curve_C1.png").is_file()
     info = json.loads((out / "space.json").read_text())
+    # every metric reading computed in one pass: each member trajectory read at most once
+    assert 0 < info["member_reads_per_member"] <= 1
     # runs are shared: two simulation choices with two values, the baselines shared by both
     # betas -> fewer family folders than specifications x methods
     folders = list((out / "runs").glob("*/*/family.json"))

@@ -329,25 +329,51 @@ def _run_on_slurm(todo: list, launcher: dict, out_dir: Path, log) -> None:
         raise IncompleteSweepError("\n".join(lines))
 
 
-def family_table(folder: Path, metrics: MetricsConfig, out_dir: Path) -> pd.DataFrame:
-    """A family's per-member metrics: as run, or re-scored from the stored trajectories with
-    other metric settings (cached)."""
+def _rescored_path(folder: Path, metrics: MetricsConfig, out_dir: Path) -> Path:
+    return out_dir / "rescored" / f"{folder.parent.name}_{folder.name}_{_metrics_hash(metrics)}.csv"
+
+
+def rescore_family(folder: Path, readings: list[MetricsConfig], out_dir: Path) -> int:
+    """Re-score a family's members under every metric setting in ``readings`` that it was not
+    run with and that has no cached table yet, reading each member's trajectory once for all of
+    them. Returns the number of member trajectories read."""
     from pipeline.analysis.metrics import compute_metrics
     from pipeline.studies.experiment import trajectory_context
 
     family = read_family(folder, members=False)
+    todo, seen = [], set()
+    for metrics in readings:
+        key = _metrics_hash(metrics)
+        if metrics == family.config.metrics or key in seen \
+                or _rescored_path(folder, metrics, out_dir).is_file():
+            continue
+        seen.add(key)
+        todo.append(metrics)
+    if not todo:
+        return 0
+    context = trajectory_context(family.config)
+    rows: list[list[dict]] = [[] for _ in todo]
+    reads = 0
+    for index, trajectory, previous in member_trajectories(folder):
+        reads += 1
+        keep = {k: previous.get(k) for k in ("method", "scenario", "track", "config_hash")}
+        for block, metrics in zip(rows, todo):
+            block.append({"member": index,
+                          **compute_metrics(trajectory, context, metrics).to_json(), **keep})
+    for block, metrics in zip(rows, todo):
+        write_csv_atomic(_rescored_path(folder, metrics, out_dir), pd.DataFrame(block))
+    return reads
+
+
+def family_table(folder: Path, metrics: MetricsConfig, out_dir: Path) -> pd.DataFrame:
+    """A family's per-member metrics: as run, or re-scored from the stored trajectories with
+    other metric settings (cached; :func:`rescore_family` fills the cache in one pass)."""
+    family = read_family(folder, members=False)
     if family.config.metrics == metrics:
         return family.table
-    cached = out_dir / "rescored" / f"{folder.parent.name}_{folder.name}_{_metrics_hash(metrics)}.csv"
-    if cached.is_file():
-        return pd.read_csv(cached)
-    context = trajectory_context(family.config)
-    rows = []
-    for index, trajectory, previous in member_trajectories(folder):
-        scored = compute_metrics(trajectory, context, metrics).to_json()
-        keep = {k: previous.get(k) for k in ("method", "scenario", "track", "config_hash")}
-        rows.append({"member": index, **scored, **keep})
-    write_csv_atomic(cached, pd.DataFrame(rows))
+    cached = _rescored_path(folder, metrics, out_dir)
+    if not cached.is_file():
+        rescore_family(folder, [metrics], out_dir)
     # read back: the same rounding as family_metrics.csv, so a resumed analysis is identical
     return pd.read_csv(cached)
 
@@ -518,6 +544,18 @@ def run_multiverse(space: Space, out_dir: Path, overrides: list[str] | None = No
         analysis_settings(row, space, base)
     folders = run_simulations(design, space, out_dir, compose, log, launcher)
     jobs = [(row, folders[simulation_key(row, space)]) for row in design.to_dict("records")]
+    # every metric reading a family needs, computed in one pass over its members (each member
+    # read once per analysis, not once per reading)
+    readings: dict[Path, list[MetricsConfig]] = {}
+    for row, family_folders in jobs:
+        metrics, _ = analysis_settings(row, space, base)
+        for folder in family_folders.values():
+            readings.setdefault(Path(folder), []).append(metrics)
+    members = sum(len(read_family(f, members=False).table) for f in readings)
+    reads = sum(Parallel(n_jobs=n_jobs)(delayed(rescore_family)(folder, wanted, out_dir)
+                                        for folder, wanted in readings.items()))
+    log(f"re-scoring: {reads} member trajectories read for {members} members "
+        f"({len(readings)} families)")
     results = Parallel(n_jobs=n_jobs)(
         delayed(analyse_specification)(row, f, space, out_dir) for row, f in jobs)
     rows = [r for block in results for r in block]
@@ -529,6 +567,7 @@ def run_multiverse(space: Space, out_dir: Path, overrides: list[str] | None = No
     write_json_atomic(out_dir / "space.json", {
         "name": space.name, "n_specifications": int(len(design)),
         "n_simulation_configurations": len(folders), "family_size": space.family_size,
+        "member_reads_per_member": reads / members if members else 0.0,
         "rule": ROBUSTNESS_RULE, "robust_share": space.robust_share,
         "fragile_share": space.fragile_share,
         "dimensions": [{"key": d.key, "config_key": d.target, "stage": d.stage,
