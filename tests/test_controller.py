@@ -313,6 +313,7 @@ def test_daqp_backend_solves_the_same_qps_as_clarabel(make_config, overrides, me
     s = lateral.LateralQpStructure.of(cfg.controller, cfg.vehicle)
     clarabel = DirectQp(compile_affine_map(*lateral.build_condensed_lateral_problem(s)), 200)
     daqp = lateral.DaqpCondensedQp(s, 200)
+    dense = lateral.ClarabelCondensedQp(s, 200)  # backend clarabel_dense: the same QP again
     T = blocking_matrix(s.horizon, s.control_horizon, s.input_hold)
 
     def cost(data, U):
@@ -323,11 +324,12 @@ def test_daqp_backend_solves_the_same_qps_as_clarabel(make_config, overrides, me
 
     assert len(captured) > 50
     for data in captured:
-        a, b = clarabel.solve(data.theta()), daqp.solve(data)
-        assert a.status == b.status == "optimal"
-        assert abs(a.values["U"][0] - b.values["U"][0]) < 1e-5
-        assert cost(data, b.values["U"]) <= cost(data, a.values["U"]) * (1 + 1e-6) + 1e-9
-        assert cost(data, a.values["U"]) <= cost(data, b.values["U"]) * (1 + 1e-6) + 1e-9
+        a = clarabel.solve(data.theta())
+        for b in (daqp.solve(data), dense.solve(data)):
+            assert a.status == b.status == "optimal"
+            assert abs(a.values["U"][0] - b.values["U"][0]) < 1e-5
+            assert cost(data, b.values["U"]) <= cost(data, a.values["U"]) * (1 + 1e-6) + 1e-9
+            assert cost(data, a.values["U"]) <= cost(data, b.values["U"]) * (1 + 1e-6) + 1e-9
 
 
 def test_daqp_iteration_limit_and_bad_data_take_the_fallback(make_config):
@@ -348,8 +350,9 @@ def test_daqp_iteration_limit_and_bad_data_take_the_fallback(make_config):
     assert np.isfinite(trajectory["steering_rate_rad_s"].to_numpy(float)[:-1]).all()
 
 
-def test_daqp_needs_the_condensed_lateral_mpc(make_config):
+@pytest.mark.parametrize("backend", ["daqp", "clarabel_dense"])
+def test_dense_backends_need_the_condensed_lateral_mpc(make_config, backend):
     from pipeline.errors import ConfigError
 
-    with pytest.raises(ConfigError, match="daqp only with"):
-        make_config(["controller.backend=daqp", "controller.formulation=sparse"])
+    with pytest.raises(ConfigError, match=f"{backend} only with"):
+        make_config([f"controller.backend={backend}", "controller.formulation=sparse"])

@@ -164,11 +164,13 @@ class ControllerConfig:
 
     def __post_init__(self) -> None:
         choice("controller.kind", self.kind, ("mpc", "pure_pursuit", "kinematic_mpc"))
-        choice("controller.backend", self.backend, ("cvxpy", "clarabel_direct", "daqp"))
+        choice("controller.backend", self.backend,
+               ("cvxpy", "clarabel_direct", "clarabel_dense", "daqp"))
         choice("controller.formulation", self.formulation, ("condensed", "sparse"))
-        if self.backend == "daqp" and (self.kind != "mpc" or self.formulation != "condensed"):
+        if self.backend in ("daqp", "clarabel_dense") and (
+                self.kind != "mpc" or self.formulation != "condensed"):
             raise ConfigError("controller.backend", self.backend,
-                              "daqp only with controller.kind=mpc and "
+                              f"{self.backend} only with controller.kind=mpc and "
                               "controller.formulation=condensed (else cvxpy or clarabel_direct)")
         for key in ("output_weights", "input_weights", "input_rate_weights"):
             pair(f"controller.{key}", getattr(self, key))

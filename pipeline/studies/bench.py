@@ -120,7 +120,8 @@ def _timed(call):
 
 def bench_lateral(horizons, obstacle_counts, n_steps: int, repeats: int) -> list[dict]:
     """Per QP, interleaved on identical inputs in one process: the controller step of every
-    backend (default: condensed QP on a kept Clarabel; daqp; cvxpy on the sparse QP) and each
+    backend (default clarabel_direct: the condensed QP stated in CVXPY on a kept Clarabel;
+    clarabel_dense: its numpy data on a kept Clarabel; daqp; cvxpy on the sparse QP) and each
     floor (the sparse QP and the condensed QP on a kept Clarabel), wall and CPU time."""
     from pipeline.loop.controller import LateralMpc
     from pipeline.loop.controller.lateral import condensed_data
@@ -139,6 +140,8 @@ def bench_lateral(horizons, obstacle_counts, n_steps: int, repeats: int) -> list
                                             formulation="condensed"), cfg.vehicle)
             mpc_daqp = LateralMpc(replace(ctrl, backend="daqp", formulation="condensed"),
                                   cfg.vehicle)
+            mpc_dense = LateralMpc(replace(ctrl, backend="clarabel_dense",
+                                           formulation="condensed"), cfg.vehicle)
             steps = step_inputs(cfg, n_obs, n_steps)
             sparse_thetas = [mpc_sparse.parameter_vector(inputs) for inputs, _ in steps]
             condensed_thetas = [condensed_data(mpc_direct.prediction(inputs.model), inputs,
@@ -153,6 +156,7 @@ def bench_lateral(horizons, obstacle_counts, n_steps: int, repeats: int) -> list
                     fc_wall, fc_cpu, _ = condensed_floor.time(condensed_thetas[k])
                     direct, d_wall, d_cpu = _timed(lambda: mpc_direct.solve(inputs))
                     daqp, q_wall, q_cpu = _timed(lambda: mpc_daqp.solve(inputs))
+                    dense, n_wall, n_cpu = _timed(lambda: mpc_dense.solve(inputs))
                     solution, c_wall, _ = _timed(lambda: mpc_cvxpy.qp.solve(sparse_thetas[k]))
                     clarabel_s = float(mpc_cvxpy.qp.problem.solver_stats.solve_time or np.nan)
                     u_cvxpy = float(np.asarray(solution.values["U"]).ravel()[0]) \
@@ -165,10 +169,13 @@ def bench_lateral(horizons, obstacle_counts, n_steps: int, repeats: int) -> list
                         "direct_s": d_wall, "direct_cpu_s": d_cpu,
                         "direct_step_s": apf_s + d_wall,
                         "daqp_s": q_wall, "daqp_cpu_s": q_cpu, "daqp_step_s": apf_s + q_wall,
+                        "dense_s": n_wall, "dense_cpu_s": n_cpu, "dense_step_s": apf_s + n_wall,
+                        "default_backend": ctrl.backend,
                         "floor_s": fs_wall, "floor_cpu_s": fs_cpu,
                         "condensed_floor_s": fc_wall, "condensed_floor_cpu_s": fc_cpu,
                         "u0_cvxpy": u_cvxpy, "u0_direct": direct.steering_rate_rad_s,
                         "u0_daqp": daqp.steering_rate_rad_s,
+                        "u0_dense": dense.steering_rate_rad_s,
                         "u0_floor": float(fs_x[offset_u]),
                         "cvxpy_status": solution.status,
                         "compiles_cvxpy": mpc_cvxpy.qp.compile_count,
@@ -193,7 +200,7 @@ class _RecordingMap:
         return getattr(self._map, name)
 
 
-def bench_closed_loop(repeats: int = 5, backend: str = "clarabel_direct") -> dict:
+def bench_closed_loop(repeats: int = 5, backend: str | None = None) -> dict:
     """One complete paper-scenario run of the improved method in this process (the QP compiled
     inside the timed region, a fresh cache each time), over the sparse floor of the same QPs
     (the run's steps replayed as the sparse QP, recorded from a sparse run of the same
@@ -203,7 +210,7 @@ def bench_closed_loop(repeats: int = 5, backend: str = "clarabel_direct") -> dic
     from pipeline.loop.scenario import build_scenario
     from pipeline.loop.simulate import simulate
 
-    cfg = _config(["method=improved", f"controller.backend={backend}"])
+    cfg = _config(["method=improved"] + ([f"controller.backend={backend}"] if backend else []))
     scenario = build_scenario(cfg.scenario)
     walls, cpus, compile_s, qp_s, steps = [], [], [], [], 0
     for _ in range(repeats):
@@ -227,7 +234,7 @@ def bench_closed_loop(repeats: int = 5, backend: str = "clarabel_direct") -> dic
     floor_sum = float(np.median([f.sum() for f in floors]))
     wall, qp = float(np.median(walls)), float(np.median(qp_s))
     steps = max(steps, 1)
-    return {"backend": backend, "closed_loop_wall_s": wall,
+    return {"backend": cfg.controller.backend, "closed_loop_wall_s": wall,
             "closed_loop_cpu_s": float(np.median(cpus)),
             "closed_loop_compile_s": float(np.median(compile_s)),
             "closed_loop_qps": len(recorder.recorded), "floor_sum_s": floor_sum,
@@ -350,18 +357,28 @@ def summarize(lateral: pd.DataFrame, peers: pd.DataFrame, kinematic: pd.DataFram
         row = {"N": int(N), "obstacles": int(n_obs)}
         for key in ("apf_s", "cvxpy_solve_s", "cvxpy_clarabel_s", "cvxpy_step_s", "direct_s",
                     "direct_step_s", "floor_s", "daqp_s", "daqp_step_s", "condensed_floor_s",
-                    "direct_cpu_s", "daqp_cpu_s", "floor_cpu_s", "condensed_floor_cpu_s"):
+                    "direct_cpu_s", "daqp_cpu_s", "floor_cpu_s", "condensed_floor_cpu_s",
+                    "dense_s", "dense_step_s", "dense_cpu_s"):
             row[key[:-2] + "_median_ms"] = float(np.median(part[key]) * 1e3)
         row["cvxpy_step_over_floor"] = row["cvxpy_step_median_ms"] / row["floor_median_ms"]
         row["direct_step_over_floor"] = row["direct_step_median_ms"] / row["floor_median_ms"]
-        # per QP, interleaved: the median of the per-QP ratios (load cancels within a QP)
-        row["step_over_sparse_floor"] = float(np.median(part["direct_step_s"] / part["floor_s"]))
+        # per QP, interleaved: the median of the per-QP ratios (load cancels within a QP); the
+        # default backend's step (the lateral MPC's configured backend)
+        default = {"clarabel_dense": "dense", "daqp": "daqp"}.get(
+            str(part["default_backend"].iloc[0]), "direct")
+        row["default_backend"] = str(part["default_backend"].iloc[0])
+        row["step_over_sparse_floor"] = float(np.median(part[f"{default}_step_s"]
+                                                        / part["floor_s"]))
+        row["step_over_sparse_floor_direct"] = float(np.median(part["direct_step_s"]
+                                                               / part["floor_s"]))
+        row["step_over_sparse_floor_dense"] = float(np.median(part["dense_step_s"]
+                                                              / part["floor_s"]))
         row["step_over_sparse_floor_daqp"] = float(np.median(part["daqp_step_s"]
                                                              / part["floor_s"]))
         row["condensed_floor_over_sparse_floor"] = float(np.median(part["condensed_floor_s"]
                                                                    / part["floor_s"]))
         row["step_over_sparse_floor_cpu"] = float(np.median(
-            (part["apf_s"] + part["direct_cpu_s"]) / part["floor_cpu_s"]))
+            (part["apf_s"] + part[f"{default}_cpu_s"]) / part["floor_cpu_s"]))
         row["max_u0_diff_daqp_vs_direct"] = float(np.max(np.abs(part["u0_daqp"]
                                                                 - part["u0_direct"])))
         row["iterations_median"] = float(np.median(part["cvxpy_iterations"]))
@@ -390,6 +407,7 @@ def summarize(lateral: pd.DataFrame, peers: pd.DataFrame, kinematic: pd.DataFram
             "step_over_floor": head["direct_step_over_floor"],
             "step_over_sparse_floor": head["step_over_sparse_floor"],
             "step_over_sparse_floor_daqp": head["step_over_sparse_floor_daqp"],
+            "step_over_sparse_floor_dense": head["step_over_sparse_floor_dense"],
             "step_over_sparse_floor_cpu": head["step_over_sparse_floor_cpu"],
             "outside_qp_us_per_step": closed_loop["outside_qp_us_per_step"],
             "qp_us_per_step": closed_loop["qp_us_per_step"],
@@ -461,7 +479,8 @@ def main(argv: list[str] | None = None) -> int:
     save_figure(scaling_figure(lateral), args.out, "scaling")
     print(json.dumps({key: summary[key] for key in (
         "closed_loop_over_floor", "step_over_floor", "step_over_sparse_floor",
-        "step_over_sparse_floor_daqp", "step_over_sparse_floor_cpu", "outside_qp_us_per_step",
+        "step_over_sparse_floor_daqp", "step_over_sparse_floor_dense",
+        "step_over_sparse_floor_cpu", "outside_qp_us_per_step",
         "qp_us_per_step", "outside_qp_over_qp", "compiles_per_family",
         "family_scenarios_per_s")}, indent=1))
     print(json.dumps({"lateral_N10_1obs": summary["lateral"][0], "peers": summary["peers"],

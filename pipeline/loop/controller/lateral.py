@@ -227,6 +227,99 @@ def condensed_data(prediction: CondensedPrediction, inputs: "MpcInputs",
     return CondensedData(gamma_w, free_w, gamma[:, 4, :], free[:, 4], gamma_h, bound_h, free)
 
 
+class ClarabelCondensedQp:
+    """Backend ``clarabel_dense``: the condensed QP's data built in numpy (``P = 2 (gamma_w'
+    gamma_w + r_u T T')`` and the rows of :class:`DaqpCondensedQp`) and handed to a kept
+    Clarabel solver, updated in place on a fixed sparsity pattern: the 33-variable QP itself,
+    without the auxiliary variables CVXPY's canonicalization of ``sum_squares(Gamma U + F)``
+    adds (the CVXPY statement stays the reference the tests compare with)."""
+
+    def __init__(self, structure: LateralQpStructure, max_iter: int) -> None:
+        import scipy.sparse as sparse
+
+        self.daqp = DaqpCondensedQp(structure, max_iter)
+        self.max_iter = int(max_iter)
+        self._solver = None
+        N, Nc, M = structure.horizon, structure.control_horizon, structure.max_obstacles
+        n_u, n_s = Nc, N * M
+        self.n_u, self.n_s, self.N, n = n_u, n_s, N, n_u + n_s
+        # the pattern: dense blocks where data live, diagonals for the identities
+        rows = 2 * n_u + n_s + 2 * N + n_s
+        mask = np.zeros((rows, n), bool)
+        mask[np.arange(n_u), np.arange(n_u)] = True
+        mask[n_u + np.arange(n_u), np.arange(n_u)] = True
+        mask[2 * n_u + np.arange(n_s), n_u + np.arange(n_s)] = True
+        r = 2 * n_u + n_s
+        mask[r:r + 2 * N, :n_u] = True
+        mask[r + 2 * N:, :n_u] = True
+        mask[r + 2 * N + np.arange(n_s), n_u + np.arange(n_s)] = True
+        a_pattern = sparse.csc_matrix(mask.astype(float))
+        a_pattern.sort_indices()
+        cols = np.repeat(np.arange(n), np.diff(a_pattern.indptr))
+        self.a_index = (a_pattern.indices, cols)
+        self.a_structure = (a_pattern.indices.copy(), a_pattern.indptr.copy(), mask.shape)
+        p_mask = np.zeros((n, n), bool)
+        p_mask[:n_u, :n_u] = np.triu(np.ones((n_u, n_u), bool))
+        p_mask[n_u + np.arange(n_s), n_u + np.arange(n_s)] = True
+        p_pattern = sparse.csc_matrix(p_mask.astype(float))
+        p_pattern.sort_indices()
+        self.p_index = (p_pattern.indices, np.repeat(np.arange(n), np.diff(p_pattern.indptr)))
+        self.p_structure = (p_pattern.indices.copy(), p_pattern.indptr.copy(), (n, n))
+
+    def _data(self, data: CondensedData):
+        """Dense ``P``, ``q``, ``A`` and ``b`` of ``A z + s = b, s >= 0``."""
+        d, s = self.daqp, self.daqp.s
+        n_u, n_s, N = self.n_u, self.n_s, self.N
+        n = n_u + n_s
+        P = np.zeros((n, n))
+        P[:n_u, :n_u] = 2.0 * (data.gamma_w.T @ data.gamma_w + d.input_hessian)
+        P[n_u:, n_u:] = 2.0 * s.weights[6] * np.eye(n_s)
+        q = np.concatenate([2.0 * data.gamma_w.T @ data.free_w, np.full(n_s, s.weights[5])])
+        A = np.zeros(self.a_structure[2])
+        A[:n_u, :n_u], A[n_u:2 * n_u, :n_u] = np.eye(n_u), -np.eye(n_u)
+        A[2 * n_u:2 * n_u + n_s, n_u:] = -np.eye(n_s)
+        r = 2 * n_u + n_s
+        A[r:r + N, :n_u], A[r + N:r + 2 * N, :n_u] = data.gamma_d, -data.gamma_d
+        A[r + 2 * N:, :n_u], A[r + 2 * N:, n_u:] = -data.gamma_h, -np.eye(n_s)
+        rate, dmax = s.steering_rate_max_rad_s, s.steering_max_rad
+        b = np.concatenate([np.full(2 * n_u, rate), np.zeros(n_s), dmax - data.free_d,
+                            dmax + data.free_d, -data.bound_h])
+        return P[self.p_index], q, A[self.a_index], b
+
+    def solve(self, data: CondensedData) -> QpSolution:
+        import time
+
+        import clarabel
+        import scipy.sparse as sparse
+
+        from pipeline.loop.controller.qp import CLARABEL_STATUS, SOLVER_ERRORS, clarabel_settings
+
+        start = time.perf_counter()
+        p_values, q, a_values, b = self._data(data)
+        if not (np.isfinite(p_values).all() and np.isfinite(q).all()
+                and np.isfinite(a_values).all() and np.isfinite(b).all()):
+            return QpSolution(NON_FINITE_DATA, -1, time.perf_counter() - start, None)
+        try:
+            if self._solver is None:
+                p_idx, p_ptr, p_shape = self.p_structure
+                a_idx, a_ptr, a_shape = self.a_structure
+                self._solver = clarabel.DefaultSolver(
+                    sparse.csc_matrix((p_values, p_idx, p_ptr), shape=p_shape), q,
+                    sparse.csc_matrix((a_values, a_idx, a_ptr), shape=a_shape), b,
+                    [clarabel.NonnegativeConeT(a_shape[0])], clarabel_settings(self.max_iter))
+            else:
+                self._solver.update(P=p_values, q=q, A=a_values, b=b)
+            solution = self._solver.solve()
+        except SOLVER_ERRORS as exc:
+            return QpSolution(f"error:{type(exc).__name__}", -1, time.perf_counter() - start,
+                              None)
+        status = CLARABEL_STATUS.get(str(solution.status).rsplit(".", 1)[-1], "solver_error")
+        x = np.asarray(solution.x)
+        values = {"U": x[:self.n_u], "slack": x[self.n_u:]} \
+            if status in ("optimal", "optimal_inaccurate") else None
+        return QpSolution(status, int(solution.iterations), time.perf_counter() - start, values)
+
+
 class DaqpCondensedQp:
     """Backend ``daqp``: the condensed lateral QP with explicit slacks, solved by DAQP (a dual
     active-set solver for small dense QPs): the same problem as the Clarabel backends.
@@ -323,10 +416,11 @@ class LateralMpc:
         self.condensed = controller.formulation == "condensed"
         builder = build_condensed_lateral_problem if self.condensed else build_lateral_problem
         self.weights = structure.weights
-        if controller.backend == "daqp":
-            # no compilation: the condensed data go to DAQP as dense matrices
+        if controller.backend in ("daqp", "clarabel_dense"):
+            # no compilation: the condensed data go to the solver as numpy matrices
+            dense = DaqpCondensedQp if controller.backend == "daqp" else ClarabelCondensedQp
             self.qp, self.compile_count, self.compile_time_s = \
-                DaqpCondensedQp(structure, controller.solver_max_iter), 0, 0.0
+                dense(structure, controller.solver_max_iter), 0, 0.0
         else:
             self.qp, self.compile_count, self.compile_time_s = compiled_backend(
                 qp_cache, "lateral", structure, lambda: builder(structure),
@@ -361,8 +455,9 @@ class LateralMpc:
             if self.condensed:
                 data = condensed_data(self.prediction(inputs.model), inputs, self.weights)
                 free = data.free
-                solution = self.qp.solve(data if isinstance(self.qp, DaqpCondensedQp)
-                                         else data.theta())
+                solution = self.qp.solve(
+                    data if isinstance(self.qp, (DaqpCondensedQp, ClarabelCondensedQp))
+                    else data.theta())
             else:
                 solution = self.qp.solve(self.parameter_vector(inputs))
         if solution.ok:
