@@ -35,8 +35,7 @@ experiment: $(STAMP)  ## run every method on the paper scenario and on the scena
 report: $(STAMP)  ## rebuild the HTML report from existing run folders (no simulation)
 	$(PY) -m pipeline.report $(RUNS) --out $(REPORT) --command "make reproduce"
 
-reproduce: experiment report  ## set up, run the experiment and write reports/latest/index.html
-	@echo "Report: $(abspath $(REPORT))/index.html"
+reproduce: experiment report  ## set up, run the experiment and write reports/latest/index.html (its last lines: the verdicts in words)
 
 sweep: $(STAMP)  ## run a sweep preset (SWEEP=sensitivity|horizon|obstacle_speed, LAUNCHER=basic|local_cores)
 	$(PY) -m pipeline.run sweep=$(SWEEP) hydra/launcher=$(LAUNCHER)

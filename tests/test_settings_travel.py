@@ -108,3 +108,21 @@ def test_settings_read_back_equal_a_fresh_composition(user_runs):
     data["scenario"]["obstacles"][0]["foo"] = 1
     with pytest.raises(ConfigError, match=r"scenario\.obstacles\[0\]\.foo"):
         experiment_config_from_data(data)
+
+
+def test_the_report_command_ends_with_the_answer_in_words(user_runs, tmp_path, capsys):
+    """``python -m pipeline.report`` (and so ``make reproduce``) ends with one line per claim:
+    the claim's words, its outcome against each comparison, the estimate with its interval
+    and unit."""
+    from pipeline.analysis.claims import ALL_CLAIMS
+    from pipeline.report import main as report_main
+
+    assert report_main([str(user_runs), "--out", str(tmp_path / "r"),
+                        "--bench", str(tmp_path / "none")]) == 0
+    lines = capsys.readouterr().out.strip().splitlines()
+    last = lines[-len(ALL_CLAIMS):]
+    assert [line.split(" ", 1)[0] for line in last] == [c.claim_id for c in ALL_CLAIMS]
+    for line, claim in zip(last, ALL_CLAIMS):
+        assert claim.text in line and "vs baseline" in line and "vs baseline_matched" in line
+    assert " s)" in last[1] and "m/s^3" in last[2]   # C1 in seconds, C2 in m/s^3
+    assert (tmp_path / "r" / "answer.txt").read_text().splitlines() == last

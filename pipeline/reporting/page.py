@@ -488,6 +488,9 @@ def build_report(run_root: Path, out_dir: Path, command: str,
         run_notes=run_notes, **_rules(cfg_claims))
     path = out_dir / "index.html"
     write_text_atomic(path, page)
+    # the answer in words, for the command line (make reproduce prints it at its end)
+    write_text_atomic(out_dir / "answer.txt",
+                      "\n".join(family["answer"]) + "\n" if family else "")
     return path
 
 
@@ -665,6 +668,35 @@ def _paper_figures(by_method: dict, scenario: str, goal: tuple, radius: float, a
     return figures
 
 
+def _unit(metric: str) -> str:
+    """The unit of a metric, read off its name."""
+    for suffix, unit in (("_mps3", "m/s^3"), ("_rad_s", "rad/s"), ("_s", "s"), ("_m", "m")):
+        if metric.endswith(suffix):
+            return unit
+    if metric == "collision":
+        return "collision rate"
+    if "share" in metric:
+        return "share"
+    return "count" if metric.endswith("count") else ""
+
+
+def answer_lines(ledger) -> list[str]:
+    """The answer in words: one line per claim, its outcome against each comparison with the
+    estimate, its unit and interval (what ``make reproduce`` prints at its end)."""
+    lines = []
+    for claim in ALL_CLAIMS:
+        parts = []
+        for row in ledger:
+            if row.claim_id != claim.claim_id:
+                continue
+            r = row.result
+            parts.append(f"{row.outcome} vs {row.comparison} ({_fmt(r.estimate)} "
+                         f"[{_fmt(r.ci_low)}, {_fmt(r.ci_high)}] {_unit(claim.primary_metric)})")
+        if parts:
+            lines.append(f"{claim.claim_id} {claim.text}: " + "; ".join(parts))
+    return lines
+
+
 def _family_section(tables: dict, info: dict, paper_metrics: dict, fig_dir: Path,
                     table_dir: Path, cfg: ClaimsConfig, all_tables: dict | None = None,
                     settings: dict | None = None) -> dict:
@@ -740,6 +772,7 @@ def _family_section(tables: dict, info: dict, paper_metrics: dict, fig_dir: Path
            if s.controller.kind == "kinematic_mpc" else "")
         for label, s in (settings or {}).items() if label in tables) or "not recorded"
     return {"ledger": grouped, "comparisons": comparisons, "solvers": solvers,
+            "answer": answer_lines(typed),
             "by_claim": {r["claim"]: r for r in ledger if r["comparison"] == "baseline"},
             "counts": [{k: _fmt(v) for k, v in c.items()} for c in counts],
             "cap_note": cap_note, "figures": figures, "seed": first["seed"],
@@ -804,6 +837,12 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     print(f"report written to {path.resolve()}"
           + (f" ({len(skipped)} folder(s) skipped, listed in the report)" if skipped else ""))
+    answer = path.parent / "answer.txt"
+    if answer.is_file() and answer.read_text().strip():
+        # the answer in words, last, so that a command's final lines are the verdicts
+        print("The answer over the scenario family (outcome vs each comparison, estimate "
+              "[95 % interval] unit; d = improved - comparison, below 0 is better):")
+        print(answer.read_text().rstrip())
     if args.strict and skipped:
         print(f"error: --strict: {len(skipped)} folder(s) skipped", file=sys.stderr)
         return 1
