@@ -335,8 +335,6 @@ def test_daqp_backend_solves_the_same_qps_as_clarabel(make_config, overrides, me
 def test_daqp_iteration_limit_and_bad_data_take_the_fallback(make_config):
     """A DAQP solve stopped by its iteration limit is 'user_limit' and non-finite data never
     reach it: both take the shifted-plan / safe-input fallback, as with Clarabel."""
-    import dataclasses
-
     from pipeline.loop.scenario import build_scenario
     from pipeline.loop.simulate import simulate
 

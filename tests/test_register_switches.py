@@ -233,7 +233,7 @@ def test_plant_substeps_and_run_length(make_config, tmp_path):
 
 def test_threat_margin_and_horizon_decide_what_threatens():
     from pipeline.config import MetricsConfig
-    from pipeline.analysis.metrics import TrajectoryContext, compute_metrics
+    from pipeline.analysis.metrics import TrajectoryContext
     from tests.test_metrics import synthetic
 
     t = np.round(np.arange(0.0, 8.0 + 1e-9, 0.1), 10)
@@ -270,7 +270,7 @@ def test_an_obstacle_that_collides_threatened_even_beyond_the_horizon():
 
 def test_smoothness_window_selects_the_primary_jerk():
     from pipeline.config import MetricsConfig
-    from pipeline.analysis.metrics import TrajectoryContext, compute_metrics
+    from pipeline.analysis.metrics import TrajectoryContext
     from tests.test_metrics import out_and_back
 
     frame = out_and_back(0.4)
@@ -287,7 +287,7 @@ def test_attribution_samples_decide_between_a_narrow_gap_and_none():
     swerve clears it, so the count of samples is what the check depends on; with the default
     nine it is avoidable too, and an obstacle appearing on the vehicle never is."""
     from pipeline.config import MetricsConfig
-    from pipeline.analysis.metrics import TrajectoryContext, compute_metrics
+    from pipeline.analysis.metrics import TrajectoryContext
     from tests.test_metrics import synthetic
 
     t = np.round(np.arange(0.0, 8.0 + 1e-9, 0.1), 10)

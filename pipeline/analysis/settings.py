@@ -7,7 +7,7 @@ from dataclasses import dataclass, field
 from typing import Dict, Optional
 
 from pipeline.errors import ConfigError
-from pipeline.validation import at_least, between, choice, finite, pair, safe_name
+from pipeline.validation import at_least, between, choice
 
 
 @dataclass

@@ -24,8 +24,7 @@ import pandas as pd
 import yaml
 
 from pipeline.store.collection import RunCollection, load_runs
-from pipeline.store.runs import (RunFolderError, Skipped, check, discover, read_family, read_run,
-                           write_text_atomic)
+from pipeline.store.runs import Skipped, check, write_text_atomic
 from pipeline.analysis.claims import (ALL_CLAIMS, OUTCOME_RULE, OUTCOMES, SINGLE_RULE, claims_table,
                              family_ledger, outcome_counts)
 from pipeline.analysis.tally import Tally

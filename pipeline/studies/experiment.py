@@ -154,7 +154,6 @@ def run_family(cfg: ExperimentConfig, out_dir: Path, progress: bool = True,
         The per-member metrics table.
     """
     import dataclasses
-    import json
 
     from joblib import Parallel, delayed
     from tqdm import tqdm

@@ -35,7 +35,7 @@ from typing import Any, Optional, Sequence
 from hydra_plugins.hydra_submitit_launcher.config import SlurmQueueConf
 from hydra_plugins.hydra_submitit_launcher.submitit_launcher import SlurmLauncher
 
-from pipeline.errors import ConfigError, IncompleteSweepError, SweepConfigError, describe_config_error
+from pipeline.errors import IncompleteSweepError, SweepConfigError, describe_config_error
 
 log = logging.getLogger(__name__)
 

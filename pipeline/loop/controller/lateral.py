@@ -268,13 +268,9 @@ class ClarabelCondensedQp:
 
     def _data(self, data: CondensedData):
         """Dense ``P``, ``q``, ``A`` and ``b`` of ``A z + s = b, s >= 0``."""
-        d, s = self.daqp, self.daqp.s
+        s = self.daqp.s
         n_u, n_s, N = self.n_u, self.n_s, self.N
-        n = n_u + n_s
-        P = np.zeros((n, n))
-        P[:n_u, :n_u] = 2.0 * (data.gamma_w.T @ data.gamma_w + d.input_hessian)
-        P[n_u:, n_u:] = 2.0 * s.weights[6] * np.eye(n_s)
-        q = np.concatenate([2.0 * data.gamma_w.T @ data.free_w, np.full(n_s, s.weights[5])])
+        P, q = self.daqp.cost(data)
         A = np.zeros(self.a_structure[2])
         A[:n_u, :n_u], A[n_u:2 * n_u, :n_u] = np.eye(n_u), -np.eye(n_u)
         A[2 * n_u:2 * n_u + n_s, n_u:] = -np.eye(n_s)
@@ -341,6 +337,17 @@ class DaqpCondensedQp:
         self.input_hessian = structure.weights[4] * blocking @ blocking.T
         self.max_iter = int(max_iter)
 
+    def cost(self, data: CondensedData) -> tuple[np.ndarray, np.ndarray]:
+        """``H`` and ``f`` of the cost ``0.5 z' H z + f' z`` over ``z = [U, S]`` (shared with
+        :class:`ClarabelCondensedQp`, whose ``P`` is the same ``H``)."""
+        n_u, n_s = self.n_u, self.n_s
+        w1, w2 = self.s.weights[5], self.s.weights[6]
+        H = np.zeros((n_u + n_s, n_u + n_s))
+        H[:n_u, :n_u] = 2.0 * (data.gamma_w.T @ data.gamma_w + self.input_hessian)
+        H[n_u:, n_u:] = 2.0 * w2 * np.eye(n_s)
+        f = np.concatenate([2.0 * data.gamma_w.T @ data.free_w, np.full(n_s, w1)])
+        return H, f
+
     def solve(self, data: CondensedData) -> QpSolution:
         import time
 
@@ -348,12 +355,8 @@ class DaqpCondensedQp:
 
         start = time.perf_counter()
         n_u, n_s = self.n_u, self.n_s
-        w1, w2 = self.s.weights[5], self.s.weights[6]
         n = n_u + n_s
-        H = np.zeros((n, n))
-        H[:n_u, :n_u] = 2.0 * (data.gamma_w.T @ data.gamma_w + self.input_hessian)
-        H[n_u:, n_u:] = 2.0 * w2 * np.eye(n_s)
-        f = np.concatenate([2.0 * data.gamma_w.T @ data.free_w, np.full(n_s, w1)])
+        H, f = self.cost(data)
         A = np.zeros((data.gamma_d.shape[0] + n_s, n))
         A[:data.gamma_d.shape[0], :n_u] = data.gamma_d
         A[data.gamma_d.shape[0]:, :n_u] = data.gamma_h
