@@ -230,6 +230,21 @@ def _run_both_formulations(cfg):
     return out["sparse"], out["condensed"]
 
 
+def _capture_condensed_data(monkeypatch) -> list:
+    """Every step's condensed QP data of the closed loops that follow (a list filled in)."""
+    import pipeline.loop.controller.lateral as lateral
+
+    captured = []
+    original = lateral.condensed_data
+
+    def capture(*args, **kwargs):
+        captured.append(original(*args, **kwargs))
+        return captured[-1]
+
+    monkeypatch.setattr(lateral, "condensed_data", capture)
+    return captured
+
+
 @pytest.mark.parametrize("overrides, member", [
     (["method=improved"], None), (["method=baseline"], None),
     (["method=improved", "scenario=family", "scenario.family.size=12"], 0),
@@ -299,14 +314,7 @@ def test_daqp_backend_solves_the_same_qps_as_clarabel(make_config, overrides, me
     if member is not None:
         cfg = dataclasses.replace(cfg, scenario=family_members(
             cfg.scenario, cfg.vehicle.footprint_radius_m)[member])
-    captured = []
-    original = lateral.condensed_data
-
-    def capture(*args, **kwargs):
-        captured.append(original(*args, **kwargs))
-        return captured[-1]
-
-    monkeypatch.setattr(lateral, "condensed_data", capture)
+    captured = _capture_condensed_data(monkeypatch)
     trajectory = simulate(cfg, build_scenario(cfg.scenario)).trajectory
     if member is not None:
         assert np.nanmax(trajectory["max_slack_m"].to_numpy(float)) > 0.05  # slacks bind
@@ -354,3 +362,40 @@ def test_dense_backends_need_the_condensed_lateral_mpc(make_config, backend):
 
     with pytest.raises(ConfigError, match=f"{backend} only with"):
         make_config([f"controller.backend={backend}", "controller.formulation=sparse"])
+
+
+@pytest.mark.parametrize("backend", ["daqp", "clarabel_dense"])
+def test_kept_dense_workspaces_follow_speed_changes(make_config, monkeypatch, backend):
+    """The kept DAQP workspace (and the kept dense Clarabel) receive the Hessian only when the
+    model's speed changes it; with velocity planning on, the speed changes during the run, and
+    every QP's u0 equals a fresh ``daqp.solve`` of the same data (the oracle: no kept state)."""
+    import daqp
+
+    import pipeline.loop.controller.lateral as lateral
+    from pipeline.loop.scenario import build_scenario
+    from pipeline.loop.simulate import simulate
+
+    cfg = make_config(["method=improved", f"controller.backend={backend}",
+                       "planner.velocity_planning=true"])
+    captured = _capture_condensed_data(monkeypatch)
+    trajectory = simulate(cfg, build_scenario(cfg.scenario)).trajectory
+    assert trajectory["speed_ref_mps"].nunique() > 2  # the model changed during the run
+    assert len({id(d.hessian_u) for d in captured}) > 2
+    s = lateral.LateralQpStructure.of(cfg.controller, cfg.vehicle)
+    kept = lateral.DaqpCondensedQp(s, 200) if backend == "daqp" \
+        else lateral.ClarabelCondensedQp(s, 200)
+    fresh = lateral.DaqpCondensedQp(s, 200)
+    for data in captured:
+        got = kept.solve(data)
+        H, f = fresh.cost(data)
+        A = fresh._A.copy()
+        A[:s.horizon, :fresh.n_u], A[s.horizon:, :fresh.n_u] = data.gamma_d, data.gamma_h
+        upper, lower = fresh._upper.copy(), fresh._lower.copy()
+        base = fresh.n_u + fresh.n_s
+        upper[base:base + s.horizon] = s.steering_max_rad - data.free_d
+        lower[base:base + s.horizon] = -s.steering_max_rad - data.free_d
+        lower[base + s.horizon:] = data.bound_h
+        x, _, flag, _ = daqp.solve(H.copy(), f.copy(), A, upper, lower,
+                                   np.zeros(upper.size, np.intc))
+        assert flag == 1 and got.status == "optimal"
+        assert abs(got.values["U"][0] - x[0]) < (1e-9 if backend == "daqp" else 1e-5)

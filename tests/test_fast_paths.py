@@ -183,3 +183,49 @@ def test_a_family_discretizes_each_model_once(tmp_path, make_config, monkeypatch
     run_family(make_config(["method=improved", "scenario=family", "scenario.family.size=6",
                             "scenario.family.n_jobs=1"]), tmp_path / "family", progress=False)
     assert len(calls) == 2
+
+
+def test_trajectory_csv_writer_matches_pandas(make_config):
+    """The store's CSV writer gives pandas' ``to_csv(float_format="%.10g")`` byte for byte (the
+    oracle: pandas itself) on a real trajectory, on missing values of every kind, and falls back
+    to pandas where a cell needs quoting."""
+    import pandas as pd
+
+    from pipeline.loop.scenario import build_scenario
+    from pipeline.loop.simulate import simulate
+    from pipeline.store.runs import csv_text
+
+    def pandas_csv(frame):
+        return frame.to_csv(index=False, float_format="%.10g", lineterminator="\n")
+
+    cfg = make_config(["method=improved"])
+    trajectory = simulate(cfg, build_scenario(cfg.scenario)).trajectory
+    assert csv_text(trajectory) == pandas_csv(trajectory)
+    odd = pd.DataFrame({"x": [1.0, np.nan, -0.0, 1e-12, np.inf, 123456789012.5],
+                        "flag": [True, False, True, False, True, False],
+                        "n": np.arange(6), "word": ["a", None, np.nan, "optimal", True, "b"]})
+    assert csv_text(odd) == pandas_csv(odd)
+    quoted = odd.assign(word=["a,b", 'say "x"', "", "c", "d", "e"])
+    assert csv_text(quoted) == pandas_csv(quoted)
+
+
+def test_closed_loop_runs_blas_on_one_thread(make_config, monkeypatch):
+    """simulate limits BLAS to one thread for the loop (OpenBLAS's idle threads spin and double
+    a run's CPU time); checked from inside a step with threadpoolctl's own report."""
+    from threadpoolctl import threadpool_info
+
+    import pipeline.loop.simulate as simulate_module
+    from pipeline.loop.scenario import build_scenario
+
+    seen = []
+    original = simulate_module.apf_rollout
+
+    def spy(*args, **kwargs):
+        seen.extend(pool["num_threads"] for pool in threadpool_info()
+                    if pool["user_api"] == "blas")
+        return original(*args, **kwargs)
+
+    monkeypatch.setattr(simulate_module, "apf_rollout", spy)
+    cfg = make_config(["method=improved", "scenario.n_steps=5"])
+    simulate_module.simulate(cfg, build_scenario(cfg.scenario))
+    assert seen and set(seen) == {1}

@@ -152,6 +152,12 @@ def save_figure(fig: Figure, out_dir: Path, stem: str) -> dict[str, Path]:
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     paths = {"svg": out_dir / f"{stem}.svg", "png": out_dir / f"{stem}.png"}
+    engine = fig.get_layout_engine()
+    if engine is not None:
+        # the layout solved once for both files (each savefig would solve it again: it was
+        # 40 % of the report's time), then frozen
+        engine.execute(fig)
+        fig.set_layout_engine("none")
     # fixed metadata so that identical data give identical files
     fig.savefig(paths["svg"], metadata={"Date": None})
     fig.savefig(paths["png"], dpi=130, metadata={"Software": None})

@@ -191,7 +191,49 @@ def write_json_atomic(path: Path, data: dict) -> None:
 
 def write_csv_atomic(path: Path, frame: pd.DataFrame) -> None:
     # fixed float format so identical runs give byte-identical files
-    write_text_atomic(path, frame.to_csv(index=False, float_format="%.10g", lineterminator="\n"))
+    write_text_atomic(path, csv_text(frame))
+
+
+_CSV_SPECIAL = (",", '"', "\r", "\n")
+
+
+def _csv_cells(column: pd.Series) -> list[str] | None:
+    """One column's cells as pandas writes them (``%.10g`` floats, empty for missing values),
+    or None when the column needs pandas (quoting, an unusual dtype)."""
+    kind = column.dtype.kind
+    values = column.to_numpy().tolist()
+    if kind == "f":
+        return ["" if v != v else "%.10g" % v for v in values]
+    if kind in "biu":
+        return [str(v) for v in values]
+    if kind in "OUT":
+        cells = []
+        for v in values:
+            if v is None or (isinstance(v, float) and v != v):
+                cells.append("")
+            elif isinstance(v, (str, bool, int)):
+                text = str(v)
+                if any(c in text for c in _CSV_SPECIAL):
+                    return None
+                cells.append(text)
+            else:
+                return None
+        return cells
+    return None
+
+
+def csv_text(frame: pd.DataFrame) -> str:
+    """``frame.to_csv(index=False, float_format="%.10g", lineterminator="\\n")``, byte for byte,
+    at a fraction of its cost for the plain tables the pipeline writes (floats, flags, short
+    words); anything else (cells that need quoting, other dtypes) goes through pandas itself."""
+    names = [str(c) for c in frame.columns]
+    columns = [_csv_cells(frame[c]) for c in frame.columns] \
+        if frame.shape[1] >= 2 and frame.columns.is_unique else [None]
+    if any(c is None for c in columns) or any(ch in n for n in names for ch in _CSV_SPECIAL):
+        return frame.to_csv(index=False, float_format="%.10g", lineterminator="\n")
+    lines = [",".join(names)]
+    lines.extend(",".join(row) for row in zip(*columns))
+    return "\n".join(lines) + "\n"
 
 
 def clean_leftovers(folder: Path) -> list[Path]:
@@ -265,8 +307,7 @@ def write_run(folder: Path, *, config_text: str, model: dict, trajectory: pd.Dat
     folder = Path(folder)
     # everything serialized (and checked) before the folder is touched
     texts = {"config.yaml": config_text, "model.json": _json_text("model.json", model),
-             "trajectory.csv": trajectory.to_csv(index=False, float_format="%.10g",
-                                                 lineterminator="\n"),
+             "trajectory.csv": csv_text(trajectory),
              "timing.json": _json_text("timing.json", timing),
              "metrics.json": _json_text("metrics.json", {**metrics.to_json(),
                                                          **info.to_json()})}

@@ -206,7 +206,6 @@ def bench_closed_loop(repeats: int = 5, backend: str | None = None) -> dict:
     (the run's steps replayed as the sparse QP, recorded from a sparse run of the same
     configuration: the same QPs to ~1e-7), and its time outside the QP per step."""
     from pipeline.loop.controller import QpCache
-    from pipeline.loop.controller.lateral import LateralQpStructure
     from pipeline.loop.scenario import build_scenario
     from pipeline.loop.simulate import simulate
 
@@ -221,15 +220,8 @@ def bench_closed_loop(repeats: int = 5, backend: str | None = None) -> dict:
         compile_s.append(result.compile_time_s)
         qp_s.append(float(np.sum(result.solve_times_s)))
         steps = len(result.solve_times_s)
-    sparse_cfg = replace(cfg, controller=replace(cfg.controller, backend="clarabel_direct",
-                                                 formulation="sparse"))
-    cache = QpCache()
-    simulate(sparse_cfg, scenario, cache)
-    key = ("lateral", "map", LateralQpStructure.of(sparse_cfg.controller, sparse_cfg.vehicle))
-    recorder = _RecordingMap(cache.entries[key])
-    cache.entries[key] = recorder
-    simulate(sparse_cfg, scenario, cache)
-    floors = [floor_times(recorder._map, recorder.recorded,
+    qp_map, thetas = _recorded_sparse_qps(cfg, scenario)
+    floors = [floor_times(qp_map, thetas,
                           cfg.controller.solver_max_iter)[0] for _ in range(repeats)]
     floor_sum = float(np.median([f.sum() for f in floors]))
     wall, qp = float(np.median(walls)), float(np.median(qp_s))
@@ -237,7 +229,7 @@ def bench_closed_loop(repeats: int = 5, backend: str | None = None) -> dict:
     return {"backend": cfg.controller.backend, "closed_loop_wall_s": wall,
             "closed_loop_cpu_s": float(np.median(cpus)),
             "closed_loop_compile_s": float(np.median(compile_s)),
-            "closed_loop_qps": len(recorder.recorded), "floor_sum_s": floor_sum,
+            "closed_loop_qps": len(thetas), "floor_sum_s": floor_sum,
             "closed_loop_over_floor": wall / floor_sum,
             "qp_us_per_step": 1e6 * qp / steps,
             "outside_qp_us_per_step": 1e6 * (wall - qp - float(np.median(compile_s))) / steps}
@@ -314,6 +306,88 @@ def bench_kinematic(n_steps: int) -> list[dict]:
                      "kinematic_compiles": mpc.compile_count, "status": step.status})
         state = state + np.array([0.3, 0.0, 0.0, 0.0])
     return rows
+
+
+def _recorded_sparse_qps(cfg, scenario) -> tuple[object, list]:
+    """The sparse QPs of a run of ``cfg`` (its closed loop with the states as variables, which
+    agrees with the condensed one to ~1e-7), as the compiled map and the parameter vectors."""
+    from pipeline.loop.controller import QpCache
+    from pipeline.loop.controller.lateral import LateralQpStructure
+    from pipeline.loop.simulate import simulate
+
+    sparse_cfg = replace(cfg, controller=replace(cfg.controller, backend="clarabel_direct",
+                                                 formulation="sparse"))
+    cache = QpCache()
+    simulate(sparse_cfg, scenario, cache)
+    key = ("lateral", "map", LateralQpStructure.of(sparse_cfg.controller, sparse_cfg.vehicle))
+    recorder = _RecordingMap(cache.entries[key])
+    cache.entries[key] = recorder
+    simulate(sparse_cfg, scenario, cache)
+    return recorder._map, recorder.recorded
+
+
+def bench_family_member(backend: str | None = None, n_members: int = 8,
+                        repeats: int = 3) -> dict:
+    """CPU time of whole family members, everything included (simulation, metrics, writing the
+    run folder; the QP compiled beforehand, as a family's workers receive it), over the CPU
+    time of the sparse floor of the same members' QPs, measured in this process, member by
+    member interleaved with its floor."""
+    import dataclasses
+    import tempfile
+
+    from pipeline.loop.controller import QpCache
+    from pipeline.loop.scenario import build_scenario, family_members
+    from pipeline.studies.experiment import run_experiment
+
+    cfg = _config(["method=improved", "scenario=family", f"scenario.family.size={n_members}"]
+                  + ([f"controller.backend={backend}"] if backend else []))
+    members = family_members(cfg.scenario, cfg.vehicle.footprint_radius_m)
+    cache = QpCache()
+    member_cpu, floor_cpu, steps = [], [], 0
+    with tempfile.TemporaryDirectory() as tmp:
+        run_experiment(dataclasses.replace(cfg, scenario=members[0]), Path(tmp) / "warm",
+                       resume=False, qp_cache=cache)
+        for i, member in enumerate(members):
+            member_cfg = dataclasses.replace(cfg, scenario=member)
+            qp_map, thetas = _recorded_sparse_qps(member_cfg, build_scenario(member))
+            steps += len(thetas)
+            cpu_runs, cpu_floors = [], []
+            for rep in range(repeats):
+                cpu = time.process_time()
+                run_experiment(member_cfg, Path(tmp) / f"m{i}_{rep}", resume=False,
+                               qp_cache=cache)
+                cpu_runs.append(time.process_time() - cpu)
+                floor = KeptClarabelFloor(qp_map, cfg.controller.solver_max_iter)
+                floor.time(thetas[0])  # the solver set up outside the timed sum
+                cpu_floors.append(sum(floor.time(theta)[1] for theta in thetas))
+            member_cpu.append(float(np.median(cpu_runs)))
+            floor_cpu.append(float(np.median(cpu_floors)))
+    return {"backend": cfg.controller.backend, "members": len(members),
+            "member_cpu_ms": 1e3 * float(np.mean(member_cpu)),
+            "sparse_floor_cpu_ms": 1e3 * float(np.mean(floor_cpu)),
+            "qps_per_member": steps / len(members),
+            "family_member_over_sparse_floor": float(np.sum(member_cpu) / np.sum(floor_cpu))}
+
+
+def bench_multiverse_reads() -> dict:
+    """The quick multiverse (conf/multiverse/quick.yaml) run once into a temporary folder: how
+    many member trajectories its re-scoring read per member (goal 1: every metric reading of a
+    member computed in one pass)."""
+    import contextlib
+    import io
+    import tempfile
+
+    from pipeline.config import CONF_DIR
+    from pipeline.studies.multiverse import load_space, run_multiverse
+
+    with tempfile.TemporaryDirectory() as tmp, contextlib.redirect_stdout(io.StringIO()):
+        start = time.perf_counter()
+        run_multiverse(load_space(CONF_DIR / "multiverse" / "quick.yaml"), Path(tmp),
+                       log=lambda message: None)
+        wall = time.perf_counter() - start
+        space = json.loads((Path(tmp) / "space.json").read_text())
+    return {"multiverse_member_reads_per_member": space["member_reads_per_member"],
+            "quick_multiverse_wall_s": wall}
 
 
 def bench_pipeline(family_size: int, compile_family_size: int = 40) -> dict:
@@ -417,7 +491,10 @@ def summarize(lateral: pd.DataFrame, peers: pd.DataFrame, kinematic: pd.DataFram
                       "1 obstacle)", "step_over_sparse_floor": "<= 0.5 (default backend)",
                       "step_over_sparse_floor_daqp": "<= 0.25",
                       "outside_qp_over_qp": "<= 1.0", "compiles_per_family": "1 (40 members, 2 workers)",
-                      "family_scenarios_per_s": ">= 20 (200 members, 2 workers)"},
+                      "family_scenarios_per_s": ">= 20 (200 members, 2 workers)",
+                      "family_member_over_sparse_floor": "<= 1.0 (default backend)",
+                      "family_member_over_sparse_floor_daqp": "<= 0.6",
+                      "multiverse_member_reads_per_member": "1 (at most)"},
             "closed_loop": closed_loop,
             "lateral": table, "peers": peer_rows,
             "kinematic": stats(kinematic["kinematic_step_s"]),
@@ -457,6 +534,16 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--quick", action="store_true", help="N=10 and 1 obstacle only")
     parser.add_argument("--family-size", type=int, default=200)
     args = parser.parse_args(argv)
+    from threadpoolctl import threadpool_limits
+
+    # the whole benchmark on one BLAS thread, as the closed loop runs (simulate sets it too);
+    # OpenBLAS's idle threads would otherwise spin and inflate every CPU time
+    with threadpool_limits(limits=1, user_api="blas"):
+        return _run(args)
+
+
+def _run(args) -> int:
+    """The benchmark proper (see :func:`main`)."""
     horizons = (10,) if args.quick else (10, 20, 30, 50)
     counts = (1,) if args.quick else (1, 3, 5)
     lateral = pd.DataFrame(bench_lateral(horizons, counts, args.steps, args.repeats))
@@ -468,6 +555,13 @@ def main(argv: list[str] | None = None) -> int:
                                       8 if args.quick else 40)
     summary = summarize(lateral, peers, kinematic, pipeline_figures, closed_loop)
     summary["closed_loop_daqp"] = closed_loop_daqp
+    member = bench_family_member(n_members=4 if args.quick else 8)
+    member_daqp = bench_family_member("daqp", n_members=4 if args.quick else 8)
+    summary["family_member"] = {"default": member, "daqp": member_daqp}
+    summary["family_member_over_sparse_floor"] = member["family_member_over_sparse_floor"]
+    summary["family_member_over_sparse_floor_daqp"] = \
+        member_daqp["family_member_over_sparse_floor"]
+    summary.update(bench_multiverse_reads())
     summary["outside_qp_over_qp"] = closed_loop["outside_qp_us_per_step"] \
         / closed_loop["qp_us_per_step"]
     args.out.mkdir(parents=True, exist_ok=True)
@@ -482,7 +576,9 @@ def main(argv: list[str] | None = None) -> int:
         "step_over_sparse_floor_daqp", "step_over_sparse_floor_dense",
         "step_over_sparse_floor_cpu", "outside_qp_us_per_step",
         "qp_us_per_step", "outside_qp_over_qp", "compiles_per_family",
-        "family_scenarios_per_s")}, indent=1))
+        "family_scenarios_per_s", "family_member_over_sparse_floor",
+        "family_member_over_sparse_floor_daqp", "multiverse_member_reads_per_member")},
+        indent=1))
     print(json.dumps({"lateral_N10_1obs": summary["lateral"][0], "peers": summary["peers"],
                       "pipeline": pipeline_figures, "n50_over_n10": summary["n50_over_n10_direct"]},
                      indent=1))

@@ -25,6 +25,7 @@ variables); its parameters are the weighted prediction rows and the half-planes 
 from __future__ import annotations
 
 from dataclasses import dataclass
+from math import isfinite
 
 import cvxpy as cp
 import numpy as np
@@ -123,20 +124,49 @@ COST_STATES = (0, 2, 3, 4)
 
 @dataclass(frozen=True)
 class CondensedPrediction:
-    """Prediction over the horizon for one model: ``X_k = A^k x0 + sum A^(k-1-i) (B u_i +
-    e_i)``, with the input sequence ``u = U T`` (move blocking).
+    """Prediction over the horizon for one model, as stacked maps (built once per model, i.e.
+    per speed): ``X_k = A^k x0 + sum A^(k-1-i) (B u_i + e_i)`` with the input sequence
+    ``u = U T`` (move blocking).
+
+    Everything of the condensed QP that depends on the model alone is here, so one step's data
+    are a few matrix-vector products (:func:`condensed_data`).
 
     Attributes
     ----------
     gamma : ndarray, shape (N, 5, Nc)
         Response of each state at steps 1..N to the free moves ``U``.
+    free_map : ndarray, shape (5 N, 5)
+        ``A^k`` stacked (step-major): the free response is ``free_map @ x0`` without disturbance.
+    gamma_w, free_w_map : ndarray, shapes (4 N, Nc) and (4 N, 5)
+        The weighted cost rows (``sqrt(q)`` times y, epsi, r, delta; ordered by term, then step)
+        and their free part's map from ``x0``.
+    hessian_u : ndarray, shape (Nc, Nc)
+        ``2 (gamma_w' gamma_w + r_u T T')``, the cost's Hessian in ``U``.
+    chol : ndarray, shape (Nc, Nc)
+        Upper-triangular ``R`` with ``R' R = hessian_u / 2`` (the cost as ``|R U + r|^2``).
+    chol_rhs_map : ndarray, shape (Nc, 4 N)
+        ``R^-T gamma_w'``: ``r = chol_rhs_map @ free_w``.
+    gradient_map : ndarray, shape (Nc, 4 N)
+        ``2 gamma_w'``: the cost's gradient in ``U`` is ``gradient_map @ free_w``.
     """
 
     model: LateralModel
     gamma: np.ndarray
+    free_map: np.ndarray
+    gamma_w: np.ndarray
+    free_w_map: np.ndarray
+    root_weights: np.ndarray
+    hessian_u: np.ndarray
+    chol: np.ndarray
+    chol_rhs_map: np.ndarray
+    gradient_map: np.ndarray
 
     @classmethod
-    def of(cls, model: LateralModel, blocking: np.ndarray) -> "CondensedPrediction":
+    def of(cls, model: LateralModel, blocking: np.ndarray,
+           weights: tuple = (1.0, 1.0, 1.0, 1.0, 0.0)) -> "CondensedPrediction":
+        """Build the maps of ``model``; ``weights`` starts ``(q_y, q_psi, q_r, q_d, r_u)``."""
+        from scipy.linalg import cholesky, solve_triangular
+
         Ad, Bd = model.Ad, model.Bd[:, 0]
         nc, n = blocking.shape
         # response of x_k to a unit input at step i (k > i): A^(k-1-i) B
@@ -149,7 +179,27 @@ class CondensedPrediction:
         for k in range(1, n + 1):
             for i in range(k):
                 psi[k - 1, :, i] = impulse[k - 1 - i]
-        return cls(model, psi @ blocking.T)
+        gamma = psi @ blocking.T
+        powers = np.zeros((n, 5, 5))
+        power = np.eye(5)
+        for k in range(n):
+            power = Ad @ power
+            powers[k] = power
+        root = np.sqrt(np.asarray(weights[:4], float))
+        # rows ordered by cost term, then step: [y_1..y_N, epsi_1.., r_1.., delta_1..]
+        gamma_w = (root[:, None, None] * gamma[:, COST_STATES, :].transpose(1, 0, 2)
+                   ).reshape(-1, nc)
+        free_w_map = (root[:, None, None] * powers[:, COST_STATES, :].transpose(1, 0, 2)
+                      ).reshape(-1, 5)
+        half_hessian = gamma_w.T @ gamma_w + float(weights[4]) * blocking @ blocking.T
+        chol = cholesky(half_hessian, lower=False)
+        chol_rhs_map = solve_triangular(chol, gamma_w.T, trans="T", lower=False)
+        # Fortran order: OpenBLAS multithreads a row-major gemv even this small, and its idle
+        # threads then spin on the other core (measured: 2x the CPU time of the product)
+        fortran = np.asfortranarray
+        return cls(model, gamma, fortran(powers.reshape(-1, 5)), fortran(gamma_w),
+                   fortran(free_w_map), root, 2.0 * half_hessian, chol, fortran(chol_rhs_map),
+                   fortran(2.0 * gamma_w.T))
 
     def free_response(self, x0: np.ndarray, disturbance: np.ndarray) -> np.ndarray:
         """States at steps 1..N with ``U = 0`` (shape (N, 5)); ``disturbance`` is (5, N)."""
@@ -163,33 +213,37 @@ class CondensedPrediction:
 
 
 def build_condensed_lateral_problem(s: LateralQpStructure) -> tuple[cp.Problem, list, dict]:
-    """The same lateral QP with the states eliminated (see the module docstring)."""
+    """The same lateral QP with the states eliminated (see the module docstring).
+
+    The tracking cost ``|gamma_w U + free_w|^2 + r_u |U T|^2`` is stated through its Cholesky
+    factor as ``|R U + r|^2`` (equal up to a constant: the same minimizer), so CVXPY's
+    canonicalization adds ``Nc`` auxiliary variables instead of ``4 N``.
+    """
     N, Nc, M = s.horizon, s.control_horizon, s.max_obstacles
-    q_y, q_psi, q_r, q_d, r_u, w1, w2 = s.weights
-    blocking = blocking_matrix(N, Nc, s.input_hold)
-    gamma_w = cp.Parameter((4 * N, Nc), name="weighted_gamma")
-    free_w = cp.Parameter(4 * N, name="weighted_free_error")
+    w1, w2 = s.weights[5], s.weights[6]
+    chol = cp.Parameter((Nc, Nc), name="cost_cholesky")
+    chol_rhs = cp.Parameter(Nc, name="cost_cholesky_rhs")
     gamma_d = cp.Parameter((N, Nc), name="steering_gamma")
     free_d = cp.Parameter(N, name="steering_free")
     gamma_h = cp.Parameter((N * M, Nc), name="halfplane_gamma")
     bound_h = cp.Parameter(N * M, name="halfplane_free_bound")
     U = cp.Variable(Nc, name="U")
     S = cp.Variable(N * M, nonneg=True, name="slack")
-    cost = (cp.sum_squares(gamma_w @ U + free_w) + r_u * cp.sum_squares(U @ blocking)
-            + w1 * cp.sum(S) + w2 * cp.sum_squares(S))
+    cost = cp.sum_squares(chol @ U + chol_rhs) + w1 * cp.sum(S) + w2 * cp.sum_squares(S)
     constraints = [cp.abs(U) <= s.steering_rate_max_rad_s,
                    cp.abs(gamma_d @ U + free_d) <= s.steering_max_rad,
                    gamma_h @ U + S >= bound_h]
     problem = cp.Problem(cp.Minimize(cost), constraints)
     if not problem.is_dcp(dpp=True):
         raise RuntimeError("condensed lateral MPC is not DPP; it would recompile every step")
-    return problem, [gamma_w, free_w, gamma_d, free_d, gamma_h, bound_h], {"U": U}
+    return problem, [chol, chol_rhs, gamma_d, free_d, gamma_h, bound_h], {"U": U}
 
 
 @dataclass(frozen=True)
 class CondensedData:
     """One step's condensed QP data (the parameters of
-    :func:`build_condensed_lateral_problem`) and the free response they came from."""
+    :func:`build_condensed_lateral_problem`, and the cost's ``gamma_w``, ``free_w`` they come
+    from) and the free response."""
 
     gamma_w: np.ndarray     # (4N, Nc) weighted responses of y, epsi, r, delta to U
     free_w: np.ndarray      # (4N,) weighted free errors
@@ -198,95 +252,113 @@ class CondensedData:
     gamma_h: np.ndarray     # (N M, Nc) half-plane rows folded onto U
     bound_h: np.ndarray     # (N M,) their bounds
     free: np.ndarray        # (N, 5) free response
+    hessian_u: np.ndarray   # (Nc, Nc) 2 (gamma_w' gamma_w + r_u T T')
+    gradient_u: np.ndarray  # (Nc,) 2 gamma_w' free_w
+    chol: np.ndarray        # (Nc, Nc) R, R' R = hessian_u / 2
+    chol_rhs: np.ndarray    # (Nc,) r = R^-T gamma_w' free_w
 
     def theta(self) -> np.ndarray:
         """The parameter vector in the compiled problem's order (column-major)."""
-        return np.concatenate([self.gamma_w.ravel(order="F"), self.free_w,
+        return np.concatenate([self.chol.ravel(order="F"), self.chol_rhs,
                                self.gamma_d.ravel(order="F"), self.free_d,
                                self.gamma_h.ravel(order="F"), self.bound_h])
 
 
 def condensed_data(prediction: CondensedPrediction, inputs: "MpcInputs",
                    weights: tuple) -> CondensedData:
-    """The condensed QP's data for one step."""
-    q_y, q_psi, q_r, q_d = weights[:4]
-    disturbance = inputs.model.Ed @ inputs.disturbance_rad_s[None, :]
-    free = prediction.free_response(inputs.x0, disturbance)
+    """The condensed QP's data for one step: one product for the free response, one for the
+    weighted errors, one for the gradient (``weights`` must be those ``prediction`` was built
+    with)."""
+    n = inputs.y_ref_m.shape[0]
+    if inputs.disturbance_rad_s.any():
+        disturbance = inputs.model.Ed @ inputs.disturbance_rad_s[None, :]
+        free = prediction.free_response(inputs.x0, disturbance)
+    else:
+        free = (prediction.free_map @ inputs.x0).reshape(n, 5)
+    root = prediction.root_weights
+    target = np.zeros(4 * n)
+    target[:n] = root[0] * inputs.y_ref_m
+    target[n:2 * n] = root[1] * inputs.psi_ref_rad
+    free_w = (root[:, None] * free[:, COST_STATES].T).ravel() - target
     gamma = prediction.gamma
-    root = np.sqrt(np.array([q_y, q_psi, q_r, q_d]))
-    # rows ordered by cost term, then step: [y_1..y_N, epsi_1.., r_1.., delta_1..]
-    gamma_w = (root[:, None, None] * gamma[:, COST_STATES, :].transpose(1, 0, 2)
-               ).reshape(-1, gamma.shape[2])
-    target = np.stack([inputs.y_ref_m, inputs.psi_ref_rad, np.zeros_like(inputs.y_ref_m),
-                       np.zeros_like(inputs.y_ref_m)])
-    free_w = (root[:, None] * (free[:, COST_STATES].T - target)).ravel()
     G, h = inputs.constraint_gain, inputs.constraint_bound  # (N, M)
     # G_kj (y_free,k + gamma_y,k U) + s_kj >= h_kj, rows k-major as S is flattened (C order)
     gamma_h = (G[:, :, None] * gamma[:, 0, None, :]).reshape(-1, gamma.shape[2])
     bound_h = (h - G * free[:, 0, None]).ravel()
-    return CondensedData(gamma_w, free_w, gamma[:, 4, :], free[:, 4], gamma_h, bound_h, free)
+    return CondensedData(prediction.gamma_w, free_w, gamma[:, 4, :], free[:, 4], gamma_h,
+                         bound_h, free, prediction.hessian_u, prediction.gradient_map @ free_w,
+                         prediction.chol, prediction.chol_rhs_map @ free_w)
 
 
 class ClarabelCondensedQp:
-    """Backend ``clarabel_dense``: the condensed QP's data built in numpy (``P = 2 (gamma_w'
-    gamma_w + r_u T T')`` and the rows of :class:`DaqpCondensedQp`) and handed to a kept
+    """Backend ``clarabel_dense``: the condensed QP's data built in numpy and handed to a kept
     Clarabel solver, updated in place on a fixed sparsity pattern: the 33-variable QP itself,
-    without the auxiliary variables CVXPY's canonicalization of ``sum_squares(Gamma U + F)``
-    adds (the CVXPY statement stays the reference the tests compare with)."""
+    without the auxiliary variables of CVXPY's canonicalization (the CVXPY statement stays the
+    reference the tests compare with).
+
+    Variables ``z = [U, S]``; ``A z + s = b, s >= 0`` with rows ``U <= rate``, ``-U <= rate``,
+    ``-S <= 0``, ``gamma_d U <= dmax - free_d``, ``-gamma_d U <= dmax + free_d``,
+    ``-gamma_h U - S <= -bound_h``. Only the ``U`` columns change from step to step: their
+    values are one stacked array, column after column (CSC order).
+    """
 
     def __init__(self, structure: LateralQpStructure, max_iter: int) -> None:
         import scipy.sparse as sparse
 
-        self.daqp = DaqpCondensedQp(structure, max_iter)
-        self.max_iter = int(max_iter)
-        self._solver = None
+        self.s, self.max_iter, self._solver = structure, int(max_iter), None
         N, Nc, M = structure.horizon, structure.control_horizon, structure.max_obstacles
         n_u, n_s = Nc, N * M
-        self.n_u, self.n_s, self.N, n = n_u, n_s, N, n_u + n_s
-        # the pattern: dense blocks where data live, diagonals for the identities
+        self.n_u, self.n_s, self.N = n_u, n_s, N
         rows = 2 * n_u + n_s + 2 * N + n_s
-        mask = np.zeros((rows, n), bool)
-        mask[np.arange(n_u), np.arange(n_u)] = True
-        mask[n_u + np.arange(n_u), np.arange(n_u)] = True
-        mask[2 * n_u + np.arange(n_s), n_u + np.arange(n_s)] = True
         r = 2 * n_u + n_s
-        mask[r:r + 2 * N, :n_u] = True
-        mask[r + 2 * N:, :n_u] = True
-        mask[r + 2 * N + np.arange(n_s), n_u + np.arange(n_s)] = True
-        a_pattern = sparse.csc_matrix(mask.astype(float))
-        a_pattern.sort_indices()
-        cols = np.repeat(np.arange(n), np.diff(a_pattern.indptr))
-        self.a_index = (a_pattern.indices, cols)
-        self.a_structure = (a_pattern.indices.copy(), a_pattern.indptr.copy(), mask.shape)
-        p_mask = np.zeros((n, n), bool)
-        p_mask[:n_u, :n_u] = np.triu(np.ones((n_u, n_u), bool))
-        p_mask[n_u + np.arange(n_s), n_u + np.arange(n_s)] = True
-        p_pattern = sparse.csc_matrix(p_mask.astype(float))
-        p_pattern.sort_indices()
-        self.p_index = (p_pattern.indices, np.repeat(np.arange(n), np.diff(p_pattern.indptr)))
-        self.p_structure = (p_pattern.indices.copy(), p_pattern.indptr.copy(), (n, n))
+        # U columns: the two rate rows, then every steering and half-plane row
+        u_rows = [np.concatenate([[j, n_u + j], np.arange(r, rows)]) for j in range(n_u)]
+        s_rows = [np.array([2 * n_u + i, r + 2 * N + i]) for i in range(n_s)]
+        indices = np.concatenate(u_rows + s_rows)
+        indptr = np.concatenate([[0], np.cumsum([a.size for a in u_rows + s_rows])])
+        self.a_structure = (indices, indptr, (rows, n_u + n_s))
+        self._a_values = np.full(indices.size, -1.0)  # slack columns: -1, -1
+        self._u_block = np.empty((n_u, 2 + 2 * N + n_s))
+        self._u_block[:, 0], self._u_block[:, 1] = 1.0, -1.0
+        self._u_size = self._u_block.size
+        upper = np.triu_indices(n_u)
+        order = np.lexsort((upper[0], upper[1]))
+        self._p_upper = (upper[0][order], upper[1][order])
+        p_idx = np.concatenate([self._p_upper[0], n_u + np.arange(n_s)])
+        p_ptr = np.concatenate([[0], np.cumsum(np.arange(1, n_u + 1)), n_u * (n_u + 1) // 2
+                                + np.arange(1, n_s + 1)])
+        self.p_structure = (p_idx, p_ptr, (n_u + n_s, n_u + n_s))
+        self._p_values = np.full(p_idx.size, 2.0 * structure.weights[6])
+        self._q = np.full(n_u + n_s, float(structure.weights[5]))
+        rate, dmax = structure.steering_rate_max_rad_s, structure.steering_max_rad
+        self._b = np.zeros(rows)
+        self._b[:2 * n_u] = rate
+        self._dmax = dmax
+        self._sparse = sparse
 
     def _data(self, data: CondensedData):
-        """Dense ``P``, ``q``, ``A`` and ``b`` of ``A z + s = b, s >= 0``."""
-        s = self.daqp.s
-        n_u, n_s, N = self.n_u, self.n_s, self.N
-        P, q = self.daqp.cost(data)
-        A = np.zeros(self.a_structure[2])
-        A[:n_u, :n_u], A[n_u:2 * n_u, :n_u] = np.eye(n_u), -np.eye(n_u)
-        A[2 * n_u:2 * n_u + n_s, n_u:] = -np.eye(n_s)
-        r = 2 * n_u + n_s
-        A[r:r + N, :n_u], A[r + N:r + 2 * N, :n_u] = data.gamma_d, -data.gamma_d
-        A[r + 2 * N:, :n_u], A[r + 2 * N:, n_u:] = -data.gamma_h, -np.eye(n_s)
-        rate, dmax = s.steering_rate_max_rad_s, s.steering_max_rad
-        b = np.concatenate([np.full(2 * n_u, rate), np.zeros(n_s), dmax - data.free_d,
-                            dmax + data.free_d, -data.bound_h])
-        return P[self.p_index], q, A[self.a_index], b
+        """Values of ``P`` (upper triangle) and ``A`` on their fixed patterns, ``q`` and ``b``."""
+        n_u, N, r = self.n_u, self.N, 2 * self.n_u + self.n_s
+        p_values = self._p_values
+        p_values[:n_u * (n_u + 1) // 2] = data.hessian_u[self._p_upper]
+        q = self._q
+        q[:n_u] = data.gradient_u
+        block = self._u_block
+        block[:, 2:2 + N] = data.gamma_d.T
+        block[:, 2 + N:2 + 2 * N] = -data.gamma_d.T
+        block[:, 2 + 2 * N:] = -data.gamma_h.T
+        a_values = self._a_values
+        a_values[:self._u_size] = block.ravel()
+        b = self._b
+        b[r:r + N] = self._dmax - data.free_d
+        b[r + N:r + 2 * N] = self._dmax + data.free_d
+        b[r + 2 * N:] = -data.bound_h
+        return p_values, q, a_values, b
 
     def solve(self, data: CondensedData) -> QpSolution:
         import time
 
         import clarabel
-        import scipy.sparse as sparse
 
         from pipeline.loop.controller.qp import CLARABEL_STATUS, SOLVER_ERRORS, clarabel_settings
 
@@ -297,11 +369,12 @@ class ClarabelCondensedQp:
             return QpSolution(NON_FINITE_DATA, -1, time.perf_counter() - start, None)
         try:
             if self._solver is None:
+                csc = self._sparse.csc_matrix
                 p_idx, p_ptr, p_shape = self.p_structure
                 a_idx, a_ptr, a_shape = self.a_structure
                 self._solver = clarabel.DefaultSolver(
-                    sparse.csc_matrix((p_values, p_idx, p_ptr), shape=p_shape), q,
-                    sparse.csc_matrix((a_values, a_idx, a_ptr), shape=a_shape), b,
+                    csc((p_values, p_idx, p_ptr), shape=p_shape), q,
+                    csc((a_values, a_idx, a_ptr), shape=a_shape), b,
                     [clarabel.NonnegativeConeT(a_shape[0])], clarabel_settings(self.max_iter))
             else:
                 self._solver.update(P=p_values, q=q, A=a_values, b=b)
@@ -332,20 +405,31 @@ class DaqpCondensedQp:
     def __init__(self, structure: LateralQpStructure, max_iter: int) -> None:
         self.s = structure
         N, Nc, M = structure.horizon, structure.control_horizon, structure.max_obstacles
-        self.n_u, self.n_s = Nc, N * M
-        blocking = blocking_matrix(N, Nc, structure.input_hold)
-        self.input_hessian = structure.weights[4] * blocking @ blocking.T
+        self.n_u, self.n_s, self.N = Nc, N * M, N
+        n = Nc + N * M
         self.max_iter = int(max_iter)
+        w1, w2 = structure.weights[5], structure.weights[6]
+        self._H = 2.0 * w2 * np.eye(n)
+        self._f = np.full(n, float(w1))
+        self._A = np.zeros((N + N * M, n))
+        self._A[N:, Nc:] = np.eye(N * M)
+        rate, dmax = structure.steering_rate_max_rad_s, structure.steering_max_rad
+        self._dmax = dmax
+        self._upper = np.concatenate([np.full(Nc, rate), np.full(N * M, 1e30), np.zeros(N),
+                                      np.full(N * M, 1e30)])
+        self._lower = np.concatenate([np.full(Nc, -rate), np.zeros(N * M), np.zeros(N),
+                                      np.zeros(N * M)])
+        self._sense = np.zeros(self._upper.size, np.intc)
+        self._model = None        # daqp.Model, set up on the first solve
+        self._hessian_of = None   # the hessian_u array the workspace holds (one per speed)
 
     def cost(self, data: CondensedData) -> tuple[np.ndarray, np.ndarray]:
-        """``H`` and ``f`` of the cost ``0.5 z' H z + f' z`` over ``z = [U, S]`` (shared with
-        :class:`ClarabelCondensedQp`, whose ``P`` is the same ``H``)."""
-        n_u, n_s = self.n_u, self.n_s
-        w1, w2 = self.s.weights[5], self.s.weights[6]
-        H = np.zeros((n_u + n_s, n_u + n_s))
-        H[:n_u, :n_u] = 2.0 * (data.gamma_w.T @ data.gamma_w + self.input_hessian)
-        H[n_u:, n_u:] = 2.0 * w2 * np.eye(n_s)
-        f = np.concatenate([2.0 * data.gamma_w.T @ data.free_w, np.full(n_s, w1)])
+        """``H`` and ``f`` of the cost ``0.5 z' H z + f' z`` over ``z = [U, S]`` (the same ``H``
+        as :class:`ClarabelCondensedQp`'s ``P``)."""
+        n_u = self.n_u
+        H, f = self._H, self._f
+        H[:n_u, :n_u] = data.hessian_u
+        f[:n_u] = data.gradient_u
         return H, f
 
     def solve(self, data: CondensedData) -> QpSolution:
@@ -354,23 +438,31 @@ class DaqpCondensedQp:
         import daqp
 
         start = time.perf_counter()
-        n_u, n_s = self.n_u, self.n_s
-        n = n_u + n_s
+        n_u, n_s, N = self.n_u, self.n_s, self.N
         H, f = self.cost(data)
-        A = np.zeros((data.gamma_d.shape[0] + n_s, n))
-        A[:data.gamma_d.shape[0], :n_u] = data.gamma_d
-        A[data.gamma_d.shape[0]:, :n_u] = data.gamma_h
-        A[data.gamma_d.shape[0]:, n_u:] = np.eye(n_s)
-        rate, dmax = self.s.steering_rate_max_rad_s, self.s.steering_max_rad
-        upper = np.concatenate([np.full(n_u, rate), np.full(n_s, 1e30), dmax - data.free_d,
-                                np.full(n_s, 1e30)])
-        lower = np.concatenate([np.full(n_u, -rate), np.zeros(n_s), -dmax - data.free_d,
-                                data.bound_h])
-        if not (np.isfinite(H).all() and np.isfinite(f).all() and np.isfinite(A).all()
-                and np.isfinite(lower).all()):
+        A = self._A
+        A[:N, :n_u] = data.gamma_d
+        A[N:, :n_u] = data.gamma_h
+        upper, lower = self._upper, self._lower
+        base = n_u + n_s
+        upper[base:base + N] = self._dmax - data.free_d
+        lower[base:base + N] = -self._dmax - data.free_d
+        lower[base + N:] = data.bound_h
+        if not (np.isfinite(data.hessian_u).all() and np.isfinite(f).all()
+                and np.isfinite(A).all() and np.isfinite(lower).all()):
             return QpSolution(NON_FINITE_DATA, -1, time.perf_counter() - start, None)
-        x, _, exitflag, info = daqp.solve(H, f, A, upper, lower, np.zeros(upper.size, np.intc),
-                                          iter_limit=self.max_iter)
+        # a kept workspace (daqp.Model): the Hessian is sent again only when the model's speed
+        # changed it; the rest every step (the same optimum as daqp.solve, ~3x cheaper)
+        if self._model is None:
+            self._model = daqp.Model()
+            self._model.setup(H, f, A, upper, lower, self._sense)
+            self._model.settings = {"iter_limit": self.max_iter}
+        elif data.hessian_u is self._hessian_of:
+            self._model.update(f=f, A=A, bupper=upper, blower=lower)
+        else:
+            self._model.update(H=H, f=f, A=A, bupper=upper, blower=lower)
+        self._hessian_of = data.hessian_u
+        x, _, exitflag, info = self._model.solve()
         status = self.STATUS.get(int(exitflag), "solver_error")
         values = {"U": np.asarray(x[:n_u], float), "slack": np.asarray(x[n_u:], float)} \
             if status == "optimal" else None
@@ -428,7 +520,14 @@ class LateralMpc:
             self.qp, self.compile_count, self.compile_time_s = compiled_backend(
                 qp_cache, "lateral", structure, lambda: builder(structure),
                 controller.backend, controller.solver_max_iter)
-        self._predictions: dict[int, CondensedPrediction] = {}
+        # condensed predictions by model speed, shared like the models (built once per speed)
+        key = ("lateral_predictions", vehicle_key(vehicle), self.sample_time_s,
+               self.model_cfg.b2_heading_entry, self.model_cfg.speed_grid_mps,
+               controller.horizon, controller.control_horizon, controller.input_hold,
+               self.weights[:5])
+        self._predictions: dict[float, CondensedPrediction] = \
+            qp_cache.memo(key, dict) if qp_cache is not None else {}
+        self._dense = controller.backend in ("daqp", "clarabel_dense")
         self.fallback = PlanFallback(controller.horizon)
         self._steps_ahead_s = np.arange(1, controller.horizon + 1) * self.sample_time_s
         self._times_s = np.concatenate([[0.0], self._steps_ahead_s])
@@ -444,34 +543,34 @@ class LateralMpc:
 
     def prediction(self, model: LateralModel) -> CondensedPrediction:
         """The condensed prediction of ``model`` (built once per model, i.e. per speed)."""
-        key = id(model)
+        key = model.speed_mps
         entry = self._predictions.get(key)
         if entry is None or entry.model is not model:
-            entry = self._predictions[key] = CondensedPrediction.of(model, self.blocking)
+            entry = self._predictions[key] = CondensedPrediction.of(model, self.blocking,
+                                                                   self.weights[:5])
         return entry
 
     def solve(self, inputs: MpcInputs, log: dict | None = None) -> ControlStep:
         """Solve the QP for one step's data, falling back safely on any failure."""
         solution = QpSolution("not_solved", -1, 0.0, None)
-        free = None
-        if np.all(np.isfinite(inputs.x0)):
+        free = prediction = None
+        if isfinite(sum(inputs.x0.tolist())):  # inf or nan anywhere makes the sum non-finite
             if self.condensed:
-                data = condensed_data(self.prediction(inputs.model), inputs, self.weights)
+                prediction = self.prediction(inputs.model)
+                data = condensed_data(prediction, inputs, self.weights)
                 free = data.free
-                solution = self.qp.solve(
-                    data if isinstance(self.qp, (DaqpCondensedQp, ClarabelCondensedQp))
-                    else data.theta())
+                solution = self.qp.solve(data if self._dense else data.theta())
             else:
                 solution = self.qp.solve(self.parameter_vector(inputs))
         if solution.ok:
             U = np.asarray(solution.values["U"], dtype=float).reshape(-1)
             plan = U @ self.blocking
-            if np.all(np.isfinite(plan)):
+            if isfinite(sum(plan.tolist())):
                 plan = plan[None, :]
                 self.fallback.accept(plan)
                 if self.condensed:
                     # the eliminated states, for the log and the slack: X = free + Gamma U
-                    predicted = free + self.prediction(inputs.model).gamma @ U
+                    predicted = free + prediction.gamma @ U
                     states = np.concatenate([inputs.x0[:, None], predicted.T], axis=1)
                 else:
                     states = solution.values["X"]

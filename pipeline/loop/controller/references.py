@@ -3,6 +3,8 @@ stations, and the soft avoidance half-planes (one normal rule shared by both tra
 
 from __future__ import annotations
 
+from math import tan
+
 import numpy as np
 
 from pipeline.loop.settings import ControllerConfig, VehicleConfig
@@ -32,14 +34,18 @@ def lateral_reference(path_line_m: np.ndarray, stations_m: np.ndarray,
     if len(xs) < 2:
         # the rollout does not advance: hold its last lateral position
         return np.full(stations_m.shape, points[-1][1]), np.zeros(stations_m.shape)
-    xs_a, ys_a = np.asarray(xs), np.asarray(ys)
-    max_slope = np.tan(controller.heading_ref_max_rad)
-    seg_slopes = np.clip(np.diff(ys_a) / np.diff(xs_a), -max_slope, max_slope)
+    xs_a, ys_a = np.array(xs), np.array(ys)
+    max_slope = tan(controller.heading_ref_max_rad)
+    # np.minimum/np.maximum, not np.clip: the same values at a third of the call overhead
+    seg_slopes = np.minimum(np.maximum((ys_a[1:] - ys_a[:-1]) / (xs_a[1:] - xs_a[:-1]),
+                                       -max_slope), max_slope)
     end_slope = seg_slopes[-1] if controller.path_beyond_end == "extend" else 0.0
     y_ref = np.interp(stations_m, xs_a, ys_a)
-    beyond = stations_m > xs_a[-1]
-    y_ref[beyond] = ys_a[-1] + end_slope * (stations_m[beyond] - xs_a[-1])
-    idx = np.clip(np.searchsorted(xs_a, stations_m, side="right") - 1, 0, seg_slopes.size - 1)
+    beyond = stations_m > xs[-1]
+    if beyond.any():
+        y_ref[beyond] = ys[-1] + end_slope * (stations_m[beyond] - xs[-1])
+    idx = np.searchsorted(xs_a, stations_m, side="right") - 1
+    idx = np.minimum(np.maximum(idx, 0), seg_slopes.size - 1)
     slope = np.where(beyond, end_slope, seg_slopes[idx])
     return y_ref, np.arctan(slope)
 
