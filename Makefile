@@ -10,10 +10,11 @@ PYTEST_ARGS ?=
 
 SWEEP       ?= obstacle_speed
 MULTIVERSE  ?= default
+TUNE        ?= default
 export SLURM_CI_DIR ?= /tmp/slurm-ci
 LAUNCHER    ?= basic
 
-.PHONY: help install reproduce experiment report sweep verify ablation multiverse test test-slurm test-all bench clean
+.PHONY: help install reproduce experiment report sweep verify ablation multiverse tune test test-slurm test-all bench clean
 
 help:  ## list the targets
 	@grep -E '^[a-zA-Z_-]+:.*## ' $(MAKEFILE_LIST) | awk -F':.*## ' '{printf "  %-12s %s\n", $$1, $$2}'
@@ -49,6 +50,10 @@ ablation: $(STAMP)  ## which revision does what: ablations + interpretation vari
 
 multiverse: $(STAMP)  ## how robust is each verdict: the multiverse (MULTIVERSE=default|quick), then the report
 	$(PY) -m pipeline.multiverse --space $(MULTIVERSE) --out $(RUNS)/multiverse
+	$(MAKE) report
+
+tune: $(STAMP)  ## a fair fight: both methods tuned with one budget, judged on held-out scenarios (TUNE=default|quick), then the report
+	$(PY) -m pipeline.tune --space $(TUNE) --out $(RUNS)/tune
 	$(MAKE) report
 
 bench: $(STAMP)  ## benchmark the controller step vs the Clarabel floor and the peers -> reports/bench/

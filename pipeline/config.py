@@ -17,6 +17,7 @@ from typing import Any
 
 from omegaconf import MISSING
 
+from pipeline.analysis.objectives import Objective, TuneConfig
 from pipeline.analysis.settings import ClaimsConfig, MetricsConfig
 from pipeline.errors import ConfigError
 from pipeline.loop.qp_memory import MAX_HORIZON
@@ -25,7 +26,7 @@ from pipeline.loop.settings import (ControllerConfig, FamilyConfig, ModelConfig,
 from pipeline.register import INTERPRETATION_REGISTER, RegisterEntry
 from pipeline.validation import safe_name
 
-__all__ = ["CONF_DIR", "ClaimsConfig", "ConfigError", "ControllerConfig", "ExperimentConfig", "FamilyConfig",
+__all__ = ["CONF_DIR", "ClaimsConfig", "Objective", "TuneConfig", "schema_from_data", "ConfigError", "ControllerConfig", "ExperimentConfig", "FamilyConfig",
            "INTERPRETATION_REGISTER", "MAX_HORIZON", "MetricsConfig", "ModelConfig",
            "ObstacleConfig", "PlannerConfig", "RegisterEntry", "RunConfig", "ScenarioConfig",
            "VehicleConfig", "experiment_config_from_data", "register_configs", "to_experiment_config"]
@@ -60,6 +61,7 @@ class ExperimentConfig:
     metrics: MetricsConfig = field(default_factory=MetricsConfig)
     claims: ClaimsConfig = field(default_factory=ClaimsConfig)
     run: RunConfig = field(default_factory=RunConfig)
+    tune: TuneConfig = field(default_factory=TuneConfig)
 
     def __post_init__(self) -> None:
         # cross-group checks need the whole config
@@ -94,9 +96,11 @@ class ExperimentConfig:
 
     def config_hash(self) -> str:
         """Stable SHA-256 (first 16 hex digits) of what a run depends on: the resolved
-        configuration without ``claims`` (how runs are compared re-scores, never re-simulates)."""
+        configuration without ``claims`` (how runs are compared re-scores, never re-simulates)
+        and without ``tune`` (what the run returns to a tuner)."""
         data = self.to_dict()
         data.pop("claims", None)
+        data.pop("tune", None)
         text = json.dumps(data, sort_keys=True, default=str)
         return hashlib.sha256(text.encode()).hexdigest()[:16]
 
@@ -123,6 +127,13 @@ def experiment_config_from_data(data: dict) -> ExperimentConfig:
     values of the wrong shape raise :class:`ConfigError` naming the full key path.
     """
     return _build(ExperimentConfig, data, "")
+
+
+def schema_from_data(schema, data: Any, path: str = ""):
+    """An instance of the dataclass ``schema`` from a plain mapping (a settings file read outside
+    Hydra), strictly: unknown keys and wrong shapes raise :class:`ConfigError` with the full key
+    path, before any work starts; each schema's own range checks run as it is built."""
+    return _build(schema, data, path)
 
 
 def _build(schema, data: Any, path: str):

@@ -90,3 +90,11 @@ def describe_config_error(exc: BaseException) -> str | None:
         if isinstance(err, (OverrideParseException, ConfigCompositionException)):
             return "config error: " + " ".join(str(err).split())
     return None
+
+
+def study_error_line(exc: BaseException) -> str | None:
+    """The one line a study's command prints for ``exc`` before exiting 2 (a configuration
+    error, an incomplete SLURM sweep, a study that cannot go on), or None for a code error."""
+    if isinstance(exc, (ConfigError, IncompleteSweepError)):
+        return str(exc)
+    return describe_config_error(exc)

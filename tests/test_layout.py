@@ -23,7 +23,7 @@ LAYERS = (
     ("pipeline.reporting.figures",),
     ("pipeline.studies",),
     ("pipeline.reporting",),
-    ("pipeline.run", "pipeline.report", "pipeline.aggregate", "pipeline.multiverse",
+    ("pipeline.run", "pipeline.report", "pipeline.aggregate", "pipeline.multiverse", "pipeline.tune",
      "pipeline.verify", "pipeline.bench", "pipeline.score"),
 )
 #: Files a run or family folder holds (its layout belongs to the store).

@@ -317,3 +317,35 @@ def ablation_forest_figure(effects: pd.DataFrame) -> Figure:
     fig.supxlabel("median paired effect vs baseline (95 % CI); < 0 = the claimed improvement",
                   fontsize=8)
     return fig
+
+
+def pareto_front_figure(points: dict[str, np.ndarray], labels: list[str],
+                        title: str) -> Figure:
+    """The Pareto settings of each tuned method on shared axes, one panel per pair of
+    objectives (smaller is better on every axis unless its label says otherwise).
+
+    Parameters
+    ----------
+    points : dict of method -> ndarray, shape (n, k)
+        Objective values of each method's Pareto settings.
+    labels : list of str
+        The ``k`` objectives' labels.
+    """
+    k = len(labels)
+    pairs = [(a, b) for a in range(k) for b in range(a + 1, k)] or [(0, 0)]
+    fig, axes = plt.subplots(1, len(pairs), figsize=(3.4 * len(pairs), 3.3),
+                             layout="constrained", squeeze=False)
+    markers = ("o", "s", "^", "D")
+    for ax, (a, b) in zip(axes[0], pairs):
+        for n, (method, values) in enumerate(points.items()):
+            values = np.asarray(values, float).reshape(-1, k)
+            ax.scatter(values[:, a], values[:, b], s=28, marker=markers[n % len(markers)],
+                       color=method_color(method), edgecolor="k", linewidth=0.4, alpha=0.85,
+                       label=f"{method} ({len(values)})")
+        ax.set_xlabel(labels[a], fontsize=8)
+        ax.set_ylabel(labels[b], fontsize=8)
+        ax.tick_params(labelsize=7)
+        ax.grid(alpha=0.3)
+    axes[0][0].legend(fontsize=7, loc="best")
+    fig.suptitle(f"Pareto settings of each tuned method, {title}", fontsize=9)
+    return fig

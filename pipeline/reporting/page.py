@@ -339,10 +339,72 @@ def _performance_section(bench_dir: Path | None, fig_dir: Path) -> dict | None:
                 "family_scenarios_per_s")}}
 
 
+def _fair_fight_section(tune_dir: Path | None, fig_dir: Path, table_dir: Path) -> dict | None:
+    """The fair fight (``make tune``), if it was run: the budget and search spaces, per claim
+    the default verdict beside the tuned-vs-tuned verdict on held-out scenarios, the settings
+    that make each claim hold, the Pareto fronts on shared axes."""
+    import json
+    import shutil
+
+    if tune_dir is None or not (Path(tune_dir) / "summary.json").is_file():
+        return None
+    folder = Path(tune_dir)
+    reason = check(folder, "tune")
+    if reason:
+        raise ValueError(f"tuning tables not trusted: {reason}")
+    summary = json.loads((folder / "summary.json").read_text())
+    for name in ("trials.csv", "heldout.csv", "ledger_tuned.csv", "settings_outcomes.csv"):
+        shutil.copyfile(folder / name, table_dir / f"tune_{name}")
+    figures = []
+    for part, words in (("training", "training family (where the settings were tuned)"),
+                        ("heldout", "held-out family (scenarios the tuning never saw)")):
+        stem = f"pareto_fronts_{part}"
+        png = folder / "figures" / f"{stem}.png"
+        if not png.is_file():
+            continue
+        fig_dir.mkdir(parents=True, exist_ok=True)
+        for ext in ("png", "svg"):
+            if (folder / "figures" / f"{stem}.{ext}").is_file():
+                shutil.copyfile(folder / "figures" / f"{stem}.{ext}", fig_dir / f"{stem}.{ext}")
+        figures.append({"id": f"tune_{stem}", "group": "fair fight",
+                        "paths": {"png": fig_dir / f"{stem}.png", "svg": fig_dir / f"{stem}.svg"},
+                        "caption": f"Each method's Pareto settings on the {words}, every pair "
+                                   "of tuning objectives on shared axes (smaller is better).",
+                        "alt": f"Pareto fronts of the tuned methods, {part}"})
+    dominance = summary.get("dominance", {})
+    methods = summary["settings"]["methods"]
+    dom_text = []
+    for part, words in (("training", "on the training family"),
+                        ("heldout", "on the held-out family")):
+        d = dominance.get(part)
+        if d:
+            dom_text.append(f"{words}, {methods[0]}'s Pareto settings dominate "
+                            f"{d['treatment_dominates']} of {d['control_points']} of "
+                            f"{methods[1]}'s, and {methods[1]}'s dominate "
+                            f"{d['control_dominates']} of {d['treatment_points']} of "
+                            f"{methods[0]}'s")
+    rows = []
+    for c in summary["claims"]:
+        holds = c.get("holds_with_trials", [])
+        rows.append({**c, "tuned_fmt": f"{_fmt(c['tuned_estimate'])} "
+                                       f"[{_fmt(c['tuned_ci'][0])}, {_fmt(c['tuned_ci'][1])}] "
+                                       f"{_unit(c['metric'])}",
+                     "default_fmt": f"{_fmt(c['default_estimate'])} {_unit(c['metric'])}",
+                     "holds": ("trials " + ", ".join(str(t) for t in holds)) if holds
+                     else "none of the judged settings"})
+    spaces = [{"method": m, "params": [{"key": k, "range": v} for k, v in space.items()]}
+              for m, space in summary["search_spaces"].items()]
+    return {"summary": summary, "rows": rows, "figures": figures, "spaces": spaces,
+            "dominance": "; ".join(dom_text), "methods": methods,
+            "compromise": {m: ", ".join(f"{k.split('.')[-1]} = {_fmt(v) if isinstance(v, float) else v}"
+                                        for k, v in p.items())
+                           for m, p in summary["compromise"].items()}}
+
+
 def build_report(run_root: Path, out_dir: Path, command: str,
                  sweep_dirs: tuple[Path, ...] = (), bench_dir: Path | None = None,
                  multiverse_dir: Path | None = None,
-                 skipped: list[Skipped] | None = None) -> Path:
+                 skipped: list[Skipped] | None = None, tune_dir: Path | None = None) -> Path:
     """Write ``out_dir/index.html`` (plus figures/ and tables/) from the runs under ``run_root``.
 
     Parameters
@@ -393,6 +455,10 @@ def build_report(run_root: Path, out_dir: Path, command: str,
         multiverse_dir = Path(run_root) / "multiverse"
     robustness = optional(_robustness_section, multiverse_dir, fig_dir, table_dir) \
         if multiverse_dir else None
+    if tune_dir is None and (Path(run_root) / "tune" / "summary.json").is_file():
+        tune_dir = Path(run_root) / "tune"
+    fair_fight = optional(_fair_fight_section, tune_dir, fig_dir, table_dir) \
+        if tune_dir else None
     env = jinja2.Environment(loader=jinja2.PackageLoader("pipeline.reporting", "templates"),
                              autoescape=jinja2.select_autoescape(["html", "j2"]),
                              undefined=jinja2.StrictUndefined)
@@ -403,7 +469,7 @@ def build_report(run_root: Path, out_dir: Path, command: str,
         figures += performance["figures"] if performance else []
         _inline(figures, out_dir)
         page = env.get_template("report.html.j2").render(
-            paper=False, sweeps=sweeps, performance=performance, robustness=None, ablation=None, figures=figures, family=None, kinematic=None,
+            paper=False, sweeps=sweeps, performance=performance, robustness=None, fair_fight=None, ablation=None, figures=figures, family=None, kinematic=None,
             skipped=_skipped_rows(skipped, run_root), other_runs=[], run_notes=[],
             methods=[], scenario="(sweep only)", prov=provenance(command),
             register=register_rows({}), metrics_doc=_metrics_doc(), **_rules(None))
@@ -473,9 +539,11 @@ def build_report(run_root: Path, out_dir: Path, command: str,
         figures.extend(sw["figures"])
     figures += performance["figures"] if performance else []
     figures += robustness["figures"] if robustness else []
+    figures += fair_fight["figures"] if fair_fight else []
     _inline(figures, out_dir)
     page = env.get_template("report.html.j2").render(
-        paper=True, sweeps=sweeps, performance=performance, robustness=robustness, scenario=scenario, ablation=ablation, methods=order, figures=figures, metric_rows=metric_rows,
+        paper=True, sweeps=sweeps, performance=performance, robustness=robustness,
+        fair_fight=fair_fight, scenario=scenario, ablation=ablation, methods=order, figures=figures, metric_rows=metric_rows,
         timing_rows=timing_rows, claims=claims, claim_secondary=claim_secondary,
         comparisons=comparisons, family=family, kinematic=kinematic,
         register=register_rows({m: r["config"] for m, r in by_method.items()}),
@@ -488,8 +556,10 @@ def build_report(run_root: Path, out_dir: Path, command: str,
     path = out_dir / "index.html"
     write_text_atomic(path, page)
     # the answer in words, for the command line (make reproduce prints it at its end)
-    write_text_atomic(out_dir / "answer.txt",
-                      "\n".join(family["answer"]) + "\n" if family else "")
+    answer = list(family["answer"]) if family else []
+    if fair_fight:
+        answer += [c["sentence"] for c in fair_fight["rows"]]
+    write_text_atomic(out_dir / "answer.txt", "\n".join(answer) + "\n" if answer else "")
     return path
 
 
@@ -817,6 +887,8 @@ def main(argv: list[str] | None = None) -> int:
                         help="benchmark folder to add as the Performance section, if present")
     parser.add_argument("--multiverse", type=Path, default=None,
                         help="multiverse folder (default: RUNS/multiverse, if present)")
+    parser.add_argument("--tune", type=Path, default=None,
+                        help="fair-fight folder of make tune (default: RUNS/tune, if present)")
     parser.add_argument("--strict", action="store_true",
                         help="exit 1 when any folder was skipped (after writing the report)")
     parser.add_argument("--command", default=None,
@@ -826,7 +898,7 @@ def main(argv: list[str] | None = None) -> int:
     skipped: list[Skipped] = []
     try:
         path = build_report(args.runs, args.out, command, tuple(args.sweep), args.bench,
-                            args.multiverse, skipped)
+                            args.multiverse, skipped, args.tune)
     except FileNotFoundError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2

@@ -53,7 +53,7 @@ class RunCollection:
         return self.runs[0]["claims"] if self.runs else None
 
 
-EXCLUDED_SECTIONS = ("sweeps", "ablation", "interpretations", "multiverse")
+EXCLUDED_SECTIONS = ("sweeps", "ablation", "interpretations", "multiverse", "tune")
 
 
 def _flatten(config: dict, prefix: str = "") -> dict:

@@ -34,7 +34,11 @@ RUN_FILES = ("config.yaml", "model.json", "trajectory.csv", "timing.json", "metr
 FAMILY_FILES = ("family_metrics.csv", "family.json")
 MULTIVERSE_FILES = ("design.csv", "specifications.csv", "robustness.csv", "dimensions.csv",
                     "space.json")
-REQUIRED = {"run": RUN_FILES, "family": FAMILY_FILES, "multiverse": MULTIVERSE_FILES}
+#: Tables of a tuning folder (``make tune``), covered by its manifest.
+TUNE_FILES = ("trials.csv", "heldout.csv", "ledger_default.csv", "ledger_tuned.csv",
+              "settings_outcomes.csv", "summary.json")
+REQUIRED = {"run": RUN_FILES, "family": FAMILY_FILES, "multiverse": MULTIVERSE_FILES,
+            "tune": TUNE_FILES}
 MANIFEST = "manifest.json"
 SCHEMA = 1
 #: Folder names that are Hydra's or submitit's bookkeeping, never runs.
@@ -361,7 +365,7 @@ def check(folder: Path, kind: str = "run", expected_hash: str | None = None,
 
     Parameters
     ----------
-    kind : {"run", "family", "multiverse"}
+    kind : {"run", "family", "multiverse", "tune"}
     expected_hash : str, optional
         The config hash the folder must carry (resume).
     members : bool

@@ -44,7 +44,7 @@ from pipeline.store.runs import (MULTIVERSE_FILES, check, member_trajectories, r
 
 from pipeline.analysis.claims import ALL_CLAIMS, OUTCOMES, family_ledger
 from pipeline.config import CONF_DIR, ClaimsConfig, ExperimentConfig, MetricsConfig
-from pipeline.errors import ConfigError, IncompleteSweepError, describe_config_error
+from pipeline.errors import ConfigError, IncompleteSweepError, study_error_line
 
 METHODS = ("baseline", "baseline_matched", "improved")
 COMPARISONS = ("baseline", "baseline_matched")
@@ -284,7 +284,6 @@ def run_simulations(design: pd.DataFrame, space: Space, out_dir: Path, compose,
         ``simulation key -> {method: family folder}``.
     """
     from pipeline.loop.controller import QpCache
-    from pipeline.studies.experiment import run_family
 
     cache = QpCache()
     folders: dict[tuple, dict[str, Path]] = {}
@@ -303,13 +302,27 @@ def run_simulations(design: pd.DataFrame, space: Space, out_dir: Path, compose,
             folders[key][method] = folder
     log(f"{len(unique)} simulation configurations, {len(todo)} family runs to do "
         f"({3 * len(unique) - len(todo)} shared or complete)")
-    if launcher is not None and todo:
+    run_families(todo, out_dir, log, launcher, cache)
+    return folders
+
+
+def run_families(todo: list, out_dir: Path, log=print, launcher: dict | None = None,
+                 cache=None, label: str = "family runs") -> None:
+    """Run each ``(config, folder)`` family here (one after the other, each on its own joblib
+    workers, sharing ``cache``'s compilations), or as one SLURM array when ``launcher`` holds
+    ``hydra/launcher=slurm`` settings; complete families are resumed, never redone."""
+    from pipeline.loop.controller import QpCache
+    from pipeline.studies.experiment import run_family
+
+    if not todo:
+        return
+    if launcher is not None:
         _run_on_slurm(todo, launcher, out_dir, log)
-        return folders
+        return
+    cache = cache if cache is not None else QpCache()
     for n, (cfg, folder) in enumerate(todo, 1):
         run_family(cfg, folder, progress=False, qp_cache=cache)
-        log(f"family runs {n}/{len(todo)} done")
-    return folders
+        log(f"{label} {n}/{len(todo)} done")
 
 
 def _run_on_slurm(todo: list, launcher: dict, out_dir: Path, log) -> None:
@@ -533,7 +546,7 @@ def run_multiverse(space: Space, out_dir: Path, overrides: list[str] | None = No
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     untrust(out_dir)  # tables being rewritten: not trusted until the manifest is written last
-    compose, launcher = _composer(list(overrides or []))
+    compose, launcher = composer(list(overrides or []))
     # the default specification is the user's configuration (its analysis settings)
     base = compose(["method=improved", "scenario=family"])
     space = with_user_defaults(space, base)
@@ -582,7 +595,7 @@ def run_multiverse(space: Space, out_dir: Path, overrides: list[str] | None = No
     return robust
 
 
-def _composer(extra: list[str]):
+def composer(extra: list[str]):
     """A function composing one run's config (with ``extra`` overrides), and the SLURM
     launcher's settings when ``extra`` selects ``hydra/launcher=slurm`` (else None)."""
     from hydra import compose, initialize_config_dir
@@ -624,18 +637,8 @@ def main(argv: list[str] | None = None) -> int:
         space = load_space(path)
         robust = run_multiverse(space, args.out, args.overrides, args.jobs,
                                 log=lambda m: print(m, file=sys.stderr))
-    except ConfigError as exc:
-        print(str(exc), file=sys.stderr)
-        return 2
-    except RuntimeError as exc:
-
-        if not isinstance(exc, IncompleteSweepError):
-            raise
-        print(str(exc), file=sys.stderr)
-        return 2
-    except Exception as exc:  # noqa: BLE001 - composition errors become one line
-
-        message = describe_config_error(exc)
+    except Exception as exc:  # noqa: BLE001 - configuration errors become one line
+        message = study_error_line(exc)
         if message is None:
             raise
         print(message, file=sys.stderr)
