@@ -14,7 +14,7 @@ TUNE        ?= default
 export SLURM_CI_DIR ?= /tmp/slurm-ci
 LAUNCHER    ?= basic
 
-.PHONY: help install reproduce experiment report sweep verify ablation multiverse tune test test-slurm test-all bench clean
+.PHONY: help install reproduce experiment report sweep verify ablation multiverse tune nmpc-check test test-slurm test-all bench clean
 
 help:  ## list the targets
 	@grep -E '^[a-zA-Z_-]+:.*## ' $(MAKEFILE_LIST) | awk -F':.*## ' '{printf "  %-12s %s\n", $$1, $$2}'
@@ -54,6 +54,10 @@ multiverse: $(STAMP)  ## how robust is each verdict: the multiverse (MULTIVERSE=
 
 tune: $(STAMP)  ## a fair fight: both methods tuned with one budget, judged on held-out scenarios (TUNE=default|quick), then the report
 	$(PY) -m pipeline.tune --space $(TUNE) --out $(RUNS)/tune
+	$(MAKE) report
+
+nmpc-check: $(STAMP)  ## the Appendix-A track: LTV-QP against the nonlinear MPC (CasADi) on the paper scenario and 50 family members, then the report
+	$(PY) -m pipeline.nmpc_check --out $(RUNS)/nmpc_check
 	$(MAKE) report
 
 bench: $(STAMP)  ## benchmark the controller step vs the Clarabel floor and the peers -> reports/bench/

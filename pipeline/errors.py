@@ -39,6 +39,11 @@ class NonFiniteResultError(ValueError):
     is not written). The message names the file (stage) and the key."""
 
 
+class StudyError(RuntimeError):
+    """A study that cannot go on, for a reason its message states (e.g. a tuning in which no
+    setting was safe enough)."""
+
+
 class IncompleteSweepError(RuntimeError):
     """Some tasks of a sweep did not finish; the message lists them and how to resume."""
 
@@ -97,4 +102,21 @@ def study_error_line(exc: BaseException) -> str | None:
     error, an incomplete SLURM sweep, a study that cannot go on), or None for a code error."""
     if isinstance(exc, (ConfigError, IncompleteSweepError)):
         return str(exc)
+    if isinstance(exc, StudyError):
+        return f"error: {exc}"
     return describe_config_error(exc)
+
+
+def run_study(call):
+    """``(0, call())``, or ``(2, None)`` after printing :func:`study_error_line`'s one line for
+    a configuration error; code errors propagate with their traceback."""
+    import sys
+
+    try:
+        return 0, call()
+    except Exception as exc:  # noqa: BLE001 - configuration errors become one line
+        message = study_error_line(exc)
+        if message is None:
+            raise
+        print(message, file=sys.stderr)
+        return 2, None

@@ -166,4 +166,28 @@ INTERPRETATION_REGISTER: tuple[RegisterEntry, ...] = (
         "130 steps: at 3 m/s a 100-step run ends at the goal line before the vehicle can settle; "
         "the run stops early once the goal line is reached",
         "100 (literal)", "scenario.n_steps"),
+    RegisterEntry(
+        "Which figure shows which method", "Table 2 labels its columns 'First Graph "
+        "(Improved)' and 'Second Graph (Original)', while the text says Figure 2 is the existing "
+        "method and Figure 3 the improved one",
+        "the text: Figure 2 = baseline (ref. [18]), Figure 3 = improved; Table 2's column labels "
+        "are read as swapped", "the column labels (Figure 2 = improved)", "(none: naming only)"),
+    RegisterEntry(
+        "The Appendix-A controller", "MATLAB nlmpc (fmincon on the nonlinear kinematic model)",
+        "an LTV-QP linearized about the previous plan once per step (fast; its agreement with "
+        "the nonlinear program is measured by make nmpc-check)",
+        "nmpc: the nonlinear program itself (CasADi + IPOPT, single shooting on the Euler "
+        "model)", "controller.backend"),
+    RegisterEntry(
+        "The baseline's reference on the Appendix-A track",
+        "p(k+1) = p(k) + alpha F_total (Section 2, printed without normalization) while ref. "
+        "[18] normalizes; nlmpcmove receives the APF's positions row by row",
+        "literal: normalized 0.1 m steps, row k for predicted step k (the baseline then crawls "
+        "at about 0.83 m/s and never comes within 4.49 m of the obstacle on the paper scenario)",
+        "the printed formula (planner.normalize_step=false: meets the obstacle, 0.17 m, with "
+        "+-0.4 rad chattering steering, jerk RMS 45 m/s^3); a path-indexed reference at the "
+        "planned speed (controller.reference_alignment=path_speed, Section 3.1: 0.06 m); "
+        "shifted rows (2.99 m); a normalized 0.3 m step (collides). The default is kept until "
+        "the paper's figure descriptions are measured as features (issue 24)",
+        "planner.normalize_step, planner.step_size, controller.reference_alignment"),
 )

@@ -8,8 +8,8 @@ import sys
 from pathlib import Path
 
 from pipeline.config import CONF_DIR
-from pipeline.errors import study_error_line
-from pipeline.studies.tune import NoFeasibleSettingError, load_tune_space, run_tuning
+from pipeline.errors import run_study
+from pipeline.studies.tune import load_tune_space, run_tuning
 
 __all__ = ["main", "run_tuning"]
 
@@ -27,18 +27,10 @@ def main(argv: list[str] | None = None) -> int:
     if not path.suffix:
         path = CONF_DIR / "tune" / f"{args.space}.yaml"
     log = (lambda message: print(message, file=sys.stderr, flush=True))
-    try:
-        space = load_tune_space(path)
-        summary = run_tuning(space, args.out, args.overrides, log=log)
-    except NoFeasibleSettingError as exc:
-        print(f"error: {exc}", file=sys.stderr)
-        return 2
-    except Exception as exc:  # noqa: BLE001 - configuration errors become one line
-        message = study_error_line(exc)
-        if message is None:
-            raise
-        print(message, file=sys.stderr)
-        return 2
+    code, summary = run_study(lambda: run_tuning(load_tune_space(path), args.out,
+                                                 args.overrides, log=log))
+    if code:
+        return code
     for claim in summary["claims"]:
         print(claim["sentence"])
     print(f"tuning written to {Path(args.out).resolve()}")

@@ -165,7 +165,11 @@ class ControllerConfig:
     def __post_init__(self) -> None:
         choice("controller.kind", self.kind, ("mpc", "pure_pursuit", "kinematic_mpc"))
         choice("controller.backend", self.backend,
-               ("cvxpy", "clarabel_direct", "clarabel_dense", "daqp"))
+               ("cvxpy", "clarabel_direct", "clarabel_dense", "daqp", "nmpc"))
+        if self.backend == "nmpc" and self.kind != "kinematic_mpc":
+            raise ConfigError("controller.backend", self.backend,
+                              "nmpc only with controller.kind=kinematic_mpc (the Appendix-A "
+                              "track: experiment=kinematic); the lateral MPC is a QP")
         choice("controller.formulation", self.formulation, ("condensed", "sparse"))
         if self.backend in ("daqp", "clarabel_dense") and (
                 self.kind != "mpc" or self.formulation != "condensed"):
@@ -185,7 +189,7 @@ class ControllerConfig:
             raise ConfigError("controller.ltv_iterations", self.ltv_iterations,
                               "an integer in [1, 50]")
         choice("controller.reference_alignment", self.reference_alignment,
-                ("literal", "shifted"))
+                ("literal", "shifted", "path_speed"))
         at_least("controller.lookahead_min_m", self.lookahead_min_m, 0.0, inclusive=False)
         at_least("controller.lookahead_time_s", self.lookahead_time_s, 0.0)
         for key in ("horizon", "control_horizon", "max_obstacles", "solver_max_iter"):

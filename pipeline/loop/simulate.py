@@ -240,8 +240,10 @@ def _closed_loop(cfg: LoopSettings, scenario: Scenario,
             break
         visible = snapshot.only_visible()
         position = state[:2].copy()
+        # the kinematic track uses it only for reference_alignment=path_speed (Section 3.1)
         speed_ref = plan_speed(position, psi, visible, scenario.speed_mps, vehicle_radius,
-                               cfg.planner) if not kinematic else np.nan
+                               cfg.planner) if not kinematic \
+            or cfg.controller.reference_alignment == "path_speed" else np.nan
         rollout = apf_rollout(position, scenario.goal_m, visible, cfg.planner, N, ts,
                               plant.velocity(state))
         observation = Observation(time_s, state, frame, np.array([along, lateral]), e_psi,

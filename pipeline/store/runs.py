@@ -193,6 +193,20 @@ def write_json_atomic(path: Path, data: dict) -> None:
     write_text_atomic(path, json.dumps(data, indent=2, sort_keys=True, allow_nan=False) + "\n")
 
 
+def json_safe(value):
+    """A copy of nested dicts and lists with NaN and infinities as None (what a study's
+    summary.json may hold where a number is undefined)."""
+    import math
+
+    if isinstance(value, dict):
+        return {k: json_safe(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [json_safe(v) for v in value]
+    if isinstance(value, float) and not math.isfinite(value):
+        return None
+    return value
+
+
 def write_csv_atomic(path: Path, frame: pd.DataFrame) -> None:
     # fixed float format so identical runs give byte-identical files
     write_text_atomic(path, csv_text(frame))

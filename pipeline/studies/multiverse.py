@@ -44,7 +44,7 @@ from pipeline.store.runs import (MULTIVERSE_FILES, check, member_trajectories, r
 
 from pipeline.analysis.claims import ALL_CLAIMS, OUTCOMES, family_ledger
 from pipeline.config import CONF_DIR, ClaimsConfig, ExperimentConfig, MetricsConfig
-from pipeline.errors import ConfigError, IncompleteSweepError, study_error_line
+from pipeline.errors import ConfigError, IncompleteSweepError, run_study
 
 METHODS = ("baseline", "baseline_matched", "improved")
 COMPARISONS = ("baseline", "baseline_matched")
@@ -633,16 +633,11 @@ def main(argv: list[str] | None = None) -> int:
     path = Path(args.space)
     if not path.suffix:
         path = CONF_DIR / "multiverse" / f"{args.space}.yaml"
-    try:
-        space = load_space(path)
-        robust = run_multiverse(space, args.out, args.overrides, args.jobs,
-                                log=lambda m: print(m, file=sys.stderr))
-    except Exception as exc:  # noqa: BLE001 - configuration errors become one line
-        message = study_error_line(exc)
-        if message is None:
-            raise
-        print(message, file=sys.stderr)
-        return 2
+    code, robust = run_study(lambda: run_multiverse(
+        load_space(path), args.out, args.overrides, args.jobs,
+        log=lambda m: print(m, file=sys.stderr)))
+    if code:
+        return code
     for r in robust.to_dict("records"):
         print(f"{r['claim']} vs {r['comparison']}: default {r['default_outcome']}, {r['label']} "
               f"({100 * r['agree_share']:.0f} % agree); most influential: "

@@ -31,7 +31,6 @@ finished families are read back, never simulated again). Families run here or, w
 from __future__ import annotations
 
 import json
-import math
 import time
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
@@ -44,9 +43,9 @@ from pipeline.analysis.claims import ALL_CLAIMS, Ledger, family_ledger
 from pipeline.analysis.objectives import Objective, objective_values
 from pipeline.analysis.tally import Tally
 from pipeline.config import CONF_DIR, schema_from_data
-from pipeline.errors import ConfigError
-from pipeline.store.runs import (TUNE_FILES, read_family, untrust, write_csv_atomic,
-                                 write_json_atomic, write_manifest)
+from pipeline.errors import ConfigError, StudyError
+from pipeline.store.runs import (TUNE_FILES, json_safe, read_family, untrust,
+                                 write_csv_atomic, write_json_atomic, write_manifest)
 from pipeline.validation import choice, safe_name
 
 #: The rule that picks one setting per method from its Pareto set.
@@ -56,7 +55,7 @@ COMPROMISE_RULE = ("closest_to_ideal: among the method's feasible Pareto setting
                    "trials (one scale for both methods)")
 
 
-class NoFeasibleSettingError(RuntimeError):
+class NoFeasibleSettingError(StudyError):
     """Every trial of a method collided more often than the untuned control."""
 
 
@@ -330,7 +329,7 @@ def run_tuning(space: TuneSpace, out_dir: Path, overrides: list[str] | None = No
     trials = trials_table(studies, space)
     chosen = pick_settings(trials, space)
     heldout, ledgers, outcomes = judge_heldout(runner, space, trials, chosen, base.claims)
-    summary = _plain(summarize(space, spaces, threshold, trials, chosen, heldout, ledgers,
+    summary = json_safe(summarize(space, spaces, threshold, trials, chosen, heldout, ledgers,
                                outcomes))
     write_csv_atomic(out_dir / "trials.csv", trials)
     write_csv_atomic(out_dir / "heldout.csv", heldout)
@@ -531,7 +530,7 @@ def summarize(space: TuneSpace, spaces: dict, threshold: int, trials: pd.DataFra
     compromise = {m: json.loads(f.loc[f["compromise"], "params"].iloc[0])
                   for m, f in chosen.items()}
     return {
-        "name": space.name, "settings": _plain(asdict(space)),
+        "name": space.name, "settings": json_safe(asdict(space)),
         "budget": {"n_trials_per_method": space.n_trials, "sampler": "NSGA-II (optuna)",
                    "sampler_seed": space.sampler_seed, "population_size": space.population_size,
                    "batch_size": space.batch_size},
@@ -549,14 +548,3 @@ def summarize(space: TuneSpace, spaces: dict, threshold: int, trials: pd.DataFra
         "dominance": {part: front_dominance(_front_points(trials, heldout, space, part), space)
                       for part in ("training", "heldout")},
         "claims": claims}
-
-
-def _plain(value):
-    """JSON-safe copy (NaN/inf as None)."""
-    if isinstance(value, dict):
-        return {k: _plain(v) for k, v in value.items()}
-    if isinstance(value, (list, tuple)):
-        return [_plain(v) for v in value]
-    if isinstance(value, float) and not math.isfinite(value):
-        return None
-    return value

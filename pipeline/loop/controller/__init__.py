@@ -6,6 +6,7 @@
 * :mod:`~pipeline.loop.controller.references`: APF path to references and half-planes;
 * :mod:`~pipeline.loop.controller.lateral`: the paper's lateral MPC;
 * :mod:`~pipeline.loop.controller.kinematic`: Appendix A's kinematic LTV-MPC;
+* :mod:`~pipeline.loop.controller.nmpc`: Appendix A's ``nlmpc`` as a nonlinear MPC (CasADi);
 * :mod:`~pipeline.loop.controller.pursuit`: the pure-pursuit peer.
 
 :func:`make_controller` picks one from the configuration.
@@ -34,6 +35,10 @@ def make_controller(cfg: LoopSettings, sample_time_s: float,
     """The controller named by ``cfg.controller.kind``, its QP taken from ``qp_cache``."""
     kind = cfg.controller.kind
     if kind == "kinematic_mpc":
+        if cfg.controller.backend == "nmpc":
+            from pipeline.loop.controller.nmpc import KinematicNmpc
+
+            return KinematicNmpc(cfg.controller, cfg.vehicle, sample_time_s, qp_cache)
         return KinematicLtvMpc(cfg.controller, cfg.vehicle, sample_time_s, qp_cache)
     if kind == "pure_pursuit":
         return PurePursuit(cfg.controller, cfg.vehicle, sample_time_s, cfg.model.speed_grid_mps)

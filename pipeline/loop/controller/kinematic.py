@@ -88,7 +88,70 @@ def build_kinematic_problem(s: KinematicQpStructure) -> tuple[cp.Problem, list, 
     return problem, [x0, u_prev, ref, c, *A, *B, Gx, Gy, h], {"X": X, "U": U}
 
 
-class KinematicLtvMpc:
+def path_at_arc_length(path_m: np.ndarray, stations_m: np.ndarray) -> np.ndarray:
+    """Points of the polyline ``path_m`` (n, 2) at arc lengths ``stations_m`` from its first
+    point, continued along its last segment beyond its end; shape (len(stations_m), 2). A path
+    that does not move gives its first point."""
+    steps = np.diff(path_m, axis=0)
+    lengths = np.hypot(steps[:, 0], steps[:, 1])
+    keep = lengths > 1e-9
+    if not keep.any():
+        return np.repeat(path_m[:1], len(stations_m), axis=0)
+    points = np.vstack([path_m[:1], path_m[1:][keep]])
+    arc = np.concatenate([[0.0], np.cumsum(lengths[keep])])
+    out = np.column_stack([np.interp(stations_m, arc, points[:, 0]),
+                           np.interp(stations_m, arc, points[:, 1])])
+    beyond = stations_m > arc[-1]
+    if beyond.any():
+        direction = (points[-1] - points[-2]) / (arc[-1] - arc[-2])
+        out[beyond] = points[-1] + (stations_m[beyond] - arc[-1])[:, None] * direction
+    return out
+
+
+class KinematicTrack:
+    """What both kinematic-track controllers share: the Euler rollout of a plan and the
+    closed-loop step (the APF's time-indexed path as ``y_ref``, as ``nlmpcmove`` receives it;
+    constant-velocity obstacle predictions). Subclasses set ``cfg``, ``vehicle``, ``ts``,
+    ``horizon``, ``u_prev``, ``_steps_ahead_s`` and provide ``solve``."""
+
+    def rollout(self, x0: np.ndarray, plan: np.ndarray) -> np.ndarray:
+        """States of the Euler model from ``x0`` under ``plan`` (2 x N), shape (4, N + 1)."""
+        states = np.zeros((4, self.horizon + 1))
+        states[:, 0] = x0
+        for k in range(self.horizon):
+            states[:, k + 1] = kinematic_euler_step(states[:, k], plan[:, k],
+                                                    self.vehicle.wheelbase_m, self.ts)
+        return states
+
+    def reference(self, obs: Observation) -> np.ndarray:
+        """The position reference for predicted steps 1..N, shape (2, N), by
+        ``controller.reference_alignment``: ``literal`` (row k of the APF path for step k, as
+        ``nlmpcmove`` receives it), ``shifted`` (row k + 1), or ``path_speed`` (Section 3.1's
+        velocity planning: the point at arc length ``V_r Ts k`` along the APF path, continued
+        along its last segment beyond its end)."""
+        N = self.horizon
+        path = obs.rollout.path_m
+        if self.cfg.reference_alignment == "path_speed":
+            return path_at_arc_length(path, obs.speed_ref_mps * self._steps_ahead_s).T
+        rows = np.arange(N) if self.cfg.reference_alignment == "literal" \
+            else np.minimum(np.arange(1, N + 1), N - 1)
+        return path[rows].T
+
+    def step(self, obs: Observation) -> ControlStep:
+        """One closed-loop step."""
+        reference = self.reference(obs)
+        predicted = obs.obstacles.predicted_positions(self._steps_ahead_s)
+        ref_line = obs.frame.to_line(reference[:, 0])
+        u_prev = self.u_prev
+        step = self.solve(obs.plant_state, u_prev, reference, predicted, obs.obstacles.radii_m,
+                          log={"y_ref_m": ref_line[1], "psi_ref_rad": np.nan})
+        step.log["steering_rate_rad_s"] = (step.command[1] - u_prev[1]) / self.ts
+        step.log["accel_mps2"] = step.command[0]
+        self.u_prev = step.command
+        return step
+
+
+class KinematicLtvMpc(KinematicTrack):
     """The kinematic LTV-MPC: one compiled QP, a kept solver, linearization passes, fallback.
 
     Parameters
@@ -112,15 +175,6 @@ class KinematicLtvMpc:
         self.fallback = PlanFallback(controller.horizon)
         self.u_prev = np.zeros(2)
         self._steps_ahead_s = np.arange(1, controller.horizon + 1) * self.ts
-
-    def rollout(self, x0: np.ndarray, plan: np.ndarray) -> np.ndarray:
-        """States of the Euler model from ``x0`` under ``plan`` (2 x N), shape (4, N + 1)."""
-        states = np.zeros((4, self.horizon + 1))
-        states[:, 0] = x0
-        for k in range(self.horizon):
-            states[:, k + 1] = kinematic_euler_step(states[:, k], plan[:, k],
-                                                    self.vehicle.wheelbase_m, self.ts)
-        return states
 
     def _linearize(self, x0: np.ndarray, plan: np.ndarray) -> tuple[np.ndarray, list, list,
                                                                      np.ndarray]:
@@ -195,20 +249,3 @@ class KinematicLtvMpc:
         return self.fallback.step(
             status, total_iters, total_time,
             lambda: np.array([float(np.clip(-speed / self.ts, a_lo, a_hi)), 0.0]), log)
-
-    def step(self, obs: Observation) -> ControlStep:
-        """One closed-loop step: the APF's time-indexed path as ``y_ref`` (as ``nlmpcmove``
-        receives it), constant-velocity obstacle predictions."""
-        N = self.horizon
-        rows = np.arange(N) if self.cfg.reference_alignment == "literal" \
-            else np.minimum(np.arange(1, N + 1), N - 1)
-        reference = obs.rollout.path_m[rows].T
-        predicted = obs.obstacles.predicted_positions(self._steps_ahead_s)
-        ref_line = obs.frame.to_line(reference[:, 0])
-        u_prev = self.u_prev
-        step = self.solve(obs.plant_state, u_prev, reference, predicted, obs.obstacles.radii_m,
-                          log={"y_ref_m": ref_line[1], "psi_ref_rad": np.nan})
-        step.log["steering_rate_rad_s"] = (step.command[1] - u_prev[1]) / self.ts
-        step.log["accel_mps2"] = step.command[0]
-        self.u_prev = step.command
-        return step
