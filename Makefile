@@ -28,9 +28,10 @@ $(STAMP): pyproject.toml constraints.txt
 install: $(STAMP)  ## create .venv and install the project with pinned versions
 
 experiment: $(STAMP)  ## run every method on the paper scenario and on the scenario family
-	rm -rf $(RUNS)/paper $(RUNS)/kinematic $(RUNS)/family  # code may have changed: no reuse here
+	rm -rf $(RUNS)/paper $(RUNS)/kinematic $(RUNS)/kinematic_readings $(RUNS)/family  # code may have changed: no reuse here
 	$(PY) -m pipeline.run experiment=paper hydra.sweep.dir=$(RUNS)/paper
 	$(PY) -m pipeline.run experiment=kinematic hydra.sweep.dir=$(RUNS)/kinematic
+	$(PY) -m pipeline.run experiment=kinematic_readings hydra.sweep.dir=$(RUNS)/kinematic_readings
 	$(PY) -m pipeline.run experiment=family hydra.sweep.dir=$(RUNS)/family scenario.family.size=$(FAMILY_SIZE)
 
 report: $(STAMP)  ## rebuild the HTML report from existing run folders (no simulation)

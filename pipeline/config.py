@@ -17,6 +17,7 @@ from typing import Any
 
 from omegaconf import MISSING
 
+from pipeline.analysis.features import FeatureConfig
 from pipeline.analysis.objectives import Objective, TuneConfig
 from pipeline.analysis.settings import ClaimsConfig, MetricsConfig
 from pipeline.errors import ConfigError
@@ -62,6 +63,7 @@ class ExperimentConfig:
     claims: ClaimsConfig = field(default_factory=ClaimsConfig)
     run: RunConfig = field(default_factory=RunConfig)
     tune: TuneConfig = field(default_factory=TuneConfig)
+    features: FeatureConfig = field(default_factory=FeatureConfig)
 
     def __post_init__(self) -> None:
         # cross-group checks need the whole config
@@ -96,11 +98,12 @@ class ExperimentConfig:
 
     def config_hash(self) -> str:
         """Stable SHA-256 (first 16 hex digits) of what a run depends on: the resolved
-        configuration without ``claims`` (how runs are compared re-scores, never re-simulates)
-        and without ``tune`` (what the run returns to a tuner)."""
+        configuration without ``claims`` (how runs are compared re-scores, never re-simulates),
+        ``tune`` (what the run returns to a tuner) and ``features`` (how runs are described)."""
         data = self.to_dict()
         data.pop("claims", None)
         data.pop("tune", None)
+        data.pop("features", None)
         text = json.dumps(data, sort_keys=True, default=str)
         return hashlib.sha256(text.encode()).hexdigest()[:16]
 

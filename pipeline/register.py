@@ -182,12 +182,14 @@ INTERPRETATION_REGISTER: tuple[RegisterEntry, ...] = (
         "The baseline's reference on the Appendix-A track",
         "p(k+1) = p(k) + alpha F_total (Section 2, printed without normalization) while ref. "
         "[18] normalizes; nlmpcmove receives the APF's positions row by row",
-        "literal: normalized 0.1 m steps, row k for predicted step k (the baseline then crawls "
-        "at about 0.83 m/s and never comes within 4.49 m of the obstacle on the paper scenario)",
-        "the printed formula (planner.normalize_step=false: meets the obstacle, 0.17 m, with "
-        "+-0.4 rad chattering steering, jerk RMS 45 m/s^3); a path-indexed reference at the "
-        "planned speed (controller.reference_alignment=path_speed, Section 3.1: 0.06 m); "
-        "shifted rows (2.99 m); a normalized 0.3 m step (collides). The default is kept until "
-        "the paper's figure descriptions are measured as features (issue 24)",
+        "the formula as printed (planner=baseline_printed: normalize_step = false), chosen by "
+        "the rule: among the readings under which both methods meet the obstacle (within "
+        "claims.comparable_clearance_m), the one whose runs match most of the paper's words "
+        "about its figures (features.*; 5 of 9 here). It meets the obstacle at 0.17 m with "
+        "+-0.4 rad chattering steering (jerk RMS 45 m/s^3)",
+        "literal (ref. [18]'s normalized 0.1 m steps, row k for step k: the baseline crawls at "
+        "about 0.83 m/s and never comes within 4.49 m of the obstacle; 3 of 9); path-indexed at "
+        "the planned speed (controller.reference_alignment=path_speed, Section 3.1: 0.06 m; 4 "
+        "of 9); shifted rows (2.99 m); a normalized 0.3 m step (collides)",
         "planner.normalize_step, planner.step_size, controller.reference_alignment"),
 )

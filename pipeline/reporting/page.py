@@ -12,6 +12,7 @@ import base64
 import datetime as dt
 import html
 import importlib.metadata
+import math
 import os
 import platform
 import subprocess
@@ -339,6 +340,82 @@ def _performance_section(bench_dir: Path | None, fig_dir: Path) -> dict | None:
                 "family_scenarios_per_s")}}
 
 
+def _features_section(lateral: dict[str, dict], kinematic_runs: list[dict], run_root: Path,
+                      clearance_m: float) -> dict | None:
+    """'Does it look like the paper?': each phrase of the paper about its figures as a
+    feature, present or absent, for baseline and improved on each track and reading; the
+    rule that picks the Appendix-A reading (both methods meet the obstacle, most phrases
+    matched) and whether the configured default is its pick."""
+    from pipeline.analysis.features import FEATURES, FeatureConfig, feature_row, paper_likeness
+    from pipeline.store.collection import load_runs
+
+    def pair(runs: list[dict]) -> dict[str, dict]:
+        return {r["metrics"].get("method"): r for r in runs
+                if r["metrics"].get("method") in ("baseline", "improved")}
+
+    columns = [("lateral track", "default", {m: lateral[m] for m in ("baseline", "improved")
+                                             if m in lateral})]
+    kin = pair(kinematic_runs)
+    if "baseline" in kin:
+        columns.append(("Appendix-A track", _reading_of(kin["baseline"]["config"])
+                        + " (default)", kin))
+    readings_root = Path(run_root) / "kinematic_readings"
+    if readings_root.is_dir():
+        found = load_runs(readings_root, [])
+        by_variant: dict[str, list] = {}
+        for r in found.runs:
+            by_variant.setdefault(r["config"]["run"].get("variant", "?"), []).append(r)
+        for variant, runs in sorted(by_variant.items()):
+            columns.append(("Appendix-A track", variant, pair(runs)))
+    columns = [c for c in columns if {"baseline", "improved"} <= set(c[2])]
+    if not columns:
+        return None
+    settings = columns[0][2]["improved"]["config"].get("features") or {}
+    cfg = FeatureConfig(**settings)
+    cells = []
+    for track, reading, runs in columns:
+        rows = {m: feature_row(runs[m]["metrics"], cfg) for m in ("baseline", "improved")}
+        met = all((runs[m]["metrics"].get("min_clearance_m") or math.inf) <= clearance_m
+                  for m in ("baseline", "improved"))
+        cells.append({"track": track, "reading": reading, "rows": rows, "met": met,
+                      "score": paper_likeness(rows["baseline"], rows["improved"])})
+    word = {True: "yes", False: "no", None: "—"}
+    table = [{"phrase": f.phrase, "describes": f.describes, "rule": f.rule,
+              "cells": [[word[c["rows"][m][f.key]] for m in ("baseline", "improved")]
+                        for c in cells]} for f in FEATURES]
+    kinematic = [c for c in cells if c["track"] == "Appendix-A track"]
+    eligible = [c for c in kinematic if c["met"]]
+    pick = max(eligible, key=lambda c: c["score"]) if eligible else None
+    default = next((c for c in kinematic if c["reading"].endswith("(default)")), None)
+    rule = ("The register's rule for the Appendix-A reading: among the readings under which "
+            "both methods meet the obstacle, the one whose runs match most of the paper's "
+            "phrases. ")
+    if pick is None:
+        rule_note = (rule + "No Appendix-A reading lets both methods meet the obstacle (within "
+                     f"{clearance_m:g} m).") if kinematic else ""
+    elif default is not None and pick["score"] == default["score"] and default["met"]:
+        rule_note = rule + ("It picks the configured default ("
+                            + default["reading"].replace(" (default)", "") + ").")
+    else:
+        rule_note = (rule + f"It picks <code>{pick['reading']}</code> ({pick['score']} of "
+                     f"{len(FEATURES)} phrases); the configured default "
+                     + (f"({default['reading']}) " if default else "") + "differs: change "
+                     "conf/experiment/kinematic.yaml.")
+    return {"columns": [{"track": c["track"], "reading": c["reading"], "score": c["score"],
+                         "met": "yes" if c["met"] else "no"} for c in cells],
+            "rows": table, "n": len(FEATURES), "rule_note": rule_note,
+            "clearance": f"{clearance_m:g}"}
+
+
+def _reading_of(baseline_config: dict) -> str:
+    """Which Appendix-A reading a kinematic baseline run was made under."""
+    alignment = baseline_config.get("controller", {}).get("reference_alignment", "literal")
+    if alignment != "literal":
+        return alignment
+    return "literal" if baseline_config.get("planner", {}).get("normalize_step", True) \
+        else "printed"
+
+
 def _nmpc_check(folder: Path) -> dict:
     """The LTV-QP against the nonlinear MPC on the kinematic track (``make nmpc-check``)."""
     import json
@@ -489,7 +566,7 @@ def build_report(run_root: Path, out_dir: Path, command: str,
         figures += performance["figures"] if performance else []
         _inline(figures, out_dir)
         page = env.get_template("report.html.j2").render(
-            paper=False, sweeps=sweeps, performance=performance, robustness=None, fair_fight=None, ablation=None, figures=figures, family=None, kinematic=None,
+            paper=False, sweeps=sweeps, performance=performance, robustness=None, fair_fight=None, looks=None, ablation=None, figures=figures, family=None, kinematic=None,
             skipped=_skipped_rows(skipped, run_root), other_runs=[], run_notes=[],
             methods=[], scenario="(sweep only)", prov=provenance(command),
             register=register_rows({}), metrics_doc=_metrics_doc(), **_rules(None))
@@ -547,6 +624,8 @@ def build_report(run_root: Path, out_dir: Path, command: str,
         kinematic["nmpc"] = optional(_nmpc_check, Path(run_root) / "nmpc_check") \
             if (Path(run_root) / "nmpc_check" / "summary.json").is_file() else None
         figures.extend(kinematic["figures"])
+    looks = _features_section(by_method, kinematic_runs, run_root,
+                              cfg_claims.comparable_clearance_m)
 
     family = None
     family_primary, family_notes = _primary_tables(family_tables, family_info)
@@ -565,7 +644,7 @@ def build_report(run_root: Path, out_dir: Path, command: str,
     _inline(figures, out_dir)
     page = env.get_template("report.html.j2").render(
         paper=True, sweeps=sweeps, performance=performance, robustness=robustness,
-        fair_fight=fair_fight, scenario=scenario, ablation=ablation, methods=order, figures=figures, metric_rows=metric_rows,
+        fair_fight=fair_fight, looks=looks, scenario=scenario, ablation=ablation, methods=order, figures=figures, metric_rows=metric_rows,
         timing_rows=timing_rows, claims=claims, claim_secondary=claim_secondary,
         comparisons=comparisons, family=family, kinematic=kinematic,
         register=register_rows({m: r["config"] for m, r in by_method.items()}),

@@ -53,7 +53,8 @@ class RunCollection:
         return self.runs[0]["claims"] if self.runs else None
 
 
-EXCLUDED_SECTIONS = ("sweeps", "ablation", "interpretations", "multiverse", "tune")
+EXCLUDED_SECTIONS = ("sweeps", "ablation", "interpretations", "multiverse", "tune",
+                     "kinematic_readings")
 
 
 def _flatten(config: dict, prefix: str = "") -> dict:

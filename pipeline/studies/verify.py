@@ -29,10 +29,12 @@ LEDGER_COLUMNS = ["claim", "comparison", "metric", "outcome", "estimate", "ci_lo
 
 def paper_metrics_table(runs_root: Path) -> pd.DataFrame:
     """One row per (track, method) on the paper scenario, from the trusted runs under
-    ``runs_root`` (family members and the sweep, ablation and multiverse sections excluded)."""
+    ``runs_root`` (family members and the study sections the report reads apart excluded:
+    sweeps, ablation, multiverse, tuning, the Appendix-A readings)."""
+    from pipeline.store.collection import EXCLUDED_SECTIONS
+
     rows = []
-    found = discover(runs_root, exclude=("sweeps", "ablation", "interpretations",
-                                         "multiverse"))
+    found = discover(runs_root, exclude=EXCLUDED_SECTIONS)
     for item in found.skipped:
         print(f"verify: skipped {item.folder}: {item.reason}", file=sys.stderr)
     for folder in found.runs:
