@@ -32,8 +32,17 @@ __all__ = ["CONF_DIR", "ClaimsConfig", "Objective", "TuneConfig", "schema_from_d
            "ObstacleConfig", "PlannerConfig", "RegisterEntry", "RunConfig", "ScenarioConfig",
            "VehicleConfig", "experiment_config_from_data", "register_configs", "to_experiment_config"]
 
-#: The Hydra config folder (``conf/``) the entry points compose from.
-CONF_DIR = Path(__file__).resolve().parent.parent / "conf"
+def _conf_dir() -> Path:
+    """``pipeline/conf`` in an installed package (the wheel ships the configs there), else the
+    repository's ``conf/`` beside the package (a checkout or an editable install)."""
+    packaged = Path(__file__).resolve().parent / "conf"
+    if (packaged / "config.yaml").is_file():
+        return packaged
+    return Path(__file__).resolve().parent.parent / "conf"
+
+
+#: The Hydra config folder the entry points compose from.
+CONF_DIR = _conf_dir()
 
 
 @dataclass

@@ -1,0 +1,91 @@
+"""What a run returns to a tuner: statistics of metrics over a family's members.
+
+``tune.objectives`` lists them (metric, statistic, direction); ``python -m pipeline.run``
+returns their values (a float for one objective, a tuple for several), so Hydra sweepers such
+as hydra-optuna-sweeper can optimize any metric of the ledger, and ``make tune`` computes the
+same values with :func:`objective_values`.
+"""
+
+from __future__ import annotations
+
+import math
+import re
+from dataclasses import dataclass, field
+from typing import List
+
+import numpy as np
+import pandas as pd
+
+from pipeline.analysis.metrics import METRIC_KEYS
+from pipeline.errors import ConfigError
+from pipeline.validation import choice
+
+#: Statistics over a family's members: mean, median, or a quantile ``q<percent>`` (q90).
+STATISTIC_PATTERN = re.compile(r"^(mean|median|q(100|[1-9]?[0-9]))$")
+
+
+@dataclass
+class Objective:
+    """One objective: ``statistic`` of ``metric`` over the members, to ``direction``.
+
+    Members without a value (e.g. no reaction to time) are left out of the statistic; when no
+    member has one, the objective is the worst value (``inf`` for minimize, ``-inf`` for
+    maximize), so a tuner never prefers a setting that shows nothing.
+    """
+
+    metric: str = "reaction_delay_s"
+    statistic: str = "mean"
+    direction: str = "minimize"
+
+    # checked by the list that holds it (TuneConfig, TuneSpace), which knows its index
+
+    def check(self, key: str) -> None:
+        """Range checks with the full key path (``tune.objectives[1]``)."""
+        if self.metric not in METRIC_KEYS:
+            raise ConfigError(f"{key}.metric", self.metric,
+                              "a metric of metrics.json (e.g. reaction_delay_s, "
+                              "lateral_jerk_rms_mps3, recovery_time_s, collision)")
+        if not isinstance(self.statistic, str) or not STATISTIC_PATTERN.match(self.statistic):
+            raise ConfigError(f"{key}.statistic", self.statistic,
+                              "mean, median or a quantile q0-q100 (e.g. q90)")
+        choice(f"{key}.direction", self.direction, ("minimize", "maximize"))
+
+    @property
+    def label(self) -> str:
+        return f"{self.statistic} {self.metric}"
+
+
+@dataclass
+class TuneConfig:
+    """``tune.*``: what ``pipeline.run`` returns (outside the run's config hash)."""
+
+    objectives: List[Objective] = field(default_factory=lambda: [Objective()])
+
+    def __post_init__(self) -> None:
+        if not self.objectives:
+            raise ConfigError("tune.objectives", [], "a list of at least one objective")
+        for i, objective in enumerate(self.objectives):
+            objective.check(f"tune.objectives[{i}]")
+
+
+def objective_value(values: np.ndarray, objective: Objective) -> float:
+    """``objective.statistic`` of the finite ``values`` (the worst value when none is)."""
+    values = np.asarray(values, dtype=float)
+    values = values[np.isfinite(values)]
+    if values.size == 0:
+        return math.inf if objective.direction == "minimize" else -math.inf
+    if objective.statistic == "mean":
+        return float(np.mean(values))
+    if objective.statistic == "median":
+        return float(np.median(values))
+    return float(np.quantile(values, int(objective.statistic[1:]) / 100.0))
+
+
+def objective_values(table: pd.DataFrame, objectives: list[Objective]) -> tuple[float, ...]:
+    """The objectives over a family table (``family_metrics.csv``; one row for one run)."""
+    out = []
+    for objective in objectives:
+        column = table[objective.metric] if objective.metric in table else pd.Series(dtype=float)
+        out.append(objective_value(pd.to_numeric(column, errors="coerce").to_numpy(float),
+                                   objective))
+    return tuple(out)

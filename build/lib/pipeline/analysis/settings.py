@@ -1,0 +1,144 @@
+"""Settings of the analysis half: metric thresholds and readings (``metrics.*``) and the rules that
+turn paired differences into verdicts (``claims.*``, outside the run hash)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Dict, Optional
+
+from pipeline.errors import ConfigError
+from pipeline.validation import at_least, between, choice
+
+
+@dataclass
+class MetricsConfig:
+    """Thresholds and readings of the Table 1 metrics (definitions: :mod:`pipeline.analysis.metrics`).
+
+    The ``*_definition``-like string switches select which reading a claim's primary metric
+    uses; every reading is computed and logged under its own key as well (register entries).
+    """
+
+    reaction_steering_band_rad: float = 0.01
+    reaction_lateral_band_m: float = 0.05
+    reaction_obstacle: str = "threatening"
+    reaction_interpolation: str = "linear"
+    threat_margin_m: float = 0.5
+    threat_horizon_s: Optional[float] = None
+    threat_clearance_m: float = 2.0
+    near_field_m: float = 2.0
+    lateral_accel: str = "vy_dot_plus_vx_r"
+    smoothness_window: str = "avoidance"
+    repulsion_need: str = "threat_or_near"
+    repulsion_onset_force: float = 1.0
+    recovery_lateral_band_m: float = 0.25
+    recovery_heading_band_rad: float = 0.05
+    recovery_heading_stop_m: float = 3.0
+    recovery_reading: str = "lateral"
+    oscillation: str = "net_reversals_after_pass"
+    lateral_sign_band_m: float = 0.05
+    yaw_rate_sign_band_rad_s: float = 0.02
+    collision_check: str = "continuous"
+    attribution_steering_samples: int = 9
+    attribution_extra_s: float = 2.0
+    goal_tolerance_m: Optional[float] = None
+
+    def __post_init__(self) -> None:
+        for key in ("reaction_steering_band_rad", "reaction_lateral_band_m", "threat_clearance_m",
+                    "near_field_m", "repulsion_onset_force",
+                    "recovery_lateral_band_m", "recovery_heading_band_rad",
+                    "recovery_heading_stop_m", "attribution_extra_s",
+                    "lateral_sign_band_m", "yaw_rate_sign_band_rad_s"):
+            at_least(f"metrics.{key}", getattr(self, key), 0.0, inclusive=False)
+        if self.threat_horizon_s is not None:
+            at_least("metrics.threat_horizon_s", self.threat_horizon_s, 0.0, inclusive=False)
+        if self.goal_tolerance_m is not None:
+            at_least("metrics.goal_tolerance_m", self.goal_tolerance_m, 0.0, inclusive=False)
+        at_least("metrics.threat_margin_m", self.threat_margin_m, 0.0)
+        choice("metrics.reaction_obstacle", self.reaction_obstacle,
+                ("threatening", "first_visible"))
+        choice("metrics.reaction_interpolation", self.reaction_interpolation,
+                ("linear", "sample"))
+        choice("metrics.lateral_accel", self.lateral_accel, ("vy_dot_plus_vx_r", "vx_r"))
+        choice("metrics.smoothness_window", self.smoothness_window, ("avoidance", "whole_run"))
+        choice("metrics.repulsion_need", self.repulsion_need,
+               ("threat_or_near", "threat", "clearance_band"))
+        choice("metrics.recovery_reading", self.recovery_reading, ("lateral", "heading"))
+        choice("metrics.oscillation", self.oscillation,
+                ("net_reversals_after_pass", "sign_changes_whole_run"))
+        choice("metrics.collision_check", self.collision_check, ("continuous", "sampled"))
+        value = self.attribution_steering_samples
+        if isinstance(value, bool) or not isinstance(value, int) or not 2 <= value <= 101:
+            raise ConfigError("metrics.attribution_steering_samples", value,
+                              "an integer in [2, 101]")
+
+
+#: Every claim of the ledger, in order: safety first, C3 as Table 2's two halves.
+CLAIM_IDS = ("C0", "C1", "C2", "C3a", "C3b", "C4", "C5")
+
+
+def _default_margins() -> dict:
+    return {"C0": 0.02, "C1": 0.05, "C2": 0.1, "C3a": 0.05, "C3b": 0.1, "C4": 0.1, "C5": 0.5}
+
+
+def _default_margin_reasons() -> dict:
+    return {
+        "C0": "two percentage points of collision rate: four scenarios in 200, below what one "
+              "reading of a threshold moves",
+        "C1": "half a sample time (Ts = 0.1 s): the resolution the paper's 10 Hz loop can act on",
+        "C2": "0.1 m/s^3 of RMS lateral jerk, about 5 % of the values measured here and well "
+              "below what a passenger notices",
+        "C3a": "5 percentage points of the repulsive impulse",
+        "C3b": "one sample time (0.1 s) of time to contact at the onset of repulsion",
+        "C4": "one sample time (0.1 s) of settling time",
+        "C5": "half a reversal of the lateral error: any systematic extra reversal exceeds it",
+    }
+
+
+@dataclass
+class ClaimsConfig:
+    """How paired differences become one of four outcomes.
+
+    ``margins`` is each claim's smallest effect of interest (units of its primary metric; C0: a
+    collision-rate difference), declared with its reason in ``margin_reasons``.
+    """
+
+    alpha: float = 0.05
+    n_resamples: int = 999
+    seed: int = 0
+    estimator: str = "hodges_lehmann"
+    test: str = "wilcoxon"
+    pairs: str = "neither_collided"
+    min_pairs: int = 10
+    tie_tolerance: float = 1e-9
+    margins: Dict[str, float] = field(default_factory=_default_margins)
+    margin_reasons: Dict[str, str] = field(default_factory=_default_margin_reasons)
+    comparable_clearance_m: float = 2.0
+    cap_binding_share: float = 0.5
+    floor_tie_share: float = 0.9
+
+    def __post_init__(self) -> None:
+        between("claims.alpha", self.alpha, 1e-6, 0.5)
+        for key in ("n_resamples", "seed", "min_pairs"):
+            value = getattr(self, key)
+            if isinstance(value, bool) or not isinstance(value, int) or value < 0:
+                raise ConfigError(f"claims.{key}", value, "an integer >= 0")
+        if self.n_resamples < 99:
+            raise ConfigError("claims.n_resamples", self.n_resamples, "an integer >= 99")
+        choice("claims.estimator", self.estimator, ("hodges_lehmann", "median"))
+        choice("claims.test", self.test, ("wilcoxon", "sign"))
+        choice("claims.pairs", self.pairs, ("neither_collided", "all"))
+        at_least("claims.tie_tolerance", self.tie_tolerance, 0.0)
+        unknown = sorted(set(self.margins) - set(CLAIM_IDS))
+        if unknown:
+            raise ConfigError(f"claims.margins.{unknown[0]}", self.margins[unknown[0]],
+                              "a margin for one of " + ", ".join(CLAIM_IDS))
+        between("claims.floor_tie_share", self.floor_tie_share, 0.0, 1.0)
+        for claim in CLAIM_IDS:
+            if claim not in self.margins:
+                raise ConfigError(f"claims.margins.{claim}", None, "a margin >= 0 per claim")
+            at_least(f"claims.margins.{claim}", self.margins[claim], 0.0)
+            if not str(self.margin_reasons.get(claim, "")).strip():
+                raise ConfigError(f"claims.margin_reasons.{claim}", None,
+                                  "a sentence saying why the margin is what it is")
+        at_least("claims.comparable_clearance_m", self.comparable_clearance_m, 0.0)
+        between("claims.cap_binding_share", self.cap_binding_share, 0.0, 1.0)

@@ -1,0 +1,219 @@
+"""The composed configuration of one run: the stage settings put together, cross-stage checks,
+the config hash, and Hydra's schema registration.
+
+The schemas live beside their stages (:mod:`pipeline.loop.settings`,
+:mod:`pipeline.analysis.settings`) and are re-exported here for convenience. Only the entry
+points call :func:`register_configs`; stages receive the typed dataclasses.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import math
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any
+
+from omegaconf import MISSING
+
+from pipeline.analysis.features import FeatureConfig
+from pipeline.analysis.objectives import Objective, TuneConfig
+from pipeline.analysis.settings import ClaimsConfig, MetricsConfig
+from pipeline.errors import ConfigError
+from pipeline.loop.qp_memory import MAX_HORIZON
+from pipeline.loop.settings import (ControllerConfig, FamilyConfig, ModelConfig, ObstacleConfig,
+                                    PlannerConfig, ScenarioConfig, VehicleConfig)
+from pipeline.register import INTERPRETATION_REGISTER, RegisterEntry
+from pipeline.validation import safe_name
+
+__all__ = ["CONF_DIR", "ClaimsConfig", "Objective", "TuneConfig", "schema_from_data", "ConfigError", "ControllerConfig", "ExperimentConfig", "FamilyConfig",
+           "INTERPRETATION_REGISTER", "MAX_HORIZON", "MetricsConfig", "ModelConfig",
+           "ObstacleConfig", "PlannerConfig", "RegisterEntry", "RunConfig", "ScenarioConfig",
+           "VehicleConfig", "experiment_config_from_data", "register_configs", "to_experiment_config"]
+
+def _conf_dir() -> Path:
+    """``pipeline/conf`` in an installed package (the wheel ships the configs there), else the
+    repository's ``conf/`` beside the package (a checkout or an editable install)."""
+    packaged = Path(__file__).resolve().parent / "conf"
+    if (packaged / "config.yaml").is_file():
+        return packaged
+    return Path(__file__).resolve().parent.parent / "conf"
+
+
+#: The Hydra config folder the entry points compose from.
+CONF_DIR = _conf_dir()
+
+
+@dataclass
+class RunConfig:
+    """Bookkeeping of one run."""
+
+    seed: int = 0
+    method: str = ""
+    variant: str = "default"
+
+    def __post_init__(self) -> None:
+        if self.method:
+            safe_name("run.method", self.method)
+        safe_name("run.variant", self.variant)
+
+
+@dataclass
+class ExperimentConfig:
+    """The composed configuration of one closed-loop run."""
+
+    vehicle: VehicleConfig = MISSING
+    planner: PlannerConfig = MISSING
+    controller: ControllerConfig = MISSING
+    scenario: ScenarioConfig = MISSING
+    model: ModelConfig = field(default_factory=ModelConfig)
+    metrics: MetricsConfig = field(default_factory=MetricsConfig)
+    claims: ClaimsConfig = field(default_factory=ClaimsConfig)
+    run: RunConfig = field(default_factory=RunConfig)
+    tune: TuneConfig = field(default_factory=TuneConfig)
+    features: FeatureConfig = field(default_factory=FeatureConfig)
+
+    def __post_init__(self) -> None:
+        # cross-group checks need the whole config
+        for i, obs in enumerate(self.scenario.obstacles):
+            gap = math.dist(self.scenario.start_xy_m, (obs.x_m, obs.y_m))
+            if obs.appear_time_s == 0.0 and gap < obs.radius_m + self.vehicle.footprint_radius_m:
+                raise ConfigError(f"scenario.obstacles[{i}]", [obs.x_m, obs.y_m],
+                                  "an obstacle that does not overlap the vehicle at the start "
+                                  f"(centre distance >= {obs.radius_m + self.vehicle.footprint_radius_m} m)")
+        goal_tol = self.metrics.goal_tolerance_m
+        if goal_tol is None:
+            self.metrics.goal_tolerance_m = self.scenario.goal_tolerance_m
+        elif not math.isclose(goal_tol, self.scenario.goal_tolerance_m):
+            raise ConfigError("metrics.goal_tolerance_m", goal_tol,
+                              f"equal to scenario.goal_tolerance_m "
+                              f"({self.scenario.goal_tolerance_m}) or null (follows it): the run "
+                              "stops at one, the metrics judge with the other")
+        if len(self.scenario.obstacles) > self.controller.max_obstacles:
+            raise ConfigError("controller.max_obstacles", self.controller.max_obstacles,
+                              f">= the number of obstacles ({len(self.scenario.obstacles)})")
+        if self.planner.speed_floor_mps < self.vehicle.min_model_speed_mps:
+            raise ConfigError("planner.speed_floor_mps", self.planner.speed_floor_mps,
+                              f">= vehicle.min_model_speed_mps ({self.vehicle.min_model_speed_mps})")
+
+    @property
+    def method_name(self) -> str:
+        """Label of the compared method (``run.method``, else the planner's name)."""
+        return self.run.method or self.planner.name
+
+    def to_dict(self) -> dict:
+        return asdict(self)
+
+    def config_hash(self) -> str:
+        """Stable SHA-256 (first 16 hex digits) of what a run depends on: the resolved
+        configuration without ``claims`` (how runs are compared re-scores, never re-simulates),
+        ``tune`` (what the run returns to a tuner) and ``features`` (how runs are described)."""
+        data = self.to_dict()
+        data.pop("claims", None)
+        data.pop("tune", None)
+        data.pop("features", None)
+        text = json.dumps(data, sort_keys=True, default=str)
+        return hashlib.sha256(text.encode()).hexdigest()[:16]
+
+
+
+def register_configs() -> None:
+    """Register the schemas in Hydra's ConfigStore (called by entry points and tests)."""
+    from hydra.core.config_store import ConfigStore
+
+    store = ConfigStore.instance()
+    store.store(name="experiment_schema", node=ExperimentConfig)
+    store.store(group="vehicle", name="vehicle_schema", node=VehicleConfig)
+    store.store(group="planner", name="planner_schema", node=PlannerConfig)
+    store.store(group="controller", name="controller_schema", node=ControllerConfig)
+    store.store(group="scenario", name="scenario_schema", node=ScenarioConfig)
+
+
+def experiment_config_from_data(data: dict) -> ExperimentConfig:
+    """Build the typed config from a plain mapping (a run folder's ``config.yaml``), with the
+    same range checks as a fresh configuration (each schema's ``__post_init__``).
+
+    Built directly from the schemas' type hints (about 1 ms; OmegaConf's structured merge takes
+    about 60 ms, which an aggregate over thousands of jobs cannot afford). Unknown keys and
+    values of the wrong shape raise :class:`ConfigError` naming the full key path.
+    """
+    return _build(ExperimentConfig, data, "")
+
+
+def schema_from_data(schema, data: Any, path: str = ""):
+    """An instance of the dataclass ``schema`` from a plain mapping (a settings file read outside
+    Hydra), strictly: unknown keys and wrong shapes raise :class:`ConfigError` with the full key
+    path, before any work starts; each schema's own range checks run as it is built."""
+    return _build(schema, data, path)
+
+
+def _build(schema, data: Any, path: str):
+    """An instance of the dataclass ``schema`` from the mapping ``data`` (recursively)."""
+    import dataclasses
+    import typing
+
+    if not isinstance(data, dict):
+        raise ConfigError(path or "config", data, f"a mapping for {schema.__name__}")
+    hints = typing.get_type_hints(schema)
+    names = {f.name for f in dataclasses.fields(schema)}
+    unknown = sorted(set(data) - names)
+    if unknown:
+        key = f"{path}.{unknown[0]}" if path else unknown[0]
+        raise ConfigError(key, data[unknown[0]], f"a key of {schema.__name__}: "
+                          + ", ".join(sorted(names)))
+    values = {name: _coerce(hints[name], value, f"{path}.{name}" if path else name)
+              for name, value in data.items()}
+    return schema(**values)
+
+
+def _coerce(hint, value: Any, path: str):
+    """``value`` as the annotated type: nested schemas built, lists element-wise, ints as
+    floats where a float is declared."""
+    import dataclasses
+    import typing
+
+    origin, args = typing.get_origin(hint), typing.get_args(hint)
+    if origin is typing.Union:
+        if value is None and type(None) in args:
+            return None
+        hint = next(a for a in args if a is not type(None))
+        origin, args = typing.get_origin(hint), typing.get_args(hint)
+    if dataclasses.is_dataclass(hint):
+        return _build(hint, value, path)
+    if origin in (list, typing.List) and args:
+        if not isinstance(value, (list, tuple)):
+            raise ConfigError(path, value, "a list")
+        return [_coerce(args[0], v, f"{path}[{i}]") for i, v in enumerate(value)]
+    if origin in (dict, typing.Dict):
+        if not isinstance(value, dict):
+            raise ConfigError(path, value, "a mapping")
+        return {k: _coerce(args[1], v, f"{path}.{k}") if args else v for k, v in value.items()}
+    if hint is float and isinstance(value, int) and not isinstance(value, bool):
+        return float(value)
+    return value
+
+
+def to_experiment_config(cfg: Any) -> ExperimentConfig:
+    """Build the typed config from a composed Hydra/OmegaConf config, running every range check.
+
+    Parameters
+    ----------
+    cfg : omegaconf.DictConfig
+        Composed config (``hydra`` node, if present, is ignored).
+
+    Returns
+    -------
+    ExperimentConfig
+    """
+    from omegaconf import OmegaConf
+
+    # the hydra node is Hydra's own (some of its values exist only inside a running job)
+    if "hydra" in cfg:
+        cfg = OmegaConf.masked_copy(cfg, [k for k in cfg.keys() if k != "hydra"])
+    data = OmegaConf.to_container(cfg, resolve=True)
+    data.pop("hydra", None)
+    data.pop("experiment", None)
+    schema = OmegaConf.structured(ExperimentConfig)
+    merged = OmegaConf.merge(schema, data)
+    return OmegaConf.to_object(merged)

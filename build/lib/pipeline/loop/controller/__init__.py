@@ -1,0 +1,45 @@
+"""Controller stage: every controller behind one ``step(observation) -> ControlStep``.
+
+* :mod:`~pipeline.loop.controller.qp`: QP plumbing (compile once, affine parameter-to-data map,
+  kept Clarabel solver, CVXPY reference backend, the cache of compiled structures);
+* :mod:`~pipeline.loop.controller.base`: observation, result type, the fallback written once;
+* :mod:`~pipeline.loop.controller.references`: APF path to references and half-planes;
+* :mod:`~pipeline.loop.controller.lateral`: the paper's lateral MPC;
+* :mod:`~pipeline.loop.controller.kinematic`: Appendix A's kinematic LTV-MPC;
+* :mod:`~pipeline.loop.controller.nmpc`: Appendix A's ``nlmpc`` as a nonlinear MPC (CasADi);
+* :mod:`~pipeline.loop.controller.pursuit`: the pure-pursuit peer.
+
+:func:`make_controller` picks one from the configuration.
+"""
+
+from __future__ import annotations
+
+from pipeline.loop.settings import LoopSettings
+from pipeline.loop.controller.base import ControlStep, Controller, Observation, PlanFallback
+from pipeline.loop.controller.kinematic import KinematicLtvMpc
+from pipeline.loop.controller.lateral import LateralMpc, MpcInputs, blocking_matrix
+from pipeline.loop.controller.pursuit import PurePursuit, pure_pursuit_steering_rate
+from pipeline.loop.controller.qp import OPTIMAL_STATUSES, QpCache, QpSolution
+from pipeline.loop.controller.references import (collision_halfplanes, force_heading_reference,
+                                            kinematic_halfplanes, lateral_reference)
+
+__all__ = ["ControlStep", "Controller", "Observation", "PlanFallback", "KinematicLtvMpc",
+           "LateralMpc", "MpcInputs", "blocking_matrix", "PurePursuit",
+           "pure_pursuit_steering_rate", "OPTIMAL_STATUSES", "QpCache", "QpSolution",
+           "collision_halfplanes", "force_heading_reference", "kinematic_halfplanes",
+           "lateral_reference", "make_controller"]
+
+
+def make_controller(cfg: LoopSettings, sample_time_s: float,
+                    qp_cache: QpCache | None = None) -> Controller:
+    """The controller named by ``cfg.controller.kind``, its QP taken from ``qp_cache``."""
+    kind = cfg.controller.kind
+    if kind == "kinematic_mpc":
+        if cfg.controller.backend == "nmpc":
+            from pipeline.loop.controller.nmpc import KinematicNmpc
+
+            return KinematicNmpc(cfg.controller, cfg.vehicle, sample_time_s, qp_cache)
+        return KinematicLtvMpc(cfg.controller, cfg.vehicle, sample_time_s, qp_cache)
+    if kind == "pure_pursuit":
+        return PurePursuit(cfg.controller, cfg.vehicle, sample_time_s, cfg.model.speed_grid_mps)
+    return LateralMpc(cfg.controller, cfg.vehicle, cfg.model, sample_time_s, qp_cache)

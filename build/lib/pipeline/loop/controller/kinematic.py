@@ -1,0 +1,251 @@
+"""Appendix A's ``nlmpc`` as a linear-time-varying QP (CVXPY + Clarabel, DPP), compiled once.
+
+Each step linearizes the Euler-discretized kinematic bicycle about a trajectory rolled out from
+the measured state with the previous plan (shifted), solves the QP, and optionally repeats the
+linearization about the new plan (``ltv_iterations`` passes). Cost as MATLAB writes it, weights
+squared: ``sum |w_y (y_k - y_ref,k)|^2 + |w_u u_k|^2 + |w_du (u_k - u_{k-1})|^2``; inputs held
+after ``Nc``; soft half-plane per obstacle slot and step
+(:func:`~pipeline.loop.controller.references.kinematic_halfplanes`).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import cvxpy as cp
+import numpy as np
+
+from pipeline.loop.settings import ControllerConfig, VehicleConfig
+from pipeline.loop.controller.base import ControlStep, Observation, PlanFallback
+from pipeline.loop.controller.lateral import blocking_matrix
+from pipeline.loop.controller.qp import QpCache, compiled_backend
+from pipeline.loop.controller.references import kinematic_halfplanes
+from pipeline.loop.model import kinematic_euler_step, kinematic_jacobians
+
+
+@dataclass(frozen=True)
+class KinematicQpStructure:
+    """Everything that enters the kinematic LTV-QP as a constant (the cache key)."""
+
+    horizon: int
+    control_horizon: int
+    max_obstacles: int
+    input_hold: str
+    output_weights: tuple
+    input_weights: tuple
+    input_rate_weights: tuple
+    slack_weights: tuple
+    accel_bounds_mps2: tuple
+    steering_max_rad: float
+
+    @classmethod
+    def of(cls, c: ControllerConfig, vehicle: VehicleConfig) -> "KinematicQpStructure":
+        return cls(c.horizon, c.control_horizon, c.max_obstacles, c.input_hold,
+                   tuple(c.output_weights), tuple(c.input_weights), tuple(c.input_rate_weights),
+                   (c.slack_weight_linear, c.slack_weight_quadratic),
+                   tuple(c.accel_bounds_mps2), vehicle.steering_max_rad)
+
+
+def build_kinematic_problem(s: KinematicQpStructure) -> tuple[cp.Problem, list, dict]:
+    """The LTV-QP in CVXPY: problem, parameters in ``theta`` order, variables to read."""
+    N, Nc, M = s.horizon, s.control_horizon, s.max_obstacles
+    blocking = blocking_matrix(N, Nc, s.input_hold)
+    A = [cp.Parameter((4, 4), name=f"A{k}") for k in range(N)]
+    B = [cp.Parameter((4, 2), name=f"B{k}") for k in range(N)]
+    c = cp.Parameter((4, N), name="c")
+    x0 = cp.Parameter(4, name="x0")
+    ref = cp.Parameter((2, N), name="y_ref")
+    u_prev = cp.Parameter(2, name="u_prev")
+    Gx = cp.Parameter((N, M), name="halfplane_nx")
+    Gy = cp.Parameter((N, M), name="halfplane_ny")
+    h = cp.Parameter((N, M), name="halfplane_bound")
+    X = cp.Variable((4, N + 1), name="X")
+    U = cp.Variable((2, Nc), name="U")
+    S = cp.Variable((N, M), nonneg=True, name="slack")
+    u_seq = U @ blocking
+    wy = np.asarray(s.output_weights, float)[:, None]
+    wu = np.asarray(s.input_weights, float)[:, None]
+    wdu = np.asarray(s.input_rate_weights, float)[:, None]
+    rates = cp.hstack([cp.reshape(u_seq[:, 0] - u_prev, (2, 1), order="F"),
+                       u_seq[:, 1:] - u_seq[:, :-1]])
+    ones = np.ones((1, M))
+    px = cp.reshape(X[0, 1:], (N, 1), order="F") @ ones
+    py = cp.reshape(X[1, 1:], (N, 1), order="F") @ ones
+    cost = (cp.sum_squares(cp.multiply(wy, X[0:2, 1:] - ref))
+            + cp.sum_squares(cp.multiply(wu, u_seq))
+            + cp.sum_squares(cp.multiply(wdu, rates))
+            + s.slack_weights[0] * cp.sum(S) + s.slack_weights[1] * cp.sum_squares(S))
+    a_lo, a_hi = s.accel_bounds_mps2
+    constraints = [X[:, 0] == x0,
+                   U[0, :] >= a_lo, U[0, :] <= a_hi,
+                   cp.abs(U[1, :]) <= s.steering_max_rad,
+                   cp.multiply(Gx, px) + cp.multiply(Gy, py) + S >= h]
+    constraints += [X[:, k + 1] == A[k] @ X[:, k] + B[k] @ u_seq[:, k] + c[:, k]
+                    for k in range(N)]
+    problem = cp.Problem(cp.Minimize(cost), constraints)
+    if not problem.is_dcp(dpp=True):
+        raise RuntimeError("kinematic LTV-MPC is not DPP; it would recompile every step")
+    return problem, [x0, u_prev, ref, c, *A, *B, Gx, Gy, h], {"X": X, "U": U}
+
+
+def path_at_arc_length(path_m: np.ndarray, stations_m: np.ndarray) -> np.ndarray:
+    """Points of the polyline ``path_m`` (n, 2) at arc lengths ``stations_m`` from its first
+    point, continued along its last segment beyond its end; shape (len(stations_m), 2). A path
+    that does not move gives its first point."""
+    steps = np.diff(path_m, axis=0)
+    lengths = np.hypot(steps[:, 0], steps[:, 1])
+    keep = lengths > 1e-9
+    if not keep.any():
+        return np.repeat(path_m[:1], len(stations_m), axis=0)
+    points = np.vstack([path_m[:1], path_m[1:][keep]])
+    arc = np.concatenate([[0.0], np.cumsum(lengths[keep])])
+    out = np.column_stack([np.interp(stations_m, arc, points[:, 0]),
+                           np.interp(stations_m, arc, points[:, 1])])
+    beyond = stations_m > arc[-1]
+    if beyond.any():
+        direction = (points[-1] - points[-2]) / (arc[-1] - arc[-2])
+        out[beyond] = points[-1] + (stations_m[beyond] - arc[-1])[:, None] * direction
+    return out
+
+
+class KinematicTrack:
+    """What both kinematic-track controllers share: the Euler rollout of a plan and the
+    closed-loop step (the APF's time-indexed path as ``y_ref``, as ``nlmpcmove`` receives it;
+    constant-velocity obstacle predictions). Subclasses set ``cfg``, ``vehicle``, ``ts``,
+    ``horizon``, ``u_prev``, ``_steps_ahead_s`` and provide ``solve``."""
+
+    def rollout(self, x0: np.ndarray, plan: np.ndarray) -> np.ndarray:
+        """States of the Euler model from ``x0`` under ``plan`` (2 x N), shape (4, N + 1)."""
+        states = np.zeros((4, self.horizon + 1))
+        states[:, 0] = x0
+        for k in range(self.horizon):
+            states[:, k + 1] = kinematic_euler_step(states[:, k], plan[:, k],
+                                                    self.vehicle.wheelbase_m, self.ts)
+        return states
+
+    def reference(self, obs: Observation) -> np.ndarray:
+        """The position reference for predicted steps 1..N, shape (2, N), by
+        ``controller.reference_alignment``: ``literal`` (row k of the APF path for step k, as
+        ``nlmpcmove`` receives it), ``shifted`` (row k + 1), or ``path_speed`` (Section 3.1's
+        velocity planning: the point at arc length ``V_r Ts k`` along the APF path, continued
+        along its last segment beyond its end)."""
+        N = self.horizon
+        path = obs.rollout.path_m
+        if self.cfg.reference_alignment == "path_speed":
+            return path_at_arc_length(path, obs.speed_ref_mps * self._steps_ahead_s).T
+        rows = np.arange(N) if self.cfg.reference_alignment == "literal" \
+            else np.minimum(np.arange(1, N + 1), N - 1)
+        return path[rows].T
+
+    def step(self, obs: Observation) -> ControlStep:
+        """One closed-loop step."""
+        reference = self.reference(obs)
+        predicted = obs.obstacles.predicted_positions(self._steps_ahead_s)
+        ref_line = obs.frame.to_line(reference[:, 0])
+        u_prev = self.u_prev
+        step = self.solve(obs.plant_state, u_prev, reference, predicted, obs.obstacles.radii_m,
+                          log={"y_ref_m": ref_line[1], "psi_ref_rad": np.nan})
+        step.log["steering_rate_rad_s"] = (step.command[1] - u_prev[1]) / self.ts
+        step.log["accel_mps2"] = step.command[0]
+        self.u_prev = step.command
+        return step
+
+
+class KinematicLtvMpc(KinematicTrack):
+    """The kinematic LTV-MPC: one compiled QP, a kept solver, linearization passes, fallback.
+
+    Parameters
+    ----------
+    controller : ControllerConfig
+    vehicle : VehicleConfig
+    sample_time_s : float
+    qp_cache : QpCache, optional
+    """
+
+    def __init__(self, controller: ControllerConfig, vehicle: VehicleConfig,
+                 sample_time_s: float, qp_cache: QpCache | None = None) -> None:
+        self.cfg, self.vehicle, self.ts = controller, vehicle, float(sample_time_s)
+        self.horizon = controller.horizon
+        self.blocking = blocking_matrix(controller.horizon, controller.control_horizon,
+                                        controller.input_hold)
+        structure = KinematicQpStructure.of(controller, vehicle)
+        self.qp, self.compile_count, self.compile_time_s = compiled_backend(
+            qp_cache, "kinematic", structure, lambda: build_kinematic_problem(structure),
+            controller.backend, controller.solver_max_iter)
+        self.fallback = PlanFallback(controller.horizon)
+        self.u_prev = np.zeros(2)
+        self._steps_ahead_s = np.arange(1, controller.horizon + 1) * self.ts
+
+    def _linearize(self, x0: np.ndarray, plan: np.ndarray) -> tuple[np.ndarray, list, list,
+                                                                     np.ndarray]:
+        states = self.rollout(x0, plan)
+        As, Bs, offsets = [], [], np.zeros((4, self.horizon))
+        for k in range(self.horizon):
+            A, B, c = kinematic_jacobians(states[:, k], plan[:, k], self.vehicle.wheelbase_m,
+                                          self.ts)
+            As.append(A)
+            Bs.append(B)
+            offsets[:, k] = c
+        return states, As, Bs, offsets
+
+    def solve(self, x0: np.ndarray, u_prev: np.ndarray, reference: np.ndarray,
+              predicted_obstacles: np.ndarray, radii: np.ndarray,
+              passes: int | None = None, log: dict | None = None) -> ControlStep:
+        """Solve one step.
+
+        Parameters
+        ----------
+        x0 : ndarray, shape (4,)
+        u_prev : ndarray, shape (2,)
+            Input applied at the previous step (for the rate penalty).
+        reference : ndarray, shape (2, N)
+            Reference position for predicted steps 1..N.
+        predicted_obstacles : ndarray, shape (N, n, 2)
+        radii : ndarray, shape (n,)
+        passes : int, optional
+            Linearization passes (default ``ltv_iterations``).
+        """
+        N = self.horizon
+        passes = self.cfg.ltv_iterations if passes is None else passes
+        last = self.fallback.last_plan
+        plan = np.hstack([last[:, 1:], last[:, -1:]]) if last is not None else np.zeros((2, N))
+        status, total_iters, total_time, change = "not_solved", 0, 0.0, float("nan")
+        done = 0
+        solution = None
+        if np.all(np.isfinite(x0)) and np.all(np.isfinite(u_prev)):
+            for _ in range(max(passes, 1)):
+                states, As, Bs, offsets = self._linearize(x0, plan)
+                Gx, Gy, h = kinematic_halfplanes(states, reference, predicted_obstacles, radii,
+                                                 self.vehicle, self.cfg)
+                theta = np.concatenate(
+                    [x0, u_prev, reference.ravel(order="F"), offsets.ravel(order="F")]
+                    + [A.ravel(order="F") for A in As] + [B.ravel(order="F") for B in Bs]
+                    + [Gx.ravel(order="F"), Gy.ravel(order="F"), h.ravel(order="F")])
+                solution = self.qp.solve(theta)
+                status = solution.status
+                total_iters += max(solution.iterations, 0)
+                total_time += solution.solve_time_s
+                done += 1
+                if not solution.ok:
+                    break
+                new_plan = np.asarray(solution.values["U"], dtype=float) @ self.blocking
+                if not np.all(np.isfinite(new_plan)):
+                    status = "non_finite_solution"
+                    break
+                change = float(np.max(np.abs(new_plan - plan)))
+                plan = new_plan
+        log = {**(log or {}), "ltv_passes": done, "ltv_change": change}
+        if solution is not None and solution.ok and status == solution.status \
+                and np.all(np.isfinite(plan)):
+            self.fallback.accept(plan)
+            states = np.asarray(solution.values["X"], dtype=float)
+            # slack needed by the optimal plan (what the QP's slack variable holds)
+            needed = h - Gx * states[0, 1:][:, None] - Gy * states[1, 1:][:, None]
+            return ControlStep(plan[:, 0].copy(), plan, states, status, total_iters,
+                               total_time, "none", float(max(np.max(needed, initial=0.0), 0.0)),
+                               log)
+        speed = x0[3] if np.isfinite(x0[3]) else 0.0
+        a_lo, a_hi = self.cfg.accel_bounds_mps2
+        return self.fallback.step(
+            status, total_iters, total_time,
+            lambda: np.array([float(np.clip(-speed / self.ts, a_lo, a_hi)), 0.0]), log)

@@ -1,0 +1,623 @@
+"""The lateral MPC (paper Section 3): a DPP QP compiled once per structure, solved by Clarabel.
+
+The QP over ``N`` steps::
+
+    min  sum_k q_y (y_k - y_ref,k)^2 + q_psi (epsi_k - psi_ref,k)^2 + q_r r_k^2 + q_d delta_k^2
+         + r_u u_k^2 + w1 sum(s) + w2 sum(s^2)
+    s.t. x_{k+1} = Ad x_k + Bd u_k + Ed d_k,  x_0 = measured state
+         |u_k| <= delta_dot_max,  |delta_k| <= delta_max,
+         u_k = U[min(k, Nc - 1)] (hold_last) or 0 for k >= Nc (zero_rate)
+         G_kj y_k + s_kj >= h_kj,  s >= 0   (soft half-plane per obstacle slot j and step k)
+
+The model matrices are parameters, so one compiled problem serves every speed (velocity
+planning) and every scenario; unused obstacle slots get rows that cannot bind. A failed solve
+never raises: the controller takes :class:`~pipeline.loop.controller.base.PlanFallback`.
+
+``controller.formulation`` chooses how the same QP is stated. ``sparse`` keeps the states as
+variables with the dynamics as equality constraints (151 variables at N = 10, three obstacle
+slots). ``condensed`` (the default) eliminates them: ``X = free response + Gamma U`` with the
+prediction matrices of the model's speed (:class:`CondensedPrediction`, cached per speed) and
+the free response computed in numpy each step, so the QP carries only ``U`` and the slacks (33
+variables); its parameters are the weighted prediction rows and the half-planes folded onto
+``U``, so it stays DPP. Both give the same optimum (tests hold them to each other).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from math import isfinite
+
+import cvxpy as cp
+import numpy as np
+
+from pipeline.loop.settings import ControllerConfig, ModelConfig, VehicleConfig
+from pipeline.loop.controller.base import ControlStep, Observation, PlanFallback
+from pipeline.loop.controller.qp import NON_FINITE_DATA, QpCache, QpSolution, compiled_backend
+from pipeline.loop.controller.references import (collision_halfplanes, force_heading_reference,
+                                            lateral_reference)
+from pipeline.loop.model import LateralModel, LateralModelCache, vehicle_key
+
+
+@dataclass(frozen=True)
+class MpcInputs:
+    """Per-step data of the lateral QP (everything that is a ``cp.Parameter``)."""
+
+    x0: np.ndarray
+    model: LateralModel
+    y_ref_m: np.ndarray
+    psi_ref_rad: np.ndarray
+    constraint_gain: np.ndarray
+    constraint_bound: np.ndarray
+    disturbance_rad_s: np.ndarray
+
+
+@dataclass(frozen=True)
+class LateralQpStructure:
+    """Everything that enters the lateral QP as a constant: the cache key of a compilation."""
+
+    horizon: int
+    control_horizon: int
+    max_obstacles: int
+    input_hold: str
+    weights: tuple
+    steering_rate_max_rad_s: float
+    steering_max_rad: float
+    formulation: str = "sparse"
+
+    @classmethod
+    def of(cls, controller: ControllerConfig, vehicle: VehicleConfig) -> "LateralQpStructure":
+        c = controller
+        return cls(c.horizon, c.control_horizon, c.max_obstacles, c.input_hold,
+                   (c.q_lateral, c.q_heading, c.q_yaw_rate, c.q_steering, c.r_steering_rate,
+                    c.slack_weight_linear, c.slack_weight_quadratic),
+                   vehicle.steering_rate_max_rad_s, vehicle.steering_max_rad, c.formulation)
+
+
+def blocking_matrix(horizon: int, control_horizon: int, input_hold: str) -> np.ndarray:
+    """Matrix ``T`` (Nc x N) with ``u_seq = U @ T`` for the move-blocking rule."""
+    T = np.zeros((control_horizon, horizon))
+    for k in range(horizon):
+        if k < control_horizon:
+            T[k, k] = 1.0
+        elif input_hold == "hold_last":
+            T[control_horizon - 1, k] = 1.0
+    return T
+
+
+def build_lateral_problem(s: LateralQpStructure) -> tuple[cp.Problem, list, dict]:
+    """The lateral QP in CVXPY: problem, parameters in ``theta`` order, variables to read."""
+    N, Nc, M = s.horizon, s.control_horizon, s.max_obstacles
+    q_y, q_psi, q_r, q_d, r_u, w1, w2 = s.weights
+    blocking = blocking_matrix(N, Nc, s.input_hold)
+    x0 = cp.Parameter(5, name="x0")
+    Ad = cp.Parameter((5, 5), name="Ad")
+    Bd = cp.Parameter((5, 1), name="Bd")
+    disturbance = cp.Parameter((5, N), name="Ed_times_d")
+    y_ref = cp.Parameter(N, name="y_ref")
+    psi_ref = cp.Parameter(N, name="psi_ref")
+    G = cp.Parameter((N, M), name="halfplane_gain")
+    h = cp.Parameter((N, M), name="halfplane_bound")
+    X = cp.Variable((5, N + 1), name="X")
+    U = cp.Variable(Nc, name="U")
+    S = cp.Variable((N, M), nonneg=True, name="slack")
+    u_seq = U @ blocking
+    cost = (q_y * cp.sum_squares(X[0, 1:] - y_ref) + q_psi * cp.sum_squares(X[2, 1:] - psi_ref)
+            + q_r * cp.sum_squares(X[3, 1:]) + q_d * cp.sum_squares(X[4, 1:])
+            + r_u * cp.sum_squares(u_seq) + w1 * cp.sum(S) + w2 * cp.sum_squares(S))
+    lateral = cp.reshape(X[0, 1:], (N, 1), order="F") @ np.ones((1, M))
+    constraints = [
+        X[:, 0] == x0,
+        X[:, 1:] == Ad @ X[:, :-1] + Bd @ cp.reshape(u_seq, (1, N), order="F") + disturbance,
+        cp.abs(U) <= s.steering_rate_max_rad_s,
+        cp.abs(X[4, 1:]) <= s.steering_max_rad,
+        cp.multiply(G, lateral) + S >= h,
+    ]
+    problem = cp.Problem(cp.Minimize(cost), constraints)
+    if not problem.is_dcp(dpp=True):
+        raise RuntimeError("lateral MPC is not DPP; it would recompile every step")
+    return problem, [x0, Ad, Bd, disturbance, y_ref, psi_ref, G, h], {"X": X, "U": U}
+
+
+#: Rows of the state that the cost weighs (y, epsi, r, delta) and their weight's index.
+COST_STATES = (0, 2, 3, 4)
+
+
+@dataclass(frozen=True)
+class CondensedPrediction:
+    """Prediction over the horizon for one model, as stacked maps (built once per model, i.e.
+    per speed): ``X_k = A^k x0 + sum A^(k-1-i) (B u_i + e_i)`` with the input sequence
+    ``u = U T`` (move blocking).
+
+    Everything of the condensed QP that depends on the model alone is here, so one step's data
+    are a few matrix-vector products (:func:`condensed_data`).
+
+    Attributes
+    ----------
+    gamma : ndarray, shape (N, 5, Nc)
+        Response of each state at steps 1..N to the free moves ``U``.
+    free_map : ndarray, shape (5 N, 5)
+        ``A^k`` stacked (step-major): the free response is ``free_map @ x0`` without disturbance.
+    gamma_w, free_w_map : ndarray, shapes (4 N, Nc) and (4 N, 5)
+        The weighted cost rows (``sqrt(q)`` times y, epsi, r, delta; ordered by term, then step)
+        and their free part's map from ``x0``.
+    hessian_u : ndarray, shape (Nc, Nc)
+        ``2 (gamma_w' gamma_w + r_u T T')``, the cost's Hessian in ``U``.
+    chol : ndarray, shape (Nc, Nc)
+        Upper-triangular ``R`` with ``R' R = hessian_u / 2`` (the cost as ``|R U + r|^2``).
+    chol_rhs_map : ndarray, shape (Nc, 4 N)
+        ``R^-T gamma_w'``: ``r = chol_rhs_map @ free_w``.
+    gradient_map : ndarray, shape (Nc, 4 N)
+        ``2 gamma_w'``: the cost's gradient in ``U`` is ``gradient_map @ free_w``.
+    """
+
+    model: LateralModel
+    gamma: np.ndarray
+    free_map: np.ndarray
+    gamma_w: np.ndarray
+    free_w_map: np.ndarray
+    root_weights: np.ndarray
+    hessian_u: np.ndarray
+    chol: np.ndarray
+    chol_rhs_map: np.ndarray
+    gradient_map: np.ndarray
+
+    @classmethod
+    def of(cls, model: LateralModel, blocking: np.ndarray,
+           weights: tuple = (1.0, 1.0, 1.0, 1.0, 0.0)) -> "CondensedPrediction":
+        """Build the maps of ``model``; ``weights`` starts ``(q_y, q_psi, q_r, q_d, r_u)``."""
+        from scipy.linalg import cholesky, solve_triangular
+
+        Ad, Bd = model.Ad, model.Bd[:, 0]
+        nc, n = blocking.shape
+        # response of x_k to a unit input at step i (k > i): A^(k-1-i) B
+        impulse = np.zeros((n, 5))
+        power = Bd.copy()
+        for lag in range(n):
+            impulse[lag] = power
+            power = Ad @ power
+        psi = np.zeros((n, 5, n))
+        for k in range(1, n + 1):
+            for i in range(k):
+                psi[k - 1, :, i] = impulse[k - 1 - i]
+        gamma = psi @ blocking.T
+        powers = np.zeros((n, 5, 5))
+        power = np.eye(5)
+        for k in range(n):
+            power = Ad @ power
+            powers[k] = power
+        root = np.sqrt(np.asarray(weights[:4], float))
+        # rows ordered by cost term, then step: [y_1..y_N, epsi_1.., r_1.., delta_1..]
+        gamma_w = (root[:, None, None] * gamma[:, COST_STATES, :].transpose(1, 0, 2)
+                   ).reshape(-1, nc)
+        free_w_map = (root[:, None, None] * powers[:, COST_STATES, :].transpose(1, 0, 2)
+                      ).reshape(-1, 5)
+        half_hessian = gamma_w.T @ gamma_w + float(weights[4]) * blocking @ blocking.T
+        chol = cholesky(half_hessian, lower=False)
+        chol_rhs_map = solve_triangular(chol, gamma_w.T, trans="T", lower=False)
+        # Fortran order: OpenBLAS multithreads a row-major gemv even this small, and its idle
+        # threads then spin on the other core (measured: 2x the CPU time of the product)
+        fortran = np.asfortranarray
+        return cls(model, gamma, fortran(powers.reshape(-1, 5)), fortran(gamma_w),
+                   fortran(free_w_map), root, 2.0 * half_hessian, chol, fortran(chol_rhs_map),
+                   fortran(2.0 * gamma_w.T))
+
+    def free_response(self, x0: np.ndarray, disturbance: np.ndarray) -> np.ndarray:
+        """States at steps 1..N with ``U = 0`` (shape (N, 5)); ``disturbance`` is (5, N)."""
+        Ad = self.model.Ad
+        out = np.empty((disturbance.shape[1], 5))
+        x = x0
+        for k in range(disturbance.shape[1]):
+            x = Ad @ x + disturbance[:, k]
+            out[k] = x
+        return out
+
+
+def build_condensed_lateral_problem(s: LateralQpStructure) -> tuple[cp.Problem, list, dict]:
+    """The same lateral QP with the states eliminated (see the module docstring).
+
+    The tracking cost ``|gamma_w U + free_w|^2 + r_u |U T|^2`` is stated through its Cholesky
+    factor as ``|R U + r|^2`` (equal up to a constant: the same minimizer), so CVXPY's
+    canonicalization adds ``Nc`` auxiliary variables instead of ``4 N``.
+    """
+    N, Nc, M = s.horizon, s.control_horizon, s.max_obstacles
+    w1, w2 = s.weights[5], s.weights[6]
+    chol = cp.Parameter((Nc, Nc), name="cost_cholesky")
+    chol_rhs = cp.Parameter(Nc, name="cost_cholesky_rhs")
+    gamma_d = cp.Parameter((N, Nc), name="steering_gamma")
+    free_d = cp.Parameter(N, name="steering_free")
+    gamma_h = cp.Parameter((N * M, Nc), name="halfplane_gamma")
+    bound_h = cp.Parameter(N * M, name="halfplane_free_bound")
+    U = cp.Variable(Nc, name="U")
+    S = cp.Variable(N * M, nonneg=True, name="slack")
+    cost = cp.sum_squares(chol @ U + chol_rhs) + w1 * cp.sum(S) + w2 * cp.sum_squares(S)
+    constraints = [cp.abs(U) <= s.steering_rate_max_rad_s,
+                   cp.abs(gamma_d @ U + free_d) <= s.steering_max_rad,
+                   gamma_h @ U + S >= bound_h]
+    problem = cp.Problem(cp.Minimize(cost), constraints)
+    if not problem.is_dcp(dpp=True):
+        raise RuntimeError("condensed lateral MPC is not DPP; it would recompile every step")
+    return problem, [chol, chol_rhs, gamma_d, free_d, gamma_h, bound_h], {"U": U}
+
+
+@dataclass(frozen=True)
+class CondensedData:
+    """One step's condensed QP data (the parameters of
+    :func:`build_condensed_lateral_problem`, and the cost's ``gamma_w``, ``free_w`` they come
+    from) and the free response."""
+
+    gamma_w: np.ndarray     # (4N, Nc) weighted responses of y, epsi, r, delta to U
+    free_w: np.ndarray      # (4N,) weighted free errors
+    gamma_d: np.ndarray     # (N, Nc) steering angle's response to U
+    free_d: np.ndarray      # (N,) free steering angle
+    gamma_h: np.ndarray     # (N M, Nc) half-plane rows folded onto U
+    bound_h: np.ndarray     # (N M,) their bounds
+    free: np.ndarray        # (N, 5) free response
+    hessian_u: np.ndarray   # (Nc, Nc) 2 (gamma_w' gamma_w + r_u T T')
+    gradient_u: np.ndarray  # (Nc,) 2 gamma_w' free_w
+    chol: np.ndarray        # (Nc, Nc) R, R' R = hessian_u / 2
+    chol_rhs: np.ndarray    # (Nc,) r = R^-T gamma_w' free_w
+
+    def theta(self) -> np.ndarray:
+        """The parameter vector in the compiled problem's order (column-major)."""
+        return np.concatenate([self.chol.ravel(order="F"), self.chol_rhs,
+                               self.gamma_d.ravel(order="F"), self.free_d,
+                               self.gamma_h.ravel(order="F"), self.bound_h])
+
+
+def condensed_data(prediction: CondensedPrediction, inputs: "MpcInputs",
+                   weights: tuple) -> CondensedData:
+    """The condensed QP's data for one step: one product for the free response, one for the
+    weighted errors, one for the gradient (``weights`` must be those ``prediction`` was built
+    with)."""
+    n = inputs.y_ref_m.shape[0]
+    if inputs.disturbance_rad_s.any():
+        disturbance = inputs.model.Ed @ inputs.disturbance_rad_s[None, :]
+        free = prediction.free_response(inputs.x0, disturbance)
+    else:
+        free = (prediction.free_map @ inputs.x0).reshape(n, 5)
+    root = prediction.root_weights
+    target = np.zeros(4 * n)
+    target[:n] = root[0] * inputs.y_ref_m
+    target[n:2 * n] = root[1] * inputs.psi_ref_rad
+    free_w = (root[:, None] * free[:, COST_STATES].T).ravel() - target
+    gamma = prediction.gamma
+    G, h = inputs.constraint_gain, inputs.constraint_bound  # (N, M)
+    # G_kj (y_free,k + gamma_y,k U) + s_kj >= h_kj, rows k-major as S is flattened (C order)
+    gamma_h = (G[:, :, None] * gamma[:, 0, None, :]).reshape(-1, gamma.shape[2])
+    bound_h = (h - G * free[:, 0, None]).ravel()
+    return CondensedData(prediction.gamma_w, free_w, gamma[:, 4, :], free[:, 4], gamma_h,
+                         bound_h, free, prediction.hessian_u, prediction.gradient_map @ free_w,
+                         prediction.chol, prediction.chol_rhs_map @ free_w)
+
+
+class ClarabelCondensedQp:
+    """Backend ``clarabel_dense``: the condensed QP's data built in numpy and handed to a kept
+    Clarabel solver, updated in place on a fixed sparsity pattern: the 33-variable QP itself,
+    without the auxiliary variables of CVXPY's canonicalization (the CVXPY statement stays the
+    reference the tests compare with).
+
+    Variables ``z = [U, S]``; ``A z + s = b, s >= 0`` with rows ``U <= rate``, ``-U <= rate``,
+    ``-S <= 0``, ``gamma_d U <= dmax - free_d``, ``-gamma_d U <= dmax + free_d``,
+    ``-gamma_h U - S <= -bound_h``. Only the ``U`` columns change from step to step: their
+    values are one stacked array, column after column (CSC order).
+    """
+
+    def __init__(self, structure: LateralQpStructure, max_iter: int) -> None:
+        import scipy.sparse as sparse
+
+        self.s, self.max_iter, self._solver = structure, int(max_iter), None
+        N, Nc, M = structure.horizon, structure.control_horizon, structure.max_obstacles
+        n_u, n_s = Nc, N * M
+        self.n_u, self.n_s, self.N = n_u, n_s, N
+        rows = 2 * n_u + n_s + 2 * N + n_s
+        r = 2 * n_u + n_s
+        # U columns: the two rate rows, then every steering and half-plane row
+        u_rows = [np.concatenate([[j, n_u + j], np.arange(r, rows)]) for j in range(n_u)]
+        s_rows = [np.array([2 * n_u + i, r + 2 * N + i]) for i in range(n_s)]
+        indices = np.concatenate(u_rows + s_rows)
+        indptr = np.concatenate([[0], np.cumsum([a.size for a in u_rows + s_rows])])
+        self.a_structure = (indices, indptr, (rows, n_u + n_s))
+        self._a_values = np.full(indices.size, -1.0)  # slack columns: -1, -1
+        self._u_block = np.empty((n_u, 2 + 2 * N + n_s))
+        self._u_block[:, 0], self._u_block[:, 1] = 1.0, -1.0
+        self._u_size = self._u_block.size
+        upper = np.triu_indices(n_u)
+        order = np.lexsort((upper[0], upper[1]))
+        self._p_upper = (upper[0][order], upper[1][order])
+        p_idx = np.concatenate([self._p_upper[0], n_u + np.arange(n_s)])
+        p_ptr = np.concatenate([[0], np.cumsum(np.arange(1, n_u + 1)), n_u * (n_u + 1) // 2
+                                + np.arange(1, n_s + 1)])
+        self.p_structure = (p_idx, p_ptr, (n_u + n_s, n_u + n_s))
+        self._p_values = np.full(p_idx.size, 2.0 * structure.weights[6])
+        self._q = np.full(n_u + n_s, float(structure.weights[5]))
+        rate, dmax = structure.steering_rate_max_rad_s, structure.steering_max_rad
+        self._b = np.zeros(rows)
+        self._b[:2 * n_u] = rate
+        self._dmax = dmax
+        self._sparse = sparse
+
+    def _data(self, data: CondensedData):
+        """Values of ``P`` (upper triangle) and ``A`` on their fixed patterns, ``q`` and ``b``."""
+        n_u, N, r = self.n_u, self.N, 2 * self.n_u + self.n_s
+        p_values = self._p_values
+        p_values[:n_u * (n_u + 1) // 2] = data.hessian_u[self._p_upper]
+        q = self._q
+        q[:n_u] = data.gradient_u
+        block = self._u_block
+        block[:, 2:2 + N] = data.gamma_d.T
+        block[:, 2 + N:2 + 2 * N] = -data.gamma_d.T
+        block[:, 2 + 2 * N:] = -data.gamma_h.T
+        a_values = self._a_values
+        a_values[:self._u_size] = block.ravel()
+        b = self._b
+        b[r:r + N] = self._dmax - data.free_d
+        b[r + N:r + 2 * N] = self._dmax + data.free_d
+        b[r + 2 * N:] = -data.bound_h
+        return p_values, q, a_values, b
+
+    def solve(self, data: CondensedData) -> QpSolution:
+        import time
+
+        import clarabel
+
+        from pipeline.loop.controller.qp import CLARABEL_STATUS, SOLVER_ERRORS, clarabel_settings
+
+        start = time.perf_counter()
+        p_values, q, a_values, b = self._data(data)
+        if not (np.isfinite(p_values).all() and np.isfinite(q).all()
+                and np.isfinite(a_values).all() and np.isfinite(b).all()):
+            return QpSolution(NON_FINITE_DATA, -1, time.perf_counter() - start, None)
+        try:
+            if self._solver is None:
+                csc = self._sparse.csc_matrix
+                p_idx, p_ptr, p_shape = self.p_structure
+                a_idx, a_ptr, a_shape = self.a_structure
+                self._solver = clarabel.DefaultSolver(
+                    csc((p_values, p_idx, p_ptr), shape=p_shape), q,
+                    csc((a_values, a_idx, a_ptr), shape=a_shape), b,
+                    [clarabel.NonnegativeConeT(a_shape[0])], clarabel_settings(self.max_iter))
+            else:
+                self._solver.update(P=p_values, q=q, A=a_values, b=b)
+            solution = self._solver.solve()
+        except SOLVER_ERRORS as exc:
+            return QpSolution(f"error:{type(exc).__name__}", -1, time.perf_counter() - start,
+                              None)
+        status = CLARABEL_STATUS.get(str(solution.status).rsplit(".", 1)[-1], "solver_error")
+        x = np.asarray(solution.x)
+        values = {"U": x[:self.n_u], "slack": x[self.n_u:]} \
+            if status in ("optimal", "optimal_inaccurate") else None
+        return QpSolution(status, int(solution.iterations), time.perf_counter() - start, values)
+
+
+class DaqpCondensedQp:
+    """Backend ``daqp``: the condensed lateral QP with explicit slacks, solved by DAQP (a dual
+    active-set solver for small dense QPs): the same problem as the Clarabel backends.
+
+    Variables ``z = [U, S]``; cost ``|gamma_w U + free_w|^2 + r_u |U T|^2 + w1 sum S +
+    w2 |S|^2`` as ``0.5 z' H z + f' z``; simple bounds ``|U| <= rate max``, ``S >= 0``; rows
+    ``|gamma_d U + free_d| <= delta max`` and ``gamma_h U + S >= bound_h``.
+    """
+
+    #: DAQP exit flags mapped to the status words the log uses (CVXPY's)
+    STATUS = {1: "optimal", 2: "optimal", -1: "infeasible", -2: "solver_error",
+              -3: "unbounded", -4: "user_limit", -5: "solver_error", -6: "solver_error"}
+
+    def __init__(self, structure: LateralQpStructure, max_iter: int) -> None:
+        self.s = structure
+        N, Nc, M = structure.horizon, structure.control_horizon, structure.max_obstacles
+        self.n_u, self.n_s, self.N = Nc, N * M, N
+        n = Nc + N * M
+        self.max_iter = int(max_iter)
+        w1, w2 = structure.weights[5], structure.weights[6]
+        self._H = 2.0 * w2 * np.eye(n)
+        self._f = np.full(n, float(w1))
+        self._A = np.zeros((N + N * M, n))
+        self._A[N:, Nc:] = np.eye(N * M)
+        rate, dmax = structure.steering_rate_max_rad_s, structure.steering_max_rad
+        self._dmax = dmax
+        self._upper = np.concatenate([np.full(Nc, rate), np.full(N * M, 1e30), np.zeros(N),
+                                      np.full(N * M, 1e30)])
+        self._lower = np.concatenate([np.full(Nc, -rate), np.zeros(N * M), np.zeros(N),
+                                      np.zeros(N * M)])
+        self._sense = np.zeros(self._upper.size, np.intc)
+        self._model = None        # daqp.Model, set up on the first solve
+        self._hessian_of = None   # the hessian_u array the workspace holds (one per speed)
+
+    def cost(self, data: CondensedData) -> tuple[np.ndarray, np.ndarray]:
+        """``H`` and ``f`` of the cost ``0.5 z' H z + f' z`` over ``z = [U, S]`` (the same ``H``
+        as :class:`ClarabelCondensedQp`'s ``P``)."""
+        n_u = self.n_u
+        H, f = self._H, self._f
+        H[:n_u, :n_u] = data.hessian_u
+        f[:n_u] = data.gradient_u
+        return H, f
+
+    def solve(self, data: CondensedData) -> QpSolution:
+        import time
+
+        import daqp
+
+        start = time.perf_counter()
+        n_u, n_s, N = self.n_u, self.n_s, self.N
+        H, f = self.cost(data)
+        A = self._A
+        A[:N, :n_u] = data.gamma_d
+        A[N:, :n_u] = data.gamma_h
+        upper, lower = self._upper, self._lower
+        base = n_u + n_s
+        upper[base:base + N] = self._dmax - data.free_d
+        lower[base:base + N] = -self._dmax - data.free_d
+        lower[base + N:] = data.bound_h
+        if not (np.isfinite(data.hessian_u).all() and np.isfinite(f).all()
+                and np.isfinite(A).all() and np.isfinite(lower).all()):
+            return QpSolution(NON_FINITE_DATA, -1, time.perf_counter() - start, None)
+        # a kept workspace (daqp.Model): the Hessian is sent again only when the model's speed
+        # changed it; the rest every step (the same optimum as daqp.solve, ~3x cheaper)
+        if self._model is None:
+            self._model = daqp.Model()
+            self._model.setup(H, f, A, upper, lower, self._sense)
+            self._model.settings = {"iter_limit": self.max_iter}
+        elif data.hessian_u is self._hessian_of:
+            self._model.update(f=f, A=A, bupper=upper, blower=lower)
+        else:
+            self._model.update(H=H, f=f, A=A, bupper=upper, blower=lower)
+        self._hessian_of = data.hessian_u
+        x, _, exitflag, info = self._model.solve()
+        status = self.STATUS.get(int(exitflag), "solver_error")
+        values = {"U": np.asarray(x[:n_u], float), "slack": np.asarray(x[n_u:], float)} \
+            if status == "optimal" else None
+        return QpSolution(status, int(info.get("iterations", -1)), time.perf_counter() - start,
+                          values)
+
+
+class LateralMpc:
+    """The lateral MPC: one compiled QP (from ``qp_cache``), a kept solver, the fallback.
+
+    Parameters
+    ----------
+    controller : ControllerConfig
+    vehicle : VehicleConfig
+    model : ModelConfig
+        The lateral model's settings (B2 entry, speed grid).
+    sample_time_s : float
+    qp_cache : QpCache, optional
+        Compiled problems shared across runs; a private one when omitted.
+
+    Attributes
+    ----------
+    compile_count : int
+        Compilations this controller caused (0 when the cache already held its structure).
+    compile_time_s : float
+    """
+
+    def __init__(self, controller: ControllerConfig, vehicle: VehicleConfig,
+                 model: ModelConfig | None = None, sample_time_s: float = 0.1,
+                 qp_cache: QpCache | None = None) -> None:
+        self.cfg, self.vehicle = controller, vehicle
+        self.model_cfg = model if model is not None else ModelConfig()
+        self.horizon = controller.horizon
+        self.sample_time_s = float(sample_time_s)
+        self.blocking = blocking_matrix(controller.horizon, controller.control_horizon,
+                                        controller.input_hold)
+        # the discretized models by speed, shared by every run handed the same cache (python-
+        # control's c2d is paid once per speed, not once per family member)
+        shared = qp_cache.memo(("lateral_models", vehicle_key(vehicle), self.sample_time_s,
+                                self.model_cfg.b2_heading_entry, self.model_cfg.speed_grid_mps),
+                               dict) if qp_cache is not None else {}
+        self.models = LateralModelCache(vehicle, self.sample_time_s,
+                                        self.model_cfg.b2_heading_entry,
+                                        self.model_cfg.speed_grid_mps, shared)
+        structure = LateralQpStructure.of(controller, vehicle)
+        self.condensed = controller.formulation == "condensed"
+        builder = build_condensed_lateral_problem if self.condensed else build_lateral_problem
+        self.weights = structure.weights
+        if controller.backend in ("daqp", "clarabel_dense"):
+            # no compilation: the condensed data go to the solver as numpy matrices
+            dense = DaqpCondensedQp if controller.backend == "daqp" else ClarabelCondensedQp
+            self.qp, self.compile_count, self.compile_time_s = \
+                dense(structure, controller.solver_max_iter), 0, 0.0
+        else:
+            self.qp, self.compile_count, self.compile_time_s = compiled_backend(
+                qp_cache, "lateral", structure, lambda: builder(structure),
+                controller.backend, controller.solver_max_iter)
+        # condensed predictions by model speed, shared like the models (built once per speed)
+        key = ("lateral_predictions", vehicle_key(vehicle), self.sample_time_s,
+               self.model_cfg.b2_heading_entry, self.model_cfg.speed_grid_mps,
+               controller.horizon, controller.control_horizon, controller.input_hold,
+               self.weights[:5])
+        self._predictions: dict[float, CondensedPrediction] = \
+            qp_cache.memo(key, dict) if qp_cache is not None else {}
+        self._dense = controller.backend in ("daqp", "clarabel_dense")
+        self.fallback = PlanFallback(controller.horizon)
+        self._steps_ahead_s = np.arange(1, controller.horizon + 1) * self.sample_time_s
+        self._times_s = np.concatenate([[0.0], self._steps_ahead_s])
+
+    @staticmethod
+    def parameter_vector(inputs: MpcInputs) -> np.ndarray:
+        """One step's parameter values stacked (column-major) in ``theta`` order."""
+        disturbance = inputs.model.Ed @ inputs.disturbance_rad_s[None, :]
+        return np.concatenate([
+            inputs.x0, inputs.model.Ad.ravel(order="F"), inputs.model.Bd.ravel(order="F"),
+            disturbance.ravel(order="F"), inputs.y_ref_m, inputs.psi_ref_rad,
+            inputs.constraint_gain.ravel(order="F"), inputs.constraint_bound.ravel(order="F")])
+
+    def prediction(self, model: LateralModel) -> CondensedPrediction:
+        """The condensed prediction of ``model`` (built once per model, i.e. per speed)."""
+        key = model.speed_mps
+        entry = self._predictions.get(key)
+        if entry is None or entry.model is not model:
+            entry = self._predictions[key] = CondensedPrediction.of(model, self.blocking,
+                                                                   self.weights[:5])
+        return entry
+
+    def solve(self, inputs: MpcInputs, log: dict | None = None) -> ControlStep:
+        """Solve the QP for one step's data, falling back safely on any failure."""
+        solution = QpSolution("not_solved", -1, 0.0, None)
+        free = prediction = None
+        if isfinite(sum(inputs.x0.tolist())):  # inf or nan anywhere makes the sum non-finite
+            if self.condensed:
+                prediction = self.prediction(inputs.model)
+                data = condensed_data(prediction, inputs, self.weights)
+                free = data.free
+                solution = self.qp.solve(data if self._dense else data.theta())
+            else:
+                solution = self.qp.solve(self.parameter_vector(inputs))
+        if solution.ok:
+            U = np.asarray(solution.values["U"], dtype=float).reshape(-1)
+            plan = U @ self.blocking
+            if isfinite(sum(plan.tolist())):
+                plan = plan[None, :]
+                self.fallback.accept(plan)
+                if self.condensed:
+                    # the eliminated states, for the log and the slack: X = free + Gamma U
+                    predicted = free + prediction.gamma @ U
+                    states = np.concatenate([inputs.x0[:, None], predicted.T], axis=1)
+                else:
+                    states = solution.values["X"]
+                # slack needed by the optimal plan (what the QP's slack variable holds); rows
+                # of idle slots and far obstacles are 0 y + s >= 0 and need none
+                slack = 0.0
+                if inputs.constraint_gain.any() or inputs.constraint_bound.any():
+                    lateral = states[0, 1:][:, None]
+                    slack = np.max(inputs.constraint_bound - inputs.constraint_gain * lateral,
+                                   initial=0.0)
+                return ControlStep(plan[:, 0].copy(), plan, states, solution.status,
+                                   solution.iterations, solution.solve_time_s, "none",
+                                   float(max(slack, 0.0)), log or {})
+        delta = inputs.x0[4] if np.isfinite(inputs.x0[4]) else 0.0
+        rate_max = self.vehicle.steering_rate_max_rad_s
+        ts = inputs.model.sample_time_s
+        return self.fallback.step(
+            solution.status, solution.iterations, solution.solve_time_s,
+            lambda: np.array([float(np.clip(-delta / ts, -rate_max, rate_max))]), log)
+
+    def inputs_from(self, obs: Observation) -> tuple[MpcInputs, dict]:
+        """The QP data of one observation: references from the APF path, half-planes, model."""
+        ctrl, N = self.cfg, self.horizon
+        model = self.models.at_speed(obs.speed_ref_mps)
+        line_pos = obs.position_line_m
+        stations = line_pos[0] + model.speed_mps * self._steps_ahead_s
+        path_line = obs.frame.to_line(obs.rollout.path_m)
+        y_ref, psi_ref = lateral_reference(path_line, stations, ctrl)
+        if ctrl.heading_reference == "apf_force":
+            rollout = obs.rollout
+            force_line = obs.frame.vectors_to_line(rollout.attraction[0] + rollout.repulsion[0]) \
+                if N > 1 else np.array([1.0, 0.0])
+            psi_ref = force_heading_reference(force_line, obs.heading_line_rad, N,
+                                              self.sample_time_s, ctrl)
+        visible = obs.obstacles
+        if visible.radii_m.shape[0]:
+            predicted = obs.frame.to_line(visible.predicted_positions(self._times_s))[1:]
+        else:
+            predicted = np.zeros((N, 0, 2))
+        G, h = collision_halfplanes(stations, y_ref, line_pos, predicted, visible.radii_m,
+                                    self.vehicle, ctrl)
+        s = obs.plant_state
+        x0 = np.array([line_pos[1], s[4], obs.heading_line_rad, s[5], s[6]])
+        log = {"y_ref_m": y_ref[0], "psi_ref_rad": psi_ref[0]}
+        return MpcInputs(x0, model, y_ref, psi_ref, G, h, np.zeros(N)), log
+
+    def step(self, obs: Observation) -> ControlStep:
+        """One closed-loop step."""
+        inputs, log = self.inputs_from(obs)
+        return self.solve(inputs, log)

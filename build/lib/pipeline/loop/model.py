@@ -1,0 +1,314 @@
+"""Model stage: the MPC's lateral linear model and the nonlinear single-track plant.
+
+The lateral model (paper Section 2) has state
+``x = [y, vy, epsi, r, delta]`` (lateral position m, lateral velocity m/s, heading error rad,
+yaw rate rad/s, steering angle rad), input ``u = delta_dot`` (rad/s) and disturbance
+``d = r_d`` (rad/s). It is built with python-control and discretized zero-order-hold.
+
+The plant is a different, nonlinear model: a single-track vehicle in global coordinates with
+saturating (tanh) tyre forces, a first-order speed loop and an integrating steering actuator,
+integrated with RK4 substeps.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+from math import atan2, cos, sin, tan, tanh
+
+import control
+import numpy as np
+
+from pipeline.loop.settings import VehicleConfig
+
+GRAVITY_MPS2 = 9.81
+
+#: Plant state layout (global frame).
+PLANT_STATE_NAMES = ("X_m", "Y_m", "psi_rad", "vx_mps", "vy_mps", "r_rad_s", "delta_rad")
+LATERAL_STATE_NAMES = ("y_m", "vy_mps", "epsi_rad", "r_rad_s", "delta_rad")
+
+
+@dataclass(frozen=True)
+class LateralModel:
+    """Continuous and zero-order-hold discrete lateral model at one speed.
+
+    Attributes
+    ----------
+    A, B1, B2 : ndarray
+        Continuous matrices, shapes (5, 5), (5, 1), (5, 1).
+    Ad, Bd, Ed : ndarray
+        Discrete matrices for input and disturbance.
+    speed_mps, sample_time_s : float
+    """
+
+    A: np.ndarray
+    B1: np.ndarray
+    B2: np.ndarray
+    Ad: np.ndarray
+    Bd: np.ndarray
+    Ed: np.ndarray
+    speed_mps: float
+    sample_time_s: float
+
+    def to_json(self) -> dict:
+        return {
+            "state": list(LATERAL_STATE_NAMES),
+            "input": "delta_dot_rad_s",
+            "disturbance": "r_d_rad_s",
+            "speed_mps": self.speed_mps,
+            "sample_time_s": self.sample_time_s,
+            "discretization": "zoh (control.c2d)",
+            "continuous": {"A": self.A.tolist(), "B1": self.B1.tolist(), "B2": self.B2.tolist()},
+            "discrete": {"Ad": self.Ad.tolist(), "Bd": self.Bd.tolist(), "Ed": self.Ed.tolist()},
+        }
+
+
+def lateral_matrices(vehicle: VehicleConfig, speed_mps: float,
+                     b2_heading_entry: float = -1.0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Continuous-time ``A, B1, B2`` of the lateral model.
+
+    Parameters
+    ----------
+    vehicle : VehicleConfig
+    speed_mps : float
+        Longitudinal speed vx (> 0); the matrix has 1/vx terms.
+    b2_heading_entry : float
+        Entry of B2 in the heading-error row (-1 by default; see the interpretation register).
+    """
+    if not np.isfinite(speed_mps) or speed_mps <= 0.0:
+        raise ValueError(f"lateral model needs a positive finite speed, got {speed_mps!r}")
+    m, iz = vehicle.mass_kg, vehicle.yaw_inertia_kg_m2
+    a, b = vehicle.cg_to_front_m, vehicle.cg_to_rear_m
+    caf, car = vehicle.cornering_stiffness_front_n_per_rad, vehicle.cornering_stiffness_rear_n_per_rad
+    vx = float(speed_mps)
+    A = np.array([
+        [0.0, 1.0, vx, 0.0, 0.0],
+        [0.0, -(caf + car) / (m * vx), 0.0, (b * car - a * caf) / (m * vx) - vx, caf / m],
+        [0.0, 0.0, 0.0, 1.0, 0.0],
+        [0.0, (b * car - a * caf) / (iz * vx), 0.0, -(a**2 * caf + b**2 * car) / (iz * vx),
+         a * caf / iz],
+        [0.0, 0.0, 0.0, 0.0, 0.0],
+    ])
+    B1 = np.array([[0.0], [0.0], [0.0], [0.0], [1.0]])
+    B2 = np.array([[0.0], [0.0], [float(b2_heading_entry)], [0.0], [0.0]])
+    return A, B1, B2
+
+
+def build_lateral_model(vehicle: VehicleConfig, speed_mps: float, sample_time_s: float,
+                        b2_heading_entry: float = -1.0) -> LateralModel:
+    """Build the lateral model with python-control and discretize it (zero-order hold).
+
+    The speed is floored at ``vehicle.min_model_speed_mps`` because the model has 1/vx terms.
+    """
+    speed = max(float(speed_mps), vehicle.min_model_speed_mps)
+    A, B1, B2 = lateral_matrices(vehicle, speed, b2_heading_entry)
+    sys_c = control.ss(A, np.hstack([B1, B2]), np.eye(5), np.zeros((5, 2)))
+    sys_d = control.c2d(sys_c, sample_time_s, method="zoh")
+    Bd_all = np.asarray(sys_d.B)
+    return LateralModel(A=A, B1=B1, B2=B2, Ad=np.asarray(sys_d.A), Bd=Bd_all[:, :1],
+                        Ed=Bd_all[:, 1:], speed_mps=speed, sample_time_s=float(sample_time_s))
+
+
+def model_speed_mps(speed_mps: float, floor_mps: float, grid_mps: float) -> float:
+    """Speed at which the lateral model is built: floored, rounded to the grid (m/s)."""
+    key = round(max(speed_mps, floor_mps) / grid_mps) * grid_mps
+    return round(max(key, floor_mps), 6)
+
+
+def vehicle_key(vehicle: VehicleConfig) -> tuple:
+    """A hashable identity of the vehicle's parameters (for caches of its models)."""
+    from dataclasses import asdict
+
+    return tuple(sorted((k, repr(v)) for k, v in asdict(vehicle).items()))
+
+
+@dataclass
+class LateralModelCache:
+    """Discretized lateral models keyed by speed rounded to ``grid_mps`` (for velocity planning)."""
+
+    vehicle: VehicleConfig
+    sample_time_s: float
+    b2_heading_entry: float
+    grid_mps: float
+    models: dict = field(default_factory=dict)
+
+    def at_speed(self, speed_mps: float) -> LateralModel:
+        key = model_speed_mps(speed_mps, self.vehicle.min_model_speed_mps, self.grid_mps)
+        if key not in self.models:
+            self.models[key] = build_lateral_model(self.vehicle, key, self.sample_time_s,
+                                                   self.b2_heading_entry)
+        return self.models[key]
+
+
+def _single_track_constants(vehicle: VehicleConfig) -> tuple[float, ...]:
+    """Mass, yaw inertia, axle distances, cornering stiffnesses and the tyre force limits
+    ``mu Fz`` (static axle loads) of the single-track plant."""
+    m, iz = vehicle.mass_kg, vehicle.yaw_inertia_kg_m2
+    a, b = vehicle.cg_to_front_m, vehicle.cg_to_rear_m
+    L = a + b
+    mu = vehicle.tire_friction
+    fz_front = m * GRAVITY_MPS2 * b / L
+    fz_rear = m * GRAVITY_MPS2 * a / L
+    return (m, iz, a, b, vehicle.cornering_stiffness_front_n_per_rad,
+            vehicle.cornering_stiffness_rear_n_per_rad, mu * fz_front, mu * fz_rear)
+
+
+def plant_derivative(state: np.ndarray, steering_rate_rad_s: float, speed_target_mps: float,
+                     vehicle: VehicleConfig) -> np.ndarray:
+    """Time derivative of the nonlinear single-track plant.
+
+    Parameters
+    ----------
+    state : ndarray, shape (7,)
+        ``[X, Y, psi, vx, vy, r, delta]`` (m, m, rad, m/s, m/s, rad/s, rad).
+    steering_rate_rad_s : float
+        Commanded steering rate (already saturated by the caller).
+    speed_target_mps : float
+        Target of the first-order speed loop.
+    vehicle : VehicleConfig
+    """
+    X, Y, psi, vx, vy, r, delta = state
+    m, iz, a, b, cf, cr, lim_f, lim_r = _single_track_constants(vehicle)
+    vx_safe = max(vx, 0.1)
+    slip_front = delta - np.arctan2(vy + a * r, vx_safe)
+    slip_rear = -np.arctan2(vy - b * r, vx_safe)
+    # tanh saturation: slope C at zero slip, limit mu * Fz
+    fy_front = lim_f * np.tanh(cf * slip_front / lim_f)
+    fy_rear = lim_r * np.tanh(cr * slip_rear / lim_r)
+    accel = np.clip((speed_target_mps - vx) / vehicle.speed_time_constant_s,
+                    -vehicle.accel_max_mps2, vehicle.accel_max_mps2)
+    rate = steering_rate_rad_s
+    if (delta >= vehicle.steering_max_rad and rate > 0) or (delta <= -vehicle.steering_max_rad
+                                                           and rate < 0):
+        rate = 0.0
+    return np.array([
+        vx * np.cos(psi) - vy * np.sin(psi),
+        vx * np.sin(psi) + vy * np.cos(psi),
+        r,
+        accel + vy * r,
+        (fy_front * np.cos(delta) + fy_rear) / m - vx * r,
+        (a * fy_front * np.cos(delta) - b * fy_rear) / iz,
+        rate,
+    ])
+
+
+def step_plant(state: np.ndarray, steering_rate_rad_s: float, speed_target_mps: float,
+               vehicle: VehicleConfig, dt_s: float, substeps: int) -> np.ndarray:
+    """Advance the plant by ``dt_s`` with ``substeps`` RK4 steps; the input is held (ZOH).
+
+    The same equations as :func:`plant_derivative`, evaluated on plain floats with the
+    vehicle's constants hoisted out of the substeps (seven states, forty derivative calls per
+    step: numpy's per-call overhead would cost more than the arithmetic). The tests hold the two
+    together.
+    """
+    rate_max = vehicle.steering_rate_max_rad_s
+    rate_cmd = min(max(float(steering_rate_rad_s), -rate_max), rate_max)
+    m, iz, a, b, cf, cr, lim_f, lim_r = _single_track_constants(vehicle)
+    tau, acc_max = vehicle.speed_time_constant_s, vehicle.accel_max_mps2
+    d_max = vehicle.steering_max_rad
+    target = float(speed_target_mps)
+
+    def rates(psi, vx, vy, r, delta):
+        vx_safe = max(vx, 0.1)
+        fy_front = lim_f * tanh(cf * (delta - atan2(vy + a * r, vx_safe)) / lim_f)
+        fy_rear = lim_r * tanh(cr * -atan2(vy - b * r, vx_safe) / lim_r)
+        accel = min(max((target - vx) / tau, -acc_max), acc_max)
+        rate = rate_cmd
+        if (delta >= d_max and rate > 0) or (delta <= -d_max and rate < 0):
+            rate = 0.0
+        cos_d = cos(delta)
+        c_psi, s_psi = cos(psi), sin(psi)
+        return (vx * c_psi - vy * s_psi, vx * s_psi + vy * c_psi, r, accel + vy * r,
+                (fy_front * cos_d + fy_rear) / m - vx * r,
+                (a * fy_front * cos_d - b * fy_rear) / iz, rate)
+
+    h = dt_s / substeps
+    half, sixth = 0.5 * h, h / 6.0
+    X, Y, psi, vx, vy, r, delta = (float(v) for v in state)
+    for _ in range(substeps):
+        # classic RK4, unrolled over the seven states (X and Y do not feed back)
+        a0, a1, a2, a3, a4, a5, a6 = rates(psi, vx, vy, r, delta)
+        b0, b1, b2, b3, b4, b5, b6 = rates(psi + half * a2, vx + half * a3, vy + half * a4,
+                                           r + half * a5, delta + half * a6)
+        c0, c1, c2, c3, c4, c5, c6 = rates(psi + half * b2, vx + half * b3, vy + half * b4,
+                                           r + half * b5, delta + half * b6)
+        d0, d1, d2, d3, d4, d5, d6 = rates(psi + h * c2, vx + h * c3, vy + h * c4,
+                                           r + h * c5, delta + h * c6)
+        X = X + sixth * (a0 + 2 * b0 + 2 * c0 + d0)
+        Y = Y + sixth * (a1 + 2 * b1 + 2 * c1 + d1)
+        psi = psi + sixth * (a2 + 2 * b2 + 2 * c2 + d2)
+        vx = vx + sixth * (a3 + 2 * b3 + 2 * c3 + d3)
+        vy = vy + sixth * (a4 + 2 * b4 + 2 * c4 + d4)
+        r = r + sixth * (a5 + 2 * b5 + 2 * c5 + d5)
+        delta = min(max(delta + sixth * (a6 + 2 * b6 + 2 * c6 + d6), -d_max), d_max)
+    return np.array([X, Y, psi, vx, vy, r, delta])
+
+
+#: Kinematic bicycle (paper Appendix A): state [x, y, theta, v], input [a, delta].
+KINEMATIC_STATE_NAMES = ("X_m", "Y_m", "psi_rad", "v_mps")
+
+
+def kinematic_derivative(state: np.ndarray, control_input: np.ndarray,
+                         wheelbase_m: float) -> np.ndarray:
+    """``f(x, u)`` of Appendix A: ``[v cos th, v sin th, v/L tan delta, a]``."""
+    _, _, theta, v = state
+    accel, delta = control_input
+    return np.array([v * np.cos(theta), v * np.sin(theta), v / wheelbase_m * np.tan(delta),
+                     accel])
+
+
+def kinematic_euler_step(state: np.ndarray, control_input: np.ndarray, wheelbase_m: float,
+                         dt_s: float) -> np.ndarray:
+    """The MPC's prediction model: one forward-Euler step ``x + Ts f(x, u)`` (as Appendix A's
+    loop advances its state)."""
+    return np.asarray(state, float) + dt_s * kinematic_derivative(state, control_input,
+                                                                  wheelbase_m)
+
+
+def kinematic_jacobians(state: np.ndarray, control_input: np.ndarray, wheelbase_m: float,
+                        dt_s: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Linearization of :func:`kinematic_euler_step` about ``(state, control_input)``.
+
+    Returns
+    -------
+    A : ndarray, shape (4, 4)
+    B : ndarray, shape (4, 2)
+    c : ndarray, shape (4,)
+        Offset so that ``x+ ~= A x + B u + c`` near the point.
+    """
+    _, _, theta, v = state
+    accel, delta = control_input
+    L = wheelbase_m
+    A = np.eye(4)
+    A[0, 2] = -dt_s * v * np.sin(theta)
+    A[0, 3] = dt_s * np.cos(theta)
+    A[1, 2] = dt_s * v * np.cos(theta)
+    A[1, 3] = dt_s * np.sin(theta)
+    A[2, 3] = dt_s * np.tan(delta) / L
+    B = np.zeros((4, 2))
+    B[2, 1] = dt_s * v / (L * np.cos(delta) ** 2)
+    B[3, 0] = dt_s
+    c = kinematic_euler_step(state, control_input, L, dt_s) - A @ state - B @ control_input
+    return A, B, c
+
+
+def kinematic_plant_step(state: np.ndarray, control_input: np.ndarray, wheelbase_m: float,
+                         dt_s: float, substeps: int) -> np.ndarray:
+    """The plant of the kinematic track: the exact nonlinear model, RK4 with substeps, input
+    held over the step (plain floats; the same equations as :func:`kinematic_derivative`)."""
+    h = dt_s / substeps
+    half, sixth = 0.5 * h, h / 6.0
+    accel, delta = float(control_input[0]), float(control_input[1])
+
+    def rates(X, Y, theta, v):
+        return (v * cos(theta), v * sin(theta), v / wheelbase_m * tan(delta), accel)
+
+    x = [float(v) for v in state]
+    for _ in range(substeps):
+        k1 = rates(*x)
+        k2 = rates(*[xi + half * ki for xi, ki in zip(x, k1)])
+        k3 = rates(*[xi + half * ki for xi, ki in zip(x, k2)])
+        k4 = rates(*[xi + h * ki for xi, ki in zip(x, k3)])
+        x = [xi + sixth * (a1 + 2 * a2 + 2 * a3 + a4)
+             for xi, a1, a2, a3, a4 in zip(x, k1, k2, k3, k4)]
+    return np.array(x)

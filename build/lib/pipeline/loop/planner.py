@@ -1,0 +1,291 @@
+"""Planner stage: the APF rollout (baseline and improved as presets of one switch space) and the
+velocity planner ``V_r = f_v(obstacles)``.
+
+Equations (paper Section 2)::
+
+    F_att(p) = g - p
+    H_i      = H_max / (1 + exp(beta (s - s_o)^2))      if rho_i <= rho_p else 0
+    polynomial  F_rep,i = H_i (1/rho - 1/rho0) (p - o)/rho^3            for rho < rho0
+    exponential F_rep,i = k_rep exp(alpha_e (1 - rho/rho0)) (p - o)/rho^2 for rho < rho0
+    p_{t+1}  = p_t + step_size * F/|F|   (normalized)   or   p_t + step_size * F
+
+then the minimum-movement threshold (``step_min_m``) and the registered step cap
+(``step_max_m``). All positions in metres, global frame.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from math import exp, sqrt
+
+import numpy as np
+
+from pipeline.loop.settings import PlannerConfig
+from pipeline.loop.scenario import ObstacleSnapshot
+
+_TINY = 1e-12
+
+
+@dataclass(frozen=True)
+class ApfRollout:
+    """The APF's short reference path over the horizon.
+
+    Attributes
+    ----------
+    path_m : ndarray, shape (Np, 2)
+        ``p_1 .. p_Np``; ``p_1`` is the vehicle's position.
+    attraction : ndarray, shape (Np - 1, 2)
+        ``F_att`` at ``p_1 .. p_{Np-1}``.
+    repulsion : ndarray, shape (Np - 1, 2)
+        ``F_rep`` (sum over obstacles) at the same points.
+    step_cap_active : ndarray of bool, shape (Np - 1,)
+        Whether the step cap shortened each step.
+    step_min_active : ndarray of bool, shape (Np - 1,)
+        Whether the minimum-movement threshold lengthened each step.
+    """
+
+    path_m: np.ndarray
+    attraction: np.ndarray
+    repulsion: np.ndarray
+    step_cap_active: np.ndarray
+    step_min_active: np.ndarray
+
+
+def adaptive_coefficient(position_m: np.ndarray, obstacle_positions_m: np.ndarray,
+                         h_max: float, beta: float, rho_p_m: float) -> np.ndarray:
+    """Adaptive repulsive coefficient ``H_i`` for each obstacle.
+
+    ``H_i = H_max / (1 + exp(beta (s - s_o)^2))`` when ``rho_i <= rho_p``, else 0, with
+    ``s`` the longitudinal (x) coordinate.
+
+    Returns
+    -------
+    ndarray, shape (n,)
+    """
+    obstacles = np.asarray(obstacle_positions_m, dtype=float).reshape(-1, 2)
+    rho = np.linalg.norm(position_m[None, :] - obstacles, axis=1)
+    ds = position_m[0] - obstacles[:, 0]
+    # exp overflows for large beta*ds^2; 1/(1+inf) = 0 is the right limit
+    with np.errstate(over="ignore"):
+        h = h_max / (1.0 + np.exp(beta * ds**2))
+    return np.where(rho <= rho_p_m, h, 0.0)
+
+
+def repulsive_force(position_m: np.ndarray, goal_m: np.ndarray,
+                    obstacle_positions_m: np.ndarray, params: PlannerConfig,
+                    closing_speed_mps: np.ndarray | None = None) -> np.ndarray:
+    """Sum of the repulsive forces of all obstacles at ``position_m``.
+
+    Parameters
+    ----------
+    position_m, goal_m : ndarray, shape (2,)
+    obstacle_positions_m : ndarray, shape (n, 2)
+    params : PlannerConfig
+        ``repulsion_law`` (``none`` turns repulsion off: the no-APF peer), ``rho0_m``, ``alpha_e``, ``k_rep_source`` and the H_i constants.
+    closing_speed_mps : ndarray, shape (n,), optional
+        Rate at which each obstacle's distance shrinks; with
+        ``closing_speed_gain_s_per_m > 0`` repulsion is scaled by ``1 + gain * max(0, closing)``.
+
+    Returns
+    -------
+    ndarray, shape (2,)
+    """
+    obstacles = np.asarray(obstacle_positions_m, dtype=float).reshape(-1, 2)
+    if obstacles.shape[0] == 0 or params.repulsion_law == "none":
+        return np.zeros(2)
+    diff = position_m[None, :] - obstacles
+    rho = np.linalg.norm(diff, axis=1)
+    # direction away from the obstacle; at rho = 0 use the left normal of the goal direction
+    to_goal = goal_m - position_m
+    normal = np.array([-to_goal[1], to_goal[0]])
+    normal = normal / np.linalg.norm(normal) if np.linalg.norm(normal) > _TINY else np.array([0.0, 1.0])
+    direction = np.where(rho[:, None] > _TINY, diff / np.maximum(rho, _TINY)[:, None], normal[None, :])
+    rho_eff = np.maximum(rho, params.rho_floor_m)
+    h = adaptive_coefficient(position_m, obstacles, params.h_max, params.beta, params.rho_p_m)
+    if params.repulsion_law == "polynomial":
+        magnitude = h * (1.0 / rho_eff - 1.0 / params.rho0_m) / rho_eff**2
+    else:
+        k_rep = h if params.k_rep_source == "adaptive_h" else params.k_rep_constant
+        magnitude = k_rep * np.exp(params.alpha_e * (1.0 - rho_eff / params.rho0_m)) / rho_eff
+    magnitude = np.where(rho < params.rho0_m, magnitude, 0.0)
+    if closing_speed_mps is not None and params.closing_speed_gain_s_per_m > 0.0:
+        magnitude = magnitude * (1.0 + params.closing_speed_gain_s_per_m
+                                 * np.maximum(np.asarray(closing_speed_mps, dtype=float), 0.0))
+    return (magnitude[:, None] * direction).sum(axis=0)
+
+
+def apf_step(position_m: np.ndarray, goal_m: np.ndarray, obstacle_positions_m: np.ndarray,
+             params: PlannerConfig, closing_speed_mps: np.ndarray | None = None
+             ) -> tuple[np.ndarray, np.ndarray, np.ndarray, bool, bool]:
+    """One APF update ``p -> p + step``.
+
+    Returns
+    -------
+    next_position_m, attraction, repulsion : ndarray, shape (2,)
+    cap_active, min_active : bool
+        Whether the step cap or the minimum-movement threshold changed the step.
+    """
+    attraction = goal_m - position_m
+    repulsion = repulsive_force(position_m, goal_m, obstacle_positions_m, params, closing_speed_mps)
+    total = attraction + repulsion
+    norm = float(np.linalg.norm(total))
+    if params.normalize_step:
+        step = params.step_size * total / norm if norm > _TINY else np.zeros(2)
+    else:
+        step = params.step_size * total
+    length = float(np.linalg.norm(step))
+    min_active = cap_active = False
+    if params.step_min_m > 0.0 and length < params.step_min_m:
+        if norm > _TINY:
+            direction = total / norm
+        else:
+            goal_dist = np.linalg.norm(attraction)
+            direction = attraction / goal_dist if goal_dist > _TINY else np.zeros(2)
+        step = params.step_min_m * direction
+        min_active = True
+    elif params.step_max_m is not None and length > params.step_max_m:
+        step = step * (params.step_max_m / length)
+        cap_active = True
+    return position_m + step, attraction, repulsion, cap_active, min_active
+
+
+def apf_rollout(position_m: np.ndarray, goal_m: np.ndarray, obstacles: ObstacleSnapshot,
+                params: PlannerConfig, horizon: int, sample_time_s: float,
+                vehicle_velocity_mps: np.ndarray | None = None) -> ApfRollout:
+    """Roll the APF out over the horizon: ``p_1`` = vehicle position, ``p_2 .. p_Np`` by
+    :func:`apf_step`.
+
+    The rollout runs on plain floats (a handful of obstacles, ``Np - 1`` sequential steps:
+    numpy's per-call overhead would dominate); :func:`apf_step` is the vectorized statement of
+    the same update and the tests hold the two together.
+
+    Parameters
+    ----------
+    position_m, goal_m : ndarray, shape (2,)
+    obstacles : ObstacleSnapshot
+        Visible obstacles only.
+    params : PlannerConfig
+    horizon : int
+        ``Np``, number of points of the path.
+    sample_time_s : float
+        Time per rollout step, used only for ``obstacle_prediction = constant_velocity``.
+    vehicle_velocity_mps : ndarray, shape (2,), optional
+        For the closing-speed scaling of the velocity-aware variant.
+    """
+    n = horizon
+    px, py = float(position_m[0]), float(position_m[1])
+    gx, gy = float(goal_m[0]), float(goal_m[1])
+    centres = obstacles.positions_m.tolist()
+    velocities = obstacles.velocities_mps.tolist()
+    predict = params.obstacle_prediction == "constant_velocity"
+    closing_on = vehicle_velocity_mps is not None and params.closing_speed_gain_s_per_m > 0.0
+    vvx, vvy = (float(vehicle_velocity_mps[0]), float(vehicle_velocity_mps[1])) \
+        if vehicle_velocity_mps is not None else (0.0, 0.0)
+    law = params.repulsion_law
+    polynomial, constant_k = law == "polynomial", params.k_rep_source != "adaptive_h"
+    h_max, beta, rho_p, rho0 = params.h_max, params.beta, params.rho_p_m, params.rho0_m
+    alpha_e, k_const, floor = params.alpha_e, params.k_rep_constant, params.rho_floor_m
+    gain, step_size, normalize = params.closing_speed_gain_s_per_m, params.step_size, \
+        params.normalize_step
+    step_min, step_max = params.step_min_m, params.step_max_m
+    path = [(px, py)]
+    att_rows, rep_rows, cap, low = [], [], [], []
+    for t in range(n - 1):
+        ax, ay = gx - px, gy - py
+        rx = ry = 0.0
+        if centres and law != "none":
+            # direction away from an obstacle sitting exactly at p: left normal of the goal
+            nlen = sqrt(ay * ay + ax * ax)
+            nx, ny = ((-ay / nlen, ax / nlen) if nlen > _TINY else (0.0, 1.0))
+            for (ox, oy), (ovx, ovy) in zip(centres, velocities):
+                if predict:
+                    ox, oy = ox + t * sample_time_s * ovx, oy + t * sample_time_s * ovy
+                dx, dy = px - ox, py - oy
+                rho = sqrt(dx * dx + dy * dy)
+                if rho >= rho0:
+                    continue
+                ux, uy = ((dx / max(rho, _TINY), dy / max(rho, _TINY)) if rho > _TINY
+                          else (nx, ny))
+                rho_eff = max(rho, floor)
+                h = 0.0
+                if rho <= rho_p:
+                    try:
+                        h = h_max / (1.0 + exp(beta * (dx * dx)))
+                    except OverflowError:  # 1 / (1 + inf) = 0 is the right limit
+                        h = 0.0
+                if polynomial:
+                    magnitude = h * (1.0 / rho_eff - 1.0 / rho0) / rho_eff**2
+                else:
+                    k_rep = k_const if constant_k else h
+                    magnitude = k_rep * exp(alpha_e * (1.0 - rho_eff / rho0)) / rho_eff
+                if closing_on:
+                    lx, ly = -dx, -dy
+                    dist = max(rho, _TINY)
+                    closing = ((vvx - ovx) * lx + (vvy - ovy) * ly) / dist
+                    magnitude = magnitude * (1.0 + gain * max(closing, 0.0))
+                rx += magnitude * ux
+                ry += magnitude * uy
+        fx, fy = ax + rx, ay + ry
+        norm = sqrt(fx * fx + fy * fy)
+        if normalize:
+            sx, sy = ((step_size * fx / norm, step_size * fy / norm) if norm > _TINY
+                      else (0.0, 0.0))
+        else:
+            sx, sy = step_size * fx, step_size * fy
+        length = sqrt(sx * sx + sy * sy)
+        is_low = is_cap = False
+        if step_min > 0.0 and length < step_min:
+            if norm > _TINY:
+                dirx, diry = fx / norm, fy / norm
+            else:
+                goal_dist = sqrt(ax * ax + ay * ay)
+                dirx, diry = (ax / goal_dist, ay / goal_dist) if goal_dist > _TINY else (0.0, 0.0)
+            sx, sy = step_min * dirx, step_min * diry
+            is_low = True
+        elif step_max is not None and length > step_max:
+            scale = step_max / length
+            sx, sy = sx * scale, sy * scale
+            is_cap = True
+        px, py = px + sx, py + sy
+        path.append((px, py))
+        att_rows.append((ax, ay))
+        rep_rows.append((rx, ry))
+        cap.append(is_cap)
+        low.append(is_low)
+    shape = (max(n - 1, 0), 2)
+    return ApfRollout(np.array(path[:max(n, 1)]).reshape(-1, 2),
+                      np.array(att_rows, dtype=float).reshape(shape),
+                      np.array(rep_rows, dtype=float).reshape(shape),
+                      np.array(cap, dtype=bool), np.array(low, dtype=bool))
+
+
+def plan_speed(position_m: np.ndarray, heading_rad: float, obstacles: ObstacleSnapshot,
+               nominal_speed_mps: float, vehicle_radius_m: float,
+               params: PlannerConfig) -> float:
+    """Velocity planning ``V_r = f_v(obstacles)`` from a stopping-distance rule.
+
+    An obstacle counts when it lies ahead of the vehicle inside a corridor as wide as both radii
+    plus ``stop_margin_m``. With ``gap`` the free distance to it, the speed is capped at
+    ``sqrt(2 a_brake max(gap - stop_margin, 0))`` (the speed from which the vehicle can stop in
+    the gap), never below ``speed_floor_mps`` and never above the nominal speed.
+
+    Returns
+    -------
+    float
+        Planned speed (m/s).
+    """
+    if not params.velocity_planning or obstacles.positions_m.shape[0] == 0:
+        return float(nominal_speed_mps)
+    forward = np.array([np.cos(heading_rad), np.sin(heading_rad)])
+    left = np.array([-forward[1], forward[0]])
+    rel = obstacles.positions_m - position_m[None, :]
+    ahead = rel @ forward
+    lateral = np.abs(rel @ left)
+    corridor = obstacles.radii_m + vehicle_radius_m + params.stop_margin_m
+    relevant = (ahead > 0.0) & (lateral < corridor)
+    if not np.any(relevant):
+        return float(nominal_speed_mps)
+    gap = float(np.min(ahead[relevant] - obstacles.radii_m[relevant])) - vehicle_radius_m
+    allowed = np.sqrt(2.0 * params.braking_decel_mps2 * max(gap - params.stop_margin_m, 0.0))
+    return float(np.clip(allowed, params.speed_floor_mps, nominal_speed_mps))

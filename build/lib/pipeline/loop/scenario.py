@@ -1,0 +1,227 @@
+"""Scenario stage: start, goal, obstacles over time, and the straight start-to-goal line frame.
+
+Obstacles are circles that are invisible until their appearance time and then move at constant
+velocity from the position at which they appear.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from pipeline.loop.settings import ScenarioConfig
+
+
+@dataclass(frozen=True)
+class ObstacleSnapshot:
+    """Obstacle states at one instant (arrays over obstacles, global frame).
+
+    Attributes
+    ----------
+    positions_m : ndarray, shape (n, 2)
+    velocities_mps : ndarray, shape (n, 2)
+    radii_m : ndarray, shape (n,)
+    visible : ndarray of bool, shape (n,)
+    """
+
+    positions_m: np.ndarray
+    velocities_mps: np.ndarray
+    radii_m: np.ndarray
+    visible: np.ndarray
+
+    def only_visible(self) -> "ObstacleSnapshot":
+        keep = self.visible
+        return ObstacleSnapshot(self.positions_m[keep], self.velocities_mps[keep],
+                                self.radii_m[keep], self.visible[keep])
+
+    def predicted_positions(self, times_ahead_s: np.ndarray) -> np.ndarray:
+        """Constant-velocity prediction, shape (len(times_ahead_s), n, 2)."""
+        t = np.asarray(times_ahead_s, dtype=float)[:, None, None]
+        return self.positions_m[None, :, :] + t * self.velocities_mps[None, :, :]
+
+
+@dataclass(frozen=True)
+class LineFrame:
+    """Frame whose x axis runs from the start to the goal (the lateral model's reference line)."""
+
+    origin_m: np.ndarray
+    heading_rad: float
+
+    def to_line(self, points_m: np.ndarray) -> np.ndarray:
+        c, s = np.cos(self.heading_rad), np.sin(self.heading_rad)
+        d = np.asarray(points_m, dtype=float) - self.origin_m
+        out = np.empty(d.shape)
+        out[..., 0] = c * d[..., 0] + s * d[..., 1]
+        out[..., 1] = -s * d[..., 0] + c * d[..., 1]
+        return out
+
+    def vectors_to_line(self, vectors: np.ndarray) -> np.ndarray:
+        c, s = np.cos(self.heading_rad), np.sin(self.heading_rad)
+        v = np.asarray(vectors, dtype=float)
+        return np.stack([c * v[..., 0] + s * v[..., 1], -s * v[..., 0] + c * v[..., 1]], axis=-1)
+
+    def to_global(self, points_line_m: np.ndarray) -> np.ndarray:
+        c, s = np.cos(self.heading_rad), np.sin(self.heading_rad)
+        p = np.asarray(points_line_m, dtype=float)
+        return np.stack([c * p[..., 0] - s * p[..., 1], s * p[..., 0] + c * p[..., 1]],
+                        axis=-1) + self.origin_m
+
+
+@dataclass(frozen=True)
+class Scenario:
+    """A closed-loop scenario built from :class:`ScenarioConfig`."""
+
+    name: str
+    start_m: np.ndarray
+    start_heading_rad: float
+    goal_m: np.ndarray
+    goal_tolerance_m: float
+    speed_mps: float
+    initial_speed_mps: float
+    sample_time_s: float
+    n_steps: int
+    plant_substeps: int
+    obstacle_start_m: np.ndarray
+    obstacle_velocity_mps: np.ndarray
+    obstacle_radius_m: np.ndarray
+    obstacle_appear_s: np.ndarray
+
+    @property
+    def n_obstacles(self) -> int:
+        return int(self.obstacle_radius_m.shape[0])
+
+    @property
+    def line_frame(self) -> LineFrame:
+        d = self.goal_m - self.start_m
+        return LineFrame(self.start_m.copy(), float(np.arctan2(d[1], d[0])))
+
+    def obstacles_at(self, time_s: float) -> ObstacleSnapshot:
+        """Obstacle positions at ``time_s``; before appearance an obstacle sits where it will appear."""
+        elapsed = np.maximum(time_s - self.obstacle_appear_s, 0.0)[:, None]
+        positions = self.obstacle_start_m + elapsed * self.obstacle_velocity_mps
+        # a small tolerance so that an obstacle appearing at t = 3.0 s is seen at step 30
+        visible = time_s + 1e-9 >= self.obstacle_appear_s
+        return ObstacleSnapshot(positions, self.obstacle_velocity_mps.copy(),
+                                self.obstacle_radius_m.copy(), visible)
+
+
+def build_scenario(cfg: ScenarioConfig) -> Scenario:
+    """Turn the scenario config into arrays.
+
+    Parameters
+    ----------
+    cfg : ScenarioConfig
+
+    Returns
+    -------
+    Scenario
+    """
+    obs = cfg.obstacles
+    return Scenario(
+        name=cfg.name,
+        start_m=np.asarray(cfg.start_xy_m, dtype=float),
+        start_heading_rad=float(cfg.start_heading_rad),
+        goal_m=np.asarray(cfg.goal_xy_m, dtype=float),
+        goal_tolerance_m=float(cfg.goal_tolerance_m),
+        speed_mps=float(cfg.speed_mps),
+        initial_speed_mps=float(cfg.speed_mps if cfg.initial_speed_mps is None
+                                else cfg.initial_speed_mps),
+        sample_time_s=float(cfg.sample_time_s),
+        n_steps=int(cfg.n_steps),
+        plant_substeps=int(cfg.plant_substeps),
+        obstacle_start_m=np.array([[o.x_m, o.y_m] for o in obs], dtype=float).reshape(-1, 2),
+        obstacle_velocity_mps=np.array([[o.vx_mps, o.vy_mps] for o in obs],
+                                       dtype=float).reshape(-1, 2),
+        obstacle_radius_m=np.array([o.radius_m for o in obs], dtype=float),
+        obstacle_appear_s=np.array([o.appear_time_s for o in obs], dtype=float),
+    )
+
+
+def _uniform(rng: np.random.Generator, bounds) -> float:
+    return float(rng.uniform(bounds[0], bounds[1]))
+
+
+def draw_family_member(base: ScenarioConfig, index: int,
+                       vehicle_radius_m: float = 1.0) -> ScenarioConfig:
+    """Scenario ``index`` of the family described by ``base.family``.
+
+    The first obstacle is the "sudden" one of the paper: it appears at a random time, a random
+    distance ahead of where the vehicle would be at that time and a random lateral offset, and it
+    is static, crossing the path (moving toward and over the start-goal line) or oncoming. Up to
+    two further obstacles (static or slowly moving) are scattered along the route; draws that
+    would sit on the vehicle when they appear are redrawn. Every draw comes from
+    ``numpy.random.default_rng([seed, index])``.
+
+    Parameters
+    ----------
+    base : ScenarioConfig
+        Start, goal, speed, timing and ``family`` ranges.
+    index : int
+        Member number (>= 0).
+    vehicle_radius_m : float
+        Footprint used to keep further obstacles off the vehicle when they appear.
+
+    Returns
+    -------
+    ScenarioConfig
+        A plain scenario (``family = None``) named ``<base name>_s<seed>_i<index>``.
+    """
+    from dataclasses import replace
+
+    from pipeline.loop.settings import ObstacleConfig
+
+    fam = base.family
+    rng = np.random.default_rng([fam.seed, index])
+    start, goal = np.asarray(base.start_xy_m, float), np.asarray(base.goal_xy_m, float)
+    e1 = (goal - start) / np.linalg.norm(goal - start)
+    e2 = np.array([-e1[1], e1[0]])
+    counts = np.arange(1, len(fam.obstacle_count_probabilities) + 1)
+    n_obstacles = int(rng.choice(counts, p=np.asarray(fam.obstacle_count_probabilities)))
+
+    def to_global(along: float, lateral: float) -> np.ndarray:
+        return start + along * e1 + lateral * e2
+
+    obstacles = []
+    appear = _uniform(rng, fam.appear_time_s)
+    along = base.speed_mps * appear + _uniform(rng, fam.ahead_m)
+    lateral = _uniform(rng, fam.lateral_m)
+    radius = _uniform(rng, fam.radius_m)
+    kind = rng.uniform()
+    if kind < fam.static_probability:
+        vel = np.zeros(2)
+    elif kind < fam.static_probability + fam.oncoming_probability:
+        vel = -_uniform(rng, fam.oncoming_speed_mps) * e1
+    else:
+        toward = -np.sign(lateral) if lateral != 0.0 else (1.0 if rng.uniform() < 0.5 else -1.0)
+        vel = toward * _uniform(rng, fam.crossing_speed_mps) * e2
+    pos = to_global(along, lateral)
+    obstacles.append(ObstacleConfig(x_m=float(pos[0]), y_m=float(pos[1]), vx_mps=float(vel[0]),
+                                    vy_mps=float(vel[1]), radius_m=radius,
+                                    appear_time_s=appear))
+    for _ in range(n_obstacles - 1):
+        for _attempt in range(50):
+            appear_k = _uniform(rng, fam.extra_appear_time_s)
+            along_k, lateral_k = _uniform(rng, fam.extra_x_m), _uniform(rng, fam.extra_y_m)
+            radius_k = _uniform(rng, fam.radius_m)
+            moving = rng.uniform() < 0.5
+            heading = rng.uniform(-np.pi, np.pi)
+            speed_k = rng.uniform(0.0, 0.5) if moving else 0.0
+            vel_k = speed_k * np.array([np.cos(heading), np.sin(heading)])
+            nominal = to_global(base.speed_mps * appear_k, 0.0)
+            pos_k = to_global(along_k, lateral_k)
+            clear = radius_k + vehicle_radius_m + 1.5
+            if np.linalg.norm(pos_k - nominal) > clear and np.linalg.norm(pos_k - goal) > clear:
+                break
+        obstacles.append(ObstacleConfig(x_m=float(pos_k[0]), y_m=float(pos_k[1]),
+                                        vx_mps=float(vel_k[0]), vy_mps=float(vel_k[1]),
+                                        radius_m=radius_k, appear_time_s=appear_k))
+    return replace(base, name=f"{base.name}_s{fam.seed}_i{index:04d}", obstacles=obstacles,
+                   family=None)
+
+
+def family_members(base: ScenarioConfig, vehicle_radius_m: float = 1.0) -> list[ScenarioConfig]:
+    """All ``base.family.size`` members, in index order."""
+    if base.family is None:
+        raise ValueError("scenario has no family block")
+    return [draw_family_member(base, i, vehicle_radius_m) for i in range(base.family.size)]

@@ -1,0 +1,379 @@
+"""Settings of the closed loop (scenario, vehicle, model, planner, controller), beside the stages
+that use them.
+
+Every number the loop uses lives in one of these dataclasses. Hydra composes YAML files in
+``conf/`` onto them (each YAML names its schema in ``defaults``); ``OmegaConf.to_object`` then
+builds the dataclasses, whose ``__post_init__`` checks ranges and raises
+:class:`pipeline.errors.ConfigError` naming the key, the value and what is allowed.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import List, Optional, Protocol
+
+from omegaconf import MISSING
+
+from pipeline.errors import ConfigError
+from pipeline.loop.qp_memory import MAX_HORIZON, qp_memory_gib
+from pipeline.validation import at_least, between, choice, finite, pair, safe_name
+
+
+@dataclass
+class VehicleConfig:
+    """Vehicle parameters for the lateral model and the nonlinear plant (SI units)."""
+
+    name: str = MISSING
+    source: str = MISSING
+    mass_kg: float = 1500.0
+    yaw_inertia_kg_m2: float = 2500.0
+    cg_to_front_m: float = 1.2
+    cg_to_rear_m: float = 1.3
+    cornering_stiffness_front_n_per_rad: float = 60000.0
+    cornering_stiffness_rear_n_per_rad: float = 60000.0
+    tire_friction: float = 0.9
+    footprint_radius_m: float = 1.0
+    steering_max_rad: float = 0.4
+    steering_rate_max_rad_s: float = 1.0
+    min_model_speed_mps: float = 1.0
+    speed_time_constant_s: float = 0.5
+    accel_max_mps2: float = 3.0
+
+    #: Physical range of each parameter (a road vehicle, from a cart to a truck).
+    BOUNDS = {"mass_kg": (10.0, 1e5), "yaw_inertia_kg_m2": (1.0, 1e7),
+              "cg_to_front_m": (0.05, 20.0), "cg_to_rear_m": (0.05, 20.0),
+              "cornering_stiffness_front_n_per_rad": (10.0, 1e7),
+              "cornering_stiffness_rear_n_per_rad": (10.0, 1e7), "tire_friction": (0.01, 3.0),
+              "footprint_radius_m": (0.0, 20.0), "steering_rate_max_rad_s": (1e-3, 20.0),
+              "min_model_speed_mps": (0.05, 20.0), "speed_time_constant_s": (1e-3, 100.0),
+              "accel_max_mps2": (1e-3, 50.0)}
+
+    def __post_init__(self) -> None:
+        for key, (low, high) in self.BOUNDS.items():
+            between(f"vehicle.{key}", getattr(self, key), low, high)
+        between("vehicle.steering_max_rad", self.steering_max_rad, 1e-3, 1.2)
+        safe_name("vehicle.name", self.name)
+
+    @property
+    def wheelbase_m(self) -> float:
+        return self.cg_to_front_m + self.cg_to_rear_m
+
+
+@dataclass
+class PlannerConfig:
+    """APF rollout settings. ``baseline`` and ``improved`` are two presets of these switches."""
+
+    name: str = MISSING
+    step_size: float = 0.1
+    normalize_step: bool = True
+    h_max: float = 50.0
+    beta: float = 1.0
+    rho_p_m: float = 6.0
+    rho0_m: float = 4.0
+    repulsion_law: str = "polynomial"
+    k_rep_source: str = "adaptive_h"
+    k_rep_constant: float = 25.0
+    alpha_e: float = 2.0
+    step_min_m: float = 0.0
+    step_max_m: Optional[float] = None
+    rho_floor_m: float = 0.05
+    obstacle_prediction: str = "current"
+    closing_speed_gain_s_per_m: float = 0.0
+    # velocity planning V_r = f_v(obstacles): off for the paper scenario
+    velocity_planning: bool = False
+    braking_decel_mps2: float = 2.0
+    stop_margin_m: float = 1.0
+    speed_floor_mps: float = 1.0
+
+    def __post_init__(self) -> None:
+        safe_name("planner.name", self.name)
+        at_least("planner.braking_decel_mps2", self.braking_decel_mps2, 0.0, inclusive=False)
+        at_least("planner.stop_margin_m", self.stop_margin_m, 0.0)
+        at_least("planner.speed_floor_mps", self.speed_floor_mps, 0.0, inclusive=False)
+        at_least("planner.step_size", self.step_size, 0.0, inclusive=False)
+        at_least("planner.h_max", self.h_max, 0.0)
+        at_least("planner.beta", self.beta, 0.0)
+        at_least("planner.rho_p_m", self.rho_p_m, 0.0, inclusive=False)
+        at_least("planner.rho0_m", self.rho0_m, 0.0, inclusive=False)
+        choice("planner.repulsion_law", self.repulsion_law, ("polynomial", "exponential", "none"))
+        choice("planner.k_rep_source", self.k_rep_source, ("adaptive_h", "constant"))
+        at_least("planner.k_rep_constant", self.k_rep_constant, 0.0)
+        between("planner.alpha_e", self.alpha_e, 0.0, 50.0)
+        at_least("planner.step_min_m", self.step_min_m, 0.0)
+        if self.step_max_m is not None:
+            at_least("planner.step_max_m", self.step_max_m, 0.0, inclusive=False)
+            if self.step_max_m < self.step_min_m:
+                raise ConfigError("planner.step_max_m", self.step_max_m,
+                                  f">= planner.step_min_m ({self.step_min_m}) or null")
+        at_least("planner.rho_floor_m", self.rho_floor_m, 0.0, inclusive=False)
+        choice("planner.obstacle_prediction", self.obstacle_prediction,
+                ("current", "constant_velocity"))
+        at_least("planner.closing_speed_gain_s_per_m", self.closing_speed_gain_s_per_m, 0.0)
+
+
+@dataclass
+class ModelConfig:
+    """Settings of the MPC's lateral prediction model."""
+
+    b2_heading_entry: float = -1.0
+    speed_grid_mps: float = 0.1
+    validity_heading_rad: float = 0.35
+
+    def __post_init__(self) -> None:
+        choice("model.b2_heading_entry", self.b2_heading_entry, (-1.0, 1.0))
+        at_least("model.speed_grid_mps", self.speed_grid_mps, 0.0, inclusive=False)
+        between("model.validity_heading_rad", self.validity_heading_rad, 0.0, math.pi)
+
+
+@dataclass
+class ControllerConfig:
+    """Lateral MPC settings (CVXPY + Clarabel)."""
+
+    name: str = MISSING
+    kind: str = "mpc"
+    backend: str = "clarabel_direct"
+    formulation: str = "condensed"
+    horizon: int = 10
+    control_horizon: int = 3
+    input_hold: str = "hold_last"
+    q_lateral: float = 10.0
+    q_heading: float = 5.0
+    q_yaw_rate: float = 0.1
+    q_steering: float = 0.5
+    r_steering_rate: float = 1.0
+    slack_weight_linear: float = 1.0e4
+    slack_weight_quadratic: float = 1.0e3
+    safety_margin_m: float = 0.2
+    constraint_activation_m: float = 12.0
+    halfplane_normal: str = "lateral_side"
+    max_obstacles: int = 3
+    heading_reference: str = "path_slope"
+    heading_ref_max_rad: float = 0.5
+    yaw_rate_ref_max_rad_s: float = 0.6
+    path_beyond_end: str = "extend"
+    solver_max_iter: int = 200
+    lookahead_min_m: float = 2.0
+    lookahead_time_s: float = 0.8
+    output_weights: List[float] = field(default_factory=lambda: [1.0, 1.0])
+    input_weights: List[float] = field(default_factory=lambda: [0.1, 0.1])
+    input_rate_weights: List[float] = field(default_factory=lambda: [0.01, 0.01])
+    accel_bounds_mps2: List[float] = field(default_factory=lambda: [-3.0, 3.0])
+    ltv_iterations: int = 1
+    reference_alignment: str = "literal"
+
+    def __post_init__(self) -> None:
+        choice("controller.kind", self.kind, ("mpc", "pure_pursuit", "kinematic_mpc"))
+        choice("controller.backend", self.backend,
+               ("cvxpy", "clarabel_direct", "clarabel_dense", "daqp", "nmpc"))
+        if self.backend == "nmpc" and self.kind != "kinematic_mpc":
+            raise ConfigError("controller.backend", self.backend,
+                              "nmpc only with controller.kind=kinematic_mpc (the Appendix-A "
+                              "track: experiment=kinematic); the lateral MPC is a QP")
+        choice("controller.formulation", self.formulation, ("condensed", "sparse"))
+        if self.backend in ("daqp", "clarabel_dense") and (
+                self.kind != "mpc" or self.formulation != "condensed"):
+            raise ConfigError("controller.backend", self.backend,
+                              f"{self.backend} only with controller.kind=mpc and "
+                              "controller.formulation=condensed (else cvxpy or clarabel_direct)")
+        for key in ("output_weights", "input_weights", "input_rate_weights"):
+            pair(f"controller.{key}", getattr(self, key))
+            for i, w in enumerate(getattr(self, key)):
+                at_least(f"controller.{key}[{i}]", w, 0.0)
+        pair("controller.accel_bounds_mps2", self.accel_bounds_mps2)
+        if not self.accel_bounds_mps2[0] < self.accel_bounds_mps2[1]:
+            raise ConfigError("controller.accel_bounds_mps2", list(self.accel_bounds_mps2),
+                              "[low, high] with low < high")
+        if isinstance(self.ltv_iterations, bool) or not isinstance(self.ltv_iterations, int) \
+                or not 1 <= self.ltv_iterations <= 50:
+            raise ConfigError("controller.ltv_iterations", self.ltv_iterations,
+                              "an integer in [1, 50]")
+        choice("controller.reference_alignment", self.reference_alignment,
+                ("literal", "shifted", "path_speed"))
+        at_least("controller.lookahead_min_m", self.lookahead_min_m, 0.0, inclusive=False)
+        at_least("controller.lookahead_time_s", self.lookahead_time_s, 0.0)
+        for key in ("horizon", "control_horizon", "max_obstacles", "solver_max_iter"):
+            value = getattr(self, key)
+            if isinstance(value, bool) or not isinstance(value, int):
+                raise ConfigError(f"controller.{key}", value, "an integer")
+        if not 1 <= self.horizon <= MAX_HORIZON:
+            memory = (f" (the compiled QP grows with N: N = {self.horizon} would need about "
+                      f"{qp_memory_gib(self.horizon, self.max_obstacles):.3g} GiB)"
+                      if self.horizon > MAX_HORIZON else "")
+            raise ConfigError("controller.horizon", self.horizon,
+                              f"an integer in [1, {MAX_HORIZON}]{memory}")
+        if not 1 <= self.control_horizon <= self.horizon:
+            raise ConfigError("controller.control_horizon", self.control_horizon,
+                              f"an integer in [1, controller.horizon={self.horizon}]")
+        if not 1 <= self.max_obstacles <= 50:
+            raise ConfigError("controller.max_obstacles", self.max_obstacles,
+                              "an integer in [1, 50]")
+        if self.solver_max_iter > 100000:
+            raise ConfigError("controller.solver_max_iter", self.solver_max_iter,
+                              "an integer in [1, 100000]")
+        safe_name("controller.name", self.name)
+        if self.solver_max_iter < 1:
+            raise ConfigError("controller.solver_max_iter", self.solver_max_iter, "an integer >= 1")
+        choice("controller.input_hold", self.input_hold, ("hold_last", "zero_rate"))
+        choice("controller.halfplane_normal", self.halfplane_normal, ("lateral_side", "radial"))
+        for key in ("q_lateral", "q_heading", "q_yaw_rate", "q_steering", "r_steering_rate",
+                    "slack_weight_linear", "slack_weight_quadratic", "safety_margin_m",
+                    "constraint_activation_m"):
+            at_least(f"controller.{key}", getattr(self, key), 0.0)
+        at_least("controller.r_steering_rate", self.r_steering_rate, 0.0, inclusive=False)
+        choice("controller.heading_reference", self.heading_reference,
+                ("path_slope", "apf_force"))
+        between("controller.heading_ref_max_rad", self.heading_ref_max_rad, 0.0, math.pi / 2)
+        at_least("controller.yaw_rate_ref_max_rad_s", self.yaw_rate_ref_max_rad_s, 0.0,
+                  inclusive=False)
+        choice("controller.path_beyond_end", self.path_beyond_end, ("extend", "hold"))
+
+
+@dataclass
+class ObstacleConfig:
+    """One circular obstacle, invisible before ``appear_time_s``, then moving at constant velocity."""
+
+    x_m: float = MISSING
+    y_m: float = MISSING
+    vx_mps: float = 0.0
+    vy_mps: float = 0.0
+    radius_m: float = 0.5
+    appear_time_s: float = 0.0
+
+
+@dataclass
+class FamilyConfig:
+    """Seeded random draws of obstacles around a base scenario.
+
+    Member ``i`` of seed ``s`` is drawn from ``numpy.random.default_rng([s, i])`` alone, so it is
+    the same on every machine and does not depend on the family size. Ranges are ``[low, high]``.
+    """
+
+    seed: int = 0
+    size: int = 200
+    n_jobs: int = 2
+    appear_time_s: List[float] = field(default_factory=lambda: [2.0, 4.0])
+    ahead_m: List[float] = field(default_factory=lambda: [4.0, 8.0])
+    lateral_m: List[float] = field(default_factory=lambda: [-2.0, 2.0])
+    radius_m: List[float] = field(default_factory=lambda: [0.3, 0.7])
+    crossing_speed_mps: List[float] = field(default_factory=lambda: [0.2, 0.8])
+    oncoming_speed_mps: List[float] = field(default_factory=lambda: [0.3, 1.0])
+    static_probability: float = 0.25
+    oncoming_probability: float = 0.25
+    obstacle_count_probabilities: List[float] = field(default_factory=lambda: [0.5, 0.3, 0.2])
+    extra_x_m: List[float] = field(default_factory=lambda: [8.0, 26.0])
+    extra_y_m: List[float] = field(default_factory=lambda: [-3.0, 3.0])
+    extra_appear_time_s: List[float] = field(default_factory=lambda: [0.0, 6.0])
+
+    def __post_init__(self) -> None:
+        for key in ("seed", "size", "n_jobs"):
+            value = getattr(self, key)
+            if isinstance(value, bool) or not isinstance(value, int):
+                raise ConfigError(f"scenario.family.{key}", value, "an integer")
+        if self.seed < 0:
+            raise ConfigError("scenario.family.seed", self.seed, "an integer >= 0")
+        if self.size < 1:
+            raise ConfigError("scenario.family.size", self.size, "an integer >= 1")
+        if self.n_jobs < 1:
+            raise ConfigError("scenario.family.n_jobs", self.n_jobs, "an integer >= 1")
+        for key in ("appear_time_s", "ahead_m", "lateral_m", "radius_m", "crossing_speed_mps",
+                    "oncoming_speed_mps", "extra_x_m", "extra_y_m", "extra_appear_time_s"):
+            value = getattr(self, key)
+            pair(f"scenario.family.{key}", value)
+            if value[0] > value[1]:
+                raise ConfigError(f"scenario.family.{key}", list(value), "[low, high] with low <= high")
+        for key in ("radius_m", "appear_time_s", "extra_appear_time_s", "crossing_speed_mps",
+                    "oncoming_speed_mps"):
+            if getattr(self, key)[0] < 0:
+                raise ConfigError(f"scenario.family.{key}", list(getattr(self, key)),
+                                  "a range of non-negative numbers")
+        between("scenario.family.static_probability", self.static_probability, 0.0, 1.0)
+        between("scenario.family.oncoming_probability", self.oncoming_probability, 0.0, 1.0)
+        if self.static_probability + self.oncoming_probability > 1.0:
+            raise ConfigError("scenario.family.oncoming_probability", self.oncoming_probability,
+                              f"<= 1 - static_probability ({1.0 - self.static_probability})")
+        probs = self.obstacle_count_probabilities
+        if not 1 <= len(probs) <= 3 or any(not math.isfinite(p) or p < 0 for p in probs) \
+                or not math.isclose(sum(probs), 1.0, abs_tol=1e-9):
+            raise ConfigError("scenario.family.obstacle_count_probabilities", list(probs),
+                              "1 to 3 non-negative numbers (for 1, 2, 3 obstacles) summing to 1")
+
+
+@dataclass
+class ScenarioConfig:
+    """Start, goal, speed, run length and obstacles of one closed-loop run."""
+
+    name: str = MISSING
+    start_xy_m: List[float] = field(default_factory=lambda: [0.0, 0.0])
+    start_heading_rad: float = 0.0
+    goal_xy_m: List[float] = field(default_factory=lambda: [30.0, 0.0])
+    goal_tolerance_m: float = 0.5
+    speed_mps: float = 3.0
+    sample_time_s: float = 0.1
+    n_steps: int = 130
+    plant_substeps: int = 10
+    initial_speed_mps: Optional[float] = None
+    obstacles: List[ObstacleConfig] = field(default_factory=list)
+    allow_no_obstacles: bool = False
+    family: Optional[FamilyConfig] = None
+
+    def __post_init__(self) -> None:
+        pair("scenario.start_xy_m", self.start_xy_m)
+        pair("scenario.goal_xy_m", self.goal_xy_m)
+        finite("scenario.start_heading_rad", self.start_heading_rad)
+        gap = math.dist(self.start_xy_m, self.goal_xy_m)
+        if gap <= self.goal_tolerance_m:
+            raise ConfigError("scenario.goal_xy_m", list(self.goal_xy_m),
+                              f"a goal farther than goal_tolerance_m={self.goal_tolerance_m} "
+                              f"from start_xy_m={list(self.start_xy_m)}")
+        between("scenario.goal_tolerance_m", self.goal_tolerance_m, 1e-3, 100.0)
+        for i, v in enumerate(list(self.start_xy_m) + list(self.goal_xy_m)):
+            key = f"scenario.{'start' if i < 2 else 'goal'}_xy_m[{i % 2}]"
+            between(key, v, -1e5, 1e5)
+        if gap > 10_000.0:
+            raise ConfigError("scenario.goal_xy_m", list(self.goal_xy_m),
+                              "a goal within 10 km of the start")
+        between("scenario.speed_mps", self.speed_mps, 0.1, 40.0)
+        between("scenario.sample_time_s", self.sample_time_s, 1e-3, 1.0)
+        safe_name("scenario.name", self.name)
+        if self.initial_speed_mps is not None:
+            between("scenario.initial_speed_mps", self.initial_speed_mps, 0.0, 40.0)
+        for key in ("n_steps", "plant_substeps"):
+            value = getattr(self, key)
+            if isinstance(value, bool) or not isinstance(value, int) or value < 1:
+                raise ConfigError(f"scenario.{key}", value, "an integer >= 1")
+        if not 2 <= self.n_steps <= 100_000:
+            raise ConfigError("scenario.n_steps", self.n_steps,
+                              "an integer in [2, 100000] (the simulated time must exceed "
+                              "sample_time_s)")
+        if self.plant_substeps > 1000:
+            raise ConfigError("scenario.plant_substeps", self.plant_substeps,
+                              "an integer in [1, 1000]")
+        if not self.obstacles and self.family is None and not self.allow_no_obstacles:
+            raise ConfigError("scenario.obstacles", [], "a non-empty obstacle list (or "
+                              "scenario.allow_no_obstacles=true for an obstacle-free run)")
+        seen = set()
+        for i, obs in enumerate(self.obstacles):
+            key = f"scenario.obstacles[{i}]"
+            for attr in ("x_m", "y_m", "vx_mps", "vy_mps", "radius_m", "appear_time_s"):
+                finite(f"{key}.{attr}", getattr(obs, attr))
+            between(f"{key}.radius_m", obs.radius_m, 1e-3, 100.0)
+            at_least(f"{key}.appear_time_s", obs.appear_time_s, 0.0)
+            for attr in ("x_m", "y_m"):
+                between(f"{key}.{attr}", getattr(obs, attr), -1e5, 1e5)
+            for attr in ("vx_mps", "vy_mps"):
+                between(f"{key}.{attr}", getattr(obs, attr), -1000.0, 1000.0)
+            signature = (obs.x_m, obs.y_m, obs.vx_mps, obs.vy_mps, obs.radius_m, obs.appear_time_s)
+            if signature in seen:
+                raise ConfigError(f"{key}", signature, "obstacles that are not exact duplicates")
+            seen.add(signature)
+
+
+class LoopSettings(Protocol):
+    """What the closed loop reads of a composed configuration (``ExperimentConfig`` has it)."""
+
+    vehicle: VehicleConfig
+    model: ModelConfig
+    planner: PlannerConfig
+    controller: ControllerConfig
+    scenario: ScenarioConfig

@@ -1,0 +1,279 @@
+"""Simulation stage: one closed loop for every controller, do-mpc style, logged step by step.
+
+Each step k (time ``t = k Ts``)::
+
+    obstacles = scenario.obstacles_at(t)            # one snapshot per step
+    V_r       = plan_speed(...)                     # velocity planning (planner settings)
+    rollout   = apf_rollout(...)                    # the APF's reference path
+    step      = controller.step(observation)        # lateral MPC, kinematic MPC, pure pursuit
+    x         = plant.step(x, step.command, V_r)    # nonlinear single-track or kinematic plant
+
+The run ends after ``n_steps`` or when the vehicle reaches the goal line. The log is written
+into preallocated arrays and becomes one DataFrame at the end.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from math import atan2, cos, isfinite, sin, sqrt
+
+import numpy as np
+import pandas as pd
+
+from pipeline.loop.settings import LoopSettings
+from pipeline.loop.controller import ControlStep, Observation, QpCache, make_controller
+from pipeline.loop.model import kinematic_plant_step, step_plant
+from pipeline.loop.planner import ApfRollout, apf_rollout, plan_speed
+from pipeline.loop.scenario import Scenario
+from pipeline.loop.trajectory import HEAD, OBSTACLE_FIELDS, TAIL, obstacle_column
+
+
+@dataclass(frozen=True)
+class SimulationResult:
+    """Logged closed-loop run.
+
+    Attributes
+    ----------
+    trajectory : pandas.DataFrame
+        One row per step (see :func:`simulate` for the columns).
+    solve_times_s : ndarray
+        Wall time of each QP solve (not part of the deterministic log).
+    compile_count : int
+        Compilations this run caused (0 when the QP came from the cache).
+    compile_time_s : float
+    goal_reached : bool
+    termination : str
+        ``"goal_line"``, ``"max_steps"`` or ``"non_finite_state"``.
+    """
+
+    trajectory: pd.DataFrame
+    solve_times_s: np.ndarray
+    compile_count: int
+    compile_time_s: float
+    goal_reached: bool
+    termination: str
+
+
+class SingleTrackPlant:
+    """The nonlinear single-track plant of the lateral track; command ``[steering rate]``."""
+
+    def __init__(self, cfg: LoopSettings, scenario: Scenario) -> None:
+        self.vehicle, self.ts, self.substeps = cfg.vehicle, scenario.sample_time_s, \
+            scenario.plant_substeps
+
+    @staticmethod
+    def initial_state(scenario: Scenario) -> np.ndarray:
+        return np.array([scenario.start_m[0], scenario.start_m[1], scenario.start_heading_rad,
+                         scenario.initial_speed_mps, 0.0, 0.0, 0.0])
+
+    @staticmethod
+    def velocity(state: np.ndarray) -> np.ndarray:
+        c, s = cos(state[2]), sin(state[2])
+        return np.array([state[3] * c - state[4] * s, state[3] * s + state[4] * c])
+
+    @staticmethod
+    def log_columns(state: np.ndarray, command: np.ndarray | None,
+                    previous: np.ndarray | None) -> dict:
+        return {"vx_mps": state[3], "vy_mps": state[4], "r_rad_s": state[5],
+                "delta_rad": state[6]}
+
+    def step(self, state: np.ndarray, command: np.ndarray, speed_ref_mps: float) -> np.ndarray:
+        return step_plant(state, command[0], speed_ref_mps, self.vehicle, self.ts,
+                          self.substeps)
+
+
+class KinematicPlant:
+    """Appendix A's kinematic bicycle, integrated exactly; command ``[a, delta]``."""
+
+    def __init__(self, cfg: LoopSettings, scenario: Scenario) -> None:
+        self.L, self.ts, self.substeps = cfg.vehicle.wheelbase_m, scenario.sample_time_s, \
+            scenario.plant_substeps
+
+    @staticmethod
+    def initial_state(scenario: Scenario) -> np.ndarray:
+        return np.array([scenario.start_m[0], scenario.start_m[1], scenario.start_heading_rad,
+                         scenario.initial_speed_mps])
+
+    @staticmethod
+    def velocity(state: np.ndarray) -> np.ndarray:
+        return state[3] * np.array([cos(state[2]), sin(state[2])])
+
+    def log_columns(self, state: np.ndarray, command: np.ndarray | None,
+                    previous: np.ndarray | None) -> dict:
+        # the steering angle is an input here: the one applied over the step (or the last one)
+        delta = command[1] if command is not None else previous[1]
+        return {"vx_mps": state[3], "vy_mps": 0.0, "r_rad_s": state[3] * np.tan(delta) / self.L,
+                "delta_rad": delta}
+
+    def step(self, state: np.ndarray, command: np.ndarray, speed_ref_mps: float) -> np.ndarray:
+        return kinematic_plant_step(state, command, self.L, self.ts, self.substeps)
+
+
+class TrajectoryLog:
+    """Preallocated per-column arrays, one row per step, turned into a DataFrame once.
+
+    Float columns start as NaN; text and flag columns as None (written as empty cells).
+    """
+
+    TEXT = ("solver_status", "fallback", "apf_step_capped", "apf_step_min_used")
+
+    def __init__(self, n_rows: int) -> None:
+        self.n_rows = n_rows
+        self.columns: dict[str, np.ndarray] = {}
+        self.rows = 0
+
+    def put(self, k: int, values: dict) -> None:
+        columns = self.columns
+        for name, value in values.items():
+            column = columns.get(name)
+            if column is None:
+                if name in self.TEXT:
+                    column = np.full(self.n_rows, None, dtype=object)
+                elif isinstance(value, (bool, np.bool_)):
+                    column = np.zeros(self.n_rows, dtype=bool)
+                else:
+                    column = np.full(self.n_rows, np.nan)
+                columns[name] = column
+            column[k] = value
+        self.rows = max(self.rows, k + 1)
+
+    def frame(self, order: list[str]) -> pd.DataFrame:
+        names = [c for c in order if c in self.columns] \
+            + [c for c in self.columns if c not in order]
+        frame = pd.DataFrame({c: self.columns[c][:self.rows] for c in names})
+        for name in self.TEXT:
+            if name in frame:
+                frame[name] = frame[name].where(frame[name].notna(), np.nan)
+        return frame
+
+
+def _apf_columns(rollout: ApfRollout) -> dict:
+    n = rollout.path_m.shape[0]
+    if n > 1:
+        (ax, ay), (rx, ry) = rollout.attraction[0].tolist(), rollout.repulsion[0].tolist()
+        nx, ny = rollout.path_m[1].tolist()
+    else:
+        ax = ay = rx = ry = 0.0
+        nx, ny = rollout.path_m[0].tolist()
+    ex, ey = rollout.path_m[-1].tolist()
+    return {"apf_next_x_m": nx, "apf_next_y_m": ny, "apf_end_x_m": ex, "apf_end_y_m": ey,
+            "apf_att_x": ax, "apf_att_y": ay, "apf_rep_x": rx, "apf_rep_y": ry,
+            "apf_rep_norm": sqrt(rx * rx + ry * ry),
+            "apf_step_capped": bool(rollout.step_cap_active.any()),
+            "apf_step_min_used": bool(rollout.step_min_active.any()),
+            "apf_step_cap_share": float(rollout.step_cap_active.mean())
+            if rollout.step_cap_active.size else 0.0}
+
+
+def simulate(cfg: LoopSettings, scenario: Scenario,
+             qp_cache: QpCache | None = None) -> SimulationResult:
+    """Run the closed loop once (with BLAS on one thread, see :func:`_closed_loop`).
+
+    Parameters
+    ----------
+    cfg : LoopSettings
+    scenario : Scenario
+    qp_cache : QpCache, optional
+        Compiled QPs shared with other runs (a private cache when omitted).
+
+    Returns
+    -------
+    SimulationResult
+        The trajectory has columns ``time_s``, plant states (``X_m, Y_m, psi_rad, vx_mps,
+        vy_mps, r_rad_s, delta_rad``), line-frame errors (``e_y_m, e_psi_rad``), the applied input
+        ``steering_rate_rad_s`` (and ``accel_mps2`` on the kinematic track), ``speed_ref_mps``,
+        the references (``y_ref_m, psi_ref_rad``), the APF's next point and forces at the vehicle
+        and whether its step cap bound (``apf_*``), per-obstacle columns (``obs{j}_x_m,
+        obs{j}_y_m, obs{j}_radius_m, obs{j}_visible``) and solver columns (``solver_status,
+        solver_iterations, fallback, max_slack_m``; ``ltv_passes, ltv_change`` on the kinematic
+        track).
+    """
+    from threadpoolctl import threadpool_limits
+
+    # every product in the loop is tiny: OpenBLAS would still start threads for some of them
+    # and leave them spinning on the other core (measured: twice the CPU time of a run)
+    with threadpool_limits(limits=1, user_api="blas"):
+        return _closed_loop(cfg, scenario, qp_cache)
+
+
+def _closed_loop(cfg: LoopSettings, scenario: Scenario,
+                 qp_cache: QpCache | None) -> SimulationResult:
+    """The loop of :func:`simulate`."""
+    kinematic = cfg.controller.kind == "kinematic_mpc"
+    plant = KinematicPlant(cfg, scenario) if kinematic else SingleTrackPlant(cfg, scenario)
+    controller = make_controller(cfg, scenario.sample_time_s, qp_cache)
+    vehicle_radius = cfg.vehicle.footprint_radius_m
+    ts, N = scenario.sample_time_s, cfg.controller.horizon
+    frame = scenario.line_frame
+    origin_x, origin_y = frame.origin_m.tolist()
+    c_line, s_line = cos(frame.heading_rad), sin(frame.heading_rad)
+    goal_line_x = float(frame.to_line(scenario.goal_m)[0])
+    obstacle_names = [tuple(obstacle_column(j, f) for f in OBSTACLE_FIELDS)
+                      for j in range(scenario.n_obstacles)]
+    log = TrajectoryLog(scenario.n_steps + 1)
+    solve_times = np.zeros(scenario.n_steps + 1)
+    n_solves = 0
+    state = plant.initial_state(scenario)
+    command: np.ndarray | None = None
+    termination = "max_steps"
+    for k in range(scenario.n_steps + 1):
+        time_s = k * ts
+        X, Y, psi = float(state[0]), float(state[1]), float(state[2])
+        dx, dy = X - origin_x, Y - origin_y
+        along, lateral = c_line * dx + s_line * dy, -s_line * dx + c_line * dy
+        e_psi = atan2(sin(psi - frame.heading_rad), cos(psi - frame.heading_rad))
+        snapshot = scenario.obstacles_at(time_s)
+        row = {"time_s": time_s, "X_m": X, "Y_m": Y, "psi_rad": psi, "e_y_m": lateral,
+               "e_psi_rad": e_psi}
+        for j, ((ox, oy), radius, seen) in enumerate(zip(snapshot.positions_m.tolist(),
+                                                         snapshot.radii_m.tolist(),
+                                                         snapshot.visible.tolist())):
+            names = obstacle_names[j]
+            row[names[0]], row[names[1]], row[names[2]], row[names[3]] = ox, oy, radius, seen
+        ending = _termination(state, along, goal_line_x, scenario, k)
+        if ending is not None:
+            termination = ending
+            row.update(plant.log_columns(state, None, command if command is not None
+                                         else np.zeros(2)))
+            row.update(fallback="end", solver_status="end")
+            log.put(k, row)
+            break
+        visible = snapshot.only_visible()
+        position = state[:2].copy()
+        # the kinematic track uses it only for reference_alignment=path_speed (Section 3.1)
+        speed_ref = plan_speed(position, psi, visible, scenario.speed_mps, vehicle_radius,
+                               cfg.planner) if not kinematic \
+            or cfg.controller.reference_alignment == "path_speed" else np.nan
+        rollout = apf_rollout(position, scenario.goal_m, visible, cfg.planner, N, ts,
+                              plant.velocity(state))
+        observation = Observation(time_s, state, frame, np.array([along, lateral]), e_psi,
+                                  rollout, visible, speed_ref)
+        step: ControlStep = controller.step(observation)
+        if cfg.controller.kind != "pure_pursuit":
+            solve_times[n_solves] = step.solve_time_s
+            n_solves += 1
+        row.update(plant.log_columns(state, step.command, command))
+        if not kinematic:
+            row["steering_rate_rad_s"] = step.command[0]
+        row["speed_ref_mps"] = speed_ref
+        row.update(step.log)
+        row.update(_apf_columns(rollout))
+        row.update(solver_status=step.status, solver_iterations=step.iterations,
+                   fallback=step.fallback, max_slack_m=step.max_slack_m)
+        log.put(k, row)
+        command = step.command
+        state = plant.step(state, command, speed_ref)
+    trajectory = log.frame(list(HEAD) + [c for names in obstacle_names for c in names]
+                           + list(TAIL))
+    return SimulationResult(trajectory, solve_times[:n_solves], controller.compile_count,
+                            controller.compile_time_s, termination == "goal_line", termination)
+
+
+def _termination(state: np.ndarray, along_line_m: float, goal_line_x_m: float,
+                 scenario: Scenario, step: int) -> str | None:
+    """Why the run ends at this step, or None: non-finite state, goal line, last step."""
+    if not isfinite(sum(state.tolist())):  # inf or nan anywhere makes the sum non-finite
+        return "non_finite_state"
+    if along_line_m >= goal_line_x_m - scenario.goal_tolerance_m:
+        return "goal_line"
+    return "max_steps" if step == scenario.n_steps else None

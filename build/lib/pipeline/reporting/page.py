@@ -1,0 +1,1051 @@
+"""Report stage: gather run folders into tables, figures and one self-contained HTML page.
+
+``python -m pipeline.report RUNS_DIR [--out reports/latest]`` reads every complete run folder
+under ``RUNS_DIR`` (it never simulates), writes ``index.html`` with figures inlined, and puts the
+SVG/PNG figures and CSV tables beside it.
+"""
+
+from __future__ import annotations
+
+import argparse
+import base64
+import datetime as dt
+import html
+import importlib.metadata
+import math
+import os
+import platform
+import subprocess
+import sys
+from pathlib import Path
+
+import jinja2
+import numpy as np
+import pandas as pd
+import yaml
+
+from pipeline.store.collection import RunCollection, load_runs
+from pipeline.store.runs import Skipped, check, write_text_atomic
+from pipeline.analysis.claims import (ALL_CLAIMS, OUTCOME_RULE, OUTCOMES, SINGLE_RULE, claims_table,
+                             family_ledger, outcome_counts)
+from pipeline.analysis.tally import Tally
+from pipeline.config import INTERPRETATION_REGISTER, ClaimsConfig
+from pipeline.reporting.figures import (apf_force_figure, claim_differences_figure,
+                              family_distribution_figure, overlay_figure, save_figure,
+                              timeseries_figure, trajectory_figure)
+
+PACKAGES = ("numpy", "scipy", "pandas", "matplotlib", "control", "cvxpy", "clarabel",
+            "hydra-core", "omegaconf", "jinja2")
+METHOD_ORDER = ("baseline", "baseline_matched", "improved", "velocity_aware", "mpc_no_apf",
+                "apf_pursuit")
+COMPARISONS = ("baseline", "baseline_matched")
+
+
+def _rules(cfg: ClaimsConfig | None) -> dict:
+    """Template values shared by every page: the rules and the margins with their reasons
+    (none listed when no run carries claims settings, e.g. a sweep-only page)."""
+    return {"family_rule": OUTCOME_RULE, "verdict_rule": SINGLE_RULE,
+            "margins": [{"claim": c.claim_id, "margin": _fmt(cfg.margins[c.claim_id]),
+                         "reason": cfg.margin_reasons[c.claim_id]} for c in ALL_CLAIMS]
+            if cfg is not None else [],
+            "claim_defs": ALL_CLAIMS}
+
+
+def _git(*args: str) -> str:
+    try:
+        return subprocess.run(["git", *args], capture_output=True, text=True, check=True,
+                              cwd=Path(__file__).resolve().parent).stdout.strip()
+    except (OSError, subprocess.CalledProcessError):
+        return "unknown"
+
+
+def provenance(command: str) -> dict:
+    """Command, git commit and dirty flag, package versions, date and machine."""
+    versions = {}
+    for name in PACKAGES:
+        try:
+            versions[name] = importlib.metadata.version(name)
+        except importlib.metadata.PackageNotFoundError:
+            versions[name] = "not installed"
+    status = _git("status", "--porcelain")
+    return {
+        "command": command,
+        "git_commit": _git("rev-parse", "HEAD"),
+        "git_dirty": bool(status) and status != "unknown",
+        "python": sys.version.split()[0],
+        "packages": versions,
+        "date_utc": dt.datetime.now(dt.timezone.utc).strftime("%Y-%m-%d %H:%M:%S UTC"),
+        "machine": f"{platform.system()} {platform.machine()}, {os.cpu_count()} cores",
+    }
+
+
+def _lookup(config: dict, dotted: str):
+    node = config
+    for part in dotted.split("."):
+        if not isinstance(node, dict) or part not in node:
+            return None
+        node = node[part]
+    return node
+
+
+def register_rows(configs_by_method: dict[str, dict]) -> list[dict]:
+    """Interpretation register with the value each method's run used."""
+    rows = []
+    for entry in INTERPRETATION_REGISTER:
+        keys = [k.strip() for k in entry.config_key.split(",")]
+        used = {}
+        for method, config in configs_by_method.items():
+            used[method] = "; ".join(f"{_lookup(config, k)!s}" for k in keys)
+        rows.append({"topic": entry.topic, "paper says": entry.paper_says,
+                     "default reading": entry.default, "alternatives": entry.alternatives,
+                     "config key": entry.config_key, "used": used})
+    return rows
+
+
+def _png_data_uri(path: Path) -> str:
+    return "data:image/png;base64," + base64.b64encode(Path(path).read_bytes()).decode()
+
+
+def _fmt(value) -> str:
+    if value is None:
+        return "—"
+    if isinstance(value, (bool, np.bool_)):
+        return "yes" if value else "no"
+    if isinstance(value, (int, np.integer)):
+        return str(int(value))
+    if isinstance(value, (float, np.floating)):
+        if not np.isfinite(value):
+            return "—"
+        return f"{value:.3g}" if abs(value) >= 1e-3 or value == 0 else f"{value:.2e}"
+    return html.escape(str(value))
+
+
+def _ordered(methods) -> list[str]:
+    """Known methods first in their order, labelled variants right after their method."""
+    def rank(label: str) -> tuple:
+        base = label.split(" (")[0].split(" #")[0]
+        return (METHOD_ORDER.index(base) if base in METHOD_ORDER else len(METHOD_ORDER),
+                base, label != base, label)
+
+    return sorted(dict.fromkeys(methods), key=rank)
+
+
+def _label(run: dict) -> str:
+    return run["metrics"].get("label") or run["metrics"].get("method", "")
+
+
+def _choose_per_method(items: dict, method_of, kind: str, use: str
+                       ) -> tuple[dict, list[str]]:
+    """One item per method (the one labelled with the bare method name, else the first) and a
+    note for every method given more than once."""
+    groups: dict[str, list[str]] = {}
+    for label, item in items.items():
+        groups.setdefault(method_of(label, item), []).append(label)
+    chosen, notes = {}, []
+    for method, labels in groups.items():
+        pick = method if method in labels else labels[0]
+        chosen[method] = items[pick]
+        if len(labels) > 1:
+            notes.append(f"{len(labels)} {kind} of {method} were given ({'; '.join(labels)}); "
+                         f"{use} '{pick}', the other tables show all of them.")
+    return chosen, notes
+
+
+def _primary_tables(tables: dict[str, pd.DataFrame], info: dict[str, dict]
+                    ) -> tuple[dict[str, pd.DataFrame], list[str]]:
+    """One family table per method for the ledger."""
+    return _choose_per_method(tables, lambda label, _: info.get(label, {}).get("method", label),
+                              "families", "the ledger uses")
+
+
+def _skipped_rows(skipped: list[Skipped], root: Path) -> list[dict]:
+    rows = []
+    for item in skipped:
+        try:
+            where = str(Path(item.folder).relative_to(root))
+        except ValueError:
+            where = str(item.folder)
+        rows.append({"folder": where, "reason": item.reason})
+    return rows
+
+
+def _other_rows(runs: list[dict]) -> list[dict]:
+    keys = ("collision", "min_clearance_m", "reaction_delay_s", "recovery_time_s",
+            "time_to_goal_s")
+    return [{"label": _label(r), "scenario": r["metrics"].get("scenario"),
+             "track": r["metrics"].get("track"), "folder": str(r["dir"]),
+             "values": [_fmt(r["metrics"].get(k)) for k in keys]} for r in runs]
+
+
+def _primary(runs_by_label: dict[str, dict]) -> tuple[dict[str, dict], list[str]]:
+    """One run per method for the claims."""
+    return _choose_per_method(runs_by_label,
+                              lambda label, run: run["metrics"].get("method", label), "runs",
+                              "the claims use")
+
+
+def is_sweep_folder(folder: Path) -> bool:
+    """A multirun folder whose swept keys go beyond the method (a parameter sweep)."""
+    import json
+
+    path = Path(folder) / "swept_keys.json"
+    if not path.is_file():
+        return False
+    swept = set(json.loads(path.read_text())["swept_keys"])
+    return bool(swept - {"method", "run.method", "planner"})
+
+
+def _ablation_section(run_root: Path, fig_dir: Path, table_dir: Path,
+                      cfg: ClaimsConfig) -> dict | None:
+    """Effects of each revision alone and left out, attribution sentences, interpretation flips."""
+    from pipeline.studies.ablation import (ablation_effects, attribution_sentences, interpretation_flips,
+                                   load_family_jobs)
+    from pipeline.reporting.figures import ablation_forest_figure
+
+    run_root = Path(run_root)
+    tables = load_family_jobs(run_root / "ablation") if (run_root / "ablation").is_dir() else {}
+    flips = interpretation_flips(run_root / "interpretations", cfg)
+    if "baseline" not in tables and flips is None:
+        return None
+    section = {"effects": [], "sentences": {}, "figures": [], "counts": [], "flips": []}
+    if "baseline" in tables and "improved" in tables:
+        effects = ablation_effects(tables, cfg)
+        effects.to_csv(table_dir / "ablation_effects.csv", index=False)
+        section["sentences"] = attribution_sentences(effects, tables, cfg)
+        section["effects"] = [{**{k: _fmt(v) for k, v in r.items()},
+                               "ci": f"[{_fmt(r['ci_low'])}, {_fmt(r['ci_high'])}]"}
+                              for r in effects.to_dict("records")]
+        section["counts"] = [{"configuration": label, "collisions": Tally.of(t).collisions,
+                              "not_recovered": Tally.of(t).not_recovered,
+                              "scenarios": len(t)} for label, t in tables.items()]
+        section["figures"].append({
+            "id": "ablation_forest", "group": "ablation",
+            "paths": save_figure(ablation_forest_figure(effects), fig_dir, "ablation_forest"),
+            "caption": "Median paired effect versus the baseline with its 95 % bootstrap "
+                       "interval, per claim: the improved bundle (blue), each revision added "
+                       "alone to the baseline (green), the bundle without each revision (orange).",
+            "alt": "Forest plot of ablation effects per claim"})
+    if flips is not None:
+        flips.to_csv(table_dir / "interpretation_flips.csv", index=False)
+        section["flips"] = flips.to_dict("records")
+    return section
+
+
+def _robustness_section(multiverse_dir: Path | None, fig_dir: Path,
+                        table_dir: Path) -> dict | None:
+    """The multiverse (``make multiverse``), if it was run: per claim the default outcome, its
+    robustness and the choice that moves it most; specification curves; per-dimension effects."""
+    import json
+    import shutil
+
+    if multiverse_dir is None or not (Path(multiverse_dir) / "robustness.csv").is_file():
+        return None
+    folder = Path(multiverse_dir)
+    reason = check(folder, "multiverse")
+    if reason:
+        raise ValueError(f"multiverse tables not trusted: {reason}")
+    robust = pd.read_csv(folder / "robustness.csv")
+    info = json.loads((folder / "space.json").read_text()) \
+        if (folder / "space.json").is_file() else {}
+    dims = pd.read_csv(folder / "dimensions.csv") if (folder / "dimensions.csv").is_file() \
+        else pd.DataFrame()
+    robust.to_csv(table_dir / "multiverse_robustness.csv", index=False)
+    rows = {}
+    for r in robust.to_dict("records"):
+        entry = rows.setdefault(r["claim"], {"claim": r["claim"], "cells": {}})
+        if r["influence"] > 0:
+            moved = (f"{r['most_influential']}"
+                     + (f" = {r['flipping_values']}" if isinstance(r["flipping_values"], str)
+                        and r["flipping_values"] else "")
+                     + f" (flips {100 * r['influence']:.0f} % of its specifications)")
+        else:
+            moved = f"nothing flips it; largest shift: {r['most_influential']}"
+        entry["cells"][r["comparison"]] = {
+            "outcome": r["default_outcome"], "label": r["label"],
+            "agree": f"{100 * r['agree_share']:.0f} %", "moved": moved,
+            "shares": ", ".join(f"{o} {100 * r[f'share_{o}']:.0f} %"
+                                for o in OUTCOMES if r.get(f"share_{o}", 0) > 0),
+            "holds_with": r["holds_with"] if isinstance(r.get("holds_with"), str)
+            and r["holds_with"] else "no single choice"}
+    figures = []
+    for claim in ALL_CLAIMS:
+        png = folder / "figures" / f"specification_curve_{claim.claim_id}.png"
+        if not png.is_file():
+            continue
+        fig_dir.mkdir(parents=True, exist_ok=True)
+        stem = f"specification_curve_{claim.claim_id}"
+        shutil.copyfile(png, fig_dir / f"{stem}.png")
+        svg = folder / "figures" / f"{stem}.svg"
+        if svg.is_file():
+            shutil.copyfile(svg, fig_dir / f"{stem}.svg")
+        figures.append({"id": stem, "group": "robustness",
+                        "paths": {"png": fig_dir / f"{stem}.png", "svg": fig_dir / f"{stem}.svg"},
+                        "caption": f"{claim.claim_id} ({claim.text}): the estimate with its 95 % "
+                                   "interval in every specification, sorted, coloured by outcome, "
+                                   "against each comparison; below, which choices each "
+                                   "specification changes from the default.",
+                        "alt": f"Specification curve of {claim.claim_id}"})
+    dim_rows = []
+    if len(dims):
+        for (claim, comparison), part in dims.groupby(["claim", "comparison"], sort=False):
+            if comparison != "baseline":
+                continue
+            for r in part.to_dict("records"):
+                if r["default"] or r["flipped_share"] < 0.5:
+                    continue
+                dim_rows.append({"claim": claim, "dimension": r["dimension"],
+                                 "value": r["value"], "flipped": f"{100 * r['flipped_share']:.0f} %",
+                                 "outcome": r["modal_outcome"],
+                                 "estimate": _fmt(r["median_estimate"])})
+    return {"rows": list(rows.values()), "figures": figures, "dims": dim_rows,
+            "n": info.get("n_specifications"), "n_sim": info.get("n_simulation_configurations"),
+            "size": info.get("family_size"), "name": info.get("name"),
+            "rule": info.get("rule", ""), "dimensions": info.get("dimensions", [])}
+
+
+def _performance_section(bench_dir: Path | None, fig_dir: Path) -> dict | None:
+    """The benchmark's summary (``make bench``), if it was run."""
+    import json
+    import shutil
+
+    if bench_dir is None or not (Path(bench_dir) / "bench_summary.json").is_file():
+        return None
+    summary = json.loads((Path(bench_dir) / "bench_summary.json").read_text())
+    figures = []
+    png = Path(bench_dir) / "scaling.png"
+    if png.is_file():
+        fig_dir.mkdir(parents=True, exist_ok=True)
+        shutil.copyfile(png, fig_dir / "bench_scaling.png")
+        svg = Path(bench_dir) / "scaling.svg"
+        if svg.is_file():
+            shutil.copyfile(svg, fig_dir / "bench_scaling.svg")
+        figures.append({"id": "bench_scaling", "group": "performance",
+                        "paths": {"png": fig_dir / "bench_scaling.png",
+                                  "svg": fig_dir / "bench_scaling.svg"},
+                        "caption": "Median controller step (APF rollout + QP) of both backends "
+                                   "and the Clarabel floor versus the horizon N, per obstacle "
+                                   "count.", "alt": "Step time versus horizon"})
+    rows = [{k: _fmt(v) for k, v in r.items()} for r in summary["lateral"]]
+    peers = [{"N": p["N"], "kept": _fmt(p["kept_cvxpy"]["median_ms"]),
+              "rebuild": _fmt(p["rebuild_cvxpy"]["median_ms"]),
+              "python_control": _fmt(p["python_control"]["median_ms"]),
+              "ratio": _fmt(p["python_control_over_kept"]),
+              "diff": _fmt(p["max_u0_diff_python_control"])} for p in summary["peers"]]
+    return {"rows": rows, "peers": peers, "figures": figures,
+            "pipeline": {k: _fmt(v) for k, v in summary["pipeline"].items()},
+            "kinematic": {k: _fmt(v) for k, v in summary["kinematic"].items()},
+            "n50": _fmt(summary.get("n50_over_n10_direct")),
+            "headline": {k: _fmt(summary.get(k)) for k in (
+                "closed_loop_over_floor", "step_over_floor", "compiles_per_family",
+                "family_scenarios_per_s")}}
+
+
+def _features_section(lateral: dict[str, dict], kinematic_runs: list[dict], run_root: Path,
+                      clearance_m: float) -> dict | None:
+    """'Does it look like the paper?': each phrase of the paper about its figures as a
+    feature, present or absent, for baseline and improved on each track and reading; the
+    rule that picks the Appendix-A reading (both methods meet the obstacle, most phrases
+    matched) and whether the configured default is its pick."""
+    from pipeline.analysis.features import FEATURES, FeatureConfig, feature_row, paper_likeness
+    from pipeline.store.collection import load_runs
+
+    def pair(runs: list[dict]) -> dict[str, dict]:
+        return {r["metrics"].get("method"): r for r in runs
+                if r["metrics"].get("method") in ("baseline", "improved")}
+
+    columns = [("lateral track", "default", {m: lateral[m] for m in ("baseline", "improved")
+                                             if m in lateral})]
+    kin = pair(kinematic_runs)
+    if "baseline" in kin:
+        columns.append(("Appendix-A track", _reading_of(kin["baseline"]["config"])
+                        + " (default)", kin))
+    readings_root = Path(run_root) / "kinematic_readings"
+    if readings_root.is_dir():
+        found = load_runs(readings_root, [])
+        by_variant: dict[str, list] = {}
+        for r in found.runs:
+            by_variant.setdefault(r["config"]["run"].get("variant", "?"), []).append(r)
+        for variant, runs in sorted(by_variant.items()):
+            columns.append(("Appendix-A track", variant, pair(runs)))
+    columns = [c for c in columns if {"baseline", "improved"} <= set(c[2])]
+    if not columns:
+        return None
+    settings = columns[0][2]["improved"]["config"].get("features") or {}
+    cfg = FeatureConfig(**settings)
+    cells = []
+    for track, reading, runs in columns:
+        rows = {m: feature_row(runs[m]["metrics"], cfg) for m in ("baseline", "improved")}
+        met = all((runs[m]["metrics"].get("min_clearance_m") or math.inf) <= clearance_m
+                  for m in ("baseline", "improved"))
+        cells.append({"track": track, "reading": reading, "rows": rows, "met": met,
+                      "score": paper_likeness(rows["baseline"], rows["improved"])})
+    word = {True: "yes", False: "no", None: "—"}
+    table = [{"phrase": f.phrase, "describes": f.describes, "rule": f.rule,
+              "cells": [[word[c["rows"][m][f.key]] for m in ("baseline", "improved")]
+                        for c in cells]} for f in FEATURES]
+    kinematic = [c for c in cells if c["track"] == "Appendix-A track"]
+    eligible = [c for c in kinematic if c["met"]]
+    pick = max(eligible, key=lambda c: c["score"]) if eligible else None
+    default = next((c for c in kinematic if c["reading"].endswith("(default)")), None)
+    rule = ("The register's rule for the Appendix-A reading: among the readings under which "
+            "both methods meet the obstacle, the one whose runs match most of the paper's "
+            "phrases. ")
+    if pick is None:
+        rule_note = (rule + "No Appendix-A reading lets both methods meet the obstacle (within "
+                     f"{clearance_m:g} m).") if kinematic else ""
+    elif default is not None and pick["score"] == default["score"] and default["met"]:
+        rule_note = rule + ("It picks the configured default ("
+                            + default["reading"].replace(" (default)", "") + ").")
+    else:
+        rule_note = (rule + f"It picks <code>{pick['reading']}</code> ({pick['score']} of "
+                     f"{len(FEATURES)} phrases); the configured default "
+                     + (f"({default['reading']}) " if default else "") + "differs: change "
+                     "conf/experiment/kinematic.yaml.")
+    return {"columns": [{"track": c["track"], "reading": c["reading"], "score": c["score"],
+                         "met": "yes" if c["met"] else "no"} for c in cells],
+            "rows": table, "n": len(FEATURES), "rule_note": rule_note,
+            "clearance": f"{clearance_m:g}"}
+
+
+def _reading_of(baseline_config: dict) -> str:
+    """Which Appendix-A reading a kinematic baseline run was made under."""
+    alignment = baseline_config.get("controller", {}).get("reference_alignment", "literal")
+    if alignment != "literal":
+        return alignment
+    return "literal" if baseline_config.get("planner", {}).get("normalize_step", True) \
+        else "printed"
+
+
+def _nmpc_check(folder: Path) -> dict:
+    """The LTV-QP against the nonlinear MPC on the kinematic track (``make nmpc-check``)."""
+    import json
+
+    summary = json.loads((Path(folder) / "summary.json").read_text())
+    differ = [f"{v['claim']} vs {v['comparison']}: {v['ltv']} (LTV) / {v['nmpc']} (NMPC)"
+              for v in summary["verdicts"] if v["ltv"] != v["nmpc"]]
+    return {"paper_path": _fmt(summary["paper"]["max_path_difference_m"]),
+            "paper_steer": _fmt(summary["paper"]["max_steering_difference_rad"]),
+            "paper_accel": _fmt(summary["paper"]["max_accel_difference_mps2"]),
+            "family_path": _fmt(summary["family"]["max_path_difference_m"]),
+            "family_median": _fmt(summary["family"]["median_of_max_path_difference_m"]),
+            "family_apart": summary["family"].get("runs_over_half_metre"),
+            "family_runs": summary["family"].get("runs"),
+            "n_members": summary["n_members"], "agree": summary["verdicts_agree"],
+            "differ": "; ".join(differ), "solve_median": _fmt(summary["nmpc_solve_median_ms"]),
+            "solve_max": _fmt(summary["nmpc_solve_max_ms"]),
+            "ltv_median": _fmt(summary["ltv_solve_median_ms"])}
+
+
+def _fair_fight_section(tune_dir: Path | None, fig_dir: Path, table_dir: Path) -> dict | None:
+    """The fair fight (``make tune``), if it was run: the budget and search spaces, per claim
+    the default verdict beside the tuned-vs-tuned verdict on held-out scenarios, the settings
+    that make each claim hold, the Pareto fronts on shared axes."""
+    import json
+    import shutil
+
+    if tune_dir is None or not (Path(tune_dir) / "summary.json").is_file():
+        return None
+    folder = Path(tune_dir)
+    reason = check(folder, "tune")
+    if reason:
+        raise ValueError(f"tuning tables not trusted: {reason}")
+    summary = json.loads((folder / "summary.json").read_text())
+    for name in ("trials.csv", "heldout.csv", "ledger_tuned.csv", "settings_outcomes.csv"):
+        shutil.copyfile(folder / name, table_dir / f"tune_{name}")
+    figures = []
+    for part, words in (("training", "training family (where the settings were tuned)"),
+                        ("heldout", "held-out family (scenarios the tuning never saw)")):
+        stem = f"pareto_fronts_{part}"
+        png = folder / "figures" / f"{stem}.png"
+        if not png.is_file():
+            continue
+        fig_dir.mkdir(parents=True, exist_ok=True)
+        for ext in ("png", "svg"):
+            if (folder / "figures" / f"{stem}.{ext}").is_file():
+                shutil.copyfile(folder / "figures" / f"{stem}.{ext}", fig_dir / f"{stem}.{ext}")
+        figures.append({"id": f"tune_{stem}", "group": "fair fight",
+                        "paths": {"png": fig_dir / f"{stem}.png", "svg": fig_dir / f"{stem}.svg"},
+                        "caption": f"Each method's Pareto settings on the {words}, every pair "
+                                   "of tuning objectives on shared axes (smaller is better).",
+                        "alt": f"Pareto fronts of the tuned methods, {part}"})
+    dominance = summary.get("dominance", {})
+    methods = summary["settings"]["methods"]
+    dom_text = []
+    for part, words in (("training", "on the training family"),
+                        ("heldout", "on the held-out family")):
+        d = dominance.get(part)
+        if d:
+            dom_text.append(f"{words}, {methods[0]}'s Pareto settings dominate "
+                            f"{d['treatment_dominates']} of {d['control_points']} of "
+                            f"{methods[1]}'s, and {methods[1]}'s dominate "
+                            f"{d['control_dominates']} of {d['treatment_points']} of "
+                            f"{methods[0]}'s")
+    rows = []
+    for c in summary["claims"]:
+        holds = c.get("holds_with_trials", [])
+        rows.append({**c, "tuned_fmt": f"{_fmt(c['tuned_estimate'])} "
+                                       f"[{_fmt(c['tuned_ci'][0])}, {_fmt(c['tuned_ci'][1])}] "
+                                       f"{_unit(c['metric'])}",
+                     "default_fmt": f"{_fmt(c['default_estimate'])} {_unit(c['metric'])}",
+                     "holds": ("trials " + ", ".join(str(t) for t in holds)) if holds
+                     else "none of the judged settings"})
+    spaces = [{"method": m, "params": [{"key": k, "range": v} for k, v in space.items()]}
+              for m, space in summary["search_spaces"].items()]
+    return {"summary": summary, "rows": rows, "figures": figures, "spaces": spaces,
+            "dominance": "; ".join(dom_text), "methods": methods,
+            "compromise": {m: ", ".join(f"{k.split('.')[-1]} = {_fmt(v) if isinstance(v, float) else v}"
+                                        for k, v in p.items())
+                           for m, p in summary["compromise"].items()}}
+
+
+def build_report(run_root: Path, out_dir: Path, command: str,
+                 sweep_dirs: tuple[Path, ...] = (), bench_dir: Path | None = None,
+                 multiverse_dir: Path | None = None,
+                 skipped: list[Skipped] | None = None, tune_dir: Path | None = None) -> Path:
+    """Write ``out_dir/index.html`` (plus figures/ and tables/) from the runs under ``run_root``.
+
+    Parameters
+    ----------
+    run_root : Path
+        Folder with the paper, kinematic and family runs (``make reproduce``'s ``outputs``), or a
+        parameter-sweep folder on its own.
+    sweep_dirs : tuple of Path
+        Aggregated sweep folders (``summary.csv``) to add as Sweep sections.
+    skipped : list, optional
+        Receives every folder passed over (:class:`pipeline.store.runs.Skipped`); they are also listed
+        in the page and on stderr.
+
+    Returns
+    -------
+    Path
+        The HTML file.
+    """
+    out_dir = Path(out_dir)
+    fig_dir, table_dir = out_dir / "figures", out_dir / "tables"
+    table_dir.mkdir(parents=True, exist_ok=True)
+    sweep_dirs = tuple(Path(d) for d in sweep_dirs)
+    skipped = skipped if skipped is not None else []
+    if is_sweep_folder(run_root):
+        sweep_dirs, collection = (Path(run_root),) + sweep_dirs, RunCollection()
+    else:
+        collection = load_runs(run_root, skipped)
+    runs, family_tables, family_info = (collection.runs, collection.family_tables,
+                                        collection.family_info)
+    for item in skipped:
+        print(f"skipped {item.folder}: {item.reason}", file=sys.stderr)
+    def optional(section, folder, *args):
+        """An optional section whose files are broken is left out and listed, not a crash."""
+        try:
+            return section(folder, *args)
+        except (OSError, ValueError, KeyError, TypeError, IndexError,
+                pd.errors.ParserError) as exc:
+            reason = f"{section.__name__.strip('_').replace('_', ' ')} left out " \
+                     f"({type(exc).__name__}: {str(exc).splitlines()[0][:120] if str(exc) else ''})"
+            skipped.append(Skipped(Path(folder), reason))
+            print(f"skipped {folder}: {reason}", file=sys.stderr)
+            return None
+
+    sweeps = [sw for sw in (optional(_sweep_section, d, fig_dir, table_dir) for d in sweep_dirs)
+              if sw is not None]
+    performance = optional(_performance_section, bench_dir, fig_dir) if bench_dir else None
+    if multiverse_dir is None and (Path(run_root) / "multiverse" / "robustness.csv").is_file():
+        multiverse_dir = Path(run_root) / "multiverse"
+    robustness = optional(_robustness_section, multiverse_dir, fig_dir, table_dir) \
+        if multiverse_dir else None
+    if tune_dir is None and (Path(run_root) / "tune" / "summary.json").is_file():
+        tune_dir = Path(run_root) / "tune"
+    fair_fight = optional(_fair_fight_section, tune_dir, fig_dir, table_dir) \
+        if tune_dir else None
+    env = jinja2.Environment(loader=jinja2.PackageLoader("pipeline.reporting", "templates"),
+                             autoescape=jinja2.select_autoescape(["html", "j2"]),
+                             undefined=jinja2.StrictUndefined)
+    if not runs:
+        if not sweeps:
+            raise FileNotFoundError(f"no single runs (the paper scenario) under {run_root}")
+        figures = [f for sw in sweeps for f in sw["figures"]]
+        figures += performance["figures"] if performance else []
+        _inline(figures, out_dir)
+        page = env.get_template("report.html.j2").render(
+            paper=False, sweeps=sweeps, performance=performance, robustness=None, fair_fight=None, looks=None, ablation=None, figures=figures, family=None, kinematic=None,
+            skipped=_skipped_rows(skipped, run_root), other_runs=[], run_notes=[],
+            methods=[], scenario="(sweep only)", prov=provenance(command),
+            register=register_rows({}), metrics_doc=_metrics_doc(), **_rules(None))
+        path = out_dir / "index.html"
+        write_text_atomic(path, page)
+        return path
+    scenario = "paper_sudden_obstacle"
+    kinematic_runs = [r for r in runs if r["metrics"].get("track") == "kinematic"]
+    runs = [r for r in runs if r["metrics"].get("track", "lateral") == "lateral"] or runs
+    paper_runs = [r for r in runs if r["metrics"]["scenario"] == scenario] or runs
+    scenario = paper_runs[0]["metrics"]["scenario"]
+    other_runs = [r for r in runs if r["metrics"]["scenario"] != scenario]
+    by_label = {_label(r): r for r in paper_runs}
+    order = _ordered(by_label)
+    by_method = {m: by_label[m] for m in order}
+    primary, run_notes = _primary(by_method)
+    first_cfg = next(iter(by_method.values()))["config"]
+    goal = tuple(first_cfg["scenario"]["goal_xy_m"])
+    radius = first_cfg["vehicle"]["footprint_radius_m"]
+    appear = next(iter(by_method.values()))["metrics"].get("obstacle_appear_time_s")
+    figures = _paper_figures(by_method, scenario, goal, radius, appear, fig_dir)
+
+    metrics_by_method = {m: r["metrics"] for m, r in by_method.items()}
+    metrics_frame = pd.DataFrame(metrics_by_method)
+    metrics_frame.index.name = "metric"
+    metrics_frame.to_csv(table_dir / "metrics_paper_scenario.csv")
+    skip = {"method", "scenario", "config_hash", "track"}
+    metric_rows = [{"metric": k, "values": [_fmt(metrics_by_method[m].get(k)) for m in order]}
+                   for k in metrics_frame.index if k not in skip]
+    timing_rows = [{"method": m,
+                    "median_ms": _fmt(_ms(r["timing"]["solve_time_median_s"])),
+                    "p95_ms": _fmt(_ms(r["timing"]["solve_time_p95_s"])),
+                    "max_ms": _fmt(_ms(r["timing"]["solve_time_max_s"])),
+                    "compile_s": _fmt(r["timing"]["compile_time_s"]),
+                    "compiles": _fmt(r["metrics"].get("compile_count"))}
+                   for m, r in by_method.items()]
+    # the claims settings the runs were made with, never defaults rebuilt from text
+    cfg_claims = collection.claims_settings("improved")
+    comparisons = tuple(c for c in COMPARISONS if c in primary)
+    claim_metrics = {**metrics_by_method, **{m: r["metrics"] for m, r in primary.items()}}
+    claims = claims_table(claim_metrics, cfg_claims.margins, comparisons)
+    pd.DataFrame(claims).to_csv(table_dir / "claims_paper_scenario.csv", index=False)
+    for row in claims:
+        row["values"] = [_fmt(row.get(m)) for m in order]
+    claim_secondary = {c.claim_id: ", ".join(c.secondary_metrics) for c in ALL_CLAIMS}
+
+    ablation = _ablation_section(run_root, fig_dir, table_dir, cfg_claims)
+    if ablation:
+        figures.extend(ablation["figures"])
+
+    kinematic = None
+    if kinematic_runs:
+        kinematic = _track_section(kinematic_runs, "kinematic", fig_dir, table_dir, claims,
+                                   cfg_claims)
+        kinematic["nmpc"] = optional(_nmpc_check, Path(run_root) / "nmpc_check") \
+            if (Path(run_root) / "nmpc_check" / "summary.json").is_file() else None
+        figures.extend(kinematic["figures"])
+    looks = _features_section(by_method, kinematic_runs, run_root,
+                              cfg_claims.comparable_clearance_m)
+
+    family = None
+    family_primary, family_notes = _primary_tables(family_tables, family_info)
+    run_notes += family_notes
+    if "baseline" in family_primary and "improved" in family_primary:
+        family = _family_section(family_primary, family_info, claim_metrics, fig_dir,
+                                 table_dir, cfg_claims, all_tables=family_tables,
+                                 settings=collection.family_settings)
+        for f in family["figures"]:
+            figures.append(f)
+    for sw in sweeps:
+        figures.extend(sw["figures"])
+    figures += performance["figures"] if performance else []
+    figures += robustness["figures"] if robustness else []
+    figures += fair_fight["figures"] if fair_fight else []
+    _inline(figures, out_dir)
+    page = env.get_template("report.html.j2").render(
+        paper=True, sweeps=sweeps, performance=performance, robustness=robustness,
+        fair_fight=fair_fight, looks=looks, scenario=scenario, ablation=ablation, methods=order, figures=figures, metric_rows=metric_rows,
+        timing_rows=timing_rows, claims=claims, claim_secondary=claim_secondary,
+        comparisons=comparisons, family=family, kinematic=kinematic,
+        register=register_rows({m: r["config"] for m, r in by_method.items()}),
+        configs={m: yaml.safe_dump(r["config"], sort_keys=False) for m, r in by_method.items()},
+        hashes={m: r["metrics"]["config_hash"] for m, r in by_method.items()},
+        run_dirs={m: str(r["dir"]) for m, r in by_method.items()},
+        metrics_doc=_metrics_doc(), prov=provenance(command),
+        skipped=_skipped_rows(skipped, run_root), other_runs=_other_rows(other_runs),
+        run_notes=run_notes, **_rules(cfg_claims))
+    path = out_dir / "index.html"
+    write_text_atomic(path, page)
+    # the answer in words, for the command line (make reproduce prints it at its end)
+    answer = list(family["answer"]) if family else []
+    if fair_fight:
+        answer += [c["sentence"] for c in fair_fight["rows"]]
+    write_text_atomic(out_dir / "answer.txt", "\n".join(answer) + "\n" if answer else "")
+    return path
+
+
+def _inline(figures: list[dict], out_dir: Path) -> None:
+    for f in figures:
+        f["src"] = _png_data_uri(f["paths"]["png"])
+        f["svg"] = os.path.relpath(f["paths"]["svg"], out_dir)
+
+
+def _sweep_section(sweep_dir: Path, fig_dir: Path, table_dir: Path) -> dict:
+    """Summary table, metric-vs-parameter figures and verdicts per swept value of a sweep."""
+    import json
+    import shutil
+
+    from pipeline.studies.aggregate import aggregate
+
+    sweep_dir = Path(sweep_dir)
+    if not (sweep_dir / "summary.csv").is_file():
+        aggregate(sweep_dir, progress=False)
+    summary = pd.read_csv(sweep_dir / "summary.csv")
+    keys = json.loads((sweep_dir / "swept_keys.json").read_text())
+    swept = keys["swept_keys"]
+    name = sweep_dir.name
+    # the claims' primary metrics and safety; the full table is summary.csv
+    shown = [k for k in swept if k in summary] + [c for c in ("method", "kind", "status",
+                                                              "collisions",
+                                                              "reaction_delay_s",
+                                                              "lateral_jerk_rms_mps3",
+                                                              "repulsion_unneeded_share",
+                                                              "recovery_time_s",
+                                                              "oscillation_count",
+                                                              "min_clearance_m", "reason")
+                                                  if c in summary and c not in swept]
+    table = summary[shown]
+    table.to_csv(table_dir / f"sweep_{name}_summary.csv", index=False)
+    figures = []
+    for png in sorted((sweep_dir / "figures").glob("*.png")):
+        svg = png.with_suffix(".svg")
+        fig_dir.mkdir(parents=True, exist_ok=True)
+        target_png, target_svg = fig_dir / f"{name}_{png.name}", fig_dir / f"{name}_{svg.name}"
+        shutil.copyfile(png, target_png)
+        if svg.is_file():
+            shutil.copyfile(svg, target_svg)
+        figures.append({"id": f"{name}_{png.stem}", "group": f"sweep_{name}",
+                        "paths": {"png": target_png, "svg": target_svg},
+                        "caption": f"Sweep {name}: claim metrics versus "
+                                   f"{', '.join(k for k in swept if k != 'method')} "
+                                   "(lines: median per method, band: range over family seeds; "
+                                   "heatmaps: median per cell).",
+                        "alt": f"Metrics versus swept parameters of sweep {name}"})
+    verdict_rows, verdict_cols = [], []
+    if (sweep_dir / "verdicts.csv").is_file():
+        verdicts = pd.read_csv(sweep_dir / "verdicts.csv")
+        value_keys = [k for k in swept if k in verdicts and k != "method"]
+        verdicts["setting"] = verdicts[value_keys].astype(str).agg(", ".join, axis=1) \
+            if value_keys else verdicts["job"]
+        pivot = verdicts.pivot_table(index="setting", columns="claim", values="verdict",
+                                     aggfunc="first")
+        verdict_cols = list(pivot.columns)
+        verdict_rows = [{"setting": idx, "verdicts": [str(v) for v in row.values],
+                         "basis": verdicts.loc[verdicts["setting"] == idx, "basis"].iloc[0]}
+                        for idx, row in pivot.iterrows()]
+        verdicts.to_csv(table_dir / f"sweep_{name}_verdicts.csv", index=False)
+    return {"name": name, "dir": str(sweep_dir), "swept": swept, "columns": shown,
+            "rows": [[_fmt(v) for v in r] for r in table.itertuples(index=False)],
+            "figures": figures, "verdict_cols": verdict_cols, "verdict_rows": verdict_rows,
+            "value_keys": ", ".join(k for k in swept if k != "method")}
+
+
+def _ms(seconds) -> float | None:
+    return None if seconds is None else 1e3 * seconds
+
+
+def _track_section(runs: list[dict], track: str, fig_dir: Path, table_dir: Path,
+                   lateral_claims: list[dict], cfg: ClaimsConfig) -> dict:
+    """Figures, metrics and claims of a second track, and how its outcomes compare.
+
+    A comparison is made only when both methods come within ``cfg.comparable_clearance_m`` of
+    the obstacle: otherwise they did not meet the same threat and the claim is "not comparable".
+    """
+    by_label = {_label(r): r for r in runs}
+    order = _ordered(by_label)
+    by_method = {m: by_label[m] for m in order}
+    primary, _ = _primary(by_method)
+    first = next(iter(by_method.values()))
+    config = first["config"]
+    figures = _paper_figures(by_method, first["metrics"]["scenario"],
+                             tuple(config["scenario"]["goal_xy_m"]),
+                             config["vehicle"]["footprint_radius_m"],
+                             first["metrics"].get("obstacle_appear_time_s"), fig_dir,
+                             prefix=f"{track}_", group_prefix=f"{track}_")
+    metrics_by_method = {m: r["metrics"] for m, r in by_method.items()}
+    frame = pd.DataFrame(metrics_by_method)
+    frame.index.name = "metric"
+    frame.to_csv(table_dir / f"metrics_{track}_track.csv")
+    skip = {"method", "scenario", "config_hash", "track"}
+    metric_rows = [{"metric": k, "values": [_fmt(metrics_by_method[m].get(k)) for m in order]}
+                   for k in frame.index if k not in skip]
+    comparisons = tuple(c for c in COMPARISONS if c in primary)
+    claim_metrics = {**metrics_by_method, **{m: r["metrics"] for m, r in primary.items()}}
+    claims = claims_table(claim_metrics, cfg.margins, comparisons)
+
+    def met(method: str) -> bool:
+        clearance = claim_metrics.get(method, {}).get("min_clearance_m")
+        return clearance is not None and clearance <= cfg.comparable_clearance_m
+
+    comparability = []
+    for comparison in comparisons:
+        if not (met(comparison) and met("improved")):
+            far = [m for m in (comparison, "improved") if not met(m)]
+            comparability.append(f"vs {comparison}: not comparable ({', '.join(far)} never "
+                                 f"came within {cfg.comparable_clearance_m:g} m).")
+            rates = {c.claim_id for c in ALL_CLAIMS if c.is_rate}
+            for row in claims:
+                if row["claim"] not in rates:
+                    row[f"vs {comparison}"] = "not comparable"
+        else:
+            comparability.append(f"vs {comparison}: comparable.")
+    for row in claims:
+        row["values"] = [_fmt(row.get(m)) for m in order]
+    lateral = {r["claim"]: r.get("vs baseline", "n/a") for r in lateral_claims}
+    comparison_rows = []
+    for r in claims:
+        ours = r.get("vs baseline", "n/a")
+        agree = "n/a" if ours == "not comparable" else ("yes" if lateral.get(r["claim"]) == ours
+                                                        else "no")
+        comparison_rows.append({"claim": r["claim"], "lateral": lateral.get(r["claim"], "n/a"),
+                                "other": ours, "agree": agree})
+    pd.DataFrame(claims).drop(columns=["values"]).to_csv(table_dir / f"claims_{track}_track.csv",
+                                                          index=False)
+    return {"methods": order, "figures": figures, "metric_rows": metric_rows, "claims": claims,
+            "comparison": comparison_rows, "comparability": comparability,
+            "comparable_clearance": _fmt(cfg.comparable_clearance_m),
+            "n_steps": config["scenario"]["n_steps"],
+            "initial_speed": config["scenario"].get("initial_speed_mps")}
+
+
+def _paper_figures(by_method: dict, scenario: str, goal: tuple, radius: float, appear,
+                   fig_dir: Path, prefix: str = "", group_prefix: str = "") -> list[dict]:
+    """Figure 2/3 analogues (shared axes), overlay, time series and APF forces."""
+    xs = np.concatenate([r["trajectory"]["X_m"].to_numpy() for r in by_method.values()])
+    ys = np.concatenate([r["trajectory"]["Y_m"].to_numpy() for r in by_method.values()])
+    limits = (min(xs.min(), 0) - 1.5, max(xs.max(), goal[0]) + 1.5, ys.min() - 2.0,
+              ys.max() + 2.5)
+    snap = tuple(float(appear) + d for d in (0.0, 1.0, 2.0, 3.0)) if appear is not None \
+        else (3.0, 4.0, 5.0, 6.0)
+    figures = []
+    for method, run in by_method.items():
+        label = {"baseline": "Figure 2 analogue", "improved": "Figure 3 analogue"}.get(
+            method, "Variant")
+        paths = save_figure(trajectory_figure(run["trajectory"], method, goal, radius, snap,
+                                              title=f"{label}: {method}", limits=limits),
+                            fig_dir, f"{prefix}trajectory_{method}")
+        figures.append({"id": f"{prefix}trajectory_{method}", "group": f"{group_prefix}paths",
+                        "paths": paths,
+                        "caption": f"{label} — {method} on {scenario}: vehicle path, "
+                                   f"footprint (dotted) and obstacle (grey, darker is later) at "
+                                   f"{', '.join(f'{s:.0f}' for s in snap)} s.",
+                        "alt": f"Path of the vehicle with the {method} method around the "
+                               f"moving obstacle"})
+    tr_by_method = {m: r["trajectory"] for m, r in by_method.items()}
+    for stem, fig, caption, alt in (
+            ("overlay", overlay_figure(tr_by_method, goal),
+             "All methods' paths on the same axes; the grey band is the obstacle's track "
+             "while visible.", "Paths of all methods overlaid"),
+            ("timeseries", timeseries_figure(tr_by_method, appear),
+             "Steering angle, steering rate (the input), heading and lateral deviation "
+             "over time.", "Time series of steering, heading and lateral deviation"),
+            ("apf_forces", apf_force_figure(tr_by_method),
+             "Magnitude of the APF's repulsive and attractive forces at the vehicle's position "
+             "(first rollout point).", "APF force magnitudes over time")):
+        figures.append({"id": prefix + stem, "group": f"{group_prefix}series",
+                        "paths": save_figure(fig, fig_dir, prefix + stem),
+                        "caption": caption, "alt": alt})
+    return figures
+
+
+def _unit(metric: str) -> str:
+    """The unit of a metric, read off its name."""
+    for suffix, unit in (("_mps3", "m/s^3"), ("_rad_s", "rad/s"), ("_s", "s"), ("_m", "m")):
+        if metric.endswith(suffix):
+            return unit
+    if metric == "collision":
+        return "collision rate"
+    if "share" in metric:
+        return "share"
+    return "count" if metric.endswith("count") else ""
+
+
+def answer_lines(ledger) -> list[str]:
+    """The answer in words: one line per claim, its outcome against each comparison with the
+    estimate, its unit and interval (what ``make reproduce`` prints at its end)."""
+    lines = []
+    for claim in ALL_CLAIMS:
+        parts = []
+        for row in ledger:
+            if row.claim_id != claim.claim_id:
+                continue
+            r = row.result
+            parts.append(f"{row.outcome} vs {row.comparison} ({_fmt(r.estimate)} "
+                         f"[{_fmt(r.ci_low)}, {_fmt(r.ci_high)}] {_unit(claim.primary_metric)})")
+        if parts:
+            lines.append(f"{claim.claim_id} {claim.text}: " + "; ".join(parts))
+    return lines
+
+
+def _family_section(tables: dict, info: dict, paper_metrics: dict, fig_dir: Path,
+                    table_dir: Path, cfg: ClaimsConfig, all_tables: dict | None = None,
+                    settings: dict | None = None) -> dict:
+    """Claims ledger over the family (C0-C5 against each comparison), outcome counts,
+    distribution plots and what the step cap does."""
+    order = _ordered(tables)
+    tables = {m: tables[m] for m in order}
+    typed = family_ledger(tables, cfg, paper_metrics)
+    typed.to_frame().to_csv(table_dir / "claims_ledger.csv", index=False)
+    ledger = typed.records()
+    counts = outcome_counts({m: all_tables[m] for m in _ordered(all_tables)}
+                            if all_tables else tables)
+    pd.DataFrame(counts).to_csv(table_dir / "family_outcomes.csv", index=False)
+    for row in ledger:
+        row["estimate_fmt"] = _fmt(row["estimate"])
+        row["ci_fmt"] = f"[{_fmt(row['ci_low'])}, {_fmt(row['ci_high'])}]"
+        row["p_fmt"] = _fmt(row["p_holm"])
+        row["pi_fmt"] = (f"{_fmt(row['prob_improvement'])} [{_fmt(row['pi_low'])}, "
+                         f"{_fmt(row['pi_high'])}]")
+        row["counts_fmt"] = (f"{row['n_better']} / {row['n_tied']} / {row['n_worse']} / "
+                             f"{row['n_missing']}")
+        row["margin_fmt"] = _fmt(row["margin"])
+    # group the rows by claim for the table (one row group per claim)
+    by_claim_rows = {}
+    for row in ledger:
+        by_claim_rows.setdefault(row["claim"], []).append(row)
+    grouped = []
+    for claim_rows in by_claim_rows.values():
+        for i, row in enumerate(claim_rows):
+            row["first"], row["span"] = i == 0, len(claim_rows)
+            grouped.append(row)
+    comparisons = [{"name": c, "rows": [r for r in ledger if r["comparison"] == c]}
+                   for c in COMPARISONS if any(r["comparison"] == c for r in ledger)]
+    cap = {c["method"]: c["step_cap_binding_share"] for c in counts}
+    cap_note = ""
+    share = cap.get("improved")
+    if share is not None and np.isfinite(share):
+        cap_note = (f"The improved rollout's step cap binds on {100 * share:.0f} % of its steps "
+                    f"over the family.")
+        if share >= cfg.cap_binding_share:
+            cap_note += (" On those steps two of the paper's revisions are inactive: 'no "
+                         "normalization' and 'a larger step' change nothing, and the rollout is a "
+                         "normalized step of the cap's length; the comparison with "
+                         "baseline_matched isolates the remaining revisions.")
+    differences = typed.differences
+    intervals = {row.key: (row.result.ci_low, row.result.ci_high, row.result.estimate)
+                 for row in typed}
+    names = {c.claim_id: c.primary_metric for c in ALL_CLAIMS}
+    figures = [
+        {"id": "claim_differences", "group": "claims",
+         "paths": save_figure(claim_differences_figure(differences, names, intervals), fig_dir,
+                              "claim_differences"),
+         "caption": "Per-scenario paired differences improved − comparison on each claim's "
+                    "primary metric (below zero: improved better), with the estimate's 95 % "
+                    "bootstrap interval, against each comparison.",
+         "alt": "Scatter of paired differences per claim with estimate and confidence interval"},
+        {"id": "family_distributions", "group": "family",
+         "paths": save_figure(family_distribution_figure(tables, [c.primary_metric
+                                                                  for c in ALL_CLAIMS[1:]]
+                                                         + ["min_clearance_m"]),
+                              fig_dir, "family_distributions"),
+         "caption": "Distribution of each claim's metric and of the minimum clearance per method "
+                    "over the scenario family (missing values, e.g. never recovered, are "
+                    "left out of the boxes and counted in the outcomes table).",
+         "alt": "Box plots of metrics per method over the scenario family"},
+    ]
+    first = next(iter(info.values())) if info else {"seed": "?", "size": len(
+        next(iter(tables.values())))}
+    solvers = "; ".join(
+        f"{label}: {s.controller.kind}"
+        + (f" ({s.controller.formulation} QP, {s.controller.backend})"
+           if s.controller.kind == "mpc" else f" ({s.controller.backend})"
+           if s.controller.kind == "kinematic_mpc" else "")
+        for label, s in (settings or {}).items() if label in tables) or "not recorded"
+    apf_adds = _baseline_apf_adds(tables, cfg, table_dir)
+    answer = answer_lines(typed) + ([apf_adds["sentence"]] if apf_adds else [])
+    return {"ledger": grouped, "comparisons": comparisons, "solvers": solvers,
+            "answer": answer, "apf_adds": apf_adds,
+            "by_claim": {r["claim"]: r for r in ledger if r["comparison"] == "baseline"},
+            "counts": [{k: _fmt(v) for k, v in c.items()} for c in counts],
+            "cap_note": cap_note, "figures": figures, "seed": first["seed"],
+            "size": first["size"], "methods": order}
+
+
+def _baseline_apf_adds(tables: dict, cfg: ClaimsConfig, table_dir: Path) -> dict | None:
+    """What the paper's baseline APF contributes at all: the baseline judged against
+    ``mpc_no_apf`` (the same MPC tracking a straight-to-goal reference) with the same ledger;
+    the baseline is *indistinguishable from having no APF* when no claim's outcome is
+    supported, contradicted or mixed against it."""
+    if "baseline" not in tables or "mpc_no_apf" not in tables:
+        return None
+    ledger = family_ledger(tables, cfg, None, "baseline", ("mpc_no_apf",), sensitivity=False)
+    ledger.to_frame().to_csv(table_dir / "claims_ledger_baseline_vs_no_apf.csv", index=False)
+    rows = [{"claim": r.claim_id, "outcome": str(r.outcome),
+             "estimate": f"{_fmt(r.result.estimate)} [{_fmt(r.result.ci_low)}, "
+                         f"{_fmt(r.result.ci_high)}] {_unit(r.claim.primary_metric)}"}
+            for r in ledger]
+    decisive = [r["claim"] for r in rows
+                if r["outcome"] in ("supported", "contradicted", "mixed")]
+    if decisive:
+        sentence = ("The baseline's APF against no APF (mpc_no_apf, the same MPC on a "
+                    "straight-to-goal reference): it differs on " + ", ".join(
+                        f"{r['claim']} ({r['outcome']})" for r in rows
+                        if r["claim"] in decisive) + ".")
+    else:
+        sentence = ("The baseline's APF is indistinguishable from having no APF (mpc_no_apf): "
+                    "no claim is supported, contradicted or mixed against it, so 'improved vs "
+                    "baseline' is close to 'improved APF vs no APF'.")
+    return {"rows": rows, "sentence": sentence, "indistinguishable": not decisive}
+
+
+def _metrics_doc() -> list[str]:
+    """Bullet paragraphs of the metric definitions (from :mod:`pipeline.analysis.metrics`)."""
+    import pipeline.analysis.metrics as metrics_module
+
+    doc = metrics_module.__doc__ or ""
+    bullets, current = [], []
+    for line in doc.splitlines():
+        if line.startswith("* "):
+            if current:
+                bullets.append(" ".join(current))
+            current = [line[2:].strip()]
+        elif current and line.strip():
+            current.append(line.strip())
+        elif current:
+            bullets.append(" ".join(current))
+            current = []
+    if current:
+        bullets.append(" ".join(current))
+    import re
+
+    from markupsafe import Markup, escape
+
+    # the docstring's **Name** becomes bold; everything else is escaped text
+    return [Markup(re.sub(r"\*\*(.+?)\*\*", r"<strong>\1</strong>",
+                          str(escape(b.replace("``", ""))))) for b in bullets]
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog="python -m pipeline.report",
+                                     description="Build the HTML report from run folders.")
+    parser.add_argument("runs", type=Path, help="folder holding run folders (e.g. outputs/paper)")
+    parser.add_argument("--out", type=Path, default=Path("reports/latest"),
+                        help="output folder (default: reports/latest)")
+    parser.add_argument("--sweep", type=Path, action="append", default=[],
+                        help="aggregated sweep folder to add as a Sweep section (repeatable)")
+    parser.add_argument("--bench", type=Path, default=Path("reports/bench"),
+                        help="benchmark folder to add as the Performance section, if present")
+    parser.add_argument("--multiverse", type=Path, default=None,
+                        help="multiverse folder (default: RUNS/multiverse, if present)")
+    parser.add_argument("--tune", type=Path, default=None,
+                        help="fair-fight folder of make tune (default: RUNS/tune, if present)")
+    parser.add_argument("--strict", action="store_true",
+                        help="exit 1 when any folder was skipped (after writing the report)")
+    parser.add_argument("--command", default=None,
+                        help="command to show under provenance (default: this command line)")
+    args = parser.parse_args(argv)
+    command = args.command or "python -m pipeline.report " + " ".join(argv or sys.argv[1:])
+    skipped: list[Skipped] = []
+    try:
+        path = build_report(args.runs, args.out, command, tuple(args.sweep), args.bench,
+                            args.multiverse, skipped, args.tune)
+    except FileNotFoundError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    except OSError as exc:
+        print(f"error: --out {args.out}: cannot write the report ({exc.strerror or exc}: "
+              f"{exc.filename or args.out})", file=sys.stderr)
+        return 2
+    print(f"report written to {path.resolve()}"
+          + (f" ({len(skipped)} folder(s) skipped, listed in the report)" if skipped else ""))
+    answer = path.parent / "answer.txt"
+    if answer.is_file() and answer.read_text().strip():
+        # the answer in words, last, so that a command's final lines are the verdicts
+        print("The answer over the scenario family (outcome vs each comparison, estimate "
+              "[95 % interval] unit; d = improved - comparison, below 0 is better):")
+        print(answer.read_text().rstrip())
+    if args.strict and skipped:
+        print(f"error: --strict: {len(skipped)} folder(s) skipped", file=sys.stderr)
+        return 1
+    return 0
+

@@ -1,0 +1,149 @@
+"""A set of run folders read together: every trusted run and family under a root, labelled by
+what differs between runs of one method, and the settings they were made with.
+
+Reads only through :mod:`pipeline.store.runs`; folders that cannot be trusted (or whose settings
+cannot be read) are listed as :class:`~pipeline.store.runs.Skipped` with their reason.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import pandas as pd
+
+from pipeline.analysis.settings import ClaimsConfig
+from pipeline.config import ExperimentConfig
+from pipeline.errors import RunFolderError
+from pipeline.store.runs import Skipped, discover, read_family, read_run
+
+
+@dataclass
+class RunCollection:
+    """What :func:`load_runs` found.
+
+    Attributes
+    ----------
+    runs : list of dict
+        :meth:`pipeline.store.runs.RunRecord.as_dict` of each trusted single-run folder (its
+        ``metrics`` carry a ``label``).
+    family_tables : dict of label -> DataFrame
+        ``family_metrics.csv`` of each trusted family folder.
+    family_info : dict of label -> dict
+        ``family.json`` of each family folder (with ``dir``).
+    family_settings : dict of label -> ExperimentConfig
+        The settings each family was made with.
+    """
+
+    runs: list[dict] = field(default_factory=list)
+    family_tables: dict[str, pd.DataFrame] = field(default_factory=dict)
+    family_info: dict[str, dict] = field(default_factory=dict)
+    family_settings: dict[str, ExperimentConfig] = field(default_factory=dict)
+
+    def claims_settings(self, treatment: str = "improved") -> ClaimsConfig | None:
+        """The claims settings the runs were made with: the treatment's family, else its
+        paper-scenario run, else the first run or family; None when there is nothing."""
+        if treatment in self.family_settings:
+            return self.family_settings[treatment].claims
+        for run in self.runs:
+            if run["metrics"].get("method") == treatment:
+                return run["claims"]
+        if self.family_settings:
+            return next(iter(self.family_settings.values())).claims
+        return self.runs[0]["claims"] if self.runs else None
+
+
+EXCLUDED_SECTIONS = ("sweeps", "ablation", "interpretations", "multiverse", "tune",
+                     "kinematic_readings")
+
+
+def _flatten(config: dict, prefix: str = "") -> dict:
+    flat = {}
+    for key, value in (config or {}).items():
+        name = f"{prefix}{key}"
+        if isinstance(value, dict):
+            flat.update(_flatten(value, name + "."))
+        else:
+            flat[name] = value
+    return flat
+
+
+def label_by_difference(configs: list[dict], method: str, skip: tuple[str, ...] = (
+        "run.", "scenario.name")) -> list[str]:
+    """Labels for several runs of one method: the method plus the config values that differ
+    between them (at most three, the rest counted)."""
+    if len(configs) < 2:
+        return [method] * len(configs)
+    flats = [_flatten(c) for c in configs]
+    keys = sorted({k for f in flats for k in f})
+    differing = [k for k in keys if not k.startswith(skip)
+                 and len({repr(f.get(k)) for f in flats}) > 1]
+    labels = []
+    for f in flats:
+        parts = [f"{k}={f.get(k)}" for k in differing[:3]]
+        more = f", +{len(differing) - 3} more" if len(differing) > 3 else ""
+        labels.append(f"{method} ({', '.join(parts)}{more})" if parts else method)
+    # identical configs: number them so that no run hides another
+    seen: dict[str, int] = {}
+    for i, label in enumerate(labels):
+        if labels.count(label) > 1:
+            seen[label] = seen.get(label, 0) + 1
+            labels[i] = f"{label} #{seen[label]}"
+    return labels
+
+
+def load_runs(run_root: Path, skipped: list[Skipped] | None = None) -> RunCollection:
+    """Single runs (outside family folders) and per-method family tables under ``run_root``.
+
+    Every folder is read through :mod:`pipeline.store.runs`; folders that cannot be trusted are
+    appended to ``skipped`` with their reason. Several runs of one method on one track are all
+    kept, labelled by what differs between them (``metrics["label"]``).
+
+    Returns
+    -------
+    RunCollection
+    """
+    run_root = Path(run_root)
+    skipped = skipped if skipped is not None else []
+    if not run_root.is_dir():
+        raise FileNotFoundError(f"no complete run folders under {run_root} (no such folder)")
+    found = discover(run_root, exclude=EXCLUDED_SECTIONS)
+    skipped.extend(found.skipped)
+    families = []
+    for folder in found.families:
+        try:
+            families.append(read_family(folder))
+        except RunFolderError as exc:
+            skipped.append(Skipped(folder, str(exc).split(": ", 1)[-1]))
+    runs = []
+    for folder in found.runs:
+        try:
+            runs.append(read_run(folder).as_dict())
+        except RunFolderError as exc:
+            skipped.append(Skipped(folder, str(exc).split(": ", 1)[-1]))
+    if not runs and not families:
+        if skipped:
+            raise FileNotFoundError(f"no trusted run folders under {run_root} ("
+                                    f"{len(skipped)} skipped, e.g. {skipped[0].folder}: "
+                                    f"{skipped[0].reason})")
+        raise FileNotFoundError(f"no complete run folders (with metrics.json) under {run_root}")
+    # label runs of the same method and track by what differs between them
+    groups: dict[tuple, list[dict]] = {}
+    for run in runs:
+        key = (run["metrics"].get("track", "lateral"), run["metrics"].get("method", ""))
+        groups.setdefault(key, []).append(run)
+    for (_, method), group in groups.items():
+        for run, label in zip(group, label_by_difference([r["config"] for r in group], method)):
+            run["metrics"] = {**run["metrics"], "label": label}
+    family_tables, family_info = {}, {}
+    by_method: dict[str, list] = {}
+    for family in families:
+        by_method.setdefault(family.info.get("method", ""), []).append(family)
+    family_settings = {}
+    for method, group in by_method.items():
+        configs = [family.config_data for family in group]
+        for family, label in zip(group, label_by_difference(configs, method)):
+            family_tables[label] = family.table
+            family_info[label] = {**family.info, "dir": str(family.folder)}
+            family_settings[label] = family.config
+    return RunCollection(runs, family_tables, family_info, family_settings)

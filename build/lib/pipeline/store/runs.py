@@ -1,0 +1,562 @@
+"""Run records: the one owner of a run folder's layout (its only writer, reader and finder).
+
+A *run folder* holds ``config.yaml`` (resolved config), ``model.json``, ``trajectory.csv``,
+``timing.json`` (wall-clock solve times, which differ between identical runs), ``metrics.json``
+and, written last and atomically, ``manifest.json``: every file with its size and SHA-256, the
+config hash and the code version. A *family folder* holds ``family_metrics.csv``, ``family.json``
+and its own manifest, which also lists each member folder's manifest hash. A folder is trusted
+only when its manifest matches what is on disk; resume, aggregate, report and verify all go
+through :func:`check` and :func:`discover`, and every folder they pass over is listed with its
+reason (:class:`Skipped`).
+
+Every file is written to a hidden temporary name and renamed, so a killed write never leaves a
+half-written file; the temporaries a killed process leaves behind are removed by the next write
+into that folder (:func:`clean_leftovers`).
+"""
+
+from __future__ import annotations
+
+import functools
+import hashlib
+import json
+import os
+import tempfile
+from dataclasses import dataclass, field, fields
+from pathlib import Path
+
+import pandas as pd
+
+from pipeline.analysis.metrics import RunMetrics
+from pipeline.config import ExperimentConfig, experiment_config_from_data
+from pipeline.errors import ConfigError, NonFiniteResultError, RunFolderError
+
+RUN_FILES = ("config.yaml", "model.json", "trajectory.csv", "timing.json", "metrics.json")
+FAMILY_FILES = ("family_metrics.csv", "family.json")
+MULTIVERSE_FILES = ("design.csv", "specifications.csv", "robustness.csv", "dimensions.csv",
+                    "space.json")
+#: Tables of a tuning folder (``make tune``), covered by its manifest.
+TUNE_FILES = ("trials.csv", "heldout.csv", "ledger_default.csv", "ledger_tuned.csv",
+              "settings_outcomes.csv", "summary.json")
+REQUIRED = {"run": RUN_FILES, "family": FAMILY_FILES, "multiverse": MULTIVERSE_FILES,
+            "tune": TUNE_FILES}
+MANIFEST = "manifest.json"
+SCHEMA = 1
+#: Folder names that are Hydra's or submitit's bookkeeping, never runs.
+BOOKKEEPING = (".hydra", ".submitit")
+
+
+def _non_finite_key(data, path: str = "") -> str | None:
+    import math
+
+    if isinstance(data, float) and not math.isfinite(data):
+        return path or "(value)"
+    if isinstance(data, dict):
+        for key, value in data.items():
+            found = _non_finite_key(value, f"{path}.{key}" if path else str(key))
+            if found:
+                return found
+    if isinstance(data, (list, tuple)):
+        for i, value in enumerate(data):
+            found = _non_finite_key(value, f"{path}[{i}]")
+            if found:
+                return found
+    return None
+
+
+def _json_text(name: str, data: dict) -> str:
+    """Serialize a record file, refusing NaN and infinities with the key that holds one."""
+    key = _non_finite_key(data)
+    if key is not None:
+        stage = {"model.json": "model", "metrics.json": "metrics",
+                 "timing.json": "simulate"}.get(name, name)
+        raise NonFiniteResultError(
+            f"error: the run produced a non-finite value in {name} at {key} (stage: {stage}); "
+            "no run folder was written. Check the physical parameters (vehicle.*, "
+            "scenario.sample_time_s) for values outside their physical range")
+    return json.dumps(data, indent=2, sort_keys=True, allow_nan=False) + "\n"
+
+
+@dataclass(frozen=True)
+class Skipped:
+    """A folder passed over, and why."""
+
+    folder: Path
+    reason: str
+
+
+@dataclass(frozen=True)
+class RunInfo:
+    """What a run was (bookkeeping written beside its metrics in ``metrics.json``)."""
+
+    method: str
+    scenario: str
+    track: str
+    config_hash: str
+    termination: str
+    compile_count: int
+
+    def to_json(self) -> dict:
+        return {f.name: getattr(self, f.name) for f in fields(self)}
+
+    @classmethod
+    def from_json(cls, data: dict) -> "RunInfo":
+        return cls(str(data.get("method", "")), str(data.get("scenario", "")),
+                   str(data.get("track", "lateral")), str(data.get("config_hash", "")),
+                   str(data.get("termination", "")), int(data.get("compile_count") or 0))
+
+
+@dataclass(frozen=True)
+class RunRecord:
+    """One trusted run folder, read and typed.
+
+    Attributes
+    ----------
+    folder : Path
+    config : ExperimentConfig
+        The settings the run was made with (validated like a fresh configuration).
+    config_data : dict
+        The same, as the mapping in ``config.yaml`` (for labels and the register).
+    metrics : RunMetrics
+    info : RunInfo
+    timing, model, manifest : dict
+    trajectory : pandas.DataFrame or None
+        None when read with ``trajectory=False``.
+    """
+
+    folder: Path
+    config: ExperimentConfig
+    config_data: dict
+    metrics: RunMetrics
+    info: RunInfo
+    timing: dict
+    model: dict
+    manifest: dict
+    trajectory: pd.DataFrame | None
+
+    @property
+    def method(self) -> str:
+        return self.info.method
+
+    def flat_metrics(self) -> dict:
+        """``metrics.json`` as written: the metrics and the run's bookkeeping."""
+        return {**self.metrics.to_json(), **self.info.to_json()}
+
+    def as_dict(self) -> dict:
+        """The report's view of the run (``dir``, ``config``, ``metrics``, ``timing``,
+        ``trajectory``, ``claims``: the claims settings the run was made with)."""
+        return {"dir": self.folder, "config": self.config_data, "metrics": self.flat_metrics(),
+                "timing": self.timing, "trajectory": self.trajectory,
+                "claims": self.config.claims}
+
+
+@dataclass(frozen=True)
+class FamilyRecord:
+    """One trusted family folder, read: ``family.json``, the per-member table and the settings
+    the family was made with (its first member's configuration)."""
+
+    folder: Path
+    info: dict
+    table: pd.DataFrame
+    manifest: dict
+    config: ExperimentConfig | None
+    config_data: dict | None
+
+
+@dataclass
+class Discovery:
+    """What :func:`discover` found under a root."""
+
+    runs: list[Path] = field(default_factory=list)
+    families: list[Path] = field(default_factory=list)
+    skipped: list[Skipped] = field(default_factory=list)
+
+
+# --- writing ---------------------------------------------------------------------------------
+
+def write_text_atomic(path: Path, text: str) -> None:
+    """Write ``text`` to ``path`` via a temporary file in the same folder and ``os.replace``;
+    on any failure the previous file (if any) is left as it was."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    try:
+        with os.fdopen(fd, "w", encoding="utf-8", newline="\n") as handle:
+            handle.write(text)
+        os.chmod(tmp, 0o644)  # mkstemp creates 0600; results are meant to be shared
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+
+
+def write_json_atomic(path: Path, data: dict) -> None:
+    write_text_atomic(path, json.dumps(data, indent=2, sort_keys=True, allow_nan=False) + "\n")
+
+
+def json_safe(value):
+    """A copy of nested dicts and lists with NaN and infinities as None (what a study's
+    summary.json may hold where a number is undefined)."""
+    import math
+
+    if isinstance(value, dict):
+        return {k: json_safe(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [json_safe(v) for v in value]
+    if isinstance(value, float) and not math.isfinite(value):
+        return None
+    return value
+
+
+def write_csv_atomic(path: Path, frame: pd.DataFrame) -> None:
+    # fixed float format so identical runs give byte-identical files
+    write_text_atomic(path, csv_text(frame))
+
+
+_CSV_SPECIAL = (",", '"', "\r", "\n")
+
+
+def _csv_cells(column: pd.Series) -> list[str] | None:
+    """One column's cells as pandas writes them (``%.10g`` floats, empty for missing values),
+    or None when the column needs pandas (quoting, an unusual dtype)."""
+    kind = column.dtype.kind
+    values = column.to_numpy().tolist()
+    if kind == "f":
+        return ["" if v != v else "%.10g" % v for v in values]
+    if kind in "biu":
+        return [str(v) for v in values]
+    if kind in "OUT":
+        cells = []
+        for v in values:
+            if v is None or (isinstance(v, float) and v != v):
+                cells.append("")
+            elif isinstance(v, (str, bool, int)):
+                text = str(v)
+                if any(c in text for c in _CSV_SPECIAL):
+                    return None
+                cells.append(text)
+            else:
+                return None
+        return cells
+    return None
+
+
+def csv_text(frame: pd.DataFrame) -> str:
+    """``frame.to_csv(index=False, float_format="%.10g", lineterminator="\\n")``, byte for byte,
+    at a fraction of its cost for the plain tables the pipeline writes (floats, flags, short
+    words); anything else (cells that need quoting, other dtypes) goes through pandas itself."""
+    names = [str(c) for c in frame.columns]
+    columns = [_csv_cells(frame[c]) for c in frame.columns] \
+        if frame.shape[1] >= 2 and frame.columns.is_unique else [None]
+    if any(c is None for c in columns) or any(ch in n for n in names for ch in _CSV_SPECIAL):
+        return frame.to_csv(index=False, float_format="%.10g", lineterminator="\n")
+    lines = [",".join(names)]
+    lines.extend(",".join(row) for row in zip(*columns))
+    return "\n".join(lines) + "\n"
+
+
+def clean_leftovers(folder: Path) -> list[Path]:
+    """Remove the hidden temporaries (``.<name>.<random>.tmp``) that a killed write left in
+    ``folder``; returns what was removed."""
+    folder = Path(folder)
+    removed = []
+    if folder.is_dir():
+        for path in folder.glob(".*.tmp"):
+            if path.is_file():
+                path.unlink(missing_ok=True)
+                removed.append(path)
+    return removed
+
+
+@functools.lru_cache(maxsize=1)
+def code_version() -> str:
+    """SHA-256 (first 16 hex digits) of the package's source files: which code wrote a run."""
+    digest = hashlib.sha256()
+    root = Path(__file__).resolve().parents[1]  # the package
+    for path in sorted(root.rglob("*")):
+        if path.suffix in (".py", ".j2") and "__pycache__" not in path.parts:
+            digest.update(str(path.relative_to(root)).encode())
+            digest.update(path.read_bytes())
+    return digest.hexdigest()[:16]
+
+
+def _file_entry(path: Path) -> dict:
+    data = path.read_bytes()
+    return {"bytes": len(data), "sha256": hashlib.sha256(data).hexdigest()}
+
+
+def write_manifest(folder: Path, kind: str, files: tuple[str, ...], config_hash: str,
+                   extra: dict | None = None) -> dict:
+    """Write ``manifest.json`` for files already in ``folder`` (last, atomically)."""
+    return _write_manifest(Path(folder), kind, files, config_hash, extra)
+
+
+def _write_manifest(folder: Path, kind: str, files: tuple[str, ...], config_hash: str,
+                    extra: dict | None = None) -> dict:
+    manifest = {"schema": SCHEMA, "kind": kind, "config_hash": config_hash,
+                "code_version": code_version(),
+                "files": {name: _file_entry(folder / name) for name in files}, **(extra or {})}
+    write_json_atomic(folder / MANIFEST, manifest)
+    return manifest
+
+
+def untrust(folder: Path) -> None:
+    """Remove a folder's manifest: its files are being rewritten and must not be trusted until
+    a new manifest is written last."""
+    (Path(folder) / MANIFEST).unlink(missing_ok=True)
+
+
+def folder_kind(folder: Path) -> str | None:
+    """``"family"``, ``"run"`` or None: what kind of record a folder holds, by its files."""
+    folder = Path(folder)
+    if any((folder / name).is_file() for name in FAMILY_FILES):
+        return "family"
+    if any((folder / name).is_file() for name in RUN_FILES + (MANIFEST,)):
+        return "run"
+    return None
+
+
+def write_run(folder: Path, *, config_text: str, model: dict, trajectory: pd.DataFrame,
+              timing: dict, metrics: RunMetrics, info: RunInfo) -> Path:
+    """Write a complete run folder: the files, then the manifest (last, atomically).
+
+    An existing manifest is removed first, so a folder being rewritten is never trusted
+    half-way; leftover temporaries of a killed write are removed.
+    """
+    folder = Path(folder)
+    # everything serialized (and checked) before the folder is touched
+    texts = {"config.yaml": config_text, "model.json": _json_text("model.json", model),
+             "trajectory.csv": csv_text(trajectory),
+             "timing.json": _json_text("timing.json", timing),
+             "metrics.json": _json_text("metrics.json", {**metrics.to_json(),
+                                                         **info.to_json()})}
+    folder.mkdir(parents=True, exist_ok=True)
+    clean_leftovers(folder)
+    (folder / MANIFEST).unlink(missing_ok=True)
+    for name in RUN_FILES:
+        write_text_atomic(folder / name, texts[name])
+    _write_manifest(folder, "run", RUN_FILES, info.config_hash)
+    return folder
+
+
+def write_family(folder: Path, table: pd.DataFrame, info: dict, config_hash: str,
+                 members: list[Path]) -> Path:
+    """Write a family folder's table and summary, then its manifest (with the members'
+    manifest hashes)."""
+    folder = Path(folder)
+    folder.mkdir(parents=True, exist_ok=True)
+    clean_leftovers(folder)
+    (folder / MANIFEST).unlink(missing_ok=True)
+    write_csv_atomic(folder / "family_metrics.csv", table)
+    write_json_atomic(folder / "family.json", info)
+    member_hashes = {m.name: _file_entry(m / MANIFEST)["sha256"] for m in members}
+    _write_manifest(folder, "family", FAMILY_FILES, config_hash, {"members": member_hashes})
+    return folder
+
+
+# --- checking and reading --------------------------------------------------------------------
+
+def _load_manifest(folder: Path, kind: str) -> tuple[dict | None, str | None]:
+    path = folder / MANIFEST
+    present = [n for n in REQUIRED[kind] if (folder / n).exists()]
+    if not path.is_file():
+        if present:
+            return None, (f"no {MANIFEST}: incomplete (killed or failed) or written by an older "
+                          f"version; has {', '.join(present)}")
+        return None, "empty folder"
+    try:
+        manifest = json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
+        return None, f"{MANIFEST} unreadable ({type(exc).__name__})"
+    if not isinstance(manifest, dict) or manifest.get("kind") != kind \
+            or not isinstance(manifest.get("files"), dict):
+        return None, f"{MANIFEST} is not a {kind} manifest"
+    return manifest, None
+
+
+def check(folder: Path, kind: str = "run", expected_hash: str | None = None,
+          members: bool = True) -> str | None:
+    """Why ``folder`` cannot be trusted, or None when its manifest matches the disk.
+
+    Parameters
+    ----------
+    kind : {"run", "family", "multiverse", "tune"}
+    expected_hash : str, optional
+        The config hash the folder must carry (resume).
+    members : bool
+        For a family, also compare each member's manifest with the hash recorded.
+    """
+    folder = Path(folder)
+    if not folder.is_dir():
+        return "not a folder"
+    manifest, reason = _load_manifest(folder, kind)
+    if reason:
+        return reason
+    missing = [n for n in REQUIRED[kind] if n not in manifest["files"]]
+    if missing:
+        return f"{MANIFEST} does not list {', '.join(missing)}"
+    for name, entry in manifest["files"].items():
+        path = folder / name
+        if not path.is_file():
+            return f"{name} is missing"
+        actual = _file_entry(path)
+        if actual["bytes"] != entry.get("bytes") or actual["sha256"] != entry.get("sha256"):
+            return f"{name} differs from its manifest entry (changed or damaged after writing)"
+    if expected_hash is not None and manifest.get("config_hash") != expected_hash:
+        return (f"config hash {manifest.get('config_hash')} is not this configuration's "
+                f"({expected_hash})")
+    if kind == "family" and members:
+        for name, digest in (manifest.get("members") or {}).items():
+            member = folder / name / MANIFEST
+            if not member.is_file() or _file_entry(member)["sha256"] != digest:
+                return f"member {name} changed after the family was written"
+    return None
+
+
+def _read_json(path: Path) -> dict:
+    data = json.loads(path.read_text(encoding="utf-8"))
+    if not isinstance(data, dict):
+        raise RunFolderError(f"{path}: not a JSON object")
+    return data
+
+
+def _settings(folder: Path, text: str) -> tuple[ExperimentConfig, dict]:
+    """The typed settings of a ``config.yaml``; :class:`RunFolderError` when they cannot be
+    read (never filled with defaults)."""
+    import yaml
+
+    try:
+        # the C loader when PyYAML has it: the pure-Python one costs ~10 ms per config
+        data = yaml.load(text, Loader=getattr(yaml, "CSafeLoader", yaml.SafeLoader))
+        if not isinstance(data, dict):
+            raise ValueError("not a mapping")
+        return experiment_config_from_data(data), data
+    except (ValueError, TypeError, yaml.YAMLError, ConfigError) as exc:
+        message = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+        raise RunFolderError(f"{folder}: settings in config.yaml cannot be read ({message})"
+                             ) from None
+
+
+def read_metrics_json(folder: Path) -> dict:
+    """``metrics.json`` of a folder already checked (resume of a complete run)."""
+    return _read_json(Path(folder) / "metrics.json")
+
+
+def read_run(folder: Path, trajectory: bool = True) -> RunRecord:
+    """Read a trusted run folder; :class:`RunFolderError` (with the reason) otherwise.
+
+    Parameters
+    ----------
+    trajectory : bool
+        Also read ``trajectory.csv`` (False: ``RunRecord.trajectory`` is None).
+    """
+    folder = Path(folder)
+    reason = check(folder, "run")
+    if reason:
+        raise RunFolderError(f"{folder}: {reason}")
+    try:
+        config, data = _settings(folder, (folder / "config.yaml").read_text())
+        flat = _read_json(folder / "metrics.json")
+        return RunRecord(folder=folder, config=config, config_data=data,
+                         metrics=RunMetrics.from_json(flat), info=RunInfo.from_json(flat),
+                         timing=_read_json(folder / "timing.json"),
+                         model=_read_json(folder / "model.json"),
+                         manifest=_read_json(folder / MANIFEST),
+                         trajectory=pd.read_csv(folder / "trajectory.csv") if trajectory
+                         else None)
+    except (OSError, ValueError, pd.errors.ParserError) as exc:
+        if isinstance(exc, RunFolderError):
+            raise
+        raise RunFolderError(f"{folder}: unreadable ({type(exc).__name__}: "
+                             f"{str(exc).splitlines()[0] if str(exc) else ''})") from None
+
+
+def member_folders(folder: Path) -> list[Path]:
+    """The member folders a family's manifest lists, in order."""
+    manifest, reason = _load_manifest(Path(folder), "family")
+    if reason:
+        raise RunFolderError(f"{folder}: {reason}")
+    return [Path(folder) / name for name in sorted(manifest.get("members") or {})]
+
+
+def member_trajectories(folder: Path):
+    """Each member of a trusted family as ``(index, trajectory, metrics.json mapping)``, every
+    member checked against its manifest first (:class:`RunFolderError` when one is not)."""
+    for member in member_folders(folder):
+        reason = check(member, "run")
+        if reason:
+            raise RunFolderError(f"{member}: {reason}")
+        try:
+            yield (int(member.name.split("_")[1]), pd.read_csv(member / "trajectory.csv"),
+                   _read_json(member / "metrics.json"))
+        except (OSError, ValueError, pd.errors.ParserError) as exc:
+            raise RunFolderError(f"{member}: unreadable ({type(exc).__name__})") from None
+
+
+def read_family(folder: Path, members: bool = True, settings: bool = True) -> FamilyRecord:
+    """Read a trusted family folder; :class:`RunFolderError` (with the reason) otherwise.
+
+    Parameters
+    ----------
+    members : bool
+        Also check each member's manifest against the family's.
+    settings : bool
+        Read the settings the family was made with (its first member's ``config.yaml``); a
+        family without readable settings is then an error. False: ``config`` is None, for a
+        caller that judges the table with settings of its own and says so.
+    """
+    folder = Path(folder)
+    reason = check(folder, "family", members=members)
+    if reason:
+        raise RunFolderError(f"{folder}: {reason}")
+    try:
+        config = data = None
+        names = member_folders(folder)
+        if settings and (not names or not (names[0] / "config.yaml").is_file()):
+            raise RunFolderError(f"{folder}: settings cannot be read (no member config.yaml)")
+        if settings:
+            config, data = _settings(folder, (names[0] / "config.yaml").read_text())
+        return FamilyRecord(folder=folder, info=_read_json(folder / "family.json"),
+                            table=pd.read_csv(folder / "family_metrics.csv"),
+                            manifest=_read_json(folder / MANIFEST), config=config,
+                            config_data=data)
+    except (OSError, ValueError, pd.errors.ParserError) as exc:
+        if isinstance(exc, RunFolderError):
+            raise
+        raise RunFolderError(f"{folder}: unreadable ({type(exc).__name__})") from None
+
+
+def discover(root: Path, exclude: tuple[str, ...] = ()) -> Discovery:
+    """Every run and family folder under ``root``, trusted or skipped with its reason.
+
+    Family members are part of their family, not separate runs. Folders whose path relative to
+    ``root`` contains a part in ``exclude`` are not visited (other sections read them).
+    """
+    root = Path(root)
+    found = Discovery()
+    if not root.is_dir():
+        found.skipped.append(Skipped(root, "no such folder"))
+        return found
+    for current, dirs, files in os.walk(root):
+        here = Path(current)
+        rel = here.relative_to(root).parts
+        dirs[:] = sorted(d for d in dirs if d not in BOOKKEEPING and d not in exclude)
+        names = set(files)
+        if names & set(FAMILY_FILES):
+            reason = check(here, "family")
+            if reason:
+                found.skipped.append(Skipped(here, reason))
+            else:
+                found.families.append(here)
+            # members belong to the family: not listed as runs
+            dirs[:] = [d for d in dirs if not d.startswith("member_")]
+            continue
+        if names & (set(RUN_FILES) | {MANIFEST}):
+            reason = check(here, "run")
+            if reason:
+                found.skipped.append(Skipped(here, reason))
+            else:
+                found.runs.append(here)
+            continue
+        if any(part.startswith("member_") for part in rel):
+            continue
+    return found

@@ -1,0 +1,193 @@
+"""Ablation analysis: which revision of the APF does what, and do the verdicts survive the
+alternative readings of the interpretation register.
+
+Reads family jobs (``family.json`` + ``family_metrics.csv``) written by
+``experiment=ablation`` (labels ``baseline``, ``improved``, ``baseline+<revision>``,
+``improved-<revision>``) and ``experiment=interpretations`` (one folder per variant, baseline
+and improved inside). Pure functions over tables; the report draws and prints them.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from pipeline.analysis.claims import ALL_CLAIMS, CLAIMS, compare, family_ledger, judge
+from pipeline.analysis.tally import Tally
+
+REVISIONS = ("normalize", "step", "beta", "exponential", "step_min")
+REVISION_TEXT = {
+    "normalize": "no normalization of F (with its step cap)",
+    "step": "larger step (alpha = 0.2)",
+    "beta": "beta sensitivity of H_i",
+    "exponential": "exponential repulsion",
+    "step_min": "minimum movement threshold",
+}
+
+
+def load_family_jobs(root: Path) -> dict[str, pd.DataFrame]:
+    """``{label: family_metrics}`` of every trusted family job below ``root`` (label = its
+    method); untrusted folders are named on stderr and left out. The tables are judged with
+    the claims settings the caller passes (the report's: those of its main runs)."""
+    import sys
+
+    from pipeline.store.runs import RunFolderError, discover, read_family
+
+    tables = {}
+    found = discover(Path(root))
+    for item in found.skipped:
+        print(f"ablation: skipped {item.folder}: {item.reason}", file=sys.stderr)
+    for folder in found.families:
+        try:
+            family = read_family(folder, settings=False)
+        except RunFolderError as exc:
+            print(f"ablation: skipped {exc}", file=sys.stderr)
+            continue
+        tables[family.info["method"]] = family.table
+    return tables
+
+
+def ablation_effects(tables: dict[str, pd.DataFrame], cfg) -> pd.DataFrame:
+    """Paired effect of every configuration versus the baseline, per claim, computed as the
+    claims ledger does (:func:`pipeline.analysis.claims.compare`: pairs where neither collided, missing
+    values apart, Hodges-Lehmann estimate, bootstrap interval, unadjusted test).
+
+    Returns
+    -------
+    DataFrame
+        Rows ``(configuration, claim)``: ``effect`` (configuration - baseline, < 0 is the
+        claimed improvement), ``ci_low``, ``ci_high``, ``outcome`` against the claim's margin,
+        counts; plus collision and non-recovery counts of the configuration.
+    """
+    baseline = tables["baseline"]
+    order = (["improved", "baseline_matched"] + [f"baseline+{r}" for r in REVISIONS]
+             + [f"improved-{r}" for r in REVISIONS])
+    rows = []
+    for label in [o for o in order if o in tables]:
+        table = tables[label]
+        for claim in CLAIMS:
+            result = compare(table, baseline, claim, cfg)
+            outcome, _ = judge(result, result.p_value, cfg.margins[claim.claim_id], cfg,
+                               claim)
+            tally = Tally.of(table)
+            rows.append({"configuration": label, "claim": claim.claim_id,
+                         "metric": claim.primary_metric, "effect": result.estimate,
+                         "ci_low": result.ci_low, "ci_high": result.ci_high,
+                         "outcome": str(outcome), "n_pairs": result.n_pairs,
+                         "collisions": tally.collisions, "not_recovered": tally.not_recovered})
+    return pd.DataFrame(rows)
+
+
+def _clear(row) -> bool:
+    return bool(row["ci_high"] < 0 or row["ci_low"] > 0)
+
+
+def attribution_sentences(effects: pd.DataFrame, tables: dict[str, pd.DataFrame] | None = None,
+                          cfg=None) -> dict[str, str]:
+    """One sentence per claim naming the revision that accounts for most of the effect, checked
+    against the look-ahead-matched control.
+
+    Rule: take the improved bundle's effect on the claim. Among the revisions added alone to the
+    baseline, the one whose effect has the same sign and the largest size accounts for most of
+    it if its interval excludes zero; the leave-one-out row of that revision is quoted beside
+    it. Otherwise no single revision does. When the improved rollout's step cap binds on at
+    least ``cfg.cap_binding_share`` of its steps, the sentence says that 'no normalization' and
+    'a larger step' are inactive there, and quotes ``baseline_matched`` (the baseline with the
+    cap's normalized step): an effect that ``baseline_matched`` shares is look-ahead length, not
+    the other revisions.
+    """
+    sentences = {}
+    cap_share = None
+    if tables is not None and "improved" in tables \
+            and "step_cap_binding_share" in tables["improved"]:
+        cap_share = float(tables["improved"]["step_cap_binding_share"].mean())
+    binding = cap_share is not None and cfg is not None and cap_share >= cfg.cap_binding_share
+    for claim in CLAIMS:
+        part = effects[effects["claim"] == claim.claim_id].set_index("configuration")
+        if "improved" not in part.index:
+            continue
+        total = part.loc["improved", "effect"]
+        direction = "improves" if total < 0 else ("worsens" if total > 0 else "does not change")
+        text = (f"{claim.claim_id} ({claim.primary_metric}): the improved bundle {direction} it "
+                f"(effect {total:+.3g}, {part.loc['improved', 'outcome']}).")
+        singles = part.loc[[f"baseline+{r}" for r in REVISIONS if f"baseline+{r}" in part.index]]
+        if binding:
+            # the cap makes these two revisions inactive: do not credit them
+            singles = singles.drop(index=[i for i in ("baseline+normalize", "baseline+step")
+                                          if i in singles.index])
+        same_sign = singles[np.sign(singles["effect"]) == np.sign(total)] if total != 0 \
+            else singles.iloc[0:0]
+        significant = same_sign[same_sign.apply(_clear, axis=1)] if len(same_sign) else same_sign
+        if "baseline_matched" in part.index:
+            matched = part.loc["baseline_matched"]
+            shares = np.sign(matched["effect"]) == np.sign(total) and _clear(matched) \
+                and total != 0
+            text += (f" The look-ahead-matched baseline alone {'shares' if shares else 'does not share'}"
+                     f" it (effect {matched['effect']:+.3g}, {matched['outcome']})"
+                     + (": the effect is look-ahead length, not the other revisions." if shares
+                        and abs(matched["effect"]) >= 0.5 * abs(total) else "."))
+        # a revision accounts for most of the effect only when, alone, it has at least half
+        # of the bundle's effect (same sign, interval clear of zero)
+        large = significant[significant["effect"].abs() >= 0.5 * abs(total)] \
+            if len(significant) else significant
+        if len(large):
+            best = large["effect"].abs().idxmax()
+            revision = best.split("+", 1)[1]
+            row = large.loc[best]
+            text += (f" Alone, '{REVISION_TEXT[revision]}' accounts for most of it "
+                     f"({row['effect']:+.3g} [{row['ci_low']:.3g}, {row['ci_high']:.3g}])")
+            loo = f"improved-{revision}"
+            if loo in part.index:
+                text += f"; without it the bundle's effect is {part.loc[loo, 'effect']:+.3g}"
+            text += "."
+        else:
+            text += (" No single active revision accounts for it (none alone has at least half "
+                     "of the effect, of the same sign, with an interval clear of zero).")
+            if total != 0:
+                needed = [r for r in REVISIONS if f"improved-{r}" in part.index
+                          and not (binding and r in ("normalize", "step"))
+                          and abs(part.loc[f"improved-{r}", "effect"]) < 0.5 * abs(total)]
+                if needed:
+                    text += (" It needs the revisions together: without "
+                             + ", or without ".join(
+                                 f"'{REVISION_TEXT[r]}' the bundle's effect is "
+                                 f"{part.loc[f'improved-{r}', 'effect']:+.3g}" for r in needed)
+                             + ".")
+        if binding:
+            text += (f" The step cap binds on {100 * cap_share:.0f} % of improved's rollout "
+                     "steps, so 'no normalization' and 'a larger step' are inactive there and "
+                     "are not credited.")
+        sentences[claim.claim_id] = text
+    return sentences
+
+
+def interpretation_flips(root: Path, cfg) -> pd.DataFrame | None:
+    """Family verdicts of every interpretation variant and whether they differ from the default.
+
+    ``root`` holds ``<variant>/<method>/family.json`` for methods baseline and improved.
+    """
+    root = Path(root)
+    variants = sorted(p.name for p in root.iterdir() if p.is_dir()) if root.is_dir() else []
+    verdicts = {}
+    for variant in variants:
+        tables = load_family_jobs(root / variant)
+        if "baseline" in tables and "improved" in tables:
+            ledger = family_ledger(tables, cfg, comparisons=("baseline",))
+            verdicts[variant] = {r.claim_id: str(r.outcome) for r in ledger}
+            verdicts[variant]["collisions_improved"] = Tally.of(tables["improved"]).collisions
+    if "default" not in verdicts:
+        return None
+    rows = []
+    for variant, result in verdicts.items():
+        row = {"variant": variant}
+        flipped = []
+        for claim in ALL_CLAIMS:
+            row[claim.claim_id] = result[claim.claim_id]
+            if result[claim.claim_id] != verdicts["default"][claim.claim_id]:
+                flipped.append(claim.claim_id)
+        row["collisions_improved"] = result["collisions_improved"]
+        row["flips"] = ", ".join(flipped) if flipped else "none"
+        rows.append(row)
+    return pd.DataFrame(rows)

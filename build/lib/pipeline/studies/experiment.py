@@ -1,0 +1,207 @@
+"""One closed-loop run and one scenario family, as plain functions over typed configs.
+
+``run_experiment`` simulates one configuration and writes its run folder (through
+:mod:`pipeline.store`); ``run_family`` does so for every member of a scenario family, in
+parallel. The Hydra entry point is :mod:`pipeline.run`.
+"""
+
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from pipeline.analysis.tally import Tally
+from pipeline.analysis.metrics import RunMetrics, TrajectoryContext, compute_metrics
+from pipeline.config import ExperimentConfig
+from pipeline.loop.controller import QpCache
+from pipeline.loop.model import build_lateral_model, vehicle_key
+from pipeline.loop.scenario import build_scenario, family_members
+from pipeline.loop.simulate import simulate
+from pipeline.store.runs import (RunInfo, check, clean_leftovers, read_metrics_json,
+                                 write_family, write_run)
+
+log = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True)
+class RunSummary:
+    """What one run produced: its folder, metrics and bookkeeping, and whether it was already
+    complete (resume)."""
+
+    out_dir: Path
+    metrics: RunMetrics
+    info: RunInfo
+    skipped: bool
+
+    def flat(self) -> dict:
+        """The run's ``metrics.json`` mapping (metrics and bookkeeping)."""
+        return {**self.metrics.to_json(), **self.info.to_json()}
+
+
+def run_experiment(cfg: ExperimentConfig, out_dir: Path, resume: bool = True,
+                   qp_cache: QpCache | None = None) -> RunSummary:
+    """Simulate one configuration and write its run folder.
+
+    Parameters
+    ----------
+    cfg : ExperimentConfig
+    out_dir : Path
+        Folder that receives ``config.yaml``, ``model.json``, ``trajectory.csv``,
+        ``timing.json`` and ``metrics.json`` (written last, atomically).
+    resume : bool
+        Skip the simulation when ``out_dir`` already holds complete results of the same config
+        hash.
+    qp_cache : QpCache, optional
+        Compiled QPs shared with other runs of this process (or shipped to a worker).
+
+    Returns
+    -------
+    RunSummary
+    """
+    out_dir = Path(out_dir)
+    config_hash = cfg.config_hash()
+    if resume:
+        reason = check(out_dir, "run", config_hash)
+        if reason is None:
+            clean_leftovers(out_dir)  # temporaries of a write killed after the manifest
+            previous = read_metrics_json(out_dir)
+            return RunSummary(out_dir, RunMetrics.from_json(previous), RunInfo.from_json(previous),
+                              skipped=True)
+        if reason not in ("not a folder", "empty folder"):
+            log.warning("re-running %s: %s", out_dir, reason)
+
+    scenario = build_scenario(cfg.scenario)
+    qp_cache = qp_cache if qp_cache is not None else QpCache()
+    # the model of the nominal speed (model.json), built once per process for a family
+    model = qp_cache.memo(("model_json", vehicle_key(cfg.vehicle), cfg.scenario.speed_mps,
+                           cfg.scenario.sample_time_s, cfg.model.b2_heading_entry),
+                          lambda: build_lateral_model(cfg.vehicle, cfg.scenario.speed_mps,
+                                                      cfg.scenario.sample_time_s,
+                                                      cfg.model.b2_heading_entry))
+    result = simulate(cfg, scenario, qp_cache)
+    context = trajectory_context(cfg)
+    metrics = compute_metrics(result.trajectory, context, cfg.metrics)
+    track = "kinematic" if cfg.controller.kind == "kinematic_mpc" else "lateral"
+    info = RunInfo(method=cfg.method_name, scenario=cfg.scenario.name, track=track,
+                   config_hash=config_hash, termination=result.termination,
+                   compile_count=result.compile_count)
+    times = result.solve_times_s
+    timing = {
+        "solve_time_median_s": float(np.median(times)) if times.size else None,
+        "solve_time_p95_s": float(np.percentile(times, 95)) if times.size else None,
+        "solve_time_max_s": float(np.max(times)) if times.size else None,
+        "compile_time_s": result.compile_time_s,
+        "solve_times_s": [float(x) for x in times],
+    }
+    write_run(out_dir, config_text=config_yaml(cfg), model=model.to_json(),
+              trajectory=result.trajectory, timing=timing, metrics=metrics, info=info)
+    return RunSummary(out_dir, metrics, info, skipped=False)
+
+
+def trajectory_context(cfg: ExperimentConfig) -> TrajectoryContext:
+    """Geometry and vehicle limits the metrics need, from the run's configuration."""
+    v = cfg.vehicle
+    return TrajectoryContext(tuple(cfg.scenario.start_xy_m), tuple(cfg.scenario.goal_xy_m),
+                             v.footprint_radius_m, cfg.model.validity_heading_rad,
+                             wheelbase_m=v.wheelbase_m, steering_max_rad=v.steering_max_rad,
+                             steering_rate_max_rad_s=v.steering_rate_max_rad_s,
+                             braking_mps2=v.accel_max_mps2)
+
+
+def config_yaml(cfg: ExperimentConfig) -> str:
+    """The resolved configuration as YAML (keys in schema order). PyYAML's C dumper: the
+    OmegaConf round trip cost more than a member's whole simulation."""
+    import yaml
+
+    dumper = getattr(yaml, "CSafeDumper", yaml.SafeDumper)
+    return yaml.dump(cfg.to_dict(), Dumper=dumper, sort_keys=False, default_flow_style=False,
+                     allow_unicode=True)
+
+
+def _run_chunk(jobs: list[tuple[int, ExperimentConfig, Path]], qp_cache: QpCache
+               ) -> list[tuple[int, dict]]:
+    """Run a few family members in one worker, all with the compiled QP shipped in
+    ``qp_cache`` (so a worker compiles nothing)."""
+    return [(index, run_experiment(member_cfg, folder, qp_cache=qp_cache).flat())
+            for index, member_cfg, folder in jobs]
+
+
+def _chunks(items: list, n_workers: int, per_worker: int = 4) -> list[list]:
+    """Split ``items`` into about ``per_worker`` chunks per worker, interleaved so that every
+    chunk holds early and late members alike (balanced load)."""
+    n = max(1, min(len(items), n_workers * per_worker))
+    return [items[i::n] for i in range(n) if items[i::n]]
+
+
+def run_family(cfg: ExperimentConfig, out_dir: Path, progress: bool = True,
+               qp_cache: QpCache | None = None) -> pd.DataFrame:
+    """Run every member of ``cfg.scenario.family`` (in parallel with joblib) for one method.
+
+    The QP is compiled once, here, and handed to the workers with their members (chunks of
+    members per task, so a worker's process start and imports are paid once per family, and
+    loky keeps its workers for the next family of the same process). Each member gets a
+    complete run folder ``member_<index>/``; the family folder receives ``family_metrics.csv``
+    (one row per member) and ``family.json`` (counts, compilations, config hash). Members
+    already complete with the same config hash are not simulated again.
+
+    Returns
+    -------
+    pandas.DataFrame
+        The per-member metrics table.
+    """
+    import dataclasses
+
+    from joblib import Parallel, delayed
+    from tqdm import tqdm
+
+    from pipeline.loop.controller import make_controller
+
+    out_dir = Path(out_dir)
+    family = cfg.scenario.family
+    members = family_members(cfg.scenario, cfg.vehicle.footprint_radius_m)
+    cache = qp_cache if qp_cache is not None else QpCache()
+    compiles_before = cache.compile_count
+    metrics_by_index: dict[int, dict] = {}
+    pending = []
+    for i, member in enumerate(members):
+        member_cfg = dataclasses.replace(cfg, scenario=member)
+        folder = out_dir / f"member_{i:04d}"
+        reason = check(folder, "run", member_cfg.config_hash())
+        if reason is None:
+            metrics_by_index[i] = read_metrics_json(folder)
+            continue
+        if reason not in ("not a folder", "empty folder"):
+            log.warning("re-running %s: %s", folder, reason)
+        pending.append((i, member_cfg, folder))
+    if pending:
+        make_controller(cfg, cfg.scenario.sample_time_s, cache)  # compile once, in the parent
+    chunks = _chunks(pending, family.n_jobs)
+    results = Parallel(n_jobs=family.n_jobs, return_as="generator_unordered")(
+        delayed(_run_chunk)(chunk, cache) for chunk in chunks)
+    with tqdm(total=len(members), initial=len(metrics_by_index), disable=not progress,
+              desc=f"{cfg.method_name} family", unit="scenario") as bar:
+        for done in results:
+            for index, metrics in done:
+                metrics_by_index[index] = metrics
+            bar.update(len(done))
+    rows = [{"member": i, **metrics_by_index[i]} for i in range(len(members))]
+    table = pd.DataFrame(rows)
+    # fixed column order: fresh and resumed (read back from metrics.json) members agree
+    table = table[["member"] + sorted(c for c in table.columns if c != "member")]
+    member_compiles = int(table["compile_count"].fillna(0).sum()) if "compile_count" in table \
+        else 0
+    tally = Tally.of(table)
+    summary = {
+        "method": cfg.method_name, "scenario": cfg.scenario.name, "seed": family.seed,
+        "size": family.size, "config_hash": cfg.config_hash(),
+        "collisions": tally.collisions, "not_recovered": tally.not_recovered,
+        "goal_not_reached": tally.goal_not_reached, "fallback_steps": tally.fallback_steps,
+        "compiles": cache.compile_count - compiles_before + member_compiles,
+    }
+    write_family(out_dir, table, summary, cfg.config_hash(),
+                 [out_dir / f"member_{i:04d}" for i in range(len(members))])
+    return table

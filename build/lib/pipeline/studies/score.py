@@ -1,0 +1,274 @@
+"""Score any trajectory CSV with the Table 1 metrics: ``python -m pipeline.score FILE.csv``.
+
+Required columns: ``time_s``, ``X_m``, ``Y_m`` (strictly increasing time, at least two rows,
+numbers only). Optional: ``psi_rad``, ``vx_mps``, ``vy_mps``, ``r_rad_s``, ``delta_rad``,
+``steering_rate_rad_s`` (derived from the path where missing; steering metrics need
+``delta_rad``), and obstacles as ``obs{j}_x_m, obs{j}_y_m, obs{j}_radius_m, obs{j}_visible`` or
+through ``--obstacle``. Other tools' column names are mapped with ``--columns``, e.g.
+``--columns time_s=t,X_m=x,Y_m=y,psi_rad=theta`` for the paper's MATLAB state ``[x y theta v]``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import io
+import json
+import sys
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from pipeline.config import MetricsConfig
+from pipeline.analysis.metrics import TrajectoryContext, compute_metrics
+from pipeline.loop.trajectory import OBSTACLE_COLUMN, REQUIRED, STATE
+
+#: Optional columns a scored file may carry: the state (else derived from the path) and the APF
+#: repulsion at the vehicle (C3a and C3b need it).
+OPTIONAL = STATE + ("apf_rep_norm",)
+from pipeline.store.runs import write_text_atomic
+
+
+
+class TrajectoryFileError(ValueError):
+    """A trajectory file that cannot be scored; the message says why."""
+
+
+def _pairs(text: str, option: str) -> dict[str, str]:
+    mapping = {}
+    for item in filter(None, (part.strip() for part in text.split(","))):
+        ours, sep, theirs = item.partition("=")
+        if not sep or not ours or not theirs:
+            raise TrajectoryFileError(f"{option}: expected OUR=THEIRS pairs, got {item!r}")
+        mapping[ours] = theirs
+    return mapping
+
+
+def _floats(text: str, count: tuple[int, ...], option: str) -> list[float]:
+    try:
+        values = [float(v) for v in text.split(",")]
+    except ValueError:
+        raise TrajectoryFileError(f"{option}: expected comma-separated numbers, got {text!r}")
+    if len(values) not in count or not all(np.isfinite(values)):
+        raise TrajectoryFileError(f"{option}: expected {' or '.join(map(str, count))} finite "
+                                  f"numbers, got {text!r}")
+    return values
+
+
+def _decode(raw: bytes, source: str) -> str:
+    """Text of a trajectory file: UTF-8 (a BOM is dropped), else Latin-1 (every byte is one)."""
+    if b"\x00" in raw[:4096]:
+        raise TrajectoryFileError(f"{source}: binary data (a NUL byte), not a CSV text file")
+    try:
+        return raw.decode("utf-8-sig")
+    except UnicodeDecodeError:
+        return raw.decode("latin-1")
+
+
+def _separator(text: str, source: str) -> str:
+    """The field separator of the header line: comma, semicolon or tab."""
+    header = next((line for line in text.splitlines() if line.strip()
+                   and not line.lstrip().startswith("#")), "")
+    if not header:
+        raise TrajectoryFileError(f"{source}: no header line (only comments or blank lines)")
+    counts = {sep: header.count(sep) for sep in (",", ";", "\t")}
+    best = max(counts, key=counts.get)
+    if counts[best] == 0:
+        raise TrajectoryFileError(f"{source}: the header {header[:60]!r} has no comma, semicolon "
+                                  "or tab between column names")
+    return best
+
+
+#: Magnitudes beyond these are not a vehicle trajectory (and overflow the metrics).
+PLAUSIBLE = {"time_s": 1e7, "X_m": 1e7, "Y_m": 1e7}
+PLAUSIBLE_DEFAULT = 1e6
+BOOLEAN_WORDS = {"true": True, "false": False, "1": True, "0": False, "1.0": True, "0.0": False}
+
+
+def _bad_cell(source: str, column: str, row: int, value) -> TrajectoryFileError:
+    return TrajectoryFileError(f"{source}: column {column!r}, data row {row + 1}: {value!r} is "
+                               "not a finite number")
+
+
+def load_trajectory(path: Path | str, columns: dict[str, str] | None = None,
+                    obstacles: list[list[float]] | None = None,
+                    stdin_text: str | None = None) -> pd.DataFrame:
+    """Read and check a trajectory CSV, renaming mapped columns and adding obstacle columns.
+
+    UTF-8 (with or without BOM) or Latin-1 text; comma, semicolon or tab separated; lines
+    starting with ``#`` are comments. ``path == "-"`` reads ``stdin_text``.
+
+    Raises
+    ------
+    TrajectoryFileError
+        One line naming the file and what is wrong: a missing file or column, an empty file, a
+        single row, a malformed cell (by column and data row), a boolean that is not true/false,
+        a radius that is not positive, time not strictly increasing, a mapping key that is not a
+        known column or clashes with a column already in the file.
+    """
+    source = "stdin" if str(path) == "-" else str(path)
+    if str(path) == "-":
+        text = stdin_text if stdin_text is not None else ""
+    else:
+        path = Path(path)
+        if not path.is_file():
+            raise TrajectoryFileError(f"{path}: no such file")
+        try:
+            text = _decode(path.read_bytes(), source)
+        except OSError as exc:
+            raise TrajectoryFileError(f"{path}: cannot be read ({exc.strerror})")
+    if not text.strip():
+        raise TrajectoryFileError(f"{source}: the file is empty")
+    sep = _separator(text, source)
+    header = next(line for line in text.splitlines() if line.strip()
+                  and not line.lstrip().startswith("#"))
+    names = [n.strip().strip('"') for n in header.split(sep)]
+    repeated = sorted({n for n in names if names.count(n) > 1})
+    if repeated:
+        raise TrajectoryFileError(f"{source}: column(s) {repeated} appear more than once in the "
+                                  "header")
+    try:
+        frame = pd.read_csv(io.StringIO(text), sep=sep, comment="#", skipinitialspace=True)
+    except pd.errors.EmptyDataError:
+        raise TrajectoryFileError(f"{source}: the file is empty")
+    except pd.errors.ParserError as exc:
+        raise TrajectoryFileError(f"{source}: not a CSV table ({str(exc).splitlines()[0]})")
+    frame.columns = [str(c).strip() for c in frame.columns]
+    duplicated = sorted({c for c in frame.columns if list(frame.columns).count(c) > 1})
+    if duplicated:
+        raise TrajectoryFileError(f"{source}: column(s) {duplicated} appear more than once")
+    columns = columns or {}
+    allowed = set(REQUIRED) | set(OPTIONAL)
+    unknown = [k for k in columns if k not in allowed and not OBSTACLE_COLUMN.fullmatch(k)]
+    if unknown:
+        raise TrajectoryFileError(f"--columns: unknown name(s) {unknown}; allowed: "
+                                  f"{', '.join(REQUIRED + OPTIONAL)}, obs<j>_x_m, obs<j>_y_m, "
+                                  "obs<j>_radius_m, obs<j>_visible")
+    missing_mapped = [theirs for theirs in columns.values() if theirs not in frame.columns]
+    if missing_mapped:
+        raise TrajectoryFileError(f"{source}: mapped column(s) {missing_mapped} not in the file; "
+                                  f"it has {list(frame.columns)}")
+    clashes = [ours for ours, theirs in columns.items()
+               if ours in frame.columns and ours != theirs]
+    if clashes:
+        raise TrajectoryFileError(f"--columns: {clashes} already in the file; map another column "
+                                  "onto them only after renaming or dropping it")
+    frame = frame.rename(columns={theirs: ours for ours, theirs in columns.items()})
+    missing = [c for c in REQUIRED if c not in frame.columns]
+    if missing:
+        raise TrajectoryFileError(f"{source}: missing required column(s) {missing}; it has "
+                                  f"{list(frame.columns)} (map names with --columns)")
+    if len(frame) == 0:
+        raise TrajectoryFileError(f"{source}: the file has a header but no rows")
+    if len(frame) < 2:
+        raise TrajectoryFileError(f"{source}: a single row; at least two are needed")
+    obstacle_ids = sorted({int(m.group(1)) for c in frame.columns
+                           if (m := OBSTACLE_COLUMN.fullmatch(c))})
+    for j in obstacle_ids:
+        needed = [f"obs{j}_{n}" for n in ("x_m", "y_m", "radius_m")]
+        absent = [c for c in needed if c not in frame.columns]
+        if absent:
+            raise TrajectoryFileError(f"{source}: obstacle {j} has no {', '.join(absent)} "
+                                      "column (x, y and radius are needed)")
+    numeric = [c for c in frame.columns if c in REQUIRED + OPTIONAL
+               or (OBSTACLE_COLUMN.fullmatch(c) and not c.endswith("_visible"))]
+    for column in numeric:
+        raw = frame[column].map(lambda v: "" if pd.isna(v) else str(v).strip())
+        values = pd.to_numeric(raw.replace("", np.nan), errors="coerce").astype(float)
+        # text that is not a number is always an error; an empty cell only in required columns
+        bad = (values.isna() & (raw != "")) | np.isinf(values)
+        if column in REQUIRED or column.startswith("obs"):
+            bad |= values.isna()
+        if bad.any():
+            row = int(np.argmax(bad.to_numpy()))
+            raise _bad_cell(source, column, row, raw.iloc[row])
+        limit = PLAUSIBLE.get(column, PLAUSIBLE_DEFAULT)
+        outside = values.abs() > limit
+        if outside.any():
+            row = int(np.argmax(outside.to_numpy()))
+            raise TrajectoryFileError(f"{source}: column {column!r}, data row {row + 1}: "
+                                      f"{raw.iloc[row]!r} is outside the plausible range "
+                                      f"[-{limit:g}, {limit:g}]")
+        frame[column] = values
+    for j in obstacle_ids:
+        radius = frame[f"obs{j}_radius_m"]
+        if (radius <= 0).any():
+            row = int(np.argmax((radius <= 0).to_numpy()))
+            raise TrajectoryFileError(f"{source}: column 'obs{j}_radius_m', data row {row + 1}: "
+                                      f"{radius.iloc[row]!r} is not a positive radius")
+        column = f"obs{j}_visible"
+        if column in frame.columns:
+            words = frame[column].map(lambda v: "" if pd.isna(v) else str(v).strip().lower())
+            bad = ~words.isin(list(BOOLEAN_WORDS))
+            if bad.any():
+                row = int(np.argmax(bad.to_numpy()))
+                cell = frame[column].iloc[row]
+                raise TrajectoryFileError(f"{source}: column {column!r}, data row {row + 1}: "
+                                          f"{'' if pd.isna(cell) else cell!r} is not a boolean "
+                                          "(allowed: true, false, 1, 0)")
+            frame[column] = words.map(BOOLEAN_WORDS).astype(bool)
+        else:
+            frame[column] = True
+    dt = np.diff(frame["time_s"].to_numpy())
+    if np.any(dt <= 0):
+        row = int(np.argmax(dt <= 0)) + 1
+        raise TrajectoryFileError(f"{source}: time_s must increase strictly; it does not at data "
+                                  f"row {row + 1}")
+    if obstacles:
+        if obstacle_ids:
+            raise TrajectoryFileError("--obstacle given but the file already has obs0_* columns")
+        t = frame["time_s"].to_numpy()
+        for j, spec in enumerate(obstacles):
+            x, y, r = spec[:3]
+            if not r > 0:
+                raise TrajectoryFileError(f"--obstacle {j + 1}: radius {r!r} is not positive")
+            appear = spec[3] if len(spec) > 3 else 0.0
+            vx, vy = (spec[4], spec[5]) if len(spec) > 5 else (0.0, 0.0)
+            elapsed = np.maximum(t - appear, 0.0)
+            frame[f"obs{j}_x_m"] = x + vx * elapsed
+            frame[f"obs{j}_y_m"] = y + vy * elapsed
+            frame[f"obs{j}_radius_m"] = r
+            frame[f"obs{j}_visible"] = t + 1e-9 >= appear
+    return frame
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog="python -m pipeline.score", description=__doc__,
+                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("trajectory", help="trajectory CSV, or - for standard input")
+    parser.add_argument("--columns", default="", help="OUR=THEIRS,... column name mapping")
+    parser.add_argument("--start", default="0,0", help="start X,Y in m (default 0,0)")
+    parser.add_argument("--goal", default="30,0", help="goal X,Y in m (default 30,0)")
+    parser.add_argument("--vehicle-radius", type=float, default=1.0,
+                        help="vehicle footprint radius in m (default 1.0)")
+    parser.add_argument("--obstacle", action="append", default=[],
+                        help="x,y,radius[,appear_s[,vx,vy]] (repeatable)")
+    parser.add_argument("--out", type=Path, default=None, help="write metrics JSON here")
+    args = parser.parse_args(argv)
+    try:
+        frame = load_trajectory(
+            args.trajectory, _pairs(args.columns, "--columns"),
+            [_floats(o, (3, 4, 6), "--obstacle") for o in args.obstacle],
+            stdin_text=sys.stdin.read() if args.trajectory == "-" else None)
+        start = _floats(args.start, (2,), "--start")
+        goal = _floats(args.goal, (2,), "--goal")
+        if start == goal:
+            raise TrajectoryFileError("--goal must differ from --start")
+        if not np.isfinite(args.vehicle_radius) or args.vehicle_radius < 0:
+            raise TrajectoryFileError("--vehicle-radius must be a finite number >= 0")
+    except TrajectoryFileError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    metrics = compute_metrics(frame, TrajectoryContext(tuple(start), tuple(goal),
+                                                       args.vehicle_radius), MetricsConfig())
+    text = json.dumps(metrics.to_json(), indent=2, sort_keys=True)
+    if args.out:
+        try:
+            # atomic: a failed write leaves an existing file as it was
+            write_text_atomic(args.out, text + "\n")
+        except OSError as exc:
+            print(f"error: --out {args.out}: cannot write ({exc.strerror})", file=sys.stderr)
+            return 2
+    print(text)
+    return 0
+

@@ -1,0 +1,150 @@
+"""Compare fresh results with the committed reference: ``python -m pipeline.verify RUNS REF``.
+
+``reports/reference/`` holds the summary of the default ``make reproduce``:
+``paper_metrics.csv`` (every method and track on the paper scenario) and, when the family was
+run, ``claims_ledger.csv``. Numbers must agree within ``rel 1e-6 or abs 1e-6`` (deterministic
+code; the slack covers floating-point differences between BLAS builds), labels and verdicts
+exactly. ``--update`` rewrites the reference (say why in the commit).
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import sys
+from pathlib import Path
+
+import pandas as pd
+
+from pipeline.store.runs import RunFolderError, discover, read_run, write_csv_atomic
+
+REL_TOL = 1e-6
+ABS_TOL = 1e-6
+PAPER_FILE = "paper_metrics.csv"
+LEDGER_FILE = "claims_ledger.csv"
+LEDGER_COLUMNS = ["claim", "comparison", "metric", "outcome", "estimate", "ci_low", "ci_high",
+                  "p_holm", "prob_improvement", "n_better", "n_tied", "n_worse", "n_missing",
+                  "n_pairs", "outcome_all_pairs", "paper_scenario"]
+
+
+def paper_metrics_table(runs_root: Path) -> pd.DataFrame:
+    """One row per (track, method) on the paper scenario, from the trusted runs under
+    ``runs_root`` (family members and the study sections the report reads apart excluded:
+    sweeps, ablation, multiverse, tuning, the Appendix-A readings)."""
+    from pipeline.store.collection import EXCLUDED_SECTIONS
+
+    rows = []
+    found = discover(runs_root, exclude=EXCLUDED_SECTIONS)
+    for item in found.skipped:
+        print(f"verify: skipped {item.folder}: {item.reason}", file=sys.stderr)
+    for folder in found.runs:
+        try:
+            metrics = read_run(folder, trajectory=False).flat_metrics()
+        except RunFolderError as exc:
+            print(f"verify: skipped {exc}", file=sys.stderr)
+            continue
+        if metrics.get("scenario") != "paper_sudden_obstacle":
+            continue
+        # the config hash is provenance (it changes with any new config key), not a result
+        rows.append({k: v for k, v in metrics.items() if k not in ("compile_count",
+                                                                   "config_hash", "label")})
+    if not rows:
+        raise FileNotFoundError(f"no paper-scenario runs under {runs_root}")
+    table = pd.DataFrame(rows).sort_values(["track", "method"]).reset_index(drop=True)
+    return table[["track", "method"] + sorted(c for c in table.columns
+                                              if c not in ("track", "method"))]
+
+
+def ledger_table(runs_root: Path) -> pd.DataFrame | None:
+    """The family claims ledger, if the family was run."""
+    from pipeline.analysis.claims import family_ledger
+    from pipeline.store.collection import load_runs
+
+    collection = load_runs(runs_root)
+    tables = collection.family_tables
+    if "baseline" not in tables or "improved" not in tables:
+        return None
+    paper = {}
+    try:
+        frame = paper_metrics_table(runs_root)
+        paper = {r["method"]: r for r in frame[frame["track"] == "lateral"].to_dict("records")}
+    except FileNotFoundError:
+        pass
+    # the claims settings the runs were made with
+    cfg = collection.claims_settings("improved")
+    return family_ledger(tables, cfg, paper or None).to_frame().reindex(columns=LEDGER_COLUMNS)
+
+
+def compare_tables(fresh: pd.DataFrame, reference: pd.DataFrame, name: str) -> list[str]:
+    """Differences between two tables (numbers within tolerance, the rest exactly)."""
+    problems = []
+    if list(fresh.columns) != list(reference.columns):
+        missing = sorted(set(reference.columns) - set(fresh.columns))
+        extra = sorted(set(fresh.columns) - set(reference.columns))
+        problems.append(f"{name}: columns differ (missing {missing}, new {extra})")
+    if len(fresh) != len(reference):
+        problems.append(f"{name}: {len(fresh)} rows, reference has {len(reference)}")
+        return problems
+    for column in [c for c in reference.columns if c in fresh.columns]:
+        for i, (a, b) in enumerate(zip(fresh[column], reference[column])):
+            if _same(a, b):
+                continue
+            problems.append(f"{name}: row {i} ({fresh.iloc[i, 0]}, {fresh.iloc[i, 1]}) "
+                            f"{column}: {a!r} vs reference {b!r}")
+    return problems
+
+
+def _same(a, b) -> bool:
+    try:
+        fa, fb = float(a), float(b)
+    except (TypeError, ValueError):
+        return str(a) == str(b) or (pd.isna(a) and pd.isna(b))
+    if math.isnan(fa) and math.isnan(fb):
+        return True
+    return math.isclose(fa, fb, rel_tol=REL_TOL, abs_tol=ABS_TOL)
+
+
+def verify(runs_root: Path, reference_dir: Path, update: bool = False) -> list[str]:
+    """Compare (or, with ``update``, rewrite) the reference; returns the differences."""
+    reference_dir = Path(reference_dir)
+    fresh = {PAPER_FILE: paper_metrics_table(runs_root)}
+    ledger = ledger_table(runs_root)
+    if ledger is not None:
+        fresh[LEDGER_FILE] = ledger
+    if update:
+        for name, table in fresh.items():
+            write_csv_atomic(reference_dir / name, table)
+        return []
+    problems = []
+    for name, table in fresh.items():
+        path = reference_dir / name
+        if not path.is_file():
+            problems.append(f"{name}: no reference file {path}")
+            continue
+        # round-trip through CSV so both sides have the same types
+        problems += compare_tables(pd.read_csv(pd.io.common.StringIO(
+            table.to_csv(index=False, float_format="%.10g"))), pd.read_csv(path), name)
+    return problems
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog="python -m pipeline.verify", description=__doc__,
+                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("runs", type=Path, help="runs folder (make reproduce's outputs)")
+    parser.add_argument("reference", type=Path, nargs="?", default=Path("reports/reference"))
+    parser.add_argument("--update", action="store_true", help="rewrite the reference")
+    args = parser.parse_args(argv)
+    try:
+        problems = verify(args.runs, args.reference, args.update)
+    except FileNotFoundError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    if args.update:
+        print(f"reference written to {args.reference}")
+        return 0
+    for line in problems:
+        print(line)
+    print("verify: " + ("OK, matches the reference" if not problems
+                        else f"{len(problems)} difference(s)"))
+    return 1 if problems else 0
+

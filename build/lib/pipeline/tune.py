@@ -1,0 +1,41 @@
+"""Entry point of the fair fight: ``python -m pipeline.tune [--space default] [--out DIR]
+[hydra overrides]`` (``make tune``). The work is :func:`pipeline.studies.tune.run_tuning`."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+from pipeline.config import CONF_DIR
+from pipeline.errors import run_study
+from pipeline.studies.tune import load_tune_space, run_tuning
+
+__all__ = ["main", "run_tuning"]
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog="python -m pipeline.tune",
+                                     description=__doc__.split("\n\n")[0])
+    parser.add_argument("--space", default="default",
+                        help="conf/tune/<name>.yaml or a path (default: default)")
+    parser.add_argument("--out", type=Path, default=Path("outputs/tune"))
+    parser.add_argument("overrides", nargs="*",
+                        help="Hydra overrides for every run (e.g. hydra/launcher=slurm)")
+    args = parser.parse_args(argv)
+    path = Path(args.space)
+    if not path.suffix:
+        path = CONF_DIR / "tune" / f"{args.space}.yaml"
+    log = (lambda message: print(message, file=sys.stderr, flush=True))
+    code, summary = run_study(lambda: run_tuning(load_tune_space(path), args.out,
+                                                 args.overrides, log=log))
+    if code:
+        return code
+    for claim in summary["claims"]:
+        print(claim["sentence"])
+    print(f"tuning written to {Path(args.out).resolve()}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,50 @@
+"""The package as a user installs it: a wheel with the configs inside, console commands that
+take the same arguments as ``python -m pipeline.<name>``, run from an empty folder."""
+
+from __future__ import annotations
+
+import glob
+import subprocess
+import sys
+import sysconfig
+import zipfile
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parent.parent
+
+
+def test_wheel_installs_and_runs_from_an_empty_folder(tmp_path):
+    """Build the wheel, install it (alone) into a fresh virtual environment whose dependencies
+    come from this one, and run ``apf-mpc-run planner=baseline`` from an empty folder: exit 0
+    and a run folder with its manifest, the package and its configs read from the install."""
+    wheels = tmp_path / "wheels"
+    subprocess.run([sys.executable, "-m", "pip", "wheel", "--no-deps", "--no-build-isolation",
+                    "-q", "-w", str(wheels), str(ROOT)], check=True, capture_output=True,
+                   timeout=300)
+    wheel = glob.glob(str(wheels / "*.whl"))[0]
+    names = zipfile.ZipFile(wheel).namelist()
+    assert "pipeline/conf/config.yaml" in names and "pipeline/py.typed" in names
+    assert any(n.startswith("pipeline/conf/hparams_search/") for n in names)
+    venv = tmp_path / "venv"
+    subprocess.run([sys.executable, "-m", "venv", "--without-pip", str(venv)], check=True,
+                   timeout=120)
+    python = venv / "bin" / "python"
+    site = Path(subprocess.run([str(python), "-c", "import sysconfig; print(sysconfig."
+                                "get_paths()['purelib'])"], check=True, capture_output=True,
+                               text=True).stdout.strip())
+    (site / "project_deps.pth").write_text(sysconfig.get_paths()["purelib"] + "\n")
+    subprocess.run([sys.executable, "-m", "pip", "--python", str(python), "install", "-q",
+                    "--no-deps", wheel], check=True, capture_output=True, timeout=300)
+    empty = tmp_path / "empty"
+    empty.mkdir()
+    proc = subprocess.run([str(venv / "bin" / "apf-mpc-run"), "planner=baseline"], cwd=empty,
+                          capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    assert list(empty.glob("outputs/runs/*/baseline/*/manifest.json"))
+    where = subprocess.run([str(python), "-c", "import pipeline.config as c; "
+                            "print(c.__file__); print(c.CONF_DIR)"], cwd=empty,
+                           capture_output=True, text=True, check=True).stdout.split()
+    assert all(str(venv) in line for line in where)
+    for command in ("apf-mpc-report", "apf-mpc-score", "apf-mpc-tune"):
+        assert subprocess.run([str(venv / "bin" / command), "--help"], cwd=empty,
+                              capture_output=True, timeout=120).returncode == 0
