@@ -36,7 +36,7 @@ def _conf_dir() -> Path:
     """``pipeline/conf`` in an installed package (the wheel ships the configs there), else the
     repository's ``conf/`` beside the package (a checkout or an editable install)."""
     packaged = Path(__file__).resolve().parent / "conf"
-    if (packaged / "config.yaml").is_file():
+    if packaged.is_dir():
         return packaged
     return Path(__file__).resolve().parent.parent / "conf"
 

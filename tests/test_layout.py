@@ -23,7 +23,7 @@ LAYERS = (
     ("pipeline.reporting.figures",),
     ("pipeline.studies",),
     ("pipeline.reporting",),
-    ("pipeline.run", "pipeline.report", "pipeline.aggregate", "pipeline.multiverse", "pipeline.tune",
+    ("pipeline.run", "pipeline.report", "pipeline.aggregate", "pipeline.multiverse", "pipeline.tune", "pipeline.api",
      "pipeline.nmpc_check",
      "pipeline.verify", "pipeline.bench", "pipeline.score"),
 )

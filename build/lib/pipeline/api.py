@@ -1,0 +1,160 @@
+"""A Python API for notebooks, in python-control's style: functions that take Hydra overrides
+(or a composed config) and return typed results.
+
+>>> from pipeline import api
+>>> run = api.simulate(["method=improved"])                      # one run, the paper scenario
+>>> run.trajectory[["time_s", "X_m", "Y_m"]].head()              # a pandas DataFrame
+>>> run.metrics.value("reaction_delay_s")                        # Table 1's metrics
+>>> fam = api.simulate_family(["method=baseline", "scenario.family.size=20"])
+>>> ledger = api.compare(api.simulate_family(["method=improved", "scenario.family.size=20"]),
+...                      {"baseline": fam})                      # the claims ledger
+>>> ledger.to_frame()
+
+Nothing is written unless ``out_dir`` is given (then the same run folders as the commands).
+"""
+
+from __future__ import annotations
+
+import tempfile
+from dataclasses import dataclass
+from pathlib import Path
+
+import pandas as pd
+
+from pipeline.analysis.claims import Ledger, family_ledger
+from pipeline.analysis.metrics import RunMetrics, compute_metrics
+from pipeline.analysis.tally import Tally
+from pipeline.config import CONF_DIR, ExperimentConfig, register_configs, to_experiment_config
+
+__all__ = ["FamilyResult", "RunResult", "compare", "compose", "simulate", "simulate_family"]
+
+
+def compose(overrides: list[str] | None = None) -> ExperimentConfig:
+    """The validated configuration for Hydra ``overrides`` (as on the command line), e.g.
+    ``compose(["method=baseline", "planner.rho0_m=3"])``; a bad value raises
+    :class:`pipeline.errors.ConfigError` naming the key and what is allowed."""
+    from hydra import compose as hydra_compose
+    from hydra import initialize_config_dir
+
+    register_configs()
+    with initialize_config_dir(config_dir=str(CONF_DIR), version_base="1.3"):
+        return to_experiment_config(hydra_compose(config_name="config",
+                                                  overrides=list(overrides or [])))
+
+
+@dataclass(frozen=True)
+class RunResult:
+    """One closed-loop run.
+
+    Attributes
+    ----------
+    config : ExperimentConfig
+    trajectory : pandas.DataFrame
+        One row per step (columns: :func:`pipeline.loop.simulate.simulate`).
+    metrics : RunMetrics
+        Table 1's metrics (``metrics.value(name)``, ``metrics.to_json()``).
+    termination : str
+        ``goal_line``, ``max_steps`` or ``non_finite_state``.
+    """
+
+    config: ExperimentConfig
+    trajectory: pd.DataFrame
+    metrics: RunMetrics
+    termination: str
+
+
+@dataclass(frozen=True)
+class FamilyResult:
+    """A scenario family of one method.
+
+    Attributes
+    ----------
+    config : ExperimentConfig
+    table : pandas.DataFrame
+        One row per member: its metrics (``family_metrics.csv``).
+    tally : Tally
+        Collisions, non-recoveries, fallbacks.
+    """
+
+    config: ExperimentConfig
+    table: pd.DataFrame
+    tally: Tally
+
+    @property
+    def method(self) -> str:
+        return self.config.method_name
+
+
+def _config(overrides: list[str] | None, config: ExperimentConfig | None) -> ExperimentConfig:
+    if config is not None and overrides:
+        raise ValueError("give overrides or a config, not both")
+    return config if config is not None else compose(overrides)
+
+
+def simulate(overrides: list[str] | None = None, *, config: ExperimentConfig | None = None,
+             out_dir: Path | None = None) -> RunResult:
+    """Run one scenario (the paper's unless the overrides choose another).
+
+    Parameters
+    ----------
+    overrides : list of str, optional
+        Hydra overrides, e.g. ``["method=improved", "planner.beta=0.5"]``.
+    config : ExperimentConfig, optional
+        A composed configuration instead of overrides.
+    out_dir : Path, optional
+        Also write the run folder (config, trajectory, metrics, manifest) there.
+    """
+    from pipeline.loop.scenario import build_scenario
+    from pipeline.loop.simulate import simulate as closed_loop
+    from pipeline.studies.experiment import run_experiment, trajectory_context
+
+    cfg = _config(overrides, config)
+    if cfg.scenario.family is not None:
+        raise ValueError("this configuration is a scenario family: use simulate_family")
+    if out_dir is not None:
+        from pipeline.store.runs import read_run
+
+        run_experiment(cfg, Path(out_dir), resume=False)
+        record = read_run(Path(out_dir))
+        return RunResult(cfg, record.trajectory, record.metrics, record.info.termination)
+    result = closed_loop(cfg, build_scenario(cfg.scenario))
+    metrics = compute_metrics(result.trajectory, trajectory_context(cfg), cfg.metrics)
+    return RunResult(cfg, result.trajectory, metrics, result.termination)
+
+
+def simulate_family(overrides: list[str] | None = None, *,
+                    config: ExperimentConfig | None = None,
+                    out_dir: Path | None = None) -> FamilyResult:
+    """Run every member of a scenario family for one method (``scenario=family`` is added
+    when the overrides choose no family); members run on ``scenario.family.n_jobs`` workers.
+    Without ``out_dir`` the run folders go to a temporary folder that is removed."""
+    from pipeline.studies.experiment import run_family
+
+    if config is None:
+        overrides = list(overrides or [])
+        if not any(o.startswith("scenario=") for o in overrides):
+            overrides = ["scenario=family"] + overrides
+    cfg = _config(overrides, config)
+    if cfg.scenario.family is None:
+        raise ValueError("this configuration has no scenario family (add scenario=family)")
+    if out_dir is not None:
+        table = run_family(cfg, Path(out_dir), progress=False)
+    else:
+        with tempfile.TemporaryDirectory() as tmp:
+            table = run_family(cfg, Path(tmp), progress=False)
+    return FamilyResult(cfg, table, Tally.of(table))
+
+
+def compare(treatment: FamilyResult, controls: dict[str, FamilyResult] | FamilyResult,
+            claims=None) -> Ledger:
+    """The claims ledger (C0-C5, four outcomes, Holm over the claims) of ``treatment`` against
+    each control, paired by scenario; ``claims`` (a ``ClaimsConfig``) defaults to the
+    treatment's own settings."""
+    if isinstance(controls, FamilyResult):
+        controls = {controls.method: controls}
+    names = tuple(controls)
+    if treatment.method in names:
+        raise ValueError(f"the treatment {treatment.method!r} is also a control")
+    tables = {treatment.method: treatment.table, **{n: f.table for n, f in controls.items()}}
+    return family_ledger(tables, claims if claims is not None else treatment.config.claims,
+                         None, treatment.method, names)
