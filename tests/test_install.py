@@ -4,6 +4,7 @@ take the same arguments as ``python -m pipeline.<name>``, run from an empty fold
 from __future__ import annotations
 
 import glob
+import shutil
 import subprocess
 import sys
 import sysconfig
@@ -17,9 +18,16 @@ def test_wheel_installs_and_runs_from_an_empty_folder(tmp_path):
     """Build the wheel, install it (alone) into a fresh virtual environment whose dependencies
     come from this one, and run ``apf-mpc-run planner=baseline`` from an empty folder: exit 0
     and a run folder with its manifest, the package and its configs read from the install."""
+    # build from a copy: setuptools writes build/ beside the sources, never into the checkout
+    source = tmp_path / "source"
+    ignore = shutil.ignore_patterns("__pycache__", "*.pyc")
+    for folder in ("pipeline", "conf", "hydra_plugins"):
+        shutil.copytree(ROOT / folder, source / folder, ignore=ignore)
+    for name in ("pyproject.toml", "README.md", "LICENSE"):
+        shutil.copy(ROOT / name, source / name)
     wheels = tmp_path / "wheels"
     subprocess.run([sys.executable, "-m", "pip", "wheel", "--no-deps", "--no-build-isolation",
-                    "-q", "-w", str(wheels), str(ROOT)], check=True, capture_output=True,
+                    "-q", "-w", str(wheels), str(source)], check=True, capture_output=True,
                    timeout=300)
     wheel = glob.glob(str(wheels / "*.whl"))[0]
     names = zipfile.ZipFile(wheel).namelist()
