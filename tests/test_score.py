@@ -90,6 +90,9 @@ def test_scoring_our_own_trajectory_reproduces_its_metrics(tmp_path, make_config
     out = tmp_path / "scored.json"
     assert score_main([str(tmp_path / "run" / "trajectory.csv"), "--out", str(out)]) == 0
     scored = json.loads(out.read_text())
+    # every column is there: nothing missing, nothing derived from the path
+    assert scored.pop("score_quality") == {"missing": {}, "derived": {}}
+    assert "score:" not in capsys.readouterr().err
     for key, value in scored.items():
         if isinstance(value, float):
             assert value == pytest.approx(expected[key], rel=1e-6, abs=1e-6), key
@@ -108,6 +111,42 @@ def test_external_trajectory_with_mapping_and_obstacle(tmp_path):
     assert m["min_clearance_m"] == pytest.approx(2.0 - 1.5)
     assert m["goal_reached"] and m["time_to_goal_s"] == pytest.approx(9.9)
     assert m["reaction_delay_s"] is None  # no steering column
+
+
+def test_partial_trajectories_say_what_they_cannot_give(tmp_path, make_config, capsys):
+    """The README's case (t, x, y, theta, as the paper's MATLAB code would export): C1 and C3
+    are missing (null, never 'false'), C2 is derived from the path, one stderr line each and
+    marked in the JSON; adding the steering and APF columns makes them exact (equal to the
+    run's own metrics.json)."""
+    import pandas as pd
+
+    run_experiment(make_config(["method=improved"]), tmp_path / "run")
+    expected = json.loads((tmp_path / "run" / "metrics.json").read_text())
+    full = pd.read_csv(tmp_path / "run" / "trajectory.csv")
+    obstacles = [c for c in full.columns if c.startswith("obs")]
+    part = full[["time_s", "X_m", "Y_m", "psi_rad"] + obstacles].rename(
+        columns={"time_s": "t", "X_m": "x", "Y_m": "y", "psi_rad": "theta"})
+    part.to_csv(tmp_path / "part.csv", index=False)
+    capsys.readouterr()
+    assert score_main([str(tmp_path / "part.csv"), "--columns",
+                       "time_s=t,X_m=x,Y_m=y,psi_rad=theta", "--out",
+                       str(tmp_path / "p.json")]) == 0
+    err = capsys.readouterr().err
+    assert "score: C1 reaction_delay_s missing: no steering-angle column" in err
+    assert "score: C3a repulsion_unneeded_share missing" in err
+    assert "score: C2 lateral_jerk_rms_mps3 derived" in err
+    scored = json.loads((tmp_path / "p.json").read_text())
+    assert scored["reacted"] is None and scored["reaction_delay_s"] is None
+    assert "lateral_jerk_rms_mps3" in scored["score_quality"]["derived"]
+    assert scored["lateral_jerk_rms_mps3"] != pytest.approx(expected["lateral_jerk_rms_mps3"])
+    exact = full[["time_s", "X_m", "Y_m", "psi_rad", "vx_mps", "vy_mps", "r_rad_s",
+                  "delta_rad", "steering_rate_rad_s", "apf_rep_norm"] + obstacles]
+    exact.to_csv(tmp_path / "exact.csv", index=False)
+    assert score_main([str(tmp_path / "exact.csv"), "--out", str(tmp_path / "e.json")]) == 0
+    scored = json.loads((tmp_path / "e.json").read_text())
+    for key in ("reaction_delay_s", "lateral_jerk_rms_mps3", "repulsion_unneeded_share",
+                "repulsion_onset_ttc_s", "recovery_time_s", "oscillation_count"):
+        assert scored[key] == pytest.approx(expected[key], rel=1e-6, abs=1e-6), key
 
 
 def c3_known_answer_csv(path, onset_x_m: float = 6.0) -> None:

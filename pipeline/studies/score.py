@@ -3,9 +3,13 @@
 Required columns: ``time_s``, ``X_m``, ``Y_m`` (strictly increasing time, at least two rows,
 numbers only). Optional: ``psi_rad``, ``vx_mps``, ``vy_mps``, ``r_rad_s``, ``delta_rad``,
 ``steering_rate_rad_s`` (derived from the path where missing; steering metrics need
-``delta_rad``), and obstacles as ``obs{j}_x_m, obs{j}_y_m, obs{j}_radius_m, obs{j}_visible`` or
+``delta_rad``), ``apf_rep_norm`` (C3a and C3b need it), and obstacles as ``obs{j}_x_m, obs{j}_y_m, obs{j}_radius_m, obs{j}_visible`` or
 through ``--obstacle``. Other tools' column names are mapped with ``--columns``, e.g.
 ``--columns time_s=t,X_m=x,Y_m=y,psi_rad=theta`` for the paper's MATLAB state ``[x y theta v]``.
+
+The output says which metrics the file could not give (``missing``: set to null, e.g. C1
+without a steering column) and which it gave only derived from the path (``derived``, e.g. C2
+without the lateral velocity), one line each on stderr and under ``score_quality`` in the JSON.
 """
 
 from __future__ import annotations
@@ -232,6 +236,56 @@ def load_trajectory(path: Path | str, columns: dict[str, str] | None = None,
     return frame
 
 
+#: Metrics that cannot be computed without a column: (column, what it is, metrics).
+NEEDS_COLUMN = (
+    ("delta_rad", "no steering-angle column (delta_rad)",
+     ("reaction_delay_s", "reaction_delay_threat_s", "reaction_delay_first_visible_s", "reacted",
+      "steering_rate_rms_rad_s", "steering_rate_max_rad_s", "steering_rate_rms_window_rad_s")),
+    ("apf_rep_norm", "no APF repulsion column (apf_rep_norm)",
+     ("repulsive_impulse", "repulsion_unneeded_impulse", "repulsion_unneeded_share",
+      "repulsion_unneeded_share_threat", "repulsive_impulse_far_share", "repulsive_force_peak",
+      "repulsion_onset_clearance_m", "repulsion_onset_ttc_s")),
+)
+#: Metrics derived from the path where a column is missing: (columns, how, metrics).
+DERIVED_FROM_PATH = (
+    (("vx_mps", "vy_mps", "r_rad_s"), "lateral acceleration as v r of the path (no vx_mps, "
+     "vy_mps, r_rad_s): not the report's vy_dot + vx r",
+     ("lateral_accel_max_mps2", "lateral_jerk_rms_run_mps3", "lateral_jerk_max_mps3",
+      "lateral_jerk_rms_window_mps3", "lateral_jerk_max_window_mps3", "lateral_jerk_rms_mps3",
+      "curvature_rate_rms_1_per_ms")),
+    (("r_rad_s",), "yaw rate from the path's heading (no r_rad_s)",
+     ("yaw_rate_sign_changes", "yaw_rate_sign_changes_after_pass",
+      "oscillation_whole_run_count")),
+    (("psi_rad",), "heading from the path's direction (no psi_rad)",
+     ("recovery_heading_s", "max_abs_heading_error_rad", "heading_step_max_rad",
+      "heading_validity_exceeded")),
+)
+#: The claim whose primary metric a key is (for the messages).
+CLAIM_OF = {"collision": "C0", "reaction_delay_s": "C1", "lateral_jerk_rms_mps3": "C2",
+            "repulsion_unneeded_share": "C3a", "repulsion_onset_ttc_s": "C3b",
+            "recovery_time_s": "C4", "oscillation_count": "C5"}
+
+
+def score_quality(columns) -> tuple[dict[str, str], dict[str, str]]:
+    """Which metrics a file with these columns cannot give (``missing``, reason) and which it
+    gives only derived from the path (``derived``, how): what makes an outside method's scores
+    comparable with the report's, or not."""
+    present = set(columns)
+    missing, derived = {}, {}
+    for column, reason, keys in NEEDS_COLUMN:
+        if column not in present:
+            for key in keys:
+                if column == "delta_rad" and key.startswith("steering_rate") \
+                        and "steering_rate_rad_s" in present:
+                    continue
+                missing[key] = reason
+    for needed, how, keys in DERIVED_FROM_PATH:
+        if not all(c in present for c in needed):
+            for key in keys:
+                derived.setdefault(key, how)
+    return missing, derived
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="python -m pipeline.score", description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -261,7 +315,17 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     metrics = compute_metrics(frame, TrajectoryContext(tuple(start), tuple(goal),
                                                        args.vehicle_radius), MetricsConfig())
-    text = json.dumps(metrics.to_json(), indent=2, sort_keys=True)
+    missing, derived = score_quality(frame.columns)
+    values = metrics.to_json()
+    for key, reason in missing.items():
+        values[key] = None  # not "false" or "0": the file cannot say
+        claim = f"{CLAIM_OF[key]} " if key in CLAIM_OF else ""
+        print(f"score: {claim}{key} missing: {reason}", file=sys.stderr)
+    for key, how in derived.items():
+        claim = f"{CLAIM_OF[key]} " if key in CLAIM_OF else ""
+        print(f"score: {claim}{key} derived: {how}", file=sys.stderr)
+    values["score_quality"] = {"missing": missing, "derived": derived}
+    text = json.dumps(values, indent=2, sort_keys=True)
     if args.out:
         try:
             # atomic: a failed write leaves an existing file as it was
