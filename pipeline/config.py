@@ -113,6 +113,12 @@ class ExperimentConfig:
         data.pop("claims", None)
         data.pop("tune", None)
         data.pop("features", None)
+        for section in ("planner", "controller"):
+            # a plug-in's class and settings change the run; their absence does not
+            if data[section].get("_target_") is None:
+                data[section].pop("_target_", None)
+            if not data[section].get("params"):
+                data[section].pop("params", None)
         text = json.dumps(data, sort_keys=True, default=str)
         return hashlib.sha256(text.encode()).hexdigest()[:16]
 

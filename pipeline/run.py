@@ -42,6 +42,7 @@ def hydra_main(cfg: DictConfig) -> float | tuple[float, ...]:
 
     try:
         experiment = to_experiment_config(cfg)
+        _check_targets(experiment)
     except Exception as exc:  # noqa: BLE001 - config errors become one line; others re-raise
         message = describe_config_error(exc)
         if message is None or os.environ.get("PIPELINE_USER_FULL_ERROR") == "1":
@@ -67,6 +68,17 @@ def hydra_main(cfg: DictConfig) -> float | tuple[float, ...]:
              m["min_clearance_m"] if m["min_clearance_m"] is not None else float("nan"),
              m["collision"], m["time_to_goal_s"], _describe(objectives, values), out_dir)
     return values[0] if len(values) == 1 else values
+
+
+def _check_targets(experiment) -> None:
+    """A planner or controller of the user's own must import before anything runs (one line
+    naming the key otherwise)."""
+    from pipeline.validation import resolve_target
+
+    for key, target in (("planner._target_", experiment.planner._target_),
+                        ("controller._target_", experiment.controller._target_)):
+        if target:
+            resolve_target(key, target)
 
 
 def _describe(objectives, values) -> str:

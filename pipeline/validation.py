@@ -53,3 +53,35 @@ def pair(key: str, value: Any) -> None:
         raise ConfigError(key, list(value), "a list of two finite numbers [x_m, y_m]")
     for i, v in enumerate(value):
         finite(f"{key}[{i}]", v)
+
+
+TARGET_PATTERN = r"[A-Za-z_][A-Za-z0-9_]*(\.[A-Za-z_][A-Za-z0-9_]*)+"
+
+
+def target_path(key: str, value) -> None:
+    """A Hydra-style ``_target_``: a dotted ``module.Class`` path (or None: the built-in)."""
+    import re
+
+    if value is None:
+        return
+    if not isinstance(value, str) or not re.fullmatch(TARGET_PATTERN, value):
+        raise ConfigError(key, value, "a dotted path module.Class (e.g. my_planner.MyPlanner) "
+                          "or null for the built-in")
+
+
+def resolve_target(key: str, value: str):
+    """The class a ``_target_`` names, imported (the user's module must be importable: on
+    PYTHONPATH or installed); a :class:`ConfigError` naming the key otherwise."""
+    import importlib
+
+    module_name, _, name = value.rpartition(".")
+    try:
+        module = importlib.import_module(module_name)
+    except ImportError as exc:
+        raise ConfigError(key, value, f"a class importable as module.Class ({exc}; put its "
+                          "folder on PYTHONPATH)") from None
+    target = getattr(module, name, None)
+    if not callable(target):
+        raise ConfigError(key, value, f"a class importable as module.Class (module "
+                          f"{module_name} has no {name})")
+    return target

@@ -214,18 +214,19 @@ def test_closed_loop_runs_blas_on_one_thread(make_config, monkeypatch):
     a run's CPU time); checked from inside a step with threadpoolctl's own report."""
     from threadpoolctl import threadpool_info
 
+    import pipeline.loop.planner as planner_module
     import pipeline.loop.simulate as simulate_module
     from pipeline.loop.scenario import build_scenario
 
     seen = []
-    original = simulate_module.apf_rollout
+    original = planner_module.apf_rollout
 
     def spy(*args, **kwargs):
         seen.extend(pool["num_threads"] for pool in threadpool_info()
                     if pool["user_api"] == "blas")
         return original(*args, **kwargs)
 
-    monkeypatch.setattr(simulate_module, "apf_rollout", spy)
+    monkeypatch.setattr(planner_module, "apf_rollout", spy)
     cfg = make_config(["method=improved", "scenario.n_steps=5"])
     simulate_module.simulate(cfg, build_scenario(cfg.scenario))
     assert seen and set(seen) == {1}

@@ -4,7 +4,7 @@ turn paired differences into verdicts (``claims.*``, outside the run hash)."""
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Dict, Optional
+from typing import Dict, List, Optional
 
 from pipeline.errors import ConfigError
 from pipeline.validation import at_least, between, choice
@@ -115,8 +115,22 @@ class ClaimsConfig:
     comparable_clearance_m: float = 2.0
     cap_binding_share: float = 0.5
     floor_tie_share: float = 0.9
+    # what is compared with what: the treatment (the method whose claims are judged) and its
+    # controls, by method name (run.method); any method, your own included
+    treatment: str = "improved"
+    controls: List[str] = field(default_factory=lambda: ["baseline", "baseline_matched"])
 
     def __post_init__(self) -> None:
+        from pipeline.validation import safe_name
+
+        safe_name("claims.treatment", self.treatment)
+        if not self.controls:
+            raise ConfigError("claims.controls", [], "a list of at least one method name")
+        for i, name in enumerate(self.controls):
+            safe_name(f"claims.controls[{i}]", name)
+        if self.treatment in self.controls:
+            raise ConfigError("claims.controls", list(self.controls),
+                              f"methods other than the treatment ({self.treatment})")
         between("claims.alpha", self.alpha, 1e-6, 0.5)
         for key in ("n_resamples", "seed", "min_pairs"):
             value = getattr(self, key)

@@ -289,3 +289,39 @@ def plan_speed(position_m: np.ndarray, heading_rad: float, obstacles: ObstacleSn
     gap = float(np.min(ahead[relevant] - obstacles.radii_m[relevant])) - vehicle_radius_m
     allowed = np.sqrt(2.0 * params.braking_decel_mps2 * max(gap - params.stop_margin_m, 0.0))
     return float(np.clip(allowed, params.speed_floor_mps, nominal_speed_mps))
+
+
+class ApfPlanner:
+    """The planner protocol and its built-in: the paper's APF (baseline or improved by its
+    settings) rolled out over the horizon, and velocity planning.
+
+    A planner of your own subclasses this (or follows the same two methods) and is named by
+    ``planner._target_`` (``module.Class``); it is built as ``cls(settings, horizon,
+    sample_time_s)`` and may read its own settings from ``settings.params``.
+    """
+
+    def __init__(self, settings: PlannerConfig, horizon: int, sample_time_s: float) -> None:
+        self.settings, self.horizon, self.sample_time_s = settings, horizon, sample_time_s
+
+    def rollout(self, position_m: np.ndarray, goal_m: np.ndarray, obstacles: ObstacleSnapshot,
+                vehicle_velocity_mps: np.ndarray | None = None) -> ApfRollout:
+        """The reference path (``horizon`` points from the vehicle's position) and the forces
+        behind it (:func:`apf_rollout`)."""
+        return apf_rollout(position_m, goal_m, obstacles, self.settings, self.horizon,
+                           self.sample_time_s, vehicle_velocity_mps)
+
+    def speed(self, position_m: np.ndarray, heading_rad: float, obstacles: ObstacleSnapshot,
+              nominal_speed_mps: float, vehicle_radius_m: float) -> float:
+        """The planned speed ``V_r`` (:func:`plan_speed`)."""
+        return plan_speed(position_m, heading_rad, obstacles, nominal_speed_mps,
+                          vehicle_radius_m, self.settings)
+
+
+def make_planner(settings: PlannerConfig, horizon: int, sample_time_s: float) -> ApfPlanner:
+    """The planner ``settings._target_`` names (a user's class), else :class:`ApfPlanner`."""
+    from pipeline.validation import resolve_target
+
+    if settings._target_:
+        return resolve_target("planner._target_", settings._target_)(settings, horizon,
+                                                                     sample_time_s)
+    return ApfPlanner(settings, horizon, sample_time_s)

@@ -11,13 +11,14 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import List, Optional, Protocol
+from typing import Any, Dict, List, Optional, Protocol
 
 from omegaconf import MISSING
 
 from pipeline.errors import ConfigError
 from pipeline.loop.qp_memory import MAX_HORIZON, qp_memory_gib
-from pipeline.validation import at_least, between, choice, finite, pair, safe_name
+from pipeline.validation import (at_least, between, choice, finite, pair, safe_name,
+                                 target_path)
 
 
 @dataclass
@@ -85,9 +86,15 @@ class PlannerConfig:
     braking_decel_mps2: float = 2.0
     stop_margin_m: float = 1.0
     speed_floor_mps: float = 1.0
+    # a planner of your own (Hydra's convention): module.Class, built with (these settings,
+    # horizon, sample time); None: the paper's APF (pipeline.loop.planner.ApfPlanner).
+    # ``params`` carries its own settings. Both enter the run hash only when set.
+    _target_: Optional[str] = None
+    params: Dict[str, Any] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
         safe_name("planner.name", self.name)
+        target_path("planner._target_", self._target_)
         at_least("planner.braking_decel_mps2", self.braking_decel_mps2, 0.0, inclusive=False)
         at_least("planner.stop_margin_m", self.stop_margin_m, 0.0)
         at_least("planner.speed_floor_mps", self.speed_floor_mps, 0.0, inclusive=False)
@@ -161,8 +168,14 @@ class ControllerConfig:
     accel_bounds_mps2: List[float] = field(default_factory=lambda: [-3.0, 3.0])
     ltv_iterations: int = 1
     reference_alignment: str = "literal"
+    # a controller of your own (Hydra's convention): module.Class, built with (these settings,
+    # the vehicle, the sample time, the QP cache) and stepped as step(Observation) ->
+    # ControlStep; None: the built-in chosen by ``kind``. Enter the run hash only when set.
+    _target_: Optional[str] = None
+    params: Dict[str, Any] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
+        target_path("controller._target_", self._target_)
         choice("controller.kind", self.kind, ("mpc", "pure_pursuit", "kinematic_mpc"))
         choice("controller.backend", self.backend,
                ("cvxpy", "clarabel_direct", "clarabel_dense", "daqp", "nmpc"))

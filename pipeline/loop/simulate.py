@@ -23,7 +23,7 @@ import pandas as pd
 from pipeline.loop.settings import LoopSettings
 from pipeline.loop.controller import ControlStep, Observation, QpCache, make_controller
 from pipeline.loop.model import kinematic_plant_step, step_plant
-from pipeline.loop.planner import ApfRollout, apf_rollout, plan_speed
+from pipeline.loop.planner import ApfRollout, make_planner
 from pipeline.loop.scenario import Scenario
 from pipeline.loop.trajectory import HEAD, OBSTACLE_FIELDS, TAIL, obstacle_column
 
@@ -202,8 +202,9 @@ def _closed_loop(cfg: LoopSettings, scenario: Scenario,
     kinematic = cfg.controller.kind == "kinematic_mpc"
     plant = KinematicPlant(cfg, scenario) if kinematic else SingleTrackPlant(cfg, scenario)
     controller = make_controller(cfg, scenario.sample_time_s, qp_cache)
+    planner = make_planner(cfg.planner, cfg.controller.horizon, scenario.sample_time_s)
     vehicle_radius = cfg.vehicle.footprint_radius_m
-    ts, N = scenario.sample_time_s, cfg.controller.horizon
+    ts = scenario.sample_time_s
     frame = scenario.line_frame
     origin_x, origin_y = frame.origin_m.tolist()
     c_line, s_line = cos(frame.heading_rad), sin(frame.heading_rad)
@@ -241,11 +242,9 @@ def _closed_loop(cfg: LoopSettings, scenario: Scenario,
         visible = snapshot.only_visible()
         position = state[:2].copy()
         # the kinematic track uses it only for reference_alignment=path_speed (Section 3.1)
-        speed_ref = plan_speed(position, psi, visible, scenario.speed_mps, vehicle_radius,
-                               cfg.planner) if not kinematic \
-            or cfg.controller.reference_alignment == "path_speed" else np.nan
-        rollout = apf_rollout(position, scenario.goal_m, visible, cfg.planner, N, ts,
-                              plant.velocity(state))
+        speed_ref = planner.speed(position, psi, visible, scenario.speed_mps, vehicle_radius) \
+            if not kinematic or cfg.controller.reference_alignment == "path_speed" else np.nan
+        rollout = planner.rollout(position, scenario.goal_m, visible, plant.velocity(state))
         observation = Observation(time_s, state, frame, np.array([along, lateral]), e_psi,
                                   rollout, visible, speed_ref)
         step: ControlStep = controller.step(observation)

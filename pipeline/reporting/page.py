@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import argparse
 import base64
+import dataclasses
 import datetime as dt
 import html
 import importlib.metadata
@@ -38,7 +39,6 @@ PACKAGES = ("numpy", "scipy", "pandas", "matplotlib", "control", "cvxpy", "clara
             "hydra-core", "omegaconf", "jinja2")
 METHOD_ORDER = ("baseline", "baseline_matched", "improved", "velocity_aware", "mpc_no_apf",
                 "apf_pursuit")
-COMPARISONS = ("baseline", "baseline_matched")
 
 
 def _rules(cfg: ClaimsConfig | None) -> dict:
@@ -501,7 +501,8 @@ def _fair_fight_section(tune_dir: Path | None, fig_dir: Path, table_dir: Path) -
 def build_report(run_root: Path, out_dir: Path, command: str,
                  sweep_dirs: tuple[Path, ...] = (), bench_dir: Path | None = None,
                  multiverse_dir: Path | None = None,
-                 skipped: list[Skipped] | None = None, tune_dir: Path | None = None) -> Path:
+                 skipped: list[Skipped] | None = None, tune_dir: Path | None = None,
+                 treatment: str | None = None, controls: tuple[str, ...] = ()) -> Path:
     """Write ``out_dir/index.html`` (plus figures/ and tables/) from the runs under ``run_root``.
 
     Parameters
@@ -603,11 +604,17 @@ def build_report(run_root: Path, out_dir: Path, command: str,
                     "compile_s": _fmt(r["timing"]["compile_time_s"]),
                     "compiles": _fmt(r["metrics"].get("compile_count"))}
                    for m, r in by_method.items()]
-    # the claims settings the runs were made with, never defaults rebuilt from text
-    cfg_claims = collection.claims_settings("improved")
-    comparisons = tuple(c for c in COMPARISONS if c in primary)
+    # the claims settings the runs were made with, never defaults rebuilt from text; what is
+    # compared with what: the command's --treatment/--controls, else those settings'
+    cfg_claims = collection.claims_settings(treatment or "improved") \
+        or collection.claims_settings("improved") or ClaimsConfig()
+    cfg_claims = dataclasses.replace(
+        cfg_claims, treatment=treatment or cfg_claims.treatment,
+        controls=list(controls) if controls else list(cfg_claims.controls))
+    comparisons = tuple(c for c in cfg_claims.controls if c in primary)
     claim_metrics = {**metrics_by_method, **{m: r["metrics"] for m, r in primary.items()}}
-    claims = claims_table(claim_metrics, cfg_claims.margins, comparisons)
+    claims = claims_table(claim_metrics, cfg_claims.margins, comparisons,
+                          improved=cfg_claims.treatment)
     pd.DataFrame(claims).to_csv(table_dir / "claims_paper_scenario.csv", index=False)
     for row in claims:
         row["values"] = [_fmt(row.get(m)) for m in order]
@@ -630,7 +637,8 @@ def build_report(run_root: Path, out_dir: Path, command: str,
     family = None
     family_primary, family_notes = _primary_tables(family_tables, family_info)
     run_notes += family_notes
-    if "baseline" in family_primary and "improved" in family_primary:
+    if cfg_claims.treatment in family_primary \
+            and any(c in family_primary for c in cfg_claims.controls):
         family = _family_section(family_primary, family_info, claim_metrics, fig_dir,
                                  table_dir, cfg_claims, all_tables=family_tables,
                                  settings=collection.family_settings)
@@ -759,9 +767,9 @@ def _track_section(runs: list[dict], track: str, fig_dir: Path, table_dir: Path,
     skip = {"method", "scenario", "config_hash", "track"}
     metric_rows = [{"metric": k, "values": [_fmt(metrics_by_method[m].get(k)) for m in order]}
                    for k in frame.index if k not in skip]
-    comparisons = tuple(c for c in COMPARISONS if c in primary)
+    comparisons = tuple(c for c in cfg.controls if c in primary)
     claim_metrics = {**metrics_by_method, **{m: r["metrics"] for m, r in primary.items()}}
-    claims = claims_table(claim_metrics, cfg.margins, comparisons)
+    claims = claims_table(claim_metrics, cfg.margins, comparisons, improved=cfg.treatment)
 
     def met(method: str) -> bool:
         clearance = claim_metrics.get(method, {}).get("min_clearance_m")
@@ -769,8 +777,8 @@ def _track_section(runs: list[dict], track: str, fig_dir: Path, table_dir: Path,
 
     comparability = []
     for comparison in comparisons:
-        if not (met(comparison) and met("improved")):
-            far = [m for m in (comparison, "improved") if not met(m)]
+        if not (met(comparison) and met(cfg.treatment)):
+            far = [m for m in (comparison, cfg.treatment) if not met(m)]
             comparability.append(f"vs {comparison}: not comparable ({', '.join(far)} never "
                                  f"came within {cfg.comparable_clearance_m:g} m).")
             rates = {c.claim_id for c in ALL_CLAIMS if c.is_rate}
@@ -874,7 +882,7 @@ def _family_section(tables: dict, info: dict, paper_metrics: dict, fig_dir: Path
     distribution plots and what the step cap does."""
     order = _ordered(tables)
     tables = {m: tables[m] for m in order}
-    typed = family_ledger(tables, cfg, paper_metrics)
+    typed = family_ledger(tables, cfg, paper_metrics, cfg.treatment, tuple(cfg.controls))
     typed.to_frame().to_csv(table_dir / "claims_ledger.csv", index=False)
     ledger = typed.records()
     counts = outcome_counts({m: all_tables[m] for m in _ordered(all_tables)}
@@ -899,7 +907,7 @@ def _family_section(tables: dict, info: dict, paper_metrics: dict, fig_dir: Path
             row["first"], row["span"] = i == 0, len(claim_rows)
             grouped.append(row)
     comparisons = [{"name": c, "rows": [r for r in ledger if r["comparison"] == c]}
-                   for c in COMPARISONS if any(r["comparison"] == c for r in ledger)]
+                   for c in cfg.controls if any(r["comparison"] == c for r in ledger)]
     cap = {c["method"]: c["step_cap_binding_share"] for c in counts}
     cap_note = ""
     share = cap.get("improved")
@@ -944,8 +952,8 @@ def _family_section(tables: dict, info: dict, paper_metrics: dict, fig_dir: Path
     apf_adds = _baseline_apf_adds(tables, cfg, table_dir)
     answer = answer_lines(typed) + ([apf_adds["sentence"]] if apf_adds else [])
     return {"ledger": grouped, "comparisons": comparisons, "solvers": solvers,
-            "answer": answer, "apf_adds": apf_adds,
-            "by_claim": {r["claim"]: r for r in ledger if r["comparison"] == "baseline"},
+            "answer": answer, "apf_adds": apf_adds, "treatment": cfg.treatment,
+            "by_claim": {r["claim"]: r for r in ledger if r["comparison"] == cfg.controls[0]},
             "counts": [{k: _fmt(v) for k, v in c.items()} for c in counts],
             "cap_note": cap_note, "figures": figures, "seed": first["seed"],
             "size": first["size"], "methods": order}
@@ -1017,6 +1025,12 @@ def main(argv: list[str] | None = None) -> int:
                         help="benchmark folder to add as the Performance section, if present")
     parser.add_argument("--multiverse", type=Path, default=None,
                         help="multiverse folder (default: RUNS/multiverse, if present)")
+    parser.add_argument("--treatment", default=None,
+                        help="the method whose claims are judged (default: claims.treatment of "
+                             "the runs' settings, improved)")
+    parser.add_argument("--controls", default=None,
+                        help="comma-separated methods it is compared with (default: "
+                             "claims.controls, baseline,baseline_matched)")
     parser.add_argument("--tune", type=Path, default=None,
                         help="fair-fight folder of make tune (default: RUNS/tune, if present)")
     parser.add_argument("--strict", action="store_true",
@@ -1027,8 +1041,9 @@ def main(argv: list[str] | None = None) -> int:
     command = args.command or "python -m pipeline.report " + " ".join(argv or sys.argv[1:])
     skipped: list[Skipped] = []
     try:
+        controls = tuple(c.strip() for c in (args.controls or "").split(",") if c.strip())
         path = build_report(args.runs, args.out, command, tuple(args.sweep), args.bench,
-                            args.multiverse, skipped, args.tune)
+                            args.multiverse, skipped, args.tune, args.treatment, controls)
     except FileNotFoundError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
@@ -1042,7 +1057,7 @@ def main(argv: list[str] | None = None) -> int:
     if answer.is_file() and answer.read_text().strip():
         # the answer in words, last, so that a command's final lines are the verdicts
         print("The answer over the scenario family (outcome vs each comparison, estimate "
-              "[95 % interval] unit; d = improved - comparison, below 0 is better):")
+              "[95 % interval] unit; d = treatment - comparison, below 0 is better):")
         print(answer.read_text().rstrip())
     if args.strict and skipped:
         print(f"error: --strict: {len(skipped)} folder(s) skipped", file=sys.stderr)

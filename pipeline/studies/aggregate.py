@@ -235,10 +235,13 @@ def sweep_verdicts(summary: pd.DataFrame, tables: dict, swept: list[str],
     Partners share every swept key outside ``planner.*`` and the method; failing that, the job
     in ``baseline_dir``.
     """
-    if "method" not in summary:
+    if "method" not in summary or not settings:
         return None
-    improved = summary[summary["method"] == "improved"]
-    baseline = summary[summary["method"] == "baseline"]
+    # the treatment and its first control, as the jobs' claims settings name them
+    first = next(iter(settings.values()))
+    treatment, control = first.treatment, first.controls[0]
+    improved = summary[summary["method"] == treatment]
+    baseline = summary[summary["method"] == control]
     external_row, external_table = None, None
     if baseline_dir is not None and Path(baseline_dir).is_dir():
         kind = "family" if folder_kind(baseline_dir) == "family" else "single"
@@ -263,8 +266,8 @@ def sweep_verdicts(summary: pd.DataFrame, tables: dict, swept: list[str],
         cfg = settings[imp["job"]]
         swept_values = {k: imp[k] for k in swept if k not in METHOD_KEYS}
         if imp_table is not None and base_table is not None:
-            ledger = family_ledger({"improved": imp_table, "baseline": base_table}, cfg,
-                                   comparisons=("baseline",))
+            ledger = family_ledger({treatment: imp_table, control: base_table}, cfg,
+                                   improved=treatment, comparisons=(control,))
             for r in ledger:
                 rows.append({**swept_values, "job": imp["job"], "claim": r.claim_id,
                              "metric": r.claim.primary_metric, "estimate": r.result.estimate,

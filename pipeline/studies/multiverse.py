@@ -46,8 +46,9 @@ from pipeline.analysis.claims import ALL_CLAIMS, OUTCOMES, family_ledger
 from pipeline.config import CONF_DIR, ClaimsConfig, ExperimentConfig, MetricsConfig
 from pipeline.errors import ConfigError, IncompleteSweepError, run_study
 
+#: The methods simulated by default: the claims' controls and treatment (claims.treatment,
+#: claims.controls of the user's configuration choose others).
 METHODS = ("baseline", "baseline_matched", "improved")
-COMPARISONS = ("baseline", "baseline_matched")
 STAGES = ("simulation", "analysis")
 ANALYSIS_PREFIXES = ("metrics.", "claims.")
 
@@ -274,7 +275,8 @@ def _family_task(cfg, folder: str) -> str:
 
 
 def run_simulations(design: pd.DataFrame, space: Space, out_dir: Path, compose,
-                    log=print, launcher: dict | None = None) -> dict[tuple, dict[str, Path]]:
+                    log=print, launcher: dict | None = None,
+                    methods: tuple[str, ...] = METHODS) -> dict[tuple, dict[str, Path]]:
     """Run every distinct simulation configuration's families (resumed by config hash): here,
     or as a SLURM array when ``launcher`` holds ``hydra/launcher=slurm`` settings.
 
@@ -293,7 +295,7 @@ def run_simulations(design: pd.DataFrame, space: Space, out_dir: Path, compose,
         unique.setdefault(simulation_key(row, space), row)
     for key, row in unique.items():
         folders[key] = {}
-        for method in METHODS:
+        for method in methods:
             cfg = compose(simulation_overrides(row, space, method))
             folder = out_dir / "runs" / method / cfg.config_hash()
             if check(folder, "family", cfg.config_hash(), members=False) is not None \
@@ -301,7 +303,7 @@ def run_simulations(design: pd.DataFrame, space: Space, out_dir: Path, compose,
                 todo.append((cfg, folder))
             folders[key][method] = folder
     log(f"{len(unique)} simulation configurations, {len(todo)} family runs to do "
-        f"({3 * len(unique) - len(todo)} shared or complete)")
+        f"({len(methods) * len(unique) - len(todo)} shared or complete)")
     run_families(todo, out_dir, log, launcher, cache)
     return folders
 
@@ -393,11 +395,15 @@ def family_table(folder: Path, metrics: MetricsConfig, out_dir: Path) -> pd.Data
 
 def analyse_specification(row: dict, folders: dict[str, Path], space: Space,
                           out_dir: Path) -> list[dict]:
-    """Ledger rows (C0-C5 against both comparisons) of one specification."""
-    base = read_family(folders["improved"], members=False).config
+    """Ledger rows (C0-C5 against each control) of one specification; ``folders`` holds the
+    controls' families, then the treatment's (:func:`run_simulations`' order)."""
+    treatment = list(folders)[-1]
+    base = read_family(folders[treatment], members=False).config
     metrics, claims = analysis_settings(row, space, base)
-    tables = {m: family_table(folders[m], metrics, out_dir) for m in METHODS}
-    ledger = family_ledger(tables, claims, sensitivity=False)
+    tables = {m: family_table(folders[m], metrics, out_dir) for m in folders}
+    ledger = family_ledger(tables, claims, improved=treatment,
+                           comparisons=tuple(m for m in folders if m != treatment),
+                           sensitivity=False)
     return [{"spec_id": row["spec_id"], "claim": r.claim_id, "comparison": r.comparison,
              "metric": r.claim.primary_metric, "estimate": r.result.estimate,
              "ci_low": r.result.ci_low, "ci_high": r.result.ci_high, "p_holm": r.p_holm,
@@ -482,7 +488,7 @@ def specification_curve_figure(results: pd.DataFrame, design: pd.DataFrame, spac
     colors = {"supported": "#2ca02c", "contradicted": "#d62728", "equivalent": "#7f7f9f",
               "inconclusive": "#e0a000", "mixed": "#9467bd"}
     part = results[results["claim"] == claim].merge(design, on="spec_id")
-    comparisons = [c for c in COMPARISONS if (part["comparison"] == c).any()]
+    comparisons = list(dict.fromkeys(part["comparison"]))
     dims = [d for d in space.dimensions]
     fig, axes = plt.subplots(len(comparisons) + 1, 1, figsize=(11.0, 2.4 * len(comparisons)
                                                                 + 0.22 * len(dims) + 1.0),
@@ -555,7 +561,10 @@ def run_multiverse(space: Space, out_dir: Path, overrides: list[str] | None = No
     # validate every composition before anything runs: a bad value stops here
     for row in design.to_dict("records"):
         analysis_settings(row, space, base)
-    folders = run_simulations(design, space, out_dir, compose, log, launcher)
+    # what is compared with what: the user's claims.treatment and claims.controls (last: the
+    # treatment)
+    methods = tuple(base.claims.controls) + (base.claims.treatment,)
+    folders = run_simulations(design, space, out_dir, compose, log, launcher, methods)
     jobs = [(row, folders[simulation_key(row, space)]) for row in design.to_dict("records")]
     # every metric reading a family needs, computed in one pass over its members (each member
     # read once per analysis, not once per reading)

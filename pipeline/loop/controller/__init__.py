@@ -32,8 +32,15 @@ __all__ = ["ControlStep", "Controller", "Observation", "PlanFallback", "Kinemati
 
 def make_controller(cfg: LoopSettings, sample_time_s: float,
                     qp_cache: QpCache | None = None) -> Controller:
-    """The controller named by ``cfg.controller.kind``, its QP taken from ``qp_cache``."""
+    """The controller ``cfg.controller._target_`` names (a user's class), else the built-in
+    named by ``cfg.controller.kind``, its QP taken from ``qp_cache``."""
     kind = cfg.controller.kind
+    if cfg.controller._target_:
+        # a controller of your own: step(Observation) -> ControlStep (see base.Controller)
+        from pipeline.validation import resolve_target
+
+        cls = resolve_target("controller._target_", cfg.controller._target_)
+        return cls(cfg.controller, cfg.vehicle, sample_time_s, qp_cache)
     if kind == "kinematic_mpc":
         if cfg.controller.backend == "nmpc":
             from pipeline.loop.controller.nmpc import KinematicNmpc
