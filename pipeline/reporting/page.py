@@ -134,20 +134,37 @@ def _label(run: dict) -> str:
     return run["metrics"].get("label") or run["metrics"].get("method", "")
 
 
-def _choose_per_method(items: dict, method_of, kind: str, use: str
+#: Where make reproduce writes each method's run: ``<runs>/<section>/<method>``. A run there is
+#: the method's default and is judged before any other run of the same method.
+CANONICAL_SECTIONS = ("paper", "family", "kinematic")
+
+
+def _canonical(folder, method: str) -> bool:
+    path = Path(str(folder)) if folder else None
+    return path is not None and path.name == method and path.parent.name in CANONICAL_SECTIONS
+
+
+def _choose_per_method(items: dict, method_of, kind: str, use: str, folder_of=None
                        ) -> tuple[dict, list[str]]:
-    """One item per method (the one labelled with the bare method name, else the first) and a
-    note for every method given more than once."""
+    """One item per method and a note for every method given more than once. The pick: the
+    run make reproduce wrote (``<section>/<method>``), else the one labelled with the bare
+    method name, else the first; the note names it and the ones left out."""
     groups: dict[str, list[str]] = {}
     for label, item in items.items():
         groups.setdefault(method_of(label, item), []).append(label)
     chosen, notes = {}, []
     for method, labels in groups.items():
-        pick = method if method in labels else labels[0]
+        canonical = [label for label in labels
+                     if folder_of is not None and _canonical(folder_of(label, items[label]),
+                                                             method)]
+        pick = canonical[0] if canonical else method if method in labels else labels[0]
         chosen[method] = items[pick]
         if len(labels) > 1:
-            notes.append(f"{len(labels)} {kind} of {method} were given ({'; '.join(labels)}); "
-                         f"{use} '{pick}', the other tables show all of them.")
+            why = "the run make reproduce wrote" if canonical else \
+                "no run in make reproduce's place: the first"
+            notes.append(f"{len(labels)} {kind} of {method} were given; {use} '{pick}' ({why}); "
+                         f"left out of the claims: {'; '.join(x for x in labels if x != pick)} "
+                         "(shown apart).")
     return chosen, notes
 
 
@@ -155,7 +172,8 @@ def _primary_tables(tables: dict[str, pd.DataFrame], info: dict[str, dict]
                     ) -> tuple[dict[str, pd.DataFrame], list[str]]:
     """One family table per method for the ledger."""
     return _choose_per_method(tables, lambda label, _: info.get(label, {}).get("method", label),
-                              "families", "the ledger uses")
+                              "families", "the ledger uses",
+                              folder_of=lambda label, _: info.get(label, {}).get("dir"))
 
 
 def _skipped_rows(skipped: list[Skipped], root: Path) -> list[dict]:
@@ -181,7 +199,7 @@ def _primary(runs_by_label: dict[str, dict]) -> tuple[dict[str, dict], list[str]
     """One run per method for the claims."""
     return _choose_per_method(runs_by_label,
                               lambda label, run: run["metrics"].get("method", label), "runs",
-                              "the claims use")
+                              "the claims use", folder_of=lambda label, run: run.get("dir"))
 
 
 def is_sweep_folder(folder: Path) -> bool:
