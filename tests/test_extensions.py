@@ -130,3 +130,19 @@ def test_the_worked_example_runs_as_the_readme_says(tmp_path):
     trajectory = pd.read_csv(out / "trajectory.csv")
     assert (trajectory["apf_rep_norm"].dropna() == 0).all()  # its own rollout, not the APF's
     assert trajectory["Y_m"].abs().max() > 1.0  # it stepped aside
+
+
+def test_studies_compose_a_users_method_from_their_config_folder(monkeypatch):
+    """The multiverse, the tuning and the NMPC check compose every run through one composer:
+    a user's config folder given as hydra.searchpath reaches it (other hydra.* keys do not),
+    so claims.treatment can name the user's method there too."""
+    from pipeline.studies.multiverse import composer
+
+    monkeypatch.syspath_prepend(str(ROOT / "examples" / "my_planner"))
+    compose, launcher = composer([f"hydra.searchpath=[file://{ROOT / 'examples/my_planner/conf'}]",
+                                  "hydra.job.chdir=false", "claims.treatment=side_step",
+                                  "claims.controls=[baseline]"])
+    cfg = compose(["method=side_step", "scenario=family"])
+    assert launcher is None
+    assert cfg.method_name == "side_step" and cfg.planner._target_ == "my_planner.SideStepPlanner"
+    assert cfg.claims.treatment == "side_step" and cfg.claims.controls == ["baseline"]

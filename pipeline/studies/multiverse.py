@@ -615,7 +615,10 @@ def composer(extra: list[str]):
 
     register_configs()
     register_launcher()
-    run_overrides = [o for o in extra if not o.startswith(("hydra/", "hydra."))]
+    # Hydra's own settings stay out of a run's config, except the search path: a user's config
+    # folder (their own method) must be found when composing every run
+    run_overrides = [o for o in extra if not o.startswith(("hydra/", "hydra."))
+                     or o.startswith("hydra.searchpath")]
     launcher = None
     if any(o.startswith("hydra/launcher=slurm") for o in extra):
         with initialize_config_dir(config_dir=str(CONF_DIR), version_base="1.3"):
