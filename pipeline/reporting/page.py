@@ -17,6 +17,7 @@ import math
 import os
 import platform
 import subprocess
+import time
 import sys
 from pathlib import Path
 
@@ -542,11 +543,19 @@ def build_report(run_root: Path, out_dir: Path, command: str,
     out_dir = Path(out_dir)
     fig_dir, table_dir = out_dir / "figures", out_dir / "tables"
     table_dir.mkdir(parents=True, exist_ok=True)
+    started = time.perf_counter()
+
+    def progress(step: str) -> None:
+        """A plain line per stage on stderr, with the time so far (the report takes a while)."""
+        print(f"report: {step} ({time.perf_counter() - started:.0f} s)", file=sys.stderr,
+              flush=True)
+
     sweep_dirs = tuple(Path(d) for d in sweep_dirs)
     skipped = skipped if skipped is not None else []
     if is_sweep_folder(run_root):
         sweep_dirs, collection = (Path(run_root),) + sweep_dirs, RunCollection()
     else:
+        progress("reading the run folders")
         collection = load_runs(run_root, skipped)
     runs, family_tables, family_info = (collection.runs, collection.family_tables,
                                         collection.family_info)
@@ -606,6 +615,7 @@ def build_report(run_root: Path, out_dir: Path, command: str,
     goal = tuple(first_cfg["scenario"]["goal_xy_m"])
     radius = first_cfg["vehicle"]["footprint_radius_m"]
     appear = next(iter(by_method.values()))["metrics"].get("obstacle_appear_time_s")
+    progress("paper-scenario figures")
     figures = _paper_figures(by_method, scenario, goal, radius, appear, fig_dir)
 
     metrics_by_method = {m: r["metrics"] for m, r in by_method.items()}
@@ -644,6 +654,7 @@ def build_report(run_root: Path, out_dir: Path, command: str,
 
     kinematic = None
     if kinematic_runs:
+        progress("Appendix-A track")
         kinematic = _track_section(kinematic_runs, "kinematic", fig_dir, table_dir, claims,
                                    cfg_claims)
         kinematic["nmpc"] = optional(_nmpc_check, Path(run_root) / "nmpc_check") \
@@ -657,6 +668,7 @@ def build_report(run_root: Path, out_dir: Path, command: str,
     run_notes += family_notes
     if cfg_claims.treatment in family_primary \
             and any(c in family_primary for c in cfg_claims.controls):
+        progress("family ledger (bootstrap intervals) and figures")
         family = _family_section(family_primary, family_info, claim_metrics, fig_dir,
                                  table_dir, cfg_claims, all_tables=family_tables,
                                  settings=collection.family_settings)
@@ -668,6 +680,7 @@ def build_report(run_root: Path, out_dir: Path, command: str,
     figures += robustness["figures"] if robustness else []
     figures += fair_fight["figures"] if fair_fight else []
     _inline(figures, out_dir)
+    progress("writing the page")
     page = env.get_template("report.html.j2").render(
         paper=True, sweeps=sweeps, performance=performance, robustness=robustness,
         fair_fight=fair_fight, looks=looks, scenario=scenario, ablation=ablation, methods=order, figures=figures, metric_rows=metric_rows,
