@@ -179,14 +179,20 @@ def pareto_mask(values: np.ndarray, objectives: list[Objective]) -> np.ndarray:
                      for i, row in enumerate(signed)], dtype=bool)
 
 
-def closest_to_ideal(candidates: np.ndarray, scale_rows: np.ndarray,
-                     objectives: list[Objective]) -> int:
-    """Index of the candidate nearest the ideal point (see :data:`COMPROMISE_RULE`)."""
+def distances_to_ideal(candidates: np.ndarray, scale_rows: np.ndarray,
+                       objectives: list[Objective]) -> np.ndarray:
+    """Each candidate's distance to the ideal point, every objective min-max scaled over
+    ``scale_rows`` (see :data:`COMPROMISE_RULE`)."""
     scale = _signed(scale_rows, objectives)
     low, high = scale.min(axis=0), scale.max(axis=0)
     span = np.where(high > low, high - low, 1.0)
-    scaled = (_signed(candidates, objectives) - low) / span
-    return int(np.argmin(np.linalg.norm(scaled, axis=1)))
+    return np.linalg.norm((_signed(candidates, objectives) - low) / span, axis=1)
+
+
+def closest_to_ideal(candidates: np.ndarray, scale_rows: np.ndarray,
+                     objectives: list[Objective]) -> int:
+    """Index of the candidate nearest the ideal point (see :data:`COMPROMISE_RULE`)."""
+    return int(np.argmin(distances_to_ideal(candidates, scale_rows, objectives)))
 
 
 # --- the tuning loop ------------------------------------------------------------------------
@@ -384,19 +390,14 @@ def pick_settings(trials: pd.DataFrame, space: TuneSpace) -> dict[str, pd.DataFr
     for method in space.methods:
         front = trials[(trials["method"] == method) & trials["pareto"]].copy()
         if not len(front):
-            raise NoFeasibleSettingError(f"no feasible setting of {method}: every trial collided more "
-                               "often than the untuned control; widen its search space or "
-                               "raise n_trials")
-        values = front[columns].to_numpy(float)
-        signed = _signed(values, space.objectives)
-        low, high = _signed(scale, space.objectives).min(axis=0), \
-            _signed(scale, space.objectives).max(axis=0)
-        span = np.where(high > low, high - low, 1.0)
-        front["distance_to_ideal"] = np.linalg.norm((signed - low) / span, axis=1)
+            raise NoFeasibleSettingError(
+                f"no feasible setting of {method}: every trial collided more often than the "
+                "untuned control; widen its search space or raise n_trials")
+        front["distance_to_ideal"] = distances_to_ideal(front[columns].to_numpy(float), scale,
+                                                        space.objectives)
         front = front.sort_values(["distance_to_ideal", "trial"])
-        front["compromise"] = False
-        front.iloc[closest_to_ideal(front[columns].to_numpy(float), scale,
-                                    space.objectives), front.columns.get_loc("compromise")] = True
+        # the compromise: the nearest to the ideal point (first after sorting)
+        front["compromise"] = np.arange(len(front)) == 0
         chosen[method] = front.head(space.max_heldout_settings)
     return chosen
 

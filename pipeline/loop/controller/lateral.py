@@ -137,9 +137,9 @@ class CondensedPrediction:
         Response of each state at steps 1..N to the free moves ``U``.
     free_map : ndarray, shape (5 N, 5)
         ``A^k`` stacked (step-major): the free response is ``free_map @ x0`` without disturbance.
-    gamma_w, free_w_map : ndarray, shapes (4 N, Nc) and (4 N, 5)
-        The weighted cost rows (``sqrt(q)`` times y, epsi, r, delta; ordered by term, then step)
-        and their free part's map from ``x0``.
+    gamma_w : ndarray, shape (4 N, Nc)
+        The weighted cost rows (``sqrt(q)`` times y, epsi, r, delta; ordered by term, then
+        step).
     hessian_u : ndarray, shape (Nc, Nc)
         ``2 (gamma_w' gamma_w + r_u T T')``, the cost's Hessian in ``U``.
     chol : ndarray, shape (Nc, Nc)
@@ -154,7 +154,6 @@ class CondensedPrediction:
     gamma: np.ndarray
     free_map: np.ndarray
     gamma_w: np.ndarray
-    free_w_map: np.ndarray
     root_weights: np.ndarray
     hessian_u: np.ndarray
     chol: np.ndarray
@@ -189,8 +188,6 @@ class CondensedPrediction:
         # rows ordered by cost term, then step: [y_1..y_N, epsi_1.., r_1.., delta_1..]
         gamma_w = (root[:, None, None] * gamma[:, COST_STATES, :].transpose(1, 0, 2)
                    ).reshape(-1, nc)
-        free_w_map = (root[:, None, None] * powers[:, COST_STATES, :].transpose(1, 0, 2)
-                      ).reshape(-1, 5)
         half_hessian = gamma_w.T @ gamma_w + float(weights[4]) * blocking @ blocking.T
         chol = cholesky(half_hessian, lower=False)
         chol_rhs_map = solve_triangular(chol, gamma_w.T, trans="T", lower=False)
@@ -198,7 +195,7 @@ class CondensedPrediction:
         # threads then spin on the other core (measured: 2x the CPU time of the product)
         fortran = np.asfortranarray
         return cls(model, gamma, fortran(powers.reshape(-1, 5)), fortran(gamma_w),
-                   fortran(free_w_map), root, 2.0 * half_hessian, chol, fortran(chol_rhs_map),
+                   root, 2.0 * half_hessian, chol, fortran(chol_rhs_map),
                    fortran(2.0 * gamma_w.T))
 
     def free_response(self, x0: np.ndarray, disturbance: np.ndarray) -> np.ndarray:
