@@ -5,6 +5,7 @@ PY          := $(VENV)/bin/python
 STAMP       := $(VENV)/.installed
 RUNS        ?= outputs
 FAMILY_SIZE ?= 200
+KINEMATIC_FAMILY_SIZE ?= 50
 REPORT      ?= reports/latest
 PYTEST_ARGS ?=
 
@@ -14,7 +15,7 @@ TUNE        ?= default
 export SLURM_CI_DIR ?= /tmp/slurm-ci
 LAUNCHER    ?= basic
 
-.PHONY: help install reproduce experiment report sweep verify ablation multiverse tune nmpc-check test test-slurm test-all bench clean
+.PHONY: help install reproduce experiment report screenshot sweep verify ablation multiverse tune nmpc-check test test-slurm test-all bench clean
 
 help:  ## list the targets
 	@grep -E '^[a-zA-Z_-]+:.*## ' $(MAKEFILE_LIST) | awk -F':.*## ' '{printf "  %-12s %s\n", $$1, $$2}'
@@ -28,14 +29,18 @@ $(STAMP): pyproject.toml constraints.txt
 install: $(STAMP)  ## create .venv and install the project with pinned versions
 
 experiment: $(STAMP)  ## run every method on the paper scenario and on the scenario family
-	rm -rf $(RUNS)/paper $(RUNS)/kinematic $(RUNS)/kinematic_readings $(RUNS)/family  # code may have changed: no reuse here
+	rm -rf $(RUNS)/paper $(RUNS)/kinematic $(RUNS)/kinematic_readings $(RUNS)/kinematic_family $(RUNS)/family  # code may have changed: no reuse here
 	$(PY) -m pipeline.run experiment=paper hydra.sweep.dir=$(RUNS)/paper
 	$(PY) -m pipeline.run experiment=kinematic hydra.sweep.dir=$(RUNS)/kinematic
 	$(PY) -m pipeline.run experiment=kinematic_readings hydra.sweep.dir=$(RUNS)/kinematic_readings
+	$(PY) -m pipeline.run experiment=kinematic_family hydra.sweep.dir=$(RUNS)/kinematic_family scenario.family.size=$(KINEMATIC_FAMILY_SIZE)
 	$(PY) -m pipeline.run experiment=family hydra.sweep.dir=$(RUNS)/family scenario.family.size=$(FAMILY_SIZE)
 
 report: $(STAMP)  ## rebuild the HTML report from existing run folders (no simulation)
 	$(PY) -m pipeline.report $(RUNS) --out $(REPORT) --command "make reproduce"
+
+screenshot: $(STAMP)  ## the README's screenshot (docs/report_screenshot.png) from make reproduce's own report
+	$(PY) -m pipeline.reporting.screenshot $(REPORT)/index.html docs/report_screenshot.png
 
 reproduce: experiment report  ## set up, run the experiment and write reports/latest/index.html (its last lines: the verdicts in words)
 

@@ -11,7 +11,7 @@ from __future__ import annotations
 import hashlib
 import json
 import math
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -25,7 +25,7 @@ from pipeline.loop.qp_memory import MAX_HORIZON
 from pipeline.loop.settings import (ControllerConfig, FamilyConfig, ModelConfig, ObstacleConfig,
                                     PlannerConfig, ScenarioConfig, VehicleConfig)
 from pipeline.register import INTERPRETATION_REGISTER, RegisterEntry
-from pipeline.validation import safe_name
+from pipeline.validation import FrozenAfterValidation, safe_name
 
 __all__ = ["CONF_DIR", "ClaimsConfig", "Objective", "TuneConfig", "schema_from_data", "ConfigError", "ControllerConfig", "ExperimentConfig", "FamilyConfig",
            "INTERPRETATION_REGISTER", "MAX_HORIZON", "MetricsConfig", "ModelConfig",
@@ -46,7 +46,7 @@ CONF_DIR = _conf_dir()
 
 
 @dataclass
-class RunConfig:
+class RunConfig(FrozenAfterValidation):
     """Bookkeeping of one run."""
 
     seed: int = 0
@@ -60,7 +60,7 @@ class RunConfig:
 
 
 @dataclass
-class ExperimentConfig:
+class ExperimentConfig(FrozenAfterValidation):
     """The composed configuration of one closed-loop run."""
 
     vehicle: VehicleConfig = MISSING
@@ -84,7 +84,8 @@ class ExperimentConfig:
                                   f"(centre distance >= {obs.radius_m + self.vehicle.footprint_radius_m} m)")
         goal_tol = self.metrics.goal_tolerance_m
         if goal_tol is None:
-            self.metrics.goal_tolerance_m = self.scenario.goal_tolerance_m
+            self.metrics = replace(self.metrics,
+                                   goal_tolerance_m=self.scenario.goal_tolerance_m)
         elif not math.isclose(goal_tol, self.scenario.goal_tolerance_m):
             raise ConfigError("metrics.goal_tolerance_m", goal_tol,
                               f"equal to scenario.goal_tolerance_m "
@@ -96,6 +97,7 @@ class ExperimentConfig:
         if self.planner.speed_floor_mps < self.vehicle.min_model_speed_mps:
             raise ConfigError("planner.speed_floor_mps", self.planner.speed_floor_mps,
                               f">= vehicle.min_model_speed_mps ({self.vehicle.min_model_speed_mps})")
+        self.freeze()  # checked: from here on read-only (a change is a new, checked object)
 
     @property
     def method_name(self) -> str:
@@ -113,6 +115,8 @@ class ExperimentConfig:
         data.pop("claims", None)
         data.pop("tune", None)
         data.pop("features", None)
+        if data["scenario"].get("obstacle_anchor") == "world":
+            data["scenario"].pop("obstacle_anchor")  # the default reading, as before the key
         for section in ("planner", "controller"):
             # a plug-in's class and settings change the run; their absence does not
             if data[section].get("_target_") is None:

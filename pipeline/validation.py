@@ -85,3 +85,31 @@ def resolve_target(key: str, value: str):
         raise ConfigError(key, value, f"a class importable as module.Class (module "
                           f"{module_name} has no {name})")
     return target
+
+
+class FrozenAfterValidation:
+    """Mixin of the settings dataclasses: mutable while Hydra and OmegaConf build and check
+    them, read-only once :meth:`freeze` runs (the composed :class:`ExperimentConfig` freezes
+    itself after its checks). A changed setting is a new, checked object:
+    ``dataclasses.replace(cfg.planner, beta=0.5)`` or a compose with overrides."""
+
+    def __setattr__(self, name: str, value: Any) -> None:
+        if self.__dict__.get("_frozen", False):
+            import dataclasses
+
+            raise dataclasses.FrozenInstanceError(
+                f"cannot assign {type(self).__name__}.{name}: a validated configuration is "
+                "read-only (use dataclasses.replace, or compose with an override)")
+        object.__setattr__(self, name, value)
+
+    def freeze(self) -> "FrozenAfterValidation":
+        """Make this object and every settings object inside it read-only; returns it."""
+        import dataclasses
+
+        for f in dataclasses.fields(self):  # type: ignore[arg-type]
+            value = getattr(self, f.name)
+            for item in value if isinstance(value, (list, tuple)) else (value,):
+                if isinstance(item, FrozenAfterValidation):
+                    item.freeze()
+        object.__setattr__(self, "_frozen", True)
+        return self

@@ -19,7 +19,8 @@ def paper_runs(root: Path, make_config) -> None:
     for method in METHODS:
         run_experiment(make_config([f"method={method}"]), root / "paper" / method)
     # the Appendix-A track as experiment=kinematic runs it (its baseline: the printed formula)
-    for planner in ("baseline_printed", "baseline_matched", "improved", "velocity_aware"):
+    for planner in ("baseline_printed", "baseline_matched", "improved", "velocity_aware",
+                    "mpc_no_apf"):
         run_experiment(make_config(["experiment=kinematic", f"planner={planner}"]),
                        root / "kinematic" / planner)
 
@@ -42,6 +43,15 @@ def test_verify_reports_a_changed_number(tmp_path, make_config):
                                                            + text[2:]) + "\n")
     problems = verify(tmp_path, reference)
     assert len(problems) == 1 and "min_clearance_m" in problems[0]
+    # rows are matched by (track, method): the reference in another order is no difference
+    (reference / "paper_metrics.csv").write_text("\n".join([text[0]] + text[1:][::-1]) + "\n")
+    assert verify(tmp_path, reference) == []
+    # a row missing from the rerun is named by its key
+    extra = text[1].split(",")
+    extra[1] = "someone_else"
+    (reference / "paper_metrics.csv").write_text("\n".join(text + [",".join(extra)]) + "\n")
+    assert verify(tmp_path, reference) == [f"paper_metrics.csv: row {extra[0]}, someone_else is "
+                                           "in the reference, not in the rerun"]
 
 
 @pytest.mark.slow

@@ -48,6 +48,7 @@ SWITCH_TESTS = {
     "claims.estimator": "here", "claims.test": "here", "claims.pairs": "test_claims",
     "claims.margins": "here", "claims.comparable_clearance_m": "here",
     "controller.backend": "test_kinematic", "planner.normalize_step": "test_kinematic",
+    "scenario.obstacle_anchor": "here",
 
 
 }
@@ -349,3 +350,34 @@ def test_comparable_clearance_marks_the_kinematic_comparison(tmp_path, make_conf
                            ClaimsConfig(comparable_clearance_m=5.0))
     assert strict["claims"][1]["vs baseline"] == "not comparable"
     assert loose["claims"][1]["vs baseline"] == "within margin"
+
+
+def test_obstacle_anchor_places_the_obstacle_relative_to_the_vehicle(make_config):
+    """Under obstacle_anchor=vehicle an obstacle appears shifted by the vehicle's offset from
+    its nominal place (start + speed * appear time along the line) at that instant; before it
+    appears and under "world" it is where the config puts it."""
+    from pipeline.loop.scenario import build_scenario
+    from pipeline.loop.simulate import simulate
+
+    overrides = ["controller=kinematic", "scenario.initial_speed_mps=0.0", "scenario.n_steps=40",
+                 "planner=baseline"]
+    world = make_config(overrides)
+    anchored = make_config(overrides + ["scenario.obstacle_anchor=vehicle"])
+    assert world.config_hash() != anchored.config_hash()
+    t_world = simulate(world, build_scenario(world.scenario)).trajectory
+    t_anch = simulate(anchored, build_scenario(anchored.scenario)).trajectory
+    obstacle = world.scenario.obstacles[0]
+    k = int(round(obstacle.appear_time_s / world.scenario.sample_time_s))
+    # where the vehicle is at the appearance step, against where 3 m/s would have put it
+    vehicle = t_anch[["X_m", "Y_m"]].to_numpy()[k]
+    nominal = np.array([world.scenario.speed_mps * obstacle.appear_time_s, 0.0])
+    assert vehicle[0] < nominal[0] - 2.0  # started at rest: well behind its nominal place
+    expected = np.array([obstacle.x_m, obstacle.y_m]) + vehicle - nominal
+    got = t_anch[["obs0_x_m", "obs0_y_m"]].to_numpy()
+    np.testing.assert_allclose(got[k], expected, atol=1e-9)
+    # it then moves at its own velocity from there
+    np.testing.assert_allclose(got[k + 5], expected + 0.5 * np.array(
+        [obstacle.vx_mps, obstacle.vy_mps]), atol=1e-9)
+    np.testing.assert_allclose(t_world[["obs0_x_m", "obs0_y_m"]].to_numpy()[k],
+                               [obstacle.x_m, obstacle.y_m], atol=1e-9)
+    np.testing.assert_allclose(got[k - 1], [obstacle.x_m, obstacle.y_m], atol=1e-9)

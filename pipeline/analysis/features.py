@@ -16,11 +16,11 @@ import math
 from dataclasses import dataclass
 from typing import Callable
 
-from pipeline.validation import at_least
+from pipeline.validation import FrozenAfterValidation, at_least
 
 
 @dataclass
-class FeatureConfig:
+class FeatureConfig(FrozenAfterValidation):
     """Thresholds of the features (``features.*``); each names the metric it reads."""
 
     slow_reaction_s: float = 0.5                 # reaction_delay_s at or above

@@ -18,14 +18,14 @@ import pandas as pd
 
 from pipeline.analysis.metrics import METRIC_KEYS
 from pipeline.errors import ConfigError
-from pipeline.validation import choice
+from pipeline.validation import FrozenAfterValidation, choice
 
 #: Statistics over a family's members: mean, median, or a quantile ``q<percent>`` (q90).
 STATISTIC_PATTERN = re.compile(r"^(mean|median|q(100|[1-9]?[0-9]))$")
 
 
 @dataclass
-class Objective:
+class Objective(FrozenAfterValidation):
     """One objective: ``statistic`` of ``metric`` over the members, to ``direction``.
 
     Members without a value (e.g. no reaction to time) are left out of the statistic; when no
@@ -56,7 +56,7 @@ class Objective:
 
 
 @dataclass
-class TuneConfig:
+class TuneConfig(FrozenAfterValidation):
     """``tune.*``: what ``pipeline.run`` returns (outside the run's config hash)."""
 
     objectives: List[Objective] = field(default_factory=lambda: [Objective()])

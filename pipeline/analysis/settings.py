@@ -7,11 +7,11 @@ from dataclasses import dataclass, field
 from typing import Dict, List, Optional
 
 from pipeline.errors import ConfigError
-from pipeline.validation import at_least, between, choice
+from pipeline.validation import FrozenAfterValidation, at_least, between, choice
 
 
 @dataclass
-class MetricsConfig:
+class MetricsConfig(FrozenAfterValidation):
     """Thresholds and readings of the Table 1 metrics (definitions: :mod:`pipeline.analysis.metrics`).
 
     The ``*_definition``-like string switches select which reading a claim's primary metric
@@ -95,7 +95,7 @@ def _default_margin_reasons() -> dict:
 
 
 @dataclass
-class ClaimsConfig:
+class ClaimsConfig(FrozenAfterValidation):
     """How paired differences become one of four outcomes.
 
     ``margins`` is each claim's smallest effect of interest (units of its primary metric; C0: a

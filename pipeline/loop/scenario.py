@@ -86,6 +86,7 @@ class Scenario:
     obstacle_velocity_mps: np.ndarray
     obstacle_radius_m: np.ndarray
     obstacle_appear_s: np.ndarray
+    obstacle_anchor: str = "world"
 
     @property
     def n_obstacles(self) -> int:
@@ -104,6 +105,23 @@ class Scenario:
         visible = time_s + 1e-9 >= self.obstacle_appear_s
         return ObstacleSnapshot(positions, self.obstacle_velocity_mps.copy(),
                                 self.obstacle_radius_m.copy(), visible)
+
+
+    def nominal_position_m(self, time_s: float) -> np.ndarray:
+        """Where a vehicle at ``speed_mps`` along the start-goal line would be at ``time_s``."""
+        d = self.goal_m - self.start_m
+        return self.start_m + self.speed_mps * time_s * d / np.linalg.norm(d)
+
+    def anchored(self, which: np.ndarray, vehicle_m: np.ndarray) -> "Scenario":
+        """The scenario with obstacles ``which`` (bool mask) moved by the vehicle's offset from
+        its nominal place at their appearance (``obstacle_anchor="vehicle"``)."""
+        from dataclasses import replace
+
+        starts = self.obstacle_start_m.copy()
+        for j in np.flatnonzero(which):
+            starts[j] += np.asarray(vehicle_m, float) \
+                - self.nominal_position_m(float(self.obstacle_appear_s[j]))
+        return replace(self, obstacle_start_m=starts)
 
 
 def build_scenario(cfg: ScenarioConfig) -> Scenario:
@@ -135,6 +153,7 @@ def build_scenario(cfg: ScenarioConfig) -> Scenario:
                                        dtype=float).reshape(-1, 2),
         obstacle_radius_m=np.array([o.radius_m for o in obs], dtype=float),
         obstacle_appear_s=np.array([o.appear_time_s for o in obs], dtype=float),
+        obstacle_anchor=str(getattr(cfg, "obstacle_anchor", "world")),
     )
 
 

@@ -17,12 +17,12 @@ from omegaconf import MISSING
 
 from pipeline.errors import ConfigError
 from pipeline.loop.qp_memory import MAX_HORIZON, qp_memory_gib
-from pipeline.validation import (at_least, between, choice, finite, pair, safe_name,
+from pipeline.validation import (FrozenAfterValidation, at_least, between, choice, finite, pair, safe_name,
                                  target_path)
 
 
 @dataclass
-class VehicleConfig:
+class VehicleConfig(FrozenAfterValidation):
     """Vehicle parameters for the lateral model and the nonlinear plant (SI units)."""
 
     name: str = MISSING
@@ -62,7 +62,7 @@ class VehicleConfig:
 
 
 @dataclass
-class PlannerConfig:
+class PlannerConfig(FrozenAfterValidation):
     """APF rollout settings. ``baseline`` and ``improved`` are two presets of these switches."""
 
     name: str = MISSING
@@ -120,7 +120,7 @@ class PlannerConfig:
 
 
 @dataclass
-class ModelConfig:
+class ModelConfig(FrozenAfterValidation):
     """Settings of the MPC's lateral prediction model."""
 
     b2_heading_entry: float = -1.0
@@ -134,7 +134,7 @@ class ModelConfig:
 
 
 @dataclass
-class ControllerConfig:
+class ControllerConfig(FrozenAfterValidation):
     """Lateral MPC settings (CVXPY + Clarabel)."""
 
     name: str = MISSING
@@ -243,7 +243,7 @@ class ControllerConfig:
 
 
 @dataclass
-class ObstacleConfig:
+class ObstacleConfig(FrozenAfterValidation):
     """One circular obstacle, invisible before ``appear_time_s``, then moving at constant velocity."""
 
     x_m: float = MISSING
@@ -255,7 +255,7 @@ class ObstacleConfig:
 
 
 @dataclass
-class FamilyConfig:
+class FamilyConfig(FrozenAfterValidation):
     """Seeded random draws of obstacles around a base scenario.
 
     Member ``i`` of seed ``s`` is drawn from ``numpy.random.default_rng([s, i])`` alone, so it is
@@ -313,7 +313,7 @@ class FamilyConfig:
 
 
 @dataclass
-class ScenarioConfig:
+class ScenarioConfig(FrozenAfterValidation):
     """Start, goal, speed, run length and obstacles of one closed-loop run."""
 
     name: str = MISSING
@@ -329,6 +329,11 @@ class ScenarioConfig:
     obstacles: List[ObstacleConfig] = field(default_factory=list)
     allow_no_obstacles: bool = False
     family: Optional[FamilyConfig] = None
+    # "world": obstacles appear where the config puts them; "vehicle": x_m, y_m are read for a
+    # vehicle at its nominal place (start + speed_mps * appear_time_s along the start-goal
+    # line) and shifted with the vehicle's actual position when the obstacle appears (Figure 1:
+    # "interrupted after the mobile platform moved in three seconds")
+    obstacle_anchor: str = "world"
 
     def __post_init__(self) -> None:
         pair("scenario.start_xy_m", self.start_xy_m)
@@ -351,6 +356,9 @@ class ScenarioConfig:
         safe_name("scenario.name", self.name)
         if self.initial_speed_mps is not None:
             between("scenario.initial_speed_mps", self.initial_speed_mps, 0.0, 40.0)
+        if self.obstacle_anchor not in ("world", "vehicle"):
+            raise ConfigError("scenario.obstacle_anchor", self.obstacle_anchor,
+                              "one of 'world', 'vehicle'")
         for key in ("n_steps", "plant_substeps"):
             value = getattr(self, key)
             if isinstance(value, bool) or not isinstance(value, int) or value < 1:

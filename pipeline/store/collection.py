@@ -54,7 +54,7 @@ class RunCollection:
 
 
 EXCLUDED_SECTIONS = ("sweeps", "ablation", "interpretations", "multiverse", "tune",
-                     "kinematic_readings")
+                     "kinematic_readings", "kinematic_family")
 
 
 def _flatten(config: dict, prefix: str = "") -> dict:

@@ -49,8 +49,20 @@ def load_family_jobs(root: Path) -> dict[str, pd.DataFrame]:
     return tables
 
 
+def ablation_roles(tables: dict[str, pd.DataFrame], cfg) -> tuple[str, str]:
+    """The bundle and the reference of the ablation: the claims' treatment and first control
+    (``claims.treatment``, ``claims.controls[0]``) when the ablation has them, else the
+    paper's improved and baseline."""
+    treatment = getattr(cfg, "treatment", "improved")
+    controls = list(getattr(cfg, "controls", None) or ["baseline"])
+    bundle = treatment if treatment in tables else "improved"
+    reference = controls[0] if controls[0] in tables else "baseline"
+    return bundle, reference
+
+
 def ablation_effects(tables: dict[str, pd.DataFrame], cfg) -> pd.DataFrame:
-    """Paired effect of every configuration versus the baseline, per claim, computed as the
+    """Paired effect of every configuration versus the reference (:func:`ablation_roles`:
+    the first control, by default the baseline), per claim, computed as the
     claims ledger does (:func:`pipeline.analysis.claims.compare`: pairs where neither collided, missing
     values apart, Hodges-Lehmann estimate, bootstrap interval, unadjusted test).
 
@@ -61,11 +73,14 @@ def ablation_effects(tables: dict[str, pd.DataFrame], cfg) -> pd.DataFrame:
         claimed improvement), ``ci_low``, ``ci_high``, ``outcome`` against the claim's margin,
         counts; plus collision and non-recovery counts of the configuration.
     """
-    baseline = tables["baseline"]
-    order = (["improved", "baseline_matched"] + [f"baseline+{r}" for r in REVISIONS]
+    bundle, reference = ablation_roles(tables, cfg)
+    baseline = tables[reference]
+    order = ([bundle, "improved", "baseline_matched"] + [f"baseline+{r}" for r in REVISIONS]
              + [f"improved-{r}" for r in REVISIONS])
+    # a user's own configurations (any other label) follow the paper's, in sorted order
+    order = list(dict.fromkeys(order + sorted(tables)))
     rows = []
-    for label in [o for o in order if o in tables]:
+    for label in [o for o in order if o in tables and o != reference]:
         table = tables[label]
         for claim in CLAIMS:
             result = compare(table, baseline, claim, cfg)
@@ -100,18 +115,21 @@ def attribution_sentences(effects: pd.DataFrame, tables: dict[str, pd.DataFrame]
     """
     sentences = {}
     cap_share = None
-    if tables is not None and "improved" in tables \
-            and "step_cap_binding_share" in tables["improved"]:
-        cap_share = float(tables["improved"]["step_cap_binding_share"].mean())
+    bundle = ablation_roles(tables, cfg)[0] if tables is not None and cfg is not None \
+        else "improved"
+    if tables is not None and bundle in tables \
+            and "step_cap_binding_share" in tables[bundle]:
+        cap_share = float(tables[bundle]["step_cap_binding_share"].mean())
     binding = cap_share is not None and cfg is not None and cap_share >= cfg.cap_binding_share
     for claim in CLAIMS:
         part = effects[effects["claim"] == claim.claim_id].set_index("configuration")
-        if "improved" not in part.index:
+        if bundle not in part.index:
             continue
-        total = part.loc["improved", "effect"]
+        total = part.loc[bundle, "effect"]
         direction = "improves" if total < 0 else ("worsens" if total > 0 else "does not change")
-        text = (f"{claim.claim_id} ({claim.primary_metric}): the improved bundle {direction} it "
-                f"(effect {total:+.3g}, {part.loc['improved', 'outcome']}).")
+        name = "the improved bundle" if bundle == "improved" else f"{bundle}"
+        text = (f"{claim.claim_id} ({claim.primary_metric}): {name} {direction} it "
+                f"(effect {total:+.3g}, {part.loc[bundle, 'outcome']}).")
         singles = part.loc[[f"baseline+{r}" for r in REVISIONS if f"baseline+{r}" in part.index]]
         if binding:
             # the cap makes these two revisions inactive: do not credit them
@@ -173,10 +191,11 @@ def interpretation_flips(root: Path, cfg) -> pd.DataFrame | None:
     verdicts = {}
     for variant in variants:
         tables = load_family_jobs(root / variant)
-        if "baseline" in tables and "improved" in tables:
-            ledger = family_ledger(tables, cfg, comparisons=("baseline",))
+        bundle, reference = ablation_roles(tables, cfg)
+        if reference in tables and bundle in tables:
+            ledger = family_ledger(tables, cfg, improved=bundle, comparisons=(reference,))
             verdicts[variant] = {r.claim_id: str(r.outcome) for r in ledger}
-            verdicts[variant]["collisions_improved"] = Tally.of(tables["improved"]).collisions
+            verdicts[variant]["collisions_improved"] = Tally.of(tables[bundle]).collisions
     if "default" not in verdicts:
         return None
     rows = []

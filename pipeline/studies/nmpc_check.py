@@ -20,8 +20,10 @@ import pandas as pd
 from pipeline.analysis.claims import family_ledger
 from pipeline.store.runs import json_safe, write_csv_atomic, write_json_atomic
 
-#: Methods of the kinematic track (experiment=kinematic).
+#: Methods of the kinematic track (experiment=kinematic) and the planner preset of each: the
+#: baseline under the track's default reading (the printed formula).
 TRACK_METHODS = ("baseline", "baseline_matched", "improved")
+TRACK_PLANNERS = {"baseline": "baseline_printed"}
 
 
 def _pair(cfg_ltv, cfg_nmpc, scenario) -> dict:
@@ -65,7 +67,7 @@ def nmpc_agreement(compose, out_dir: Path, n_members: int = 50, log=print) -> di
     out_dir.mkdir(parents=True, exist_ok=True)
     rows, tables = [], {"ltv": {}, "nmpc": {}}
     for method in TRACK_METHODS:
-        base = ["experiment=kinematic", f"planner={method}"]
+        base = ["experiment=kinematic", f"planner={TRACK_PLANNERS.get(method, method)}"]
         paper_ltv, paper_nmpc = compose(base), compose(base + ["controller.backend=nmpc"])
         jobs = [("paper", paper_ltv, paper_nmpc, build_scenario(paper_ltv.scenario))]
         family = compose(base + ["scenario=family", f"scenario.family.size={n_members}"])

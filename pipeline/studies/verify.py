@@ -1,10 +1,12 @@
 """Compare fresh results with the committed reference: ``python -m pipeline.verify RUNS REF``.
 
 ``reports/reference/`` holds the summary of the default ``make reproduce``:
-``paper_metrics.csv`` (every method and track on the paper scenario) and, when the family was
-run, ``claims_ledger.csv``. Numbers must agree within ``rel 1e-6 or abs 1e-6`` (deterministic
-code; the slack covers floating-point differences between BLAS builds), labels and verdicts
-exactly. ``--update`` rewrites the reference (say why in the commit).
+``paper_metrics.csv`` (every method and track on the paper scenario) and, when the families
+were run, ``claims_ledger.csv`` (the lateral family) and ``claims_ledger_kinematic_family.csv``
+(the Appendix-A track's family). Rows are matched by their key (track and method; claim and
+comparison), whatever their order. Numbers must agree within ``rel 1e-6 or abs 1e-6``
+(deterministic code; the slack covers floating-point differences between BLAS builds), labels
+and verdicts exactly. ``--update`` rewrites the reference (say why in the commit).
 """
 
 from __future__ import annotations
@@ -22,6 +24,10 @@ REL_TOL = 1e-6
 ABS_TOL = 1e-6
 PAPER_FILE = "paper_metrics.csv"
 LEDGER_FILE = "claims_ledger.csv"
+KINEMATIC_LEDGER_FILE = "claims_ledger_kinematic_family.csv"
+#: the columns that name a row of each file
+KEYS = {PAPER_FILE: ("track", "method"), LEDGER_FILE: ("claim", "comparison"),
+        KINEMATIC_LEDGER_FILE: ("claim", "comparison")}
 LEDGER_COLUMNS = ["claim", "comparison", "metric", "outcome", "estimate", "ci_low", "ci_high",
                   "p_holm", "prob_improvement", "n_better", "n_tied", "n_worse", "n_missing",
                   "n_pairs", "outcome_all_pairs", "paper_scenario"]
@@ -55,19 +61,26 @@ def paper_metrics_table(runs_root: Path) -> pd.DataFrame:
                                               if c not in ("track", "method"))]
 
 
-def ledger_table(runs_root: Path) -> pd.DataFrame | None:
-    """The family claims ledger, if the family was run."""
+def ledger_table(runs_root: Path, kinematic: bool = False) -> pd.DataFrame | None:
+    """The family claims ledger, if the family was run (``kinematic``: the Appendix-A
+    track's family under ``runs_root/kinematic_family``, without the paper-scenario column)."""
     from pipeline.analysis.claims import family_ledger
     from pipeline.store.collection import load_runs
 
+    if kinematic:
+        runs_root = Path(runs_root) / "kinematic_family"
+        if not runs_root.is_dir():
+            return None
     collection = load_runs(runs_root)
     tables = collection.family_tables
     if "baseline" not in tables or "improved" not in tables:
         return None
     paper = {}
     try:
-        frame = paper_metrics_table(runs_root)
-        paper = {r["method"]: r for r in frame[frame["track"] == "lateral"].to_dict("records")}
+        if not kinematic:
+            frame = paper_metrics_table(runs_root)
+            paper = {r["method"]: r
+                     for r in frame[frame["track"] == "lateral"].to_dict("records")}
     except FileNotFoundError:
         pass
     # the claims settings the runs were made with
@@ -75,22 +88,32 @@ def ledger_table(runs_root: Path) -> pd.DataFrame | None:
     return family_ledger(tables, cfg, paper or None).to_frame().reindex(columns=LEDGER_COLUMNS)
 
 
-def compare_tables(fresh: pd.DataFrame, reference: pd.DataFrame, name: str) -> list[str]:
-    """Differences between two tables (numbers within tolerance, the rest exactly)."""
+def compare_tables(fresh: pd.DataFrame, reference: pd.DataFrame, name: str,
+                   key: tuple[str, ...] | None = None) -> list[str]:
+    """Differences between two tables (numbers within tolerance, the rest exactly), rows
+    matched by ``key`` (default: the first two columns) in any order."""
     problems = []
     if list(fresh.columns) != list(reference.columns):
         missing = sorted(set(reference.columns) - set(fresh.columns))
         extra = sorted(set(fresh.columns) - set(reference.columns))
         problems.append(f"{name}: columns differ (missing {missing}, new {extra})")
-    if len(fresh) != len(reference):
-        problems.append(f"{name}: {len(fresh)} rows, reference has {len(reference)}")
-        return problems
-    for column in [c for c in reference.columns if c in fresh.columns]:
-        for i, (a, b) in enumerate(zip(fresh[column], reference[column])):
-            if _same(a, b):
-                continue
-            problems.append(f"{name}: row {i} ({fresh.iloc[i, 0]}, {fresh.iloc[i, 1]}) "
-                            f"{column}: {a!r} vs reference {b!r}")
+    key = tuple(key or reference.columns[:2])
+    if not set(key) <= set(fresh.columns) & set(reference.columns):
+        return problems + [f"{name}: no key columns {list(key)}"]
+
+    def rows_by_key(table: pd.DataFrame) -> dict:
+        return {tuple(str(v) for v in row[list(key)]): row for _, row in table.iterrows()}
+
+    ours, theirs = rows_by_key(fresh), rows_by_key(reference)
+    for k in theirs.keys() - ours.keys():
+        problems.append(f"{name}: row {', '.join(k)} is in the reference, not in the rerun")
+    for k in ours.keys() - theirs.keys():
+        problems.append(f"{name}: row {', '.join(k)} is new (not in the reference)")
+    for k in [k for k in theirs if k in ours]:
+        for column in [c for c in reference.columns if c in fresh.columns]:
+            a, b = ours[k][column], theirs[k][column]
+            if not _same(a, b):
+                problems.append(f"{name}: row {', '.join(k)} {column}: {a!r} vs reference {b!r}")
     return problems
 
 
@@ -108,9 +131,10 @@ def verify(runs_root: Path, reference_dir: Path, update: bool = False) -> list[s
     """Compare (or, with ``update``, rewrite) the reference; returns the differences."""
     reference_dir = Path(reference_dir)
     fresh = {PAPER_FILE: paper_metrics_table(runs_root)}
-    ledger = ledger_table(runs_root)
-    if ledger is not None:
-        fresh[LEDGER_FILE] = ledger
+    for file, kinematic in ((LEDGER_FILE, False), (KINEMATIC_LEDGER_FILE, True)):
+        ledger = ledger_table(runs_root, kinematic=kinematic)
+        if ledger is not None:
+            fresh[file] = ledger
     if update:
         for name, table in fresh.items():
             write_csv_atomic(reference_dir / name, table)
@@ -123,7 +147,8 @@ def verify(runs_root: Path, reference_dir: Path, update: bool = False) -> list[s
             continue
         # round-trip through CSV so both sides have the same types
         problems += compare_tables(pd.read_csv(pd.io.common.StringIO(
-            table.to_csv(index=False, float_format="%.10g"))), pd.read_csv(path), name)
+            table.to_csv(index=False, float_format="%.10g"))), pd.read_csv(path), name,
+            KEYS.get(name))
     return problems
 
 
