@@ -92,8 +92,10 @@ def test_a_planner_from_outside_the_package_runs_and_is_judged(tmp_path):
     assert proc.returncode == 0, proc.stderr[-2000:]
     ledger = pd.read_csv(tmp_path / "report" / "tables" / "claims_ledger.csv")
     assert set(ledger["comparison"]) == {"baseline"} and len(ledger) == 7
-    assert "straight vs <strong>baseline</strong>" in (tmp_path / "report" /
-                                                       "index.html").read_text()
+    page = (tmp_path / "report" / "index.html").read_text()
+    answer = page[page.index('id="answer"'):]
+    answer = answer[:answer.index("</div>")]
+    assert "(straight against each control" in answer and "</span> vs baseline" in answer
 
 
 def test_a_controller_from_outside_the_package_and_bad_targets(tmp_path):

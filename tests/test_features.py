@@ -5,6 +5,8 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
+import pandas as pd
 import pytest
 
 from pipeline.analysis.features import FEATURES, FeatureConfig, feature_row, paper_likeness
@@ -66,11 +68,44 @@ def test_report_has_the_feature_table_and_what_the_baseline_apf_adds(tmp_path, m
     for planner in ("baseline_printed", "improved"):
         run_experiment(make_config(["experiment=kinematic", f"planner={planner}"]),
                        runs / "kinematic" / planner)
-        run_experiment(make_config(["experiment=kinematic_readings", f"planner={planner}",
+        literal = planner.replace("_printed", "")  # the literal reading: ref. [18]'s baseline
+        run_experiment(make_config(["experiment=kinematic_readings", f"planner={literal}",
                                     "appendix_reading=literal"]),
-                       runs / "kinematic_readings" / "literal" / planner)
+                       runs / "kinematic_readings" / "literal" / literal)
+    run_experiment(make_config(["experiment=kinematic_readings", "planner=baseline",
+                                "appendix_reading=vehicle_anchor"]),
+                   runs / "kinematic_readings" / "vehicle_anchor" / "baseline")
+    run_experiment(make_config(["experiment=kinematic_readings", "planner=improved",
+                                "appendix_reading=vehicle_anchor"]),
+                   runs / "kinematic_readings" / "vehicle_anchor" / "improved")
+    for planner in ("baseline_printed", "improved", "mpc_no_apf"):
+        run_family(make_config(["experiment=kinematic_family", f"planner={planner}",
+                                "scenario.family.size=8", "scenario.family.n_jobs=1"]),
+                   runs / "kinematic_family" / planner.replace("_printed", ""), progress=False)
     page = build_report(runs, tmp_path / "report", "pytest").read_text()
     assert 'id="features-table"' in page and 'id="apf-adds"' in page
+    # the Appendix-A track's own ledger, recomputed here from its family tables
+    from pipeline.analysis.claims import family_ledger
+    from pipeline.store.runs import read_family
+
+    tables = {m: read_family(runs / "kinematic_family" / m).table
+              for m in ("baseline", "improved", "mpc_no_apf")}
+    claims = make_config(["experiment=kinematic_family"]).claims
+    expected = family_ledger(tables, claims, None, "improved", ("baseline", "baseline_matched"),
+                             sensitivity=False).to_frame()
+    written = pd.read_csv(tmp_path / "report" / "tables" / "claims_ledger_kinematic_family.csv")
+    assert list(written["outcome"]) == list(expected["outcome"])
+    np.testing.assert_allclose(written["estimate"], expected["estimate"].astype(float))
+    assert 'id="kinematic-family"' in page and "<strong>Appendix-A track</strong>" in page
+    assert (tmp_path / "report" / "tables"
+            / "claims_ledger_baseline_vs_no_apf_kinematic_family.csv").is_file()
+    readings = page[page.index('id="kinematic-readings"'):]
+    readings = readings[:readings.index("</table>")]
+    # literal: the baseline never meets the obstacle; vehicle-anchored: it does
+    literal_row = readings[readings.index(">literal<"):].split("</tr>")[0]
+    anchored_row = readings[readings.index(">vehicle_anchor<"):].split("</tr>")[0]
+    assert "not comparable" in literal_row and "not comparable" not in anchored_row
+    assert "Appendix-A track (8 scenarios)" in (tmp_path / "report" / "answer.txt").read_text()
     table = page[page.index('id="features-table"'):]
     table = table[:table.index("</table>")]
     assert "Appendix-A track, printed (default)" in table and "Appendix-A track, literal" in table

@@ -18,7 +18,8 @@ def test_report_from_runs(tmp_path, make_config):
                    "provenance"):
         assert f'id="{anchor}"' in page
     images = re.findall(r'<img src="([^"]+)" alt="([^"]+)"', page)
-    assert len(images) >= 5 and all(src.startswith("data:image/png;base64,") for src, _ in images)
+    # the Figure 2/3 analogue pair, the overlay, the time series and the APF forces
+    assert len(images) >= 4 and all(src.startswith("data:image/png;base64,") for src, _ in images)
     for entry in INTERPRETATION_REGISTER:
         assert entry.config_key in page
     claims_part = page[page.index('id="claims"'):page.index('id="table2"')]
@@ -26,7 +27,7 @@ def test_report_from_runs(tmp_path, make_config):
         "C0", "C1", "C2", "C3a", "C3b", "C4", "C5"]
     assert 'id="table2"' in page and "Slow and aggressive curved avoidance" in page
     assert (tmp_path / "report" / "tables" / "metrics_paper_scenario.csv").is_file()
-    assert (tmp_path / "report" / "figures" / "trajectory_baseline.svg").is_file()
+    assert (tmp_path / "report" / "figures" / "trajectory_pair.svg").is_file()
 
 
 def test_report_without_runs_is_a_clear_error(tmp_path, capsys):
@@ -60,7 +61,81 @@ def test_extra_runs_never_replace_the_default_ones(tmp_path, make_config):
     claims = pd.read_csv(tmp_path / "report" / "tables" / "claims_paper_scenario.csv")
     c0 = claims[claims["claim"] == "C1"].iloc[0]
     assert float(c0["baseline"]) == default["reaction_delay_s"]
-    box = page[page.index('class="summary"'):]
-    box = box[:box.index("</p>")]
+    box = page[page.index('id="answer"'):]
+    box = box[:box.index("</div>")]
     assert "Runs judged:" in box and "the run make reproduce wrote" in box
     assert "planner.rho0_m=3" in box
+
+
+def test_figure_2_3_analogue_labels_never_overlap(make_config):
+    """The Figure 2/3 analogue on a three-obstacle family member and on the paper scenario:
+    the labels (where the obstacle appears, the closest approach) of one panel never overlap,
+    by their bounding boxes from matplotlib's renderer; the panels share equal-scale axes."""
+    import dataclasses
+
+    from pipeline.loop.scenario import build_scenario, family_members
+    from pipeline.loop.simulate import simulate
+    from pipeline.reporting.figures import closest_approach, paths_figure
+
+    family = make_config(["scenario=family", "scenario.family.size=12"])
+    members = family_members(family.scenario, family.vehicle.footprint_radius_m)
+    busy = next(m for m in members if len(m.obstacles) == 3)
+    for scenario_cfg in (make_config().scenario, busy):
+        runs = {}
+        for method in ("baseline", "improved"):
+            cfg = dataclasses.replace(make_config([f"method={method}"]), scenario=scenario_cfg)
+            runs[method] = simulate(cfg, build_scenario(scenario_cfg)).trajectory
+        appear = scenario_cfg.obstacles[0].appear_time_s
+        fig = paths_figure(runs, tuple(scenario_cfg.goal_xy_m), 1.0, appear)
+        fig.canvas.draw()
+        renderer = fig.canvas.get_renderer()
+        axes = [ax for ax in fig.axes if ax.get_title(loc="left")]
+        assert len(axes) == 2
+        assert axes[0].get_xlim() == axes[1].get_xlim()
+        assert axes[0].get_aspect() == 1.0
+        for ax in axes:
+            labels = [t for t in ax.texts if (t.get_gid() or "").startswith("label-")]
+            assert {t.get_gid() for t in labels} == {"label-appear", "label-closest"}
+            boxes = [t.get_window_extent(renderer) for t in labels]
+            for i in range(len(boxes)):
+                for j in range(i + 1, len(boxes)):
+                    assert not boxes[i].overlaps(boxes[j]), [t.get_text() for t in labels]
+        # the closest-approach label quotes the clearance computed from the log
+        near = closest_approach(runs["improved"], 1.0)
+        text = next(t.get_text() for t in axes[1].texts if t.get_gid() == "label-closest")
+        assert f"{near['clearance_m']:.2f} m" in text
+
+
+def test_the_figure_style_sets_size_format_and_font(tmp_path, make_config, capsys):
+    """--figure-style paper: PDF beside a 300-dpi PNG, every figure 7 in wide (2100 px), serif
+    text; the default: SVG and a 130-dpi PNG; a misspelled key or a value out of range exits 2
+    with one line naming it."""
+    from PIL import Image
+
+    from pipeline.reporting.page import main
+
+    runs = tmp_path / "runs"
+    for method in ("baseline", "improved"):
+        run_experiment(make_config([f"method={method}"]), runs / "paper" / method)
+    assert main([str(runs), "--out", str(tmp_path / "plain")]) == 0
+    assert main([str(runs), "--out", str(tmp_path / "paper"), "--figure-style", "paper"]) == 0
+    plain, paper = tmp_path / "plain" / "figures", tmp_path / "paper" / "figures"
+    assert (plain / "overlay.svg").is_file() and not (plain / "overlay.pdf").exists()
+    assert (paper / "overlay.pdf").read_bytes().startswith(b"%PDF")
+    assert Image.open(paper / "overlay.png").size[0] == 2100
+    assert Image.open(paper / "timeseries.png").size[0] == 2100
+    assert Image.open(plain / "overlay.png").size[0] == 910
+    pdf = (paper / "overlay.pdf").read_bytes()
+    assert b"DejaVuSerif" in pdf and b"/FontFile2" in pdf  # serif, embedded as TrueType
+    svg = (plain / "overlay.svg").read_text()
+    assert "<text" in svg and "DejaVu Sans" in svg  # text stays text in the default SVG
+    assert 'href="figures/overlay.pdf"' in (tmp_path / "paper" / "index.html").read_text()
+    bad = tmp_path / "bad.yaml"
+    bad.write_text("dpi: 300\nfontsize: 9\n")
+    capsys.readouterr()
+    assert main([str(runs), "--out", str(tmp_path / "bad"), "--figure-style", str(bad)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "figure_style.fontsize" in err[0]
+    bad.write_text("vector_format: eps\n")
+    assert main([str(runs), "--out", str(tmp_path / "bad"), "--figure-style", str(bad)]) == 2
+    assert "figure_style.vector_format" in capsys.readouterr().err

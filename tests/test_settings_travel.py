@@ -124,4 +124,8 @@ def test_the_report_command_ends_with_the_answer_in_words(user_runs, tmp_path, c
     for line, claim in zip(last, ALL_CLAIMS):
         assert claim.text in line and "vs baseline" in line and "vs baseline_matched" in line
     assert " s)" in last[1] and "m/s^3" in last[2]   # C1 in seconds, C2 in m/s^3
-    assert (tmp_path / "r" / "answer.txt").read_text().splitlines() == last
+    # answer.txt: the collisions and the model-validity caveat first, then the same verdicts
+    answer = (tmp_path / "r" / "answer.txt").read_text().splitlines()
+    assert answer[-len(last):] == last
+    assert answer[0].startswith("Collisions: baseline ") and "validity bound" in answer[0]
+    assert lines[-len(last) - 1] == answer[0]

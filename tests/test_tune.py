@@ -248,6 +248,8 @@ def test_make_tune_quick_resumes_after_sigkill_and_feeds_the_report(tmp_path, ma
                         "--bench", str(tmp_path / "no_bench")]) == 0
     page = (tmp_path / "report" / "index.html").read_text()
     assert 'id="fairfight"' in page and "Tuned vs tuned" in page
-    assert "Fair fight</strong> (both methods tuned with 4 trials each" in page
+    assert "<strong>Fair fight:</strong> both methods tuned with 4 trials each" in page
+    # the answer's line per claim carries the tuned-vs-tuned outcome
+    assert "tuned vs tuned: " in page[page.index('id="answer"'):]
     answer = (tmp_path / "report" / "answer.txt").read_text()
     assert "when both methods are tuned with the same budget" in answer

@@ -19,11 +19,20 @@ from matplotlib.figure import Figure  # noqa: E402
 from matplotlib.patches import Circle  # noqa: E402
 
 METHOD_COLORS = {"baseline": "#d62728", "improved": "#1f77b4", "velocity_aware": "#2ca02c",
-                 "mpc_no_apf": "#9467bd", "apf_pursuit": "#8c564b"}
+                 "mpc_no_apf": "#9467bd", "apf_pursuit": "#8c564b",
+                 "baseline_matched": "#ff7f0e"}
+#: colours for methods without their own (a user's method, extra runs): stable by name
+EXTRA_COLORS = ("#17becf", "#bcbd22", "#e377c2", "#7f7f7f", "#393b79", "#8c6d31")
 
 
 def method_color(method: str) -> str:
-    return METHOD_COLORS.get(method, "#7f7f7f")
+    """A method's colour; any other name gets one of :data:`EXTRA_COLORS`, the same on every
+    call (a stable hash of the name, not Python's salted one)."""
+    if method in METHOD_COLORS:
+        return METHOD_COLORS[method]
+    import zlib
+
+    return EXTRA_COLORS[zlib.crc32(method.encode()) % len(EXTRA_COLORS)]
 
 
 def _obstacle_indices(trajectory: pd.DataFrame) -> list[int]:
@@ -34,98 +43,204 @@ def _obstacle_indices(trajectory: pd.DataFrame) -> list[int]:
     return out
 
 
-def trajectory_figure(trajectory: pd.DataFrame, method: str, goal_xy_m: tuple[float, float],
-                      vehicle_radius_m: float, snapshot_times_s: tuple[float, ...] = (3.0, 4.0,
-                                                                                      5.0, 6.0),
-                      title: str | None = None, limits: tuple | None = None) -> Figure:
-    """Figure 2/3 analogue: vehicle path, obstacle where it was at several times, start, goal.
+#: line styles that keep every method visible where paths coincide (with the colours)
+LABEL_BOX = {"boxstyle": "round,pad=0.15", "fc": "white", "ec": "none", "alpha": 0.85}
+LINE_STYLES = ("-", "--", "-.", ":", (0, (5, 1, 1, 1)), (0, (1, 1)))
+
+
+def _time_colormap():
+    return plt.get_cmap("viridis")
+
+
+def snapshot_times(trajectory: pd.DataFrame, appear_time_s: float | None,
+                   n: int = 7, span_s: float = 4.5) -> np.ndarray:
+    """Instants at which vehicle and obstacles are drawn: ``n`` evenly spaced from the
+    appearance (or the start) over ``span_s`` seconds, within the run."""
+    t = trajectory["time_s"].to_numpy(float)
+    first = float(appear_time_s) if appear_time_s is not None and np.isfinite(appear_time_s) \
+        else float(t[0])
+    last = min(first + span_s, float(t[-1]))
+    return np.linspace(first, last, n) if last > first else np.array([first])
+
+
+def closest_approach(trajectory: pd.DataFrame, vehicle_radius_m: float) -> dict | None:
+    """Where the footprint came closest to a visible obstacle: time, vehicle and obstacle
+    centres, clearance (centre distance minus both radii)."""
+    best = None
+    x, y = trajectory["X_m"].to_numpy(float), trajectory["Y_m"].to_numpy(float)
+    for j in _obstacle_indices(trajectory):
+        visible = trajectory[f"obs{j}_visible"].astype(bool).to_numpy()
+        if not visible.any():
+            continue
+        ox, oy = trajectory[f"obs{j}_x_m"].to_numpy(float), trajectory[f"obs{j}_y_m"].to_numpy(float)
+        clearance = np.hypot(x - ox, y - oy) - trajectory[f"obs{j}_radius_m"].to_numpy(float) \
+            - vehicle_radius_m
+        clearance = np.where(visible, clearance, np.inf)
+        k = int(np.argmin(clearance))
+        if best is None or clearance[k] < best["clearance_m"]:
+            best = {"time_s": float(trajectory["time_s"].iloc[k]), "vehicle": (x[k], y[k]),
+                    "obstacle": (ox[k], oy[k]), "clearance_m": float(clearance[k]), "j": j}
+    return best
+
+
+def paths_figure(runs: dict[str, pd.DataFrame], goal_xy_m: tuple[float, float],
+                 vehicle_radius_m: float, appear_time_s: float | None,
+                 limits: tuple | None = None, titles: dict[str, str] | None = None,
+                 width_in: float = 7.0) -> Figure:
+    """Figure 2/3 analogues as small multiples on shared limits (one panel per method, top
+    to bottom): the path; the vehicle's footprint and every visible obstacle at the same
+    instants in the same colour (time colour bar); where each obstacle appears (x and the time);
+    the closest approach (a segment, its clearance and time).
 
     Parameters
     ----------
-    trajectory : DataFrame
-        A run's ``trajectory.csv``.
-    method : str
+    runs : dict of method -> trajectory
     goal_xy_m : tuple
     vehicle_radius_m : float
-        Drawn as the vehicle's footprint at the snapshot times.
-    snapshot_times_s : tuple of float
-        Times at which obstacle and vehicle are drawn (only while the obstacle is visible).
+    appear_time_s : float or None
+        The threatening obstacle's appearance (the first snapshot).
     limits : tuple, optional
-        ``(xmin, xmax, ymin, ymax)`` so that several panels share axes.
+        ``(xmin, xmax, ymin, ymax)``; by default the data's, shared by all panels.
+    titles : dict, optional
+        Panel titles by method.
     """
-    fig, ax = plt.subplots(figsize=(7.0, 3.6), layout="constrained")
-    t = trajectory["time_s"].to_numpy(float)
-    color = method_color(method)
-    ax.plot(trajectory["X_m"], trajectory["Y_m"], color=color, lw=2, label=f"{method} path")
-    cmap = plt.get_cmap("Greys")
-    for n, ts in enumerate(snapshot_times_s):
-        k = int(np.argmin(np.abs(t - ts)))
-        if abs(t[k] - ts) > 0.051:
-            continue
-        shade = 0.35 + 0.6 * n / max(len(snapshot_times_s) - 1, 1)
-        ax.add_patch(Circle((trajectory["X_m"].iloc[k], trajectory["Y_m"].iloc[k]),
-                            vehicle_radius_m, fill=False, ls=":", color=color, alpha=0.8))
-        for j in _obstacle_indices(trajectory):
-            if not bool(trajectory[f"obs{j}_visible"].iloc[k]):
+    methods = list(runs)
+    frames = list(runs.values())
+    if limits is None:
+        xs = np.concatenate([f["X_m"].to_numpy(float) for f in frames] + [[goal_xy_m[0]]])
+        ys = np.concatenate([f["Y_m"].to_numpy(float) for f in frames] + [[goal_xy_m[1]]])
+        limits = (np.nanmin(xs) - 1.5, np.nanmax(xs) + 1.5, np.nanmin(ys) - 2.0,
+                  np.nanmax(ys) + 2.0)
+    x_span, y_span = limits[1] - limits[0], limits[3] - limits[2]
+    # equal scales (circles stay circles); a flat path gets a taller window, never a
+    # stretched one: panels at least 1.7 in tall, the lateral limits widened about the data
+    panel_h = max(width_in * 0.84 * y_span / x_span, 1.7)
+    y_span_shown = panel_h * x_span / (width_in * 0.84)
+    centre = 0.5 * (limits[2] + limits[3])
+    limits = (limits[0], limits[1], centre - 0.5 * y_span_shown, centre + 0.5 * y_span_shown)
+    fig, axes = plt.subplots(len(methods), 1, figsize=(width_in, panel_h * len(methods) + 0.9),
+                             sharex=True, sharey=True, layout="constrained", squeeze=False)
+    cmap = _time_colormap()
+    times = snapshot_times(frames[0], appear_time_s)
+    norm = matplotlib.colors.Normalize(times[0], times[-1] if times[-1] > times[0]
+                                       else times[0] + 1.0)
+    for ax, method, tr in zip(axes[:, 0], methods, frames):
+        t = tr["time_s"].to_numpy(float)
+        ax.plot(tr["X_m"], tr["Y_m"], color=method_color(method), lw=2, zorder=3)
+        for ts in times:
+            k = int(np.argmin(np.abs(t - ts)))
+            if abs(t[k] - ts) > 0.051:
                 continue
-            centre = (trajectory[f"obs{j}_x_m"].iloc[k], trajectory[f"obs{j}_y_m"].iloc[k])
-            ax.add_patch(Circle(centre, trajectory[f"obs{j}_radius_m"].iloc[k],
-                                color=cmap(shade), alpha=0.9))
-            ax.annotate(f"{t[k]:.1f} s", centre, textcoords="offset points", xytext=(10, 0),
-                        fontsize=7)
-    ax.plot(trajectory["X_m"].iloc[0], trajectory["Y_m"].iloc[0], "ko", label="start")
-    ax.plot(*goal_xy_m, marker="*", color="gold", mec="k", ms=14, ls="none", label="goal")
-    ax.axhline(0.0, color="k", lw=0.5, ls="--")
-    ax.set_aspect("equal", adjustable="box" if limits is not None else "datalim")
-    if limits is not None:
+            colour = cmap(norm(t[k]))
+            ax.add_patch(Circle((tr["X_m"].iloc[k], tr["Y_m"].iloc[k]), vehicle_radius_m,
+                                fill=False, lw=1.2, color=colour, zorder=4))
+            for j in _obstacle_indices(tr):
+                if bool(tr[f"obs{j}_visible"].iloc[k]):
+                    ax.add_patch(Circle((tr[f"obs{j}_x_m"].iloc[k], tr[f"obs{j}_y_m"].iloc[k]),
+                                        tr[f"obs{j}_radius_m"].iloc[k], color=colour,
+                                        alpha=0.55, lw=0, zorder=2))
+        for j in _obstacle_indices(tr):
+            visible = tr[f"obs{j}_visible"].astype(bool).to_numpy()
+            if visible.any():
+                k = int(np.argmax(visible))
+                ax.plot(tr[f"obs{j}_x_m"].iloc[k], tr[f"obs{j}_y_m"].iloc[k], "kx", ms=6,
+                        zorder=5)
+                if j == 0:
+                    ax.annotate(f"appears {t[k]:.1f} s", (tr[f"obs{j}_x_m"].iloc[k],
+                                                         tr[f"obs{j}_y_m"].iloc[k]),
+                                xytext=(6, 6), textcoords="offset points", fontsize=7,
+                                gid="label-appear", bbox=LABEL_BOX, zorder=7)
+        near = closest_approach(tr, vehicle_radius_m)
+        if near is not None:
+            (vx, vy), (ox, oy) = near["vehicle"], near["obstacle"]
+            ax.plot([vx, ox], [vy, oy], color="k", lw=1.0, zorder=6)
+            ax.annotate(f"closest {near['clearance_m']:.2f} m at {near['time_s']:.1f} s",
+                        (vx, vy), xytext=(6, -12), textcoords="offset points", fontsize=7,
+                        gid="label-closest", bbox=LABEL_BOX, zorder=7)
+        ax.plot(tr["X_m"].iloc[0], tr["Y_m"].iloc[0], "ko", ms=4)
+        ax.plot(*goal_xy_m, marker="*", color="gold", mec="k", ms=12, ls="none")
+        ax.axhline(goal_xy_m[1], color="k", lw=0.5, ls="--")
         ax.set_xlim(limits[0], limits[1])
         ax.set_ylim(limits[2], limits[3])
-    ax.set_xlabel("X [m]")
-    ax.set_ylabel("Y [m]")
-    ax.set_title(title or f"{method}: path and obstacle (grey, darker = later)")
-    ax.grid(True, alpha=0.3)
-    ax.legend(loc="lower left", fontsize=8)
+        ax.set_aspect("equal", adjustable="box")
+        ax.set_title((titles or {}).get(method, method), fontsize=9, loc="left")
+        ax.set_ylabel("Y [m]", fontsize=8)
+        ax.tick_params(labelsize=7)
+        ax.grid(True, alpha=0.3)
+    axes[-1, 0].set_xlabel("X [m]   (dot: start, star: goal, x: where an obstacle appears)",
+                           fontsize=8)
+    bar = fig.colorbar(matplotlib.cm.ScalarMappable(norm=norm, cmap=cmap), ax=axes[:, 0],
+                       shrink=0.9, pad=0.01)
+    bar.set_label("time [s]: footprint and obstacles", fontsize=8)
+    bar.ax.tick_params(labelsize=7)
     return fig
 
 
-def overlay_figure(runs: dict[str, pd.DataFrame], goal_xy_m: tuple[float, float]) -> Figure:
-    """All methods' paths on one axes, with the obstacle's track."""
-    fig, ax = plt.subplots(figsize=(7.0, 3.6), layout="constrained")
-    for method, tr in runs.items():
-        ax.plot(tr["X_m"], tr["Y_m"], color=method_color(method), lw=2, label=method)
+def overlay_figure(runs: dict[str, pd.DataFrame], goal_xy_m: tuple[float, float],
+                   width_in: float = 7.0) -> Figure:
+    """All methods' paths on one axes, each with its own colour and line style (so that
+    coinciding paths stay visible), the obstacles' tracks while visible, the legend outside."""
+    fig, ax = plt.subplots(figsize=(width_in, 3.4), layout="constrained")
+    for n, (method, tr) in enumerate(runs.items()):
+        ax.plot(tr["X_m"], tr["Y_m"], color=method_color(method), lw=2.4 - 0.25 * min(n, 5),
+                ls=LINE_STYLES[n % len(LINE_STYLES)], label=method, zorder=3 + n)
     first = next(iter(runs.values()))
     for j in _obstacle_indices(first):
         vis = first[f"obs{j}_visible"].astype(bool)
         ax.plot(first.loc[vis, f"obs{j}_x_m"], first.loc[vis, f"obs{j}_y_m"], color="0.4",
                 lw=6, alpha=0.35, solid_capstyle="round", label="obstacle track" if j == 0 else None)
-    ax.plot(*goal_xy_m, marker="*", color="gold", mec="k", ms=14, ls="none", label="goal")
-    ax.set_aspect("equal", adjustable="datalim")
+    ax.plot(*goal_xy_m, marker="*", color="gold", mec="k", ms=12, ls="none", label="goal")
     ax.set_xlabel("X [m]")
     ax.set_ylabel("Y [m]")
-    ax.set_title("Paths of all methods")
     ax.grid(True, alpha=0.3)
-    ax.legend(fontsize=8)
+    fig.legend(loc="outside right upper", fontsize=8, frameon=False)
     return fig
 
 
-def timeseries_figure(runs: dict[str, pd.DataFrame], appear_time_s: float | None) -> Figure:
-    """Steering angle, steering rate, heading and lateral deviation over time."""
+def avoidance_window(runs: dict[str, pd.DataFrame], appear_time_s: float | None
+                     ) -> tuple[float, float] | None:
+    """From the appearance until the last method's vehicle has passed the first obstacle
+    (its along-track position beyond the obstacle's), within the runs."""
+    if appear_time_s is None or not np.isfinite(appear_time_s):
+        return None
+    end = appear_time_s
+    for tr in runs.values():
+        if "obs0_x_m" not in tr:
+            continue
+        t = tr["time_s"].to_numpy(float)
+        passed = (tr["X_m"].to_numpy(float) > tr["obs0_x_m"].to_numpy(float)
+                  + tr["obs0_radius_m"].to_numpy(float)) & (t >= appear_time_s)
+        end = max(end, float(t[np.argmax(passed)]) if passed.any() else float(t[-1]))
+    return (float(appear_time_s), end) if end > appear_time_s else None
+
+
+def timeseries_figure(runs: dict[str, pd.DataFrame], appear_time_s: float | None,
+                      width_in: float = 7.0) -> Figure:
+    """Steering angle, steering rate, heading and lateral deviation over time; the avoidance
+    window (appearance until every vehicle has passed the obstacle) shaded; legend above."""
     panels = [("delta_rad", "steering angle [rad]"),
               ("steering_rate_rad_s", "steering rate [rad/s]"),
               ("psi_rad", "heading [rad]"), ("e_y_m", "lateral deviation [m]")]
-    fig, axes = plt.subplots(len(panels), 1, figsize=(7.0, 7.5), sharex=True,
-                             layout="constrained")
-    for ax, (column, label) in zip(axes, panels):
-        for method, tr in runs.items():
+    panels = [p for p in panels if any(p[0] in tr for tr in runs.values())]
+    fig, axes = plt.subplots(len(panels), 1, figsize=(width_in, 1.7 * len(panels) + 0.8),
+                             sharex=True, layout="constrained", squeeze=False)
+    window = avoidance_window(runs, appear_time_s)
+    for ax, (column, label) in zip(axes[:, 0], panels):
+        for n, (method, tr) in enumerate(runs.items()):
             if column in tr:
-                ax.plot(tr["time_s"], tr[column], color=method_color(method), lw=1.5,
-                        label=method)
-        if appear_time_s is not None and np.isfinite(appear_time_s):
-            ax.axvline(appear_time_s, color="k", ls=":", lw=1)
-        ax.set_ylabel(label)
+                ax.plot(tr["time_s"], tr[column], color=method_color(method),
+                        lw=1.8 - 0.2 * min(n, 5), ls=LINE_STYLES[n % len(LINE_STYLES)],
+                        label=method if ax is axes[0, 0] else None)
+        if window is not None:
+            ax.axvspan(*window, color="0.85", zorder=0,
+                       label="avoidance window" if ax is axes[0, 0] else None)
+        ax.set_ylabel(label, fontsize=8)
+        ax.tick_params(labelsize=7)
         ax.grid(True, alpha=0.3)
-    axes[0].legend(fontsize=8, ncols=3)
-    axes[-1].set_xlabel("time [s] (dotted: obstacle appears)")
+    axes[-1, 0].set_xlabel("time [s] (shaded: from the obstacle's appearance until every "
+                           "vehicle has passed it)", fontsize=8)
+    fig.legend(loc="outside upper center", ncols=min(len(runs) + 1, 4), fontsize=8,
+               frameon=False)
     return fig
 
 
@@ -147,11 +262,22 @@ def apf_force_figure(runs: dict[str, pd.DataFrame]) -> Figure:
     return fig
 
 
-def save_figure(fig: Figure, out_dir: Path, stem: str) -> dict[str, Path]:
-    """Write ``stem.svg`` and ``stem.png`` into ``out_dir`` and close the figure."""
+def save_figure(fig: Figure, out_dir: Path, stem: str, style=None) -> dict[str, Path]:
+    """Write ``stem.<vector format>`` and ``stem.png`` into ``out_dir`` and close the figure.
+
+    ``style`` (a :class:`pipeline.reporting.style.FigureStyle`, or anything with its
+    ``width_in``, ``dpi`` and ``vector_format``) sets the width, the PNG's resolution and the
+    vector format; by default each figure as designed, 130 dpi, SVG. The returned mapping has
+    ``"png"`` and ``"svg"`` (the vector file, whatever its format)."""
+    width_in = getattr(style, "width_in", None)
+    dpi = getattr(style, "dpi", 130)
+    vector = getattr(style, "vector_format", "svg")
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
-    paths = {"svg": out_dir / f"{stem}.svg", "png": out_dir / f"{stem}.png"}
+    paths = {"svg": out_dir / f"{stem}.{vector}", "png": out_dir / f"{stem}.png"}
+    if width_in is not None:
+        width, height = fig.get_size_inches()
+        fig.set_size_inches(width_in, height * width_in / width)
     engine = fig.get_layout_engine()
     if engine is not None:
         # the layout solved once for both files (each savefig would solve it again: it was
@@ -159,8 +285,9 @@ def save_figure(fig: Figure, out_dir: Path, stem: str) -> dict[str, Path]:
         engine.execute(fig)
         fig.set_layout_engine("none")
     # fixed metadata so that identical data give identical files
-    fig.savefig(paths["svg"], metadata={"Date": None})
-    fig.savefig(paths["png"], dpi=130, metadata={"Software": None})
+    fig.savefig(paths["svg"], metadata={"CreationDate": None} if vector == "pdf"
+                else {"Date": None})
+    fig.savefig(paths["png"], dpi=dpi, metadata={"Software": None})
     plt.close(fig)
     return paths
 
@@ -289,15 +416,16 @@ def sweep_figure(summary: pd.DataFrame, swept: list[str]) -> list[tuple[Figure, 
     return out
 
 
-def ablation_forest_figure(effects: pd.DataFrame) -> Figure:
-    """Forest plot: paired effect versus baseline (95 % CI) of each configuration, one
+def ablation_forest_figure(effects: pd.DataFrame, reference: str = "baseline",
+                           bundle: str = "improved") -> Figure:
+    """Forest plot: paired effect versus ``reference`` (95 % CI) of each configuration, one
     panel per claim; left of zero is the paper's claimed direction."""
     claims = list(dict.fromkeys(effects["claim"]))
     configs = list(dict.fromkeys(effects["configuration"]))
     fig, axes = plt.subplots(1, len(claims), figsize=(2.6 * len(claims), 0.32 * len(configs) + 1.6),
                              layout="constrained", sharey=True, squeeze=False)
     y = np.arange(len(configs))[::-1]
-    colors = ["#1f77b4" if c == "improved" else "#2ca02c" if c.startswith("baseline+")
+    colors = ["#1f77b4" if c == bundle else "#2ca02c" if c.startswith("baseline+")
               else "#ff7f0e" for c in configs]
     for ax, claim in zip(axes[0], claims):
         part = effects[effects["claim"] == claim].set_index("configuration").reindex(configs)
@@ -314,7 +442,7 @@ def ablation_forest_figure(effects: pd.DataFrame) -> Figure:
         ax.tick_params(labelsize=7)
         ax.grid(True, axis="x", alpha=0.3)
     axes[0][0].set_yticks(y, configs, fontsize=7)
-    fig.supxlabel("median paired effect vs baseline (95 % CI); < 0 = the claimed improvement",
+    fig.supxlabel(f"median paired effect vs {reference} (95 % CI); < 0 = the claimed improvement",
                   fontsize=8)
     return fig
 

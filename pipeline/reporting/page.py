@@ -33,8 +33,9 @@ from pipeline.analysis.claims import (ALL_CLAIMS, OUTCOME_RULE, OUTCOMES, SINGLE
 from pipeline.analysis.tally import Tally
 from pipeline.config import INTERPRETATION_REGISTER, ClaimsConfig
 from pipeline.reporting.figures import (apf_force_figure, claim_differences_figure,
-                              family_distribution_figure, overlay_figure, save_figure,
-                              timeseries_figure, trajectory_figure)
+                              family_distribution_figure, overlay_figure, paths_figure,
+                              save_figure, timeseries_figure)
+from pipeline.reporting.style import FigureStyle, load_figure_style
 
 PACKAGES = ("numpy", "scipy", "pandas", "matplotlib", "control", "cvxpy", "clarabel",
             "hydra-core", "omegaconf", "jinja2")
@@ -94,9 +95,13 @@ def register_rows(configs_by_method: dict[str, dict]) -> list[dict]:
     rows = []
     for entry in INTERPRETATION_REGISTER:
         keys = [k.strip() for k in entry.config_key.split(",")]
-        used = {}
+        # the value each run used, one line per distinct value ("all runs" when they agree)
+        groups: dict[str, list[str]] = {}
         for method, config in configs_by_method.items():
-            used[method] = "; ".join(f"{_lookup(config, k)!s}" for k in keys)
+            value = "; ".join(f"{_lookup(config, k)!s}" for k in keys)
+            groups.setdefault(value, []).append(method)
+        used = [("all runs" if len(groups) == 1 else ", ".join(methods), value)
+                for value, methods in groups.items()]
         rows.append({"topic": entry.topic, "paper says": entry.paper_says,
                      "default reading": entry.default, "alternatives": entry.alternatives,
                      "config key": entry.config_key, "used": used})
@@ -215,19 +220,23 @@ def is_sweep_folder(folder: Path) -> bool:
 
 
 def _ablation_section(run_root: Path, fig_dir: Path, table_dir: Path,
-                      cfg: ClaimsConfig) -> dict | None:
+                      cfg: ClaimsConfig, style: FigureStyle | None = None) -> dict | None:
     """Effects of each revision alone and left out, attribution sentences, interpretation flips."""
     from pipeline.studies.ablation import (ablation_effects, attribution_sentences, interpretation_flips,
                                    load_family_jobs)
     from pipeline.reporting.figures import ablation_forest_figure
 
     run_root = Path(run_root)
+    from pipeline.studies.ablation import ablation_roles
+
     tables = load_family_jobs(run_root / "ablation") if (run_root / "ablation").is_dir() else {}
     flips = interpretation_flips(run_root / "interpretations", cfg)
-    if "baseline" not in tables and flips is None:
+    bundle, reference = ablation_roles(tables, cfg)
+    if reference not in tables and flips is None:
         return None
-    section = {"effects": [], "sentences": {}, "figures": [], "counts": [], "flips": []}
-    if "baseline" in tables and "improved" in tables:
+    section = {"effects": [], "sentences": {}, "figures": [], "counts": [], "flips": [],
+               "bundle": bundle, "reference": reference}
+    if reference in tables and bundle in tables:
         effects = ablation_effects(tables, cfg)
         effects.to_csv(table_dir / "ablation_effects.csv", index=False)
         section["sentences"] = attribution_sentences(effects, tables, cfg)
@@ -239,7 +248,8 @@ def _ablation_section(run_root: Path, fig_dir: Path, table_dir: Path,
                               "scenarios": len(t)} for label, t in tables.items()]
         section["figures"].append({
             "id": "ablation_forest", "group": "ablation",
-            "paths": save_figure(ablation_forest_figure(effects), fig_dir, "ablation_forest"),
+            "paths": save_figure(ablation_forest_figure(effects, reference, bundle), fig_dir,
+                                 "ablation_forest", style),
             "caption": "Median paired effect versus the baseline with its 95 % bootstrap "
                        "interval, per claim: the improved bundle (blue), each revision added "
                        "alone to the baseline (green), the bundle without each revision (orange).",
@@ -428,6 +438,8 @@ def _features_section(lateral: dict[str, dict], kinematic_runs: list[dict], run_
 
 def _reading_of(baseline_config: dict) -> str:
     """Which Appendix-A reading a kinematic baseline run was made under."""
+    if baseline_config.get("scenario", {}).get("obstacle_anchor", "world") == "vehicle":
+        return "vehicle_anchor"
     alignment = baseline_config.get("controller", {}).get("reference_alignment", "literal")
     if alignment != "literal":
         return alignment
@@ -521,7 +533,8 @@ def build_report(run_root: Path, out_dir: Path, command: str,
                  sweep_dirs: tuple[Path, ...] = (), bench_dir: Path | None = None,
                  multiverse_dir: Path | None = None,
                  skipped: list[Skipped] | None = None, tune_dir: Path | None = None,
-                 treatment: str | None = None, controls: tuple[str, ...] = ()) -> Path:
+                 treatment: str | None = None, controls: tuple[str, ...] = (),
+                 style: FigureStyle | None = None) -> Path:
     """Write ``out_dir/index.html`` (plus figures/ and tables/) from the runs under ``run_root``.
 
     Parameters
@@ -535,11 +548,25 @@ def build_report(run_root: Path, out_dir: Path, command: str,
         Receives every folder passed over (:class:`pipeline.store.runs.Skipped`); they are also listed
         in the page and on stderr.
 
+    style : FigureStyle, optional
+        How figures are written (:func:`load_figure_style`); the default when omitted.
+
     Returns
     -------
     Path
         The HTML file.
     """
+    import matplotlib
+
+    style = style or FigureStyle()
+    with matplotlib.rc_context(style.rc()):
+        return _build_report(run_root, out_dir, command, sweep_dirs, bench_dir,
+                             multiverse_dir, skipped, tune_dir, treatment, controls, style)
+
+
+def _build_report(run_root, out_dir, command, sweep_dirs, bench_dir, multiverse_dir, skipped,
+                  tune_dir, treatment, controls, style: FigureStyle) -> Path:
+    """:func:`build_report` inside the figure style's matplotlib settings."""
     out_dir = Path(out_dir)
     fig_dir, table_dir = out_dir / "figures", out_dir / "tables"
     table_dir.mkdir(parents=True, exist_ok=True)
@@ -594,7 +621,7 @@ def build_report(run_root: Path, out_dir: Path, command: str,
         figures += performance["figures"] if performance else []
         _inline(figures, out_dir)
         page = env.get_template("report.html.j2").render(
-            paper=False, sweeps=sweeps, performance=performance, robustness=None, fair_fight=None, looks=None, ablation=None, figures=figures, family=None, kinematic=None,
+            answer=[], caveat="", paper=False, sweeps=sweeps, performance=performance, robustness=None, fair_fight=None, looks=None, ablation=None, figures=figures, family=None, kinematic=None,
             skipped=_skipped_rows(skipped, run_root), other_runs=[], run_notes=[],
             methods=[], scenario="(sweep only)", prov=provenance(command),
             register=register_rows({}), metrics_doc=_metrics_doc(), **_rules(None))
@@ -608,15 +635,24 @@ def build_report(run_root: Path, out_dir: Path, command: str,
     scenario = paper_runs[0]["metrics"]["scenario"]
     other_runs = [r for r in runs if r["metrics"]["scenario"] != scenario]
     by_label = {_label(r): r for r in paper_runs}
-    order = _ordered(by_label)
-    by_method = {m: by_label[m] for m in order}
-    primary, run_notes = _primary(by_method)
+    primary, run_notes = _primary({m: by_label[m] for m in _ordered(by_label)})
+    # the judged run of each method everywhere; extra runs of a method apart ("other runs":
+    # their own colour and label in the overlay, their numbers under "Runs given")
+    order = _ordered(primary)
+    by_method = {m: primary[m] for m in order}
+    judged = {id(r) for r in by_method.values()}
+    extra_runs = [r for r in by_label.values() if id(r) not in judged]
+    other_runs = extra_runs + other_runs
     first_cfg = next(iter(by_method.values()))["config"]
     goal = tuple(first_cfg["scenario"]["goal_xy_m"])
     radius = first_cfg["vehicle"]["footprint_radius_m"]
     appear = next(iter(by_method.values()))["metrics"].get("obstacle_appear_time_s")
     progress("paper-scenario figures")
-    figures = _paper_figures(by_method, scenario, goal, radius, appear, fig_dir)
+    figures = _paper_figures(by_method, scenario, goal, radius, appear, fig_dir,
+                             treatment=treatment or "improved",
+                             control=controls[0] if controls else "baseline",
+                             extras={_label(r): r["trajectory"] for r in extra_runs},
+                             style=style)
 
     metrics_by_method = {m: r["metrics"] for m, r in by_method.items()}
     metrics_frame = pd.DataFrame(metrics_by_method)
@@ -648,7 +684,7 @@ def build_report(run_root: Path, out_dir: Path, command: str,
         row["values"] = [_fmt(row.get(m)) for m in order]
     claim_secondary = {c.claim_id: ", ".join(c.secondary_metrics) for c in ALL_CLAIMS}
 
-    ablation = _ablation_section(run_root, fig_dir, table_dir, cfg_claims)
+    ablation = _ablation_section(run_root, fig_dir, table_dir, cfg_claims, style)
     if ablation:
         figures.extend(ablation["figures"])
 
@@ -656,7 +692,7 @@ def build_report(run_root: Path, out_dir: Path, command: str,
     if kinematic_runs:
         progress("Appendix-A track")
         kinematic = _track_section(kinematic_runs, "kinematic", fig_dir, table_dir, claims,
-                                   cfg_claims)
+                                   cfg_claims, style)
         kinematic["nmpc"] = optional(_nmpc_check, Path(run_root) / "nmpc_check") \
             if (Path(run_root) / "nmpc_check" / "summary.json").is_file() else None
         figures.extend(kinematic["figures"])
@@ -671,9 +707,17 @@ def build_report(run_root: Path, out_dir: Path, command: str,
         progress("family ledger (bootstrap intervals) and figures")
         family = _family_section(family_primary, family_info, claim_metrics, fig_dir,
                                  table_dir, cfg_claims, all_tables=family_tables,
-                                 settings=collection.family_settings)
+                                 settings=collection.family_settings, style=style)
         for f in family["figures"]:
             figures.append(f)
+    if kinematic is not None:
+        lateral_outcomes = {c: str(r.get("outcome")) for c, r in
+                            (family["by_claim"].items() if family else ())}
+        kin_family_dir = Path(run_root) / "kinematic_family"
+        kinematic["family"] = optional(_kinematic_family_section, kin_family_dir, cfg_claims,
+                                       table_dir, lateral_outcomes) \
+            if kin_family_dir.is_dir() else None
+        kinematic["readings"] = _reading_sensitivity(run_root, kinematic_runs, cfg_claims)
     for sw in sweeps:
         figures.extend(sw["figures"])
     figures += performance["figures"] if performance else []
@@ -681,8 +725,10 @@ def build_report(run_root: Path, out_dir: Path, command: str,
     figures += fair_fight["figures"] if fair_fight else []
     _inline(figures, out_dir)
     progress("writing the page")
+    answer = answer_rows(family, robustness, fair_fight, kinematic, cfg_claims)
+    caveat = validity_caveat(family["raw_counts"]) if family else ""
     page = env.get_template("report.html.j2").render(
-        paper=True, sweeps=sweeps, performance=performance, robustness=robustness,
+        answer=answer, caveat=caveat, paper=True, sweeps=sweeps, performance=performance, robustness=robustness,
         fair_fight=fair_fight, looks=looks, scenario=scenario, ablation=ablation, methods=order, figures=figures, metric_rows=metric_rows,
         timing_rows=timing_rows, claims=claims, claim_secondary=claim_secondary,
         comparisons=comparisons, family=family, kinematic=kinematic,
@@ -699,6 +745,17 @@ def build_report(run_root: Path, out_dir: Path, command: str,
     answer = list(family["answer"]) if family else []
     if fair_fight:
         answer += [c["sentence"] for c in fair_fight["rows"]]
+    if family:
+        # before the verdicts: the last lines stay the verdicts in words
+        answer.insert(0, "Collisions: " + ", ".join(f"{c['method']} {c['collisions']}"
+                                                    for c in family["raw_counts"]) + "."
+                      + (f" {caveat}" if caveat else ""))
+    if kinematic and kinematic.get("family"):
+        kf = kinematic["family"]
+        answer.append(f"Appendix-A track ({kf['size']} scenarios): {kf['treatment']} vs baseline "
+                      + "; ".join(f"{r['claim']} {r['outcome']}" for r in kf["rows"]
+                                  if r["comparison"] == "baseline")
+                      + (f". {kf['apf_adds']['sentence']}" if kf["apf_adds"] else "."))
     write_text_atomic(out_dir / "answer.txt", "\n".join(answer) + "\n" if answer else "")
     return path
 
@@ -774,23 +831,24 @@ def _ms(seconds) -> float | None:
 
 
 def _track_section(runs: list[dict], track: str, fig_dir: Path, table_dir: Path,
-                   lateral_claims: list[dict], cfg: ClaimsConfig) -> dict:
+                   lateral_claims: list[dict], cfg: ClaimsConfig,
+                   style: FigureStyle | None = None) -> dict:
     """Figures, metrics and claims of a second track, and how its outcomes compare.
 
     A comparison is made only when both methods come within ``cfg.comparable_clearance_m`` of
     the obstacle: otherwise they did not meet the same threat and the claim is "not comparable".
     """
     by_label = {_label(r): r for r in runs}
-    order = _ordered(by_label)
-    by_method = {m: by_label[m] for m in order}
-    primary, _ = _primary(by_method)
+    primary, _ = _primary({m: by_label[m] for m in _ordered(by_label)})
+    order = _ordered(primary)
+    by_method = {m: primary[m] for m in order}
     first = next(iter(by_method.values()))
     config = first["config"]
     figures = _paper_figures(by_method, first["metrics"]["scenario"],
                              tuple(config["scenario"]["goal_xy_m"]),
                              config["vehicle"]["footprint_radius_m"],
                              first["metrics"].get("obstacle_appear_time_s"), fig_dir,
-                             prefix=f"{track}_", group_prefix=f"{track}_")
+                             prefix=f"{track}_", group_prefix=f"{track}_", style=style)
     metrics_by_method = {m: r["metrics"] for m, r in by_method.items()}
     frame = pd.DataFrame(metrics_by_method)
     frame.index.name = "metric"
@@ -838,41 +896,43 @@ def _track_section(runs: list[dict], track: str, fig_dir: Path, table_dir: Path,
 
 
 def _paper_figures(by_method: dict, scenario: str, goal: tuple, radius: float, appear,
-                   fig_dir: Path, prefix: str = "", group_prefix: str = "") -> list[dict]:
-    """Figure 2/3 analogues (shared axes), overlay, time series and APF forces."""
-    xs = np.concatenate([r["trajectory"]["X_m"].to_numpy() for r in by_method.values()])
-    ys = np.concatenate([r["trajectory"]["Y_m"].to_numpy() for r in by_method.values()])
-    limits = (min(xs.min(), 0) - 1.5, max(xs.max(), goal[0]) + 1.5, ys.min() - 2.0,
-              ys.max() + 2.5)
-    snap = tuple(float(appear) + d for d in (0.0, 1.0, 2.0, 3.0)) if appear is not None \
-        else (3.0, 4.0, 5.0, 6.0)
-    figures = []
-    for method, run in by_method.items():
-        label = {"baseline": "Figure 2 analogue", "improved": "Figure 3 analogue"}.get(
-            method, "Variant")
-        paths = save_figure(trajectory_figure(run["trajectory"], method, goal, radius, snap,
-                                              title=f"{label}: {method}", limits=limits),
-                            fig_dir, f"{prefix}trajectory_{method}")
-        figures.append({"id": f"{prefix}trajectory_{method}", "group": f"{group_prefix}paths",
-                        "paths": paths,
-                        "caption": f"{label} — {method} on {scenario}: vehicle path, "
-                                   f"footprint (dotted) and obstacle (grey, darker is later) at "
-                                   f"{', '.join(f'{s:.0f}' for s in snap)} s.",
-                        "alt": f"Path of the vehicle with the {method} method around the "
-                               f"moving obstacle"})
+                   fig_dir: Path, prefix: str = "", group_prefix: str = "",
+                   treatment: str = "improved", control: str = "baseline",
+                   extras: dict | None = None, style: FigureStyle | None = None) -> list[dict]:
+    """Figure 2/3 analogues (control above treatment, shared limits, time colours), overlay
+    of every method (and of ``extras``, other runs by label, each in its own colour), time
+    series with the avoidance window, APF forces."""
+    pair = [m for m in (control, treatment) if m in by_method] or list(by_method)[:2]
+    names = {control: "Figure 2 analogue", treatment: "Figure 3 analogue"} \
+        if (control, treatment) == ("baseline", "improved") else {}
+    titles = {m: f"{names.get(m, m)}: {m}" if m in names else m for m in pair}
+    figures = [{"id": f"{prefix}trajectory_pair", "group": f"{group_prefix}paths",
+                "paths": save_figure(paths_figure({m: by_method[m]["trajectory"] for m in pair},
+                                                  goal, radius, appear, titles=titles),
+                                     fig_dir, f"{prefix}trajectory_pair", style),
+                "caption": f"{' and '.join(titles.values())} on {scenario}, on shared axes: the "
+                           "path; the footprint and the obstacles at the same instants in the "
+                           "same colour (colour bar: time from the obstacle's appearance); x "
+                           "where an obstacle appears; the segment at the closest approach with "
+                           "its clearance and time.",
+                "alt": f"Paths of {' and '.join(pair)} with the obstacle at the same instants"}]
     tr_by_method = {m: r["trajectory"] for m, r in by_method.items()}
     for stem, fig, caption, alt in (
-            ("overlay", overlay_figure(tr_by_method, goal),
-             "All methods' paths on the same axes; the grey band is the obstacle's track "
-             "while visible.", "Paths of all methods overlaid"),
+            ("overlay", overlay_figure({**tr_by_method, **(extras or {})}, goal),
+             "Every method's path on the same axes, each in its own colour and line style"
+             + (" (other runs, not judged, labelled by what differs)" if extras else "")
+             + "; the grey band is the obstacle's track while visible.",
+             "Paths of all methods overlaid"),
             ("timeseries", timeseries_figure(tr_by_method, appear),
-             "Steering angle, steering rate (the input), heading and lateral deviation "
-             "over time.", "Time series of steering, heading and lateral deviation"),
+             "Steering angle, steering rate (the input), heading and lateral deviation over "
+             "time; shaded: the avoidance window, from the obstacle's appearance until every "
+             "vehicle has passed it.", "Time series of steering, heading and lateral deviation"),
             ("apf_forces", apf_force_figure(tr_by_method),
              "Magnitude of the APF's repulsive and attractive forces at the vehicle's position "
              "(first rollout point).", "APF force magnitudes over time")):
-        figures.append({"id": prefix + stem, "group": f"{group_prefix}series",
-                        "paths": save_figure(fig, fig_dir, prefix + stem),
+        figures.append({"id": prefix + stem,
+                        "group": f"{group_prefix}{'paths' if stem == 'overlay' else 'series'}",
+                        "paths": save_figure(fig, fig_dir, prefix + stem, style),
                         "caption": caption, "alt": alt})
     return figures
 
@@ -887,6 +947,55 @@ def _unit(metric: str) -> str:
     if "share" in metric:
         return "share"
     return "count" if metric.endswith("count") else ""
+
+
+def answer_rows(family: dict | None, robustness: dict | None, fair_fight: dict | None,
+                kinematic: dict | None, cfg: ClaimsConfig) -> list[dict]:
+    """The answer in words for the top of the report: per claim its words, the family outcome
+    against the first control with the estimate, unit and interval, the other controls'
+    outcomes, and (when run) its robustness over the multiverse, the tuned-vs-tuned outcome
+    and the Appendix-A track's outcome."""
+    if not family:
+        return []
+    by_claim: dict[str, list[dict]] = {}
+    for row in family["ledger"]:
+        by_claim.setdefault(row["claim"], []).append(row)
+    robust = {r["claim"]: r["cells"] for r in (robustness or {}).get("rows", [])}
+    tuned = {r["claim"]: r for r in (fair_fight or {}).get("rows", [])}
+    kin = {r["claim"]: r for r in ((kinematic or {}).get("family") or {}).get("rows", [])
+           if r["comparison"] == (cfg.controls[0] if cfg.controls else "baseline")}
+    out = []
+    for claim in ALL_CLAIMS:
+        rows = by_claim.get(claim.claim_id)
+        if not rows:
+            continue
+        main, others = rows[0], rows[1:]
+        unit = _unit(claim.primary_metric)
+        extra = [f"vs {r['comparison']}: {r['outcome']}" for r in others]
+        cell = robust.get(claim.claim_id, {}).get(main["comparison"])
+        if cell:
+            extra.append(f"{cell['agree']} of the multiverse's specifications agree")
+        if claim.claim_id in tuned:
+            extra.append(f"tuned vs tuned: {tuned[claim.claim_id]['tuned']}")
+        if claim.claim_id in kin:
+            extra.append(f"Appendix-A track: {kin[claim.claim_id]['outcome']}")
+        out.append({"claim": claim.claim_id, "words": claim.text, "outcome": main["outcome"],
+                    "comparison": main["comparison"],
+                    "effect": f"{_fmt(main['estimate'])} {unit} [{_fmt(main['ci_low'])}, "
+                              f"{_fmt(main['ci_high'])}]".replace("  ", " "),
+                    "extra": "; ".join(extra)})
+    return out
+
+
+def validity_caveat(counts: list[dict]) -> str:
+    """How often each method left the MPC model's small-angle validity (family counts)."""
+    parts = [f"{c['method']} in {c['heading_validity_exceeded']} of {c['scenarios']}"
+             for c in counts if c.get("heading_validity_exceeded")]
+    if not parts:
+        return ""
+    return ("Caveat: the vehicle's heading leaves the MPC prediction model's small-angle "
+            "validity bound (model.validity_heading_rad) in some scenarios: "
+            + ", ".join(parts) + "; the predictions there are the linear model's, not the plant's.")
 
 
 def answer_lines(ledger) -> list[str]:
@@ -908,7 +1017,7 @@ def answer_lines(ledger) -> list[str]:
 
 def _family_section(tables: dict, info: dict, paper_metrics: dict, fig_dir: Path,
                     table_dir: Path, cfg: ClaimsConfig, all_tables: dict | None = None,
-                    settings: dict | None = None) -> dict:
+                    settings: dict | None = None, style: FigureStyle | None = None) -> dict:
     """Claims ledger over the family (C0-C5 against each comparison), outcome counts,
     distribution plots and what the step cap does."""
     order = _ordered(tables)
@@ -920,6 +1029,7 @@ def _family_section(tables: dict, info: dict, paper_metrics: dict, fig_dir: Path
                             if all_tables else tables)
     pd.DataFrame(counts).to_csv(table_dir / "family_outcomes.csv", index=False)
     for row in ledger:
+        row["unit"] = _unit(row["metric"])
         row["estimate_fmt"] = _fmt(row["estimate"])
         row["ci_fmt"] = f"[{_fmt(row['ci_low'])}, {_fmt(row['ci_high'])}]"
         row["p_fmt"] = _fmt(row["p_holm"])
@@ -957,7 +1067,7 @@ def _family_section(tables: dict, info: dict, paper_metrics: dict, fig_dir: Path
     figures = [
         {"id": "claim_differences", "group": "claims",
          "paths": save_figure(claim_differences_figure(differences, names, intervals), fig_dir,
-                              "claim_differences"),
+                              "claim_differences", style),
          "caption": "Per-scenario paired differences improved − comparison on each claim's "
                     "primary metric (below zero: improved better), with the estimate's 95 % "
                     "bootstrap interval, against each comparison.",
@@ -966,7 +1076,7 @@ def _family_section(tables: dict, info: dict, paper_metrics: dict, fig_dir: Path
          "paths": save_figure(family_distribution_figure(tables, [c.primary_metric
                                                                   for c in ALL_CLAIMS[1:]]
                                                          + ["min_clearance_m"]),
-                              fig_dir, "family_distributions"),
+                              fig_dir, "family_distributions", style),
          "caption": "Distribution of each claim's metric and of the minimum clearance per method "
                     "over the scenario family (missing values, e.g. never recovered, are "
                     "left out of the boxes and counted in the outcomes table).",
@@ -982,15 +1092,143 @@ def _family_section(tables: dict, info: dict, paper_metrics: dict, fig_dir: Path
         for label, s in (settings or {}).items() if label in tables) or "not recorded"
     apf_adds = _baseline_apf_adds(tables, cfg, table_dir)
     answer = answer_lines(typed) + ([apf_adds["sentence"]] if apf_adds else [])
-    return {"ledger": grouped, "comparisons": comparisons, "solvers": solvers,
+    gallery = _gallery(tables, info, cfg, fig_dir, style)
+    figures.extend(gallery)
+    return {"gallery": gallery, "ledger": grouped, "comparisons": comparisons, "solvers": solvers,
             "answer": answer, "apf_adds": apf_adds, "treatment": cfg.treatment,
             "by_claim": {r["claim"]: r for r in ledger if r["comparison"] == cfg.controls[0]},
             "counts": [{k: _fmt(v) for k, v in c.items()} for c in counts],
+            "raw_counts": counts,
             "cap_note": cap_note, "figures": figures, "seed": first["seed"],
             "size": first["size"], "methods": order}
 
 
-def _baseline_apf_adds(tables: dict, cfg: ClaimsConfig, table_dir: Path) -> dict | None:
+def _gallery(tables: dict, info: dict, cfg: ClaimsConfig, fig_dir: Path,
+             style: FigureStyle | None = None) -> list[dict]:
+    """Family members picked by :func:`pipeline.reporting.gallery.gallery_members`, each drawn
+    as the Figure 2/3 analogue (first control above the treatment). Members that cannot be
+    read are left out (the report says which in the caption of the rest)."""
+    from pipeline.errors import RunFolderError
+    from pipeline.reporting.gallery import gallery_members
+    from pipeline.store.runs import read_member
+
+    if not cfg.controls:
+        return []
+    treatment, control = cfg.treatment, cfg.controls[0]
+    picks = gallery_members(tables, treatment, control,
+                            {c.claim_id: c.primary_metric for c in ALL_CLAIMS})
+    figures = []
+    for pick in picks:
+        member = pick["member"]
+        try:
+            runs = {m: read_member(Path(info[m]["dir"]), member) for m in (control, treatment)}
+        except (RunFolderError, KeyError, OSError):
+            continue
+        first = runs[treatment]
+        stem = f"gallery_member_{member:04d}"
+        fig = paths_figure({m: r.trajectory for m, r in runs.items()},
+                           tuple(first.config.scenario.goal_xy_m),
+                           first.config.vehicle.footprint_radius_m,
+                           first.config.scenario.obstacles[0].appear_time_s,
+                           titles={m: f"{m}, member {member}" for m in runs}, width_in=6.0)
+        figures.append({"id": stem, "group": "gallery", "member": member,
+                        "why": "; ".join(pick["why"]),
+                        "paths": save_figure(fig, fig_dir, stem, style),
+                        "caption": f"Family member {member} ({first.config.scenario.name}): "
+                                   + "; ".join(pick["why"]) + ".",
+                        "alt": f"Paths of {control} and {treatment} on family member {member}"})
+    return figures
+
+
+def _kinematic_family_section(folder: Path, cfg: ClaimsConfig, table_dir: Path,
+                              lateral_by_claim: dict[str, str]) -> dict | None:
+    """The Appendix-A track's own ledger over its family (``outputs/kinematic_family``, the
+    default reading): the treatment against each control, the baseline against mpc_no_apf,
+    collision counts per method, and whether each outcome agrees with the lateral family's."""
+    from pipeline.store.collection import load_runs
+
+    found = load_runs(folder, [])
+    tables, notes = _primary_tables(found.family_tables, found.family_info)
+    if cfg.treatment not in tables or not any(c in tables for c in cfg.controls):
+        return None
+    typed = family_ledger(tables, cfg, None, cfg.treatment, tuple(cfg.controls),
+                          sensitivity=False)
+    typed.to_frame().to_csv(table_dir / "claims_ledger_kinematic_family.csv", index=False)
+    rows = [{"claim": r.claim_id, "words": r.claim.text,
+             "comparison": r.comparison, "outcome": str(r.outcome),
+             "estimate": f"{_fmt(r.result.estimate)} [{_fmt(r.result.ci_low)}, "
+                         f"{_fmt(r.result.ci_high)}] {_unit(r.claim.primary_metric)}",
+             "n_pairs": r.result.n_pairs,
+             "lateral": lateral_by_claim.get(r.claim_id, "n/a") if r.comparison
+             == cfg.controls[0] else "",
+             "agree": ("yes" if lateral_by_claim.get(r.claim_id) == str(r.outcome) else "no")
+             if r.comparison == cfg.controls[0] and r.claim_id in lateral_by_claim else ""}
+            for r in typed]
+    collisions = [{"method": m, "collisions": int(pd.to_numeric(t.get("collision"),
+                                                                errors="coerce").fillna(0).sum())
+                   if "collision" in t else "n/a", "members": len(t)}
+                  for m, t in ((m, tables[m]) for m in _ordered(tables))]
+    apf_adds = _baseline_apf_adds(tables, cfg, table_dir, suffix="_kinematic_family")
+    size = next(iter(found.family_info.values()), {}).get("size", len(tables[cfg.treatment]))
+    agree = [r for r in rows if r["agree"]]
+    # one row per claim: each comparison a column (and the baseline against no APF)
+    columns = [c for c in cfg.controls if any(r["comparison"] == c for r in rows)]
+    apf = {r["claim"]: r for r in (apf_adds or {}).get("rows", [])}
+    grid = []
+    for claim in dict.fromkeys(r["claim"] for r in rows):
+        cells = {r["comparison"]: r for r in rows if r["claim"] == claim}
+        first = cells.get(columns[0], {}) if columns else {}
+        grid.append({"claim": claim, "words": first.get("words", ""),
+                     "cells": [cells.get(c) for c in columns], "apf": apf.get(claim),
+                     "lateral": first.get("lateral", ""), "agree": first.get("agree", "")})
+    return {"rows": rows, "grid": grid, "columns": columns,
+            "collisions": collisions, "apf_adds": apf_adds, "size": size,
+            "notes": notes, "n_agree": sum(r["agree"] == "yes" for r in agree),
+            "n_compared": len(agree), "treatment": cfg.treatment}
+
+
+def _reading_sensitivity(run_root: Path, kinematic_runs: list[dict], cfg: ClaimsConfig
+                         ) -> list[dict]:
+    """The paper scenario's claims on the Appendix-A track under each reading of the
+    baseline (the default and ``kinematic_readings``): treatment against baseline, "not
+    comparable" where either method stays farther than ``comparable_clearance_m``."""
+    from pipeline.store.collection import load_runs
+
+    def outcomes(runs: list[dict]) -> dict[str, str] | None:
+        by = {r["metrics"].get("method"): r["metrics"] for r in runs}
+        if cfg.treatment not in by or "baseline" not in by:
+            return None
+        met = all((by[m].get("min_clearance_m") or math.inf) <= cfg.comparable_clearance_m
+                  for m in (cfg.treatment, "baseline"))
+        table = claims_table({m: by[m] for m in (cfg.treatment, "baseline")}, cfg.margins,
+                             ("baseline",), improved=cfg.treatment)
+        rates = {c.claim_id for c in ALL_CLAIMS if c.is_rate}
+        return {row["claim"]: row.get("vs baseline", "n/a")
+                if met or row["claim"] in rates else "not comparable" for row in table}
+
+    columns = []
+    default = [r for r in kinematic_runs if r["metrics"].get("method") in
+               (cfg.treatment, "baseline")]
+    base = next((r for r in default if r["metrics"].get("method") == "baseline"), None)
+    if base is not None and (o := outcomes(default)) is not None:
+        columns.append((_reading_of(base["config"]) + " (default)", o))
+    root = Path(run_root) / "kinematic_readings"
+    if root.is_dir():
+        by_variant: dict[str, list] = {}
+        for r in load_runs(root, []).runs:
+            by_variant.setdefault(r["config"]["run"].get("variant", "?"), []).append(r)
+        for variant, runs in sorted(by_variant.items()):
+            if (o := outcomes(runs)) is not None:
+                columns.append((variant, o))
+    if len(columns) < 2:
+        return []
+    claims = list(columns[0][1])
+    return [{"reading": name, "cells": [o.get(c, "n/a") for c in claims], "claims": claims}
+            for name, o in columns]
+
+
+def _baseline_apf_adds(tables: dict, cfg: ClaimsConfig, table_dir: Path,
+                       suffix: str = "") -> dict | None:
     """What the paper's baseline APF contributes at all: the baseline judged against
     ``mpc_no_apf`` (the same MPC tracking a straight-to-goal reference) with the same ledger;
     the baseline is *indistinguishable from having no APF* when no claim's outcome is
@@ -998,7 +1236,8 @@ def _baseline_apf_adds(tables: dict, cfg: ClaimsConfig, table_dir: Path) -> dict
     if "baseline" not in tables or "mpc_no_apf" not in tables:
         return None
     ledger = family_ledger(tables, cfg, None, "baseline", ("mpc_no_apf",), sensitivity=False)
-    ledger.to_frame().to_csv(table_dir / "claims_ledger_baseline_vs_no_apf.csv", index=False)
+    ledger.to_frame().to_csv(table_dir / f"claims_ledger_baseline_vs_no_apf{suffix}.csv",
+                             index=False)
     rows = [{"claim": r.claim_id, "outcome": str(r.outcome),
              "estimate": f"{_fmt(r.result.estimate)} [{_fmt(r.result.ci_low)}, "
                          f"{_fmt(r.result.ci_high)}] {_unit(r.claim.primary_metric)}"}
@@ -1064,6 +1303,9 @@ def main(argv: list[str] | None = None) -> int:
                              "claims.controls, baseline,baseline_matched)")
     parser.add_argument("--tune", type=Path, default=None,
                         help="fair-fight folder of make tune (default: RUNS/tune, if present)")
+    parser.add_argument("--figure-style", default="default",
+                        help="how figures are written: a name under conf/report/figure_style/ "
+                             "(default, paper) or a YAML file's path")
     parser.add_argument("--strict", action="store_true",
                         help="exit 1 when any folder was skipped (after writing the report)")
     parser.add_argument("--command", default=None,
@@ -1071,10 +1313,18 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     command = args.command or "python -m pipeline.report " + " ".join(argv or sys.argv[1:])
     skipped: list[Skipped] = []
+    from pipeline.errors import ConfigError
+
+    try:
+        style = load_figure_style(args.figure_style)
+    except ConfigError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
     try:
         controls = tuple(c.strip() for c in (args.controls or "").split(",") if c.strip())
         path = build_report(args.runs, args.out, command, tuple(args.sweep), args.bench,
-                            args.multiverse, skipped, args.tune, args.treatment, controls)
+                            args.multiverse, skipped, args.tune, args.treatment, controls,
+                            style=style)
     except FileNotFoundError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2

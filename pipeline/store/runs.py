@@ -478,6 +478,16 @@ def member_folders(folder: Path) -> list[Path]:
     return [Path(folder) / name for name in sorted(manifest.get("members") or {})]
 
 
+def read_member(folder: Path, index: int) -> RunRecord:
+    """Member ``index`` of a trusted family, checked against its manifest
+    (:class:`RunFolderError` when it is missing or not trusted)."""
+    wanted = f"member_{int(index):04d}"
+    for member in member_folders(folder):
+        if member.name == wanted:
+            return read_run(member)
+    raise RunFolderError(f"{folder}: no {wanted} in the family's manifest")
+
+
 def member_trajectories(folder: Path):
     """Each member of a trusted family as ``(index, trajectory, metrics.json mapping)``, every
     member checked against its manifest first (:class:`RunFolderError` when one is not)."""

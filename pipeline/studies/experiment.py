@@ -156,9 +156,9 @@ def run_family(cfg: ExperimentConfig, out_dir: Path, progress: bool = True,
     import dataclasses
 
     from joblib import Parallel, delayed
-    from tqdm import tqdm
 
     from pipeline.loop.controller import make_controller
+    from pipeline.studies.progress import Progress
 
     out_dir = Path(out_dir)
     family = cfg.scenario.family
@@ -182,8 +182,8 @@ def run_family(cfg: ExperimentConfig, out_dir: Path, progress: bool = True,
     chunks = _chunks(pending, family.n_jobs)
     results = Parallel(n_jobs=family.n_jobs, return_as="generator_unordered")(
         delayed(_run_chunk)(chunk, cache) for chunk in chunks)
-    with tqdm(total=len(members), initial=len(metrics_by_index), disable=not progress,
-              desc=f"{cfg.method_name} family", unit="scenario") as bar:
+    with Progress(len(members), f"{cfg.method_name} family", "scenario",
+                  initial=len(metrics_by_index), disable=not progress) as bar:
         for done in results:
             for index, metrics in done:
                 metrics_by_index[index] = metrics

@@ -321,10 +321,31 @@ def run_families(todo: list, out_dir: Path, log=print, launcher: dict | None = N
     if launcher is not None:
         _run_on_slurm(todo, launcher, out_dir, log)
         return
+    from pipeline.studies.progress import Progress
+
     cache = cache if cache is not None else QpCache()
-    for n, (cfg, folder) in enumerate(todo, 1):
-        run_family(cfg, folder, progress=False, qp_cache=cache)
-        log(f"{label} {n}/{len(todo)} done")
+    with Progress(len(todo), label, "family", every_s=0.0,
+                  stream=_LogStream(log)) as bar:
+        for cfg, folder in todo:
+            run_family(cfg, folder, progress=False, qp_cache=cache)
+            bar.update()
+
+
+class _LogStream:
+    """A file-like object that hands each line to ``log`` (plain lines, never a bar)."""
+
+    def __init__(self, log) -> None:
+        self.log = log
+
+    def write(self, text: str) -> None:
+        if text.strip():
+            self.log(text.rstrip("\n"))
+
+    def flush(self) -> None:
+        pass
+
+    def isatty(self) -> bool:
+        return False
 
 
 def _run_on_slurm(todo: list, launcher: dict, out_dir: Path, log) -> None:
@@ -547,6 +568,8 @@ def run_multiverse(space: Space, out_dir: Path, overrides: list[str] | None = No
     """Design, runs, re-scoring, analysis and figures; returns the robustness table."""
     from joblib import Parallel, delayed
 
+    from pipeline.studies.progress import Progress
+
     from pipeline.reporting.figures import save_figure
 
     out_dir = Path(out_dir)
@@ -574,10 +597,18 @@ def run_multiverse(space: Space, out_dir: Path, overrides: list[str] | None = No
         for folder in family_folders.values():
             readings.setdefault(Path(folder), []).append(metrics)
     members = sum(len(read_family(f, members=False).table) for f in readings)
-    reads = sum(Parallel(n_jobs=n_jobs)(delayed(rescore_family)(folder, wanted, out_dir)
-                                        for folder, wanted in readings.items()))
+    log(f"re-scoring {members} members of {len(readings)} families under their metric "
+        "readings ...")
+    reads = 0
+    with Progress(len(readings), "re-scoring", "family", stream=_LogStream(log)) as bar:
+        for n_read in Parallel(n_jobs=n_jobs, return_as="generator_unordered")(
+                delayed(rescore_family)(folder, wanted, out_dir)
+                for folder, wanted in readings.items()):
+            reads += n_read
+            bar.update()
     log(f"re-scoring: {reads} member trajectories read for {members} members "
         f"({len(readings)} families)")
+    log(f"judging {len(jobs)} specifications ...")
     results = Parallel(n_jobs=n_jobs)(
         delayed(analyse_specification)(row, f, space, out_dir) for row, f in jobs)
     rows = [r for block in results for r in block]

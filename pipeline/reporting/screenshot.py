@@ -1,0 +1,60 @@
+"""The README's screenshot, taken from a report in headless Chromium (``make screenshot``).
+
+``python -m pipeline.reporting.screenshot REPORT.html OUT.png`` opens the page at 1280 x 800
+and saves the top of it: the answer in words and the start of the ledger. It needs Playwright
+(the test extras) and a Chromium (Debian's ``chromium``, or Playwright's own).
+"""
+
+from __future__ import annotations
+
+import argparse
+import shutil
+import sys
+from pathlib import Path
+
+
+def take_screenshot(report: Path, out: Path, width: int = 1280, height: int = 800) -> Path:
+    """Save the top ``width`` x ``height`` pixels of ``report`` as ``out`` (PNG)."""
+    from playwright.sync_api import sync_playwright
+
+    chromium = shutil.which("chromium") or shutil.which("chromium-browser")
+    out.parent.mkdir(parents=True, exist_ok=True)
+    with sync_playwright() as pw:
+        browser = pw.chromium.launch(executable_path=chromium,
+                                     args=["--no-sandbox", "--disable-gpu"])
+        page = browser.new_page(viewport={"width": width, "height": height})
+        page.goto(Path(report).resolve().as_uri())
+        page.wait_for_load_state("load")
+        page.locator("#claims").scroll_into_view_if_needed()
+        page.evaluate("window.scrollTo(0, document.querySelector('#claims').offsetTop - 10)")
+        page.screenshot(path=str(out))
+        browser.close()
+    return out
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog="python -m pipeline.reporting.screenshot",
+                                     description=__doc__,
+                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("report", type=Path, help="the report's index.html")
+    parser.add_argument("out", type=Path, help="the PNG to write")
+    args = parser.parse_args(argv)
+    if not args.report.is_file():
+        print(f"error: no report at {args.report} (run make reproduce first)", file=sys.stderr)
+        return 2
+    try:
+        take_screenshot(args.report, args.out)
+    except ImportError:
+        print("error: the screenshot needs Playwright (pip install -e '.[test]')",
+              file=sys.stderr)
+        return 2
+    except Exception as exc:  # a browser that cannot start: one line, not a traceback
+        print(f"error: no screenshot ({type(exc).__name__}: {str(exc).splitlines()[0]})",
+              file=sys.stderr)
+        return 2
+    print(f"screenshot written to {args.out}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
