@@ -224,6 +224,43 @@ def to_experiment_config(cfg: Any) -> ExperimentConfig:
     data = OmegaConf.to_container(cfg, resolve=True)
     data.pop("hydra", None)
     data.pop("experiment", None)
+    from omegaconf.errors import ConfigKeyError
+
     schema = OmegaConf.structured(ExperimentConfig)
-    merged = OmegaConf.merge(schema, data)
+    try:
+        merged = OmegaConf.merge(schema, data)
+    except ConfigKeyError as exc:
+        # inside a list (obstacles) OmegaConf names only the last key: give its full path
+        key = str(getattr(exc, "full_key", "") or "")
+        path = _path_of(data, key) if key and "." not in key and "[" not in key else None
+        if path is None or path == key:
+            raise  # OmegaConf's own message already names the whole key
+        kind = getattr(exc, "object_type_str", None) or "this section"
+        raise ConfigError(path, _value_at(data, path), f"one of the keys of {kind} (a "
+                          "misspelled or unknown key)") from None
     return OmegaConf.to_object(merged)
+
+
+def _path_of(data: Any, key: str, prefix: str = "") -> str | None:
+    """The dotted path (list items as ``[i]``) of the first ``key`` in nested ``data``."""
+    if isinstance(data, dict):
+        if key in data:
+            return f"{prefix}.{key}" if prefix else key
+        items = ((f"{prefix}.{k}" if prefix else str(k), v) for k, v in data.items())
+    elif isinstance(data, list):
+        items = ((f"{prefix}[{i}]", v) for i, v in enumerate(data))
+    else:
+        return None
+    for path, value in items:
+        found = _path_of(value, key, path)
+        if found is not None:
+            return found
+    return None
+
+
+def _value_at(data: Any, path: str) -> Any:
+    import re
+
+    for part in re.findall(r"[^.\[\]]+|\[\d+\]", path):
+        data = data[int(part[1:-1])] if part.startswith("[") else data[part]
+    return data

@@ -26,8 +26,35 @@ class ConfigError(ValueError):
         self.key = key
         self.value = value
         self.allowed = allowed
-        super().__init__(f"config error: {key}={value!r} is invalid; allowed: {allowed}")
+        super().__init__(f"config error: {key}={plain_value(value)} is invalid; "
+                         f"allowed: {allowed}")
 
+
+def plain_value(value: Any, limit: int = 60) -> str:
+    """A value as a person would write it: numpy scalars as plain numbers (``-0.5``, not
+    ``np.float64(-0.5)``), containers element by element, anything longer than ``limit``
+    characters cut with its length (a 400-digit number stays one short line)."""
+    if hasattr(value, "item") and getattr(value, "shape", None) == ():
+        value = value.item()  # a numpy scalar
+    if isinstance(value, (list, tuple)):
+        text = "[" + ", ".join(plain_value(v, limit) for v in value) + "]"
+    elif isinstance(value, dict):
+        text = "{" + ", ".join(f"{k}: {plain_value(v, limit)}" for k, v in value.items()) + "}"
+    else:
+        text = repr(value)
+    if len(text) > limit:
+        text = f"{text[:limit - 20]}... ({len(text)} characters)"
+    return text
+
+
+
+class OutputPathError(OSError):
+    """An output path that a write must not replace (a folder, a device, a pipe, or an input of
+    the same command). ``strerror`` says why, ``filename`` names the path."""
+
+
+class FolderBusyError(RuntimeError):
+    """Another run is writing into the same output folder (its lock is held)."""
 
 
 class RunFolderError(ValueError):
@@ -102,21 +129,59 @@ def study_error_line(exc: BaseException) -> str | None:
     error, an incomplete SLURM sweep, a study that cannot go on), or None for a code error."""
     if isinstance(exc, (ConfigError, IncompleteSweepError)):
         return str(exc)
-    if isinstance(exc, StudyError):
+    if isinstance(exc, (StudyError, FolderBusyError)):
         return f"error: {exc}"
+    if isinstance(exc, OSError) and exc.filename is not None:
+        # a folder that cannot be written or read: blocked by a file, read-only, missing
+        return f"error: {exc.filename}: {exc.strerror or type(exc).__name__}"
     return describe_config_error(exc)
 
 
 def run_study(call):
     """``(0, call())``, or ``(2, None)`` after printing :func:`study_error_line`'s one line for
-    a configuration error; code errors propagate with their traceback."""
+    a configuration error, or ``(130 / 143, None)`` with one line when Ctrl-C or SIGTERM
+    stops it; code errors propagate with their traceback."""
     import sys
 
+    stop_on_signals()
     try:
         return 0, call()
+    except KeyboardInterrupt as exc:
+        code = interrupted_exit_code(exc)
+        print(f"stopped ({'SIGTERM' if code == 143 else 'interrupted'}): completed family "
+              "runs and tables are kept; the same command resumes", file=sys.stderr)
+        return code, None
     except Exception as exc:  # noqa: BLE001 - configuration errors become one line
         message = study_error_line(exc)
         if message is None:
             raise
         print(message, file=sys.stderr)
         return 2, None
+
+
+class Interrupted(KeyboardInterrupt):
+    """The process was asked to stop (SIGINT or SIGTERM); ``exit_code`` is 128 + the signal."""
+
+    def __init__(self, signum: int) -> None:
+        super().__init__(signum)
+        self.signum = signum
+        self.exit_code = 128 + signum
+
+
+def stop_on_signals() -> None:
+    """Turn SIGTERM (a scheduler, ``kill``) into :class:`Interrupted`, as SIGINT already is a
+    KeyboardInterrupt: the running study stops between members, joblib tears its workers
+    down, atomic writes remove their temporaries, and the command exits 143 (130 for SIGINT)
+    with one line. Without it a SIGTERM killed the parent and left its workers writing."""
+    import signal
+
+    def _raise(signum, frame):  # noqa: ARG001 - the signal module's signature
+        raise Interrupted(signum)
+
+    signal.signal(signal.SIGTERM, _raise)
+
+
+def interrupted_exit_code(exc: BaseException) -> int:
+    """130 for Ctrl-C (SIGINT), 143 for SIGTERM."""
+    return getattr(exc, "exit_code", 130)
+

@@ -21,7 +21,9 @@ import pandas as pd
 from pipeline.analysis.objectives import objective_values
 from pipeline.analysis.tally import Tally
 from pipeline.config import CONF_DIR, register_configs, to_experiment_config
-from pipeline.errors import describe_config_error
+from pipeline.errors import (FolderBusyError, describe_config_error, interrupted_exit_code,
+                             stop_on_signals)
+from pipeline.store.runs import folder_lock
 from pipeline.studies.experiment import RunSummary, run_experiment, run_family
 from pipeline.studies.slurm import register_launcher
 
@@ -51,6 +53,16 @@ def hydra_main(cfg: DictConfig) -> float | tuple[float, ...]:
         print(message, file=sys.stderr)
         raise SystemExit(2) from None
     out_dir = Path(HydraConfig.get().runtime.output_dir)
+    try:
+        with folder_lock(out_dir):
+            return _run(experiment, out_dir)
+    except FolderBusyError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        raise SystemExit(2) from None
+
+
+def _run(experiment, out_dir: Path) -> float | tuple[float, ...]:
+    """The run or family of :func:`hydra_main`, into ``out_dir`` (locked)."""
     objectives = experiment.tune.objectives
     if experiment.scenario.family is not None:
         table = run_family(experiment, out_dir)
@@ -92,8 +104,16 @@ def main() -> None:
     user_wants_trace = original == "1"
     os.environ["PIPELINE_USER_FULL_ERROR"] = "1" if user_wants_trace else "0"
     os.environ["HYDRA_FULL_ERROR"] = "1"  # let exceptions reach us instead of Hydra's printer
+    stop_on_signals()
     try:
         hydra_main()
+    except KeyboardInterrupt as exc:
+        # completed members and runs are kept (each written atomically); rerunning the same
+        # command resumes them
+        print(f"stopped ({'SIGTERM' if interrupted_exit_code(exc) == 143 else 'interrupted'}"
+              "): completed runs and family members are kept; the same command resumes",
+              file=sys.stderr)
+        sys.exit(interrupted_exit_code(exc))
     except Exception as exc:  # noqa: BLE001 - turned into a message and an exit code
         if user_wants_trace:
             raise

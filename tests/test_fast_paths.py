@@ -156,8 +156,10 @@ def test_family_compiles_once_on_two_workers(make_config, tmp_path):
                        "scenario.family.n_jobs=2"])
     cache = QpCache()
     table = run_family(cfg, tmp_path / "fam", progress=False, qp_cache=cache)
-    summary = json.loads((tmp_path / "fam" / "family.json").read_text())
-    assert summary["compiles"] == 1 and cache.compile_count == 1
+    # compilations depend on the process: in the family's timing.json, not family.json
+    timing = json.loads((tmp_path / "fam" / "timing.json").read_text())
+    assert timing["compiles"] == 1 and cache.compile_count == 1
+    assert "compiles" not in json.loads((tmp_path / "fam" / "family.json").read_text())
     assert table["compile_count"].sum() == 0  # every member reused the parent's compilation
     # the same structure in this process again: nothing to compile
     assert LateralMpc(cfg.controller, cfg.vehicle, qp_cache=cache).compile_count == 0

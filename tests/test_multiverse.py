@@ -86,6 +86,16 @@ def test_quick_space_end_to_end_and_resume(tmp_path):
     assert main(["--space", "quick", "--out", str(out), "scenario.family.n_jobs=1"]) == 0
     assert {p: p.stat().st_mtime_ns for p in folders} == stamps  # nothing re-simulated
     pd.testing.assert_frame_equal(pd.read_csv(out / "specifications.csv"), specs)
+    # a forged re-scoring table is caught by its manifest and recomputed, never trusted
+    tables = sorted((out / "rescored").glob("*.csv"))
+    assert tables and all((t.parent / (t.name + ".manifest.json")).is_file() for t in tables)
+    original = tables[0].read_bytes()
+    forged = pd.read_csv(tables[0])
+    forged["reaction_delay_s"] = forged["reaction_delay_s"] + 1.0
+    forged.to_csv(tables[0], index=False)
+    assert main(["--space", "quick", "--out", str(out), "scenario.family.n_jobs=1"]) == 0
+    assert tables[0].read_bytes() == original
+    pd.testing.assert_frame_equal(pd.read_csv(out / "specifications.csv"), specs)
     # the report built after it leads with robustness and has a curve per claim
     from pipeline.reporting.page import build_report
     from pipeline.studies.experiment import run_experiment

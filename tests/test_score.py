@@ -91,7 +91,7 @@ def test_scoring_our_own_trajectory_reproduces_its_metrics(tmp_path, make_config
     assert score_main([str(tmp_path / "run" / "trajectory.csv"), "--out", str(out)]) == 0
     scored = json.loads(out.read_text())
     # every column is there: nothing missing, nothing derived from the path
-    assert scored.pop("score_quality") == {"missing": {}, "derived": {}}
+    assert scored.pop("score_quality") == {"missing": {}, "derived": {}, "empty_cells": {}}
     assert "score:" not in capsys.readouterr().err
     for key, value in scored.items():
         if isinstance(value, float):

@@ -100,3 +100,17 @@ def test_resume_redoes_only_the_deleted_job(basic_sweep, tmp_path):
 def test_aggregate_without_jobs_is_a_clear_error(tmp_path):
     with pytest.raises(FileNotFoundError):
         aggregate(tmp_path, progress=False)
+
+
+def test_a_job_copied_in_without_its_provenance_is_passed_over(basic_sweep, tmp_path):
+    """A job folder without Hydra's record (.hydra/overrides.yaml) in a sweep cannot say which
+    swept values it ran: aggregate lists it with that reason instead of calling it ok."""
+    sweep = tmp_path / "sweep"
+    shutil.copytree(basic_sweep, sweep)
+    stray = sweep / "copied_in"
+    shutil.copytree(job_dirs(sweep)[0], stray)
+    shutil.rmtree(stray / ".hydra")
+    summary = aggregate(sweep, progress=False, figures=False)
+    row = summary[summary["job"] == "copied_in"].iloc[0]
+    assert row["status"] == "skipped" and "no provenance" in row["reason"]
+    assert (summary["status"] == "ok").sum() == 4

@@ -1314,7 +1314,17 @@ def main(argv: list[str] | None = None) -> int:
     command = args.command or "python -m pipeline.report " + " ".join(argv or sys.argv[1:])
     skipped: list[Skipped] = []
     from pipeline.errors import ConfigError
+    from pipeline.store.runs import refuse_input_as_output
 
+    try:
+        # the report is a folder of its own: never one of its inputs, never a file
+        refuse_input_as_output(args.out, [args.runs, *args.sweep, args.multiverse, args.tune])
+        if args.out.exists() and not args.out.is_dir():
+            raise OSError(20, "a file, not a folder", str(args.out))
+    except OSError as exc:
+        print(f"error: --out {args.out}: cannot write the report ({exc.strerror})",
+              file=sys.stderr)
+        return 2
     try:
         style = load_figure_style(args.figure_style)
     except ConfigError as exc:

@@ -16,6 +16,8 @@ into that folder (:func:`clean_leftovers`).
 
 from __future__ import annotations
 
+import contextlib
+import errno
 import functools
 import hashlib
 import json
@@ -28,7 +30,8 @@ import pandas as pd
 
 from pipeline.analysis.metrics import RunMetrics
 from pipeline.config import ExperimentConfig, experiment_config_from_data
-from pipeline.errors import ConfigError, NonFiniteResultError, RunFolderError
+from pipeline.errors import (ConfigError, FolderBusyError, NonFiniteResultError,
+                             OutputPathError, RunFolderError)
 
 RUN_FILES = ("config.yaml", "model.json", "trajectory.csv", "timing.json", "metrics.json")
 FAMILY_FILES = ("family_metrics.csv", "family.json")
@@ -160,6 +163,8 @@ class FamilyRecord:
     manifest: dict
     config: ExperimentConfig | None
     config_data: dict | None
+    #: ``timing.json``: what depends on the process (compilations); {} for older families
+    timing: dict = field(default_factory=dict)
 
 
 @dataclass
@@ -173,10 +178,45 @@ class Discovery:
 
 # --- writing ---------------------------------------------------------------------------------
 
+def output_target(path: Path) -> Path:
+    """Where a write to ``path`` lands: a symbolic link is followed to its target (the link
+    stays a link); a path that exists and is not a regular file (a folder, a device, a pipe)
+    is refused with :class:`OutputPathError`, so a write never replaces it."""
+    import stat
+
+    path = Path(path)
+    if path.is_symlink():
+        path = Path(os.path.realpath(path))
+    try:
+        mode = path.stat().st_mode
+    except FileNotFoundError:
+        return path
+    if stat.S_ISDIR(mode):
+        raise OutputPathError(errno.EISDIR, "a folder, not a file", str(path))
+    if not stat.S_ISREG(mode):
+        raise OutputPathError(errno.EINVAL, "not a regular file (a device or a pipe)",
+                              str(path))
+    return path
+
+
+def refuse_input_as_output(out: Path, inputs: list[Path], option: str = "--out") -> None:
+    """Raise :class:`OutputPathError` when ``out`` is one of the command's ``inputs`` (the
+    same file or folder, links followed): the output would destroy what it is computed from."""
+    target = Path(os.path.realpath(out))
+    for item in inputs:
+        if item is None:
+            continue
+        if target == Path(os.path.realpath(item)):
+            raise OutputPathError(errno.EINVAL, f"{option} is an input of this command "
+                                  f"({item})", str(out))
+
+
 def write_text_atomic(path: Path, text: str) -> None:
     """Write ``text`` to ``path`` via a temporary file in the same folder and ``os.replace``;
-    on any failure the previous file (if any) is left as it was."""
-    path = Path(path)
+    on any failure the previous file (if any) is left as it was. A symbolic link is written
+    through to its target; a folder, device or pipe at ``path`` is refused
+    (:func:`output_target`)."""
+    path = output_target(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
     try:
@@ -252,6 +292,87 @@ def csv_text(frame: pd.DataFrame) -> str:
     lines = [",".join(names)]
     lines.extend(",".join(row) for row in zip(*columns))
     return "\n".join(lines) + "\n"
+
+
+LOCK = ".lock"
+
+
+def _pid_alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        return True
+    return True
+
+
+@contextlib.contextmanager
+def folder_lock(folder: Path):
+    """Hold ``folder/.lock`` (the writer's pid) while a run or family writes into ``folder``.
+    A second writer raises :class:`FolderBusyError` naming the first; a lock whose process is
+    gone (killed) is taken over. The lock is not part of any manifest."""
+    folder = Path(folder)
+    folder.mkdir(parents=True, exist_ok=True)
+    lock = folder / LOCK
+    for _ in range(2):
+        try:
+            fd = os.open(lock, os.O_CREAT | os.O_EXCL | os.O_WRONLY, 0o644)
+            break
+        except FileExistsError:
+            try:
+                pid = int(lock.read_text().split()[0])
+            except (OSError, ValueError, IndexError):
+                pid = None
+            if pid is not None and pid != os.getpid() and _pid_alive(pid):
+                raise FolderBusyError(f"{folder} is being written by another run (pid {pid}); "
+                                      "wait for it to finish or choose another output folder")
+            lock.unlink(missing_ok=True)  # left by a killed run
+    else:
+        raise FolderBusyError(f"{folder}: cannot take its lock ({lock})")
+    try:
+        os.write(fd, f"{os.getpid()}\n".encode())
+    finally:
+        os.close(fd)
+    try:
+        yield folder
+    finally:
+        lock.unlink(missing_ok=True)
+
+
+def write_derived_table(path: Path, frame: pd.DataFrame, sources: dict[str, Path]) -> None:
+    """Write a table computed from other records (e.g. a family re-scored under other metric
+    settings) with a sidecar ``<name>.manifest.json``: the table's hash and the manifest
+    hashes of the ``sources`` it was computed from (name -> record folder)."""
+    path = Path(path)
+    write_csv_atomic(path, frame)
+    write_json_atomic(path.with_name(path.name + ".manifest.json"), {
+        "schema": SCHEMA, "kind": "derived", "code_version": code_version(),
+        "table": _file_entry(path),
+        "sources": {name: _file_entry(Path(folder) / MANIFEST)["sha256"]
+                    for name, folder in sources.items()}})
+
+
+def check_derived_table(path: Path, sources: dict[str, Path]) -> str | None:
+    """Why the derived table at ``path`` cannot be reused, or None: no sidecar manifest, the
+    table changed after writing, or a source record changed since."""
+    path = Path(path)
+    sidecar = path.with_name(path.name + ".manifest.json")
+    if not path.is_file():
+        return "not computed yet"
+    if not sidecar.is_file():
+        return "no manifest (written by an older version, or not by this pipeline)"
+    try:
+        manifest = json.loads(sidecar.read_text(encoding="utf-8"))
+        entry = _file_entry(path)
+        if manifest["table"]["sha256"] != entry["sha256"]:
+            return "the table differs from its manifest (changed after writing)"
+        for name, folder in sources.items():
+            if manifest["sources"].get(name) != _file_entry(Path(folder) / MANIFEST)["sha256"]:
+                return f"its source {name} changed since"
+    except (OSError, ValueError, KeyError, TypeError):
+        return "its manifest is unreadable"
+    return None
 
 
 def clean_leftovers(folder: Path) -> list[Path]:
@@ -338,18 +459,28 @@ def write_run(folder: Path, *, config_text: str, model: dict, trajectory: pd.Dat
     return folder
 
 
+#: What depends on the process that wrote a family (compilations), apart from its results, so
+#: that identical work gives identical ``family.json`` and ``family_metrics.csv`` bytes, resumed
+#: or not. Listed in the manifest when present (older families have none).
+FAMILY_TIMING = "timing.json"
+
+
 def write_family(folder: Path, table: pd.DataFrame, info: dict, config_hash: str,
-                 members: list[Path]) -> Path:
-    """Write a family folder's table and summary, then its manifest (with the members'
-    manifest hashes)."""
+                 members: list[Path], timing: dict | None = None) -> Path:
+    """Write a family folder's table, summary and (optional) process bookkeeping, then its
+    manifest (with the members' manifest hashes)."""
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
     clean_leftovers(folder)
     (folder / MANIFEST).unlink(missing_ok=True)
     write_csv_atomic(folder / "family_metrics.csv", table)
     write_json_atomic(folder / "family.json", info)
+    files = FAMILY_FILES
+    if timing is not None:
+        write_json_atomic(folder / FAMILY_TIMING, timing)
+        files = FAMILY_FILES + (FAMILY_TIMING,)
     member_hashes = {m.name: _file_entry(m / MANIFEST)["sha256"] for m in members}
-    _write_manifest(folder, "family", FAMILY_FILES, config_hash, {"members": member_hashes})
+    _write_manifest(folder, "family", files, config_hash, {"members": member_hashes})
     return folder
 
 
@@ -525,10 +656,13 @@ def read_family(folder: Path, members: bool = True, settings: bool = True) -> Fa
             raise RunFolderError(f"{folder}: settings cannot be read (no member config.yaml)")
         if settings:
             config, data = _settings(folder, (names[0] / "config.yaml").read_text())
+        manifest = _read_json(folder / MANIFEST)
+        timing = _read_json(folder / FAMILY_TIMING) \
+            if FAMILY_TIMING in manifest.get("files", {}) else {}
         return FamilyRecord(folder=folder, info=_read_json(folder / "family.json"),
                             table=pd.read_csv(folder / "family_metrics.csv"),
-                            manifest=_read_json(folder / MANIFEST), config=config,
-                            config_data=data)
+                            manifest=manifest, config=config, config_data=data,
+                            timing=timing)
     except (OSError, ValueError, pd.errors.ParserError) as exc:
         if isinstance(exc, RunFolderError):
             raise

@@ -111,6 +111,12 @@ def find_jobs(sweep_dir: Path) -> tuple[list[Job], list[dict]]:
     for kind, folders in (("family", found.families), ("single", found.runs)):
         for folder in folders:
             recorded = folder / ".hydra" / "overrides.yaml"
+            if members is not None and not recorded.is_file():
+                # a job copied in without Hydra's record: which swept values did it run?
+                skipped.append({"job": name(folder), "status": "skipped",
+                                "reason": "no provenance (.hydra/overrides.yaml): its swept "
+                                          "values cannot be told; copied in from elsewhere?"})
+                continue
             if members is not None and recorded.is_file() \
                     and frozenset(_override_list(recorded)) not in members:
                 skipped.append({"job": name(folder), "status": "stale",
@@ -165,7 +171,7 @@ def aggregate(sweep_dir: Path, baseline_dir: Path | None = None, progress: bool 
     pandas.DataFrame
         The summary table, one row per job.
     """
-    from tqdm import tqdm
+    from pipeline.studies.progress import Progress
 
     from pipeline.store.runs import RunFolderError
 
@@ -178,7 +184,8 @@ def aggregate(sweep_dir: Path, baseline_dir: Path | None = None, progress: bool 
                                 + (f" ({len(skipped)} passed over: see above)" if skipped
                                    else ""))
     rows, tables, settings = [], {}, {}
-    for job in tqdm(jobs, desc="aggregate", unit="job", disable=not progress):
+    bar = Progress(len(jobs), "aggregate", "job", disable=not progress)
+    for job in _counted(jobs, bar):
         try:
             row, table, settings[str(job.folder.relative_to(sweep_dir))] = \
                 _job_row(job, sweep_dir)
@@ -324,11 +331,31 @@ def main(argv: list[str] | None = None) -> int:
                         help="baseline job folder for improved jobs without a partner")
     parser.add_argument("--no-figures", action="store_true", help="skip the figures")
     args = parser.parse_args(argv)
+    if args.baseline is not None and folder_kind(args.baseline) is None:
+        # named on purpose, so never ignored: a folder that is not a trusted run or family
+        print(f"error: --baseline {args.baseline}: not a run or family folder (no manifest)",
+              file=sys.stderr)
+        return 2
+    if args.sweep_dir.exists() and not args.sweep_dir.is_dir():
+        print(f"error: {args.sweep_dir}: a file, not a sweep folder", file=sys.stderr)
+        return 2
     try:
         summary = aggregate(args.sweep_dir, args.baseline, figures=not args.no_figures)
     except FileNotFoundError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
+    except OSError as exc:
+        print(f"error: {exc.filename or args.sweep_dir}: cannot write the summary "
+              f"({exc.strerror or exc})", file=sys.stderr)
+        return 2
     print(f"{len(summary)} jobs -> {args.sweep_dir / 'summary.csv'}")
     return 0
+
+
+def _counted(items, bar):
+    """Yield ``items``, counting each on ``bar`` (closed at the end)."""
+    with bar:
+        for item in items:
+            yield item
+            bar.update()
 

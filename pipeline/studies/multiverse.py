@@ -39,8 +39,9 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from pipeline.store.runs import (MULTIVERSE_FILES, check, member_trajectories, read_family, untrust,
-                                 write_csv_atomic, write_json_atomic, write_manifest)
+from pipeline.store.runs import (MULTIVERSE_FILES, check, check_derived_table,
+                                 member_trajectories, read_family, untrust, write_csv_atomic,
+                                 write_derived_table, write_json_atomic, write_manifest)
 
 from pipeline.analysis.claims import ALL_CLAIMS, OUTCOMES, family_ledger
 from pipeline.config import CONF_DIR, ClaimsConfig, ExperimentConfig, MetricsConfig
@@ -121,8 +122,41 @@ def load_space(path: Path) -> Space:
         data = yaml.safe_load(path.read_text()) or {}
     except yaml.YAMLError as exc:
         raise ConfigError("multiverse space", str(path), f"valid YAML ({str(exc).splitlines()[0]})")
+    # strict: an unknown key, a wrong type or a wrong shape stops here, before any work
+    if not isinstance(data, dict):
+        raise ConfigError("multiverse space", type(data).__name__,
+                          "a mapping with 'dimensions' and the space's settings")
+    fields = {f.name: f for f in dataclasses.fields(Space)}
+    for key, value in data.items():
+        if key not in fields:
+            raise ConfigError(f"multiverse space: {key}", value,
+                              f"one of the keys {sorted(fields)}")
+        if key in ("name", "dimensions"):
+            continue
+        kind = fields[key].type if isinstance(fields[key].type, type) else \
+            {"int": int, "float": float}.get(str(fields[key].type), object)
+        if isinstance(value, bool) or not isinstance(value, (int, float) if kind is float
+                                                     else kind):
+            raise ConfigError(f"multiverse space: {key}", value,
+                              f"a number ({getattr(kind, '__name__', kind)})")
+    if not isinstance(data.get("dimensions", []), list):
+        raise ConfigError("multiverse space: dimensions", type(data["dimensions"]).__name__,
+                          "a list of dimensions")
+    dimension_keys = ("name", "key", "stage", "values", "applies_to", "cap", "why")
     dims = []
     for i, item in enumerate(data.get("dimensions") or []):
+        if not isinstance(item, dict):
+            raise ConfigError(f"dimensions[{i}]", item, "a mapping with key, stage, values")
+        for k in item:
+            if k not in dimension_keys:
+                raise ConfigError(f"dimensions[{i}].{k}", item[k],
+                                  f"one of the keys {list(dimension_keys)}")
+        if not isinstance(item.get("values"), list):
+            raise ConfigError(f"dimensions[{i}].values", item.get("values"),
+                              "a list of two or more values, the first the default")
+        if item.get("applies_to") is not None and not isinstance(item["applies_to"], list):
+            raise ConfigError(f"dimensions[{i}].applies_to", item["applies_to"],
+                              "a list of method names")
         key = str(item.get("name") or item.get("key", ""))
         config_key = str(item.get("key", "")) if item.get("name") else ""
         stage = item.get("stage")
@@ -142,8 +176,7 @@ def load_space(path: Path) -> Space:
         raise ConfigError("dimensions", [], "at least one dimension")
     if len({d.key for d in dims}) != len(dims):
         raise ConfigError("dimensions", [d.key for d in dims], "each key once")
-    fields = {f.name for f in dataclasses.fields(Space)} - {"dimensions", "name"}
-    settings = {k: v for k, v in data.items() if k in fields}
+    settings = {k: v for k, v in data.items() if k not in ("dimensions", "name")}
     space = Space(name=str(data.get("name", path.stem)), dimensions=tuple(dims), **settings)
     if space.family_size < 1 or space.n_specifications < 1:
         raise ConfigError("family_size / n_specifications",
@@ -298,7 +331,7 @@ def run_simulations(design: pd.DataFrame, space: Space, out_dir: Path, compose,
         for method in methods:
             cfg = compose(simulation_overrides(row, space, method))
             folder = out_dir / "runs" / method / cfg.config_hash()
-            if check(folder, "family", cfg.config_hash(), members=False) is not None \
+            if check(folder, "family", cfg.config_hash(), members=True) is not None \
                     and all(folder != f for _, f in todo):
                 todo.append((cfg, folder))
             folders[key][method] = folder
@@ -380,9 +413,14 @@ def rescore_family(folder: Path, readings: list[MetricsConfig], out_dir: Path) -
     todo, seen = [], set()
     for metrics in readings:
         key = _metrics_hash(metrics)
-        if metrics == family.config.metrics or key in seen \
-                or _rescored_path(folder, metrics, out_dir).is_file():
+        if metrics == family.config.metrics or key in seen:
             continue
+        path = _rescored_path(folder, metrics, out_dir)
+        reason = check_derived_table(path, {"family": folder})
+        if reason is None:
+            continue
+        if reason != "not computed yet":
+            print(f"re-scoring {path.name} again: {reason}", file=sys.stderr)
         seen.add(key)
         todo.append(metrics)
     if not todo:
@@ -397,7 +435,8 @@ def rescore_family(folder: Path, readings: list[MetricsConfig], out_dir: Path) -
             block.append({"member": index,
                           **compute_metrics(trajectory, context, metrics).to_json(), **keep})
     for block, metrics in zip(rows, todo):
-        write_csv_atomic(_rescored_path(folder, metrics, out_dir), pd.DataFrame(block))
+        write_derived_table(_rescored_path(folder, metrics, out_dir), pd.DataFrame(block),
+                            {"family": folder})
     return reads
 
 
@@ -408,7 +447,7 @@ def family_table(folder: Path, metrics: MetricsConfig, out_dir: Path) -> pd.Data
     if family.config.metrics == metrics:
         return family.table
     cached = _rescored_path(folder, metrics, out_dir)
-    if not cached.is_file():
+    if check_derived_table(cached, {"family": folder}) is not None:
         rescore_family(folder, [metrics], out_dir)
     # read back: the same rounding as family_metrics.csv, so a resumed analysis is identical
     return pd.read_csv(cached)
@@ -673,6 +712,10 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--jobs", type=int, default=2, help="analysis workers (default 2)")
     parser.add_argument("overrides", nargs="*", help="Hydra overrides for every run")
     args = parser.parse_args(argv)
+    if not 1 <= args.jobs <= 256:
+        print(f"error: --jobs={args.jobs} is invalid; allowed: an integer in [1, 256]",
+              file=sys.stderr)
+        return 2
     path = Path(args.space)
     if not path.suffix:
         path = CONF_DIR / "multiverse" / f"{args.space}.yaml"

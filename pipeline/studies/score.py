@@ -30,7 +30,7 @@ from pipeline.loop.trajectory import OBSTACLE_COLUMN, REQUIRED, STATE
 #: Optional columns a scored file may carry: the state (else derived from the path) and the APF
 #: repulsion at the vehicle (C3a and C3b need it).
 OPTIONAL = STATE + ("apf_rep_norm",)
-from pipeline.store.runs import write_text_atomic
+from pipeline.store.runs import output_target, refuse_input_as_output, write_text_atomic
 
 
 
@@ -127,6 +127,12 @@ def load_trajectory(path: Path | str, columns: dict[str, str] | None = None,
     header = next(line for line in text.splitlines() if line.strip()
                   and not line.lstrip().startswith("#"))
     names = [n.strip().strip('"') for n in header.split(sep)]
+    # empty columns at the end of the header (a spreadsheet's trailing separators) are no
+    # columns at all; an empty name elsewhere is
+    trailing = 0
+    while names and names[-1] == "":
+        names.pop()
+        trailing += 1
     repeated = sorted({n for n in names if names.count(n) > 1})
     if repeated:
         raise TrajectoryFileError(f"{source}: column(s) {repeated} appear more than once in the "
@@ -137,6 +143,12 @@ def load_trajectory(path: Path | str, columns: dict[str, str] | None = None,
         raise TrajectoryFileError(f"{source}: the file is empty")
     except pd.errors.ParserError as exc:
         raise TrajectoryFileError(f"{source}: not a CSV table ({str(exc).splitlines()[0]})")
+    if trailing:
+        tail = frame.iloc[:, len(frame.columns) - trailing:]
+        if tail.notna().any().any():
+            raise TrajectoryFileError(f"{source}: a column without a name in the header holds "
+                                      "values (name it, or remove it)")
+        frame = frame.iloc[:, :len(frame.columns) - trailing]
     frame.columns = [str(c).strip() for c in frame.columns]
     duplicated = sorted({c for c in frame.columns if list(frame.columns).count(c) > 1})
     if duplicated:
@@ -194,6 +206,13 @@ def load_trajectory(path: Path | str, columns: dict[str, str] | None = None,
                                       f"{raw.iloc[row]!r} is outside the plausible range "
                                       f"[-{limit:g}, {limit:g}]")
         frame[column] = values
+        # an empty cell in an optional column (the last row excepted: it logs the end state,
+        # without an input) is counted and said, never dropped silently
+        blank = values.isna().to_numpy()[:-1]
+        if blank.any():
+            rows = np.flatnonzero(blank) + 1
+            frame.attrs.setdefault("blank_cells", {})[column] = (int(blank.sum()),
+                                                                 int(rows[0]), int(rows[-1]))
     for j in obstacle_ids:
         radius = frame[f"obs{j}_radius_m"]
         if (radius <= 0).any():
@@ -299,6 +318,15 @@ def main(argv: list[str] | None = None) -> int:
                         help="x,y,radius[,appear_s[,vx,vy]] (repeatable)")
     parser.add_argument("--out", type=Path, default=None, help="write metrics JSON here")
     args = parser.parse_args(argv)
+    if args.out is not None:
+        # refused before anything is read: the input must never become the output
+        try:
+            refuse_input_as_output(args.out, [Path(args.trajectory)]
+                                   if args.trajectory != "-" else [])
+            output_target(args.out)
+        except OSError as exc:
+            print(f"error: --out {args.out}: cannot write ({exc.strerror})", file=sys.stderr)
+            return 2
     try:
         frame = load_trajectory(
             args.trajectory, _pairs(args.columns, "--columns"),
@@ -317,6 +345,10 @@ def main(argv: list[str] | None = None) -> int:
                                                        args.vehicle_radius), MetricsConfig())
     missing, derived = score_quality(frame.columns)
     values = metrics.to_json()
+    blank = frame.attrs.get("blank_cells", {})
+    for column, (count, first, last) in blank.items():
+        print(f"score: column {column}: {count} empty cell(s) (data rows {first}-{last}); the "
+              "metrics that use it leave those rows out", file=sys.stderr)
     for key, reason in missing.items():
         values[key] = None  # not "false" or "0": the file cannot say
         claim = f"{CLAIM_OF[key]} " if key in CLAIM_OF else ""
@@ -324,7 +356,8 @@ def main(argv: list[str] | None = None) -> int:
     for key, how in derived.items():
         claim = f"{CLAIM_OF[key]} " if key in CLAIM_OF else ""
         print(f"score: {claim}{key} derived: {how}", file=sys.stderr)
-    values["score_quality"] = {"missing": missing, "derived": derived}
+    values["score_quality"] = {"missing": missing, "derived": derived,
+                               "empty_cells": {c: v[0] for c, v in blank.items()}}
     text = json.dumps(values, indent=2, sort_keys=True)
     if args.out:
         try:

@@ -159,10 +159,17 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("reference", type=Path, nargs="?", default=Path("reports/reference"))
     parser.add_argument("--update", action="store_true", help="rewrite the reference")
     args = parser.parse_args(argv)
+    if args.reference.exists() and not args.reference.is_dir():
+        print(f"error: reference {args.reference}: a file, not a folder", file=sys.stderr)
+        return 2
     try:
         problems = verify(args.runs, args.reference, args.update)
     except FileNotFoundError as exc:
         print(f"error: {exc}", file=sys.stderr)
+        return 2
+    except OSError as exc:
+        print(f"error: {exc.filename or args.reference}: cannot "
+              f"{'write' if args.update else 'read'} ({exc.strerror or exc})", file=sys.stderr)
         return 2
     if args.update:
         print(f"reference written to {args.reference}")
