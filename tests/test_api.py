@@ -47,3 +47,33 @@ def test_api_refuses_what_it_cannot_do():
         api.simulate(["scenario=family"])
     with pytest.raises(ValueError, match="not both"):
         api.simulate(["method=improved"], config=api.compose([]))
+
+
+def test_a_checked_configuration_is_read_only_and_replace_checks_again():
+    """Frozen after validation: every part refuses assignment (also after pickling, as a
+    worker receives it); dataclasses.replace builds a new object and runs the checks again."""
+    import dataclasses
+    import pickle
+
+    import pytest
+
+    from pipeline import api
+    from pipeline.errors import ConfigError
+
+    cfg = api.compose(["method=improved"])
+    for target, name, value in ((cfg, "run", None), (cfg.planner, "beta", 0.5),
+                                (cfg.scenario, "n_steps", 3),
+                                (cfg.scenario.obstacles[0], "radius_m", 2.0),
+                                (cfg.claims, "treatment", "x"), (cfg.metrics, "near_field_m", 1.0)):
+        with pytest.raises(dataclasses.FrozenInstanceError, match="read-only"):
+            setattr(target, name, value)
+    copy = pickle.loads(pickle.dumps(cfg))
+    assert copy.config_hash() == cfg.config_hash()
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        copy.planner.beta = 0.5
+    changed = dataclasses.replace(cfg, planner=dataclasses.replace(cfg.planner, beta=0.5))
+    assert changed.planner.beta == 0.5 and cfg.planner.beta != 0.5
+    assert changed.config_hash() == api.compose(["method=improved",
+                                                 "planner.beta=0.5"]).config_hash()
+    with pytest.raises(ConfigError, match="scenario.n_steps"):
+        dataclasses.replace(cfg.scenario, n_steps=0)

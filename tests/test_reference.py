@@ -25,13 +25,19 @@ def paper_runs(root: Path, make_config) -> None:
                        root / "kinematic" / planner)
 
 
-def test_paper_scenario_matches_reference(tmp_path, make_config):
-    paper_runs(tmp_path, make_config)
-    assert verify(tmp_path, REFERENCE) == []
+@pytest.fixture(scope="module")
+def paper_root(tmp_path_factory, make_config):
+    """The paper-scenario runs of every method and track, made once for this module."""
+    root = tmp_path_factory.mktemp("reference_runs")
+    paper_runs(root, make_config)
+    return root
 
 
-def test_verify_reports_a_changed_number(tmp_path, make_config):
-    paper_runs(tmp_path, make_config)
+def test_paper_scenario_matches_reference(paper_root):
+    assert verify(paper_root, REFERENCE) == []
+
+
+def test_verify_reports_a_changed_number(paper_root, tmp_path):
     reference = tmp_path / "ref"
     reference.mkdir()
     text = (REFERENCE / "paper_metrics.csv").read_text().splitlines()
@@ -41,16 +47,16 @@ def test_verify_reports_a_changed_number(tmp_path, make_config):
     row[column] = str(float(row[column]) + 0.01)
     (reference / "paper_metrics.csv").write_text("\n".join([text[0], ",".join(row)]
                                                            + text[2:]) + "\n")
-    problems = verify(tmp_path, reference)
+    problems = verify(paper_root, reference)
     assert len(problems) == 1 and "min_clearance_m" in problems[0]
     # rows are matched by (track, method): the reference in another order is no difference
     (reference / "paper_metrics.csv").write_text("\n".join([text[0]] + text[1:][::-1]) + "\n")
-    assert verify(tmp_path, reference) == []
+    assert verify(paper_root, reference) == []
     # a row missing from the rerun is named by its key
     extra = text[1].split(",")
     extra[1] = "someone_else"
     (reference / "paper_metrics.csv").write_text("\n".join(text + [",".join(extra)]) + "\n")
-    assert verify(tmp_path, reference) == [f"paper_metrics.csv: row {extra[0]}, someone_else is "
+    assert verify(paper_root, reference) == [f"paper_metrics.csv: row {extra[0]}, someone_else is "
                                            "in the reference, not in the rerun"]
 
 
