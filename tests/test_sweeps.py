@@ -114,3 +114,25 @@ def test_a_job_copied_in_without_its_provenance_is_passed_over(basic_sweep, tmp_
     row = summary[summary["job"] == "copied_in"].iloc[0]
     assert row["status"] == "skipped" and "no provenance" in row["reason"]
     assert (summary["status"] == "ok").sum() == 4
+
+
+def test_an_edited_or_stale_summary_is_recomputed_not_trusted(basic_sweep, tmp_path):
+    """summary.csv carries a manifest tied to the jobs it was computed from: an edited summary,
+    or a job removed since, makes the report re-aggregate (and say so) instead of showing it."""
+    from pipeline.reporting.page import _sweep_section
+    from pipeline.studies.aggregate import summary_reason
+
+    sweep = tmp_path / "sweep"
+    shutil.copytree(basic_sweep, sweep)
+    (tmp_path / "tab").mkdir()
+    aggregate(sweep, progress=False, figures=False)
+    assert summary_reason(sweep) is None
+    original = (sweep / "summary.csv").read_text()
+    (sweep / "summary.csv").write_text(original.replace("improved", "forged", 1))
+    assert "differs from its manifest" in summary_reason(sweep)
+    _sweep_section(sweep, tmp_path / "fig", tmp_path / "tab")
+    assert (sweep / "summary.csv").read_text() == original and summary_reason(sweep) is None
+    shutil.rmtree(job_dirs(sweep)[0])
+    assert "added or removed since" in summary_reason(sweep)
+    _sweep_section(sweep, tmp_path / "fig", tmp_path / "tab")
+    assert len(pd.read_csv(sweep / "summary.csv")) == 3

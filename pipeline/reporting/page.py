@@ -771,10 +771,14 @@ def _sweep_section(sweep_dir: Path, fig_dir: Path, table_dir: Path) -> dict:
     import json
     import shutil
 
-    from pipeline.studies.aggregate import aggregate
+    from pipeline.studies.aggregate import aggregate, summary_reason
 
     sweep_dir = Path(sweep_dir)
-    if not (sweep_dir / "summary.csv").is_file():
+    reason = summary_reason(sweep_dir)
+    if reason is not None:
+        # a summary is a cache of its jobs: recomputed, never trusted without its manifest
+        if reason != "not computed yet":
+            print(f"report: re-aggregating {sweep_dir}: summary.csv {reason}", file=sys.stderr)
         aggregate(sweep_dir, progress=False)
     summary = pd.read_csv(sweep_dir / "summary.csv")
     keys = json.loads((sweep_dir / "swept_keys.json").read_text())

@@ -367,6 +367,8 @@ def check_derived_table(path: Path, sources: dict[str, Path]) -> str | None:
         entry = _file_entry(path)
         if manifest["table"]["sha256"] != entry["sha256"]:
             return "the table differs from its manifest (changed after writing)"
+        if set(manifest["sources"]) != set(sources):
+            return "its sources are not the ones it was computed from (added or removed since)"
         for name, folder in sources.items():
             if manifest["sources"].get(name) != _file_entry(Path(folder) / MANIFEST)["sha256"]:
                 return f"its source {name} changed since"

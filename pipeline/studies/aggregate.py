@@ -22,7 +22,8 @@ import pandas as pd
 import yaml
 from hydra.experimental.callback import Callback
 
-from pipeline.store.runs import folder_kind, write_csv_atomic, write_json_atomic
+from pipeline.store.runs import (check_derived_table, folder_kind, write_csv_atomic,
+                                 write_derived_table, write_json_atomic)
 from pipeline.analysis.claims import ALL_CLAIMS, family_ledger, single_scenario_outcome
 from pipeline.config import ClaimsConfig
 
@@ -85,6 +86,18 @@ def current_sweep_jobs(sweep_dir: Path) -> set[frozenset] | None:
     except Exception:  # noqa: BLE001 - another sweeper or an unreadable file: no stale check
         return None
     return {frozenset(job) for batch in batches for job in batch}
+
+
+def job_sources(sweep_dir: Path, jobs: list[Job]) -> dict[str, Path]:
+    """The record folders a summary is computed from, by their path in the sweep."""
+    return {str(job.folder.relative_to(sweep_dir)): job.folder for job in jobs}
+
+
+def summary_reason(sweep_dir: Path) -> str | None:
+    """Why ``summary.csv`` of ``sweep_dir`` cannot be trusted as it is, or None (its manifest
+    matches the table and the jobs now in the folder)."""
+    jobs, _ = find_jobs(Path(sweep_dir))
+    return check_derived_table(Path(sweep_dir) / "summary.csv", job_sources(sweep_dir, jobs))
 
 
 def find_jobs(sweep_dir: Path) -> tuple[list[Job], list[dict]]:
@@ -223,6 +236,9 @@ def aggregate(sweep_dir: Path, baseline_dir: Path | None = None, progress: bool 
 
         for fig, stem in sweep_figure(good, swept):
             save_figure(fig, sweep_dir / "figures", stem)
+    # last: the summary's manifest, tied to the jobs it was computed from (a reader re-aggregates
+    # when a job changed, appeared or went, or when the summary was edited)
+    write_derived_table(sweep_dir / "summary.csv", summary, job_sources(sweep_dir, jobs))
     return summary
 
 
