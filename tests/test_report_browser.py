@@ -115,7 +115,7 @@ def test_report_in_headless_chromium(report):
     assert all(w > 200 and h > 100 for _, w, h in rendered), rendered
     # the page's height at 1280 px: this fixture's page measured 10,103 px (16,076 before the
     # specification curves went into a collapsible block); make reproduce's report measured
-    # 21,312 px before the answer box and the collapsible blocks, 10,611 after
+    # 21,312 px before the answer box and the collapsible blocks, 10,593 after
     assert height_1280 < 11000, height_1280
     # a narrow window does not scroll sideways (wide tables scroll inside their box), and the
     # ledger's outcome column is visible at 390 px without scrolling its table sideways

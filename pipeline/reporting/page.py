@@ -1039,6 +1039,8 @@ def _family_section(tables: dict, info: dict, paper_metrics: dict, fig_dir: Path
         row["p_fmt"] = _fmt(row["p_holm"])
         row["pi_fmt"] = (f"{_fmt(row['prob_improvement'])} [{_fmt(row['pi_low'])}, "
                          f"{_fmt(row['pi_high'])}]")
+        row["pi_main"] = _fmt(row["prob_improvement"])
+        row["pi_ci"] = f"[{_fmt(row['pi_low'])}, {_fmt(row['pi_high'])}]"
         row["counts_fmt"] = (f"{row['n_better']} / {row['n_tied']} / {row['n_worse']} / "
                              f"{row['n_missing']}")
         row["margin_fmt"] = _fmt(row["margin"])
