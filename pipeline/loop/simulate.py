@@ -218,14 +218,17 @@ def _closed_loop(cfg: LoopSettings, scenario: Scenario,
     command: np.ndarray | None = None
     termination = "max_steps"
     # obstacle_anchor="vehicle": each obstacle is placed relative to the vehicle when it appears
+    # (a plain flag keeps the default reading's loop free of the per-step check)
     unanchored = np.full(scenario.n_obstacles, scenario.obstacle_anchor == "vehicle")
+    anchoring = bool(unanchored.any())
     for k in range(scenario.n_steps + 1):
         time_s = k * ts
-        if unanchored.any():
+        if anchoring:
             due = unanchored & (time_s + 1e-9 >= scenario.obstacle_appear_s)
             if due.any():
                 scenario = scenario.anchored(due, state[:2])
                 unanchored &= ~due
+                anchoring = bool(unanchored.any())
         X, Y, psi = float(state[0]), float(state[1]), float(state[2])
         dx, dy = X - origin_x, Y - origin_y
         along, lateral = c_line * dx + s_line * dy, -s_line * dx + c_line * dy

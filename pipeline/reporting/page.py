@@ -376,8 +376,6 @@ def _features_section(lateral: dict[str, dict], kinematic_runs: list[dict], run_
     rule that picks the Appendix-A reading (both methods meet the obstacle, most phrases
     matched) and whether the configured default is its pick."""
     from pipeline.analysis.features import FEATURES, FeatureConfig, feature_row, paper_likeness
-    from pipeline.store.collection import load_runs
-
     def pair(runs: list[dict]) -> dict[str, dict]:
         return {r["metrics"].get("method"): r for r in runs
                 if r["metrics"].get("method") in ("baseline", "improved")}
@@ -388,14 +386,8 @@ def _features_section(lateral: dict[str, dict], kinematic_runs: list[dict], run_
     if "baseline" in kin:
         columns.append(("Appendix-A track", _reading_of(kin["baseline"]["config"])
                         + " (default)", kin))
-    readings_root = Path(run_root) / "kinematic_readings"
-    if readings_root.is_dir():
-        found = load_runs(readings_root, [])
-        by_variant: dict[str, list] = {}
-        for r in found.runs:
-            by_variant.setdefault(r["config"]["run"].get("variant", "?"), []).append(r)
-        for variant, runs in sorted(by_variant.items()):
-            columns.append(("Appendix-A track", variant, pair(runs)))
+    for variant, runs in _readings_runs(run_root).items():
+        columns.append(("Appendix-A track", variant, pair(runs)))
     columns = [c for c in columns if {"baseline", "improved"} <= set(c[2])]
     if not columns:
         return None
@@ -434,6 +426,16 @@ def _features_section(lateral: dict[str, dict], kinematic_runs: list[dict], run_
                          "met": "yes" if c["met"] else "no"} for c in cells],
             "rows": table, "n": len(FEATURES), "rule_note": rule_note,
             "clearance": f"{clearance_m:g}"}
+
+
+def _readings_runs(run_root: Path) -> dict[str, list[dict]]:
+    """The Appendix-A readings' runs (``kinematic_readings``) by reading, in name order."""
+    root = Path(run_root) / "kinematic_readings"
+    by_variant: dict[str, list] = {}
+    if root.is_dir():
+        for r in load_runs(root, []).runs:
+            by_variant.setdefault(r["config"]["run"].get("variant", "?"), []).append(r)
+    return dict(sorted(by_variant.items()))
 
 
 def _reading_of(baseline_config: dict) -> str:
@@ -1151,8 +1153,6 @@ def _kinematic_family_section(folder: Path, cfg: ClaimsConfig, table_dir: Path,
     """The Appendix-A track's own ledger over its family (``outputs/kinematic_family``, the
     default reading): the treatment against each control, the baseline against mpc_no_apf,
     collision counts per method, and whether each outcome agrees with the lateral family's."""
-    from pipeline.store.collection import load_runs
-
     found = load_runs(folder, [])
     tables, notes = _primary_tables(found.family_tables, found.family_info)
     if cfg.treatment not in tables or not any(c in tables for c in cfg.controls):
@@ -1198,8 +1198,6 @@ def _reading_sensitivity(run_root: Path, kinematic_runs: list[dict], cfg: Claims
     """The paper scenario's claims on the Appendix-A track under each reading of the
     baseline (the default and ``kinematic_readings``): treatment against baseline, "not
     comparable" where either method stays farther than ``comparable_clearance_m``."""
-    from pipeline.store.collection import load_runs
-
     def outcomes(runs: list[dict]) -> dict[str, str] | None:
         by = {r["metrics"].get("method"): r["metrics"] for r in runs}
         if cfg.treatment not in by or "baseline" not in by:
@@ -1218,14 +1216,9 @@ def _reading_sensitivity(run_root: Path, kinematic_runs: list[dict], cfg: Claims
     base = next((r for r in default if r["metrics"].get("method") == "baseline"), None)
     if base is not None and (o := outcomes(default)) is not None:
         columns.append((_reading_of(base["config"]) + " (default)", o))
-    root = Path(run_root) / "kinematic_readings"
-    if root.is_dir():
-        by_variant: dict[str, list] = {}
-        for r in load_runs(root, []).runs:
-            by_variant.setdefault(r["config"]["run"].get("variant", "?"), []).append(r)
-        for variant, runs in sorted(by_variant.items()):
-            if (o := outcomes(runs)) is not None:
-                columns.append((variant, o))
+    for variant, runs in _readings_runs(run_root).items():
+        if (o := outcomes(runs)) is not None:
+            columns.append((variant, o))
     if len(columns) < 2:
         return []
     claims = list(columns[0][1])
