@@ -150,7 +150,7 @@ def bench_lateral(horizons, obstacle_counts, n_steps: int, repeats: int) -> list
             offset_u = mpc_sparse.qp.map.variables["U"][0]
             for rep in range(repeats):
                 sparse_floor = KeptClarabelFloor(mpc_sparse.qp.map, ctrl.solver_max_iter)
-                condensed_floor = KeptClarabelFloor(mpc_direct.qp.map, ctrl.solver_max_iter)
+                condensed_floor = KeptClarabelFloor(mpc_direct.qp.compiled.map, ctrl.solver_max_iter)
                 for k, (inputs, apf_s) in enumerate(steps):
                     fs_wall, fs_cpu, fs_x = sparse_floor.time(sparse_thetas[k])
                     fc_wall, fc_cpu, _ = condensed_floor.time(condensed_thetas[k])

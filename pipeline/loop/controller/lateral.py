@@ -20,6 +20,13 @@ prediction matrices of the model's speed (:class:`CondensedPrediction`, cached p
 the free response computed in numpy each step, so the QP carries only ``U`` and the slacks (33
 variables); its parameters are the weighted prediction rows and the half-planes folded onto
 ``U``, so it stays DPP. Both give the same optimum (tests hold them to each other).
+
+The condensed statement is written in the coordinates ``W = R U`` of the cost's Cholesky factor
+``R`` (``R' R`` = half the Hessian in ``U``): the tracking cost is then ``|W|^2 + 2 r' W``, a
+constant quadratic, and every bound is a plain pair of inequalities, so CVXPY's canonical
+problem is the 33-variable, 86-row QP itself (no auxiliary variables, no equality rows) and the
+kept Clarabel solver sees exactly what :class:`ClarabelCondensedQp` hands it. ``U = R^-1 W`` is
+read back (:class:`CompiledCondensedQp`).
 """
 
 from __future__ import annotations
@@ -146,6 +153,8 @@ class CondensedPrediction:
         Upper-triangular ``R`` with ``R' R = hessian_u / 2`` (the cost as ``|R U + r|^2``).
     chol_rhs_map : ndarray, shape (Nc, 4 N)
         ``R^-T gamma_w'``: ``r = chol_rhs_map @ free_w``.
+    chol_inv : ndarray, shape (Nc, Nc)
+        ``R^-1``: the moves of the condensed statement's coordinates, ``U = R^-1 W``.
     gradient_map : ndarray, shape (Nc, 4 N)
         ``2 gamma_w'``: the cost's gradient in ``U`` is ``gradient_map @ free_w``.
     """
@@ -159,6 +168,7 @@ class CondensedPrediction:
     chol: np.ndarray
     chol_rhs_map: np.ndarray
     gradient_map: np.ndarray
+    chol_inv: np.ndarray
 
     @classmethod
     def of(cls, model: LateralModel, blocking: np.ndarray,
@@ -196,7 +206,7 @@ class CondensedPrediction:
         fortran = np.asfortranarray
         return cls(model, gamma, fortran(powers.reshape(-1, 5)), fortran(gamma_w),
                    root, 2.0 * half_hessian, chol, fortran(chol_rhs_map),
-                   fortran(2.0 * gamma_w.T))
+                   fortran(2.0 * gamma_w.T), solve_triangular(chol, np.eye(nc), lower=False))
 
     def free_response(self, x0: np.ndarray, disturbance: np.ndarray) -> np.ndarray:
         """States at steps 1..N with ``U = 0`` (shape (N, 5)); ``disturbance`` is (5, N)."""
@@ -210,30 +220,36 @@ class CondensedPrediction:
 
 
 def build_condensed_lateral_problem(s: LateralQpStructure) -> tuple[cp.Problem, list, dict]:
-    """The same lateral QP with the states eliminated (see the module docstring).
+    """The same lateral QP with the states eliminated, in the coordinates ``W = R U``.
 
-    The tracking cost ``|gamma_w U + free_w|^2 + r_u |U T|^2`` is stated through its Cholesky
-    factor as ``|R U + r|^2`` (equal up to a constant: the same minimizer), so CVXPY's
-    canonicalization adds ``Nc`` auxiliary variables instead of ``4 N``.
+    The tracking cost ``|gamma_w U + free_w|^2 + r_u |U T|^2`` equals ``|R U + r|^2`` up to a
+    constant (``R`` its Cholesky factor), i.e. ``|W|^2 + 2 r' W``: a constant quadratic, so
+    CVXPY adds no auxiliary variable for it. The bounds are stated as pairs of inequalities
+    (``cp.abs`` would add one variable per bounded entry). Every matrix that multiplies ``W``
+    is one parameter computed in numpy (``R^-1``, ``gamma_d R^-1``, ``gamma_h R^-1``), which
+    keeps the problem DPP. Canonicalized, it is the 33-variable, 86-row QP itself.
     """
     N, Nc, M = s.horizon, s.control_horizon, s.max_obstacles
     w1, w2 = s.weights[5], s.weights[6]
-    chol = cp.Parameter((Nc, Nc), name="cost_cholesky")
+    chol_inv = cp.Parameter((Nc, Nc), name="cost_cholesky_inverse")
     chol_rhs = cp.Parameter(Nc, name="cost_cholesky_rhs")
-    gamma_d = cp.Parameter((N, Nc), name="steering_gamma")
+    gamma_d = cp.Parameter((N, Nc), name="steering_gamma_w")
     free_d = cp.Parameter(N, name="steering_free")
-    gamma_h = cp.Parameter((N * M, Nc), name="halfplane_gamma")
+    gamma_h = cp.Parameter((N * M, Nc), name="halfplane_gamma_w")
     bound_h = cp.Parameter(N * M, name="halfplane_free_bound")
-    U = cp.Variable(Nc, name="U")
-    S = cp.Variable(N * M, nonneg=True, name="slack")
-    cost = cp.sum_squares(chol @ U + chol_rhs) + w1 * cp.sum(S) + w2 * cp.sum_squares(S)
-    constraints = [cp.abs(U) <= s.steering_rate_max_rad_s,
-                   cp.abs(gamma_d @ U + free_d) <= s.steering_max_rad,
-                   gamma_h @ U + S >= bound_h]
+    W = cp.Variable(Nc, name="W")
+    S = cp.Variable(N * M, name="slack")
+    rate, steering = s.steering_rate_max_rad_s, s.steering_max_rad
+    cost = cp.sum_squares(W) + 2 * chol_rhs @ W + w1 * cp.sum(S) + w2 * cp.sum_squares(S)
+    moves = chol_inv @ W
+    steering_angle = gamma_d @ W
+    constraints = [moves <= rate, -moves <= rate,
+                   steering_angle <= steering - free_d, -steering_angle <= steering + free_d,
+                   gamma_h @ W + S >= bound_h, S >= 0]
     problem = cp.Problem(cp.Minimize(cost), constraints)
     if not problem.is_dcp(dpp=True):
         raise RuntimeError("condensed lateral MPC is not DPP; it would recompile every step")
-    return problem, [chol, chol_rhs, gamma_d, free_d, gamma_h, bound_h], {"U": U}
+    return problem, [chol_inv, chol_rhs, gamma_d, free_d, gamma_h, bound_h], {"W": W}
 
 
 @dataclass(frozen=True)
@@ -253,12 +269,15 @@ class CondensedData:
     gradient_u: np.ndarray  # (Nc,) 2 gamma_w' free_w
     chol: np.ndarray        # (Nc, Nc) R, R' R = hessian_u / 2
     chol_rhs: np.ndarray    # (Nc,) r = R^-T gamma_w' free_w
+    chol_inv: np.ndarray    # (Nc, Nc) R^-1: U = R^-1 W
 
     def theta(self) -> np.ndarray:
-        """The parameter vector in the compiled problem's order (column-major)."""
-        return np.concatenate([self.chol.ravel(order="F"), self.chol_rhs,
-                               self.gamma_d.ravel(order="F"), self.free_d,
-                               self.gamma_h.ravel(order="F"), self.bound_h])
+        """The parameter vector of :func:`build_condensed_lateral_problem` (its order, column-
+        major): the rows that multiply ``U`` taken to ``W = R U``."""
+        inverse = self.chol_inv
+        return np.concatenate([inverse.ravel(order="F"), self.chol_rhs,
+                               (self.gamma_d @ inverse).ravel(order="F"), self.free_d,
+                               (self.gamma_h @ inverse).ravel(order="F"), self.bound_h])
 
 
 def condensed_data(prediction: CondensedPrediction, inputs: "MpcInputs",
@@ -284,7 +303,30 @@ def condensed_data(prediction: CondensedPrediction, inputs: "MpcInputs",
     bound_h = (h - G * free[:, 0, None]).ravel()
     return CondensedData(prediction.gamma_w, free_w, gamma[:, 4, :], free[:, 4], gamma_h,
                          bound_h, free, prediction.hessian_u, prediction.gradient_map @ free_w,
-                         prediction.chol, prediction.chol_rhs_map @ free_w)
+                         prediction.chol, prediction.chol_rhs_map @ free_w, prediction.chol_inv)
+
+
+class CompiledCondensedQp:
+    """Backends ``clarabel_direct`` and ``cvxpy`` on the condensed statement: one step's
+    :class:`CondensedData` in, the moves ``U = R^-1 W`` out (the statement's own variable is
+    ``W``, see :func:`build_condensed_lateral_problem`).
+
+    Parameters
+    ----------
+    compiled : DirectQp or CvxpyQp
+        The compiled statement (shared through the ``QpCache``).
+    """
+
+    def __init__(self, compiled) -> None:
+        self.compiled = compiled
+
+    def solve(self, data: CondensedData) -> QpSolution:
+        solution = self.compiled.solve(data.theta())
+        if solution.values is None:
+            return solution
+        W = np.asarray(solution.values["W"], float).reshape(-1)
+        return QpSolution(solution.status, solution.iterations, solution.solve_time_s,
+                          {"U": data.chol_inv @ W, "W": W})
 
 
 class ClarabelCondensedQp:
@@ -517,6 +559,8 @@ class LateralMpc:
             self.qp, self.compile_count, self.compile_time_s = compiled_backend(
                 qp_cache, "lateral", structure, lambda: builder(structure),
                 controller.backend, controller.solver_max_iter)
+            if self.condensed:
+                self.qp = CompiledCondensedQp(self.qp)
         # condensed predictions by model speed, shared like the models (built once per speed)
         key = ("lateral_predictions", vehicle_key(vehicle), self.sample_time_s,
                self.model_cfg.b2_heading_entry, self.model_cfg.speed_grid_mps,
@@ -524,7 +568,6 @@ class LateralMpc:
                self.weights[:5])
         self._predictions: dict[float, CondensedPrediction] = \
             qp_cache.memo(key, dict) if qp_cache is not None else {}
-        self._dense = controller.backend in ("daqp", "clarabel_dense")
         self.fallback = PlanFallback(controller.horizon)
         self._steps_ahead_s = np.arange(1, controller.horizon + 1) * self.sample_time_s
         self._times_s = np.concatenate([[0.0], self._steps_ahead_s])
@@ -556,7 +599,7 @@ class LateralMpc:
                 prediction = self.prediction(inputs.model)
                 data = condensed_data(prediction, inputs, self.weights)
                 free = data.free
-                solution = self.qp.solve(data if self._dense else data.theta())
+                solution = self.qp.solve(data)
             else:
                 solution = self.qp.solve(self.parameter_vector(inputs))
         if solution.ok:
