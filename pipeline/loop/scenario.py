@@ -7,6 +7,7 @@ velocity from the position at which they appear.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 
@@ -32,6 +33,8 @@ class ObstacleSnapshot:
 
     def only_visible(self) -> "ObstacleSnapshot":
         keep = self.visible
+        if np.count_nonzero(keep) == keep.size:  # all seen (the common case): nothing to drop
+            return self
         return ObstacleSnapshot(self.positions_m[keep], self.velocities_mps[keep],
                                 self.radii_m[keep], self.visible[keep])
 
@@ -48,8 +51,13 @@ class LineFrame:
     origin_m: np.ndarray
     heading_rad: float
 
+    @cached_property
+    def cos_sin(self) -> tuple:
+        """``cos`` and ``sin`` of the heading (numpy's, computed once per frame)."""
+        return np.cos(self.heading_rad), np.sin(self.heading_rad)
+
     def to_line(self, points_m: np.ndarray) -> np.ndarray:
-        c, s = np.cos(self.heading_rad), np.sin(self.heading_rad)
+        c, s = self.cos_sin
         d = np.asarray(points_m, dtype=float) - self.origin_m
         out = np.empty(d.shape)
         out[..., 0] = c * d[..., 0] + s * d[..., 1]
@@ -57,12 +65,12 @@ class LineFrame:
         return out
 
     def vectors_to_line(self, vectors: np.ndarray) -> np.ndarray:
-        c, s = np.cos(self.heading_rad), np.sin(self.heading_rad)
+        c, s = self.cos_sin
         v = np.asarray(vectors, dtype=float)
         return np.stack([c * v[..., 0] + s * v[..., 1], -s * v[..., 0] + c * v[..., 1]], axis=-1)
 
     def to_global(self, points_line_m: np.ndarray) -> np.ndarray:
-        c, s = np.cos(self.heading_rad), np.sin(self.heading_rad)
+        c, s = self.cos_sin
         p = np.asarray(points_line_m, dtype=float)
         return np.stack([c * p[..., 0] - s * p[..., 1], s * p[..., 0] + c * p[..., 1]],
                         axis=-1) + self.origin_m

@@ -156,13 +156,14 @@ def _apf_columns(rollout: ApfRollout) -> dict:
         ax = ay = rx = ry = 0.0
         nx, ny = rollout.path_m[0].tolist()
     ex, ey = rollout.path_m[-1].tolist()
+    # counts, not .any()/.mean(): the same values without a ufunc reduction each
+    capped, steps = int(np.count_nonzero(rollout.step_cap_active)), rollout.step_cap_active.size
     return {"apf_next_x_m": nx, "apf_next_y_m": ny, "apf_end_x_m": ex, "apf_end_y_m": ey,
             "apf_att_x": ax, "apf_att_y": ay, "apf_rep_x": rx, "apf_rep_y": ry,
             "apf_rep_norm": sqrt(rx * rx + ry * ry),
-            "apf_step_capped": bool(rollout.step_cap_active.any()),
-            "apf_step_min_used": bool(rollout.step_min_active.any()),
-            "apf_step_cap_share": float(rollout.step_cap_active.mean())
-            if rollout.step_cap_active.size else 0.0}
+            "apf_step_capped": capped > 0,
+            "apf_step_min_used": bool(np.count_nonzero(rollout.step_min_active)),
+            "apf_step_cap_share": capped / steps if steps else 0.0}
 
 
 def simulate(cfg: LoopSettings, scenario: Scenario,
