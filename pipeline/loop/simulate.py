@@ -189,11 +189,15 @@ def simulate(cfg: LoopSettings, scenario: Scenario,
         solver_iterations, fallback, max_slack_m``; ``ltv_passes, ltv_change`` on the kinematic
         track).
     """
-    from threadpoolctl import threadpool_limits
+    from threadpoolctl import ThreadpoolController
 
     # every product in the loop is tiny: OpenBLAS would still start threads for some of them
-    # and leave them spinning on the other core (measured: twice the CPU time of a run)
-    with threadpool_limits(limits=1, user_api="blas"):
+    # and leave them spinning on the other core (measured: twice the CPU time of a run). The
+    # controller (a scan of the loaded libraries, ~2 ms) is kept in the cache's process-local
+    # part, so a family's members pay it once per worker
+    qp_cache = qp_cache if qp_cache is not None else QpCache()
+    threads = qp_cache.local("threadpool_controller", ThreadpoolController)
+    with threads.limit(limits=1, user_api="blas"):
         return _closed_loop(cfg, scenario, qp_cache)
 
 

@@ -364,6 +364,15 @@ class QpCache:
     #: workers with the cache, never counted as compilations
     memos: dict = field(default_factory=dict)
 
+    #: objects bound to this process (e.g. threadpoolctl's controller): never pickled
+    process_local: dict = field(default_factory=dict)
+
+    def local(self, key: Hashable, build: Callable[[], Any]) -> Any:
+        """The process-local object stored under ``key``, built once per process."""
+        if key not in self.process_local:
+            self.process_local[key] = build()
+        return self.process_local[key]
+
     def memo(self, key: Hashable, build: Callable[[], Any]) -> Any:
         """The value stored under ``key``, built once (not counted as a compilation)."""
         if key not in self.memos:
@@ -381,7 +390,7 @@ class QpCache:
     def __getstate__(self) -> dict:
         portable = {k: v for k, v in self.entries.items() if isinstance(v, AffineQpMap)}
         return {"entries": portable, "compile_count": 0, "compile_time_s": 0.0,
-                "memos": dict(self.memos)}
+                "memos": dict(self.memos), "process_local": {}}
 
     def __setstate__(self, state: dict) -> None:
         self.__dict__.update(state)
