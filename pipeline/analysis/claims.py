@@ -255,12 +255,15 @@ def hodges_lehmann_on(sample: np.ndarray):
         if u.size == 0 or not np.array_equal(u[index], flat):
             return hodges_lehmann(x, axis=-1)
         rows = flat.shape[0]
+        # every partial sum is at most n (n + 1) / 2: 32-bit integers whenever that fits (half
+        # the memory traffic of the weights and their cumulative sum, the same integers)
+        dtype = np.int32 if n * (n + 1) // 2 < 2**31 else np.int64
         counts = np.bincount((index + u.size * np.arange(rows)[:, None]).ravel(),
-                             minlength=rows * u.size).reshape(rows, u.size).astype(np.int64)
+                             minlength=rows * u.size).reshape(rows, u.size).astype(dtype)
         weights = counts[:, a] * counts[:, b]
         on_diagonal = counts[:, a[diagonal]]
         weights[:, diagonal] = on_diagonal * (on_diagonal + 1) // 2
-        cumulative = np.cumsum(weights, axis=1)
+        cumulative = np.cumsum(weights, axis=1, dtype=dtype)
         total = n * (n + 1) // 2
         low = np.argmax(cumulative > (total - 1) // 2, axis=1)
         high = np.argmax(cumulative > total // 2, axis=1)

@@ -51,7 +51,6 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, fields
 
-import control
 import numpy as np
 import pandas as pd
 
@@ -138,6 +137,10 @@ def settling_time(time_s: np.ndarray, error: np.ndarray, band: float) -> float:
         # step_info's rise-time search would find no 90 % point; settle by direct rule
         outside = np.nonzero(np.abs(e) > band)[0]
         return float(t[outside[-1] + 1])
+    # imported here: python-control costs a second to import, and readers of run folders (the
+    # report, verify, aggregate) never settle a signal themselves
+    import control
+
     info = control.step_info(mirrored, t, final_output=e0, SettlingTimeThreshold=band / abs(e0))
     return float(info["SettlingTime"])
 
