@@ -232,3 +232,48 @@ def test_closed_loop_runs_blas_on_one_thread(make_config, monkeypatch):
     cfg = make_config(["method=improved", "scenario.n_steps=5"])
     simulate_module.simulate(cfg, build_scenario(cfg.scenario))
     assert seen and set(seen) == {1}
+
+
+def _lateral_reference_numpy(path_line_m, stations_m, controller):
+    """The vectorized statement of :func:`lateral_reference` (np.interp, np.searchsorted): the
+    oracle of its plain-float version."""
+    from math import tan
+
+    from pipeline.loop.controller.references import advancing_points
+
+    xs, ys = advancing_points(path_line_m)
+    if len(xs) < 2:
+        return np.full(stations_m.shape, path_line_m[-1, 1]), np.zeros(stations_m.shape)
+    xs_a, ys_a = np.array(xs), np.array(ys)
+    max_slope = tan(controller.heading_ref_max_rad)
+    seg_slopes = np.clip((ys_a[1:] - ys_a[:-1]) / (xs_a[1:] - xs_a[:-1]), -max_slope, max_slope)
+    end_slope = seg_slopes[-1] if controller.path_beyond_end == "extend" else 0.0
+    y_ref = np.interp(stations_m, xs_a, ys_a)
+    beyond = stations_m > xs[-1]
+    y_ref[beyond] = ys[-1] + end_slope * (stations_m[beyond] - xs[-1])
+    idx = np.clip(np.searchsorted(xs_a, stations_m, side="right") - 1, 0, seg_slopes.size - 1)
+    return y_ref, np.arctan(np.where(beyond, end_slope, seg_slopes[idx]))
+
+
+@pytest.mark.parametrize("beyond", ["extend", "hold"])
+def test_plain_float_lateral_reference_equals_np_interp(make_config, beyond):
+    """Random APF paths (some points not advancing, steep segments past the heading bound) and
+    stations before the path, on its knots, between them and past its end: the plain-float
+    reference equals the np.interp statement exactly."""
+    import dataclasses
+
+    from pipeline.loop.controller import lateral_reference
+
+    ctrl = dataclasses.replace(make_config().controller, path_beyond_end=beyond)
+    rng = np.random.default_rng(3)
+    for trial in range(300):
+        n = int(rng.integers(1, 12))
+        steps = rng.choice([0.0, 0.05, 0.3], size=n) * rng.uniform(0.5, 1.5, n)
+        path = np.column_stack([rng.uniform(-1, 1) + np.cumsum(steps),
+                                rng.normal(0, 1.5, n) if trial % 3 else np.full(n, 0.2)])
+        stations = np.sort(np.concatenate([rng.uniform(path[0, 0] - 0.5, path[-1, 0] + 1.0, 8),
+                                           path[rng.integers(0, n, 2), 0]]))
+        got = lateral_reference(path, stations, ctrl)
+        want = _lateral_reference_numpy(path, stations, ctrl)
+        np.testing.assert_array_equal(got[0], want[0])
+        np.testing.assert_array_equal(got[1], want[1])

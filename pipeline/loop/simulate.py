@@ -112,7 +112,8 @@ class KinematicPlant:
 class TrajectoryLog:
     """Preallocated per-column arrays, one row per step, turned into a DataFrame once.
 
-    Float columns start as NaN; text and flag columns as None (written as empty cells).
+    Float columns start as NaN; text and flag columns hold NaN where nothing was logged
+    (written as empty cells).
     """
 
     TEXT = ("solver_status", "fallback", "apf_step_capped", "apf_step_min_used")
@@ -128,7 +129,7 @@ class TrajectoryLog:
             column = columns.get(name)
             if column is None:
                 if name in self.TEXT:
-                    column = np.full(self.n_rows, None, dtype=object)
+                    column = np.full(self.n_rows, np.nan, dtype=object)
                 elif isinstance(value, (bool, np.bool_)):
                     column = np.zeros(self.n_rows, dtype=bool)
                 else:
@@ -140,11 +141,7 @@ class TrajectoryLog:
     def frame(self, order: list[str]) -> pd.DataFrame:
         names = [c for c in order if c in self.columns] \
             + [c for c in self.columns if c not in order]
-        frame = pd.DataFrame({c: self.columns[c][:self.rows] for c in names})
-        for name in self.TEXT:
-            if name in frame:
-                frame[name] = frame[name].where(frame[name].notna(), np.nan)
-        return frame
+        return pd.DataFrame({c: self.columns[c][:self.rows] for c in names})
 
 
 def _apf_columns(rollout: ApfRollout) -> dict:

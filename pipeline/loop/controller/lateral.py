@@ -155,6 +155,11 @@ class CondensedPrediction:
         ``R^-T gamma_w'``: ``r = chol_rhs_map @ free_w``.
     chol_inv : ndarray, shape (Nc, Nc)
         ``R^-1``: the moves of the condensed statement's coordinates, ``U = R^-1 W``.
+    cost_index, cost_root : ndarray, shape (4 N,)
+        Where each weighted cost row's state sits in the flat free response (``5 k + state``)
+        and its weight's square root: ``free_w = cost_root * free.ravel()[cost_index] - target``.
+    steering_gamma_w : ndarray, shape (N, Nc)
+        The steering angle's response in the statement's coordinates, ``gamma_d R^-1``.
     gradient_map : ndarray, shape (Nc, 4 N)
         ``2 gamma_w'``: the cost's gradient in ``U`` is ``gradient_map @ free_w``.
     """
@@ -169,6 +174,9 @@ class CondensedPrediction:
     chol_rhs_map: np.ndarray
     gradient_map: np.ndarray
     chol_inv: np.ndarray
+    cost_index: np.ndarray
+    cost_root: np.ndarray
+    steering_gamma_w: np.ndarray
 
     @classmethod
     def of(cls, model: LateralModel, blocking: np.ndarray,
@@ -204,9 +212,14 @@ class CondensedPrediction:
         # Fortran order: OpenBLAS multithreads a row-major gemv even this small, and its idle
         # threads then spin on the other core (measured: 2x the CPU time of the product)
         fortran = np.asfortranarray
+        chol_inv = solve_triangular(chol, np.eye(nc), lower=False)
+        # rows ordered by cost term, then step, as gamma_w: state COST_STATES[t] at step k
+        cost_index = (5 * np.arange(n)[None, :] + np.array(COST_STATES)[:, None]).ravel()
+        cost_root = np.repeat(root, n)
         return cls(model, gamma, fortran(powers.reshape(-1, 5)), fortran(gamma_w),
                    root, 2.0 * half_hessian, chol, fortran(chol_rhs_map),
-                   fortran(2.0 * gamma_w.T), solve_triangular(chol, np.eye(nc), lower=False))
+                   fortran(2.0 * gamma_w.T), chol_inv, cost_index, cost_root,
+                   gamma[:, 4, :] @ chol_inv)
 
     def free_response(self, x0: np.ndarray, disturbance: np.ndarray) -> np.ndarray:
         """States at steps 1..N with ``U = 0`` (shape (N, 5)); ``disturbance`` is (5, N)."""
@@ -270,13 +283,14 @@ class CondensedData:
     chol: np.ndarray        # (Nc, Nc) R, R' R = hessian_u / 2
     chol_rhs: np.ndarray    # (Nc,) r = R^-T gamma_w' free_w
     chol_inv: np.ndarray    # (Nc, Nc) R^-1: U = R^-1 W
+    gamma_d_w: np.ndarray   # (N, Nc) gamma_d R^-1 (from the prediction)
 
     def theta(self) -> np.ndarray:
         """The parameter vector of :func:`build_condensed_lateral_problem` (its order, column-
         major): the rows that multiply ``U`` taken to ``W = R U``."""
         inverse = self.chol_inv
         return np.concatenate([inverse.ravel(order="F"), self.chol_rhs,
-                               (self.gamma_d @ inverse).ravel(order="F"), self.free_d,
+                               self.gamma_d_w.ravel(order="F"), self.free_d,
                                (self.gamma_h @ inverse).ravel(order="F"), self.bound_h])
 
 
@@ -286,16 +300,17 @@ def condensed_data(prediction: CondensedPrediction, inputs: "MpcInputs",
     weighted errors, one for the gradient (``weights`` must be those ``prediction`` was built
     with)."""
     n = inputs.y_ref_m.shape[0]
-    if inputs.disturbance_rad_s.any():
+    if np.count_nonzero(inputs.disturbance_rad_s):
         disturbance = inputs.model.Ed @ inputs.disturbance_rad_s[None, :]
         free = prediction.free_response(inputs.x0, disturbance)
     else:
         free = (prediction.free_map @ inputs.x0).reshape(n, 5)
     root = prediction.root_weights
-    target = np.zeros(4 * n)
-    target[:n] = root[0] * inputs.y_ref_m
-    target[n:2 * n] = root[1] * inputs.psi_ref_rad
-    free_w = (root[:, None] * free[:, COST_STATES].T).ravel() - target
+    # the weighted free errors, rows by cost term then step: one gather, one product, and the
+    # two reference terms (the same operations on each entry as a stacked target)
+    free_w = prediction.cost_root * free.ravel()[prediction.cost_index]
+    free_w[:n] -= root[0] * inputs.y_ref_m
+    free_w[n:2 * n] -= root[1] * inputs.psi_ref_rad
     gamma = prediction.gamma
     G, h = inputs.constraint_gain, inputs.constraint_bound  # (N, M)
     # G_kj (y_free,k + gamma_y,k U) + s_kj >= h_kj, rows k-major as S is flattened (C order)
@@ -303,7 +318,8 @@ def condensed_data(prediction: CondensedPrediction, inputs: "MpcInputs",
     bound_h = (h - G * free[:, 0, None]).ravel()
     return CondensedData(prediction.gamma_w, free_w, gamma[:, 4, :], free[:, 4], gamma_h,
                          bound_h, free, prediction.hessian_u, prediction.gradient_map @ free_w,
-                         prediction.chol, prediction.chol_rhs_map @ free_w, prediction.chol_inv)
+                         prediction.chol, prediction.chol_rhs_map @ free_w, prediction.chol_inv,
+                         prediction.steering_gamma_w)
 
 
 class CompiledCondensedQp:
@@ -617,7 +633,8 @@ class LateralMpc:
                 # slack needed by the optimal plan (what the QP's slack variable holds); rows
                 # of idle slots and far obstacles are 0 y + s >= 0 and need none
                 slack = 0.0
-                if inputs.constraint_gain.any() or inputs.constraint_bound.any():
+                if np.count_nonzero(inputs.constraint_gain) \
+                        or np.count_nonzero(inputs.constraint_bound):
                     lateral = states[0, 1:][:, None]
                     slack = np.max(inputs.constraint_bound - inputs.constraint_gain * lateral,
                                    initial=0.0)
