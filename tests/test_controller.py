@@ -429,3 +429,24 @@ def test_kept_dense_workspaces_follow_speed_changes(make_config, monkeypatch, ba
                                    np.zeros(upper.size, np.intc))
         assert flag == 1 and got.status == "optimal"
         assert abs(got.values["U"][0] - x[0]) < (1e-9 if backend == "daqp" else 1e-5)
+
+
+def test_status_words_are_cvxpys_and_the_loop_imports_neither_cvxpy_nor_python_control():
+    """The QP plumbing spells CVXPY's status words out (so a worker that runs shipped maps never
+    imports CVXPY); they are CVXPY's own. And importing the run entry point imports neither
+    CVXPY nor python-control (each costs start-up to every process; they load where used)."""
+    import subprocess
+    import sys
+
+    import pipeline.loop.controller.qp as qp
+
+    assert qp.OPTIMAL_STATUSES == (cp.OPTIMAL, cp.OPTIMAL_INACCURATE)
+    assert qp.SOLVER_ERROR == cp.SOLVER_ERROR
+    assert set(qp.CLARABEL_STATUS.values()) == {cp.OPTIMAL, cp.OPTIMAL_INACCURATE, cp.INFEASIBLE,
+                                                cp.INFEASIBLE_INACCURATE, cp.UNBOUNDED,
+                                                cp.UNBOUNDED_INACCURATE, cp.USER_LIMIT}
+    assert cp.error.SolverError in qp.solver_errors()
+    code = ("import sys, pipeline.run; "
+            "print(sorted(m for m in ('cvxpy', 'control') if m in sys.modules))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.strip() == "[]"

@@ -16,7 +16,6 @@ from dataclasses import dataclass, field
 
 from math import atan2, cos, sin, tan, tanh
 
-import control
 import numpy as np
 
 from pipeline.loop.settings import VehicleConfig
@@ -102,6 +101,8 @@ def build_lateral_model(vehicle: VehicleConfig, speed_mps: float, sample_time_s:
     """
     speed = max(float(speed_mps), vehicle.min_model_speed_mps)
     A, B1, B2 = lateral_matrices(vehicle, speed, b2_heading_entry)
+    import control  # here: python-control costs half a second of start-up to every importer
+
     sys_c = control.ss(A, np.hstack([B1, B2]), np.eye(5), np.zeros((5, 2)))
     sys_d = control.c2d(sys_c, sample_time_s, method="zoh")
     Bd_all = np.asarray(sys_d.B)

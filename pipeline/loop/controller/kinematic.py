@@ -11,8 +11,8 @@ after ``Nc``; soft half-plane per obstacle slot and step
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
-import cvxpy as cp
 import numpy as np
 
 from pipeline.loop.settings import ControllerConfig, VehicleConfig
@@ -21,6 +21,9 @@ from pipeline.loop.controller.lateral import blocking_matrix
 from pipeline.loop.controller.qp import QpCache, compiled_backend
 from pipeline.loop.controller.references import kinematic_halfplanes
 from pipeline.loop.model import kinematic_euler_step, kinematic_jacobians
+
+if TYPE_CHECKING:
+    import cvxpy as cp
 
 
 @dataclass(frozen=True)
@@ -48,6 +51,8 @@ class KinematicQpStructure:
 
 def build_kinematic_problem(s: KinematicQpStructure) -> tuple[cp.Problem, list, dict]:
     """The LTV-QP in CVXPY: problem, parameters in ``theta`` order, variables to read."""
+    import cvxpy as cp
+
     N, Nc, M = s.horizon, s.control_horizon, s.max_obstacles
     blocking = blocking_matrix(N, Nc, s.input_hold)
     A = [cp.Parameter((4, 4), name=f"A{k}") for k in range(N)]

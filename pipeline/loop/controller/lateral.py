@@ -33,8 +33,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from math import isfinite
+from typing import TYPE_CHECKING
 
-import cvxpy as cp
 import numpy as np
 
 from pipeline.loop.settings import ControllerConfig, ModelConfig, VehicleConfig
@@ -43,6 +43,9 @@ from pipeline.loop.controller.qp import NON_FINITE_DATA, QpCache, QpSolution, co
 from pipeline.loop.controller.references import (collision_halfplanes, force_heading_reference,
                                             lateral_reference)
 from pipeline.loop.model import LateralModel, LateralModelCache, vehicle_key
+
+if TYPE_CHECKING:
+    import cvxpy as cp
 
 
 @dataclass(frozen=True)
@@ -93,6 +96,8 @@ def blocking_matrix(horizon: int, control_horizon: int, input_hold: str) -> np.n
 
 def build_lateral_problem(s: LateralQpStructure) -> tuple[cp.Problem, list, dict]:
     """The lateral QP in CVXPY: problem, parameters in ``theta`` order, variables to read."""
+    import cvxpy as cp
+
     N, Nc, M = s.horizon, s.control_horizon, s.max_obstacles
     q_y, q_psi, q_r, q_d, r_u, w1, w2 = s.weights
     blocking = blocking_matrix(N, Nc, s.input_hold)
@@ -242,6 +247,8 @@ def build_condensed_lateral_problem(s: LateralQpStructure) -> tuple[cp.Problem, 
     is one parameter computed in numpy (``R^-1``, ``gamma_d R^-1``, ``gamma_h R^-1``), which
     keeps the problem DPP. Canonicalized, it is the 33-variable, 86-row QP itself.
     """
+    import cvxpy as cp
+
     N, Nc, M = s.horizon, s.control_horizon, s.max_obstacles
     w1, w2 = s.weights[5], s.weights[6]
     chol_inv = cp.Parameter((Nc, Nc), name="cost_cholesky_inverse")
@@ -415,7 +422,7 @@ class ClarabelCondensedQp:
 
         import clarabel
 
-        from pipeline.loop.controller.qp import CLARABEL_STATUS, SOLVER_ERRORS, clarabel_settings
+        from pipeline.loop.controller.qp import CLARABEL_STATUS, clarabel_settings, solver_errors
 
         start = time.perf_counter()
         p_values, q, a_values, b = self._data(data)
@@ -434,7 +441,7 @@ class ClarabelCondensedQp:
             else:
                 self._solver.update(P=p_values, q=q, A=a_values, b=b)
             solution = self._solver.solve()
-        except SOLVER_ERRORS as exc:
+        except solver_errors() as exc:
             return QpSolution(f"error:{type(exc).__name__}", -1, time.perf_counter() - start,
                               None)
         status = CLARABEL_STATUS.get(str(solution.status).rsplit(".", 1)[-1], "solver_error")

@@ -24,24 +24,37 @@ from __future__ import annotations
 import time
 import warnings
 from dataclasses import dataclass, field
-from typing import Any, Callable, Hashable
+from typing import TYPE_CHECKING, Any, Callable, Hashable
 
-import cvxpy as cp
 import numpy as np
 import scipy.sparse as sp
 
-OPTIMAL_STATUSES = (cp.OPTIMAL, cp.OPTIMAL_INACCURATE)
+if TYPE_CHECKING:
+    import cvxpy as cp
+
+# CVXPY's status words, spelled out: a process that only runs compiled maps (a family's worker)
+# never imports CVXPY (a second of start-up); tests/test_controller.py holds them to CVXPY's
+OPTIMAL, OPTIMAL_INACCURATE = "optimal", "optimal_inaccurate"
+SOLVER_ERROR = "solver_error"
+OPTIMAL_STATUSES = (OPTIMAL, OPTIMAL_INACCURATE)
 
 #: Clarabel's status names mapped to CVXPY's status strings (the log uses CVXPY's words).
-CLARABEL_STATUS = {"Solved": cp.OPTIMAL, "AlmostSolved": cp.OPTIMAL_INACCURATE,
-                   "PrimalInfeasible": cp.INFEASIBLE,
-                   "AlmostPrimalInfeasible": cp.INFEASIBLE_INACCURATE,
-                   "DualInfeasible": cp.UNBOUNDED, "AlmostDualInfeasible": cp.UNBOUNDED_INACCURATE,
-                   "MaxIterations": cp.USER_LIMIT, "MaxTime": cp.USER_LIMIT}
+CLARABEL_STATUS = {"Solved": OPTIMAL, "AlmostSolved": OPTIMAL_INACCURATE,
+                   "PrimalInfeasible": "infeasible",
+                   "AlmostPrimalInfeasible": "infeasible_inaccurate",
+                   "DualInfeasible": "unbounded", "AlmostDualInfeasible": "unbounded_inaccurate",
+                   "MaxIterations": "user_limit", "MaxTime": "user_limit"}
 
-#: Exceptions a solver may raise on numerical trouble; anything else (a shape error, a bug) is a
-#: code error and propagates instead of being recorded as a solver fallback.
-SOLVER_ERRORS = (cp.error.SolverError, ArithmeticError)
+
+def solver_errors() -> tuple[type, ...]:
+    """Exceptions a solver may raise on numerical trouble; anything else (a shape error, a
+    bug) is a code error and propagates instead of being recorded as a solver fallback. A
+    function, called in ``except`` clauses (evaluated only when something was raised), so
+    CVXPY is imported only then."""
+    from cvxpy.error import SolverError
+
+    return (SolverError, ArithmeticError)
+
 
 #: Status of a step whose QP data were not finite (never handed to the solver).
 NON_FINITE_DATA = "non_finite_data"
@@ -149,6 +162,7 @@ def compile_affine_map(problem: cp.Problem, parameters: list, variables: dict,
     -------
     AffineQpMap
     """
+    import cvxpy as cp
     from cvxpy.cvxcore.python.canonInterface import reduce_problem_data_tensor
     from cvxpy.lin_ops.lin_op import CONSTANT_ID
 
@@ -275,11 +289,11 @@ class DirectQp:
             else:
                 self._solver.update(q=q, A=a, b=b)
             solution = self._solver.solve()
-        except SOLVER_ERRORS as exc:
+        except solver_errors() as exc:
             return QpSolution(f"error:{type(exc).__name__}", -1, time.perf_counter() - start,
                               None)
         elapsed = time.perf_counter() - start
-        status = CLARABEL_STATUS.get(str(solution.status).rsplit(".", 1)[-1], cp.SOLVER_ERROR)
+        status = CLARABEL_STATUS.get(str(solution.status).rsplit(".", 1)[-1], SOLVER_ERROR)
         values = m.unpack(np.asarray(solution.x)) if status in OPTIMAL_STATUSES else None
         return QpSolution(status, int(solution.iterations), elapsed, values)
 
@@ -308,6 +322,8 @@ class CvxpyQp:
         self._program = None
 
     def solve(self, theta: np.ndarray) -> QpSolution:
+        import cvxpy as cp
+
         if not np.all(np.isfinite(theta)):
             return QpSolution(NON_FINITE_DATA, -1, 0.0, None)
         for param, chunk in zip(self.parameters, np.split(theta, self.sizes)):
@@ -318,7 +334,7 @@ class CvxpyQp:
                 # "solution may be inaccurate": the status says so and is logged per step
                 warnings.simplefilter("ignore", UserWarning)
                 self.problem.solve(solver=cp.CLARABEL, max_iter=self.max_iter)
-        except SOLVER_ERRORS as exc:
+        except solver_errors() as exc:
             return QpSolution(f"error:{type(exc).__name__}", -1, time.perf_counter() - start,
                               None)
         elapsed = time.perf_counter() - start
