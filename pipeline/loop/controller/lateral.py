@@ -643,8 +643,7 @@ class LateralMpc:
                 if np.count_nonzero(inputs.constraint_gain) \
                         or np.count_nonzero(inputs.constraint_bound):
                     lateral = states[0, 1:][:, None]
-                    slack = np.max(inputs.constraint_bound - inputs.constraint_gain * lateral,
-                                   initial=0.0)
+                    slack = (inputs.constraint_bound - inputs.constraint_gain * lateral).max()
                 return ControlStep(plan[:, 0].copy(), plan, states, solution.status,
                                    solution.iterations, solution.solve_time_s, "none",
                                    float(max(slack, 0.0)), log or {})

@@ -108,9 +108,21 @@ class AffineQpMap:
     n_theta: int
     compile_time_s: float
 
+    def __post_init__(self) -> None:
+        # the map's entries as (row, column, value) in CSR's stored order, for data()
+        self.map_rows = np.repeat(np.arange(self.maps.shape[0]), np.diff(self.maps.indptr))
+        self.map_columns = np.asarray(self.maps.indices, dtype=np.intp)
+        self.map_values = np.asarray(self.maps.data, dtype=float)
+
     def data(self, theta: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """``q``, the values of ``A`` and ``b`` at ``theta``."""
-        flat = self.offset + self.maps @ theta
+        """``q``, the values of ``A`` and ``b`` at ``theta``.
+
+        ``maps @ theta`` as a gather, a product and a ``bincount`` over the map's few hundred
+        entries: each row's products summed in the stored order, as scipy's CSR product sums
+        them (the same numbers), without its per-call dispatch (half the time)."""
+        products = self.map_values * theta[self.map_columns]
+        flat = self.offset + np.bincount(self.map_rows, weights=products,
+                                         minlength=self.offset.size)
         return flat[:self.n_q], flat[self.n_q:self.n_q + self.n_a], flat[self.n_q + self.n_a:]
 
     def matrix_A(self, values: np.ndarray) -> sp.csc_matrix:
