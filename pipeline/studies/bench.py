@@ -119,7 +119,8 @@ def _timed(call):
 
 
 def bench_lateral(horizons, obstacle_counts, n_steps: int, repeats: int) -> list[dict]:
-    """Per QP, interleaved on identical inputs in one process: the controller step of every
+    """Per QP, interleaved on identical inputs in one process (the order rotating from QP to
+    QP): the controller step of every
     backend (default clarabel_direct: the condensed QP stated in CVXPY on a kept Clarabel;
     clarabel_dense: its numpy data on a kept Clarabel; daqp; cvxpy on the sparse QP) and each
     floor (the sparse QP and the condensed QP on a kept Clarabel), wall and CPU time."""
@@ -152,12 +153,24 @@ def bench_lateral(horizons, obstacle_counts, n_steps: int, repeats: int) -> list
                 sparse_floor = KeptClarabelFloor(mpc_sparse.qp.map, ctrl.solver_max_iter)
                 condensed_floor = KeptClarabelFloor(mpc_direct.qp.compiled.map, ctrl.solver_max_iter)
                 for k, (inputs, apf_s) in enumerate(steps):
-                    fs_wall, fs_cpu, fs_x = sparse_floor.time(sparse_thetas[k])
-                    fc_wall, fc_cpu, _ = condensed_floor.time(condensed_thetas[k])
-                    direct, d_wall, d_cpu = _timed(lambda: mpc_direct.solve(inputs))
-                    daqp, q_wall, q_cpu = _timed(lambda: mpc_daqp.solve(inputs))
-                    dense, n_wall, n_cpu = _timed(lambda: mpc_dense.solve(inputs))
-                    solution, c_wall, _ = _timed(lambda: mpc_cvxpy.qp.solve(sparse_thetas[k]))
+                    # every method timed on this QP, in an order that rotates from QP to QP:
+                    # what runs just before a solve (and what it left in the caches) is then
+                    # the same for every method on average
+                    timers = [
+                        ("sparse_floor", lambda: sparse_floor.time(sparse_thetas[k])),
+                        ("condensed_floor", lambda: condensed_floor.time(condensed_thetas[k])),
+                        ("direct", lambda: _timed(lambda: mpc_direct.solve(inputs))),
+                        ("daqp", lambda: _timed(lambda: mpc_daqp.solve(inputs))),
+                        ("dense", lambda: _timed(lambda: mpc_dense.solve(inputs))),
+                        ("cvxpy", lambda: _timed(lambda: mpc_cvxpy.qp.solve(sparse_thetas[k])))]
+                    shift = (k + rep) % len(timers)
+                    timed = dict((name, run()) for name, run in timers[shift:] + timers[:shift])
+                    fs_wall, fs_cpu, fs_x = timed["sparse_floor"]
+                    fc_wall, fc_cpu, _ = timed["condensed_floor"]
+                    direct, d_wall, d_cpu = timed["direct"]
+                    daqp, q_wall, q_cpu = timed["daqp"]
+                    dense, n_wall, n_cpu = timed["dense"]
+                    solution, c_wall, _ = timed["cvxpy"]
                     clarabel_s = float(mpc_cvxpy.qp.problem.solver_stats.solve_time or np.nan)
                     u_cvxpy = float(np.asarray(solution.values["U"]).ravel()[0]) \
                         if solution.values is not None else np.nan
