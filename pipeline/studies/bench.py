@@ -19,6 +19,7 @@ Results: ``reports/bench/bench.csv`` (every sample), ``bench_summary.json`` and
 from __future__ import annotations
 
 import argparse
+import gc
 import json
 import resource
 import subprocess
@@ -150,6 +151,11 @@ def bench_lateral(horizons, obstacle_counts, n_steps: int, repeats: int) -> list
                                 for inputs, _ in steps]
             offset_u = mpc_sparse.qp.map.variables["U"][0]
             for rep in range(repeats):
+                # the garbage collector off while timing (as timeit does): the CVXPY backend's
+                # allocations would otherwise trigger collections inside whichever solve
+                # happens to allocate next, and charge their cost to it
+                gc.collect()
+                gc.disable()
                 sparse_floor = KeptClarabelFloor(mpc_sparse.qp.map, ctrl.solver_max_iter)
                 condensed_floor = KeptClarabelFloor(mpc_direct.qp.compiled.map, ctrl.solver_max_iter)
                 for k, (inputs, apf_s) in enumerate(steps):
@@ -194,6 +200,7 @@ def bench_lateral(horizons, obstacle_counts, n_steps: int, repeats: int) -> list
                         "compiles_cvxpy": mpc_cvxpy.qp.compile_count,
                         "compiles_direct": mpc_direct.compile_count,
                         "compile_time_direct_s": mpc_direct.compile_time_s})
+                gc.enable()
     return rows
 
 
