@@ -277,3 +277,35 @@ def test_plain_float_lateral_reference_equals_np_interp(make_config, beyond):
         want = _lateral_reference_numpy(path, stations, ctrl)
         np.testing.assert_array_equal(got[0], want[0])
         np.testing.assert_array_equal(got[1], want[1])
+
+
+def test_the_kept_blas_limit_covers_every_blas_the_loop_has_loaded():
+    """simulate() keeps threadpoolctl's controller in the cache (a library scan per run cost
+    ~2 ms); once a run has loaded what the loop needs (scipy.linalg's BLAS among them, imported
+    only when a prediction is first built), the next run's limit covers every BLAS library
+    loaded in the process, as a fresh scan would. In a fresh interpreter, where nothing else
+    has loaded those libraries first."""
+    import subprocess
+    import sys
+
+    code = """
+from threadpoolctl import threadpool_info
+from hydra import compose, initialize_config_dir
+from pipeline.config import CONF_DIR, register_configs, to_experiment_config
+from pipeline.loop.controller import QpCache
+from pipeline.loop.scenario import build_scenario
+from pipeline.loop.simulate import simulate
+register_configs()
+with initialize_config_dir(config_dir=str(CONF_DIR), version_base="1.3"):
+    cfg = to_experiment_config(compose(config_name="config", overrides=["method=improved",
+                                                                        "controller.backend=daqp"]))
+cache = QpCache()
+for _ in range(2):
+    simulate(cfg, build_scenario(cfg.scenario), cache)
+kept = {c.filepath for c in list(cache.process_local.values())[-1].lib_controllers}
+blas = {i["filepath"] for i in threadpool_info() if i["user_api"] == "blas"}
+print(len(blas), sorted(blas - kept))
+"""
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         check=True).stdout.split()
+    assert int(out[0]) >= 2 and out[1:] == ["[]"]

@@ -14,6 +14,7 @@ into preallocated arrays and becomes one DataFrame at the end.
 
 from __future__ import annotations
 
+import sys
 from dataclasses import dataclass
 from math import atan2, cos, isfinite, sin, sqrt
 
@@ -191,9 +192,10 @@ def simulate(cfg: LoopSettings, scenario: Scenario,
     # every product in the loop is tiny: OpenBLAS would still start threads for some of them
     # and leave them spinning on the other core (measured: twice the CPU time of a run). The
     # controller (a scan of the loaded libraries, ~2 ms) is kept in the cache's process-local
-    # part, so a family's members pay it once per worker
+    # part, so a family's members pay it once per worker; it is built again whenever modules
+    # were imported since (a new module may have loaded another BLAS, e.g. scipy.linalg's)
     qp_cache = qp_cache if qp_cache is not None else QpCache()
-    threads = qp_cache.local("threadpool_controller", ThreadpoolController)
+    threads = qp_cache.local(("threadpool_controller", len(sys.modules)), ThreadpoolController)
     with threads.limit(limits=1, user_api="blas"):
         return _closed_loop(cfg, scenario, qp_cache)
 
