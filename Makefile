@@ -15,7 +15,7 @@ TUNE        ?= default
 export SLURM_CI_DIR ?= /tmp/slurm-ci
 LAUNCHER    ?= basic
 
-.PHONY: help install reproduce experiment report screenshot sweep verify ablation multiverse tune nmpc-check test test-slurm test-all bench clean
+.PHONY: help install reproduce experiment run-paper run-kinematic run-kinematic-readings report screenshot sweep verify ablation multiverse tune nmpc-check test test-slurm test-all bench clean
 
 help:  ## list the targets
 	@grep -E '^[a-zA-Z_-]+:.*## ' $(MAKEFILE_LIST) | awk -F':.*## ' '{printf "  %-12s %s\n", $$1, $$2}'
@@ -30,19 +30,15 @@ install: $(STAMP)  ## create .venv and install the project with pinned versions
 
 experiment: $(STAMP)  ## run every method on the paper scenario and on the scenario family
 	rm -rf $(RUNS)/paper $(RUNS)/kinematic $(RUNS)/kinematic_readings $(RUNS)/kinematic_family $(RUNS)/family  # code may have changed: no reuse here
-	@# the three single-scenario experiments are one process each on one core: run side by side
-	@echo "running experiment=paper, kinematic and kinematic_readings side by side (logs: $(RUNS)/<name>/multirun.log)"
-	@mkdir -p $(RUNS)
-	@$(PY) -m pipeline.run experiment=paper hydra.sweep.dir=$(RUNS)/paper > $(RUNS)/paper.log 2>&1 & a=$$!; \
-	 $(PY) -m pipeline.run experiment=kinematic hydra.sweep.dir=$(RUNS)/kinematic > $(RUNS)/kinematic.log 2>&1 & b=$$!; \
-	 $(PY) -m pipeline.run experiment=kinematic_readings hydra.sweep.dir=$(RUNS)/kinematic_readings > $(RUNS)/kinematic_readings.log 2>&1 & c=$$!; \
-	 wait $$a; sa=$$?; wait $$b; sb=$$?; wait $$c; sc=$$?; \
-	 for n in paper kinematic kinematic_readings; do mv $(RUNS)/$$n.log $(RUNS)/$$n/multirun.log 2>/dev/null || cat $(RUNS)/$$n.log; done; \
-	 grep -h "INFO" $(RUNS)/paper/multirun.log $(RUNS)/kinematic/multirun.log $(RUNS)/kinematic_readings/multirun.log 2>/dev/null | sed 's/^.*INFO\] - //'; \
-	 if [ $$sa -ne 0 ] || [ $$sb -ne 0 ] || [ $$sc -ne 0 ]; then \
-	   for n in paper kinematic kinematic_readings; do tail -n 5 $(RUNS)/$$n/multirun.log 2>/dev/null; done; exit 1; fi
+	@# the three single-scenario experiments are one process each on one core: side by side,
+	@# each one's output printed whole when it ends (-O)
+	$(MAKE) --no-print-directory -j3 -O run-paper run-kinematic run-kinematic-readings
 	$(PY) -m pipeline.run experiment=kinematic_family hydra.sweep.dir=$(RUNS)/kinematic_family scenario.family.size=$(KINEMATIC_FAMILY_SIZE)
 	$(PY) -m pipeline.run experiment=family hydra.sweep.dir=$(RUNS)/family scenario.family.size=$(FAMILY_SIZE)
+
+# the single-scenario experiments of `make experiment` (run side by side from there)
+run-paper run-kinematic run-kinematic-readings: run-%: $(STAMP)
+	$(PY) -m pipeline.run experiment=$(subst -,_,$*) hydra.sweep.dir=$(RUNS)/$(subst -,_,$*)
 
 report: $(STAMP)  ## rebuild the HTML report from existing run folders (no simulation)
 	$(PY) -m pipeline.report $(RUNS) --out $(REPORT) --command "make reproduce"

@@ -302,7 +302,7 @@ with initialize_config_dir(config_dir=str(CONF_DIR), version_base="1.3"):
 cache = QpCache()
 for _ in range(2):
     simulate(cfg, build_scenario(cfg.scenario), cache)
-kept = {c.filepath for c in list(cache.process_local.values())[-1].lib_controllers}
+kept = {c.filepath for c in cache.process_local["threadpool_controller"][1].lib_controllers}
 blas = {i["filepath"] for i in threadpool_info() if i["user_api"] == "blas"}
 print(len(blas), sorted(blas - kept))
 """

@@ -195,7 +195,10 @@ def simulate(cfg: LoopSettings, scenario: Scenario,
     # part, so a family's members pay it once per worker; it is built again whenever modules
     # were imported since (a new module may have loaded another BLAS, e.g. scipy.linalg's)
     qp_cache = qp_cache if qp_cache is not None else QpCache()
-    threads = qp_cache.local(("threadpool_controller", len(sys.modules)), ThreadpoolController)
+    modules, threads = qp_cache.process_local.get("threadpool_controller", (-1, None))
+    if modules != len(sys.modules):
+        threads = ThreadpoolController()
+        qp_cache.process_local["threadpool_controller"] = (len(sys.modules), threads)
     with threads.limit(limits=1, user_api="blas"):
         return _closed_loop(cfg, scenario, qp_cache)
 

@@ -32,6 +32,7 @@ read back (:class:`CompiledCondensedQp`).
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 from math import isfinite
 from typing import TYPE_CHECKING
 
@@ -274,38 +275,58 @@ def build_condensed_lateral_problem(s: LateralQpStructure) -> tuple[cp.Problem, 
 
 @dataclass(frozen=True)
 class CondensedData:
-    """One step's condensed QP data (the parameters of
-    :func:`build_condensed_lateral_problem`, and the cost's ``gamma_w``, ``free_w`` they come
-    from) and the free response."""
+    """One step's condensed QP data: the free response and what depends on it, with the
+    prediction of the step's model for everything that does not. The cost's gradient in ``U``
+    (the numpy backends) and its Cholesky right-hand side (the CVXPY statement) are computed
+    when a backend first asks, so each step computes only the one its backend uses."""
 
-    gamma_w: np.ndarray     # (4N, Nc) weighted responses of y, epsi, r, delta to U
+    prediction: CondensedPrediction
     free_w: np.ndarray      # (4N,) weighted free errors
     gamma_d: np.ndarray     # (N, Nc) steering angle's response to U
     free_d: np.ndarray      # (N,) free steering angle
     gamma_h: np.ndarray     # (N M, Nc) half-plane rows folded onto U
     bound_h: np.ndarray     # (N M,) their bounds
     free: np.ndarray        # (N, 5) free response
-    hessian_u: np.ndarray   # (Nc, Nc) 2 (gamma_w' gamma_w + r_u T T')
-    gradient_u: np.ndarray  # (Nc,) 2 gamma_w' free_w
-    chol: np.ndarray        # (Nc, Nc) R, R' R = hessian_u / 2
-    chol_rhs: np.ndarray    # (Nc,) r = R^-T gamma_w' free_w
-    chol_inv: np.ndarray    # (Nc, Nc) R^-1: U = R^-1 W
-    gamma_d_w: np.ndarray   # (N, Nc) gamma_d R^-1 (from the prediction)
+
+    @property
+    def gamma_w(self) -> np.ndarray:
+        """(4N, Nc) weighted responses of y, epsi, r, delta to U."""
+        return self.prediction.gamma_w
+
+    @property
+    def hessian_u(self) -> np.ndarray:
+        """(Nc, Nc) ``2 (gamma_w' gamma_w + r_u T T')``."""
+        return self.prediction.hessian_u
+
+    @property
+    def chol_inv(self) -> np.ndarray:
+        """(Nc, Nc) ``R^-1``: ``U = R^-1 W``."""
+        return self.prediction.chol_inv
+
+    @cached_property
+    def gradient_u(self) -> np.ndarray:
+        """(Nc,) ``2 gamma_w' free_w``."""
+        return self.prediction.gradient_map @ self.free_w
+
+    @cached_property
+    def chol_rhs(self) -> np.ndarray:
+        """(Nc,) ``r = R^-T gamma_w' free_w``."""
+        return self.prediction.chol_rhs_map @ self.free_w
 
     def theta(self) -> np.ndarray:
         """The parameter vector of :func:`build_condensed_lateral_problem` (its order, column-
         major): the rows that multiply ``U`` taken to ``W = R U``."""
         inverse = self.chol_inv
         return np.concatenate([inverse.ravel(order="F"), self.chol_rhs,
-                               self.gamma_d_w.ravel(order="F"), self.free_d,
+                               self.prediction.steering_gamma_w.ravel(order="F"), self.free_d,
                                (self.gamma_h @ inverse).ravel(order="F"), self.bound_h])
 
 
 def condensed_data(prediction: CondensedPrediction, inputs: "MpcInputs",
                    weights: tuple) -> CondensedData:
-    """The condensed QP's data for one step: one product for the free response, one for the
-    weighted errors, one for the gradient (``weights`` must be those ``prediction`` was built
-    with)."""
+    """The condensed QP's data for one step: one product for the free response, one gather
+    for the weighted errors, the half-planes folded onto ``U`` (``weights`` must be those
+    ``prediction`` was built with)."""
     n = inputs.y_ref_m.shape[0]
     if np.count_nonzero(inputs.disturbance_rad_s):
         disturbance = inputs.model.Ed @ inputs.disturbance_rad_s[None, :]
@@ -323,10 +344,7 @@ def condensed_data(prediction: CondensedPrediction, inputs: "MpcInputs",
     # G_kj (y_free,k + gamma_y,k U) + s_kj >= h_kj, rows k-major as S is flattened (C order)
     gamma_h = (G[:, :, None] * gamma[:, 0, None, :]).reshape(-1, gamma.shape[2])
     bound_h = (h - G * free[:, 0, None]).ravel()
-    return CondensedData(prediction.gamma_w, free_w, gamma[:, 4, :], free[:, 4], gamma_h,
-                         bound_h, free, prediction.hessian_u, prediction.gradient_map @ free_w,
-                         prediction.chol, prediction.chol_rhs_map @ free_w, prediction.chol_inv,
-                         prediction.steering_gamma_w)
+    return CondensedData(prediction, free_w, gamma[:, 4, :], free[:, 4], gamma_h, bound_h, free)
 
 
 class CompiledCondensedQp:
@@ -422,7 +440,8 @@ class ClarabelCondensedQp:
 
         import clarabel
 
-        from pipeline.loop.controller.qp import CLARABEL_STATUS, clarabel_settings, solver_errors
+        from pipeline.loop.controller.qp import (CLARABEL_STATUS, OPTIMAL_STATUSES, SOLVER_ERROR,
+                                                 clarabel_settings, solver_errors)
 
         start = time.perf_counter()
         p_values, q, a_values, b = self._data(data)
@@ -444,10 +463,10 @@ class ClarabelCondensedQp:
         except solver_errors() as exc:
             return QpSolution(f"error:{type(exc).__name__}", -1, time.perf_counter() - start,
                               None)
-        status = CLARABEL_STATUS.get(str(solution.status).rsplit(".", 1)[-1], "solver_error")
+        status = CLARABEL_STATUS.get(str(solution.status).rsplit(".", 1)[-1], SOLVER_ERROR)
         x = np.asarray(solution.x)
         values = {"U": x[:self.n_u], "slack": x[self.n_u:]} \
-            if status in ("optimal", "optimal_inaccurate") else None
+            if status in OPTIMAL_STATUSES else None
         return QpSolution(status, int(solution.iterations), time.perf_counter() - start, values)
 
 

@@ -395,12 +395,6 @@ class QpCache:
     #: objects bound to this process (e.g. threadpoolctl's controller): never pickled
     process_local: dict = field(default_factory=dict)
 
-    def local(self, key: Hashable, build: Callable[[], Any]) -> Any:
-        """The process-local object stored under ``key``, built once per process."""
-        if key not in self.process_local:
-            self.process_local[key] = build()
-        return self.process_local[key]
-
     def memo(self, key: Hashable, build: Callable[[], Any]) -> Any:
         """The value stored under ``key``, built once (not counted as a compilation)."""
         if key not in self.memos:
