@@ -47,7 +47,6 @@ def plain_value(value: Any, limit: int = 60) -> str:
     return text
 
 
-
 class OutputPathError(OSError):
     """An output path that a write must not replace (a folder, a device, a pipe, or an input of
     the same command). ``strerror`` says why, ``filename`` names the path."""
@@ -147,10 +146,8 @@ def run_study(call):
     try:
         return 0, call()
     except KeyboardInterrupt as exc:
-        code = interrupted_exit_code(exc)
-        print(f"stopped ({'SIGTERM' if code == 143 else 'interrupted'}): completed family "
-              "runs and tables are kept; the same command resumes", file=sys.stderr)
-        return code, None
+        print(stopped_line(exc, "completed family runs and tables"), file=sys.stderr)
+        return interrupted_exit_code(exc), None
     except Exception as exc:  # noqa: BLE001 - configuration errors become one line
         message = study_error_line(exc)
         if message is None:
@@ -185,3 +182,8 @@ def interrupted_exit_code(exc: BaseException) -> int:
     """130 for Ctrl-C (SIGINT), 143 for SIGTERM."""
     return getattr(exc, "exit_code", 130)
 
+
+def stopped_line(exc: BaseException, kept: str) -> str:
+    """The one line a command prints when a signal stopped it (``kept``: what it keeps)."""
+    how = "SIGTERM" if interrupted_exit_code(exc) == 143 else "interrupted"
+    return f"stopped ({how}): {kept} are kept; the same command resumes"

@@ -22,7 +22,7 @@ from pipeline.analysis.objectives import objective_values
 from pipeline.analysis.tally import Tally
 from pipeline.config import CONF_DIR, register_configs, to_experiment_config
 from pipeline.errors import (FolderBusyError, describe_config_error, interrupted_exit_code,
-                             stop_on_signals)
+                             stop_on_signals, stopped_line)
 from pipeline.store.runs import folder_lock
 from pipeline.studies.experiment import RunSummary, run_experiment, run_family
 from pipeline.studies.slurm import register_launcher
@@ -110,9 +110,7 @@ def main() -> None:
     except KeyboardInterrupt as exc:
         # completed members and runs are kept (each written atomically); rerunning the same
         # command resumes them
-        print(f"stopped ({'SIGTERM' if interrupted_exit_code(exc) == 143 else 'interrupted'}"
-              "): completed runs and family members are kept; the same command resumes",
-              file=sys.stderr)
+        print(stopped_line(exc, "completed runs and family members"), file=sys.stderr)
         sys.exit(interrupted_exit_code(exc))
     except Exception as exc:  # noqa: BLE001 - turned into a message and an exit code
         if user_wants_trace:
