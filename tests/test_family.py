@@ -94,3 +94,40 @@ def test_ledger_over_a_small_family(small_family):
         assert len(differences[(row["claim"], "baseline")]) == row["n_pairs"]
     counts = outcome_counts(small_family)
     assert [c["scenarios"] for c in counts] == [4, 4]
+
+
+def test_a_prepared_cache_spares_the_workers_python_control(tmp_path, make_config):
+    """A family's parent builds the compiled QP and its members' models into the cache it ships
+    (prepare_members): a worker, a fresh interpreter given that pickled cache, runs a member
+    without importing python-control, with the numbers of a member run here."""
+    import dataclasses
+    import json
+    import pickle
+    import subprocess
+    import sys
+
+    from pipeline.loop.controller import QpCache
+    from pipeline.studies.experiment import prepare_members, run_experiment
+
+    cfg = make_config(["method=improved", "scenario=family", "scenario.family.size=2"])
+
+    member_cfg = dataclasses.replace(cfg, scenario=family_members(cfg.scenario)[1])
+    cache = QpCache()
+    prepare_members(cfg, [member_cfg], cache)
+    (tmp_path / "job.pkl").write_bytes(pickle.dumps((member_cfg, cache)))
+    code = ("import pickle, sys\n"
+            "from pathlib import Path\n"
+            "from pipeline.studies.experiment import run_experiment\n"
+            f"member_cfg, cache = pickle.loads(Path({str(tmp_path / 'job.pkl')!r}).read_bytes())\n"
+            f"run_experiment(member_cfg, Path({str(tmp_path / 'worker')!r}), qp_cache=cache)\n"
+            "print('control' in sys.modules, cache.compile_count)\n")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.split() == ["False", "0"]
+    # the same member in this process, from scratch
+    run_experiment(member_cfg, tmp_path / "here", qp_cache=QpCache())
+    for name in ("trajectory.csv", "model.json"):
+        assert (tmp_path / "worker" / name).read_bytes() == (tmp_path / "here" / name).read_bytes()
+    worker, here = ({k: v for k, v in json.loads((tmp_path / where / "metrics.json").read_text())
+                     .items() if k != "compile_count"} for where in ("worker", "here"))
+    assert worker == here  # compilations apart (the worker compiled none)

@@ -139,3 +139,79 @@ def test_the_figure_style_sets_size_format_and_font(tmp_path, make_config, capsy
     bad.write_text("vector_format: eps\n")
     assert main([str(runs), "--out", str(tmp_path / "bad"), "--figure-style", str(bad)]) == 2
     assert "figure_style.vector_format" in capsys.readouterr().err
+
+
+def _two_figures():
+    import matplotlib.pyplot as plt
+
+    figures = []
+    for k in (1, 2):
+        fig, ax = plt.subplots(figsize=(3, 2), layout="constrained")
+        ax.plot([0, 1, 2], [0, k, k * k], label=f"k={k}")
+        ax.legend()
+        figures.append(fig)
+    return figures
+
+
+def test_figure_writer_draws_in_children_the_same_files(tmp_path):
+    """Figures written by forked children are byte for byte the ones written in this process
+    (PNG), the paths are returned at once and the files exist after close; one writer slot
+    draws everything here."""
+    from pipeline.reporting.figures import FigureWriter, save_figure
+
+    serial = [save_figure(fig, tmp_path / "serial", f"f{i}")
+              for i, fig in enumerate(_two_figures())]
+    with FigureWriter(max_workers=2) as writer:
+        forked = [writer.save(fig, tmp_path / "forked", f"f{i}")
+                  for i, fig in enumerate(_two_figures())]
+    assert writer.forked == 2 and writer.written_here == 0
+    for a, b in zip(serial, forked):
+        assert a["png"].read_bytes() == b["png"].read_bytes()
+        assert b["svg"].is_file() and b["svg"].stat().st_size > 1000
+    one = FigureWriter(max_workers=1)
+    one.save(_two_figures()[0], tmp_path / "one", "f0")
+    assert one.forked == 0 and one.written_here == 1
+    assert (tmp_path / "one" / "f0.png").read_bytes() == serial[0]["png"].read_bytes()
+
+
+def test_figure_writer_redraws_what_a_dead_child_left(tmp_path):
+    """A child that dies (killed here) leaves its figure to the writer's own process: the file
+    is complete after close, and the fallback is counted."""
+    import os
+    import signal
+
+    from pipeline.reporting.figures import FigureWriter, save_figure
+
+    expected = save_figure(_two_figures()[0], tmp_path / "serial", "f0")["png"].read_bytes()
+    writer = FigureWriter(max_workers=2)
+    paths = writer.save(_two_figures()[0], tmp_path / "killed", "f0")
+    os.kill(writer._running[-1][0], signal.SIGKILL)
+    writer.close()
+    assert writer.forked == 1 and writer.written_here == 1
+    assert paths["png"].read_bytes() == expected
+
+
+def test_report_figure_jobs_switch(tmp_path, make_config, monkeypatch):
+    """--figure-jobs 1 draws every figure in the report's own process (no fork); by default the
+    figures are drawn in children; an out-of-range value is refused in one line."""
+    import os
+
+    runs = tmp_path / "runs"
+    for method in ("baseline", "improved"):
+        run_experiment(make_config([f"planner={method}"]), runs / method)
+    forks = []
+    real_fork = os.fork
+
+    def counting_fork():
+        forks.append(1)
+        return real_fork()
+
+    monkeypatch.setattr(os, "fork", counting_fork)
+    assert report_main([str(runs), "--out", str(tmp_path / "serial"), "--figure-jobs", "1"]) == 0
+    assert forks == []
+    assert report_main([str(runs), "--out", str(tmp_path / "forked"), "--figure-jobs", "2"]) == 0
+    assert len(forks) >= 4
+    for name in ("trajectory_pair.png", "overlay.png"):
+        assert (tmp_path / "serial" / "figures" / name).read_bytes() == \
+            (tmp_path / "forked" / "figures" / name).read_bytes()
+    assert report_main([str(runs), "--out", str(tmp_path / "bad"), "--figure-jobs", "0"]) == 2

@@ -292,6 +292,93 @@ def save_figure(fig: Figure, out_dir: Path, stem: str, style=None) -> dict[str, 
     return paths
 
 
+class FigureWriter:
+    """Writes figures like :func:`save_figure`, each in a forked child process when it can, so
+    that drawing (most of a report's time) runs beside the caller's own work.
+
+    :meth:`save` returns the paths at once; the files exist after :meth:`close` (or the end of
+    a ``with`` block). A child inherits the figure and the matplotlib settings in force by
+    ``fork`` (nothing is pickled) and exits with the files written. A child that fails leaves
+    its figure to be written here, in this process, at :meth:`close` (:attr:`written_here`
+    counts them). With ``max_workers=1``, or where ``os.fork`` does not exist, every figure is
+    written here at once.
+
+    Parameters
+    ----------
+    style : FigureStyle or None
+        As for :func:`save_figure`.
+    max_workers : int or None
+        Children drawing at the same time; None: the machine's cores.
+    """
+
+    def __init__(self, style=None, max_workers: int | None = None) -> None:
+        import os
+
+        self.style = style
+        self.max_workers = int(max_workers or os.cpu_count() or 1)
+        self.parallel = self.max_workers > 1 and hasattr(os, "fork")
+        self.forked = 0          # children started
+        self.written_here = 0    # figures written in this process (serial, or a child failed)
+        self._running: list = []  # (pid, figure, out_dir, stem), oldest first
+
+    def save(self, fig: Figure, out_dir: Path, stem: str) -> dict[str, Path]:
+        """Write ``fig`` as ``stem.<vector format>`` and ``stem.png`` under ``out_dir`` (now, or
+        in a child); the paths as :func:`save_figure` returns them."""
+        vector = getattr(self.style, "vector_format", "svg")
+        out_dir = Path(out_dir)
+        paths = {"svg": out_dir / f"{stem}.{vector}", "png": out_dir / f"{stem}.png"}
+        if not self.parallel:
+            self.written_here += 1
+            return save_figure(fig, out_dir, stem, self.style)
+        import os
+        import sys
+        import warnings
+
+        out_dir.mkdir(parents=True, exist_ok=True)
+        while len(self._running) >= self.max_workers:
+            self._reap_oldest()
+        # nothing buffered may be written twice (the child leaves by os._exit, unflushed)
+        sys.stdout.flush()
+        sys.stderr.flush()
+        with warnings.catch_warnings():
+            # Python >= 3.12 warns on fork with threads; here the only other threads are the
+            # BLAS library's idle workers, and the child draws one figure and exits
+            warnings.simplefilter("ignore", DeprecationWarning)
+            pid = os.fork()
+        if pid == 0:  # the child: write the files, leave without running the parent's exit code
+            code = 1
+            try:
+                save_figure(fig, out_dir, stem, self.style)
+                code = 0
+            finally:
+                os._exit(code)
+        self.forked += 1
+        plt.close(fig)  # out of pyplot's registry; the object stays for a fallback
+        self._running.append((pid, fig, out_dir, stem))
+        return paths
+
+    def _reap_oldest(self) -> None:
+        import os
+
+        pid, fig, out_dir, stem = self._running.pop(0)
+        _, status = os.waitpid(pid, 0)
+        if not (os.WIFEXITED(status) and os.WEXITSTATUS(status) == 0):
+            # the child failed (or was killed): write the figure here instead
+            self.written_here += 1
+            save_figure(fig, out_dir, stem, self.style)
+
+    def close(self) -> None:
+        """Wait for every child; afterwards every figure saved so far is on disk."""
+        while self._running:
+            self._reap_oldest()
+
+    def __enter__(self) -> "FigureWriter":
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+
 def claim_differences_figure(differences: dict[tuple[str, str], np.ndarray],
                              metric_names: dict[str, str],
                              intervals: dict[tuple[str, str], tuple[float, float, float]]

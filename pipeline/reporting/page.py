@@ -34,7 +34,7 @@ from pipeline.analysis.tally import Tally
 from pipeline.config import INTERPRETATION_REGISTER, ClaimsConfig
 from pipeline.reporting.figures import (apf_force_figure, claim_differences_figure,
                               family_distribution_figure, overlay_figure, paths_figure,
-                              save_figure, timeseries_figure)
+                              FigureWriter, timeseries_figure)
 from pipeline.reporting.style import FigureStyle, load_figure_style
 
 PACKAGES = ("numpy", "scipy", "pandas", "matplotlib", "control", "cvxpy", "clarabel",
@@ -220,8 +220,9 @@ def is_sweep_folder(folder: Path) -> bool:
 
 
 def _ablation_section(run_root: Path, fig_dir: Path, table_dir: Path,
-                      cfg: ClaimsConfig, style: FigureStyle | None = None) -> dict | None:
+                      cfg: ClaimsConfig, writer: FigureWriter | None = None) -> dict | None:
     """Effects of each revision alone and left out, attribution sentences, interpretation flips."""
+    writer = writer if writer is not None else FigureWriter(max_workers=1)
     from pipeline.studies.ablation import (ablation_effects, attribution_sentences, interpretation_flips,
                                    load_family_jobs)
     from pipeline.reporting.figures import ablation_forest_figure
@@ -248,8 +249,8 @@ def _ablation_section(run_root: Path, fig_dir: Path, table_dir: Path,
                               "scenarios": len(t)} for label, t in tables.items()]
         section["figures"].append({
             "id": "ablation_forest", "group": "ablation",
-            "paths": save_figure(ablation_forest_figure(effects, reference, bundle), fig_dir,
-                                 "ablation_forest", style),
+            "paths": writer.save(ablation_forest_figure(effects, reference, bundle), fig_dir,
+                                 "ablation_forest"),
             "caption": "Median paired effect versus the baseline with its 95 % bootstrap "
                        "interval, per claim: the improved bundle (blue), each revision added "
                        "alone to the baseline (green), the bundle without each revision (orange).",
@@ -536,7 +537,7 @@ def build_report(run_root: Path, out_dir: Path, command: str,
                  multiverse_dir: Path | None = None,
                  skipped: list[Skipped] | None = None, tune_dir: Path | None = None,
                  treatment: str | None = None, controls: tuple[str, ...] = (),
-                 style: FigureStyle | None = None) -> Path:
+                 style: FigureStyle | None = None, figure_jobs: int | None = None) -> Path:
     """Write ``out_dir/index.html`` (plus figures/ and tables/) from the runs under ``run_root``.
 
     Parameters
@@ -552,6 +553,9 @@ def build_report(run_root: Path, out_dir: Path, command: str,
 
     style : FigureStyle, optional
         How figures are written (:func:`load_figure_style`); the default when omitted.
+    figure_jobs : int, optional
+        Figures drawn at the same time, each in a forked child (:class:`FigureWriter`); None:
+        the machine's cores; 1: one after the other in this process. The files are the same.
 
     Returns
     -------
@@ -561,14 +565,17 @@ def build_report(run_root: Path, out_dir: Path, command: str,
     import matplotlib
 
     style = style or FigureStyle()
-    with matplotlib.rc_context(style.rc()):
+    # figures drawn in forked children beside the ledgers' bootstraps (the writer waits for
+    # them before the page inlines the PNGs, and on any way out of this block)
+    with matplotlib.rc_context(style.rc()), FigureWriter(style, figure_jobs) as writer:
         return _build_report(run_root, out_dir, command, sweep_dirs, bench_dir,
-                             multiverse_dir, skipped, tune_dir, treatment, controls, style)
+                             multiverse_dir, skipped, tune_dir, treatment, controls, writer)
 
 
 def _build_report(run_root, out_dir, command, sweep_dirs, bench_dir, multiverse_dir, skipped,
-                  tune_dir, treatment, controls, style: FigureStyle) -> Path:
-    """:func:`build_report` inside the figure style's matplotlib settings."""
+                  tune_dir, treatment, controls, writer: FigureWriter) -> Path:
+    """:func:`build_report` inside the figure style's matplotlib settings, its figures written
+    by ``writer``."""
     out_dir = Path(out_dir)
     fig_dir, table_dir = out_dir / "figures", out_dir / "tables"
     table_dir.mkdir(parents=True, exist_ok=True)
@@ -621,6 +628,7 @@ def _build_report(run_root, out_dir, command, sweep_dirs, bench_dir, multiverse_
             raise FileNotFoundError(f"no single runs (the paper scenario) under {run_root}")
         figures = [f for sw in sweeps for f in sw["figures"]]
         figures += performance["figures"] if performance else []
+        writer.close()  # every figure on disk before the page inlines them
         _inline(figures, out_dir)
         page = env.get_template("report.html.j2").render(
             answer=[], caveat="", paper=False, sweeps=sweeps, performance=performance, robustness=None, fair_fight=None, looks=None, ablation=None, figures=figures, family=None, kinematic=None,
@@ -654,7 +662,7 @@ def _build_report(run_root, out_dir, command, sweep_dirs, bench_dir, multiverse_
                              treatment=treatment or "improved",
                              control=controls[0] if controls else "baseline",
                              extras={_label(r): r["trajectory"] for r in extra_runs},
-                             style=style)
+                             writer=writer)
 
     metrics_by_method = {m: r["metrics"] for m, r in by_method.items()}
     metrics_frame = pd.DataFrame(metrics_by_method)
@@ -686,7 +694,7 @@ def _build_report(run_root, out_dir, command, sweep_dirs, bench_dir, multiverse_
         row["values"] = [_fmt(row.get(m)) for m in order]
     claim_secondary = {c.claim_id: ", ".join(c.secondary_metrics) for c in ALL_CLAIMS}
 
-    ablation = _ablation_section(run_root, fig_dir, table_dir, cfg_claims, style)
+    ablation = _ablation_section(run_root, fig_dir, table_dir, cfg_claims, writer)
     if ablation:
         figures.extend(ablation["figures"])
 
@@ -694,7 +702,7 @@ def _build_report(run_root, out_dir, command, sweep_dirs, bench_dir, multiverse_
     if kinematic_runs:
         progress("Appendix-A track")
         kinematic = _track_section(kinematic_runs, "kinematic", fig_dir, table_dir, claims,
-                                   cfg_claims, style)
+                                   cfg_claims, writer)
         kinematic["nmpc"] = optional(_nmpc_check, Path(run_root) / "nmpc_check") \
             if (Path(run_root) / "nmpc_check" / "summary.json").is_file() else None
         figures.extend(kinematic["figures"])
@@ -709,7 +717,7 @@ def _build_report(run_root, out_dir, command, sweep_dirs, bench_dir, multiverse_
         progress("family ledger (bootstrap intervals) and figures")
         family = _family_section(family_primary, family_info, claim_metrics, fig_dir,
                                  table_dir, cfg_claims, all_tables=family_tables,
-                                 settings=collection.family_settings, style=style)
+                                 settings=collection.family_settings, writer=writer)
         for f in family["figures"]:
             figures.append(f)
     if kinematic is not None:
@@ -725,6 +733,7 @@ def _build_report(run_root, out_dir, command, sweep_dirs, bench_dir, multiverse_
     figures += performance["figures"] if performance else []
     figures += robustness["figures"] if robustness else []
     figures += fair_fight["figures"] if fair_fight else []
+    writer.close()  # every figure on disk before the page inlines them
     _inline(figures, out_dir)
     progress("writing the page")
     answer = answer_rows(family, robustness, fair_fight, kinematic, cfg_claims)
@@ -838,7 +847,7 @@ def _ms(seconds) -> float | None:
 
 def _track_section(runs: list[dict], track: str, fig_dir: Path, table_dir: Path,
                    lateral_claims: list[dict], cfg: ClaimsConfig,
-                   style: FigureStyle | None = None) -> dict:
+                   writer: FigureWriter | None = None) -> dict:
     """Figures, metrics and claims of a second track, and how its outcomes compare.
 
     A comparison is made only when both methods come within ``cfg.comparable_clearance_m`` of
@@ -854,7 +863,7 @@ def _track_section(runs: list[dict], track: str, fig_dir: Path, table_dir: Path,
                              tuple(config["scenario"]["goal_xy_m"]),
                              config["vehicle"]["footprint_radius_m"],
                              first["metrics"].get("obstacle_appear_time_s"), fig_dir,
-                             prefix=f"{track}_", group_prefix=f"{track}_", style=style)
+                             prefix=f"{track}_", group_prefix=f"{track}_", writer=writer)
     metrics_by_method = {m: r["metrics"] for m, r in by_method.items()}
     frame = pd.DataFrame(metrics_by_method)
     frame.index.name = "metric"
@@ -904,18 +913,20 @@ def _track_section(runs: list[dict], track: str, fig_dir: Path, table_dir: Path,
 def _paper_figures(by_method: dict, scenario: str, goal: tuple, radius: float, appear,
                    fig_dir: Path, prefix: str = "", group_prefix: str = "",
                    treatment: str = "improved", control: str = "baseline",
-                   extras: dict | None = None, style: FigureStyle | None = None) -> list[dict]:
+                   extras: dict | None = None, writer: FigureWriter | None = None
+                   ) -> list[dict]:
     """Figure 2/3 analogues (control above treatment, shared limits, time colours), overlay
     of every method (and of ``extras``, other runs by label, each in its own colour), time
     series with the avoidance window, APF forces."""
+    writer = writer if writer is not None else FigureWriter(max_workers=1)
     pair = [m for m in (control, treatment) if m in by_method] or list(by_method)[:2]
     names = {control: "Figure 2 analogue", treatment: "Figure 3 analogue"} \
         if (control, treatment) == ("baseline", "improved") else {}
     titles = {m: f"{names.get(m, m)}: {m}" if m in names else m for m in pair}
     figures = [{"id": f"{prefix}trajectory_pair", "group": f"{group_prefix}paths",
-                "paths": save_figure(paths_figure({m: by_method[m]["trajectory"] for m in pair},
+                "paths": writer.save(paths_figure({m: by_method[m]["trajectory"] for m in pair},
                                                   goal, radius, appear, titles=titles),
-                                     fig_dir, f"{prefix}trajectory_pair", style),
+                                     fig_dir, f"{prefix}trajectory_pair"),
                 "caption": f"{' and '.join(titles.values())} on {scenario}, on shared axes: the "
                            "path; the footprint and the obstacles at the same instants in the "
                            "same colour (colour bar: time from the obstacle's appearance); x "
@@ -938,7 +949,7 @@ def _paper_figures(by_method: dict, scenario: str, goal: tuple, radius: float, a
              "(first rollout point).", "APF force magnitudes over time")):
         figures.append({"id": prefix + stem,
                         "group": f"{group_prefix}{'paths' if stem == 'overlay' else 'series'}",
-                        "paths": save_figure(fig, fig_dir, prefix + stem, style),
+                        "paths": writer.save(fig, fig_dir, prefix + stem),
                         "caption": caption, "alt": alt})
     return figures
 
@@ -1023,9 +1034,10 @@ def answer_lines(ledger) -> list[str]:
 
 def _family_section(tables: dict, info: dict, paper_metrics: dict, fig_dir: Path,
                     table_dir: Path, cfg: ClaimsConfig, all_tables: dict | None = None,
-                    settings: dict | None = None, style: FigureStyle | None = None) -> dict:
+                    settings: dict | None = None, writer: FigureWriter | None = None) -> dict:
     """Claims ledger over the family (C0-C5 against each comparison), outcome counts,
     distribution plots and what the step cap does."""
+    writer = writer if writer is not None else FigureWriter(max_workers=1)
     order = _ordered(tables)
     tables = {m: tables[m] for m in order}
     typed = family_ledger(tables, cfg, paper_metrics, cfg.treatment, tuple(cfg.controls))
@@ -1074,17 +1086,17 @@ def _family_section(tables: dict, info: dict, paper_metrics: dict, fig_dir: Path
     names = {c.claim_id: c.primary_metric for c in ALL_CLAIMS}
     figures = [
         {"id": "claim_differences", "group": "claims",
-         "paths": save_figure(claim_differences_figure(differences, names, intervals), fig_dir,
-                              "claim_differences", style),
+         "paths": writer.save(claim_differences_figure(differences, names, intervals), fig_dir,
+                              "claim_differences"),
          "caption": "Per-scenario paired differences improved − comparison on each claim's "
                     "primary metric (below zero: improved better), with the estimate's 95 % "
                     "bootstrap interval, against each comparison.",
          "alt": "Scatter of paired differences per claim with estimate and confidence interval"},
         {"id": "family_distributions", "group": "family",
-         "paths": save_figure(family_distribution_figure(tables, [c.primary_metric
+         "paths": writer.save(family_distribution_figure(tables, [c.primary_metric
                                                                   for c in ALL_CLAIMS[1:]]
                                                          + ["min_clearance_m"]),
-                              fig_dir, "family_distributions", style),
+                              fig_dir, "family_distributions"),
          "caption": "Distribution of each claim's metric and of the minimum clearance per method "
                     "over the scenario family (missing values, e.g. never recovered, are "
                     "left out of the boxes and counted in the outcomes table).",
@@ -1100,7 +1112,7 @@ def _family_section(tables: dict, info: dict, paper_metrics: dict, fig_dir: Path
         for label, s in (settings or {}).items() if label in tables) or "not recorded"
     apf_adds = _baseline_apf_adds(tables, cfg, table_dir)
     answer = answer_lines(typed) + ([apf_adds["sentence"]] if apf_adds else [])
-    gallery = _gallery(tables, info, cfg, fig_dir, style)
+    gallery = _gallery(tables, info, cfg, fig_dir, writer)
     figures.extend(gallery)
     return {"gallery": gallery, "ledger": grouped, "comparisons": comparisons, "solvers": solvers,
             "answer": answer, "apf_adds": apf_adds, "treatment": cfg.treatment,
@@ -1112,10 +1124,11 @@ def _family_section(tables: dict, info: dict, paper_metrics: dict, fig_dir: Path
 
 
 def _gallery(tables: dict, info: dict, cfg: ClaimsConfig, fig_dir: Path,
-             style: FigureStyle | None = None) -> list[dict]:
+             writer: FigureWriter | None = None) -> list[dict]:
     """Family members picked by :func:`pipeline.reporting.gallery.gallery_members`, each drawn
     as the Figure 2/3 analogue (first control above the treatment). Members that cannot be
     read are left out (the report says which in the caption of the rest)."""
+    writer = writer if writer is not None else FigureWriter(max_workers=1)
     from pipeline.errors import RunFolderError
     from pipeline.reporting.gallery import gallery_members
     from pipeline.store.runs import read_member
@@ -1141,7 +1154,7 @@ def _gallery(tables: dict, info: dict, cfg: ClaimsConfig, fig_dir: Path,
                            titles={m: f"{m}, member {member}" for m in runs}, width_in=6.0)
         figures.append({"id": stem, "group": "gallery", "member": member,
                         "why": "; ".join(pick["why"]),
-                        "paths": save_figure(fig, fig_dir, stem, style),
+                        "paths": writer.save(fig, fig_dir, stem),
                         "caption": f"Family member {member} ({first.config.scenario.name}): "
                                    + "; ".join(pick["why"]) + ".",
                         "alt": f"Paths of {control} and {treatment} on family member {member}"})
@@ -1305,6 +1318,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--figure-style", default="default",
                         help="how figures are written: a name under conf/report/figure_style/ "
                              "(default, paper) or a YAML file's path")
+    parser.add_argument("--figure-jobs", type=int, default=None,
+                        help="figures drawn at the same time, in child processes (default: the "
+                             "machine's cores; 1: one after the other here)")
     parser.add_argument("--strict", action="store_true",
                         help="exit 1 when any folder was skipped (after writing the report)")
     parser.add_argument("--command", default=None,
@@ -1324,6 +1340,10 @@ def main(argv: list[str] | None = None) -> int:
         print(f"error: --out {args.out}: cannot write the report ({exc.strerror})",
               file=sys.stderr)
         return 2
+    if args.figure_jobs is not None and not 1 <= args.figure_jobs <= 256:
+        print(f"error: --figure-jobs={args.figure_jobs} is invalid; allowed: an integer in "
+              "[1, 256]", file=sys.stderr)
+        return 2
     try:
         style = load_figure_style(args.figure_style)
     except ConfigError as exc:
@@ -1333,7 +1353,7 @@ def main(argv: list[str] | None = None) -> int:
         controls = tuple(c.strip() for c in (args.controls or "").split(",") if c.strip())
         path = build_report(args.runs, args.out, command, tuple(args.sweep), args.bench,
                             args.multiverse, skipped, args.tune, args.treatment, controls,
-                            style=style)
+                            style=style, figure_jobs=args.figure_jobs)
     except FileNotFoundError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2

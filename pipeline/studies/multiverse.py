@@ -609,7 +609,7 @@ def run_multiverse(space: Space, out_dir: Path, overrides: list[str] | None = No
 
     from pipeline.studies.progress import Progress
 
-    from pipeline.reporting.figures import save_figure
+    from pipeline.reporting.figures import FigureWriter
 
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
@@ -666,9 +666,10 @@ def run_multiverse(space: Space, out_dir: Path, overrides: list[str] | None = No
                         "values": [str(v) for v in d.values],
                         "applies_to": list(d.applies_to or []), "why": d.why}
                        for d in space.dimensions]})
-    for claim in ALL_CLAIMS:
-        fig = specification_curve_figure(pd.DataFrame(rows), design, space, claim.claim_id)
-        save_figure(fig, out_dir / "figures", f"specification_curve_{claim.claim_id}")
+    with FigureWriter() as writer:  # drawn in forked children, all on disk after the block
+        for claim in ALL_CLAIMS:
+            fig = specification_curve_figure(pd.DataFrame(rows), design, space, claim.claim_id)
+            writer.save(fig, out_dir / "figures", f"specification_curve_{claim.claim_id}")
     # written last: the report trusts these tables only when they match it
     write_manifest(out_dir, "multiverse", MULTIVERSE_FILES, space.name)
     return robust
