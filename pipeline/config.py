@@ -218,6 +218,14 @@ def to_experiment_config(cfg: Any) -> ExperimentConfig:
     """
     from omegaconf import OmegaConf
 
+    return OmegaConf.to_object(typed_config(cfg))
+
+
+def typed_config(cfg: Any):
+    """The composed config merged into :class:`ExperimentConfig`'s structured schema (types
+    checked, interpolations resolved; ``OmegaConf.to_object`` of it runs the range checks)."""
+    from omegaconf import OmegaConf
+
     # the hydra node is Hydra's own (some of its values exist only inside a running job)
     if "hydra" in cfg:
         cfg = OmegaConf.masked_copy(cfg, [k for k in cfg.keys() if k != "hydra"])
@@ -238,7 +246,7 @@ def to_experiment_config(cfg: Any) -> ExperimentConfig:
         kind = getattr(exc, "object_type_str", None) or "this section"
         raise ConfigError(path, _value_at(data, path), f"one of the keys of {kind} (a "
                           "misspelled or unknown key)") from None
-    return OmegaConf.to_object(merged)
+    return merged
 
 
 def _path_of(data: Any, key: str, prefix: str = "") -> str | None:

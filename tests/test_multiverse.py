@@ -152,3 +152,41 @@ def test_default_space_covers_every_free_parameter_of_both_apfs():
     assert "planner.rho0_m=5.0" not in simulation_overrides(row, space, "baseline")
     assert "planner.rho0_m=5.0" in simulation_overrides(row, space, "improved")
     assert "planner.rho0_m=3.0" not in simulation_overrides(row, space, "improved")
+
+
+def test_the_composer_gives_hydras_configs_at_a_fraction_of_the_composes():
+    """The composer composes each set of structural overrides once and sets a run's values on a
+    copy of the typed config: for one value of every simulation dimension of the default space
+    (each method it applies to), a tuning's backend key and a user's extra override, it returns
+    exactly the config Hydra's full path gives; a bad value still fails in Hydra's words."""
+    from hydra import compose, initialize_config_dir
+
+    from pipeline.config import to_experiment_config
+    from pipeline.studies.multiverse import composer
+
+    def hydra_path(overrides):
+        with initialize_config_dir(config_dir=str(CONF_DIR), version_base="1.3"):
+            return to_experiment_config(compose(config_name="config", overrides=overrides))
+
+    space = load_space(CONF_DIR / "multiverse" / "default.yaml")
+    extra = ["scenario.family.n_jobs=1"]
+    make, _ = composer(extra)
+    methods = ("baseline", "baseline_matched", "improved")
+    rows = [{d.key: d.values[k if k < len(d.values) else -1] for d in space.dimensions}
+            for k in (0, 1, 2)]
+    cases = [simulation_overrides(row, space, m) for row in rows for m in methods]
+    cases.append(["method=improved", "scenario=family", "controller.backend=daqp",
+                  "planner.k_rep_source=constant", "planner.k_rep_constant=5"])
+    keys = {o.split("=")[0] for case in cases for o in case}
+    assert {d.target for d in space.of("simulation")} <= keys  # every dimension is set
+    for overrides in cases:
+        fast = make(overrides)
+        reference = hydra_path(overrides + extra)
+        assert fast == reference and fast.config_hash() == reference.config_hash(), overrides
+    # the values differ between cases, the structure hardly: a Hydra compose per method
+    assert len(make.typed_bases) == 3 < len(cases) and make.fallbacks == []
+    with pytest.raises(ConfigError, match="planner.beta"):
+        make(["method=improved", "scenario=family", "planner.beta=-1"])
+    with pytest.raises(Exception, match="no_such_key"):
+        make(["method=improved", "scenario=family", "planner.no_such_key=1"])
+    assert len(make.fallbacks) == 2
