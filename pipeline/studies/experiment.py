@@ -76,7 +76,12 @@ def run_experiment(cfg: ExperimentConfig, out_dir: Path, resume: bool = True,
 
     scenario = build_scenario(cfg.scenario)
     qp_cache = qp_cache if qp_cache is not None else QpCache()
-    model = nominal_model(cfg, qp_cache)
+    # the model of the nominal speed (model.json), built once per process for a family
+    model = qp_cache.memo(("model_json", vehicle_key(cfg.vehicle), cfg.scenario.speed_mps,
+                           cfg.scenario.sample_time_s, cfg.model.b2_heading_entry),
+                          lambda: build_lateral_model(cfg.vehicle, cfg.scenario.speed_mps,
+                                                      cfg.scenario.sample_time_s,
+                                                      cfg.model.b2_heading_entry))
     result = simulate(cfg, scenario, qp_cache)
     context = trajectory_context(cfg)
     metrics = compute_metrics(result.trajectory, context, cfg.metrics)
@@ -95,16 +100,6 @@ def run_experiment(cfg: ExperimentConfig, out_dir: Path, resume: bool = True,
     write_run(out_dir, config_text=config_yaml(cfg), model=model.to_json(),
               trajectory=result.trajectory, timing=timing, metrics=metrics, info=info)
     return RunSummary(out_dir, metrics, info, skipped=False)
-
-
-def nominal_model(cfg: ExperimentConfig, qp_cache: QpCache):
-    """The lateral model of the scenario's nominal speed (a run's ``model.json``), built once
-    per cache (a family's parent builds its members' and ships them to the workers)."""
-    return qp_cache.memo(("model_json", vehicle_key(cfg.vehicle), cfg.scenario.speed_mps,
-                          cfg.scenario.sample_time_s, cfg.model.b2_heading_entry),
-                         lambda: build_lateral_model(cfg.vehicle, cfg.scenario.speed_mps,
-                                                     cfg.scenario.sample_time_s,
-                                                     cfg.model.b2_heading_entry))
 
 
 def trajectory_context(cfg: ExperimentConfig) -> TrajectoryContext:
@@ -142,22 +137,6 @@ def _chunks(items: list, n_workers: int, per_worker: int = 4) -> list[list]:
     return [items[i::n] for i in range(n) if items[i::n]]
 
 
-def prepare_members(cfg: ExperimentConfig, member_cfgs: list[ExperimentConfig],
-                    cache: QpCache) -> None:
-    """What a family's members share, built once into ``cache`` (in the parent, before it is
-    shipped to the workers): the compiled QP, and the discretized models (python-control's
-    c2d) and condensed predictions of the members' starting speeds, so that a worker neither
-    compiles nor imports python-control (seconds of start-up per process)."""
-    from pipeline.loop.controller import make_controller
-    from pipeline.loop.controller.lateral import LateralMpc
-
-    controller = make_controller(cfg, cfg.scenario.sample_time_s, cache)
-    for member_cfg in member_cfgs:
-        nominal_model(member_cfg, cache)
-    if isinstance(controller, LateralMpc):
-        controller.prepare(sorted({m.scenario.speed_mps for m in member_cfgs}))
-
-
 def run_family(cfg: ExperimentConfig, out_dir: Path, progress: bool = True,
                qp_cache: QpCache | None = None) -> pd.DataFrame:
     """Run every member of ``cfg.scenario.family`` (in parallel with joblib) for one method.
@@ -178,6 +157,7 @@ def run_family(cfg: ExperimentConfig, out_dir: Path, progress: bool = True,
 
     from joblib import Parallel, delayed
 
+    from pipeline.loop.controller import make_controller
     from pipeline.studies.progress import Progress
 
     out_dir = Path(out_dir)
@@ -198,7 +178,7 @@ def run_family(cfg: ExperimentConfig, out_dir: Path, progress: bool = True,
             log.warning("re-running %s: %s", folder, reason)
         pending.append((i, member_cfg, folder))
     if pending:
-        prepare_members(cfg, [member_cfg for _, member_cfg, _ in pending], cache)
+        make_controller(cfg, cfg.scenario.sample_time_s, cache)  # compile once, in the parent
     chunks = _chunks(pending, family.n_jobs)
     results = Parallel(n_jobs=family.n_jobs, return_as="generator_unordered")(
         delayed(_run_chunk)(chunk, cache) for chunk in chunks)

@@ -623,15 +623,6 @@ class LateralMpc:
             disturbance.ravel(order="F"), inputs.y_ref_m, inputs.psi_ref_rad,
             inputs.constraint_gain.ravel(order="F"), inputs.constraint_bound.ravel(order="F")])
 
-    def prepare(self, speeds_mps) -> None:
-        """Build the discretized models (and condensed predictions) of ``speeds_mps`` now, into
-        the shared cache: a family's parent does it once, so its workers never import
-        python-control (seconds per process) for the speeds its members start at."""
-        for speed in speeds_mps:
-            model = self.models.at_speed(speed)
-            if self.condensed:
-                self.prediction(model)
-
     def prediction(self, model: LateralModel) -> CondensedPrediction:
         """The condensed prediction of ``model`` (built once per model, i.e. per speed)."""
         key = model.speed_mps
