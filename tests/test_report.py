@@ -172,23 +172,40 @@ def test_figure_writer_draws_in_children_the_same_files(tmp_path):
     one.save(_two_figures()[0], tmp_path / "one", "f0")
     assert one.forked == 0 and one.written_here == 1
     assert (tmp_path / "one" / "f0.png").read_bytes() == serial[0]["png"].read_bytes()
+    # a function that builds the figure: built and drawn in the child, the same file
+    with FigureWriter(max_workers=2) as built:
+        path = built.save(lambda: _two_figures()[1], tmp_path / "built", "f1")["png"]
+    assert built.forked == 1 and path.read_bytes() == serial[1]["png"].read_bytes()
 
 
-def test_figure_writer_redraws_what_a_dead_child_left(tmp_path):
-    """A child that dies (killed here) leaves its figure to the writer's own process: the file
-    is complete after close, and the fallback is counted."""
+def test_figure_writer_redraws_what_a_dead_child_left(tmp_path, monkeypatch):
+    """A child that dies (killed here while it hangs) leaves its figure, given as a Figure or as
+    a function building one, to the writer's own process: the files are complete after close,
+    and the fallbacks are counted."""
     import os
     import signal
+    import time
 
+    import pipeline.reporting.figures as figures
     from pipeline.reporting.figures import FigureWriter, save_figure
 
     expected = save_figure(_two_figures()[0], tmp_path / "serial", "f0")["png"].read_bytes()
+    parent = os.getpid()
+
+    def hangs_in_a_child(fig, out_dir, stem, style=None):
+        if os.getpid() != parent:
+            time.sleep(60)  # killed before it wakes
+        return save_figure(fig, out_dir, stem, style)
+
+    monkeypatch.setattr(figures, "save_figure", hangs_in_a_child)
     writer = FigureWriter(max_workers=2)
     paths = writer.save(_two_figures()[0], tmp_path / "killed", "f0")
     os.kill(writer._running[-1][0], signal.SIGKILL)
+    built = writer.save(lambda: _two_figures()[0], tmp_path / "killed", "built")
+    os.kill(writer._running[-1][0], signal.SIGKILL)
     writer.close()
-    assert writer.forked == 1 and writer.written_here == 1
-    assert paths["png"].read_bytes() == expected
+    assert writer.forked == 2 and writer.written_here == 2
+    assert paths["png"].read_bytes() == expected == built["png"].read_bytes()
 
 
 def test_report_figure_jobs_switch(tmp_path, make_config, monkeypatch):

@@ -281,9 +281,13 @@ def save_figure(fig: Figure, out_dir: Path, stem: str, style=None) -> dict[str, 
     engine = fig.get_layout_engine()
     if engine is not None:
         # the layout solved once for both files (each savefig would solve it again: it was
-        # 40 % of the report's time), then frozen
+        # 40 % of the report's time), then frozen. No engine at all afterwards: with any engine
+        # left (even the "none" placeholder) savefig draws the figure once more, unrendered,
+        # before drawing it for the file
         engine.execute(fig)
-        fig.set_layout_engine("none")
+        with matplotlib.rc_context({"figure.autolayout": False,
+                                    "figure.constrained_layout.use": False}):
+            fig.set_layout_engine(None)
     # fixed metadata so that identical data give identical files
     fig.savefig(paths["svg"], metadata={"CreationDate": None} if vector == "pdf"
                 else {"Date": None})
@@ -294,42 +298,45 @@ def save_figure(fig: Figure, out_dir: Path, stem: str, style=None) -> dict[str, 
 
 class FigureWriter:
     """Writes figures like :func:`save_figure`, each in a forked child process when it can, so
-    that drawing (most of a report's time) runs beside the caller's own work.
+    that building and drawing them (most of a report's time) runs beside the caller's work.
 
-    :meth:`save` returns the paths at once; the files exist after :meth:`close` (or the end of
-    a ``with`` block). A child inherits the figure and the matplotlib settings in force by
-    ``fork`` (nothing is pickled) and exits with the files written. A child that fails leaves
-    its figure to be written here, in this process, at :meth:`close` (:attr:`written_here`
-    counts them). With ``max_workers=1``, or where ``os.fork`` does not exist, every figure is
-    written here at once.
+    :meth:`save` takes a figure, or a function of no arguments that builds one (then the child
+    builds it too), and returns the paths at once; the files exist after :meth:`close` (or the
+    end of a ``with`` block). A child inherits the figure, its data and the matplotlib settings
+    in force by ``fork`` (nothing is pickled) and exits with the files written. A child that
+    fails leaves its figure to be written here, in this process, at :meth:`close`
+    (:attr:`written_here` counts them). With ``max_workers=1``, or where ``os.fork`` does not
+    exist, every figure is written here at once.
 
     Parameters
     ----------
     style : FigureStyle or None
         As for :func:`save_figure`.
     max_workers : int or None
-        Children drawing at the same time; None: the machine's cores.
+        Children at the same time; None: twice the machine's cores (the caller keeps working
+        while they run, so a few more than the cores keep every core busy).
     """
 
     def __init__(self, style=None, max_workers: int | None = None) -> None:
         import os
 
         self.style = style
-        self.max_workers = int(max_workers or os.cpu_count() or 1)
+        self.max_workers = int(max_workers or 2 * (os.cpu_count() or 1))
         self.parallel = self.max_workers > 1 and hasattr(os, "fork")
         self.forked = 0          # children started
         self.written_here = 0    # figures written in this process (serial, or a child failed)
-        self._running: list = []  # (pid, figure, out_dir, stem), oldest first
+        self._running: list = []  # (pid, figure or builder, out_dir, stem), oldest first
 
-    def save(self, fig: Figure, out_dir: Path, stem: str) -> dict[str, Path]:
-        """Write ``fig`` as ``stem.<vector format>`` and ``stem.png`` under ``out_dir`` (now, or
-        in a child); the paths as :func:`save_figure` returns them."""
+    def save(self, figure, out_dir: Path, stem: str) -> dict[str, Path]:
+        """Write ``figure`` (a Figure, or a function returning one) as ``stem.<vector format>``
+        and ``stem.png`` under ``out_dir`` (now, or in a child); the paths as
+        :func:`save_figure` returns them."""
         vector = getattr(self.style, "vector_format", "svg")
         out_dir = Path(out_dir)
         paths = {"svg": out_dir / f"{stem}.{vector}", "png": out_dir / f"{stem}.png"}
         if not self.parallel:
             self.written_here += 1
-            return save_figure(fig, out_dir, stem, self.style)
+            return self._write(figure, out_dir, stem)
         import os
         import sys
         import warnings
@@ -348,24 +355,29 @@ class FigureWriter:
         if pid == 0:  # the child: write the files, leave without running the parent's exit code
             code = 1
             try:
-                save_figure(fig, out_dir, stem, self.style)
+                self._write(figure, out_dir, stem)
                 code = 0
             finally:
                 os._exit(code)
         self.forked += 1
-        plt.close(fig)  # out of pyplot's registry; the object stays for a fallback
-        self._running.append((pid, fig, out_dir, stem))
+        if isinstance(figure, Figure):
+            plt.close(figure)  # out of pyplot's registry; the object stays for a fallback
+        self._running.append((pid, figure, out_dir, stem))
         return paths
+
+    def _write(self, figure, out_dir: Path, stem: str) -> dict[str, Path]:
+        return save_figure(figure if isinstance(figure, Figure) else figure(), out_dir, stem,
+                           self.style)
 
     def _reap_oldest(self) -> None:
         import os
 
-        pid, fig, out_dir, stem = self._running.pop(0)
+        pid, figure, out_dir, stem = self._running.pop(0)
         _, status = os.waitpid(pid, 0)
         if not (os.WIFEXITED(status) and os.WEXITSTATUS(status) == 0):
             # the child failed (or was killed): write the figure here instead
             self.written_here += 1
-            save_figure(fig, out_dir, stem, self.style)
+            self._write(figure, out_dir, stem)
 
     def close(self) -> None:
         """Wait for every child; afterwards every figure saved so far is on disk."""

@@ -11,6 +11,7 @@ import argparse
 import base64
 import dataclasses
 import datetime as dt
+import functools
 import html
 import importlib.metadata
 import math
@@ -924,9 +925,9 @@ def _paper_figures(by_method: dict, scenario: str, goal: tuple, radius: float, a
         if (control, treatment) == ("baseline", "improved") else {}
     titles = {m: f"{names.get(m, m)}: {m}" if m in names else m for m in pair}
     figures = [{"id": f"{prefix}trajectory_pair", "group": f"{group_prefix}paths",
-                "paths": writer.save(paths_figure({m: by_method[m]["trajectory"] for m in pair},
-                                                  goal, radius, appear, titles=titles),
-                                     fig_dir, f"{prefix}trajectory_pair"),
+                "paths": writer.save(functools.partial(
+                    paths_figure, {m: by_method[m]["trajectory"] for m in pair}, goal, radius,
+                    appear, titles=titles), fig_dir, f"{prefix}trajectory_pair"),
                 "caption": f"{' and '.join(titles.values())} on {scenario}, on shared axes: the "
                            "path; the footprint and the obstacles at the same instants in the "
                            "same colour (colour bar: time from the obstacle's appearance); x "
@@ -935,16 +936,17 @@ def _paper_figures(by_method: dict, scenario: str, goal: tuple, radius: float, a
                 "alt": f"Paths of {' and '.join(pair)} with the obstacle at the same instants"}]
     tr_by_method = {m: r["trajectory"] for m, r in by_method.items()}
     for stem, fig, caption, alt in (
-            ("overlay", overlay_figure({**tr_by_method, **(extras or {})}, goal),
+            ("overlay", functools.partial(overlay_figure, {**tr_by_method, **(extras or {})},
+                                          goal),
              "Every method's path on the same axes, each in its own colour and line style"
              + (" (other runs, not judged, labelled by what differs)" if extras else "")
              + "; the grey band is the obstacle's track while visible.",
              "Paths of all methods overlaid"),
-            ("timeseries", timeseries_figure(tr_by_method, appear),
+            ("timeseries", functools.partial(timeseries_figure, tr_by_method, appear),
              "Steering angle, steering rate (the input), heading and lateral deviation over "
              "time; shaded: the avoidance window, from the obstacle's appearance until every "
              "vehicle has passed it.", "Time series of steering, heading and lateral deviation"),
-            ("apf_forces", apf_force_figure(tr_by_method),
+            ("apf_forces", functools.partial(apf_force_figure, tr_by_method),
              "Magnitude of the APF's repulsive and attractive forces at the vehicle's position "
              "(first rollout point).", "APF force magnitudes over time")):
         figures.append({"id": prefix + stem,
@@ -1147,11 +1149,13 @@ def _gallery(tables: dict, info: dict, cfg: ClaimsConfig, fig_dir: Path,
             continue
         first = runs[treatment]
         stem = f"gallery_member_{member:04d}"
-        fig = paths_figure({m: r.trajectory for m, r in runs.items()},
-                           tuple(first.config.scenario.goal_xy_m),
-                           first.config.vehicle.footprint_radius_m,
-                           first.config.scenario.obstacles[0].appear_time_s,
-                           titles={m: f"{m}, member {member}" for m in runs}, width_in=6.0)
+        # built in the writer's child (the parent goes on to the next member)
+        fig = functools.partial(paths_figure, {m: r.trajectory for m, r in runs.items()},
+                                tuple(first.config.scenario.goal_xy_m),
+                                first.config.vehicle.footprint_radius_m,
+                                first.config.scenario.obstacles[0].appear_time_s,
+                                titles={m: f"{m}, member {member}" for m in runs},
+                                width_in=6.0)
         figures.append({"id": stem, "group": "gallery", "member": member,
                         "why": "; ".join(pick["why"]),
                         "paths": writer.save(fig, fig_dir, stem),
