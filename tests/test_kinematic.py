@@ -249,3 +249,25 @@ def test_path_indexed_reading_lets_the_baseline_meet_the_obstacle(make_config):
     assert clearance(["controller.reference_alignment=path_speed"]) < 2.0
     # the formula as printed (no normalization) meets it too
     assert clearance(["planner.normalize_step=false"]) < 2.0
+
+
+def test_the_horizons_linearization_is_kinematic_jacobians_bit_for_bit(make_config):
+    """KinematicLtvMpc._linearize builds every step's (A, B, c) on the horizon's vectors: equal,
+    bit for bit, to kinematic_jacobians at each rollout point (so closed loops are unchanged),
+    on random points and on steering angles whose cos^2 differs in the last bit between C's
+    pow() and x * x (the scalar expression's square)."""
+    cfg = make_config(["controller=kinematic", "planner=improved"])
+    ctrl = KinematicLtvMpc(cfg.controller, cfg.vehicle, TS)
+    rng = np.random.default_rng(3)
+    L_m = cfg.vehicle.wheelbase_m
+    tricky = np.array([-0.13080466962260637, -0.24043177389736495, 0.11711756010596237])
+    for trial in range(40):
+        x0 = np.array([*rng.normal(size=3), abs(rng.normal()) * 3.0])
+        plan = rng.normal(size=(2, ctrl.horizon)) * 0.3
+        if trial < 3:
+            plan[1, :3] = tricky
+        states, As, Bs, offsets = ctrl._linearize(x0, plan)
+        for k in range(ctrl.horizon):
+            A, B, c = kinematic_jacobians(states[:, k], plan[:, k], L_m, TS)
+            assert np.array_equal(A, As[k]) and np.array_equal(B, Bs[k]) \
+                and np.array_equal(c, offsets[:, k])

@@ -20,7 +20,7 @@ from pipeline.loop.controller.base import ControlStep, Observation, PlanFallback
 from pipeline.loop.controller.lateral import blocking_matrix
 from pipeline.loop.controller.qp import QpCache, compiled_backend
 from pipeline.loop.controller.references import kinematic_halfplanes
-from pipeline.loop.model import kinematic_euler_step, kinematic_jacobians
+from pipeline.loop.model import kinematic_euler_step
 
 if TYPE_CHECKING:
     import cvxpy as cp
@@ -181,16 +181,32 @@ class KinematicLtvMpc(KinematicTrack):
         self.u_prev = np.zeros(2)
         self._steps_ahead_s = np.arange(1, controller.horizon + 1) * self.ts
 
-    def _linearize(self, x0: np.ndarray, plan: np.ndarray) -> tuple[np.ndarray, list, list,
-                                                                     np.ndarray]:
+    def _linearize(self, x0: np.ndarray, plan: np.ndarray) -> tuple[np.ndarray, np.ndarray,
+                                                                     np.ndarray, np.ndarray]:
+        """:func:`kinematic_jacobians` at every step of the rollout, shapes (N, 4, 4), (N, 4, 2)
+        and (4, N), entry for entry the same expressions on the horizon's vectors (the tests
+        hold them to the function). The offset's Euler step is the rollout's next state (the
+        same call on the same numbers), and ``A x``, ``B u`` stay one product per step."""
         states = self.rollout(x0, plan)
-        As, Bs, offsets = [], [], np.zeros((4, self.horizon))
-        for k in range(self.horizon):
-            A, B, c = kinematic_jacobians(states[:, k], plan[:, k], self.vehicle.wheelbase_m,
-                                          self.ts)
-            As.append(A)
-            Bs.append(B)
-            offsets[:, k] = c
+        N, dt_s, L = self.horizon, self.ts, self.vehicle.wheelbase_m
+        theta, v, delta = states[2, :N], states[3, :N], plan[1]
+        sin_t, cos_t = np.sin(theta), np.cos(theta)
+        As = np.zeros((N, 4, 4))
+        As[:, (0, 1, 2, 3), (0, 1, 2, 3)] = 1.0
+        As[:, 0, 2] = -dt_s * v * sin_t
+        As[:, 0, 3] = dt_s * cos_t
+        As[:, 1, 2] = dt_s * v * cos_t
+        As[:, 1, 3] = dt_s * sin_t
+        As[:, 2, 3] = dt_s * np.tan(delta) / L
+        Bs = np.zeros((N, 4, 2))
+        # the square as the scalar expression takes it (C's pow(), which differs from numpy's
+        # x * x in the last bit now and then)
+        cos_squared = np.array([c ** 2 for c in np.cos(delta).tolist()])
+        Bs[:, 2, 1] = dt_s * v / (L * cos_squared)
+        Bs[:, 3, 0] = dt_s
+        offsets = np.zeros((4, N))
+        for k in range(N):
+            offsets[:, k] = states[:, k + 1] - As[k] @ states[:, k] - Bs[k] @ plan[:, k]
         return states, As, Bs, offsets
 
     def solve(self, x0: np.ndarray, u_prev: np.ndarray, reference: np.ndarray,
