@@ -253,7 +253,8 @@ def test_path_indexed_reading_lets_the_baseline_meet_the_obstacle(make_config):
 
 def test_the_horizons_linearization_is_kinematic_jacobians_bit_for_bit(make_config):
     """KinematicLtvMpc._linearize builds every step's (A, B, c) on the horizon's vectors: equal,
-    bit for bit, to kinematic_jacobians at each rollout point (so closed loops are unchanged),
+    bit for bit, to kinematic_jacobians at each point of its rollout (itself the chain of
+    kinematic_euler_step, bit for bit) (so closed loops are unchanged),
     on random points and on steering angles whose cos^2 differs in the last bit between C's
     pow() and x * x (the scalar expression's square)."""
     cfg = make_config(["controller=kinematic", "planner=improved"])
@@ -267,7 +268,11 @@ def test_the_horizons_linearization_is_kinematic_jacobians_bit_for_bit(make_conf
         if trial < 3:
             plan[1, :3] = tricky
         states, As, Bs, offsets = ctrl._linearize(x0, plan)
+        assert np.array_equal(states[:, 0], x0)
         for k in range(ctrl.horizon):
+            # the rollout is kinematic_euler_step's chain, bit for bit
+            assert np.array_equal(states[:, k + 1],
+                                  kinematic_euler_step(states[:, k], plan[:, k], L_m, TS))
             A, B, c = kinematic_jacobians(states[:, k], plan[:, k], L_m, TS)
             assert np.array_equal(A, As[k]) and np.array_equal(B, Bs[k]) \
                 and np.array_equal(c, offsets[:, k])

@@ -20,7 +20,6 @@ from pipeline.loop.controller.base import ControlStep, Observation, PlanFallback
 from pipeline.loop.controller.lateral import blocking_matrix
 from pipeline.loop.controller.qp import QpCache, compiled_backend
 from pipeline.loop.controller.references import kinematic_halfplanes
-from pipeline.loop.model import kinematic_euler_step
 
 if TYPE_CHECKING:
     import cvxpy as cp
@@ -123,9 +122,15 @@ class KinematicTrack:
         """States of the Euler model from ``x0`` under ``plan`` (2 x N), shape (4, N + 1)."""
         states = np.zeros((4, self.horizon + 1))
         states[:, 0] = x0
-        for k in range(self.horizon):
-            states[:, k + 1] = kinematic_euler_step(states[:, k], plan[:, k],
-                                                    self.vehicle.wheelbase_m, self.ts)
+        # kinematic_euler_step written out on scalars (the same operations in the same order,
+        # numpy's trig: bit for bit its result, without two arrays per step)
+        dt_s, L = self.ts, self.vehicle.wheelbase_m
+        X, Y, theta, v = states[:, 0].tolist()
+        N = self.horizon
+        for k, (accel, delta) in enumerate(zip(plan[0, :N].tolist(), plan[1, :N].tolist())):
+            X, Y, theta, v = (X + dt_s * (v * np.cos(theta)), Y + dt_s * (v * np.sin(theta)),
+                              theta + dt_s * (v / L * np.tan(delta)), v + dt_s * accel)
+            states[:, k + 1] = (X, Y, theta, v)
         return states
 
     def reference(self, obs: Observation) -> np.ndarray:
