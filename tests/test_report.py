@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import re
 
+import pytest
+
 from pipeline.config import INTERPRETATION_REGISTER
 from pipeline.reporting.page import build_report, main as report_main
 from pipeline.studies.experiment import run_experiment
@@ -206,6 +208,14 @@ def test_figure_writer_redraws_what_a_dead_child_left(tmp_path, monkeypatch):
     writer.close()
     assert writer.forked == 2 and writer.written_here == 2
     assert paths["png"].read_bytes() == expected == built["png"].read_bytes()
+    # leaving a with block on an error (or Ctrl-C): the children are waited for, nothing redrawn
+    with pytest.raises(KeyboardInterrupt):
+        with FigureWriter(max_workers=2) as stopped:
+            stopped.save(_two_figures()[0], tmp_path / "stopped", "f0")
+            os.kill(stopped._running[-1][0], signal.SIGKILL)
+            raise KeyboardInterrupt
+    assert stopped.forked == 1 and stopped.written_here == 0 and not stopped._running
+    assert not (tmp_path / "stopped" / "f0.png").exists()
 
 
 def test_report_figure_jobs_switch(tmp_path, make_config, monkeypatch):

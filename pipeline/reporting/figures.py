@@ -369,26 +369,29 @@ class FigureWriter:
         return save_figure(figure if isinstance(figure, Figure) else figure(), out_dir, stem,
                            self.style)
 
-    def _reap_oldest(self) -> None:
+    def _reap_oldest(self, redraw: bool = True) -> None:
         import os
 
         pid, figure, out_dir, stem = self._running.pop(0)
         _, status = os.waitpid(pid, 0)
-        if not (os.WIFEXITED(status) and os.WEXITSTATUS(status) == 0):
+        if redraw and not (os.WIFEXITED(status) and os.WEXITSTATUS(status) == 0):
             # the child failed (or was killed): write the figure here instead
             self.written_here += 1
             self._write(figure, out_dir, stem)
 
-    def close(self) -> None:
-        """Wait for every child; afterwards every figure saved so far is on disk."""
+    def close(self, redraw: bool = True) -> None:
+        """Wait for every child; afterwards every figure saved so far is on disk (with
+        ``redraw=False``, what failed in a child is left undrawn)."""
         while self._running:
-            self._reap_oldest()
+            self._reap_oldest(redraw)
 
     def __enter__(self) -> "FigureWriter":
         return self
 
-    def __exit__(self, *exc) -> None:
-        self.close()
+    def __exit__(self, exc_type, *exc) -> None:
+        # leaving on an error or a signal (Ctrl-C reaches the children too): wait for the
+        # children, never redraw what they left, so that stopping stays prompt
+        self.close(redraw=exc_type is None)
 
 
 def claim_differences_figure(differences: dict[tuple[str, str], np.ndarray],
