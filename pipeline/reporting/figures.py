@@ -6,6 +6,7 @@ Each ``*_figure`` function takes run data and returns a ``matplotlib.figure.Figu
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 
 import matplotlib
@@ -262,6 +263,13 @@ def apf_force_figure(runs: dict[str, pd.DataFrame]) -> Figure:
     return fig
 
 
+def figure_paths(out_dir: Path, stem: str, style=None) -> dict[str, Path]:
+    """Where :func:`save_figure` writes ``stem``: ``"png"`` and ``"svg"`` (the vector file,
+    whatever ``style``'s vector format)."""
+    vector = getattr(style, "vector_format", "svg")
+    return {"svg": Path(out_dir) / f"{stem}.{vector}", "png": Path(out_dir) / f"{stem}.png"}
+
+
 def save_figure(fig: Figure, out_dir: Path, stem: str, style=None) -> dict[str, Path]:
     """Write ``stem.<vector format>`` and ``stem.png`` into ``out_dir`` and close the figure.
 
@@ -274,7 +282,7 @@ def save_figure(fig: Figure, out_dir: Path, stem: str, style=None) -> dict[str, 
     vector = getattr(style, "vector_format", "svg")
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
-    paths = {"svg": out_dir / f"{stem}.{vector}", "png": out_dir / f"{stem}.png"}
+    paths = figure_paths(out_dir, stem, style)
     if width_in is not None:
         width, height = fig.get_size_inches()
         fig.set_size_inches(width_in, height * width_in / width)
@@ -318,8 +326,6 @@ class FigureWriter:
     """
 
     def __init__(self, style=None, max_workers: int | None = None) -> None:
-        import os
-
         self.style = style
         self.max_workers = int(max_workers or 2 * (os.cpu_count() or 1))
         self.parallel = self.max_workers > 1 and hasattr(os, "fork")
@@ -331,13 +337,10 @@ class FigureWriter:
         """Write ``figure`` (a Figure, or a function returning one) as ``stem.<vector format>``
         and ``stem.png`` under ``out_dir`` (now, or in a child); the paths as
         :func:`save_figure` returns them."""
-        vector = getattr(self.style, "vector_format", "svg")
         out_dir = Path(out_dir)
-        paths = {"svg": out_dir / f"{stem}.{vector}", "png": out_dir / f"{stem}.png"}
         if not self.parallel:
             self.written_here += 1
             return self._write(figure, out_dir, stem)
-        import os
         import sys
         import warnings
 
@@ -363,15 +366,13 @@ class FigureWriter:
         if isinstance(figure, Figure):
             plt.close(figure)  # out of pyplot's registry; the object stays for a fallback
         self._running.append((pid, figure, out_dir, stem))
-        return paths
+        return figure_paths(out_dir, stem, self.style)
 
     def _write(self, figure, out_dir: Path, stem: str) -> dict[str, Path]:
         return save_figure(figure if isinstance(figure, Figure) else figure(), out_dir, stem,
                            self.style)
 
     def _reap_oldest(self, redraw: bool = True) -> None:
-        import os
-
         pid, figure, out_dir, stem = self._running.pop(0)
         _, status = os.waitpid(pid, 0)
         if redraw and not (os.WIFEXITED(status) and os.WEXITSTATUS(status) == 0):

@@ -716,11 +716,10 @@ def composer(extra: list[str]):
     def typed_base(structural: tuple):
         if structural not in typed_bases:
             cfg = hydra_compose(list(structural))
-            plain = OmegaConf.to_container(cfg, resolve=False)
             # an interpolation could read a key a run overrides: only plain values are shared
-            typed_bases[structural] = typed_config(cfg) \
-                if plain == OmegaConf.to_container(cfg, resolve=True) \
-                and "${" not in OmegaConf.to_yaml(cfg) else None
+            plain = OmegaConf.to_container(cfg, resolve=False) \
+                == OmegaConf.to_container(cfg, resolve=True)
+            typed_bases[structural] = typed_config(cfg) if plain else None
         return typed_bases[structural]
 
     def make(overrides: list[str]):
