@@ -8,6 +8,7 @@ FAMILY_SIZE ?= 200
 KINEMATIC_FAMILY_SIZE ?= 50
 REPORT      ?= reports/latest
 PYTEST_ARGS ?=
+PYTEST_JOBS ?= auto
 
 SWEEP       ?= obstacle_speed
 MULTIVERSE  ?= default
@@ -77,8 +78,9 @@ bench: $(STAMP)  ## benchmark the controller step vs the Clarabel floor and the 
 verify: reproduce  ## rerun `make reproduce` and compare with reports/reference/ (tolerances in pipeline/studies/verify.py)
 	$(PY) -m pipeline.verify $(RUNS) reports/reference
 
-test: $(STAMP)  ## run the test suite (excludes tests marked slow or slurm)
-	$(PY) -m pytest -m "not slow and not slurm" $(PYTEST_ARGS)
+test: $(STAMP)  ## run the test suite on every core (PYTEST_JOBS=auto; excludes tests marked slow or slurm)
+	@# one test file per worker at a time (--dist loadfile), so a file's shared runs are made once
+	$(PY) -m pytest -m "not slow and not slurm" -n $(PYTEST_JOBS) --dist loadfile $(PYTEST_ARGS)
 
 test-slurm: $(STAMP)  ## start a single-node SLURM cluster (.ci/slurm-cluster), run the SLURM tests, stop it
 	.ci/slurm-cluster start

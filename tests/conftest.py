@@ -11,6 +11,21 @@ from pipeline.config import ExperimentConfig, register_configs, to_experiment_co
 
 CONF_DIR = Path(__file__).resolve().parent.parent / "conf"
 
+#: Test files with whole runs in them, longest first (serial `pytest --durations=0` on a 2-core
+#: machine). `make test` hands whole files to its workers (``--dist loadfile``) in collection
+#: order; starting the longest first keeps one worker from running a long file alone at the end.
+LONGEST_FILES_FIRST = ("test_tune.py", "test_multiverse.py", "test_hardening.py",
+                       "test_report_browser.py", "test_extensions.py", "test_features.py",
+                       "test_run_records.py", "test_sweeps.py", "test_report.py",
+                       "test_robustness.py", "test_pins.py", "test_properties.py",
+                       "test_install.py")
+
+
+def pytest_collection_modifyitems(config, items):
+    """Longest files first (:data:`LONGEST_FILES_FIRST`); the order within a file is kept."""
+    rank = {name: i for i, name in enumerate(LONGEST_FILES_FIRST)}
+    items.sort(key=lambda item: rank.get(item.path.name, len(rank)))
+
 
 @pytest.fixture(scope="session")
 def make_config():

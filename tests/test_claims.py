@@ -92,6 +92,40 @@ def test_fast_hodges_lehmann_on_resamples_equals_the_direct_one():
     np.testing.assert_array_equal(hodges_lehmann_on(sample)(other), hodges_lehmann(other))
 
 
+def test_wilcoxon_pvalue_is_scipys_own_and_enumerates_all_at_once(monkeypatch):
+    """Oracle: ``scipy.stats.wilcoxon(zero_method="pratt")``, equal to the last bit, on small
+    samples with zeros and ties (where SciPy enumerates every sign flip one by one), without
+    them (its exact distribution) and beyond 13 pairs (its normal approximation); the first
+    kind goes through one vectorized ``permutation_test``."""
+    import warnings
+
+    from pipeline.analysis import claims
+
+    calls = []
+    original = stats.permutation_test
+
+    def counted(*args, **kwargs):
+        calls.append(kwargs.get("vectorized"))
+        return original(*args, **kwargs)
+
+    monkeypatch.setattr(stats, "permutation_test", counted)
+    rng = np.random.default_rng(3)
+    samples = [np.array([0.0, 0.3]), np.array([0.2, -0.2, 0.2]), np.zeros(4) + [0, 0, 0, 1.0],
+               np.round(rng.normal(0.4, 1, size=13), 1)]  # 13: SciPy's last enumerated size
+    samples += [rng.integers(-3, 4, n) * 0.5 for n in range(2, 10)]  # zeros and ties
+    samples += [rng.normal(size=n) for n in (3, 9, 13)]  # no ties: SciPy's exact distribution
+    samples += [np.round(rng.normal(size=n), 1) for n in (14, 30)]  # ties, approximated
+    for d in samples:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            expected = stats.wilcoxon(d, zero_method="pratt").pvalue
+        calls.clear()
+        got = claims.wilcoxon_pratt_pvalue(d)
+        assert got == expected or (np.isnan(got) and np.isnan(expected)), d
+        ties = np.any(d == 0) or np.unique(np.abs(d)).size < d.size
+        assert calls == ([True] if ties and d.size <= 13 else []), d
+
+
 def test_holm_matches_the_step_down_formula():
     p = [0.01, 0.04, 0.03, 0.5]
     # sorted 0.01, 0.03, 0.04, 0.5 -> 4*0.01, max(., 3*0.03), max(., 2*0.04), max(., 0.5)

@@ -114,7 +114,7 @@ def test_messages_show_plain_values():
 
 
 def test_sigterm_stops_a_family_keeps_its_members_and_a_resume_gives_the_same_bytes(tmp_path):
-    """SIGTERM to ``pipeline.run`` on an 80-member family: it exits 143 within seconds with one
+    """SIGTERM to ``pipeline.run`` on a 40-member family: it exits 143 within seconds with one
     line, its workers stop with it (no member appears afterwards), no temporary is left; rerunning
     the same command completes it with family.json and family_metrics.csv byte-identical to an
     uninterrupted run's."""
@@ -125,7 +125,7 @@ def test_sigterm_stops_a_family_keeps_its_members_and_a_resume_gives_the_same_by
 
     def command(folder):
         return [sys.executable, "-m", "pipeline.run", "method=improved", "scenario=family",
-                "scenario.family.size=80", f"hydra.run.dir={folder}"]
+                "scenario.family.size=40", f"hydra.run.dir={folder}"]
 
     folder = tmp_path / "fam"
     proc = subprocess.Popen(command(folder), stdout=subprocess.PIPE, stderr=subprocess.PIPE,
@@ -140,7 +140,7 @@ def test_sigterm_stops_a_family_keeps_its_members_and_a_resume_gives_the_same_by
     assert err.strip().splitlines()[-1].startswith("stopped (SIGTERM)")
     done = len(list(folder.glob("member_*/manifest.json")))
     time.sleep(2)
-    assert len(list(folder.glob("member_*/manifest.json"))) == done < 80
+    assert len(list(folder.glob("member_*/manifest.json"))) == done < 40
     assert list(folder.rglob("*.tmp")) == []
     assert not (folder / "family.json").exists()
     resumed = subprocess.run(command(folder), capture_output=True, text=True)

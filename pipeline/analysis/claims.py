@@ -343,7 +343,42 @@ def paired_test(d: np.ndarray, cfg) -> float:
     if cfg.test == "sign":
         return float(stats.binomtest(better, better + worse, 0.5).pvalue)
     cleaned = np.where(np.abs(d) <= tie, 0.0, d)
-    return float(stats.wilcoxon(cleaned, zero_method="pratt").pvalue)
+    return wilcoxon_pratt_pvalue(cleaned)
+
+
+#: SciPy's ``wilcoxon(method="auto")`` enumerates every sign flip up to this many pairs when
+#: zeros or ties make its exact distribution inexact (2**13 < its 9999 resamples)
+WILCOXON_ENUMERATED_MAX_PAIRS = 13
+
+
+def wilcoxon_pratt_pvalue(d: np.ndarray) -> float:
+    """``scipy.stats.wilcoxon(d, zero_method="pratt").pvalue``, the same number, faster where
+    SciPy enumerates.
+
+    With zeros or tied ``|d|`` and at most 13 pairs SciPy runs ``permutation_test`` over all
+    ``2**n`` sign flips, calling its statistic once per flip in Python (about 0.15 s for 12
+    pairs, most of a small family's ledger). Every flip keeps ``|d|`` and so its ranks; ``R+``
+    is the sum of the ranks of the positive entries. Here the same ``permutation_test`` gets
+    that sum over all flips at once (``vectorized=True``): the same null distribution, the same
+    comparisons, the same p-value. Everything else is SciPy's own call.
+    """
+    from scipy import stats
+
+    d = np.asarray(d, dtype=float)
+    magnitude = np.abs(d)
+    n = d.size
+    enumerated = 2 <= n <= WILCOXON_ENUMERATED_MAX_PAIRS and np.all(np.isfinite(d)) and (
+        np.count_nonzero(d == 0.0) > 0 or np.unique(magnitude).size < n)
+    if not enumerated:
+        return float(stats.wilcoxon(d, zero_method="pratt").pvalue)
+    ranks = stats.rankdata(magnitude)  # average ranks, as SciPy's statistic takes them
+
+    def positive_rank_sum(flipped: np.ndarray, axis: int = -1) -> np.ndarray:
+        return np.sum((flipped > 0) * ranks, axis=axis)
+
+    return float(stats.permutation_test((d,), positive_rank_sum, permutation_type="samples",
+                                        vectorized=True, alternative="two-sided",
+                                        axis=-1).pvalue)
 
 
 def holm(p_values: list[float]) -> list[float]:
