@@ -120,6 +120,44 @@ def describe_config_error(exc: BaseException) -> str | None:
     for err in chain:
         if isinstance(err, (OverrideParseException, ConfigCompositionException)):
             return "config error: " + " ".join(str(err).split())
+    for err in chain:
+        line = _override_under_null_line(err)
+        if line is not None:
+            return line
+    return None
+
+
+#: Sections that are null unless a config group sets them, and the group that does.
+NULL_SECTION_SOURCES = {"scenario.family": "scenario=family"}
+
+
+def _override_under_null_line(err: BaseException) -> str | None:
+    """One line for an override below a null section (``scenario.family.n_jobs=1`` on the
+    paper scenario, whose ``scenario.family`` is null): OmegaConf's ``update``, which Hydra
+    calls for each override, stops there with a bare ``AssertionError`` that Hydra passes on.
+    The key and the null section come from that call's frame."""
+    if not isinstance(err, AssertionError):
+        return None
+    from omegaconf import OmegaConf
+
+    tb = err.__traceback__
+    while tb is not None:
+        frame = tb.tb_frame
+        if frame.f_code.co_name == "update" and "omegaconf" in frame.f_code.co_filename:
+            key, cfg = frame.f_locals.get("key"), frame.f_locals.get("cfg")
+            if not isinstance(key, str) or cfg is None:
+                return None
+            parts = key.split(".")
+            section = next((".".join(parts[:i]) for i in range(1, len(parts))
+                            if OmegaConf.select(cfg, ".".join(parts[:i])) is None), None)
+            if section is None:
+                return None
+            source = NULL_SECTION_SOURCES.get(section)
+            allowed = (f"choose {source} first, which sets {section}" if source
+                       else f"set {section} itself first")
+            return (f"config error: {key} cannot be set: {section} is null in this "
+                    f"configuration; allowed: {allowed}")
+        tb = tb.tb_next
     return None
 
 

@@ -52,6 +52,9 @@ CASES = [
     (["controller.accel_bounds_mps2=[3.0,-3.0]"], "controller.accel_bounds_mps2=[3.0, -3.0]",
      "low < high"),
     (["scenario.obstacles=[]"], "scenario.obstacles=[]", "non-empty obstacle list"),
+    # the paper scenario has no family: OmegaConf stops the override with a bare assertion
+    (["scenario.family.n_jobs=1"], "scenario.family.n_jobs cannot be set: scenario.family is null",
+     "choose scenario=family first"),
     (["scenario.obstacles=[{x_m:14.0,y_m:1.5},{x_m:14.0,y_m:1.5}]"], "scenario.obstacles[1]",
      "not exact duplicates"),
     (["scenario=family", "scenario.family.size=0"], "scenario.family.size=0", "integer >= 1"),

@@ -76,9 +76,12 @@ def test_a_planner_from_outside_the_package_runs_and_is_judged(tmp_path):
     env = {**os.environ, "PYTHONPATH": str(module)}
     runs = tmp_path / "runs"
     search = f"hydra.searchpath=[file://{tmp_path / 'conf'}]"
+    # the user's planner on two workers (they import its module too); the baseline on one
     for method, extra in (("straight", [search]), ("baseline", [])):
+        workers = 2 if method == "straight" else 1
         proc = _run(["pipeline.run", *extra, f"method={method}", "scenario=family",
-                     "scenario.family.size=10", f"hydra.run.dir={runs / 'family' / method}"], env)
+                     "scenario.family.size=10", f"scenario.family.n_jobs={workers}",
+                     f"hydra.run.dir={runs / 'family' / method}"], env)
         assert proc.returncode == 0, proc.stderr[-2000:]
         proc = _run(["pipeline.run", *extra, f"method={method}",
                      f"hydra.run.dir={runs / 'paper' / method}"], env)

@@ -19,11 +19,20 @@ from pipeline.store.runs import (MANIFEST, RunInfo, NonFiniteResultError, RunFol
                            read_run, write_run)
 
 
-@pytest.fixture()
-def paper(tmp_path, make_config):
-    root = tmp_path / "outputs"
+@pytest.fixture(scope="module")
+def pristine_paper(tmp_path_factory, make_config):
+    """The paper scenario's baseline and improved runs, made once for the module."""
+    root = tmp_path_factory.mktemp("pristine") / "outputs"
     for method in ("baseline", "improved"):
         run_experiment(make_config([f"method={method}"]), root / "paper" / method)
+    return root
+
+
+@pytest.fixture()
+def paper(tmp_path, pristine_paper):
+    """A test's own copy of :func:`pristine_paper` (files and their times), free to damage."""
+    root = tmp_path / "outputs"
+    shutil.copytree(pristine_paper, root)
     return root
 
 
