@@ -132,11 +132,12 @@ NULL_SECTION_SOURCES = {"scenario.family": "scenario=family"}
 
 
 def _override_under_null_line(err: BaseException) -> str | None:
-    """One line for an override below a null section (``scenario.family.n_jobs=1`` on the
-    paper scenario, whose ``scenario.family`` is null): OmegaConf's ``update``, which Hydra
-    calls for each override, stops there with a bare ``AssertionError`` that Hydra passes on.
-    The key and the null section come from that call's frame."""
-    if not isinstance(err, AssertionError):
+    """One line for an override of or below a null section (``scenario.family.n_jobs=1`` or
+    ``scenario.family={size: 3}`` on the paper scenario, whose ``scenario.family`` is null):
+    OmegaConf's ``update``, which Hydra calls for each override, stops there with a bare
+    ``AssertionError`` or ``AttributeError`` that Hydra passes on. The key and the null section
+    come from that call's frame."""
+    if not isinstance(err, (AssertionError, AttributeError)):
         return None
     from omegaconf import OmegaConf
 
@@ -148,15 +149,13 @@ def _override_under_null_line(err: BaseException) -> str | None:
             if not isinstance(key, str) or cfg is None:
                 return None
             parts = key.split(".")
-            section = next((".".join(parts[:i]) for i in range(1, len(parts))
+            section = next((".".join(parts[:i]) for i in range(1, len(parts) + 1)
                             if OmegaConf.select(cfg, ".".join(parts[:i])) is None), None)
             if section is None:
                 return None
-            source = NULL_SECTION_SOURCES.get(section)
-            allowed = (f"choose {source} first, which sets {section}" if source
-                       else f"set {section} itself first")
+            source = NULL_SECTION_SOURCES.get(section, f"a config group that sets {section}")
             return (f"config error: {key} cannot be set: {section} is null in this "
-                    f"configuration; allowed: {allowed}")
+                    f"configuration; allowed: choose {source} first")
         tb = tb.tb_next
     return None
 

@@ -55,6 +55,8 @@ CASES = [
     # the paper scenario has no family: OmegaConf stops the override with a bare assertion
     (["scenario.family.n_jobs=1"], "scenario.family.n_jobs cannot be set: scenario.family is null",
      "choose scenario=family first"),
+    (["scenario.family={size:3}"], "scenario.family cannot be set: scenario.family is null",
+     "choose scenario=family first"),
     (["scenario.obstacles=[{x_m:14.0,y_m:1.5},{x_m:14.0,y_m:1.5}]"], "scenario.obstacles[1]",
      "not exact duplicates"),
     (["scenario=family", "scenario.family.size=0"], "scenario.family.size=0", "integer >= 1"),
