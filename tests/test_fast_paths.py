@@ -239,9 +239,12 @@ def _lateral_reference_numpy(path_line_m, stations_m, controller):
     oracle of its plain-float version."""
     from math import tan
 
-    from pipeline.loop.controller.references import advancing_points
-
-    xs, ys = advancing_points(path_line_m)
+    # the points that advance in x by more than 1e-9 m past the last one kept
+    xs, ys = [path_line_m[0, 0]], [path_line_m[0, 1]]
+    for x, y in path_line_m[1:].tolist():
+        if x > xs[-1] + 1e-9:
+            xs.append(x)
+            ys.append(y)
     if len(xs) < 2:
         return np.full(stations_m.shape, path_line_m[-1, 1]), np.zeros(stations_m.shape)
     xs_a, ys_a = np.array(xs), np.array(ys)
@@ -309,3 +312,25 @@ print(len(blas), sorted(blas - kept))
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                          check=True).stdout.split()
     assert int(out[0]) >= 2 and out[1:] == ["[]"]
+
+
+def test_line_frame_at_heading_zero_gives_the_rotations_values():
+    """The heading-0 shortcut of ``to_line`` and ``vectors_to_line`` against the rotation
+    written out (cos 0 = 1, sin 0 = 0), and a turned frame still rotated."""
+    from pipeline.loop.scenario import LineFrame
+
+    rng = np.random.default_rng(5)
+    points = rng.normal(0.0, 20.0, (10, 3, 2))
+    origin = np.array([1.5, -2.0])
+    frame = LineFrame(origin, 0.0)
+    d = points - origin
+    rotated = np.stack([1.0 * d[..., 0] + 0.0 * d[..., 1], -0.0 * d[..., 0] + 1.0 * d[..., 1]],
+                       axis=-1)
+    assert np.array_equal(frame.to_line(points), rotated)
+    assert np.array_equal(frame.vectors_to_line(points[0]), points[0])
+    turned = LineFrame(origin, 0.3)
+    c, s = np.cos(0.3), np.sin(0.3)
+    np.testing.assert_array_equal(turned.to_line(points)[..., 1],
+                                  -s * d[..., 0] + c * d[..., 1])
+    back = turned.to_global(turned.to_line(points))
+    np.testing.assert_allclose(back, points, atol=1e-12)

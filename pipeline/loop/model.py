@@ -154,6 +154,22 @@ def _single_track_constants(vehicle: VehicleConfig) -> tuple[float, ...]:
             vehicle.cornering_stiffness_rear_n_per_rad, mu * fz_front, mu * fz_rear)
 
 
+#: Order of :func:`single_track_rk4`'s ``constants``.
+SINGLE_TRACK_CONSTANT_NAMES = (
+    "mass_kg", "yaw_inertia_kg_m2", "cg_to_front_m", "cg_to_rear_m", "cornering_front_n_per_rad",
+    "cornering_rear_n_per_rad", "force_limit_front_n", "force_limit_rear_n",
+    "speed_time_constant_s", "accel_max_mps2", "steering_max_rad")
+
+
+def single_track_constants(vehicle: VehicleConfig) -> tuple[float, ...]:
+    """The plant's constants as :func:`single_track_rk4` takes them (order
+    :data:`SINGLE_TRACK_CONSTANT_NAMES`): those of :func:`_single_track_constants`, then the
+    speed loop's time constant and acceleration limit and the steering bound."""
+    return tuple(float(c) for c in _single_track_constants(vehicle)) + (
+        float(vehicle.speed_time_constant_s), float(vehicle.accel_max_mps2),
+        float(vehicle.steering_max_rad))
+
+
 def plant_derivative(state: np.ndarray, steering_rate_rad_s: float, speed_target_mps: float,
                      vehicle: VehicleConfig) -> np.ndarray:
     """Time derivative of the nonlinear single-track plant.
@@ -193,37 +209,64 @@ def plant_derivative(state: np.ndarray, steering_rate_rad_s: float, speed_target
     ])
 
 
-#: RK4's stages: (fraction of the substep at which the slope is taken, weight in the update)
-_RK4_STAGES = ((0.0, 1.0), (0.5, 2.0), (0.5, 2.0), (1.0, 1.0))
-
-
 def step_plant(state: np.ndarray, steering_rate_rad_s: float, speed_target_mps: float,
                vehicle: VehicleConfig, dt_s: float, substeps: int) -> np.ndarray:
     """Advance the plant by ``dt_s`` with ``substeps`` RK4 steps; the input is held (ZOH).
 
-    The same equations as :func:`plant_derivative`, evaluated on plain floats with the
-    vehicle's constants hoisted out of the substeps and the four stages written inline (seven
-    states, forty slope evaluations per step: numpy's per-call overhead, and even a Python call
-    per slope, would cost more than the arithmetic). The sums run in RK4's usual order
-    (``k1 + 2 k2 + 2 k3 + k4``), so the result is bit for bit the textbook one; the tests hold
-    it to :func:`plant_derivative` integrated by hand.
-    """
+    The steering rate is saturated at the vehicle's limit, then :func:`single_track_rk4`
+    integrates :func:`plant_derivative`'s equations (the tests hold the two together)."""
     rate_max = vehicle.steering_rate_max_rad_s
     rate_cmd = min(max(float(steering_rate_rad_s), -rate_max), rate_max)
-    m, iz, a, b, cf, cr, lim_f, lim_r = _single_track_constants(vehicle)
-    tau, acc_max = vehicle.speed_time_constant_s, vehicle.accel_max_mps2
-    d_max = vehicle.steering_max_rad
-    target = float(speed_target_mps)
+    # plain floats in (a list, a tuple): CPython's arithmetic on numpy scalars is slower
+    return single_track_rk4(state.tolist(), single_track_constants(vehicle), rate_cmd,
+                            float(speed_target_mps), dt_s, substeps)
+
+
+def single_track_rk4(state: np.ndarray, constants: np.ndarray, rate_cmd: float, target: float,
+                     dt_s: float, substeps: int) -> np.ndarray:
+    """One sample period of the single-track plant: ``substeps`` RK4 steps of ``dt_s /
+    substeps`` with the steering rate ``rate_cmd`` (already saturated) and the speed target
+    ``target`` held.
+
+    The equations of :func:`plant_derivative` on plain floats, the constants
+    (:func:`single_track_constants`) hoisted out of the substeps and the four stages in one
+    loop (seven states, forty slope evaluations per step: numpy's per-call overhead, and even a
+    Python call per slope, would cost more than the arithmetic). The sums run in RK4's usual
+    order (``k1 + 2 k2 + 2 k3 + k4``), so the result is bit for bit the textbook one.
+
+    This one statement runs in CPython (a single run) and compiled by numba
+    (:mod:`pipeline.loop.compiled`, the family runner's workers): the same operations on the
+    same C library's functions, so the same bits (the tests hold them equal).
+
+    Parameters
+    ----------
+    state : sequence of 7 floats
+        ``[X, Y, psi, vx, vy, r, delta]`` (a list in CPython, an array compiled).
+    constants : sequence of 11 floats
+        :func:`single_track_constants` (a tuple in CPython, an array compiled).
+
+    Returns
+    -------
+    ndarray, shape (7,)
+        The state one sample period later (a new array).
+    """
+    m, iz, a, b = constants[0], constants[1], constants[2], constants[3]
+    cf, cr, lim_f, lim_r = constants[4], constants[5], constants[6], constants[7]
+    tau, acc_max, d_max = constants[8], constants[9], constants[10]
     # the steering rate is cut to 0 at the steering bound (the same rule in every stage)
     rate_at_upper = rate_cmd if rate_cmd <= 0 else 0.0
     rate_at_lower = rate_cmd if rate_cmd >= 0 else 0.0
     h = dt_s / substeps
     sixth = h / 6.0
-    X, Y, psi, vx, vy, r, delta = state.tolist()
+    X, Y, psi, vx = state[0], state[1], state[2], state[3]
+    vy, r, delta = state[4], state[5], state[6]
     for _ in range(substeps):
         k2 = k3 = k4 = k5 = k6 = 0.0   # the previous stage's slopes (X, Y never feed back)
         s0 = s1 = s2 = s3 = s4 = s5 = s6 = 0.0
-        for fraction, weight in _RK4_STAGES:
+        for stage in range(4):
+            # RK4's stages: (fraction of the substep, weight) = (0, 1), (.5, 2), (.5, 2), (1, 1)
+            fraction = 0.0 if stage == 0 else (0.5 if stage < 3 else 1.0)
+            weight = 2.0 if stage == 1 or stage == 2 else 1.0
             step = fraction * h
             p, u, v = psi + step * k2, vx + step * k3, vy + step * k4
             w, d = r + step * k5, delta + step * k6
@@ -243,7 +286,10 @@ def step_plant(state: np.ndarray, steering_rate_rad_s: float, speed_target_mps: 
         vy, r = vy + sixth * s4, r + sixth * s5
         delta = delta + sixth * s6
         delta = d_max if delta > d_max else (-d_max if delta < -d_max else delta)
-    return np.array([X, Y, psi, vx, vy, r, delta])
+    out = np.empty(7)
+    out[0], out[1], out[2], out[3] = X, Y, psi, vx
+    out[4], out[5], out[6] = vy, r, delta
+    return out
 
 
 #: Kinematic bicycle (paper Appendix A): state [x, y, theta, v], input [a, delta].

@@ -17,7 +17,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from math import exp, sqrt
+from math import exp, inf, sqrt
 
 import numpy as np
 
@@ -173,47 +173,80 @@ def apf_rollout(position_m: np.ndarray, goal_m: np.ndarray, obstacles: ObstacleS
     vehicle_velocity_mps : ndarray, shape (2,), optional
         For the closing-speed scaling of the velocity-aware variant.
     """
-    n = horizon
-    px, py = float(position_m[0]), float(position_m[1])
-    gx, gy = float(goal_m[0]), float(goal_m[1])
-    centres = obstacles.positions_m.tolist()
-    velocities = obstacles.velocities_mps.tolist()
-    predict = params.obstacle_prediction == "constant_velocity"
-    closing_on = vehicle_velocity_mps is not None and params.closing_speed_gain_s_per_m > 0.0
     vvx, vvy = (float(vehicle_velocity_mps[0]), float(vehicle_velocity_mps[1])) \
         if vehicle_velocity_mps is not None else (0.0, 0.0)
-    law = params.repulsion_law
-    polynomial, constant_k = law == "polynomial", params.k_rep_source != "adaptive_h"
-    h_max, beta, rho_p, rho0 = params.h_max, params.beta, params.rho_p_m, params.rho0_m
-    alpha_e, k_const, floor = params.alpha_e, params.k_rep_constant, params.rho_floor_m
-    gain, step_size, normalize = params.closing_speed_gain_s_per_m, params.step_size, \
-        params.normalize_step
-    step_min, step_max = params.step_min_m, params.step_max_m
-    path = [(px, py)]
-    att_rows, rep_rows, cap, low = [], [], [], []
-    for t in range(n - 1):
+    settings = apf_kernel_settings(params)
+    if vehicle_velocity_mps is None:
+        settings[16] = 0.0  # no velocity, no closing-speed scaling
+    # plain floats in (lists, a tuple): CPython's arithmetic on numpy scalars is slower
+    return ApfRollout(*apf_rollout_arrays(
+        float(position_m[0]), float(position_m[1]), float(goal_m[0]), float(goal_m[1]),
+        obstacles.positions_m.tolist(), obstacles.velocities_mps.tolist(),
+        tuple(settings.tolist()), int(horizon), float(sample_time_s), vvx, vvy))
+
+
+def _exp_or_inf(x: float) -> float:
+    """``exp(x)``, ``inf`` where it overflows (CPython raises; compiled, ``exp`` gives inf)."""
+    try:
+        return exp(x)
+    except OverflowError:
+        return inf
+
+
+def apf_rollout_arrays(px, py, gx, gy, centres, velocities, settings, horizon, sample_time_s,
+                       vvx, vvy):
+    """The rollout of :func:`apf_rollout` on plain numbers: ``path (max(Np, 1), 2), attraction
+    (Np - 1, 2), repulsion (Np - 1, 2), step cap active, step minimum used (Np - 1,)``.
+
+    ``centres`` and ``velocities`` are the obstacles' rows ``[x, y]`` (lists in CPython, arrays
+    compiled); ``settings`` is :func:`apf_kernel_settings`. This one statement runs in CPython
+    (a single run) and compiled by numba (:mod:`pipeline.loop.compiled`, the family runner's
+    workers): the same operations on the same C library's functions, so the same bits (the
+    tests hold them equal).
+    """
+    h_max, beta, rho_p, rho0 = settings[0], settings[1], settings[2], settings[3]
+    alpha_e, k_const, floor, gain = settings[4], settings[5], settings[6], settings[7]
+    step_size, step_min, step_max = settings[8], settings[9], settings[10]
+    repulsion_on, polynomial = settings[11] != 0.0, settings[12] != 0.0
+    constant_k, predict = settings[13] != 0.0, settings[14] != 0.0
+    normalize, closing_on = settings[15] != 0.0, settings[16] != 0.0
+    n = horizon
+    steps = max(n - 1, 0)
+    path = np.empty((max(n, 1), 2))
+    attraction = np.empty((steps, 2))
+    repulsion = np.empty((steps, 2))
+    cap = np.zeros(steps, dtype=np.bool_)
+    low = np.zeros(steps, dtype=np.bool_)
+    path[0, 0], path[0, 1] = px, py
+    n_obstacles = len(centres)
+    for t in range(steps):
         ax, ay = gx - px, gy - py
         rx = ry = 0.0
-        if centres and law != "none":
+        if n_obstacles > 0 and repulsion_on:
             # direction away from an obstacle sitting exactly at p: left normal of the goal
             nlen = sqrt(ay * ay + ax * ax)
-            nx, ny = ((-ay / nlen, ax / nlen) if nlen > _TINY else (0.0, 1.0))
-            for (ox, oy), (ovx, ovy) in zip(centres, velocities):
+            if nlen > _TINY:
+                nx, ny = -ay / nlen, ax / nlen
+            else:
+                nx, ny = 0.0, 1.0
+            for j in range(n_obstacles):
+                ox, oy = centres[j][0], centres[j][1]
+                ovx, ovy = velocities[j][0], velocities[j][1]
                 if predict:
                     ox, oy = ox + t * sample_time_s * ovx, oy + t * sample_time_s * ovy
                 dx, dy = px - ox, py - oy
                 rho = sqrt(dx * dx + dy * dy)
                 if rho >= rho0:
                     continue
-                ux, uy = ((dx / max(rho, _TINY), dy / max(rho, _TINY)) if rho > _TINY
-                          else (nx, ny))
+                if rho > _TINY:
+                    ux, uy = dx / max(rho, _TINY), dy / max(rho, _TINY)
+                else:
+                    ux, uy = nx, ny
                 rho_eff = max(rho, floor)
                 h = 0.0
                 if rho <= rho_p:
-                    try:
-                        h = h_max / (1.0 + exp(beta * (dx * dx)))
-                    except OverflowError:  # 1 / (1 + inf) = 0 is the right limit
-                        h = 0.0
+                    # 1 / (1 + inf) = 0 is the right limit where exp overflows
+                    h = h_max / (1.0 + _exp_or_inf(beta * (dx * dx)))
                 if polynomial:
                     magnitude = h * (1.0 / rho_eff - 1.0 / rho0) / rho_eff**2
                 else:
@@ -229,35 +262,33 @@ def apf_rollout(position_m: np.ndarray, goal_m: np.ndarray, obstacles: ObstacleS
         fx, fy = ax + rx, ay + ry
         norm = sqrt(fx * fx + fy * fy)
         if normalize:
-            sx, sy = ((step_size * fx / norm, step_size * fy / norm) if norm > _TINY
-                      else (0.0, 0.0))
+            if norm > _TINY:
+                sx, sy = step_size * fx / norm, step_size * fy / norm
+            else:
+                sx, sy = 0.0, 0.0
         else:
             sx, sy = step_size * fx, step_size * fy
         length = sqrt(sx * sx + sy * sy)
-        is_low = is_cap = False
         if step_min > 0.0 and length < step_min:
             if norm > _TINY:
                 dirx, diry = fx / norm, fy / norm
             else:
                 goal_dist = sqrt(ax * ax + ay * ay)
-                dirx, diry = (ax / goal_dist, ay / goal_dist) if goal_dist > _TINY else (0.0, 0.0)
+                if goal_dist > _TINY:
+                    dirx, diry = ax / goal_dist, ay / goal_dist
+                else:
+                    dirx, diry = 0.0, 0.0
             sx, sy = step_min * dirx, step_min * diry
-            is_low = True
-        elif step_max is not None and length > step_max:
+            low[t] = True
+        elif length > step_max:  # no cap: step_max is inf
             scale = step_max / length
             sx, sy = sx * scale, sy * scale
-            is_cap = True
+            cap[t] = True
         px, py = px + sx, py + sy
-        path.append((px, py))
-        att_rows.append((ax, ay))
-        rep_rows.append((rx, ry))
-        cap.append(is_cap)
-        low.append(is_low)
-    shape = (max(n - 1, 0), 2)
-    return ApfRollout(np.array(path[:max(n, 1)]).reshape(-1, 2),
-                      np.array(att_rows, dtype=float).reshape(shape),
-                      np.array(rep_rows, dtype=float).reshape(shape),
-                      np.array(cap, dtype=bool), np.array(low, dtype=bool))
+        path[t + 1, 0], path[t + 1, 1] = px, py
+        attraction[t, 0], attraction[t, 1] = ax, ay
+        repulsion[t, 0], repulsion[t, 1] = rx, ry
+    return path, attraction, repulsion, cap, low
 
 
 def plan_speed(position_m: np.ndarray, heading_rad: float, obstacles: ObstacleSnapshot,
@@ -300,13 +331,33 @@ class ApfPlanner:
     sample_time_s)`` and may read its own settings from ``settings.params``.
     """
 
-    def __init__(self, settings: PlannerConfig, horizon: int, sample_time_s: float) -> None:
+    def __init__(self, settings: PlannerConfig, horizon: int, sample_time_s: float,
+                 compiled: bool = False) -> None:
         self.settings, self.horizon, self.sample_time_s = settings, horizon, sample_time_s
+        self._kernel = None
+        if compiled:
+            # apf_rollout_arrays compiled (pipeline.loop.compiled): the same bits
+            from pipeline.loop.compiled import apf_rollout_kernel
+
+            self._kernel = apf_rollout_kernel
+            self._kernel_settings = apf_kernel_settings(settings)
 
     def rollout(self, position_m: np.ndarray, goal_m: np.ndarray, obstacles: ObstacleSnapshot,
                 vehicle_velocity_mps: np.ndarray | None = None) -> ApfRollout:
         """The reference path (``horizon`` points from the vehicle's position) and the forces
         behind it (:func:`apf_rollout`)."""
+        if self._kernel is not None:
+            vvx, vvy = (float(vehicle_velocity_mps[0]), float(vehicle_velocity_mps[1])) \
+                if vehicle_velocity_mps is not None else (0.0, 0.0)
+            settings = self._kernel_settings
+            if vehicle_velocity_mps is None and settings[16] != 0.0:
+                settings = settings.copy()
+                settings[16] = 0.0  # no velocity, no closing-speed scaling (as apf_rollout)
+            return ApfRollout(*self._kernel(
+                float(position_m[0]), float(position_m[1]), float(goal_m[0]), float(goal_m[1]),
+                np.ascontiguousarray(obstacles.positions_m, dtype=float).reshape(-1, 2),
+                np.ascontiguousarray(obstacles.velocities_mps, dtype=float).reshape(-1, 2),
+                settings, int(self.horizon), float(self.sample_time_s), vvx, vvy))
         return apf_rollout(position_m, goal_m, obstacles, self.settings, self.horizon,
                            self.sample_time_s, vehicle_velocity_mps)
 
@@ -317,11 +368,34 @@ class ApfPlanner:
                           vehicle_radius_m, self.settings)
 
 
-def make_planner(settings: PlannerConfig, horizon: int, sample_time_s: float) -> ApfPlanner:
-    """The planner ``settings._target_`` names (a user's class), else :class:`ApfPlanner`."""
+#: Order of :func:`apf_rollout_arrays`'s ``settings``.
+APF_SETTING_NAMES = ("h_max", "beta", "rho_p_m", "rho0_m", "alpha_e", "k_rep_constant",
+                     "rho_floor_m", "closing_speed_gain_s_per_m", "step_size", "step_min_m",
+                     "step_max_m (inf: none)", "repulsion on", "polynomial law",
+                     "constant k_rep", "constant-velocity prediction", "normalize step",
+                     "closing-speed scaling on")
+
+
+def apf_kernel_settings(params: PlannerConfig) -> np.ndarray:
+    """``params`` as :func:`apf_rollout_arrays` takes them (order :data:`APF_SETTING_NAMES`;
+    switches as 1.0 / 0.0, no step cap as ``inf``)."""
+    return np.array([
+        params.h_max, params.beta, params.rho_p_m, params.rho0_m, params.alpha_e,
+        params.k_rep_constant, params.rho_floor_m, params.closing_speed_gain_s_per_m,
+        params.step_size, params.step_min_m,
+        np.inf if params.step_max_m is None else params.step_max_m,
+        params.repulsion_law != "none", params.repulsion_law == "polynomial",
+        params.k_rep_source != "adaptive_h", params.obstacle_prediction == "constant_velocity",
+        bool(params.normalize_step), params.closing_speed_gain_s_per_m > 0.0], dtype=float)
+
+
+def make_planner(settings: PlannerConfig, horizon: int, sample_time_s: float,
+                 compiled: bool = False) -> ApfPlanner:
+    """The planner ``settings._target_`` names (a user's class), else :class:`ApfPlanner`
+    (with ``compiled``, its rollout by the compiled kernel: the same bits)."""
     from pipeline.validation import resolve_target
 
     if settings._target_:
         return resolve_target("planner._target_", settings._target_)(settings, horizon,
                                                                      sample_time_s)
-    return ApfPlanner(settings, horizon, sample_time_s)
+    return ApfPlanner(settings, horizon, sample_time_s, compiled)

@@ -57,16 +57,22 @@ class LineFrame:
         return np.cos(self.heading_rad), np.sin(self.heading_rad)
 
     def to_line(self, points_m: np.ndarray) -> np.ndarray:
-        c, s = self.cos_sin
         d = np.asarray(points_m, dtype=float) - self.origin_m
+        if self.heading_rad == 0.0:
+            # cos 0 = 1 and sin 0 = 0 exactly: the rotation below gives these values (for
+            # finite points), without its six small-array operations
+            return d
+        c, s = self.cos_sin
         out = np.empty(d.shape)
         out[..., 0] = c * d[..., 0] + s * d[..., 1]
         out[..., 1] = -s * d[..., 0] + c * d[..., 1]
         return out
 
     def vectors_to_line(self, vectors: np.ndarray) -> np.ndarray:
-        c, s = self.cos_sin
         v = np.asarray(vectors, dtype=float)
+        if self.heading_rad == 0.0:
+            return v.copy()  # the rotation by 0 (see to_line)
+        c, s = self.cos_sin
         return np.stack([c * v[..., 0] + s * v[..., 1], -s * v[..., 0] + c * v[..., 1]], axis=-1)
 
     def to_global(self, points_line_m: np.ndarray) -> np.ndarray:

@@ -23,7 +23,7 @@ import pandas as pd
 
 from pipeline.loop.settings import LoopSettings
 from pipeline.loop.controller import ControlStep, Observation, QpCache, make_controller
-from pipeline.loop.model import kinematic_plant_step, step_plant
+from pipeline.loop.model import kinematic_plant_step, single_track_constants, single_track_rk4
 from pipeline.loop.planner import ApfRollout, make_planner
 from pipeline.loop.scenario import Scenario
 from pipeline.loop.trajectory import HEAD, OBSTACLE_FIELDS, TAIL, obstacle_column
@@ -58,9 +58,20 @@ class SimulationResult:
 class SingleTrackPlant:
     """The nonlinear single-track plant of the lateral track; command ``[steering rate]``."""
 
-    def __init__(self, cfg: LoopSettings, scenario: Scenario) -> None:
+    def __init__(self, cfg: LoopSettings, scenario: Scenario, compiled: bool = False) -> None:
         self.vehicle, self.ts, self.substeps = cfg.vehicle, scenario.sample_time_s, \
             scenario.plant_substeps
+        self._rate_max = cfg.vehicle.steering_rate_max_rad_s
+        self.compiled = compiled
+        if compiled:
+            # model.single_track_rk4 compiled (pipeline.loop.compiled): the same bits; arrays in
+            from pipeline.loop.compiled import single_track_rk4 as kernel
+
+            self._constants = np.array(single_track_constants(cfg.vehicle))
+        else:
+            # run by CPython (what step_plant calls): plain floats in
+            kernel, self._constants = single_track_rk4, single_track_constants(cfg.vehicle)
+        self._kernel = kernel
 
     @staticmethod
     def initial_state(scenario: Scenario) -> np.ndarray:
@@ -79,8 +90,11 @@ class SingleTrackPlant:
                 "delta_rad": state[6]}
 
     def step(self, state: np.ndarray, command: np.ndarray, speed_ref_mps: float) -> np.ndarray:
-        return step_plant(state, command[0], speed_ref_mps, self.vehicle, self.ts,
-                          self.substeps)
+        """:func:`~pipeline.loop.model.step_plant` with this plant's constants hoisted."""
+        rate_max = self._rate_max
+        rate = min(max(float(command[0]), -rate_max), rate_max)
+        return self._kernel(state if self.compiled else state.tolist(), self._constants, rate,
+                            float(speed_ref_mps), self.ts, self.substeps)
 
 
 class KinematicPlant:
@@ -207,9 +221,12 @@ def _closed_loop(cfg: LoopSettings, scenario: Scenario,
                  qp_cache: QpCache | None) -> SimulationResult:
     """The loop of :func:`simulate`."""
     kinematic = cfg.controller.kind == "kinematic_mpc"
-    plant = KinematicPlant(cfg, scenario) if kinematic else SingleTrackPlant(cfg, scenario)
+    compiled = qp_cache is not None and qp_cache.compiled_kernels
+    plant = KinematicPlant(cfg, scenario) if kinematic else \
+        SingleTrackPlant(cfg, scenario, compiled)
     controller = make_controller(cfg, scenario.sample_time_s, qp_cache)
-    planner = make_planner(cfg.planner, cfg.controller.horizon, scenario.sample_time_s)
+    planner = make_planner(cfg.planner, cfg.controller.horizon, scenario.sample_time_s,
+                           compiled)
     vehicle_radius = cfg.vehicle.footprint_radius_m
     ts = scenario.sample_time_s
     frame = scenario.line_frame

@@ -47,10 +47,12 @@ def _config(overrides: list[str]):
 
 def step_inputs(cfg, n_obstacles: int, n_steps: int, seed: int = 0) -> list:
     """A deterministic sequence of realistic QP inputs: a vehicle passing ``n_obstacles``
-    obstacles near its path, references from the improved APF, active half-planes."""
+    obstacles near its path, references from the improved APF, active half-planes; with each
+    the APF rollout's wall time as the studies run it (the compiled kernel, see
+    :mod:`pipeline.loop.compiled`) and as a single run does (Python)."""
     from pipeline.loop.controller import MpcInputs, collision_halfplanes, lateral_reference
     from pipeline.loop.model import build_lateral_model
-    from pipeline.loop.planner import apf_rollout
+    from pipeline.loop.planner import ApfPlanner, apf_rollout
     from pipeline.loop.scenario import ObstacleSnapshot
 
     rng = np.random.default_rng(seed)
@@ -61,18 +63,25 @@ def step_inputs(cfg, n_obstacles: int, n_steps: int, seed: int = 0) -> list:
                                  rng.uniform(-1.5, 1.5, n_obstacles)])
     snap = ObstacleSnapshot(obstacles, np.zeros_like(obstacles), np.full(n_obstacles, 0.5),
                             np.ones(n_obstacles, bool))
+    compiled = ApfPlanner(cfg.planner, N, 0.1, compiled=True)
+    goal = np.array([30.0, 0.0])
+    compiled.rollout(np.zeros(2), goal, snap)  # numba's cache load, outside the timing
     out = []
     for k in range(n_steps):
         position = np.array([4.0 + 0.3 * k, 0.3 * np.sin(0.2 * k)])
         started = time.perf_counter()
-        rollout = apf_rollout(position, np.array([30.0, 0.0]), snap, cfg.planner, N, 0.1)
+        rollout = apf_rollout(position, goal, snap, cfg.planner, N, 0.1)
+        apf_python_s = time.perf_counter() - started
+        started = time.perf_counter()
+        compiled.rollout(position, goal, snap)
         apf_s = time.perf_counter() - started
         stations = position[0] + 0.3 * np.arange(1, N + 1)
         y_ref, psi_ref = lateral_reference(rollout.path_m, stations, ctrl)
         predicted = np.repeat(obstacles[None, :, :], N, axis=0)
         G, h = collision_halfplanes(stations, y_ref, position, predicted, snap.radii_m, veh, ctrl)
         x0 = np.array([position[1], 0.0, 0.06 * np.cos(0.2 * k), 0.0, 0.05 * np.sin(0.3 * k)])
-        out.append((MpcInputs(x0, model, y_ref, psi_ref, G, h, np.zeros(N)), apf_s))
+        out.append((MpcInputs(x0, model, y_ref, psi_ref, G, h, np.zeros(N)), apf_s,
+                    apf_python_s))
     return out
 
 
@@ -145,10 +154,10 @@ def bench_lateral(horizons, obstacle_counts, n_steps: int, repeats: int) -> list
             mpc_dense = LateralMpc(replace(ctrl, backend="clarabel_dense",
                                            formulation="condensed"), cfg.vehicle)
             steps = step_inputs(cfg, n_obs, n_steps)
-            sparse_thetas = [mpc_sparse.parameter_vector(inputs) for inputs, _ in steps]
+            sparse_thetas = [mpc_sparse.parameter_vector(inputs) for inputs, *_ in steps]
             condensed_thetas = [condensed_data(mpc_direct.prediction(inputs.model), inputs,
                                                mpc_direct.weights).theta()
-                                for inputs, _ in steps]
+                                for inputs, *_ in steps]
             offset_u = mpc_sparse.qp.map.variables["U"][0]
             for rep in range(repeats):
                 # the garbage collector off while timing (as timeit does): the CVXPY backend's
@@ -168,7 +177,7 @@ def bench_lateral(horizons, obstacle_counts, n_steps: int, repeats: int) -> list
                     solved, wall, _ = _timed(lambda: mpc_cvxpy.qp.solve(theta))
                     stats = mpc_cvxpy.qp.problem.solver_stats
                     through_cvxpy.append((solved, wall, float(stats.solve_time or np.nan)))
-                for k, (inputs, apf_s) in enumerate(steps):
+                for k, (inputs, apf_s, apf_python_s) in enumerate(steps):
                     # every method timed on this QP, in an order that rotates from QP to QP:
                     # what runs just before a solve (and what it left in the caches) is then
                     # the same for every method on average
@@ -190,7 +199,9 @@ def bench_lateral(horizons, obstacle_counts, n_steps: int, repeats: int) -> list
                         if solution.values is not None else np.nan
                     rows.append({
                         "section": "lateral", "N": N, "obstacles": n_obs, "repeat": rep, "step": k,
-                        "apf_s": apf_s, "cvxpy_solve_s": c_wall, "cvxpy_clarabel_s": clarabel_s,
+                        "apf_s": apf_s, "apf_python_s": apf_python_s,
+                        "direct_python_step_s": apf_python_s + d_wall,
+                        "cvxpy_solve_s": c_wall, "cvxpy_clarabel_s": clarabel_s,
                         "cvxpy_iterations": solution.iterations,
                         "cvxpy_step_s": apf_s + c_wall,
                         "direct_s": d_wall, "direct_cpu_s": d_cpu,
@@ -228,7 +239,8 @@ class _RecordingMap:
         return getattr(self._map, name)
 
 
-def bench_closed_loop(repeats: int = 5, backend: str | None = None) -> dict:
+def bench_closed_loop(repeats: int = 5, backend: str | None = None,
+                      compiled_kernels: bool = True) -> dict:
     """One complete paper-scenario run of the improved method in this process (the QP compiled
     inside the timed region, a fresh cache each time), over the sparse floor of the same QPs
     (the run's steps replayed as the sparse QP, recorded from a sparse run of the same
@@ -238,17 +250,24 @@ def bench_closed_loop(repeats: int = 5, backend: str | None = None) -> dict:
     models and the BLAS thread limit's library scan included) and again with the cache it just
     filled (what every step costs: ``outside_qp_us_per_step`` comes from this run, so one-off
     set-up is not spread over the steps; ``setup_ms`` is the difference of the two runs'
-    time outside the QP, compilation excluded)."""
+    time outside the QP, compilation excluded).
+
+    With ``compiled_kernels`` (the default) the plant and the APF rollout run as the family
+    runner's workers run them, compiled (:mod:`pipeline.loop.compiled`; numba's cache is
+    loaded before the first repeat); without, as a single run does."""
     from pipeline.loop.controller import QpCache
     from pipeline.loop.scenario import build_scenario
     from pipeline.loop.simulate import simulate
 
     cfg = _config(["method=improved"] + ([f"controller.backend={backend}"] if backend else []))
     scenario = build_scenario(cfg.scenario)
+    if compiled_kernels:
+        # numba's import and the kernels' cache load, once per process: outside the timing
+        simulate(cfg, scenario, QpCache(compiled_kernels=True))
     walls, cpus, compile_s, qp_s, steps = [], [], [], [], 0
     outside_warm, qp_warm, setup = [], [], []
     for _ in range(repeats):
-        cache = QpCache()
+        cache = QpCache(compiled_kernels=compiled_kernels)
         wall, cpu = time.perf_counter(), time.process_time()
         result = simulate(cfg, scenario, cache)
         walls.append(time.perf_counter() - wall)
@@ -267,7 +286,8 @@ def bench_closed_loop(repeats: int = 5, backend: str | None = None) -> dict:
                           cfg.controller.solver_max_iter)[0] for _ in range(repeats)]
     floor_sum = float(np.median([f.sum() for f in floors]))
     wall = float(np.median(walls))
-    return {"backend": cfg.controller.backend, "closed_loop_wall_s": wall,
+    return {"backend": cfg.controller.backend, "compiled_kernels": compiled_kernels,
+            "closed_loop_wall_s": wall,
             "closed_loop_cpu_s": float(np.median(cpus)),
             "closed_loop_compile_s": float(np.median(compile_s)),
             "closed_loop_qps": len(thetas), "floor_sum_s": floor_sum,
@@ -307,7 +327,7 @@ def bench_peers(n_steps: int) -> list[dict]:
         constraints = [opt.input_range_constraint(sys_d, [-veh.steering_rate_max_rad_s],
                                                   [veh.steering_rate_max_rad_s]),
                        opt.state_range_constraint(sys_d, lower, upper)]
-        for k, (inputs, _) in enumerate(steps):
+        for k, (inputs, *_) in enumerate(steps):
             # constant references so that python-control's quadratic_cost states the same QP
             y_ref, psi_ref = float(inputs.y_ref_m[-1]), float(inputs.psi_ref_rad[-1])
             flat = replace(inputs, y_ref_m=np.full(N, y_ref), psi_ref_rad=np.full(N, psi_ref),
@@ -386,7 +406,8 @@ def bench_family_member(backend: str | None = None, n_members: int = 8,
     cfg = _config(["method=improved", "scenario=family", f"scenario.family.size={n_members}"]
                   + ([f"controller.backend={backend}"] if backend else []))
     members = family_members(cfg.scenario, cfg.vehicle.footprint_radius_m)
-    cache = QpCache()
+    # as a family's workers run them: the plant and the APF rollout compiled
+    cache = QpCache(compiled_kernels=True)
     member_cpu, floor_cpu, steps = [], [], 0
     with tempfile.TemporaryDirectory() as tmp:
         run_experiment(dataclasses.replace(cfg, scenario=members[0]), Path(tmp) / "warm",
@@ -473,7 +494,7 @@ def summarize(lateral: pd.DataFrame, peers: pd.DataFrame, kinematic: pd.DataFram
     table = []
     for (N, n_obs), part in lateral.groupby(["N", "obstacles"]):
         row = {"N": int(N), "obstacles": int(n_obs)}
-        for key in ("apf_s", "cvxpy_solve_s", "cvxpy_clarabel_s", "cvxpy_step_s", "direct_s",
+        for key in ("apf_s", "apf_python_s", "direct_python_step_s", "cvxpy_solve_s", "cvxpy_clarabel_s", "cvxpy_step_s", "direct_s",
                     "direct_step_s", "floor_s", "daqp_s", "daqp_step_s", "condensed_floor_s",
                     "direct_cpu_s", "daqp_cpu_s", "floor_cpu_s", "condensed_floor_cpu_s",
                     "dense_s", "dense_step_s", "dense_cpu_s"):
@@ -489,6 +510,9 @@ def summarize(lateral: pd.DataFrame, peers: pd.DataFrame, kinematic: pd.DataFram
                                                         / part["floor_s"]))
         row["step_over_sparse_floor_direct"] = float(np.median(part["direct_step_s"]
                                                                / part["floor_s"]))
+        # the same step with the APF rollout in Python (a single run's path)
+        row["step_over_sparse_floor_python_apf"] = float(np.median(
+            part["direct_python_step_s"] / part["floor_s"]))
         row["step_over_sparse_floor_dense"] = float(np.median(part["dense_step_s"]
                                                               / part["floor_s"]))
         row["step_over_sparse_floor_daqp"] = float(np.median(part["daqp_step_s"]
@@ -594,11 +618,17 @@ def _run(args) -> int:
     peers = pd.DataFrame(bench_peers(10 if args.quick else 20))
     kinematic = pd.DataFrame(bench_kinematic(args.steps))
     closed_loop = bench_closed_loop(3 if args.quick else 7)
+    closed_loop_python = bench_closed_loop(3 if args.quick else 7, compiled_kernels=False)
     closed_loop_daqp = bench_closed_loop(3 if args.quick else 7, backend="daqp")
     pipeline_figures = bench_pipeline(8 if args.quick else args.family_size,
                                       8 if args.quick else 40)
     summary = summarize(lateral, peers, kinematic, pipeline_figures, closed_loop)
     summary["closed_loop_daqp"] = closed_loop_daqp
+    summary["closed_loop_python_kernels"] = closed_loop_python
+    summary["outside_qp_over_qp_python_kernels"] = \
+        closed_loop_python["outside_qp_us_per_step"] / closed_loop_python["qp_us_per_step"]
+    summary["outside_qp_over_qp_daqp"] = \
+        closed_loop_daqp["outside_qp_us_per_step"] / closed_loop_daqp["qp_us_per_step"]
     member = bench_family_member(n_members=4 if args.quick else 8)
     member_daqp = bench_family_member("daqp", n_members=4 if args.quick else 8)
     summary["family_member"] = {"default": member, "daqp": member_daqp}
@@ -620,7 +650,8 @@ def _run(args) -> int:
         "closed_loop_over_floor", "step_over_floor", "step_over_sparse_floor",
         "step_over_sparse_floor_daqp", "step_over_sparse_floor_dense",
         "step_over_sparse_floor_cpu", "outside_qp_us_per_step",
-        "qp_us_per_step", "outside_qp_over_qp", "setup_ms", "compiles_per_family",
+        "qp_us_per_step", "outside_qp_over_qp", "outside_qp_over_qp_python_kernels",
+        "setup_ms", "compiles_per_family",
         "family_scenarios_per_s", "family_member_over_sparse_floor",
         "family_member_over_sparse_floor_daqp", "multiverse_member_reads_per_member")},
         indent=1))

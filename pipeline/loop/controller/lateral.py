@@ -32,7 +32,6 @@ read back (:class:`CompiledCondensedQp`).
 from __future__ import annotations
 
 from dataclasses import dataclass
-from functools import cached_property
 from math import isfinite
 from typing import TYPE_CHECKING
 
@@ -166,6 +165,8 @@ class CondensedPrediction:
         and its weight's square root: ``free_w = cost_root * free.ravel()[cost_index] - target``.
     steering_gamma_w : ndarray, shape (N, Nc)
         The steering angle's response in the statement's coordinates, ``gamma_d R^-1``.
+    chol_inv_flat, steering_gamma_w_flat : ndarray
+        The two, column-major and flat (parameters of the CVXPY statement).
     gradient_map : ndarray, shape (Nc, 4 N)
         ``2 gamma_w'``: the cost's gradient in ``U`` is ``gradient_map @ free_w``.
     """
@@ -183,6 +184,8 @@ class CondensedPrediction:
     cost_index: np.ndarray
     cost_root: np.ndarray
     steering_gamma_w: np.ndarray
+    chol_inv_flat: np.ndarray
+    steering_gamma_w_flat: np.ndarray
 
     @classmethod
     def of(cls, model: LateralModel, blocking: np.ndarray,
@@ -222,10 +225,12 @@ class CondensedPrediction:
         # rows ordered by cost term, then step, as gamma_w: state COST_STATES[t] at step k
         cost_index = (5 * np.arange(n)[None, :] + np.array(COST_STATES)[:, None]).ravel()
         cost_root = np.repeat(root, n)
+        steering_gamma_w = gamma[:, 4, :] @ chol_inv
         return cls(model, gamma, fortran(powers.reshape(-1, 5)), fortran(gamma_w),
                    root, 2.0 * half_hessian, chol, fortran(chol_rhs_map),
                    fortran(2.0 * gamma_w.T), chol_inv, cost_index, cost_root,
-                   gamma[:, 4, :] @ chol_inv)
+                   steering_gamma_w, chol_inv.ravel(order="F"),
+                   steering_gamma_w.ravel(order="F"))
 
     def free_response(self, x0: np.ndarray, disturbance: np.ndarray) -> np.ndarray:
         """States at steps 1..N with ``U = 0`` (shape (N, 5)); ``disturbance`` is (5, N)."""
@@ -303,23 +308,24 @@ class CondensedData:
         """(Nc, Nc) ``R^-1``: ``U = R^-1 W``."""
         return self.prediction.chol_inv
 
-    @cached_property
+    @property
     def gradient_u(self) -> np.ndarray:
-        """(Nc,) ``2 gamma_w' free_w``."""
+        """(Nc,) ``2 gamma_w' free_w`` (computed on each access: a backend asks once)."""
         return self.prediction.gradient_map @ self.free_w
 
-    @cached_property
+    @property
     def chol_rhs(self) -> np.ndarray:
-        """(Nc,) ``r = R^-T gamma_w' free_w``."""
+        """(Nc,) ``r = R^-T gamma_w' free_w`` (computed on each access: a backend asks once)."""
         return self.prediction.chol_rhs_map @ self.free_w
 
     def theta(self) -> np.ndarray:
         """The parameter vector of :func:`build_condensed_lateral_problem` (its order, column-
         major): the rows that multiply ``U`` taken to ``W = R U``."""
-        inverse = self.chol_inv
-        return np.concatenate([inverse.ravel(order="F"), self.chol_rhs,
-                               self.prediction.steering_gamma_w.ravel(order="F"), self.free_d,
-                               (self.gamma_h @ inverse).ravel(order="F"), self.bound_h])
+        prediction = self.prediction
+        return np.concatenate([prediction.chol_inv_flat, self.chol_rhs,
+                               prediction.steering_gamma_w_flat, self.free_d,
+                               (self.gamma_h @ prediction.chol_inv).ravel(order="F"),
+                               self.bound_h])
 
 
 def condensed_data(prediction: CondensedPrediction, inputs: "MpcInputs",
@@ -611,6 +617,8 @@ class LateralMpc:
         self._predictions: dict[float, CondensedPrediction] = \
             qp_cache.memo(key, dict) if qp_cache is not None else {}
         self.fallback = PlanFallback(controller.horizon)
+        # the references by the compiled kernel (the same bits) in long studies
+        self.compiled_kernels = qp_cache is not None and qp_cache.compiled_kernels
         self._steps_ahead_s = np.arange(1, controller.horizon + 1) * self.sample_time_s
         self._times_s = np.concatenate([[0.0], self._steps_ahead_s])
 
@@ -680,7 +688,7 @@ class LateralMpc:
         line_pos = obs.position_line_m
         stations = line_pos[0] + model.speed_mps * self._steps_ahead_s
         path_line = obs.frame.to_line(obs.rollout.path_m)
-        y_ref, psi_ref = lateral_reference(path_line, stations, ctrl)
+        y_ref, psi_ref = lateral_reference(path_line, stations, ctrl, self.compiled_kernels)
         if ctrl.heading_reference == "apf_force":
             rollout = obs.rollout
             force_line = obs.frame.vectors_to_line(rollout.attraction[0] + rollout.repulsion[0]) \

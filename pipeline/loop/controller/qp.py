@@ -394,6 +394,14 @@ class QpCache:
 
     #: objects bound to this process (e.g. threadpoolctl's controller): never pickled
     process_local: dict = field(default_factory=dict)
+    #: run the single-track plant and the APF rollout as compiled kernels
+    #: (:mod:`pipeline.loop.compiled`, the same bits as their Python statements); set by runners
+    #: of many runs, where numba's import and cache load (about 0.8 s per process) pay back, and
+    #: shipped to their workers
+    compiled_kernels: bool = False
+    #: members the family runner has planned through this cache (what ``compiled_kernels``
+    #: is decided on)
+    members_planned: int = 0
 
     def memo(self, key: Hashable, build: Callable[[], Any]) -> Any:
         """The value stored under ``key``, built once (not counted as a compilation)."""
@@ -412,7 +420,9 @@ class QpCache:
     def __getstate__(self) -> dict:
         portable = {k: v for k, v in self.entries.items() if isinstance(v, AffineQpMap)}
         return {"entries": portable, "compile_count": 0, "compile_time_s": 0.0,
-                "memos": dict(self.memos), "process_local": {}}
+                "memos": dict(self.memos), "process_local": {},
+                "compiled_kernels": self.compiled_kernels,
+                "members_planned": self.members_planned}
 
     def __setstate__(self, state: dict) -> None:
         self.__dict__.update(state)

@@ -3,7 +3,6 @@ stations, and the soft avoidance half-planes (one normal rule shared by both tra
 
 from __future__ import annotations
 
-from bisect import bisect_right
 from math import hypot, sqrt, tan
 
 import numpy as np
@@ -13,20 +12,9 @@ from pipeline.loop.settings import ControllerConfig, VehicleConfig
 _NORMAL_EPS_M = 1e-6
 
 
-def advancing_points(path_line_m: np.ndarray) -> tuple[list, list]:
-    """The path's points that advance in x (by more than 1e-9 m past the last one kept), as
-    two lists ``xs, ys``: a monotone curve to interpolate."""
-    points = path_line_m.tolist()
-    xs, ys = [points[0][0]], [points[0][1]]
-    for x, y in points[1:]:
-        if x > xs[-1] + 1e-9:
-            xs.append(x)
-            ys.append(y)
-    return xs, ys
-
-
 def lateral_reference(path_line_m: np.ndarray, stations_m: np.ndarray,
-                      controller: ControllerConfig) -> tuple[np.ndarray, np.ndarray]:
+                      controller: ControllerConfig, compiled: bool = False
+                      ) -> tuple[np.ndarray, np.ndarray]:
     """Lateral and heading references at the MPC's predicted stations.
 
     The APF path (line frame) is made monotone in x (points that do not advance are dropped),
@@ -34,42 +22,77 @@ def lateral_reference(path_line_m: np.ndarray, stations_m: np.ndarray,
     (slope saturated at ``heading_ref_max_rad``) or held (``path_beyond_end``). The heading
     reference is the saturated slope of that curve.
 
-    A dozen points and stations: the interpolation runs on plain floats with ``np.interp``'s
-    own arithmetic (the segment's slope times the offset from its left end, plus its left
-    value; a station on a knot takes the knot's value), which is cheaper than numpy's per-call
-    overhead and gives the same numbers (the tests hold it to ``np.interp``).
+    A dozen points and stations: the interpolation (:func:`reference_arrays`) runs on plain
+    floats with ``np.interp``'s own arithmetic (the segment's slope times the offset from its
+    left end, plus its left value; a station on a knot takes the knot's value), which is
+    cheaper than numpy's per-call overhead and gives the same numbers (the tests hold it to
+    ``np.interp``); with ``compiled``, numba runs the same statement
+    (:mod:`pipeline.loop.compiled`, the same bits).
 
     Returns
     -------
     y_ref_m, psi_ref_rad : ndarray, shape (len(stations_m),)
     """
-    xs, ys = advancing_points(path_line_m)
-    if len(xs) < 2:
-        # the rollout does not advance: hold its last lateral position
-        return np.full(stations_m.shape, float(path_line_m[-1, 1])), np.zeros(stations_m.shape)
     max_slope = tan(controller.heading_ref_max_rad)
+    extend = controller.path_beyond_end == "extend"
+    if compiled:
+        from pipeline.loop.compiled import reference_kernel
+
+        y_ref, slopes = reference_kernel(np.ascontiguousarray(path_line_m, dtype=float),
+                                         np.ascontiguousarray(stations_m, dtype=float),
+                                         max_slope, extend)
+    else:
+        y_ref, slopes = reference_arrays(path_line_m.tolist(), stations_m.tolist(), max_slope,
+                                         extend)
+    return y_ref, np.arctan(slopes)
+
+
+def reference_arrays(path_line_m, stations_m, max_slope: float, extend: bool):
+    """:func:`lateral_reference`'s interpolation on plain numbers: ``y_ref`` and the saturated
+    slopes at the stations (arrays). ``path_line_m`` holds rows ``[x, y]`` and ``stations_m``
+    numbers (lists in CPython, arrays compiled)."""
+    n_points = len(path_line_m)
+    # the path's points that advance in x (by more than 1e-9 m past the last one kept); read
+    # from lists (CPython's arithmetic on numpy scalars is slower), written into arrays
+    xs, ys = [path_line_m[0][0]], [path_line_m[0][1]]
+    for i in range(1, n_points):
+        x = path_line_m[i][0]
+        if x > xs[-1] + 1e-9:
+            xs.append(x)
+            ys.append(path_line_m[i][1])
+    count = len(xs)
+    n = len(stations_m)
+    y_ref, slopes = np.empty(n), np.zeros(n)
+    if count < 2:
+        # the rollout does not advance: hold its last lateral position (zero slope)
+        y_ref[:] = path_line_m[n_points - 1][1]
+        return y_ref, slopes
     low = -max_slope
-    last = len(xs) - 1
+    last = count - 1
     seg_slopes = [min(max((ys[i + 1] - ys[i]) / (xs[i + 1] - xs[i]), low), max_slope)
                   for i in range(last)]
-    end_slope = seg_slopes[-1] if controller.path_beyond_end == "extend" else 0.0
+    end_slope = seg_slopes[last - 1] if extend else 0.0
     last_x, last_y = xs[last], ys[last]
-    y_ref, slopes = [], []
-    for station in stations_m.tolist():
+    j = -1  # the last knot at or left of the station (stations usually ascend)
+    for k in range(n):
+        station = stations_m[k]
         if station > last_x:
-            y_ref.append(last_y + end_slope * (station - last_x))
-            slopes.append(end_slope)
+            y_ref[k] = last_y + end_slope * (station - last_x)
+            slopes[k] = end_slope
             continue
-        j = bisect_right(xs, station) - 1
+        while j + 1 < count and xs[j + 1] <= station:
+            j += 1
+        while j >= 0 and xs[j] > station:
+            j -= 1
         if j < 0:
             y = ys[0]
         elif j == last or xs[j] == station:
             y = ys[j]
         else:
             y = (ys[j + 1] - ys[j]) / (xs[j + 1] - xs[j]) * (station - xs[j]) + ys[j]
-        y_ref.append(y)
-        slopes.append(seg_slopes[min(max(j, 0), last - 1)])
-    return np.array(y_ref), np.arctan(np.array(slopes))
+        y_ref[k] = y
+        slopes[k] = seg_slopes[min(max(j, 0), last - 1)]
+    return y_ref, slopes
 
 
 def force_heading_reference(total_force_line: np.ndarray, heading_line_rad: float,

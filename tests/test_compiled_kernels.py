@@ -1,0 +1,193 @@
+"""The compiled kernels (numba) against the same functions run by CPython, bit for bit: the
+single-track plant's RK4 step against ``step_plant`` and the APF rollout against
+``apf_rollout`` over every switch of the planner (an overflowing ``exp`` included); the closed
+loop with the kernels against the loop without; and the family runner's rule for turning them
+on."""
+
+from __future__ import annotations
+
+import itertools
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from pipeline.loop.compiled import apf_rollout_kernel, single_track_rk4
+from pipeline.loop.controller import QpCache, lateral_reference
+from pipeline.loop.model import SINGLE_TRACK_CONSTANT_NAMES, single_track_constants, step_plant
+from pipeline.loop.planner import (APF_SETTING_NAMES, ApfPlanner, apf_kernel_settings,
+                                   apf_rollout)
+from pipeline.loop.scenario import ObstacleSnapshot, build_scenario, family_members
+from pipeline.loop.simulate import SingleTrackPlant, simulate
+
+
+def test_compiled_plant_gives_step_plants_bits(make_config):
+    vehicle = make_config().vehicle
+    constants = np.array(single_track_constants(vehicle))
+    assert constants.shape == (len(SINGLE_TRACK_CONSTANT_NAMES),)
+    rng = np.random.default_rng(7)
+    rate_max, d_max = vehicle.steering_rate_max_rad_s, vehicle.steering_max_rad
+    cases = 0
+    for _ in range(400):
+        state = np.array([rng.normal(0, 20), rng.normal(0, 3), rng.normal(0, 0.5),
+                          rng.uniform(-1.0, 25.0), rng.normal(0, 0.8), rng.normal(0, 0.5),
+                          rng.uniform(-1.05, 1.05) * d_max])
+        rate = float(rng.normal(0, 1.5 * rate_max))  # beyond the limit too
+        target = float(rng.uniform(0.0, 25.0))
+        substeps = int(rng.integers(1, 12))
+        expected = step_plant(state, rate, target, vehicle, 0.1, substeps)
+        clipped = min(max(rate, -rate_max), rate_max)
+        got = single_track_rk4(state, constants, clipped, target, 0.1, substeps)
+        assert np.array_equal(got, expected), (state, rate, target, substeps)
+        cases += 1
+    assert cases == 400
+
+
+def test_compiled_plant_is_what_the_plant_object_steps(make_config):
+    """Both plant objects step as step_plant does (the rate saturated)."""
+    cfg = make_config()
+    scenario = build_scenario(cfg.scenario)
+    python, compiled = SingleTrackPlant(cfg, scenario), SingleTrackPlant(cfg, scenario, True)
+    assert compiled._kernel is single_track_rk4 and python._kernel is not single_track_rk4
+    state = python.initial_state(scenario)
+    for rate in (0.0, 0.2, -5.0, 5.0):
+        expected = step_plant(state, rate, 2.5, cfg.vehicle, scenario.sample_time_s,
+                              scenario.plant_substeps)
+        assert np.array_equal(compiled.step(state, np.array([rate]), 2.5), expected)
+        assert np.array_equal(python.step(state, np.array([rate]), 2.5), expected)
+
+
+PLANNER_SWITCHES = {
+    "repulsion_law": ["polynomial", "exponential", "none"],
+    "k_rep_source": ["adaptive_h", "constant"],
+    "obstacle_prediction": ["current", "constant_velocity"],
+    "normalize_step": [True, False],
+    "steps": [(0.0, None), (0.35, None), (0.0, 0.12), (0.05, 0.3)],
+    "closing_speed_gain_s_per_m": [0.0, 0.4],
+}
+
+
+@pytest.mark.parametrize("obstacles", [[], [[12.0, 1.0]], [[12.0, 1.0], [13.0, -1.0],
+                                                           [10.0, 0.3], [10.2, 0.3]]])
+def test_compiled_rollout_gives_apf_rollouts_bits_for_every_switch(make_config, obstacles):
+    base = make_config(["method=improved"]).planner
+    positions = np.array(obstacles, float).reshape(-1, 2)
+    n = positions.shape[0]
+    snap = ObstacleSnapshot(positions, np.tile([[0.4, -0.3]], (n, 1)), np.full(n, 0.5),
+                            np.ones(n, bool))
+    goal = np.array([30.0, 0.0])
+    combos = 0
+    for law, source, prediction, normalize, (step_min, step_max), gain in itertools.product(
+            *PLANNER_SWITCHES.values()):
+        params = replace(base, repulsion_law=law, k_rep_source=source,
+                         obstacle_prediction=prediction, normalize_step=normalize,
+                         step_min_m=step_min, step_max_m=step_max,
+                         closing_speed_gain_s_per_m=gain)
+        settings = apf_kernel_settings(params)
+        assert settings.shape == (len(APF_SETTING_NAMES),)
+        # on the obstacle, beside it, far away; with and without the vehicle's velocity
+        for start, velocity in (([10.0, 0.3], [3.0, 0.1]), ([11.5, 0.9], None),
+                                ([0.0, 0.0], [1.0, 0.0])):
+            start = np.array(start)
+            velocity = None if velocity is None else np.array(velocity)
+            for horizon in (0, 1, 10):
+                expected = apf_rollout(start, goal, snap, params, horizon, 0.1, velocity)
+                got = ApfPlanner(params, horizon, 0.1, compiled=True).rollout(
+                    start, goal, snap, velocity)
+                for field in ("path_m", "attraction", "repulsion", "step_cap_active",
+                              "step_min_active"):
+                    a, b = getattr(got, field), getattr(expected, field)
+                    assert a.dtype == b.dtype and np.array_equal(a, b), (field, params, start)
+        combos += 1
+    assert combos == 3 * 2 * 2 * 2 * 4 * 2
+
+
+def test_overflowing_gaussian_gives_no_repulsion_in_both(make_config):
+    """``exp(beta dx^2)`` overflows far along the track: Python raises (the rollout takes
+    ``h = 0``), the kernel gets ``inf`` and ``H / (1 + inf) = 0``."""
+    params = replace(make_config(["method=improved"]).planner, beta=1e308, rho0_m=50.0,
+                     rho_p_m=50.0)
+    snap = ObstacleSnapshot(np.array([[12.0, 1.0]]), np.zeros((1, 2)), np.array([0.5]),
+                            np.ones(1, bool))
+    start, goal = np.array([10.0, 0.3]), np.array([30.0, 0.0])
+    expected = apf_rollout(start, goal, snap, params, 10, 0.1)
+    got = apf_rollout_kernel(10.0, 0.3, 30.0, 0.0, snap.positions_m, snap.velocities_mps,
+                             apf_kernel_settings(params), 10, 0.1, 0.0, 0.0)
+    assert np.array_equal(got[0], expected.path_m) and np.array_equal(got[2],
+                                                                       expected.repulsion)
+    assert not expected.repulsion.any()
+
+
+@pytest.mark.parametrize("beyond", ["extend", "hold"])
+def test_compiled_reference_gives_the_references_bits(make_config, beyond):
+    """Paths that advance, stall (repeated and backward points) or do not advance at all;
+    stations before, on, between and beyond the knots, ascending or not."""
+    ctrl = make_config([f"controller.path_beyond_end={beyond}"]).controller
+    rng = np.random.default_rng(11)
+    for case in range(300):
+        n = int(rng.integers(1, 12))
+        xs = np.cumsum(rng.choice([0.0, 1e-10, -0.2, 0.3, 0.5], n)) + rng.normal(0, 2)
+        path = np.column_stack([xs, rng.normal(0, 1.5, n)])
+        stations = np.sort(rng.uniform(xs.min() - 1, xs.max() + 2, 10))
+        if case % 3 == 0:
+            stations[:4] = xs[:4] if n >= 4 else stations[:4]  # on knots
+        if case % 7 == 0:
+            stations = stations[::-1].copy()
+        plain = lateral_reference(path, stations, ctrl)
+        fast = lateral_reference(path, stations, ctrl, compiled=True)
+        assert np.array_equal(plain[0], fast[0]) and np.array_equal(plain[1], fast[1]), case
+        # where the path advances, the interpolation is np.interp's
+        if np.all(np.diff(xs) > 1e-9) and n > 1:
+            inside = (stations >= xs[0]) & (stations <= xs[-1])
+            np.testing.assert_array_equal(plain[0][inside],
+                                          np.interp(stations[inside], xs, path[:, 1]))
+
+
+@pytest.mark.parametrize("method", ["improved", "baseline"])
+def test_closed_loop_with_kernels_is_the_closed_loop_without(make_config, monkeypatch, method):
+    import pipeline.loop.compiled as compiled
+
+    calls = {"plant": 0, "rollout": 0, "reference": 0}
+
+    def counting(name, kernel):
+        def wrapped(*args):
+            calls[name] += 1
+            return kernel(*args)
+        return wrapped
+
+    monkeypatch.setattr(compiled, "single_track_rk4",
+                        counting("plant", compiled.single_track_rk4))
+    monkeypatch.setattr(compiled, "apf_rollout_kernel",
+                        counting("rollout", compiled.apf_rollout_kernel))
+    monkeypatch.setattr(compiled, "reference_kernel",
+                        counting("reference", compiled.reference_kernel))
+    cfg = make_config([f"method={method}", "scenario=family", "scenario.family.size=3"])
+    for member in family_members(cfg.scenario, cfg.vehicle.footprint_radius_m):
+        member_cfg = replace(cfg, scenario=member)
+        scenario = build_scenario(member)
+        before = dict(calls)
+        plain = simulate(member_cfg, scenario, QpCache())
+        assert calls == before  # the default: no kernel
+        fast = simulate(member_cfg, scenario, QpCache(compiled_kernels=True))
+        steps = len(fast.trajectory) - 1
+        assert calls["plant"] - before["plant"] == steps
+        assert calls["rollout"] - before["rollout"] == steps
+        assert calls["reference"] - before["reference"] == steps
+        assert fast.trajectory.equals(plain.trajectory)
+
+
+def test_family_runner_turns_the_kernels_on_after_enough_members(make_config, tmp_path,
+                                                                 monkeypatch):
+    import pipeline.studies.experiment as experiment
+
+    cfg = make_config(["method=improved", "scenario=family", "scenario.family.size=3",
+                       "scenario.family.n_jobs=1"])
+    cache = QpCache()
+    plain = experiment.run_family(cfg, tmp_path / "small", progress=False, qp_cache=cache)
+    assert cache.members_planned == 3 and not cache.compiled_kernels
+    monkeypatch.setattr(experiment, "COMPILED_KERNELS_MIN_MEMBERS", 5)
+    fast = experiment.run_family(cfg, tmp_path / "second", progress=False, qp_cache=cache)
+    assert cache.members_planned == 6 and cache.compiled_kernels
+    # the same members, the same numbers, with and without the kernels (times aside)
+    timing = [c for c in plain if "time" in c or "compile" in c]
+    assert len(plain) == 3 and plain.drop(columns=timing).equals(fast.drop(columns=timing))
