@@ -14,7 +14,7 @@ SWEEP       ?= obstacle_speed
 MULTIVERSE  ?= default
 TUNE        ?= default
 export SLURM_CI_DIR ?= /tmp/slurm-ci
-LAUNCHER    ?= basic
+LAUNCHER    ?= sequential
 
 .PHONY: help install reproduce experiment run-paper run-kinematic run-kinematic-readings run-family run-kinematic-family report screenshot sweep verify ablation multiverse tune nmpc-check test test-slurm test-all bench clean
 
@@ -56,7 +56,7 @@ screenshot: $(STAMP)  ## the README's screenshot (docs/report_screenshot.png) fr
 
 reproduce: experiment report  ## set up, run the experiment and write reports/latest/index.html (its last lines: the verdicts in words)
 
-sweep: $(STAMP)  ## run a sweep preset (SWEEP=sensitivity|horizon|obstacle_speed, LAUNCHER=basic|local_cores)
+sweep: $(STAMP)  ## run a sweep preset (SWEEP=sensitivity|horizon|obstacle_speed, LAUNCHER=sequential|local_cores|basic)
 	$(PY) -m pipeline.run sweep=$(SWEEP) hydra/launcher=$(LAUNCHER)
 	$(PY) -m pipeline.report $(RUNS) --sweep $(RUNS)/sweeps/$(SWEEP) --out $(REPORT) --command "make sweep SWEEP=$(SWEEP)"
 
