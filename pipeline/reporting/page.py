@@ -368,7 +368,10 @@ def _performance_section(bench_dir: Path | None, fig_dir: Path) -> dict | None:
             "n50": _fmt(summary.get("n50_over_n10_direct")),
             "headline": {k: _fmt(summary.get(k)) for k in (
                 "closed_loop_over_floor", "step_over_floor", "compiles_per_family",
-                "family_scenarios_per_s")}}
+                "family_scenarios_per_s", "step_over_sparse_floor",
+                "step_over_sparse_floor_daqp", "outside_qp_over_qp",
+                "outside_qp_over_qp_python_kernels", "family_member_over_sparse_floor",
+                "family_member_over_sparse_floor_daqp")}}
 
 
 def _features_section(lateral: dict[str, dict], kinematic_runs: list[dict], run_root: Path,
