@@ -334,3 +334,31 @@ def test_line_frame_at_heading_zero_gives_the_rotations_values():
                                   -s * d[..., 0] + c * d[..., 1])
     back = turned.to_global(turned.to_line(points))
     np.testing.assert_allclose(back, points, atol=1e-12)
+
+
+def test_config_yaml_from_kept_sections_is_the_whole_dump(make_config):
+    """Family members share every section but the scenario: the YAML put together from the
+    sections kept in the memo is the dump of the whole configuration, byte for byte (a member
+    of a different family, a kinematic run and a changed section included)."""
+    import dataclasses
+
+    from pipeline.loop.scenario import family_members
+    from pipeline.studies.experiment import config_yaml
+
+    memo: dict = {}
+    seen = 0
+    for overrides in (["method=baseline", "scenario=family", "scenario.family.size=5"],
+                      ["method=improved", "scenario=family", "scenario.family.size=3",
+                       "controller.backend=daqp"], ["experiment=kinematic"]):
+        cfg = make_config(overrides)
+        configs = [cfg]
+        if cfg.scenario.family is not None:
+            configs += [dataclasses.replace(cfg, scenario=m) for m in
+                        family_members(cfg.scenario, cfg.vehicle.footprint_radius_m)]
+        configs.append(dataclasses.replace(cfg, planner=dataclasses.replace(cfg.planner,
+                                                                           beta=0.123)))
+        for c in configs:
+            whole = config_yaml(c)
+            assert config_yaml(c, memo) == whole and config_yaml(c, memo) == whole
+            seen += 1
+    assert seen == 14 and "beta: 0.123" in whole
