@@ -221,14 +221,14 @@ def test_closed_loop_runs_blas_on_one_thread(make_config, monkeypatch):
     from pipeline.loop.scenario import build_scenario
 
     seen = []
-    original = planner_module.apf_rollout
+    original = planner_module._rollout  # what every APF rollout of a step goes through
 
     def spy(*args, **kwargs):
         seen.extend(pool["num_threads"] for pool in threadpool_info()
                     if pool["user_api"] == "blas")
         return original(*args, **kwargs)
 
-    monkeypatch.setattr(planner_module, "apf_rollout", spy)
+    monkeypatch.setattr(planner_module, "_rollout", spy)
     cfg = make_config(["method=improved", "scenario.n_steps=5"])
     simulate_module.simulate(cfg, build_scenario(cfg.scenario))
     assert seen and set(seen) == {1}

@@ -173,16 +173,30 @@ def apf_rollout(position_m: np.ndarray, goal_m: np.ndarray, obstacles: ObstacleS
     vehicle_velocity_mps : ndarray, shape (2,), optional
         For the closing-speed scaling of the velocity-aware variant.
     """
+    return _rollout(None, apf_kernel_settings(params), position_m, goal_m, obstacles, horizon,
+                    sample_time_s, vehicle_velocity_mps)
+
+
+def _rollout(kernel, settings: np.ndarray, position_m: np.ndarray, goal_m: np.ndarray,
+             obstacles: ObstacleSnapshot, horizon: int, sample_time_s: float,
+             vehicle_velocity_mps: np.ndarray | None) -> ApfRollout:
+    """:func:`apf_rollout_arrays` run by CPython (``kernel`` None: lists and a tuple in, as
+    CPython's arithmetic on numpy scalars is slower) or by its compiled ``kernel`` (arrays
+    in); ``settings`` is :func:`apf_kernel_settings`."""
     vvx, vvy = (float(vehicle_velocity_mps[0]), float(vehicle_velocity_mps[1])) \
         if vehicle_velocity_mps is not None else (0.0, 0.0)
-    settings = apf_kernel_settings(params)
-    if vehicle_velocity_mps is None:
+    if vehicle_velocity_mps is None and settings[16] != 0.0:
+        settings = settings.copy()
         settings[16] = 0.0  # no velocity, no closing-speed scaling
-    # plain floats in (lists, a tuple): CPython's arithmetic on numpy scalars is slower
-    return ApfRollout(*apf_rollout_arrays(
-        float(position_m[0]), float(position_m[1]), float(goal_m[0]), float(goal_m[1]),
-        obstacles.positions_m.tolist(), obstacles.velocities_mps.tolist(),
-        tuple(settings.tolist()), int(horizon), float(sample_time_s), vvx, vvy))
+    start = (float(position_m[0]), float(position_m[1]), float(goal_m[0]), float(goal_m[1]))
+    if kernel is None:
+        return ApfRollout(*apf_rollout_arrays(
+            *start, obstacles.positions_m.tolist(), obstacles.velocities_mps.tolist(),
+            tuple(settings.tolist()), int(horizon), float(sample_time_s), vvx, vvy))
+    return ApfRollout(*kernel(
+        *start, np.ascontiguousarray(obstacles.positions_m, dtype=float).reshape(-1, 2),
+        np.ascontiguousarray(obstacles.velocities_mps, dtype=float).reshape(-1, 2), settings,
+        int(horizon), float(sample_time_s), vvx, vvy))
 
 
 def _exp_or_inf(x: float) -> float:
@@ -334,32 +348,21 @@ class ApfPlanner:
     def __init__(self, settings: PlannerConfig, horizon: int, sample_time_s: float,
                  compiled: bool = False) -> None:
         self.settings, self.horizon, self.sample_time_s = settings, horizon, sample_time_s
+        # apf_rollout's settings, once; its statement compiled (pipeline.loop.compiled, the
+        # same bits) with ``compiled``
+        self._settings = apf_kernel_settings(settings)
         self._kernel = None
         if compiled:
-            # apf_rollout_arrays compiled (pipeline.loop.compiled): the same bits
             from pipeline.loop.compiled import apf_rollout_kernel
 
             self._kernel = apf_rollout_kernel
-            self._kernel_settings = apf_kernel_settings(settings)
 
     def rollout(self, position_m: np.ndarray, goal_m: np.ndarray, obstacles: ObstacleSnapshot,
                 vehicle_velocity_mps: np.ndarray | None = None) -> ApfRollout:
         """The reference path (``horizon`` points from the vehicle's position) and the forces
         behind it (:func:`apf_rollout`)."""
-        if self._kernel is not None:
-            vvx, vvy = (float(vehicle_velocity_mps[0]), float(vehicle_velocity_mps[1])) \
-                if vehicle_velocity_mps is not None else (0.0, 0.0)
-            settings = self._kernel_settings
-            if vehicle_velocity_mps is None and settings[16] != 0.0:
-                settings = settings.copy()
-                settings[16] = 0.0  # no velocity, no closing-speed scaling (as apf_rollout)
-            return ApfRollout(*self._kernel(
-                float(position_m[0]), float(position_m[1]), float(goal_m[0]), float(goal_m[1]),
-                np.ascontiguousarray(obstacles.positions_m, dtype=float).reshape(-1, 2),
-                np.ascontiguousarray(obstacles.velocities_mps, dtype=float).reshape(-1, 2),
-                settings, int(self.horizon), float(self.sample_time_s), vvx, vvy))
-        return apf_rollout(position_m, goal_m, obstacles, self.settings, self.horizon,
-                           self.sample_time_s, vehicle_velocity_mps)
+        return _rollout(self._kernel, self._settings, position_m, goal_m, obstacles,
+                        self.horizon, self.sample_time_s, vehicle_velocity_mps)
 
     def speed(self, position_m: np.ndarray, heading_rad: float, obstacles: ObstacleSnapshot,
               nominal_speed_mps: float, vehicle_radius_m: float) -> float:
