@@ -165,6 +165,38 @@ def test_family_compiles_once_on_two_workers(make_config, tmp_path):
     assert LateralMpc(cfg.controller, cfg.vehicle, qp_cache=cache).compile_count == 0
 
 
+def test_a_family_chunk_freezes_what_outlives_it_and_still_collects_its_own_cycles(
+        make_config, tmp_path):
+    """A worker's chunk moves what is alive when it starts (imports, kernels) out of the
+    collector's scans, so loky's gc.collect() after each task stays cheap; cycles made by the
+    chunk's own runs are still found by that collection."""
+    import dataclasses
+    import gc
+    import weakref
+
+    from pipeline.loop.scenario import family_members
+    from pipeline.studies.experiment import _run_chunk
+
+    cfg = make_config(["method=improved", "scenario=family", "scenario.family.size=1"])
+
+    member = dataclasses.replace(cfg, scenario=family_members(cfg.scenario, 0.5)[0])
+    gc.unfreeze()
+    try:
+        rows = _run_chunk([(0, member, tmp_path / "m0")], QpCache())
+        assert gc.get_freeze_count() > 1000 and rows[0][0] == 0
+        class Node:
+            pass
+
+        node = Node()
+        node.self = node  # a cycle made after the freeze: only the collector frees it
+        probe = weakref.ref(node)
+        del node
+        gc.collect()
+        assert probe() is None
+    finally:
+        gc.unfreeze()
+
+
 def test_a_family_discretizes_each_model_once(tmp_path, make_config, monkeypatch):
     """python-control's c2d runs once per (vehicle, speed, sample time) for a whole family, not
     once per member: 6 members at one speed build the nominal model and the controller's model

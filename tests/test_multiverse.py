@@ -3,14 +3,16 @@ space end to end (resume without recomputation), and bad space files."""
 
 from __future__ import annotations
 
+import dataclasses
 import json
 
 import pandas as pd
 import pytest
 
 from pipeline.config import ConfigError
-from pipeline.studies.multiverse import (CONF_DIR, Dimension, Space, build_design, load_space,
-                                 robustness, simulation_overrides)
+from pipeline.studies.multiverse import (CONF_DIR, Dimension, Space, build_design, composer,
+                                         family_config, load_space, robustness,
+                                         simulation_overrides)
 
 SPACE = Space("planted", (
     Dimension("planner.beta", "simulation", (0.25, 0.5, 1.0), ("improved",)),
@@ -76,6 +78,15 @@ def test_quick_space_end_to_end_and_resume(tmp_path):
     assert "holds_with" in robust.columns
     assert (out / "figures" / "specification_curve_C1.png").is_file()
     info = json.loads((out / "space.json").read_text())
+    # the runs solved their QPs on the space's backend, and say so
+    assert space.backend == "daqp" and info["backend"] == "daqp"
+    assert info["backends"] == {"baseline": "daqp", "baseline_matched": "daqp",
+                                "improved": "daqp"}
+    import yaml
+
+    members = sorted((out / "runs" / "improved").glob("*/member_0000/config.yaml"))
+    assert members and all(yaml.safe_load(m.read_text())["controller"]["backend"] == "daqp"
+                           for m in members)
     # every metric reading computed in one pass: each member trajectory read at most once
     assert 0 < info["member_reads_per_member"] <= 1
     # runs are shared: two simulation choices with two values, the baselines shared by both
@@ -113,6 +124,7 @@ def test_quick_space_end_to_end_and_resume(tmp_path):
     assert 'id="robustness"' in page and 'id="robustness-summary"' in page
     assert page.index('id="robustness-summary"') < page.index('id="paths"')
     assert page.count('id="fig-specification_curve_C') == 7
+    assert "QP backend of these runs: daqp (baseline, baseline_matched, improved)" in page
 
 
 @pytest.mark.parametrize("text, match", [
@@ -125,6 +137,31 @@ def test_bad_space_files_are_one_line_errors(tmp_path, text, match):
     path = tmp_path / "space.yaml"
     path.write_text(text)
     with pytest.raises(ConfigError, match=match):
+        load_space(path)
+
+
+def test_the_space_backend_is_the_lateral_mpcs_and_an_explicit_override_wins():
+    compose, _ = composer([])
+    row = {d.key: d.default for d in SPACE.dimensions}
+    daqp = family_config(row, SPACE, "improved", compose)
+    clarabel = family_config(row, dataclasses.replace(SPACE, backend="clarabel_direct"),
+                             "improved", compose)
+    assert (daqp.controller.backend, clarabel.controller.backend) == ("daqp", "clarabel_direct")
+    assert daqp.config_hash() != clarabel.config_hash()  # their runs never mix
+    assert dataclasses.replace(daqp, controller=clarabel.controller) == clarabel
+    # a run override names the backend: it wins over the space's
+    user, _ = composer(["controller.backend=clarabel_direct"])
+    assert family_config(row, SPACE, "baseline", user).controller.backend == "clarabel_direct"
+    # a controller without a condensed QP keeps its own backend (DAQP is no choice there)
+    pursuit = family_config(row, SPACE, "apf_pursuit", compose)
+    assert pursuit.controller.kind == "pure_pursuit" and pursuit.controller.backend != "daqp"
+
+
+def test_a_space_backend_outside_the_qp_backends_is_a_one_line_error(tmp_path):
+    path = tmp_path / "space.yaml"
+    path.write_text("backend: gurobi\ndimensions: [{key: planner.beta, stage: simulation, "
+                    "values: [1, 2]}]")
+    with pytest.raises(ConfigError, match="backend"):
         load_space(path)
 
 

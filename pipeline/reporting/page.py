@@ -331,7 +331,17 @@ def _robustness_section(multiverse_dir: Path | None, fig_dir: Path,
     return {"rows": list(rows.values()), "figures": figures, "dims": dim_rows,
             "n": info.get("n_specifications"), "n_sim": info.get("n_simulation_configurations"),
             "size": info.get("family_size"), "name": info.get("name"),
-            "rule": info.get("rule", ""), "dimensions": info.get("dimensions", [])}
+            "rule": info.get("rule", ""), "dimensions": info.get("dimensions", []),
+            "backends": _backends_text(info.get("backends") or {})}
+
+
+def _backends_text(backends: dict) -> str:
+    """``daqp (baseline, improved); pure_pursuit (apf_pursuit)``: each QP backend with the
+    methods whose runs used it (a multiverse's ``space.json``)."""
+    by_backend: dict[str, list] = {}
+    for method, backend in backends.items():
+        by_backend.setdefault(str(backend), []).append(str(method))
+    return "; ".join(f"{b} ({', '.join(m)})" for b, m in by_backend.items())
 
 
 def _performance_section(bench_dir: Path | None, fig_dir: Path) -> dict | None:

@@ -12,7 +12,10 @@ the runs; *analysis* dimensions (metric readings and thresholds, statistics) onl
 2. **Runs**: every distinct simulation configuration runs ``baseline``, ``baseline_matched`` and
    ``improved`` on the same family (``family_size`` >= 100 scenarios), one family folder per
    config hash under ``runs/``; a folder already complete comes back from its hash, never
-   recomputed (resume after an interruption loses nothing).
+   recomputed (resume after an interruption loses nothing). The lateral MPC's QP runs on the
+   space's ``backend`` (``daqp`` by default: the same condensed QP as the reference
+   ``clarabel_direct``, its first input within 1e-6, the QP about 3x faster); a run override
+   ``controller.backend=...`` wins, and ``space.json`` records each method's backend.
 3. **Re-scoring**: a specification whose metric settings differ from the runs' recomputes the
    metrics from the stored trajectories (cached under ``rescored/``).
 4. **Analysis**: per specification, claim and comparison the claims ledger (estimate, interval,
@@ -52,6 +55,8 @@ from pipeline.errors import ConfigError, IncompleteSweepError, run_study
 #: claims.controls of the user's configuration choose others).
 METHODS = ("baseline", "baseline_matched", "improved")
 STAGES = ("simulation", "analysis")
+#: the lateral MPC's QP backends a space may choose (``controller.backend``)
+QP_BACKENDS = ("clarabel_direct", "daqp", "clarabel_dense", "cvxpy")
 ANALYSIS_PREFIXES = ("metrics.", "claims.")
 
 ROBUSTNESS_RULE = (
@@ -106,6 +111,9 @@ class Space:
     robust_share: float = 0.9
     fragile_share: float = 0.5
     min_pairs: int = 10
+    #: the lateral MPC's QP backend of the runs (issue 22: the multiverse and the tuning may
+    #: trade the reference Clarabel for DAQP, the same QP solved about 3x faster)
+    backend: str = "daqp"
 
     def of(self, stage: str) -> list[Dimension]:
         return [d for d in self.dimensions if d.stage == stage]
@@ -182,6 +190,9 @@ def load_space(path: Path) -> Space:
     if space.family_size < 1 or space.n_specifications < 1:
         raise ConfigError("family_size / n_specifications",
                           [space.family_size, space.n_specifications], "positive integers")
+    if space.backend not in QP_BACKENDS:
+        raise ConfigError("multiverse space: backend", space.backend,
+                          f"one of {list(QP_BACKENDS)} (the lateral MPC's QP backend)")
     return space
 
 
@@ -233,6 +244,18 @@ def simulation_overrides(row: dict, space: Space, method: str) -> list[str]:
             continue
         overrides.append(f"{dim.target}={_hydra_value(value)}")
     return overrides
+
+
+def family_config(row: dict, space: Space, method: str, compose) -> ExperimentConfig:
+    """One method's family configuration for a specification's simulation choices, its lateral
+    MPC on ``space.backend`` (a condensed-QP MPC only; other controllers keep their own, and
+    an explicit ``controller.backend`` among the run overrides wins: they come last)."""
+    overrides = simulation_overrides(row, space, method)
+    cfg = compose(overrides)
+    if cfg.controller.kind == "mpc" and cfg.controller.formulation == "condensed" \
+            and cfg.controller.backend != space.backend:
+        cfg = compose(overrides + [f"controller.backend={space.backend}"])
+    return cfg
 
 
 def _hydra_value(value) -> str:
@@ -316,8 +339,10 @@ def run_simulations(design: pd.DataFrame, space: Space, out_dir: Path, compose,
 
     Returns
     -------
-    dict
+    folders : dict
         ``simulation key -> {method: family folder}``.
+    backends : dict
+        ``method -> controller.backend`` of its runs (``a/b`` if they differ).
     """
     from pipeline.loop.controller import QpCache
 
@@ -327,19 +352,22 @@ def run_simulations(design: pd.DataFrame, space: Space, out_dir: Path, compose,
     unique = {}
     for row in design.to_dict("records"):
         unique.setdefault(simulation_key(row, space), row)
+    backends: dict[str, set] = {}
     for key, row in unique.items():
         folders[key] = {}
         for method in methods:
-            cfg = compose(simulation_overrides(row, space, method))
+            cfg = family_config(row, space, method, compose)
+            backends.setdefault(method, set()).add(cfg.controller.backend)
             folder = out_dir / "runs" / method / cfg.config_hash()
             if check(folder, "family", cfg.config_hash(), members=True) is not None \
                     and all(folder != f for _, f in todo):
                 todo.append((cfg, folder))
             folders[key][method] = folder
     log(f"{len(unique)} simulation configurations, {len(todo)} family runs to do "
-        f"({len(methods) * len(unique) - len(todo)} shared or complete)")
+        f"({len(methods) * len(unique) - len(todo)} shared or complete); QP backend: "
+        + ", ".join(f"{m} {'/'.join(sorted(b))}" for m, b in backends.items()))
     run_families(todo, out_dir, log, launcher, cache)
-    return folders
+    return folders, {m: "/".join(sorted(b)) for m, b in backends.items()}
 
 
 def run_families(todo: list, out_dir: Path, log=print, launcher: dict | None = None,
@@ -627,7 +655,7 @@ def run_multiverse(space: Space, out_dir: Path, overrides: list[str] | None = No
     # what is compared with what: the user's claims.treatment and claims.controls (last: the
     # treatment)
     methods = tuple(base.claims.controls) + (base.claims.treatment,)
-    folders = run_simulations(design, space, out_dir, compose, log, launcher, methods)
+    folders, backends = run_simulations(design, space, out_dir, compose, log, launcher, methods)
     jobs = [(row, folders[simulation_key(row, space)]) for row in design.to_dict("records")]
     # every metric reading a family needs, computed in one pass over its members (each member
     # read once per analysis, not once per reading)
@@ -660,6 +688,7 @@ def run_multiverse(space: Space, out_dir: Path, overrides: list[str] | None = No
     write_json_atomic(out_dir / "space.json", {
         "name": space.name, "n_specifications": int(len(design)),
         "n_simulation_configurations": len(folders), "family_size": space.family_size,
+        "backend": space.backend, "backends": backends,
         "member_reads_per_member": reads / members if members else 0.0,
         "rule": ROBUSTNESS_RULE, "robust_share": space.robust_share,
         "fragile_share": space.fragile_share,
