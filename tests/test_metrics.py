@@ -290,3 +290,123 @@ def test_a_wider_recovery_band_settles_sooner():
     narrow = metrics_json(frame, CTX, MetricsConfig(recovery_lateral_band_m=0.1))
     wide = metrics_json(frame, CTX, MetricsConfig(recovery_lateral_band_m=0.5))
     assert wide["recovery_time_s"] < narrow["recovery_time_s"]
+
+
+# --- several metric readings of one run in one pass (the multiverse's re-scoring) -------------
+
+#: alternative values of every metric setting (the first: a second value besides the default)
+READING_VALUES = {
+    "reaction_steering_band_rad": [0.02], "reaction_lateral_band_m": [0.1],
+    "reaction_obstacle": ["first_visible"], "reaction_interpolation": ["sample"],
+    "threat_margin_m": [0.25, 1.0], "threat_horizon_s": [3.0, 2.0],
+    "threat_clearance_m": [1.0], "near_field_m": [1.0, 3.0], "lateral_accel": ["vx_r"],
+    "smoothness_window": ["whole_run"], "repulsion_need": ["threat", "clearance_band"],
+    "repulsion_onset_force": [0.5], "recovery_lateral_band_m": [0.15, 0.4],
+    "recovery_heading_band_rad": [0.1], "recovery_heading_stop_m": [2.0],
+    "recovery_reading": ["heading"], "oscillation": ["sign_changes_whole_run"],
+    "lateral_sign_band_m": [0.1], "yaw_rate_sign_band_rad_s": [0.05],
+    "collision_check": ["sampled"], "attribution_steering_samples": [5],
+    "attribution_extra_s": [1.0], "goal_tolerance_m": [1.0]}
+
+
+@pytest.fixture(scope="module")
+def closed_loop_runs(make_config):
+    """Family members of both APFs with and without collisions (avoidable and not): their
+    trajectories and contexts."""
+    import dataclasses
+
+    from pipeline import api
+    from pipeline.loop.scenario import family_members
+    from pipeline.studies.experiment import trajectory_context
+
+    runs = []
+    for method, indices in (("baseline", (1, 47, 48)), ("improved", (0, 2))):
+        cfg = make_config([f"method={method}", "scenario=family", "scenario.family.size=50"])
+        members = family_members(cfg.scenario, cfg.vehicle.footprint_radius_m)
+        for i in indices:
+            member = dataclasses.replace(cfg, scenario=members[i])
+            runs.append((api.simulate(config=member).trajectory, trajectory_context(member)))
+    return runs
+
+
+def _readings(base: MetricsConfig) -> list[MetricsConfig]:
+    """The base, every one-at-a-time change (a criterion keyed on too few fields would hand
+    the base's result to the changed reading), and seeded combinations."""
+    import dataclasses
+
+    assert set(READING_VALUES) == {f.name for f in dataclasses.fields(MetricsConfig)}
+    readings = [base] + [dataclasses.replace(base, **{name: value})
+                         for name, values in READING_VALUES.items() for value in values]
+    rng = np.random.default_rng(0)
+    for _ in range(30):
+        change = {name: ([getattr(base, name)] + values)[rng.integers(len(values) + 1)]
+                  for name, values in READING_VALUES.items() if rng.random() < 0.4}
+        readings.append(dataclasses.replace(base, **change))
+    return readings
+
+
+def test_every_reading_in_one_pass_equals_each_reading_alone(closed_loop_runs):
+    import json
+
+    from pipeline.analysis.metrics import compute_metrics_readings
+
+    readings = _readings(MetricsConfig())
+    collisions = avoidable = 0
+    changed = set()
+    for trajectory, context in closed_loop_runs:
+        together = compute_metrics_readings(trajectory, context, readings)
+        alone = [compute_metrics(trajectory, context, r).to_json() for r in readings]
+        assert [json.dumps(m.to_json()) for m in together] == [json.dumps(m) for m in alone]
+        collisions += bool(alone[0]["collision"])
+        avoidable += alone[0]["collision_avoidable"] is False
+        changed |= {k for m in alone for k in m if json.dumps(m[k]) != json.dumps(alone[0][k])}
+    # the runs exercise the shared criteria: collisions (one not avoidable), and readings that
+    # move every reading-dependent criterion
+    # the runs collide (one unavoidably), and readings move every criterion's output: a result
+    # shared between readings that differ in what it reads would show here
+    assert collisions >= 2 and avoidable >= 1
+    assert {"min_clearance_m", "threat_appear_time_s", "reaction_delay_s",
+            "lateral_jerk_rms_window_mps3", "recovery_time_s", "oscillation_count",
+            "repulsion_unneeded_share", "time_to_goal_s"} <= changed
+
+
+def test_each_criterion_reads_only_the_settings_it_is_shared_on(closed_loop_runs, monkeypatch):
+    """A recorder in place of the settings, per criterion: the fields each one reads are
+    within its ``*_READS`` (what the one-pass computation shares its result on)."""
+    import inspect
+
+    import pipeline.analysis.metrics as metrics_module
+
+    class Recorder:
+        def __init__(self, settings, log):
+            self._settings, self._log = settings, log
+
+        def __getattr__(self, name):
+            self._log.add(name)
+            return getattr(self._settings, name)
+
+    declared = {"safety_block": metrics_module.SAFETY_READS,
+                "threat_block": metrics_module.THREAT_READS,
+                "recovery_block": metrics_module.RECOVERY_READS,
+                "reaction_block": metrics_module.REACTION_READS,
+                "smoothness_block": metrics_module.SMOOTHNESS_READS,
+                "stability_block": metrics_module.STABILITY_READS,
+                "repulsion_block": metrics_module.REPULSION_READS,
+                "progress_block": metrics_module.PROGRESS_READS}
+    read: dict[str, set] = {name: set() for name in declared}
+    for name in declared:
+        original = getattr(metrics_module, name)
+        signature = inspect.signature(original)
+
+        def recording(*args, _original=original, _signature=signature, _log=read[name],
+                      **kwargs):
+            bound = _signature.bind(*args, **kwargs)
+            bound.arguments["thresholds"] = Recorder(bound.arguments["thresholds"], _log)
+            return _original(*bound.args, **bound.kwargs)
+
+        monkeypatch.setattr(metrics_module, name, recording)
+    for trajectory, context in closed_loop_runs:
+        metrics_module.compute_metrics_readings(trajectory, context, _readings(MetricsConfig()))
+    for name, fields_read in read.items():
+        assert fields_read, name  # the recorder saw the criterion's reads
+        assert fields_read <= set(declared[name]), (name, fields_read - set(declared[name]))

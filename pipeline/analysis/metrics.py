@@ -936,6 +936,24 @@ def solver_blocks(tr: pd.DataFrame) -> tuple[SolverIterations | None, Fallbacks 
     return iterations, fallbacks
 
 
+#: The :class:`MetricsConfig` fields each reading-dependent criterion reads, itself or through
+#: the criteria it is computed from (threat from safety's collision; recovery, reaction,
+#: stability and repulsion from the threat geometry; smoothness from recovery too): what
+#: :func:`compute_metrics_readings` shares a criterion's result between readings on.
+SAFETY_READS = ("collision_check", "attribution_steering_samples", "attribution_extra_s")
+THREAT_READS = SAFETY_READS + ("threat_margin_m", "threat_horizon_s")
+RECOVERY_READS = THREAT_READS + ("recovery_reading", "recovery_lateral_band_m",
+                                 "recovery_heading_band_rad", "recovery_heading_stop_m")
+REACTION_READS = THREAT_READS + ("reaction_obstacle", "reaction_interpolation",
+                                 "reaction_steering_band_rad", "reaction_lateral_band_m")
+SMOOTHNESS_READS = RECOVERY_READS + ("lateral_accel", "smoothness_window")
+STABILITY_READS = THREAT_READS + ("oscillation", "lateral_sign_band_m",
+                                  "yaw_rate_sign_band_rad_s")
+REPULSION_READS = THREAT_READS + ("repulsion_need", "near_field_m", "repulsion_onset_force",
+                                  "threat_clearance_m")
+PROGRESS_READS = ("goal_tolerance_m",)
+
+
 def compute_metrics(trajectory: pd.DataFrame, context: TrajectoryContext,
                     thresholds: MetricsConfig) -> RunMetrics:
     """All Table 1 metrics of one logged run.
@@ -952,20 +970,58 @@ def compute_metrics(trajectory: pd.DataFrame, context: TrajectoryContext,
     RunMetrics
         One block per criterion; ``to_json()`` gives the flat ``metrics.json`` mapping.
     """
+    return compute_metrics_readings(trajectory, context, [thresholds])[0]
+
+
+def compute_metrics_readings(trajectory: pd.DataFrame, context: TrajectoryContext,
+                             readings: list[MetricsConfig]) -> list[RunMetrics]:
+    """:func:`compute_metrics` of one logged run under each metric reading in ``readings``,
+    the same numbers, in one pass: the signals, obstacle tracks, clearances, step cap and
+    solver counts are computed once, and each criterion once per distinct value of the fields
+    it reads (``*_READS``), e.g. the safety check once per ``collision_check`` when readings
+    differ only in thresholds elsewhere (the multiverse's re-scoring).
+
+    Returns
+    -------
+    list of RunMetrics
+        In the order of ``readings``.
+    """
     sig = trajectory_signals(trajectory, context)
     tracks = obstacle_tracks(trajectory)
     clearance = clearance_series(trajectory, context.vehicle_radius_m)
-    safety, colliding = safety_block(trajectory, sig, tracks, clearance, context, thresholds)
-    threat, geo = threat_block(sig, tracks, context, thresholds, colliding)
-    recovery = recovery_block(sig, geo, thresholds)
     step_cap = StepCap(float(np.nanmean(trajectory["apf_step_cap_share"].to_numpy(float)))) \
         if "apf_step_cap_share" in trajectory else None
     iterations, fallbacks = solver_blocks(trajectory)
-    return RunMetrics(
-        threat=threat, reaction=reaction_block(sig, geo, thresholds),
-        smoothness=smoothness_block(sig, threat, geo, recovery, thresholds),
-        recovery=recovery, stability=stability_block(sig, threat, geo, thresholds),
-        safety=safety,
-        progress=progress_block(sig, context, thresholds),
-        repulsion=repulsion_block(trajectory, sig, geo, clearance, thresholds),
-        step_cap=step_cap, iterations=iterations, fallbacks=fallbacks)
+    memo: dict[tuple, object] = {}
+
+    def once(criterion: str, reads: tuple[str, ...], thresholds: MetricsConfig, build):
+        key = (criterion,) + tuple(getattr(thresholds, name) for name in reads)
+        if key not in memo:
+            memo[key] = build()
+        return memo[key]
+
+    results = []
+    for thresholds in readings:
+        # each build is called at once, inside this iteration (the lambdas' names are current)
+        safety, colliding = once("safety", SAFETY_READS, thresholds, lambda: safety_block(
+            trajectory, sig, tracks, clearance, context, thresholds))
+        threat, geo = once("threat", THREAT_READS, thresholds, lambda: threat_block(
+            sig, tracks, context, thresholds, colliding))
+        recovery = once("recovery", RECOVERY_READS, thresholds,
+                        lambda: recovery_block(sig, geo, thresholds))
+        results.append(RunMetrics(
+            threat=threat,
+            reaction=once("reaction", REACTION_READS, thresholds,
+                          lambda: reaction_block(sig, geo, thresholds)),
+            smoothness=once("smoothness", SMOOTHNESS_READS, thresholds,
+                            lambda: smoothness_block(sig, threat, geo, recovery, thresholds)),
+            recovery=recovery,
+            stability=once("stability", STABILITY_READS, thresholds,
+                           lambda: stability_block(sig, threat, geo, thresholds)),
+            safety=safety,
+            progress=once("progress", PROGRESS_READS, thresholds,
+                          lambda: progress_block(sig, context, thresholds)),
+            repulsion=once("repulsion", REPULSION_READS, thresholds,
+                           lambda: repulsion_block(trajectory, sig, geo, clearance, thresholds)),
+            step_cap=step_cap, iterations=iterations, fallbacks=fallbacks))
+    return results

@@ -435,7 +435,7 @@ def rescore_family(folder: Path, readings: list[MetricsConfig], out_dir: Path) -
     """Re-score a family's members under every metric setting in ``readings`` that it was not
     run with and that has no cached table yet, reading each member's trajectory once for all of
     them. Returns the number of member trajectories read."""
-    from pipeline.analysis.metrics import compute_metrics
+    from pipeline.analysis.metrics import compute_metrics_readings
     from pipeline.studies.experiment import trajectory_context
 
     family = read_family(folder, members=False)
@@ -460,9 +460,9 @@ def rescore_family(folder: Path, readings: list[MetricsConfig], out_dir: Path) -
     for index, trajectory, previous in member_trajectories(folder):
         reads += 1
         keep = {k: previous.get(k) for k in ("method", "scenario", "track", "config_hash")}
-        for block, metrics in zip(rows, todo):
-            block.append({"member": index,
-                          **compute_metrics(trajectory, context, metrics).to_json(), **keep})
+        # every reading of this member in one pass (what no reading changes, computed once)
+        for block, scored in zip(rows, compute_metrics_readings(trajectory, context, todo)):
+            block.append({"member": index, **scored.to_json(), **keep})
     for block, metrics in zip(rows, todo):
         write_derived_table(_rescored_path(folder, metrics, out_dir), pd.DataFrame(block),
                             {"family": folder})
