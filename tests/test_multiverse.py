@@ -11,8 +11,9 @@ import pytest
 
 from pipeline.config import ConfigError
 from pipeline.studies.multiverse import (CONF_DIR, Dimension, Space, build_design, composer,
-                                         family_config, load_space, robustness,
-                                         simulation_overrides)
+                                         family_config, load_space, qp_backend,
+                                         robustness, simulation_overrides)
+from pipeline.reporting.page import _backends_text
 
 SPACE = Space("planted", (
     Dimension("planner.beta", "simulation", (0.25, 0.5, 1.0), ("improved",)),
@@ -155,6 +156,10 @@ def test_the_space_backend_is_the_lateral_mpcs_and_an_explicit_override_wins():
     # a controller without a condensed QP keeps its own backend (DAQP is no choice there)
     pursuit = family_config(row, SPACE, "apf_pursuit", compose)
     assert pursuit.controller.kind == "pure_pursuit" and pursuit.controller.backend != "daqp"
+    # what space.json records and the report says
+    backends = {m: qp_backend(c) for m, c in (("improved", daqp), ("apf_pursuit", pursuit))}
+    assert backends == {"improved": "daqp", "apf_pursuit": "no QP"}
+    assert _backends_text(backends) == "daqp (improved); no QP (apf_pursuit)"
 
 
 def test_a_space_backend_outside_the_qp_backends_is_a_one_line_error(tmp_path):

@@ -336,8 +336,8 @@ def _robustness_section(multiverse_dir: Path | None, fig_dir: Path,
 
 
 def _backends_text(backends: dict) -> str:
-    """``daqp (baseline, improved); pure_pursuit (apf_pursuit)``: each QP backend with the
-    methods whose runs used it (a multiverse's ``space.json``)."""
+    """``daqp (baseline, improved); no QP (apf_pursuit)``: each QP backend with the methods
+    whose runs used it (a multiverse's ``space.json``)."""
     by_backend: dict[str, list] = {}
     for method, backend in backends.items():
         by_backend.setdefault(str(backend), []).append(str(method))

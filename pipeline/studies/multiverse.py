@@ -111,8 +111,8 @@ class Space:
     robust_share: float = 0.9
     fragile_share: float = 0.5
     min_pairs: int = 10
-    #: the lateral MPC's QP backend of the runs (issue 22: the multiverse and the tuning may
-    #: trade the reference Clarabel for DAQP, the same QP solved about 3x faster)
+    #: the lateral MPC's QP backend of the runs (like the tuning's: DAQP, the reference
+    #: Clarabel's QP solved about 3x faster, the first input within 1e-6)
     backend: str = "daqp"
 
     def of(self, stage: str) -> list[Dimension]:
@@ -258,6 +258,12 @@ def family_config(row: dict, space: Space, method: str, compose) -> ExperimentCo
     return cfg
 
 
+def qp_backend(cfg: ExperimentConfig) -> str:
+    """The QP backend a run's controller solves with (``no QP`` for a pure pursuit)."""
+    return cfg.controller.backend if cfg.controller.kind in ("mpc", "kinematic_mpc") \
+        else "no QP"
+
+
 def _hydra_value(value) -> str:
     if value is None:
         return "null"
@@ -342,7 +348,8 @@ def run_simulations(design: pd.DataFrame, space: Space, out_dir: Path, compose,
     folders : dict
         ``simulation key -> {method: family folder}``.
     backends : dict
-        ``method -> controller.backend`` of its runs (``a/b`` if they differ).
+        ``method -> controller.backend`` of its runs (``a/b`` if they differ; ``no QP`` for
+        a controller without one).
     """
     from pipeline.loop.controller import QpCache
 
@@ -357,7 +364,7 @@ def run_simulations(design: pd.DataFrame, space: Space, out_dir: Path, compose,
         folders[key] = {}
         for method in methods:
             cfg = family_config(row, space, method, compose)
-            backends.setdefault(method, set()).add(cfg.controller.backend)
+            backends.setdefault(method, set()).add(qp_backend(cfg))
             folder = out_dir / "runs" / method / cfg.config_hash()
             if check(folder, "family", cfg.config_hash(), members=True) is not None \
                     and all(folder != f for _, f in todo):
