@@ -185,9 +185,9 @@ def _rollout(kernel, settings: np.ndarray, position_m: np.ndarray, goal_m: np.nd
     in); ``settings`` is :func:`apf_kernel_settings`."""
     vvx, vvy = (float(vehicle_velocity_mps[0]), float(vehicle_velocity_mps[1])) \
         if vehicle_velocity_mps is not None else (0.0, 0.0)
-    if vehicle_velocity_mps is None and settings[16] != 0.0:
+    if vehicle_velocity_mps is None and settings[_CLOSING_ON] != 0.0:
         settings = settings.copy()
-        settings[16] = 0.0  # no velocity, no closing-speed scaling
+        settings[_CLOSING_ON] = 0.0  # no velocity, no closing-speed scaling
     start = (float(position_m[0]), float(position_m[1]), float(goal_m[0]), float(goal_m[1]))
     if kernel is None:
         return ApfRollout(*apf_rollout_arrays(
@@ -377,6 +377,8 @@ APF_SETTING_NAMES = ("h_max", "beta", "rho_p_m", "rho0_m", "alpha_e", "k_rep_con
                      "step_max_m (inf: none)", "repulsion on", "polynomial law",
                      "constant k_rep", "constant-velocity prediction", "normalize step",
                      "closing-speed scaling on")
+#: Index of the closing-speed switch in those settings.
+_CLOSING_ON = APF_SETTING_NAMES.index("closing-speed scaling on")
 
 
 def apf_kernel_settings(params: PlannerConfig) -> np.ndarray:
