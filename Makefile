@@ -16,7 +16,7 @@ TUNE        ?= default
 export SLURM_CI_DIR ?= /tmp/slurm-ci
 LAUNCHER    ?= sequential
 
-.PHONY: help install reproduce experiment run-paper run-kinematic run-kinematic-readings run-family run-kinematic-family report screenshot sweep verify ablation multiverse tune nmpc-check test test-slurm test-all bench clean
+.PHONY: help install reproduce experiment run-paper run-kinematic run-kinematic-readings run-family run-kinematic-family run-frames speed-check report screenshot sweep verify ablation multiverse tune nmpc-check test test-slurm test-all bench clean
 
 help:  ## list the targets
 	@grep -E '^[a-zA-Z_-]+:.*## ' $(MAKEFILE_LIST) | awk -F':.*## ' '{printf "  %-12s %s\n", $$1, $$2}'
@@ -30,13 +30,13 @@ $(STAMP): pyproject.toml constraints.txt
 install: $(STAMP)  ## create .venv and install the project with pinned versions
 
 experiment: $(STAMP)  ## run every method on the paper scenario and on the scenario family
-	rm -rf $(RUNS)/paper $(RUNS)/kinematic $(RUNS)/kinematic_readings $(RUNS)/kinematic_family $(RUNS)/family  # code may have changed: no reuse here
+	rm -rf $(RUNS)/paper $(RUNS)/kinematic $(RUNS)/kinematic_readings $(RUNS)/kinematic_family $(RUNS)/family $(RUNS)/frames  # code may have changed: no reuse here
 	@# all five experiments side by side, the longest first: each family's parent has serial
 	@# stretches (Hydra's job set-up, the compilation, the tables) in which the others use the
 	@# cores (measured: 162-166 s against 173-178 s one family after the other). Each one's
 	@# output is printed whole when it ends (-O).
-	@echo "five experiments side by side; each one's output follows when it ends"
-	$(MAKE) --no-print-directory -j5 -O run-family run-kinematic-family run-paper run-kinematic run-kinematic-readings
+	@echo "six experiments side by side; each one's output follows when it ends"
+	$(MAKE) --no-print-directory -j6 -O run-family run-kinematic-family run-frames run-paper run-kinematic run-kinematic-readings
 
 # the experiments of `make experiment` (run side by side from there)
 run-paper run-kinematic run-kinematic-readings: run-%: $(STAMP)
@@ -44,6 +44,9 @@ run-paper run-kinematic run-kinematic-readings: run-%: $(STAMP)
 
 run-family: $(STAMP)
 	$(PY) -m pipeline.run experiment=family hydra.sweep.dir=$(RUNS)/family scenario.family.size=$(FAMILY_SIZE)
+
+run-frames: $(STAMP)
+	$(PY) -m pipeline.run experiment=frames hydra.sweep.dir=$(RUNS)/frames scenario.family.size=$(FAMILY_SIZE)
 
 run-kinematic-family: $(STAMP)
 	$(PY) -m pipeline.run experiment=kinematic_family hydra.sweep.dir=$(RUNS)/kinematic_family scenario.family.size=$(KINEMATIC_FAMILY_SIZE)
@@ -74,8 +77,12 @@ tune: $(STAMP)  ## a fair fight: both methods tuned with one budget, judged on h
 	$(PY) -m pipeline.tune --space $(TUNE) --out $(RUNS)/tune
 	$(MAKE) report
 
-nmpc-check: $(STAMP)  ## the Appendix-A track: LTV-QP against the nonlinear MPC (CasADi) on the paper scenario and 50 family members, then the report
+nmpc-check: $(STAMP)  ## each track's linear MPC against the nonlinear MPC (CasADi) on the paper scenario and 50 family members per method, then the report
 	$(PY) -m pipeline.nmpc_check --out $(RUNS)/nmpc_check
+	$(MAKE) report
+
+speed-check: $(STAMP)  ## is slower ever less safe? both methods at 1.5 and 3 m/s and with velocity planning, then the report
+	$(PY) -m pipeline.speed_check --out $(RUNS)/speed
 	$(MAKE) report
 
 bench: $(STAMP)  ## benchmark the controller step vs the Clarabel floor and the peers -> reports/bench/

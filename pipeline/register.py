@@ -20,8 +20,9 @@ class RegisterEntry:
 INTERPRETATION_REGISTER: tuple[RegisterEntry, ...] = (
     RegisterEntry(
         "Sign of B2", "B2 printed as [0 0 0 1 0]^T (minus signs lost in extraction)",
-        "B2 = [0, 0, -1, 0, 0]^T: d(psi - psi_d)/dt = r - r_d (no effect on these runs: the "
-        "reference line is straight, so r_d = 0)",
+        "B2 = [0, 0, -1, 0, 0]^T: d(psi - psi_d)/dt = r - r_d (r_d = v kappa, the path's "
+        "curvature previewed over the horizon; in the fixed frame the line is straight and "
+        "r_d = 0)",
         "+1 (literal placement of a positive entry in the heading row)",
         "model.b2_heading_entry"),
     RegisterEntry(
@@ -66,17 +67,52 @@ INTERPRETATION_REGISTER: tuple[RegisterEntry, ...] = (
         "off in baseline and improved; the velocity_aware preset scales repulsion by "
         "1 + gain * closing speed", "gain > 0", "planner.closing_speed_gain_s_per_m"),
     RegisterEntry(
+        "What the lateral model's state is measured against",
+        "Section 2: state [y, vy, psi - psi_d, r, delta] with d(psi - psi_d)/dt = r - r_d, "
+        "r_d 'desired yaw rate (external disturbance)': the lateral error dynamics about a "
+        "desired path (Rajamani, ch. 2-3)",
+        "path: each step the APF rollout becomes a drivable path (from the vehicle along its "
+        "velocity, arcs whose curvature chases the rollout at controller.path_lookahead_m, "
+        "clipped at controller.path_curvature_max_1_per_m: the kinematic limit by default); the "
+        "state is the offset and heading error from it, its curvature is previewed as r_d, "
+        "the references are the model's equilibrium on it (r = r_d and the steering and "
+        "sideslip that hold it: controller.path_state_reference), the stations follow the "
+        "predicted speed, obstacles are projected to path coordinates; the prediction step "
+        "stretches so the horizon covers controller.horizon_reach_m at low speed",
+        "fixed: the state against the start-goal line (the earlier reading: the model's "
+        "small-angle bound is left in 199 of 200 runs of the improved method); "
+        "path_state_reference=zero (r and delta penalized about 0); another look-ahead or "
+        "curvature limit; horizon_reach_m=null (the horizon is Np Ts at any speed)",
+        "controller.frame, controller.path_lookahead_m, controller.path_curvature_max_1_per_m, "
+        "controller.path_state_reference, controller.horizon_reach_m"),
+    RegisterEntry(
+        "Velocity planning V_r = f_v(obstacles)",
+        "Section 3.1: 'considers the relative position and motion of obstacles'; 'safety "
+        "constraints (e.g., minimum stopping distance)', 'heuristics or optimization "
+        "techniques' (off by default; planner.velocity_planning)",
+        "predicted_clearance: the fastest of planner.speed_candidates speeds in "
+        "[speed_floor_mps, nominal] whose constant-velocity prediction along the APF's path "
+        "keeps stop_margin_m of clearance over speed_check_horizon_s (else the speed with the "
+        "largest predicted clearance): slowing only where it is predicted to be safer",
+        "stopping_distance: the speed that can stop before the nearest obstacle in a corridor "
+        "along the heading (the earlier reading; ignores where obstacles go and where the "
+        "vehicle steers, and made both methods collide more)",
+        "planner.velocity_rule"),
+    RegisterEntry(
         "APF path to lateral MPC reference",
         "Section 3.1: y_ref from the rollout; psi_apf = atan2(F_y, F_x), omega_ref = sat(...)",
-        "lateral reference = rollout interpolated at the MPC's predicted stations; heading "
-        "reference = path slope, saturated at controller.heading_ref_max_rad",
-        "apf_force: heading ramps toward psi_apf at the saturated rate omega_max",
+        "path frame: the rollout chased as a drivable path (see above); fixed frame: lateral "
+        "reference = rollout interpolated at the MPC's predicted stations, heading reference = "
+        "path slope, saturated at controller.heading_ref_max_rad",
+        "apf_force: heading ramps toward psi_apf at the saturated rate omega_max (in the path "
+        "frame the path's heading does)",
         "controller.heading_reference"),
     RegisterEntry(
         "Reference beyond the end of the rollout",
         "the baseline rollout covers only Np * 0.1 m = 1 m, the MPC looks vx * Np * Ts ahead",
-        "extend the last rollout segment linearly (slope saturated)",
-        "hold: keep the last lateral position", "controller.path_beyond_end"),
+        "extend the last rollout segment linearly (slope saturated in the fixed frame)",
+        "hold: keep the last lateral position (continue parallel to the start-goal line)",
+        "controller.path_beyond_end"),
     RegisterEntry(
         "Inputs after the control horizon",
         "Nc = 3 (Appendix A, MATLAB: manipulated variable held after Nc)",
@@ -87,7 +123,8 @@ INTERPRETATION_REGISTER: tuple[RegisterEntry, ...] = (
         "'Collision avoidance constraints from APF' (no formula)",
         "one soft half-plane per obstacle and horizon step, side chosen by the APF reference: "
         "sigma (y_k - o_y) >= sqrt(R^2 - (x_k - o_x)^2), sigma = sign(y_ref,k - o_y), "
-        "R = r_o + r_v + margin (exact for the disk at the MPC's fixed station x_k)",
+        "R = r_o + r_v + margin (exact for the disk at the MPC's station x_k; in the path "
+        "frame in path coordinates, the obstacle's predicted centre projected to (s, d))",
         "radial: n . (p_k - o_k) >= R, n from the predicted obstacle toward the APF reference "
         "point (tangent plane; mostly longitudinal, so a lateral MPC can meet it only with slack)",
         "controller.halfplane_normal"),

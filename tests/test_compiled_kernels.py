@@ -143,11 +143,86 @@ def test_compiled_reference_gives_the_references_bits(make_config, beyond):
                                           np.interp(stations[inside], xs, path[:, 1]))
 
 
+def test_compiled_chase_gives_the_paths_bits():
+    """The drivable path (frame=path) compiled and in CPython: rollouts that advance, stall
+    (repeated and backward points), do not advance at all, and bend past the curvature
+    limit; look-aheads beyond the rollout's end."""
+    from pipeline.loop.compiled import chase_path_kernel
+    from pipeline.loop.controller.path import chase_path_arrays
+
+    rng = np.random.default_rng(5)
+    clipped_seen = 0
+    for case in range(300):
+        n = int(rng.integers(1, 12))
+        steps = rng.normal(0.3, 0.3, (n, 2)) * rng.choice([0.0, 1.0, 1e-11], (n, 1))
+        rollout = np.cumsum(steps, axis=0) + rng.normal(0, 2, 2)
+        angle = rng.uniform(-np.pi, np.pi)
+        args = (float(rollout[0, 0]), float(rollout[0, 1]), float(rng.uniform(-3, 3)),
+                rollout, float(np.cos(angle)), float(np.sin(angle)),
+                float(rng.uniform(0.5, 5.0)), float(rng.uniform(0.05, 0.5)),
+                float(rng.uniform(0.05, 0.5)), int(rng.integers(1, 14)))
+        plain = chase_path_arrays(*args[:3], rollout.tolist(), *args[4:])
+        fast = chase_path_kernel(*args)
+        for a, b in zip(plain, fast):
+            assert np.array_equal(a, b), case
+        clipped_seen += int(plain[3].any())
+    assert clipped_seen > 30  # the curvature limit bound in many cases
+
+
+def test_compiled_frame_step_and_check_give_the_same_bits():
+    """One step's path-frame data and one record's prediction check, compiled and in CPython:
+    paths that bend and clip, stations with and without a previous plan, obstacles on both
+    sides and behind, records whose window ends early, prediction steps longer than the
+    sample time."""
+    from pipeline.loop.compiled import chase_path_kernel, check_record_kernel, frame_step_kernel
+    from pipeline.loop.controller.path import check_record_arrays, frame_step_arrays
+
+    rng = np.random.default_rng(9)
+    for case in range(120):
+        rollout = np.cumsum(rng.normal(0.3, 0.3, (8, 2)), axis=0)
+        ds = float(rng.uniform(0.1, 0.4))
+        path = chase_path_kernel(0.0, 0.0, float(rng.uniform(-1, 1)), rollout, 1.0, 0.0,
+                                 2.5, 0.2, ds, 14)
+        points, headings, curvature, _ = path
+        m = int(rng.choice([0, 11]))
+        plan_xy = rng.normal(0, 1, (m, 2)) + np.column_stack([np.arange(m) * ds, np.zeros(m)])
+        plan_course = rng.normal(0, 0.3, m)
+        obstacles = rng.uniform(-3, 5, (int(rng.integers(0, 7)), 2))
+        settings = (ds, 14, float(rng.normal(0, 0.1)), float(rng.normal(0, 0.1)),
+                    float(rng.uniform(1, 4)), float(rng.uniform(1, 4)),
+                    float(rng.normal(1, 0.2)), float(rng.choice([0.1, 0.2])), 10, 0.5, 3.0)
+        fast = frame_step_kernel(points, headings, curvature, *settings, plan_xy, plan_course,
+                                 obstacles)
+        plain = frame_step_arrays(points.tolist(), headings.tolist(), curvature.tolist(),
+                                  *settings, plan_xy.tolist(), plan_course.tolist(),
+                                  obstacles.tolist())
+        for a, b in zip(plain, fast):
+            assert np.array_equal(a, b), case
+        stations = fast[2]
+        rows = 14
+        xy = np.cumsum(rng.normal(0.3, 0.05, (rows, 2)), axis=0)
+        psi, delta = rng.normal(0, 0.3, rows), rng.normal(0, 0.2, rows)
+        Ad, Bd, Ed = rng.normal(0, 0.3, (5, 5)), rng.normal(0, 0.1, 5), rng.normal(0, 0.1, 5)
+        x0 = rng.normal(0, 0.2, 5)
+        plan = rng.normal(0, 0.2, 11) if case % 2 else np.zeros(0)
+        first = int(rng.integers(0, 8))
+        last = min(rows - 1, first + 10)
+        args = (ds, 14, stations, float(settings[7]), x0, Ad, Bd, Ed, plan, xy, psi, delta,
+                first, last, 5, 10, 0.1)
+        fast = check_record_kernel(points, headings, curvature, *args)
+        plain = check_record_arrays(points.tolist(), headings.tolist(), curvature.tolist(),
+                                    *[a.tolist() if isinstance(a, np.ndarray) else a
+                                      for a in args])
+        assert np.array_equal(np.array(plain), np.array(fast), equal_nan=True), case
+
+
+@pytest.mark.parametrize("frame", ["path", "fixed"])
 @pytest.mark.parametrize("method", ["improved", "baseline"])
-def test_closed_loop_with_kernels_is_the_closed_loop_without(make_config, monkeypatch, method):
+def test_closed_loop_with_kernels_is_the_closed_loop_without(make_config, monkeypatch, method,
+                                                             frame):
     import pipeline.loop.compiled as compiled
 
-    calls = {"plant": 0, "rollout": 0, "reference": 0}
+    calls = {"plant": 0, "rollout": 0, "reference": 0, "chase": 0}
 
     def counting(name, kernel):
         def wrapped(*args):
@@ -161,7 +236,11 @@ def test_closed_loop_with_kernels_is_the_closed_loop_without(make_config, monkey
                         counting("rollout", compiled.apf_rollout_kernel))
     monkeypatch.setattr(compiled, "reference_kernel",
                         counting("reference", compiled.reference_kernel))
-    cfg = make_config([f"method={method}", "scenario=family", "scenario.family.size=3"])
+    monkeypatch.setattr(compiled, "chase_path_kernel",
+                        counting("chase", compiled.chase_path_kernel))
+    cfg = make_config([f"method={method}", "scenario=family", "scenario.family.size=3",
+                       f"controller.frame={frame}"])
+    references = "chase" if frame == "path" else "reference"
     for member in family_members(cfg.scenario, cfg.vehicle.footprint_radius_m):
         member_cfg = replace(cfg, scenario=member)
         scenario = build_scenario(member)
@@ -172,7 +251,7 @@ def test_closed_loop_with_kernels_is_the_closed_loop_without(make_config, monkey
         steps = len(fast.trajectory) - 1
         assert calls["plant"] - before["plant"] == steps
         assert calls["rollout"] - before["rollout"] == steps
-        assert calls["reference"] - before["reference"] == steps
+        assert calls[references] - before[references] == steps
         assert fast.trajectory.equals(plain.trajectory)
 
 

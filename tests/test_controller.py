@@ -260,13 +260,18 @@ def test_condensed_qp_equals_the_sparse_qp_in_closed_loop(make_config, overrides
 
 @pytest.mark.parametrize("overrides, member", [
     (["method=improved", "scenario=family", "scenario.family.size=12"], 0),
-    (["method=baseline", "scenario=family", "scenario.family.size=12"], 4)])
+    (["method=baseline", "scenario=family", "scenario.family.size=12"], 5),
+    (["method=improved", "scenario=family", "scenario.family.size=12",
+      "controller.frame=fixed"], 0),
+    (["method=baseline", "scenario=family", "scenario.family.size=12",
+      "controller.frame=fixed"], 4)])
 def test_condensed_qp_equals_the_sparse_qp_where_slacks_bind(make_config, monkeypatch, overrides,
                                                              member):
-    """On every QP of family members where the half-plane slacks bind (member 0 of improved, 4
-    of baseline: slack up to 1.05 m / 0.15 m) the condensed statement (``W = R U``) and the
-    sparse QP (states as variables) reach the same moves to Clarabel's tolerance (1e-5 rad/s),
-    on identical data. (Their closed loops part where the plant's steering bound switches: a
+    """On every QP of family members where the half-plane slacks bind (in the path frame
+    member 0 of improved, 5 of baseline: slack up to 0.52 m / 0.057 m; in the fixed frame 0
+    and 4) the condensed statement (``W = R U``) and the sparse QP (states as variables) reach
+    the same moves to Clarabel's tolerance (1e-5 rad/s), on identical data: in the path frame
+    with the previewed curvature as disturbance and the yaw-rate and steering references. (Their closed loops part where the plant's steering bound switches: a
     1e-6 difference decides whether a step saturates, so closed loops are compared on the
     paper scenario only.)"""
     import dataclasses
@@ -289,6 +294,9 @@ def test_condensed_qp_equals_the_sparse_qp_where_slacks_bind(make_config, monkey
     trajectory = simulate(cfg, build_scenario(cfg.scenario)).trajectory
     assert np.nanmax(trajectory["max_slack_m"].to_numpy(float)) > 0.05  # slacks bind
     monkeypatch.undo()  # capture no more
+    if cfg.controller.frame == "path":  # the path frame's data reach the QP
+        assert any(np.count_nonzero(i.disturbance_rad_s) for i in captured_inputs)
+        assert any(np.count_nonzero(i.delta_ref_rad) for i in captured_inputs)
     condensed = LateralMpc(cfg.controller, cfg.vehicle)
     sparse = LateralMpc(dataclasses.replace(cfg.controller, formulation="sparse"), cfg.vehicle)
     assert len(captured_inputs) > 50
@@ -324,7 +332,9 @@ def test_condensed_prediction_matches_the_recurrence():
 @pytest.mark.parametrize("overrides, member", [
     (["method=improved"], None), (["method=baseline"], None),
     (["method=improved", "scenario=family", "scenario.family.size=12"], 0),
-    (["method=baseline", "scenario=family", "scenario.family.size=12"], 4)])
+    (["method=baseline", "scenario=family", "scenario.family.size=12"], 5),
+    (["method=baseline", "scenario=family", "scenario.family.size=12",
+      "controller.frame=fixed"], 4)])
 def test_daqp_backend_solves_the_same_qps_as_clarabel(make_config, overrides, member,
                                                       monkeypatch):
     """controller.backend=daqp solves the same condensed QP (explicit slacks) with DAQP. On
@@ -405,8 +415,11 @@ def test_kept_dense_workspaces_follow_speed_changes(make_config, monkeypatch, ba
     from pipeline.loop.scenario import build_scenario
     from pipeline.loop.simulate import simulate
 
+    # the stopping-distance rule slows the vehicle on the paper scenario (the default rule
+    # keeps the nominal speed there: nothing is predicted in the way)
     cfg = make_config(["method=improved", f"controller.backend={backend}",
-                       "planner.velocity_planning=true"])
+                       "planner.velocity_planning=true",
+                       "planner.velocity_rule=stopping_distance"])
     captured = _capture_condensed_data(monkeypatch)
     trajectory = simulate(cfg, build_scenario(cfg.scenario)).trajectory
     assert trajectory["speed_ref_mps"].nunique() > 2  # the model changed during the run

@@ -197,10 +197,13 @@ def test_a_family_chunk_freezes_what_outlives_it_and_still_collects_its_own_cycl
         gc.unfreeze()
 
 
-def test_a_family_discretizes_each_model_once(tmp_path, make_config, monkeypatch):
+@pytest.mark.parametrize("frame", ["fixed", "path"])
+def test_a_family_discretizes_each_model_once(tmp_path, make_config, monkeypatch, frame):
     """python-control's c2d runs once per (vehicle, speed, sample time) for a whole family, not
     once per member: 6 members at one speed build the nominal model and the controller's model
-    once each (12 calls before the models were shared through the QpCache)."""
+    once each (12 calls before the models were shared through the QpCache). In the path
+    frame the controller's model follows the predicted speed (3.0-3.2 m/s on the speed grid
+    here: the plant's forward speed grows in turns), each speed built once."""
     import pipeline.loop.model as model_module
     import pipeline.studies.experiment as experiment_module
     from pipeline.studies.experiment import run_family
@@ -215,8 +218,11 @@ def test_a_family_discretizes_each_model_once(tmp_path, make_config, monkeypatch
     monkeypatch.setattr(model_module, "build_lateral_model", counting)
     monkeypatch.setattr(experiment_module, "build_lateral_model", counting)
     run_family(make_config(["method=improved", "scenario=family", "scenario.family.size=6",
-                            "scenario.family.n_jobs=1"]), tmp_path / "family", progress=False)
-    assert len(calls) == 2
+                            "scenario.family.n_jobs=1", f"controller.frame={frame}"]),
+               tmp_path / "family", progress=False)
+    assert calls.count(3.0) == 2  # the nominal model (model.json) and the controller's
+    assert len(calls) == len(set(calls)) + 1
+    assert len(calls) == 2 if frame == "fixed" else len(calls) > 2
 
 
 def test_trajectory_csv_writer_matches_pandas(make_config):

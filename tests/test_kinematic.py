@@ -210,17 +210,24 @@ def test_ltv_and_nmpc_agree_near_a_straight_line(make_config):
     assert np.abs(far.command - near.command).max() > 0.1
 
 
-def test_nmpc_backend_only_on_the_kinematic_track(make_config):
+def test_nmpc_backend_needs_a_model(make_config):
+    """backend=nmpc on both MPC tracks (the lateral one: LateralNmpc), refused for pure
+    pursuit, which has no model to make a nonlinear program of."""
     from pipeline.errors import ConfigError
+    from pipeline.loop.controller import make_controller
+    from pipeline.loop.controller.lateral_nmpc import LateralNmpc
 
-    with pytest.raises(ConfigError, match="nmpc only with controller.kind=kinematic_mpc"):
-        make_config(["controller.backend=nmpc"])
+    with pytest.raises(ConfigError, match="nmpc only with controller.kind=mpc or "
+                                          "kinematic_mpc"):
+        make_config(["method=apf_pursuit", "controller.backend=nmpc"])
+    cfg = make_config(["controller.backend=nmpc"])
+    assert isinstance(make_controller(cfg, 0.1), LateralNmpc)
 
 
 def test_path_at_arc_length_closed_form():
     """Points along an L-shaped polyline at given arc lengths (closed form), continued along
     the last segment beyond the end; repeated points are skipped."""
-    from pipeline.loop.controller.kinematic import path_at_arc_length
+    from pipeline.loop.planner import path_at_arc_length
 
     path = np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 0.0], [1.0, 2.0]])
     got = path_at_arc_length(path, np.array([0.5, 1.0, 2.0, 4.5]))

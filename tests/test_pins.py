@@ -14,7 +14,9 @@ into C3a/C3b, the rate interval, the "mixed" outcome); the condensed lateral QP 
 new config key changes the hash; numbers agree with the sparse QP to ~1e-7); the condensed
 cost stated through its Cholesky factor (issue 22: the same QP, Clarabel's iterates differ, the
 numbers move at the 1e-6 level); the condensed statement in ``W = R U`` coordinates (issue 22:
-the same QP without auxiliary variables, Clarabel's iterates differ).
+the same QP without auxiliary variables, Clarabel's iterates differ); the lateral MPC in path
+coordinates (issue 38: ``controller.frame=path`` is the new default, new keys change the hash,
+every lateral number moves, and the runs carry the model-validity metrics).
 """
 
 from __future__ import annotations
@@ -32,7 +34,7 @@ from pipeline.studies.verify import compare_tables
 from pipeline.report import main as report_main
 from pipeline.run import run_experiment, run_family
 
-DEFAULT_CONFIG_HASH = "96432c1324aa2103"
+DEFAULT_CONFIG_HASH = "4fa9d218bf262e48"
 PINS = Path(__file__).parent / "data" / "pins"
 METHODS = ("improved", "baseline", "baseline_matched")
 UPDATE = os.environ.get("PIPELINE_UPDATE_PINS") == "1"

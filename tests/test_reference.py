@@ -66,5 +66,13 @@ def test_full_reproduction_matches_reference(tmp_path, make_config):
     for method in METHODS:
         run_family(make_config([f"method={method}", "scenario=family"]),
                    tmp_path / "family" / method, progress=False)
+    # the other frame (experiment=frames) and the Appendix-A family, as make reproduce runs them
+    for method in ("baseline", "baseline_matched", "improved"):
+        run_family(make_config([f"method={method}", "scenario=family",
+                                "controller.frame=fixed"]),
+                   tmp_path / "frames" / method, progress=False)
+    for planner in ("baseline_printed", "baseline_matched", "improved", "mpc_no_apf"):
+        run_family(make_config(["experiment=kinematic_family", f"planner={planner}"]),
+                   tmp_path / "kinematic_family" / planner, progress=False)
     assert verify(tmp_path, REFERENCE) == []
     assert (REFERENCE / "claims_ledger.csv").is_file()

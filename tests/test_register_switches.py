@@ -49,6 +49,10 @@ SWITCH_TESTS = {
     "claims.margins": "here", "claims.comparable_clearance_m": "here",
     "controller.backend": "test_kinematic", "planner.normalize_step": "test_kinematic",
     "scenario.obstacle_anchor": "here",
+    "controller.frame": "test_path_frame", "controller.path_lookahead_m": "test_path_frame",
+    "controller.path_curvature_max_1_per_m": "test_path_frame",
+    "controller.path_state_reference": "test_path_frame",
+    "controller.horizon_reach_m": "test_path_frame", "planner.velocity_rule": "test_path_frame",
 
 
 }
@@ -150,8 +154,9 @@ def observation(cfg, rollout):
 
 
 def test_heading_reference_from_the_apf_force(make_config):
-    slope = make_config(["planner=improved"])
-    force = make_config(["planner=improved", "controller.heading_reference=apf_force"])
+    slope = make_config(["planner=improved", "controller.frame=fixed"])
+    force = make_config(["planner=improved", "controller.heading_reference=apf_force",
+                         "controller.frame=fixed"])
     rollout = apf_rollout(np.array([10.0, 0.0]), GOAL, snap([[14.0, 0.5]]), slope.planner, 10,
                           0.1)
     psi_slope = LateralMpc(slope.controller, slope.vehicle).inputs_from(
@@ -162,6 +167,26 @@ def test_heading_reference_from_the_apf_force(make_config):
     np.testing.assert_allclose(psi_force, force_heading_reference(total, 0.0, 10, 0.1,
                                                                   force.controller))
     assert not np.allclose(psi_slope, psi_force)
+
+
+def test_heading_reference_from_the_apf_force_in_the_path_frame(make_config):
+    """In the path frame the reading's heading ramp is the path's heading: knot k's heading
+    (line frame, course 0 here) is the fixed frame's psi_ref at step k (the curvature limit
+    lifted, so nothing clips the ramp), and the path differs from the rollout's chase."""
+    lifted = ["planner=improved", "controller.path_curvature_max_1_per_m=5.0"]
+    slope = make_config(lifted)
+    force = make_config(lifted + ["controller.heading_reference=apf_force"])
+    rollout = apf_rollout(np.array([10.0, 0.0]), GOAL, snap([[14.0, 0.5]]), slope.planner, 10,
+                          0.1)
+    chase = LateralMpc(slope.controller, slope.vehicle)
+    ramp = LateralMpc(force.controller, force.vehicle)
+    chase.inputs_from(observation(slope, rollout))
+    ramp.inputs_from(observation(force, rollout))
+    path = ramp._frame_record[1]
+    total = rollout.attraction[0] + rollout.repulsion[0]
+    np.testing.assert_allclose(path.headings_rad[1:11], force_heading_reference(
+        total, 0.0, 10, 0.1, force.controller), atol=1e-12)
+    assert not np.allclose(chase._frame_record[1].headings_rad[1:11], path.headings_rad[1:11])
 
 
 def test_path_beyond_end_hold_keeps_the_last_lateral_position(make_config):

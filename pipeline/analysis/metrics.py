@@ -44,6 +44,13 @@ definition. Definitions (also in the report's Methods section):
 * **Progress**: time to reach the goal line (NaN if not reached), path length (m).
 * **Solver**: median and p95 of Clarabel's iteration count, fallback count, largest heading
   error against the model's validity bound, share of rollout steps where the step cap bound.
+* **Model validity** (:class:`ModelValidity`): does the MPC's model hold where it is used? The
+  loop logs, per step, the largest heading error of the plant against that step's frame over
+  the next second, the tyres' normalized slip, whether the reference path was clipped at the
+  curvature limit, and the model's and the plan's position error 0.5 s and 1 s ahead
+  (:func:`pipeline.loop.controller.path.prediction_check`); the run's shares and quantiles.
+  The run leaves the model's validity (``heading_validity_exceeded``) when that heading error
+  exceeds ``model.validity_heading_rad`` (the heading to the line for a scored trajectory).
 """
 
 from __future__ import annotations
@@ -69,6 +76,7 @@ class TrajectoryContext:
     goal_m: tuple[float, float]
     vehicle_radius_m: float
     validity_heading_rad: float = math.inf
+    tyre_linear_limit: float = math.inf
     wheelbase_m: float = 2.5
     steering_max_rad: float = 0.4
     steering_rate_max_rad_s: float = 1.0
@@ -529,6 +537,27 @@ class Progress(_Block):
 
 
 @dataclass(frozen=True)
+class ModelValidity(_Block):
+    """Does the MPC's model hold where it is used? Shares of the run's steps (0-1) whose
+    prediction left the small-angle bound over the next second, with a tyre beyond its linear
+    range, whose reference path was clipped at the curvature limit; the model's prediction
+    error (replayed with the applied inputs) and the plan's, 0.5 s and 1 s ahead (m,
+    median and 95th percentile over the run's steps). NaN where the run logged no such
+    column (a scored trajectory, pure pursuit)."""
+
+    model_heading_error_max_rad: float
+    share_steps_beyond_bound: float
+    share_steps_tyre_nonlinear: float
+    share_steps_path_clipped: float
+    prediction_error_05s_p50_m: float
+    prediction_error_05s_p95_m: float
+    prediction_error_1s_p50_m: float
+    prediction_error_1s_p95_m: float
+    plan_error_1s_p50_m: float
+    plan_error_1s_p95_m: float
+
+
+@dataclass(frozen=True)
 class SolverIterations(_Block):
     """Median and 95th percentile of the QP solver's iteration count."""
 
@@ -563,12 +592,14 @@ class RunMetrics:
     step_cap: StepCap | None = None
     iterations: SolverIterations | None = None
     fallbacks: Fallbacks | None = None
+    validity: ModelValidity | None = None
 
     def blocks(self) -> tuple[_Block, ...]:
         """The blocks present, in Table 1 order."""
         return tuple(b for b in (self.threat, self.reaction, self.smoothness, self.repulsion,
                                  self.step_cap, self.recovery, self.stability, self.safety,
-                                 self.progress, self.iterations, self.fallbacks)
+                                 self.progress, self.iterations, self.fallbacks,
+                                 self.validity)
                      if b is not None)
 
     def to_json(self) -> dict:
@@ -596,13 +627,13 @@ class RunMetrics:
                    Smoothness.from_json(data), Recovery.from_json(data),
                    Stability.from_json(data), Safety.from_json(data), Progress.from_json(data),
                    optional(Repulsion), optional(StepCap), optional(SolverIterations),
-                   optional(Fallbacks))
+                   optional(Fallbacks), optional(ModelValidity))
 
 
 #: Every key :meth:`RunMetrics.to_json` can write.
 METRIC_KEYS: tuple[str, ...] = tuple(k for block in (
     Threat, Reaction, Smoothness, Repulsion, StepCap, Recovery, Stability, Safety, Progress,
-    SolverIterations, Fallbacks) for k in block.keys())
+    SolverIterations, Fallbacks, ModelValidity) for k in block.keys())
 
 
 def _none_to_nan(value):
@@ -634,6 +665,7 @@ class Signals:
     steer_rate: np.ndarray
     heading_error: np.ndarray
     bearing_error: np.ndarray
+    model_heading_error: np.ndarray | None = None
 
 
 def trajectory_signals(tr: pd.DataFrame, context: TrajectoryContext) -> Signals:
@@ -668,9 +700,11 @@ def trajectory_signals(tr: pd.DataFrame, context: TrajectoryContext) -> Signals:
     to_goal = goal - xy
     bearing = np.arctan2(to_goal[:, 1], to_goal[:, 0])
     bearing_error = np.arctan2(np.sin(psi - bearing), np.cos(psi - bearing))
+    model_heading = tr["model_heading_error_rad"].to_numpy(float) \
+        if "model_heading_error_rad" in tr else None
     return Signals(t, dt, start, goal, line, xy, (xy - start) @ line, (xy - start) @ normal, psi,
                    velocity, speed, vx, vy, yaw_rate, delta, steer_rate, heading_error,
-                   bearing_error)
+                   bearing_error, model_heading)
 
 
 @dataclass(frozen=True)
@@ -910,13 +944,60 @@ def progress_block(sig: Signals, context: TrajectoryContext,
     tolerance = thresholds.goal_tolerance_m if thresholds.goal_tolerance_m is not None else 0.5
     reached = np.nonzero(sig.along >= (sig.goal - sig.start) @ sig.line - tolerance)[0]
     heading = max_abs(sig.heading_error)
+    # against the bound: the heading error the MPC's model is about (its own frame's, over
+    # each prediction's second) where the run logged it, else the heading to the line
+    judged = max_abs(sig.model_heading_error) if sig.model_heading_error is not None \
+        else heading
     return Progress(
         n_steps_logged=int(len(t)), duration_s=float(t[-1] - t[0]) if t.size else 0.0,
         goal_reached=bool(reached.size),
         time_to_goal_s=float(t[reached[0]] - t[0]) if reached.size else float("nan"),
         path_length_m=float(np.sum(np.linalg.norm(np.diff(sig.xy, axis=0), axis=1))),
         max_abs_heading_error_rad=heading,
-        heading_validity_exceeded=bool(heading > context.validity_heading_rad))
+        heading_validity_exceeded=bool(judged > context.validity_heading_rad))
+
+
+def _share(flags: np.ndarray, known: np.ndarray) -> float:
+    """Share of ``flags`` among the rows where ``known`` (NaN when none is)."""
+    return float(np.count_nonzero(flags & known) / np.count_nonzero(known)) \
+        if np.count_nonzero(known) else float("nan")
+
+
+def _quantiles(values: np.ndarray) -> tuple[float, float]:
+    """Median and 95th percentile of the finite entries (NaN for none)."""
+    v = values[np.isfinite(values)]
+    if not v.size:
+        return float("nan"), float("nan")
+    p50, p95 = np.percentile(v, [50, 95])
+    return float(p50), float(p95)
+
+
+def validity_block(tr: pd.DataFrame, context: TrajectoryContext) -> ModelValidity | None:
+    """:class:`ModelValidity` from the columns the loop logged (None without any of them)."""
+    if "model_error_1s_m" not in tr and "tyre_slip_norm" not in tr:
+        return None
+
+    def column(name: str) -> np.ndarray:
+        return tr[name].to_numpy(float) if name in tr else np.full(len(tr), np.nan)
+
+    heading = column("model_heading_error_rad")
+    tyre = column("tyre_slip_norm")
+    stepped = tr["solver_status"].astype(str).to_numpy() != "end" if "solver_status" in tr \
+        else np.ones(len(tr), bool)
+    clipped = tr["path_clipped"].to_numpy() if "path_clipped" in tr else None
+    model_05, model_1 = _quantiles(column("model_error_05s_m")), _quantiles(column(
+        "model_error_1s_m"))
+    plan_1 = _quantiles(column("plan_error_1s_m"))
+    return ModelValidity(
+        model_heading_error_max_rad=max_abs(heading),
+        share_steps_beyond_bound=_share(heading > context.validity_heading_rad,
+                                        np.isfinite(heading)),
+        share_steps_tyre_nonlinear=_share(tyre > context.tyre_linear_limit, np.isfinite(tyre)),
+        share_steps_path_clipped=_share(clipped.astype(bool), stepped)
+        if clipped is not None else float("nan"),
+        prediction_error_05s_p50_m=model_05[0], prediction_error_05s_p95_m=model_05[1],
+        prediction_error_1s_p50_m=model_1[0], prediction_error_1s_p95_m=model_1[1],
+        plan_error_1s_p50_m=plan_1[0], plan_error_1s_p95_m=plan_1[1])
 
 
 def solver_blocks(tr: pd.DataFrame) -> tuple[SolverIterations | None, Fallbacks | None]:
@@ -992,6 +1073,7 @@ def compute_metrics_readings(trajectory: pd.DataFrame, context: TrajectoryContex
     step_cap = StepCap(float(np.nanmean(trajectory["apf_step_cap_share"].to_numpy(float)))) \
         if "apf_step_cap_share" in trajectory else None
     iterations, fallbacks = solver_blocks(trajectory)
+    validity = validity_block(trajectory, context)
     memo: dict[tuple, object] = {}
 
     def once(criterion: str, reads: tuple[str, ...], thresholds: MetricsConfig, build):
@@ -1023,5 +1105,6 @@ def compute_metrics_readings(trajectory: pd.DataFrame, context: TrajectoryContex
                           lambda: progress_block(sig, context, thresholds)),
             repulsion=once("repulsion", REPULSION_READS, thresholds,
                            lambda: repulsion_block(trajectory, sig, geo, clearance, thresholds)),
-            step_cap=step_cap, iterations=iterations, fallbacks=fallbacks))
+            step_cap=step_cap, iterations=iterations, fallbacks=fallbacks,
+            validity=validity))
     return results

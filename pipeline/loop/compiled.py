@@ -9,7 +9,10 @@ by CPython in a single run and by numba in the family runner's workers.
 * :func:`apf_rollout_kernel` is :func:`pipeline.loop.planner.apf_rollout_arrays`, the APF
   rollout (about 65 us and 20 us with the call);
 * :func:`reference_kernel` is :func:`pipeline.loop.controller.references.reference_arrays`,
-  the lateral MPC's references at its stations (about 35 us and 10 us with the call).
+  the lateral MPC's references at its stations (about 35 us and 10 us with the call);
+* :func:`chase_path_kernel`, :func:`frame_step_kernel` and :func:`check_record_kernel` are the
+  path frame's statements (:mod:`pipeline.loop.controller.path`): the drivable path, one
+  step's stations and obstacle coordinates, one step's prediction check.
 
 Compiled without fast-math, they do the same operations in the same order on the same C
 library's ``atan2``, ``tanh``, ``exp``, ``cos`` and ``sin``, so they give the same bits (the
@@ -30,7 +33,7 @@ from numba import njit
 from numba.extending import overload
 
 from pipeline.loop import model, planner
-from pipeline.loop.controller import references
+from pipeline.loop.controller import path, references
 
 
 def _jit(function):
@@ -52,3 +55,23 @@ def _exp_or_inf_compiled(x):  # pragma: no cover (numba's typing calls it)
 single_track_rk4 = _jit(model.single_track_rk4)
 apf_rollout_kernel = _jit(planner.apf_rollout_arrays)
 reference_kernel = _jit(references.reference_arrays)
+
+
+def _same_signature(function):
+    """numba's typing function for ``overload(function)``: ``function`` itself is the
+    implementation (a helper the kernels call, compiled with them)."""
+    import inspect
+
+    def typer(*args):
+        return function
+
+    typer.__signature__ = inspect.signature(function)
+    return typer
+
+
+for _helper in (path._heading_at, path._curvature_at, path._project_point, path._point_at):
+    overload(_helper)(_same_signature(_helper))
+
+chase_path_kernel = _jit(path.chase_path_arrays)
+frame_step_kernel = _jit(path.frame_step_arrays)
+check_record_kernel = _jit(path.check_record_arrays)

@@ -141,6 +141,16 @@ class LateralModelCache:
         return self.models[key]
 
 
+def tyre_linear_limit(tolerance: float) -> float:
+    """The normalized slip ``z = C alpha / (mu Fz)`` beyond which the plant's tanh tyre law
+    gives ``tolerance`` (a share) less force than the linear law the MPC's model assumes:
+    the root of ``tanh(z) / z = 1 - tolerance`` (0.39 for 5 %)."""
+    from scipy.optimize import brentq
+
+    return float(brentq(lambda z: np.tanh(z) / z - (1.0 - tolerance), 1e-6, 100.0,
+                        xtol=1e-12))
+
+
 def _single_track_constants(vehicle: VehicleConfig) -> tuple[float, ...]:
     """Mass, yaw inertia, axle distances, cornering stiffnesses and the tyre force limits
     ``mu Fz`` (static axle loads) of the single-track plant."""

@@ -307,13 +307,21 @@ def apf_rollout_arrays(px, py, gx, gy, centres, velocities, settings, horizon, s
 
 def plan_speed(position_m: np.ndarray, heading_rad: float, obstacles: ObstacleSnapshot,
                nominal_speed_mps: float, vehicle_radius_m: float,
-               params: PlannerConfig) -> float:
-    """Velocity planning ``V_r = f_v(obstacles)`` from a stopping-distance rule.
+               params: PlannerConfig, path_m: np.ndarray | None = None,
+               speed_mps: float | None = None) -> float:
+    """Velocity planning ``V_r = f_v(obstacles)`` (Section 3.1: "considers the relative
+    position and motion of obstacles"; "safety constraints (e.g., minimum stopping
+    distance)"), by ``params.velocity_rule``:
 
-    An obstacle counts when it lies ahead of the vehicle inside a corridor as wide as both radii
-    plus ``stop_margin_m``. With ``gap`` the free distance to it, the speed is capped at
-    ``sqrt(2 a_brake max(gap - stop_margin, 0))`` (the speed from which the vehicle can stop in
-    the gap), never below ``speed_floor_mps`` and never above the nominal speed.
+    * ``predicted_clearance`` (default, needs ``path_m``): :func:`clearance_speed`, the fastest
+      speed whose constant-velocity prediction along the APF's path keeps its clearance;
+    * ``stopping_distance`` (the earlier reading): an obstacle counts when it lies ahead of the
+      vehicle inside a corridor as wide as both radii plus ``stop_margin_m``; with ``gap`` the
+      free distance to it, the speed is capped at ``sqrt(2 a_brake max(gap - stop_margin,
+      0))`` (the speed from which the vehicle can stop in the gap), never below
+      ``speed_floor_mps`` and never above the nominal speed. It ignores where the obstacle
+      goes and where the vehicle steers: it slowed the vehicle in front of obstacles crossing
+      the way it swerved, and collisions rose (27 / 22 to 66 / 98 of 200 in the fixed frame).
 
     Returns
     -------
@@ -322,6 +330,10 @@ def plan_speed(position_m: np.ndarray, heading_rad: float, obstacles: ObstacleSn
     """
     if not params.velocity_planning or obstacles.positions_m.shape[0] == 0:
         return float(nominal_speed_mps)
+    if params.velocity_rule == "predicted_clearance" and path_m is not None:
+        return clearance_speed(path_m, obstacles, nominal_speed_mps,
+                               nominal_speed_mps if speed_mps is None else speed_mps,
+                               vehicle_radius_m, params)
     forward = np.array([np.cos(heading_rad), np.sin(heading_rad)])
     left = np.array([-forward[1], forward[0]])
     rel = obstacles.positions_m - position_m[None, :]
@@ -334,6 +346,63 @@ def plan_speed(position_m: np.ndarray, heading_rad: float, obstacles: ObstacleSn
     gap = float(np.min(ahead[relevant] - obstacles.radii_m[relevant])) - vehicle_radius_m
     allowed = np.sqrt(2.0 * params.braking_decel_mps2 * max(gap - params.stop_margin_m, 0.0))
     return float(np.clip(allowed, params.speed_floor_mps, nominal_speed_mps))
+
+
+def path_at_arc_length(path_m: np.ndarray, stations_m: np.ndarray) -> np.ndarray:
+    """Points of the polyline ``path_m`` (n, 2) at arc lengths ``stations_m`` from its first
+    point, continued along its last segment beyond its end; shape (len(stations_m), 2). A path
+    that does not move gives its first point."""
+    steps = np.diff(path_m, axis=0)
+    lengths = np.hypot(steps[:, 0], steps[:, 1])
+    keep = lengths > 1e-9
+    if not keep.any():
+        return np.repeat(path_m[:1], len(stations_m), axis=0)
+    points = np.vstack([path_m[:1], path_m[1:][keep]])
+    arc = np.concatenate([[0.0], np.cumsum(lengths[keep])])
+    out = np.column_stack([np.interp(stations_m, arc, points[:, 0]),
+                           np.interp(stations_m, arc, points[:, 1])])
+    beyond = stations_m > arc[-1]
+    if beyond.any():
+        direction = (points[-1] - points[-2]) / (arc[-1] - arc[-2])
+        out[beyond] = points[-1] + (stations_m[beyond] - arc[-1])[:, None] * direction
+    return out
+
+
+def clearance_speed(path_m: np.ndarray, obstacles: ObstacleSnapshot, nominal_speed_mps: float,
+                    speed_mps: float, vehicle_radius_m: float, params: PlannerConfig) -> float:
+    """The fastest of ``speed_candidates`` speeds in ``[speed_floor_mps, nominal]`` whose
+    prediction keeps the clearance: the vehicle along ``path_m`` (the APF rollout, continued
+    along its last segment), its speed moving from ``speed_mps`` towards the candidate at
+    most ``braking_decel_mps2``, every obstacle at constant velocity, over
+    ``speed_check_horizon_s`` in steps of 0.1 s; "keeps" = a clearance of at least
+    ``stop_margin_m`` beyond both radii. When no candidate keeps it, the one with the largest
+    predicted clearance (the faster one on a tie): slowing down is chosen only where it is
+    predicted to be safer."""
+    candidates = np.linspace(params.speed_floor_mps, nominal_speed_mps, params.speed_candidates)
+    dt = 0.1
+    steps = max(int(np.ceil(params.speed_check_horizon_s / dt)), 1)
+    times = dt * np.arange(1, steps + 1)
+    change = params.braking_decel_mps2 * dt
+    speed = np.full(candidates.size, float(speed_mps))
+    along = np.zeros(candidates.size)
+    distances = np.empty((steps, candidates.size))
+    for j in range(steps):
+        new = speed + np.clip(candidates - speed, -change, change)
+        along = along + 0.5 * (speed + new) * dt
+        speed = new
+        distances[j] = along
+    points = path_at_arc_length(np.asarray(path_m, float), distances.ravel()).reshape(
+        steps, candidates.size, 2)
+    centres = obstacles.positions_m[None, :, :] + times[:, None, None] \
+        * obstacles.velocities_mps[None, :, :]                      # (steps, n, 2)
+    gaps = np.linalg.norm(points[:, :, None, :] - centres[:, None, :, :], axis=-1) \
+        - obstacles.radii_m[None, None, :] - vehicle_radius_m        # (steps, cand, n)
+    clearance = gaps.min(axis=(0, 2))
+    keeps = np.nonzero(clearance >= params.stop_margin_m)[0]
+    if keeps.size:
+        return float(candidates[keeps[-1]])
+    best = np.flatnonzero(clearance == clearance.max())
+    return float(candidates[best[-1]])
 
 
 class ApfPlanner:
@@ -365,10 +434,12 @@ class ApfPlanner:
                         self.horizon, self.sample_time_s, vehicle_velocity_mps)
 
     def speed(self, position_m: np.ndarray, heading_rad: float, obstacles: ObstacleSnapshot,
-              nominal_speed_mps: float, vehicle_radius_m: float) -> float:
-        """The planned speed ``V_r`` (:func:`plan_speed`)."""
+              nominal_speed_mps: float, vehicle_radius_m: float,
+              path_m: np.ndarray | None = None, speed_mps: float | None = None) -> float:
+        """The planned speed ``V_r`` (:func:`plan_speed`; ``path_m``: the rollout the vehicle
+        follows, ``speed_mps``: its speed now)."""
         return plan_speed(position_m, heading_rad, obstacles, nominal_speed_mps,
-                          vehicle_radius_m, self.settings)
+                          vehicle_radius_m, self.settings, path_m, speed_mps)
 
 
 #: Order of :func:`apf_rollout_arrays`'s ``settings``.

@@ -83,9 +83,12 @@ class PlannerConfig(FrozenAfterValidation):
     closing_speed_gain_s_per_m: float = 0.0
     # velocity planning V_r = f_v(obstacles): off for the paper scenario
     velocity_planning: bool = False
+    velocity_rule: str = "predicted_clearance"
     braking_decel_mps2: float = 2.0
     stop_margin_m: float = 1.0
     speed_floor_mps: float = 1.0
+    speed_candidates: int = 7
+    speed_check_horizon_s: float = 3.0
     # a planner of your own (Hydra's convention): module.Class, built with (these settings,
     # horizon, sample time); None: the paper's APF (pipeline.loop.planner.ApfPlanner).
     # ``params`` carries its own settings. Both enter the run hash only when set.
@@ -98,6 +101,13 @@ class PlannerConfig(FrozenAfterValidation):
         at_least("planner.braking_decel_mps2", self.braking_decel_mps2, 0.0, inclusive=False)
         at_least("planner.stop_margin_m", self.stop_margin_m, 0.0)
         at_least("planner.speed_floor_mps", self.speed_floor_mps, 0.0, inclusive=False)
+        choice("planner.velocity_rule", self.velocity_rule,
+               ("predicted_clearance", "stopping_distance"))
+        if isinstance(self.speed_candidates, bool) or not isinstance(self.speed_candidates, int) \
+                or not 2 <= self.speed_candidates <= 100:
+            raise ConfigError("planner.speed_candidates", self.speed_candidates,
+                              "an integer in [2, 100]")
+        between("planner.speed_check_horizon_s", self.speed_check_horizon_s, 0.1, 60.0)
         at_least("planner.step_size", self.step_size, 0.0, inclusive=False)
         at_least("planner.h_max", self.h_max, 0.0)
         at_least("planner.beta", self.beta, 0.0)
@@ -126,11 +136,13 @@ class ModelConfig(FrozenAfterValidation):
     b2_heading_entry: float = -1.0
     speed_grid_mps: float = 0.1
     validity_heading_rad: float = 0.35
+    tyre_linear_tolerance: float = 0.05
 
     def __post_init__(self) -> None:
         choice("model.b2_heading_entry", self.b2_heading_entry, (-1.0, 1.0))
         at_least("model.speed_grid_mps", self.speed_grid_mps, 0.0, inclusive=False)
         between("model.validity_heading_rad", self.validity_heading_rad, 0.0, math.pi)
+        between("model.tyre_linear_tolerance", self.tyre_linear_tolerance, 1e-4, 0.9)
 
 
 @dataclass
@@ -159,6 +171,14 @@ class ControllerConfig(FrozenAfterValidation):
     heading_ref_max_rad: float = 0.5
     yaw_rate_ref_max_rad_s: float = 0.6
     path_beyond_end: str = "extend"
+    # what the lateral MPC's state is measured against: the drivable path built from the APF
+    # rollout each step (path), or the start-goal line (fixed, the earlier reading)
+    frame: str = "path"
+    path_lookahead_m: float = 2.5
+    path_curvature_max_1_per_m: Optional[float] = None  # None: tan(steering_max) / wheelbase
+    path_state_reference: str = "steady_state"
+    horizon_reach_m: Optional[float] = 3.0
+    nmpc_substeps: int = 5
     solver_max_iter: int = 200
     lookahead_min_m: float = 2.0
     lookahead_time_s: float = 0.8
@@ -179,10 +199,14 @@ class ControllerConfig(FrozenAfterValidation):
         choice("controller.kind", self.kind, ("mpc", "pure_pursuit", "kinematic_mpc"))
         choice("controller.backend", self.backend,
                ("cvxpy", "clarabel_direct", "clarabel_dense", "daqp", "nmpc"))
-        if self.backend == "nmpc" and self.kind != "kinematic_mpc":
+        if self.backend == "nmpc" and self.kind not in ("kinematic_mpc", "mpc"):
             raise ConfigError("controller.backend", self.backend,
-                              "nmpc only with controller.kind=kinematic_mpc (the Appendix-A "
-                              "track: experiment=kinematic); the lateral MPC is a QP")
+                              "nmpc only with controller.kind=mpc or kinematic_mpc (a "
+                              "nonlinear program needs a model: pure pursuit has none)")
+        if isinstance(self.nmpc_substeps, bool) or not isinstance(self.nmpc_substeps, int) \
+                or not 1 <= self.nmpc_substeps <= 100:
+            raise ConfigError("controller.nmpc_substeps", self.nmpc_substeps,
+                              "an integer in [1, 100]")
         choice("controller.formulation", self.formulation, ("condensed", "sparse"))
         if self.backend in ("daqp", "clarabel_dense") and (
                 self.kind != "mpc" or self.formulation != "condensed"):
@@ -240,6 +264,15 @@ class ControllerConfig(FrozenAfterValidation):
         at_least("controller.yaw_rate_ref_max_rad_s", self.yaw_rate_ref_max_rad_s, 0.0,
                   inclusive=False)
         choice("controller.path_beyond_end", self.path_beyond_end, ("extend", "hold"))
+        choice("controller.frame", self.frame, ("path", "fixed"))
+        between("controller.path_lookahead_m", self.path_lookahead_m, 0.1, 100.0)
+        if self.path_curvature_max_1_per_m is not None:
+            between("controller.path_curvature_max_1_per_m", self.path_curvature_max_1_per_m,
+                    1e-3, 10.0)
+        choice("controller.path_state_reference", self.path_state_reference,
+               ("steady_state", "zero"))
+        if self.horizon_reach_m is not None:
+            between("controller.horizon_reach_m", self.horizon_reach_m, 0.1, 1000.0)
 
 
 @dataclass

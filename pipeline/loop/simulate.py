@@ -14,6 +14,7 @@ into preallocated arrays and becomes one DataFrame at the end.
 
 from __future__ import annotations
 
+import inspect
 import sys
 from dataclasses import dataclass
 from math import atan2, cos, isfinite, sin, sqrt
@@ -23,6 +24,7 @@ import pandas as pd
 
 from pipeline.loop.settings import LoopSettings
 from pipeline.loop.controller import ControlStep, Observation, QpCache, make_controller
+from pipeline.loop.controller.path import MODEL_CHECK_COLUMNS
 from pipeline.loop.model import kinematic_plant_step, single_track_constants, single_track_rk4
 from pipeline.loop.planner import ApfRollout, make_planner
 from pipeline.loop.scenario import Scenario
@@ -72,6 +74,9 @@ class SingleTrackPlant:
             # run by CPython (what step_plant calls): plain floats in
             kernel, self._constants = single_track_rk4, single_track_constants(cfg.vehicle)
         self._kernel = kernel
+        constants = single_track_constants(cfg.vehicle)
+        self._tyres = (constants[2], constants[3], constants[4], constants[5], constants[6],
+                       constants[7])
 
     @staticmethod
     def initial_state(scenario: Scenario) -> np.ndarray:
@@ -83,11 +88,10 @@ class SingleTrackPlant:
         c, s = cos(state[2]), sin(state[2])
         return np.array([state[3] * c - state[4] * s, state[3] * s + state[4] * c])
 
-    @staticmethod
-    def log_columns(state: np.ndarray, command: np.ndarray | None,
+    def log_columns(self, state: np.ndarray, command: np.ndarray | None,
                     previous: np.ndarray | None) -> dict:
         return {"vx_mps": state[3], "vy_mps": state[4], "r_rad_s": state[5],
-                "delta_rad": state[6]}
+                "delta_rad": state[6], "tyre_slip_norm": tyre_slip_norm(state, self._tyres)}
 
     def step(self, state: np.ndarray, command: np.ndarray, speed_ref_mps: float) -> np.ndarray:
         """:func:`~pipeline.loop.model.step_plant` with this plant's constants hoisted."""
@@ -95,6 +99,20 @@ class SingleTrackPlant:
         rate = min(max(float(command[0]), -rate_max), rate_max)
         return self._kernel(state if self.compiled else state.tolist(), self._constants, rate,
                             float(speed_ref_mps), self.ts, self.substeps)
+
+
+def tyre_slip_norm(state: np.ndarray, tyres: tuple) -> float:
+    """The larger of the two axles' ``C alpha / (mu Fz)``: how far into its tanh law a tyre
+    is (0: no slip; the force falls 5 % short of the linear law at about 0.39).
+
+    ``tyres`` is ``(a, b, C_f, C_r, mu Fz_f, mu Fz_r)``; slip angles as the plant computes
+    them."""
+    a, b, cf, cr, lim_f, lim_r = tyres
+    vx, vy, r, delta = float(state[3]), float(state[4]), float(state[5]), float(state[6])
+    vx = vx if vx > 0.1 else 0.1
+    front = abs(cf * (delta - atan2(vy + a * r, vx)) / lim_f)
+    rear = abs(cr * atan2(vy - b * r, vx) / lim_r)
+    return front if front > rear else rear
 
 
 class KinematicPlant:
@@ -228,6 +246,8 @@ def _closed_loop(cfg: LoopSettings, scenario: Scenario,
     planner = make_planner(cfg.planner, cfg.controller.horizon, scenario.sample_time_s,
                            compiled)
     vehicle_radius = cfg.vehicle.footprint_radius_m
+    # a planner of one's own may keep speed()'s earlier signature (no path, no speed)
+    path_aware = "path_m" in inspect.signature(planner.speed).parameters
     ts = scenario.sample_time_s
     frame = scenario.line_frame
     origin_x, origin_y = frame.origin_m.tolist()
@@ -275,10 +295,15 @@ def _closed_loop(cfg: LoopSettings, scenario: Scenario,
             break
         visible = snapshot.only_visible()
         position = state[:2].copy()
-        # the kinematic track uses it only for reference_alignment=path_speed (Section 3.1)
-        speed_ref = planner.speed(position, psi, visible, scenario.speed_mps, vehicle_radius) \
-            if not kinematic or cfg.controller.reference_alignment == "path_speed" else np.nan
         rollout = planner.rollout(position, scenario.goal_m, visible, plant.velocity(state))
+        # the kinematic track uses it only for reference_alignment=path_speed (Section 3.1)
+        if not kinematic or cfg.controller.reference_alignment == "path_speed":
+            speed_ref = planner.speed(position, psi, visible, scenario.speed_mps,
+                                      vehicle_radius, **({"path_m": rollout.path_m,
+                                                          "speed_mps": float(state[3])}
+                                                         if path_aware else {}))
+        else:
+            speed_ref = np.nan
         observation = Observation(time_s, state, frame, np.array([along, lateral]), e_psi,
                                   rollout, visible, speed_ref)
         step: ControlStep = controller.step(observation)
@@ -296,6 +321,16 @@ def _closed_loop(cfg: LoopSettings, scenario: Scenario,
         log.put(k, row)
         command = step.command
         state = plant.step(state, command, speed_ref)
+    check = getattr(controller, "model_check", None)
+    if check is not None and log.rows:
+        # how each step's prediction held against what the plant then did (model validity)
+        for name, values in check({name: column[:log.rows]
+                                   for name, column in log.columns.items()}).items():
+            log.columns[name] = values
+    elif log.rows:
+        # a controller without a model (pure pursuit): nothing to check, nothing left
+        for name in MODEL_CHECK_COLUMNS:
+            log.columns[name] = np.full(log.rows, np.nan)
     trajectory = log.frame(list(HEAD) + [c for names in obstacle_names for c in names]
                            + list(TAIL))
     return SimulationResult(trajectory, solve_times[:n_solves], controller.compile_count,

@@ -30,7 +30,12 @@ SOLVER = ("solver_status", "solver_iterations", "fallback", "max_slack_m", "ltv_
 HEAD = REQUIRED + ("psi_rad", "vx_mps", "vy_mps", "r_rad_s", "delta_rad", "e_y_m", "e_psi_rad",
                    "steering_rate_rad_s", "accel_mps2", "speed_ref_mps", "y_ref_m",
                    "psi_ref_rad") + APF
-TAIL = SOLVER
+#: The lateral MPC's path frame (path coordinates), the plant's tyres, and how each step's
+#: prediction held against the plant (:mod:`pipeline.loop.controller.path`).
+MODEL = ("path_clipped", "path_curvature_1_per_m", "r_d_rad_s", "tyre_slip_norm",
+         "model_heading_error_rad", "model_error_05s_m", "model_error_1s_m",
+         "plan_error_05s_m", "plan_error_1s_m")
+TAIL = SOLVER + MODEL
 
 OBSTACLE_COLUMN = re.compile(r"obs(\d+)_(x_m|y_m|radius_m|visible)")
 

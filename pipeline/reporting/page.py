@@ -469,6 +469,9 @@ def _nmpc_check(folder: Path) -> dict:
     import json
 
     summary = json.loads((Path(folder) / "summary.json").read_text())
+    summary = summary["tracks"].get("kinematic") if "tracks" in summary else summary
+    if not summary:
+        return None  # the check ran on the lateral track only
     differ = [f"{v['claim']} vs {v['comparison']}: {v['ltv']} (LTV) / {v['nmpc']} (NMPC)"
               for v in summary["verdicts"] if v["ltv"] != v["nmpc"]]
     return {"paper_path": _fmt(summary["paper"]["max_path_difference_m"]),
@@ -645,7 +648,7 @@ def _build_report(run_root, out_dir, command, sweep_dirs, bench_dir, multiverse_
         writer.close()  # every figure on disk before the page inlines them
         _inline(figures, out_dir)
         page = env.get_template("report.html.j2").render(
-            answer=[], caveat="", paper=False, sweeps=sweeps, performance=performance, robustness=None, fair_fight=None, looks=None, ablation=None, figures=figures, family=None, kinematic=None,
+            answer=[], caveat="", paper=False, sweeps=sweeps, performance=performance, robustness=None, fair_fight=None, looks=None, ablation=None, figures=figures, family=None, kinematic=None, validity=None,
             skipped=_skipped_rows(skipped, run_root), other_runs=[], run_notes=[],
             methods=[], scenario="(sweep only)", prov=provenance(command),
             register=register_rows({}), metrics_doc=_metrics_doc(), **_rules(None))
@@ -734,6 +737,13 @@ def _build_report(run_root, out_dir, command, sweep_dirs, bench_dir, multiverse_
                                  settings=collection.family_settings, writer=writer)
         for f in family["figures"]:
             figures.append(f)
+    validity = None
+    if family is not None:
+        progress("does the MPC's model hold? (model checks of every family)")
+        from pipeline.reporting.validity_section import validity_section
+
+        validity = optional(validity_section, Path(run_root), family_primary, cfg_claims,
+                            table_dir)
     if kinematic is not None:
         lateral_outcomes = {c: str(r.get("outcome")) for c, r in
                             (family["by_claim"].items() if family else ())}
@@ -756,7 +766,7 @@ def _build_report(run_root, out_dir, command, sweep_dirs, bench_dir, multiverse_
         answer=answer, caveat=caveat, paper=True, sweeps=sweeps, performance=performance, robustness=robustness,
         fair_fight=fair_fight, looks=looks, scenario=scenario, ablation=ablation, methods=order, figures=figures, metric_rows=metric_rows,
         timing_rows=timing_rows, claims=claims, claim_secondary=claim_secondary,
-        comparisons=comparisons, family=family, kinematic=kinematic,
+        comparisons=comparisons, family=family, kinematic=kinematic, validity=validity,
         register=register_rows({m: r["config"] for m, r in by_method.items()}),
         configs={m: yaml.safe_dump(r["config"], sort_keys=False) for m, r in by_method.items()},
         hashes={m: r["metrics"]["config_hash"] for m, r in by_method.items()},
@@ -1025,9 +1035,11 @@ def validity_caveat(counts: list[dict]) -> str:
              for c in counts if c.get("heading_validity_exceeded")]
     if not parts:
         return ""
-    return ("Caveat: the vehicle's heading leaves the MPC prediction model's small-angle "
-            "validity bound (model.validity_heading_rad) in some scenarios: "
-            + ", ".join(parts) + "; the predictions there are the linear model's, not the plant's.")
+    return ("Caveat: the MPC's model leaves its small-angle validity bound "
+            "(model.validity_heading_rad: the plant's heading error in the model's own frame "
+            "over a prediction's second) in some scenarios: " + ", ".join(parts)
+            + "; the predictions there are the linear model's, not the plant's (see "
+            "\"Does the MPC's model hold?\").")
 
 
 def answer_lines(ledger) -> list[str]:

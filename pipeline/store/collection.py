@@ -13,9 +13,11 @@ from pathlib import Path
 import pandas as pd
 
 from pipeline.analysis.settings import ClaimsConfig
+from pipeline.analysis.validity import ValidityTable, validity_row
 from pipeline.config import ExperimentConfig
 from pipeline.errors import RunFolderError
-from pipeline.store.runs import Skipped, discover, read_family, read_run
+from pipeline.store.runs import (FamilyRecord, Skipped, discover, member_trajectories,
+                                 read_family, read_run)
 
 
 @dataclass
@@ -54,7 +56,8 @@ class RunCollection:
 
 
 EXCLUDED_SECTIONS = ("sweeps", "ablation", "interpretations", "multiverse", "tune",
-                     "kinematic_readings", "kinematic_family")
+                     "kinematic_readings", "kinematic_family", "frames", "nmpc_check",
+                     "speed")
 
 
 def _flatten(config: dict, prefix: str = "") -> dict:
@@ -147,3 +150,49 @@ def load_runs(run_root: Path, skipped: list[Skipped] | None = None) -> RunCollec
             family_info[label] = {**family.info, "dir": str(family.folder)}
             family_settings[label] = family.config
     return RunCollection(runs, family_tables, family_info, family_settings)
+
+
+#: Where ``make reproduce`` keeps the families whose models are checked: the default frame's,
+#: the other frame's and the Appendix-A track's (folders under the outputs root).
+VALIDITY_FOLDERS = ("family", "frames", "kinematic_family")
+#: The methods whose MPC models are checked (the controls and the treatment of the ledger).
+VALIDITY_METHODS = ("baseline", "baseline_matched", "improved")
+
+
+def trusted_families(root: Path) -> list[FamilyRecord]:
+    """Every trusted family folder under ``root`` with readable settings (none when ``root``
+    is missing; the report's sections list what they skip)."""
+    if not Path(root).is_dir():
+        return []
+    out = []
+    for folder in discover(Path(root)).families:
+        try:
+            family = read_family(folder)
+        except RunFolderError:
+            continue
+        if family.config is not None:
+            out.append(family)
+    return out
+
+
+def model_validity_table(run_root: Path) -> ValidityTable:
+    """:class:`~pipeline.analysis.validity.ValidityTable` of ``make reproduce``'s families
+    (:data:`VALIDITY_FOLDERS`, the methods of :data:`VALIDITY_METHODS`): each family's member
+    trajectories pooled into one row, lateral rows first (path frame first), then the
+    Appendix-A track's."""
+    rows = []
+    for name in VALIDITY_FOLDERS:
+        for family in trusted_families(Path(run_root) / name):
+            cfg = family.config
+            method = family.info.get("method", cfg.method_name)
+            if method not in VALIDITY_METHODS or cfg.controller.kind == "pure_pursuit":
+                continue
+            track = "kinematic" if cfg.controller.kind == "kinematic_mpc" else "lateral"
+            frame = cfg.controller.frame if track == "lateral" else "global (LTV)"
+            members = ((trajectory, metrics) for _, trajectory, metrics
+                       in member_trajectories(family.folder))
+            rows.append(validity_row(track, frame, method, members))
+    order = {"lateral": 0, "kinematic": 1}
+    rows.sort(key=lambda r: (order.get(r.track, 2), r.frame != "path",
+                             VALIDITY_METHODS.index(r.method)))
+    return ValidityTable(tuple(rows))

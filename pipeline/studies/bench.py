@@ -9,6 +9,8 @@ Everything runs in one process, methods interleaved on identical inputs, each re
 * peers on the same QP: CVXPY rebuilding the problem every step (as PythonRobotics does) and
   python-control's ``control.optimal.solve_ocp`` (no obstacles, Nc = N, N = 10 and 20);
 * the kinematic LTV-QP step;
+* the lateral MPC's whole step in each frame (``controller.frame``): the APF, the frame's QP
+  data and the solve, over the sparse floor of the same QP (:func:`bench_path_frame`);
 * whole-pipeline figures: import time, one paper-scenario run, a family's throughput on both
   cores, peak memory.
 
@@ -390,6 +392,79 @@ def _recorded_sparse_qps(cfg, scenario) -> tuple[object, list]:
     return recorder._map, recorder.recorded
 
 
+def bench_path_frame(n_steps: int, repeats: int) -> list[dict]:
+    """The lateral MPC's whole step in each frame, per QP, interleaved on identical situations
+    (N = 10, one obstacle, the improved APF; the plant, the APF and the path kernels compiled
+    as a family's workers run them): the APF rollout, the QP data of the frame
+    (``inputs_from``: references and half-planes in the fixed frame; the drivable path,
+    stations, projections and references in the path frame) and the solve, by the default
+    backend (``clarabel_direct``) and DAQP; over the sparse floor of the same QP (the path
+    frame's own data, disturbance and references included). ``*_solve_s`` alone is the
+    definition of the head ratios (the data prepared outside), ``*_step_s`` the whole step."""
+    from pipeline.loop.controller import LateralMpc, Observation, QpCache
+    from pipeline.loop.planner import ApfPlanner
+    from pipeline.loop.scenario import LineFrame, ObstacleSnapshot
+
+    rows = []
+    cfg = _config(["method=improved"])
+    ctrl, veh = cfg.controller, cfg.vehicle
+    cache = QpCache(compiled_kernels=True)
+    planner = ApfPlanner(cfg.planner, ctrl.horizon, 0.1, compiled=True)
+    goal = np.array([30.0, 0.0])
+    obstacle = ObstacleSnapshot(np.array([[9.0, 0.6]]), np.array([[0.0, -0.3]]),
+                                np.array([0.5]), np.ones(1, bool))
+    frame = LineFrame(np.zeros(2), 0.0)
+    mpcs = {(f, b): LateralMpc(replace(ctrl, frame=f, backend=b), veh, cfg.model, 0.1, cache)
+            for f in ("fixed", "path") for b in ("clarabel_direct", "daqp")}
+    sparse = LateralMpc(replace(ctrl, formulation="sparse"), veh, cfg.model, 0.1, cache)
+    observations = []
+    for k in range(n_steps):
+        x, y = 3.0 + 0.15 * k, 0.4 * np.sin(0.15 * k)
+        state = np.array([x, y, 0.25 * np.cos(0.15 * k), 3.0, 0.05 * np.sin(0.3 * k),
+                          0.1 * np.cos(0.2 * k), 0.05 * np.sin(0.25 * k)])
+        rollout = planner.rollout(state[:2], goal, obstacle, np.array([3.0, 0.0]))
+        observations.append(Observation(0.1 * k, state, frame, frame.to_line(state[:2]),
+                                        float(state[2]), rollout, obstacle, 3.0))
+    for mpc in mpcs.values():  # numba's cache load and the models, outside the timing
+        mpc.step(observations[0])
+    for rep in range(repeats):
+        gc.collect()
+        gc.disable()
+        floor = KeptClarabelFloor(sparse.qp.map, ctrl.solver_max_iter)
+        for k, obs in enumerate(observations):
+            apf, apf_s, _ = _timed(lambda: planner.rollout(obs.plant_state[:2], goal, obstacle,
+                                                            np.array([3.0, 0.0])))
+            row = {"section": "path_frame", "repeat": rep, "step": k, "apf_s": apf_s}
+            for (f, b), mpc in mpcs.items():
+                (inputs, _), data_s, _ = _timed(lambda: mpc.inputs_from(obs))
+                _, solve_s, _ = _timed(lambda: mpc.solve(inputs))
+                row[f"{f}_{b}_data_s"], row[f"{f}_{b}_solve_s"] = data_s, solve_s
+                if b == "clarabel_direct":
+                    row[f"{f}_floor_s"] = floor.time(sparse.parameter_vector(inputs))[0]
+            rows.append(row)
+        gc.enable()
+    return rows
+
+
+def summarize_path_frame(rows: list[dict]) -> dict:
+    """Per frame and backend: the head ratio's definition (APF + solve, the QP data prepared
+    outside) and the whole step (APF + the frame's QP data + solve) over the sparse floor of
+    the same QP, the median of the per-QP ratios."""
+    table = pd.DataFrame(rows)
+    out = {}
+    for f in ("fixed", "path"):
+        floor = table[f"{f}_floor_s"]
+        for b, name in (("clarabel_direct", ""), ("daqp", "_daqp")):
+            solve, data = table[f"{f}_{b}_solve_s"], table[f"{f}_{b}_data_s"]
+            out[f"step_over_sparse_floor_{f}{name}"] = float(np.median(
+                (table["apf_s"] + solve) / floor))
+            out[f"whole_step_over_sparse_floor_{f}{name}"] = float(np.median(
+                (table["apf_s"] + data + solve) / floor))
+            out[f"qp_data_us_{f}{name}"] = 1e6 * float(np.median(data))
+        out[f"sparse_floor_us_{f}"] = 1e6 * float(np.median(floor))
+    return out
+
+
 def bench_family_member(backend: str | None = None, n_members: int = 8,
                         repeats: int = 3) -> dict:
     """CPU time of whole family members, everything included (simulation, metrics, writing the
@@ -558,6 +633,8 @@ def summarize(lateral: pd.DataFrame, peers: pd.DataFrame, kinematic: pd.DataFram
             "goals": {"closed_loop_over_floor": "<= 2.0", "step_over_floor": "<= 1.3 (N=10, "
                       "1 obstacle)", "step_over_sparse_floor": "<= 0.5 (default backend)",
                       "step_over_sparse_floor_daqp": "<= 0.25",
+                      "step_over_sparse_floor_path": "<= 0.5 (path frame, Clarabel)",
+                      "step_over_sparse_floor_path_daqp": "<= 0.25 (path frame, DAQP)",
                       "outside_qp_over_qp": "<= 1.0", "compiles_per_family": "1 (40 members, 2 workers)",
                       "family_scenarios_per_s": ">= 20 (200 members, 2 workers)",
                       "family_member_over_sparse_floor": "<= 1.0 (default backend)",
@@ -635,12 +712,19 @@ def _run(args) -> int:
     summary["family_member_over_sparse_floor"] = member["family_member_over_sparse_floor"]
     summary["family_member_over_sparse_floor_daqp"] = \
         member_daqp["family_member_over_sparse_floor"]
+    path_rows = bench_path_frame(args.steps, args.repeats)
+    summary["path_frame"] = summarize_path_frame(path_rows)
+    summary["step_over_sparse_floor_path"] = \
+        summary["path_frame"]["step_over_sparse_floor_path"]
+    summary["step_over_sparse_floor_path_daqp"] = \
+        summary["path_frame"]["step_over_sparse_floor_path_daqp"]
     summary.update(bench_multiverse_reads())
     summary["outside_qp_over_qp"] = closed_loop["outside_qp_us_per_step"] \
         / closed_loop["qp_us_per_step"]
     summary["setup_ms"] = closed_loop["setup_ms"]
     args.out.mkdir(parents=True, exist_ok=True)
-    write_csv_atomic(args.out / "bench.csv", pd.concat([lateral, peers, kinematic],
+    write_csv_atomic(args.out / "bench.csv", pd.concat([lateral, peers, kinematic,
+                                                        pd.DataFrame(path_rows)],
                                                        ignore_index=True))
     write_json_atomic(args.out / "bench_summary.json", summary)
     from pipeline.reporting.figures import save_figure
@@ -649,12 +733,14 @@ def _run(args) -> int:
     print(json.dumps({key: summary[key] for key in (
         "closed_loop_over_floor", "step_over_floor", "step_over_sparse_floor",
         "step_over_sparse_floor_daqp", "step_over_sparse_floor_dense",
+        "step_over_sparse_floor_path", "step_over_sparse_floor_path_daqp",
         "step_over_sparse_floor_cpu", "outside_qp_us_per_step",
         "qp_us_per_step", "outside_qp_over_qp", "outside_qp_over_qp_python_kernels",
         "setup_ms", "compiles_per_family",
         "family_scenarios_per_s", "family_member_over_sparse_floor",
         "family_member_over_sparse_floor_daqp", "multiverse_member_reads_per_member")},
         indent=1))
+    print(json.dumps({"path_frame": summary["path_frame"]}, indent=1))
     print(json.dumps({"lateral_N10_1obs": summary["lateral"][0], "peers": summary["peers"],
                       "pipeline": pipeline_figures, "n50_over_n10": summary["n50_over_n10_direct"]},
                      indent=1))

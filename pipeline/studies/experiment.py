@@ -7,6 +7,7 @@ parallel. The Hydra entry point is :mod:`pipeline.run`.
 
 from __future__ import annotations
 
+import functools
 import gc
 import logging
 from dataclasses import dataclass
@@ -109,9 +110,18 @@ def trajectory_context(cfg: ExperimentConfig) -> TrajectoryContext:
     v = cfg.vehicle
     return TrajectoryContext(tuple(cfg.scenario.start_xy_m), tuple(cfg.scenario.goal_xy_m),
                              v.footprint_radius_m, cfg.model.validity_heading_rad,
+                             tyre_linear_limit=_tyre_limit(cfg.model.tyre_linear_tolerance),
                              wheelbase_m=v.wheelbase_m, steering_max_rad=v.steering_max_rad,
                              steering_rate_max_rad_s=v.steering_rate_max_rad_s,
                              braking_mps2=v.accel_max_mps2)
+
+
+@functools.lru_cache(maxsize=16)
+def _tyre_limit(tolerance: float) -> float:
+    """:func:`~pipeline.loop.model.tyre_linear_limit`, solved once per tolerance."""
+    from pipeline.loop.model import tyre_linear_limit
+
+    return tyre_linear_limit(tolerance)
 
 
 def config_yaml(cfg: ExperimentConfig, memo: dict | None = None) -> str:

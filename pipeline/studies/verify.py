@@ -2,8 +2,9 @@
 
 ``reports/reference/`` holds the summary of the default ``make reproduce``:
 ``paper_metrics.csv`` (every method and track on the paper scenario) and, when the families
-were run, ``claims_ledger.csv`` (the lateral family) and ``claims_ledger_kinematic_family.csv``
-(the Appendix-A track's family). Rows are matched by their key (track and method; claim and
+were run, ``claims_ledger.csv`` (the lateral family), ``claims_ledger_kinematic_family.csv``
+(the Appendix-A track's family) and ``model_validity.csv`` (does each MPC's model hold, per
+track, frame and method). Rows are matched by their key (track and method; claim and
 comparison), whatever their order. Numbers must agree within ``rel 1e-6 or abs 1e-6``
 (deterministic code; the slack covers floating-point differences between BLAS builds), labels
 and verdicts exactly. ``--update`` rewrites the reference (say why in the commit).
@@ -25,9 +26,11 @@ ABS_TOL = 1e-6
 PAPER_FILE = "paper_metrics.csv"
 LEDGER_FILE = "claims_ledger.csv"
 KINEMATIC_LEDGER_FILE = "claims_ledger_kinematic_family.csv"
+VALIDITY_FILE = "model_validity.csv"
 #: the columns that name a row of each file
 KEYS = {PAPER_FILE: ("track", "method"), LEDGER_FILE: ("claim", "comparison"),
-        KINEMATIC_LEDGER_FILE: ("claim", "comparison")}
+        KINEMATIC_LEDGER_FILE: ("claim", "comparison"),
+        VALIDITY_FILE: ("track", "frame", "method")}
 LEDGER_COLUMNS = ["claim", "comparison", "metric", "outcome", "estimate", "ci_low", "ci_high",
                   "p_holm", "prob_improvement", "n_better", "n_tied", "n_worse", "n_missing",
                   "n_pairs", "outcome_all_pairs", "paper_scenario"]
@@ -135,6 +138,11 @@ def verify(runs_root: Path, reference_dir: Path, update: bool = False) -> list[s
         ledger = ledger_table(runs_root, kinematic=kinematic)
         if ledger is not None:
             fresh[file] = ledger
+    from pipeline.store.collection import model_validity_table
+
+    validity = model_validity_table(runs_root).to_frame()
+    if len(validity):
+        fresh[VALIDITY_FILE] = validity
     if update:
         for name, table in fresh.items():
             write_csv_atomic(reference_dir / name, table)

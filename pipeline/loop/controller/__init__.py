@@ -7,6 +7,8 @@
 * :mod:`~pipeline.loop.controller.lateral`: the paper's lateral MPC;
 * :mod:`~pipeline.loop.controller.kinematic`: Appendix A's kinematic LTV-MPC;
 * :mod:`~pipeline.loop.controller.nmpc`: Appendix A's ``nlmpc`` as a nonlinear MPC (CasADi);
+* :mod:`~pipeline.loop.controller.lateral_nmpc`: the lateral MPC's problem on the nonlinear
+  single-track model (CasADi), the check of its linearization;
 * :mod:`~pipeline.loop.controller.pursuit`: the pure-pursuit peer.
 
 :func:`make_controller` picks one from the configuration.
@@ -47,6 +49,10 @@ def make_controller(cfg: LoopSettings, sample_time_s: float,
 
             return KinematicNmpc(cfg.controller, cfg.vehicle, sample_time_s, qp_cache)
         return KinematicLtvMpc(cfg.controller, cfg.vehicle, sample_time_s, qp_cache)
+    if cfg.controller.backend == "nmpc":
+        from pipeline.loop.controller.lateral_nmpc import LateralNmpc
+
+        return LateralNmpc(cfg.controller, cfg.vehicle, cfg.model, sample_time_s, qp_cache)
     if kind == "pure_pursuit":
         return PurePursuit(cfg.controller, cfg.vehicle, sample_time_s, cfg.model.speed_grid_mps)
     return LateralMpc(cfg.controller, cfg.vehicle, cfg.model, sample_time_s, qp_cache)

@@ -20,6 +20,7 @@ from pipeline.loop.controller.base import ControlStep, Observation, PlanFallback
 from pipeline.loop.controller.lateral import blocking_matrix
 from pipeline.loop.controller.qp import QpCache, compiled_backend
 from pipeline.loop.controller.references import kinematic_halfplanes
+from pipeline.loop.planner import path_at_arc_length
 
 if TYPE_CHECKING:
     import cvxpy as cp
@@ -92,31 +93,12 @@ def build_kinematic_problem(s: KinematicQpStructure) -> tuple[cp.Problem, list, 
     return problem, [x0, u_prev, ref, c, *A, *B, Gx, Gy, h], {"X": X, "U": U}
 
 
-def path_at_arc_length(path_m: np.ndarray, stations_m: np.ndarray) -> np.ndarray:
-    """Points of the polyline ``path_m`` (n, 2) at arc lengths ``stations_m`` from its first
-    point, continued along its last segment beyond its end; shape (len(stations_m), 2). A path
-    that does not move gives its first point."""
-    steps = np.diff(path_m, axis=0)
-    lengths = np.hypot(steps[:, 0], steps[:, 1])
-    keep = lengths > 1e-9
-    if not keep.any():
-        return np.repeat(path_m[:1], len(stations_m), axis=0)
-    points = np.vstack([path_m[:1], path_m[1:][keep]])
-    arc = np.concatenate([[0.0], np.cumsum(lengths[keep])])
-    out = np.column_stack([np.interp(stations_m, arc, points[:, 0]),
-                           np.interp(stations_m, arc, points[:, 1])])
-    beyond = stations_m > arc[-1]
-    if beyond.any():
-        direction = (points[-1] - points[-2]) / (arc[-1] - arc[-2])
-        out[beyond] = points[-1] + (stations_m[beyond] - arc[-1])[:, None] * direction
-    return out
-
-
 class KinematicTrack:
     """What both kinematic-track controllers share: the Euler rollout of a plan and the
     closed-loop step (the APF's time-indexed path as ``y_ref``, as ``nlmpcmove`` receives it;
     constant-velocity obstacle predictions). Subclasses set ``cfg``, ``vehicle``, ``ts``,
-    ``horizon``, ``u_prev``, ``_steps_ahead_s`` and provide ``solve``."""
+    ``horizon``, ``u_prev``, ``_steps_ahead_s``, ``records`` (an empty list: each step's state
+    and plan, for :meth:`model_check`) and provide ``solve``."""
 
     def rollout(self, x0: np.ndarray, plan: np.ndarray) -> np.ndarray:
         """States of the Euler model from ``x0`` under ``plan`` (2 x N), shape (4, N + 1)."""
@@ -158,7 +140,37 @@ class KinematicTrack:
         step.log["steering_rate_rad_s"] = (step.command[1] - u_prev[1]) / self.ts
         step.log["accel_mps2"] = step.command[0]
         self.u_prev = step.command
+        self.records.append((np.asarray(obs.plant_state, float).copy(),
+                        step.predicted_states if step.fallback == "none" else None))
         return step
+
+    def model_check(self, log: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+        """How well each step's prediction held, one value per row of the run's log: the
+        Euler model replayed from the step's state with the inputs then applied (``accel_mps2``,
+        ``delta_rad``), and the plan's own states, against the plant's position 0.5 s and 1 s
+        later (the columns of :func:`~pipeline.loop.controller.path.prediction_check`; the
+        kinematic model has no small-angle assumption, so no heading error)."""
+        from pipeline.loop.controller.path import MODEL_CHECK_COLUMNS
+        from pipeline.loop.model import kinematic_euler_step
+
+        xy = np.column_stack([log["X_m"], log["Y_m"]])
+        inputs = np.column_stack([log["accel_mps2"], log["delta_rad"]])
+        rows = xy.shape[0]
+        out = {name: np.full(rows, np.nan) for name in MODEL_CHECK_COLUMNS}
+        one, half = int(round(1.0 / self.ts)), int(round(0.5 / self.ts))
+        L = self.vehicle.wheelbase_m
+        for k, (x0, plan) in enumerate(self.records[:rows]):
+            steps = min(rows - 1, k + one) - k
+            x = x0
+            for j in range(1, steps + 1):
+                x = kinematic_euler_step(x, inputs[k + j - 1], L, self.ts)
+                if j in (half, one):
+                    suffix = "05s" if j == half else "1s"
+                    out[f"model_error_{suffix}_m"][k] = float(np.hypot(*(x[:2] - xy[k + j])))
+                    if plan is not None and j < plan.shape[1]:
+                        out[f"plan_error_{suffix}_m"][k] = float(np.hypot(
+                            *(plan[:2, j] - xy[k + j])))
+        return out
 
 
 class KinematicLtvMpc(KinematicTrack):
@@ -185,6 +197,7 @@ class KinematicLtvMpc(KinematicTrack):
         self.fallback = PlanFallback(controller.horizon)
         self.u_prev = np.zeros(2)
         self._steps_ahead_s = np.arange(1, controller.horizon + 1) * self.ts
+        self.records: list[tuple] = []
 
     def _linearize(self, x0: np.ndarray, plan: np.ndarray) -> tuple[np.ndarray, np.ndarray,
                                                                      np.ndarray, np.ndarray]:

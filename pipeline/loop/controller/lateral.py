@@ -2,15 +2,23 @@
 
 The QP over ``N`` steps::
 
-    min  sum_k q_y (y_k - y_ref,k)^2 + q_psi (epsi_k - psi_ref,k)^2 + q_r r_k^2 + q_d delta_k^2
-         + r_u u_k^2 + w1 sum(s) + w2 sum(s^2)
+    min  sum_k q_y (y_k - y_ref,k)^2 + q_psi (epsi_k - psi_ref,k)^2 + q_r (r_k - r_ref,k)^2
+         + q_d (delta_k - delta_ref,k)^2 + r_u u_k^2 + w1 sum(s) + w2 sum(s^2)
     s.t. x_{k+1} = Ad x_k + Bd u_k + Ed d_k,  x_0 = measured state
          |u_k| <= delta_dot_max,  |delta_k| <= delta_max,
          u_k = U[min(k, Nc - 1)] (hold_last) or 0 for k >= Nc (zero_rate)
          G_kj y_k + s_kj >= h_kj,  s >= 0   (soft half-plane per obstacle slot j and step k)
 
 The model matrices are parameters, so one compiled problem serves every speed (velocity
-planning) and every scenario; unused obstacle slots get rows that cannot bind. A failed solve
+planning) and every scenario; unused obstacle slots get rows that cannot bind.
+
+``controller.frame`` says what the state is measured against. ``path`` (the default): the
+offset and heading error from a drivable path built from the APF rollout each step
+(:mod:`~pipeline.loop.controller.path`), the path's curvature previewed as the disturbance
+``r_d`` and the references the model's equilibrium on it (``r_ref = r_d``, the steering and
+sideslip that hold it); ``fixed``: the position and heading against the start-goal line, the
+references interpolated on the rollout, ``r_d = 0`` (the earlier reading). Both are the same QP
+with other data. A failed solve
 never raises: the controller takes :class:`~pipeline.loop.controller.base.PlanFallback`.
 
 ``controller.formulation`` chooses how the same QP is stated. ``sparse`` keeps the states as
@@ -32,17 +40,20 @@ read back (:class:`CompiledCondensedQp`).
 from __future__ import annotations
 
 from dataclasses import dataclass
-from math import isfinite
+from math import atan2, isfinite
 from typing import TYPE_CHECKING
 
 import numpy as np
 
 from pipeline.loop.settings import ControllerConfig, ModelConfig, VehicleConfig
 from pipeline.loop.controller.base import ControlStep, Observation, PlanFallback
+from pipeline.loop.controller.path import (PredictionRecord, ReferencePath, chase_path_arrays,
+                                           frame_step_arrays, heading_ramp_path,
+                                           prediction_check, steady_state_gains)
 from pipeline.loop.controller.qp import NON_FINITE_DATA, QpCache, QpSolution, compiled_backend
 from pipeline.loop.controller.references import (collision_halfplanes, force_heading_reference,
                                             lateral_reference)
-from pipeline.loop.model import LateralModel, LateralModelCache, vehicle_key
+from pipeline.loop.model import LateralModel, LateralModelCache, model_speed_mps, vehicle_key
 
 if TYPE_CHECKING:
     import cvxpy as cp
@@ -59,6 +70,18 @@ class MpcInputs:
     constraint_gain: np.ndarray
     constraint_bound: np.ndarray
     disturbance_rad_s: np.ndarray
+    r_ref_rad_s: np.ndarray | None = None
+    delta_ref_rad: np.ndarray | None = None
+
+    def yaw_rate_reference(self) -> np.ndarray:
+        """``r_ref`` over the horizon (zeros when not set)."""
+        return self.r_ref_rad_s if self.r_ref_rad_s is not None \
+            else np.zeros(self.y_ref_m.shape[0])
+
+    def steering_reference(self) -> np.ndarray:
+        """``delta_ref`` over the horizon (zeros when not set)."""
+        return self.delta_ref_rad if self.delta_ref_rad is not None \
+            else np.zeros(self.y_ref_m.shape[0])
 
 
 @dataclass(frozen=True)
@@ -107,6 +130,8 @@ def build_lateral_problem(s: LateralQpStructure) -> tuple[cp.Problem, list, dict
     disturbance = cp.Parameter((5, N), name="Ed_times_d")
     y_ref = cp.Parameter(N, name="y_ref")
     psi_ref = cp.Parameter(N, name="psi_ref")
+    r_ref = cp.Parameter(N, name="r_ref")
+    delta_ref = cp.Parameter(N, name="delta_ref")
     G = cp.Parameter((N, M), name="halfplane_gain")
     h = cp.Parameter((N, M), name="halfplane_bound")
     X = cp.Variable((5, N + 1), name="X")
@@ -114,7 +139,7 @@ def build_lateral_problem(s: LateralQpStructure) -> tuple[cp.Problem, list, dict
     S = cp.Variable((N, M), nonneg=True, name="slack")
     u_seq = U @ blocking
     cost = (q_y * cp.sum_squares(X[0, 1:] - y_ref) + q_psi * cp.sum_squares(X[2, 1:] - psi_ref)
-            + q_r * cp.sum_squares(X[3, 1:]) + q_d * cp.sum_squares(X[4, 1:])
+            + q_r * cp.sum_squares(X[3, 1:] - r_ref) + q_d * cp.sum_squares(X[4, 1:] - delta_ref)
             + r_u * cp.sum_squares(u_seq) + w1 * cp.sum(S) + w2 * cp.sum_squares(S))
     lateral = cp.reshape(X[0, 1:], (N, 1), order="F") @ np.ones((1, M))
     constraints = [
@@ -127,7 +152,8 @@ def build_lateral_problem(s: LateralQpStructure) -> tuple[cp.Problem, list, dict
     problem = cp.Problem(cp.Minimize(cost), constraints)
     if not problem.is_dcp(dpp=True):
         raise RuntimeError("lateral MPC is not DPP; it would recompile every step")
-    return problem, [x0, Ad, Bd, disturbance, y_ref, psi_ref, G, h], {"X": X, "U": U}
+    return problem, [x0, Ad, Bd, disturbance, y_ref, psi_ref, r_ref, delta_ref, G, h], \
+        {"X": X, "U": U}
 
 
 #: Rows of the state that the cost weighs (y, epsi, r, delta) and their weight's index.
@@ -167,6 +193,9 @@ class CondensedPrediction:
         The steering angle's response in the statement's coordinates, ``gamma_d R^-1``.
     chol_inv_flat, steering_gamma_w_flat : ndarray
         The two, column-major and flat (parameters of the CVXPY statement).
+    disturbance_map : ndarray, shape (5 N, N)
+        Response of the states at steps 1..N (step-major) to the disturbances ``r_d`` at steps
+        0..N-1: the free response is ``free_map @ x0 + disturbance_map @ r_d``.
     gradient_map : ndarray, shape (Nc, 4 N)
         ``2 gamma_w'``: the cost's gradient in ``U`` is ``gradient_map @ free_w``.
     """
@@ -186,6 +215,7 @@ class CondensedPrediction:
     steering_gamma_w: np.ndarray
     chol_inv_flat: np.ndarray
     steering_gamma_w_flat: np.ndarray
+    disturbance_map: np.ndarray
 
     @classmethod
     def of(cls, model: LateralModel, blocking: np.ndarray,
@@ -206,6 +236,13 @@ class CondensedPrediction:
             for i in range(k):
                 psi[k - 1, :, i] = impulse[k - 1 - i]
         gamma = psi @ blocking.T
+        # the same for the disturbance: response of x_k to a unit r_d at step i, A^(k-1-i) E
+        disturbance_map = np.zeros((n, 5, n))
+        power = model.Ed[:, 0].copy()
+        for lag in range(n):
+            for k in range(lag + 1, n + 1):
+                disturbance_map[k - 1, :, k - 1 - lag] = power
+            power = Ad @ power
         powers = np.zeros((n, 5, 5))
         power = np.eye(5)
         for k in range(n):
@@ -230,7 +267,8 @@ class CondensedPrediction:
                    root, 2.0 * half_hessian, chol, fortran(chol_rhs_map),
                    fortran(2.0 * gamma_w.T), chol_inv, cost_index, cost_root,
                    steering_gamma_w, chol_inv.ravel(order="F"),
-                   steering_gamma_w.ravel(order="F"))
+                   steering_gamma_w.ravel(order="F"),
+                   fortran(disturbance_map.reshape(-1, n)))
 
     def free_response(self, x0: np.ndarray, disturbance: np.ndarray) -> np.ndarray:
         """States at steps 1..N with ``U = 0`` (shape (N, 5)); ``disturbance`` is (5, N)."""
@@ -335,8 +373,8 @@ def condensed_data(prediction: CondensedPrediction, inputs: "MpcInputs",
     ``prediction`` was built with)."""
     n = inputs.y_ref_m.shape[0]
     if np.count_nonzero(inputs.disturbance_rad_s):
-        disturbance = inputs.model.Ed @ inputs.disturbance_rad_s[None, :]
-        free = prediction.free_response(inputs.x0, disturbance)
+        free = (prediction.free_map @ inputs.x0
+                + prediction.disturbance_map @ inputs.disturbance_rad_s).reshape(n, 5)
     else:
         free = (prediction.free_map @ inputs.x0).reshape(n, 5)
     root = prediction.root_weights
@@ -345,6 +383,10 @@ def condensed_data(prediction: CondensedPrediction, inputs: "MpcInputs",
     free_w = prediction.cost_root * free.ravel()[prediction.cost_index]
     free_w[:n] -= root[0] * inputs.y_ref_m
     free_w[n:2 * n] -= root[1] * inputs.psi_ref_rad
+    if inputs.r_ref_rad_s is not None:
+        free_w[2 * n:3 * n] -= root[2] * inputs.r_ref_rad_s
+    if inputs.delta_ref_rad is not None:
+        free_w[3 * n:] -= root[3] * inputs.delta_ref_rad
     gamma = prediction.gamma
     G, h = inputs.constraint_gain, inputs.constraint_bound  # (N, M)
     # G_kj (y_free,k + gamma_y,k U) + s_kj >= h_kj, rows k-major as S is flattened (C order)
@@ -594,6 +636,9 @@ class LateralMpc:
         self.models = LateralModelCache(vehicle, self.sample_time_s,
                                         self.model_cfg.b2_heading_entry,
                                         self.model_cfg.speed_grid_mps, shared)
+        # models with a stretched prediction step (controller.horizon_reach_m), by step
+        self._qp_cache = qp_cache
+        self._stretched: dict[float, LateralModelCache] = {}
         structure = LateralQpStructure.of(controller, vehicle)
         self.condensed = controller.formulation == "condensed"
         builder = build_condensed_lateral_problem if self.condensed else build_lateral_problem
@@ -621,6 +666,11 @@ class LateralMpc:
         self.compiled_kernels = qp_cache is not None and qp_cache.compiled_kernels
         self._steps_ahead_s = np.arange(1, controller.horizon + 1) * self.sample_time_s
         self._times_s = np.concatenate([[0.0], self._steps_ahead_s])
+        self._gains: dict[float, tuple] = {}   # steady-state gains by model speed
+        self._frame_record: tuple = ()         # the last step's frame, for its record
+        self._plan_poses: tuple | None = None  # the last plan's global poses (path frame)
+        self._speeds = np.zeros(0)             # the last path step's predicted speeds
+        self.records: list[PredictionRecord] = []
 
     @staticmethod
     def parameter_vector(inputs: MpcInputs) -> np.ndarray:
@@ -629,11 +679,41 @@ class LateralMpc:
         return np.concatenate([
             inputs.x0, inputs.model.Ad.ravel(order="F"), inputs.model.Bd.ravel(order="F"),
             disturbance.ravel(order="F"), inputs.y_ref_m, inputs.psi_ref_rad,
+            inputs.yaw_rate_reference(), inputs.steering_reference(),
             inputs.constraint_gain.ravel(order="F"), inputs.constraint_bound.ravel(order="F")])
 
+    def model_at(self, speed_mps: float, step_s: float) -> LateralModel:
+        """The model at ``speed_mps`` discretized with the prediction step ``step_s`` (the
+        sample time, or longer where ``controller.horizon_reach_m`` stretches it)."""
+        if step_s == self.sample_time_s:
+            return self.models.at_speed(speed_mps)
+        cache = self._stretched.get(step_s)
+        if cache is None:
+            cfg = self.model_cfg
+            shared = self._qp_cache.memo(("lateral_models", vehicle_key(self.vehicle), step_s,
+                                          cfg.b2_heading_entry, cfg.speed_grid_mps), dict) \
+                if self._qp_cache is not None else {}
+            cache = self._stretched[step_s] = LateralModelCache(
+                self.vehicle, step_s, cfg.b2_heading_entry, cfg.speed_grid_mps, shared)
+        return cache.at_speed(speed_mps)
+
+    def prediction_step(self, speed_mps: float, speed_ref_mps: float) -> float:
+        """The prediction step (s): the sample time, stretched where the horizon would cover
+        less than ``controller.horizon_reach_m`` at the slower of the measured and the planned
+        speed (on the model's speed grid), so that the half-planes see as far ahead in space
+        at low speed as at the nominal one."""
+        reach = self.cfg.horizon_reach_m
+        if reach is None:
+            return self.sample_time_s
+        vehicle, cfg = self.vehicle, self.model_cfg
+        slow = model_speed_mps(min(speed_mps, speed_ref_mps), vehicle.min_model_speed_mps,
+                               cfg.speed_grid_mps)
+        step = reach / (self.horizon * slow)
+        return self.sample_time_s if step <= self.sample_time_s else round(step, 6)
+
     def prediction(self, model: LateralModel) -> CondensedPrediction:
-        """The condensed prediction of ``model`` (built once per model, i.e. per speed)."""
-        key = model.speed_mps
+        """The condensed prediction of ``model`` (built once per model: speed and step)."""
+        key = (model.speed_mps, model.sample_time_s)
         entry = self._predictions.get(key)
         if entry is None or entry.model is not model:
             entry = self._predictions[key] = CondensedPrediction.of(model, self.blocking,
@@ -676,13 +756,20 @@ class LateralMpc:
                                    float(max(slack, 0.0)), log or {})
         delta = inputs.x0[4] if np.isfinite(inputs.x0[4]) else 0.0
         rate_max = self.vehicle.steering_rate_max_rad_s
-        ts = inputs.model.sample_time_s
+        ts = self.sample_time_s
         return self.fallback.step(
             solution.status, solution.iterations, solution.solve_time_s,
             lambda: np.array([float(np.clip(-delta / ts, -rate_max, rate_max))]), log)
 
     def inputs_from(self, obs: Observation) -> tuple[MpcInputs, dict]:
-        """The QP data of one observation: references from the APF path, half-planes, model."""
+        """The QP data of one observation in the configured frame (``controller.frame``)."""
+        if self.cfg.frame == "path":
+            return self.path_inputs(obs)
+        return self.fixed_inputs(obs)
+
+    def fixed_inputs(self, obs: Observation) -> tuple[MpcInputs, dict]:
+        """The QP data against the start-goal line: references interpolated on the APF path,
+        half-planes about them, no disturbance."""
         ctrl, N = self.cfg, self.horizon
         model = self.models.at_speed(obs.speed_ref_mps)
         line_pos = obs.position_line_m
@@ -704,10 +791,155 @@ class LateralMpc:
                                     self.vehicle, ctrl)
         s = obs.plant_state
         x0 = np.array([line_pos[1], s[4], obs.heading_line_rad, s[5], s[6]])
-        log = {"y_ref_m": y_ref[0], "psi_ref_rad": psi_ref[0]}
+        log = {"y_ref_m": y_ref[0], "psi_ref_rad": psi_ref[0],
+               "path_clipped": bool(abs(np.tan(psi_ref[0])) >= np.tan(ctrl.heading_ref_max_rad)
+                                    - 1e-12) if ctrl.heading_reference == "path_slope"
+               else False}
+        self._frame_record = ("fixed", obs.frame.to_global(np.array([line_pos[0], 0.0])),
+                              obs.frame.heading_rad, model.speed_mps * self._times_s,
+                              self.sample_time_s)
         return MpcInputs(x0, model, y_ref, psi_ref, G, h, np.zeros(N)), log
 
+    def path_inputs(self, obs: Observation) -> tuple[MpcInputs, dict]:
+        """The QP data in path coordinates about the drivable path from the vehicle's pose
+        towards the APF rollout (:meth:`reference_path`; :meth:`path_frame_inputs`)."""
+        N, vehicle = self.horizon, self.vehicle
+        speed = max(float(obs.plant_state[3]), vehicle.min_model_speed_mps)
+        dt = self.prediction_step(speed, float(obs.speed_ref_mps))
+        reach = max(speed, float(obs.speed_ref_mps)) + vehicle.accel_max_mps2 * dt
+        path = self.reference_path(obs, speed * dt, int(np.ceil(N * reach / speed)) + 1)
+        return self.path_frame_inputs(obs, path, dt)
+
+    def path_frame_inputs(self, obs: Observation, path: ReferencePath, dt: float
+                          ) -> tuple[MpcInputs, dict]:
+        """The QP data about ``path`` with prediction step ``dt``: the state as errors from it
+        (the vehicle projected on it), its curvature previewed as ``r_d`` at the stations the
+        predicted speed reaches (:func:`~pipeline.loop.controller.path.frame_step_arrays`),
+        the model's equilibrium on it as the references, and each predicted obstacle projected
+        to ``(s, d)`` for half-planes in ``e_y``. On a path built from the vehicle's pose
+        along its velocity (its course) ``s0 = e_y = 0`` and the heading error is minus the
+        sideslip (what it is in a steady turn on the path)."""
+        ctrl, N, vehicle = self.cfg, self.horizon, self.vehicle
+        st = obs.plant_state
+        speed = max(float(st[3]), vehicle.min_model_speed_mps)
+        gains = self._steady_state(self.models.at_speed(speed))
+        visible = obs.obstacles
+        n_obs = visible.radii_m.shape[0]
+        obstacles = visible.predicted_positions(dt * np.arange(1, N + 1)).reshape(-1, 2) \
+            if n_obs else np.zeros((0, 2))
+        plan_xy, plan_course = self._plan_poses if self._plan_poses is not None \
+            else (np.zeros((0, 2)), np.zeros(0))
+        settings = (path.ds_m, path.n_intervals, float(st[0]), float(st[1]), speed,
+                    float(obs.speed_ref_mps), float(gains[1]), dt, N,
+                    vehicle.speed_time_constant_s, vehicle.accel_max_mps2)
+        if self.compiled_kernels:
+            from pipeline.loop.compiled import frame_step_kernel
+
+            s0, d0, stations, r_d, vx, s_o, d_o = frame_step_kernel(
+                path.points_m, path.headings_rad, path.curvature_1_per_m, *settings,
+                np.ascontiguousarray(plan_xy), np.ascontiguousarray(plan_course),
+                np.ascontiguousarray(obstacles))
+        else:
+            s0, d0, stations, r_d, vx, s_o, d_o = frame_step_arrays(
+                path.points_m.tolist(), path.headings_rad.tolist(),
+                path.curvature_1_per_m.tolist(), *settings, plan_xy.tolist(),
+                plan_course.tolist(), obstacles.tolist())
+        self._speeds = vx
+        model = self.model_at(float(np.mean(vx)), dt)
+        heading_error = float(st[2]) - float(path.heading_at(s0))
+        heading_error = (heading_error + np.pi) % (2.0 * np.pi) - np.pi
+        x0 = np.array([d0, st[4], heading_error, st[5], st[6]])
+        if ctrl.path_state_reference == "steady_state":
+            gains = self._steady_state(model)
+            refs = gains[:, None] * r_d[None, :]  # the state that holds r_d, at steps 1..N
+            psi_ref, r_ref, delta_ref = refs[2], refs[3], refs[4]
+        else:
+            psi_ref = r_ref = delta_ref = np.zeros(N)
+        projected = np.stack([s_o, d_o], axis=-1).reshape(N, n_obs, 2)
+        G, h = collision_halfplanes(stations[1:], np.zeros(N), np.array([s0, d0]), projected,
+                                    visible.radii_m, vehicle, ctrl)
+        first = obs.frame.to_line(path.points_m[1]) if N else obs.position_line_m
+        log = {"y_ref_m": first[1], "psi_ref_rad": path.headings_rad[1] - obs.frame.heading_rad,
+               "path_clipped": bool(np.count_nonzero(
+                   path.clipped[:int(np.ceil(stations[-1] / path.ds_m - 1e-9))])),
+               "path_curvature_1_per_m": path.curvature_1_per_m[0], "r_d_rad_s": r_d[0]}
+        self._frame_record = ("path", path, stations, dt)
+        return MpcInputs(x0, model, np.zeros(N), psi_ref, G, h, r_d, r_ref, delta_ref), log
+
+    def reference_path(self, obs: Observation, ds_m: float, n_intervals: int
+                       ) -> ReferencePath:
+        """The drivable path of one observation: ``n_intervals`` arcs of ``ds_m``."""
+        ctrl, vehicle = self.cfg, self.vehicle
+        kappa_max = ctrl.path_curvature_max_1_per_m if ctrl.path_curvature_max_1_per_m \
+            is not None else np.tan(vehicle.steering_max_rad) / vehicle.wheelbase_m
+        rollout = obs.rollout.path_m
+        line = obs.frame.heading_rad
+        ext = (np.cos(line), np.sin(line))
+        if ctrl.path_beyond_end == "extend":
+            for i in range(rollout.shape[0] - 1, 0, -1):  # the last segment that advances
+                dx, dy = (rollout[i] - rollout[i - 1]).tolist()
+                length = np.hypot(dx, dy)
+                if length > 1e-9:
+                    ext = (dx / length, dy / length)
+                    break
+        st = obs.plant_state
+        course = float(st[2]) + atan2(float(st[4]), max(float(st[3]), 0.1))
+        if ctrl.heading_reference == "apf_force":
+            # Section 3.1's psi_apf / omega_ref as the path's heading (the reading's path)
+            rollout_forces = obs.rollout
+            force = rollout_forces.attraction[0] + rollout_forces.repulsion[0] \
+                if rollout_forces.attraction.shape[0] else np.array([np.cos(line),
+                                                                   np.sin(line)])
+            limits = (line - ctrl.heading_ref_max_rad, line + ctrl.heading_ref_max_rad)
+            arrays = heading_ramp_path(float(st[0]), float(st[1]), course,
+                                       float(np.arctan2(force[1], force[0])),
+                                       ctrl.yaw_rate_ref_max_rad_s, limits, float(kappa_max),
+                                       float(ds_m), self.sample_time_s, int(n_intervals))
+            return ReferencePath(*arrays, float(ds_m))
+        args = (float(st[0]), float(st[1]), course)
+        settings = (float(ext[0]), float(ext[1]), float(ctrl.path_lookahead_m),
+                    float(kappa_max), float(ds_m), int(n_intervals))
+        if self.compiled_kernels:
+            from pipeline.loop.compiled import chase_path_kernel
+
+            arrays = chase_path_kernel(*args, np.ascontiguousarray(rollout, dtype=float),
+                                       *settings)
+        else:
+            arrays = chase_path_arrays(*args, rollout.tolist(), *settings)
+        return ReferencePath(*arrays, float(ds_m))
+
+    def _steady_state(self, model: LateralModel) -> np.ndarray:
+        """:func:`~pipeline.loop.controller.path.steady_state_gains` of ``model`` (of its
+        continuous matrices: one per speed)."""
+        gains = self._gains.get(model.speed_mps)
+        if gains is None:
+            gains = self._gains[model.speed_mps] = steady_state_gains(model)
+        return gains
+
     def step(self, obs: Observation) -> ControlStep:
-        """One closed-loop step."""
+        """One closed-loop step (its prediction kept for :meth:`model_check`)."""
         inputs, log = self.inputs_from(obs)
-        return self.solve(inputs, log)
+        step = self.solve(inputs, log)
+        plan = step.predicted_states[0] if step.predicted_states is not None \
+            and step.fallback == "none" else None
+        self._plan_poses = None
+        if plan is not None and self._frame_record[0] == "path":
+            # the plan's poses (global), for the next step's stations
+            _, path, stations, _ = self._frame_record
+            states = step.predicted_states
+            heading = path.heading_at(stations) + states[2]
+            course = heading + np.arctan2(states[1], np.maximum(self._speeds, 0.1))
+            self._plan_poses = (path.to_global(stations, states[0]), course)
+        self.records.append(PredictionRecord(self._frame_record, inputs.x0,
+                                             self.models.at_speed(inputs.model.speed_mps),
+                                             inputs.disturbance_rad_s, plan))
+        return step
+
+    def model_check(self, log: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+        """How well each step's prediction held (:func:`prediction_check`), one value per row
+        of the run's log (``log``: its columns)."""
+        plant = np.column_stack([log[name] for name in ("X_m", "Y_m", "psi_rad", "delta_rad")])
+        kernel = None
+        if self.compiled_kernels:
+            from pipeline.loop.compiled import check_record_kernel as kernel
+        return prediction_check(self.records, log["time_s"], plant, self.sample_time_s, kernel)

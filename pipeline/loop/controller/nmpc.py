@@ -142,6 +142,7 @@ class KinematicNmpc(KinematicTrack):
         self.u_prev = np.zeros(2)
         self._moves: np.ndarray | None = None
         self._steps_ahead_s = np.arange(1, controller.horizon + 1) * self.ts
+        self.records: list[tuple] = []
 
     def parameters(self, x0: np.ndarray, u_prev: np.ndarray, reference: np.ndarray,
                    halfplanes: tuple[np.ndarray, np.ndarray, np.ndarray]) -> np.ndarray:

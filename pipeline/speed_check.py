@@ -1,0 +1,49 @@
+"""Entry point: ``python -m pipeline.speed_check [--members 200] [--out DIR]`` (``make
+speed-check``): is slower ever less safe? (:mod:`pipeline.studies.speed`)."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+from pipeline.errors import run_study
+from pipeline.studies.speed import VARIANTS, speed_check
+
+__all__ = ["main", "speed_check"]
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog="python -m pipeline.speed_check",
+                                     description=__doc__.split("\n\n")[0])
+    parser.add_argument("--members", type=int, default=200,
+                        help="family members per variant and method (1-10000, default 200)")
+    parser.add_argument("--out", type=Path, default=Path("outputs/speed"))
+    parser.add_argument("--variants", default=",".join(VARIANTS),
+                        help="comma-separated subset of: " + ", ".join(VARIANTS))
+    args = parser.parse_args(argv)
+    if not 1 <= args.members <= 10_000:
+        print(f"--members: {args.members} is not allowed; allowed: an integer in [1, 10000]",
+              file=sys.stderr)
+        return 2
+    variants = tuple(v.strip() for v in args.variants.split(",") if v.strip())
+    unknown = [v for v in variants if v not in VARIANTS]
+    if unknown or not variants:
+        print(f"--variants: {','.join(unknown) or '(none)'} is not allowed; allowed: "
+              + ", ".join(VARIANTS), file=sys.stderr)
+        return 2
+    from pipeline.studies.multiverse import composer
+
+    code, summary = run_study(lambda: speed_check(
+        composer([])[0], args.out, args.members,
+        log=lambda m: print(m, file=sys.stderr, flush=True), variants=variants))
+    if code:
+        return code
+    print(json.dumps(summary["checks"], indent=1))
+    print(f"speed check written to {args.out.resolve()}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
