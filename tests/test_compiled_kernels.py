@@ -158,7 +158,7 @@ def test_compiled_chase_gives_the_paths_bits():
         rollout = np.cumsum(steps, axis=0) + rng.normal(0, 2, 2)
         angle = rng.uniform(-np.pi, np.pi)
         args = (float(rollout[0, 0]), float(rollout[0, 1]), float(rng.uniform(-3, 3)),
-                rollout, float(np.cos(angle)), float(np.sin(angle)),
+                rollout, float(np.cos(angle)), float(np.sin(angle)), bool(case % 3),
                 float(rng.uniform(0.5, 5.0)), float(rng.uniform(0.05, 0.5)),
                 float(rng.uniform(0.05, 0.5)), int(rng.integers(1, 14)))
         plain = chase_path_arrays(*args[:3], rollout.tolist(), *args[4:])
@@ -170,19 +170,22 @@ def test_compiled_chase_gives_the_paths_bits():
 
 
 def test_compiled_frame_step_and_check_give_the_same_bits():
-    """One step's path-frame data and one record's prediction check, compiled and in CPython:
+    """One step's path-frame data, a plan's poses and one record's prediction check, compiled
+    and in CPython:
     paths that bend and clip, stations with and without a previous plan, obstacles on both
     sides and behind, records whose window ends early, prediction steps longer than the
     sample time."""
-    from pipeline.loop.compiled import chase_path_kernel, check_record_kernel, frame_step_kernel
-    from pipeline.loop.controller.path import check_record_arrays, frame_step_arrays
+    from pipeline.loop.compiled import (chase_path_kernel, check_record_kernel,
+                                        frame_step_kernel, plan_poses_kernel)
+    from pipeline.loop.controller.path import (check_record_arrays, frame_step_arrays,
+                                               plan_poses_arrays)
 
     rng = np.random.default_rng(9)
     for case in range(120):
         rollout = np.cumsum(rng.normal(0.3, 0.3, (8, 2)), axis=0)
         ds = float(rng.uniform(0.1, 0.4))
         path = chase_path_kernel(0.0, 0.0, float(rng.uniform(-1, 1)), rollout, 1.0, 0.0,
-                                 2.5, 0.2, ds, 14)
+                                 True, 2.5, 0.2, ds, 14)
         points, headings, curvature, _ = path
         m = int(rng.choice([0, 11]))
         plan_xy = rng.normal(0, 1, (m, 2)) + np.column_stack([np.arange(m) * ds, np.zeros(m)])
@@ -198,7 +201,14 @@ def test_compiled_frame_step_and_check_give_the_same_bits():
                                   obstacles.tolist())
         for a, b in zip(plain, fast):
             assert np.array_equal(a, b), case
-        stations = fast[2]
+        stations = fast[3]
+        poses = (stations, rng.normal(0, 0.5, 11), rng.normal(0, 0.2, 11),
+                 rng.normal(0, 0.3, 11), rng.uniform(-0.5, 4, 11))
+        fast_poses = plan_poses_kernel(points, headings, curvature, ds, 14, *poses)
+        plain_poses = plan_poses_arrays(points.tolist(), headings.tolist(), curvature.tolist(),
+                                        ds, 14, *(p.tolist() for p in poses))
+        for a, b in zip(plain_poses, fast_poses):
+            assert np.array_equal(a, b), case
         rows = 14
         xy = np.cumsum(rng.normal(0.3, 0.05, (rows, 2)), axis=0)
         psi, delta = rng.normal(0, 0.3, rows), rng.normal(0, 0.2, rows)

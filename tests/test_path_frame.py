@@ -89,14 +89,14 @@ def test_chase_is_pure_pursuit_and_clips_at_the_curvature_limit():
     lookahead = 2.0
     goal = np.array([lookahead / np.sqrt(2), lookahead / np.sqrt(2)])
     alpha = np.arctan2(goal[1], goal[0])
-    args = (0.0, 0.0, 0.0, rollout.tolist(), 1 / np.sqrt(2), 1 / np.sqrt(2), lookahead)
+    args = (0.0, 0.0, 0.0, rollout.tolist(), 1.0, 0.0, True, lookahead)
     points, headings, curvature, clipped = chase_path_arrays(*args, 5.0, 0.1, 4)
     assert curvature[0] == pytest.approx(2 * np.sin(alpha) / lookahead, rel=1e-12)
     assert not clipped[0]
     _, _, limited, clipped = chase_path_arrays(*args, 0.1, 0.1, 4)
     assert limited[0] == 0.1 and clipped[0]
-    straight = chase_path_arrays(0.0, 0.0, 0.0, [[0.0, 0.0], [1.0, 0.0]], 1.0, 0.0, 2.5, 0.2,
-                                 0.3, 6)
+    straight = chase_path_arrays(0.0, 0.0, 0.0, [[0.0, 0.0], [1.0, 0.0]], 0.0, 1.0, True,
+                                 2.5, 0.2, 0.3, 6)
     assert np.all(straight[2] == 0.0) and np.allclose(straight[0][:, 1], 0.0)
     np.testing.assert_allclose(straight[0][:, 0], 0.3 * np.arange(7), atol=1e-12)
 

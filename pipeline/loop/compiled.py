@@ -10,9 +10,10 @@ by CPython in a single run and by numba in the family runner's workers.
   rollout (about 65 us and 20 us with the call);
 * :func:`reference_kernel` is :func:`pipeline.loop.controller.references.reference_arrays`,
   the lateral MPC's references at its stations (about 35 us and 10 us with the call);
-* :func:`chase_path_kernel`, :func:`frame_step_kernel` and :func:`check_record_kernel` are the
-  path frame's statements (:mod:`pipeline.loop.controller.path`): the drivable path, one
-  step's stations and obstacle coordinates, one step's prediction check.
+* :func:`chase_path_kernel`, :func:`frame_step_kernel`, :func:`plan_poses_kernel` and
+  :func:`check_record_kernel` are the path frame's statements
+  (:mod:`pipeline.loop.controller.path`): the drivable path, one step's stations and obstacle
+  coordinates, a plan's poses, one step's prediction check.
 
 Compiled without fast-math, they do the same operations in the same order on the same C
 library's ``atan2``, ``tanh``, ``exp``, ``cos`` and ``sin``, so they give the same bits (the
@@ -74,4 +75,5 @@ for _helper in (path._heading_at, path._curvature_at, path._project_point, path.
 
 chase_path_kernel = _jit(path.chase_path_arrays)
 frame_step_kernel = _jit(path.frame_step_arrays)
+plan_poses_kernel = _jit(path.plan_poses_arrays)
 check_record_kernel = _jit(path.check_record_arrays)

@@ -40,7 +40,7 @@ read back (:class:`CompiledCondensedQp`).
 from __future__ import annotations
 
 from dataclasses import dataclass
-from math import atan2, isfinite
+from math import atan2, isfinite, pi
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -49,6 +49,7 @@ from pipeline.loop.settings import ControllerConfig, ModelConfig, VehicleConfig
 from pipeline.loop.controller.base import ControlStep, Observation, PlanFallback
 from pipeline.loop.controller.path import (PredictionRecord, ReferencePath, chase_path_arrays,
                                            frame_step_arrays, heading_ramp_path,
+                                           plan_poses_arrays,
                                            prediction_check, steady_state_gains)
 from pipeline.loop.controller.qp import NON_FINITE_DATA, QpCache, QpSolution, compiled_backend
 from pipeline.loop.controller.references import (collision_halfplanes, force_heading_reference,
@@ -670,6 +671,8 @@ class LateralMpc:
         self._frame_record: tuple = ()         # the last step's frame, for its record
         self._plan_poses: tuple | None = None  # the last plan's global poses (path frame)
         self._speeds = np.zeros(0)             # the last path step's predicted speeds
+        self._step_times: dict[float, np.ndarray] = {}  # prediction times by step
+        self._no_points, self._no_values = np.zeros((0, 2)), np.zeros(0)
         self.records: list[PredictionRecord] = []
 
     @staticmethod
@@ -825,29 +828,31 @@ class LateralMpc:
         gains = self._steady_state(self.models.at_speed(speed))
         visible = obs.obstacles
         n_obs = visible.radii_m.shape[0]
-        obstacles = visible.predicted_positions(dt * np.arange(1, N + 1)).reshape(-1, 2) \
-            if n_obs else np.zeros((0, 2))
+        times = self._step_times.get(dt)
+        if times is None:
+            times = self._step_times[dt] = dt * np.arange(1, N + 1)
+        obstacles = visible.predicted_positions(times).reshape(-1, 2) if n_obs \
+            else self._no_points
         plan_xy, plan_course = self._plan_poses if self._plan_poses is not None \
-            else (np.zeros((0, 2)), np.zeros(0))
+            else (self._no_points, self._no_values)
         settings = (path.ds_m, path.n_intervals, float(st[0]), float(st[1]), speed,
                     float(obs.speed_ref_mps), float(gains[1]), dt, N,
                     vehicle.speed_time_constant_s, vehicle.accel_max_mps2)
         if self.compiled_kernels:
             from pipeline.loop.compiled import frame_step_kernel
 
-            s0, d0, stations, r_d, vx, s_o, d_o = frame_step_kernel(
+            s0, d0, heading0, stations, r_d, vx, s_o, d_o = frame_step_kernel(
                 path.points_m, path.headings_rad, path.curvature_1_per_m, *settings,
                 np.ascontiguousarray(plan_xy), np.ascontiguousarray(plan_course),
                 np.ascontiguousarray(obstacles))
         else:
-            s0, d0, stations, r_d, vx, s_o, d_o = frame_step_arrays(
+            s0, d0, heading0, stations, r_d, vx, s_o, d_o = frame_step_arrays(
                 path.points_m.tolist(), path.headings_rad.tolist(),
                 path.curvature_1_per_m.tolist(), *settings, plan_xy.tolist(),
                 plan_course.tolist(), obstacles.tolist())
         self._speeds = vx
-        model = self.model_at(float(np.mean(vx)), dt)
-        heading_error = float(st[2]) - float(path.heading_at(s0))
-        heading_error = (heading_error + np.pi) % (2.0 * np.pi) - np.pi
+        model = self.model_at(sum(vx.tolist()) / vx.shape[0], dt)
+        heading_error = (float(st[2]) - heading0 + pi) % (2.0 * pi) - pi
         x0 = np.array([d0, st[4], heading_error, st[5], st[6]])
         if ctrl.path_state_reference == "steady_state":
             gains = self._steady_state(model)
@@ -855,7 +860,8 @@ class LateralMpc:
             psi_ref, r_ref, delta_ref = refs[2], refs[3], refs[4]
         else:
             psi_ref = r_ref = delta_ref = np.zeros(N)
-        projected = np.stack([s_o, d_o], axis=-1).reshape(N, n_obs, 2)
+        projected = np.empty((N, n_obs, 2))
+        projected[:, :, 0], projected[:, :, 1] = s_o.reshape(N, n_obs), d_o.reshape(N, n_obs)
         G, h = collision_halfplanes(stations[1:], np.zeros(N), np.array([s0, d0]), projected,
                                     visible.radii_m, vehicle, ctrl)
         first = obs.frame.to_line(path.points_m[1]) if N else obs.position_line_m
@@ -874,14 +880,6 @@ class LateralMpc:
             is not None else np.tan(vehicle.steering_max_rad) / vehicle.wheelbase_m
         rollout = obs.rollout.path_m
         line = obs.frame.heading_rad
-        ext = (np.cos(line), np.sin(line))
-        if ctrl.path_beyond_end == "extend":
-            for i in range(rollout.shape[0] - 1, 0, -1):  # the last segment that advances
-                dx, dy = (rollout[i] - rollout[i - 1]).tolist()
-                length = np.hypot(dx, dy)
-                if length > 1e-9:
-                    ext = (dx / length, dy / length)
-                    break
         st = obs.plant_state
         course = float(st[2]) + atan2(float(st[4]), max(float(st[3]), 0.1))
         if ctrl.heading_reference == "apf_force":
@@ -897,8 +895,10 @@ class LateralMpc:
                                        float(ds_m), self.sample_time_s, int(n_intervals))
             return ReferencePath(*arrays, float(ds_m))
         args = (float(st[0]), float(st[1]), course)
-        settings = (float(ext[0]), float(ext[1]), float(ctrl.path_lookahead_m),
-                    float(kappa_max), float(ds_m), int(n_intervals))
+        cos_line, sin_line = obs.frame.cos_sin
+        settings = (float(cos_line), float(sin_line), ctrl.path_beyond_end == "extend",
+                    float(ctrl.path_lookahead_m), float(kappa_max), float(ds_m),
+                    int(n_intervals))
         if self.compiled_kernels:
             from pipeline.loop.compiled import chase_path_kernel
 
@@ -927,11 +927,21 @@ class LateralMpc:
             # the plan's poses (global), for the next step's stations
             _, path, stations, _ = self._frame_record
             states = step.predicted_states
-            heading = path.heading_at(stations) + states[2]
-            course = heading + np.arctan2(states[1], np.maximum(self._speeds, 0.1))
-            self._plan_poses = (path.to_global(stations, states[0]), course)
-        self.records.append(PredictionRecord(self._frame_record, inputs.x0,
-                                             self.models.at_speed(inputs.model.speed_mps),
+            arrays = (path.points_m, path.headings_rad, path.curvature_1_per_m)
+            rows = (stations, states[0], states[2], states[1], self._speeds)
+            if self.compiled_kernels:
+                from pipeline.loop.compiled import plan_poses_kernel
+
+                self._plan_poses = plan_poses_kernel(
+                    *arrays, path.ds_m, path.n_intervals,
+                    *(np.ascontiguousarray(r) for r in rows))
+            else:
+                self._plan_poses = plan_poses_arrays(
+                    *(a.tolist() for a in arrays), path.ds_m, path.n_intervals,
+                    *(r.tolist() for r in rows))
+        model = inputs.model if inputs.model.sample_time_s == self.sample_time_s \
+            else self.models.at_speed(inputs.model.speed_mps)  # the replay's, at the log's rate
+        self.records.append(PredictionRecord(self._frame_record, inputs.x0, model,
                                              inputs.disturbance_rad_s, plan))
         return step
 

@@ -41,8 +41,8 @@ from pipeline.loop.model import LateralModel
 _TINY = 1e-9
 
 
-def chase_path_arrays(px, py, heading, target, ext_x, ext_y, lookahead_m, kappa_max, ds_m,
-                      n_intervals):
+def chase_path_arrays(px, py, heading, target, line_x, line_y, extend, lookahead_m, kappa_max,
+                      ds_m, n_intervals):
     """The drivable path of :mod:`this module <pipeline.loop.controller.path>` on plain
     numbers: ``points (n + 1, 2), headings (n + 1,), curvature (n,), clipped (n,)``.
 
@@ -53,9 +53,12 @@ def chase_path_arrays(px, py, heading, target, ext_x, ext_y, lookahead_m, kappa_
     target : sequence of [x, y]
         The APF rollout (its first point is the vehicle's position); points that do not advance
         by more than 1e-9 m are dropped.
-    ext_x, ext_y : float
-        Unit direction of the ray that extends the rollout beyond its last point (used as the
-        whole target when the rollout does not advance).
+    line_x, line_y : float
+        Unit direction of the start-goal line.
+    extend : bool
+        Extend the rollout beyond its last point along its last segment that advances
+        (``path_beyond_end=extend``), else parallel to the line (``hold``, and a rollout that
+        does not advance).
     lookahead_m, kappa_max, ds_m : float
         Chase look-ahead (m), curvature limit (1/m), arc length per interval (m).
     n_intervals : int
@@ -78,6 +81,10 @@ def chase_path_arrays(px, py, heading, target, ext_x, ext_y, lookahead_m, kappa_
     for i in range(n_seg):
         sx, sy = tx[i + 1] - tx[i], ty[i + 1] - ty[i]
         lengths[i + 1] = lengths[i] + sqrt(sx * sx + sy * sy)
+    ext_x, ext_y = line_x, line_y
+    if extend and n_seg > 0:
+        last = lengths[n_seg] - lengths[n_seg - 1]
+        ext_x, ext_y = (tx[n_seg] - tx[n_seg - 1]) / last, (ty[n_seg] - ty[n_seg - 1]) / last
     n = n_intervals
     points = np.empty((n + 1, 2))
     headings = np.empty(n + 1)
@@ -367,9 +374,10 @@ def frame_step_arrays(points, headings, curvature, ds, n, px, py, speed, speed_r
                       ts, n_steps, time_constant, accel_max, plan_xy, plan_course, obstacles):
     """One step's path-frame data on plain numbers: the vehicle's path coordinates, where it
     will be along the path at each step, the yaw rate the path then demands, and each obstacle
-    point in path coordinates. Returns ``s0, d0`` and arrays ``stations (n_steps + 1,), r_d
-    (n_steps,), vx (n_steps + 1,), obstacle_s, obstacle_d (len(obstacles),)``; the stations
-    start at the vehicle's ``s0`` (0 on a path built from its pose).
+    point in path coordinates. Returns ``s0, d0``, the path's heading at ``s0``, and arrays
+    ``stations (n_steps + 1,), r_d (n_steps,), vx (n_steps + 1,), obstacle_s, obstacle_d
+    (len(obstacles),)``; the stations start at the vehicle's ``s0`` (0 on a path built from
+    its pose).
 
     The stations follow the plant's speed loop (first order towards ``speed_ref`` with the
     vehicle's time constant and acceleration limit) plus its ``vy r`` term (in a turn the
@@ -409,6 +417,7 @@ def frame_step_arrays(points, headings, curvature, ds, n, px, py, speed, speed_r
     decay = 1.0 - exp(-ts / time_constant)
     limit = accel_max * ts
     s0, d0 = _project_point(px, py, points, headings, ds, n)
+    heading0 = _heading_at(s0, headings, curvature, ds, n)
     r_d = np.zeros(N)
     stations = np.full(N + 1, s0)
     vx = np.empty(N + 1)
@@ -441,7 +450,23 @@ def frame_step_arrays(points, headings, curvature, ds, n, px, py, speed, speed_r
     for i in range(q):
         obstacle_s[i], obstacle_d[i] = _project_point(obstacles[i][0], obstacles[i][1], points,
                                                       headings, ds, n)
-    return s0, d0, stations, r_d, vx, obstacle_s, obstacle_d
+    return s0, d0, heading0, stations, r_d, vx, obstacle_s, obstacle_d
+
+
+def plan_poses_arrays(points, headings, curvature, ds, n, stations, lateral, heading_error,
+                      vy, vx):
+    """A plan's poses on plain numbers: the global position of each of its steps (at its
+    station, ``lateral`` off the path) and its course (the path's heading there plus the
+    heading error, plus the sideslip ``atan2(vy, vx)``): arrays ``xy (m, 2), course (m,)``."""
+    m = len(stations)
+    xy = np.empty((m, 2))
+    course = np.empty(m)
+    for k in range(m):
+        xy[k, 0], xy[k, 1] = _point_at(stations[k], lateral[k], points, headings, ds, n)
+        forward = vx[k] if vx[k] > 0.1 else 0.1
+        course[k] = (_heading_at(stations[k], headings, curvature, ds, n) + heading_error[k]
+                     + atan2(vy[k], forward))
+    return xy, course
 
 
 def check_record_arrays(points, headings, curvature, ds, n, stations, step, x0, Ad, Bd, Ed,
