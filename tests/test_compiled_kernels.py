@@ -12,11 +12,11 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from pipeline.loop.compiled import apf_rollout_kernel, single_track_rk4
+from pipeline.loop.compiled import COMPILED_KERNELS, apf_rollout_kernel, single_track_rk4
 from pipeline.loop.controller import QpCache, lateral_reference
+from pipeline.loop.python_kernels import PYTHON_KERNELS
 from pipeline.loop.model import SINGLE_TRACK_CONSTANT_NAMES, single_track_constants, step_plant
-from pipeline.loop.planner import (APF_SETTING_NAMES, ApfPlanner, apf_kernel_settings,
-                                   apf_rollout)
+from pipeline.loop.planner import ApfPlanner, ApfSettings, apf_kernel_settings, apf_rollout
 from pipeline.loop.scenario import ObstacleSnapshot, build_scenario, family_members
 from pipeline.loop.simulate import SingleTrackPlant, simulate
 
@@ -47,7 +47,8 @@ def test_compiled_plant_is_what_the_plant_object_steps(make_config):
     """Both plant objects step as step_plant does (the rate saturated)."""
     cfg = make_config()
     scenario = build_scenario(cfg.scenario)
-    python, compiled = SingleTrackPlant(cfg, scenario), SingleTrackPlant(cfg, scenario, True)
+    python = SingleTrackPlant(cfg, scenario)
+    compiled = SingleTrackPlant(cfg, scenario, COMPILED_KERNELS)
     assert compiled._kernel is single_track_rk4 and python._kernel is not single_track_rk4
     state = python.initial_state(scenario)
     for rate in (0.0, 0.2, -5.0, 5.0):
@@ -84,7 +85,7 @@ def test_compiled_rollout_gives_apf_rollouts_bits_for_every_switch(make_config, 
                          step_min_m=step_min, step_max_m=step_max,
                          closing_speed_gain_s_per_m=gain)
         settings = apf_kernel_settings(params)
-        assert settings.shape == (len(APF_SETTING_NAMES),)
+        assert isinstance(settings, ApfSettings) and settings.h_max == params.h_max
         # on the obstacle, beside it, far away; with and without the vehicle's velocity
         for start, velocity in (([10.0, 0.3], [3.0, 0.1]), ([11.5, 0.9], None),
                                 ([0.0, 0.0], [1.0, 0.0])):
@@ -92,7 +93,7 @@ def test_compiled_rollout_gives_apf_rollouts_bits_for_every_switch(make_config, 
             velocity = None if velocity is None else np.array(velocity)
             for horizon in (0, 1, 10):
                 expected = apf_rollout(start, goal, snap, params, horizon, 0.1, velocity)
-                got = ApfPlanner(params, horizon, 0.1, compiled=True).rollout(
+                got = ApfPlanner(params, horizon, 0.1, COMPILED_KERNELS).rollout(
                     start, goal, snap, velocity)
                 for field in ("path_m", "attraction", "repulsion", "step_cap_active",
                               "step_min_active"):
@@ -134,7 +135,7 @@ def test_compiled_reference_gives_the_references_bits(make_config, beyond):
         if case % 7 == 0:
             stations = stations[::-1].copy()
         plain = lateral_reference(path, stations, ctrl)
-        fast = lateral_reference(path, stations, ctrl, compiled=True)
+        fast = lateral_reference(path, stations, ctrl, COMPILED_KERNELS)
         assert np.array_equal(plain[0], fast[0]) and np.array_equal(plain[1], fast[1]), case
         # where the path advances, the interpolation is np.interp's
         if np.all(np.diff(xs) > 1e-9) and n > 1:
@@ -177,8 +178,8 @@ def test_compiled_frame_step_and_check_give_the_same_bits():
     sample time."""
     from pipeline.loop.compiled import (chase_path_kernel, check_record_kernel,
                                         frame_step_kernel, plan_poses_kernel)
-    from pipeline.loop.controller.path import (check_record_arrays, frame_step_arrays,
-                                               plan_poses_arrays)
+    from pipeline.loop.controller.path import frame_step_arrays, plan_poses_arrays
+    from pipeline.loop.controller.prediction_check import check_record_arrays
 
     rng = np.random.default_rng(9)
     for case in range(120):
@@ -228,11 +229,11 @@ def test_compiled_frame_step_and_check_give_the_same_bits():
 
 @pytest.mark.parametrize("frame", ["path", "fixed"])
 @pytest.mark.parametrize("method", ["improved", "baseline"])
-def test_closed_loop_with_kernels_is_the_closed_loop_without(make_config, monkeypatch, method,
-                                                             frame):
-    import pipeline.loop.compiled as compiled
-
-    calls = {"plant": 0, "rollout": 0, "reference": 0, "chase": 0}
+def test_closed_loop_with_kernels_is_the_closed_loop_without(make_config, method, frame):
+    """A run with the compiled kernels, counted, against the run with CPython's: every step
+    through the compiled plant, rollout and references (the path frame's chase, or the fixed
+    frame's interpolation), the same trajectory bit for bit; the cache's flag chooses them."""
+    calls = {"plant": 0, "rollout": 0, "references": 0, "chase": 0}
 
     def counting(name, kernel):
         def wrapped(*args):
@@ -240,29 +241,33 @@ def test_closed_loop_with_kernels_is_the_closed_loop_without(make_config, monkey
             return kernel(*args)
         return wrapped
 
-    monkeypatch.setattr(compiled, "single_track_rk4",
-                        counting("plant", compiled.single_track_rk4))
-    monkeypatch.setattr(compiled, "apf_rollout_kernel",
-                        counting("rollout", compiled.apf_rollout_kernel))
-    monkeypatch.setattr(compiled, "reference_kernel",
-                        counting("reference", compiled.reference_kernel))
-    monkeypatch.setattr(compiled, "chase_path_kernel",
-                        counting("chase", compiled.chase_path_kernel))
+    counted = COMPILED_KERNELS._replace(
+        plant_rk4=counting("plant", COMPILED_KERNELS.plant_rk4),
+        apf_rollout=counting("rollout", COMPILED_KERNELS.apf_rollout),
+        references=counting("references", COMPILED_KERNELS.references),
+        chase_path=counting("chase", COMPILED_KERNELS.chase_path))
     cfg = make_config([f"method={method}", "scenario=family", "scenario.family.size=3",
                        f"controller.frame={frame}"])
-    references = "chase" if frame == "path" else "reference"
+    references = "chase" if frame == "path" else "references"
     for member in family_members(cfg.scenario, cfg.vehicle.footprint_radius_m):
         member_cfg = replace(cfg, scenario=member)
         scenario = build_scenario(member)
         before = dict(calls)
         plain = simulate(member_cfg, scenario, QpCache())
-        assert calls == before  # the default: no kernel
-        fast = simulate(member_cfg, scenario, QpCache(compiled_kernels=True))
+        assert calls == before  # the default: CPython's
+        fast = simulate(member_cfg, scenario, QpCache(), counted)
         steps = len(fast.trajectory) - 1
         assert calls["plant"] - before["plant"] == steps
         assert calls["rollout"] - before["rollout"] == steps
         assert calls[references] - before[references] == steps
         assert fast.trajectory.equals(plain.trajectory)
+        # the flag a family runner sets chooses the compiled set
+        flagged = simulate(member_cfg, scenario, QpCache(compiled_kernels=True))
+        assert flagged.trajectory.equals(plain.trajectory)
+    from pipeline.loop.simulate import run_kernels
+
+    assert run_kernels(QpCache(compiled_kernels=True)) is COMPILED_KERNELS
+    assert run_kernels(QpCache()) is PYTHON_KERNELS and run_kernels(None) is PYTHON_KERNELS
 
 
 def test_family_runner_turns_the_kernels_on_after_enough_members(make_config, tmp_path,

@@ -10,7 +10,7 @@ from scipy.optimize import minimize
 
 from pipeline.loop.controller import (LateralMpc, MpcInputs, QpCache, blocking_matrix,
                                  collision_halfplanes)
-from pipeline.loop.controller.lateral import LateralQpStructure, build_lateral_problem
+from pipeline.loop.controller.lateral_qp import LateralQpStructure, build_lateral_problem
 from pipeline.loop.model import build_lateral_model
 
 
@@ -311,7 +311,7 @@ def test_condensed_qp_equals_the_sparse_qp_where_slacks_bind(make_config, monkey
 def test_condensed_prediction_matches_the_recurrence():
     """Gamma U + free response equals stepping x_{k+1} = A x_k + B u_k + e_k (oracle: the
     recurrence itself, u from the move-blocking rule)."""
-    from pipeline.loop.controller.lateral import CondensedPrediction, blocking_matrix
+    from pipeline.loop.controller.lateral_qp import CondensedPrediction, blocking_matrix
     from pipeline.loop.model import build_lateral_model
     from pipeline.loop.settings import VehicleConfig
 
@@ -344,7 +344,8 @@ def test_daqp_backend_solves_the_same_qps_as_clarabel(make_config, overrides, me
     steering bound switches, so they are compared per QP, on identical data)."""
     import dataclasses
 
-    import pipeline.loop.controller.lateral as lateral
+    import pipeline.loop.controller.lateral_backends as backends
+    import pipeline.loop.controller.lateral_qp as lateral_qp
     from pipeline.loop.controller.qp import DirectQp, compile_affine_map
     from pipeline.loop.scenario import build_scenario, family_members
     from pipeline.loop.simulate import simulate
@@ -357,11 +358,11 @@ def test_daqp_backend_solves_the_same_qps_as_clarabel(make_config, overrides, me
     trajectory = simulate(cfg, build_scenario(cfg.scenario)).trajectory
     if member is not None:
         assert np.nanmax(trajectory["max_slack_m"].to_numpy(float)) > 0.05  # slacks bind
-    s = lateral.LateralQpStructure.of(cfg.controller, cfg.vehicle)
-    clarabel = lateral.CompiledCondensedQp(
-        DirectQp(compile_affine_map(*lateral.build_condensed_lateral_problem(s)), 200))
-    daqp = lateral.DaqpCondensedQp(s, 200)
-    dense = lateral.ClarabelCondensedQp(s, 200)  # backend clarabel_dense: the same QP again
+    s = lateral_qp.LateralQpStructure.of(cfg.controller, cfg.vehicle)
+    clarabel = backends.CompiledCondensedQp(
+        DirectQp(compile_affine_map(*lateral_qp.build_condensed_lateral_problem(s)), 200))
+    daqp = backends.DaqpCondensedQp(s, 200)
+    dense = backends.ClarabelCondensedQp(s, 200)  # backend clarabel_dense: the same QP again
     T = blocking_matrix(s.horizon, s.control_horizon, s.input_hold)
 
     def cost(data, U):
@@ -411,7 +412,8 @@ def test_kept_dense_workspaces_follow_speed_changes(make_config, monkeypatch, ba
     every QP's u0 equals a fresh ``daqp.solve`` of the same data (the oracle: no kept state)."""
     import daqp
 
-    import pipeline.loop.controller.lateral as lateral
+    import pipeline.loop.controller.lateral_backends as backends
+    import pipeline.loop.controller.lateral_qp as lateral_qp
     from pipeline.loop.scenario import build_scenario
     from pipeline.loop.simulate import simulate
 
@@ -424,10 +426,10 @@ def test_kept_dense_workspaces_follow_speed_changes(make_config, monkeypatch, ba
     trajectory = simulate(cfg, build_scenario(cfg.scenario)).trajectory
     assert trajectory["speed_ref_mps"].nunique() > 2  # the model changed during the run
     assert len({id(d.hessian_u) for d in captured}) > 2
-    s = lateral.LateralQpStructure.of(cfg.controller, cfg.vehicle)
-    kept = lateral.DaqpCondensedQp(s, 200) if backend == "daqp" \
-        else lateral.ClarabelCondensedQp(s, 200)
-    fresh = lateral.DaqpCondensedQp(s, 200)
+    s = lateral_qp.LateralQpStructure.of(cfg.controller, cfg.vehicle)
+    kept = backends.DaqpCondensedQp(s, 200) if backend == "daqp" \
+        else backends.ClarabelCondensedQp(s, 200)
+    fresh = backends.DaqpCondensedQp(s, 200)
     for data in captured:
         got = kept.solve(data)
         H, f = fresh.cost(data)

@@ -12,8 +12,8 @@ import numpy as np
 import pytest
 
 from pipeline.loop.controller import LateralMpc, Observation
-from pipeline.loop.controller.path import (PredictionRecord, ReferencePath, chase_path_arrays,
-                                           prediction_check, steady_state_gains)
+from pipeline.loop.controller.path import ReferencePath, chase_path_arrays, steady_state_gains
+from pipeline.loop.controller.prediction_check import PredictionRecord, prediction_check
 from pipeline.loop.model import build_lateral_model, step_plant
 from pipeline.loop.planner import ApfRollout, apf_rollout, plan_speed
 from pipeline.loop.scenario import LineFrame, ObstacleSnapshot
@@ -155,7 +155,7 @@ def test_on_a_straight_reference_the_path_frame_is_the_fixed_frame(make_config, 
     fixed_inputs, _ = fixed.inputs_from(obs)
     mpc = LateralMpc(path_cfg.controller, path_cfg.vehicle)
     line = ReferencePath.straight(np.array([0.0, 0.0]), 0.0, 0.3, 70)
-    path_inputs, _ = mpc.path_frame_inputs(obs, line, 0.1)
+    path_inputs, _ = mpc.frame.inputs_about(obs, line, 0.1)
     assert not np.count_nonzero(path_inputs.disturbance_rad_s)
     np.testing.assert_allclose(path_inputs.x0, fixed_inputs.x0, atol=1e-12)
     np.testing.assert_allclose(path_inputs.constraint_gain, fixed_inputs.constraint_gain,
@@ -282,14 +282,14 @@ def test_horizon_reach_stretches_the_prediction_step_at_low_speed(make_config):
     state = np.array([10.0, 0.0, 0.0, 1.5, 0.0, 0.0, 0.0])
     rollout = straight_rollout([10.0, 0.0])
     mpc, inputs, _ = path_step(make_config(), state, rollout, snap([[13.0, 0.3]]), 1.5)
-    assert mpc._frame_record[-1] == pytest.approx(0.2)
+    assert mpc.frame.record[-1] == pytest.approx(0.2)
     np.testing.assert_allclose(inputs.model.Ad, build_lateral_model(
         make_config().vehicle, 1.5, 0.2).Ad, atol=1e-12)
-    assert mpc._frame_record[-2][-1] == pytest.approx(3.0, abs=1e-9)
+    assert mpc.frame.record[-2][-1] == pytest.approx(3.0, abs=1e-9)
     plain, _, _ = path_step(make_config(["controller.horizon_reach_m=null"]), state, rollout,
                             snap([[13.0, 0.3]]), 1.5)
-    assert plain._frame_record[-1] == 0.1
-    assert plain._frame_record[-2][-1] == pytest.approx(1.5, abs=1e-9)
+    assert plain.frame.record[-1] == 0.1
+    assert plain.frame.record[-2][-1] == pytest.approx(1.5, abs=1e-9)
 
 
 def test_velocity_rule_predicted_clearance_does_not_slow_into_a_crossing_obstacle(make_config):

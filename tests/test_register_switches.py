@@ -182,11 +182,11 @@ def test_heading_reference_from_the_apf_force_in_the_path_frame(make_config):
     ramp = LateralMpc(force.controller, force.vehicle)
     chase.inputs_from(observation(slope, rollout))
     ramp.inputs_from(observation(force, rollout))
-    path = ramp._frame_record[1]
+    path = ramp.frame.record[1]
     total = rollout.attraction[0] + rollout.repulsion[0]
     np.testing.assert_allclose(path.headings_rad[1:11], force_heading_reference(
         total, 0.0, 10, 0.1, force.controller), atol=1e-12)
-    assert not np.allclose(chase._frame_record[1].headings_rad[1:11], path.headings_rad[1:11])
+    assert not np.allclose(chase.frame.record[1].headings_rad[1:11], path.headings_rad[1:11])
 
 
 def test_path_beyond_end_hold_keeps_the_last_lateral_position(make_config):

@@ -23,7 +23,9 @@ semantics, an overflowing ``exp``, is bridged by an overload of ``planner._exp_o
 Importing this module imports numba (about 0.45 s) and loads the kernels from numba's on-disk
 cache (about 0.3 s; about 1.5 s each the first time, when it compiles). That pays back after
 some 45 runs of 100 steps per process, so the family runner turns it on
-(:attr:`pipeline.loop.controller.QpCache.compiled_kernels`) and a single run does not.
+(:attr:`pipeline.loop.controller.QpCache.compiled_kernels`) and a single run does not. They are
+handed to a run as one value, :data:`COMPILED_KERNELS` (:class:`pipeline.loop.kernels.Kernels`);
+nothing in the loop imports this module but :func:`pipeline.loop.simulate.run_kernels`.
 """
 
 from __future__ import annotations
@@ -34,7 +36,8 @@ from numba import njit
 from numba.extending import overload
 
 from pipeline.loop import model, planner
-from pipeline.loop.controller import path, references
+from pipeline.loop.controller import path, prediction_check, references
+from pipeline.loop.kernels import Kernels
 
 
 def _jit(function):
@@ -53,11 +56,6 @@ def _exp_or_inf_compiled(x):  # pragma: no cover (numba's typing calls it)
     return lambda x: exp(x)
 
 
-single_track_rk4 = _jit(model.single_track_rk4)
-apf_rollout_kernel = _jit(planner.apf_rollout_arrays)
-reference_kernel = _jit(references.reference_arrays)
-
-
 def _same_signature(function):
     """numba's typing function for ``overload(function)``: ``function`` itself is the
     implementation (a helper the kernels call, compiled with them)."""
@@ -73,7 +71,15 @@ def _same_signature(function):
 for _helper in (path._heading_at, path._curvature_at, path._project_point, path._point_at):
     overload(_helper)(_same_signature(_helper))
 
+single_track_rk4 = _jit(model.single_track_rk4)
+apf_rollout_kernel = _jit(planner.apf_rollout_arrays)
+reference_kernel = _jit(references.reference_arrays)
 chase_path_kernel = _jit(path.chase_path_arrays)
 frame_step_kernel = _jit(path.frame_step_arrays)
 plan_poses_kernel = _jit(path.plan_poses_arrays)
-check_record_kernel = _jit(path.check_record_arrays)
+check_record_kernel = _jit(prediction_check.check_record_arrays)
+
+#: The compiled set (immutable: a named tuple of numba's dispatchers).
+COMPILED_KERNELS = Kernels(True, single_track_rk4, apf_rollout_kernel, reference_kernel,
+                           chase_path_kernel, frame_step_kernel, plan_poses_kernel,
+                           check_record_kernel)

@@ -18,11 +18,13 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from math import exp, inf, sqrt
+from typing import NamedTuple
 
 import numpy as np
 
-from pipeline.loop.settings import PlannerConfig
+from pipeline.loop.kernels import Kernels
 from pipeline.loop.scenario import ObstacleSnapshot
+from pipeline.loop.settings import PlannerConfig
 
 _TINY = 1e-12
 
@@ -177,22 +179,21 @@ def apf_rollout(position_m: np.ndarray, goal_m: np.ndarray, obstacles: ObstacleS
                     sample_time_s, vehicle_velocity_mps)
 
 
-def _rollout(kernel, settings: np.ndarray, position_m: np.ndarray, goal_m: np.ndarray,
-             obstacles: ObstacleSnapshot, horizon: int, sample_time_s: float,
-             vehicle_velocity_mps: np.ndarray | None) -> ApfRollout:
-    """:func:`apf_rollout_arrays` run by CPython (``kernel`` None: lists and a tuple in, as
-    CPython's arithmetic on numpy scalars is slower) or by its compiled ``kernel`` (arrays
-    in); ``settings`` is :func:`apf_kernel_settings`."""
+def _rollout(kernels: Kernels | None, settings: ApfSettings, position_m: np.ndarray,
+             goal_m: np.ndarray, obstacles: ObstacleSnapshot, horizon: int,
+             sample_time_s: float, vehicle_velocity_mps: np.ndarray | None) -> ApfRollout:
+    """:func:`apf_rollout_arrays` run by ``kernels`` (None: by CPython, as the function
+    stands); ``settings`` is :func:`apf_kernel_settings`."""
     vvx, vvy = (float(vehicle_velocity_mps[0]), float(vehicle_velocity_mps[1])) \
         if vehicle_velocity_mps is not None else (0.0, 0.0)
-    if vehicle_velocity_mps is None and settings[_CLOSING_ON] != 0.0:
-        settings = settings.copy()
-        settings[_CLOSING_ON] = 0.0  # no velocity, no closing-speed scaling
+    if vehicle_velocity_mps is None and settings.closing_speed_on:
+        settings = settings._replace(closing_speed_on=False)  # no velocity, no scaling
     start = (float(position_m[0]), float(position_m[1]), float(goal_m[0]), float(goal_m[1]))
-    if kernel is None:
-        return ApfRollout(*apf_rollout_arrays(
+    kernel = kernels.apf_rollout if kernels is not None else apf_rollout_arrays
+    if kernels is None or not kernels.compiled:
+        return ApfRollout(*kernel(
             *start, obstacles.positions_m.tolist(), obstacles.velocities_mps.tolist(),
-            tuple(settings.tolist()), int(horizon), float(sample_time_s), vvx, vvy))
+            settings, int(horizon), float(sample_time_s), vvx, vvy))
     return ApfRollout(*kernel(
         *start, np.ascontiguousarray(obstacles.positions_m, dtype=float).reshape(-1, 2),
         np.ascontiguousarray(obstacles.velocities_mps, dtype=float).reshape(-1, 2), settings,
@@ -218,12 +219,13 @@ def apf_rollout_arrays(px, py, gx, gy, centres, velocities, settings, horizon, s
     workers): the same operations on the same C library's functions, so the same bits (the
     tests hold them equal).
     """
-    h_max, beta, rho_p, rho0 = settings[0], settings[1], settings[2], settings[3]
-    alpha_e, k_const, floor, gain = settings[4], settings[5], settings[6], settings[7]
-    step_size, step_min, step_max = settings[8], settings[9], settings[10]
-    repulsion_on, polynomial = settings[11] != 0.0, settings[12] != 0.0
-    constant_k, predict = settings[13] != 0.0, settings[14] != 0.0
-    normalize, closing_on = settings[15] != 0.0, settings[16] != 0.0
+    h_max, beta, rho_p, rho0 = settings.h_max, settings.beta, settings.rho_p_m, settings.rho0_m
+    alpha_e, k_const = settings.alpha_e, settings.k_rep_constant
+    floor, gain = settings.rho_floor_m, settings.closing_speed_gain_s_per_m
+    step_size, step_min, step_max = settings.step_size, settings.step_min_m, settings.step_max_m
+    repulsion_on, polynomial = settings.repulsion_on, settings.polynomial
+    constant_k, predict = settings.constant_k_rep, settings.predict_obstacles
+    normalize, closing_on = settings.normalize_step, settings.closing_speed_on
     n = horizon
     steps = max(n - 1, 0)
     path = np.empty((max(n, 1), 2))
@@ -415,22 +417,18 @@ class ApfPlanner:
     """
 
     def __init__(self, settings: PlannerConfig, horizon: int, sample_time_s: float,
-                 compiled: bool = False) -> None:
+                 kernels: Kernels | None = None) -> None:
         self.settings, self.horizon, self.sample_time_s = settings, horizon, sample_time_s
-        # apf_rollout's settings, once; its statement compiled (pipeline.loop.compiled, the
-        # same bits) with ``compiled``
+        # apf_rollout's settings, once; its statement run by ``kernels`` (CPython's when
+        # omitted, or compiled: the same bits)
         self._settings = apf_kernel_settings(settings)
-        self._kernel = None
-        if compiled:
-            from pipeline.loop.compiled import apf_rollout_kernel
-
-            self._kernel = apf_rollout_kernel
+        self._kernels = kernels
 
     def rollout(self, position_m: np.ndarray, goal_m: np.ndarray, obstacles: ObstacleSnapshot,
                 vehicle_velocity_mps: np.ndarray | None = None) -> ApfRollout:
         """The reference path (``horizon`` points from the vehicle's position) and the forces
         behind it (:func:`apf_rollout`)."""
-        return _rollout(self._kernel, self._settings, position_m, goal_m, obstacles,
+        return _rollout(self._kernels, self._settings, position_m, goal_m, obstacles,
                         self.horizon, self.sample_time_s, vehicle_velocity_mps)
 
     def speed(self, position_m: np.ndarray, heading_rad: float, obstacles: ObstacleSnapshot,
@@ -442,36 +440,49 @@ class ApfPlanner:
                           vehicle_radius_m, self.settings, path_m, speed_mps)
 
 
-#: Order of :func:`apf_rollout_arrays`'s ``settings``.
-APF_SETTING_NAMES = ("h_max", "beta", "rho_p_m", "rho0_m", "alpha_e", "k_rep_constant",
-                     "rho_floor_m", "closing_speed_gain_s_per_m", "step_size", "step_min_m",
-                     "step_max_m (inf: none)", "repulsion on", "polynomial law",
-                     "constant k_rep", "constant-velocity prediction", "normalize step",
-                     "closing-speed scaling on")
-#: Index of the closing-speed switch in those settings.
-_CLOSING_ON = APF_SETTING_NAMES.index("closing-speed scaling on")
+class ApfSettings(NamedTuple):
+    """The APF settings as :func:`apf_rollout_arrays` takes them (numba compiles a named tuple
+    as it is): the numbers of :class:`~pipeline.loop.settings.PlannerConfig`, its switches as
+    booleans, no step cap as ``inf``."""
+
+    h_max: float
+    beta: float
+    rho_p_m: float
+    rho0_m: float
+    alpha_e: float
+    k_rep_constant: float
+    rho_floor_m: float
+    closing_speed_gain_s_per_m: float
+    step_size: float
+    step_min_m: float
+    step_max_m: float
+    repulsion_on: bool
+    polynomial: bool
+    constant_k_rep: bool
+    predict_obstacles: bool
+    normalize_step: bool
+    closing_speed_on: bool
 
 
-def apf_kernel_settings(params: PlannerConfig) -> np.ndarray:
-    """``params`` as :func:`apf_rollout_arrays` takes them (order :data:`APF_SETTING_NAMES`;
-    switches as 1.0 / 0.0, no step cap as ``inf``)."""
-    return np.array([
-        params.h_max, params.beta, params.rho_p_m, params.rho0_m, params.alpha_e,
-        params.k_rep_constant, params.rho_floor_m, params.closing_speed_gain_s_per_m,
-        params.step_size, params.step_min_m,
-        np.inf if params.step_max_m is None else params.step_max_m,
+def apf_kernel_settings(params: PlannerConfig) -> ApfSettings:
+    """``params`` as :func:`apf_rollout_arrays` takes them (:class:`ApfSettings`)."""
+    return ApfSettings(
+        float(params.h_max), float(params.beta), float(params.rho_p_m), float(params.rho0_m),
+        float(params.alpha_e), float(params.k_rep_constant), float(params.rho_floor_m),
+        float(params.closing_speed_gain_s_per_m), float(params.step_size),
+        float(params.step_min_m), inf if params.step_max_m is None else float(params.step_max_m),
         params.repulsion_law != "none", params.repulsion_law == "polynomial",
         params.k_rep_source != "adaptive_h", params.obstacle_prediction == "constant_velocity",
-        bool(params.normalize_step), params.closing_speed_gain_s_per_m > 0.0], dtype=float)
+        bool(params.normalize_step), params.closing_speed_gain_s_per_m > 0.0)
 
 
 def make_planner(settings: PlannerConfig, horizon: int, sample_time_s: float,
-                 compiled: bool = False) -> ApfPlanner:
+                 kernels: Kernels | None = None) -> ApfPlanner:
     """The planner ``settings._target_`` names (a user's class), else :class:`ApfPlanner`
-    (with ``compiled``, its rollout by the compiled kernel: the same bits)."""
+    (its rollout by ``kernels``: CPython's when omitted; compiled, the same bits)."""
     from pipeline.validation import resolve_target
 
     if settings._target_:
         return resolve_target("planner._target_", settings._target_)(settings, horizon,
                                                                      sample_time_s)
-    return ApfPlanner(settings, horizon, sample_time_s, compiled)
+    return ApfPlanner(settings, horizon, sample_time_s, kernels)

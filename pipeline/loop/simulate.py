@@ -24,8 +24,10 @@ import pandas as pd
 
 from pipeline.loop.settings import LoopSettings
 from pipeline.loop.controller import ControlStep, Observation, QpCache, make_controller
-from pipeline.loop.controller.path import MODEL_CHECK_COLUMNS
-from pipeline.loop.model import kinematic_plant_step, single_track_constants, single_track_rk4
+from pipeline.loop.controller.prediction_check import MODEL_CHECK_COLUMNS
+from pipeline.loop.kernels import Kernels
+from pipeline.loop.model import kinematic_plant_step, single_track_constants
+from pipeline.loop.python_kernels import PYTHON_KERNELS
 from pipeline.loop.planner import ApfRollout, make_planner
 from pipeline.loop.scenario import Scenario
 from pipeline.loop.trajectory import HEAD, OBSTACLE_FIELDS, TAIL, obstacle_column
@@ -60,21 +62,18 @@ class SimulationResult:
 class SingleTrackPlant:
     """The nonlinear single-track plant of the lateral track; command ``[steering rate]``."""
 
-    def __init__(self, cfg: LoopSettings, scenario: Scenario, compiled: bool = False) -> None:
+    def __init__(self, cfg: LoopSettings, scenario: Scenario,
+                 kernels: Kernels | None = None) -> None:
         self.vehicle, self.ts, self.substeps = cfg.vehicle, scenario.sample_time_s, \
             scenario.plant_substeps
         self._rate_max = cfg.vehicle.steering_rate_max_rad_s
-        self.compiled = compiled
-        if compiled:
-            # model.single_track_rk4 compiled (pipeline.loop.compiled): the same bits; arrays in
-            from pipeline.loop.compiled import single_track_rk4 as kernel
-
-            self._constants = np.array(single_track_constants(cfg.vehicle))
-        else:
-            # run by CPython (what step_plant calls): plain floats in
-            kernel, self._constants = single_track_rk4, single_track_constants(cfg.vehicle)
-        self._kernel = kernel
+        kernels = kernels if kernels is not None else PYTHON_KERNELS
+        # model.single_track_rk4 by the kernels: plain floats in for CPython (what step_plant
+        # calls), arrays for numba; the same bits
+        self.compiled = kernels.compiled
+        self._kernel = kernels.plant_rk4
         constants = single_track_constants(cfg.vehicle)
+        self._constants = np.array(constants) if kernels.compiled else constants
         self._tyres = (constants[2], constants[3], constants[4], constants[5], constants[6],
                        constants[7])
 
@@ -196,8 +195,18 @@ def _apf_columns(rollout: ApfRollout) -> dict:
             "apf_step_cap_share": capped / steps if steps else 0.0}
 
 
-def simulate(cfg: LoopSettings, scenario: Scenario,
-             qp_cache: QpCache | None = None) -> SimulationResult:
+def run_kernels(qp_cache: QpCache | None) -> Kernels:
+    """The kernels a run uses: compiled where the runner of many runs asked for them
+    (:attr:`QpCache.compiled_kernels <pipeline.loop.controller.qp.QpCache>`), else CPython's."""
+    if qp_cache is not None and qp_cache.compiled_kernels:
+        from pipeline.loop.compiled import COMPILED_KERNELS
+
+        return COMPILED_KERNELS
+    return PYTHON_KERNELS
+
+
+def simulate(cfg: LoopSettings, scenario: Scenario, qp_cache: QpCache | None = None,
+             kernels: Kernels | None = None) -> SimulationResult:
     """Run the closed loop once (with BLAS on one thread, see :func:`_closed_loop`).
 
     Parameters
@@ -206,6 +215,8 @@ def simulate(cfg: LoopSettings, scenario: Scenario,
     scenario : Scenario
     qp_cache : QpCache, optional
         Compiled QPs shared with other runs (a private cache when omitted).
+    kernels : Kernels, optional
+        The loop's kernels; by default :func:`run_kernels` of the cache.
 
     Returns
     -------
@@ -232,19 +243,19 @@ def simulate(cfg: LoopSettings, scenario: Scenario,
         threads = ThreadpoolController()
         qp_cache.process_local["threadpool_controller"] = (len(sys.modules), threads)
     with threads.limit(limits=1, user_api="blas"):
-        return _closed_loop(cfg, scenario, qp_cache)
+        return _closed_loop(cfg, scenario, qp_cache,
+                            kernels if kernels is not None else run_kernels(qp_cache))
 
 
-def _closed_loop(cfg: LoopSettings, scenario: Scenario,
-                 qp_cache: QpCache | None) -> SimulationResult:
+def _closed_loop(cfg: LoopSettings, scenario: Scenario, qp_cache: QpCache | None,
+                 kernels: Kernels) -> SimulationResult:
     """The loop of :func:`simulate`."""
     kinematic = cfg.controller.kind == "kinematic_mpc"
-    compiled = qp_cache is not None and qp_cache.compiled_kernels
     plant = KinematicPlant(cfg, scenario) if kinematic else \
-        SingleTrackPlant(cfg, scenario, compiled)
-    controller = make_controller(cfg, scenario.sample_time_s, qp_cache)
+        SingleTrackPlant(cfg, scenario, kernels)
+    controller = make_controller(cfg, scenario.sample_time_s, qp_cache, kernels)
     planner = make_planner(cfg.planner, cfg.controller.horizon, scenario.sample_time_s,
-                           compiled)
+                           kernels)
     vehicle_radius = cfg.vehicle.footprint_radius_m
     # a planner of one's own may keep speed()'s earlier signature (no path, no speed)
     path_aware = "path_m" in inspect.signature(planner.speed).parameters

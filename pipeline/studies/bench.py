@@ -65,7 +65,9 @@ def step_inputs(cfg, n_obstacles: int, n_steps: int, seed: int = 0) -> list:
                                  rng.uniform(-1.5, 1.5, n_obstacles)])
     snap = ObstacleSnapshot(obstacles, np.zeros_like(obstacles), np.full(n_obstacles, 0.5),
                             np.ones(n_obstacles, bool))
-    compiled = ApfPlanner(cfg.planner, N, 0.1, compiled=True)
+    from pipeline.loop.compiled import COMPILED_KERNELS
+
+    compiled = ApfPlanner(cfg.planner, N, 0.1, COMPILED_KERNELS)
     goal = np.array([30.0, 0.0])
     compiled.rollout(np.zeros(2), goal, snap)  # numba's cache load, outside the timing
     out = []
@@ -137,7 +139,7 @@ def bench_lateral(horizons, obstacle_counts, n_steps: int, repeats: int) -> list
     each floor (the sparse QP and the condensed QP on a kept Clarabel), wall and CPU time; the
     CVXPY backend on the sparse QP in a pass of its own over the same QPs."""
     from pipeline.loop.controller import LateralMpc
-    from pipeline.loop.controller.lateral import condensed_data
+    from pipeline.loop.controller.lateral_qp import condensed_data
 
     rows = []
     for N in horizons:
@@ -378,7 +380,7 @@ def _recorded_sparse_qps(cfg, scenario) -> tuple[object, list]:
     """The sparse QPs of a run of ``cfg`` (its closed loop with the states as variables, which
     agrees with the condensed one to ~1e-7), as the compiled map and the parameter vectors."""
     from pipeline.loop.controller import QpCache
-    from pipeline.loop.controller.lateral import LateralQpStructure
+    from pipeline.loop.controller.lateral_qp import LateralQpStructure
     from pipeline.loop.simulate import simulate
 
     sparse_cfg = replace(cfg, controller=replace(cfg.controller, backend="clarabel_direct",
@@ -409,12 +411,15 @@ def bench_path_frame(n_steps: int, repeats: int) -> list[dict]:
     cfg = _config(["method=improved"])
     ctrl, veh = cfg.controller, cfg.vehicle
     cache = QpCache(compiled_kernels=True)
-    planner = ApfPlanner(cfg.planner, ctrl.horizon, 0.1, compiled=True)
+    from pipeline.loop.compiled import COMPILED_KERNELS
+
+    planner = ApfPlanner(cfg.planner, ctrl.horizon, 0.1, COMPILED_KERNELS)
     goal = np.array([30.0, 0.0])
     obstacle = ObstacleSnapshot(np.array([[9.0, 0.6]]), np.array([[0.0, -0.3]]),
                                 np.array([0.5]), np.ones(1, bool))
     frame = LineFrame(np.zeros(2), 0.0)
-    mpcs = {(f, b): LateralMpc(replace(ctrl, frame=f, backend=b), veh, cfg.model, 0.1, cache)
+    mpcs = {(f, b): LateralMpc(replace(ctrl, frame=f, backend=b), veh, cfg.model, 0.1, cache,
+                               COMPILED_KERNELS)
             for f in ("fixed", "path") for b in ("clarabel_direct", "daqp")}
     sparse = LateralMpc(replace(ctrl, formulation="sparse"), veh, cfg.model, 0.1, cache)
     observations = []

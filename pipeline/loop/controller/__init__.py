@@ -4,7 +4,10 @@
   kept Clarabel solver, CVXPY reference backend, the cache of compiled structures);
 * :mod:`~pipeline.loop.controller.base`: observation, result type, the fallback written once;
 * :mod:`~pipeline.loop.controller.references`: APF path to references and half-planes;
-* :mod:`~pipeline.loop.controller.lateral`: the paper's lateral MPC;
+* :mod:`~pipeline.loop.controller.lateral`: the paper's lateral MPC, its QP
+  (:mod:`~pipeline.loop.controller.lateral_qp`, :mod:`~pipeline.loop.controller.lateral_backends`),
+  its frames (:mod:`~pipeline.loop.controller.frames`, :mod:`~pipeline.loop.controller.path`) and
+  its prediction check (:mod:`~pipeline.loop.controller.prediction_check`);
 * :mod:`~pipeline.loop.controller.kinematic`: Appendix A's kinematic LTV-MPC;
 * :mod:`~pipeline.loop.controller.nmpc`: Appendix A's ``nlmpc`` as a nonlinear MPC (CasADi);
 * :mod:`~pipeline.loop.controller.lateral_nmpc`: the lateral MPC's problem on the nonlinear
@@ -16,10 +19,12 @@
 
 from __future__ import annotations
 
+from pipeline.loop.kernels import Kernels
 from pipeline.loop.settings import LoopSettings
 from pipeline.loop.controller.base import ControlStep, Controller, Observation, PlanFallback
 from pipeline.loop.controller.kinematic import KinematicLtvMpc
-from pipeline.loop.controller.lateral import LateralMpc, MpcInputs, blocking_matrix
+from pipeline.loop.controller.lateral import LateralMpc
+from pipeline.loop.controller.lateral_qp import MpcInputs, blocking_matrix
 from pipeline.loop.controller.pursuit import PurePursuit, pure_pursuit_steering_rate
 from pipeline.loop.controller.qp import OPTIMAL_STATUSES, QpCache, QpSolution
 from pipeline.loop.controller.references import (collision_halfplanes, force_heading_reference,
@@ -33,9 +38,11 @@ __all__ = ["ControlStep", "Controller", "Observation", "PlanFallback", "Kinemati
 
 
 def make_controller(cfg: LoopSettings, sample_time_s: float,
-                    qp_cache: QpCache | None = None) -> Controller:
+                    qp_cache: QpCache | None = None, kernels: Kernels | None = None
+                    ) -> Controller:
     """The controller ``cfg.controller._target_`` names (a user's class), else the built-in
-    named by ``cfg.controller.kind``, its QP taken from ``qp_cache``."""
+    named by ``cfg.controller.kind``, its QP taken from ``qp_cache``, its innermost arithmetic
+    run by ``kernels`` (CPython's when omitted)."""
     kind = cfg.controller.kind
     if cfg.controller._target_:
         # a controller of your own: step(Observation) -> ControlStep (see base.Controller)
@@ -52,7 +59,8 @@ def make_controller(cfg: LoopSettings, sample_time_s: float,
     if cfg.controller.backend == "nmpc":
         from pipeline.loop.controller.lateral_nmpc import LateralNmpc
 
-        return LateralNmpc(cfg.controller, cfg.vehicle, cfg.model, sample_time_s, qp_cache)
+        return LateralNmpc(cfg.controller, cfg.vehicle, cfg.model, sample_time_s, qp_cache,
+                           kernels)
     if kind == "pure_pursuit":
         return PurePursuit(cfg.controller, cfg.vehicle, sample_time_s, cfg.model.speed_grid_mps)
-    return LateralMpc(cfg.controller, cfg.vehicle, cfg.model, sample_time_s, qp_cache)
+    return LateralMpc(cfg.controller, cfg.vehicle, cfg.model, sample_time_s, qp_cache, kernels)

@@ -17,7 +17,7 @@ import numpy as np
 
 from pipeline.loop.settings import ControllerConfig, VehicleConfig
 from pipeline.loop.controller.base import ControlStep, Observation, PlanFallback
-from pipeline.loop.controller.lateral import blocking_matrix
+from pipeline.loop.controller.lateral_qp import blocking_matrix
 from pipeline.loop.controller.qp import QpCache, compiled_backend
 from pipeline.loop.controller.references import kinematic_halfplanes
 from pipeline.loop.planner import path_at_arc_length
@@ -148,9 +148,9 @@ class KinematicTrack:
         """How well each step's prediction held, one value per row of the run's log: the
         Euler model replayed from the step's state with the inputs then applied (``accel_mps2``,
         ``delta_rad``), and the plan's own states, against the plant's position 0.5 s and 1 s
-        later (the columns of :func:`~pipeline.loop.controller.path.prediction_check`; the
+        later (the columns of :func:`~pipeline.loop.controller.prediction_check.prediction_check`; the
         kinematic model has no small-angle assumption, so no heading error)."""
-        from pipeline.loop.controller.path import MODEL_CHECK_COLUMNS
+        from pipeline.loop.controller.prediction_check import MODEL_CHECK_COLUMNS
         from pipeline.loop.model import kinematic_euler_step
 
         xy = np.column_stack([log["X_m"], log["Y_m"]])

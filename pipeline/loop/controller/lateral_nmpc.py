@@ -31,10 +31,11 @@ from dataclasses import dataclass
 import numpy as np
 
 from pipeline.loop.controller.base import ControlStep, Observation
-from pipeline.loop.controller.lateral import LateralMpc, LateralQpStructure
+from pipeline.loop.controller.lateral import LateralMpc
+from pipeline.loop.controller.lateral_qp import LateralQpStructure, blocking_matrix
 from pipeline.loop.controller.nmpc import IPOPT_STATUS
-from pipeline.loop.controller.path import PredictionRecord
 from pipeline.loop.controller.qp import QpCache
+from pipeline.loop.kernels import Kernels
 from pipeline.loop.model import single_track_constants
 from pipeline.loop.settings import ControllerConfig, ModelConfig, VehicleConfig
 
@@ -74,8 +75,6 @@ def build_lateral_nlp(structure: LateralQpStructure, constants: tuple, sample_ti
     variables ``[U (Nc), S (N M)]``. ``sample_time_s`` is kept for the key only: the step is a
     parameter (``controller.horizon_reach_m`` stretches it at low speed)."""
     import casadi as ca
-
-    from pipeline.loop.controller.lateral import blocking_matrix
 
     N, Nc, M = structure.horizon, structure.control_horizon, structure.max_obstacles
     q_y, q_psi, q_r, q_d, r_u, w1, w2 = structure.weights
@@ -138,10 +137,10 @@ class LateralNmpc(LateralMpc):
 
     def __init__(self, controller: ControllerConfig, vehicle: VehicleConfig,
                  model: ModelConfig | None = None, sample_time_s: float = 0.1,
-                 qp_cache: QpCache | None = None) -> None:
+                 qp_cache: QpCache | None = None, kernels: Kernels | None = None) -> None:
         # the QP's data (models, path, references, half-planes) without a QP of its own
         super().__init__(dataclasses.replace(controller, backend="daqp"), vehicle, model,
-                         sample_time_s, qp_cache)
+                         sample_time_s, qp_cache, kernels)
         self.cfg = controller
         structure = LateralQpStructure.of(controller, vehicle)
         cache = qp_cache if qp_cache is not None else QpCache()
@@ -159,14 +158,14 @@ class LateralNmpc(LateralMpc):
     def frame_parameters(self) -> np.ndarray:
         """The frame at steps 1..N as ``(3, N)``: point and heading at each station, from the
         last :meth:`inputs_from` (the path, or the line in the fixed frame)."""
-        N = self.horizon
-        stations = np.asarray(self._frame_record[-2], float)[1:N + 1]
-        if self._frame_record[0] == "fixed":
-            origin, heading = self._frame_record[1], self._frame_record[2]
+        N, record = self.horizon, self.frame.record
+        stations = np.asarray(record[-2], float)[1:N + 1]
+        if record[0] == "fixed":
+            origin, heading = record[1], record[2]
             u = np.array([np.cos(heading), np.sin(heading)])
             points = np.asarray(origin)[None, :] + stations[:, None] * u[None, :]
             return np.vstack([points.T, np.full(N, heading)])
-        path = self._frame_record[1]
+        path = record[1]
         return np.vstack([path.to_global(stations, np.zeros(N)).T, path.heading_at(stations)])
 
     def step(self, obs: Observation) -> ControlStep:
@@ -176,7 +175,7 @@ class LateralNmpc(LateralMpc):
         M = self.cfg.max_obstacles
         refs = np.vstack([inputs.y_ref_m, inputs.psi_ref_rad, inputs.yaw_rate_reference(),
                           inputs.steering_reference()])
-        params = np.concatenate([obs.plant_state, [obs.speed_ref_mps, self._frame_record[-1]],
+        params = np.concatenate([obs.plant_state, [obs.speed_ref_mps, self.frame.record[-1]],
                                  self.frame_parameters().ravel(order="F"),
                                  refs.ravel(order="F"), inputs.constraint_gain.ravel(),
                                  inputs.constraint_bound.ravel()])
@@ -215,9 +214,9 @@ class LateralNmpc(LateralMpc):
                                "none", float(max(np.max(gaps, initial=0.0), 0.0)), log)
             plan_lateral = lateral
             # the plan's poses, for the next step's stations (as the QP's plan gives them)
-            self._plan_poses = (predicted[:2].T, predicted[2] + np.arctan2(
-                predicted[4], np.maximum(predicted[3], 0.1))) \
-                if self._frame_record[0] == "path" else None
+            if self.frame.record[0] == "path":
+                self.frame.plan_poses((predicted[:2].T, predicted[2] + np.arctan2(
+                    predicted[4], np.maximum(predicted[3], 0.1))))
         else:
             self._moves = None
             delta = obs.plant_state[6] if np.isfinite(obs.plant_state[6]) else 0.0
@@ -227,7 +226,7 @@ class LateralNmpc(LateralMpc):
                 lambda: np.array([float(np.clip(-delta / self.sample_time_s, -rate_max,
                                                 rate_max))]), log)
             plan_lateral = None
-            self._plan_poses = None
-        self.records.append(PredictionRecord(self._frame_record, inputs.x0, inputs.model,
-                                             inputs.disturbance_rad_s, plan_lateral))
+            if self.frame.record[0] == "path":
+                self.frame.plan_poses(None)
+        self.keep_record(inputs, plan_lateral)
         return step

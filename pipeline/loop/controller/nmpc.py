@@ -30,7 +30,7 @@ import numpy as np
 
 from pipeline.loop.controller.base import ControlStep, PlanFallback
 from pipeline.loop.controller.kinematic import KinematicQpStructure, KinematicTrack
-from pipeline.loop.controller.lateral import blocking_matrix
+from pipeline.loop.controller.lateral_qp import blocking_matrix
 from pipeline.loop.controller.qp import QpCache
 from pipeline.loop.controller.references import kinematic_halfplanes
 from pipeline.loop.settings import ControllerConfig, VehicleConfig

@@ -7,13 +7,14 @@ from math import hypot, sqrt, tan
 
 import numpy as np
 
+from pipeline.loop.kernels import Kernels
 from pipeline.loop.settings import ControllerConfig, VehicleConfig
 
 _NORMAL_EPS_M = 1e-6
 
 
 def lateral_reference(path_line_m: np.ndarray, stations_m: np.ndarray,
-                      controller: ControllerConfig, compiled: bool = False
+                      controller: ControllerConfig, kernels: Kernels | None = None
                       ) -> tuple[np.ndarray, np.ndarray]:
     """Lateral and heading references at the MPC's predicted stations.
 
@@ -26,8 +27,8 @@ def lateral_reference(path_line_m: np.ndarray, stations_m: np.ndarray,
     floats with ``np.interp``'s own arithmetic (the segment's slope times the offset from its
     left end, plus its left value; a station on a knot takes the knot's value), which is
     cheaper than numpy's per-call overhead and gives the same numbers (the tests hold it to
-    ``np.interp``); with ``compiled``, numba runs the same statement
-    (:mod:`pipeline.loop.compiled`, the same bits).
+    ``np.interp``); ``kernels`` runs it (CPython's when omitted; compiled by numba, the same
+    bits).
 
     Returns
     -------
@@ -35,15 +36,13 @@ def lateral_reference(path_line_m: np.ndarray, stations_m: np.ndarray,
     """
     max_slope = tan(controller.heading_ref_max_rad)
     extend = controller.path_beyond_end == "extend"
-    if compiled:
-        from pipeline.loop.compiled import reference_kernel
-
-        y_ref, slopes = reference_kernel(np.ascontiguousarray(path_line_m, dtype=float),
-                                         np.ascontiguousarray(stations_m, dtype=float),
-                                         max_slope, extend)
+    if kernels is not None and kernels.compiled:
+        y_ref, slopes = kernels.references(np.ascontiguousarray(path_line_m, dtype=float),
+                                           np.ascontiguousarray(stations_m, dtype=float),
+                                           max_slope, extend)
     else:
-        y_ref, slopes = reference_arrays(path_line_m.tolist(), stations_m.tolist(), max_slope,
-                                         extend)
+        kernel = kernels.references if kernels is not None else reference_arrays
+        y_ref, slopes = kernel(path_line_m.tolist(), stations_m.tolist(), max_slope, extend)
     return y_ref, np.arctan(slopes)
 
 

@@ -1,0 +1,380 @@
+"""The lateral MPC's QP (paper Section 3), stated once per structure: the data one step hands
+it (:class:`MpcInputs`), the sparse statement (states as variables) and the condensed one
+(states eliminated), and the condensed data of one step (:func:`condensed_data`).
+
+The QP over ``N`` steps::
+
+    min  sum_k q_y (y_k - y_ref,k)^2 + q_psi (epsi_k - psi_ref,k)^2 + q_r (r_k - r_ref,k)^2
+         + q_d (delta_k - delta_ref,k)^2 + r_u u_k^2 + w1 sum(s) + w2 sum(s^2)
+    s.t. x_{k+1} = Ad x_k + Bd u_k + Ed d_k,  x_0 = measured state
+         |u_k| <= delta_dot_max,  |delta_k| <= delta_max,
+         u_k = U[min(k, Nc - 1)] (hold_last) or 0 for k >= Nc (zero_rate)
+         G_kj y_k + s_kj >= h_kj,  s >= 0   (soft half-plane per obstacle slot j and step k)
+
+The model matrices are parameters, so one compiled problem serves every speed (velocity
+planning) and every scenario; unused obstacle slots get rows that cannot bind.
+
+``controller.formulation`` chooses how the same QP is stated. ``sparse`` keeps the states as
+variables with the dynamics as equality constraints (151 variables at N = 10, three obstacle
+slots). ``condensed`` (the default) eliminates them: ``X = free response + Gamma U`` with the
+prediction matrices of the model's speed (:class:`CondensedPrediction`, cached per speed) and
+the free response computed in numpy each step, so the QP carries only ``U`` and the slacks (33
+variables); its parameters are the weighted prediction rows and the half-planes folded onto
+``U``, so it stays DPP. Both give the same optimum (tests hold them to each other).
+
+The condensed statement is written in the coordinates ``W = R U`` of the cost's Cholesky factor
+``R`` (``R' R`` = half the Hessian in ``U``): the tracking cost is then ``|W|^2 + 2 r' W``, a
+constant quadratic, and every bound is a plain pair of inequalities, so CVXPY's canonical
+problem is the 33-variable, 86-row QP itself (no auxiliary variables, no equality rows) and the
+kept Clarabel solver sees exactly what
+:class:`~pipeline.loop.controller.lateral_backends.ClarabelCondensedQp` hands it.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from pipeline.loop.model import LateralModel
+from pipeline.loop.settings import ControllerConfig, VehicleConfig
+
+if TYPE_CHECKING:
+    import cvxpy as cp
+
+
+@dataclass(frozen=True)
+class MpcInputs:
+    """Per-step data of the lateral QP (everything that is a ``cp.Parameter``)."""
+
+    x0: np.ndarray
+    model: LateralModel
+    y_ref_m: np.ndarray
+    psi_ref_rad: np.ndarray
+    constraint_gain: np.ndarray
+    constraint_bound: np.ndarray
+    disturbance_rad_s: np.ndarray
+    r_ref_rad_s: np.ndarray | None = None
+    delta_ref_rad: np.ndarray | None = None
+
+    def yaw_rate_reference(self) -> np.ndarray:
+        """``r_ref`` over the horizon (zeros when not set)."""
+        return self.r_ref_rad_s if self.r_ref_rad_s is not None \
+            else np.zeros(self.y_ref_m.shape[0])
+
+    def steering_reference(self) -> np.ndarray:
+        """``delta_ref`` over the horizon (zeros when not set)."""
+        return self.delta_ref_rad if self.delta_ref_rad is not None \
+            else np.zeros(self.y_ref_m.shape[0])
+
+
+@dataclass(frozen=True)
+class LateralQpStructure:
+    """Everything that enters the lateral QP as a constant: the cache key of a compilation."""
+
+    horizon: int
+    control_horizon: int
+    max_obstacles: int
+    input_hold: str
+    weights: tuple
+    steering_rate_max_rad_s: float
+    steering_max_rad: float
+    formulation: str = "sparse"
+
+    @classmethod
+    def of(cls, controller: ControllerConfig, vehicle: VehicleConfig) -> "LateralQpStructure":
+        c = controller
+        return cls(c.horizon, c.control_horizon, c.max_obstacles, c.input_hold,
+                   (c.q_lateral, c.q_heading, c.q_yaw_rate, c.q_steering, c.r_steering_rate,
+                    c.slack_weight_linear, c.slack_weight_quadratic),
+                   vehicle.steering_rate_max_rad_s, vehicle.steering_max_rad, c.formulation)
+
+
+def blocking_matrix(horizon: int, control_horizon: int, input_hold: str) -> np.ndarray:
+    """Matrix ``T`` (Nc x N) with ``u_seq = U @ T`` for the move-blocking rule."""
+    T = np.zeros((control_horizon, horizon))
+    for k in range(horizon):
+        if k < control_horizon:
+            T[k, k] = 1.0
+        elif input_hold == "hold_last":
+            T[control_horizon - 1, k] = 1.0
+    return T
+
+
+def build_lateral_problem(s: LateralQpStructure) -> tuple[cp.Problem, list, dict]:
+    """The lateral QP in CVXPY: problem, parameters in ``theta`` order, variables to read."""
+    import cvxpy as cp
+
+    N, Nc, M = s.horizon, s.control_horizon, s.max_obstacles
+    q_y, q_psi, q_r, q_d, r_u, w1, w2 = s.weights
+    blocking = blocking_matrix(N, Nc, s.input_hold)
+    x0 = cp.Parameter(5, name="x0")
+    Ad = cp.Parameter((5, 5), name="Ad")
+    Bd = cp.Parameter((5, 1), name="Bd")
+    disturbance = cp.Parameter((5, N), name="Ed_times_d")
+    y_ref = cp.Parameter(N, name="y_ref")
+    psi_ref = cp.Parameter(N, name="psi_ref")
+    r_ref = cp.Parameter(N, name="r_ref")
+    delta_ref = cp.Parameter(N, name="delta_ref")
+    G = cp.Parameter((N, M), name="halfplane_gain")
+    h = cp.Parameter((N, M), name="halfplane_bound")
+    X = cp.Variable((5, N + 1), name="X")
+    U = cp.Variable(Nc, name="U")
+    S = cp.Variable((N, M), nonneg=True, name="slack")
+    u_seq = U @ blocking
+    cost = (q_y * cp.sum_squares(X[0, 1:] - y_ref) + q_psi * cp.sum_squares(X[2, 1:] - psi_ref)
+            + q_r * cp.sum_squares(X[3, 1:] - r_ref) + q_d * cp.sum_squares(X[4, 1:] - delta_ref)
+            + r_u * cp.sum_squares(u_seq) + w1 * cp.sum(S) + w2 * cp.sum_squares(S))
+    lateral = cp.reshape(X[0, 1:], (N, 1), order="F") @ np.ones((1, M))
+    constraints = [
+        X[:, 0] == x0,
+        X[:, 1:] == Ad @ X[:, :-1] + Bd @ cp.reshape(u_seq, (1, N), order="F") + disturbance,
+        cp.abs(U) <= s.steering_rate_max_rad_s,
+        cp.abs(X[4, 1:]) <= s.steering_max_rad,
+        cp.multiply(G, lateral) + S >= h,
+    ]
+    problem = cp.Problem(cp.Minimize(cost), constraints)
+    if not problem.is_dcp(dpp=True):
+        raise RuntimeError("lateral MPC is not DPP; it would recompile every step")
+    return problem, [x0, Ad, Bd, disturbance, y_ref, psi_ref, r_ref, delta_ref, G, h], \
+        {"X": X, "U": U}
+
+
+#: Rows of the state that the cost weighs (y, epsi, r, delta) and their weight's index.
+COST_STATES = (0, 2, 3, 4)
+
+
+@dataclass(frozen=True)
+class CondensedPrediction:
+    """Prediction over the horizon for one model, as stacked maps (built once per model, i.e.
+    per speed): ``X_k = A^k x0 + sum A^(k-1-i) (B u_i + e_i)`` with the input sequence
+    ``u = U T`` (move blocking).
+
+    Everything of the condensed QP that depends on the model alone is here, so one step's data
+    are a few matrix-vector products (:func:`condensed_data`).
+
+    Attributes
+    ----------
+    gamma : ndarray, shape (N, 5, Nc)
+        Response of each state at steps 1..N to the free moves ``U``.
+    free_map : ndarray, shape (5 N, 5)
+        ``A^k`` stacked (step-major): the free response is ``free_map @ x0`` without disturbance.
+    gamma_w : ndarray, shape (4 N, Nc)
+        The weighted cost rows (``sqrt(q)`` times y, epsi, r, delta; ordered by term, then
+        step).
+    hessian_u : ndarray, shape (Nc, Nc)
+        ``2 (gamma_w' gamma_w + r_u T T')``, the cost's Hessian in ``U``.
+    chol : ndarray, shape (Nc, Nc)
+        Upper-triangular ``R`` with ``R' R = hessian_u / 2`` (the cost as ``|R U + r|^2``).
+    chol_rhs_map : ndarray, shape (Nc, 4 N)
+        ``R^-T gamma_w'``: ``r = chol_rhs_map @ free_w``.
+    chol_inv : ndarray, shape (Nc, Nc)
+        ``R^-1``: the moves of the condensed statement's coordinates, ``U = R^-1 W``.
+    cost_index, cost_root : ndarray, shape (4 N,)
+        Where each weighted cost row's state sits in the flat free response (``5 k + state``)
+        and its weight's square root: ``free_w = cost_root * free.ravel()[cost_index] - target``.
+    steering_gamma_w : ndarray, shape (N, Nc)
+        The steering angle's response in the statement's coordinates, ``gamma_d R^-1``.
+    chol_inv_flat, steering_gamma_w_flat : ndarray
+        The two, column-major and flat (parameters of the CVXPY statement).
+    disturbance_map : ndarray, shape (5 N, N)
+        Response of the states at steps 1..N (step-major) to the disturbances ``r_d`` at steps
+        0..N-1: the free response is ``free_map @ x0 + disturbance_map @ r_d``.
+    gradient_map : ndarray, shape (Nc, 4 N)
+        ``2 gamma_w'``: the cost's gradient in ``U`` is ``gradient_map @ free_w``.
+    """
+
+    model: LateralModel
+    gamma: np.ndarray
+    free_map: np.ndarray
+    gamma_w: np.ndarray
+    root_weights: np.ndarray
+    hessian_u: np.ndarray
+    chol: np.ndarray
+    chol_rhs_map: np.ndarray
+    gradient_map: np.ndarray
+    chol_inv: np.ndarray
+    cost_index: np.ndarray
+    cost_root: np.ndarray
+    steering_gamma_w: np.ndarray
+    chol_inv_flat: np.ndarray
+    steering_gamma_w_flat: np.ndarray
+    disturbance_map: np.ndarray
+
+    @classmethod
+    def of(cls, model: LateralModel, blocking: np.ndarray,
+           weights: tuple = (1.0, 1.0, 1.0, 1.0, 0.0)) -> "CondensedPrediction":
+        """Build the maps of ``model``; ``weights`` starts ``(q_y, q_psi, q_r, q_d, r_u)``."""
+        from scipy.linalg import cholesky, solve_triangular
+
+        Ad, Bd = model.Ad, model.Bd[:, 0]
+        nc, n = blocking.shape
+        # response of x_k to a unit input at step i (k > i): A^(k-1-i) B
+        impulse = np.zeros((n, 5))
+        power = Bd.copy()
+        for lag in range(n):
+            impulse[lag] = power
+            power = Ad @ power
+        psi = np.zeros((n, 5, n))
+        for k in range(1, n + 1):
+            for i in range(k):
+                psi[k - 1, :, i] = impulse[k - 1 - i]
+        gamma = psi @ blocking.T
+        # the same for the disturbance: response of x_k to a unit r_d at step i, A^(k-1-i) E
+        disturbance_map = np.zeros((n, 5, n))
+        power = model.Ed[:, 0].copy()
+        for lag in range(n):
+            for k in range(lag + 1, n + 1):
+                disturbance_map[k - 1, :, k - 1 - lag] = power
+            power = Ad @ power
+        powers = np.zeros((n, 5, 5))
+        power = np.eye(5)
+        for k in range(n):
+            power = Ad @ power
+            powers[k] = power
+        root = np.sqrt(np.asarray(weights[:4], float))
+        # rows ordered by cost term, then step: [y_1..y_N, epsi_1.., r_1.., delta_1..]
+        gamma_w = (root[:, None, None] * gamma[:, COST_STATES, :].transpose(1, 0, 2)
+                   ).reshape(-1, nc)
+        half_hessian = gamma_w.T @ gamma_w + float(weights[4]) * blocking @ blocking.T
+        chol = cholesky(half_hessian, lower=False)
+        chol_rhs_map = solve_triangular(chol, gamma_w.T, trans="T", lower=False)
+        # Fortran order: OpenBLAS multithreads a row-major gemv even this small, and its idle
+        # threads then spin on the other core (measured: 2x the CPU time of the product)
+        fortran = np.asfortranarray
+        chol_inv = solve_triangular(chol, np.eye(nc), lower=False)
+        # rows ordered by cost term, then step, as gamma_w: state COST_STATES[t] at step k
+        cost_index = (5 * np.arange(n)[None, :] + np.array(COST_STATES)[:, None]).ravel()
+        cost_root = np.repeat(root, n)
+        steering_gamma_w = gamma[:, 4, :] @ chol_inv
+        return cls(model, gamma, fortran(powers.reshape(-1, 5)), fortran(gamma_w),
+                   root, 2.0 * half_hessian, chol, fortran(chol_rhs_map),
+                   fortran(2.0 * gamma_w.T), chol_inv, cost_index, cost_root,
+                   steering_gamma_w, chol_inv.ravel(order="F"),
+                   steering_gamma_w.ravel(order="F"),
+                   fortran(disturbance_map.reshape(-1, n)))
+
+    def free_response(self, x0: np.ndarray, disturbance: np.ndarray) -> np.ndarray:
+        """States at steps 1..N with ``U = 0`` (shape (N, 5)); ``disturbance`` is (5, N)."""
+        Ad = self.model.Ad
+        out = np.empty((disturbance.shape[1], 5))
+        x = x0
+        for k in range(disturbance.shape[1]):
+            x = Ad @ x + disturbance[:, k]
+            out[k] = x
+        return out
+
+
+def build_condensed_lateral_problem(s: LateralQpStructure) -> tuple[cp.Problem, list, dict]:
+    """The same lateral QP with the states eliminated, in the coordinates ``W = R U``.
+
+    The tracking cost ``|gamma_w U + free_w|^2 + r_u |U T|^2`` equals ``|R U + r|^2`` up to a
+    constant (``R`` its Cholesky factor), i.e. ``|W|^2 + 2 r' W``: a constant quadratic, so
+    CVXPY adds no auxiliary variable for it. The bounds are stated as pairs of inequalities
+    (``cp.abs`` would add one variable per bounded entry). Every matrix that multiplies ``W``
+    is one parameter computed in numpy (``R^-1``, ``gamma_d R^-1``, ``gamma_h R^-1``), which
+    keeps the problem DPP. Canonicalized, it is the 33-variable, 86-row QP itself.
+    """
+    import cvxpy as cp
+
+    N, Nc, M = s.horizon, s.control_horizon, s.max_obstacles
+    w1, w2 = s.weights[5], s.weights[6]
+    chol_inv = cp.Parameter((Nc, Nc), name="cost_cholesky_inverse")
+    chol_rhs = cp.Parameter(Nc, name="cost_cholesky_rhs")
+    gamma_d = cp.Parameter((N, Nc), name="steering_gamma_w")
+    free_d = cp.Parameter(N, name="steering_free")
+    gamma_h = cp.Parameter((N * M, Nc), name="halfplane_gamma_w")
+    bound_h = cp.Parameter(N * M, name="halfplane_free_bound")
+    W = cp.Variable(Nc, name="W")
+    S = cp.Variable(N * M, name="slack")
+    rate, steering = s.steering_rate_max_rad_s, s.steering_max_rad
+    cost = cp.sum_squares(W) + 2 * chol_rhs @ W + w1 * cp.sum(S) + w2 * cp.sum_squares(S)
+    moves = chol_inv @ W
+    steering_angle = gamma_d @ W
+    constraints = [moves <= rate, -moves <= rate,
+                   steering_angle <= steering - free_d, -steering_angle <= steering + free_d,
+                   gamma_h @ W + S >= bound_h, S >= 0]
+    problem = cp.Problem(cp.Minimize(cost), constraints)
+    if not problem.is_dcp(dpp=True):
+        raise RuntimeError("condensed lateral MPC is not DPP; it would recompile every step")
+    return problem, [chol_inv, chol_rhs, gamma_d, free_d, gamma_h, bound_h], {"W": W}
+
+
+@dataclass(frozen=True)
+class CondensedData:
+    """One step's condensed QP data: the free response and what depends on it, with the
+    prediction of the step's model for everything that does not. The cost's gradient in ``U``
+    (the numpy backends) and its Cholesky right-hand side (the CVXPY statement) are computed
+    when a backend first asks, so each step computes only the one its backend uses."""
+
+    prediction: CondensedPrediction
+    free_w: np.ndarray      # (4N,) weighted free errors
+    gamma_d: np.ndarray     # (N, Nc) steering angle's response to U
+    free_d: np.ndarray      # (N,) free steering angle
+    gamma_h: np.ndarray     # (N M, Nc) half-plane rows folded onto U
+    bound_h: np.ndarray     # (N M,) their bounds
+    free: np.ndarray        # (N, 5) free response
+
+    @property
+    def gamma_w(self) -> np.ndarray:
+        """(4N, Nc) weighted responses of y, epsi, r, delta to U."""
+        return self.prediction.gamma_w
+
+    @property
+    def hessian_u(self) -> np.ndarray:
+        """(Nc, Nc) ``2 (gamma_w' gamma_w + r_u T T')``."""
+        return self.prediction.hessian_u
+
+    @property
+    def chol_inv(self) -> np.ndarray:
+        """(Nc, Nc) ``R^-1``: ``U = R^-1 W``."""
+        return self.prediction.chol_inv
+
+    @property
+    def gradient_u(self) -> np.ndarray:
+        """(Nc,) ``2 gamma_w' free_w`` (computed on each access: a backend asks once)."""
+        return self.prediction.gradient_map @ self.free_w
+
+    @property
+    def chol_rhs(self) -> np.ndarray:
+        """(Nc,) ``r = R^-T gamma_w' free_w`` (computed on each access: a backend asks once)."""
+        return self.prediction.chol_rhs_map @ self.free_w
+
+    def theta(self) -> np.ndarray:
+        """The parameter vector of :func:`build_condensed_lateral_problem` (its order, column-
+        major): the rows that multiply ``U`` taken to ``W = R U``."""
+        prediction = self.prediction
+        return np.concatenate([prediction.chol_inv_flat, self.chol_rhs,
+                               prediction.steering_gamma_w_flat, self.free_d,
+                               (self.gamma_h @ prediction.chol_inv).ravel(order="F"),
+                               self.bound_h])
+
+
+def condensed_data(prediction: CondensedPrediction, inputs: "MpcInputs",
+                   weights: tuple) -> CondensedData:
+    """The condensed QP's data for one step: one product for the free response, one gather
+    for the weighted errors, the half-planes folded onto ``U`` (``weights`` must be those
+    ``prediction`` was built with)."""
+    n = inputs.y_ref_m.shape[0]
+    if np.count_nonzero(inputs.disturbance_rad_s):
+        free = (prediction.free_map @ inputs.x0
+                + prediction.disturbance_map @ inputs.disturbance_rad_s).reshape(n, 5)
+    else:
+        free = (prediction.free_map @ inputs.x0).reshape(n, 5)
+    root = prediction.root_weights
+    # the weighted free errors, rows by cost term then step: one gather, one product, and the
+    # two reference terms (the same operations on each entry as a stacked target)
+    free_w = prediction.cost_root * free.ravel()[prediction.cost_index]
+    free_w[:n] -= root[0] * inputs.y_ref_m
+    free_w[n:2 * n] -= root[1] * inputs.psi_ref_rad
+    if inputs.r_ref_rad_s is not None:
+        free_w[2 * n:3 * n] -= root[2] * inputs.r_ref_rad_s
+    if inputs.delta_ref_rad is not None:
+        free_w[3 * n:] -= root[3] * inputs.delta_ref_rad
+    gamma = prediction.gamma
+    G, h = inputs.constraint_gain, inputs.constraint_bound  # (N, M)
+    # G_kj (y_free,k + gamma_y,k U) + s_kj >= h_kj, rows k-major as S is flattened (C order)
+    gamma_h = (G[:, :, None] * gamma[:, 0, None, :]).reshape(-1, gamma.shape[2])
+    bound_h = (h - G * free[:, 0, None]).ravel()
+    return CondensedData(prediction, free_w, gamma[:, 4, :], free[:, 4], gamma_h, bound_h, free)

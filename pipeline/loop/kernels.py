@@ -1,0 +1,54 @@
+"""The closed loop's innermost arithmetic as one value: a set of callables, each a statement of
+the loop stages run by CPython (:data:`pipeline.loop.python_kernels.PYTHON_KERNELS`) or
+compiled by numba (:data:`pipeline.loop.compiled.COMPILED_KERNELS`), the same bits either way.
+
+A run is handed one :class:`Kernels` (the family runner chooses the compiled set once a process
+has runs enough to pay numba's start-up); the plant, the planner and the controllers call
+through it and never ask which set they hold, except to prepare their arguments
+(:meth:`Kernels.prepare`: lists for CPython, whose arithmetic on numpy scalars is slower;
+contiguous arrays for numba). This module imports nothing of the pipeline, so every stage may
+name the type without an import circle.
+"""
+
+from __future__ import annotations
+
+from typing import Callable, NamedTuple
+
+import numpy as np
+
+
+class Kernels(NamedTuple):
+    """One set of the loop's kernels (see the module docstring).
+
+    Attributes
+    ----------
+    compiled : bool
+        Whether the callables are numba's (arrays in) or CPython's (lists in).
+    plant_rk4 : callable
+        :func:`pipeline.loop.model.single_track_rk4`.
+    apf_rollout : callable
+        :func:`pipeline.loop.planner.apf_rollout_arrays`.
+    references : callable
+        :func:`pipeline.loop.controller.references.reference_arrays`.
+    chase_path, frame_step, plan_poses : callable
+        :func:`pipeline.loop.controller.path.chase_path_arrays`, ``frame_step_arrays``,
+        ``plan_poses_arrays``.
+    check_record : callable
+        :func:`pipeline.loop.controller.prediction_check.check_record_arrays`.
+    """
+
+    compiled: bool
+    plant_rk4: Callable
+    apf_rollout: Callable
+    references: Callable
+    chase_path: Callable
+    frame_step: Callable
+    plan_poses: Callable
+    check_record: Callable
+
+    def prepare(self, values):
+        """``values`` as this set's callables take them: a contiguous float array for numba, a
+        (nested) list for CPython."""
+        if self.compiled:
+            return np.ascontiguousarray(values, dtype=float)
+        return np.asarray(values, dtype=float).tolist()
