@@ -55,7 +55,7 @@ report: $(STAMP)  ## rebuild the HTML report from existing run folders (no simul
 	$(PY) -m pipeline.report $(RUNS) --out $(REPORT) --command "make reproduce"
 
 screenshot: $(STAMP)  ## the README's screenshot (docs/report_screenshot.png) from make reproduce's own report
-	$(PY) -m pipeline.reporting.screenshot $(REPORT)/index.html docs/report_screenshot.png
+	$(PY) -m pipeline.screenshot $(REPORT)/index.html docs/report_screenshot.png
 
 reproduce: experiment report  ## set up, run the experiment and write reports/latest/index.html (its last lines: the verdicts in words)
 

@@ -1,15 +1,57 @@
 """Benchmark the controller step against the solver's floor: ``python -m pipeline.bench``.
 
-A thin entry: the work is in :mod:`pipeline.studies.bench`.
+The command: its options, then :func:`pipeline.studies.bench.run_benchmark` through the command
+layer (:func:`pipeline.commands.run_command`); it draws the scaling plot and prints the headline
+figures.
 """
 
 from __future__ import annotations
 
+import argparse
+import json
 import sys
+from pathlib import Path
 
-from pipeline.studies.bench import main
+from pipeline.commands import run_command
+from pipeline.studies import bench as study
 
-__all__ = ['main']
+__all__ = ["main"]
+
+#: The headline figures the command prints (``bench_summary.json`` holds them all).
+HEADLINE = ("closed_loop_over_floor", "step_over_floor", "step_over_sparse_floor",
+            "step_over_sparse_floor_daqp", "step_over_sparse_floor_dense",
+            "step_over_sparse_floor_path", "step_over_sparse_floor_path_daqp",
+            "step_over_sparse_floor_cpu", "outside_qp_us_per_step", "qp_us_per_step",
+            "outside_qp_over_qp", "outside_qp_over_qp_python_kernels", "setup_ms",
+            "compiles_per_family", "family_scenarios_per_s", "family_member_over_sparse_floor",
+            "family_member_over_sparse_floor_daqp", "multiverse_member_reads_per_member")
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog="python -m pipeline.bench", description=study.__doc__,
+                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--out", type=Path, default=Path("reports/bench"))
+    parser.add_argument("--steps", type=int, default=40, help="inputs per configuration")
+    parser.add_argument("--repeats", type=int, default=3)
+    parser.add_argument("--quick", action="store_true", help="N=10 and 1 obstacle only")
+    parser.add_argument("--family-size", type=int, default=200)
+    args = parser.parse_args(argv)
+    return run_command(lambda: _bench(args))
+
+
+def _bench(args) -> int:
+    from pipeline.reporting.figures import bench_scaling_figure, save_figure
+
+    summary, lateral = study.run_benchmark(args.out, args.steps, args.repeats, args.quick,
+                                           args.family_size)
+    save_figure(bench_scaling_figure(lateral), args.out, "scaling")
+    print(json.dumps({key: summary[key] for key in HEADLINE}, indent=1))
+    print(json.dumps({"path_frame": summary["path_frame"]}, indent=1))
+    print(json.dumps({"lateral_N10_1obs": summary["lateral"][0], "peers": summary["peers"],
+                      "pipeline": summary["pipeline"],
+                      "n50_over_n10": summary["n50_over_n10_direct"]}, indent=1))
+    return 0
+
 
 if __name__ == "__main__":
     sys.exit(main())

@@ -160,39 +160,6 @@ def _override_under_null_line(err: BaseException) -> str | None:
     return None
 
 
-def study_error_line(exc: BaseException) -> str | None:
-    """The one line a study's command prints for ``exc`` before exiting 2 (a configuration
-    error, an incomplete SLURM sweep, a study that cannot go on), or None for a code error."""
-    if isinstance(exc, (ConfigError, IncompleteSweepError)):
-        return str(exc)
-    if isinstance(exc, (StudyError, FolderBusyError)):
-        return f"error: {exc}"
-    if isinstance(exc, OSError) and exc.filename is not None:
-        # a folder that cannot be written or read: blocked by a file, read-only, missing
-        return f"error: {exc.filename}: {exc.strerror or type(exc).__name__}"
-    return describe_config_error(exc)
-
-
-def run_study(call):
-    """``(0, call())``, or ``(2, None)`` after printing :func:`study_error_line`'s one line for
-    a configuration error, or ``(130 / 143, None)`` with one line when Ctrl-C or SIGTERM
-    stops it; code errors propagate with their traceback."""
-    import sys
-
-    stop_on_signals()
-    try:
-        return 0, call()
-    except KeyboardInterrupt as exc:
-        print(stopped_line(exc, "completed family runs and tables"), file=sys.stderr)
-        return interrupted_exit_code(exc), None
-    except Exception as exc:  # noqa: BLE001 - configuration errors become one line
-        message = study_error_line(exc)
-        if message is None:
-            raise
-        print(message, file=sys.stderr)
-        return 2, None
-
-
 class Interrupted(KeyboardInterrupt):
     """The process was asked to stop (SIGINT or SIGTERM); ``exit_code`` is 128 + the signal."""
 

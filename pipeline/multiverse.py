@@ -1,15 +1,54 @@
 """How robust is each verdict: ``python -m pipeline.multiverse [--space NAME|PATH] [--out DIR]``.
 
-A thin entry: the work is in :mod:`pipeline.studies.multiverse`.
+The command: its options, then :func:`pipeline.studies.multiverse.run_multiverse` through the
+command layer (:func:`pipeline.commands.run_command`).
 """
 
 from __future__ import annotations
 
+import argparse
+import logging
 import sys
+from pathlib import Path
 
-from pipeline.studies.multiverse import main
+from pipeline.commands import CommandError, run_command
+from pipeline.studies import multiverse as study
 
-__all__ = ['main']
+__all__ = ["main"]
+
+log = logging.getLogger("pipeline.multiverse")
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog="python -m pipeline.multiverse",
+                                     description=study.__doc__.split("\n\n")[0])
+    parser.add_argument("--space", default="default",
+                        help="conf/multiverse/<name>.yaml or a path (default: default)")
+    parser.add_argument("--out", type=Path, default=Path("outputs/multiverse"))
+    parser.add_argument("--jobs", type=int, default=2, help="analysis workers (default 2)")
+    parser.add_argument("overrides", nargs="*", help="Hydra overrides for every run")
+    args = parser.parse_args(argv)
+    return run_command(lambda: _multiverse(args))
+
+
+def _multiverse(args) -> int:
+    from pipeline.config import CONF_DIR
+
+    if not 1 <= args.jobs <= 256:
+        raise CommandError(f"error: --jobs={args.jobs} is invalid; allowed: an integer in "
+                           "[1, 256]")
+    path = Path(args.space)
+    if not path.suffix:
+        path = CONF_DIR / "multiverse" / f"{args.space}.yaml"
+    robust = study.run_multiverse(study.load_space(path), args.out, args.overrides, args.jobs,
+                                  log=log.info)
+    for r in robust.to_dict("records"):
+        print(f"{r['claim']} vs {r['comparison']}: default {r['default_outcome']}, {r['label']} "
+              f"({100 * r['agree_share']:.0f} % agree); most influential: "
+              f"{r['most_influential']}")
+    print(f"multiverse written to {args.out.resolve()}")
+    return 0
+
 
 if __name__ == "__main__":
     sys.exit(main())

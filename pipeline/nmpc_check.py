@@ -1,18 +1,22 @@
 """Entry point: ``python -m pipeline.nmpc_check [--members 50] [--track both] [--out DIR]``
 (``make nmpc-check``): each track's linear MPC against the same problem on the nonlinear model
-(:mod:`pipeline.studies.nmpc_check`)."""
+(:mod:`pipeline.studies.nmpc_check`), through the command layer
+(:func:`pipeline.commands.run_command`)."""
 
 from __future__ import annotations
 
 import argparse
 import json
+import logging
 import sys
 from pathlib import Path
 
-from pipeline.errors import run_study
+from pipeline.commands import CommandError, run_command
 from pipeline.studies.nmpc_check import nmpc_agreement
 
 __all__ = ["main", "nmpc_agreement"]
+
+log = logging.getLogger("pipeline.nmpc_check")
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -26,22 +30,21 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--jobs", type=int, default=2,
                         help="worker processes (1-64, default 2)")
     args = parser.parse_args(argv)
-    if not 1 <= args.jobs <= 64:
-        print(f"--jobs: {args.jobs} is not allowed; allowed: an integer in [1, 64]",
-              file=sys.stderr)
-        return 2
-    tracks = ("lateral", "kinematic") if args.track == "both" else (args.track,)
-    if not 1 <= args.members <= 10_000:
-        print(f"--members: {args.members} is not allowed; allowed: an integer in [1, 10000]",
-              file=sys.stderr)
-        return 2
+    return run_command(lambda: _check(args), kept="completed runs")
+
+
+def _check(args) -> int:
     from pipeline.studies.multiverse import composer
 
-    code, summary = run_study(lambda: nmpc_agreement(
-        composer([])[0], args.out, args.members,
-        log=lambda m: print(m, file=sys.stderr, flush=True), tracks=tracks, n_jobs=args.jobs))
-    if code:
-        return code
+    if not 1 <= args.jobs <= 64:
+        raise CommandError(f"--jobs: {args.jobs} is not allowed; allowed: an integer in "
+                           "[1, 64]")
+    if not 1 <= args.members <= 10_000:
+        raise CommandError(f"--members: {args.members} is not allowed; allowed: an integer "
+                           "in [1, 10000]")
+    tracks = ("lateral", "kinematic") if args.track == "both" else (args.track,)
+    summary = nmpc_agreement(composer([])[0], args.out, args.members, log=log.info,
+                             tracks=tracks, n_jobs=args.jobs)
     print(json.dumps({track: {k: v for k, v in part.items() if k != "verdicts"}
                       for track, part in summary["tracks"].items()}, indent=1))
     print(f"agreement written to {args.out.resolve()}")

@@ -1,15 +1,107 @@
 """Build the HTML report from run folders: ``python -m pipeline.report RUNS [--out DIR]``.
 
-A thin entry: the work is in :mod:`pipeline.reporting.page`.
+The command: its options, then :func:`pipeline.reporting.page.build_report` through the
+command layer (:func:`pipeline.commands.run_command`). The report only reads: it never
+simulates.
 """
 
 from __future__ import annotations
 
+import argparse
 import sys
+from pathlib import Path
 
-from pipeline.reporting.page import build_report, main
+from pipeline.commands import CommandError, run_command
+from pipeline.reporting.page import build_report
 
-__all__ = ['build_report', 'main']
+__all__ = ["build_report", "main"]
+
+
+def _parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(prog="python -m pipeline.report",
+                                     description="Build the HTML report from run folders.")
+    parser.add_argument("runs", type=Path, help="folder holding run folders (e.g. outputs/paper)")
+    parser.add_argument("--out", type=Path, default=Path("reports/latest"),
+                        help="output folder (default: reports/latest)")
+    parser.add_argument("--sweep", type=Path, action="append", default=[],
+                        help="aggregated sweep folder to add as a Sweep section (repeatable)")
+    parser.add_argument("--bench", type=Path, default=Path("reports/bench"),
+                        help="benchmark folder to add as the Performance section, if present")
+    parser.add_argument("--multiverse", type=Path, default=None,
+                        help="multiverse folder (default: RUNS/multiverse, if present)")
+    parser.add_argument("--treatment", default=None,
+                        help="the method whose claims are judged (default: claims.treatment of "
+                             "the runs' settings, improved)")
+    parser.add_argument("--controls", default=None,
+                        help="comma-separated methods it is compared with (default: "
+                             "claims.controls, baseline,baseline_matched)")
+    parser.add_argument("--tune", type=Path, default=None,
+                        help="fair-fight folder of make tune (default: RUNS/tune, if present)")
+    parser.add_argument("--figure-style", default="default",
+                        help="how figures are written: a name under conf/report/figure_style/ "
+                             "(default, paper) or a YAML file's path")
+    parser.add_argument("--figure-jobs", type=int, default=None,
+                        help="figures drawn at the same time, in child processes (default: the "
+                             "machine's cores; 1: one after the other here)")
+    parser.add_argument("--strict", action="store_true",
+                        help="exit 1 when any folder was skipped (after writing the report)")
+    parser.add_argument("--command", default=None,
+                        help="command to show under provenance (default: this command line)")
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = _parser().parse_args(argv)
+    command = args.command or "python -m pipeline.report " + " ".join(argv or sys.argv[1:])
+
+    def cannot_write(exc: OSError) -> str:
+        return (f"error: --out {args.out}: cannot write the report ({exc.strerror or exc}: "
+                f"{exc.filename or args.out})")
+
+    return run_command(lambda: _report(args, command), os_error=cannot_write)
+
+
+def _report(args, command: str) -> int:
+    from pipeline.errors import ConfigError
+    from pipeline.reporting.style import load_figure_style
+    from pipeline.store.runs import Skipped, refuse_input_as_output
+
+    try:
+        # the report is a folder of its own: never one of its inputs, never a file
+        refuse_input_as_output(args.out, [args.runs, *args.sweep, args.multiverse, args.tune])
+        if args.out.exists() and not args.out.is_dir():
+            raise OSError(20, "a file, not a folder", str(args.out))
+    except OSError as exc:
+        raise CommandError(f"error: --out {args.out}: cannot write the report "
+                           f"({exc.strerror})") from None
+    if args.figure_jobs is not None and not 1 <= args.figure_jobs <= 256:
+        raise CommandError(f"error: --figure-jobs={args.figure_jobs} is invalid; allowed: an "
+                           "integer in [1, 256]")
+    try:
+        style = load_figure_style(args.figure_style)
+    except ConfigError as exc:
+        raise CommandError(f"error: {exc}") from None
+    skipped: list[Skipped] = []
+    controls = tuple(c.strip() for c in (args.controls or "").split(",") if c.strip())
+    try:
+        path = build_report(args.runs, args.out, command, tuple(args.sweep), args.bench,
+                            args.multiverse, skipped, args.tune, args.treatment, controls,
+                            style=style, figure_jobs=args.figure_jobs)
+    except FileNotFoundError as exc:
+        raise CommandError(f"error: {exc}") from None
+    print(f"report written to {path.resolve()}"
+          + (f" ({len(skipped)} folder(s) skipped, listed in the report)" if skipped else ""))
+    answer = path.parent / "answer.txt"
+    if answer.is_file() and answer.read_text().strip():
+        # the answer in words, last, so that a command's final lines are the verdicts
+        print("The answer over the scenario family (outcome vs each comparison, estimate "
+              "[95 % interval] unit; d = treatment - comparison, below 0 is better):")
+        print(answer.read_text().rstrip())
+    if args.strict and skipped:
+        print(f"error: --strict: {len(skipped)} folder(s) skipped", file=sys.stderr)
+        return 1
+    return 0
+
 
 if __name__ == "__main__":
     sys.exit(main())

@@ -21,8 +21,7 @@ import pandas as pd
 from pipeline.analysis.objectives import objective_values
 from pipeline.analysis.tally import Tally
 from pipeline.config import CONF_DIR, register_configs, to_experiment_config
-from pipeline.errors import (FolderBusyError, describe_config_error, interrupted_exit_code,
-                             stop_on_signals, stopped_line)
+from pipeline.commands import run_command, run_task
 from pipeline.store.runs import folder_lock
 from pipeline.studies.experiment import RunSummary, run_experiment, run_family
 from pipeline.studies.slurm import register_launcher
@@ -42,23 +41,18 @@ def hydra_main(cfg: DictConfig) -> float | tuple[float, ...]:
     float, or a tuple for several), which is what a Hydra sweeper optimizes."""
     from hydra.core.hydra_config import HydraConfig
 
-    try:
+    out_dir = Path(HydraConfig.get().runtime.output_dir)
+
+    def job() -> float | tuple[float, ...]:
         experiment = to_experiment_config(cfg)
         _check_targets(experiment)
-    except Exception as exc:  # noqa: BLE001 - config errors become one line; others re-raise
-        message = describe_config_error(exc)
-        if message is None or os.environ.get("PIPELINE_USER_FULL_ERROR") == "1":
-            raise
-        # SystemExit passes Hydra's job wrapper untouched: one line, exit code 2
-        print(message, file=sys.stderr)
-        raise SystemExit(2) from None
-    out_dir = Path(HydraConfig.get().runtime.output_dir)
-    try:
         with folder_lock(out_dir):
             return _run(experiment, out_dir)
-    except FolderBusyError as exc:
-        print(f"error: {exc}", file=sys.stderr)
-        raise SystemExit(2) from None
+
+    # the one exception table (pipeline.commands) here too: a configuration error in a
+    # launcher's worker process is one line and exit 2 as well
+    return run_task(job, kept=KEPT, os_error=_cannot_write, log_to_stderr=False,
+                    tracebacks=os.environ.get("PIPELINE_USER_FULL_ERROR") == "1")
 
 
 def _run(experiment, out_dir: Path) -> float | tuple[float, ...]:
@@ -98,42 +92,38 @@ def _describe(objectives, values) -> str:
     return ", ".join(f"{o.label} = {v:.4g}" for o, v in zip(objectives, values))
 
 
+KEPT = "completed runs and family members"
+
+
+def _cannot_write(exc: OSError) -> str:
+    """An output folder that cannot be made or written (a file in the way, no permission, a
+    full disk): the run wrote nothing half-way."""
+    return (f"error: cannot write {exc.filename}: {exc.strerror or exc} (choose another "
+            "output folder with hydra.run.dir=... or hydra.sweep.dir=...)")
+
+
 def main() -> None:
-    """Console entry: run Hydra; configuration errors exit 2 with one line on stderr."""
+    """Console entry: run Hydra through the command layer
+    (:func:`pipeline.commands.run_command`): configuration errors exit 2 with one line on
+    stderr, an unwritable output folder too, Ctrl-C keeps what is complete; with
+    ``HYDRA_FULL_ERROR=1`` every error keeps its traceback."""
     original = os.environ.get("HYDRA_FULL_ERROR")
     user_wants_trace = original == "1"
     os.environ["PIPELINE_USER_FULL_ERROR"] = "1" if user_wants_trace else "0"
     os.environ["HYDRA_FULL_ERROR"] = "1"  # let exceptions reach us instead of Hydra's printer
-    stop_on_signals()
+
     try:
-        hydra_main()
-    except KeyboardInterrupt as exc:
-        # completed members and runs are kept (each written atomically); rerunning the same
-        # command resumes them
-        print(stopped_line(exc, "completed runs and family members"), file=sys.stderr)
-        sys.exit(interrupted_exit_code(exc))
-    except Exception as exc:  # noqa: BLE001 - turned into a message and an exit code
-        if user_wants_trace:
-            raise
-        message = describe_config_error(exc)
-        if message is not None:
-            print(message, file=sys.stderr)
-            sys.exit(2)
-        if isinstance(exc, OSError) and exc.filename:
-            # an output folder that cannot be made or written (a file in the way, no
-            # permission, a full disk): the run wrote nothing half-way
-            print(f"error: cannot write {exc.filename}: {exc.strerror or exc} (choose another "
-                  "output folder with hydra.run.dir=... or hydra.sweep.dir=...)",
-                  file=sys.stderr)
-            sys.exit(2)
-        print(f"error: {type(exc).__name__}: {exc} (set HYDRA_FULL_ERROR=1 for the traceback)",
-              file=sys.stderr)
-        sys.exit(1)
+        code = run_command(lambda: hydra_main() and None,  # its objective is no exit code
+                           kept=KEPT, os_error=_cannot_write, tracebacks=user_wants_trace,
+                           log_to_stderr=False,  # Hydra logs its jobs
+                           code_error=lambda exc: f"error: {type(exc).__name__}: {exc} (set "
+                                                  "HYDRA_FULL_ERROR=1 for the traceback)")
     finally:
         if original is None:
             os.environ.pop("HYDRA_FULL_ERROR", None)
         else:
             os.environ["HYDRA_FULL_ERROR"] = original
+    sys.exit(code)
 
 
 if __name__ == "__main__":

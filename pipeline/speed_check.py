@@ -1,17 +1,21 @@
 """Entry point: ``python -m pipeline.speed_check [--members 200] [--out DIR]`` (``make
-speed-check``): is slower ever less safe? (:mod:`pipeline.studies.speed`)."""
+speed-check``): is slower ever less safe? (:mod:`pipeline.studies.speed`), through the command
+layer (:func:`pipeline.commands.run_command`)."""
 
 from __future__ import annotations
 
 import argparse
 import json
+import logging
 import sys
 from pathlib import Path
 
-from pipeline.errors import run_study
+from pipeline.commands import CommandError, run_command
 from pipeline.studies.speed import VARIANTS, speed_check
 
 __all__ = ["main", "speed_check"]
+
+log = logging.getLogger("pipeline.speed_check")
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -23,23 +27,22 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--variants", default=",".join(VARIANTS),
                         help="comma-separated subset of: " + ", ".join(VARIANTS))
     args = parser.parse_args(argv)
+    return run_command(lambda: _check(args), kept="completed family runs")
+
+
+def _check(args) -> int:
+    from pipeline.studies.multiverse import composer
+
     if not 1 <= args.members <= 10_000:
-        print(f"--members: {args.members} is not allowed; allowed: an integer in [1, 10000]",
-              file=sys.stderr)
-        return 2
+        raise CommandError(f"--members: {args.members} is not allowed; allowed: an integer "
+                           "in [1, 10000]")
     variants = tuple(v.strip() for v in args.variants.split(",") if v.strip())
     unknown = [v for v in variants if v not in VARIANTS]
     if unknown or not variants:
-        print(f"--variants: {','.join(unknown) or '(none)'} is not allowed; allowed: "
-              + ", ".join(VARIANTS), file=sys.stderr)
-        return 2
-    from pipeline.studies.multiverse import composer
-
-    code, summary = run_study(lambda: speed_check(
-        composer([])[0], args.out, args.members,
-        log=lambda m: print(m, file=sys.stderr, flush=True), variants=variants))
-    if code:
-        return code
+        raise CommandError(f"--variants: {','.join(unknown) or '(none)'} is not allowed; "
+                           "allowed: " + ", ".join(VARIANTS))
+    summary = speed_check(composer([])[0], args.out, args.members, log=log.info,
+                          variants=variants)
     print(json.dumps(summary["checks"], indent=1))
     print(f"speed check written to {args.out.resolve()}")
     return 0

@@ -4,14 +4,17 @@
 from __future__ import annotations
 
 import argparse
+import logging
 import sys
 from pathlib import Path
 
+from pipeline.commands import run_command
 from pipeline.config import CONF_DIR
-from pipeline.errors import run_study
 from pipeline.studies.tune import load_tune_space, run_tuning
 
 __all__ = ["main", "run_tuning"]
+
+log = logging.getLogger("pipeline.tune")
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -23,14 +26,14 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("overrides", nargs="*",
                         help="Hydra overrides for every run (e.g. hydra/launcher=slurm)")
     args = parser.parse_args(argv)
+    return run_command(lambda: _tune(args), kept="completed family runs and tables")
+
+
+def _tune(args) -> int:
     path = Path(args.space)
     if not path.suffix:
         path = CONF_DIR / "tune" / f"{args.space}.yaml"
-    log = (lambda message: print(message, file=sys.stderr, flush=True))
-    code, summary = run_study(lambda: run_tuning(load_tune_space(path), args.out,
-                                                 args.overrides, log=log))
-    if code:
-        return code
+    summary = run_tuning(load_tune_space(path), args.out, args.overrides, log=log.info)
     for claim in summary["claims"]:
         print(claim["sentence"])
     print(f"tuning written to {Path(args.out).resolve()}")

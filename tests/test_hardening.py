@@ -27,7 +27,7 @@ def _one_line(capsys) -> str:
 
 
 def test_score_never_writes_over_its_input_a_folder_or_a_pipe(trajectory, tmp_path, capsys):
-    from pipeline.studies.score import main
+    from pipeline.score import main
 
     copy = tmp_path / "t.csv"
     copy.write_bytes(trajectory.read_bytes())
@@ -54,8 +54,8 @@ def test_score_never_writes_over_its_input_a_folder_or_a_pipe(trajectory, tmp_pa
 
 def test_report_and_verify_refuse_their_inputs_and_files_as_folders(trajectory, tmp_path,
                                                                      capsys):
-    from pipeline.reporting.page import main as report_main
-    from pipeline.studies.verify import main as verify_main
+    from pipeline.report import main as report_main
+    from pipeline.verify import main as verify_main
 
     runs = trajectory.parent.parent
     assert report_main([str(runs), "--out", str(runs)]) == 2
@@ -81,7 +81,7 @@ def test_report_and_verify_refuse_their_inputs_and_files_as_folders(trajectory, 
     ("dimensions: [{key: planner.beta, stage: simulation, values: 0.5}]", "dimensions[0].values"),
 ])
 def test_a_bad_space_file_stops_before_any_work(tmp_path, capsys, text, key):
-    from pipeline.studies.multiverse import main
+    from pipeline.multiverse import main
 
     space = tmp_path / "space.yaml"
     space.write_text(text)
@@ -93,7 +93,7 @@ def test_a_bad_space_file_stops_before_any_work(tmp_path, capsys, text, key):
 
 
 def test_multiverse_jobs_and_a_blocked_output_folder(tmp_path, capsys):
-    from pipeline.studies.multiverse import main
+    from pipeline.multiverse import main
 
     assert main(["--space", "quick", "--jobs", "0", "--out", str(tmp_path / "mv")]) == 2
     assert "--jobs=0" in _one_line(capsys)
@@ -194,7 +194,7 @@ def test_score_ignores_trailing_separators_and_counts_empty_cells(trajectory, tm
 
     import pandas as pd
 
-    from pipeline.studies.score import main
+    from pipeline.score import main
 
     table = pd.read_csv(trajectory)
     keep = ["time_s", "X_m", "Y_m", "psi_rad", "delta_rad"] + [
@@ -219,7 +219,7 @@ def test_score_ignores_trailing_separators_and_counts_empty_cells(trajectory, tm
 
 
 def test_aggregate_refuses_a_baseline_that_is_not_a_run(tmp_path, capsys):
-    from pipeline.studies.aggregate import main
+    from pipeline.aggregate import main
 
     sweep = tmp_path / "sweep"
     sweep.mkdir()
@@ -237,18 +237,19 @@ def test_an_unknown_key_inside_a_list_is_named_by_its_full_path(make_config):
 def test_a_study_stopped_by_a_signal_exits_130_or_143_with_one_line(capsys):
     import signal
 
-    from pipeline.errors import Interrupted, run_study
+    from pipeline.commands import run_command
+    from pipeline.errors import Interrupted
 
     def stopped(exc):
         def call():
             raise exc
         return call
 
-    assert run_study(stopped(KeyboardInterrupt())) == (130, None)
+    assert run_command(stopped(KeyboardInterrupt())) == 130
     assert "stopped (interrupted)" in _one_line(capsys)
-    assert run_study(stopped(Interrupted(signal.SIGTERM))) == (143, None)
+    assert run_command(stopped(Interrupted(signal.SIGTERM))) == 143
     assert "stopped (SIGTERM)" in _one_line(capsys)
-    # run_study turned SIGTERM into Interrupted: a real signal to this process is caught too
+    # run_command turned SIGTERM into Interrupted: a real signal to this process is caught too
     import os
 
     def terminate():
@@ -257,7 +258,7 @@ def test_a_study_stopped_by_a_signal_exits_130_or_143_with_one_line(capsys):
         time.sleep(5)  # interrupted long before this ends
 
     try:
-        assert run_study(terminate) == (143, None)
+        assert run_command(terminate) == 143
     finally:
         signal.signal(signal.SIGTERM, signal.SIG_DFL)
     assert "SIGTERM" in _one_line(capsys)

@@ -24,7 +24,7 @@ LAYERS = (
     ("pipeline.studies",),
     ("pipeline.reporting",),
     ("pipeline.run", "pipeline.report", "pipeline.aggregate", "pipeline.multiverse", "pipeline.tune", "pipeline.api",
-     "pipeline.nmpc_check", "pipeline.speed_check",
+     "pipeline.nmpc_check", "pipeline.speed_check", "pipeline.commands", "pipeline.screenshot",
      "pipeline.verify", "pipeline.bench", "pipeline.score"),
 )
 #: Files a run or family folder holds (its layout belongs to the store).

@@ -64,7 +64,7 @@ def test_a_verdict_that_flips_under_one_dimension_is_attributed_to_it():
 
 
 def test_quick_space_end_to_end_and_resume(tmp_path):
-    from pipeline.studies.multiverse import main
+    from pipeline.multiverse import main
 
     out = tmp_path / "mv"
     assert main(["--space", "quick", "--out", str(out), "scenario.family.n_jobs=1"]) == 0
@@ -171,7 +171,7 @@ def test_a_space_backend_outside_the_qp_backends_is_a_one_line_error(tmp_path):
 
 
 def test_unknown_space_exits_2(capsys):
-    from pipeline.studies.multiverse import main
+    from pipeline.multiverse import main
 
     assert main(["--space", "no_such_space"]) == 2
     assert "conf/multiverse" in capsys.readouterr().err

@@ -7,7 +7,8 @@ import re
 import pytest
 
 from pipeline.config import INTERPRETATION_REGISTER
-from pipeline.reporting.page import build_report, main as report_main
+from pipeline.report import main as report_main
+from pipeline.reporting.page import build_report
 from pipeline.studies.experiment import run_experiment
 
 
@@ -114,7 +115,7 @@ def test_the_figure_style_sets_size_format_and_font(tmp_path, make_config, capsy
     with one line naming it."""
     from PIL import Image
 
-    from pipeline.reporting.page import main
+    from pipeline.report import main
 
     runs = tmp_path / "runs"
     for method in ("baseline", "improved"):

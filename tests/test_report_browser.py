@@ -42,7 +42,7 @@ def report(tmp_path_factory, make_config):
                    root / "examples" / "a_baseline_rho3")
     run_experiment(make_config(["method=improved", "planner.beta=1.0"]),
                    root / "examples" / "improved_beta1")
-    from pipeline.studies.multiverse import main as multiverse_main
+    from pipeline.multiverse import main as multiverse_main
 
     assert multiverse_main(["--space", "quick", "--out", str(root / "multiverse"),
                             "scenario.family.n_jobs=1"]) == 0

@@ -12,7 +12,7 @@ import pandas as pd
 import pytest
 
 from pipeline.reporting.page import build_report
-from pipeline.reporting.page import main as report_main
+from pipeline.report import main as report_main
 from pipeline.studies.experiment import run_experiment, run_family
 from pipeline.analysis.metrics import RunMetrics
 from pipeline.store.runs import (MANIFEST, RunInfo, NonFiniteResultError, RunFolderError, check, discover,
@@ -187,7 +187,7 @@ def test_nested_job_folders_are_found(tmp_path, make_config):
 
 
 def test_verify_and_report_survive_every_broken_folder(paper, capsys):
-    from pipeline.studies.verify import main as verify_main
+    from pipeline.verify import main as verify_main
 
     (paper / "paper" / "improved" / "metrics.json").write_text("{")
     broken = paper / "paper" / "weird"

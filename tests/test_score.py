@@ -7,7 +7,7 @@ import json
 import pytest
 
 from pipeline.studies.experiment import run_experiment
-from pipeline.studies.score import main as score_main
+from pipeline.score import main as score_main
 
 
 @pytest.mark.parametrize("content, message", [

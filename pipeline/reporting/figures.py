@@ -580,3 +580,22 @@ def pareto_front_figure(points: dict[str, np.ndarray], labels: list[str],
     axes[0][0].legend(fontsize=7, loc="best")
     fig.suptitle(f"Pareto settings of each tuned method, {title}", fontsize=9)
     return fig
+
+
+def bench_scaling_figure(lateral: pd.DataFrame) -> Figure:
+    """``make bench``'s scaling plot: the controller step (APF + QP; the direct and the CVXPY
+    backend) and Clarabel's floor against the horizon, one line per obstacle count (the
+    benchmark's ``lateral`` table, one row per timed QP)."""
+    fig, axes = plt.subplots(1, 2, figsize=(9.0, 3.4), layout="constrained")
+    for n_obs, part in lateral.groupby("obstacles"):
+        med = part.groupby("N")[["cvxpy_step_s", "direct_step_s", "floor_s"]].median() * 1e3
+        axes[0].plot(med.index, med["direct_step_s"], marker="o", label=f"direct, {n_obs} obs")
+        axes[0].plot(med.index, med["cvxpy_step_s"], marker="s", ls="--",
+                     label=f"cvxpy, {n_obs} obs")
+        axes[1].plot(med.index, med["floor_s"], marker="^", label=f"floor, {n_obs} obs")
+    for ax, title in zip(axes, ("controller step (APF + QP) [ms]", "Clarabel floor [ms]")):
+        ax.set_xlabel("horizon N")
+        ax.set_title(title, fontsize=9)
+        ax.grid(True, alpha=0.3)
+        ax.legend(fontsize=7)
+    return fig

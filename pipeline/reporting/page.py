@@ -7,13 +7,13 @@ SVG/PNG figures and CSV tables beside it.
 
 from __future__ import annotations
 
-import argparse
 import base64
 import dataclasses
 import datetime as dt
 import functools
 import html
 import importlib.metadata
+import logging
 import math
 import os
 import platform
@@ -36,7 +36,9 @@ from pipeline.config import INTERPRETATION_REGISTER, ClaimsConfig
 from pipeline.reporting.figures import (apf_force_figure, claim_differences_figure,
                               family_distribution_figure, overlay_figure, paths_figure,
                               FigureWriter, timeseries_figure)
-from pipeline.reporting.style import FigureStyle, load_figure_style
+from pipeline.reporting.style import FigureStyle
+
+log = logging.getLogger(__name__)
 
 PACKAGES = ("numpy", "scipy", "pandas", "matplotlib", "control", "cvxpy", "clarabel",
             "hydra-core", "omegaconf", "jinja2")
@@ -600,8 +602,7 @@ def _build_report(run_root, out_dir, command, sweep_dirs, bench_dir, multiverse_
 
     def progress(step: str) -> None:
         """A plain line per stage on stderr, with the time so far (the report takes a while)."""
-        print(f"report: {step} ({time.perf_counter() - started:.0f} s)", file=sys.stderr,
-              flush=True)
+        log.info("report: %s (%.0f s)", step, time.perf_counter() - started)
 
     sweep_dirs = tuple(Path(d) for d in sweep_dirs)
     skipped = skipped if skipped is not None else []
@@ -613,7 +614,7 @@ def _build_report(run_root, out_dir, command, sweep_dirs, bench_dir, multiverse_
     runs, family_tables, family_info = (collection.runs, collection.family_tables,
                                         collection.family_info)
     for item in skipped:
-        print(f"skipped {item.folder}: {item.reason}", file=sys.stderr)
+        log.warning("skipped %s: %s", item.folder, item.reason)
     def optional(section, folder, *args):
         """An optional section whose files are broken is left out and listed, not a crash."""
         try:
@@ -623,7 +624,7 @@ def _build_report(run_root, out_dir, command, sweep_dirs, bench_dir, multiverse_
             reason = f"{section.__name__.strip('_').replace('_', ' ')} left out " \
                      f"({type(exc).__name__}: {str(exc).splitlines()[0][:120] if str(exc) else ''})"
             skipped.append(Skipped(Path(folder), reason))
-            print(f"skipped {folder}: {reason}", file=sys.stderr)
+            log.warning("skipped %s: %s", folder, reason)
             return None
 
     sweeps = [sw for sw in (optional(_sweep_section, d, fig_dir, table_dir) for d in sweep_dirs)
@@ -813,7 +814,7 @@ def _sweep_section(sweep_dir: Path, fig_dir: Path, table_dir: Path) -> dict:
     if reason is not None:
         # a summary is a cache of its jobs: recomputed, never trusted without its manifest
         if reason != "not computed yet":
-            print(f"report: re-aggregating {sweep_dir}: summary.csv {reason}", file=sys.stderr)
+            log.warning("report: re-aggregating %s: summary.csv %s", sweep_dir, reason)
         aggregate(sweep_dir, progress=False)
     summary = pd.read_csv(sweep_dir / "summary.csv")
     keys = json.loads((sweep_dir / "swept_keys.json").read_text())
@@ -1322,84 +1323,3 @@ def _metrics_doc() -> list[str]:
     # the docstring's **Name** becomes bold; everything else is escaped text
     return [Markup(re.sub(r"\*\*(.+?)\*\*", r"<strong>\1</strong>",
                           str(escape(b.replace("``", ""))))) for b in bullets]
-
-
-def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="python -m pipeline.report",
-                                     description="Build the HTML report from run folders.")
-    parser.add_argument("runs", type=Path, help="folder holding run folders (e.g. outputs/paper)")
-    parser.add_argument("--out", type=Path, default=Path("reports/latest"),
-                        help="output folder (default: reports/latest)")
-    parser.add_argument("--sweep", type=Path, action="append", default=[],
-                        help="aggregated sweep folder to add as a Sweep section (repeatable)")
-    parser.add_argument("--bench", type=Path, default=Path("reports/bench"),
-                        help="benchmark folder to add as the Performance section, if present")
-    parser.add_argument("--multiverse", type=Path, default=None,
-                        help="multiverse folder (default: RUNS/multiverse, if present)")
-    parser.add_argument("--treatment", default=None,
-                        help="the method whose claims are judged (default: claims.treatment of "
-                             "the runs' settings, improved)")
-    parser.add_argument("--controls", default=None,
-                        help="comma-separated methods it is compared with (default: "
-                             "claims.controls, baseline,baseline_matched)")
-    parser.add_argument("--tune", type=Path, default=None,
-                        help="fair-fight folder of make tune (default: RUNS/tune, if present)")
-    parser.add_argument("--figure-style", default="default",
-                        help="how figures are written: a name under conf/report/figure_style/ "
-                             "(default, paper) or a YAML file's path")
-    parser.add_argument("--figure-jobs", type=int, default=None,
-                        help="figures drawn at the same time, in child processes (default: the "
-                             "machine's cores; 1: one after the other here)")
-    parser.add_argument("--strict", action="store_true",
-                        help="exit 1 when any folder was skipped (after writing the report)")
-    parser.add_argument("--command", default=None,
-                        help="command to show under provenance (default: this command line)")
-    args = parser.parse_args(argv)
-    command = args.command or "python -m pipeline.report " + " ".join(argv or sys.argv[1:])
-    skipped: list[Skipped] = []
-    from pipeline.errors import ConfigError
-    from pipeline.store.runs import refuse_input_as_output
-
-    try:
-        # the report is a folder of its own: never one of its inputs, never a file
-        refuse_input_as_output(args.out, [args.runs, *args.sweep, args.multiverse, args.tune])
-        if args.out.exists() and not args.out.is_dir():
-            raise OSError(20, "a file, not a folder", str(args.out))
-    except OSError as exc:
-        print(f"error: --out {args.out}: cannot write the report ({exc.strerror})",
-              file=sys.stderr)
-        return 2
-    if args.figure_jobs is not None and not 1 <= args.figure_jobs <= 256:
-        print(f"error: --figure-jobs={args.figure_jobs} is invalid; allowed: an integer in "
-              "[1, 256]", file=sys.stderr)
-        return 2
-    try:
-        style = load_figure_style(args.figure_style)
-    except ConfigError as exc:
-        print(f"error: {exc}", file=sys.stderr)
-        return 2
-    try:
-        controls = tuple(c.strip() for c in (args.controls or "").split(",") if c.strip())
-        path = build_report(args.runs, args.out, command, tuple(args.sweep), args.bench,
-                            args.multiverse, skipped, args.tune, args.treatment, controls,
-                            style=style, figure_jobs=args.figure_jobs)
-    except FileNotFoundError as exc:
-        print(f"error: {exc}", file=sys.stderr)
-        return 2
-    except OSError as exc:
-        print(f"error: --out {args.out}: cannot write the report ({exc.strerror or exc}: "
-              f"{exc.filename or args.out})", file=sys.stderr)
-        return 2
-    print(f"report written to {path.resolve()}"
-          + (f" ({len(skipped)} folder(s) skipped, listed in the report)" if skipped else ""))
-    answer = path.parent / "answer.txt"
-    if answer.is_file() and answer.read_text().strip():
-        # the answer in words, last, so that a command's final lines are the verdicts
-        print("The answer over the scenario family (outcome vs each comparison, estimate "
-              "[95 % interval] unit; d = treatment - comparison, below 0 is better):")
-        print(answer.read_text().rstrip())
-    if args.strict and skipped:
-        print(f"error: --strict: {len(skipped)} folder(s) skipped", file=sys.stderr)
-        return 1
-    return 0
-

@@ -1,15 +1,14 @@
-"""The README's screenshot, taken from a report in headless Chromium (``make screenshot``).
+"""The README's screenshot, taken from a report in headless Chromium (``make screenshot``,
+``python -m pipeline.screenshot``).
 
-``python -m pipeline.reporting.screenshot REPORT.html OUT.png`` opens the page at 1280 x 800
+:func:`take_screenshot` opens the page at 1280 x 800
 and saves the top of it: the answer in words and the start of the ledger. It needs Playwright
 (the test extras) and a Chromium (Debian's ``chromium``, or Playwright's own).
 """
 
 from __future__ import annotations
 
-import argparse
 import shutil
-import sys
 from pathlib import Path
 
 
@@ -30,31 +29,3 @@ def take_screenshot(report: Path, out: Path, width: int = 1280, height: int = 80
         page.screenshot(path=str(out))
         browser.close()
     return out
-
-
-def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="python -m pipeline.reporting.screenshot",
-                                     description=__doc__,
-                                     formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("report", type=Path, help="the report's index.html")
-    parser.add_argument("out", type=Path, help="the PNG to write")
-    args = parser.parse_args(argv)
-    if not args.report.is_file():
-        print(f"error: no report at {args.report} (run make reproduce first)", file=sys.stderr)
-        return 2
-    try:
-        take_screenshot(args.report, args.out)
-    except ImportError:
-        print("error: the screenshot needs Playwright (pip install -e '.[test]')",
-              file=sys.stderr)
-        return 2
-    except Exception as exc:  # a browser that cannot start: one line, not a traceback
-        print(f"error: no screenshot ({type(exc).__name__}: {str(exc).splitlines()[0]})",
-              file=sys.stderr)
-        return 2
-    print(f"screenshot written to {args.out}")
-    return 0
-
-
-if __name__ == "__main__":
-    sys.exit(main())

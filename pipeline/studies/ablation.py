@@ -9,6 +9,7 @@ and improved inside). Pure functions over tables; the report draws and prints th
 
 from __future__ import annotations
 
+import logging
 from pathlib import Path
 
 import numpy as np
@@ -16,6 +17,8 @@ import pandas as pd
 
 from pipeline.analysis.claims import ALL_CLAIMS, CLAIMS, compare, family_ledger, judge
 from pipeline.analysis.tally import Tally
+
+log = logging.getLogger(__name__)
 
 REVISIONS = ("normalize", "step", "beta", "exponential", "step_min")
 REVISION_TEXT = {
@@ -31,19 +34,17 @@ def load_family_jobs(root: Path) -> dict[str, pd.DataFrame]:
     """``{label: family_metrics}`` of every trusted family job below ``root`` (label = its
     method); untrusted folders are named on stderr and left out. The tables are judged with
     the claims settings the caller passes (the report's: those of its main runs)."""
-    import sys
-
     from pipeline.store.runs import RunFolderError, discover, read_family
 
     tables = {}
     found = discover(Path(root))
     for item in found.skipped:
-        print(f"ablation: skipped {item.folder}: {item.reason}", file=sys.stderr)
+        log.warning("ablation: skipped %s: %s", item.folder, item.reason)
     for folder in found.families:
         try:
             family = read_family(folder, settings=False)
         except RunFolderError as exc:
-            print(f"ablation: skipped {exc}", file=sys.stderr)
+            log.warning("ablation: skipped %s", exc)
             continue
         tables[family.info["method"]] = family.table
     return tables

@@ -11,8 +11,7 @@ swept value. Figures of metric versus parameter land in ``figures/``. A Hydra ca
 
 from __future__ import annotations
 
-import argparse
-import sys
+import logging
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -26,6 +25,8 @@ from pipeline.store.runs import (check_derived_table, folder_kind, write_csv_ato
                                  write_derived_table, write_json_atomic)
 from pipeline.analysis.claims import ALL_CLAIMS, family_ledger, single_scenario_outcome
 from pipeline.config import ClaimsConfig
+
+log = logging.getLogger(__name__)
 
 METHOD_KEYS = ("method", "run.method", "planner")
 IGNORED_KEYS = ("sweep", "experiment", "hydra", "hydra.sweep.dir")
@@ -191,7 +192,7 @@ def aggregate(sweep_dir: Path, baseline_dir: Path | None = None, progress: bool 
     sweep_dir = Path(sweep_dir)
     jobs, skipped = find_jobs(sweep_dir)
     for item in skipped:
-        print(f"aggregate: {item['status']} {item['job']}: {item['reason']}", file=sys.stderr)
+        log.warning("aggregate: %s %s: %s", item["status"], item["job"], item["reason"])
     if not jobs:
         raise FileNotFoundError(f"no complete job folders in {sweep_dir}"
                                 + (f" ({len(skipped)} passed over: see above)" if skipped
@@ -337,35 +338,6 @@ class AggregateCallback(Callback):
             log.info("aggregated %s -> %s", sweep_dir, sweep_dir / "summary.csv")
         except FileNotFoundError as exc:
             log.warning("aggregate skipped: %s", exc)
-
-
-def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="python -m pipeline.aggregate",
-                                     description="Gather a sweep folder into summary.csv.")
-    parser.add_argument("sweep_dir", type=Path)
-    parser.add_argument("--baseline", type=Path, default=None,
-                        help="baseline job folder for improved jobs without a partner")
-    parser.add_argument("--no-figures", action="store_true", help="skip the figures")
-    args = parser.parse_args(argv)
-    if args.baseline is not None and folder_kind(args.baseline) is None:
-        # named on purpose, so never ignored: a folder that is not a trusted run or family
-        print(f"error: --baseline {args.baseline}: not a run or family folder (no manifest)",
-              file=sys.stderr)
-        return 2
-    if args.sweep_dir.exists() and not args.sweep_dir.is_dir():
-        print(f"error: {args.sweep_dir}: a file, not a sweep folder", file=sys.stderr)
-        return 2
-    try:
-        summary = aggregate(args.sweep_dir, args.baseline, figures=not args.no_figures)
-    except FileNotFoundError as exc:
-        print(f"error: {exc}", file=sys.stderr)
-        return 2
-    except OSError as exc:
-        print(f"error: {exc.filename or args.sweep_dir}: cannot write the summary "
-              f"({exc.strerror or exc})", file=sys.stderr)
-        return 2
-    print(f"{len(summary)} jobs -> {args.sweep_dir / 'summary.csv'}")
-    return 0
 
 
 def _counted(items, bar):

@@ -20,7 +20,6 @@ Results: ``reports/bench/bench.csv`` (every sample), ``bench_summary.json`` and
 
 from __future__ import annotations
 
-import argparse
 import gc
 import json
 import resource
@@ -654,56 +653,31 @@ def summarize(lateral: pd.DataFrame, peers: pd.DataFrame, kinematic: pd.DataFram
             "pipeline": pipeline_figures}
 
 
-def scaling_figure(lateral: pd.DataFrame):
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    fig, axes = plt.subplots(1, 2, figsize=(9.0, 3.4), layout="constrained")
-    for n_obs, part in lateral.groupby("obstacles"):
-        med = part.groupby("N")[["cvxpy_step_s", "direct_step_s", "floor_s"]].median() * 1e3
-        axes[0].plot(med.index, med["direct_step_s"], marker="o", label=f"direct, {n_obs} obs")
-        axes[0].plot(med.index, med["cvxpy_step_s"], marker="s", ls="--",
-                     label=f"cvxpy, {n_obs} obs")
-        axes[1].plot(med.index, med["floor_s"], marker="^", label=f"floor, {n_obs} obs")
-    for ax, title in zip(axes, ("controller step (APF + QP) [ms]", "Clarabel floor [ms]")):
-        ax.set_xlabel("horizon N")
-        ax.set_title(title, fontsize=9)
-        ax.grid(True, alpha=0.3)
-        ax.legend(fontsize=7)
-    return fig
-
-
-def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="python -m pipeline.bench", description=__doc__,
-                                     formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--out", type=Path, default=Path("reports/bench"))
-    parser.add_argument("--steps", type=int, default=40, help="inputs per configuration")
-    parser.add_argument("--repeats", type=int, default=3)
-    parser.add_argument("--quick", action="store_true", help="N=10 and 1 obstacle only")
-    parser.add_argument("--family-size", type=int, default=200)
-    args = parser.parse_args(argv)
+def run_benchmark(out: Path, steps: int = 40, repeats: int = 3, quick: bool = False,
+                  family_size: int = 200) -> tuple[dict, pd.DataFrame]:
+    """The benchmark (see the module docstring), on one BLAS thread as the closed loop runs
+    (OpenBLAS's idle threads would otherwise spin and inflate every CPU time): writes
+    ``bench.csv`` and ``bench_summary.json`` into ``out`` and returns the summary and the
+    lateral table (for the command's scaling figure)."""
     from threadpoolctl import threadpool_limits
 
-    # the whole benchmark on one BLAS thread, as the closed loop runs (simulate sets it too);
-    # OpenBLAS's idle threads would otherwise spin and inflate every CPU time
     with threadpool_limits(limits=1, user_api="blas"):
-        return _run(args)
+        return _measure(Path(out), steps, repeats, quick, family_size)
 
 
-def _run(args) -> int:
-    """The benchmark proper (see :func:`main`)."""
-    horizons = (10,) if args.quick else (10, 20, 30, 50)
-    counts = (1,) if args.quick else (1, 3, 5)
-    lateral = pd.DataFrame(bench_lateral(horizons, counts, args.steps, args.repeats))
-    peers = pd.DataFrame(bench_peers(10 if args.quick else 20))
-    kinematic = pd.DataFrame(bench_kinematic(args.steps))
-    closed_loop = bench_closed_loop(3 if args.quick else 7)
-    closed_loop_python = bench_closed_loop(3 if args.quick else 7, compiled_kernels=False)
-    closed_loop_daqp = bench_closed_loop(3 if args.quick else 7, backend="daqp")
-    pipeline_figures = bench_pipeline(8 if args.quick else args.family_size,
-                                      8 if args.quick else 40)
+def _measure(out: Path, steps: int, repeats: int, quick: bool, family_size: int
+             ) -> tuple[dict, pd.DataFrame]:
+    """:func:`run_benchmark` inside its thread limit."""
+    horizons = (10,) if quick else (10, 20, 30, 50)
+    counts = (1,) if quick else (1, 3, 5)
+    lateral = pd.DataFrame(bench_lateral(horizons, counts, steps, repeats))
+    peers = pd.DataFrame(bench_peers(10 if quick else 20))
+    kinematic = pd.DataFrame(bench_kinematic(steps))
+    closed_loop = bench_closed_loop(3 if quick else 7)
+    closed_loop_python = bench_closed_loop(3 if quick else 7, compiled_kernels=False)
+    closed_loop_daqp = bench_closed_loop(3 if quick else 7, backend="daqp")
+    pipeline_figures = bench_pipeline(8 if quick else family_size,
+                                      8 if quick else 40)
     summary = summarize(lateral, peers, kinematic, pipeline_figures, closed_loop)
     summary["closed_loop_daqp"] = closed_loop_daqp
     summary["closed_loop_python_kernels"] = closed_loop_python
@@ -711,13 +685,13 @@ def _run(args) -> int:
         closed_loop_python["outside_qp_us_per_step"] / closed_loop_python["qp_us_per_step"]
     summary["outside_qp_over_qp_daqp"] = \
         closed_loop_daqp["outside_qp_us_per_step"] / closed_loop_daqp["qp_us_per_step"]
-    member = bench_family_member(n_members=4 if args.quick else 8)
-    member_daqp = bench_family_member("daqp", n_members=4 if args.quick else 8)
+    member = bench_family_member(n_members=4 if quick else 8)
+    member_daqp = bench_family_member("daqp", n_members=4 if quick else 8)
     summary["family_member"] = {"default": member, "daqp": member_daqp}
     summary["family_member_over_sparse_floor"] = member["family_member_over_sparse_floor"]
     summary["family_member_over_sparse_floor_daqp"] = \
         member_daqp["family_member_over_sparse_floor"]
-    path_rows = bench_path_frame(args.steps, args.repeats)
+    path_rows = bench_path_frame(steps, repeats)
     summary["path_frame"] = summarize_path_frame(path_rows)
     summary["step_over_sparse_floor_path"] = \
         summary["path_frame"]["step_over_sparse_floor_path"]
@@ -727,27 +701,9 @@ def _run(args) -> int:
     summary["outside_qp_over_qp"] = closed_loop["outside_qp_us_per_step"] \
         / closed_loop["qp_us_per_step"]
     summary["setup_ms"] = closed_loop["setup_ms"]
-    args.out.mkdir(parents=True, exist_ok=True)
-    write_csv_atomic(args.out / "bench.csv", pd.concat([lateral, peers, kinematic,
+    out.mkdir(parents=True, exist_ok=True)
+    write_csv_atomic(out / "bench.csv", pd.concat([lateral, peers, kinematic,
                                                         pd.DataFrame(path_rows)],
                                                        ignore_index=True))
-    write_json_atomic(args.out / "bench_summary.json", summary)
-    from pipeline.reporting.figures import save_figure
-
-    save_figure(scaling_figure(lateral), args.out, "scaling")
-    print(json.dumps({key: summary[key] for key in (
-        "closed_loop_over_floor", "step_over_floor", "step_over_sparse_floor",
-        "step_over_sparse_floor_daqp", "step_over_sparse_floor_dense",
-        "step_over_sparse_floor_path", "step_over_sparse_floor_path_daqp",
-        "step_over_sparse_floor_cpu", "outside_qp_us_per_step",
-        "qp_us_per_step", "outside_qp_over_qp", "outside_qp_over_qp_python_kernels",
-        "setup_ms", "compiles_per_family",
-        "family_scenarios_per_s", "family_member_over_sparse_floor",
-        "family_member_over_sparse_floor_daqp", "multiverse_member_reads_per_member")},
-        indent=1))
-    print(json.dumps({"path_frame": summary["path_frame"]}, indent=1))
-    print(json.dumps({"lateral_N10_1obs": summary["lateral"][0], "peers": summary["peers"],
-                      "pipeline": pipeline_figures, "n50_over_n10": summary["n50_over_n10_direct"]},
-                     indent=1))
-    return 0
-
+    write_json_atomic(out / "bench_summary.json", summary)
+    return summary, lateral

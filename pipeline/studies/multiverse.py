@@ -30,12 +30,11 @@ them. Extra arguments are Hydra overrides applied to every run (e.g. ``scenario.
 
 from __future__ import annotations
 
-import argparse
 import copy
+import logging
 import dataclasses
 import hashlib
 import json
-import sys
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -49,7 +48,9 @@ from pipeline.store.runs import (MULTIVERSE_FILES, check, check_derived_table,
 
 from pipeline.analysis.claims import ALL_CLAIMS, OUTCOMES, family_ledger
 from pipeline.config import CONF_DIR, ClaimsConfig, ExperimentConfig, MetricsConfig
-from pipeline.errors import ConfigError, IncompleteSweepError, run_study
+from pipeline.errors import ConfigError, IncompleteSweepError
+
+logger = logging.getLogger(__name__)
 
 #: The methods simulated by default: the claims' controls and treatment (claims.treatment,
 #: claims.controls of the user's configuration choose others).
@@ -338,7 +339,7 @@ def _family_task(cfg, folder: str) -> str:
 
 
 def run_simulations(design: pd.DataFrame, space: Space, out_dir: Path, compose,
-                    log=print, launcher: dict | None = None,
+                    log=logger.info, launcher: dict | None = None,
                     methods: tuple[str, ...] = METHODS) -> dict[tuple, dict[str, Path]]:
     """Run every distinct simulation configuration's families (resumed by config hash): here,
     or as a SLURM array when ``launcher`` holds ``hydra/launcher=slurm`` settings.
@@ -377,7 +378,7 @@ def run_simulations(design: pd.DataFrame, space: Space, out_dir: Path, compose,
     return folders, {m: "/".join(sorted(b)) for m, b in backends.items()}
 
 
-def run_families(todo: list, out_dir: Path, log=print, launcher: dict | None = None,
+def run_families(todo: list, out_dir: Path, log=logger.info, launcher: dict | None = None,
                  cache=None, label: str = "family runs") -> None:
     """Run each ``(config, folder)`` family here (one after the other, each on its own joblib
     workers, sharing ``cache``'s compilations), or as one SLURM array when ``launcher`` holds
@@ -456,7 +457,7 @@ def rescore_family(folder: Path, readings: list[MetricsConfig], out_dir: Path) -
         if reason is None:
             continue
         if reason != "not computed yet":
-            print(f"re-scoring {path.name} again: {reason}", file=sys.stderr)
+            logger.warning("re-scoring %s again: %s", path.name, reason)
         seen.add(key)
         todo.append(metrics)
     if not todo:
@@ -639,10 +640,12 @@ def specification_curve_figure(results: pd.DataFrame, design: pd.DataFrame, spac
 
 
 def run_multiverse(space: Space, out_dir: Path, overrides: list[str] | None = None,
-                   n_jobs: int = 2, log=print) -> pd.DataFrame:
-    """Design, runs, re-scoring, analysis and figures; returns the robustness table."""
+                   n_jobs: int = 2, log=None) -> pd.DataFrame:
+    """Design, runs, re-scoring, analysis and figures; returns the robustness table
+    (``log``: where progress lines go, the module's logger by default)."""
     from joblib import Parallel, delayed
 
+    log = log if log is not None else logger.info
     from pipeline.studies.progress import Progress
 
     from pipeline.reporting.figures import FigureWriter
@@ -788,33 +791,3 @@ def _is_value_override(text: str) -> bool:
     key = text.split("=", 1)[0]
     return "=" in text and "." in key and not key.startswith(("+", "~", "hydra")) \
         and not any(ch in key for ch in "/@")
-
-
-def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="python -m pipeline.multiverse",
-                                     description=__doc__.split("\n\n")[0])
-    parser.add_argument("--space", default="default",
-                        help="conf/multiverse/<name>.yaml or a path (default: default)")
-    parser.add_argument("--out", type=Path, default=Path("outputs/multiverse"))
-    parser.add_argument("--jobs", type=int, default=2, help="analysis workers (default 2)")
-    parser.add_argument("overrides", nargs="*", help="Hydra overrides for every run")
-    args = parser.parse_args(argv)
-    if not 1 <= args.jobs <= 256:
-        print(f"error: --jobs={args.jobs} is invalid; allowed: an integer in [1, 256]",
-              file=sys.stderr)
-        return 2
-    path = Path(args.space)
-    if not path.suffix:
-        path = CONF_DIR / "multiverse" / f"{args.space}.yaml"
-    code, robust = run_study(lambda: run_multiverse(
-        load_space(path), args.out, args.overrides, args.jobs,
-        log=lambda m: print(m, file=sys.stderr)))
-    if code:
-        return code
-    for r in robust.to_dict("records"):
-        print(f"{r['claim']} vs {r['comparison']}: default {r['default_outcome']}, {r['label']} "
-              f"({100 * r['agree_share']:.0f} % agree); most influential: "
-              f"{r['most_influential']}")
-    print(f"multiverse written to {args.out.resolve()}")
-    return 0
-

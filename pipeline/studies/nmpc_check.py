@@ -21,6 +21,8 @@ track).
 
 from __future__ import annotations
 
+import logging
+
 import dataclasses
 import time
 from pathlib import Path
@@ -30,6 +32,8 @@ import pandas as pd
 
 from pipeline.analysis.claims import family_ledger
 from pipeline.store.runs import json_safe, write_csv_atomic, write_json_atomic
+
+logger = logging.getLogger(__name__)
 
 #: Methods of each track and the planner preset of each method: on the kinematic track the
 #: baseline under the track's default reading (the printed formula).
@@ -164,7 +168,7 @@ def _track_summary(table: pd.DataFrame, compose, track: str, n_members: int) -> 
         "verdicts_agree": all(v["ltv"] == v["nmpc"] for v in verdicts)}
 
 
-def nmpc_agreement(compose, out_dir: Path, n_members: int = 50, log=print,
+def nmpc_agreement(compose, out_dir: Path, n_members: int = 50, log=logger.info,
                    tracks: tuple[str, ...] = ("lateral", "kinematic"), n_jobs: int = 2) -> dict:
     """Run the comparison and write its tables (see the module docstring).
 

@@ -1,4 +1,5 @@
-"""Score any trajectory CSV with the Table 1 metrics: ``python -m pipeline.score FILE.csv``.
+"""Score any trajectory CSV with the Table 1 metrics (``python -m pipeline.score FILE.csv``, the
+command in :mod:`pipeline.score`).
 
 Required columns: ``time_s``, ``X_m``, ``Y_m`` (strictly increasing time, at least two rows,
 numbers only). Optional: ``psi_rad``, ``vx_mps``, ``vy_mps``, ``r_rad_s``, ``delta_rad``,
@@ -14,23 +15,17 @@ without the lateral velocity), one line each on stderr and under ``score_quality
 
 from __future__ import annotations
 
-import argparse
 import io
-import json
-import sys
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
 
-from pipeline.config import MetricsConfig
-from pipeline.analysis.metrics import TrajectoryContext, compute_metrics
 from pipeline.loop.trajectory import OBSTACLE_COLUMN, REQUIRED, STATE
 
 #: Optional columns a scored file may carry: the state (else derived from the path) and the APF
 #: repulsion at the vehicle (C3a and C3b need it).
 OPTIONAL = STATE + ("apf_rep_norm",)
-from pipeline.store.runs import output_target, refuse_input_as_output, write_text_atomic
 
 
 
@@ -38,7 +33,7 @@ class TrajectoryFileError(ValueError):
     """A trajectory file that cannot be scored; the message says why."""
 
 
-def _pairs(text: str, option: str) -> dict[str, str]:
+def parse_pairs(text: str, option: str) -> dict[str, str]:
     mapping = {}
     for item in filter(None, (part.strip() for part in text.split(","))):
         ours, sep, theirs = item.partition("=")
@@ -48,7 +43,7 @@ def _pairs(text: str, option: str) -> dict[str, str]:
     return mapping
 
 
-def _floats(text: str, count: tuple[int, ...], option: str) -> list[float]:
+def parse_floats(text: str, count: tuple[int, ...], option: str) -> list[float]:
     try:
         values = [float(v) for v in text.split(",")]
     except ValueError:
@@ -303,69 +298,3 @@ def score_quality(columns) -> tuple[dict[str, str], dict[str, str]]:
             for key in keys:
                 derived.setdefault(key, how)
     return missing, derived
-
-
-def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="python -m pipeline.score", description=__doc__,
-                                     formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("trajectory", help="trajectory CSV, or - for standard input")
-    parser.add_argument("--columns", default="", help="OUR=THEIRS,... column name mapping")
-    parser.add_argument("--start", default="0,0", help="start X,Y in m (default 0,0)")
-    parser.add_argument("--goal", default="30,0", help="goal X,Y in m (default 30,0)")
-    parser.add_argument("--vehicle-radius", type=float, default=1.0,
-                        help="vehicle footprint radius in m (default 1.0)")
-    parser.add_argument("--obstacle", action="append", default=[],
-                        help="x,y,radius[,appear_s[,vx,vy]] (repeatable)")
-    parser.add_argument("--out", type=Path, default=None, help="write metrics JSON here")
-    args = parser.parse_args(argv)
-    if args.out is not None:
-        # refused before anything is read: the input must never become the output
-        try:
-            refuse_input_as_output(args.out, [Path(args.trajectory)]
-                                   if args.trajectory != "-" else [])
-            output_target(args.out)
-        except OSError as exc:
-            print(f"error: --out {args.out}: cannot write ({exc.strerror})", file=sys.stderr)
-            return 2
-    try:
-        frame = load_trajectory(
-            args.trajectory, _pairs(args.columns, "--columns"),
-            [_floats(o, (3, 4, 6), "--obstacle") for o in args.obstacle],
-            stdin_text=sys.stdin.read() if args.trajectory == "-" else None)
-        start = _floats(args.start, (2,), "--start")
-        goal = _floats(args.goal, (2,), "--goal")
-        if start == goal:
-            raise TrajectoryFileError("--goal must differ from --start")
-        if not np.isfinite(args.vehicle_radius) or args.vehicle_radius < 0:
-            raise TrajectoryFileError("--vehicle-radius must be a finite number >= 0")
-    except TrajectoryFileError as exc:
-        print(f"error: {exc}", file=sys.stderr)
-        return 2
-    metrics = compute_metrics(frame, TrajectoryContext(tuple(start), tuple(goal),
-                                                       args.vehicle_radius), MetricsConfig())
-    missing, derived = score_quality(frame.columns)
-    values = metrics.to_json()
-    blank = frame.attrs.get("blank_cells", {})
-    for column, (count, first, last) in blank.items():
-        print(f"score: column {column}: {count} empty cell(s) (data rows {first}-{last}); the "
-              "metrics that use it leave those rows out", file=sys.stderr)
-    for key, reason in missing.items():
-        values[key] = None  # not "false" or "0": the file cannot say
-        claim = f"{CLAIM_OF[key]} " if key in CLAIM_OF else ""
-        print(f"score: {claim}{key} missing: {reason}", file=sys.stderr)
-    for key, how in derived.items():
-        claim = f"{CLAIM_OF[key]} " if key in CLAIM_OF else ""
-        print(f"score: {claim}{key} derived: {how}", file=sys.stderr)
-    values["score_quality"] = {"missing": missing, "derived": derived,
-                               "empty_cells": {c: v[0] for c, v in blank.items()}}
-    text = json.dumps(values, indent=2, sort_keys=True)
-    if args.out:
-        try:
-            # atomic: a failed write leaves an existing file as it was
-            write_text_atomic(args.out, text + "\n")
-        except OSError as exc:
-            print(f"error: --out {args.out}: cannot write ({exc.strerror})", file=sys.stderr)
-            return 2
-    print(text)
-    return 0
-

@@ -19,12 +19,16 @@ like every family):
 
 from __future__ import annotations
 
+import logging
+
 from pathlib import Path
 
 import pandas as pd
 
 from pipeline.analysis.tally import Tally
 from pipeline.store.runs import json_safe, write_csv_atomic, write_json_atomic
+
+logger = logging.getLogger(__name__)
 
 SLOW = ["scenario.speed_mps=1.5", "scenario.n_steps=260"]
 #: The variants: overrides and what each one is.
@@ -48,7 +52,7 @@ VARIANTS: dict[str, tuple[list[str], str]] = {
 METHODS = ("improved", "baseline")
 
 
-def speed_check(compose, out_dir: Path, n_members: int = 200, log=print,
+def speed_check(compose, out_dir: Path, n_members: int = 200, log=logger.info,
                 variants: tuple[str, ...] = tuple(VARIANTS)) -> dict:
     """Run every variant's families and write ``speed.csv`` and ``summary.json``."""
     from pipeline.studies.experiment import run_family

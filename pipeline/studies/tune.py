@@ -30,6 +30,8 @@ finished families are read back, never simulated again). Families run here or, w
 
 from __future__ import annotations
 
+import logging
+
 import json
 import time
 from dataclasses import asdict, dataclass, field
@@ -47,6 +49,8 @@ from pipeline.errors import ConfigError, StudyError
 from pipeline.store.runs import (TUNE_FILES, json_safe, read_family, untrust,
                                  write_csv_atomic, write_json_atomic, write_manifest)
 from pipeline.validation import choice, safe_name
+
+logger = logging.getLogger(__name__)
 
 #: The rule that picks one setting per method from its Pareto set.
 COMPROMISE_RULE = ("closest_to_ideal: among the method's feasible Pareto settings, the one with "
@@ -198,7 +202,7 @@ def closest_to_ideal(candidates: np.ndarray, scale_rows: np.ndarray,
 # --- the tuning loop ------------------------------------------------------------------------
 
 def optimize(study, distributions: dict, evaluate: Callable[[list[dict]], list[tuple]],
-             n_trials: int, batch_size: int, log=print, label: str = "") -> None:
+             n_trials: int, batch_size: int, log=logger.info, label: str = "") -> None:
     """Run ``study`` until it holds ``n_trials`` complete trials, ``batch_size`` at a time.
 
     ``evaluate`` takes a list of parameter dicts and returns, per setting, ``(values,
@@ -304,7 +308,7 @@ class Runner:
 # --- the whole study --------------------------------------------------------------------------
 
 def run_tuning(space: TuneSpace, out_dir: Path, overrides: list[str] | None = None,
-               log=print) -> dict:
+               log=logger.info) -> dict:
     """Tune, pick, judge on held-out scenarios, write the tables; returns ``summary.json``."""
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)

@@ -1,4 +1,5 @@
-"""Compare fresh results with the committed reference: ``python -m pipeline.verify RUNS REF``.
+"""Compare fresh results with the committed reference (``python -m pipeline.verify RUNS REF``,
+the command in :mod:`pipeline.verify`).
 
 ``reports/reference/`` holds the summary of the default ``make reproduce``:
 ``paper_metrics.csv`` (every method and track on the paper scenario) and, when the families
@@ -12,14 +13,15 @@ and verdicts exactly. ``--update`` rewrites the reference (say why in the commit
 
 from __future__ import annotations
 
-import argparse
+import logging
 import math
-import sys
 from pathlib import Path
 
 import pandas as pd
 
 from pipeline.store.runs import RunFolderError, discover, read_run, write_csv_atomic
+
+log = logging.getLogger(__name__)
 
 REL_TOL = 1e-6
 ABS_TOL = 1e-6
@@ -45,12 +47,12 @@ def paper_metrics_table(runs_root: Path) -> pd.DataFrame:
     rows = []
     found = discover(runs_root, exclude=EXCLUDED_SECTIONS)
     for item in found.skipped:
-        print(f"verify: skipped {item.folder}: {item.reason}", file=sys.stderr)
+        log.warning("verify: skipped %s: %s", item.folder, item.reason)
     for folder in found.runs:
         try:
             metrics = read_run(folder, trajectory=False).flat_metrics()
         except RunFolderError as exc:
-            print(f"verify: skipped {exc}", file=sys.stderr)
+            log.warning("verify: skipped %s", exc)
             continue
         if metrics.get("scenario") != "paper_sudden_obstacle":
             continue
@@ -158,33 +160,3 @@ def verify(runs_root: Path, reference_dir: Path, update: bool = False) -> list[s
             table.to_csv(index=False, float_format="%.10g"))), pd.read_csv(path), name,
             KEYS.get(name))
     return problems
-
-
-def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="python -m pipeline.verify", description=__doc__,
-                                     formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("runs", type=Path, help="runs folder (make reproduce's outputs)")
-    parser.add_argument("reference", type=Path, nargs="?", default=Path("reports/reference"))
-    parser.add_argument("--update", action="store_true", help="rewrite the reference")
-    args = parser.parse_args(argv)
-    if args.reference.exists() and not args.reference.is_dir():
-        print(f"error: reference {args.reference}: a file, not a folder", file=sys.stderr)
-        return 2
-    try:
-        problems = verify(args.runs, args.reference, args.update)
-    except FileNotFoundError as exc:
-        print(f"error: {exc}", file=sys.stderr)
-        return 2
-    except OSError as exc:
-        print(f"error: {exc.filename or args.reference}: cannot "
-              f"{'write' if args.update else 'read'} ({exc.strerror or exc})", file=sys.stderr)
-        return 2
-    if args.update:
-        print(f"reference written to {args.reference}")
-        return 0
-    for line in problems:
-        print(line)
-    print("verify: " + ("OK, matches the reference" if not problems
-                        else f"{len(problems)} difference(s)"))
-    return 1 if problems else 0
-

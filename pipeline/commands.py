@@ -1,0 +1,142 @@
+"""The command layer: every ``python -m pipeline.<name>`` runs its work through
+:func:`run_command` (lightning-hydra-template's ``task_wrapper``, click's exit-code table).
+
+One table (:data:`EXIT_TABLE`) turns what a command's work raises into one line on stderr and
+an exit code: Ctrl-C or SIGTERM stops it with 130 or 143 (what is complete is kept, the same
+command resumes), a usage or configuration error, a study that cannot go on, a busy or missing
+folder and an unwritable path exit 2, anything else is a code error and keeps its traceback.
+Progress and notes go through :mod:`logging` (one line each on stderr, as printed before);
+a command prints only its result (stdout) and its one error line.
+"""
+
+from __future__ import annotations
+
+import logging
+import sys
+from typing import Callable, TypeVar
+
+from pipeline.errors import (FolderBusyError, IncompleteSweepError, StudyError,
+                             describe_config_error, interrupted_exit_code, stop_on_signals,
+                             stopped_line)
+
+log = logging.getLogger("pipeline")
+T = TypeVar("T")
+
+
+class CommandError(Exception):
+    """A usage error a command found itself (an option out of range, a path that cannot be
+    the output): its message is the one line printed, the exit code 2."""
+
+
+class _StderrHandler(logging.Handler):
+    """Each record as its message on the current ``sys.stderr`` (looked up when written, so a
+    test's captured stream receives it)."""
+
+    def emit(self, record: logging.LogRecord) -> None:
+        try:
+            sys.stderr.write(self.format(record) + "\n")
+            sys.stderr.flush()
+        except Exception:  # noqa: BLE001 - logging must never take a command down
+            self.handleError(record)
+
+
+def configure_logging(level: int = logging.INFO) -> None:
+    """The pipeline's log records as plain lines on stderr (once per process). They still
+    propagate: a test's ``caplog`` sees them; a plain command has no root handler to repeat
+    them (the Hydra entry, whose job logging is Hydra's, does not call this)."""
+    if not any(isinstance(h, _StderrHandler) for h in log.handlers):
+        handler = _StderrHandler()
+        handler.setFormatter(logging.Formatter("%(message)s"))
+        log.addHandler(handler)
+    log.setLevel(level)
+
+
+def _os_error_line(exc: OSError) -> str:
+    return f"error: {exc.filename}: {exc.strerror or type(exc).__name__}"
+
+
+def cannot(what: str, default: object) -> Callable[[OSError], str]:
+    """An ``os_error`` for :func:`run_command`: ``error: PATH: cannot WHAT (reason)``, PATH
+    being the failing file or ``default`` (the command's output)."""
+    return lambda exc: f"error: {exc.filename or default}: cannot {what} ({exc.strerror or exc})"
+
+
+#: What a command's work may raise on purpose, in the order tried, and what becomes of it:
+#: the one line it prints (None: the exception's own) and the exit code.
+EXIT_TABLE: tuple[tuple[tuple[type[BaseException], ...], Callable | None, int], ...] = (
+    ((CommandError,), lambda exc: str(exc), 2),
+    ((IncompleteSweepError,), lambda exc: str(exc), 2),
+    ((StudyError, FolderBusyError), lambda exc: f"error: {exc}", 2),
+    ((FileNotFoundError,), lambda exc: f"error: {exc}" if exc.filename is None
+     else _os_error_line(exc), 2),
+)
+
+
+def error_line(exc: BaseException, os_error: Callable[[OSError], str] | None = None
+               ) -> tuple[str, int] | None:
+    """The one line and exit code :func:`run_command` gives ``exc``, or None for a code error
+    (which keeps its traceback). ``os_error`` words an unwritable path for the command."""
+    message = describe_config_error(exc)
+    if message is not None:
+        return message, 2
+    for types, line, code in EXIT_TABLE:
+        if isinstance(exc, types):
+            return line(exc), code
+    if isinstance(exc, OSError) and exc.filename is not None:
+        return (os_error or _os_error_line)(exc), 2
+    return None
+
+
+def run_command(work: Callable[[], int | None], kept: str = "completed runs and tables",
+                os_error: Callable[[OSError], str] | None = None,
+                code_error: Callable[[BaseException], str] | None = None,
+                tracebacks: bool = False, log_to_stderr: bool = True) -> int:
+    """Run a command's ``work`` and return its exit code (see the module docstring).
+
+    Parameters
+    ----------
+    work : callable
+        The command's work; returns its exit code (None: 0).
+    kept : str
+        What an interrupted command keeps (its stop line says so).
+    os_error : callable, optional
+        The line for an ``OSError`` naming a path (the default: ``error: PATH: reason``).
+    code_error : callable, optional
+        For a code error, a line and exit code 1 instead of the traceback (the Hydra entry,
+        whose users ask for the traceback with ``HYDRA_FULL_ERROR=1``).
+    tracebacks : bool
+        Every error keeps its traceback (the table is not applied; signals still stop).
+    log_to_stderr : bool
+        Send the pipeline's log records to stderr (False under Hydra, which logs its jobs).
+    """
+    if log_to_stderr:
+        configure_logging()
+    stop_on_signals()
+    try:
+        code = work()
+    except KeyboardInterrupt as exc:
+        print(stopped_line(exc, kept), file=sys.stderr)
+        return interrupted_exit_code(exc)
+    except Exception as exc:  # noqa: BLE001 - the table decides; code errors re-raise
+        if tracebacks:
+            raise
+        found = error_line(exc, os_error)
+        if found is None:
+            if code_error is None:
+                raise
+            found = (code_error(exc), 1)
+        print(found[0], file=sys.stderr)
+        return found[1]
+    return 0 if code is None else int(code)
+
+
+def run_task(work: Callable[[], T], **options) -> T:
+    """:func:`run_command` for work whose result is a value, not an exit code (a Hydra job,
+    whose return value is what a sweeper optimizes): ``work()``'s value, or ``SystemExit``
+    with the table's exit code after its one line (SystemExit passes Hydra's job wrapper and
+    its launchers untouched, even from a worker process)."""
+    result: list[T] = []
+    code = run_command(lambda: result.append(work()), **options)
+    if code:
+        raise SystemExit(code)
+    return result[0]
