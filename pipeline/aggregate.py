@@ -8,13 +8,50 @@ layer (:func:`pipeline.commands.run_command`).
 from __future__ import annotations
 
 import argparse
+import logging
 import sys
 from pathlib import Path
 
-from pipeline.commands import CommandError, cannot, run_command
-from pipeline.studies.aggregate import AggregateCallback, aggregate
+from hydra.experimental.callback import Callback
 
-__all__ = ["AggregateCallback", "aggregate", "main"]
+from pipeline.commands import CommandError, cannot, run_command
+from pipeline.studies.aggregate import aggregate
+from pipeline.studies.results.sweep import SUMMARY, SweepSummary
+
+__all__ = ["AggregateCallback", "aggregate", "draw_sweep_figures", "main"]
+
+log = logging.getLogger("pipeline.aggregate")
+
+
+def draw_sweep_figures(result: SweepSummary) -> None:
+    """The figures of metric versus parameter of an aggregated sweep, into its folder."""
+    from pipeline.reporting.figures import save_figure, sweep_figure
+
+    good = result.summary[result.summary["status"] == "ok"]
+    for fig, stem in sweep_figure(good, list(result.swept_keys)):
+        save_figure(fig, SweepSummary.figure_folder(result.folder), stem)
+
+
+class AggregateCallback(Callback):
+    """Hydra callback: aggregate the sweep folder when a multirun ends (and draw its figures).
+
+    Configured in ``conf/config.yaml`` under ``hydra.callbacks.aggregate``.
+    """
+
+    def __init__(self, baseline_dir: str | None = None, figures: bool = True) -> None:
+        self.baseline_dir = baseline_dir
+        self.figures = figures
+
+    def on_multirun_end(self, config, **kwargs) -> None:
+        sweep_dir = Path(config.hydra.sweep.dir)
+        try:
+            result = aggregate(sweep_dir, Path(self.baseline_dir) if self.baseline_dir
+                               else None, progress=False)
+            if self.figures:
+                draw_sweep_figures(result)
+            log.info("aggregated %s -> %s", sweep_dir, sweep_dir / SUMMARY)
+        except FileNotFoundError as exc:
+            log.warning("aggregate skipped: %s", exc)
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -39,10 +76,12 @@ def _aggregate(args) -> int:
     if args.sweep_dir.exists() and not args.sweep_dir.is_dir():
         raise CommandError(f"error: {args.sweep_dir}: a file, not a sweep folder")
     try:
-        summary = aggregate(args.sweep_dir, args.baseline, figures=not args.no_figures)
+        result = aggregate(args.sweep_dir, args.baseline)
     except FileNotFoundError as exc:
         raise CommandError(f"error: {exc}") from None
-    print(f"{len(summary)} jobs -> {args.sweep_dir / 'summary.csv'}")
+    if not args.no_figures:
+        draw_sweep_figures(result)
+    print(f"{len(result.summary)} jobs -> {args.sweep_dir / SUMMARY}")
     return 0
 
 

@@ -12,6 +12,7 @@ import json
 import sys
 from pathlib import Path
 
+from pipeline.studies.results.bench import SCALING_STEM
 from pipeline.commands import run_command
 from pipeline.studies import bench as study
 
@@ -42,9 +43,10 @@ def main(argv: list[str] | None = None) -> int:
 def _bench(args) -> int:
     from pipeline.reporting.figures import bench_scaling_figure, save_figure
 
-    summary, lateral = study.run_benchmark(args.out, args.steps, args.repeats, args.quick,
-                                           args.family_size)
-    save_figure(bench_scaling_figure(lateral), args.out, "scaling")
+    result = study.run_benchmark(args.out, args.steps, args.repeats, args.quick,
+                                 args.family_size)
+    save_figure(bench_scaling_figure(result.lateral), result.folder, SCALING_STEM)
+    summary = result.summary
     print(json.dumps({key: summary[key] for key in HEADLINE}, indent=1))
     print(json.dumps({"path_frame": summary["path_frame"]}, indent=1))
     print(json.dumps({"lateral_N10_1obs": summary["lateral"][0], "peers": summary["peers"],

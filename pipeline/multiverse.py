@@ -11,8 +11,11 @@ import logging
 import sys
 from pathlib import Path
 
+import pandas as pd
+
 from pipeline.commands import CommandError, run_command
 from pipeline.studies import multiverse as study
+from pipeline.studies.results import MultiverseResult
 
 __all__ = ["main"]
 
@@ -31,6 +34,25 @@ def main(argv: list[str] | None = None) -> int:
     return run_command(lambda: _multiverse(args))
 
 
+def draw_specification_curves(result: MultiverseResult) -> None:
+    """One specification curve per claim, into the result's figure folder (drawn in forked
+    children; all on disk when this returns)."""
+    from pipeline.analysis.claims import ALL_CLAIMS
+    from pipeline.reporting.figures import FigureWriter, specification_curve_figure
+    from pipeline.studies.multiverse import matches
+
+    design = result.design.set_index("spec_id")
+    default = design[design["kind"] == "default"].iloc[0]
+    keys = [d["key"] for d in result.info.dimensions]
+    changed = pd.DataFrame({key: ~matches(design[key], default[key]) for key in keys})
+    folder = MultiverseResult.figure_folder(result.folder)
+    with FigureWriter() as writer:
+        for claim in ALL_CLAIMS:
+            writer.save(specification_curve_figure(result.specifications, changed,
+                                                   claim.claim_id),
+                        folder, MultiverseResult.curve_stem(claim.claim_id))
+
+
 def _multiverse(args) -> int:
     from pipeline.config import CONF_DIR
 
@@ -40,9 +62,10 @@ def _multiverse(args) -> int:
     path = Path(args.space)
     if not path.suffix:
         path = CONF_DIR / "multiverse" / f"{args.space}.yaml"
-    robust = study.run_multiverse(study.load_space(path), args.out, args.overrides, args.jobs,
+    result = study.run_multiverse(study.load_space(path), args.out, args.overrides, args.jobs,
                                   log=log.info)
-    for r in robust.to_dict("records"):
+    draw_specification_curves(result)
+    for r in result.robustness.to_dict("records"):
         print(f"{r['claim']} vs {r['comparison']}: default {r['default_outcome']}, {r['label']} "
               f"({100 * r['agree_share']:.0f} % agree); most influential: "
               f"{r['most_influential']}")

@@ -34,7 +34,7 @@ def main(argv: list[str] | None = None) -> int:
 
 
 def _check(args) -> int:
-    from pipeline.studies.multiverse import composer
+    from pipeline.studies.compose import composer
 
     if not 1 <= args.jobs <= 64:
         raise CommandError(f"--jobs: {args.jobs} is not allowed; allowed: an integer in "
@@ -43,10 +43,10 @@ def _check(args) -> int:
         raise CommandError(f"--members: {args.members} is not allowed; allowed: an integer "
                            "in [1, 10000]")
     tracks = ("lateral", "kinematic") if args.track == "both" else (args.track,)
-    summary = nmpc_agreement(composer([])[0], args.out, args.members, log=log.info,
-                             tracks=tracks, n_jobs=args.jobs)
+    result = nmpc_agreement(composer([])[0], args.out, args.members, log=log.info,
+                            tracks=tracks, n_jobs=args.jobs)
     print(json.dumps({track: {k: v for k, v in part.items() if k != "verdicts"}
-                      for track, part in summary["tracks"].items()}, indent=1))
+                      for track, part in result.to_json()["tracks"].items()}, indent=1))
     print(f"agreement written to {args.out.resolve()}")
     return 0
 

@@ -31,7 +31,7 @@ def main(argv: list[str] | None = None) -> int:
 
 
 def _check(args) -> int:
-    from pipeline.studies.multiverse import composer
+    from pipeline.studies.compose import composer
 
     if not 1 <= args.members <= 10_000:
         raise CommandError(f"--members: {args.members} is not allowed; allowed: an integer "
@@ -41,9 +41,9 @@ def _check(args) -> int:
     if unknown or not variants:
         raise CommandError(f"--variants: {','.join(unknown) or '(none)'} is not allowed; "
                            "allowed: " + ", ".join(VARIANTS))
-    summary = speed_check(composer([])[0], args.out, args.members, log=log.info,
-                          variants=variants)
-    print(json.dumps(summary["checks"], indent=1))
+    result = speed_check(composer([])[0], args.out, args.members, log=log.info,
+                         variants=variants)
+    print(json.dumps(result.to_json()["checks"], indent=1))
     print(f"speed check written to {args.out.resolve()}")
     return 0
 

@@ -10,7 +10,8 @@ from pathlib import Path
 
 from pipeline.commands import run_command
 from pipeline.config import CONF_DIR
-from pipeline.studies.tune import load_tune_space, run_tuning
+from pipeline.studies.results.tune import PARTS, TuneResult
+from pipeline.studies.tune import TuneSpace, front_points, load_tune_space, run_tuning
 
 __all__ = ["main", "run_tuning"]
 
@@ -29,13 +30,27 @@ def main(argv: list[str] | None = None) -> int:
     return run_command(lambda: _tune(args), kept="completed family runs and tables")
 
 
+def draw_pareto_fronts(result: TuneResult, space: TuneSpace) -> None:
+    """Each method's Pareto settings on the training and the held-out family, every pair of
+    objectives on shared axes, into the result's figure folder."""
+    from pipeline.reporting.figures import pareto_front_figure, save_figure
+
+    for part in PARTS:
+        points = front_points(result.trials, result.heldout, space, part)
+        save_figure(pareto_front_figure(points, [o.label for o in space.objectives],
+                                        f"{part} family"), TuneResult.figure_folder(result.folder),
+                    TuneResult.front_stem(part))
+
+
 def _tune(args) -> int:
     path = Path(args.space)
     if not path.suffix:
         path = CONF_DIR / "tune" / f"{args.space}.yaml"
-    summary = run_tuning(load_tune_space(path), args.out, args.overrides, log=log.info)
-    for claim in summary["claims"]:
-        print(claim["sentence"])
+    space = load_tune_space(path)
+    result = run_tuning(space, args.out, args.overrides, log=log.info)
+    draw_pareto_fronts(result, space)
+    for claim in result.summary.claims:
+        print(claim.sentence)
     print(f"tuning written to {Path(args.out).resolve()}")
     return 0
 

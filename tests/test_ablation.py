@@ -5,8 +5,9 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 
-from pipeline.studies.ablation import (REVISIONS, ablation_effects, attribution_sentences,
-                               interpretation_flips)
+from pipeline.analysis.ablation import (REVISIONS, ablation_effects, attribution_sentences,
+                                       interpretation_flips)
+from pipeline.store.collection import interpretation_tables
 from pipeline.analysis.claims import CLAIMS
 from pipeline.store.runs import write_family
 from pipeline.config import ClaimsConfig
@@ -99,7 +100,7 @@ def test_interpretation_flips(tmp_path):
         for method, shift in (("baseline", {}), ("improved", improved_shift)):
             write_family(tmp_path / variant / method, family_table(shift), {"method": method},
                          "synthetic", [])
-    flips = interpretation_flips(tmp_path, CFG).set_index("variant")
+    flips = interpretation_flips(interpretation_tables(tmp_path), CFG).set_index("variant")
     assert flips.loc["default", "C1"] == "supported" and flips.loc["default", "flips"] == "none"
     assert flips.loc["alt", "C1"] == "contradicted" and flips.loc["alt", "flips"] == "C1"
 

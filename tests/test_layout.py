@@ -12,24 +12,41 @@ import pytest
 
 PACKAGE = Path(__file__).resolve().parent.parent / "pipeline"
 
-#: Stage order (lower first). The drawing library draws typed data and imports nothing of the
-#: pipeline, so the studies that save their own figures (sweeps, multiverse) may use it.
+#: Stage order (lower first). Studies compute and return typed results; the commands (the
+#: last layer) draw their figures; the report reads the results (``pipeline.studies.results``).
 LAYERS = (
     ("pipeline", "pipeline.errors", "pipeline.validation"),
     ("pipeline.loop",),
     ("pipeline.analysis",),
     ("pipeline.config", "pipeline.register"),
     ("pipeline.store",),
-    ("pipeline.reporting.figures",),
     ("pipeline.studies",),
     ("pipeline.reporting",),
-    ("pipeline.run", "pipeline.report", "pipeline.aggregate", "pipeline.multiverse", "pipeline.tune", "pipeline.api",
-     "pipeline.nmpc_check", "pipeline.speed_check", "pipeline.commands", "pipeline.screenshot",
-     "pipeline.verify", "pipeline.bench", "pipeline.score"),
+    ("pipeline.run", "pipeline.report", "pipeline.aggregate", "pipeline.multiverse",
+     "pipeline.tune", "pipeline.api", "pipeline.nmpc_check", "pipeline.speed_check",
+     "pipeline.commands", "pipeline.screenshot", "pipeline.verify", "pipeline.bench",
+     "pipeline.score"),
 )
 #: Files a run or family folder holds (its layout belongs to the store).
 RUN_FOLDER_FILES = ("config.yaml", "model.json", "trajectory.csv", "timing.json",
                     "metrics.json", "family_metrics.csv", "family.json", "manifest.json")
+#: Each study's files and the module that owns them (its typed result): nobody else names them.
+STUDY_FILES = {
+    "pipeline.studies.results.multiverse": ("design.csv", "specifications.csv",
+                                            "robustness.csv", "dimensions.csv", "space.json"),
+    "pipeline.studies.results.tune": ("trials.csv", "heldout.csv", "ledger_default.csv",
+                                      "ledger_tuned.csv", "settings_outcomes.csv"),
+    "pipeline.studies.results.bench": ("bench.csv", "bench_summary.json"),
+    "pipeline.studies.results.speed": ("speed.csv",),
+    "pipeline.studies.results.nmpc_check": ("agreement.csv",),
+    "pipeline.studies.results.sweep": ("summary.csv", "swept_keys.json", "verdicts.csv",
+                                       "skipped.csv"),
+}
+#: The outputs root's sections: only the layout (``pipeline.store.layout``) joins them to a
+#: path.
+SECTIONS = ("paper", "kinematic", "kinematic_readings", "family", "kinematic_family", "frames",
+            "ablation", "interpretations", "multiverse", "tune", "nmpc_check", "speed",
+            "sweeps")
 
 
 def module_name(path: Path) -> str:
@@ -76,8 +93,45 @@ def test_no_module_imports_from_a_stage_after_it():
 
 
 def test_the_drawing_library_imports_nothing_of_the_pipeline():
-    tree = modules()["pipeline.reporting.figures"]
-    assert imports(tree) == set()
+    found = {name: tree for name, tree in modules().items()
+             if name.startswith("pipeline.reporting.figures")}
+    assert len(found) > 1
+    outside = {f"{name} -> {target}" for name, tree in found.items() for target in imports(tree)
+               if not target.startswith("pipeline.reporting.figures")}
+    assert outside == set()
+
+
+def test_studies_never_import_the_report_and_the_report_reads_only_their_results():
+    """Studies compute; they never draw (the commands do) nor import the report; the report
+    reads a study only through its typed result (``pipeline.studies.results``)."""
+    found = modules()
+    into_reporting = [f"{name} -> {target}" for name, tree in found.items()
+                      if name.startswith("pipeline.studies")
+                      for target in imports(tree) if target.startswith("pipeline.reporting")]
+    into_studies = [f"{name} -> {target}" for name, tree in found.items()
+                    if name.startswith("pipeline.reporting")
+                    for target in imports(tree, set(found))
+                    if target.startswith("pipeline.studies")
+                    and not target.startswith("pipeline.studies.results")]
+    assert into_reporting == [] and into_studies == []
+
+
+def test_only_a_studys_result_names_its_files_and_only_the_layout_its_sections():
+    offenders = []
+    owner_of = {f: owner for owner, files in STUDY_FILES.items() for f in files}
+    for name, tree in modules().items():
+        for node in ast.walk(tree):
+            if isinstance(node, ast.Constant) and node.value in owner_of \
+                    and name != owner_of[node.value]:
+                offenders.append(f"{name}:{node.lineno}: {node.value}")
+            # ``root / "multiverse"``: a section's folder joined by anyone but the layout (the
+            # config folder's own groups, ``CONF_DIR / "multiverse"``, are not outputs)
+            if isinstance(node, ast.BinOp) and isinstance(node.op, ast.Div) \
+                    and isinstance(node.right, ast.Constant) and node.right.value in SECTIONS \
+                    and not (isinstance(node.left, ast.Name) and node.left.id == "CONF_DIR") \
+                    and name != "pipeline.store.layout":
+                offenders.append(f"{name}:{node.lineno}: / {node.right.value!r}")
+    assert offenders == []
 
 
 def test_no_import_circle_between_modules():

@@ -13,7 +13,7 @@ from pipeline.config import ConfigError
 from pipeline.studies.multiverse import (CONF_DIR, Dimension, Space, build_design, composer,
                                          family_config, load_space, qp_backend,
                                          robustness, simulation_overrides)
-from pipeline.reporting.page import _backends_text
+from pipeline.reporting.sections.robustness import backends_text as _backends_text
 
 SPACE = Space("planted", (
     Dimension("planner.beta", "simulation", (0.25, 0.5, 1.0), ("improved",)),

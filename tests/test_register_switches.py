@@ -355,26 +355,30 @@ def test_estimator_test_and_margins_change_the_outcome():
     assert wide == "equivalent" and narrow != "equivalent"
 
 
-def test_comparable_clearance_marks_the_kinematic_comparison(tmp_path, make_config):
+def test_comparable_clearance_marks_the_kinematic_comparison():
     from pipeline.config import ClaimsConfig
-    from pipeline.reporting.page import _track_section
+    from pipeline.reporting.inputs import TrackRuns
+    from pipeline.reporting.verdicts import track_claims
 
-    runs = []
-    for method, clearance in (("baseline", 4.5), ("improved", 0.5)):
-        trajectory = pd.DataFrame({"time_s": [0.0, 0.1], "X_m": [0.0, 0.1], "Y_m": [0.0, 0.0],
-                                   "psi_rad": 0.0, "delta_rad": 0.0, "steering_rate_rad_s": 0.0,
-                                   "e_y_m": 0.0, "vx_mps": 1.0})
-        runs.append({"metrics": {"method": method, "scenario": "s", "track": "kinematic",
-                                 "min_clearance_m": clearance, "reaction_delay_s": 0.5,
-                                 "collision": False},
-                     "config": {"scenario": {"goal_xy_m": [30.0, 0.0], "n_steps": 2},
-                                "vehicle": {"footprint_radius_m": 1.0}},
-                     "trajectory": trajectory})
-    strict = _track_section(runs, "kin", tmp_path, tmp_path, [], ClaimsConfig())
-    loose = _track_section(runs, "kin", tmp_path, tmp_path, [],
-                           ClaimsConfig(comparable_clearance_m=5.0))
-    assert strict["claims"][1]["vs baseline"] == "not comparable"
-    assert loose["claims"][1]["vs baseline"] == "within margin"
+    class Run:
+        def __init__(self, method: str, clearance: float) -> None:
+            self.method = method
+            self._metrics = {"method": method, "scenario": "s", "track": "kinematic",
+                             "min_clearance_m": clearance, "reaction_delay_s": 0.5,
+                             "collision": False}
+
+        def metrics(self) -> dict:
+            return self._metrics
+
+    runs = TrackRuns("s", {m: Run(m, c) for m, c in (("baseline", 4.5), ("improved", 0.5))},
+                     (), ())
+    strict = track_claims(runs, ClaimsConfig(), comparable_only=True)
+    loose = track_claims(runs, ClaimsConfig(comparable_clearance_m=5.0), comparable_only=True)
+    assert strict.rows[1]["vs baseline"] == "not comparable"
+    assert strict.comparability[0].startswith("vs baseline: not comparable (baseline")
+    assert loose.rows[1]["vs baseline"] == "within margin"
+    # C0 is a rate: judged even where the methods never met the obstacle
+    assert strict.rows[0]["vs baseline"] != "not comparable"
 
 
 def test_obstacle_anchor_places_the_obstacle_relative_to_the_vehicle(make_config):

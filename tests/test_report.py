@@ -189,7 +189,7 @@ def test_figure_writer_redraws_what_a_dead_child_left(tmp_path, monkeypatch):
     import signal
     import time
 
-    import pipeline.reporting.figures as figures
+    import pipeline.reporting.figures.writer as figures
     from pipeline.reporting.figures import FigureWriter, save_figure
 
     expected = save_figure(_two_figures()[0], tmp_path / "serial", "f0")["png"].read_bytes()

@@ -166,7 +166,7 @@ def test_aggregate_lists_failed_and_stale_jobs_next_to_the_good_ones(tmp_path, m
     (sweep / "multirun.yaml").write_text(
         "hydra:\n  sweeper:\n    params:\n      method: baseline,improved,mpc_no_apf\n"
         "  overrides:\n    task: []\n")
-    summary = aggregate(sweep, progress=False, figures=False)
+    summary = aggregate(sweep, progress=False).summary
     status = dict(zip(summary["job"], summary["status"]))
     assert status == {"method=baseline": "ok", "method=improved": "ok",
                       "method=velocity_aware": "stale", "method=mpc_no_apf": "skipped"}
@@ -182,7 +182,7 @@ def test_nested_job_folders_are_found(tmp_path, make_config):
     nested = sweep / "deeper" / "method=improved"
     nested.parent.mkdir()
     shutil.move(str(sweep / "method=improved"), nested)
-    summary = aggregate(sweep, progress=False, figures=False)
+    summary = aggregate(sweep, progress=False).summary
     assert sorted(summary["job"]) == ["deeper/method=improved", "method=baseline"]
 
 

@@ -57,8 +57,7 @@ def test_a_claims_override_reaches_the_ledger_report_sweep_and_multiverse(user_r
     shutil.copytree(user_runs / "family" / "improved", sweep / "0")
     (sweep / "0" / ".hydra").mkdir()
     (sweep / "0" / ".hydra" / "overrides.yaml").write_text("- method=improved\n")
-    aggregate(sweep, baseline_dir=user_runs / "family" / "baseline", progress=False,
-              figures=False)
+    aggregate(sweep, baseline_dir=user_runs / "family" / "baseline", progress=False)
     verdicts = pd.read_csv(sweep / "verdicts.csv")
     assert verdicts.loc[verdicts["claim"] == "C2", "verdict"].iloc[0] == expected
     # the multiverse: its default specification is the user's configuration
@@ -85,7 +84,7 @@ def test_unreadable_settings_are_skipped_with_their_reason(user_runs, tmp_path):
     write_manifest(broken, "run", RUN_FILES, "x")  # a consistent folder, invalid settings
     skipped = []
     collection = load_runs(tmp_path / "runs", skipped)
-    assert [r["metrics"]["method"] for r in collection.runs] == ["improved"]
+    assert [r.method for r in collection.runs] == ["improved"]
     assert len(skipped) == 1 and "settings in config.yaml cannot be read" in skipped[0].reason
     assert "claims.alpha" in skipped[0].reason
 

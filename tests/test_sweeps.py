@@ -110,29 +110,39 @@ def test_a_job_copied_in_without_its_provenance_is_passed_over(basic_sweep, tmp_
     stray = sweep / "copied_in"
     shutil.copytree(job_dirs(sweep)[0], stray)
     shutil.rmtree(stray / ".hydra")
-    summary = aggregate(sweep, progress=False, figures=False)
+    summary = aggregate(sweep, progress=False).summary
     row = summary[summary["job"] == "copied_in"].iloc[0]
     assert row["status"] == "skipped" and "no provenance" in row["reason"]
     assert (summary["status"] == "ok").sum() == 4
 
 
-def test_an_edited_or_stale_summary_is_recomputed_not_trusted(basic_sweep, tmp_path):
+def test_an_edited_or_stale_summary_is_refused_not_trusted(basic_sweep, tmp_path):
     """summary.csv carries a manifest tied to the jobs it was computed from: an edited summary,
-    or a job removed since, makes the report re-aggregate (and say so) instead of showing it."""
-    from pipeline.reporting.page import _sweep_section
-    from pipeline.studies.aggregate import summary_reason
+    or a job removed since, is refused with the reason (the report never re-aggregates: it
+    skips the sweep and says how to aggregate it again)."""
+    from pipeline.reporting.page import build_report
+    from pipeline.store.runs import Skipped
+    from pipeline.studies.results import ResultError, SweepSummary
+    from pipeline.studies.results.sweep import summary_reason
 
     sweep = tmp_path / "sweep"
     shutil.copytree(basic_sweep, sweep)
-    (tmp_path / "tab").mkdir()
-    aggregate(sweep, progress=False, figures=False)
+    aggregate(sweep, progress=False)
     assert summary_reason(sweep) is None
+    assert len(SweepSummary.load(sweep).summary) == 4
     original = (sweep / "summary.csv").read_text()
     (sweep / "summary.csv").write_text(original.replace("improved", "forged", 1))
     assert "differs from its manifest" in summary_reason(sweep)
-    _sweep_section(sweep, tmp_path / "fig", tmp_path / "tab")
+    with pytest.raises(ResultError, match="aggregate it again"):
+        SweepSummary.load(sweep)
+    # the report over the sweep alone: nothing it can trust to show, and it says why
+    skipped: list[Skipped] = []
+    with pytest.raises(FileNotFoundError):
+        build_report(sweep, tmp_path / "report", "pytest", skipped=skipped)
+    assert len(skipped) == 1 and "aggregate it again" in skipped[0].reason
+    assert (sweep / "summary.csv").read_text() != original  # never re-aggregated by the report
+    aggregate(sweep, progress=False)
     assert (sweep / "summary.csv").read_text() == original and summary_reason(sweep) is None
     shutil.rmtree(job_dirs(sweep)[0])
     assert "added or removed since" in summary_reason(sweep)
-    _sweep_section(sweep, tmp_path / "fig", tmp_path / "tab")
-    assert len(pd.read_csv(sweep / "summary.csv")) == 3
+    assert len(aggregate(sweep, progress=False).summary) == 3

@@ -7,6 +7,7 @@ cannot be read) are listed as :class:`~pipeline.store.runs.Skipped` with their r
 
 from __future__ import annotations
 
+import logging
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -16,8 +17,59 @@ from pipeline.analysis.settings import ClaimsConfig
 from pipeline.analysis.validity import ValidityTable, validity_row
 from pipeline.config import ExperimentConfig
 from pipeline.errors import RunFolderError
-from pipeline.store.runs import (FamilyRecord, Skipped, discover, member_trajectories,
-                                 read_family, read_run)
+from pipeline.store.layout import OutputsLayout
+from pipeline.store.runs import (FamilyRecord, RunRecord, Skipped, discover,
+                                 member_trajectories, read_family, read_run)
+
+log = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True)
+class LabelledRun:
+    """A trusted run folder (:class:`~pipeline.store.runs.RunRecord`) and its label: the
+    method, plus what differs from the other runs of that method and track."""
+
+    label: str
+    record: RunRecord
+
+    @property
+    def method(self) -> str:
+        return self.record.info.method
+
+    @property
+    def scenario(self) -> str:
+        return self.record.info.scenario
+
+    @property
+    def track(self) -> str:
+        return self.record.info.track
+
+    @property
+    def folder(self) -> Path:
+        return self.record.folder
+
+    @property
+    def config(self) -> dict:
+        """The settings as ``config.yaml`` holds them (for labels, the register, the page)."""
+        return self.record.config_data
+
+    @property
+    def claims(self) -> ClaimsConfig:
+        """The claims settings the run was made with."""
+        return self.record.config.claims
+
+    @property
+    def trajectory(self) -> pd.DataFrame:
+        return self.record.trajectory
+
+    @property
+    def timing(self) -> dict:
+        return self.record.timing
+
+    def metrics(self) -> dict:
+        """Every metric and the run's bookkeeping by name (``metrics.json`` as written), with
+        its ``label``."""
+        return {**self.record.flat_metrics(), "label": self.label}
 
 
 @dataclass
@@ -26,9 +78,8 @@ class RunCollection:
 
     Attributes
     ----------
-    runs : list of dict
-        :meth:`pipeline.store.runs.RunRecord.as_dict` of each trusted single-run folder (its
-        ``metrics`` carry a ``label``).
+    runs : list of LabelledRun
+        Each trusted single-run folder, labelled.
     family_tables : dict of label -> DataFrame
         ``family_metrics.csv`` of each trusted family folder.
     family_info : dict of label -> dict
@@ -37,7 +88,7 @@ class RunCollection:
         The settings each family was made with.
     """
 
-    runs: list[dict] = field(default_factory=list)
+    runs: list[LabelledRun] = field(default_factory=list)
     family_tables: dict[str, pd.DataFrame] = field(default_factory=dict)
     family_info: dict[str, dict] = field(default_factory=dict)
     family_settings: dict[str, ExperimentConfig] = field(default_factory=dict)
@@ -48,16 +99,11 @@ class RunCollection:
         if treatment in self.family_settings:
             return self.family_settings[treatment].claims
         for run in self.runs:
-            if run["metrics"].get("method") == treatment:
-                return run["claims"]
+            if run.method == treatment:
+                return run.claims
         if self.family_settings:
             return next(iter(self.family_settings.values())).claims
-        return self.runs[0]["claims"] if self.runs else None
-
-
-EXCLUDED_SECTIONS = ("sweeps", "ablation", "interpretations", "multiverse", "tune",
-                     "kinematic_readings", "kinematic_family", "frames", "nmpc_check",
-                     "speed")
+        return self.runs[0].claims if self.runs else None
 
 
 def _flatten(config: dict, prefix: str = "") -> dict:
@@ -110,7 +156,8 @@ def load_runs(run_root: Path, skipped: list[Skipped] | None = None) -> RunCollec
     skipped = skipped if skipped is not None else []
     if not run_root.is_dir():
         raise FileNotFoundError(f"no complete run folders under {run_root} (no such folder)")
-    found = discover(run_root, exclude=EXCLUDED_SECTIONS)
+    # the studies and the families of other sections are read by their own sections
+    found = discover(run_root, exclude=OutputsLayout.load(run_root).not_main_runs)
     skipped.extend(found.skipped)
     families = []
     for folder in found.families:
@@ -118,26 +165,28 @@ def load_runs(run_root: Path, skipped: list[Skipped] | None = None) -> RunCollec
             families.append(read_family(folder))
         except RunFolderError as exc:
             skipped.append(Skipped(folder, str(exc).split(": ", 1)[-1]))
-    runs = []
+    records = []
     for folder in found.runs:
         try:
-            runs.append(read_run(folder).as_dict())
+            records.append(read_run(folder))
         except RunFolderError as exc:
             skipped.append(Skipped(folder, str(exc).split(": ", 1)[-1]))
-    if not runs and not families:
+    if not records and not families:
         if skipped:
             raise FileNotFoundError(f"no trusted run folders under {run_root} ("
                                     f"{len(skipped)} skipped, e.g. {skipped[0].folder}: "
                                     f"{skipped[0].reason})")
         raise FileNotFoundError(f"no complete run folders (with metrics.json) under {run_root}")
     # label runs of the same method and track by what differs between them
-    groups: dict[tuple, list[dict]] = {}
-    for run in runs:
-        key = (run["metrics"].get("track", "lateral"), run["metrics"].get("method", ""))
-        groups.setdefault(key, []).append(run)
+    groups: dict[tuple, list[RunRecord]] = {}
+    for record in records:
+        groups.setdefault((record.info.track, record.info.method), []).append(record)
+    labels = {}
     for (_, method), group in groups.items():
-        for run, label in zip(group, label_by_difference([r["config"] for r in group], method)):
-            run["metrics"] = {**run["metrics"], "label": label}
+        for record, label in zip(group, label_by_difference([r.config_data for r in group],
+                                                            method)):
+            labels[id(record)] = label
+    runs = [LabelledRun(labels[id(r)], r) for r in records]
     family_tables, family_info = {}, {}
     by_method: dict[str, list] = {}
     for family in families:
@@ -152,9 +201,6 @@ def load_runs(run_root: Path, skipped: list[Skipped] | None = None) -> RunCollec
     return RunCollection(runs, family_tables, family_info, family_settings)
 
 
-#: Where ``make reproduce`` keeps the families whose models are checked: the default frame's,
-#: the other frame's and the Appendix-A track's (folders under the outputs root).
-VALIDITY_FOLDERS = ("family", "frames", "kinematic_family")
 #: The methods whose MPC models are checked (the controls and the treatment of the ledger).
 VALIDITY_METHODS = ("baseline", "baseline_matched", "improved")
 
@@ -175,14 +221,14 @@ def trusted_families(root: Path) -> list[FamilyRecord]:
     return out
 
 
-def model_validity_table(run_root: Path) -> ValidityTable:
+def model_validity_table(layout: OutputsLayout) -> ValidityTable:
     """:class:`~pipeline.analysis.validity.ValidityTable` of ``make reproduce``'s families
-    (:data:`VALIDITY_FOLDERS`, the methods of :data:`VALIDITY_METHODS`): each family's member
-    trajectories pooled into one row, lateral rows first (path frame first), then the
-    Appendix-A track's."""
+    (the layout's :attr:`~pipeline.store.layout.OutputsLayout.validity_sections`, the methods
+    of :data:`VALIDITY_METHODS`): each family's member trajectories pooled into one row,
+    lateral rows first (path frame first), then the Appendix-A track's."""
     rows = []
-    for name in VALIDITY_FOLDERS:
-        for family in trusted_families(Path(run_root) / name):
+    for section in layout.validity_sections:
+        for family in trusted_families(layout.folder(section)):
             cfg = family.config
             method = family.info.get("method", cfg.method_name)
             if method not in VALIDITY_METHODS or cfg.controller.kind == "pure_pursuit":
@@ -196,3 +242,37 @@ def model_validity_table(run_root: Path) -> ValidityTable:
     rows.sort(key=lambda r: (order.get(r.track, 2), r.frame != "path",
                              VALIDITY_METHODS.index(r.method)))
     return ValidityTable(tuple(rows))
+
+
+def family_tables_by_method(root: Path, skipped: list[Skipped] | None = None
+                            ) -> dict[str, pd.DataFrame]:
+    """``{method: family_metrics}`` of every trusted family folder below ``root`` (an
+    ablation's or an interpretation variant's); folders that cannot be trusted are logged and
+    appended to ``skipped``, and left out. The tables are judged with the claims settings the
+    caller passes (the report's: those of its main runs)."""
+    skipped = skipped if skipped is not None else []
+    tables = {}
+    if not Path(root).is_dir():
+        return tables
+    found = discover(Path(root))
+    for item in found.skipped:
+        log.warning("ablation: skipped %s: %s", item.folder, item.reason)
+        skipped.append(item)
+    for folder in found.families:
+        try:
+            family = read_family(folder, settings=False)
+        except RunFolderError as exc:
+            log.warning("ablation: skipped %s", exc)
+            skipped.append(Skipped(folder, str(exc).split(": ", 1)[-1]))
+            continue
+        tables[family.info["method"]] = family.table
+    return tables
+
+
+def interpretation_tables(root: Path, skipped: list[Skipped] | None = None
+                          ) -> dict[str, dict[str, pd.DataFrame]]:
+    """Per interpretation variant (each a folder under ``root``, in name order) its family
+    tables by method (:func:`family_tables_by_method`)."""
+    root = Path(root)
+    variants = sorted(p.name for p in root.iterdir() if p.is_dir()) if root.is_dir() else []
+    return {v: family_tables_by_method(root / v, skipped) for v in variants}

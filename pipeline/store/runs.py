@@ -35,13 +35,9 @@ from pipeline.errors import (ConfigError, FolderBusyError, NonFiniteResultError,
 
 RUN_FILES = ("config.yaml", "model.json", "trajectory.csv", "timing.json", "metrics.json")
 FAMILY_FILES = ("family_metrics.csv", "family.json")
-MULTIVERSE_FILES = ("design.csv", "specifications.csv", "robustness.csv", "dimensions.csv",
-                    "space.json")
-#: Tables of a tuning folder (``make tune``), covered by its manifest.
-TUNE_FILES = ("trials.csv", "heldout.csv", "ledger_default.csv", "ledger_tuned.csv",
-              "settings_outcomes.csv", "summary.json")
-REQUIRED = {"run": RUN_FILES, "family": FAMILY_FILES, "multiverse": MULTIVERSE_FILES,
-            "tune": TUNE_FILES}
+#: The files a run's and a family's manifest must list (a study's result names its own and
+#: passes them to :func:`check`).
+REQUIRED = {"run": RUN_FILES, "family": FAMILY_FILES}
 MANIFEST = "manifest.json"
 SCHEMA = 1
 #: Folder names that are Hydra's or submitit's bookkeeping, never runs.
@@ -489,9 +485,10 @@ def write_family(folder: Path, table: pd.DataFrame, info: dict, config_hash: str
 
 # --- checking and reading --------------------------------------------------------------------
 
-def _load_manifest(folder: Path, kind: str) -> tuple[dict | None, str | None]:
+def _load_manifest(folder: Path, kind: str, required: tuple[str, ...]
+                   ) -> tuple[dict | None, str | None]:
     path = folder / MANIFEST
-    present = [n for n in REQUIRED[kind] if (folder / n).exists()]
+    present = [n for n in required if (folder / n).exists()]
     if not path.is_file():
         if present:
             return None, (f"no {MANIFEST}: incomplete (killed or failed) or written by an older "
@@ -508,24 +505,29 @@ def _load_manifest(folder: Path, kind: str) -> tuple[dict | None, str | None]:
 
 
 def check(folder: Path, kind: str = "run", expected_hash: str | None = None,
-          members: bool = True) -> str | None:
+          members: bool = True, required: tuple[str, ...] | None = None) -> str | None:
     """Why ``folder`` cannot be trusted, or None when its manifest matches the disk.
 
     Parameters
     ----------
-    kind : {"run", "family", "multiverse", "tune"}
+    kind : str
+        ``run``, ``family``, or a study's kind (``multiverse``, ``tune``, ...).
     expected_hash : str, optional
         The config hash the folder must carry (resume).
     members : bool
         For a family, also compare each member's manifest with the hash recorded.
+    required : tuple of str, optional
+        The files the manifest must list (a study's result names its own); by default a run's
+        or a family's.
     """
     folder = Path(folder)
     if not folder.is_dir():
         return "not a folder"
-    manifest, reason = _load_manifest(folder, kind)
+    required = tuple(required if required is not None else REQUIRED.get(kind, ()))
+    manifest, reason = _load_manifest(folder, kind, required)
     if reason:
         return reason
-    missing = [n for n in REQUIRED[kind] if n not in manifest["files"]]
+    missing = [n for n in required if n not in manifest["files"]]
     if missing:
         return f"{MANIFEST} does not list {', '.join(missing)}"
     for name, entry in manifest["files"].items():
@@ -606,7 +608,7 @@ def read_run(folder: Path, trajectory: bool = True) -> RunRecord:
 
 def member_folders(folder: Path) -> list[Path]:
     """The member folders a family's manifest lists, in order."""
-    manifest, reason = _load_manifest(Path(folder), "family")
+    manifest, reason = _load_manifest(Path(folder), "family", FAMILY_FILES)
     if reason:
         raise RunFolderError(f"{folder}: {reason}")
     return [Path(folder) / name for name in sorted(manifest.get("members") or {})]

@@ -21,7 +21,6 @@ Results: ``reports/bench/bench.csv`` (every sample), ``bench_summary.json`` and
 from __future__ import annotations
 
 import gc
-import json
 import resource
 import subprocess
 import sys
@@ -32,7 +31,8 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from pipeline.store.runs import read_family, write_csv_atomic, write_json_atomic
+from pipeline.store.runs import read_family
+from pipeline.studies.results.bench import BenchResult
 
 
 def _config(overrides: list[str]):
@@ -526,11 +526,10 @@ def bench_multiverse_reads() -> dict:
 
     with tempfile.TemporaryDirectory() as tmp, contextlib.redirect_stdout(io.StringIO()):
         start = time.perf_counter()
-        run_multiverse(load_space(CONF_DIR / "multiverse" / "quick.yaml"), Path(tmp),
-                       log=lambda message: None)
+        result = run_multiverse(load_space(CONF_DIR / "multiverse" / "quick.yaml"), Path(tmp),
+                                log=lambda message: None)
         wall = time.perf_counter() - start
-        space = json.loads((Path(tmp) / "space.json").read_text())
-    return {"multiverse_member_reads_per_member": space["member_reads_per_member"],
+    return {"multiverse_member_reads_per_member": result.info.member_reads_per_member,
             "quick_multiverse_wall_s": wall}
 
 
@@ -555,7 +554,7 @@ def bench_pipeline(family_size: int, compile_family_size: int = 40) -> dict:
         start = time.perf_counter()
         run_family(_config(["method=improved", "scenario=family",
                             f"scenario.family.size={family_size}", "scenario.family.n_jobs=2"]),
-                   Path(tmp) / "family", progress=False)
+                   Path(tmp) / "timed", progress=False)
         family = time.perf_counter() - start
     return {"import_s": imports, "one_paper_run_s": one_run, "family_size": family_size,
             "family_wall_s": family, "family_scenarios_per_s": family_size / family,
@@ -654,11 +653,11 @@ def summarize(lateral: pd.DataFrame, peers: pd.DataFrame, kinematic: pd.DataFram
 
 
 def run_benchmark(out: Path, steps: int = 40, repeats: int = 3, quick: bool = False,
-                  family_size: int = 200) -> tuple[dict, pd.DataFrame]:
+                  family_size: int = 200) -> BenchResult:
     """The benchmark (see the module docstring), on one BLAS thread as the closed loop runs
-    (OpenBLAS's idle threads would otherwise spin and inflate every CPU time): writes
-    ``bench.csv`` and ``bench_summary.json`` into ``out`` and returns the summary and the
-    lateral table (for the command's scaling figure)."""
+    (OpenBLAS's idle threads would otherwise spin and inflate every CPU time): its result
+    written into ``out`` and returned (with the lateral table, the command's scaling
+    figure's data)."""
     from threadpoolctl import threadpool_limits
 
     with threadpool_limits(limits=1, user_api="blas"):
@@ -666,7 +665,7 @@ def run_benchmark(out: Path, steps: int = 40, repeats: int = 3, quick: bool = Fa
 
 
 def _measure(out: Path, steps: int, repeats: int, quick: bool, family_size: int
-             ) -> tuple[dict, pd.DataFrame]:
+             ) -> BenchResult:
     """:func:`run_benchmark` inside its thread limit."""
     horizons = (10,) if quick else (10, 20, 30, 50)
     counts = (1,) if quick else (1, 3, 5)
@@ -701,9 +700,5 @@ def _measure(out: Path, steps: int, repeats: int, quick: bool, family_size: int
     summary["outside_qp_over_qp"] = closed_loop["outside_qp_us_per_step"] \
         / closed_loop["qp_us_per_step"]
     summary["setup_ms"] = closed_loop["setup_ms"]
-    out.mkdir(parents=True, exist_ok=True)
-    write_csv_atomic(out / "bench.csv", pd.concat([lateral, peers, kinematic,
-                                                        pd.DataFrame(path_rows)],
-                                                       ignore_index=True))
-    write_json_atomic(out / "bench_summary.json", summary)
-    return summary, lateral
+    table = pd.concat([lateral, peers, kinematic, pd.DataFrame(path_rows)], ignore_index=True)
+    return BenchResult(summary, table, lateral).write(out)

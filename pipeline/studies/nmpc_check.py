@@ -31,7 +31,7 @@ import numpy as np
 import pandas as pd
 
 from pipeline.analysis.claims import family_ledger
-from pipeline.store.runs import json_safe, write_csv_atomic, write_json_atomic
+from pipeline.studies.results.nmpc_check import NmpcCheckResult
 
 logger = logging.getLogger(__name__)
 
@@ -169,14 +169,10 @@ def _track_summary(table: pd.DataFrame, compose, track: str, n_members: int) -> 
 
 
 def nmpc_agreement(compose, out_dir: Path, n_members: int = 50, log=logger.info,
-                   tracks: tuple[str, ...] = ("lateral", "kinematic"), n_jobs: int = 2) -> dict:
-    """Run the comparison and write its tables (see the module docstring).
-
-    Returns
-    -------
-    dict
-        ``{"tracks": {track: summary}}`` as written to ``summary.json``.
-    """
+                   tracks: tuple[str, ...] = ("lateral", "kinematic"), n_jobs: int = 2
+                   ) -> NmpcCheckResult:
+    """Run the comparison; its result written into ``out_dir`` and returned (see the module
+    docstring)."""
     from joblib import Parallel, delayed
 
     from pipeline.studies.experiment import _chunks
@@ -203,7 +199,5 @@ def nmpc_agreement(compose, out_dir: Path, n_members: int = 50, log=logger.info,
     table["min_clearance_nmpc_m"] = [m.get("min_clearance_m") for m in table["metrics_nmpc"]]
     table["ltv_beyond_bound"] = [bool(m.get("heading_validity_exceeded"))
                                  for m in table["metrics_ltv"]]
-    write_csv_atomic(out_dir / "agreement.csv", table.drop(columns=["metrics_ltv",
-                                                                    "metrics_nmpc"]))
-    write_json_atomic(out_dir / "summary.json", json_safe(summary))
-    return summary
+    return NmpcCheckResult(summary["tracks"], table.drop(columns=["metrics_ltv",
+                                                                  "metrics_nmpc"])).write(out_dir)

@@ -270,10 +270,11 @@ class RobustSlurmLauncherBase(SlurmLauncher):
         from hydra.core.utils import filter_overrides
 
         from pipeline.studies.aggregate import aggregate
+        from pipeline.studies.results.sweep import SUMMARY
 
         try:
-            aggregate(sweep_dir, progress=False, figures=False)
-            summary = f"the finished jobs are in {sweep_dir / 'summary.csv'}"
+            aggregate(sweep_dir, progress=False)
+            summary = f"the finished jobs are in {sweep_dir / SUMMARY}"
         except FileNotFoundError:
             summary = "no job finished"
         lines = [f"error: {len(unfinished)} of {total} jobs did not finish:"]

@@ -26,7 +26,7 @@ from pathlib import Path
 import pandas as pd
 
 from pipeline.analysis.tally import Tally
-from pipeline.store.runs import json_safe, write_csv_atomic, write_json_atomic
+from pipeline.studies.results.speed import SpeedCheckResult
 
 logger = logging.getLogger(__name__)
 
@@ -53,8 +53,8 @@ METHODS = ("improved", "baseline")
 
 
 def speed_check(compose, out_dir: Path, n_members: int = 200, log=logger.info,
-                variants: tuple[str, ...] = tuple(VARIANTS)) -> dict:
-    """Run every variant's families and write ``speed.csv`` and ``summary.json``."""
+                variants: tuple[str, ...] = tuple(VARIANTS)) -> SpeedCheckResult:
+    """Run every variant's families; the result written into ``out_dir`` and returned."""
     from pipeline.studies.experiment import run_family
 
     out_dir = Path(out_dir)
@@ -76,11 +76,8 @@ def speed_check(compose, out_dir: Path, n_members: int = 200, log=logger.info,
                          "collision_rate": tally.collisions / max(tally.scenarios, 1)})
             log(f"speed-check: {variant} {method}: {tally.collisions} collisions of "
                 f"{tally.scenarios}")
-    table = pd.DataFrame(rows)
-    write_csv_atomic(out_dir / "speed.csv", table)
-    summary = {"n_members": n_members, "rows": rows, "checks": _checks(table)}
-    write_json_atomic(out_dir / "summary.json", json_safe(summary))
-    return summary
+    checks = _checks(pd.DataFrame(rows))
+    return SpeedCheckResult(n_members, tuple(rows), tuple(checks)).write(out_dir)
 
 
 def _checks(table: pd.DataFrame) -> list[dict]:

@@ -46,8 +46,8 @@ from pipeline.analysis.objectives import Objective, objective_values
 from pipeline.analysis.tally import Tally
 from pipeline.config import CONF_DIR, schema_from_data
 from pipeline.errors import ConfigError, StudyError
-from pipeline.store.runs import (TUNE_FILES, json_safe, read_family, untrust,
-                                 write_csv_atomic, write_json_atomic, write_manifest)
+from pipeline.studies.results.tune import TuneResult, TuneSummary
+from pipeline.store.runs import (json_safe, read_family, untrust)
 from pipeline.validation import choice, safe_name
 
 logger = logging.getLogger(__name__)
@@ -275,7 +275,7 @@ class Runner:
 
     def __init__(self, space: TuneSpace, out_dir: Path, overrides: list[str], log) -> None:
         from pipeline.loop.controller import QpCache
-        from pipeline.studies.multiverse import composer
+        from pipeline.studies.compose import composer
 
         self.space, self.out_dir, self.log = space, Path(out_dir), log
         self.compose, self.launcher = composer(list(overrides))
@@ -293,7 +293,7 @@ class Runner:
 
     def run(self, jobs: list[FamilyJob], label: str) -> list[pd.DataFrame]:
         from pipeline.store.runs import check
-        from pipeline.studies.multiverse import run_families
+        from pipeline.studies.multiverse.runs import run_families
 
         todo, seen = [], set()
         for job in jobs:
@@ -308,8 +308,10 @@ class Runner:
 # --- the whole study --------------------------------------------------------------------------
 
 def run_tuning(space: TuneSpace, out_dir: Path, overrides: list[str] | None = None,
-               log=logger.info) -> dict:
-    """Tune, pick, judge on held-out scenarios, write the tables; returns ``summary.json``."""
+               log=logger.info) -> TuneResult:
+    """Tune, pick, judge on held-out scenarios; the result written into ``out_dir`` (its
+    manifest last) and returned. The Pareto fronts are the command's to draw
+    (:func:`front_points` gives their data)."""
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     untrust(out_dir)
@@ -339,23 +341,10 @@ def run_tuning(space: TuneSpace, out_dir: Path, overrides: list[str] | None = No
     trials = trials_table(studies, space)
     chosen = pick_settings(trials, space)
     heldout, ledgers, outcomes = judge_heldout(runner, space, trials, chosen, base.claims)
-    summary = json_safe(summarize(space, spaces, threshold, trials, chosen, heldout, ledgers,
-                               outcomes))
-    write_csv_atomic(out_dir / "trials.csv", trials)
-    write_csv_atomic(out_dir / "heldout.csv", heldout)
-    write_csv_atomic(out_dir / "ledger_default.csv", ledgers["default"].to_frame())
-    write_csv_atomic(out_dir / "ledger_tuned.csv", ledgers["tuned"].to_frame())
-    write_csv_atomic(out_dir / "settings_outcomes.csv", outcomes)
-    write_json_atomic(out_dir / "summary.json", summary)
-    from pipeline.reporting.figures import pareto_front_figure, save_figure
-
-    for part in ("training", "heldout"):
-        points = _front_points(trials, heldout, space, part)
-        save_figure(pareto_front_figure(points, [o.label for o in space.objectives],
-                                        f"{part} family"), out_dir / "figures",
-                    f"pareto_fronts_{part}")
-    write_manifest(out_dir, "tune", TUNE_FILES, space.name)
-    return summary
+    summary = TuneSummary.from_json(json_safe(summarize(
+        space, spaces, threshold, trials, chosen, heldout, ledgers, outcomes)))
+    return TuneResult(summary, trials, heldout, ledgers["default"].to_frame(),
+                      ledgers["tuned"].to_frame(), outcomes).write(out_dir)
 
 
 def trials_table(studies: dict, space: TuneSpace) -> pd.DataFrame:
@@ -482,7 +471,7 @@ def artefact_sentence(claim_id: str, default: str, tuned: str, n_heldout: int) -
             "tuned with the same budget: the default verdict was a tuning artefact.")
 
 
-def _front_points(trials: pd.DataFrame, heldout: pd.DataFrame, space: TuneSpace,
+def front_points(trials: pd.DataFrame, heldout: pd.DataFrame, space: TuneSpace,
                   part: str) -> dict[str, np.ndarray]:
     """Per method, the Pareto settings' objective values on the training or held-out family."""
     out = {}
@@ -550,6 +539,6 @@ def summarize(space: TuneSpace, spaces: dict, threshold: int, trials: pd.DataFra
                        "feasible": int(((trials["method"] == m) & trials["feasible"]).sum()),
                        "pareto": int(((trials["method"] == m) & trials["pareto"]).sum())}
                    for m in space.methods},
-        "dominance": {part: front_dominance(_front_points(trials, heldout, space, part), space)
+        "dominance": {part: front_dominance(front_points(trials, heldout, space, part), space)
                       for part in ("training", "heldout")},
         "claims": claims}

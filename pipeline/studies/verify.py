@@ -42,10 +42,10 @@ def paper_metrics_table(runs_root: Path) -> pd.DataFrame:
     """One row per (track, method) on the paper scenario, from the trusted runs under
     ``runs_root`` (family members and the study sections the report reads apart excluded:
     sweeps, ablation, multiverse, tuning, the Appendix-A readings)."""
-    from pipeline.store.collection import EXCLUDED_SECTIONS
+    from pipeline.store.layout import OutputsLayout
 
     rows = []
-    found = discover(runs_root, exclude=EXCLUDED_SECTIONS)
+    found = discover(runs_root, exclude=OutputsLayout.load(runs_root).not_main_runs)
     for item in found.skipped:
         log.warning("verify: skipped %s: %s", item.folder, item.reason)
     for folder in found.runs:
@@ -72,8 +72,10 @@ def ledger_table(runs_root: Path, kinematic: bool = False) -> pd.DataFrame | Non
     from pipeline.analysis.claims import family_ledger
     from pipeline.store.collection import load_runs
 
+    from pipeline.store.layout import OutputsLayout
+
     if kinematic:
-        runs_root = Path(runs_root) / "kinematic_family"
+        runs_root = OutputsLayout.load(runs_root).folder("kinematic_family")
         if not runs_root.is_dir():
             return None
     collection = load_runs(runs_root)
@@ -141,8 +143,9 @@ def verify(runs_root: Path, reference_dir: Path, update: bool = False) -> list[s
         if ledger is not None:
             fresh[file] = ledger
     from pipeline.store.collection import model_validity_table
+    from pipeline.store.layout import OutputsLayout
 
-    validity = model_validity_table(runs_root).to_frame()
+    validity = model_validity_table(OutputsLayout.load(runs_root)).to_frame()
     if len(validity):
         fresh[VALIDITY_FILE] = validity
     if update:

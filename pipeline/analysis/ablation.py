@@ -1,24 +1,19 @@
 """Ablation analysis: which revision of the APF does what, and do the verdicts survive the
 alternative readings of the interpretation register.
 
-Reads family jobs (``family.json`` + ``family_metrics.csv``) written by
-``experiment=ablation`` (labels ``baseline``, ``improved``, ``baseline+<revision>``,
-``improved-<revision>``) and ``experiment=interpretations`` (one folder per variant, baseline
-and improved inside). Pure functions over tables; the report draws and prints them.
+Pure functions over the family tables of ``experiment=ablation`` (labels ``baseline``,
+``improved``, ``baseline+<revision>``, ``improved-<revision>``) and of
+``experiment=interpretations`` (per variant, baseline and improved), which the store reads
+(:func:`pipeline.store.collection.family_tables_by_method`); the report draws and prints them.
 """
 
 from __future__ import annotations
-
-import logging
-from pathlib import Path
 
 import numpy as np
 import pandas as pd
 
 from pipeline.analysis.claims import ALL_CLAIMS, CLAIMS, compare, family_ledger, judge
 from pipeline.analysis.tally import Tally
-
-log = logging.getLogger(__name__)
 
 REVISIONS = ("normalize", "step", "beta", "exponential", "step_min")
 REVISION_TEXT = {
@@ -28,26 +23,6 @@ REVISION_TEXT = {
     "exponential": "exponential repulsion",
     "step_min": "minimum movement threshold",
 }
-
-
-def load_family_jobs(root: Path) -> dict[str, pd.DataFrame]:
-    """``{label: family_metrics}`` of every trusted family job below ``root`` (label = its
-    method); untrusted folders are named on stderr and left out. The tables are judged with
-    the claims settings the caller passes (the report's: those of its main runs)."""
-    from pipeline.store.runs import RunFolderError, discover, read_family
-
-    tables = {}
-    found = discover(Path(root))
-    for item in found.skipped:
-        log.warning("ablation: skipped %s: %s", item.folder, item.reason)
-    for folder in found.families:
-        try:
-            family = read_family(folder, settings=False)
-        except RunFolderError as exc:
-            log.warning("ablation: skipped %s", exc)
-            continue
-        tables[family.info["method"]] = family.table
-    return tables
 
 
 def ablation_roles(tables: dict[str, pd.DataFrame], cfg) -> tuple[str, str]:
@@ -182,16 +157,15 @@ def attribution_sentences(effects: pd.DataFrame, tables: dict[str, pd.DataFrame]
     return sentences
 
 
-def interpretation_flips(root: Path, cfg) -> pd.DataFrame | None:
+def interpretation_flips(variants: dict[str, dict[str, pd.DataFrame]], cfg
+                         ) -> pd.DataFrame | None:
     """Family verdicts of every interpretation variant and whether they differ from the default.
 
-    ``root`` holds ``<variant>/<method>/family.json`` for methods baseline and improved.
+    ``variants``: per variant (in name order), its family tables by method (baseline and
+    improved; :func:`pipeline.store.collection.interpretation_tables`).
     """
-    root = Path(root)
-    variants = sorted(p.name for p in root.iterdir() if p.is_dir()) if root.is_dir() else []
     verdicts = {}
-    for variant in variants:
-        tables = load_family_jobs(root / variant)
+    for variant, tables in variants.items():
         bundle, reference = ablation_roles(tables, cfg)
         if reference in tables and bundle in tables:
             ledger = family_ledger(tables, cfg, improved=bundle, comparisons=(reference,))

@@ -1,0 +1,303 @@
+"""Everything the report reads, read once through its owners (the store for run and family
+folders, each study's typed result for its folder), before anything is computed.
+
+:meth:`ReportInputs.load` never simulates and never runs a study; a folder that cannot be read
+or trusted becomes a :class:`~pipeline.store.runs.Skipped` with its reason (listed on the page
+and on stderr), never a crash. It also decides which run of each method is judged (make
+reproduce's own, else the one labelled with the bare method name) and with which claims
+settings (those the runs were made with, the command's treatment and controls over them).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import logging
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Callable, TypeVar
+
+import pandas as pd
+
+from pipeline.analysis.validity import ValidityTable
+from pipeline.config import ClaimsConfig, ExperimentConfig
+from pipeline.store.collection import (LabelledRun, RunCollection, family_tables_by_method,
+                                       interpretation_tables, load_runs, model_validity_table,
+                                       trusted_families)
+from pipeline.store.layout import OutputsLayout
+from pipeline.store.runs import FamilyRecord, Skipped
+from pipeline.studies.results import (BenchResult, MultiverseResult, NmpcCheckResult,
+                                      ResultError, SpeedCheckResult, SweepSummary, TuneResult)
+from pipeline.studies.results.sweep import is_sweep_folder
+
+log = logging.getLogger("pipeline.reporting")
+
+T = TypeVar("T")
+
+#: Known methods first, in this order, on every table and figure.
+METHOD_ORDER = ("baseline", "baseline_matched", "improved", "velocity_aware", "mpc_no_apf",
+                "apf_pursuit")
+#: What an optional input that cannot be read may raise (it is then skipped, with its reason).
+UNREADABLE = (OSError, ValueError, KeyError, TypeError, IndexError, pd.errors.ParserError)
+
+
+def ordered(methods) -> list[str]:
+    """Known methods first in their order, labelled variants right after their method."""
+    def rank(label: str) -> tuple:
+        base = label.split(" (")[0].split(" #")[0]
+        return (METHOD_ORDER.index(base) if base in METHOD_ORDER else len(METHOD_ORDER),
+                base, label != base, label)
+
+    return sorted(dict.fromkeys(methods), key=rank)
+
+
+def choose_per_method(items: dict, method_of, kind: str, use: str, canonical: tuple[str, ...],
+                      folder_of=None) -> tuple[dict, list[str]]:
+    """One item per method and a note for every method given more than once. The pick: the
+    run make reproduce wrote (``<section>/<method>``, ``canonical`` naming the sections), else
+    the one labelled with the bare method name, else the first; the note names it and the ones
+    left out."""
+    def made_by_reproduce(folder, method: str) -> bool:
+        path = Path(str(folder)) if folder else None
+        return path is not None and path.name == method and path.parent.name in canonical
+
+    groups: dict[str, list[str]] = {}
+    for label, item in items.items():
+        groups.setdefault(method_of(label, item), []).append(label)
+    chosen, notes = {}, []
+    for method, labels in groups.items():
+        picked = [label for label in labels
+                  if folder_of is not None and made_by_reproduce(folder_of(label, items[label]),
+                                                                 method)]
+        pick = picked[0] if picked else method if method in labels else labels[0]
+        chosen[method] = items[pick]
+        if len(labels) > 1:
+            why = "the run make reproduce wrote" if picked else \
+                "no run in make reproduce's place: the first"
+            notes.append(f"{len(labels)} {kind} of {method} were given; {use} '{pick}' ({why}); "
+                         f"left out of the claims: {'; '.join(x for x in labels if x != pick)} "
+                         "(shown apart).")
+    return chosen, notes
+
+
+@dataclass(frozen=True)
+class TrackRuns:
+    """The single runs of one track on one scenario: the judged run of each method (in method
+    order), the other runs given (shown, never judged), and notes on what was picked."""
+
+    scenario: str
+    by_method: dict[str, LabelledRun]
+    extra: tuple[LabelledRun, ...]
+    notes: tuple[str, ...]
+    #: every run given, in the order they were found
+    runs: tuple[LabelledRun, ...] = ()
+
+    @property
+    def methods(self) -> list[str]:
+        return list(self.by_method)
+
+    def metrics(self) -> dict[str, dict]:
+        """Every metric of each judged run, by method."""
+        return {m: r.metrics() for m, r in self.by_method.items()}
+
+    @classmethod
+    def of(cls, runs: list[LabelledRun], canonical: tuple[str, ...]) -> TrackRuns:
+        by_label = {r.label: r for r in runs}
+        primary, notes = choose_per_method({m: by_label[m] for m in ordered(by_label)},
+                                           lambda label, run: run.method, "runs",
+                                           "the claims use", canonical,
+                                           folder_of=lambda label, run: run.folder)
+        by_method = {m: primary[m] for m in ordered(primary)}
+        judged = {id(r) for r in by_method.values()}
+        extra = tuple(r for r in by_label.values() if id(r) not in judged)
+        return cls(runs[0].scenario, by_method, extra, tuple(notes), tuple(runs))
+
+
+@dataclass(frozen=True)
+class FamilyInputs:
+    """The scenario families of one section: every table by label, the one judged per method
+    (:attr:`primary`), their ``family.json`` and settings, and notes on what was picked."""
+
+    tables: dict[str, pd.DataFrame]
+    info: dict[str, dict]
+    settings: dict[str, ExperimentConfig]
+    primary: dict[str, pd.DataFrame]
+    notes: tuple[str, ...]
+
+    @classmethod
+    def of(cls, collection: RunCollection, canonical: tuple[str, ...]) -> FamilyInputs:
+        info = collection.family_info
+        primary, notes = choose_per_method(
+            collection.family_tables, lambda label, _: info.get(label, {}).get("method", label),
+            "families", "the ledger uses", canonical,
+            folder_of=lambda label, _: info.get(label, {}).get("dir"))
+        return cls(collection.family_tables, info, collection.family_settings, primary,
+                   tuple(notes))
+
+    def judgeable(self, cfg: ClaimsConfig) -> bool:
+        """Whether the ledger can be made: the treatment and a control are among the
+        families."""
+        return cfg.treatment in self.primary and any(c in self.primary for c in cfg.controls)
+
+
+@dataclass(frozen=True)
+class ValidityInputs:
+    """What the model-validity section reads: the pooled table of the families' model checks,
+    and the default and other frame's families."""
+
+    table: ValidityTable
+    families: tuple[FamilyRecord, ...]
+    other_frame: tuple[FamilyRecord, ...]
+
+
+@dataclass(frozen=True)
+class ReportInputs:
+    """Everything the report shows, read (see the module docstring)."""
+
+    run_root: Path
+    layout: OutputsLayout
+    claims: ClaimsConfig
+    lateral: TrackRuns | None = None
+    kinematic: TrackRuns | None = None
+    other_runs: tuple[LabelledRun, ...] = ()
+    family: FamilyInputs | None = None
+    kinematic_family: FamilyInputs | None = None
+    readings: dict[str, list[LabelledRun]] = field(default_factory=dict)
+    ablation: dict[str, pd.DataFrame] = field(default_factory=dict)
+    interpretations: dict[str, dict[str, pd.DataFrame]] = field(default_factory=dict)
+    validity: ValidityInputs | None = None
+    sweeps: tuple[SweepSummary, ...] = ()
+    bench: BenchResult | None = None
+    multiverse: MultiverseResult | None = None
+    tune: TuneResult | None = None
+    nmpc: NmpcCheckResult | None = None
+    speed: SpeedCheckResult | None = None
+    skipped: tuple[Skipped, ...] = ()
+
+    @property
+    def has_runs(self) -> bool:
+        """Whether there is a paper scenario to show (else the page shows sweeps only)."""
+        return self.lateral is not None
+
+    @classmethod
+    def load(cls, run_root: Path, sweep_dirs: tuple[Path, ...] = (),
+             bench_dir: Path | None = None, multiverse_dir: Path | None = None,
+             tune_dir: Path | None = None, treatment: str | None = None,
+             controls: tuple[str, ...] = (), skipped: list[Skipped] | None = None
+             ) -> ReportInputs:
+        """Read every input (see the module docstring); ``skipped`` receives what was passed
+        over. Raises FileNotFoundError when there are neither runs nor sweeps."""
+        run_root = Path(run_root)
+        skipped = skipped if skipped is not None else []
+        layout = OutputsLayout.load(run_root)
+        sweep_dirs = tuple(Path(d) for d in sweep_dirs)
+        if is_sweep_folder(run_root):
+            sweep_dirs, collection = (run_root,) + sweep_dirs, RunCollection()
+        else:
+            log.info("report: reading the run folders")
+            collection = load_runs(run_root, skipped)
+        for item in skipped:
+            log.warning("skipped %s: %s", item.folder, item.reason)
+        optional = _Optional(skipped)
+        sweeps = tuple(s for s in (optional(SweepSummary.load, d, "sweep section")
+                                   for d in sweep_dirs) if s is not None)
+        bench = optional(BenchResult.load, bench_dir, "performance section") \
+            if BenchResult.present(bench_dir) else None
+        if multiverse_dir is None and MultiverseResult.present(layout.folder("multiverse")):
+            multiverse_dir = layout.folder("multiverse")
+        multiverse = optional(MultiverseResult.load, multiverse_dir, "robustness section") \
+            if MultiverseResult.present(multiverse_dir) else None
+        if tune_dir is None and TuneResult.present(layout.folder("tune")):
+            tune_dir = layout.folder("tune")
+        tune = optional(TuneResult.load, tune_dir, "fair fight section") \
+            if TuneResult.present(tune_dir) else None
+        claims = _claims(collection, treatment, controls)
+        runs = collection.runs
+        if not runs:
+            if not sweeps:
+                raise FileNotFoundError(f"no single runs (the paper scenario) under {run_root}")
+            return cls(run_root, layout, claims, sweeps=sweeps, bench=bench,
+                       skipped=tuple(skipped))
+        kinematic_runs = [r for r in runs if r.track == "kinematic"]
+        lateral_runs = [r for r in runs if r.track == "lateral"] or runs
+        paper = [r for r in lateral_runs if r.scenario == "paper_sudden_obstacle"] \
+            or lateral_runs
+        lateral = TrackRuns.of(paper, layout.canonical)
+        others = tuple(r for r in lateral_runs if r.scenario != lateral.scenario)
+        family = FamilyInputs.of(collection, layout.canonical)
+        kin_family_dir = layout.folder("kinematic_family")
+        kinematic_family = optional(lambda folder: FamilyInputs.of(load_runs(folder, []),
+                                                                   layout.canonical),
+                                    kin_family_dir, "kinematic family section") \
+            if kin_family_dir.is_dir() else None
+        nmpc = optional(NmpcCheckResult.load, layout.folder("nmpc_check"), "nmpc check") \
+            if NmpcCheckResult.present(layout.folder("nmpc_check")) else None
+        speed = optional(SpeedCheckResult.load, layout.folder("speed"), "speed check") \
+            if SpeedCheckResult.present(layout.folder("speed")) else None
+        # the model checks are read only when there is a ledger to put beside them
+        validity = optional(_validity, layout, "validity section") \
+            if family.judgeable(claims) else None
+        return cls(
+            run_root, layout, claims, lateral=lateral,
+            kinematic=TrackRuns.of(kinematic_runs, layout.canonical) if kinematic_runs
+            else None,
+            other_runs=lateral.extra + others, family=family,
+            kinematic_family=kinematic_family, readings=_readings(layout),
+            ablation=family_tables_by_method(layout.folder("ablation"), skipped),
+            interpretations=interpretation_tables(layout.folder("interpretations"), skipped),
+            validity=validity, sweeps=sweeps, bench=bench, multiverse=multiverse, tune=tune,
+            nmpc=nmpc, speed=speed, skipped=tuple(skipped))
+
+
+class _Optional:
+    """Calls a reader of an optional input; one that cannot be read is skipped with its
+    reason (listed on the page and on stderr), never a crash."""
+
+    def __init__(self, skipped: list[Skipped]) -> None:
+        self.skipped = skipped
+
+    def __call__(self, read: Callable[[Path], T], folder, what: str) -> T | None:
+        try:
+            return read(folder)
+        except (ResultError, *UNREADABLE) as exc:
+            text = str(exc).splitlines()[0][:120] if str(exc) else ""
+            reason = f"{what} left out ({type(exc).__name__}: {text})"
+            self.skipped.append(Skipped(Path(folder), reason))
+            log.warning("skipped %s: %s", folder, reason)
+            return None
+
+
+def _claims(collection: RunCollection, treatment: str | None,
+            controls: tuple[str, ...]) -> ClaimsConfig:
+    """The claims settings the runs were made with, never defaults rebuilt from text; what is
+    compared with what: the command's treatment and controls, else those settings'."""
+    cfg = collection.claims_settings(treatment or "improved") \
+        or collection.claims_settings("improved") or ClaimsConfig()
+    return dataclasses.replace(cfg, treatment=treatment or cfg.treatment,
+                               controls=list(controls) if controls else list(cfg.controls))
+
+
+def reading_of(baseline_config: dict) -> str:
+    """Which Appendix-A reading a kinematic baseline run was made under."""
+    if baseline_config.get("scenario", {}).get("obstacle_anchor", "world") == "vehicle":
+        return "vehicle_anchor"
+    alignment = baseline_config.get("controller", {}).get("reference_alignment", "literal")
+    if alignment != "literal":
+        return alignment
+    return "literal" if baseline_config.get("planner", {}).get("normalize_step", True) \
+        else "printed"
+
+
+def _readings(layout: OutputsLayout) -> dict[str, list[LabelledRun]]:
+    """The Appendix-A readings' runs (``kinematic_readings``) by reading, in name order."""
+    root = layout.folder("kinematic_readings")
+    by_variant: dict[str, list[LabelledRun]] = {}
+    if root.is_dir():
+        for run in load_runs(root, []).runs:
+            by_variant.setdefault(run.config["run"].get("variant", "?"), []).append(run)
+    return dict(sorted(by_variant.items()))
+
+
+def _validity(layout: OutputsLayout) -> ValidityInputs:
+    return ValidityInputs(model_validity_table(layout),
+                          tuple(trusted_families(layout.folder("family"))),
+                          tuple(trusted_families(layout.folder("frames"))))

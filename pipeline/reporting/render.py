@@ -1,0 +1,60 @@
+"""The page: every section (:class:`Page`) rendered through ``templates/report.html.j2`` and
+its one template per section (``templates/sections/``), numbers through the filters of
+:mod:`pipeline.reporting.format`."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, fields
+
+import jinja2
+
+from pipeline.reporting.format import FILTERS, interval
+from pipeline.reporting.sections.ablation import AblationSection
+from pipeline.reporting.sections.answer import AnswerSection
+from pipeline.reporting.sections.fair_fight import FairFightSection
+from pipeline.reporting.sections.family import FamilySection
+from pipeline.reporting.sections.kinematic import KinematicSection
+from pipeline.reporting.sections.looks import LooksSection
+from pipeline.reporting.sections.methods import MethodsSection
+from pipeline.reporting.sections.paper import PaperSection
+from pipeline.reporting.sections.performance import PerformanceSection
+from pipeline.reporting.sections.robustness import RobustnessSection
+from pipeline.reporting.sections.runs_given import RunsGivenSection
+from pipeline.reporting.sections.sweeps import SweepSection
+from pipeline.reporting.sections.validity import ValiditySection
+
+
+@dataclass(frozen=True)
+class Page:
+    """Every section of the report (None: not shown; ``paper`` None: a sweep-only page)."""
+
+    paper: PaperSection | None
+    answer: AnswerSection
+    family: FamilySection | None
+    kinematic: KinematicSection | None
+    looks: LooksSection | None
+    robustness: RobustnessSection | None
+    fair_fight: FairFightSection | None
+    validity: ValiditySection | None
+    ablation: AblationSection | None
+    sweeps: tuple[SweepSection, ...]
+    performance: PerformanceSection | None
+    given: RunsGivenSection
+    methods: MethodsSection
+
+
+def environment() -> jinja2.Environment:
+    """The report's Jinja environment: its templates, autoescaping, strict about undefined
+    names, the number filters."""
+    env = jinja2.Environment(loader=jinja2.PackageLoader("pipeline.reporting", "templates"),
+                             autoescape=jinja2.select_autoescape(["html", "j2"]),
+                             undefined=jinja2.StrictUndefined)
+    env.filters.update(FILTERS)
+    env.globals["interval"] = interval
+    return env
+
+
+def render(page: Page) -> str:
+    """The page's HTML (every figure must be on disk: their PNGs are inlined)."""
+    context = {f.name: getattr(page, f.name) for f in fields(page)}
+    return environment().get_template("report.html.j2").render(**context)

@@ -1,0 +1,137 @@
+"""What every page carries: the rules from numbers to outcomes with each claim's margin, every
+metric's definition, the interpretation register with the values the runs used, and the
+provenance (command, commit, packages, machine)."""
+
+from __future__ import annotations
+
+import datetime as dt
+import importlib.metadata
+import os
+import platform
+import re
+import subprocess
+import sys
+from dataclasses import dataclass
+from pathlib import Path
+
+from markupsafe import Markup, escape
+
+from pipeline.analysis.claims import ALL_CLAIMS, OUTCOME_RULE, SINGLE_RULE, Claim
+from pipeline.config import INTERPRETATION_REGISTER, ClaimsConfig
+
+PACKAGES = ("numpy", "scipy", "pandas", "matplotlib", "control", "cvxpy", "clarabel",
+            "hydra-core", "omegaconf", "jinja2")
+
+
+@dataclass(frozen=True)
+class Provenance:
+    """Command, git commit and dirty flag, package versions, date and machine."""
+
+    command: str
+    git_commit: str
+    git_dirty: bool
+    python: str
+    packages: dict[str, str]
+    date_utc: str
+    machine: str
+
+
+@dataclass(frozen=True)
+class MethodsSection:
+    """The rules, the margins and the claims' definitions, the metrics' definitions, the
+    register, the provenance."""
+
+    family_rule: str
+    verdict_rule: str
+    margins: tuple[dict, ...]
+    claim_defs: tuple[Claim, ...]
+    metrics_doc: tuple[Markup, ...]
+    register: tuple[dict, ...]
+    prov: Provenance
+
+
+def _git(*args: str) -> str:
+    try:
+        return subprocess.run(["git", *args], capture_output=True, text=True, check=True,
+                              cwd=Path(__file__).resolve().parent).stdout.strip()
+    except (OSError, subprocess.CalledProcessError):
+        return "unknown"
+
+
+def provenance(command: str) -> Provenance:
+    """Command, git commit and dirty flag, package versions, date and machine."""
+    versions = {}
+    for name in PACKAGES:
+        try:
+            versions[name] = importlib.metadata.version(name)
+        except importlib.metadata.PackageNotFoundError:
+            versions[name] = "not installed"
+    status = _git("status", "--porcelain")
+    return Provenance(command, _git("rev-parse", "HEAD"), bool(status) and status != "unknown",
+                      sys.version.split()[0], versions,
+                      dt.datetime.now(dt.timezone.utc).strftime("%Y-%m-%d %H:%M:%S UTC"),
+                      f"{platform.system()} {platform.machine()}, {os.cpu_count()} cores")
+
+
+def _lookup(config: dict, dotted: str):
+    node = config
+    for part in dotted.split("."):
+        if not isinstance(node, dict) or part not in node:
+            return None
+        node = node[part]
+    return node
+
+
+def register_rows(configs_by_method: dict[str, dict]) -> list[dict]:
+    """Interpretation register with the value each method's run used."""
+    rows = []
+    for entry in INTERPRETATION_REGISTER:
+        keys = [k.strip() for k in entry.config_key.split(",")]
+        # the value each run used, one line per distinct value ("all runs" when they agree)
+        groups: dict[str, list[str]] = {}
+        for method, config in configs_by_method.items():
+            value = "; ".join(f"{_lookup(config, k)!s}" for k in keys)
+            groups.setdefault(value, []).append(method)
+        used = [("all runs" if len(groups) == 1 else ", ".join(methods), value)
+                for value, methods in groups.items()]
+        rows.append({"topic": entry.topic, "paper says": entry.paper_says,
+                     "default reading": entry.default, "alternatives": entry.alternatives,
+                     "config key": entry.config_key, "used": used})
+    return rows
+
+
+def metrics_doc() -> list[Markup]:
+    """Bullet paragraphs of the metric definitions (from :mod:`pipeline.analysis.metrics`);
+    the docstring's **Name** becomes bold, everything else is escaped text."""
+    import pipeline.analysis.metrics as metrics_module
+
+    doc = metrics_module.__doc__ or ""
+    bullets, current = [], []
+    for line in doc.splitlines():
+        if line.startswith("* "):
+            if current:
+                bullets.append(" ".join(current))
+            current = [line[2:].strip()]
+        elif current and line.strip():
+            current.append(line.strip())
+        elif current:
+            bullets.append(" ".join(current))
+            current = []
+    if current:
+        bullets.append(" ".join(current))
+    return [Markup(re.sub(r"\*\*(.+?)\*\*", r"<strong>\1</strong>",
+                          str(escape(b.replace("``", ""))))) for b in bullets]
+
+
+def methods_section(cfg: ClaimsConfig | None, configs_by_method: dict[str, dict],
+                    command: str) -> MethodsSection:
+    """The section; no margins listed when no run carries claims settings (a sweep-only
+    page)."""
+    from pipeline.reporting.format import fmt
+
+    margins = tuple({"claim": c.claim_id, "margin": fmt(cfg.margins[c.claim_id]),
+                     "reason": cfg.margin_reasons[c.claim_id]} for c in ALL_CLAIMS) \
+        if cfg is not None else ()
+    return MethodsSection(OUTCOME_RULE, SINGLE_RULE, margins, tuple(ALL_CLAIMS),
+                          tuple(metrics_doc()), tuple(register_rows(configs_by_method)),
+                          provenance(command))

@@ -1,0 +1,96 @@
+"""The multiverse (``make multiverse``), if it was run: per claim the default outcome, its
+robustness and the choice that moves it most; the specification curves; the choices that
+flip most of their specifications."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from pipeline.analysis.claims import ALL_CLAIMS, OUTCOMES
+from pipeline.reporting.figure import Figure, Figures
+from pipeline.reporting.inputs import ReportInputs
+from pipeline.studies.results import MultiverseResult
+
+
+@dataclass(frozen=True)
+class RobustnessSection:
+    rows: tuple[dict, ...]
+    figures: tuple[Figure, ...]
+    dims: tuple[dict, ...]
+    n: int | None
+    n_sim: int | None
+    size: int | None
+    name: str | None
+    rule: str
+    dimensions: tuple[dict, ...]
+    backends: str
+
+
+def backends_text(backends: dict) -> str:
+    """``daqp (baseline, improved); no QP (apf_pursuit)``: each QP backend with the methods
+    whose runs used it (a multiverse's ``space.json``)."""
+    by_backend: dict[str, list] = {}
+    for method, backend in backends.items():
+        by_backend.setdefault(str(backend), []).append(str(method))
+    return "; ".join(f"{b} ({', '.join(m)})" for b, m in by_backend.items())
+
+
+def _cells(result: MultiverseResult) -> list[dict]:
+    rows: dict[str, dict] = {}
+    for r in result.robustness.to_dict("records"):
+        entry = rows.setdefault(r["claim"], {"claim": r["claim"], "cells": {}})
+        if r["influence"] > 0:
+            moved = (f"{r['most_influential']}"
+                     + (f" = {r['flipping_values']}" if isinstance(r["flipping_values"], str)
+                        and r["flipping_values"] else "")
+                     + f" (flips {100 * r['influence']:.0f} % of its specifications)")
+        else:
+            moved = f"nothing flips it; largest shift: {r['most_influential']}"
+        entry["cells"][r["comparison"]] = {
+            "outcome": r["default_outcome"], "label": r["label"],
+            "agree": f"{100 * r['agree_share']:.0f} %", "moved": moved,
+            "shares": ", ".join(f"{o} {100 * r[f'share_{o}']:.0f} %"
+                                for o in OUTCOMES if r.get(f"share_{o}", 0) > 0),
+            "holds_with": r["holds_with"] if isinstance(r.get("holds_with"), str)
+            and r["holds_with"] else "no single choice"}
+    return list(rows.values())
+
+
+def _flipping_choices(result: MultiverseResult) -> list[dict]:
+    """Against the baseline: each non-default value that flips most of its specifications."""
+    rows = []
+    dims = result.dimensions
+    if not len(dims):
+        return rows
+    for (claim, comparison), part in dims.groupby(["claim", "comparison"], sort=False):
+        if comparison != "baseline":
+            continue
+        for r in part.to_dict("records"):
+            if r["default"] or r["flipped_share"] < 0.5:
+                continue
+            rows.append({"claim": claim, "dimension": r["dimension"], "value": r["value"],
+                         "flipped": f"{100 * r['flipped_share']:.0f} %",
+                         "outcome": r["modal_outcome"], "estimate": r["median_estimate"]})
+    return rows
+
+
+def robustness_section(inputs: ReportInputs, figures: Figures) -> RobustnessSection | None:
+    result = inputs.multiverse
+    if result is None:
+        return None
+    drawn = []
+    for claim in ALL_CLAIMS:
+        stem = MultiverseResult.curve_stem(claim.claim_id)
+        figure = figures.copy(
+            result.curve_figure(claim.claim_id), stem, "robustness",
+            f"{claim.claim_id} ({claim.text}): the estimate with its 95 % interval in every "
+            "specification, sorted, coloured by outcome, against each comparison; below, "
+            "which choices each specification changes from the default.",
+            f"Specification curve of {claim.claim_id}")
+        if figure is not None:
+            drawn.append(figure)
+    info = result.info
+    return RobustnessSection(
+        tuple(_cells(result)), tuple(drawn), tuple(_flipping_choices(result)),
+        info.n_specifications, info.n_simulation_configurations, info.family_size, info.name,
+        info.rule, info.dimensions, backends_text(info.backends or {}))

@@ -1,0 +1,106 @@
+"""The report's tables (``tables/*.csv`` beside the page): every number the page shows, as
+CSV, written in one place from the inputs and the verdicts."""
+
+from __future__ import annotations
+
+import shutil
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from pipeline.reporting.inputs import ReportInputs, TrackRuns
+from pipeline.reporting.verdicts import TrackClaims, Verdicts
+from pipeline.studies.results.tune import HELDOUT, LEDGER_TUNED, SETTINGS_OUTCOMES, TRIALS
+
+
+def write_tables(inputs: ReportInputs, verdicts: Verdicts, table_dir: Path) -> None:
+    """Write every table of the page into ``table_dir`` (see the module docstring)."""
+    table_dir.mkdir(parents=True, exist_ok=True)
+    if inputs.lateral is not None:
+        _track(inputs.lateral, verdicts.paper, "metrics_paper_scenario.csv",
+               "claims_paper_scenario.csv", table_dir)
+    if verdicts.ablation_effects is not None:
+        verdicts.ablation_effects.to_csv(table_dir / "ablation_effects.csv", index=False)
+    if verdicts.flips is not None:
+        verdicts.flips.to_csv(table_dir / "interpretation_flips.csv", index=False)
+    if inputs.kinematic is not None:
+        _track(inputs.kinematic, verdicts.kinematic, "metrics_kinematic_track.csv",
+               "claims_kinematic_track.csv", table_dir)
+    if verdicts.family is not None:
+        verdicts.family.ledger.to_frame().to_csv(table_dir / "claims_ledger.csv", index=False)
+        pd.DataFrame(list(verdicts.family.counts)).to_csv(table_dir / "family_outcomes.csv",
+                                                          index=False)
+        if verdicts.family.apf_adds is not None:
+            verdicts.family.apf_adds.to_frame().to_csv(
+                table_dir / "claims_ledger_baseline_vs_no_apf.csv", index=False)
+    if verdicts.kinematic_family is not None:
+        kf = verdicts.kinematic_family
+        kf.ledger.to_frame().to_csv(table_dir / "claims_ledger_kinematic_family.csv",
+                                    index=False)
+        if kf.apf_adds is not None:
+            kf.apf_adds.to_frame().to_csv(
+                table_dir / "claims_ledger_baseline_vs_no_apf_kinematic_family.csv",
+                index=False)
+    if verdicts.validity is not None and has_validity(inputs):
+        inputs.validity.table.to_frame().to_csv(table_dir / "model_validity.csv", index=False)
+        pd.DataFrame(verdicts.validity.rows()).to_csv(table_dir / "claims_model_validity.csv",
+                                                      index=False)
+    for sweep in inputs.sweeps:
+        _sweep(sweep, table_dir)
+    if inputs.multiverse is not None:
+        inputs.multiverse.robustness.to_csv(table_dir / "multiverse_robustness.csv",
+                                            index=False)
+    if inputs.tune is not None:
+        files = inputs.tune.table_files()
+        for name in (TRIALS, HELDOUT, LEDGER_TUNED, SETTINGS_OUTCOMES):
+            shutil.copyfile(files[name], table_dir / f"tune_{name}")
+
+
+def has_validity(inputs: ReportInputs) -> bool:
+    """Whether any family carries model checks (else there is no validity section)."""
+    rows = inputs.validity.table.rows if inputs.validity is not None else ()
+    return bool(rows) and any(np.isfinite(r.prediction_error_1s_p95_m) for r in rows)
+
+
+def _track(runs: TrackRuns, claims: TrackClaims, metrics_name: str, claims_name: str,
+           table_dir: Path) -> None:
+    """A track's metrics on the paper scenario (a column per method) and its claims."""
+    frame = pd.DataFrame(runs.metrics())
+    frame.index.name = "metric"
+    frame.to_csv(table_dir / metrics_name)
+    pd.DataFrame(list(claims.rows)).to_csv(table_dir / claims_name, index=False)
+
+
+#: A sweep's columns shown beside its swept keys (the claims' primary metrics and safety;
+#: the full table is the sweep's own summary).
+SWEEP_COLUMNS = ("method", "kind", "status", "collisions", "reaction_delay_s",
+                 "lateral_jerk_rms_mps3", "repulsion_unneeded_share", "recovery_time_s",
+                 "oscillation_count", "min_clearance_m", "reason")
+
+
+def sweep_table(sweep) -> pd.DataFrame:
+    """The columns of a sweep's summary the page shows."""
+    swept = list(sweep.swept_keys)
+    summary = sweep.summary
+    shown = [k for k in swept if k in summary] + [c for c in SWEEP_COLUMNS
+                                                  if c in summary and c not in swept]
+    return summary[shown]
+
+
+def sweep_verdicts(sweep) -> pd.DataFrame | None:
+    """A sweep's verdicts with a ``setting`` column (the swept values, or the job)."""
+    if sweep.verdicts is None:
+        return None
+    verdicts = sweep.verdicts.copy()
+    value_keys = [k for k in sweep.swept_keys if k in verdicts and k != "method"]
+    verdicts["setting"] = verdicts[value_keys].astype(str).agg(", ".join, axis=1) \
+        if value_keys else verdicts["job"]
+    return verdicts
+
+
+def _sweep(sweep, table_dir: Path) -> None:
+    sweep_table(sweep).to_csv(table_dir / f"sweep_{sweep.name}_summary.csv", index=False)
+    verdicts = sweep_verdicts(sweep)
+    if verdicts is not None:
+        verdicts.to_csv(table_dir / f"sweep_{sweep.name}_verdicts.csv", index=False)

@@ -1,0 +1,193 @@
+"""Every ledger the report shows, computed once from its inputs: the paper scenario's claims
+on each track, the family ledgers (lateral and Appendix-A track), what the baseline's APF adds,
+the Appendix-A readings, the ablation's effects and flips, and the claims again where the
+MPC's model held and in the other frame. The sections only format these."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import pandas as pd
+
+from pipeline.analysis.ablation import (ablation_effects, ablation_roles,
+                                        interpretation_flips)
+from pipeline.analysis.claims import ALL_CLAIMS, Ledger, claims_table, family_ledger, outcome_counts
+from pipeline.analysis.validity import valid_scenario_ledgers
+from pipeline.config import ClaimsConfig
+from pipeline.reporting.inputs import (FamilyInputs, ReportInputs, TrackRuns, ordered,
+                                       reading_of)
+
+#: The claims whose outcome is a rate (judged even where the methods never met the obstacle).
+RATE_CLAIMS = frozenset(c.claim_id for c in ALL_CLAIMS if c.is_rate)
+
+
+@dataclass(frozen=True)
+class TrackClaims:
+    """The paper scenario's claims on one track: one row per claim (each method's primary
+    metric, the outcome per comparison) and the comparisons made."""
+
+    rows: tuple[dict, ...]
+    comparisons: tuple[str, ...]
+    comparability: tuple[str, ...] = ()
+
+
+@dataclass(frozen=True)
+class FamilyVerdicts:
+    """A family's ledger, its outcome counts per method and what the baseline's APF adds
+    (the baseline against ``mpc_no_apf``; None without both)."""
+
+    tables: dict[str, pd.DataFrame]
+    ledger: Ledger
+    counts: tuple[dict, ...]
+    apf_adds: Ledger | None
+
+
+@dataclass(frozen=True)
+class ValidityVerdicts:
+    """The claims again: the default ledger without the all-pairs sensitivity, per comparison
+    on the scenarios where both models held (with their number), in the other frame."""
+
+    comparisons: tuple[str, ...]
+    default: Ledger | None
+    valid: dict[str, tuple[Ledger, int]]
+    other: Ledger | None
+
+    def rows(self) -> list[dict]:
+        """Per claim and comparison: the outcome with its pairs, on the valid scenarios, in
+        the other frame (``tables/claims_model_validity.csv``)."""
+        rows = []
+        for row in (self.default or ()):
+            valid_ledger, n_valid = self.valid.get(row.comparison, (None, 0))
+            valid_row = valid_ledger.get(row.key) if valid_ledger is not None else None
+            other_row = self.other.get(row.key) if self.other is not None else None
+            rows.append({
+                "claim": row.claim_id, "comparison": row.comparison,
+                "outcome": str(row.outcome), "n": row.result.n_pairs,
+                "valid_outcome": str(valid_row.outcome) if valid_row else "—",
+                "valid_n": valid_row.result.n_pairs if valid_row else 0,
+                "valid_scenarios": n_valid,
+                "other_outcome": str(other_row.outcome) if other_row else "—",
+                "other_n": other_row.result.n_pairs if other_row else 0})
+        return rows
+
+
+@dataclass(frozen=True)
+class Verdicts:
+    """See the module docstring; each part None when its inputs were not given."""
+
+    claims: ClaimsConfig
+    paper: TrackClaims | None = None
+    kinematic: TrackClaims | None = None
+    family: FamilyVerdicts | None = None
+    kinematic_family: FamilyVerdicts | None = None
+    readings: tuple[tuple[str, dict[str, str]], ...] = ()
+    ablation_effects: pd.DataFrame | None = None
+    ablation_roles: tuple[str, str] = ("improved", "baseline")
+    flips: pd.DataFrame | None = None
+    validity: ValidityVerdicts | None = None
+    notes: tuple[str, ...] = field(default_factory=tuple)
+
+    @classmethod
+    def compute(cls, inputs: ReportInputs, claims: ClaimsConfig | None = None) -> Verdicts:
+        """Every ledger of ``inputs``, judged with ``claims`` (the inputs' by default)."""
+        cfg = claims or inputs.claims
+        if not inputs.has_runs:
+            return cls(cfg)
+        paper = track_claims(inputs.lateral, cfg)
+        kinematic = track_claims(inputs.kinematic, cfg, comparable_only=True) \
+            if inputs.kinematic is not None else None
+        family = _family(inputs.family, cfg, inputs.lateral.metrics(), paper_ledger=True) \
+            if inputs.family is not None and inputs.family.judgeable(cfg) else None
+        kinematic_family = _family(inputs.kinematic_family, cfg, None, paper_ledger=False) \
+            if inputs.kinematic is not None and inputs.kinematic_family is not None \
+            and inputs.kinematic_family.judgeable(cfg) else None
+        effects, roles = None, ablation_roles(inputs.ablation, cfg)
+        if roles[1] in inputs.ablation and roles[0] in inputs.ablation:
+            effects = ablation_effects(inputs.ablation, cfg)
+        return cls(cfg, paper, kinematic, family, kinematic_family,
+                   _readings(inputs, cfg) if inputs.kinematic is not None else (),
+                   effects, roles, interpretation_flips(inputs.interpretations, cfg),
+                   _validity(inputs, cfg) if family is not None else None)
+
+
+def track_claims(runs: TrackRuns, cfg: ClaimsConfig, comparable_only: bool = False
+                  ) -> TrackClaims:
+    """The claims on one track's paper scenario. With ``comparable_only`` a comparison is made
+    only when both methods come within ``cfg.comparable_clearance_m`` of the obstacle:
+    otherwise they did not meet the same threat and each claim but the rates is "not
+    comparable"."""
+    metrics = runs.metrics()
+    comparisons = tuple(c for c in cfg.controls if c in runs.by_method)
+    rows = claims_table(metrics, cfg.margins, comparisons, improved=cfg.treatment)
+    comparability = []
+    if comparable_only:
+        def met(method: str) -> bool:
+            clearance = metrics.get(method, {}).get("min_clearance_m")
+            return clearance is not None and clearance <= cfg.comparable_clearance_m
+
+        for comparison in comparisons:
+            if met(comparison) and met(cfg.treatment):
+                comparability.append(f"vs {comparison}: comparable.")
+                continue
+            far = [m for m in (comparison, cfg.treatment) if not met(m)]
+            comparability.append(f"vs {comparison}: not comparable ({', '.join(far)} never "
+                                 f"came within {cfg.comparable_clearance_m:g} m).")
+            for row in rows:
+                if row["claim"] not in RATE_CLAIMS:
+                    row[f"vs {comparison}"] = "not comparable"
+    return TrackClaims(tuple(rows), comparisons, tuple(comparability))
+
+
+def _family(family: FamilyInputs, cfg: ClaimsConfig, paper_metrics: dict | None,
+            paper_ledger: bool) -> FamilyVerdicts:
+    """The lateral family's ledger (with the paper scenario's column and the all-pairs
+    sensitivity), or the Appendix-A track's (without them)."""
+    tables = {m: family.primary[m] for m in ordered(family.primary)} if paper_ledger \
+        else family.primary
+    ledger = family_ledger(tables, cfg, paper_metrics, cfg.treatment, tuple(cfg.controls),
+                           **({} if paper_ledger else {"sensitivity": False}))
+    counts = outcome_counts({m: family.tables[m] for m in ordered(family.tables)}
+                            if family.tables else tables) if paper_ledger else ()
+    apf = family_ledger(tables, cfg, None, "baseline", ("mpc_no_apf",), sensitivity=False) \
+        if "baseline" in tables and "mpc_no_apf" in tables else None
+    return FamilyVerdicts(tables, ledger, tuple(counts), apf)
+
+
+def _readings(inputs: ReportInputs, cfg: ClaimsConfig) -> tuple[tuple[str, dict[str, str]], ...]:
+    """The paper scenario's claims on the Appendix-A track under each reading of the
+    baseline (the default and ``kinematic_readings``): treatment against baseline, "not
+    comparable" where either method stays farther than ``comparable_clearance_m``."""
+    def outcomes(runs) -> dict[str, str] | None:
+        by = {r.method: r.metrics() for r in runs}
+        if cfg.treatment not in by or "baseline" not in by:
+            return None
+        met = all((by[m].get("min_clearance_m") or math.inf) <= cfg.comparable_clearance_m
+                  for m in (cfg.treatment, "baseline"))
+        table = claims_table({m: by[m] for m in (cfg.treatment, "baseline")}, cfg.margins,
+                             ("baseline",), improved=cfg.treatment)
+        return {row["claim"]: row.get("vs baseline", "n/a")
+                if met or row["claim"] in RATE_CLAIMS else "not comparable" for row in table}
+
+    columns = []
+    default = [r for r in inputs.kinematic.runs if r.method in (cfg.treatment, "baseline")]
+    base = next((r for r in default if r.method == "baseline"), None)
+    if base is not None and (o := outcomes(default)) is not None:
+        columns.append((reading_of(base.config) + " (default)", o))
+    for variant, variant_runs in inputs.readings.items():
+        if (o := outcomes(variant_runs)) is not None:
+            columns.append((variant, o))
+    return tuple(columns) if len(columns) >= 2 else ()
+
+
+def _validity(inputs: ReportInputs, cfg: ClaimsConfig) -> ValidityVerdicts | None:
+    tables = inputs.family.primary
+    comparisons = tuple(c for c in cfg.controls if c in tables)
+    default = family_ledger(tables, cfg, None, cfg.treatment, comparisons,
+                            sensitivity=False) if cfg.treatment in tables else None
+    valid = valid_scenario_ledgers(tables, cfg, cfg.treatment, comparisons)
+    other_frame = inputs.validity.other_frame if inputs.validity is not None else ()
+    other_tables = {f.info.get("method"): f.table for f in other_frame}
+    other = family_ledger(other_tables, cfg, None, cfg.treatment, comparisons,
+                          sensitivity=False) if cfg.treatment in other_tables else None
+    return ValidityVerdicts(comparisons, default, valid, other)

@@ -1,0 +1,87 @@
+"""One composer for every study's runs: a function from a run's overrides to its typed
+configuration, with Hydra's composition done once per set of structural overrides (the
+multiverse, the tuning, the NMPC and speed checks all compose through it)."""
+
+from __future__ import annotations
+
+import copy
+from typing import Any
+
+from pipeline.config import CONF_DIR
+
+def composer(extra: list[str]):
+    """A function composing one run's config (with ``extra`` overrides), and the SLURM
+    launcher's settings when ``extra`` selects ``hydra/launcher=slurm`` (else None)."""
+    from hydra import compose, initialize_config_dir
+    from omegaconf import OmegaConf
+
+    from pipeline.config import register_configs, to_experiment_config, typed_config
+    from pipeline.studies.slurm import register_launcher
+
+    register_configs()
+    register_launcher()
+    # Hydra's own settings stay out of a run's config, except the search path: a user's config
+    # folder (their own method) must be found when composing every run
+    run_overrides = [o for o in extra if not o.startswith(("hydra/", "hydra."))
+                     or o.startswith("hydra.searchpath")]
+    launcher = None
+    if any(o.startswith("hydra/launcher=slurm") for o in extra):
+        with initialize_config_dir(config_dir=str(CONF_DIR), version_base="1.3"):
+            full = compose(config_name="config", overrides=extra, return_hydra_config=True)
+        launcher = OmegaConf.to_container(full.hydra.launcher, resolve=False)
+
+    from hydra.core.override_parser.overrides_parser import OverridesParser
+
+    parser = OverridesParser.create()
+    # Hydra composes the defaults list and merges every config file on each call, and the
+    # typed schema checks every node (together most of a second); the runs of a multiverse or
+    # a tuning differ mostly in values. So each set of structural overrides (config groups,
+    # Hydra's own, additions, deletions) is composed and typed once, and a run's plain
+    # `dotted.key=value` overrides are set on a copy of the typed config (OmegaConf.update,
+    # merge=True, as Hydra applies them after composing; the schema checks their types).
+    # Anything else, a config with interpolations, or any failure takes Hydra's whole path.
+    typed_bases: dict[tuple, Any] = {}
+
+    def hydra_compose(overrides: list[str]):
+        with initialize_config_dir(config_dir=str(CONF_DIR), version_base="1.3"):
+            return compose(config_name="config", overrides=overrides)
+
+    def typed_base(structural: tuple):
+        if structural not in typed_bases:
+            cfg = hydra_compose(list(structural))
+            # an interpolation could read a key a run overrides: only plain values are shared
+            plain = OmegaConf.to_container(cfg, resolve=False) \
+                == OmegaConf.to_container(cfg, resolve=True)
+            typed_bases[structural] = typed_config(cfg) if plain else None
+        return typed_bases[structural]
+
+    def make(overrides: list[str]):
+        every = list(overrides) + run_overrides
+        values = [o for o in every if _is_value_override(o)]
+        base = typed_base(tuple(o for o in every if not _is_value_override(o)))
+        if base is not None:
+            try:
+                parsed = parser.parse_overrides(values)
+                if not any(o.is_sweep_override() for o in parsed):
+                    cfg = copy.deepcopy(base)
+                    for override in parsed:
+                        OmegaConf.update(cfg, override.key_or_group, override.value(),
+                                         merge=True)
+                    return OmegaConf.to_object(cfg)
+            except Exception:  # noqa: BLE001 - whatever is wrong, Hydra's path says it
+                pass
+        fallbacks.append(every)
+        return to_experiment_config(hydra_compose(every))
+
+    fallbacks: list[list[str]] = []
+    # for inspection (tests): the structures Hydra composed, the runs that took its whole path
+    make.typed_bases, make.fallbacks = typed_bases, fallbacks
+    return make, launcher
+
+
+def _is_value_override(text: str) -> bool:
+    """``dotted.key=value`` without a prefix: a value Hydra applies after composing (not a
+    config group, an addition, a deletion or one of Hydra's own settings)."""
+    key = text.split("=", 1)[0]
+    return "=" in text and "." in key and not key.startswith(("+", "~", "hydra")) \
+        and not any(ch in key for ch in "/@")

@@ -1,0 +1,186 @@
+"""The multiverse's runs: every distinct simulation configuration's families (resumed by
+config hash, here or as a SLURM array), and their members re-scored under other metric
+readings (cached beside the study, read back as the family tables were written)."""
+
+from __future__ import annotations
+
+import dataclasses
+import hashlib
+import json
+import logging
+from pathlib import Path
+
+import pandas as pd
+
+from pipeline.config import MetricsConfig
+from pipeline.errors import IncompleteSweepError
+from pipeline.store.runs import (check, check_derived_table, member_trajectories, read_family,
+                                 write_derived_table)
+from pipeline.studies.multiverse.design import family_config, qp_backend, simulation_key
+from pipeline.studies.multiverse.space import METHODS, Space
+
+logger = logging.getLogger("pipeline.studies.multiverse")
+
+def _metrics_hash(metrics: MetricsConfig) -> str:
+    text = json.dumps(dataclasses.asdict(metrics), sort_keys=True)
+    return hashlib.sha256(text.encode()).hexdigest()[:12]
+
+
+def _family_task(cfg, folder: str) -> str:
+    """One family run on a cluster node (resumes by config hash like a local run)."""
+    from pipeline.studies.experiment import run_family
+
+    run_family(cfg, Path(folder), progress=False)
+    return folder
+
+
+def run_simulations(design: pd.DataFrame, space: Space, out_dir: Path, compose,
+                    log=logger.info, launcher: dict | None = None,
+                    methods: tuple[str, ...] = METHODS) -> dict[tuple, dict[str, Path]]:
+    """Run every distinct simulation configuration's families (resumed by config hash): here,
+    or as a SLURM array when ``launcher`` holds ``hydra/launcher=slurm`` settings.
+
+    Returns
+    -------
+    folders : dict
+        ``simulation key -> {method: family folder}``.
+    backends : dict
+        ``method -> controller.backend`` of its runs (``a/b`` if they differ; ``no QP`` for
+        a controller without one).
+    """
+    from pipeline.loop.controller import QpCache
+
+    cache = QpCache()
+    folders: dict[tuple, dict[str, Path]] = {}
+    todo = []
+    unique = {}
+    for row in design.to_dict("records"):
+        unique.setdefault(simulation_key(row, space), row)
+    backends: dict[str, set] = {}
+    for key, row in unique.items():
+        folders[key] = {}
+        for method in methods:
+            cfg = family_config(row, space, method, compose)
+            backends.setdefault(method, set()).add(qp_backend(cfg))
+            folder = out_dir / "runs" / method / cfg.config_hash()
+            if check(folder, "family", cfg.config_hash(), members=True) is not None \
+                    and all(folder != f for _, f in todo):
+                todo.append((cfg, folder))
+            folders[key][method] = folder
+    log(f"{len(unique)} simulation configurations, {len(todo)} family runs to do "
+        f"({len(methods) * len(unique) - len(todo)} shared or complete); QP backend: "
+        + ", ".join(f"{m} {'/'.join(sorted(b))}" for m, b in backends.items()))
+    run_families(todo, out_dir, log, launcher, cache)
+    return folders, {m: "/".join(sorted(b)) for m, b in backends.items()}
+
+
+def run_families(todo: list, out_dir: Path, log=logger.info, launcher: dict | None = None,
+                 cache=None, label: str = "family runs") -> None:
+    """Run each ``(config, folder)`` family here (one after the other, each on its own joblib
+    workers, sharing ``cache``'s compilations), or as one SLURM array when ``launcher`` holds
+    ``hydra/launcher=slurm`` settings; complete families are resumed, never redone."""
+    from pipeline.loop.controller import QpCache
+    from pipeline.studies.experiment import run_family
+
+    if not todo:
+        return
+    if launcher is not None:
+        _run_on_slurm(todo, launcher, out_dir, log)
+        return
+    from pipeline.studies.progress import Progress
+
+    cache = cache if cache is not None else QpCache()
+    with Progress(len(todo), label, "family", every_s=0.0,
+                  stream=_LogStream(log)) as bar:
+        for cfg, folder in todo:
+            run_family(cfg, folder, progress=False, qp_cache=cache)
+            bar.update()
+
+
+class _LogStream:
+    """A file-like object that hands each line to ``log`` (plain lines, never a bar)."""
+
+    def __init__(self, log) -> None:
+        self.log = log
+
+    def write(self, text: str) -> None:
+        if text.strip():
+            self.log(text.rstrip("\n"))
+
+    def flush(self) -> None:
+        pass
+
+    def isatty(self) -> bool:
+        return False
+
+
+def _run_on_slurm(todo: list, launcher: dict, out_dir: Path, log) -> None:
+    """Submit the family runs as one SLURM array and wait (bounded, see pipeline.studies.slurm)."""
+    from pipeline.studies.slurm import (executor_for, resume_command,
+                                wait_for_tasks, wait_policy)
+
+    executor = executor_for(launcher, out_dir / ".submitit" / "%j")
+    jobs = executor.map_array(_family_task, [c for c, _ in todo], [str(f) for _, f in todo])
+    log(f"submitted {len(jobs)} family runs to SLURM (array {jobs[0].job_id.split('_')[0]})")
+    _, failed = wait_for_tasks(jobs, *wait_policy(launcher))
+    if failed:
+        lines = [f"error: {len(failed)} of {len(jobs)} family runs did not finish:"]
+        lines += [f"  {todo[i][1]}: {reason}" for i, reason in sorted(failed.items())]
+        lines.append(f"resume with the same command (complete runs are not redone):\n  "
+                     f"{resume_command()}")
+        raise IncompleteSweepError("\n".join(lines))
+
+
+def _rescored_path(folder: Path, metrics: MetricsConfig, out_dir: Path) -> Path:
+    return out_dir / "rescored" / f"{folder.parent.name}_{folder.name}_{_metrics_hash(metrics)}.csv"
+
+
+def rescore_family(folder: Path, readings: list[MetricsConfig], out_dir: Path) -> int:
+    """Re-score a family's members under every metric setting in ``readings`` that it was not
+    run with and that has no cached table yet, reading each member's trajectory once for all of
+    them. Returns the number of member trajectories read."""
+    from pipeline.analysis.metrics import compute_metrics_readings
+    from pipeline.studies.experiment import trajectory_context
+
+    family = read_family(folder, members=False)
+    todo, seen = [], set()
+    for metrics in readings:
+        key = _metrics_hash(metrics)
+        if metrics == family.config.metrics or key in seen:
+            continue
+        path = _rescored_path(folder, metrics, out_dir)
+        reason = check_derived_table(path, {"family": folder})
+        if reason is None:
+            continue
+        if reason != "not computed yet":
+            logger.warning("re-scoring %s again: %s", path.name, reason)
+        seen.add(key)
+        todo.append(metrics)
+    if not todo:
+        return 0
+    context = trajectory_context(family.config)
+    rows: list[list[dict]] = [[] for _ in todo]
+    reads = 0
+    for index, trajectory, previous in member_trajectories(folder):
+        reads += 1
+        keep = {k: previous.get(k) for k in ("method", "scenario", "track", "config_hash")}
+        # every reading of this member in one pass (what no reading changes, computed once)
+        for block, scored in zip(rows, compute_metrics_readings(trajectory, context, todo)):
+            block.append({"member": index, **scored.to_json(), **keep})
+    for block, metrics in zip(rows, todo):
+        write_derived_table(_rescored_path(folder, metrics, out_dir), pd.DataFrame(block),
+                            {"family": folder})
+    return reads
+
+
+def family_table(folder: Path, metrics: MetricsConfig, out_dir: Path) -> pd.DataFrame:
+    """A family's per-member metrics: as run, or re-scored from the stored trajectories with
+    other metric settings (cached; :func:`rescore_family` fills the cache in one pass)."""
+    family = read_family(folder, members=False)
+    if family.config.metrics == metrics:
+        return family.table
+    cached = _rescored_path(folder, metrics, out_dir)
+    if check_derived_table(cached, {"family": folder}) is not None:
+        rescore_family(folder, [metrics], out_dir)
+    # read back: the same rounding as family_metrics.csv, so a resumed analysis is identical
+    return pd.read_csv(cached)

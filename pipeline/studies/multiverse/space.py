@@ -1,0 +1,151 @@
+"""The multiverse's space: its dimensions (a config key, its defensible values, the first the
+default, and the stage that uses it) and how it is sampled and judged, read from a space file
+(``conf/multiverse/<name>.yaml``) through the project's own strict reader
+(:func:`pipeline.config.schema_from_data`: unknown keys and wrong shapes are one line naming
+the key, before any work starts)."""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass, field, fields
+from pathlib import Path
+from typing import Any, List, Optional
+
+from pipeline.config import schema_from_data
+from pipeline.errors import ConfigError
+
+#: The methods simulated by default: the claims' controls and treatment (claims.treatment,
+#: claims.controls of the user's configuration choose others).
+METHODS = ("baseline", "baseline_matched", "improved")
+STAGES = ("simulation", "analysis")
+#: the lateral MPC's QP backends a space may choose (``controller.backend``)
+QP_BACKENDS = ("clarabel_direct", "daqp", "clarabel_dense", "cvxpy")
+ANALYSIS_PREFIXES = ("metrics.", "claims.")
+
+
+@dataclass(frozen=True)
+class Dimension:
+    """One choice of the multiverse: a config key and its defensible values.
+
+    ``key`` names the dimension (a column of the design); ``config_key`` is the Hydra key it
+    sets when that differs, e.g. the baseline's own ``planner.rho0_m`` beside the improved
+    APF's (``key: planner.rho0_m[baseline]``).
+    """
+
+    key: str
+    stage: str
+    values: tuple
+    applies_to: tuple | None = None
+    cap: bool = False
+    why: str = ""
+    config_key: str = ""
+
+    @property
+    def target(self) -> str:
+        """The config key the dimension sets."""
+        return self.config_key or self.key
+
+    @property
+    def default(self) -> Any:
+        return self.values[0]
+
+
+@dataclass(frozen=True)
+class Space:
+    """A multiverse: its dimensions and how to sample and judge it."""
+
+    name: str
+    dimensions: tuple[Dimension, ...] = ()
+    family_size: int = 100
+    family_seed: int = 0
+    n_specifications: int = 128
+    sample_seed: int = 0
+    simulation_pool: int = 12
+    n_resamples: int = 499
+    robust_share: float = 0.9
+    fragile_share: float = 0.5
+    min_pairs: int = 10
+    #: the lateral MPC's QP backend of the runs (like the tuning's: DAQP, the reference
+    #: Clarabel's QP solved about 3x faster, the first input within 1e-6)
+    backend: str = "daqp"
+
+    def __post_init__(self) -> None:
+        # a space file's values arrive as YAML gives them: each setting's type is checked here
+        for f in fields(self):
+            kind = {"int": int, "float": (int, float)}.get(str(f.type))
+            value = getattr(self, f.name)
+            if kind is not None and (isinstance(value, bool) or not isinstance(value, kind)):
+                raise ConfigError(f"multiverse space: {f.name}", value,
+                                  f"a number ({str(f.type)})")
+        if self.family_size < 1 or self.n_specifications < 1:
+            raise ConfigError("family_size / n_specifications",
+                              [self.family_size, self.n_specifications], "positive integers")
+        if self.backend not in QP_BACKENDS:
+            raise ConfigError("multiverse space: backend", self.backend,
+                              f"one of {list(QP_BACKENDS)} (the lateral MPC's QP backend)")
+
+    def of(self, stage: str) -> list[Dimension]:
+        return [d for d in self.dimensions if d.stage == stage]
+
+
+@dataclass
+class DimensionFile:
+    """One dimension as a space file writes it: ``key`` is the config key; ``name`` (optional)
+    names the dimension when it differs, e.g. the baseline's own ``planner.rho0_m`` beside the
+    improved APF's (``name: planner.rho0_m[baseline]``)."""
+
+    key: str = ""
+    stage: str = ""
+    values: List[Any] = field(default_factory=list)
+    name: str = ""
+    applies_to: Optional[List[str]] = None
+    cap: bool = False
+    why: str = ""
+
+    def check(self, where: str) -> Dimension:
+        """The dimension, or :class:`ConfigError` naming ``where`` (``dimensions[i]``)."""
+        if self.stage not in STAGES:
+            raise ConfigError(f"{where}.stage", self.stage, "simulation or analysis")
+        if len(self.values) < 2:
+            raise ConfigError(f"{where}.values", list(self.values), "two or more values, the "
+                              "first the default")
+        key = str(self.name or self.key)
+        config_key = str(self.key) if self.name else ""
+        if self.stage == "analysis" and not (config_key or key).startswith(ANALYSIS_PREFIXES):
+            raise ConfigError(f"{where}.key", key, "a metrics.* or claims.* key for an "
+                              "analysis dimension")
+        return Dimension(key, self.stage, tuple(self.values),
+                         tuple(self.applies_to) if self.applies_to else None, bool(self.cap),
+                         str(self.why), config_key)
+
+
+def load_space(path: Path) -> Space:
+    """Read and check a space file; a bad one raises :class:`ConfigError` (one line)."""
+    import yaml
+
+    path = Path(path)
+    if not path.is_file():
+        raise ConfigError("multiverse space", str(path), "a file in conf/multiverse/ "
+                          "(default, quick) or a path to one")
+    try:
+        data = yaml.safe_load(path.read_text()) or {}
+    except yaml.YAMLError as exc:
+        raise ConfigError("multiverse space", str(path),
+                          f"valid YAML ({str(exc).splitlines()[0]})") from None
+    if not isinstance(data, dict):
+        raise ConfigError("multiverse space", type(data).__name__,
+                          "a mapping with 'dimensions' and the space's settings")
+    items = data.get("dimensions", [])
+    if not isinstance(items, list):
+        raise ConfigError("multiverse space.dimensions", items, "a list of dimensions")
+    dims = [schema_from_data(DimensionFile, item, f"multiverse space.dimensions[{i}]")
+            .check(f"dimensions[{i}]") for i, item in enumerate(items)]
+    if not dims:
+        raise ConfigError("dimensions", [], "at least one dimension")
+    if len({d.key for d in dims}) != len(dims):
+        raise ConfigError("dimensions", [d.key for d in dims], "each key once")
+    # the settings through the same strict reader (unknown keys named), Space checks them
+    settings = {k: v for k, v in data.items() if k != "dimensions"}
+    space = schema_from_data(Space, {**settings, "name": str(data.get("name") or path.stem)},
+                             "multiverse space")
+    return dataclasses.replace(space, dimensions=tuple(dims))

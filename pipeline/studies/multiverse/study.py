@@ -1,0 +1,86 @@
+"""The multiverse as one study: design, runs, re-scoring, analysis, its result written."""
+
+from __future__ import annotations
+
+import logging
+from pathlib import Path
+
+import pandas as pd
+
+from pipeline.config import MetricsConfig
+from pipeline.store.runs import read_family
+from pipeline.studies.compose import composer
+from pipeline.studies.multiverse.design import (analysis_settings, build_design,
+                                                simulation_key, with_user_defaults)
+from pipeline.studies.multiverse.robustness import (ROBUSTNESS_RULE, analyse_specification,
+                                                    robustness)
+from pipeline.studies.multiverse.runs import _LogStream, rescore_family, run_simulations
+from pipeline.studies.multiverse.space import Space
+from pipeline.studies.results.multiverse import MultiverseInfo, MultiverseResult
+
+logger = logging.getLogger("pipeline.studies.multiverse")
+
+
+def run_multiverse(space: Space, out_dir: Path, overrides: list[str] | None = None,
+                   n_jobs: int = 2, log=None) -> MultiverseResult:
+    """Design, runs, re-scoring and analysis, written into ``out_dir`` (the manifest last);
+    returns the result (``log``: where progress lines go, the module's logger by default).
+    The specification curves are the command's to draw."""
+    from joblib import Parallel, delayed
+
+    log = log if log is not None else logger.info
+    from pipeline.studies.progress import Progress
+
+    out_dir = Path(out_dir)
+    compose, launcher = composer(list(overrides or []))
+    # the default specification is the user's configuration (its analysis settings)
+    base = compose(["method=improved", "scenario=family"])
+    space = with_user_defaults(space, base)
+    design = build_design(space)
+    # not trusted until the result's manifest is written last
+    MultiverseResult.write_design(out_dir, design)
+    # validate every composition before anything runs: a bad value stops here
+    for row in design.to_dict("records"):
+        analysis_settings(row, space, base)
+    # what is compared with what: the user's claims.treatment and claims.controls (last: the
+    # treatment)
+    methods = tuple(base.claims.controls) + (base.claims.treatment,)
+    folders, backends = run_simulations(design, space, out_dir, compose, log, launcher, methods)
+    jobs = [(row, folders[simulation_key(row, space)]) for row in design.to_dict("records")]
+    # every metric reading a family needs, computed in one pass over its members (each member
+    # read once per analysis, not once per reading)
+    readings: dict[Path, list[MetricsConfig]] = {}
+    for row, family_folders in jobs:
+        metrics, _ = analysis_settings(row, space, base)
+        for folder in family_folders.values():
+            readings.setdefault(Path(folder), []).append(metrics)
+    members = sum(len(read_family(f, members=False).table) for f in readings)
+    log(f"re-scoring {members} members of {len(readings)} families under their metric "
+        "readings ...")
+    reads = 0
+    with Progress(len(readings), "re-scoring", "family", stream=_LogStream(log)) as bar:
+        for n_read in Parallel(n_jobs=n_jobs, return_as="generator_unordered")(
+                delayed(rescore_family)(folder, wanted, out_dir)
+                for folder, wanted in readings.items()):
+            reads += n_read
+            bar.update()
+    log(f"re-scoring: {reads} member trajectories read for {members} members "
+        f"({len(readings)} families)")
+    log(f"judging {len(jobs)} specifications ...")
+    results = Parallel(n_jobs=n_jobs)(
+        delayed(analyse_specification)(row, f, space, out_dir) for row, f in jobs)
+    rows = [r for block in results for r in block]
+    table = pd.DataFrame(rows).merge(design, on="spec_id")
+    robust, dims = robustness(pd.DataFrame(rows), design, space)
+    info = MultiverseInfo(
+        name=space.name, n_specifications=int(len(design)),
+        n_simulation_configurations=len(folders), family_size=space.family_size,
+        backend=space.backend, backends=backends,
+        member_reads_per_member=reads / members if members else 0.0,
+        rule=ROBUSTNESS_RULE, robust_share=space.robust_share,
+        fragile_share=space.fragile_share,
+        dimensions=tuple({"key": d.key, "config_key": d.target, "stage": d.stage,
+                          "values": [str(v) for v in d.values],
+                          "applies_to": list(d.applies_to or []), "why": d.why}
+                         for d in space.dimensions))
+    return MultiverseResult(info, design, table, robust, dims).write(out_dir)

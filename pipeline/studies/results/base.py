@@ -1,0 +1,34 @@
+"""What every study result shares: the error a reader raises, and reading a trusted folder."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Any
+
+from pipeline.errors import StudyError
+
+
+class ResultError(StudyError, ValueError):
+    """A study's folder cannot be read as its result (missing, incomplete, not trusted, or
+    broken); the message says why in one line."""
+
+
+def figure_files(folder: Path, stem: str) -> dict[str, Path] | None:
+    """``{"png": ..., "svg": ...}`` of a figure a study's command drew into ``folder`` (the
+    SVG may be absent), or None when there is no PNG."""
+    png = Path(folder) / f"{stem}.png"
+    if not png.is_file():
+        return None
+    return {"png": png, "svg": png.with_suffix(".svg")}
+
+
+def read_json(path: Path) -> Any:
+    """A JSON file's content; a broken or missing one raises :class:`ResultError`."""
+    try:
+        return json.loads(Path(path).read_text())
+    except FileNotFoundError:
+        raise ResultError(f"{Path(path).name} is missing") from None
+    except (OSError, ValueError) as exc:
+        raise ResultError(f"{Path(path).name} cannot be read ({type(exc).__name__}: "
+                          f"{str(exc).splitlines()[0] if str(exc) else ''})") from None

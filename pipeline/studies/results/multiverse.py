@@ -1,0 +1,124 @@
+"""The multiverse's result (``make multiverse``): its design, every specification's ledger rows,
+the robustness of each claim, the per-dimension effects and the space it was run on."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field, fields
+from pathlib import Path
+from typing import Any
+
+import pandas as pd
+
+from pipeline.store.runs import (check, untrust, write_csv_atomic, write_json_atomic,
+                                 write_manifest)
+from pipeline.studies.results.base import ResultError, figure_files, read_json
+
+DESIGN = "design.csv"
+SPECIFICATIONS = "specifications.csv"
+ROBUSTNESS = "robustness.csv"
+DIMENSIONS = "dimensions.csv"
+SPACE = "space.json"
+#: The folder's files, in the manifest's order.
+FILES = (DESIGN, SPECIFICATIONS, ROBUSTNESS, DIMENSIONS, SPACE)
+#: The specification curves the command draws, one per claim: ``figures/<stem><claim>``.
+FIGURES = "figures"
+CURVE_STEM = "specification_curve_"
+
+
+@dataclass(frozen=True)
+class MultiverseInfo:
+    """``space.json``: the space's name and settings, how many specifications and simulation
+    configurations, each method's QP backend and the robustness rule."""
+
+    name: str
+    n_specifications: int
+    n_simulation_configurations: int
+    family_size: int
+    backend: str
+    backends: dict[str, str]
+    member_reads_per_member: float
+    rule: str
+    robust_share: float
+    fragile_share: float
+    dimensions: tuple[dict[str, Any], ...] = field(default_factory=tuple)
+
+    def to_json(self) -> dict:
+        data = {f.name: getattr(self, f.name) for f in fields(self)}
+        data["dimensions"] = list(self.dimensions)
+        return data
+
+    @classmethod
+    def from_json(cls, data: dict) -> MultiverseInfo:
+        names = {f.name for f in fields(cls)}
+        return cls(**{k: (tuple(v) if k == "dimensions" else v) for k, v in data.items()
+                      if k in names})
+
+
+@dataclass(frozen=True)
+class MultiverseResult:
+    """Everything :func:`pipeline.studies.multiverse.run_multiverse` found (see the module
+    docstring); ``folder`` is where it was read from (None before it is written)."""
+
+    info: MultiverseInfo
+    design: pd.DataFrame
+    specifications: pd.DataFrame
+    robustness: pd.DataFrame
+    dimensions: pd.DataFrame
+    folder: Path | None = None
+
+    @staticmethod
+    def write_design(folder: Path, design: pd.DataFrame) -> None:
+        """The design alone, before any run (what an interrupted study resumes from); the
+        folder is not trusted until :meth:`write` ends."""
+        Path(folder).mkdir(parents=True, exist_ok=True)
+        untrust(folder)
+        write_csv_atomic(Path(folder) / DESIGN, design)
+
+    def write(self, folder: Path) -> MultiverseResult:
+        """Write the tables and ``space.json``, then the manifest (last)."""
+        folder = Path(folder)
+        folder.mkdir(parents=True, exist_ok=True)
+        untrust(folder)
+        write_csv_atomic(folder / DESIGN, self.design)
+        write_csv_atomic(folder / SPECIFICATIONS, self.specifications)
+        write_csv_atomic(folder / ROBUSTNESS, self.robustness)
+        write_csv_atomic(folder / DIMENSIONS, self.dimensions)
+        write_json_atomic(folder / SPACE, self.info.to_json())
+        write_manifest(folder, "multiverse", FILES, self.info.name)
+        return MultiverseResult(self.info, self.design, self.specifications, self.robustness,
+                                self.dimensions, folder)
+
+    @staticmethod
+    def present(folder: Path | None) -> bool:
+        """Whether ``folder`` holds a multiverse's result (trusted or not)."""
+        return folder is not None and (Path(folder) / ROBUSTNESS).is_file()
+
+    @classmethod
+    def load(cls, folder: Path) -> MultiverseResult:
+        """The result in ``folder``; :class:`ResultError` when it cannot be trusted."""
+        folder = Path(folder)
+        reason = check(folder, "multiverse", required=FILES)
+        if reason:
+            raise ResultError(f"multiverse tables not trusted: {reason}")
+        try:
+            tables = {name: pd.read_csv(folder / name) for name in FILES[:4]}
+        except (OSError, ValueError) as exc:
+            raise ResultError(f"multiverse tables cannot be read ({exc})") from None
+        return cls(MultiverseInfo.from_json(read_json(folder / SPACE)), tables[DESIGN],
+                   tables[SPECIFICATIONS], tables[ROBUSTNESS], tables[DIMENSIONS], folder)
+
+    def curve_figure(self, claim_id: str) -> dict[str, Path] | None:
+        """The specification curve of ``claim_id`` the command drew, if it is there."""
+        if self.folder is None:
+            return None
+        return figure_files(self.folder / FIGURES, self.curve_stem(claim_id))
+
+    @staticmethod
+    def curve_stem(claim_id: str) -> str:
+        """The file stem of ``claim_id``'s specification curve."""
+        return f"{CURVE_STEM}{claim_id}"
+
+    @staticmethod
+    def figure_folder(folder: Path) -> Path:
+        """Where the command draws the specification curves."""
+        return Path(folder) / FIGURES

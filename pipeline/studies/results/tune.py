@@ -1,0 +1,163 @@
+"""The fair fight's result (``make tune``): every trial, the held-out judgement, the two
+ledgers, which settings make each claim hold, and the summary (budget, spaces, picks, per
+claim the default beside the tuned verdict)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, fields
+from pathlib import Path
+from typing import Any
+
+import pandas as pd
+
+from pipeline.store.runs import (check, json_safe, untrust, write_csv_atomic,
+                                 write_json_atomic, write_manifest)
+from pipeline.studies.results.base import ResultError, figure_files, read_json
+
+TRIALS = "trials.csv"
+HELDOUT = "heldout.csv"
+LEDGER_DEFAULT = "ledger_default.csv"
+LEDGER_TUNED = "ledger_tuned.csv"
+SETTINGS_OUTCOMES = "settings_outcomes.csv"
+SUMMARY = "summary.json"
+#: The folder's files, in the manifest's order.
+FILES = (TRIALS, HELDOUT, LEDGER_DEFAULT, LEDGER_TUNED, SETTINGS_OUTCOMES, SUMMARY)
+#: Where the command draws the Pareto fronts: ``figures/pareto_fronts_<part>``.
+FIGURES = "figures"
+PARTS = ("training", "heldout")
+
+
+@dataclass(frozen=True)
+class TunedClaim:
+    """One claim against the control on the held-out family: the verdict with our settings,
+    tuned against tuned, against the matched control, the settings under which it holds."""
+
+    claim: str
+    text: str
+    metric: str
+    default: str
+    default_estimate: float | None
+    tuned: str
+    tuned_estimate: float | None
+    tuned_ci: tuple[float | None, float | None]
+    tuned_vs_matched: str | None
+    holds_with: tuple[dict, ...]
+    holds_with_trials: tuple[int, ...]
+    sentence: str
+
+    @classmethod
+    def from_json(cls, data: dict) -> TunedClaim:
+        return cls(**{**data, "tuned_ci": tuple(data["tuned_ci"]),
+                      "holds_with": tuple(data.get("holds_with", ())),
+                      "holds_with_trials": tuple(data.get("holds_with_trials", ()))})
+
+    def to_json(self) -> dict:
+        return {f.name: (list(v) if isinstance(v := getattr(self, f.name), tuple) else v)
+                for f in fields(self)}
+
+
+@dataclass(frozen=True)
+class TuneSummary:
+    """``summary.json`` (its keys are these fields)."""
+
+    name: str
+    settings: dict[str, Any]
+    budget: dict[str, Any]
+    families: dict[str, dict[str, int]]
+    backend: str
+    objectives: tuple[str, ...]
+    safety_threshold_collisions: int
+    search_spaces: dict[str, dict[str, str]]
+    compromise_rule: str
+    compromise: dict[str, dict[str, Any]]
+    trials: dict[str, dict[str, int]]
+    dominance: dict[str, dict[str, int]]
+    claims: tuple[TunedClaim, ...]
+
+    @property
+    def methods(self) -> list[str]:
+        """``[treatment, control]``."""
+        return list(self.settings["methods"])
+
+    @classmethod
+    def from_json(cls, data: dict) -> TuneSummary:
+        return cls(**{**data, "objectives": tuple(data["objectives"]),
+                      "claims": tuple(TunedClaim.from_json(c) for c in data["claims"])})
+
+    def to_json(self) -> dict:
+        data = {f.name: getattr(self, f.name) for f in fields(self)}
+        data["objectives"] = list(self.objectives)
+        data["claims"] = [c.to_json() for c in self.claims]
+        return json_safe(data)
+
+
+@dataclass(frozen=True)
+class TuneResult:
+    """Everything :func:`pipeline.studies.tune.run_tuning` found; ``folder`` is where it was
+    read from (None before it is written)."""
+
+    summary: TuneSummary
+    trials: pd.DataFrame
+    heldout: pd.DataFrame
+    ledger_default: pd.DataFrame
+    ledger_tuned: pd.DataFrame
+    settings_outcomes: pd.DataFrame
+    folder: Path | None = None
+
+    def tables(self) -> dict[str, pd.DataFrame]:
+        """The tables by file name (the report copies them as ``tune_<name>``)."""
+        return {TRIALS: self.trials, HELDOUT: self.heldout, LEDGER_DEFAULT: self.ledger_default,
+                LEDGER_TUNED: self.ledger_tuned, SETTINGS_OUTCOMES: self.settings_outcomes}
+
+    def table_files(self) -> dict[str, Path]:
+        """The tables' files as written (a reader copies them byte for byte)."""
+        if self.folder is None:
+            raise ResultError("the tuning's result was not written yet")
+        return {name: self.folder / name for name in self.tables()}
+
+    def write(self, folder: Path) -> TuneResult:
+        """Write the tables and ``summary.json``, then the manifest (last)."""
+        folder = Path(folder)
+        folder.mkdir(parents=True, exist_ok=True)
+        untrust(folder)
+        for name, table in self.tables().items():
+            write_csv_atomic(folder / name, table)
+        write_json_atomic(folder / SUMMARY, self.summary.to_json())
+        write_manifest(folder, "tune", FILES, self.summary.name)
+        return TuneResult(self.summary, self.trials, self.heldout, self.ledger_default,
+                          self.ledger_tuned, self.settings_outcomes, folder)
+
+    @staticmethod
+    def present(folder: Path | None) -> bool:
+        """Whether ``folder`` holds a tuning's result (trusted or not)."""
+        return folder is not None and (Path(folder) / SUMMARY).is_file()
+
+    @classmethod
+    def load(cls, folder: Path) -> TuneResult:
+        """The result in ``folder``; :class:`ResultError` when it cannot be trusted."""
+        folder = Path(folder)
+        reason = check(folder, "tune", required=FILES)
+        if reason:
+            raise ResultError(f"tuning tables not trusted: {reason}")
+        try:
+            tables = [pd.read_csv(folder / name) for name in FILES[:5]]
+            summary = TuneSummary.from_json(read_json(folder / SUMMARY))
+        except (OSError, ValueError, KeyError, TypeError) as exc:
+            raise ResultError(f"tuning folder cannot be read ({type(exc).__name__}: "
+                              f"{exc})") from None
+        return cls(summary, *tables, folder=folder)
+
+    def front_figure(self, part: str) -> dict[str, Path] | None:
+        """The Pareto fronts on the ``part`` family the command drew, if they are there."""
+        if self.folder is None:
+            return None
+        return figure_files(self.folder / FIGURES, self.front_stem(part))
+
+    @staticmethod
+    def front_stem(part: str) -> str:
+        """The file stem of the Pareto fronts on the ``part`` family."""
+        return f"pareto_fronts_{part}"
+
+    @staticmethod
+    def figure_folder(folder: Path) -> Path:
+        return Path(folder) / FIGURES
