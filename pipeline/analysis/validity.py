@@ -16,7 +16,7 @@ from typing import Iterable
 import numpy as np
 import pandas as pd
 
-from pipeline.analysis.claims import Ledger, family_ledger
+from pipeline.analysis.claims.ledger import Ledger, family_ledger
 
 
 @dataclass(frozen=True)
