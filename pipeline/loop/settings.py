@@ -196,6 +196,13 @@ class ControllerConfig(FrozenAfterValidation):
 
     def __post_init__(self) -> None:
         target_path("controller._target_", self._target_)
+        self._check_kind_and_backend()
+        self._check_kinematic_and_pursuit()
+        self._check_sizes()
+        self._check_lateral()
+
+    def _check_kind_and_backend(self) -> None:
+        """``kind``, ``backend``, ``formulation`` and which of them go together."""
         choice("controller.kind", self.kind, ("mpc", "pure_pursuit", "kinematic_mpc"))
         choice("controller.backend", self.backend,
                ("cvxpy", "clarabel_direct", "clarabel_dense", "daqp", "nmpc"))
@@ -213,6 +220,10 @@ class ControllerConfig(FrozenAfterValidation):
             raise ConfigError("controller.backend", self.backend,
                               f"{self.backend} only with controller.kind=mpc and "
                               "controller.formulation=condensed (else cvxpy or clarabel_direct)")
+
+    def _check_kinematic_and_pursuit(self) -> None:
+        """The kinematic MPC's weights, bounds, passes and reference; pure pursuit's
+        look-ahead."""
         for key in ("output_weights", "input_weights", "input_rate_weights"):
             pair(f"controller.{key}", getattr(self, key))
             for i, w in enumerate(getattr(self, key)):
@@ -229,6 +240,9 @@ class ControllerConfig(FrozenAfterValidation):
                 ("literal", "shifted", "path_speed"))
         at_least("controller.lookahead_min_m", self.lookahead_min_m, 0.0, inclusive=False)
         at_least("controller.lookahead_time_s", self.lookahead_time_s, 0.0)
+
+    def _check_sizes(self) -> None:
+        """Horizons, obstacle slots, solver iterations (integers in range) and the name."""
         for key in ("horizon", "control_horizon", "max_obstacles", "solver_max_iter"):
             value = getattr(self, key)
             if isinstance(value, bool) or not isinstance(value, int):
@@ -251,6 +265,9 @@ class ControllerConfig(FrozenAfterValidation):
         safe_name("controller.name", self.name)
         if self.solver_max_iter < 1:
             raise ConfigError("controller.solver_max_iter", self.solver_max_iter, "an integer >= 1")
+
+    def _check_lateral(self) -> None:
+        """The input hold; the lateral MPC's weights, references, half-planes and frame."""
         choice("controller.input_hold", self.input_hold, ("hold_last", "zero_rate"))
         choice("controller.halfplane_normal", self.halfplane_normal, ("lateral_side", "radial"))
         for key in ("q_lateral", "q_heading", "q_yaw_rate", "q_steering", "r_steering_rate",

@@ -42,6 +42,24 @@ IPOPT_STATUS = {"Solve_Succeeded": "optimal", "Solved_To_Acceptable_Level": "opt
                 "Maximum_CpuTime_Exceeded": "user_limit"}
 
 
+def ipopt_solve(solver, **arguments) -> tuple[str, int, float, np.ndarray | None]:
+    """A CasADi IPOPT ``solver`` called on ``arguments``: its status (:data:`IPOPT_STATUS`),
+    iterations, wall time and solution vector (None, with status ``error:RuntimeError``, where
+    CasADi raised on an evaluation error)."""
+    status, iterations, values = "not_solved", -1, None
+    began = time.perf_counter()
+    try:
+        result = solver(**arguments)
+        stats = solver.stats()
+        status = IPOPT_STATUS.get(stats.get("return_status", ""), "solver_error")
+        iterations = int(stats.get("iter_count", -1))
+        values = np.asarray(result["x"], dtype=float).ravel()
+    except RuntimeError:  # CasADi raises on evaluation errors (NaN in the NLP)
+        status = "error:RuntimeError"
+    elapsed = time.perf_counter() - began
+    return status, iterations, elapsed, values
+
+
 @dataclass(frozen=True)
 class NmpcProblem:
     """The NLP of one structure: the CasADi solver and how its vectors are laid out."""
@@ -168,18 +186,10 @@ class KinematicNmpc(KinematicTrack):
             moves = guess_plan[:, :Nc]
             start = np.concatenate([moves.ravel(order="F"), np.zeros(N * M)])
             start = np.clip(start, self.problem.lbx, self.problem.ubx)
-            began = time.perf_counter()
-            try:
-                result = self.problem.solver(
-                    x0=start, p=self.parameters(x0, u_prev, reference, halfplanes),
-                    lbx=self.problem.lbx, ubx=self.problem.ubx, lbg=0.0, ubg=np.inf)
-                stats = self.problem.solver.stats()
-                status = IPOPT_STATUS.get(stats.get("return_status", ""), "solver_error")
-                iterations = int(stats.get("iter_count", -1))
-                values = np.asarray(result["x"], dtype=float).ravel()
-            except RuntimeError:  # CasADi raises on evaluation errors (NaN in the NLP)
-                status = "error:RuntimeError"
-            elapsed = time.perf_counter() - began
+            status, iterations, elapsed, values = ipopt_solve(
+                self.problem.solver, x0=start,
+                p=self.parameters(x0, u_prev, reference, halfplanes), lbx=self.problem.lbx,
+                ubx=self.problem.ubx, lbg=0.0, ubg=np.inf)
         log = {**(log or {}), "ltv_passes": 0, "ltv_change": float("nan")}
         if status in ("optimal", "optimal_inaccurate") and values is not None \
                 and np.all(np.isfinite(values)):

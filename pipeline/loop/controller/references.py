@@ -160,30 +160,43 @@ def collision_halfplanes(stations_m: np.ndarray, y_ref_m: np.ndarray, vehicle_li
             continue
         reach = float(radii_m[j]) + vehicle.footprint_radius_m + controller.safety_margin_m
         fallback_side = 1.0 if vy > cy else (-1.0 if vy < cy else 1.0)
-        if controller.halfplane_normal == "lateral_side":
-            # ten stations: plain floats (the same arithmetic as the vectorized statement)
-            gains, bounds = [], []
-            reach_sq = reach * reach
-            for station, y_ref, (ox, oy) in zip(stations_m.tolist(), y_ref_m.tolist(),
-                                                predicted_obstacles_line_m[:, j, :].tolist()):
-                dx = station - ox
-                if not abs(dx) < reach:
-                    gains.append(0.0)
-                    bounds.append(0.0)
-                    continue
-                above = y_ref - oy
-                side = 1.0 if above > 0 else (-1.0 if above < 0 else
-                                              (fallback_side if above == 0 else above))
-                gains.append(side)
-                bounds.append(side * oy + sqrt(max(reach_sq - dx * dx, 0.0)))
-            G[:, j], h[:, j] = gains, bounds
-            continue
-        obstacle = predicted_obstacles_line_m[:, j, :]
-        ref = np.stack([stations_m, y_ref_m], axis=1)
-        normal = radial_normals(ref, obstacle, np.array([0.0, fallback_side])[None, :])
-        G[:, j] = normal[:, 1]
-        h[:, j] = reach - normal[:, 0] * (stations_m - obstacle[:, 0]) + normal[:, 1] * obstacle[:, 1]
+        rows = _lateral_side_rows if controller.halfplane_normal == "lateral_side" \
+            else _radial_rows
+        G[:, j], h[:, j] = rows(stations_m, y_ref_m, predicted_obstacles_line_m[:, j, :], reach,
+                                fallback_side)
     return G, h
+
+
+def _lateral_side_rows(stations_m: np.ndarray, y_ref_m: np.ndarray, obstacle: np.ndarray,
+                       reach: float, fallback_side: float) -> tuple[list, list]:
+    """One obstacle's ``G, h`` columns of :func:`collision_halfplanes` with
+    ``halfplane_normal = lateral_side`` (``obstacle``: its centres at the stations, (N, 2))."""
+    # ten stations: plain floats (the same arithmetic as the vectorized statement)
+    gains, bounds = [], []
+    reach_sq = reach * reach
+    for station, y_ref, (ox, oy) in zip(stations_m.tolist(), y_ref_m.tolist(),
+                                        obstacle.tolist()):
+        dx = station - ox
+        if not abs(dx) < reach:
+            gains.append(0.0)
+            bounds.append(0.0)
+            continue
+        above = y_ref - oy
+        side = 1.0 if above > 0 else (-1.0 if above < 0 else
+                                      (fallback_side if above == 0 else above))
+        gains.append(side)
+        bounds.append(side * oy + sqrt(max(reach_sq - dx * dx, 0.0)))
+    return gains, bounds
+
+
+def _radial_rows(stations_m: np.ndarray, y_ref_m: np.ndarray, obstacle: np.ndarray,
+                 reach: float, fallback_side: float) -> tuple[np.ndarray, np.ndarray]:
+    """One obstacle's ``G, h`` columns of :func:`collision_halfplanes` with
+    ``halfplane_normal = radial``."""
+    ref = np.stack([stations_m, y_ref_m], axis=1)
+    normal = radial_normals(ref, obstacle, np.array([0.0, fallback_side])[None, :])
+    bound = reach - normal[:, 0] * (stations_m - obstacle[:, 0]) + normal[:, 1] * obstacle[:, 1]
+    return normal[:, 1], bound
 
 
 def kinematic_halfplanes(predicted_states: np.ndarray, reference_m: np.ndarray,
