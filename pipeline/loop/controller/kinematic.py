@@ -15,6 +15,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from pipeline.loop.controller_settings import KinematicMpcSettings, settings_of
 from pipeline.loop.settings import ControllerConfig, VehicleConfig
 from pipeline.loop.controller.base import ControlStep, Observation, PlanFallback
 from pipeline.loop.controller.lateral_qp import blocking_matrix
@@ -42,7 +43,8 @@ class KinematicQpStructure:
     steering_max_rad: float
 
     @classmethod
-    def of(cls, c: ControllerConfig, vehicle: VehicleConfig) -> "KinematicQpStructure":
+    def of(cls, c: KinematicMpcSettings | ControllerConfig,
+           vehicle: VehicleConfig) -> "KinematicQpStructure":
         return cls(c.horizon, c.control_horizon, c.max_obstacles, c.input_hold,
                    tuple(c.output_weights), tuple(c.input_weights), tuple(c.input_rate_weights),
                    (c.slack_weight_linear, c.slack_weight_quadratic),
@@ -189,14 +191,17 @@ class KinematicLtvMpc(KinematicTrack):
 
     Parameters
     ----------
-    controller : ControllerConfig
+    controller : KinematicMpcSettings
+        Its settings (a ``ControllerConfig`` is read into them).
     vehicle : VehicleConfig
     sample_time_s : float
     qp_cache : QpCache, optional
     """
 
-    def __init__(self, controller: ControllerConfig, vehicle: VehicleConfig,
-                 sample_time_s: float, qp_cache: QpCache | None = None) -> None:
+    def __init__(self, controller: KinematicMpcSettings | ControllerConfig,
+                 vehicle: VehicleConfig, sample_time_s: float,
+                 qp_cache: QpCache | None = None) -> None:
+        controller = settings_of(controller, KinematicMpcSettings)
         self.cfg, self.vehicle, self.ts = controller, vehicle, float(sample_time_s)
         self.horizon = controller.horizon
         self.blocking = blocking_matrix(controller.horizon, controller.control_horizon,

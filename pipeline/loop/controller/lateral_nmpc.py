@@ -36,6 +36,7 @@ from pipeline.loop.controller.nmpc import ipopt_solve
 from pipeline.loop.controller.qp import QpCache
 from pipeline.loop.kernels import Kernels
 from pipeline.loop.model import single_track_constants
+from pipeline.loop.controller_settings import Backend, MpcSettings, settings_of
 from pipeline.loop.settings import ControllerConfig, ModelConfig, VehicleConfig
 
 
@@ -134,11 +135,12 @@ class LateralNmpc(LateralMpc):
         own, once).
     """
 
-    def __init__(self, controller: ControllerConfig, vehicle: VehicleConfig,
+    def __init__(self, controller: MpcSettings | ControllerConfig, vehicle: VehicleConfig,
                  model: ModelConfig | None = None, sample_time_s: float = 0.1,
                  qp_cache: QpCache | None = None, kernels: Kernels | None = None) -> None:
+        controller = settings_of(controller, MpcSettings)
         # the QP's data (models, path, references, half-planes) without a QP of its own
-        super().__init__(dataclasses.replace(controller, backend="daqp"), vehicle, model,
+        super().__init__(dataclasses.replace(controller, backend=Backend.DAQP), vehicle, model,
                          sample_time_s, qp_cache, kernels)
         self.cfg = controller
         structure = LateralQpStructure.of(controller, vehicle)

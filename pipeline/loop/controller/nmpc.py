@@ -33,6 +33,7 @@ from pipeline.loop.controller.kinematic import KinematicQpStructure, KinematicTr
 from pipeline.loop.controller.lateral_qp import blocking_matrix
 from pipeline.loop.controller.qp import QpCache
 from pipeline.loop.controller.references import kinematic_halfplanes
+from pipeline.loop.controller_settings import KinematicMpcSettings, settings_of
 from pipeline.loop.settings import ControllerConfig, VehicleConfig
 
 #: IPOPT's return status mapped to the status words the log uses (CVXPY's).
@@ -133,7 +134,8 @@ class KinematicNmpc(KinematicTrack):
 
     Parameters
     ----------
-    controller : ControllerConfig
+    controller : KinematicMpcSettings
+        Its settings (a ``ControllerConfig`` is read into them).
     vehicle : VehicleConfig
     sample_time_s : float
     qp_cache : QpCache, optional
@@ -141,8 +143,10 @@ class KinematicNmpc(KinematicTrack):
         worker processes: each worker builds its own, once).
     """
 
-    def __init__(self, controller: ControllerConfig, vehicle: VehicleConfig,
-                 sample_time_s: float, qp_cache: QpCache | None = None) -> None:
+    def __init__(self, controller: KinematicMpcSettings | ControllerConfig,
+                 vehicle: VehicleConfig, sample_time_s: float,
+                 qp_cache: QpCache | None = None) -> None:
+        controller = settings_of(controller, KinematicMpcSettings)
         self.cfg, self.vehicle, self.ts = controller, vehicle, float(sample_time_s)
         self.horizon = controller.horizon
         self.structure = KinematicQpStructure.of(controller, vehicle)

@@ -8,13 +8,16 @@ from math import hypot, sqrt, tan
 import numpy as np
 
 from pipeline.loop.kernels import Kernels
+from pipeline.loop.controller_settings import (KinematicMpcSettings, MpcSettings,
+                                               PurePursuitSettings)
 from pipeline.loop.settings import ControllerConfig, VehicleConfig
 
 _NORMAL_EPS_M = 1e-6
 
 
 def lateral_reference(path_line_m: np.ndarray, stations_m: np.ndarray,
-                      controller: ControllerConfig, kernels: Kernels | None = None
+                      controller: MpcSettings | PurePursuitSettings | ControllerConfig,
+                      kernels: Kernels | None = None
                       ) -> tuple[np.ndarray, np.ndarray]:
     """Lateral and heading references at the MPC's predicted stations.
 
@@ -96,7 +99,7 @@ def reference_arrays(path_line_m, stations_m, max_slope: float, extend: bool):
 
 def force_heading_reference(total_force_line: np.ndarray, heading_line_rad: float,
                             n_steps: int, sample_time_s: float,
-                            controller: ControllerConfig) -> np.ndarray:
+                            controller: MpcSettings | ControllerConfig) -> np.ndarray:
     """Heading reference of Section 3.1: ramp toward ``psi_apf = atan2(F_y, F_x)`` at the
     saturated rate ``omega_ref = sat((psi_apf - theta)/Ts)``."""
     psi_apf = np.arctan2(total_force_line[1], total_force_line[0])
@@ -123,7 +126,7 @@ def radial_normals(points_m: np.ndarray, centres_m: np.ndarray,
 
 def collision_halfplanes(stations_m: np.ndarray, y_ref_m: np.ndarray, vehicle_line_m: np.ndarray,
                          predicted_obstacles_line_m: np.ndarray, radii_m: np.ndarray,
-                         vehicle: VehicleConfig, controller: ControllerConfig
+                         vehicle: VehicleConfig, controller: MpcSettings | ControllerConfig
                          ) -> tuple[np.ndarray, np.ndarray]:
     """Soft half-plane data ``G y_k + s >= h`` of the lateral MPC, per horizon step and obstacle.
 
@@ -201,7 +204,8 @@ def _radial_rows(stations_m: np.ndarray, y_ref_m: np.ndarray, obstacle: np.ndarr
 
 def kinematic_halfplanes(predicted_states: np.ndarray, reference_m: np.ndarray,
                          predicted_obstacles_m: np.ndarray, radii_m: np.ndarray,
-                         vehicle: VehicleConfig, controller: ControllerConfig
+                         vehicle: VehicleConfig,
+                         controller: KinematicMpcSettings | ControllerConfig
                          ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Soft half-planes ``nx x_k + ny y_k + s >= h`` of the kinematic LTV-MPC (global frame).
 
