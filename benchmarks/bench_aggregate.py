@@ -13,7 +13,7 @@ from pathlib import Path
 
 import pandas as pd
 
-from pipeline.analysis.metrics import RunMetrics
+from pipeline.analysis.metrics.results import RunMetrics
 from pipeline.store.runs import RunInfo, write_run
 from pipeline.studies.aggregate import aggregate
 from pipeline.studies.experiment import config_yaml

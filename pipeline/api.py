@@ -21,8 +21,9 @@ from pathlib import Path
 
 import pandas as pd
 
-from pipeline.analysis.claims import Ledger, family_ledger
-from pipeline.analysis.metrics import RunMetrics, compute_metrics
+from pipeline.analysis.claims.ledger import Ledger, family_ledger
+from pipeline.analysis.metrics.criteria import compute_metrics
+from pipeline.analysis.metrics.results import RunMetrics
 from pipeline.analysis.tally import Tally
 from pipeline.config import CONF_DIR, ExperimentConfig, register_configs, to_experiment_config
 

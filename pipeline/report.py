@@ -64,7 +64,8 @@ def main(argv: list[str] | None = None) -> int:
 def _report(args, command: str) -> int:
     from pipeline.errors import ConfigError
     from pipeline.reporting.style import load_figure_style
-    from pipeline.store.runs import Skipped, refuse_input_as_output
+    from pipeline.store.files import refuse_input_as_output
+    from pipeline.store.runs import Skipped
 
     try:
         # the report is a folder of its own: never one of its inputs, never a file

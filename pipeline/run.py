@@ -22,7 +22,7 @@ from pipeline.analysis.objectives import objective_values
 from pipeline.analysis.tally import Tally
 from pipeline.config import CONF_DIR, register_configs, to_experiment_config
 from pipeline.commands import run_command, run_task
-from pipeline.store.runs import folder_lock
+from pipeline.store.lock import folder_lock
 from pipeline.studies.experiment import RunSummary, run_experiment, run_family
 from pipeline.studies.slurm import register_launcher
 

@@ -46,9 +46,10 @@ def main(argv: list[str] | None = None) -> int:
 
 
 def _score(args) -> int:
-    from pipeline.analysis.metrics import TrajectoryContext, compute_metrics
+    from pipeline.analysis.metrics.criteria import compute_metrics
+    from pipeline.analysis.metrics.signals import TrajectoryContext
     from pipeline.config import MetricsConfig
-    from pipeline.store.runs import output_target, refuse_input_as_output, write_text_atomic
+    from pipeline.store.files import output_target, refuse_input_as_output, write_text_atomic
 
     if args.out is not None:
         # refused before anything is read: the input must never become the output

@@ -8,7 +8,7 @@ import pandas as pd
 from pipeline.analysis.ablation import (REVISIONS, ablation_effects, attribution_sentences,
                                        interpretation_flips)
 from pipeline.store.collection import interpretation_tables
-from pipeline.analysis.claims import CLAIMS
+from pipeline.analysis.claims.catalogue import CLAIMS
 from pipeline.store.runs import write_family
 from pipeline.config import ClaimsConfig
 

@@ -8,9 +8,10 @@ import pandas as pd
 import pytest
 from scipy import stats
 
-from pipeline.analysis.claims import (ALL_CLAIMS, CLAIMS, SAFETY, claims_table, compare, decide,
-                             family_ledger, hodges_lehmann, holm, probability_of_improvement,
-                             single_scenario_outcome)
+from pipeline.analysis.claims.catalogue import ALL_CLAIMS, CLAIMS, SAFETY
+from pipeline.analysis.claims.ledger import claims_table, family_ledger, single_scenario_outcome
+from pipeline.analysis.claims.statistics import (compare, decide, hodges_lehmann, holm,
+                                                 probability_of_improvement)
 from pipeline.config import ClaimsConfig
 
 CFG = ClaimsConfig(n_resamples=999)
@@ -80,7 +81,7 @@ def test_hodges_lehmann_equals_the_walsh_median_by_brute_force():
 
 
 def test_fast_hodges_lehmann_on_resamples_equals_the_direct_one():
-    from pipeline.analysis.claims import hodges_lehmann_on
+    from pipeline.analysis.claims.statistics import hodges_lehmann_on
 
     rng = np.random.default_rng(8)
     sample = np.round(rng.normal(size=57), 1)  # ties, as metrics on a lattice have
@@ -99,7 +100,7 @@ def test_wilcoxon_pvalue_is_scipys_own_and_enumerates_all_at_once(monkeypatch):
     kind goes through one vectorized ``permutation_test``."""
     import warnings
 
-    from pipeline.analysis import claims
+    from pipeline.analysis.claims import statistics
 
     calls = []
     original = stats.permutation_test
@@ -120,7 +121,7 @@ def test_wilcoxon_pvalue_is_scipys_own_and_enumerates_all_at_once(monkeypatch):
             warnings.simplefilter("ignore")
             expected = stats.wilcoxon(d, zero_method="pratt").pvalue
         calls.clear()
-        got = claims.wilcoxon_pratt_pvalue(d)
+        got = statistics.wilcoxon_pratt_pvalue(d)
         assert got == expected or (np.isnan(got) and np.isnan(expected)), d
         ties = np.any(d == 0) or np.unique(np.abs(d)).size < d.size
         assert calls == ([True] if ties and d.size <= 13 else []), d
@@ -231,7 +232,7 @@ def wilson(k: int, n: int, z: float = stats.norm.ppf(0.975)) -> tuple[float, flo
 @pytest.mark.parametrize("a, b, c, n", [(0, 0, 0, 12), (0, 0, 0, 2000), (2, 5, 1, 40),
                                         (10, 3, 9, 200)])
 def test_newcombe_paired_interval_matches_its_formula(a, b, c, n):
-    from pipeline.analysis.claims import newcombe_paired_interval
+    from pipeline.analysis.claims.statistics import newcombe_paired_interval
 
     low, high = newcombe_paired_interval(a, b, c, n)
     d = n - a - b - c

@@ -465,3 +465,33 @@ def test_status_words_are_cvxpys_and_the_loop_imports_neither_cvxpy_nor_python_c
             "print(sorted(m for m in ('cvxpy', 'control') if m in sys.modules))")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert out.stdout.strip() == "[]"
+
+
+def test_each_controller_kind_is_handed_its_own_typed_settings(make_config):
+    """The flat ``ControllerConfig`` (Hydra's schema, hashed as it is) is read once into the
+    settings of its kind; their choices are enums equal to the YAML's words, and the built-in
+    controller holds them (a ``ControllerConfig`` handed to a constructor is read the same)."""
+    from pipeline.errors import ConfigError
+    from pipeline.loop.controller import make_controller
+    from pipeline.loop.controller_settings import (Backend, Frame, KinematicMpcSettings,
+                                                   MpcSettings, PurePursuitSettings,
+                                                   ReferenceAlignment)
+
+    kinds = {"method=improved": MpcSettings, "method=apf_pursuit": PurePursuitSettings,
+             "experiment=kinematic": KinematicMpcSettings}
+    for override, kind in kinds.items():
+        cfg = make_config([override])
+        settings = cfg.controller.settings()
+        assert type(settings) is kind and settings.kind == cfg.controller.kind
+        assert make_controller(cfg, 0.1).cfg == settings
+    cfg = make_config(["method=improved", "controller.frame=fixed"])
+    lateral = cfg.controller.settings()
+    assert lateral.frame is Frame.FIXED and lateral.frame == "fixed"
+    assert lateral.backend is Backend(cfg.controller.backend)
+    assert LateralMpc(cfg.controller, cfg.vehicle).cfg == lateral
+    kinematic = make_config(["experiment=kinematic",
+                             "controller.reference_alignment=path_speed"]).controller.settings()
+    assert kinematic.reference_alignment is ReferenceAlignment.PATH_SPEED
+    assert kinematic.accel_bounds_mps2 == (-3.0, 3.0)
+    with pytest.raises(ConfigError, match="one of path, fixed"):
+        make_config(["controller.frame=curved"])

@@ -7,7 +7,9 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from pipeline.analysis.claims import CLAIMS, OUTCOMES, family_ledger, outcome_counts, paired_differences
+from pipeline.analysis.claims.catalogue import CLAIMS, OUTCOMES
+from pipeline.analysis.claims.ledger import family_ledger, outcome_counts
+from pipeline.analysis.claims.statistics import paired_differences
 from pipeline.config import ClaimsConfig
 from pipeline.studies.experiment import run_family
 from pipeline.loop.scenario import draw_family_member, family_members

@@ -233,7 +233,7 @@ def test_trajectory_csv_writer_matches_pandas(make_config):
 
     from pipeline.loop.scenario import build_scenario
     from pipeline.loop.simulate import simulate
-    from pipeline.store.runs import csv_text
+    from pipeline.store.files import csv_text
 
     def pandas_csv(frame):
         return frame.to_csv(index=False, float_format="%.10g", lineterminator="\n")

@@ -85,7 +85,7 @@ def test_report_has_the_feature_table_and_what_the_baseline_apf_adds(tmp_path, m
     page = build_report(runs, tmp_path / "report", "pytest").read_text()
     assert 'id="features-table"' in page and 'id="apf-adds"' in page
     # the Appendix-A track's own ledger, recomputed here from its family tables
-    from pipeline.analysis.claims import family_ledger
+    from pipeline.analysis.claims.ledger import family_ledger
     from pipeline.store.runs import read_family
 
     tables = {m: read_family(runs / "kinematic_family" / m).table

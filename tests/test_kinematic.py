@@ -241,7 +241,7 @@ def test_path_indexed_reading_lets_the_baseline_meet_the_obstacle(make_config):
     """Under the literal reading the Appendix-A baseline never comes within 2 m of the obstacle
     (its normalized 0.1 m rows crawl); read path-indexed at the planned speed (Section 3.1) it
     meets it: the switch changes the encounter, not just a number."""
-    from pipeline.analysis.metrics import compute_metrics
+    from pipeline.analysis.metrics.criteria import compute_metrics
     from pipeline.loop.scenario import build_scenario
     from pipeline.loop.simulate import simulate
     from pipeline.studies.experiment import trajectory_context

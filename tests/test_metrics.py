@@ -9,8 +9,8 @@ import pandas as pd
 import pytest
 
 from pipeline.config import MetricsConfig
-from pipeline.analysis.metrics import (TrajectoryContext, compute_metrics, settling_time,
-                                       sign_changes)
+from pipeline.analysis.metrics.criteria import compute_metrics
+from pipeline.analysis.metrics.signals import TrajectoryContext, settling_time, sign_changes
 
 
 def metrics_json(*args):
@@ -348,7 +348,7 @@ def _readings(base: MetricsConfig) -> list[MetricsConfig]:
 def test_every_reading_in_one_pass_equals_each_reading_alone(closed_loop_runs):
     import json
 
-    from pipeline.analysis.metrics import compute_metrics_readings
+    from pipeline.analysis.metrics.criteria import compute_metrics_readings
 
     readings = _readings(MetricsConfig())
     collisions = avoidable = 0
@@ -375,7 +375,7 @@ def test_each_criterion_reads_only_the_settings_it_is_shared_on(closed_loop_runs
     within its ``*_READS`` (what the one-pass computation shares its result on)."""
     import inspect
 
-    import pipeline.analysis.metrics as metrics_module
+    import pipeline.analysis.metrics.criteria as metrics_module
 
     class Recorder:
         def __init__(self, settings, log):

@@ -10,7 +10,9 @@ from hypothesis import HealthCheck, assume, given, settings
 from hypothesis import strategies as st
 
 from pipeline.config import MetricsConfig, PlannerConfig
-from pipeline.analysis.metrics import TrajectoryContext, clearance_series, compute_metrics
+from pipeline.analysis.metrics.criteria import compute_metrics
+from pipeline.analysis.metrics.geometry import clearance_series
+from pipeline.analysis.metrics.signals import TrajectoryContext
 from pipeline.loop.planner import apf_step, repulsive_force
 
 

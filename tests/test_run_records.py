@@ -14,9 +14,10 @@ import pytest
 from pipeline.reporting.page import build_report
 from pipeline.report import main as report_main
 from pipeline.studies.experiment import run_experiment, run_family
-from pipeline.analysis.metrics import RunMetrics
-from pipeline.store.runs import (MANIFEST, RunInfo, NonFiniteResultError, RunFolderError, check, discover,
-                           read_run, write_run)
+from pipeline.analysis.metrics.results import RunMetrics
+from pipeline.errors import NonFiniteResultError, RunFolderError
+from pipeline.store.manifest import MANIFEST, check
+from pipeline.store.runs import discover, read_run, RunInfo, write_run
 
 
 @pytest.fixture(scope="module")

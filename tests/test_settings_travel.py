@@ -10,7 +10,7 @@ import shutil
 import pandas as pd
 import pytest
 
-from pipeline.analysis.claims import family_ledger
+from pipeline.analysis.claims.ledger import family_ledger
 from pipeline.config import CONF_DIR
 from pipeline.reporting.page import build_report
 from pipeline.store.collection import load_runs
@@ -74,7 +74,7 @@ def test_a_claims_override_reaches_the_ledger_report_sweep_and_multiverse(user_r
 
 
 def test_unreadable_settings_are_skipped_with_their_reason(user_runs, tmp_path):
-    from pipeline.store.runs import RUN_FILES, write_manifest
+    from pipeline.store.manifest import RUN_FILES, write_manifest
 
     broken = tmp_path / "runs" / "paper" / "baseline"
     shutil.copytree(user_runs / "paper" / "baseline", broken)
@@ -112,7 +112,7 @@ def test_the_report_command_ends_with_the_answer_in_words(user_runs, tmp_path, c
     """``python -m pipeline.report`` (and so ``make reproduce``) ends with one line per claim:
     the claim's words, its outcome against each comparison, the estimate with its interval
     and unit."""
-    from pipeline.analysis.claims import ALL_CLAIMS
+    from pipeline.analysis.claims.catalogue import ALL_CLAIMS
     from pipeline.report import main as report_main
 
     assert report_main([str(user_runs), "--out", str(tmp_path / "r"),

@@ -10,7 +10,8 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from pipeline.analysis.metrics import TrajectoryContext, validity_block
+from pipeline.analysis.metrics.criteria import validity_block
+from pipeline.analysis.metrics.signals import TrajectoryContext
 from pipeline.analysis.validity import (VALIDITY_COLUMNS, ValidityTable, valid_in_both,
                                         valid_scenario_ledgers, validity_row)
 
@@ -75,7 +76,7 @@ def test_valid_scenarios_keep_only_pairs_where_both_models_held(make_config):
     rng = np.random.default_rng(3)
 
     def table(delay, flagged):
-        from pipeline.analysis.claims import ALL_CLAIMS
+        from pipeline.analysis.claims.catalogue import ALL_CLAIMS
 
         frame = pd.DataFrame({c.primary_metric: rng.normal(1.0, 0.1, n) for c in ALL_CLAIMS})
         return frame.assign(scenario=[f"s{i}" for i in range(n)], member=np.arange(n),

@@ -16,7 +16,7 @@ from typing import List
 import numpy as np
 import pandas as pd
 
-from pipeline.analysis.metrics import METRIC_KEYS
+from pipeline.analysis.metrics.results import METRIC_KEYS
 from pipeline.errors import ConfigError
 from pipeline.validation import FrozenAfterValidation, choice
 

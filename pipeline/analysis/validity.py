@@ -2,7 +2,7 @@
 over a scenario family, and the verdicts again on the scenarios where both methods' models held.
 
 Each run's trajectory carries, per step, how that step's prediction held against the plant
-(:func:`pipeline.loop.controller.path.prediction_check`); its ``metrics.json`` the run's
+(:func:`pipeline.loop.controller.prediction_check.prediction_check`); its ``metrics.json`` the run's
 shares (:class:`pipeline.analysis.metrics.ModelValidity`). A row pools them over the family:
 shares as the mean over runs of each run's share, errors as quantiles over every step of every
 run. ``reports/latest/tables/model_validity.csv`` is the rows' :meth:`ValidityTable.to_frame`.
@@ -16,7 +16,7 @@ from typing import Iterable
 import numpy as np
 import pandas as pd
 
-from pipeline.analysis.claims import Ledger, family_ledger
+from pipeline.analysis.claims.ledger import Ledger, family_ledger
 
 
 @dataclass(frozen=True)

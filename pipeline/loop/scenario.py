@@ -11,7 +11,7 @@ from functools import cached_property
 
 import numpy as np
 
-from pipeline.loop.settings import ScenarioConfig
+from pipeline.loop.settings import ObstacleConfig, ScenarioConfig
 
 
 @dataclass(frozen=True)
@@ -202,8 +202,6 @@ def draw_family_member(base: ScenarioConfig, index: int,
     """
     from dataclasses import replace
 
-    from pipeline.loop.settings import ObstacleConfig
-
     fam = base.family
     rng = np.random.default_rng([fam.seed, index])
     start, goal = np.asarray(base.start_xy_m, float), np.asarray(base.goal_xy_m, float)
@@ -215,7 +213,18 @@ def draw_family_member(base: ScenarioConfig, index: int,
     def to_global(along: float, lateral: float) -> np.ndarray:
         return start + along * e1 + lateral * e2
 
-    obstacles = []
+    obstacles = [_sudden_obstacle(rng, base, e1, e2, to_global)]
+    for _ in range(n_obstacles - 1):
+        obstacles.append(_further_obstacle(rng, base, goal, vehicle_radius_m, to_global))
+    return replace(base, name=f"{base.name}_s{fam.seed}_i{index:04d}", obstacles=obstacles,
+                   family=None)
+
+
+def _sudden_obstacle(rng: np.random.Generator, base: ScenarioConfig, e1: np.ndarray,
+                     e2: np.ndarray, to_global) -> ObstacleConfig:
+    """The family member's first obstacle, the paper's "sudden" one (see
+    :func:`draw_family_member`; ``e1``, ``e2``: along and across the start-goal line)."""
+    fam = base.family
     appear = _uniform(rng, fam.appear_time_s)
     along = base.speed_mps * appear + _uniform(rng, fam.ahead_m)
     lateral = _uniform(rng, fam.lateral_m)
@@ -229,28 +238,30 @@ def draw_family_member(base: ScenarioConfig, index: int,
         toward = -np.sign(lateral) if lateral != 0.0 else (1.0 if rng.uniform() < 0.5 else -1.0)
         vel = toward * _uniform(rng, fam.crossing_speed_mps) * e2
     pos = to_global(along, lateral)
-    obstacles.append(ObstacleConfig(x_m=float(pos[0]), y_m=float(pos[1]), vx_mps=float(vel[0]),
-                                    vy_mps=float(vel[1]), radius_m=radius,
-                                    appear_time_s=appear))
-    for _ in range(n_obstacles - 1):
-        for _attempt in range(50):
-            appear_k = _uniform(rng, fam.extra_appear_time_s)
-            along_k, lateral_k = _uniform(rng, fam.extra_x_m), _uniform(rng, fam.extra_y_m)
-            radius_k = _uniform(rng, fam.radius_m)
-            moving = rng.uniform() < 0.5
-            heading = rng.uniform(-np.pi, np.pi)
-            speed_k = rng.uniform(0.0, 0.5) if moving else 0.0
-            vel_k = speed_k * np.array([np.cos(heading), np.sin(heading)])
-            nominal = to_global(base.speed_mps * appear_k, 0.0)
-            pos_k = to_global(along_k, lateral_k)
-            clear = radius_k + vehicle_radius_m + 1.5
-            if np.linalg.norm(pos_k - nominal) > clear and np.linalg.norm(pos_k - goal) > clear:
-                break
-        obstacles.append(ObstacleConfig(x_m=float(pos_k[0]), y_m=float(pos_k[1]),
-                                        vx_mps=float(vel_k[0]), vy_mps=float(vel_k[1]),
-                                        radius_m=radius_k, appear_time_s=appear_k))
-    return replace(base, name=f"{base.name}_s{fam.seed}_i{index:04d}", obstacles=obstacles,
-                   family=None)
+    return ObstacleConfig(x_m=float(pos[0]), y_m=float(pos[1]), vx_mps=float(vel[0]),
+                          vy_mps=float(vel[1]), radius_m=radius, appear_time_s=appear)
+
+
+def _further_obstacle(rng: np.random.Generator, base: ScenarioConfig, goal: np.ndarray,
+                      vehicle_radius_m: float, to_global) -> ObstacleConfig:
+    """One further obstacle along the route, redrawn (up to 50 times) while it would sit on
+    the vehicle when it appears or on the goal."""
+    fam = base.family
+    for _attempt in range(50):
+        appear_k = _uniform(rng, fam.extra_appear_time_s)
+        along_k, lateral_k = _uniform(rng, fam.extra_x_m), _uniform(rng, fam.extra_y_m)
+        radius_k = _uniform(rng, fam.radius_m)
+        moving = rng.uniform() < 0.5
+        heading = rng.uniform(-np.pi, np.pi)
+        speed_k = rng.uniform(0.0, 0.5) if moving else 0.0
+        vel_k = speed_k * np.array([np.cos(heading), np.sin(heading)])
+        nominal = to_global(base.speed_mps * appear_k, 0.0)
+        pos_k = to_global(along_k, lateral_k)
+        clear = radius_k + vehicle_radius_m + 1.5
+        if np.linalg.norm(pos_k - nominal) > clear and np.linalg.norm(pos_k - goal) > clear:
+            break
+    return ObstacleConfig(x_m=float(pos_k[0]), y_m=float(pos_k[1]), vx_mps=float(vel_k[0]),
+                          vy_mps=float(vel_k[1]), radius_m=radius_k, appear_time_s=appear_k)
 
 
 def family_members(base: ScenarioConfig, vehicle_radius_m: float = 1.0) -> list[ScenarioConfig]:

@@ -16,6 +16,11 @@ from typing import Any, Dict, List, Optional, Protocol
 from omegaconf import MISSING
 
 from pipeline.errors import ConfigError
+from pipeline.loop.controller_settings import (KIND_SETTINGS, Backend, ControllerKind, Formulation,
+                                               Frame, HalfplaneNormal, HeadingReference,
+                                               InputHold, KinematicMpcSettings, MpcSettings,
+                                               PathBeyondEnd, PathStateReference,
+                                               PurePursuitSettings, ReferenceAlignment)
 from pipeline.loop.qp_memory import MAX_HORIZON, qp_memory_gib
 from pipeline.validation import (FrozenAfterValidation, at_least, between, choice, finite, pair, safe_name,
                                  target_path)
@@ -196,9 +201,20 @@ class ControllerConfig(FrozenAfterValidation):
 
     def __post_init__(self) -> None:
         target_path("controller._target_", self._target_)
-        choice("controller.kind", self.kind, ("mpc", "pure_pursuit", "kinematic_mpc"))
-        choice("controller.backend", self.backend,
-               ("cvxpy", "clarabel_direct", "clarabel_dense", "daqp", "nmpc"))
+        self._check_kind_and_backend()
+        self._check_kinematic_and_pursuit()
+        self._check_sizes()
+        self._check_lateral()
+
+    def settings(self) -> MpcSettings | PurePursuitSettings | KinematicMpcSettings:
+        """The typed settings of this ``kind`` (:mod:`pipeline.loop.controller_settings`), the
+        ones the built-in controller is handed."""
+        return KIND_SETTINGS[ControllerKind(self.kind)].of(self)
+
+    def _check_kind_and_backend(self) -> None:
+        """``kind``, ``backend``, ``formulation`` and which of them go together."""
+        choice("controller.kind", self.kind, tuple(ControllerKind))
+        choice("controller.backend", self.backend, tuple(Backend))
         if self.backend == "nmpc" and self.kind not in ("kinematic_mpc", "mpc"):
             raise ConfigError("controller.backend", self.backend,
                               "nmpc only with controller.kind=mpc or kinematic_mpc (a "
@@ -207,12 +223,16 @@ class ControllerConfig(FrozenAfterValidation):
                 or not 1 <= self.nmpc_substeps <= 100:
             raise ConfigError("controller.nmpc_substeps", self.nmpc_substeps,
                               "an integer in [1, 100]")
-        choice("controller.formulation", self.formulation, ("condensed", "sparse"))
+        choice("controller.formulation", self.formulation, tuple(Formulation))
         if self.backend in ("daqp", "clarabel_dense") and (
                 self.kind != "mpc" or self.formulation != "condensed"):
             raise ConfigError("controller.backend", self.backend,
                               f"{self.backend} only with controller.kind=mpc and "
                               "controller.formulation=condensed (else cvxpy or clarabel_direct)")
+
+    def _check_kinematic_and_pursuit(self) -> None:
+        """The kinematic MPC's weights, bounds, passes and reference; pure pursuit's
+        look-ahead."""
         for key in ("output_weights", "input_weights", "input_rate_weights"):
             pair(f"controller.{key}", getattr(self, key))
             for i, w in enumerate(getattr(self, key)):
@@ -226,9 +246,12 @@ class ControllerConfig(FrozenAfterValidation):
             raise ConfigError("controller.ltv_iterations", self.ltv_iterations,
                               "an integer in [1, 50]")
         choice("controller.reference_alignment", self.reference_alignment,
-                ("literal", "shifted", "path_speed"))
+               tuple(ReferenceAlignment))
         at_least("controller.lookahead_min_m", self.lookahead_min_m, 0.0, inclusive=False)
         at_least("controller.lookahead_time_s", self.lookahead_time_s, 0.0)
+
+    def _check_sizes(self) -> None:
+        """Horizons, obstacle slots, solver iterations (integers in range) and the name."""
         for key in ("horizon", "control_horizon", "max_obstacles", "solver_max_iter"):
             value = getattr(self, key)
             if isinstance(value, bool) or not isinstance(value, int):
@@ -251,26 +274,28 @@ class ControllerConfig(FrozenAfterValidation):
         safe_name("controller.name", self.name)
         if self.solver_max_iter < 1:
             raise ConfigError("controller.solver_max_iter", self.solver_max_iter, "an integer >= 1")
-        choice("controller.input_hold", self.input_hold, ("hold_last", "zero_rate"))
-        choice("controller.halfplane_normal", self.halfplane_normal, ("lateral_side", "radial"))
+
+    def _check_lateral(self) -> None:
+        """The input hold; the lateral MPC's weights, references, half-planes and frame."""
+        choice("controller.input_hold", self.input_hold, tuple(InputHold))
+        choice("controller.halfplane_normal", self.halfplane_normal, tuple(HalfplaneNormal))
         for key in ("q_lateral", "q_heading", "q_yaw_rate", "q_steering", "r_steering_rate",
                     "slack_weight_linear", "slack_weight_quadratic", "safety_margin_m",
                     "constraint_activation_m"):
             at_least(f"controller.{key}", getattr(self, key), 0.0)
         at_least("controller.r_steering_rate", self.r_steering_rate, 0.0, inclusive=False)
-        choice("controller.heading_reference", self.heading_reference,
-                ("path_slope", "apf_force"))
+        choice("controller.heading_reference", self.heading_reference, tuple(HeadingReference))
         between("controller.heading_ref_max_rad", self.heading_ref_max_rad, 0.0, math.pi / 2)
         at_least("controller.yaw_rate_ref_max_rad_s", self.yaw_rate_ref_max_rad_s, 0.0,
                   inclusive=False)
-        choice("controller.path_beyond_end", self.path_beyond_end, ("extend", "hold"))
-        choice("controller.frame", self.frame, ("path", "fixed"))
+        choice("controller.path_beyond_end", self.path_beyond_end, tuple(PathBeyondEnd))
+        choice("controller.frame", self.frame, tuple(Frame))
         between("controller.path_lookahead_m", self.path_lookahead_m, 0.1, 100.0)
         if self.path_curvature_max_1_per_m is not None:
             between("controller.path_curvature_max_1_per_m", self.path_curvature_max_1_per_m,
                     1e-3, 10.0)
         choice("controller.path_state_reference", self.path_state_reference,
-               ("steady_state", "zero"))
+               tuple(PathStateReference))
         if self.horizon_reach_m is not None:
             between("controller.horizon_reach_m", self.horizon_reach_m, 0.1, 1000.0)
 

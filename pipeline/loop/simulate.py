@@ -23,12 +23,13 @@ import numpy as np
 import pandas as pd
 
 from pipeline.loop.settings import LoopSettings
-from pipeline.loop.controller import ControlStep, Observation, QpCache, make_controller
+from pipeline.loop.controller import (ControlStep, Controller, Observation, QpCache,
+                                      make_controller)
 from pipeline.loop.controller.prediction_check import MODEL_CHECK_COLUMNS
 from pipeline.loop.kernels import Kernels
 from pipeline.loop.model import kinematic_plant_step, single_track_constants
 from pipeline.loop.python_kernels import PYTHON_KERNELS
-from pipeline.loop.planner import ApfRollout, make_planner
+from pipeline.loop.planner import ApfPlanner, ApfRollout, make_planner
 from pipeline.loop.scenario import Scenario
 from pipeline.loop.trajectory import HEAD, OBSTACLE_FIELDS, TAIL, obstacle_column
 
@@ -250,19 +251,15 @@ def simulate(cfg: LoopSettings, scenario: Scenario, qp_cache: QpCache | None = N
 def _closed_loop(cfg: LoopSettings, scenario: Scenario, qp_cache: QpCache | None,
                  kernels: Kernels) -> SimulationResult:
     """The loop of :func:`simulate`."""
-    kinematic = cfg.controller.kind == "kinematic_mpc"
-    plant = KinematicPlant(cfg, scenario) if kinematic else \
-        SingleTrackPlant(cfg, scenario, kernels)
-    controller = make_controller(cfg, scenario.sample_time_s, qp_cache, kernels)
-    planner = make_planner(cfg.planner, cfg.controller.horizon, scenario.sample_time_s,
-                           kernels)
+    kinematic, plant, controller, planner = _loop_stages(cfg, scenario, qp_cache, kernels)
     vehicle_radius = cfg.vehicle.footprint_radius_m
     # a planner of one's own may keep speed()'s earlier signature (no path, no speed)
     path_aware = "path_m" in inspect.signature(planner.speed).parameters
+    # the kinematic track uses the speed only for reference_alignment=path_speed (Section 3.1)
+    plans_speed = not kinematic or cfg.controller.reference_alignment == "path_speed"
     ts = scenario.sample_time_s
     frame = scenario.line_frame
-    origin_x, origin_y = frame.origin_m.tolist()
-    c_line, s_line = cos(frame.heading_rad), sin(frame.heading_rad)
+    line = _line_constants(frame)
     goal_line_x = float(frame.to_line(scenario.goal_m)[0])
     obstacle_names = [tuple(obstacle_column(j, f) for f in OBSTACLE_FIELDS)
                       for j in range(scenario.n_obstacles)]
@@ -279,59 +276,122 @@ def _closed_loop(cfg: LoopSettings, scenario: Scenario, qp_cache: QpCache | None
     for k in range(scenario.n_steps + 1):
         time_s = k * ts
         if anchoring:
-            due = unanchored & (time_s + 1e-9 >= scenario.obstacle_appear_s)
-            if due.any():
-                scenario = scenario.anchored(due, state[:2])
-                unanchored &= ~due
-                anchoring = bool(unanchored.any())
-        X, Y, psi = float(state[0]), float(state[1]), float(state[2])
-        dx, dy = X - origin_x, Y - origin_y
-        along, lateral = c_line * dx + s_line * dy, -s_line * dx + c_line * dy
-        e_psi = atan2(sin(psi - frame.heading_rad), cos(psi - frame.heading_rad))
+            scenario, anchoring = _anchor_due(scenario, unanchored, time_s, state)
         snapshot = scenario.obstacles_at(time_s)
-        row = {"time_s": time_s, "X_m": X, "Y_m": Y, "psi_rad": psi, "e_y_m": lateral,
-               "e_psi_rad": e_psi}
-        for j, ((ox, oy), radius, seen) in enumerate(zip(snapshot.positions_m.tolist(),
-                                                         snapshot.radii_m.tolist(),
-                                                         snapshot.visible.tolist())):
-            names = obstacle_names[j]
-            row[names[0]], row[names[1]], row[names[2]], row[names[3]] = ox, oy, radius, seen
+        row, along, lateral, psi, e_psi = _pose_row(time_s, state, frame, line, snapshot,
+                                                    obstacle_names)
         ending = _termination(state, along, goal_line_x, scenario, k)
         if ending is not None:
             termination = ending
-            row.update(plant.log_columns(state, None, command if command is not None
-                                         else np.zeros(2)))
-            row.update(fallback="end", solver_status="end")
+            _add_end_columns(row, plant, state, command)
             log.put(k, row)
             break
         visible = snapshot.only_visible()
         position = state[:2].copy()
         rollout = planner.rollout(position, scenario.goal_m, visible, plant.velocity(state))
-        # the kinematic track uses it only for reference_alignment=path_speed (Section 3.1)
-        if not kinematic or cfg.controller.reference_alignment == "path_speed":
-            speed_ref = planner.speed(position, psi, visible, scenario.speed_mps,
-                                      vehicle_radius, **({"path_m": rollout.path_m,
-                                                          "speed_mps": float(state[3])}
-                                                         if path_aware else {}))
-        else:
-            speed_ref = np.nan
+        speed_ref = _planned_speed(planner, position, psi, visible, scenario, vehicle_radius,
+                                   rollout, state, path_aware) if plans_speed else np.nan
         observation = Observation(time_s, state, frame, np.array([along, lateral]), e_psi,
                                   rollout, visible, speed_ref)
         step: ControlStep = controller.step(observation)
         if cfg.controller.kind != "pure_pursuit":
             solve_times[n_solves] = step.solve_time_s
             n_solves += 1
-        row.update(plant.log_columns(state, step.command, command))
-        if not kinematic:
-            row["steering_rate_rad_s"] = step.command[0]
-        row["speed_ref_mps"] = speed_ref
-        row.update(step.log)
-        row.update(_apf_columns(rollout))
-        row.update(solver_status=step.status, solver_iterations=step.iterations,
-                   fallback=step.fallback, max_slack_m=step.max_slack_m)
+        _add_step_columns(row, plant, state, step, command, kinematic, speed_ref, rollout)
         log.put(k, row)
         command = step.command
         state = plant.step(state, command, speed_ref)
+    _add_model_check(controller, log)
+    trajectory = log.frame(list(HEAD) + [c for names in obstacle_names for c in names]
+                           + list(TAIL))
+    return SimulationResult(trajectory, solve_times[:n_solves], controller.compile_count,
+                            controller.compile_time_s, termination == "goal_line", termination)
+
+
+def _loop_stages(cfg: LoopSettings, scenario: Scenario, qp_cache: QpCache | None,
+                 kernels: Kernels) -> tuple[bool, SingleTrackPlant | KinematicPlant, Controller,
+                                            ApfPlanner]:
+    """The run's stages: whether it is the kinematic track, its plant, controller and
+    planner."""
+    kinematic = cfg.controller.kind == "kinematic_mpc"
+    plant = KinematicPlant(cfg, scenario) if kinematic else \
+        SingleTrackPlant(cfg, scenario, kernels)
+    controller = make_controller(cfg, scenario.sample_time_s, qp_cache, kernels)
+    planner = make_planner(cfg.planner, cfg.controller.horizon, scenario.sample_time_s,
+                           kernels)
+    return kinematic, plant, controller, planner
+
+
+def _line_constants(frame) -> tuple[float, float, float, float]:
+    """The start-goal line's origin and the cosine and sine of its heading, as plain floats."""
+    origin_x, origin_y = frame.origin_m.tolist()
+    return origin_x, origin_y, cos(frame.heading_rad), sin(frame.heading_rad)
+
+
+def _anchor_due(scenario: Scenario, unanchored: np.ndarray, time_s: float,
+                state: np.ndarray) -> tuple[Scenario, bool]:
+    """``obstacle_anchor="vehicle"``: the obstacles that appear now placed relative to the
+    vehicle (``unanchored`` updated in place); the scenario, and whether any is left."""
+    due = unanchored & (time_s + 1e-9 >= scenario.obstacle_appear_s)
+    if due.any():
+        scenario = scenario.anchored(due, state[:2])
+        unanchored &= ~due
+    return scenario, bool(unanchored.any())
+
+
+def _pose_row(time_s: float, state: np.ndarray, frame, line: tuple[float, float, float, float],
+              snapshot, obstacle_names: list[tuple]) -> tuple[dict, float, float, float, float]:
+    """A step's log row so far (time, pose, line-frame errors, obstacles); and the vehicle's
+    place along and across the line, its heading and its heading error to the line."""
+    origin_x, origin_y, c_line, s_line = line
+    X, Y, psi = float(state[0]), float(state[1]), float(state[2])
+    dx, dy = X - origin_x, Y - origin_y
+    along, lateral = c_line * dx + s_line * dy, -s_line * dx + c_line * dy
+    e_psi = atan2(sin(psi - frame.heading_rad), cos(psi - frame.heading_rad))
+    row = {"time_s": time_s, "X_m": X, "Y_m": Y, "psi_rad": psi, "e_y_m": lateral,
+           "e_psi_rad": e_psi}
+    for j, ((ox, oy), radius, seen) in enumerate(zip(snapshot.positions_m.tolist(),
+                                                     snapshot.radii_m.tolist(),
+                                                     snapshot.visible.tolist())):
+        names = obstacle_names[j]
+        row[names[0]], row[names[1]], row[names[2]], row[names[3]] = ox, oy, radius, seen
+    return row, along, lateral, psi, e_psi
+
+
+def _planned_speed(planner, position: np.ndarray, psi: float, visible, scenario: Scenario,
+                   vehicle_radius: float, rollout: ApfRollout, state: np.ndarray,
+                   path_aware: bool) -> float:
+    """The planner's speed reference (the path and the speed only to a ``path_aware`` one)."""
+    return planner.speed(position, psi, visible, scenario.speed_mps,
+                         vehicle_radius, **({"path_m": rollout.path_m,
+                                             "speed_mps": float(state[3])}
+                                            if path_aware else {}))
+
+
+def _add_end_columns(row: dict, plant, state: np.ndarray, command: np.ndarray | None) -> None:
+    """The last row's columns after the observation's: the plant's, no solve."""
+    row.update(plant.log_columns(state, None, command if command is not None
+                                 else np.zeros(2)))
+    row.update(fallback="end", solver_status="end")
+
+
+def _add_step_columns(row: dict, plant, state: np.ndarray, step: ControlStep,
+                      command: np.ndarray | None, kinematic: bool, speed_ref: float,
+                      rollout: ApfRollout) -> None:
+    """A step's columns after the observation's, into ``row``: the plant's, the applied input,
+    the speed reference, the controller's own, the APF's and the solver's."""
+    row.update(plant.log_columns(state, step.command, command))
+    if not kinematic:
+        row["steering_rate_rad_s"] = step.command[0]
+    row["speed_ref_mps"] = speed_ref
+    row.update(step.log)
+    row.update(_apf_columns(rollout))
+    row.update(solver_status=step.status, solver_iterations=step.iterations,
+               fallback=step.fallback, max_slack_m=step.max_slack_m)
+
+
+def _add_model_check(controller, log: TrajectoryLog) -> None:
+    """The model-check columns of a finished run (NaN for a controller without a model)."""
     check = getattr(controller, "model_check", None)
     if check is not None and log.rows:
         # how each step's prediction held against what the plant then did (model validity)
@@ -342,10 +402,6 @@ def _closed_loop(cfg: LoopSettings, scenario: Scenario, qp_cache: QpCache | None
         # a controller without a model (pure pursuit): nothing to check, nothing left
         for name in MODEL_CHECK_COLUMNS:
             log.columns[name] = np.full(log.rows, np.nan)
-    trajectory = log.frame(list(HEAD) + [c for names in obstacle_names for c in names]
-                           + list(TAIL))
-    return SimulationResult(trajectory, solve_times[:n_solves], controller.compile_count,
-                            controller.compile_time_s, termination == "goal_line", termination)
 
 
 def _termination(state: np.ndarray, along_line_m: float, goal_line_x_m: float,

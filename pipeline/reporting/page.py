@@ -34,7 +34,8 @@ from pipeline.reporting.sections.validity import validity_section
 from pipeline.reporting.style import FigureStyle
 from pipeline.reporting.tables import write_tables
 from pipeline.reporting.verdicts import Verdicts
-from pipeline.store.runs import Skipped, write_text_atomic
+from pipeline.store.files import write_text_atomic
+from pipeline.store.runs import Skipped
 
 log = logging.getLogger("pipeline.reporting")
 

@@ -18,8 +18,8 @@ from pipeline.analysis.validity import ValidityTable, validity_row
 from pipeline.config import ExperimentConfig
 from pipeline.errors import RunFolderError
 from pipeline.store.layout import OutputsLayout
-from pipeline.store.runs import (FamilyRecord, RunRecord, Skipped, discover,
-                                 member_trajectories, read_family, read_run)
+from pipeline.store.runs import (discover, FamilyRecord, member_trajectories, read_family,
+                                 read_run, RunRecord, Skipped)
 
 log = logging.getLogger(__name__)
 

@@ -23,8 +23,9 @@ from pipeline.loop.controller import QpCache
 from pipeline.loop.model import build_lateral_model, vehicle_key
 from pipeline.loop.scenario import build_scenario, family_members
 from pipeline.loop.simulate import simulate
-from pipeline.store.runs import (RunInfo, check, clean_leftovers, read_metrics_json,
-                                 write_family, write_run)
+from pipeline.store.files import clean_leftovers
+from pipeline.store.manifest import check
+from pipeline.store.runs import read_metrics_json, RunInfo, write_family, write_run
 
 log = logging.getLogger(__name__)
 

@@ -210,7 +210,7 @@ class RobustSlurmLauncherBase(SlurmLauncher):
         from hydra.core.utils import JobReturn, JobStatus, filter_overrides
 
         from pipeline.config import to_experiment_config
-        from pipeline.store.runs import check
+        from pipeline.store.manifest import check
 
         for offset, overrides in enumerate(job_overrides):
             idx = initial_job_idx + offset

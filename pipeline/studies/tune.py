@@ -47,7 +47,9 @@ from pipeline.analysis.tally import Tally
 from pipeline.config import CONF_DIR, schema_from_data
 from pipeline.errors import ConfigError, StudyError
 from pipeline.studies.results.tune import TuneResult, TuneSummary
-from pipeline.store.runs import (json_safe, read_family, untrust)
+from pipeline.store.files import json_safe
+from pipeline.store.manifest import untrust
+from pipeline.store.runs import read_family
 from pipeline.validation import choice, safe_name
 
 logger = logging.getLogger(__name__)
@@ -292,7 +294,7 @@ class Runner:
                          / cfg.config_hash())
 
     def run(self, jobs: list[FamilyJob], label: str) -> list[pd.DataFrame]:
-        from pipeline.store.runs import check
+        from pipeline.store.manifest import check
         from pipeline.studies.multiverse.runs import run_families
 
         todo, seen = [], set()

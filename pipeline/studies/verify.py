@@ -19,7 +19,8 @@ from pathlib import Path
 
 import pandas as pd
 
-from pipeline.store.runs import RunFolderError, discover, read_run, write_csv_atomic
+from pipeline.store.files import write_csv_atomic
+from pipeline.store.runs import discover, read_run, RunFolderError
 
 log = logging.getLogger(__name__)
 

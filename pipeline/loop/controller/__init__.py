@@ -19,6 +19,7 @@
 
 from __future__ import annotations
 
+from pipeline.loop.controller_settings import Backend, ControllerKind
 from pipeline.loop.kernels import Kernels
 from pipeline.loop.settings import LoopSettings
 from pipeline.loop.controller.base import ControlStep, Controller, Observation, PlanFallback
@@ -40,27 +41,29 @@ __all__ = ["ControlStep", "Controller", "Observation", "PlanFallback", "Kinemati
 def make_controller(cfg: LoopSettings, sample_time_s: float,
                     qp_cache: QpCache | None = None, kernels: Kernels | None = None
                     ) -> Controller:
-    """The controller ``cfg.controller._target_`` names (a user's class), else the built-in
-    named by ``cfg.controller.kind``, its QP taken from ``qp_cache``, its innermost arithmetic
-    run by ``kernels`` (CPython's when omitted)."""
-    kind = cfg.controller.kind
+    """The controller ``cfg.controller._target_`` names (a user's class, built with the flat
+    ``ControllerConfig``), else the built-in named by ``cfg.controller.kind``, built with the
+    settings of its kind (:meth:`ControllerConfig.settings
+    <pipeline.loop.settings.ControllerConfig.settings>`), its QP taken from ``qp_cache``, its
+    innermost arithmetic run by ``kernels`` (CPython's when omitted)."""
     if cfg.controller._target_:
         # a controller of your own: step(Observation) -> ControlStep (see base.Controller)
         from pipeline.validation import resolve_target
 
         cls = resolve_target("controller._target_", cfg.controller._target_)
         return cls(cfg.controller, cfg.vehicle, sample_time_s, qp_cache)
-    if kind == "kinematic_mpc":
-        if cfg.controller.backend == "nmpc":
+    settings = cfg.controller.settings()
+    if settings.kind is ControllerKind.KINEMATIC_MPC:
+        if settings.backend is Backend.NMPC:
             from pipeline.loop.controller.nmpc import KinematicNmpc
 
-            return KinematicNmpc(cfg.controller, cfg.vehicle, sample_time_s, qp_cache)
-        return KinematicLtvMpc(cfg.controller, cfg.vehicle, sample_time_s, qp_cache)
-    if cfg.controller.backend == "nmpc":
+            return KinematicNmpc(settings, cfg.vehicle, sample_time_s, qp_cache)
+        return KinematicLtvMpc(settings, cfg.vehicle, sample_time_s, qp_cache)
+    if settings.kind is ControllerKind.PURE_PURSUIT:
+        # (ControllerConfig refuses backend=nmpc with pure pursuit)
+        return PurePursuit(settings, cfg.vehicle, sample_time_s, cfg.model.speed_grid_mps)
+    if settings.backend is Backend.NMPC:
         from pipeline.loop.controller.lateral_nmpc import LateralNmpc
 
-        return LateralNmpc(cfg.controller, cfg.vehicle, cfg.model, sample_time_s, qp_cache,
-                           kernels)
-    if kind == "pure_pursuit":
-        return PurePursuit(cfg.controller, cfg.vehicle, sample_time_s, cfg.model.speed_grid_mps)
-    return LateralMpc(cfg.controller, cfg.vehicle, cfg.model, sample_time_s, qp_cache, kernels)
+        return LateralNmpc(settings, cfg.vehicle, cfg.model, sample_time_s, qp_cache, kernels)
+    return LateralMpc(settings, cfg.vehicle, cfg.model, sample_time_s, qp_cache, kernels)

@@ -26,7 +26,8 @@ from pipeline.loop.controller.references import (collision_halfplanes, force_hea
                                                  lateral_reference)
 from pipeline.loop.kernels import Kernels
 from pipeline.loop.model import LateralModel, LateralModelCache, model_speed_mps, vehicle_key
-from pipeline.loop.settings import ControllerConfig, ModelConfig, VehicleConfig
+from pipeline.loop.controller_settings import MpcSettings
+from pipeline.loop.settings import ModelConfig, VehicleConfig
 
 
 class ModelBank:
@@ -76,7 +77,7 @@ class FixedFrame:
     docstring). ``record`` holds the last step's frame for its prediction record: the line
     from the vehicle's projection on it, as a straight path, and the stations."""
 
-    def __init__(self, controller: ControllerConfig, vehicle: VehicleConfig, bank: ModelBank,
+    def __init__(self, controller: MpcSettings, vehicle: VehicleConfig, bank: ModelBank,
                  kernels: Kernels | None) -> None:
         self.cfg, self.vehicle, self.bank, self.kernels = controller, vehicle, bank, kernels
         self.horizon = controller.horizon
@@ -128,7 +129,7 @@ class PathFrame:
     its prediction record (the path, the stations, the prediction step); the last plan's
     poses are kept for the next step's stations (:meth:`after_step`)."""
 
-    def __init__(self, controller: ControllerConfig, vehicle: VehicleConfig, bank: ModelBank,
+    def __init__(self, controller: MpcSettings, vehicle: VehicleConfig, bank: ModelBank,
                  kernels: Kernels | None) -> None:
         from pipeline.loop.python_kernels import PYTHON_KERNELS
 
@@ -264,7 +265,7 @@ class PathFrame:
         self._plan_poses = poses
 
 
-def make_frame(controller: ControllerConfig, vehicle: VehicleConfig, bank: ModelBank,
+def make_frame(controller: MpcSettings, vehicle: VehicleConfig, bank: ModelBank,
                kernels: Kernels | None) -> FixedFrame | PathFrame:
     """The frame ``controller.frame`` names."""
     frame = PathFrame if controller.frame == "path" else FixedFrame

@@ -15,6 +15,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from pipeline.loop.controller_settings import KinematicMpcSettings, settings_of
 from pipeline.loop.settings import ControllerConfig, VehicleConfig
 from pipeline.loop.controller.base import ControlStep, Observation, PlanFallback
 from pipeline.loop.controller.lateral_qp import blocking_matrix
@@ -42,7 +43,8 @@ class KinematicQpStructure:
     steering_max_rad: float
 
     @classmethod
-    def of(cls, c: ControllerConfig, vehicle: VehicleConfig) -> "KinematicQpStructure":
+    def of(cls, c: KinematicMpcSettings | ControllerConfig,
+           vehicle: VehicleConfig) -> "KinematicQpStructure":
         return cls(c.horizon, c.control_horizon, c.max_obstacles, c.input_hold,
                    tuple(c.output_weights), tuple(c.input_weights), tuple(c.input_rate_weights),
                    (c.slack_weight_linear, c.slack_weight_quadratic),
@@ -91,6 +93,17 @@ def build_kinematic_problem(s: KinematicQpStructure) -> tuple[cp.Problem, list, 
     if not problem.is_dcp(dpp=True):
         raise RuntimeError("kinematic LTV-MPC is not DPP; it would recompile every step")
     return problem, [x0, u_prev, ref, c, *A, *B, Gx, Gy, h], {"X": X, "U": U}
+
+
+def kinematic_theta(x0: np.ndarray, u_prev: np.ndarray, reference: np.ndarray,
+                    offsets: np.ndarray, As: np.ndarray, Bs: np.ndarray, Gx: np.ndarray,
+                    Gy: np.ndarray, h: np.ndarray) -> np.ndarray:
+    """The LTV-QP's parameters stacked as ``theta`` (the order of
+    :func:`build_kinematic_problem`'s list, each column-major)."""
+    return np.concatenate(
+        [x0, u_prev, reference.ravel(order="F"), offsets.ravel(order="F")]
+        + [A.ravel(order="F") for A in As] + [B.ravel(order="F") for B in Bs]
+        + [Gx.ravel(order="F"), Gy.ravel(order="F"), h.ravel(order="F")])
 
 
 class KinematicTrack:
@@ -178,14 +191,17 @@ class KinematicLtvMpc(KinematicTrack):
 
     Parameters
     ----------
-    controller : ControllerConfig
+    controller : KinematicMpcSettings
+        Its settings (a ``ControllerConfig`` is read into them).
     vehicle : VehicleConfig
     sample_time_s : float
     qp_cache : QpCache, optional
     """
 
-    def __init__(self, controller: ControllerConfig, vehicle: VehicleConfig,
-                 sample_time_s: float, qp_cache: QpCache | None = None) -> None:
+    def __init__(self, controller: KinematicMpcSettings | ControllerConfig,
+                 vehicle: VehicleConfig, sample_time_s: float,
+                 qp_cache: QpCache | None = None) -> None:
+        controller = settings_of(controller, KinematicMpcSettings)
         self.cfg, self.vehicle, self.ts = controller, vehicle, float(sample_time_s)
         self.horizon = controller.horizon
         self.blocking = blocking_matrix(controller.horizon, controller.control_horizon,
@@ -227,6 +243,18 @@ class KinematicLtvMpc(KinematicTrack):
             offsets[:, k] = states[:, k + 1] - As[k] @ states[:, k] - Bs[k] @ plan[:, k]
         return states, As, Bs, offsets
 
+    def _accepted(self, plan: np.ndarray, solution, halfplanes: tuple, status: str,
+                  total_iters: int, total_time: float, log: dict) -> ControlStep:
+        """The step of a solved plan (kept for the fallback), with the slack it needs."""
+        Gx, Gy, h = halfplanes
+        self.fallback.accept(plan)
+        states = np.asarray(solution.values["X"], dtype=float)
+        # slack needed by the optimal plan (what the QP's slack variable holds)
+        needed = h - Gx * states[0, 1:][:, None] - Gy * states[1, 1:][:, None]
+        return ControlStep(plan[:, 0].copy(), plan, states, status, total_iters,
+                           total_time, "none", float(max(np.max(needed, initial=0.0), 0.0)),
+                           log)
+
     def solve(self, x0: np.ndarray, u_prev: np.ndarray, reference: np.ndarray,
               predicted_obstacles: np.ndarray, radii: np.ndarray,
               passes: int | None = None, log: dict | None = None) -> ControlStep:
@@ -256,11 +284,8 @@ class KinematicLtvMpc(KinematicTrack):
                 states, As, Bs, offsets = self._linearize(x0, plan)
                 Gx, Gy, h = kinematic_halfplanes(states, reference, predicted_obstacles, radii,
                                                  self.vehicle, self.cfg)
-                theta = np.concatenate(
-                    [x0, u_prev, reference.ravel(order="F"), offsets.ravel(order="F")]
-                    + [A.ravel(order="F") for A in As] + [B.ravel(order="F") for B in Bs]
-                    + [Gx.ravel(order="F"), Gy.ravel(order="F"), h.ravel(order="F")])
-                solution = self.qp.solve(theta)
+                solution = self.qp.solve(kinematic_theta(x0, u_prev, reference, offsets, As, Bs,
+                                                         Gx, Gy, h))
                 status = solution.status
                 total_iters += max(solution.iterations, 0)
                 total_time += solution.solve_time_s
@@ -276,13 +301,8 @@ class KinematicLtvMpc(KinematicTrack):
         log = {**(log or {}), "ltv_passes": done, "ltv_change": change}
         if solution is not None and solution.ok and status == solution.status \
                 and np.all(np.isfinite(plan)):
-            self.fallback.accept(plan)
-            states = np.asarray(solution.values["X"], dtype=float)
-            # slack needed by the optimal plan (what the QP's slack variable holds)
-            needed = h - Gx * states[0, 1:][:, None] - Gy * states[1, 1:][:, None]
-            return ControlStep(plan[:, 0].copy(), plan, states, status, total_iters,
-                               total_time, "none", float(max(np.max(needed, initial=0.0), 0.0)),
-                               log)
+            return self._accepted(plan, solution, (Gx, Gy, h), status, total_iters, total_time,
+                                  log)
         speed = x0[3] if np.isfinite(x0[3]) else 0.0
         a_lo, a_hi = self.cfg.accel_bounds_mps2
         return self.fallback.step(

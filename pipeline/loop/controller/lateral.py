@@ -31,6 +31,7 @@ from pipeline.loop.controller.prediction_check import PredictionRecord, predicti
 from pipeline.loop.controller.qp import QpCache, QpSolution, compiled_backend
 from pipeline.loop.kernels import Kernels
 from pipeline.loop.model import LateralModel, vehicle_key
+from pipeline.loop.controller_settings import MpcSettings, settings_of
 from pipeline.loop.settings import ControllerConfig, ModelConfig, VehicleConfig
 
 __all__ = ["LateralMpc", "LateralQpStructure", "MpcInputs", "blocking_matrix",
@@ -43,7 +44,8 @@ class LateralMpc:
 
     Parameters
     ----------
-    controller : ControllerConfig
+    controller : MpcSettings
+        Its settings (a ``ControllerConfig`` is read into them).
     vehicle : VehicleConfig
     model : ModelConfig
         The lateral model's settings (B2 entry, speed grid).
@@ -62,9 +64,10 @@ class LateralMpc:
         What each step predicted with (:meth:`model_check`).
     """
 
-    def __init__(self, controller: ControllerConfig, vehicle: VehicleConfig,
+    def __init__(self, controller: MpcSettings | ControllerConfig, vehicle: VehicleConfig,
                  model: ModelConfig | None = None, sample_time_s: float = 0.1,
                  qp_cache: QpCache | None = None, kernels: Kernels | None = None) -> None:
+        controller = settings_of(controller, MpcSettings)
         if kernels is None:
             from pipeline.loop.python_kernels import PYTHON_KERNELS
 

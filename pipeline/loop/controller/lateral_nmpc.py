@@ -25,7 +25,6 @@ default to, and the program is small (3 moves, 30 slacks).
 from __future__ import annotations
 
 import dataclasses
-import time
 from dataclasses import dataclass
 
 import numpy as np
@@ -33,10 +32,11 @@ import numpy as np
 from pipeline.loop.controller.base import ControlStep, Observation
 from pipeline.loop.controller.lateral import LateralMpc
 from pipeline.loop.controller.lateral_qp import LateralQpStructure, blocking_matrix
-from pipeline.loop.controller.nmpc import IPOPT_STATUS
+from pipeline.loop.controller.nmpc import ipopt_solve
 from pipeline.loop.controller.qp import QpCache
 from pipeline.loop.kernels import Kernels
 from pipeline.loop.model import single_track_constants
+from pipeline.loop.controller_settings import Backend, MpcSettings, settings_of
 from pipeline.loop.settings import ControllerConfig, ModelConfig, VehicleConfig
 
 
@@ -135,11 +135,12 @@ class LateralNmpc(LateralMpc):
         own, once).
     """
 
-    def __init__(self, controller: ControllerConfig, vehicle: VehicleConfig,
+    def __init__(self, controller: MpcSettings | ControllerConfig, vehicle: VehicleConfig,
                  model: ModelConfig | None = None, sample_time_s: float = 0.1,
                  qp_cache: QpCache | None = None, kernels: Kernels | None = None) -> None:
+        controller = settings_of(controller, MpcSettings)
         # the QP's data (models, path, references, half-planes) without a QP of its own
-        super().__init__(dataclasses.replace(controller, backend="daqp"), vehicle, model,
+        super().__init__(dataclasses.replace(controller, backend=Backend.DAQP), vehicle, model,
                          sample_time_s, qp_cache, kernels)
         self.cfg = controller
         structure = LateralQpStructure.of(controller, vehicle)
@@ -171,8 +172,6 @@ class LateralNmpc(LateralMpc):
     def step(self, obs: Observation) -> ControlStep:
         """One closed-loop step: the QP's data, then the nonlinear program on them."""
         inputs, log = self.inputs_from(obs)
-        N, Nc = self.horizon, self.nlp.n_moves
-        M = self.cfg.max_obstacles
         refs = np.vstack([inputs.y_ref_m, inputs.psi_ref_rad, inputs.yaw_rate_reference(),
                           inputs.steering_reference()])
         params = np.concatenate([obs.plant_state, [obs.speed_ref_mps, self.frame.record[-1]],
@@ -181,52 +180,61 @@ class LateralNmpc(LateralMpc):
                                  inputs.constraint_bound.ravel()])
         status, iterations, elapsed, values = "not_solved", -1, 0.0, None
         if np.all(np.isfinite(params)):
-            moves = np.concatenate([self._moves[1:], self._moves[-1:]]) \
-                if self._moves is not None else np.zeros(Nc)
-            start = np.concatenate([moves, np.zeros(N * M)])
-            start = np.clip(start, self.nlp.lbx, self.nlp.ubx)
-            began = time.perf_counter()
-            try:
-                result = self.nlp.solver(x0=start, p=params, lbx=self.nlp.lbx,
-                                         ubx=self.nlp.ubx, lbg=self.nlp.lbg,
-                                         ubg=self.nlp.ubg)
-                stats = self.nlp.solver.stats()
-                status = IPOPT_STATUS.get(stats.get("return_status", ""), "solver_error")
-                iterations = int(stats.get("iter_count", -1))
-                values = np.asarray(result["x"], dtype=float).ravel()
-            except RuntimeError:  # CasADi raises on evaluation errors (NaN in the NLP)
-                status = "error:RuntimeError"
-            elapsed = time.perf_counter() - began
-        step = None
+            status, iterations, elapsed, values = self._solve_nlp(params)
         if status in ("optimal", "optimal_inaccurate") and values is not None \
                 and np.all(np.isfinite(values)):
-            U = values[:Nc]
-            plan = (U @ self.blocking)[None, :]
-            self._moves = U
-            self.fallback.accept(plan)
-            predicted, lateral = (np.asarray(v, dtype=float) for v in
-                                  self.nlp.predict(U, params))
-            lateral = lateral.ravel()
-            gaps = inputs.constraint_bound - inputs.constraint_gain * lateral[1:, None]
-            states = np.zeros((5, N + 1))
-            states[0] = lateral
-            step = ControlStep(plan[:, 0].copy(), plan, states, status, iterations, elapsed,
-                               "none", float(max(np.max(gaps, initial=0.0), 0.0)), log)
-            plan_lateral = lateral
-            # the plan's poses, for the next step's stations (as the QP's plan gives them)
-            if self.frame.record[0] == "path":
-                self.frame.plan_poses((predicted[:2].T, predicted[2] + np.arctan2(
-                    predicted[4], np.maximum(predicted[3], 0.1))))
+            step, plan_lateral = self._accepted(values, params, inputs, status, iterations,
+                                                elapsed, log)
         else:
-            self._moves = None
-            delta = obs.plant_state[6] if np.isfinite(obs.plant_state[6]) else 0.0
-            rate_max = self.vehicle.steering_rate_max_rad_s
-            step = self.fallback.step(
-                status, iterations, elapsed,
-                lambda: np.array([float(np.clip(-delta / self.sample_time_s, -rate_max,
-                                                rate_max))]), log)
-            plan_lateral = None
-            if self.frame.record[0] == "path":
-                self.frame.plan_poses(None)
+            step, plan_lateral = self._fell_back(obs, status, iterations, elapsed, log)
         self.keep_record(inputs, plan_lateral)
         return step
+
+    def _solve_nlp(self, params: np.ndarray) -> tuple[str, int, float, np.ndarray | None]:
+        """IPOPT on the NLP at ``params``, warm-started from the last moves (shifted)
+        (:func:`~pipeline.loop.controller.nmpc.ipopt_solve`)."""
+        N, Nc = self.horizon, self.nlp.n_moves
+        M = self.cfg.max_obstacles
+        moves = np.concatenate([self._moves[1:], self._moves[-1:]]) \
+            if self._moves is not None else np.zeros(Nc)
+        start = np.concatenate([moves, np.zeros(N * M)])
+        start = np.clip(start, self.nlp.lbx, self.nlp.ubx)
+        return ipopt_solve(self.nlp.solver, x0=start, p=params, lbx=self.nlp.lbx,
+                           ubx=self.nlp.ubx, lbg=self.nlp.lbg, ubg=self.nlp.ubg)
+
+    def _accepted(self, values: np.ndarray, params: np.ndarray, inputs, status: str,
+                  iterations: int, elapsed: float, log: dict) -> tuple[ControlStep, np.ndarray]:
+        """The step of a solved NLP (its moves kept for the next start and the fallback), and
+        the plan's lateral error at its steps."""
+        N, Nc = self.horizon, self.nlp.n_moves
+        U = values[:Nc]
+        plan = (U @ self.blocking)[None, :]
+        self._moves = U
+        self.fallback.accept(plan)
+        predicted, lateral = (np.asarray(v, dtype=float) for v in
+                              self.nlp.predict(U, params))
+        lateral = lateral.ravel()
+        gaps = inputs.constraint_bound - inputs.constraint_gain * lateral[1:, None]
+        states = np.zeros((5, N + 1))
+        states[0] = lateral
+        step = ControlStep(plan[:, 0].copy(), plan, states, status, iterations, elapsed,
+                           "none", float(max(np.max(gaps, initial=0.0), 0.0)), log)
+        # the plan's poses, for the next step's stations (as the QP's plan gives them)
+        if self.frame.record[0] == "path":
+            self.frame.plan_poses((predicted[:2].T, predicted[2] + np.arctan2(
+                predicted[4], np.maximum(predicted[3], 0.1))))
+        return step, lateral
+
+    def _fell_back(self, obs: Observation, status: str, iterations: int, elapsed: float,
+                   log: dict) -> tuple[ControlStep, None]:
+        """The fallback's step (steering back toward straight at the rate limit), no plan."""
+        self._moves = None
+        delta = obs.plant_state[6] if np.isfinite(obs.plant_state[6]) else 0.0
+        rate_max = self.vehicle.steering_rate_max_rad_s
+        step = self.fallback.step(
+            status, iterations, elapsed,
+            lambda: np.array([float(np.clip(-delta / self.sample_time_s, -rate_max,
+                                            rate_max))]), log)
+        if self.frame.record[0] == "path":
+            self.frame.plan_poses(None)
+        return step, None

@@ -38,6 +38,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from pipeline.loop.model import LateralModel
+from pipeline.loop.controller_settings import MpcSettings
 from pipeline.loop.settings import ControllerConfig, VehicleConfig
 
 if TYPE_CHECKING:
@@ -83,7 +84,8 @@ class LateralQpStructure:
     formulation: str = "sparse"
 
     @classmethod
-    def of(cls, controller: ControllerConfig, vehicle: VehicleConfig) -> "LateralQpStructure":
+    def of(cls, controller: MpcSettings | ControllerConfig,
+           vehicle: VehicleConfig) -> "LateralQpStructure":
         c = controller
         return cls(c.horizon, c.control_horizon, c.max_obstacles, c.input_hold,
                    (c.q_lateral, c.q_heading, c.q_yaw_rate, c.q_steering, c.r_steering_rate,

@@ -33,6 +33,7 @@ from pipeline.loop.controller.kinematic import KinematicQpStructure, KinematicTr
 from pipeline.loop.controller.lateral_qp import blocking_matrix
 from pipeline.loop.controller.qp import QpCache
 from pipeline.loop.controller.references import kinematic_halfplanes
+from pipeline.loop.controller_settings import KinematicMpcSettings, settings_of
 from pipeline.loop.settings import ControllerConfig, VehicleConfig
 
 #: IPOPT's return status mapped to the status words the log uses (CVXPY's).
@@ -40,6 +41,24 @@ IPOPT_STATUS = {"Solve_Succeeded": "optimal", "Solved_To_Acceptable_Level": "opt
                 "Infeasible_Problem_Detected": "infeasible",
                 "Maximum_Iterations_Exceeded": "user_limit",
                 "Maximum_CpuTime_Exceeded": "user_limit"}
+
+
+def ipopt_solve(solver, **arguments) -> tuple[str, int, float, np.ndarray | None]:
+    """A CasADi IPOPT ``solver`` called on ``arguments``: its status (:data:`IPOPT_STATUS`),
+    iterations, wall time and solution vector (None, with status ``error:RuntimeError``, where
+    CasADi raised on an evaluation error)."""
+    status, iterations, values = "not_solved", -1, None
+    began = time.perf_counter()
+    try:
+        result = solver(**arguments)
+        stats = solver.stats()
+        status = IPOPT_STATUS.get(stats.get("return_status", ""), "solver_error")
+        iterations = int(stats.get("iter_count", -1))
+        values = np.asarray(result["x"], dtype=float).ravel()
+    except RuntimeError:  # CasADi raises on evaluation errors (NaN in the NLP)
+        status = "error:RuntimeError"
+    elapsed = time.perf_counter() - began
+    return status, iterations, elapsed, values
 
 
 @dataclass(frozen=True)
@@ -115,7 +134,8 @@ class KinematicNmpc(KinematicTrack):
 
     Parameters
     ----------
-    controller : ControllerConfig
+    controller : KinematicMpcSettings
+        Its settings (a ``ControllerConfig`` is read into them).
     vehicle : VehicleConfig
     sample_time_s : float
     qp_cache : QpCache, optional
@@ -123,8 +143,10 @@ class KinematicNmpc(KinematicTrack):
         worker processes: each worker builds its own, once).
     """
 
-    def __init__(self, controller: ControllerConfig, vehicle: VehicleConfig,
-                 sample_time_s: float, qp_cache: QpCache | None = None) -> None:
+    def __init__(self, controller: KinematicMpcSettings | ControllerConfig,
+                 vehicle: VehicleConfig, sample_time_s: float,
+                 qp_cache: QpCache | None = None) -> None:
+        controller = settings_of(controller, KinematicMpcSettings)
         self.cfg, self.vehicle, self.ts = controller, vehicle, float(sample_time_s)
         self.horizon = controller.horizon
         self.structure = KinematicQpStructure.of(controller, vehicle)
@@ -168,18 +190,10 @@ class KinematicNmpc(KinematicTrack):
             moves = guess_plan[:, :Nc]
             start = np.concatenate([moves.ravel(order="F"), np.zeros(N * M)])
             start = np.clip(start, self.problem.lbx, self.problem.ubx)
-            began = time.perf_counter()
-            try:
-                result = self.problem.solver(
-                    x0=start, p=self.parameters(x0, u_prev, reference, halfplanes),
-                    lbx=self.problem.lbx, ubx=self.problem.ubx, lbg=0.0, ubg=np.inf)
-                stats = self.problem.solver.stats()
-                status = IPOPT_STATUS.get(stats.get("return_status", ""), "solver_error")
-                iterations = int(stats.get("iter_count", -1))
-                values = np.asarray(result["x"], dtype=float).ravel()
-            except RuntimeError:  # CasADi raises on evaluation errors (NaN in the NLP)
-                status = "error:RuntimeError"
-            elapsed = time.perf_counter() - began
+            status, iterations, elapsed, values = ipopt_solve(
+                self.problem.solver, x0=start,
+                p=self.parameters(x0, u_prev, reference, halfplanes), lbx=self.problem.lbx,
+                ubx=self.problem.ubx, lbg=0.0, ubg=np.inf)
         log = {**(log or {}), "ltv_passes": 0, "ltv_change": float("nan")}
         if status in ("optimal", "optimal_inaccurate") and values is not None \
                 and np.all(np.isfinite(values)):

@@ -176,19 +176,27 @@ def prediction_check(records: list, time_s: np.ndarray, plant: np.ndarray,
     xy = np.ascontiguousarray(plant[:, :2]) if compiled else plant[:, :2].tolist()
     psi = np.ascontiguousarray(plant[:, 2]) if compiled else plant[:, 2].tolist()
     delta = np.ascontiguousarray(plant[:, 3]) if compiled else plant[:, 3].tolist()
-    empty = np.zeros(0)
     for k, record in enumerate(records[:rows]):
         last = min(rows - 1, k + one)
-        path = record.path(max(one, record.disturbance_rad_s.shape[0]))
-        model = record.model
-        plan = record.plan_lateral_m if record.plan_lateral_m is not None else empty
-        arrays = (path.points_m, path.headings_rad, path.curvature_1_per_m,
-                  record.stations_m, record.x0, model.Ad, np.ascontiguousarray(model.Bd[:, 0]),
-                  np.ascontiguousarray(model.Ed[:, 0]), plan)
-        if not compiled:
-            arrays = tuple(a.tolist() for a in arrays)
+        path, arrays = _record_arrays(record, one, compiled)
         points, headings, curvature, stations, x0, Ad, Bd, Ed, plan = arrays
         out[k] = check(points, headings, curvature, path.ds_m, path.n_intervals, stations,
                        record.step_s, x0, Ad, Bd, Ed, plan, xy, psi, delta, k, last, half, one,
                        sample_time_s)
     return {name: out[:, i] for i, name in enumerate(MODEL_CHECK_COLUMNS)}
+
+
+def _record_arrays(record: PredictionRecord, one: int, compiled: bool) -> tuple:
+    """A record's path (long enough for ``one`` sample ahead) and the arrays
+    :func:`check_record_arrays` reads of it (lists for CPython, arrays for the kernel): the
+    path's points, headings and curvature, the model's stations, the state, ``Ad``, ``Bd``,
+    ``Ed`` and the plan's lateral error (empty when it fell back)."""
+    path = record.path(max(one, record.disturbance_rad_s.shape[0]))
+    model = record.model
+    plan = record.plan_lateral_m if record.plan_lateral_m is not None else np.zeros(0)
+    arrays = (path.points_m, path.headings_rad, path.curvature_1_per_m,
+              record.stations_m, record.x0, model.Ad, np.ascontiguousarray(model.Bd[:, 0]),
+              np.ascontiguousarray(model.Ed[:, 0]), plan)
+    if not compiled:
+        arrays = tuple(a.tolist() for a in arrays)
+    return path, arrays

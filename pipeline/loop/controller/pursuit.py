@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from pipeline.loop.controller_settings import PurePursuitSettings, settings_of
 from pipeline.loop.settings import ControllerConfig, VehicleConfig
 from pipeline.loop.controller.base import ControlStep, Observation
 from pipeline.loop.controller.references import lateral_reference
@@ -12,7 +13,8 @@ from pipeline.loop.model import model_speed_mps
 
 def pure_pursuit_steering_rate(path_line_m: np.ndarray, position_line_m: np.ndarray,
                                heading_line_rad: float, steering_rad: float, speed_mps: float,
-                               vehicle: VehicleConfig, controller: ControllerConfig,
+                               vehicle: VehicleConfig,
+                               controller: PurePursuitSettings | ControllerConfig,
                                sample_time_s: float) -> float:
     """Pure pursuit of the APF path: steering rate toward the pursuit angle.
 
@@ -48,7 +50,8 @@ class PurePursuit:
 
     Parameters
     ----------
-    controller : ControllerConfig
+    controller : PurePursuitSettings
+        Its settings (a ``ControllerConfig`` is read into them).
     vehicle : VehicleConfig
     sample_time_s : float
     """
@@ -56,8 +59,10 @@ class PurePursuit:
     compile_count = 0
     compile_time_s = 0.0
 
-    def __init__(self, controller: ControllerConfig, vehicle: VehicleConfig,
-                 sample_time_s: float, speed_grid_mps: float = 0.1) -> None:
+    def __init__(self, controller: PurePursuitSettings | ControllerConfig,
+                 vehicle: VehicleConfig, sample_time_s: float,
+                 speed_grid_mps: float = 0.1) -> None:
+        controller = settings_of(controller, PurePursuitSettings)
         self.cfg, self.vehicle, self.ts = controller, vehicle, float(sample_time_s)
         self.speed_grid_mps = speed_grid_mps
         self._steps_ahead_s = np.arange(1, controller.horizon + 1) * self.ts

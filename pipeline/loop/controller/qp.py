@@ -175,22 +175,49 @@ def compile_affine_map(problem: cp.Problem, parameters: list, variables: dict,
     AffineQpMap
     """
     import cvxpy as cp
-    from cvxpy.cvxcore.python.canonInterface import reduce_problem_data_tensor
-    from cvxpy.lin_ops.lin_op import CONSTANT_ID
 
     start = time.perf_counter()
-    from cvxpy.reductions.dcp2cone.cone_matrix_stuffing import ConeMatrixStuffing
-
     data, chain, inverse = problem.get_problem_data(cp.CLARABEL)
     prog = data["param_prob"]
+    columns, const_col = _parameter_columns(prog, parameters)
+    n = prog.x.size
+    maps, offset, n_a, m, indices, indptr = _constraint_map(prog, n, columns, const_col)
+    P = _constant_quadratic(prog, n, columns, const_col)
+    dims = data["dims"]
+    qp_map = AffineQpMap(
+        P=P, offset=offset, maps=maps, n_q=n, n_a=n_a,
+        A_indices=np.asarray(indices[:n_a], dtype=np.int64),
+        A_indptr=np.asarray(indptr, dtype=np.int64)[:n + 1].copy(), A_shape=(m, n),
+        cone_dims={"zero": int(dims.zero), "nonneg": int(dims.nonneg),
+                   "soc": [int(d) for d in dims.soc]},
+        variables=_variable_offsets(chain, inverse, variables),
+        n_theta=int(columns.size), compile_time_s=0.0)
+    if int(dims.exp) or list(dims.psd) or list(dims.p3d) or list(dims.pnd):
+        raise RuntimeError("the direct backend handles zero, nonnegative and SOC cones only")
+    if check:
+        _check_map(qp_map, prog, parameters)
+    qp_map.compile_time_s = time.perf_counter() - start
+    return qp_map
+
+
+def _parameter_columns(prog, parameters: list) -> tuple[np.ndarray, int]:
+    """The tensors' columns of ``parameters`` (in the caller's order) and of the constant;
+    ``RuntimeError`` for variable bounds or a parameter list that is not the problem's."""
+    from cvxpy.lin_ops.lin_op import CONSTANT_ID
+
     if getattr(prog, "lb_tensor", None) is not None or getattr(prog, "ub_tensor", None) is not None:
         raise RuntimeError("variable bounds are not supported by the direct backend")
-    n = prog.x.size
     known = {p.id for p in parameters}
     if known != {pid for pid in prog.param_id_to_col if pid != CONSTANT_ID}:
         raise RuntimeError("the parameter list does not match the problem's parameters")
-    columns = _column_ranges(prog, parameters)
-    const_col = prog.param_id_to_col[CONSTANT_ID]
+    return _column_ranges(prog, parameters), prog.param_id_to_col[CONSTANT_ID]
+
+
+def _constraint_map(prog, n: int, columns: np.ndarray, const_col: int):
+    """``q``, ``A``'s nonzero values and ``b`` as one affine map of ``theta`` (``maps`` and
+    ``offset``), with ``A``'s sparsity (``m`` rows, ``n_a`` entries, ``indices``, ``indptr``)."""
+    from cvxpy.cvxcore.python.canonInterface import reduce_problem_data_tensor
+
     # constraints: flat (m x (n + 1)) data, column-major, rows that can ever be nonzero
     reduced, indices, indptr, shape = reduce_problem_data_tensor(sp.csc_matrix(prog.A), n)
     reduced = sp.csr_matrix(reduced)
@@ -206,30 +233,28 @@ def compile_affine_map(problem: cp.Problem, parameters: list, variables: dict,
     stacked = sp.vstack([q_tensor, -A_rows, scatter_b @ b_rows]).tocsc()
     maps = sp.csr_matrix(stacked[:, columns])
     offset = np.asarray(stacked[:, [const_col]].todense()).ravel()
+    return maps, offset, n_a, m, indices, indptr
+
+
+def _constant_quadratic(prog, n: int, columns: np.ndarray, const_col: int) -> sp.csc_matrix:
+    """The objective's ``P`` (upper triangle); ``RuntimeError`` where it depends on
+    ``theta``."""
     P_tensor = sp.csc_matrix(prog.P)
     if P_tensor.nnz and np.any(np.abs(P_tensor[:, columns]).sum() > 0):
         raise RuntimeError("the direct backend needs a constant quadratic objective")
     P_full = np.asarray(P_tensor[:, [const_col]].todense()).reshape((n, n), order="F")
-    P = sp.triu(sp.csc_matrix(P_full)).tocsc()
-    # the variable offsets in the solver's vector are those of the matrix-stuffing step
+    return sp.triu(sp.csc_matrix(P_full)).tocsc()
+
+
+def _variable_offsets(chain, inverse, variables: dict) -> dict:
+    """Each variable's offset in the solver's vector and its shape: those of the
+    matrix-stuffing step."""
+    from cvxpy.reductions.dcp2cone.cone_matrix_stuffing import ConeMatrixStuffing
+
     stuffing = next(inv for reduction, inv in zip(chain.reductions, inverse)
                     if isinstance(reduction, ConeMatrixStuffing))
-    dims = data["dims"]
-    qp_map = AffineQpMap(
-        P=P, offset=offset, maps=maps, n_q=n, n_a=n_a,
-        A_indices=np.asarray(indices[:n_a], dtype=np.int64),
-        A_indptr=np.asarray(indptr, dtype=np.int64)[:n + 1].copy(), A_shape=(m, n),
-        cone_dims={"zero": int(dims.zero), "nonneg": int(dims.nonneg),
-                   "soc": [int(d) for d in dims.soc]},
-        variables={name: (int(stuffing.var_offsets[v.id]), tuple(v.shape))
-                   for name, v in variables.items()},
-        n_theta=int(columns.size), compile_time_s=0.0)
-    if int(dims.exp) or list(dims.psd) or list(dims.p3d) or list(dims.pnd):
-        raise RuntimeError("the direct backend handles zero, nonnegative and SOC cones only")
-    if check:
-        _check_map(qp_map, prog, parameters)
-    qp_map.compile_time_s = time.perf_counter() - start
-    return qp_map
+    return {name: (int(stuffing.var_offsets[v.id]), tuple(v.shape))
+            for name, v in variables.items()}
 
 
 def _check_map(qp_map: AffineQpMap, prog, parameters: list) -> None:

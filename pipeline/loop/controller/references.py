@@ -8,13 +8,16 @@ from math import hypot, sqrt, tan
 import numpy as np
 
 from pipeline.loop.kernels import Kernels
+from pipeline.loop.controller_settings import (KinematicMpcSettings, MpcSettings,
+                                               PurePursuitSettings)
 from pipeline.loop.settings import ControllerConfig, VehicleConfig
 
 _NORMAL_EPS_M = 1e-6
 
 
 def lateral_reference(path_line_m: np.ndarray, stations_m: np.ndarray,
-                      controller: ControllerConfig, kernels: Kernels | None = None
+                      controller: MpcSettings | PurePursuitSettings | ControllerConfig,
+                      kernels: Kernels | None = None
                       ) -> tuple[np.ndarray, np.ndarray]:
     """Lateral and heading references at the MPC's predicted stations.
 
@@ -96,7 +99,7 @@ def reference_arrays(path_line_m, stations_m, max_slope: float, extend: bool):
 
 def force_heading_reference(total_force_line: np.ndarray, heading_line_rad: float,
                             n_steps: int, sample_time_s: float,
-                            controller: ControllerConfig) -> np.ndarray:
+                            controller: MpcSettings | ControllerConfig) -> np.ndarray:
     """Heading reference of Section 3.1: ramp toward ``psi_apf = atan2(F_y, F_x)`` at the
     saturated rate ``omega_ref = sat((psi_apf - theta)/Ts)``."""
     psi_apf = np.arctan2(total_force_line[1], total_force_line[0])
@@ -123,7 +126,7 @@ def radial_normals(points_m: np.ndarray, centres_m: np.ndarray,
 
 def collision_halfplanes(stations_m: np.ndarray, y_ref_m: np.ndarray, vehicle_line_m: np.ndarray,
                          predicted_obstacles_line_m: np.ndarray, radii_m: np.ndarray,
-                         vehicle: VehicleConfig, controller: ControllerConfig
+                         vehicle: VehicleConfig, controller: MpcSettings | ControllerConfig
                          ) -> tuple[np.ndarray, np.ndarray]:
     """Soft half-plane data ``G y_k + s >= h`` of the lateral MPC, per horizon step and obstacle.
 
@@ -160,35 +163,49 @@ def collision_halfplanes(stations_m: np.ndarray, y_ref_m: np.ndarray, vehicle_li
             continue
         reach = float(radii_m[j]) + vehicle.footprint_radius_m + controller.safety_margin_m
         fallback_side = 1.0 if vy > cy else (-1.0 if vy < cy else 1.0)
-        if controller.halfplane_normal == "lateral_side":
-            # ten stations: plain floats (the same arithmetic as the vectorized statement)
-            gains, bounds = [], []
-            reach_sq = reach * reach
-            for station, y_ref, (ox, oy) in zip(stations_m.tolist(), y_ref_m.tolist(),
-                                                predicted_obstacles_line_m[:, j, :].tolist()):
-                dx = station - ox
-                if not abs(dx) < reach:
-                    gains.append(0.0)
-                    bounds.append(0.0)
-                    continue
-                above = y_ref - oy
-                side = 1.0 if above > 0 else (-1.0 if above < 0 else
-                                              (fallback_side if above == 0 else above))
-                gains.append(side)
-                bounds.append(side * oy + sqrt(max(reach_sq - dx * dx, 0.0)))
-            G[:, j], h[:, j] = gains, bounds
-            continue
-        obstacle = predicted_obstacles_line_m[:, j, :]
-        ref = np.stack([stations_m, y_ref_m], axis=1)
-        normal = radial_normals(ref, obstacle, np.array([0.0, fallback_side])[None, :])
-        G[:, j] = normal[:, 1]
-        h[:, j] = reach - normal[:, 0] * (stations_m - obstacle[:, 0]) + normal[:, 1] * obstacle[:, 1]
+        rows = _lateral_side_rows if controller.halfplane_normal == "lateral_side" \
+            else _radial_rows
+        G[:, j], h[:, j] = rows(stations_m, y_ref_m, predicted_obstacles_line_m[:, j, :], reach,
+                                fallback_side)
     return G, h
+
+
+def _lateral_side_rows(stations_m: np.ndarray, y_ref_m: np.ndarray, obstacle: np.ndarray,
+                       reach: float, fallback_side: float) -> tuple[list, list]:
+    """One obstacle's ``G, h`` columns of :func:`collision_halfplanes` with
+    ``halfplane_normal = lateral_side`` (``obstacle``: its centres at the stations, (N, 2))."""
+    # ten stations: plain floats (the same arithmetic as the vectorized statement)
+    gains, bounds = [], []
+    reach_sq = reach * reach
+    for station, y_ref, (ox, oy) in zip(stations_m.tolist(), y_ref_m.tolist(),
+                                        obstacle.tolist()):
+        dx = station - ox
+        if not abs(dx) < reach:
+            gains.append(0.0)
+            bounds.append(0.0)
+            continue
+        above = y_ref - oy
+        side = 1.0 if above > 0 else (-1.0 if above < 0 else
+                                      (fallback_side if above == 0 else above))
+        gains.append(side)
+        bounds.append(side * oy + sqrt(max(reach_sq - dx * dx, 0.0)))
+    return gains, bounds
+
+
+def _radial_rows(stations_m: np.ndarray, y_ref_m: np.ndarray, obstacle: np.ndarray,
+                 reach: float, fallback_side: float) -> tuple[np.ndarray, np.ndarray]:
+    """One obstacle's ``G, h`` columns of :func:`collision_halfplanes` with
+    ``halfplane_normal = radial``."""
+    ref = np.stack([stations_m, y_ref_m], axis=1)
+    normal = radial_normals(ref, obstacle, np.array([0.0, fallback_side])[None, :])
+    bound = reach - normal[:, 0] * (stations_m - obstacle[:, 0]) + normal[:, 1] * obstacle[:, 1]
+    return normal[:, 1], bound
 
 
 def kinematic_halfplanes(predicted_states: np.ndarray, reference_m: np.ndarray,
                          predicted_obstacles_m: np.ndarray, radii_m: np.ndarray,
-                         vehicle: VehicleConfig, controller: ControllerConfig
+                         vehicle: VehicleConfig,
+                         controller: KinematicMpcSettings | ControllerConfig
                          ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Soft half-planes ``nx x_k + ny y_k + s >= h`` of the kinematic LTV-MPC (global frame).
 

@@ -14,8 +14,8 @@ import pandas as pd
 
 from pipeline.config import MetricsConfig
 from pipeline.errors import IncompleteSweepError
-from pipeline.store.runs import (check, check_derived_table, member_trajectories, read_family,
-                                 write_derived_table)
+from pipeline.store.manifest import check, check_derived_table, write_derived_table
+from pipeline.store.runs import member_trajectories, read_family
 from pipeline.studies.multiverse.design import family_config, qp_backend, simulation_key
 from pipeline.studies.multiverse.space import METHODS, Space
 

@@ -9,8 +9,8 @@ from typing import Any
 
 import pandas as pd
 
-from pipeline.store.runs import (check, json_safe, untrust, write_csv_atomic,
-                                 write_json_atomic, write_manifest)
+from pipeline.store.files import json_safe, write_csv_atomic, write_json_atomic
+from pipeline.store.manifest import check, untrust, write_manifest
 from pipeline.studies.results.base import ResultError, read_json
 
 TABLE = "agreement.csv"

@@ -14,8 +14,8 @@ from pathlib import Path
 
 import pandas as pd
 
-from pipeline.store.runs import (check_derived_table, write_csv_atomic, write_derived_table,
-                                 write_json_atomic)
+from pipeline.store.files import write_csv_atomic, write_json_atomic
+from pipeline.store.manifest import check_derived_table, write_derived_table
 from pipeline.studies.results.base import ResultError, read_json
 from pipeline.studies.sweep_jobs import Job, find_jobs, job_sources
 

@@ -1,0 +1,32 @@
+"""Claims stage: the paper's claims mapped to metrics, and four-outcome verdicts on given runs.
+
+Each claim names one primary metric (the outcome is taken on it) and secondary metrics shown
+beside it; C0 (safety: collisions) comes first. Over a scenario family a claim is judged on the
+paired differences ``d = improved - comparison`` (``d < 0`` is the claimed improvement) as
+*supported*, *contradicted*, *equivalent* or *inconclusive* (:data:`OUTCOME_RULE`); on the single
+paper scenario the words are *better*, *worse* or *within margin*. Statistics come from
+``scipy.stats``: the paired bootstrap interval (``bootstrap``, BCa where defined), the Wilcoxon
+signed-rank or sign test (``wilcoxon``, ``binomtest``), McNemar's exact test on discordant
+collision pairs (``binomtest``); Holm's adjustment over the six claims is written out (SciPy has
+none).
+"""
+
+# The code is in modules of one concern: catalogue, statistics, ledger.
+from pipeline.analysis.claims.catalogue import (Claim, CLAIMS, SAFETY, ALL_CLAIMS, Outcome,
+                                                OUTCOMES, OUTCOME_RULE, SINGLE_RULE)
+from pipeline.analysis.claims.statistics import (hodges_lehmann, hodges_lehmann_on,
+                                                 bootstrap_interval, probability_of_improvement,
+                                                 paired_test, WILCOXON_ENUMERATED_MAX_PAIRS,
+                                                 wilcoxon_pratt_pvalue, holm, decide,
+                                                 newcombe_paired_interval, PAIRS,
+                                                 paired_differences, PairedResult, compare, judge)
+from pipeline.analysis.claims.ledger import (single_scenario_outcome, claims_table, LEDGER_COLUMNS,
+                                             LedgerRow, Ledger, family_ledger, outcome_counts)
+
+__all__ = ["Claim", "CLAIMS", "SAFETY", "ALL_CLAIMS", "Outcome", "OUTCOMES", "OUTCOME_RULE",
+           "SINGLE_RULE", "hodges_lehmann", "hodges_lehmann_on", "bootstrap_interval",
+           "probability_of_improvement", "paired_test", "WILCOXON_ENUMERATED_MAX_PAIRS",
+           "wilcoxon_pratt_pvalue", "holm", "decide", "newcombe_paired_interval", "PAIRS",
+           "paired_differences", "PairedResult", "compare", "judge", "single_scenario_outcome",
+           "claims_table", "LEDGER_COLUMNS", "LedgerRow", "Ledger", "family_ledger",
+           "outcome_counts"]

@@ -1,0 +1,215 @@
+"""The claims ledger: every claim against every comparison over a family
+(:func:`family_ledger` -> :class:`Ledger` of :class:`LedgerRow`), the single paper scenario's
+table (:func:`claims_table`, :data:`pipeline.analysis.claims.catalogue.SINGLE_RULE`) and the
+outcome counts per method (:func:`outcome_counts`)."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+import pandas as pd
+
+from pipeline.analysis.claims.catalogue import ALL_CLAIMS, Claim, Outcome
+from pipeline.analysis.claims.statistics import PairedResult, compare, holm, judge
+from pipeline.analysis.tally import Tally
+
+
+def _value(metrics: dict, key: str) -> float:
+    value = metrics.get(key)
+    if isinstance(value, (bool, np.bool_)):
+        return float(value)
+    return float(value) if value is not None else math.nan
+
+
+def single_scenario_outcome(claim: Claim, comparison: dict, improved: dict,
+                            margin: float) -> str:
+    """Outcome of one claim on one scenario (see :data:`SINGLE_RULE`)."""
+    b, i = _value(comparison, claim.primary_metric), _value(improved, claim.primary_metric)
+    if math.isnan(b) or math.isnan(i):
+        return "missing"
+    d = (i - b) if claim.lower_is_better else (b - i)
+    if d <= -margin and d < 0:
+        return "better"
+    if d >= margin and d > 0:
+        return "worse"
+    return "within margin"
+
+
+def claims_table(metrics_by_method: dict[str, dict], margins: dict[str, float],
+                 comparisons: tuple[str, ...] = ("baseline", "baseline_matched"),
+                 improved: str = "improved") -> list[dict]:
+    """One row per claim on one scenario: primary metric per method, outcome per comparison."""
+    rows = []
+    for claim in ALL_CLAIMS:
+        row = {"claim": claim.claim_id, "paper says": claim.text,
+               "metric": claim.primary_metric,
+               "better": "lower" if claim.lower_is_better else "higher",
+               "margin": margins[claim.claim_id]}
+        for method, metrics in metrics_by_method.items():
+            row[method] = metrics.get(claim.primary_metric)
+        for comparison in comparisons:
+            if comparison in metrics_by_method and improved in metrics_by_method:
+                row[f"vs {comparison}"] = single_scenario_outcome(
+                    claim, metrics_by_method[comparison], metrics_by_method[improved],
+                    margins[claim.claim_id])
+        rows.append(row)
+    return rows
+
+
+LEDGER_COLUMNS = ["claim", "comparison", "metric", "outcome", "estimate", "ci_low", "ci_high",
+                  "p_value", "p_holm", "prob_improvement", "pi_low", "pi_high", "n_better",
+                  "n_tied", "n_worse", "n_missing", "n_pairs", "margin", "note",
+                  "outcome_all_pairs", "estimate_all_pairs", "paper_scenario"]
+
+
+@dataclass(frozen=True)
+class LedgerRow:
+    """The verdict on one claim against one comparison."""
+
+    claim: Claim
+    comparison: str
+    outcome: Outcome
+    result: PairedResult
+    p_holm: float
+    margin: float
+    note: str
+    margin_reason: str
+    outcome_all_pairs: Outcome | None = None
+    estimate_all_pairs: float | None = None
+    paper_scenario: str | None = None
+
+    @property
+    def claim_id(self) -> str:
+        return self.claim.claim_id
+
+    @property
+    def key(self) -> tuple[str, str]:
+        return (self.claim.claim_id, self.comparison)
+
+    def to_dict(self) -> dict:
+        """The row as the ledger table writes it (:data:`LEDGER_COLUMNS` and more)."""
+        r = self.result
+        return {"claim": self.claim.claim_id, "comparison": self.comparison,
+                "metric": self.claim.primary_metric, "outcome": str(self.outcome),
+                "n_pairs": r.n_pairs, "n_missing": r.n_missing, "n_better": r.n_better,
+                "n_tied": r.n_tied, "n_worse": r.n_worse, "estimate": r.estimate,
+                "ci_low": r.ci_low, "ci_high": r.ci_high, "interval_method": r.interval_method,
+                "p_value": r.p_value, "prob_improvement": r.prob_improvement,
+                "pi_low": r.pi_low, "pi_high": r.pi_high, "p_holm": self.p_holm,
+                "margin": self.margin, "note": self.note, "margin_reason": self.margin_reason,
+                "paper says": self.claim.text,
+                "outcome_all_pairs": None if self.outcome_all_pairs is None
+                else str(self.outcome_all_pairs),
+                "estimate_all_pairs": self.estimate_all_pairs,
+                "paper_scenario": self.paper_scenario}
+
+
+@dataclass(frozen=True)
+class Ledger:
+    """Verdicts on every claim against every comparison, keyed by ``(claim_id, comparison)``."""
+
+    rows: tuple[LedgerRow, ...] = ()
+    treatment: str = "improved"
+
+    def __iter__(self):
+        return iter(self.rows)
+
+    def __len__(self) -> int:
+        return len(self.rows)
+
+    def __getitem__(self, key: tuple[str, str]) -> LedgerRow:
+        for row in self.rows:
+            if row.key == key:
+                return row
+        raise KeyError(key)
+
+    def get(self, key: tuple[str, str]) -> LedgerRow | None:
+        return next((row for row in self.rows if row.key == key), None)
+
+    @property
+    def comparisons(self) -> tuple[str, ...]:
+        return tuple(dict.fromkeys(row.comparison for row in self.rows))
+
+    @property
+    def differences(self) -> dict[tuple[str, str], np.ndarray]:
+        """The paired differences each outcome was taken on, for plotting."""
+        return {row.key: row.result.differences for row in self.rows}
+
+    def records(self) -> list[dict]:
+        return [row.to_dict() for row in self.rows]
+
+    def to_frame(self) -> pd.DataFrame:
+        """The ledger table (``claims_ledger.csv``)."""
+        return pd.DataFrame(self.records()).reindex(
+            columns=LEDGER_COLUMNS + ["interval_method", "margin_reason"])
+
+
+def family_ledger(tables: dict[str, pd.DataFrame], cfg, paper_metrics: dict[str, dict] | None
+                  = None, improved: str = "improved",
+                  comparisons: tuple[str, ...] = ("baseline", "baseline_matched"),
+                  sensitivity: bool = True) -> Ledger:
+    """Claims ledger over a scenario family: C0-C5 against each comparison present.
+
+    Parameters
+    ----------
+    tables : dict of method -> DataFrame
+        Per-scenario metrics (``family_metrics.csv``) of each method, with a ``scenario`` column.
+    cfg : ClaimsConfig
+    paper_metrics : dict of method -> metrics, optional
+        The paper scenario's values: its better / worse / within-margin word per claim.
+    improved : str
+        The treatment; ``comparisons`` are its controls.
+    sensitivity : bool
+        Also judge C1-C5 on the other set of pairs (all pairs when the ledger uses those where
+        neither collided).
+
+    Returns
+    -------
+    Ledger
+    """
+    rows: list[LedgerRow] = []
+    if improved not in tables:
+        return Ledger((), improved)
+    for comparison in [c for c in comparisons if c in tables]:
+        block = [(claim, compare(tables[improved], tables[comparison], claim, cfg))
+                 for claim in ALL_CLAIMS]
+        adjusted = holm([r.p_value for _, r in block])
+        for (claim, result), p_holm in zip(block, adjusted):
+            rows.append(_ledger_row(claim, comparison, result, p_holm, tables, cfg,
+                                    paper_metrics, improved, sensitivity))
+    return Ledger(tuple(rows), improved)
+
+
+def _ledger_row(claim: Claim, comparison: str, result: PairedResult, p_holm: float,
+                tables: dict[str, pd.DataFrame], cfg, paper_metrics: dict | None,
+                improved: str, sensitivity: bool) -> LedgerRow:
+    margin = float(cfg.margins[claim.claim_id])
+    outcome, note = judge(result, p_holm, margin, cfg, claim)
+    if not claim.is_rate and result.n_pairs and \
+            result.n_floor_ties >= cfg.floor_tie_share * result.n_pairs:
+        floor_note = (f"neither method shows the behaviour in {result.n_floor_ties} of "
+                      f"{result.n_pairs} pairs (both at {result.floor_value:.3g})")
+        note = f"{note}; {floor_note}" if note else floor_note
+    all_pairs, estimate_all = None, None
+    if claim.is_rate:
+        all_pairs, estimate_all = outcome, result.estimate
+    elif sensitivity:
+        other = "all" if cfg.pairs == "neither_collided" else "neither_collided"
+        sens = compare(tables[improved], tables[comparison], claim, cfg, pairs=other)
+        # the sensitivity keeps its own unadjusted test: it is a check, not a claim
+        all_pairs, _ = judge(sens, sens.p_value, margin, cfg, claim)
+        estimate_all = sens.estimate
+    paper = None
+    if paper_metrics and comparison in paper_metrics and improved in paper_metrics:
+        paper = single_scenario_outcome(claim, paper_metrics[comparison],
+                                        paper_metrics[improved], margin)
+    return LedgerRow(claim, comparison, outcome, result, p_holm, margin, note,
+                     cfg.margin_reasons[claim.claim_id], all_pairs, estimate_all, paper)
+
+
+def outcome_counts(tables: dict[str, pd.DataFrame]) -> list[dict]:
+    """Collisions (avoidable / unavoidable), failures and fallbacks per method; how often the
+    APF's step cap binds (:class:`pipeline.analysis.tally.Tally`)."""
+    return [{"method": method, **Tally.of(t).to_dict()} for method, t in tables.items()]

@@ -1,0 +1,201 @@
+"""Obstacle geometry of a logged run: obstacle tracks, clearances (sampled and continuous),
+straight-line time to contact, time to collision, and whether a collision was avoidable (a
+sampled reachability check). Definitions: :mod:`pipeline.analysis.metrics`."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import pandas as pd
+
+from pipeline.analysis.metrics.signals import TrajectoryContext, float_columns, time_derivative
+from pipeline.analysis.settings import MetricsConfig
+from pipeline.loop.trajectory import obstacle_indices
+
+
+def obstacle_count(trajectory: pd.DataFrame) -> int:
+    """How many obstacles the table carries (their indices may have gaps)."""
+    return len(obstacle_indices(trajectory.columns))
+
+
+def clearance_series(trajectory: pd.DataFrame, vehicle_radius_m: float) -> np.ndarray:
+    """Per-step clearance to the nearest visible obstacle (NaN while none is visible)."""
+    xy = float_columns(trajectory, "X_m", "Y_m")
+    result = np.full(len(trajectory), np.inf)
+    for j in obstacle_indices(trajectory.columns):
+        centre = float_columns(trajectory, f"obs{j}_x_m", f"obs{j}_y_m")
+        gap = (np.linalg.norm(xy - centre, axis=1) - trajectory[f"obs{j}_radius_m"].to_numpy(float)
+               - vehicle_radius_m)
+        visible = trajectory[f"obs{j}_visible"].to_numpy(bool)
+        result = np.where(visible, np.minimum(result, gap), result)
+    return np.where(np.isfinite(result), result, np.nan)
+
+
+def min_time_to_collision(trajectory: pd.DataFrame, vehicle_radius_m: float) -> float:
+    """Smallest ``clearance / closing speed`` over steps and visible obstacles while closing."""
+    t = trajectory["time_s"].to_numpy(float)
+    xy = float_columns(trajectory, "X_m", "Y_m")
+    best = np.inf
+    for j in obstacle_indices(trajectory.columns):
+        centre = float_columns(trajectory, f"obs{j}_x_m", f"obs{j}_y_m")
+        dist = np.linalg.norm(xy - centre, axis=1)
+        closing = -time_derivative(dist, t)
+        gap = np.maximum(dist - trajectory[f"obs{j}_radius_m"].to_numpy(float) - vehicle_radius_m,
+                         0.0)
+        visible = trajectory[f"obs{j}_visible"].to_numpy(bool)
+        ok = visible & (closing > 1e-6)
+        if np.any(ok):
+            best = min(best, float(np.min(gap[ok] / closing[ok])))
+    return float(best) if np.isfinite(best) else float("nan")
+
+
+def straight_line_time_to_contact(p: np.ndarray, v: np.ndarray, o: np.ndarray, ov: np.ndarray,
+                                  reach_m: np.ndarray, horizon_s) -> np.ndarray:
+    """First time in ``[0, horizon_s]`` at which ``|(o + ov t) - (p + v t)| <= reach`` (inf if
+    none): the vehicle continuing straight at its current velocity, the obstacle at constant
+    velocity. Closed form (a quadratic in t); arrays broadcast over rows (``horizon_s`` too: a
+    per-row horizon such as the time left in the run).
+    """
+    r0 = np.asarray(o, float) - np.asarray(p, float)
+    dv = np.asarray(ov, float) - np.asarray(v, float)
+    a = np.sum(dv * dv, axis=-1)
+    b = 2.0 * np.sum(r0 * dv, axis=-1)
+    c = np.sum(r0 * r0, axis=-1) - np.asarray(reach_m, float) ** 2
+    with np.errstate(invalid="ignore", divide="ignore"):
+        disc = b * b - 4.0 * a * c
+        first = (-b - np.sqrt(np.maximum(disc, 0.0))) / (2.0 * a)
+    hit = (disc >= 0.0) & (a > 1e-12) & (first >= 0.0) & (first <= horizon_s)
+    return np.where(c <= 0.0, 0.0, np.where(hit, first, np.inf))
+
+
+@dataclass(frozen=True)
+class ObstacleTrack:
+    """One obstacle as logged: positions (n, 2), forward-difference velocities (n, 2), radii
+    (n,), visibility (n,) and the first visible row (-1 if never visible)."""
+
+    position: np.ndarray
+    velocity: np.ndarray
+    radius: np.ndarray
+    visible: np.ndarray
+    appear: int
+
+
+def obstacle_tracks(trajectory: pd.DataFrame) -> list[ObstacleTrack]:
+    """Every obstacle of the table as an :class:`ObstacleTrack`."""
+    t = trajectory["time_s"].to_numpy(float)
+    tracks = []
+    for j in obstacle_indices(trajectory.columns):
+        pos = float_columns(trajectory, f"obs{j}_x_m", f"obs{j}_y_m")
+        vel = np.zeros_like(pos)
+        if len(t) > 1:
+            vel[:-1] = np.diff(pos, axis=0) / np.diff(t)[:, None]
+            vel[-1] = vel[-2]
+        visible = trajectory[f"obs{j}_visible"].to_numpy(bool)
+        tracks.append(ObstacleTrack(pos, vel, trajectory[f"obs{j}_radius_m"].to_numpy(float),
+                                    visible, int(np.argmax(visible)) if visible.any() else -1))
+    return tracks
+
+
+def continuous_clearance(time_s: np.ndarray, xy: np.ndarray, tracks: list[ObstacleTrack],
+                         vehicle_radius_m: float) -> tuple[float, int, float]:
+    """Smallest clearance with vehicle and obstacles moving linearly between log rows.
+
+    Over each interval where the obstacle is visible at both ends the closest approach of the
+    relative position is found in closed form; single visible rows count as well.
+
+    Returns
+    -------
+    min_clearance_m : float
+        NaN when no obstacle is ever visible.
+    contact_obstacle : int
+        Index of the obstacle of the first contact (clearance < 0), -1 if none.
+    contact_time_s : float
+        Time of that first contact (the interval's closest approach), NaN if none.
+    """
+    best, contact_j, contact_t = np.inf, -1, np.inf
+    for j, track in enumerate(tracks):
+        rel = xy - track.position
+        vis = track.visible
+        reach = track.radius + vehicle_radius_m
+        gaps = np.where(vis, np.linalg.norm(rel, axis=1) - reach, np.inf)
+        times = np.asarray(time_s, float).copy()
+        if len(rel) > 1:
+            p0, d = rel[:-1], np.diff(rel, axis=0)
+            dd = np.sum(d * d, axis=1)
+            with np.errstate(invalid="ignore", divide="ignore"):
+                s = np.clip(np.where(dd > 0, -np.sum(p0 * d, axis=1) / dd, 0.0), 0.0, 1.0)
+            closest = np.linalg.norm(p0 + s[:, None] * d, axis=1) - reach[1:]
+            both = vis[:-1] & vis[1:]
+            interval_gaps = np.where(both, closest, np.inf)
+            interval_times = time_s[:-1] + s * np.diff(time_s)
+            gaps = np.concatenate([gaps, interval_gaps])
+            times = np.concatenate([times, interval_times])
+        if np.isfinite(gaps).any():
+            best = min(best, float(np.min(gaps)))
+            touching = np.nonzero(gaps < 0.0)[0]
+            if touching.size:
+                first = float(np.min(times[touching]))
+                if first < contact_t:
+                    contact_j, contact_t = j, first
+    return (float(best) if np.isfinite(best) else float("nan"), contact_j,
+            float(contact_t) if np.isfinite(contact_t) else float("nan"))
+
+
+def collision_is_avoidable(time_s: np.ndarray, pose: np.ndarray, tracks: list[ObstacleTrack],
+                           contact_obstacle: int, contact_time_s: float,
+                           context: TrajectoryContext, thresholds: MetricsConfig) -> bool:
+    """Whether any admissible manoeuvre from the state at the colliding obstacle's appearance
+    keeps a non-negative clearance to every obstacle (a sampled reachability check).
+
+    Manoeuvres: steering targets ``linspace(-delta_max, delta_max, attribution_steering_samples)``
+    reached at the steering-rate limit and held, each at constant speed and under full braking
+    (``context.braking_mps2``, down to standstill), integrated on the kinematic bicycle
+    (``context.wheelbase_m``) in steps of 0.02 s from the appearance until the contact time plus
+    ``attribution_extra_s``. Obstacles follow their logged tracks (extrapolated at their last
+    velocity), each from its own appearance on.
+
+    Parameters
+    ----------
+    time_s : ndarray, shape (n,)
+    pose : ndarray, shape (n, 5)
+        ``X, Y, psi, speed, delta`` per log row (delta NaN when unknown: taken as 0).
+    """
+    t = np.asarray(time_s, float)
+    track = tracks[contact_obstacle]
+    a = track.appear
+    if a < 0:
+        return True
+    x0, y0, psi0, v0, delta0 = (float(v) for v in pose[a])
+    delta0 = delta0 if np.isfinite(delta0) else 0.0
+    if not all(np.isfinite([x0, y0, psi0, v0])):
+        return False
+    dt = 0.02
+    end = contact_time_s + thresholds.attribution_extra_s
+    steps = max(int(np.ceil((end - t[a]) / dt)), 1)
+    targets = np.linspace(-context.steering_max_rad, context.steering_max_rad,
+                          thresholds.attribution_steering_samples)
+    brake = np.array([0.0, context.braking_mps2])
+    target, decel = (g.ravel() for g in np.meshgrid(targets, brake))
+    X, Y = np.full(target.size, x0), np.full(target.size, y0)
+    psi, v, delta = np.full(target.size, psi0), np.full(target.size, v0), \
+        np.full(target.size, delta0)
+    ok = np.ones(target.size, dtype=bool)
+    rate = context.steering_rate_max_rad_s * dt
+    for k in range(1, steps + 1):
+        delta = delta + np.clip(target - delta, -rate, rate)
+        X = X + dt * v * np.cos(psi)
+        Y = Y + dt * v * np.sin(psi)
+        psi = psi + dt * v * np.tan(delta) / context.wheelbase_m
+        v = np.maximum(v - decel * dt, 0.0)
+        now = t[a] + k * dt
+        for other in tracks:
+            if other.appear < 0 or now < t[other.appear] - 1e-9:
+                continue
+            i = min(int(np.searchsorted(t, now, side="right")) - 1, len(t) - 1)
+            centre = other.position[i] + other.velocity[i] * (now - t[i])
+            reach = other.radius[i] + context.vehicle_radius_m
+            ok &= np.hypot(X - centre[0], Y - centre[1]) >= reach
+        if not ok.any():
+            return False
+    return bool(ok.any())

@@ -1,0 +1,247 @@
+"""The metrics as result objects: one frozen block per Table 1 criterion, :class:`RunMetrics`
+holding them (``to_json`` / ``from_json``: ``metrics.json``), and :data:`METRIC_KEYS`."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, fields
+
+import numpy as np
+
+
+def _nan_to_none(value):
+    if isinstance(value, (float, np.floating)) and not np.isfinite(value):
+        return None
+    if isinstance(value, np.generic):
+        return value.item()
+    return value
+
+
+class _Block:
+    """A frozen block of metrics; its fields are the ``metrics.json`` keys it owns."""
+
+    def to_json(self) -> dict:
+        """The block's keys and values, NaN as ``None`` and numpy scalars as Python ones."""
+        return {f.name: _nan_to_none(getattr(self, f.name)) for f in fields(self)}
+
+    @classmethod
+    def from_json(cls, data: dict):
+        """The block read back from ``metrics.json`` (``None`` for its keys when absent)."""
+        return cls(**{f.name: _none_to_nan(data.get(f.name)) for f in fields(cls)})
+
+    @classmethod
+    def keys(cls) -> tuple[str, ...]:
+        return tuple(f.name for f in fields(cls))
+
+
+@dataclass(frozen=True)
+class Threat(_Block):
+    """Which obstacle threatened and when (s); when every threat was passed (s)."""
+
+    threatened: bool
+    obstacle_appear_time_s: float
+    threat_appear_time_s: float
+    obstacle_passed_time_s: float
+
+
+@dataclass(frozen=True)
+class Reaction(_Block):
+    """C1: reaction delays (s) from the threat's (or the first visible obstacle's) appearance."""
+
+    reaction_delay_threat_s: float
+    reaction_delay_first_visible_s: float
+    reaction_delay_s: float
+    reacted: bool
+    reaction_delay_lateral_s: float
+
+
+@dataclass(frozen=True)
+class Smoothness(_Block):
+    """C2: steering rate (rad/s), lateral acceleration (m/s^2), jerk (m/s^3), curvature rate."""
+
+    steering_rate_rms_rad_s: float
+    steering_rate_max_rad_s: float
+    steering_rate_rms_window_rad_s: float
+    lateral_accel_max_mps2: float
+    lateral_jerk_rms_run_mps3: float
+    lateral_jerk_max_mps3: float
+    lateral_jerk_rms_window_mps3: float
+    lateral_jerk_max_window_mps3: float
+    lateral_jerk_rms_vx_r_mps3: float
+    lateral_jerk_rms_mps3: float
+    curvature_rate_rms_1_per_ms: float
+
+
+@dataclass(frozen=True)
+class Repulsion(_Block):
+    """C3a: repulsive impulse at the vehicle (force x s) and its unneeded share; C3b: onset."""
+
+    repulsive_impulse: float
+    repulsion_unneeded_impulse: float
+    repulsion_unneeded_share: float
+    repulsion_unneeded_share_threat: float
+    repulsive_impulse_far_share: float
+    repulsive_force_peak: float
+    repulsion_onset_clearance_m: float
+    repulsion_onset_ttc_s: float
+
+
+@dataclass(frozen=True)
+class StepCap(_Block):
+    """Share of rollout steps on which the APF's step cap bound."""
+
+    step_cap_binding_share: float
+
+
+@dataclass(frozen=True)
+class Recovery(_Block):
+    """C4: settling times (s) after every threat is passed."""
+
+    recovery_lateral_s: float
+    recovery_heading_s: float
+    recovery_time_s: float
+    recovered: bool
+
+
+@dataclass(frozen=True)
+class Stability(_Block):
+    """C5: reversals and sign changes (counts), overshoot (m), largest heading step (rad)."""
+
+    lateral_sign_changes: int
+    yaw_rate_sign_changes: int
+    oscillation_whole_run_count: int
+    oscillation_after_pass_count: float
+    yaw_rate_sign_changes_after_pass: float
+    overshoot_m: float
+    oscillation_count: float
+    heading_step_max_rad: float
+    max_lateral_deviation_m: float
+
+
+@dataclass(frozen=True)
+class Safety(_Block):
+    """Clearance (m, sampled and continuous), collision and its attribution, time to collision."""
+
+    min_clearance_sampled_m: float
+    min_clearance_continuous_m: float
+    min_clearance_m: float
+    collision: bool
+    collision_avoidable: bool | None
+    min_time_to_collision_s: float
+
+
+@dataclass(frozen=True)
+class Progress(_Block):
+    """Log length, goal reached and when (s), path length (m), heading against validity."""
+
+    n_steps_logged: int
+    duration_s: float
+    goal_reached: bool
+    time_to_goal_s: float
+    path_length_m: float
+    max_abs_heading_error_rad: float
+    heading_validity_exceeded: bool
+
+
+@dataclass(frozen=True)
+class ModelValidity(_Block):
+    """Does the MPC's model hold where it is used? Shares of the run's steps (0-1) whose
+    prediction left the small-angle bound over the next second, with a tyre beyond its linear
+    range, whose reference path was clipped at the curvature limit; the model's prediction
+    error (replayed with the applied inputs) and the plan's, 0.5 s and 1 s ahead (m,
+    median and 95th percentile over the run's steps). NaN where the run logged no such
+    column (a scored trajectory, pure pursuit)."""
+
+    model_heading_error_max_rad: float
+    share_steps_beyond_bound: float
+    share_steps_tyre_nonlinear: float
+    share_steps_path_clipped: float
+    prediction_error_05s_p50_m: float
+    prediction_error_05s_p95_m: float
+    prediction_error_1s_p50_m: float
+    prediction_error_1s_p95_m: float
+    plan_error_1s_p50_m: float
+    plan_error_1s_p95_m: float
+
+
+@dataclass(frozen=True)
+class SolverIterations(_Block):
+    """Median and 95th percentile of the QP solver's iteration count."""
+
+    solver_iterations_median: float
+    solver_iterations_p95: float
+
+
+@dataclass(frozen=True)
+class Fallbacks(_Block):
+    """Steps on which the controller fell back (shifted plan or safe input)."""
+
+    fallback_count: int
+    fallback_safe_input_count: int
+
+
+@dataclass(frozen=True)
+class RunMetrics:
+    """Every Table 1 metric of one run, one block per criterion (python-control style).
+
+    Blocks that need a column the trajectory lacks (APF forces, solver columns) are ``None``
+    and their keys are absent from :meth:`to_json`.
+    """
+
+    threat: Threat
+    reaction: Reaction
+    smoothness: Smoothness
+    recovery: Recovery
+    stability: Stability
+    safety: Safety
+    progress: Progress
+    repulsion: Repulsion | None = None
+    step_cap: StepCap | None = None
+    iterations: SolverIterations | None = None
+    fallbacks: Fallbacks | None = None
+    validity: ModelValidity | None = None
+
+    def blocks(self) -> tuple[_Block, ...]:
+        """The blocks present, in Table 1 order."""
+        return tuple(b for b in (self.threat, self.reaction, self.smoothness, self.repulsion,
+                                 self.step_cap, self.recovery, self.stability, self.safety,
+                                 self.progress, self.iterations, self.fallbacks,
+                                 self.validity)
+                     if b is not None)
+
+    def to_json(self) -> dict:
+        """Flat mapping of metric name to value (``metrics.json``); NaN as ``None``."""
+        out: dict = {}
+        for block in self.blocks():
+            out.update(block.to_json())
+        return out
+
+    def value(self, name: str) -> float:
+        """One metric by its name as a float (booleans as 0/1; NaN when missing or absent)."""
+        for block in self.blocks():
+            if name in block.keys():
+                v = getattr(block, name)
+                return float(v) if v is not None else math.nan
+        return math.nan
+
+    @classmethod
+    def from_json(cls, data: dict) -> "RunMetrics":
+        """Read back what :meth:`to_json` wrote (keys of other records are ignored)."""
+        def optional(block):
+            return block.from_json(data) if any(k in data for k in block.keys()) else None
+
+        return cls(Threat.from_json(data), Reaction.from_json(data),
+                   Smoothness.from_json(data), Recovery.from_json(data),
+                   Stability.from_json(data), Safety.from_json(data), Progress.from_json(data),
+                   optional(Repulsion), optional(StepCap), optional(SolverIterations),
+                   optional(Fallbacks), optional(ModelValidity))
+
+
+#: Every key :meth:`RunMetrics.to_json` can write.
+METRIC_KEYS: tuple[str, ...] = tuple(k for block in (
+    Threat, Reaction, Smoothness, Repulsion, StepCap, Recovery, Stability, Safety, Progress,
+    SolverIterations, Fallbacks, ModelValidity) for k in block.keys())
+
+
+def _none_to_nan(value):
+    return math.nan if value is None else value

@@ -1,0 +1,225 @@
+"""What the metrics read of a run: its context (geometry and limits), its signals in the
+goal-line frame (:func:`trajectory_signals`), and the time-series helpers every criterion uses
+(RMS, derivatives, settling and band-exit times, reversals). Definitions:
+:mod:`pipeline.analysis.metrics`."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+import pandas as pd
+
+
+@dataclass(frozen=True)
+class TrajectoryContext:
+    """What the metrics need besides the table: geometry and limits of the run (SI units).
+
+    The limits feed the collision attribution (defaults: the compact car of ``conf/vehicle``).
+    """
+
+    start_m: tuple[float, float]
+    goal_m: tuple[float, float]
+    vehicle_radius_m: float
+    validity_heading_rad: float = math.inf
+    tyre_linear_limit: float = math.inf
+    wheelbase_m: float = 2.5
+    steering_max_rad: float = 0.4
+    steering_rate_max_rad_s: float = 1.0
+    braking_mps2: float = 3.0
+
+
+def rms(values: np.ndarray) -> float:
+    """Root mean square of the finite entries (NaN for none)."""
+    v = np.asarray(values, dtype=float)
+    v = v[np.isfinite(v)]
+    return float(np.sqrt(np.mean(v**2))) if v.size else float("nan")
+
+
+def max_abs(values: np.ndarray) -> float:
+    v = np.asarray(values, dtype=float)
+    v = v[np.isfinite(v)]
+    return float(np.max(np.abs(v))) if v.size else float("nan")
+
+
+def sign_changes(values: np.ndarray, band: float) -> int:
+    """Number of sign changes of ``values`` counting only samples with ``|v| > band``."""
+    v = np.asarray(values, dtype=float)
+    signs = np.sign(v[np.abs(v) > band])
+    return int(np.count_nonzero(signs[1:] != signs[:-1])) if signs.size > 1 else 0
+
+
+def time_derivative(values: np.ndarray, time_s: np.ndarray) -> np.ndarray:
+    """Central-difference derivative (one-sided at the ends)."""
+    v = np.asarray(values, dtype=float)
+    if v.size < 2:
+        return np.full(v.shape, np.nan)
+    return np.gradient(v, np.asarray(time_s, dtype=float))
+
+
+def settling_time(time_s: np.ndarray, error: np.ndarray, band: float) -> float:
+    """Time after ``time_s[0]`` from which ``|error|`` stays within ``band`` (NaN if it ends
+    outside).
+
+    Uses ``control.step_info`` on the mirrored signal ``e0 - e(t)``, a step from 0 to ``e0`` whose
+    settling band ``SettlingTimeThreshold * |e0|`` is set to ``band``.
+    """
+    t = np.asarray(time_s, dtype=float) - float(time_s[0])
+    e = np.asarray(error, dtype=float)
+    if e.size == 0 or not np.all(np.isfinite(e)):
+        return float("nan")
+    if abs(e[-1]) > band:
+        return float("nan")
+    e0 = float(e[0])
+    if abs(e0) <= band and np.all(np.abs(e) <= band):
+        return 0.0
+    if abs(e0) <= 1e-12:
+        # step_info needs a non-zero step; the error starts at zero, so measure from the
+        # last exit directly (same convention: first sample after the last exit)
+        outside = np.nonzero(np.abs(e) > band)[0]
+        return float(t[outside[-1] + 1])
+    mirrored = e0 - e
+    if np.all(np.sign(e0) * mirrored < 0.9 * abs(e0)):
+        # step_info's rise-time search would find no 90 % point; settle by direct rule
+        outside = np.nonzero(np.abs(e) > band)[0]
+        return float(t[outside[-1] + 1])
+    # imported here: python-control costs a second to import, and readers of run folders (the
+    # report, verify, aggregate) never settle a signal themselves
+    import control
+
+    info = control.step_info(mirrored, t, final_output=e0, SettlingTimeThreshold=band / abs(e0))
+    return float(info["SettlingTime"])
+
+
+def float_columns(frame: pd.DataFrame, *names: str) -> np.ndarray:
+    """Columns ``names`` of ``frame`` side by side as floats, shape (rows, len(names)); the
+    same values as ``frame[list(names)].to_numpy(float)`` without pandas' multi-column
+    selection (an index lookup and a copy of a block, ten times the cost)."""
+    return np.column_stack([frame[name].to_numpy(float) for name in names])
+
+
+def band_exit_time(time_s: np.ndarray, values: np.ndarray, start_time_s: float, band: float,
+                   interpolate: bool = True) -> float:
+    """Time from ``start_time_s`` until ``|values - values(start)|`` first exceeds ``band``.
+
+    With ``interpolate`` the crossing is placed by linear interpolation between the last sample
+    inside the band and the first outside (exact for a piecewise-linear signal); otherwise at the
+    first sample outside. NaN if the band is never left.
+    """
+    t = np.asarray(time_s, dtype=float)
+    v = np.asarray(values, dtype=float)
+    after = np.nonzero(t >= start_time_s - 1e-9)[0]
+    if after.size == 0:
+        return float("nan")
+    deviation = np.abs(v[after] - v[after[0]])
+    exits = np.nonzero(deviation > band)[0]
+    if exits.size == 0:
+        return float("nan")
+    i = exits[0]
+    if not interpolate or i == 0:
+        return float(t[after[i]] - start_time_s)
+    d0, d1 = deviation[i - 1], deviation[i]
+    t0, t1 = t[after[i - 1]], t[after[i]]
+    return float(t0 + (band - d0) / (d1 - d0) * (t1 - t0) - start_time_s)
+
+
+def reversal_count(values: np.ndarray, band: float) -> tuple[int, int]:
+    """Direction reversals of a signal with a hysteresis of ``band``, and the first direction.
+
+    The direction is set by the first move of more than ``band`` from the start; a reversal is
+    counted each time the signal retreats from its running extreme by more than ``band``.
+
+    Returns
+    -------
+    count : int
+    first_direction : int
+        +1, -1, or 0 when the signal never moved by more than ``band``.
+    """
+    v = np.asarray(values, dtype=float)
+    v = v[np.isfinite(v)]
+    if v.size < 2:
+        return 0, 0
+    start = extreme = float(v[0])
+    direction = first = count = 0
+    for x in v[1:].tolist():
+        if direction == 0:
+            if x - start > band or start - x > band:
+                direction = first = 1 if x > start else -1
+                extreme = x
+        elif direction == 1:
+            if x > extreme:
+                extreme = x
+            elif extreme - x > band:
+                count, direction, extreme = count + 1, -1, x
+        else:
+            if x < extreme:
+                extreme = x
+            elif x - extreme > band:
+                count, direction, extreme = count + 1, 1, x
+    return count, first
+
+
+@dataclass(frozen=True)
+class Signals:
+    """The trajectory's signals in the goal-line frame; optional columns derived from the path
+    when a scored trajectory lacks them (``vy`` is None then)."""
+
+    t: np.ndarray
+    dt: float
+    start: np.ndarray
+    goal: np.ndarray
+    line: np.ndarray
+    xy: np.ndarray
+    along: np.ndarray
+    lateral: np.ndarray
+    psi: np.ndarray
+    velocity: np.ndarray
+    speed: np.ndarray
+    vx: np.ndarray
+    vy: np.ndarray | None
+    yaw_rate: np.ndarray
+    delta: np.ndarray
+    steer_rate: np.ndarray
+    heading_error: np.ndarray
+    bearing_error: np.ndarray
+    model_heading_error: np.ndarray | None = None
+
+
+def trajectory_signals(tr: pd.DataFrame, context: TrajectoryContext) -> Signals:
+    """The signals every criterion reads, from the table's columns (or the path)."""
+    t = tr["time_s"].to_numpy(float)
+    dt = float(np.median(np.diff(t))) if t.size > 1 else float("nan")
+    start, goal = np.asarray(context.start_m, float), np.asarray(context.goal_m, float)
+    line = (goal - start) / np.linalg.norm(goal - start)
+    normal = np.array([-line[1], line[0]])
+    xy = float_columns(tr, "X_m", "Y_m")
+    if "psi_rad" in tr:
+        psi = tr["psi_rad"].to_numpy(float)
+    else:
+        psi = np.unwrap(np.arctan2(time_derivative(xy[:, 1], t), time_derivative(xy[:, 0], t)))
+    if "vx_mps" in tr:
+        vx = tr["vx_mps"].to_numpy(float)
+        vy = tr["vy_mps"].to_numpy(float) if "vy_mps" in tr else np.zeros(len(tr))
+        speed = np.hypot(vx, vy)
+        velocity = np.column_stack([vx * np.cos(psi) - vy * np.sin(psi),
+                                    vx * np.sin(psi) + vy * np.cos(psi)])
+    else:
+        velocity = np.column_stack([time_derivative(xy[:, 0], t), time_derivative(xy[:, 1], t)])
+        speed = np.hypot(velocity[:, 0], velocity[:, 1])
+        vx, vy = speed, None
+    yaw_rate = tr["r_rad_s"].to_numpy(float) if "r_rad_s" in tr \
+        else time_derivative(np.unwrap(psi), t)
+    delta = tr["delta_rad"].to_numpy(float) if "delta_rad" in tr else np.full(len(tr), np.nan)
+    steer_rate = tr["steering_rate_rad_s"].to_numpy(float) if "steering_rate_rad_s" in tr \
+        else time_derivative(delta, t)
+    line_heading = np.arctan2(line[1], line[0])
+    heading_error = np.arctan2(np.sin(psi - line_heading), np.cos(psi - line_heading))
+    to_goal = goal - xy
+    bearing = np.arctan2(to_goal[:, 1], to_goal[:, 0])
+    bearing_error = np.arctan2(np.sin(psi - bearing), np.cos(psi - bearing))
+    model_heading = tr["model_heading_error_rad"].to_numpy(float) \
+        if "model_heading_error_rad" in tr else None
+    return Signals(t, dt, start, goal, line, xy, (xy - start) @ line, (xy - start) @ normal, psi,
+                   velocity, speed, vx, vy, yaw_rate, delta, steer_rate, heading_error,
+                   bearing_error, model_heading)
