@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Callable
+from typing import Any, Callable
 
 from pipeline.validation import FrozenAfterValidation, at_least
 
@@ -46,31 +46,34 @@ class Feature:
     phrase: str
     describes: str          # "baseline" or "improved": whose figure the paper says shows it
     rule: str               # the test in words, for the report
-    present: Callable[[dict, FeatureConfig], bool | None]
+    present: Callable[[dict[str, Any], FeatureConfig], bool | None]
 
 
-def _value(metrics: dict, key: str) -> float:
+def _value(metrics: dict[str, Any], key: str) -> float:
     value = metrics.get(key)
     if value is None or isinstance(value, str):
         return math.nan
     return float(value)
 
 
-def _at_least(key: str, threshold: str):
-    def test(m: dict, cfg: FeatureConfig) -> bool | None:
+FeatureTest = Callable[[dict[str, Any], FeatureConfig], bool | None]
+
+
+def _at_least(key: str, threshold: str) -> FeatureTest:
+    def test(m: dict[str, Any], cfg: FeatureConfig) -> bool | None:
         v = _value(m, key)
         return None if math.isnan(v) else v >= getattr(cfg, threshold)
     return test
 
 
-def _at_most(key: str, threshold: str, missing_means: bool | None = None):
-    def test(m: dict, cfg: FeatureConfig) -> bool | None:
+def _at_most(key: str, threshold: str, missing_means: bool | None = None) -> FeatureTest:
+    def test(m: dict[str, Any], cfg: FeatureConfig) -> bool | None:
         v = _value(m, key)
         return missing_means if math.isnan(v) else v <= getattr(cfg, threshold)
     return test
 
 
-def _smooth_return(m: dict, cfg: FeatureConfig) -> bool | None:
+def _smooth_return(m: dict[str, Any], cfg: FeatureConfig) -> bool | None:
     recovery, overshoot = _value(m, "recovery_time_s"), _value(m, "overshoot_m")
     if math.isnan(recovery):
         return False  # never settled back
@@ -109,7 +112,7 @@ FEATURES: tuple[Feature, ...] = (
 )
 
 
-def feature_row(metrics: dict, cfg: FeatureConfig) -> dict[str, bool | None]:
+def feature_row(metrics: dict[str, Any], cfg: FeatureConfig) -> dict[str, bool | None]:
     """Every feature of one run: present, absent, or None when its metric is missing."""
     return {f.key: f.present(metrics, cfg) for f in FEATURES}
 

@@ -4,7 +4,7 @@ turn paired differences into verdicts (``claims.*``, outside the run hash)."""
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Dict, List, Optional
+from typing import Any, Dict, List, Optional
 
 from pipeline.errors import ConfigError
 from pipeline.validation import FrozenAfterValidation, at_least, between, choice
@@ -76,11 +76,11 @@ class MetricsConfig(FrozenAfterValidation):
 CLAIM_IDS = ("C0", "C1", "C2", "C3a", "C3b", "C4", "C5")
 
 
-def _default_margins() -> dict:
+def _default_margins() -> dict[str, Any]:
     return {"C0": 0.02, "C1": 0.05, "C2": 0.1, "C3a": 0.05, "C3b": 0.1, "C4": 0.1, "C5": 0.5}
 
 
-def _default_margin_reasons() -> dict:
+def _default_margin_reasons() -> dict[str, Any]:
     return {
         "C0": "two percentage points of collision rate: four scenarios in 200, below what one "
               "reading of a threshold moves",

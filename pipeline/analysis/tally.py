@@ -4,6 +4,8 @@ validity exceedances, fallbacks, how often the APF's step cap binds."""
 
 from __future__ import annotations
 
+from typing import Any
+
 from dataclasses import asdict, dataclass
 
 import numpy as np
@@ -15,7 +17,8 @@ def _flags(table: pd.DataFrame, column: str, default: bool = False) -> pd.Series
     where the column is absent."""
     if column not in table:
         return pd.Series([default] * len(table), index=table.index, dtype=bool)
-    def read(v):
+
+    def read(v: object) -> bool:
         if isinstance(v, str):
             return v.strip().lower() == "true"
         return default if v is None or v != v else bool(v)  # NaN: unknown, the default
@@ -27,7 +30,8 @@ def _optional_flags(table: pd.DataFrame, column: str) -> pd.Series:
     """True / False / None (not applicable) per row."""
     if column not in table:
         return pd.Series([None] * len(table), index=table.index, dtype=object)
-    def read(v):
+
+    def read(v: object) -> bool | None:
         if isinstance(v, (bool, np.bool_)):
             return bool(v)
         text = str(v).lower()
@@ -82,5 +86,5 @@ class Tally:
                                                        errors="coerce").median())
             if "min_clearance_m" in table else float("nan"))
 
-    def to_dict(self) -> dict:
+    def to_dict(self) -> dict[str, Any]:
         return asdict(self)

@@ -11,12 +11,13 @@ run. ``reports/latest/tables/model_validity.csv`` is the rows' :meth:`ValidityTa
 from __future__ import annotations
 
 from dataclasses import asdict, dataclass, fields
-from typing import Iterable
+from typing import Any, Iterable
 
 import numpy as np
 import pandas as pd
 
 from pipeline.analysis.claims.ledger import Ledger, family_ledger
+from pipeline.analysis.settings import ClaimsConfig
 
 
 @dataclass(frozen=True)
@@ -54,7 +55,7 @@ def _pooled(values: list[np.ndarray], q: float) -> float:
 
 
 def validity_row(track: str, frame: str, method: str,
-                 members: Iterable[tuple[pd.DataFrame, dict]]) -> ValidityRow:
+                 members: Iterable[tuple[pd.DataFrame, dict[str, Any]]]) -> ValidityRow:
     """The row of one family from its members' ``(trajectory, metrics.json mapping)``."""
     runs = beyond = 0
     shares: dict[str, list[float]] = {"share_steps_beyond_bound": [],
@@ -101,9 +102,9 @@ class ValidityTable:
                      == (track, frame, method)), None)
 
 
-def valid_in_both(treatment: pd.DataFrame, control: pd.DataFrame) -> set:
+def valid_in_both(treatment: pd.DataFrame, control: pd.DataFrame) -> set[Any]:
     """Scenarios (``scenario`` values) where neither method's run left its model's validity."""
-    def valid(table: pd.DataFrame) -> set:
+    def valid(table: pd.DataFrame) -> set[Any]:
         flags = table["heading_validity_exceeded"] if "heading_validity_exceeded" in table \
             else pd.Series(False, index=table.index)
         exceeded = flags.map(lambda v: str(v).strip().lower() in ("true", "1", "1.0"))
@@ -112,7 +113,8 @@ def valid_in_both(treatment: pd.DataFrame, control: pd.DataFrame) -> set:
     return valid(treatment) & valid(control)
 
 
-def valid_scenario_ledgers(tables: dict[str, pd.DataFrame], claims, treatment: str,
+def valid_scenario_ledgers(tables: dict[str, pd.DataFrame], claims: ClaimsConfig,
+                           treatment: str,
                            comparisons: tuple[str, ...]) -> dict[str, tuple[Ledger, int]]:
     """Per comparison: the claims ledger on the scenarios where both methods' models held
     (:func:`valid_in_both`), and how many scenarios that is."""

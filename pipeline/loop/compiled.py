@@ -30,7 +30,9 @@ nothing in the loop imports this module but :func:`pipeline.loop.simulate.run_ke
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from math import exp
+from typing import Any
 
 from numba import njit
 from numba.extending import overload
@@ -40,7 +42,7 @@ from pipeline.loop.controller import path, prediction_check, references
 from pipeline.loop.kernels import Kernels
 
 
-def _jit(function):
+def _jit(function: Callable[..., Any]) -> Callable[..., Any]:
     """``numba.njit`` with numba's on-disk cache, or without it where no cache folder is
     writable (numba refuses ``cache=True`` there; the kernel is then compiled once per
     process)."""
@@ -50,21 +52,27 @@ def _jit(function):
         return njit(nogil=True)(function)
 
 
-@overload(planner._exp_or_inf)
-def _exp_or_inf_compiled(x):  # pragma: no cover (numba's typing calls it)
-    """Compiled, ``exp`` overflows to ``inf`` without raising."""
-    return lambda x: exp(x)
+def _exp_or_inf_compiled(x: float) -> Callable[[float], float]:  # pragma: no cover (numba's)
+    """Compiled, ``exp`` overflows to ``inf`` without raising (numba compares the typing
+    function's signature with the implementation's, annotations included)."""
+    def implementation(x: float) -> float:
+        return exp(x)
+
+    return implementation
 
 
-def _same_signature(function):
+overload(planner._exp_or_inf)(_exp_or_inf_compiled)
+
+
+def _same_signature(function: Callable[..., Any]) -> Callable[..., Any]:
     """numba's typing function for ``overload(function)``: ``function`` itself is the
     implementation (a helper the kernels call, compiled with them)."""
     import inspect
 
-    def typer(*args):
+    def typer(*args: Any) -> Callable[..., Any]:
         return function
 
-    typer.__signature__ = inspect.signature(function)
+    typer.__signature__ = inspect.signature(function)  # type: ignore[attr-defined]
     return typer
 
 

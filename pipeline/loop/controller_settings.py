@@ -15,7 +15,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, fields
 from enum import StrEnum
-from typing import ClassVar, Optional, TypeVar
+from typing import Any, ClassVar, Optional, TypeVar
 
 
 class ControllerKind(StrEnum):
@@ -109,11 +109,11 @@ class _KindSettings:
     kind: ClassVar[ControllerKind]
 
     @classmethod
-    def of(cls, controller):
+    def of(cls: type[Settings], controller: Any) -> Settings:
         """The fields of this class read off ``controller`` (a ``ControllerConfig``, or
         settings with these fields), choices as their enums, lists as tuples."""
-        values = {}
-        for f in fields(cls):  # type: ignore[arg-type]
+        values: dict[str, Any] = {}
+        for f in fields(cls):
             value = getattr(controller, f.name)
             if f.name in CHOICES:
                 value = CHOICES[f.name](value)
@@ -204,12 +204,13 @@ class KinematicMpcSettings(_KindSettings):
 
 
 #: The settings class of each controller kind.
-KIND_SETTINGS: dict[ControllerKind, type] = {
+KIND_SETTINGS: dict[ControllerKind, type[MpcSettings] | type[PurePursuitSettings]
+                    | type[KinematicMpcSettings]] = {
     ControllerKind.MPC: MpcSettings, ControllerKind.PURE_PURSUIT: PurePursuitSettings,
     ControllerKind.KINEMATIC_MPC: KinematicMpcSettings}
 
 
-def settings_of(controller, kind: type[Settings]) -> Settings:
+def settings_of(controller: Any, kind: type[Settings]) -> Settings:
     """``controller`` as the settings class ``kind``: settings of that class as they are, a
     ``ControllerConfig`` (a test's, the bench's) read into them (:meth:`_KindSettings.of`)."""
     return controller if isinstance(controller, kind) else kind.of(controller)

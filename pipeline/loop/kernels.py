@@ -12,7 +12,9 @@ name the type without an import circle.
 
 from __future__ import annotations
 
-from typing import Callable, NamedTuple
+from typing import Any, Callable, NamedTuple
+
+from pipeline.loop.arrays import KernelValues
 
 import numpy as np
 
@@ -38,15 +40,15 @@ class Kernels(NamedTuple):
     """
 
     compiled: bool
-    plant_rk4: Callable
-    apf_rollout: Callable
-    references: Callable
-    chase_path: Callable
-    frame_step: Callable
-    plan_poses: Callable
-    check_record: Callable
+    plant_rk4: Callable[..., Any]
+    apf_rollout: Callable[..., Any]
+    references: Callable[..., Any]
+    chase_path: Callable[..., Any]
+    frame_step: Callable[..., Any]
+    plan_poses: Callable[..., Any]
+    check_record: Callable[..., Any]
 
-    def prepare(self, values):
+    def prepare(self, values: object) -> KernelValues:
         """``values`` as this set's callables take them: a contiguous float array for numba, a
         (nested) list for CPython."""
         if self.compiled:

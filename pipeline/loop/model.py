@@ -12,12 +12,15 @@ integrated with RK4 substeps.
 
 from __future__ import annotations
 
+from typing import Any
+
 from dataclasses import dataclass, field
 
 from math import atan2, cos, sin, tan, tanh
 
 import numpy as np
 
+from pipeline.loop.arrays import KernelValues
 from pipeline.loop.settings import VehicleConfig
 
 GRAVITY_MPS2 = 9.81
@@ -49,7 +52,7 @@ class LateralModel:
     speed_mps: float
     sample_time_s: float
 
-    def to_json(self) -> dict:
+    def to_json(self) -> dict[str, Any]:
         return {
             "state": list(LATERAL_STATE_NAMES),
             "input": "delta_dot_rad_s",
@@ -116,7 +119,7 @@ def model_speed_mps(speed_mps: float, floor_mps: float, grid_mps: float) -> floa
     return round(max(key, floor_mps), 6)
 
 
-def vehicle_key(vehicle: VehicleConfig) -> tuple:
+def vehicle_key(vehicle: VehicleConfig) -> tuple[Any, ...]:
     """A hashable identity of the vehicle's parameters (for caches of its models)."""
     from dataclasses import asdict
 
@@ -131,7 +134,7 @@ class LateralModelCache:
     sample_time_s: float
     b2_heading_entry: float
     grid_mps: float
-    models: dict = field(default_factory=dict)
+    models: dict[float, LateralModel] = field(default_factory=dict)
 
     def at_speed(self, speed_mps: float) -> LateralModel:
         key = model_speed_mps(speed_mps, self.vehicle.min_model_speed_mps, self.grid_mps)
@@ -232,8 +235,8 @@ def step_plant(state: np.ndarray, steering_rate_rad_s: float, speed_target_mps: 
                             float(speed_target_mps), dt_s, substeps)
 
 
-def single_track_rk4(state: np.ndarray, constants: np.ndarray, rate_cmd: float, target: float,
-                     dt_s: float, substeps: int) -> np.ndarray:
+def single_track_rk4(state: KernelValues, constants: KernelValues, rate_cmd: float,
+                     target: float, dt_s: float, substeps: int) -> KernelValues:
     """One sample period of the single-track plant: ``substeps`` RK4 steps of ``dt_s /
     substeps`` with the steering rate ``rate_cmd`` (already saturated) and the speed target
     ``target`` held.
@@ -358,7 +361,8 @@ def kinematic_plant_step(state: np.ndarray, control_input: np.ndarray, wheelbase
     half, sixth = 0.5 * h, h / 6.0
     accel, delta = float(control_input[0]), float(control_input[1])
 
-    def rates(X, Y, theta, v):
+    def rates(X: float, Y: float, theta: float, v: float
+              ) -> tuple[float, float, float, float]:
         return (v * cos(theta), v * sin(theta), v / wheelbase_m * tan(delta), accel)
 
     x = [float(v) for v in state]

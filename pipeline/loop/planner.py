@@ -22,6 +22,7 @@ from typing import NamedTuple
 
 import numpy as np
 
+from pipeline.loop.arrays import KernelValues
 from pipeline.loop.kernels import Kernels
 from pipeline.loop.scenario import ObstacleSnapshot
 from pipeline.loop.settings import PlannerConfig
@@ -208,8 +209,11 @@ def _exp_or_inf(x: float) -> float:
         return inf
 
 
-def apf_rollout_arrays(px, py, gx, gy, centres, velocities, settings, horizon, sample_time_s,
-                       vvx, vvy):
+def apf_rollout_arrays(px: float, py: float, gx: float, gy: float, centres: KernelValues,
+                       velocities: KernelValues, settings: ApfSettings, horizon: int,
+                       sample_time_s: float, vvx: float, vvy: float
+                       ) -> tuple[KernelValues, KernelValues, KernelValues, KernelValues,
+                                  KernelValues]:
     """The rollout of :func:`apf_rollout` on plain numbers: ``path (max(Np, 1), 2), attraction
     (Np - 1, 2), repulsion (Np - 1, 2), step cap active, step minimum used (Np - 1,)``.
 

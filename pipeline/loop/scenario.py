@@ -6,12 +6,14 @@ velocity from the position at which they appear.
 
 from __future__ import annotations
 
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from functools import cached_property
+from typing import Any
 
 import numpy as np
 
-from pipeline.loop.settings import ObstacleConfig, ScenarioConfig
+from pipeline.loop.settings import FamilyConfig, ObstacleConfig, ScenarioConfig
 
 
 @dataclass(frozen=True)
@@ -52,7 +54,7 @@ class LineFrame:
     heading_rad: float
 
     @cached_property
-    def cos_sin(self) -> tuple:
+    def cos_sin(self) -> tuple[Any, ...]:
         """``cos`` and ``sin`` of the heading (numpy's, computed once per frame)."""
         return np.cos(self.heading_rad), np.sin(self.heading_rad)
 
@@ -171,7 +173,7 @@ def build_scenario(cfg: ScenarioConfig) -> Scenario:
     )
 
 
-def _uniform(rng: np.random.Generator, bounds) -> float:
+def _uniform(rng: np.random.Generator, bounds: Sequence[float]) -> float:
     return float(rng.uniform(bounds[0], bounds[1]))
 
 
@@ -203,6 +205,8 @@ def draw_family_member(base: ScenarioConfig, index: int,
     from dataclasses import replace
 
     fam = base.family
+    if fam is None:
+        raise ValueError(f"scenario {base.name} has no family to draw members from")
     rng = np.random.default_rng([fam.seed, index])
     start, goal = np.asarray(base.start_xy_m, float), np.asarray(base.goal_xy_m, float)
     e1 = (goal - start) / np.linalg.norm(goal - start)
@@ -213,18 +217,18 @@ def draw_family_member(base: ScenarioConfig, index: int,
     def to_global(along: float, lateral: float) -> np.ndarray:
         return start + along * e1 + lateral * e2
 
-    obstacles = [_sudden_obstacle(rng, base, e1, e2, to_global)]
+    obstacles = [_sudden_obstacle(rng, base, fam, e1, e2, to_global)]
     for _ in range(n_obstacles - 1):
-        obstacles.append(_further_obstacle(rng, base, goal, vehicle_radius_m, to_global))
+        obstacles.append(_further_obstacle(rng, base, fam, goal, vehicle_radius_m, to_global))
     return replace(base, name=f"{base.name}_s{fam.seed}_i{index:04d}", obstacles=obstacles,
                    family=None)
 
 
-def _sudden_obstacle(rng: np.random.Generator, base: ScenarioConfig, e1: np.ndarray,
-                     e2: np.ndarray, to_global) -> ObstacleConfig:
+def _sudden_obstacle(rng: np.random.Generator, base: ScenarioConfig, fam: FamilyConfig,
+                     e1: np.ndarray, e2: np.ndarray,
+                     to_global: Callable[[float, float], np.ndarray]) -> ObstacleConfig:
     """The family member's first obstacle, the paper's "sudden" one (see
     :func:`draw_family_member`; ``e1``, ``e2``: along and across the start-goal line)."""
-    fam = base.family
     appear = _uniform(rng, fam.appear_time_s)
     along = base.speed_mps * appear + _uniform(rng, fam.ahead_m)
     lateral = _uniform(rng, fam.lateral_m)
@@ -242,11 +246,11 @@ def _sudden_obstacle(rng: np.random.Generator, base: ScenarioConfig, e1: np.ndar
                           vy_mps=float(vel[1]), radius_m=radius, appear_time_s=appear)
 
 
-def _further_obstacle(rng: np.random.Generator, base: ScenarioConfig, goal: np.ndarray,
-                      vehicle_radius_m: float, to_global) -> ObstacleConfig:
+def _further_obstacle(rng: np.random.Generator, base: ScenarioConfig, fam: FamilyConfig,
+                      goal: np.ndarray, vehicle_radius_m: float,
+                      to_global: Callable[[float, float], np.ndarray]) -> ObstacleConfig:
     """One further obstacle along the route, redrawn (up to 50 times) while it would sit on
     the vehicle when it appears or on the goal."""
-    fam = base.family
     for _attempt in range(50):
         appear_k = _uniform(rng, fam.extra_appear_time_s)
         along_k, lateral_k = _uniform(rng, fam.extra_x_m), _uniform(rng, fam.extra_y_m)

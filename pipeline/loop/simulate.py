@@ -14,6 +14,8 @@ into preallocated arrays and becomes one DataFrame at the end.
 
 from __future__ import annotations
 
+from typing import Any
+
 import inspect
 import sys
 from dataclasses import dataclass
@@ -30,7 +32,7 @@ from pipeline.loop.kernels import Kernels
 from pipeline.loop.model import kinematic_plant_step, single_track_constants
 from pipeline.loop.python_kernels import PYTHON_KERNELS
 from pipeline.loop.planner import ApfPlanner, ApfRollout, make_planner
-from pipeline.loop.scenario import Scenario
+from pipeline.loop.scenario import LineFrame, ObstacleSnapshot, Scenario
 from pipeline.loop.trajectory import HEAD, OBSTACLE_FIELDS, TAIL, obstacle_column
 
 
@@ -89,7 +91,7 @@ class SingleTrackPlant:
         return np.array([state[3] * c - state[4] * s, state[3] * s + state[4] * c])
 
     def log_columns(self, state: np.ndarray, command: np.ndarray | None,
-                    previous: np.ndarray | None) -> dict:
+                    previous: np.ndarray | None) -> dict[str, Any]:
         return {"vx_mps": state[3], "vy_mps": state[4], "r_rad_s": state[5],
                 "delta_rad": state[6], "tyre_slip_norm": tyre_slip_norm(state, self._tyres)}
 
@@ -101,7 +103,7 @@ class SingleTrackPlant:
                             float(speed_ref_mps), self.ts, self.substeps)
 
 
-def tyre_slip_norm(state: np.ndarray, tyres: tuple) -> float:
+def tyre_slip_norm(state: np.ndarray, tyres: tuple[Any, ...]) -> float:
     """The larger of the two axles' ``C alpha / (mu Fz)``: how far into its tanh law a tyre
     is (0: no slip; the force falls 5 % short of the linear law at about 0.39).
 
@@ -132,9 +134,13 @@ class KinematicPlant:
         return state[3] * np.array([cos(state[2]), sin(state[2])])
 
     def log_columns(self, state: np.ndarray, command: np.ndarray | None,
-                    previous: np.ndarray | None) -> dict:
+                    previous: np.ndarray | None) -> dict[str, Any]:
         # the steering angle is an input here: the one applied over the step (or the last one)
-        delta = command[1] if command is not None else previous[1]
+        applied = command if command is not None else previous
+        if applied is None:
+            raise ValueError("no steering applied yet: neither this step's command nor a "
+                             "previous one")
+        delta = applied[1]
         return {"vx_mps": state[3], "vy_mps": 0.0, "r_rad_s": state[3] * np.tan(delta) / self.L,
                 "delta_rad": delta}
 
@@ -156,7 +162,7 @@ class TrajectoryLog:
         self.columns: dict[str, np.ndarray] = {}
         self.rows = 0
 
-    def put(self, k: int, values: dict) -> None:
+    def put(self, k: int, values: dict[str, Any]) -> None:
         columns = self.columns
         for name, value in values.items():
             column = columns.get(name)
@@ -177,7 +183,7 @@ class TrajectoryLog:
         return pd.DataFrame({c: self.columns[c][:self.rows] for c in names})
 
 
-def _apf_columns(rollout: ApfRollout) -> dict:
+def _apf_columns(rollout: ApfRollout) -> dict[str, Any]:
     n = rollout.path_m.shape[0]
     if n > 1:
         (ax, ay), (rx, ry) = rollout.attraction[0].tolist(), rollout.repulsion[0].tolist()
@@ -322,7 +328,7 @@ def _loop_stages(cfg: LoopSettings, scenario: Scenario, qp_cache: QpCache | None
     return kinematic, plant, controller, planner
 
 
-def _line_constants(frame) -> tuple[float, float, float, float]:
+def _line_constants(frame: LineFrame) -> tuple[float, float, float, float]:
     """The start-goal line's origin and the cosine and sine of its heading, as plain floats."""
     origin_x, origin_y = frame.origin_m.tolist()
     return origin_x, origin_y, cos(frame.heading_rad), sin(frame.heading_rad)
@@ -339,8 +345,10 @@ def _anchor_due(scenario: Scenario, unanchored: np.ndarray, time_s: float,
     return scenario, bool(unanchored.any())
 
 
-def _pose_row(time_s: float, state: np.ndarray, frame, line: tuple[float, float, float, float],
-              snapshot, obstacle_names: list[tuple]) -> tuple[dict, float, float, float, float]:
+def _pose_row(time_s: float, state: np.ndarray, frame: LineFrame,
+              line: tuple[float, float, float, float], snapshot: ObstacleSnapshot,
+              obstacle_names: list[tuple[Any, ...]]
+              ) -> tuple[dict[str, Any], float, float, float, float]:
     """A step's log row so far (time, pose, line-frame errors, obstacles); and the vehicle's
     place along and across the line, its heading and its heading error to the line."""
     origin_x, origin_y, c_line, s_line = line
@@ -358,24 +366,27 @@ def _pose_row(time_s: float, state: np.ndarray, frame, line: tuple[float, float,
     return row, along, lateral, psi, e_psi
 
 
-def _planned_speed(planner, position: np.ndarray, psi: float, visible, scenario: Scenario,
+def _planned_speed(planner: ApfPlanner, position: np.ndarray, psi: float,
+                   visible: ObstacleSnapshot, scenario: Scenario,
                    vehicle_radius: float, rollout: ApfRollout, state: np.ndarray,
                    path_aware: bool) -> float:
     """The planner's speed reference (the path and the speed only to a ``path_aware`` one)."""
-    return planner.speed(position, psi, visible, scenario.speed_mps,
-                         vehicle_radius, **({"path_m": rollout.path_m,
-                                             "speed_mps": float(state[3])}
-                                            if path_aware else {}))
+    if path_aware:
+        return planner.speed(position, psi, visible, scenario.speed_mps, vehicle_radius,
+                             path_m=rollout.path_m, speed_mps=float(state[3]))
+    return planner.speed(position, psi, visible, scenario.speed_mps, vehicle_radius)
 
 
-def _add_end_columns(row: dict, plant, state: np.ndarray, command: np.ndarray | None) -> None:
+def _add_end_columns(row: dict[str, Any], plant: SingleTrackPlant | KinematicPlant,
+                     state: np.ndarray, command: np.ndarray | None) -> None:
     """The last row's columns after the observation's: the plant's, no solve."""
     row.update(plant.log_columns(state, None, command if command is not None
                                  else np.zeros(2)))
     row.update(fallback="end", solver_status="end")
 
 
-def _add_step_columns(row: dict, plant, state: np.ndarray, step: ControlStep,
+def _add_step_columns(row: dict[str, Any], plant: SingleTrackPlant | KinematicPlant,
+                      state: np.ndarray, step: ControlStep,
                       command: np.ndarray | None, kinematic: bool, speed_ref: float,
                       rollout: ApfRollout) -> None:
     """A step's columns after the observation's, into ``row``: the plant's, the applied input,
@@ -390,7 +401,7 @@ def _add_step_columns(row: dict, plant, state: np.ndarray, step: ControlStep,
                fallback=step.fallback, max_slack_m=step.max_slack_m)
 
 
-def _add_model_check(controller, log: TrajectoryLog) -> None:
+def _add_model_check(controller: Controller, log: TrajectoryLog) -> None:
     """The model-check columns of a finished run (NaN for a controller without a model)."""
     check = getattr(controller, "model_check", None)
     if check is not None and log.rows:

@@ -9,6 +9,7 @@ the path (see :mod:`pipeline.studies.score`).
 from __future__ import annotations
 
 import re
+from collections.abc import Iterable
 
 #: Columns every trajectory has.
 REQUIRED = ("time_s", "X_m", "Y_m")
@@ -45,7 +46,7 @@ def obstacle_column(j: int, field: str) -> str:
     return f"obs{j}_{field}"
 
 
-def obstacle_indices(columns) -> list[int]:
+def obstacle_indices(columns: Iterable[object]) -> list[int]:
     """The obstacle indices that have an ``x`` column, in order (gaps allowed)."""
     found = {int(m.group(1)) for c in columns if (m := OBSTACLE_COLUMN.fullmatch(str(c)))
              and m.group(2) == "x_m"}

@@ -6,24 +6,27 @@ outcome counts per method (:func:`outcome_counts`)."""
 from __future__ import annotations
 
 import math
+from collections.abc import Iterator
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 import pandas as pd
 
 from pipeline.analysis.claims.catalogue import ALL_CLAIMS, Claim, Outcome
 from pipeline.analysis.claims.statistics import PairedResult, compare, holm, judge
+from pipeline.analysis.settings import ClaimsConfig
 from pipeline.analysis.tally import Tally
 
 
-def _value(metrics: dict, key: str) -> float:
+def _value(metrics: dict[str, Any], key: str) -> float:
     value = metrics.get(key)
     if isinstance(value, (bool, np.bool_)):
         return float(value)
     return float(value) if value is not None else math.nan
 
 
-def single_scenario_outcome(claim: Claim, comparison: dict, improved: dict,
+def single_scenario_outcome(claim: Claim, comparison: dict[str, Any], improved: dict[str, Any],
                             margin: float) -> str:
     """Outcome of one claim on one scenario (see :data:`SINGLE_RULE`)."""
     b, i = _value(comparison, claim.primary_metric), _value(improved, claim.primary_metric)
@@ -37,13 +40,13 @@ def single_scenario_outcome(claim: Claim, comparison: dict, improved: dict,
     return "within margin"
 
 
-def claims_table(metrics_by_method: dict[str, dict], margins: dict[str, float],
+def claims_table(metrics_by_method: dict[str, dict[str, Any]], margins: dict[str, float],
                  comparisons: tuple[str, ...] = ("baseline", "baseline_matched"),
-                 improved: str = "improved") -> list[dict]:
+                 improved: str = "improved") -> list[dict[str, Any]]:
     """One row per claim on one scenario: primary metric per method, outcome per comparison."""
     rows = []
     for claim in ALL_CLAIMS:
-        row = {"claim": claim.claim_id, "paper says": claim.text,
+        row: dict[str, Any] = {"claim": claim.claim_id, "paper says": claim.text,
                "metric": claim.primary_metric,
                "better": "lower" if claim.lower_is_better else "higher",
                "margin": margins[claim.claim_id]}
@@ -88,7 +91,7 @@ class LedgerRow:
     def key(self) -> tuple[str, str]:
         return (self.claim.claim_id, self.comparison)
 
-    def to_dict(self) -> dict:
+    def to_dict(self) -> dict[str, Any]:
         """The row as the ledger table writes it (:data:`LEDGER_COLUMNS` and more)."""
         r = self.result
         return {"claim": self.claim.claim_id, "comparison": self.comparison,
@@ -113,7 +116,7 @@ class Ledger:
     rows: tuple[LedgerRow, ...] = ()
     treatment: str = "improved"
 
-    def __iter__(self):
+    def __iter__(self) -> Iterator[LedgerRow]:
         return iter(self.rows)
 
     def __len__(self) -> int:
@@ -133,11 +136,11 @@ class Ledger:
         return tuple(dict.fromkeys(row.comparison for row in self.rows))
 
     @property
-    def differences(self) -> dict[tuple[str, str], np.ndarray]:
+    def differences(self) -> dict[tuple[str, str], np.ndarray | None]:
         """The paired differences each outcome was taken on, for plotting."""
         return {row.key: row.result.differences for row in self.rows}
 
-    def records(self) -> list[dict]:
+    def records(self) -> list[dict[str, Any]]:
         return [row.to_dict() for row in self.rows]
 
     def to_frame(self) -> pd.DataFrame:
@@ -146,8 +149,9 @@ class Ledger:
             columns=LEDGER_COLUMNS + ["interval_method", "margin_reason"])
 
 
-def family_ledger(tables: dict[str, pd.DataFrame], cfg, paper_metrics: dict[str, dict] | None
-                  = None, improved: str = "improved",
+def family_ledger(tables: dict[str, pd.DataFrame], cfg: ClaimsConfig,
+                  paper_metrics: dict[str, dict[str, Any]] | None = None,
+                  improved: str = "improved",
                   comparisons: tuple[str, ...] = ("baseline", "baseline_matched"),
                   sensitivity: bool = True) -> Ledger:
     """Claims ledger over a scenario family: C0-C5 against each comparison present.
@@ -183,7 +187,8 @@ def family_ledger(tables: dict[str, pd.DataFrame], cfg, paper_metrics: dict[str,
 
 
 def _ledger_row(claim: Claim, comparison: str, result: PairedResult, p_holm: float,
-                tables: dict[str, pd.DataFrame], cfg, paper_metrics: dict | None,
+                tables: dict[str, pd.DataFrame], cfg: ClaimsConfig,
+                paper_metrics: dict[str, Any] | None,
                 improved: str, sensitivity: bool) -> LedgerRow:
     margin = float(cfg.margins[claim.claim_id])
     outcome, note = judge(result, p_holm, margin, cfg, claim)
@@ -209,7 +214,7 @@ def _ledger_row(claim: Claim, comparison: str, result: PairedResult, p_holm: flo
                      cfg.margin_reasons[claim.claim_id], all_pairs, estimate_all, paper)
 
 
-def outcome_counts(tables: dict[str, pd.DataFrame]) -> list[dict]:
+def outcome_counts(tables: dict[str, pd.DataFrame]) -> list[dict[str, Any]]:
     """Collisions (avoidable / unavoidable), failures and fallbacks per method; how often the
     APF's step cap binds (:class:`pipeline.analysis.tally.Tally`)."""
     return [{"method": method, **Tally.of(t).to_dict()} for method, t in tables.items()]

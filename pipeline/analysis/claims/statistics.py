@@ -6,12 +6,15 @@ outcome (:func:`decide`, :func:`judge`; :data:`pipeline.analysis.claims.catalogu
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 import pandas as pd
 
 from pipeline.analysis.claims.catalogue import Claim, Outcome
+from pipeline.analysis.settings import ClaimsConfig
 
 
 def hodges_lehmann(values: np.ndarray, axis: int = -1) -> np.ndarray:
@@ -22,7 +25,11 @@ def hodges_lehmann(values: np.ndarray, axis: int = -1) -> np.ndarray:
     return np.median((x[..., i] + x[..., j]) / 2.0, axis=-1)
 
 
-def hodges_lehmann_on(sample: np.ndarray):
+#: A statistic of paired differences along an axis (what the bootstrap resamples).
+Statistic = Callable[..., Any]
+
+
+def hodges_lehmann_on(sample: np.ndarray) -> Statistic:
     """:func:`hodges_lehmann` specialised to resamples of ``sample`` (as a bootstrap draws them).
 
     A resample holds the sample's distinct values ``u`` with counts ``c``; its Walsh averages
@@ -38,7 +45,7 @@ def hodges_lehmann_on(sample: np.ndarray):
     walsh, a, b = walsh[order], a[order], b[order]
     diagonal = a == b
 
-    def statistic(x, axis=-1):
+    def statistic(x: Any, axis: int = -1) -> Any:
         x = np.moveaxis(np.asarray(x, dtype=float), axis, -1)
         batch_shape, n = x.shape[:-1], x.shape[-1]
         flat = x.reshape(-1, n)
@@ -49,7 +56,7 @@ def hodges_lehmann_on(sample: np.ndarray):
         # every partial sum is at most n (n + 1) / 2: 32-bit integers whenever that fits (half
         # the memory traffic of the weights and their cumulative sum, the same integers)
         dtype = np.int32 if n * (n + 1) // 2 < 2**31 else np.int64
-        counts = np.bincount((index + u.size * np.arange(rows)[:, None]).ravel(),
+        counts: np.ndarray = np.bincount((index + u.size * np.arange(rows)[:, None]).ravel(),
                              minlength=rows * u.size).reshape(rows, u.size).astype(dtype)
         total = n * (n + 1) // 2
         low, high = np.empty(rows, dtype=np.intp), np.empty(rows, dtype=np.intp)
@@ -69,13 +76,14 @@ def hodges_lehmann_on(sample: np.ndarray):
     return statistic
 
 
-def _estimator(name: str, sample: np.ndarray | None = None):
+def _estimator(name: str, sample: np.ndarray | None = None) -> Statistic:
     if name == "median":
         return lambda x, axis=-1: np.median(x, axis=axis)
     return hodges_lehmann_on(sample) if sample is not None else hodges_lehmann
 
 
-def bootstrap_interval(d: np.ndarray, statistic, cfg, level: float = 0.95
+def bootstrap_interval(d: np.ndarray, statistic: Statistic, cfg: ClaimsConfig,
+                       level: float = 0.95
                        ) -> tuple[float, float, str]:
     """Paired bootstrap interval of ``statistic`` over the differences (BCa where defined,
     percentile otherwise); a constant sample has the degenerate interval at its value."""
@@ -102,7 +110,8 @@ def bootstrap_interval(d: np.ndarray, statistic, cfg, level: float = 0.95
     return float("nan"), float("nan"), "failed"
 
 
-def probability_of_improvement(d: np.ndarray, cfg) -> tuple[float, float, float]:
+def probability_of_improvement(d: np.ndarray, cfg: ClaimsConfig
+                               ) -> tuple[float, float, float]:
     """``P(d < 0) + P(d = 0) / 2`` (ties within ``tie_tolerance``) and its percentile bootstrap
     interval."""
     from scipy import stats
@@ -122,7 +131,7 @@ def probability_of_improvement(d: np.ndarray, cfg) -> tuple[float, float, float]
     return value, float(low), float(high)
 
 
-def paired_test(d: np.ndarray, cfg) -> float:
+def paired_test(d: np.ndarray, cfg: ClaimsConfig) -> float:
     """Two-sided p-value of the paired test on ``d`` (1 when every pair ties)."""
     from scipy import stats
 
@@ -185,7 +194,8 @@ def holm(p_values: list[float]) -> list[float]:
     return adjusted.tolist()
 
 
-def decide(low: float, high: float, p_adjusted: float, margin: float, n_pairs: int, cfg,
+def decide(low: float, high: float, p_adjusted: float, margin: float, n_pairs: int,
+           cfg: ClaimsConfig,
            pi_low: float = float("nan"), pi_high: float = float("nan"),
            estimate: float = float("nan"), pi: float = float("nan")) -> tuple[Outcome, str]:
     """Outcome and note (:data:`OUTCOME_RULE`).
@@ -305,10 +315,10 @@ class PairedResult:
     n_floor_ties: int = 0
     floor_value: float = float("nan")
     #: the finite paired differences the estimate was taken on (for plots)
-    differences: np.ndarray = field(repr=False, compare=False, default=None)
+    differences: np.ndarray | None = field(repr=False, compare=False, default=None)
 
 
-def compare(improved: pd.DataFrame, comparison: pd.DataFrame, claim: Claim, cfg,
+def compare(improved: pd.DataFrame, comparison: pd.DataFrame, claim: Claim, cfg: ClaimsConfig,
             pairs: str | None = None) -> PairedResult:
     """One claim, one comparison: estimate, interval, test, probability of improvement,
     counts (before the Holm adjustment and the outcome)."""
@@ -348,7 +358,7 @@ def compare(improved: pd.DataFrame, comparison: pd.DataFrame, claim: Claim, cfg,
                         low, high, method, p_value, pi, pi_low, pi_high, n_floor, floor, d)
 
 
-def judge(result: PairedResult, p_value: float, margin: float, cfg, claim: Claim
+def judge(result: PairedResult, p_value: float, margin: float, cfg: ClaimsConfig, claim: Claim
           ) -> tuple[Outcome, str]:
     """:func:`decide` on one comparison's result (a rate's direction from its interval)."""
     if claim.is_rate:

@@ -4,7 +4,9 @@ settings each criterion reads. Definitions: :mod:`pipeline.analysis.metrics`."""
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 import pandas as pd
@@ -36,7 +38,7 @@ class ThreatGeometry:
     passed_time_s: float
 
 
-def threat_horizon(sig: Signals, thresholds: MetricsConfig):
+def threat_horizon(sig: Signals, thresholds: MetricsConfig) -> float | np.ndarray:
     """How far ahead the straight continuation is checked: until the run ends (per row), or a
     fixed ``threat_horizon_s`` (the older reading)."""
     if thresholds.threat_horizon_s is None:
@@ -98,7 +100,7 @@ def reaction_block(sig: Signals, geo: ThreatGeometry, thresholds: MetricsConfig)
     interpolate = thresholds.reaction_interpolation == "linear"
     has_delta = bool(np.any(np.isfinite(sig.delta)))
 
-    def delay(j):
+    def delay(j: int | None) -> float:
         if j is None or not has_delta:
             return float("nan")
         return band_exit_time(sig.t, sig.delta, geo.appear[j],
@@ -183,7 +185,7 @@ def repulsion_block(tr: pd.DataFrame, sig: Signals, geo: ThreatGeometry, clearan
               "clearance_band": needed_band}[thresholds.repulsion_need]
     unneeded = float(np.sum(rep[~needed]) * sig.dt)
 
-    def share(mask):  # no repulsion at all means no unnecessary repulsion either: 0
+    def share(mask: np.ndarray | np.bool_) -> float:  # no repulsion: none unnecessary
         return float(np.sum(rep[mask]) * sig.dt / impulse) if impulse > 0 else 0.0
 
     on = np.nonzero(rep > 1e-9)[0]
@@ -390,9 +392,10 @@ def compute_metrics_readings(trajectory: pd.DataFrame, context: TrajectoryContex
         if "apf_step_cap_share" in trajectory else None
     iterations, fallbacks = solver_blocks(trajectory)
     validity = validity_block(trajectory, context)
-    memo: dict[tuple, object] = {}
+    memo: dict[tuple[Any, ...], object] = {}
 
-    def once(criterion: str, reads: tuple[str, ...], thresholds: MetricsConfig, build):
+    def once(criterion: str, reads: tuple[str, ...], thresholds: MetricsConfig,
+             build: Callable[[], Any]) -> Any:
         key = (criterion,) + tuple(getattr(thresholds, name) for name in reads)
         if key not in memo:
             memo[key] = build()

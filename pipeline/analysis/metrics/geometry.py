@@ -51,7 +51,8 @@ def min_time_to_collision(trajectory: pd.DataFrame, vehicle_radius_m: float) -> 
 
 
 def straight_line_time_to_contact(p: np.ndarray, v: np.ndarray, o: np.ndarray, ov: np.ndarray,
-                                  reach_m: np.ndarray, horizon_s) -> np.ndarray:
+                                  reach_m: np.ndarray, horizon_s: float | np.ndarray
+                                  ) -> np.ndarray:
     """First time in ``[0, horizon_s]`` at which ``|(o + ov t) - (p + v t)| <= reach`` (inf if
     none): the vehicle continuing straight at its current velocity, the obstacle at constant
     velocity. Closed form (a quadratic in t); arrays broadcast over rows (``horizon_s`` too: a

@@ -3,13 +3,15 @@ holding them (``to_json`` / ``from_json``: ``metrics.json``), and :data:`METRIC_
 
 from __future__ import annotations
 
+from typing import Any, TypeVar
+
 import math
 from dataclasses import dataclass, fields
 
 import numpy as np
 
 
-def _nan_to_none(value):
+def _nan_to_none(value: Any) -> Any:
     if isinstance(value, (float, np.floating)) and not np.isfinite(value):
         return None
     if isinstance(value, np.generic):
@@ -17,21 +19,26 @@ def _nan_to_none(value):
     return value
 
 
+B = TypeVar("B", bound="_Block")
+
+
 class _Block:
     """A frozen block of metrics; its fields are the ``metrics.json`` keys it owns."""
 
-    def to_json(self) -> dict:
+    def to_json(self) -> dict[str, Any]:
         """The block's keys and values, NaN as ``None`` and numpy scalars as Python ones."""
-        return {f.name: _nan_to_none(getattr(self, f.name)) for f in fields(self)}
+        return {f.name: _nan_to_none(getattr(self, f.name))
+                for f in fields(self)}  # type: ignore[arg-type]  # each subclass a dataclass
 
     @classmethod
-    def from_json(cls, data: dict):
+    def from_json(cls: type[B], data: dict[str, Any]) -> B:
         """The block read back from ``metrics.json`` (``None`` for its keys when absent)."""
-        return cls(**{f.name: _none_to_nan(data.get(f.name)) for f in fields(cls)})
+        return cls(**{f.name: _none_to_nan(data.get(f.name))
+                      for f in fields(cls)})  # type: ignore[arg-type]
 
     @classmethod
     def keys(cls) -> tuple[str, ...]:
-        return tuple(f.name for f in fields(cls))
+        return tuple(f.name for f in fields(cls))  # type: ignore[arg-type]
 
 
 @dataclass(frozen=True)
@@ -209,9 +216,9 @@ class RunMetrics:
                                  self.validity)
                      if b is not None)
 
-    def to_json(self) -> dict:
+    def to_json(self) -> dict[str, Any]:
         """Flat mapping of metric name to value (``metrics.json``); NaN as ``None``."""
-        out: dict = {}
+        out: dict[str, Any] = {}
         for block in self.blocks():
             out.update(block.to_json())
         return out
@@ -225,9 +232,9 @@ class RunMetrics:
         return math.nan
 
     @classmethod
-    def from_json(cls, data: dict) -> "RunMetrics":
+    def from_json(cls, data: dict[str, Any]) -> "RunMetrics":
         """Read back what :meth:`to_json` wrote (keys of other records are ignored)."""
-        def optional(block):
+        def optional(block: type[B]) -> B | None:
             return block.from_json(data) if any(k in data for k in block.keys()) else None
 
         return cls(Threat.from_json(data), Reaction.from_json(data),
@@ -243,5 +250,5 @@ METRIC_KEYS: tuple[str, ...] = tuple(k for block in (
     SolverIterations, Fallbacks, ModelValidity) for k in block.keys())
 
 
-def _none_to_nan(value):
+def _none_to_nan(value: Any) -> Any:
     return math.nan if value is None else value

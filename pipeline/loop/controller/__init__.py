@@ -19,7 +19,8 @@
 
 from __future__ import annotations
 
-from pipeline.loop.controller_settings import Backend, ControllerKind
+from pipeline.loop.controller_settings import (Backend, KinematicMpcSettings,
+                                               PurePursuitSettings)
 from pipeline.loop.kernels import Kernels
 from pipeline.loop.settings import LoopSettings
 from pipeline.loop.controller.base import ControlStep, Controller, Observation, PlanFallback
@@ -53,13 +54,13 @@ def make_controller(cfg: LoopSettings, sample_time_s: float,
         cls = resolve_target("controller._target_", cfg.controller._target_)
         return cls(cfg.controller, cfg.vehicle, sample_time_s, qp_cache)
     settings = cfg.controller.settings()
-    if settings.kind is ControllerKind.KINEMATIC_MPC:
+    if isinstance(settings, KinematicMpcSettings):
         if settings.backend is Backend.NMPC:
             from pipeline.loop.controller.nmpc import KinematicNmpc
 
             return KinematicNmpc(settings, cfg.vehicle, sample_time_s, qp_cache)
         return KinematicLtvMpc(settings, cfg.vehicle, sample_time_s, qp_cache)
-    if settings.kind is ControllerKind.PURE_PURSUIT:
+    if isinstance(settings, PurePursuitSettings):
         # (ControllerConfig refuses backend=nmpc with pure pursuit)
         return PurePursuit(settings, cfg.vehicle, sample_time_s, cfg.model.speed_grid_mps)
     if settings.backend is Backend.NMPC:

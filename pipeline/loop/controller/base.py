@@ -8,7 +8,7 @@ controller (lateral MPC, kinematic LTV-MPC, pure pursuit).
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Callable, Protocol
+from typing import Any, Callable, Protocol
 
 import numpy as np
 
@@ -81,7 +81,7 @@ class ControlStep:
     solve_time_s: float
     fallback: str
     max_slack_m: float
-    log: dict = field(default_factory=dict)
+    log: dict[str, Any] = field(default_factory=dict)
 
     @property
     def steering_rate_rad_s(self) -> float:
@@ -122,7 +122,7 @@ class PlanFallback:
         self.last_plan, self.age = plan, 0
 
     def step(self, status: str, iterations: int, solve_time_s: float,
-             safe_input: Callable[[], np.ndarray], log: dict | None = None) -> ControlStep:
+             safe_input: Callable[[], np.ndarray], log: dict[str, Any] | None = None) -> ControlStep:
         """The fallback step after a failed solve (``status`` says why)."""
         if self.last_plan is not None and self.age + 1 < self.horizon:
             self.age += 1

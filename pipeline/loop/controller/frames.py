@@ -14,6 +14,8 @@ Both hand the same QP other data; the models they predict with come from one
 
 from __future__ import annotations
 
+from typing import Any
+
 from math import atan2, pi
 
 import numpy as np
@@ -84,9 +86,9 @@ class FixedFrame:
         self.sample_time_s = bank.sample_time_s
         self._steps_ahead_s = np.arange(1, controller.horizon + 1) * self.sample_time_s
         self._times_s = np.concatenate([[0.0], self._steps_ahead_s])
-        self.record: tuple = ()
+        self.record: tuple[Any, ...] = ()
 
-    def inputs(self, obs: Observation) -> tuple[MpcInputs, dict]:
+    def inputs(self, obs: Observation) -> tuple[MpcInputs, dict[str, Any]]:
         """The QP data against the start-goal line: references interpolated on the APF path,
         half-planes about them, no disturbance."""
         ctrl, N = self.cfg, self.horizon
@@ -137,8 +139,8 @@ class PathFrame:
         self.kernels = kernels if kernels is not None else PYTHON_KERNELS
         self.horizon = controller.horizon
         self.sample_time_s = bank.sample_time_s
-        self.record: tuple = ()
-        self._plan_poses: tuple | None = None   # the last plan's global poses
+        self.record: tuple[Any, ...] = ()
+        self._plan_poses: tuple[Any, ...] | None = None   # the last plan's global poses
         self._speeds = np.zeros(0)              # the last step's predicted speeds
         self._step_times: dict[float, np.ndarray] = {}  # prediction times by step
         self._no_points, self._no_values = np.zeros((0, 2)), np.zeros(0)
@@ -157,7 +159,7 @@ class PathFrame:
         step = reach / (self.horizon * slow)
         return self.sample_time_s if step <= self.sample_time_s else round(step, 6)
 
-    def inputs(self, obs: Observation) -> tuple[MpcInputs, dict]:
+    def inputs(self, obs: Observation) -> tuple[MpcInputs, dict[str, Any]]:
         """The QP data in path coordinates about the drivable path from the vehicle's pose
         towards the APF rollout (:meth:`reference_path`; :meth:`inputs_about`)."""
         N, vehicle = self.horizon, self.vehicle
@@ -168,7 +170,7 @@ class PathFrame:
         return self.inputs_about(obs, path, dt)
 
     def inputs_about(self, obs: Observation, path: ReferencePath, dt: float
-                     ) -> tuple[MpcInputs, dict]:
+                     ) -> tuple[MpcInputs, dict[str, Any]]:
         """The QP data about ``path`` with prediction step ``dt``: the state as errors from it
         (the vehicle projected on it), its curvature previewed as ``r_d`` at the stations the
         predicted speed reaches (:func:`~pipeline.loop.controller.path.frame_step_arrays`),
@@ -239,11 +241,11 @@ class PathFrame:
                                        float(ds_m), self.sample_time_s, int(n_intervals))
             return ReferencePath(*arrays, float(ds_m))
         cos_line, sin_line = obs.frame.cos_sin
-        arrays = kernels.chase_path(
+        points, headings, curvature, clipped = kernels.chase_path(
             float(st[0]), float(st[1]), course, kernels.prepare(obs.rollout.path_m),
             float(cos_line), float(sin_line), ctrl.path_beyond_end == "extend",
             float(ctrl.path_lookahead_m), float(kappa_max), float(ds_m), int(n_intervals))
-        return ReferencePath(*arrays, float(ds_m))
+        return ReferencePath(points, headings, curvature, clipped, float(ds_m))
 
     def after_step(self, step: ControlStep) -> None:
         """Keep the plan's global poses for the next step's stations (none after a
@@ -259,7 +261,7 @@ class PathFrame:
             prepare(path.curvature_1_per_m), path.ds_m, path.n_intervals, prepare(stations),
             prepare(states[0]), prepare(states[2]), prepare(states[1]), prepare(self._speeds))
 
-    def plan_poses(self, poses: tuple | None) -> None:
+    def plan_poses(self, poses: tuple[Any, ...] | None) -> None:
         """Set the plan poses the next step's stations start from (the nonlinear MPC keeps its
         own plan's)."""
         self._plan_poses = poses

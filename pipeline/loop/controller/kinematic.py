@@ -11,7 +11,7 @@ after ``Nc``; soft half-plane per obstacle slot and step
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
+from typing import Any, TYPE_CHECKING
 
 import numpy as np
 
@@ -19,7 +19,7 @@ from pipeline.loop.controller_settings import KinematicMpcSettings, settings_of
 from pipeline.loop.settings import ControllerConfig, VehicleConfig
 from pipeline.loop.controller.base import ControlStep, Observation, PlanFallback
 from pipeline.loop.controller.lateral_qp import blocking_matrix
-from pipeline.loop.controller.qp import QpCache, compiled_backend
+from pipeline.loop.controller.qp import QpCache, QpSolution, compiled_backend
 from pipeline.loop.controller.references import kinematic_halfplanes
 from pipeline.loop.planner import path_at_arc_length
 
@@ -35,11 +35,11 @@ class KinematicQpStructure:
     control_horizon: int
     max_obstacles: int
     input_hold: str
-    output_weights: tuple
-    input_weights: tuple
-    input_rate_weights: tuple
-    slack_weights: tuple
-    accel_bounds_mps2: tuple
+    output_weights: tuple[Any, ...]
+    input_weights: tuple[Any, ...]
+    input_rate_weights: tuple[Any, ...]
+    slack_weights: tuple[Any, ...]
+    accel_bounds_mps2: tuple[Any, ...]
     steering_max_rad: float
 
     @classmethod
@@ -51,7 +51,7 @@ class KinematicQpStructure:
                    tuple(c.accel_bounds_mps2), vehicle.steering_max_rad)
 
 
-def build_kinematic_problem(s: KinematicQpStructure) -> tuple[cp.Problem, list, dict]:
+def build_kinematic_problem(s: KinematicQpStructure) -> tuple[cp.Problem, list[Any], dict[str, Any]]:
     """The LTV-QP in CVXPY: problem, parameters in ``theta`` order, variables to read."""
     import cvxpy as cp
 
@@ -112,6 +112,20 @@ class KinematicTrack:
     constant-velocity obstacle predictions). Subclasses set ``cfg``, ``vehicle``, ``ts``,
     ``horizon``, ``u_prev``, ``_steps_ahead_s``, ``records`` (an empty list: each step's state
     and plan, for :meth:`model_check`) and provide ``solve``."""
+
+    cfg: KinematicMpcSettings
+    vehicle: VehicleConfig
+    ts: float
+    horizon: int
+    u_prev: np.ndarray
+    _steps_ahead_s: np.ndarray
+    records: list[tuple[Any, ...]]
+
+    def solve(self, x0: np.ndarray, u_prev: np.ndarray, reference: np.ndarray,
+              predicted_obstacles: np.ndarray, radii: np.ndarray, *,
+              log: dict[str, Any] | None = None) -> ControlStep:
+        """The subclass's solve (see :class:`KinematicLtvMpc`)."""
+        raise NotImplementedError
 
     def rollout(self, x0: np.ndarray, plan: np.ndarray) -> np.ndarray:
         """States of the Euler model from ``x0`` under ``plan`` (2 x N), shape (4, N + 1)."""
@@ -213,7 +227,7 @@ class KinematicLtvMpc(KinematicTrack):
         self.fallback = PlanFallback(controller.horizon)
         self.u_prev = np.zeros(2)
         self._steps_ahead_s = np.arange(1, controller.horizon + 1) * self.ts
-        self.records: list[tuple] = []
+        self.records = []
 
     def _linearize(self, x0: np.ndarray, plan: np.ndarray) -> tuple[np.ndarray, np.ndarray,
                                                                      np.ndarray, np.ndarray]:
@@ -243,12 +257,13 @@ class KinematicLtvMpc(KinematicTrack):
             offsets[:, k] = states[:, k + 1] - As[k] @ states[:, k] - Bs[k] @ plan[:, k]
         return states, As, Bs, offsets
 
-    def _accepted(self, plan: np.ndarray, solution, halfplanes: tuple, status: str,
-                  total_iters: int, total_time: float, log: dict) -> ControlStep:
+    def _accepted(self, plan: np.ndarray, solution: QpSolution, halfplanes: tuple[Any, ...],
+                  status: str,
+                  total_iters: int, total_time: float, log: dict[str, Any]) -> ControlStep:
         """The step of a solved plan (kept for the fallback), with the slack it needs."""
         Gx, Gy, h = halfplanes
         self.fallback.accept(plan)
-        states = np.asarray(solution.values["X"], dtype=float)
+        states = solution.value("X")
         # slack needed by the optimal plan (what the QP's slack variable holds)
         needed = h - Gx * states[0, 1:][:, None] - Gy * states[1, 1:][:, None]
         return ControlStep(plan[:, 0].copy(), plan, states, status, total_iters,
@@ -257,7 +272,7 @@ class KinematicLtvMpc(KinematicTrack):
 
     def solve(self, x0: np.ndarray, u_prev: np.ndarray, reference: np.ndarray,
               predicted_obstacles: np.ndarray, radii: np.ndarray,
-              passes: int | None = None, log: dict | None = None) -> ControlStep:
+              passes: int | None = None, log: dict[str, Any] | None = None) -> ControlStep:
         """Solve one step.
 
         Parameters
@@ -292,7 +307,7 @@ class KinematicLtvMpc(KinematicTrack):
                 done += 1
                 if not solution.ok:
                     break
-                new_plan = np.asarray(solution.values["U"], dtype=float) @ self.blocking
+                new_plan = solution.value("U") @ self.blocking
                 if not np.all(np.isfinite(new_plan)):
                     status = "non_finite_solution"
                     break

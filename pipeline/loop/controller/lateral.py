@@ -15,6 +15,8 @@ kept and checked against the plant after the run
 
 from __future__ import annotations
 
+from typing import Any
+
 from math import isfinite
 
 import numpy as np
@@ -22,7 +24,7 @@ import numpy as np
 from pipeline.loop.controller.base import ControlStep, Observation, PlanFallback
 from pipeline.loop.controller.frames import ModelBank, make_frame
 from pipeline.loop.controller.lateral_backends import (ClarabelCondensedQp, CompiledCondensedQp,
-                                                       DaqpCondensedQp)
+                                                       DaqpCondensedQp, LateralQp)
 from pipeline.loop.controller.lateral_qp import (CondensedPrediction, LateralQpStructure,
                                                  MpcInputs, blocking_matrix,
                                                  build_condensed_lateral_problem,
@@ -85,23 +87,23 @@ class LateralMpc:
         self.condensed = controller.formulation == "condensed"
         builder = build_condensed_lateral_problem if self.condensed else build_lateral_problem
         self.weights = structure.weights
+        self.qp: LateralQp
         if controller.backend in ("daqp", "clarabel_dense"):
             # no compilation: the condensed data go to the solver as numpy matrices
             dense = DaqpCondensedQp if controller.backend == "daqp" else ClarabelCondensedQp
             self.qp, self.compile_count, self.compile_time_s = \
                 dense(structure, controller.solver_max_iter), 0, 0.0
         else:
-            self.qp, self.compile_count, self.compile_time_s = compiled_backend(
+            compiled, self.compile_count, self.compile_time_s = compiled_backend(
                 qp_cache, "lateral", structure, lambda: builder(structure),
                 controller.backend, controller.solver_max_iter)
-            if self.condensed:
-                self.qp = CompiledCondensedQp(self.qp)
+            self.qp = CompiledCondensedQp(compiled) if self.condensed else compiled
         # condensed predictions by model, shared like the models (built once per speed, step)
         key = ("lateral_predictions", vehicle_key(vehicle), self.sample_time_s,
                self.model_cfg.b2_heading_entry, self.model_cfg.speed_grid_mps,
                controller.horizon, controller.control_horizon, controller.input_hold,
                self.weights[:5])
-        self._predictions: dict[tuple, CondensedPrediction] = \
+        self._predictions: dict[tuple[Any, ...], CondensedPrediction] = \
             qp_cache.memo(key, dict) if qp_cache is not None else {}
         self.fallback = PlanFallback(controller.horizon)
         self.records: list[PredictionRecord] = []
@@ -125,7 +127,7 @@ class LateralMpc:
                                                                    self.weights[:5])
         return entry
 
-    def solve(self, inputs: MpcInputs, log: dict | None = None) -> ControlStep:
+    def solve(self, inputs: MpcInputs, log: dict[str, Any] | None = None) -> ControlStep:
         """Solve the QP for one step's data, falling back safely on any failure."""
         solution = QpSolution("not_solved", -1, 0.0, None)
         free = prediction = None
@@ -138,17 +140,17 @@ class LateralMpc:
             else:
                 solution = self.qp.solve(self.parameter_vector(inputs))
         if solution.ok:
-            U = np.asarray(solution.values["U"], dtype=float).reshape(-1)
+            U = solution.value("U").reshape(-1)
             plan = U @ self.blocking
             if isfinite(sum(plan.tolist())):
                 plan = plan[None, :]
                 self.fallback.accept(plan)
-                if self.condensed:
+                if prediction is not None:  # condensed: the states were eliminated
                     # the eliminated states, for the log and the slack: X = free + Gamma U
                     predicted = free + prediction.gamma @ U
                     states = np.concatenate([inputs.x0[:, None], predicted.T], axis=1)
                 else:
-                    states = solution.values["X"]
+                    states = solution.value("X")
                 # slack needed by the optimal plan (what the QP's slack variable holds); rows
                 # of idle slots and far obstacles are 0 y + s >= 0 and need none
                 slack = 0.0
@@ -166,7 +168,7 @@ class LateralMpc:
             solution.status, solution.iterations, solution.solve_time_s,
             lambda: np.array([float(np.clip(-delta / ts, -rate_max, rate_max))]), log)
 
-    def inputs_from(self, obs: Observation) -> tuple[MpcInputs, dict]:
+    def inputs_from(self, obs: Observation) -> tuple[MpcInputs, dict[str, Any]]:
         """The QP data of one observation in the configured frame (``controller.frame``)."""
         return self.frame.inputs(obs)
 

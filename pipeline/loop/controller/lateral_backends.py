@@ -7,10 +7,21 @@ from numpy on a kept Clarabel) and ``daqp`` (:class:`DaqpCondensedQp`). Each tak
 
 from __future__ import annotations
 
+from typing import Any, Protocol
+
 import numpy as np
 
 from pipeline.loop.controller.lateral_qp import CondensedData, LateralQpStructure
-from pipeline.loop.controller.qp import NON_FINITE_DATA, QpSolution
+from pipeline.loop.controller.qp import CvxpyQp, DirectQp, NON_FINITE_DATA, QpSolution
+
+
+
+class LateralQp(Protocol):
+    """What the lateral MPC asks of its backend: one solve of a step's data (the condensed
+    data, or the sparse statement's parameter vector)."""
+
+    def solve(self, data: Any) -> QpSolution:
+        ...
 
 
 class CompiledCondensedQp:
@@ -24,7 +35,7 @@ class CompiledCondensedQp:
         The compiled statement (shared through the ``QpCache``).
     """
 
-    def __init__(self, compiled) -> None:
+    def __init__(self, compiled: DirectQp | CvxpyQp) -> None:
         self.compiled = compiled
 
     def solve(self, data: CondensedData) -> QpSolution:
@@ -51,7 +62,8 @@ class ClarabelCondensedQp:
     def __init__(self, structure: LateralQpStructure, max_iter: int) -> None:
         import scipy.sparse as sparse
 
-        self.s, self.max_iter, self._solver = structure, int(max_iter), None
+        self.s, self.max_iter = structure, int(max_iter)
+        self._solver: Any = None  # clarabel.DefaultSolver, made at the first solve
         N, Nc, M = structure.horizon, structure.control_horizon, structure.max_obstacles
         n_u, n_s = Nc, N * M
         self.n_u, self.n_s, self.N = n_u, n_s, N
@@ -82,7 +94,8 @@ class ClarabelCondensedQp:
         self._dmax = dmax
         self._sparse = sparse
 
-    def _data(self, data: CondensedData):
+    def _data(self, data: CondensedData
+              ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """Values of ``P`` (upper triangle) and ``A`` on their fixed patterns, ``q`` and ``b``."""
         n_u, N, r = self.n_u, self.N, 2 * self.n_u + self.n_s
         p_values = self._p_values
@@ -167,8 +180,9 @@ class DaqpCondensedQp:
         self._lower = np.concatenate([np.full(Nc, -rate), np.zeros(N * M), np.zeros(N),
                                       np.zeros(N * M)])
         self._sense = np.zeros(self._upper.size, np.intc)
-        self._model = None        # daqp.Model, set up on the first solve
-        self._hessian_of = None   # the hessian_u array the workspace holds (one per speed)
+        self._model: Any = None   # daqp.Model, set up on the first solve
+        # the hessian_u array the workspace holds (one per speed)
+        self._hessian_of: np.ndarray | None = None
 
     def cost(self, data: CondensedData) -> tuple[np.ndarray, np.ndarray]:
         """``H`` and ``f`` of the cost ``0.5 z' H z + f' z`` over ``z = [U, S]`` (the same ``H``

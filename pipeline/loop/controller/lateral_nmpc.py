@@ -26,12 +26,14 @@ from __future__ import annotations
 
 import dataclasses
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
 from pipeline.loop.controller.base import ControlStep, Observation
+from pipeline.loop.controller.frames import PathFrame
 from pipeline.loop.controller.lateral import LateralMpc
-from pipeline.loop.controller.lateral_qp import LateralQpStructure, blocking_matrix
+from pipeline.loop.controller.lateral_qp import LateralQpStructure, MpcInputs, blocking_matrix
 from pipeline.loop.controller.nmpc import ipopt_solve
 from pipeline.loop.controller.qp import QpCache
 from pipeline.loop.kernels import Kernels
@@ -53,7 +55,8 @@ class LateralNlp:
     n_moves: int
 
 
-def single_track_ode(ca, x, rate, speed_target, constants):
+def single_track_ode(ca: Any, x: Any, rate: Any, speed_target: Any,
+                     constants: tuple[float, ...]) -> Any:
     """:func:`~pipeline.loop.model.plant_derivative` in CasADi symbols (the steering bound is a
     constraint of the program, not a cut of the rate)."""
     m, iz, a, b, cf, cr, lim_f, lim_r, tau, acc_max, _ = constants
@@ -67,7 +70,7 @@ def single_track_ode(ca, x, rate, speed_target, constants):
                       (a * fy_front * ca.cos(delta) - b * fy_rear) / iz, rate)
 
 
-def build_lateral_nlp(structure: LateralQpStructure, constants: tuple, sample_time_s: float,
+def build_lateral_nlp(structure: LateralQpStructure, constants: tuple[Any, ...], sample_time_s: float,
                       substeps: int, max_iter: int) -> LateralNlp:
     """The program of :mod:`this module <pipeline.loop.controller.lateral_nmpc>` with parameters
     ``[x0 (7), speed target, prediction step, frame (3 N: c_x, c_y, heading per step),
@@ -202,8 +205,9 @@ class LateralNmpc(LateralMpc):
         return ipopt_solve(self.nlp.solver, x0=start, p=params, lbx=self.nlp.lbx,
                            ubx=self.nlp.ubx, lbg=self.nlp.lbg, ubg=self.nlp.ubg)
 
-    def _accepted(self, values: np.ndarray, params: np.ndarray, inputs, status: str,
-                  iterations: int, elapsed: float, log: dict) -> tuple[ControlStep, np.ndarray]:
+    def _accepted(self, values: np.ndarray, params: np.ndarray, inputs: MpcInputs,
+                  status: str, iterations: int, elapsed: float, log: dict[str, Any]
+                  ) -> tuple[ControlStep, np.ndarray | None]:
         """The step of a solved NLP (its moves kept for the next start and the fallback), and
         the plan's lateral error at its steps."""
         N, Nc = self.horizon, self.nlp.n_moves
@@ -220,13 +224,13 @@ class LateralNmpc(LateralMpc):
         step = ControlStep(plan[:, 0].copy(), plan, states, status, iterations, elapsed,
                            "none", float(max(np.max(gaps, initial=0.0), 0.0)), log)
         # the plan's poses, for the next step's stations (as the QP's plan gives them)
-        if self.frame.record[0] == "path":
+        if isinstance(self.frame, PathFrame):
             self.frame.plan_poses((predicted[:2].T, predicted[2] + np.arctan2(
                 predicted[4], np.maximum(predicted[3], 0.1))))
         return step, lateral
 
     def _fell_back(self, obs: Observation, status: str, iterations: int, elapsed: float,
-                   log: dict) -> tuple[ControlStep, None]:
+                   log: dict[str, Any]) -> tuple[ControlStep, None]:
         """The fallback's step (steering back toward straight at the rate limit), no plan."""
         self._moves = None
         delta = obs.plant_state[6] if np.isfinite(obs.plant_state[6]) else 0.0
@@ -235,6 +239,6 @@ class LateralNmpc(LateralMpc):
             status, iterations, elapsed,
             lambda: np.array([float(np.clip(-delta / self.sample_time_s, -rate_max,
                                             rate_max))]), log)
-        if self.frame.record[0] == "path":
+        if isinstance(self.frame, PathFrame):
             self.frame.plan_poses(None)
         return step, None

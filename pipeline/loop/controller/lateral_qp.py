@@ -33,7 +33,7 @@ kept Clarabel solver sees exactly what
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
+from typing import Any, TYPE_CHECKING
 
 import numpy as np
 
@@ -78,7 +78,7 @@ class LateralQpStructure:
     control_horizon: int
     max_obstacles: int
     input_hold: str
-    weights: tuple
+    weights: tuple[Any, ...]
     steering_rate_max_rad_s: float
     steering_max_rad: float
     formulation: str = "sparse"
@@ -104,7 +104,7 @@ def blocking_matrix(horizon: int, control_horizon: int, input_hold: str) -> np.n
     return T
 
 
-def build_lateral_problem(s: LateralQpStructure) -> tuple[cp.Problem, list, dict]:
+def build_lateral_problem(s: LateralQpStructure) -> tuple[cp.Problem, list[Any], dict[str, Any]]:
     """The lateral QP in CVXPY: problem, parameters in ``theta`` order, variables to read."""
     import cvxpy as cp
 
@@ -206,7 +206,7 @@ class CondensedPrediction:
 
     @classmethod
     def of(cls, model: LateralModel, blocking: np.ndarray,
-           weights: tuple = (1.0, 1.0, 1.0, 1.0, 0.0)) -> "CondensedPrediction":
+           weights: tuple[Any, ...] = (1.0, 1.0, 1.0, 1.0, 0.0)) -> "CondensedPrediction":
         """Build the maps of ``model``; ``weights`` starts ``(q_y, q_psi, q_r, q_d, r_u)``."""
         from scipy.linalg import cholesky, solve_triangular
 
@@ -268,7 +268,7 @@ class CondensedPrediction:
         return out
 
 
-def build_condensed_lateral_problem(s: LateralQpStructure) -> tuple[cp.Problem, list, dict]:
+def build_condensed_lateral_problem(s: LateralQpStructure) -> tuple[cp.Problem, list[Any], dict[str, Any]]:
     """The same lateral QP with the states eliminated, in the coordinates ``W = R U``.
 
     The tracking cost ``|gamma_w U + free_w|^2 + r_u |U T|^2`` equals ``|R U + r|^2`` up to a
@@ -354,7 +354,7 @@ class CondensedData:
 
 
 def condensed_data(prediction: CondensedPrediction, inputs: "MpcInputs",
-                   weights: tuple) -> CondensedData:
+                   weights: tuple[Any, ...]) -> CondensedData:
     """The condensed QP's data for one step: one product for the free response, one gather
     for the weighted errors, the half-planes folded onto ``U`` (``weights`` must be those
     ``prediction`` was built with)."""

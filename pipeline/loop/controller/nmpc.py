@@ -23,6 +23,8 @@ and the program is small (6 moves, 30 slacks); ``fmincon``'s SQP would need a QP
 
 from __future__ import annotations
 
+from typing import Any
+
 import time
 from dataclasses import dataclass
 
@@ -43,7 +45,7 @@ IPOPT_STATUS = {"Solve_Succeeded": "optimal", "Solved_To_Acceptable_Level": "opt
                 "Maximum_CpuTime_Exceeded": "user_limit"}
 
 
-def ipopt_solve(solver, **arguments) -> tuple[str, int, float, np.ndarray | None]:
+def ipopt_solve(solver: Any, **arguments: Any) -> tuple[str, int, float, np.ndarray | None]:
     """A CasADi IPOPT ``solver`` called on ``arguments``: its status (:data:`IPOPT_STATUS`),
     iterations, wall time and solution vector (None, with status ``error:RuntimeError``, where
     CasADi raised on an evaluation error)."""
@@ -74,7 +76,8 @@ class NmpcProblem:
     n_constraints: int
 
 
-def nmpc_cost_terms(structure: KinematicQpStructure):
+def nmpc_cost_terms(structure: KinematicQpStructure
+                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Weights of the cost (squared, as MATLAB applies them) and the move-blocking matrix."""
     wy = np.asarray(structure.output_weights, float) ** 2
     wu = np.asarray(structure.input_weights, float) ** 2
@@ -164,7 +167,7 @@ class KinematicNmpc(KinematicTrack):
         self.u_prev = np.zeros(2)
         self._moves: np.ndarray | None = None
         self._steps_ahead_s = np.arange(1, controller.horizon + 1) * self.ts
-        self.records: list[tuple] = []
+        self.records: list[tuple[Any, ...]] = []
 
     def parameters(self, x0: np.ndarray, u_prev: np.ndarray, reference: np.ndarray,
                    halfplanes: tuple[np.ndarray, np.ndarray, np.ndarray]) -> np.ndarray:
@@ -175,14 +178,14 @@ class KinematicNmpc(KinematicTrack):
 
     def solve(self, x0: np.ndarray, u_prev: np.ndarray, reference: np.ndarray,
               predicted_obstacles: np.ndarray, radii: np.ndarray,
-              log: dict | None = None) -> ControlStep:
+              log: dict[str, Any] | None = None) -> ControlStep:
         """Solve one step (arguments as :meth:`KinematicLtvMpc.solve`)."""
         N, Nc, M = self.horizon, self.problem.control_horizon, self.problem.max_obstacles
         last = self.fallback.last_plan
         guess_plan = np.hstack([last[:, 1:], last[:, -1:]]) if last is not None \
             else np.zeros((2, N))
         status, iterations, elapsed, values = "not_solved", -1, 0.0, None
-        halfplanes = None
+        halfplanes: tuple[Any, ...] | None = None
         if np.all(np.isfinite(x0)) and np.all(np.isfinite(u_prev)):
             states = self.rollout(x0, guess_plan)
             halfplanes = kinematic_halfplanes(states, reference, predicted_obstacles, radii,
@@ -196,7 +199,7 @@ class KinematicNmpc(KinematicTrack):
                 ubx=self.problem.ubx, lbg=0.0, ubg=np.inf)
         log = {**(log or {}), "ltv_passes": 0, "ltv_change": float("nan")}
         if status in ("optimal", "optimal_inaccurate") and values is not None \
-                and np.all(np.isfinite(values)):
+                and halfplanes is not None and np.all(np.isfinite(values)):
             plan = values[:2 * Nc].reshape(2, Nc, order="F") @ self.blocking
             self.fallback.accept(plan)
             states = self.rollout(x0, plan)

@@ -33,16 +33,21 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from math import atan2, cos, exp, floor, pi, sin, sqrt
+from typing import Any
 
 import numpy as np
+from numpy.typing import ArrayLike
 
+from pipeline.loop.arrays import KernelValues
 from pipeline.loop.model import LateralModel
 
 _TINY = 1e-9
 
 
-def chase_path_arrays(px, py, heading, target, line_x, line_y, extend, lookahead_m, kappa_max,
-                      ds_m, n_intervals):
+def chase_path_arrays(px: float, py: float, heading: float, target: KernelValues,
+                      line_x: float, line_y: float, extend: bool, lookahead_m: float,
+                      kappa_max: float, ds_m: float, n_intervals: int
+                      ) -> tuple[KernelValues, KernelValues, KernelValues, KernelValues]:
     """The drivable path of :mod:`this module <pipeline.loop.controller.path>` on plain
     numbers: ``points (n + 1, 2), headings (n + 1,), curvature (n,), clipped (n,)``.
 
@@ -151,7 +156,8 @@ def chase_path_arrays(px, py, heading, target, line_x, line_y, extend, lookahead
 def heading_ramp_path(px: float, py: float, heading: float, target_heading: float,
                       yaw_rate_max_rad_s: float, heading_limits: tuple[float, float],
                       kappa_max: float, ds_m: float, sample_time_s: float,
-                      n_intervals: int) -> tuple:
+                      n_intervals: int
+                      ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """The path of Section 3.1's heading reference (``heading_reference=apf_force``): from
     the pose, the heading ramps towards ``psi_apf`` at ``omega_ref = sat((psi_apf - theta) /
     Ts)`` (at most ``yaw_rate_max_rad_s``), held within ``heading_limits`` (the fixed frame's
@@ -178,7 +184,8 @@ def heading_ramp_path(px: float, py: float, heading: float, target_heading: floa
 
 # --- the path's geometry on plain numbers (one statement for CPython and numba) ------------
 
-def _heading_at(s, headings, curvature, ds, n):
+def _heading_at(s: float, headings: KernelValues, curvature: KernelValues, ds: float,
+                n: int) -> float:
     """Path heading at arc length ``s``: linear on each arc, constant beyond the ends."""
     if n == 0:
         return headings[0]
@@ -189,7 +196,7 @@ def _heading_at(s, headings, curvature, ds, n):
     return headings[j] + curvature[j] * (clamped - j * ds)
 
 
-def _curvature_at(s, curvature, ds, n):
+def _curvature_at(s: float, curvature: KernelValues, ds: float, n: int) -> float:
     """Path curvature at arc length ``s`` (0 beyond the ends)."""
     if n == 0 or s < 0.0 or s > ds * n:
         return 0.0
@@ -197,7 +204,8 @@ def _curvature_at(s, curvature, ds, n):
     return curvature[n - 1 if j > n - 1 else j]
 
 
-def _project_point(x, y, points, headings, ds, n):
+def _project_point(x: float, y: float, points: KernelValues, headings: KernelValues, ds: float,
+                   n: int) -> tuple[float, float]:
     """Path coordinates ``(s, d)`` of ``(x, y)``: the nearest point on the knots' chords or on
     the straight continuations beyond both ends (ties: the earliest of those); ``d`` signed,
     positive to the left."""
@@ -236,7 +244,8 @@ def _project_point(x, y, points, headings, ds, n):
     return s_best, (distance if cross > 0.0 else (-distance if cross < 0.0 else 0.0))
 
 
-def _point_at(s, d, points, headings, ds, n):
+def _point_at(s: float, d: float, points: KernelValues, headings: KernelValues, ds: float,
+              n: int) -> tuple[float, float]:
     """The global point at path coordinates ``(s, d)``: on the chord at ``s`` (on the straight
     continuations beyond the ends), then ``d`` along its left normal."""
     if s < 0.0 or n == 0:
@@ -257,7 +266,8 @@ def _point_at(s, d, points, headings, ds, n):
     return bx - d * uy, by + d * ux
 
 
-def project_arrays(xy, points, headings, ds, n):
+def project_arrays(xy: KernelValues, points: KernelValues, headings: KernelValues, ds: float,
+                   n: int) -> tuple[np.ndarray, np.ndarray]:
     """:func:`_project_point` of every row of ``xy``: arrays ``s, d``."""
     m = len(xy)
     s_out, d_out = np.empty(m), np.empty(m)
@@ -289,7 +299,7 @@ class ReferencePath:
     ds_m: float
 
     @classmethod
-    def straight(cls, start_m, heading_rad: float, ds_m: float, n_intervals: int
+    def straight(cls, start_m: ArrayLike, heading_rad: float, ds_m: float, n_intervals: int
                  ) -> "ReferencePath":
         """A straight path from ``start_m`` along ``heading_rad`` (the fixed frame's line)."""
         s = ds_m * np.arange(n_intervals + 1)
@@ -306,10 +316,10 @@ class ReferencePath:
     def length_m(self) -> float:
         return self.ds_m * self.n_intervals
 
-    def _args(self) -> tuple:
+    def _args(self) -> tuple[Any, ...]:
         return self.points_m.tolist(), self.headings_rad.tolist(), self.ds_m, self.n_intervals
 
-    def heading_at(self, s_m) -> np.ndarray:
+    def heading_at(self, s_m: ArrayLike) -> np.ndarray:
         """Path heading (rad, unwrapped) at arc lengths ``s_m``: linear in ``s`` on each arc,
         constant beyond the ends."""
         s = np.asarray(s_m, float)
@@ -317,14 +327,14 @@ class ReferencePath:
         return np.array([_heading_at(v, headings, curvature, self.ds_m, self.n_intervals)
                          for v in s.ravel().tolist()]).reshape(s.shape)
 
-    def curvature_at(self, s_m) -> np.ndarray:
+    def curvature_at(self, s_m: ArrayLike) -> np.ndarray:
         """Path curvature (1/m) at arc lengths ``s_m`` (0 beyond the ends)."""
         s = np.asarray(s_m, float)
         curvature = self.curvature_1_per_m.tolist()
         return np.array([_curvature_at(v, curvature, self.ds_m, self.n_intervals)
                          for v in s.ravel().tolist()]).reshape(s.shape)
 
-    def project(self, points_m) -> tuple[np.ndarray, np.ndarray]:
+    def project(self, points_m: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
         """Path coordinates ``(s, d)`` of ``points_m`` (shape (..., 2)) by
         :func:`_project_point`: the nearest point on the knots' chords or on the straight
         continuations beyond both ends; ``d`` positive to the left of the path's direction.
@@ -334,7 +344,7 @@ class ReferencePath:
         s, d = project_arrays(p.reshape(-1, 2).tolist(), *self._args())
         return s.reshape(p.shape[:-1]), d.reshape(p.shape[:-1])
 
-    def to_global(self, s_m, d_m) -> np.ndarray:
+    def to_global(self, s_m: ArrayLike, d_m: ArrayLike) -> np.ndarray:
         """Global points at path coordinates ``(s, d)`` (:func:`_point_at`; the inverse of
         :meth:`project` near the path)."""
         s, d = np.broadcast_arrays(np.asarray(s_m, float), np.asarray(d_m, float))
@@ -370,8 +380,11 @@ def steady_state_gains(model: LateralModel) -> np.ndarray:
     return np.array([0.0, vy, epsi, 1.0, delta])
 
 
-def frame_step_arrays(points, headings, curvature, ds, n, px, py, speed, speed_ref, vy_gain,
-                      ts, n_steps, time_constant, accel_max, plan_xy, plan_course, obstacles):
+def frame_step_arrays(points: KernelValues, headings: KernelValues, curvature: KernelValues,
+                      ds: float, n: int, px: float, py: float, speed: float, speed_ref: float,
+                      vy_gain: float, ts: float, n_steps: int, time_constant: float,
+                      accel_max: float, plan_xy: KernelValues, plan_course: KernelValues,
+                      obstacles: KernelValues) -> tuple[Any, ...]:
     """One step's path-frame data on plain numbers: the vehicle's path coordinates, where it
     will be along the path at each step, the yaw rate the path then demands, and each obstacle
     point in path coordinates. Returns ``s0, d0``, the path's heading at ``s0``, and arrays
@@ -453,8 +466,10 @@ def frame_step_arrays(points, headings, curvature, ds, n, px, py, speed, speed_r
     return s0, d0, heading0, stations, r_d, vx, obstacle_s, obstacle_d
 
 
-def plan_poses_arrays(points, headings, curvature, ds, n, stations, lateral, heading_error,
-                      vy, vx):
+def plan_poses_arrays(points: KernelValues, headings: KernelValues, curvature: KernelValues,
+                      ds: float, n: int, stations: KernelValues, lateral: KernelValues,
+                      heading_error: KernelValues, vy: KernelValues, vx: KernelValues
+                      ) -> tuple[KernelValues, KernelValues]:
     """A plan's poses on plain numbers: the global position of each of its steps (at its
     station, ``lateral`` off the path) and its course (the path's heading there plus the
     heading error, plus the sideslip ``atan2(vy, vx)``): arrays ``xy (m, 2), course (m,)``."""
@@ -469,6 +484,6 @@ def plan_poses_arrays(points, headings, curvature, ds, n, stations, lateral, hea
     return xy, course
 
 
-def wrap_angle(angle_rad: np.ndarray) -> np.ndarray:
+def wrap_angle(angle_rad: ArrayLike) -> np.ndarray:
     """Angles wrapped to ``[-pi, pi)``."""
     return (np.asarray(angle_rad, float) + np.pi) % (2.0 * np.pi) - np.pi

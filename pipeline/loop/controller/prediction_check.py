@@ -9,11 +9,14 @@ by :func:`check_record_arrays`, one statement for CPython and numba
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 from math import floor, pi, sqrt
+from typing import Any
 
 import numpy as np
 
+from pipeline.loop.arrays import KernelValues
 from pipeline.loop.controller.path import ReferencePath, _heading_at, _point_at, _project_point
 from pipeline.loop.model import LateralModel
 
@@ -40,7 +43,7 @@ class PredictionRecord:
         The QP's predicted lateral errors (None when the step fell back).
     """
 
-    frame: tuple
+    frame: tuple[Any, ...]
     x0: np.ndarray
     model: LateralModel
     disturbance_rad_s: np.ndarray
@@ -67,8 +70,13 @@ MODEL_CHECK_COLUMNS = ("model_heading_error_rad", "model_error_05s_m", "model_er
                        "plan_error_05s_m", "plan_error_1s_m")
 
 
-def check_record_arrays(points, headings, curvature, ds, n, stations, step, x0, Ad, Bd, Ed,
-                        plan_lateral, xy, psi, delta, first, last, half, one, ts):
+def check_record_arrays(points: KernelValues, headings: KernelValues, curvature: KernelValues,
+                        ds: float, n: int, stations: KernelValues, step: int,
+                        x0: KernelValues, Ad: KernelValues, Bd: KernelValues,
+                        Ed: KernelValues, plan_lateral: KernelValues, xy: KernelValues,
+                        psi: KernelValues, delta: KernelValues, first: int, last: int,
+                        half: int, one: int, ts: float
+                        ) -> tuple[float, float, float, float, float]:
     """:func:`prediction_check` of one record on plain numbers: ``heading error, model error
     at half and one, plan error at half and one`` (NaN where not computable).
 
@@ -130,8 +138,9 @@ def check_record_arrays(points, headings, curvature, ds, n, stations, step, x0, 
     return worst, errors[0], errors[1], errors[2], errors[3]
 
 
-def prediction_check(records: list, time_s: np.ndarray, plant: np.ndarray,
-                     sample_time_s: float, kernel=None) -> dict[str, np.ndarray]:
+def prediction_check(records: list[Any], time_s: np.ndarray, plant: np.ndarray,
+                     sample_time_s: float, kernel: Callable[..., Any] | None = None
+                     ) -> dict[str, np.ndarray]:
     """Each step's prediction against what the plant then did.
 
     For the record of step ``k`` (``records[k]`` belongs to log row ``k``):
@@ -172,7 +181,7 @@ def prediction_check(records: list, time_s: np.ndarray, plant: np.ndarray,
     one = int(round(1.0 / sample_time_s))
     half = int(round(0.5 / sample_time_s))
     compiled = kernel is not None
-    check = kernel if compiled else check_record_arrays
+    check = kernel if kernel is not None else check_record_arrays
     xy = np.ascontiguousarray(plant[:, :2]) if compiled else plant[:, :2].tolist()
     psi = np.ascontiguousarray(plant[:, 2]) if compiled else plant[:, 2].tolist()
     delta = np.ascontiguousarray(plant[:, 3]) if compiled else plant[:, 3].tolist()
@@ -186,7 +195,7 @@ def prediction_check(records: list, time_s: np.ndarray, plant: np.ndarray,
     return {name: out[:, i] for i, name in enumerate(MODEL_CHECK_COLUMNS)}
 
 
-def _record_arrays(record: PredictionRecord, one: int, compiled: bool) -> tuple:
+def _record_arrays(record: PredictionRecord, one: int, compiled: bool) -> tuple[Any, ...]:
     """A record's path (long enough for ``one`` sample ahead) and the arrays
     :func:`check_record_arrays` reads of it (lists for CPython, arrays for the kernel): the
     path's points, headings and curvature, the model's stations, the state, ``Ad``, ``Bd``,
@@ -194,7 +203,7 @@ def _record_arrays(record: PredictionRecord, one: int, compiled: bool) -> tuple:
     path = record.path(max(one, record.disturbance_rad_s.shape[0]))
     model = record.model
     plan = record.plan_lateral_m if record.plan_lateral_m is not None else np.zeros(0)
-    arrays = (path.points_m, path.headings_rad, path.curvature_1_per_m,
+    arrays: tuple[Any, ...] = (path.points_m, path.headings_rad, path.curvature_1_per_m,
               record.stations_m, record.x0, model.Ad, np.ascontiguousarray(model.Bd[:, 0]),
               np.ascontiguousarray(model.Ed[:, 0]), plan)
     if not compiled:

@@ -46,7 +46,7 @@ CLARABEL_STATUS = {"Solved": OPTIMAL, "AlmostSolved": OPTIMAL_INACCURATE,
                    "MaxIterations": "user_limit", "MaxTime": "user_limit"}
 
 
-def solver_errors() -> tuple[type, ...]:
+def solver_errors() -> tuple[type[BaseException], ...]:
     """Exceptions a solver may raise on numerical trouble; anything else (a shape error, a
     bug) is a code error and propagates instead of being recorded as a solver fallback. A
     function, called in ``except`` clauses (evaluated only when something was raised), so
@@ -79,11 +79,17 @@ class QpSolution:
     status: str
     iterations: int
     solve_time_s: float
-    values: dict | None
+    values: dict[str, Any] | None
 
     @property
     def ok(self) -> bool:
         return self.status in OPTIMAL_STATUSES and self.values is not None
+
+    def value(self, name: str) -> np.ndarray:
+        """A variable's value as a float array (a solve that has values: :attr:`ok`)."""
+        if self.values is None:
+            raise ValueError(f"no values: the solve ended {self.status}")
+        return np.asarray(self.values[name], dtype=float)
 
 
 @dataclass
@@ -102,9 +108,9 @@ class AffineQpMap:
     n_a: int
     A_indices: np.ndarray
     A_indptr: np.ndarray
-    A_shape: tuple
-    cone_dims: dict
-    variables: dict            # name -> (offset, shape)
+    A_shape: tuple[Any, ...]
+    cone_dims: dict[str, Any]
+    variables: dict[str, Any]            # name -> (offset, shape)
     n_theta: int
     compile_time_s: float
 
@@ -128,7 +134,7 @@ class AffineQpMap:
     def matrix_A(self, values: np.ndarray) -> sp.csc_matrix:
         return sp.csc_matrix((values, self.A_indices, self.A_indptr), shape=self.A_shape)
 
-    def cones(self) -> list:
+    def cones(self) -> list[Any]:
         import clarabel
 
         cones = []
@@ -139,7 +145,7 @@ class AffineQpMap:
         cones.extend(clarabel.SecondOrderConeT(d) for d in self.cone_dims["soc"])
         return cones
 
-    def unpack(self, x: np.ndarray) -> dict:
+    def unpack(self, x: np.ndarray) -> dict[str, Any]:
         """Named variable values from Clarabel's primal vector."""
         out = {}
         for name, (off, shape) in self.variables.items():
@@ -148,13 +154,13 @@ class AffineQpMap:
         return out
 
 
-def _column_ranges(param_prog, parameters: list) -> np.ndarray:
+def _column_ranges(param_prog: Any, parameters: list[Any]) -> np.ndarray:
     """CVXPY's columns of each parameter entry, in the caller's order (column-major)."""
     cols = [param_prog.param_id_to_col[p.id] + np.arange(p.size) for p in parameters]
     return np.concatenate(cols) if cols else np.zeros(0, dtype=int)
 
 
-def compile_affine_map(problem: cp.Problem, parameters: list, variables: dict,
+def compile_affine_map(problem: cp.Problem, parameters: list[Any], variables: dict[str, Any],
                        check: bool = True) -> AffineQpMap:
     """Canonicalize ``problem`` once and read its parameter-to-data map off CVXPY's tensors.
 
@@ -200,7 +206,7 @@ def compile_affine_map(problem: cp.Problem, parameters: list, variables: dict,
     return qp_map
 
 
-def _parameter_columns(prog, parameters: list) -> tuple[np.ndarray, int]:
+def _parameter_columns(prog: Any, parameters: list[Any]) -> tuple[np.ndarray, int]:
     """The tensors' columns of ``parameters`` (in the caller's order) and of the constant;
     ``RuntimeError`` for variable bounds or a parameter list that is not the problem's."""
     from cvxpy.lin_ops.lin_op import CONSTANT_ID
@@ -213,7 +219,8 @@ def _parameter_columns(prog, parameters: list) -> tuple[np.ndarray, int]:
     return _column_ranges(prog, parameters), prog.param_id_to_col[CONSTANT_ID]
 
 
-def _constraint_map(prog, n: int, columns: np.ndarray, const_col: int):
+def _constraint_map(prog: Any, n: int, columns: np.ndarray, const_col: int
+                    ) -> tuple[sp.csr_matrix, np.ndarray, int, int, np.ndarray, np.ndarray]:
     """``q``, ``A``'s nonzero values and ``b`` as one affine map of ``theta`` (``maps`` and
     ``offset``), with ``A``'s sparsity (``m`` rows, ``n_a`` entries, ``indices``, ``indptr``)."""
     from cvxpy.cvxcore.python.canonInterface import reduce_problem_data_tensor
@@ -236,7 +243,8 @@ def _constraint_map(prog, n: int, columns: np.ndarray, const_col: int):
     return maps, offset, n_a, m, indices, indptr
 
 
-def _constant_quadratic(prog, n: int, columns: np.ndarray, const_col: int) -> sp.csc_matrix:
+def _constant_quadratic(prog: Any, n: int, columns: np.ndarray, const_col: int
+                        ) -> sp.csc_matrix:
     """The objective's ``P`` (upper triangle); ``RuntimeError`` where it depends on
     ``theta``."""
     P_tensor = sp.csc_matrix(prog.P)
@@ -246,7 +254,8 @@ def _constant_quadratic(prog, n: int, columns: np.ndarray, const_col: int) -> sp
     return sp.triu(sp.csc_matrix(P_full)).tocsc()
 
 
-def _variable_offsets(chain, inverse, variables: dict) -> dict:
+def _variable_offsets(chain: Any, inverse: Any, variables: dict[str, Any]
+                      ) -> dict[str, tuple[int, tuple[int, ...]]]:
     """Each variable's offset in the solver's vector and its shape: those of the
     matrix-stuffing step."""
     from cvxpy.reductions.dcp2cone.cone_matrix_stuffing import ConeMatrixStuffing
@@ -257,7 +266,7 @@ def _variable_offsets(chain, inverse, variables: dict) -> dict:
             for name, v in variables.items()}
 
 
-def _check_map(qp_map: AffineQpMap, prog, parameters: list) -> None:
+def _check_map(qp_map: AffineQpMap, prog: Any, parameters: list[Any]) -> None:
     """The map against CVXPY's ``apply_parameters`` at one point (a guard against a change of
     CVXPY's internal layout)."""
     rng = np.random.default_rng(0)
@@ -268,7 +277,7 @@ def _check_map(qp_map: AffineQpMap, prog, parameters: list) -> None:
     P, q, _, A, b = prog.apply_parameters(values, keep_zeros=True, quad_obj=True)
     q_map, a_map, b_map = qp_map.data(theta)
     A_map = qp_map.matrix_A(a_map)
-    def largest(values) -> float:
+    def largest(values: Any) -> float:
         values = np.asarray(values.todense() if sp.issparse(values) else values)
         return float(np.max(np.abs(values))) if values.size else 0.0
 
@@ -280,7 +289,7 @@ def _check_map(qp_map: AffineQpMap, prog, parameters: list) -> None:
         raise RuntimeError(f"parameter-to-data map disagrees with CVXPY's ({error:.3g})")
 
 
-def clarabel_settings(max_iter: int):
+def clarabel_settings(max_iter: int) -> Any:
     """Clarabel's settings for a kept solver: quiet, presolve off (it would forbid in-place data
     updates), the iteration limit."""
     import clarabel
@@ -305,7 +314,7 @@ class DirectQp:
     def __init__(self, qp_map: AffineQpMap, max_iter: int) -> None:
         self.map = qp_map
         self.max_iter = int(max_iter)
-        self._solver = None
+        self._solver: Any = None  # clarabel.DefaultSolver, made at the first solve
 
     def solve(self, theta: np.ndarray) -> QpSolution:
         """Solve at ``theta``; never raises on solver trouble (the status says it)."""
@@ -348,7 +357,7 @@ class CvxpyQp:
     max_iter : int
     """
 
-    def __init__(self, problem: cp.Problem, parameters: list, variables: dict,
+    def __init__(self, problem: cp.Problem, parameters: list[Any], variables: dict[str, Any],
                  max_iter: int) -> None:
         self.problem = problem
         self.parameters = parameters
@@ -410,15 +419,15 @@ class QpCache:
         Their total wall time (s).
     """
 
-    entries: dict = field(default_factory=dict)
+    entries: dict[Hashable, Any] = field(default_factory=dict)
     compile_count: int = 0
     compile_time_s: float = 0.0
     #: values worth keeping that are no compilation (discretized models by speed): shipped to
     #: workers with the cache, never counted as compilations
-    memos: dict = field(default_factory=dict)
+    memos: dict[Hashable, Any] = field(default_factory=dict)
 
     #: objects bound to this process (e.g. threadpoolctl's controller): never pickled
-    process_local: dict = field(default_factory=dict)
+    process_local: dict[str, Any] = field(default_factory=dict)
     #: run the single-track plant and the APF rollout as compiled kernels
     #: (:mod:`pipeline.loop.compiled`, the same bits as their Python statements); set by runners
     #: of many runs, where numba's import and cache load (about 0.8 s per process) pay back, and
@@ -442,19 +451,20 @@ class QpCache:
             self.compile_time_s += time.perf_counter() - start
         return self.entries[key]
 
-    def __getstate__(self) -> dict:
+    def __getstate__(self) -> dict[str, Any]:
         portable = {k: v for k, v in self.entries.items() if isinstance(v, AffineQpMap)}
         return {"entries": portable, "compile_count": 0, "compile_time_s": 0.0,
                 "memos": dict(self.memos), "process_local": {},
                 "compiled_kernels": self.compiled_kernels,
                 "members_planned": self.members_planned}
 
-    def __setstate__(self, state: dict) -> None:
+    def __setstate__(self, state: dict[str, Any]) -> None:
         self.__dict__.update(state)
 
 
 def compiled_backend(cache: QpCache | None, name: str, structure: Hashable,
-                     build: Callable[[], tuple], backend: str, max_iter: int
+                     build: Callable[[], tuple[Any, list[Any], dict[str, Any]]], backend: str,
+                     max_iter: int
                      ) -> tuple[DirectQp | CvxpyQp, int, float]:
     """The solver object of one controller, its problem taken from ``cache``.
 

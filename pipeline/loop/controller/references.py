@@ -3,10 +3,13 @@ stations, and the soft avoidance half-planes (one normal rule shared by both tra
 
 from __future__ import annotations
 
+from typing import Any
+
 from math import hypot, sqrt, tan
 
 import numpy as np
 
+from pipeline.loop.arrays import KernelValues
 from pipeline.loop.kernels import Kernels
 from pipeline.loop.controller_settings import (KinematicMpcSettings, MpcSettings,
                                                PurePursuitSettings)
@@ -49,7 +52,8 @@ def lateral_reference(path_line_m: np.ndarray, stations_m: np.ndarray,
     return y_ref, np.arctan(slopes)
 
 
-def reference_arrays(path_line_m, stations_m, max_slope: float, extend: bool):
+def reference_arrays(path_line_m: KernelValues, stations_m: KernelValues, max_slope: float,
+                     extend: bool) -> tuple[KernelValues, KernelValues]:
     """:func:`lateral_reference`'s interpolation on plain numbers: ``y_ref`` and the saturated
     slopes at the stations (arrays). ``path_line_m`` holds rows ``[x, y]`` and ``stations_m``
     numbers (lists in CPython, arrays compiled)."""
@@ -171,7 +175,7 @@ def collision_halfplanes(stations_m: np.ndarray, y_ref_m: np.ndarray, vehicle_li
 
 
 def _lateral_side_rows(stations_m: np.ndarray, y_ref_m: np.ndarray, obstacle: np.ndarray,
-                       reach: float, fallback_side: float) -> tuple[list, list]:
+                       reach: float, fallback_side: float) -> tuple[list[Any], list[Any]]:
     """One obstacle's ``G, h`` columns of :func:`collision_halfplanes` with
     ``halfplane_normal = lateral_side`` (``obstacle``: its centres at the stations, (N, 2))."""
     # ten stations: plain floats (the same arithmetic as the vectorized statement)
