@@ -29,7 +29,7 @@ def draw_sweep_figures(result: SweepSummary) -> None:
 
     good = result.summary[result.summary["status"] == "ok"]
     for fig, stem in sweep_figure(good, list(result.swept_keys)):
-        save_figure(fig, SweepSummary.figure_folder(result.folder), stem)
+        save_figure(fig, result.figure_folder(), stem)
 
 
 class AggregateCallback(Callback):

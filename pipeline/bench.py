@@ -12,6 +12,7 @@ import json
 import sys
 from pathlib import Path
 
+from pipeline.studies.results.base import written
 from pipeline.studies.results.bench import SCALING_STEM
 from pipeline.commands import run_command
 from pipeline.studies import bench as study
@@ -45,7 +46,7 @@ def _bench(args) -> int:
 
     result = study.run_benchmark(args.out, args.steps, args.repeats, args.quick,
                                  args.family_size)
-    save_figure(bench_scaling_figure(result.lateral), result.folder, SCALING_STEM)
+    save_figure(bench_scaling_figure(result.lateral), written(result.folder), SCALING_STEM)
     summary = result.summary
     print(json.dumps({key: summary[key] for key in HEADLINE}, indent=1))
     print(json.dumps({"path_frame": summary["path_frame"]}, indent=1))

@@ -81,7 +81,7 @@ def error_line(exc: BaseException, os_error: Callable[[OSError], str] | None = N
         return message, 2
     for types, line, code in EXIT_TABLE:
         if isinstance(exc, types):
-            return line(exc), code
+            return (line(exc) if line is not None else str(exc)), code
     if isinstance(exc, OSError) and exc.filename is not None:
         return (os_error or _os_error_line)(exc), 2
     return None

@@ -218,10 +218,12 @@ def to_experiment_config(cfg: Any) -> ExperimentConfig:
     """
     from omegaconf import OmegaConf
 
-    return OmegaConf.to_object(typed_config(cfg))
+    config = OmegaConf.to_object(typed_config(cfg))
+    assert isinstance(config, ExperimentConfig)  # the structured schema's object
+    return config
 
 
-def typed_config(cfg: Any):
+def typed_config(cfg: Any) -> Any:
     """The composed config merged into :class:`ExperimentConfig`'s structured schema (types
     checked, interpolations resolved; ``OmegaConf.to_object`` of it runs the range checks)."""
     from omegaconf import OmegaConf
@@ -230,6 +232,7 @@ def typed_config(cfg: Any):
     if "hydra" in cfg:
         cfg = OmegaConf.masked_copy(cfg, [k for k in cfg.keys() if k != "hydra"])
     data = OmegaConf.to_container(cfg, resolve=True)
+    assert isinstance(data, dict)  # a composed config is a mapping
     data.pop("hydra", None)
     data.pop("experiment", None)
     from omegaconf.errors import ConfigKeyError

@@ -45,7 +45,7 @@ def draw_specification_curves(result: MultiverseResult) -> None:
     default = design[design["kind"] == "default"].iloc[0]
     keys = [d["key"] for d in result.info.dimensions]
     changed = pd.DataFrame({key: ~matches(design[key], default[key]) for key in keys})
-    folder = MultiverseResult.figure_folder(result.folder)
+    folder = result.figure_folder()
     with FigureWriter() as writer:
         for claim in ALL_CLAIMS:
             writer.save(specification_curve_figure(result.specifications, changed,

@@ -73,8 +73,8 @@ def _score(args) -> int:
             raise scoring.TrajectoryFileError("--vehicle-radius must be a finite number >= 0")
     except scoring.TrajectoryFileError as exc:
         raise CommandError(f"error: {exc}") from None
-    metrics = compute_metrics(frame, TrajectoryContext(tuple(start), tuple(goal),
-                                                       args.vehicle_radius), MetricsConfig())
+    context = TrajectoryContext((start[0], start[1]), (goal[0], goal[1]), args.vehicle_radius)
+    metrics = compute_metrics(frame, context, MetricsConfig())
     missing, derived = scoring.score_quality(frame.columns)
     values = metrics.to_json()
     blank = frame.attrs.get("blank_cells", {})

@@ -38,7 +38,7 @@ def draw_pareto_fronts(result: TuneResult, space: TuneSpace) -> None:
     for part in PARTS:
         points = front_points(result.trials, result.heldout, space, part)
         save_figure(pareto_front_figure(points, [o.label for o in space.objectives],
-                                        f"{part} family"), TuneResult.figure_folder(result.folder),
+                                        f"{part} family"), result.figure_folder(),
                     TuneResult.front_stem(part))
 
 

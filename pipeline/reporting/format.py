@@ -3,10 +3,12 @@ sentences the sections compose (one place, so a number reads the same everywhere
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 
 
-def fmt(value) -> str:
+def fmt(value: Any) -> str:
     """A value as the page shows it: three significant digits (scientific below 1e-3), yes/no
     for a flag, "—" for a value that does not exist (None, NaN, infinite)."""
     if value is None:
@@ -16,13 +18,14 @@ def fmt(value) -> str:
     if isinstance(value, (int, np.integer)):
         return str(int(value))
     if isinstance(value, (float, np.floating)):
-        if not np.isfinite(value):
+        number = float(value)
+        if not np.isfinite(number):
             return "—"
-        return f"{value:.3g}" if abs(value) >= 1e-3 or value == 0 else f"{value:.2e}"
+        return f"{number:.3g}" if abs(number) >= 1e-3 or number == 0 else f"{number:.2e}"
     return str(value)
 
 
-def fmt_spec(value, digits: str = ".3g") -> str:
+def fmt_spec(value: Any, digits: str = ".3g") -> str:
     """A number with a format spec (``.2f``, ``.2g``), "—" when it does not exist."""
     if value is None or (isinstance(value, float) and not np.isfinite(value)):
         return "—"
@@ -31,7 +34,7 @@ def fmt_spec(value, digits: str = ".3g") -> str:
     return format(float(value), digits)
 
 
-def interval(low, high) -> str:
+def interval(low: Any, high: Any) -> str:
     """``[low, high]`` as :func:`fmt` writes each end."""
     return f"[{fmt(low)}, {fmt(high)}]"
 
@@ -48,12 +51,12 @@ def unit(metric: str) -> str:
     return "count" if metric.endswith("count") else ""
 
 
-def ms(seconds) -> float | None:
+def ms(seconds: float | None) -> float | None:
     """Seconds as milliseconds (None stays None)."""
     return None if seconds is None else 1e3 * seconds
 
 
-def percent(share) -> str:
+def percent(share: float) -> str:
     """A share as a whole percentage: ``0.875`` -> ``88 %``."""
     return f"{100 * share:.0f} %"
 

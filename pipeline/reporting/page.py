@@ -98,7 +98,7 @@ def build_report(run_root: Path, out_dir: Path, command: str,
 def build_page(inputs: ReportInputs, verdicts: Verdicts, figures: Figures, command: str,
                skipped: list[Skipped]) -> Page:
     """Every section of the page (see :class:`~pipeline.reporting.render.Page`)."""
-    paper = paper_section(inputs, verdicts, figures) if inputs.has_runs else None
+    paper = paper_section(inputs, verdicts, figures)
     family = family_section(inputs, verdicts, figures) if paper else None
     kinematic = kinematic_section(inputs, verdicts, figures) if paper else None
     robustness = robustness_section(inputs, figures)
@@ -116,4 +116,4 @@ def build_page(inputs: ReportInputs, verdicts: Verdicts, figures: Figures, comma
         given=runs_given_section(inputs, skipped),
         methods=methods_section(verdicts.claims if paper else None,
                                 {m: r.config for m, r in inputs.lateral.by_method.items()}
-                                if paper else {}, command))
+                                if inputs.lateral is not None else {}, command))

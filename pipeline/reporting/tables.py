@@ -17,14 +17,14 @@ from pipeline.studies.results.tune import HELDOUT, LEDGER_TUNED, SETTINGS_OUTCOM
 def write_tables(inputs: ReportInputs, verdicts: Verdicts, table_dir: Path) -> None:
     """Write every table of the page into ``table_dir`` (see the module docstring)."""
     table_dir.mkdir(parents=True, exist_ok=True)
-    if inputs.lateral is not None:
+    if inputs.lateral is not None and verdicts.paper is not None:
         _track(inputs.lateral, verdicts.paper, "metrics_paper_scenario.csv",
                "claims_paper_scenario.csv", table_dir)
     if verdicts.ablation_effects is not None:
         verdicts.ablation_effects.to_csv(table_dir / "ablation_effects.csv", index=False)
     if verdicts.flips is not None:
         verdicts.flips.to_csv(table_dir / "interpretation_flips.csv", index=False)
-    if inputs.kinematic is not None:
+    if inputs.kinematic is not None and verdicts.kinematic is not None:
         _track(inputs.kinematic, verdicts.kinematic, "metrics_kinematic_track.csv",
                "claims_kinematic_track.csv", table_dir)
     if verdicts.family is not None:
@@ -42,7 +42,7 @@ def write_tables(inputs: ReportInputs, verdicts: Verdicts, table_dir: Path) -> N
             kf.apf_adds.to_frame().to_csv(
                 table_dir / "claims_ledger_baseline_vs_no_apf_kinematic_family.csv",
                 index=False)
-    if verdicts.validity is not None and has_validity(inputs):
+    if verdicts.validity is not None and inputs.validity is not None and has_validity(inputs):
         inputs.validity.table.to_frame().to_csv(table_dir / "model_validity.csv", index=False)
         pd.DataFrame(verdicts.validity.rows()).to_csv(table_dir / "claims_model_validity.csv",
                                                       index=False)

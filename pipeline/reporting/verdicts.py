@@ -6,6 +6,7 @@ MPC's model held and in the other frame. The sections only format these."""
 from __future__ import annotations
 
 import math
+from collections.abc import Iterable
 from dataclasses import dataclass, field
 
 import pandas as pd
@@ -17,6 +18,7 @@ from pipeline.analysis.validity import valid_scenario_ledgers
 from pipeline.config import ClaimsConfig
 from pipeline.reporting.inputs import (FamilyInputs, ReportInputs, TrackRuns, ordered,
                                        reading_of)
+from pipeline.store.collection import LabelledRun
 
 #: The claims whose outcome is a rate (judged even where the methods never met the obstacle).
 RATE_CLAIMS = frozenset(c.claim_id for c in ALL_CLAIMS if c.is_rate)
@@ -92,7 +94,7 @@ class Verdicts:
     def compute(cls, inputs: ReportInputs, claims: ClaimsConfig | None = None) -> Verdicts:
         """Every ledger of ``inputs``, judged with ``claims`` (the inputs' by default)."""
         cfg = claims or inputs.claims
-        if not inputs.has_runs:
+        if inputs.lateral is None:  # a page of sweeps alone
             return cls(cfg)
         paper = track_claims(inputs.lateral, cfg)
         kinematic = track_claims(inputs.kinematic, cfg, comparable_only=True) \
@@ -106,9 +108,11 @@ class Verdicts:
         if roles[1] in inputs.ablation and roles[0] in inputs.ablation:
             effects = ablation_effects(inputs.ablation, cfg)
         return cls(cfg, paper, kinematic, family, kinematic_family,
-                   _readings(inputs, cfg) if inputs.kinematic is not None else (),
+                   _readings(inputs.kinematic, inputs.readings, cfg)
+                   if inputs.kinematic is not None else (),
                    effects, roles, interpretation_flips(inputs.interpretations, cfg),
-                   _validity(inputs, cfg) if family is not None else None)
+                   _validity(inputs.family, inputs, cfg) if inputs.family is not None
+                   and family is not None else None)
 
 
 def track_claims(runs: TrackRuns, cfg: ClaimsConfig, comparable_only: bool = False
@@ -154,11 +158,12 @@ def _family(family: FamilyInputs, cfg: ClaimsConfig, paper_metrics: dict | None,
     return FamilyVerdicts(tables, ledger, tuple(counts), apf)
 
 
-def _readings(inputs: ReportInputs, cfg: ClaimsConfig) -> tuple[tuple[str, dict[str, str]], ...]:
+def _readings(kinematic: TrackRuns, readings: dict[str, list[LabelledRun]], cfg: ClaimsConfig
+              ) -> tuple[tuple[str, dict[str, str]], ...]:
     """The paper scenario's claims on the Appendix-A track under each reading of the
     baseline (the default and ``kinematic_readings``): treatment against baseline, "not
     comparable" where either method stays farther than ``comparable_clearance_m``."""
-    def outcomes(runs) -> dict[str, str] | None:
+    def outcomes(runs: Iterable[LabelledRun]) -> dict[str, str] | None:
         by = {r.method: r.metrics() for r in runs}
         if cfg.treatment not in by or "baseline" not in by:
             return None
@@ -169,25 +174,26 @@ def _readings(inputs: ReportInputs, cfg: ClaimsConfig) -> tuple[tuple[str, dict[
         return {row["claim"]: row.get("vs baseline", "n/a")
                 if met or row["claim"] in RATE_CLAIMS else "not comparable" for row in table}
 
-    columns = []
-    default = [r for r in inputs.kinematic.runs if r.method in (cfg.treatment, "baseline")]
+    columns: list[tuple[str, dict[str, str]]] = []
+    default = [r for r in kinematic.runs if r.method in (cfg.treatment, "baseline")]
     base = next((r for r in default if r.method == "baseline"), None)
     if base is not None and (o := outcomes(default)) is not None:
         columns.append((reading_of(base.config) + " (default)", o))
-    for variant, variant_runs in inputs.readings.items():
+    for variant, variant_runs in readings.items():
         if (o := outcomes(variant_runs)) is not None:
             columns.append((variant, o))
     return tuple(columns) if len(columns) >= 2 else ()
 
 
-def _validity(inputs: ReportInputs, cfg: ClaimsConfig) -> ValidityVerdicts | None:
-    tables = inputs.family.primary
+def _validity(family: FamilyInputs, inputs: ReportInputs, cfg: ClaimsConfig
+              ) -> ValidityVerdicts:
+    tables = family.primary
     comparisons = tuple(c for c in cfg.controls if c in tables)
     default = family_ledger(tables, cfg, None, cfg.treatment, comparisons,
                             sensitivity=False) if cfg.treatment in tables else None
     valid = valid_scenario_ledgers(tables, cfg, cfg.treatment, comparisons)
     other_frame = inputs.validity.other_frame if inputs.validity is not None else ()
-    other_tables = {f.info.get("method"): f.table for f in other_frame}
+    other_tables = {str(f.info.get("method")): f.table for f in other_frame}
     other = family_ledger(other_tables, cfg, None, cfg.treatment, comparisons,
                           sensitivity=False) if cfg.treatment in other_tables else None
     return ValidityVerdicts(comparisons, default, valid, other)

@@ -8,6 +8,7 @@ cannot be read) are listed as :class:`~pipeline.store.runs.Skipped` with their r
 from __future__ import annotations
 
 import logging
+from typing import Any
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -187,17 +188,19 @@ def load_runs(run_root: Path, skipped: list[Skipped] | None = None) -> RunCollec
                                                             method)):
             labels[id(record)] = label
     runs = [LabelledRun(labels[id(r)], r) for r in records]
-    family_tables, family_info = {}, {}
-    by_method: dict[str, list] = {}
+    family_tables: dict[str, pd.DataFrame] = {}
+    family_info: dict[str, dict[str, Any]] = {}
+    by_method: dict[str, list[FamilyRecord]] = {}
     for family in families:
         by_method.setdefault(family.info.get("method", ""), []).append(family)
-    family_settings = {}
-    for method, group in by_method.items():
-        configs = [family.config_data for family in group]
-        for family, label in zip(group, label_by_difference(configs, method)):
+    family_settings: dict[str, ExperimentConfig] = {}
+    for method, same_method in by_method.items():
+        configs = [family.config_data or {} for family in same_method]
+        for family, label in zip(same_method, label_by_difference(configs, method)):
             family_tables[label] = family.table
             family_info[label] = {**family.info, "dir": str(family.folder)}
-            family_settings[label] = family.config
+            if family.config is not None:  # read with its settings: always there
+                family_settings[label] = family.config
     return RunCollection(runs, family_tables, family_info, family_settings)
 
 
@@ -230,6 +233,8 @@ def model_validity_table(layout: OutputsLayout) -> ValidityTable:
     for section in layout.validity_sections:
         for family in trusted_families(layout.folder(section)):
             cfg = family.config
+            if cfg is None:  # trusted_families keeps only families with their settings
+                continue
             method = family.info.get("method", cfg.method_name)
             if method not in VALIDITY_METHODS or cfg.controller.kind == "pure_pursuit":
                 continue
@@ -251,7 +256,7 @@ def family_tables_by_method(root: Path, skipped: list[Skipped] | None = None
     appended to ``skipped``, and left out. The tables are judged with the claims settings the
     caller passes (the report's: those of its main runs)."""
     skipped = skipped if skipped is not None else []
-    tables = {}
+    tables: dict[str, pd.DataFrame] = {}
     if not Path(root).is_dir():
         return tables
     found = discover(Path(root))

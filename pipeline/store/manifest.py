@@ -140,7 +140,7 @@ def check(folder: Path, kind: str = "run", expected_hash: str | None = None,
         return "not a folder"
     required = tuple(required if required is not None else REQUIRED.get(kind, ()))
     manifest, reason = load_manifest(folder, kind, required)
-    if reason:
+    if manifest is None:
         return reason
     missing = [n for n in required if n not in manifest["files"]]
     if missing:

@@ -208,7 +208,7 @@ def write_family(folder: Path, table: pd.DataFrame, info: dict, config_hash: str
     (folder / MANIFEST).unlink(missing_ok=True)
     write_csv_atomic(folder / "family_metrics.csv", table)
     write_json_atomic(folder / "family.json", info)
-    files = FAMILY_FILES
+    files: tuple[str, ...] = FAMILY_FILES
     if timing is not None:
         write_json_atomic(folder / FAMILY_TIMING, timing)
         files = FAMILY_FILES + (FAMILY_TIMING,)
@@ -278,7 +278,7 @@ def read_run(folder: Path, trajectory: bool = True) -> RunRecord:
 def member_folders(folder: Path) -> list[Path]:
     """The member folders a family's manifest lists, in order."""
     manifest, reason = load_manifest(Path(folder), "family", FAMILY_FILES)
-    if reason:
+    if manifest is None:
         raise RunFolderError(f"{folder}: {reason}")
     return [Path(folder) / name for name in sorted(manifest.get("members") or {})]
 

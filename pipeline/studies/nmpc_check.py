@@ -118,7 +118,7 @@ def _jobs(compose, track: str, n_members: int) -> list[tuple]:
 
 def _track_summary(table: pd.DataFrame, compose, track: str, n_members: int) -> dict:
     """One track's figures: path and input differences, solve times, the two ledgers."""
-    tables = {"ltv": {}, "nmpc": {}}
+    tables: dict[str, dict[str, pd.DataFrame]] = {"ltv": {}, "nmpc": {}}
     members = table[table["scenario"] != "paper"]
     for method in TRACK_METHODS:
         part = members[members["method"] == method]

@@ -197,7 +197,8 @@ class RobustSlurmLauncherBase(SlurmLauncher):
         finished :class:`hydra.core.utils.JobReturn`)."""
         from hydra.core.hydra_config import HydraConfig
 
-        to_submit, done = [], []
+        to_submit: list[Any] = []
+        done: list[Any] = []
         previous = HydraConfig.instance().cfg
         try:
             self._split(job_overrides, initial_job_idx, to_submit, done)

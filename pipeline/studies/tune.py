@@ -44,7 +44,7 @@ import pandas as pd
 from pipeline.analysis.claims import ALL_CLAIMS, Ledger, family_ledger
 from pipeline.analysis.objectives import Objective, objective_values
 from pipeline.analysis.tally import Tally
-from pipeline.config import CONF_DIR, schema_from_data
+from pipeline.config import CONF_DIR, ExperimentConfig, schema_from_data
 from pipeline.errors import ConfigError, StudyError
 from pipeline.studies.results.tune import TuneResult, TuneSummary
 from pipeline.store.files import json_safe
@@ -268,7 +268,7 @@ class FamilyJob:
 
     method: str
     setting: str
-    cfg: object
+    cfg: ExperimentConfig
     folder: Path
 
 

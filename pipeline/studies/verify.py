@@ -71,6 +71,7 @@ def ledger_table(runs_root: Path, kinematic: bool = False) -> pd.DataFrame | Non
     """The family claims ledger, if the family was run (``kinematic``: the Appendix-A
     track's family under ``runs_root/kinematic_family``, without the paper-scenario column)."""
     from pipeline.analysis.claims import family_ledger
+    from pipeline.analysis.settings import ClaimsConfig
     from pipeline.store.collection import load_runs
 
     from pipeline.store.layout import OutputsLayout
@@ -92,7 +93,7 @@ def ledger_table(runs_root: Path, kinematic: bool = False) -> pd.DataFrame | Non
     except FileNotFoundError:
         pass
     # the claims settings the runs were made with
-    cfg = collection.claims_settings("improved")
+    cfg = collection.claims_settings("improved") or ClaimsConfig()
     return family_ledger(tables, cfg, paper or None).to_frame().reindex(columns=LEDGER_COLUMNS)
 
 

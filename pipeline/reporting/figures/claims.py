@@ -15,7 +15,7 @@ from matplotlib.figure import Figure  # noqa: E402
 from pipeline.reporting.figures.colors import method_color  # noqa: E402
 
 
-def claim_differences_figure(differences: dict[tuple[str, str], np.ndarray],
+def claim_differences_figure(differences: dict[tuple[str, str], np.ndarray | None],
                              metric_names: dict[str, str],
                              intervals: dict[tuple[str, str], tuple[float, float, float]]
                              ) -> Figure:

@@ -5,6 +5,7 @@ alternative readings."""
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any
 
 from pipeline.analysis.ablation import attribution_sentences
 from pipeline.analysis.tally import Tally
@@ -31,7 +32,10 @@ def ablation_section(inputs: ReportInputs, verdicts: Verdicts, figures: Figures
     bundle, reference = verdicts.ablation_roles
     if reference not in tables and verdicts.flips is None:
         return None
-    effects, sentences, drawn, counts = (), {}, (), ()
+    effects: tuple[dict[str, Any], ...] = ()
+    sentences: dict[str, str] = {}
+    drawn: tuple[Figure, ...] = ()
+    counts: tuple[dict[str, Any], ...] = ()
     if verdicts.ablation_effects is not None:
         frame = verdicts.ablation_effects
         sentences = attribution_sentences(frame, tables, verdicts.claims)

@@ -5,6 +5,7 @@ by rule."""
 from __future__ import annotations
 
 import functools
+from typing import Any
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -119,7 +120,7 @@ def _cap_note(counts: tuple[dict, ...], cap_binding_share: float) -> str:
 def family_section(inputs: ReportInputs, verdicts: Verdicts, figures: Figures
                    ) -> FamilySection | None:
     family, judged = inputs.family, verdicts.family
-    if judged is None:
+    if family is None or judged is None:
         return None
     cfg = verdicts.claims
     tables = judged.tables
@@ -142,7 +143,7 @@ def family_section(inputs: ReportInputs, verdicts: Verdicts, figures: Figures
             "over the scenario family (missing values, e.g. never recovered, are "
             "left out of the boxes and counted in the outcomes table).",
             "Box plots of metrics per method over the scenario family")]
-    first = next(iter(family.info.values())) if family.info else {
+    first: dict[str, Any] = next(iter(family.info.values())) if family.info else {
         "seed": "?", "size": len(next(iter(tables.values())))}
     adds = apf_adds(judged.apf_adds)
     records = ledger.records()
@@ -186,8 +187,9 @@ def _gallery(family: FamilyInputs, judged: FamilyVerdicts, cfg, figures: Figures
             continue
         first = runs[treatment]
         # built in the writer's child (the parent goes on to the next member)
+        goal = first.config.scenario.goal_xy_m
         fig = functools.partial(paths_figure, {m: r.trajectory for m, r in runs.items()},
-                                tuple(first.config.scenario.goal_xy_m),
+                                (float(goal[0]), float(goal[1])),
                                 first.config.vehicle.footprint_radius_m,
                                 first.config.scenario.obstacles[0].appear_time_s,
                                 titles={m: f"{m}, member {member}" for m in runs},

@@ -70,13 +70,13 @@ class KinematicSection:
 
 def kinematic_section(inputs: ReportInputs, verdicts: Verdicts, figures: Figures
                       ) -> KinematicSection | None:
-    runs = inputs.kinematic
-    if runs is None:
+    runs, track, paper = inputs.kinematic, verdicts.kinematic, verdicts.paper
+    if runs is None or track is None or paper is None:
         return None
     cfg = verdicts.claims
     config = next(iter(runs.by_method.values())).config
-    claims = claim_rows(verdicts.kinematic, runs.methods)
-    lateral = {r["claim"]: r.get("vs baseline", "n/a") for r in verdicts.paper.rows}
+    claims = claim_rows(track, runs.methods)
+    lateral = {r["claim"]: r.get("vs baseline", "n/a") for r in paper.rows}
     comparison = []
     for r in claims:
         ours = r.get("vs baseline", "n/a")
@@ -93,7 +93,7 @@ def kinematic_section(inputs: ReportInputs, verdicts: Verdicts, figures: Figures
         figures=tuple(paper_figures(runs, figures, prefix="kinematic_",
                                     group_prefix="kinematic_")),
         metric_rows=metric_rows(runs), claims=claims, comparison=tuple(comparison),
-        comparability=verdicts.kinematic.comparability,
+        comparability=track.comparability,
         comparable_clearance=cfg.comparable_clearance_m, n_steps=config["scenario"]["n_steps"],
         initial_speed=config["scenario"].get("initial_speed_mps"),
         nmpc=_nmpc(inputs), family=_family(inputs, verdicts, lateral_outcomes),
@@ -123,11 +123,10 @@ def _family(inputs: ReportInputs, verdicts: Verdicts, lateral_by_claim: dict[str
     """The track's own ledger over its family (the default reading): the treatment against
     each control, the baseline against mpc_no_apf, collision counts per method, and whether
     each outcome agrees with the lateral family's."""
-    judged = verdicts.kinematic_family
-    if judged is None:
+    judged, found = verdicts.kinematic_family, inputs.kinematic_family
+    if judged is None or found is None:
         return None
     cfg = verdicts.claims
-    found = inputs.kinematic_family
     tables = judged.tables
     first_control = cfg.controls[0]
     rows = tuple({"claim": r.claim_id, "words": r.claim.text, "comparison": r.comparison,

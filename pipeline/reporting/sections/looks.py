@@ -6,10 +6,13 @@ whether the configured default is its pick."""
 from __future__ import annotations
 
 import math
+from collections.abc import Iterable
 from dataclasses import dataclass
+from typing import Any
 
 from pipeline.analysis.features import FEATURES, FeatureConfig, feature_row, paper_likeness
 from pipeline.reporting.inputs import ReportInputs, reading_of
+from pipeline.store.collection import LabelledRun
 from pipeline.reporting.verdicts import Verdicts
 
 
@@ -22,15 +25,18 @@ class LooksSection:
     clearance: str
 
 
-def _pair(runs) -> dict:
+def _pair(runs: Iterable[LabelledRun]) -> dict[str, LabelledRun]:
     return {r.method: r for r in runs if r.method in ("baseline", "improved")}
 
 
 def looks_section(inputs: ReportInputs, verdicts: Verdicts) -> LooksSection | None:
+    if inputs.lateral is None:
+        return None
     clearance_m = verdicts.claims.comparable_clearance_m
     lateral = inputs.lateral.by_method
-    columns = [("lateral track", "default", {m: lateral[m] for m in ("baseline", "improved")
-                                             if m in lateral})]
+    columns: list[tuple[str, str, dict[str, LabelledRun]]] = [
+        ("lateral track", "default", {m: lateral[m] for m in ("baseline", "improved")
+                                      if m in lateral})]
     kinematic_runs = list(inputs.kinematic.runs) if inputs.kinematic is not None else []
     kin = _pair(kinematic_runs)
     if "baseline" in kin:
@@ -43,10 +49,10 @@ def looks_section(inputs: ReportInputs, verdicts: Verdicts) -> LooksSection | No
         return None
     settings = columns[0][2]["improved"].config.get("features") or {}
     cfg = FeatureConfig(**settings)
-    cells = []
-    for track, reading, runs in columns:
-        rows = {m: feature_row(runs[m].metrics(), cfg) for m in ("baseline", "improved")}
-        met = all((runs[m].metrics().get("min_clearance_m") or math.inf) <= clearance_m
+    cells: list[dict[str, Any]] = []
+    for track, reading, pair in columns:
+        rows = {m: feature_row(pair[m].metrics(), cfg) for m in ("baseline", "improved")}
+        met = all((pair[m].metrics().get("min_clearance_m") or math.inf) <= clearance_m
                   for m in ("baseline", "improved"))
         cells.append({"track": track, "reading": reading, "rows": rows, "met": met,
                       "score": paper_likeness(rows["baseline"], rows["improved"])})

@@ -106,7 +106,8 @@ def metrics_doc() -> list[Markup]:
     import pipeline.analysis.metrics as metrics_module
 
     doc = metrics_module.__doc__ or ""
-    bullets, current = [], []
+    bullets: list[str] = []
+    current: list[str] = []
     for line in doc.splitlines():
         if line.startswith("* "):
             if current:

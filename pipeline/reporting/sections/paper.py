@@ -66,8 +66,12 @@ def claim_rows(claims: TrackClaims, methods: list[str]) -> tuple[dict, ...]:
     return tuple({**row, "values": [row.get(m) for m in methods]} for row in claims.rows)
 
 
-def paper_section(inputs: ReportInputs, verdicts: Verdicts, figures: Figures) -> PaperSection:
-    runs = inputs.lateral
+def paper_section(inputs: ReportInputs, verdicts: Verdicts, figures: Figures
+                  ) -> PaperSection | None:
+    """The section; None on a page without the paper scenario (sweeps only)."""
+    runs, claims = inputs.lateral, verdicts.paper
+    if runs is None or claims is None:
+        return None
     cfg = verdicts.claims
     by_method = runs.by_method
     drawn = paper_figures(runs, figures, treatment=cfg.treatment,
@@ -80,8 +84,7 @@ def paper_section(inputs: ReportInputs, verdicts: Verdicts, figures: Figures) ->
     return PaperSection(
         scenario=runs.scenario, methods=tuple(runs.methods), figures=tuple(drawn),
         metric_rows=metric_rows(runs), timing_rows=timing,
-        claims=claim_rows(verdicts.paper, runs.methods),
-        comparisons=verdicts.paper.comparisons,
+        claims=claim_rows(claims, runs.methods), comparisons=claims.comparisons,
         claim_secondary={c.claim_id: ", ".join(c.secondary_metrics) for c in ALL_CLAIMS},
         configs={m: yaml.safe_dump(r.config, sort_keys=False) for m, r in by_method.items()},
         hashes={m: r.record.info.config_hash for m, r in by_method.items()},

@@ -5,6 +5,7 @@ flip most of their specifications."""
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any
 
 from pipeline.analysis.claims import ALL_CLAIMS, OUTCOMES
 from pipeline.reporting.figure import Figure, Figures
@@ -58,7 +59,7 @@ def _cells(result: MultiverseResult) -> list[dict]:
 
 def _flipping_choices(result: MultiverseResult) -> list[dict]:
     """Against the baseline: each non-default value that flips most of its specifications."""
-    rows = []
+    rows: list[dict[str, Any]] = []
     dims = result.dimensions
     if not len(dims):
         return rows

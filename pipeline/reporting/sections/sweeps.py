@@ -4,6 +4,7 @@ and the claims' verdicts per swept value."""
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any
 
 from pipeline.reporting.figure import Figure, Figures
 from pipeline.reporting.tables import sweep_table, sweep_verdicts
@@ -27,14 +28,17 @@ def sweep_section(sweep: SweepSummary, figures: Figures) -> SweepSection:
     name = sweep.name
     swept = list(sweep.swept_keys)
     table = sweep_table(sweep)
-    drawn = []
+    drawn: list[Figure] = []
     for files in sweep.figures():
-        drawn.append(figures.copy(
+        figure = figures.copy(
             files, f"{name}_{files['png'].stem}", f"sweep_{name}",
             f"Sweep {name}: claim metrics versus {', '.join(k for k in swept if k != 'method')}"
             " (lines: median per method, band: range over family seeds; heatmaps: median per "
-            "cell).", f"Metrics versus swept parameters of sweep {name}"))
-    verdict_rows, verdict_cols = [], []
+            "cell).", f"Metrics versus swept parameters of sweep {name}")
+        if figure is not None:  # listed by the result, so always there
+            drawn.append(figure)
+    verdict_rows: list[dict[str, Any]] = []
+    verdict_cols: list[str] = []
     verdicts = sweep_verdicts(sweep)
     if verdicts is not None:
         pivot = verdicts.pivot_table(index="setting", columns="claim", values="verdict",

@@ -70,12 +70,14 @@ class ValiditySection:
 
 def validity_section(inputs: ReportInputs, verdicts: Verdicts) -> ValiditySection | None:
     """The section; None when no family carries model checks."""
-    if verdicts.validity is None or not has_validity(inputs):
+    if verdicts.validity is None or inputs.validity is None or not has_validity(inputs):
         return None
     table = inputs.validity.table
     families, others = inputs.validity.families, inputs.validity.other_frame
-    frame = families[0].config.controller.frame if families else "path"
-    other_frame = others[0].config.controller.frame if others else None
+    config = families[0].config if families else None
+    other = others[0].config if others else None
+    frame = config.controller.frame if config is not None else "path"
+    other_frame = other.controller.frame if other is not None else None
     claim_rows = verdicts.validity.rows()
     rows = tuple({
         "track": r.track, "frame": r.frame, "method": r.method, "runs": r.runs,
@@ -92,7 +94,7 @@ def validity_section(inputs: ReportInputs, verdicts: Verdicts) -> ValiditySectio
     return ValiditySection(
         rows, tuple(claim_rows), verdicts.validity.comparisons, frame, other_frame,
         _lateral_nmpc(inputs), _summary(table, frame, other_frame, claim_rows),
-        float(families[0].config.model.validity_heading_rad) if families else float("nan"),
+        float(config.model.validity_heading_rad) if config is not None else float("nan"),
         _speed(inputs.speed) if inputs.speed is not None else None)
 
 

@@ -14,6 +14,13 @@ class ResultError(StudyError, ValueError):
     broken); the message says why in one line."""
 
 
+def written(folder: Path | None) -> Path:
+    """The folder a result was written to or read from (an unwritten one has none)."""
+    if folder is None:
+        raise ResultError("the result was not written yet")
+    return folder
+
+
 def figure_files(folder: Path, stem: str) -> dict[str, Path] | None:
     """``{"png": ..., "svg": ...}`` of a figure a study's command drew into ``folder`` (the
     SVG may be absent), or None when there is no PNG."""

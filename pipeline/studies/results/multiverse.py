@@ -11,7 +11,7 @@ import pandas as pd
 
 from pipeline.store.files import write_csv_atomic, write_json_atomic
 from pipeline.store.manifest import check, untrust, write_manifest
-from pipeline.studies.results.base import ResultError, figure_files, read_json
+from pipeline.studies.results.base import ResultError, figure_files, read_json, written
 
 DESIGN = "design.csv"
 SPECIFICATIONS = "specifications.csv"
@@ -48,10 +48,11 @@ class MultiverseInfo:
         return data
 
     @classmethod
-    def from_json(cls, data: dict) -> MultiverseInfo:
+    def from_json(cls, data: dict[str, Any]) -> MultiverseInfo:
         names = {f.name for f in fields(cls)}
-        return cls(**{k: (tuple(v) if k == "dimensions" else v) for k, v in data.items()
-                      if k in names})
+        values: dict[str, Any] = {k: (tuple(v) if k == "dimensions" else v)
+                                  for k, v in data.items() if k in names}
+        return cls(**values)
 
 
 @dataclass(frozen=True)
@@ -118,7 +119,6 @@ class MultiverseResult:
         """The file stem of ``claim_id``'s specification curve."""
         return f"{CURVE_STEM}{claim_id}"
 
-    @staticmethod
-    def figure_folder(folder: Path) -> Path:
+    def figure_folder(self) -> Path:
         """Where the command draws the specification curves."""
-        return Path(folder) / FIGURES
+        return written(self.folder) / FIGURES

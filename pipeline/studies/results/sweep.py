@@ -16,7 +16,7 @@ import pandas as pd
 
 from pipeline.store.files import write_csv_atomic, write_json_atomic
 from pipeline.store.manifest import check_derived_table, write_derived_table
-from pipeline.studies.results.base import ResultError, read_json
+from pipeline.studies.results.base import ResultError, read_json, written
 from pipeline.studies.sweep_jobs import Job, find_jobs, job_sources
 
 SUMMARY = "summary.csv"
@@ -106,6 +106,6 @@ class SweepSummary:
         return [{"png": png, "svg": png.with_suffix(".svg")}
                 for png in sorted((self.folder / FIGURES).glob("*.png"))]
 
-    @staticmethod
-    def figure_folder(folder: Path) -> Path:
-        return Path(folder) / FIGURES
+    def figure_folder(self) -> Path:
+        """Where the command draws the figures of metric versus parameter."""
+        return written(self.folder) / FIGURES

@@ -12,7 +12,7 @@ import pandas as pd
 
 from pipeline.store.files import json_safe, write_csv_atomic, write_json_atomic
 from pipeline.store.manifest import check, untrust, write_manifest
-from pipeline.studies.results.base import ResultError, figure_files, read_json
+from pipeline.studies.results.base import ResultError, figure_files, read_json, written
 
 TRIALS = "trials.csv"
 HELDOUT = "heldout.csv"
@@ -145,7 +145,8 @@ class TuneResult:
         except (OSError, ValueError, KeyError, TypeError) as exc:
             raise ResultError(f"tuning folder cannot be read ({type(exc).__name__}: "
                               f"{exc})") from None
-        return cls(summary, *tables, folder=folder)
+        trials, heldout, ledger_default, ledger_tuned, outcomes = tables
+        return cls(summary, trials, heldout, ledger_default, ledger_tuned, outcomes, folder)
 
     def front_figure(self, part: str) -> dict[str, Path] | None:
         """The Pareto fronts on the ``part`` family the command drew, if they are there."""
@@ -158,6 +159,6 @@ class TuneResult:
         """The file stem of the Pareto fronts on the ``part`` family."""
         return f"pareto_fronts_{part}"
 
-    @staticmethod
-    def figure_folder(folder: Path) -> Path:
-        return Path(folder) / FIGURES
+    def figure_folder(self) -> Path:
+        """Where the command draws the Pareto fronts."""
+        return written(self.folder) / FIGURES
