@@ -101,60 +101,82 @@ def attribution_sentences(effects: pd.DataFrame, tables: dict[str, pd.DataFrame]
         part = effects[effects["claim"] == claim.claim_id].set_index("configuration")
         if bundle not in part.index:
             continue
-        total = part.loc[bundle, "effect"]
-        direction = "improves" if total < 0 else ("worsens" if total > 0 else "does not change")
-        name = "the improved bundle" if bundle == "improved" else f"{bundle}"
-        text = (f"{claim.claim_id} ({claim.primary_metric}): {name} {direction} it "
-                f"(effect {total:+.3g}, {part.loc[bundle, 'outcome']}).")
-        singles = part.loc[[f"baseline+{r}" for r in REVISIONS if f"baseline+{r}" in part.index]]
-        if binding:
-            # the cap makes these two revisions inactive: do not credit them
-            singles = singles.drop(index=[i for i in ("baseline+normalize", "baseline+step")
-                                          if i in singles.index])
-        same_sign = singles[np.sign(singles["effect"]) == np.sign(total)] if total != 0 \
-            else singles.iloc[0:0]
-        significant = same_sign[same_sign.apply(_clear, axis=1)] if len(same_sign) else same_sign
-        if "baseline_matched" in part.index:
-            matched = part.loc["baseline_matched"]
-            shares = np.sign(matched["effect"]) == np.sign(total) and _clear(matched) \
-                and total != 0
-            text += (f" The look-ahead-matched baseline alone {'shares' if shares else 'does not share'}"
-                     f" it (effect {matched['effect']:+.3g}, {matched['outcome']})"
-                     + (": the effect is look-ahead length, not the other revisions." if shares
-                        and abs(matched["effect"]) >= 0.5 * abs(total) else "."))
-        # a revision accounts for most of the effect only when, alone, it has at least half
-        # of the bundle's effect (same sign, interval clear of zero)
-        large = significant[significant["effect"].abs() >= 0.5 * abs(total)] \
-            if len(significant) else significant
-        if len(large):
-            best = large["effect"].abs().idxmax()
-            revision = best.split("+", 1)[1]
-            row = large.loc[best]
-            text += (f" Alone, '{REVISION_TEXT[revision]}' accounts for most of it "
-                     f"({row['effect']:+.3g} [{row['ci_low']:.3g}, {row['ci_high']:.3g}])")
-            loo = f"improved-{revision}"
-            if loo in part.index:
-                text += f"; without it the bundle's effect is {part.loc[loo, 'effect']:+.3g}"
-            text += "."
-        else:
-            text += (" No single active revision accounts for it (none alone has at least half "
-                     "of the effect, of the same sign, with an interval clear of zero).")
-            if total != 0:
-                needed = [r for r in REVISIONS if f"improved-{r}" in part.index
-                          and not (binding and r in ("normalize", "step"))
-                          and abs(part.loc[f"improved-{r}", "effect"]) < 0.5 * abs(total)]
-                if needed:
-                    text += (" It needs the revisions together: without "
-                             + ", or without ".join(
-                                 f"'{REVISION_TEXT[r]}' the bundle's effect is "
-                                 f"{part.loc[f'improved-{r}', 'effect']:+.3g}" for r in needed)
-                             + ".")
-        if binding:
-            text += (f" The step cap binds on {100 * cap_share:.0f} % of improved's rollout "
-                     "steps, so 'no normalization' and 'a larger step' are inactive there and "
-                     "are not credited.")
-        sentences[claim.claim_id] = text
+        sentences[claim.claim_id] = _attribution_sentence(claim, part, bundle, binding,
+                                                          cap_share)
     return sentences
+
+
+def _attribution_sentence(claim, part: pd.DataFrame, bundle: str, binding: bool,
+                          cap_share: float | None) -> str:
+    """The attribution sentence of one claim (``part``: its effects by configuration)."""
+    total = part.loc[bundle, "effect"]
+    direction = "improves" if total < 0 else ("worsens" if total > 0 else "does not change")
+    name = "the improved bundle" if bundle == "improved" else f"{bundle}"
+    text = (f"{claim.claim_id} ({claim.primary_metric}): {name} {direction} it "
+            f"(effect {total:+.3g}, {part.loc[bundle, 'outcome']}).")
+    singles = part.loc[[f"baseline+{r}" for r in REVISIONS if f"baseline+{r}" in part.index]]
+    if binding:
+        # the cap makes these two revisions inactive: do not credit them
+        singles = singles.drop(index=[i for i in ("baseline+normalize", "baseline+step")
+                                      if i in singles.index])
+    same_sign = singles[np.sign(singles["effect"]) == np.sign(total)] if total != 0 \
+        else singles.iloc[0:0]
+    significant = same_sign[same_sign.apply(_clear, axis=1)] if len(same_sign) else same_sign
+    if "baseline_matched" in part.index:
+        text += _matched_baseline_text(part.loc["baseline_matched"], total)
+    # a revision accounts for most of the effect only when, alone, it has at least half
+    # of the bundle's effect (same sign, interval clear of zero)
+    large = significant[significant["effect"].abs() >= 0.5 * abs(total)] \
+        if len(significant) else significant
+    if len(large):
+        text += _accounting_revision_text(part, large)
+    else:
+        text += _no_single_revision_text(part, total, binding)
+    if binding:
+        text += (f" The step cap binds on {100 * cap_share:.0f} % of improved's rollout "
+                 "steps, so 'no normalization' and 'a larger step' are inactive there and "
+                 "are not credited.")
+    return text
+
+
+def _matched_baseline_text(matched: pd.Series, total: float) -> str:
+    """Whether the look-ahead-matched baseline alone shares the bundle's effect."""
+    shares = np.sign(matched["effect"]) == np.sign(total) and _clear(matched) \
+        and total != 0
+    return (f" The look-ahead-matched baseline alone {'shares' if shares else 'does not share'}"
+            f" it (effect {matched['effect']:+.3g}, {matched['outcome']})"
+            + (": the effect is look-ahead length, not the other revisions." if shares
+               and abs(matched["effect"]) >= 0.5 * abs(total) else "."))
+
+
+def _accounting_revision_text(part: pd.DataFrame, large: pd.DataFrame) -> str:
+    """The revision that alone accounts for most of the effect, and the bundle without it."""
+    best = large["effect"].abs().idxmax()
+    revision = best.split("+", 1)[1]
+    row = large.loc[best]
+    text = (f" Alone, '{REVISION_TEXT[revision]}' accounts for most of it "
+            f"({row['effect']:+.3g} [{row['ci_low']:.3g}, {row['ci_high']:.3g}])")
+    loo = f"improved-{revision}"
+    if loo in part.index:
+        text += f"; without it the bundle's effect is {part.loc[loo, 'effect']:+.3g}"
+    return text + "."
+
+
+def _no_single_revision_text(part: pd.DataFrame, total: float, binding: bool) -> str:
+    """No single revision accounts for the effect; the revisions without which it shrinks."""
+    text = (" No single active revision accounts for it (none alone has at least half "
+            "of the effect, of the same sign, with an interval clear of zero).")
+    if total != 0:
+        needed = [r for r in REVISIONS if f"improved-{r}" in part.index
+                  and not (binding and r in ("normalize", "step"))
+                  and abs(part.loc[f"improved-{r}", "effect"]) < 0.5 * abs(total)]
+        if needed:
+            text += (" It needs the revisions together: without "
+                     + ", or without ".join(
+                         f"'{REVISION_TEXT[r]}' the bundle's effect is "
+                         f"{part.loc[f'improved-{r}', 'effect']:+.3g}" for r in needed)
+                     + ".")
+    return text
 
 
 def interpretation_flips(variants: dict[str, dict[str, pd.DataFrame]], cfg

@@ -211,12 +211,24 @@ class ReportInputs:
         tune = optional(TuneResult.load, tune_dir, "fair fight section") \
             if TuneResult.present(tune_dir) else None
         claims = _claims(collection, treatment, controls)
-        runs = collection.runs
-        if not runs:
+        if not collection.runs:
             if not sweeps:
                 raise FileNotFoundError(f"no single runs (the paper scenario) under {run_root}")
             return cls(run_root, layout, claims, sweeps=sweeps, bench=bench,
                        skipped=tuple(skipped))
+        return cls._with_runs(run_root, layout, claims, collection, optional, skipped,
+                              sweeps=sweeps, bench=bench, multiverse=multiverse, tune=tune)
+
+    @classmethod
+    def _with_runs(cls, run_root: Path, layout: OutputsLayout, claims: ClaimsConfig,
+                   collection: RunCollection, optional: _Optional, skipped: list[Skipped],
+                   *, sweeps: tuple[SweepSummary, ...], bench: BenchResult | None,
+                   multiverse: MultiverseResult | None, tune: TuneResult | None
+                   ) -> ReportInputs:
+        """The inputs of a report over runs: the tracks, the families, the Appendix-A
+        readings, the ablation and interpretations and the checks, with the studies' results
+        read before (sweeps, bench, multiverse, tuning)."""
+        runs = collection.runs
         kinematic_runs = [r for r in runs if r.track == "kinematic"]
         lateral_runs = [r for r in runs if r.track == "lateral"] or runs
         paper = [r for r in lateral_runs if r.scenario == "paper_sudden_obstacle"] \

@@ -67,10 +67,6 @@ def aggregate(sweep_dir: Path, baseline_dir: Path | None = None, progress: bool 
         As written (the figures of metric versus parameter are the command's:
         :func:`pipeline.reporting.figures.sweep_figure`).
     """
-    from pipeline.studies.progress import Progress
-
-    from pipeline.store.runs import RunFolderError
-
     sweep_dir = Path(sweep_dir)
     jobs, skipped = find_jobs(sweep_dir)
     for item in skipped:
@@ -79,19 +75,7 @@ def aggregate(sweep_dir: Path, baseline_dir: Path | None = None, progress: bool 
         raise FileNotFoundError(f"no complete job folders in {sweep_dir}"
                                 + (f" ({len(skipped)} passed over: see above)" if skipped
                                    else ""))
-    rows, tables, settings = [], {}, {}
-    bar = Progress(len(jobs), "aggregate", "job", disable=not progress)
-    for job in _counted(jobs, bar):
-        try:
-            row, table, settings[str(job.folder.relative_to(sweep_dir))] = \
-                _job_row(job, sweep_dir)
-        except RunFolderError as exc:
-            skipped.append({"job": str(job.folder.relative_to(sweep_dir)), "status": "skipped",
-                            "reason": str(exc).split(": ", 1)[-1], **job.overrides})
-            continue
-        rows.append(row)
-        if table is not None:
-            tables[row["job"]] = table
+    rows, tables, settings = _read_jobs(jobs, sweep_dir, skipped, progress)
     # the jobs passed over stand in the summary next to the good ones, with their reason
     summary = pd.DataFrame(rows + skipped)
     skipped_table = pd.DataFrame(skipped, columns=["job", "status", "reason"]
@@ -112,6 +96,31 @@ def aggregate(sweep_dir: Path, baseline_dir: Path | None = None, progress: bool 
     # refuses it when a job changed, appeared or went, or when the summary was edited)
     return SweepSummary(summary, tuple(override_keys), tuple(swept), verdicts,
                         skipped_table).write(sweep_dir, jobs)
+
+
+def _read_jobs(jobs: list[Job], sweep_dir: Path, skipped: list[dict], progress: bool
+               ) -> tuple[list[dict], dict[str, pd.DataFrame], dict[str, ClaimsConfig]]:
+    """Every job's summary row, the per-member tables of the family jobs and the claims
+    settings of each job, by job label; a job that cannot be read is appended to
+    ``skipped``."""
+    from pipeline.studies.progress import Progress
+
+    from pipeline.store.runs import RunFolderError
+
+    rows, tables, settings = [], {}, {}
+    bar = Progress(len(jobs), "aggregate", "job", disable=not progress)
+    for job in _counted(jobs, bar):
+        try:
+            row, table, settings[str(job.folder.relative_to(sweep_dir))] = \
+                _job_row(job, sweep_dir)
+        except RunFolderError as exc:
+            skipped.append({"job": str(job.folder.relative_to(sweep_dir)), "status": "skipped",
+                            "reason": str(exc).split(": ", 1)[-1], **job.overrides})
+            continue
+        rows.append(row)
+        if table is not None:
+            tables[row["job"]] = table
+    return rows, tables, settings
 
 
 def _group_keys(swept: list[str]) -> list[str]:

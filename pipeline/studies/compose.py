@@ -12,10 +12,7 @@ from pipeline.config import CONF_DIR
 def composer(extra: list[str]):
     """A function composing one run's config (with ``extra`` overrides), and the SLURM
     launcher's settings when ``extra`` selects ``hydra/launcher=slurm`` (else None)."""
-    from hydra import compose, initialize_config_dir
-    from omegaconf import OmegaConf
-
-    from pipeline.config import register_configs, to_experiment_config, typed_config
+    from pipeline.config import register_configs
     from pipeline.studies.slurm import register_launcher
 
     register_configs()
@@ -24,15 +21,7 @@ def composer(extra: list[str]):
     # folder (their own method) must be found when composing every run
     run_overrides = [o for o in extra if not o.startswith(("hydra/", "hydra."))
                      or o.startswith("hydra.searchpath")]
-    launcher = None
-    if any(o.startswith("hydra/launcher=slurm") for o in extra):
-        with initialize_config_dir(config_dir=str(CONF_DIR), version_base="1.3"):
-            full = compose(config_name="config", overrides=extra, return_hydra_config=True)
-        launcher = OmegaConf.to_container(full.hydra.launcher, resolve=False)
-
-    from hydra.core.override_parser.overrides_parser import OverridesParser
-
-    parser = OverridesParser.create()
+    launcher = _slurm_launcher(extra)
     # Hydra composes the defaults list and merges every config file on each call, and the
     # typed schema checks every node (together most of a second); the runs of a multiverse or
     # a tuning differ mostly in values. So each set of structural overrides (config groups,
@@ -41,42 +30,89 @@ def composer(extra: list[str]):
     # merge=True, as Hydra applies them after composing; the schema checks their types).
     # Anything else, a config with interpolations, or any failure takes Hydra's whole path.
     typed_bases: dict[tuple, Any] = {}
+    fallbacks: list[list[str]] = []
+    make = _run_composer(run_overrides, typed_bases, fallbacks)
+    # for inspection (tests): the structures Hydra composed, the runs that took its whole path
+    make.typed_bases, make.fallbacks = typed_bases, fallbacks
+    return make, launcher
 
-    def hydra_compose(overrides: list[str]):
+
+def _slurm_launcher(extra: list[str]) -> dict | None:
+    """The SLURM launcher's settings when ``extra`` selects ``hydra/launcher=slurm``."""
+    from hydra import compose, initialize_config_dir
+    from omegaconf import OmegaConf
+
+    launcher = None
+    if any(o.startswith("hydra/launcher=slurm") for o in extra):
         with initialize_config_dir(config_dir=str(CONF_DIR), version_base="1.3"):
-            return compose(config_name="config", overrides=overrides)
+            full = compose(config_name="config", overrides=extra, return_hydra_config=True)
+        launcher = OmegaConf.to_container(full.hydra.launcher, resolve=False)
+    return launcher
 
-    def typed_base(structural: tuple):
-        if structural not in typed_bases:
-            cfg = hydra_compose(list(structural))
-            # an interpolation could read a key a run overrides: only plain values are shared
-            plain = OmegaConf.to_container(cfg, resolve=False) \
-                == OmegaConf.to_container(cfg, resolve=True)
-            typed_bases[structural] = typed_config(cfg) if plain else None
-        return typed_bases[structural]
+
+def _hydra_compose(overrides: list[str]):
+    """The config Hydra composes with ``overrides`` (its whole path)."""
+    from hydra import compose, initialize_config_dir
+
+    with initialize_config_dir(config_dir=str(CONF_DIR), version_base="1.3"):
+        return compose(config_name="config", overrides=overrides)
+
+
+def _typed_base(typed_bases: dict[tuple, Any], structural: tuple):
+    """The typed config of a set of structural overrides, composed once (None when it has
+    interpolations: a run's value could change what they read)."""
+    from omegaconf import OmegaConf
+
+    from pipeline.config import typed_config
+
+    if structural not in typed_bases:
+        cfg = _hydra_compose(list(structural))
+        # an interpolation could read a key a run overrides: only plain values are shared
+        plain = OmegaConf.to_container(cfg, resolve=False) \
+            == OmegaConf.to_container(cfg, resolve=True)
+        typed_bases[structural] = typed_config(cfg) if plain else None
+    return typed_bases[structural]
+
+
+def _with_values(base, values: list[str], parser):
+    """A copy of the typed ``base`` with the value overrides set, as the experiment config;
+    None for a sweep override or any failure (Hydra's path then says what is wrong)."""
+    from omegaconf import OmegaConf
+
+    try:
+        parsed = parser.parse_overrides(values)
+        if not any(o.is_sweep_override() for o in parsed):
+            cfg = copy.deepcopy(base)
+            for override in parsed:
+                OmegaConf.update(cfg, override.key_or_group, override.value(), merge=True)
+            return OmegaConf.to_object(cfg)
+    except Exception:  # noqa: BLE001 - whatever is wrong, Hydra's path says it
+        pass
+    return None
+
+
+def _run_composer(run_overrides: list[str], typed_bases: dict[tuple, Any],
+                  fallbacks: list[list[str]]):
+    """The function composing one run's config: from its typed base where it can, else by
+    Hydra's whole path (noted in ``fallbacks``)."""
+    from hydra.core.override_parser.overrides_parser import OverridesParser
+
+    from pipeline.config import to_experiment_config
+
+    parser = OverridesParser.create()
 
     def make(overrides: list[str]):
         every = list(overrides) + run_overrides
         values = [o for o in every if _is_value_override(o)]
-        base = typed_base(tuple(o for o in every if not _is_value_override(o)))
+        base = _typed_base(typed_bases, tuple(o for o in every if not _is_value_override(o)))
         if base is not None:
-            try:
-                parsed = parser.parse_overrides(values)
-                if not any(o.is_sweep_override() for o in parsed):
-                    cfg = copy.deepcopy(base)
-                    for override in parsed:
-                        OmegaConf.update(cfg, override.key_or_group, override.value(),
-                                         merge=True)
-                    return OmegaConf.to_object(cfg)
-            except Exception:  # noqa: BLE001 - whatever is wrong, Hydra's path says it
-                pass
+            cfg = _with_values(base, values, parser)
+            if cfg is not None:
+                return cfg
         fallbacks.append(every)
-        return to_experiment_config(hydra_compose(every))
+        return to_experiment_config(_hydra_compose(every))
 
-    fallbacks: list[list[str]] = []
-    # for inspection (tests): the structures Hydra composed, the runs that took its whole path
-    make.typed_bases, make.fallbacks = typed_bases, fallbacks
-    return make, launcher
+    return make
 
 
 def _is_value_override(text: str) -> bool:

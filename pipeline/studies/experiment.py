@@ -201,11 +201,8 @@ def run_family(cfg: ExperimentConfig, out_dir: Path, progress: bool = True,
     pandas.DataFrame
         The per-member metrics table.
     """
-    import dataclasses
-
     from joblib import Parallel, delayed
 
-    from pipeline.loop.controller import make_controller
     from pipeline.studies.progress import Progress
 
     out_dir = Path(out_dir)
@@ -213,6 +210,29 @@ def run_family(cfg: ExperimentConfig, out_dir: Path, progress: bool = True,
     members = family_members(cfg.scenario, cfg.vehicle.footprint_radius_m)
     cache = qp_cache if qp_cache is not None else QpCache()
     compiles_before = cache.compile_count
+    metrics_by_index, pending = _members_to_run(cfg, members, out_dir)
+    _prepare_cache(cfg, cache, len(pending))
+    chunks = _chunks(pending, family.n_jobs)
+    results = Parallel(n_jobs=family.n_jobs, return_as="generator_unordered")(
+        delayed(_run_chunk)(chunk, cache) for chunk in chunks)
+    with Progress(len(members), f"{cfg.method_name} family", "scenario",
+                  initial=len(metrics_by_index), disable=not progress) as bar:
+        for done in results:
+            for index, metrics in done:
+                metrics_by_index[index] = metrics
+            bar.update(len(done))
+    table = _member_table(metrics_by_index, len(members))
+    _write_family_folder(cfg, out_dir, table, len(members),
+                         cache.compile_count - compiles_before)
+    return table
+
+
+def _members_to_run(cfg: ExperimentConfig, members: list, out_dir: Path
+                    ) -> tuple[dict[int, dict], list[tuple[int, ExperimentConfig, Path]]]:
+    """The metrics of the members already complete (same config hash), by index, and the
+    ``(index, config, folder)`` of those still to run."""
+    import dataclasses
+
     metrics_by_index: dict[int, dict] = {}
     pending = []
     for i, member in enumerate(members):
@@ -225,26 +245,35 @@ def run_family(cfg: ExperimentConfig, out_dir: Path, progress: bool = True,
         if reason not in ("not a folder", "empty folder"):
             log.warning("re-running %s: %s", folder, reason)
         pending.append((i, member_cfg, folder))
-    if pending:
+    return metrics_by_index, pending
+
+
+def _prepare_cache(cfg: ExperimentConfig, cache: QpCache, n_pending: int) -> None:
+    """Compile the QP once, in the parent (when a member is to run), and switch the cache to
+    the compiled kernels once this process has planned enough members."""
+    from pipeline.loop.controller import make_controller
+
+    if n_pending:
         make_controller(cfg, cfg.scenario.sample_time_s, cache)  # compile once, in the parent
     # the plant and the APF rollout as compiled kernels (the same bits) once this process has
     # runs enough to pay numba's import and cache load in its workers (kept for later families)
-    cache.members_planned += len(pending)
+    cache.members_planned += n_pending
     if cache.members_planned >= COMPILED_KERNELS_MIN_MEMBERS:
         cache.compiled_kernels = True
-    chunks = _chunks(pending, family.n_jobs)
-    results = Parallel(n_jobs=family.n_jobs, return_as="generator_unordered")(
-        delayed(_run_chunk)(chunk, cache) for chunk in chunks)
-    with Progress(len(members), f"{cfg.method_name} family", "scenario",
-                  initial=len(metrics_by_index), disable=not progress) as bar:
-        for done in results:
-            for index, metrics in done:
-                metrics_by_index[index] = metrics
-            bar.update(len(done))
-    rows = [{"member": i, **metrics_by_index[i]} for i in range(len(members))]
+
+
+def _member_table(metrics_by_index: dict[int, dict], n_members: int) -> pd.DataFrame:
+    """The per-member metrics table, one row per member in index order."""
+    rows = [{"member": i, **metrics_by_index[i]} for i in range(n_members)]
     table = pd.DataFrame(rows)
     # fixed column order: fresh and resumed (read back from metrics.json) members agree
-    table = table[["member"] + sorted(c for c in table.columns if c != "member")]
+    return table[["member"] + sorted(c for c in table.columns if c != "member")]
+
+
+def _write_family_folder(cfg: ExperimentConfig, out_dir: Path, table: pd.DataFrame,
+                         n_members: int, parent_compiles: int) -> None:
+    """Write the family folder: its table, its counts and the compilations of this process."""
+    family = cfg.scenario.family
     member_compiles = int(table["compile_count"].fillna(0).sum()) if "compile_count" in table \
         else 0
     tally = Tally.of(table)
@@ -255,7 +284,6 @@ def run_family(cfg: ExperimentConfig, out_dir: Path, progress: bool = True,
         "goal_not_reached": tally.goal_not_reached, "fallback_steps": tally.fallback_steps,
     }
     # compilations depend on the process (a resumed family compiles again): kept apart
-    timing = {"compiles": cache.compile_count - compiles_before + member_compiles}
+    timing = {"compiles": parent_compiles + member_compiles}
     write_family(out_dir, table, summary, cfg.config_hash(),
-                 [out_dir / f"member_{i:04d}" for i in range(len(members))], timing=timing)
-    return table
+                 [out_dir / f"member_{i:04d}" for i in range(n_members)], timing=timing)

@@ -75,7 +75,8 @@ class Progress:
         now = time.perf_counter()
         if self.done >= self.total or now - self.last_line >= self.every_s:
             self.last_line = now
-            print(self.line(now), file=self.stream, flush=True)
+            self.stream.write(self.line(now) + "\n")
+            self.stream.flush()
 
     def close(self) -> None:
         if self.bar is not None:

@@ -105,6 +105,30 @@ def load_trajectory(path: Path | str, columns: dict[str, str] | None = None,
         a radius that is not positive, time not strictly increasing, a mapping key that is not a
         known column or clashes with a column already in the file.
     """
+    source, text = _read_text(path, stdin_text)
+    sep = _separator(text, source)
+    trailing = _trailing_empty_names(text, sep, source)
+    frame = _read_table(text, sep, source, trailing)
+    frame = _rename_mapped(frame, columns or {}, source)
+    _check_required(frame, source)
+    obstacle_ids = _obstacle_ids(frame, source)
+    numeric = [c for c in frame.columns if c in REQUIRED + OPTIONAL
+               or (OBSTACLE_COLUMN.fullmatch(c) and not c.endswith("_visible"))]
+    for column in numeric:
+        _check_numeric_column(frame, column, source)
+    for j in obstacle_ids:
+        _check_obstacle_radius(frame, j, source)
+        _read_visible_column(frame, f"obs{j}_visible", source)
+    _check_time_increases(frame, source)
+    if obstacles:
+        if obstacle_ids:
+            raise TrajectoryFileError("--obstacle given but the file already has obs0_* columns")
+        _add_obstacles(frame, obstacles)
+    return frame
+
+
+def _read_text(path: Path | str, stdin_text: str | None) -> tuple[str, str]:
+    """The name to quote in messages and the text of the file (``stdin_text`` for ``-``)."""
     source = "stdin" if str(path) == "-" else str(path)
     if str(path) == "-":
         text = stdin_text if stdin_text is not None else ""
@@ -118,7 +142,11 @@ def load_trajectory(path: Path | str, columns: dict[str, str] | None = None,
             raise TrajectoryFileError(f"{path}: cannot be read ({exc.strerror})")
     if not text.strip():
         raise TrajectoryFileError(f"{source}: the file is empty")
-    sep = _separator(text, source)
+    return source, text
+
+
+def _trailing_empty_names(text: str, sep: str, source: str) -> int:
+    """How many empty names end the header (refusing a name given twice)."""
     header = next(line for line in text.splitlines() if line.strip()
                   and not line.lstrip().startswith("#"))
     names = [n.strip().strip('"') for n in header.split(sep)]
@@ -132,6 +160,11 @@ def load_trajectory(path: Path | str, columns: dict[str, str] | None = None,
     if repeated:
         raise TrajectoryFileError(f"{source}: column(s) {repeated} appear more than once in the "
                                   "header")
+    return trailing
+
+
+def _read_table(text: str, sep: str, source: str, trailing: int) -> pd.DataFrame:
+    """The table of the text, without the ``trailing`` unnamed (and empty) columns."""
     try:
         frame = pd.read_csv(io.StringIO(text), sep=sep, comment="#", skipinitialspace=True)
     except pd.errors.EmptyDataError:
@@ -148,7 +181,11 @@ def load_trajectory(path: Path | str, columns: dict[str, str] | None = None,
     duplicated = sorted({c for c in frame.columns if list(frame.columns).count(c) > 1})
     if duplicated:
         raise TrajectoryFileError(f"{source}: column(s) {duplicated} appear more than once")
-    columns = columns or {}
+    return frame
+
+
+def _rename_mapped(frame: pd.DataFrame, columns: dict[str, str], source: str) -> pd.DataFrame:
+    """The table with the ``--columns`` mapping (ours=theirs) applied, after checking it."""
     allowed = set(REQUIRED) | set(OPTIONAL)
     unknown = [k for k in columns if k not in allowed and not OBSTACLE_COLUMN.fullmatch(k)]
     if unknown:
@@ -164,7 +201,11 @@ def load_trajectory(path: Path | str, columns: dict[str, str] | None = None,
     if clashes:
         raise TrajectoryFileError(f"--columns: {clashes} already in the file; map another column "
                                   "onto them only after renaming or dropping it")
-    frame = frame.rename(columns={theirs: ours for ours, theirs in columns.items()})
+    return frame.rename(columns={theirs: ours for ours, theirs in columns.items()})
+
+
+def _check_required(frame: pd.DataFrame, source: str) -> None:
+    """Refuse a table without a required column or with fewer than two rows."""
     missing = [c for c in REQUIRED if c not in frame.columns]
     if missing:
         raise TrajectoryFileError(f"{source}: missing required column(s) {missing}; it has "
@@ -173,6 +214,10 @@ def load_trajectory(path: Path | str, columns: dict[str, str] | None = None,
         raise TrajectoryFileError(f"{source}: the file has a header but no rows")
     if len(frame) < 2:
         raise TrajectoryFileError(f"{source}: a single row; at least two are needed")
+
+
+def _obstacle_ids(frame: pd.DataFrame, source: str) -> list[int]:
+    """The obstacles the table has columns of, each with its x, y and radius."""
     obstacle_ids = sorted({int(m.group(1)) for c in frame.columns
                            if (m := OBSTACLE_COLUMN.fullmatch(c))})
     for j in obstacle_ids:
@@ -181,73 +226,85 @@ def load_trajectory(path: Path | str, columns: dict[str, str] | None = None,
         if absent:
             raise TrajectoryFileError(f"{source}: obstacle {j} has no {', '.join(absent)} "
                                       "column (x, y and radius are needed)")
-    numeric = [c for c in frame.columns if c in REQUIRED + OPTIONAL
-               or (OBSTACLE_COLUMN.fullmatch(c) and not c.endswith("_visible"))]
-    for column in numeric:
-        raw = frame[column].map(lambda v: "" if pd.isna(v) else str(v).strip())
-        values = pd.to_numeric(raw.replace("", np.nan), errors="coerce").astype(float)
-        # text that is not a number is always an error; an empty cell only in required columns
-        bad = (values.isna() & (raw != "")) | np.isinf(values)
-        if column in REQUIRED or column.startswith("obs"):
-            bad |= values.isna()
+    return obstacle_ids
+
+
+def _check_numeric_column(frame: pd.DataFrame, column: str, source: str) -> None:
+    """Check a numeric column's cells and store it as floats (blank cells noted in ``attrs``)."""
+    raw = frame[column].map(lambda v: "" if pd.isna(v) else str(v).strip())
+    values = pd.to_numeric(raw.replace("", np.nan), errors="coerce").astype(float)
+    # text that is not a number is always an error; an empty cell only in required columns
+    bad = (values.isna() & (raw != "")) | np.isinf(values)
+    if column in REQUIRED or column.startswith("obs"):
+        bad |= values.isna()
+    if bad.any():
+        row = int(np.argmax(bad.to_numpy()))
+        raise _bad_cell(source, column, row, raw.iloc[row])
+    limit = PLAUSIBLE.get(column, PLAUSIBLE_DEFAULT)
+    outside = values.abs() > limit
+    if outside.any():
+        row = int(np.argmax(outside.to_numpy()))
+        raise TrajectoryFileError(f"{source}: column {column!r}, data row {row + 1}: "
+                                  f"{raw.iloc[row]!r} is outside the plausible range "
+                                  f"[-{limit:g}, {limit:g}]")
+    frame[column] = values
+    # an empty cell in an optional column (the last row excepted: it logs the end state,
+    # without an input) is counted and said, never dropped silently
+    blank = values.isna().to_numpy()[:-1]
+    if blank.any():
+        rows = np.flatnonzero(blank) + 1
+        frame.attrs.setdefault("blank_cells", {})[column] = (int(blank.sum()),
+                                                             int(rows[0]), int(rows[-1]))
+
+
+def _check_obstacle_radius(frame: pd.DataFrame, j: int, source: str) -> None:
+    """Refuse an obstacle radius that is not positive."""
+    radius = frame[f"obs{j}_radius_m"]
+    if (radius <= 0).any():
+        row = int(np.argmax((radius <= 0).to_numpy()))
+        raise TrajectoryFileError(f"{source}: column 'obs{j}_radius_m', data row {row + 1}: "
+                                  f"{radius.iloc[row]!r} is not a positive radius")
+
+
+def _read_visible_column(frame: pd.DataFrame, column: str, source: str) -> None:
+    """Store an obstacle's visibility as booleans (always visible without the column)."""
+    if column in frame.columns:
+        words = frame[column].map(lambda v: "" if pd.isna(v) else str(v).strip().lower())
+        bad = ~words.isin(list(BOOLEAN_WORDS))
         if bad.any():
             row = int(np.argmax(bad.to_numpy()))
-            raise _bad_cell(source, column, row, raw.iloc[row])
-        limit = PLAUSIBLE.get(column, PLAUSIBLE_DEFAULT)
-        outside = values.abs() > limit
-        if outside.any():
-            row = int(np.argmax(outside.to_numpy()))
+            cell = frame[column].iloc[row]
             raise TrajectoryFileError(f"{source}: column {column!r}, data row {row + 1}: "
-                                      f"{raw.iloc[row]!r} is outside the plausible range "
-                                      f"[-{limit:g}, {limit:g}]")
-        frame[column] = values
-        # an empty cell in an optional column (the last row excepted: it logs the end state,
-        # without an input) is counted and said, never dropped silently
-        blank = values.isna().to_numpy()[:-1]
-        if blank.any():
-            rows = np.flatnonzero(blank) + 1
-            frame.attrs.setdefault("blank_cells", {})[column] = (int(blank.sum()),
-                                                                 int(rows[0]), int(rows[-1]))
-    for j in obstacle_ids:
-        radius = frame[f"obs{j}_radius_m"]
-        if (radius <= 0).any():
-            row = int(np.argmax((radius <= 0).to_numpy()))
-            raise TrajectoryFileError(f"{source}: column 'obs{j}_radius_m', data row {row + 1}: "
-                                      f"{radius.iloc[row]!r} is not a positive radius")
-        column = f"obs{j}_visible"
-        if column in frame.columns:
-            words = frame[column].map(lambda v: "" if pd.isna(v) else str(v).strip().lower())
-            bad = ~words.isin(list(BOOLEAN_WORDS))
-            if bad.any():
-                row = int(np.argmax(bad.to_numpy()))
-                cell = frame[column].iloc[row]
-                raise TrajectoryFileError(f"{source}: column {column!r}, data row {row + 1}: "
-                                          f"{'' if pd.isna(cell) else cell!r} is not a boolean "
-                                          "(allowed: true, false, 1, 0)")
-            frame[column] = words.map(BOOLEAN_WORDS).astype(bool)
-        else:
-            frame[column] = True
+                                      f"{'' if pd.isna(cell) else cell!r} is not a boolean "
+                                      "(allowed: true, false, 1, 0)")
+        frame[column] = words.map(BOOLEAN_WORDS).astype(bool)
+    else:
+        frame[column] = True
+
+
+def _check_time_increases(frame: pd.DataFrame, source: str) -> None:
+    """Refuse a time column that does not increase strictly."""
     dt = np.diff(frame["time_s"].to_numpy())
     if np.any(dt <= 0):
         row = int(np.argmax(dt <= 0)) + 1
         raise TrajectoryFileError(f"{source}: time_s must increase strictly; it does not at data "
                                   f"row {row + 1}")
-    if obstacles:
-        if obstacle_ids:
-            raise TrajectoryFileError("--obstacle given but the file already has obs0_* columns")
-        t = frame["time_s"].to_numpy()
-        for j, spec in enumerate(obstacles):
-            x, y, r = spec[:3]
-            if not r > 0:
-                raise TrajectoryFileError(f"--obstacle {j + 1}: radius {r!r} is not positive")
-            appear = spec[3] if len(spec) > 3 else 0.0
-            vx, vy = (spec[4], spec[5]) if len(spec) > 5 else (0.0, 0.0)
-            elapsed = np.maximum(t - appear, 0.0)
-            frame[f"obs{j}_x_m"] = x + vx * elapsed
-            frame[f"obs{j}_y_m"] = y + vy * elapsed
-            frame[f"obs{j}_radius_m"] = r
-            frame[f"obs{j}_visible"] = t + 1e-9 >= appear
-    return frame
+
+
+def _add_obstacles(frame: pd.DataFrame, obstacles: list[list[float]]) -> None:
+    """Add the ``--obstacle`` specifications (x, y, r[, appear[, vx, vy]]) as obstacle columns."""
+    t = frame["time_s"].to_numpy()
+    for j, spec in enumerate(obstacles):
+        x, y, r = spec[:3]
+        if not r > 0:
+            raise TrajectoryFileError(f"--obstacle {j + 1}: radius {r!r} is not positive")
+        appear = spec[3] if len(spec) > 3 else 0.0
+        vx, vy = (spec[4], spec[5]) if len(spec) > 5 else (0.0, 0.0)
+        elapsed = np.maximum(t - appear, 0.0)
+        frame[f"obs{j}_x_m"] = x + vx * elapsed
+        frame[f"obs{j}_y_m"] = y + vy * elapsed
+        frame[f"obs{j}_radius_m"] = r
+        frame[f"obs{j}_visible"] = t + 1e-9 >= appear
 
 
 #: Metrics that cannot be computed without a column: (column, what it is, metrics).

@@ -87,18 +87,7 @@ def paths_figure(runs: dict[str, pd.DataFrame], goal_xy_m: tuple[float, float],
     """
     methods = list(runs)
     frames = list(runs.values())
-    if limits is None:
-        xs = np.concatenate([f["X_m"].to_numpy(float) for f in frames] + [[goal_xy_m[0]]])
-        ys = np.concatenate([f["Y_m"].to_numpy(float) for f in frames] + [[goal_xy_m[1]]])
-        limits = (np.nanmin(xs) - 1.5, np.nanmax(xs) + 1.5, np.nanmin(ys) - 2.0,
-                  np.nanmax(ys) + 2.0)
-    x_span, y_span = limits[1] - limits[0], limits[3] - limits[2]
-    # equal scales (circles stay circles); a flat path gets a taller window, never a
-    # stretched one: panels at least 1.7 in tall, the lateral limits widened about the data
-    panel_h = max(width_in * 0.84 * y_span / x_span, 1.7)
-    y_span_shown = panel_h * x_span / (width_in * 0.84)
-    centre = 0.5 * (limits[2] + limits[3])
-    limits = (limits[0], limits[1], centre - 0.5 * y_span_shown, centre + 0.5 * y_span_shown)
+    limits, panel_h = _panel_limits(frames, goal_xy_m, limits, width_in)
     fig, axes = plt.subplots(len(methods), 1, figsize=(width_in, panel_h * len(methods) + 0.9),
                              sharex=True, sharey=True, layout="constrained", squeeze=False)
     cmap = _time_colormap()
@@ -108,36 +97,9 @@ def paths_figure(runs: dict[str, pd.DataFrame], goal_xy_m: tuple[float, float],
     for ax, method, tr in zip(axes[:, 0], methods, frames):
         t = tr["time_s"].to_numpy(float)
         ax.plot(tr["X_m"], tr["Y_m"], color=method_color(method), lw=2, zorder=3)
-        for ts in times:
-            k = int(np.argmin(np.abs(t - ts)))
-            if abs(t[k] - ts) > 0.051:
-                continue
-            colour = cmap(norm(t[k]))
-            ax.add_patch(Circle((tr["X_m"].iloc[k], tr["Y_m"].iloc[k]), vehicle_radius_m,
-                                fill=False, lw=1.2, color=colour, zorder=4))
-            for j in _obstacle_indices(tr):
-                if bool(tr[f"obs{j}_visible"].iloc[k]):
-                    ax.add_patch(Circle((tr[f"obs{j}_x_m"].iloc[k], tr[f"obs{j}_y_m"].iloc[k]),
-                                        tr[f"obs{j}_radius_m"].iloc[k], color=colour,
-                                        alpha=0.55, lw=0, zorder=2))
-        for j in _obstacle_indices(tr):
-            visible = tr[f"obs{j}_visible"].astype(bool).to_numpy()
-            if visible.any():
-                k = int(np.argmax(visible))
-                ax.plot(tr[f"obs{j}_x_m"].iloc[k], tr[f"obs{j}_y_m"].iloc[k], "kx", ms=6,
-                        zorder=5)
-                if j == 0:
-                    ax.annotate(f"appears {t[k]:.1f} s", (tr[f"obs{j}_x_m"].iloc[k],
-                                                         tr[f"obs{j}_y_m"].iloc[k]),
-                                xytext=(6, 6), textcoords="offset points", fontsize=7,
-                                gid="label-appear", bbox=LABEL_BOX, zorder=7)
-        near = closest_approach(tr, vehicle_radius_m)
-        if near is not None:
-            (vx, vy), (ox, oy) = near["vehicle"], near["obstacle"]
-            ax.plot([vx, ox], [vy, oy], color="k", lw=1.0, zorder=6)
-            ax.annotate(f"closest {near['clearance_m']:.2f} m at {near['time_s']:.1f} s",
-                        (vx, vy), xytext=(6, -12), textcoords="offset points", fontsize=7,
-                        gid="label-closest", bbox=LABEL_BOX, zorder=7)
+        _draw_snapshots(ax, tr, t, times, cmap, norm, vehicle_radius_m)
+        _mark_appearances(ax, tr, t)
+        _mark_closest_approach(ax, tr, vehicle_radius_m)
         ax.plot(tr["X_m"].iloc[0], tr["Y_m"].iloc[0], "ko", ms=4)
         ax.plot(*goal_xy_m, marker="*", color="gold", mec="k", ms=12, ls="none")
         ax.axhline(goal_xy_m[1], color="k", lw=0.5, ls="--")
@@ -155,6 +117,70 @@ def paths_figure(runs: dict[str, pd.DataFrame], goal_xy_m: tuple[float, float],
     bar.set_label("time [s]: footprint and obstacles", fontsize=8)
     bar.ax.tick_params(labelsize=7)
     return fig
+
+
+def _panel_limits(frames: list[pd.DataFrame], goal_xy_m: tuple[float, float],
+                  limits: tuple | None, width_in: float) -> tuple[tuple, float]:
+    """The panels' shared limits (the data's by default) on equal scales, and a panel's
+    height (in)."""
+    if limits is None:
+        xs = np.concatenate([f["X_m"].to_numpy(float) for f in frames] + [[goal_xy_m[0]]])
+        ys = np.concatenate([f["Y_m"].to_numpy(float) for f in frames] + [[goal_xy_m[1]]])
+        limits = (np.nanmin(xs) - 1.5, np.nanmax(xs) + 1.5, np.nanmin(ys) - 2.0,
+                  np.nanmax(ys) + 2.0)
+    x_span, y_span = limits[1] - limits[0], limits[3] - limits[2]
+    # equal scales (circles stay circles); a flat path gets a taller window, never a
+    # stretched one: panels at least 1.7 in tall, the lateral limits widened about the data
+    panel_h = max(width_in * 0.84 * y_span / x_span, 1.7)
+    y_span_shown = panel_h * x_span / (width_in * 0.84)
+    centre = 0.5 * (limits[2] + limits[3])
+    limits = (limits[0], limits[1], centre - 0.5 * y_span_shown, centre + 0.5 * y_span_shown)
+    return limits, panel_h
+
+
+def _draw_snapshots(ax, tr: pd.DataFrame, t: np.ndarray, times: np.ndarray, cmap, norm,
+                    vehicle_radius_m: float) -> None:
+    """The vehicle's footprint and the visible obstacles at each snapshot time, coloured by
+    time."""
+    for ts in times:
+        k = int(np.argmin(np.abs(t - ts)))
+        if abs(t[k] - ts) > 0.051:
+            continue
+        colour = cmap(norm(t[k]))
+        ax.add_patch(Circle((tr["X_m"].iloc[k], tr["Y_m"].iloc[k]), vehicle_radius_m,
+                            fill=False, lw=1.2, color=colour, zorder=4))
+        for j in _obstacle_indices(tr):
+            if bool(tr[f"obs{j}_visible"].iloc[k]):
+                ax.add_patch(Circle((tr[f"obs{j}_x_m"].iloc[k], tr[f"obs{j}_y_m"].iloc[k]),
+                                    tr[f"obs{j}_radius_m"].iloc[k], color=colour,
+                                    alpha=0.55, lw=0, zorder=2))
+
+
+def _mark_appearances(ax, tr: pd.DataFrame, t: np.ndarray) -> None:
+    """A cross where each obstacle appears; the first one's time beside it."""
+    for j in _obstacle_indices(tr):
+        visible = tr[f"obs{j}_visible"].astype(bool).to_numpy()
+        if visible.any():
+            k = int(np.argmax(visible))
+            ax.plot(tr[f"obs{j}_x_m"].iloc[k], tr[f"obs{j}_y_m"].iloc[k], "kx", ms=6,
+                    zorder=5)
+            if j == 0:
+                ax.annotate(f"appears {t[k]:.1f} s", (tr[f"obs{j}_x_m"].iloc[k],
+                                                     tr[f"obs{j}_y_m"].iloc[k]),
+                            xytext=(6, 6), textcoords="offset points", fontsize=7,
+                            gid="label-appear", bbox=LABEL_BOX, zorder=7)
+
+
+def _mark_closest_approach(ax, tr: pd.DataFrame, vehicle_radius_m: float) -> None:
+    """The closest approach: a segment from the vehicle to the obstacle, its clearance and
+    time."""
+    near = closest_approach(tr, vehicle_radius_m)
+    if near is not None:
+        (vx, vy), (ox, oy) = near["vehicle"], near["obstacle"]
+        ax.plot([vx, ox], [vy, oy], color="k", lw=1.0, zorder=6)
+        ax.annotate(f"closest {near['clearance_m']:.2f} m at {near['time_s']:.1f} s",
+                    (vx, vy), xytext=(6, -12), textcoords="offset points", fontsize=7,
+                    gid="label-closest", bbox=LABEL_BOX, zorder=7)
 
 
 def overlay_figure(runs: dict[str, pd.DataFrame], goal_xy_m: tuple[float, float],

@@ -157,6 +157,11 @@ def bench_scaling_figure(lateral: pd.DataFrame) -> Figure:
     return fig
 
 
+#: The specification curve's colour of each outcome.
+OUTCOME_COLORS = {"supported": "#2ca02c", "contradicted": "#d62728", "equivalent": "#7f7f9f",
+                  "inconclusive": "#e0a000", "mixed": "#9467bd"}
+
+
 def specification_curve_figure(specifications: pd.DataFrame, changed: pd.DataFrame,
                                claim: str) -> Figure:
     """Specification curve of one claim: estimates with intervals, sorted, coloured by outcome,
@@ -171,8 +176,6 @@ def specification_curve_figure(specifications: pd.DataFrame, changed: pd.DataFra
         Indexed by ``spec_id``, one boolean column per dimension (in the space's order): the
         specification's choice differs from the default.
     """
-    colors = {"supported": "#2ca02c", "contradicted": "#d62728", "equivalent": "#7f7f9f",
-              "inconclusive": "#e0a000", "mixed": "#9467bd"}
     part = specifications[specifications["claim"] == claim]
     comparisons = list(dict.fromkeys(part["comparison"]))
     dims = list(changed.columns)
@@ -189,39 +192,49 @@ def specification_curve_figure(specifications: pd.DataFrame, changed: pd.DataFra
             order = rows["spec_id"].tolist()
         else:
             rows = rows.set_index("spec_id").loc[order].reset_index()
-        x = np.arange(len(rows))
-        for outcome, color in colors.items():
-            sel = rows["outcome"] == outcome
-            if sel.any():
-                ax.vlines(x[sel], rows["ci_low"][sel], rows["ci_high"][sel], color=color,
-                          alpha=0.5, lw=1.2)
-                ax.scatter(x[sel], rows["estimate"][sel], s=10, color=color, label=outcome,
-                           zorder=3)
-        default = rows.index[rows["kind"] == "default"]
-        if len(default):
-            ax.axvline(default[0], color="k", lw=0.8, ls=":", label="default")
-        ax.axhline(0.0, color="k", lw=0.6)
-        margin = float(rows["margin"].iloc[0]) if len(rows) else 0.0
-        ax.axhspan(-margin, margin, color="#dddddd", alpha=0.5, lw=0)
-        ax.set_ylabel(f"d vs {comparison}", fontsize=8)
-        ax.set_xlim(-1, len(rows))
-        ax.set_xticks([])
-        ax.tick_params(labelsize=7)
-        ax.legend(fontsize=7, ncol=5, loc="upper left")
+        _draw_curve(ax, rows, comparison)
     first = axes[0, 0]
     first.set_title(f"{claim}: specification curve over {len(order or [])} specifications "
                     "(estimate d = improved - comparison, 95 % CI; grey band: margin)",
                     fontsize=9)
-    matrix = axes[-1, 0]
-    spec_rows = changed.loc[order or []]
+    _draw_choice_matrix(axes[-1, 0], changed, order or [], dims)
+    return fig
+
+
+def _draw_curve(ax, rows: pd.DataFrame, comparison: str) -> None:
+    """One comparison's estimates and intervals in the specifications' order, coloured by
+    outcome, with the default, zero and the margin's band."""
+    x = np.arange(len(rows))
+    for outcome, color in OUTCOME_COLORS.items():
+        sel = rows["outcome"] == outcome
+        if sel.any():
+            ax.vlines(x[sel], rows["ci_low"][sel], rows["ci_high"][sel], color=color,
+                      alpha=0.5, lw=1.2)
+            ax.scatter(x[sel], rows["estimate"][sel], s=10, color=color, label=outcome,
+                       zorder=3)
+    default = rows.index[rows["kind"] == "default"]
+    if len(default):
+        ax.axvline(default[0], color="k", lw=0.8, ls=":", label="default")
+    ax.axhline(0.0, color="k", lw=0.6)
+    margin = float(rows["margin"].iloc[0]) if len(rows) else 0.0
+    ax.axhspan(-margin, margin, color="#dddddd", alpha=0.5, lw=0)
+    ax.set_ylabel(f"d vs {comparison}", fontsize=8)
+    ax.set_xlim(-1, len(rows))
+    ax.set_xticks([])
+    ax.tick_params(labelsize=7)
+    ax.legend(fontsize=7, ncol=5, loc="upper left")
+
+
+def _draw_choice_matrix(matrix, changed: pd.DataFrame, order: list, dims: list) -> None:
+    """The indicator matrix: a mark where a specification's choice is away from its default."""
+    spec_rows = changed.loc[order]
     for i, dim in enumerate(dims):
         xs = np.nonzero(spec_rows[dim].to_numpy())[0]
         matrix.scatter(xs, np.full(xs.size, i), marker="|", s=40, color="#1f77b4")
     matrix.set_yticks(range(len(dims)))
     matrix.set_yticklabels(dims, fontsize=6)
     matrix.set_ylim(-0.7, len(dims) - 0.3)
-    matrix.set_xlim(-1, len(order or []))
+    matrix.set_xlim(-1, len(order))
     matrix.set_xlabel("specifications, sorted by the estimate against the first comparison; "
                       "a mark: a choice away from its default", fontsize=7)
     matrix.tick_params(axis="x", labelsize=7)
-    return fig

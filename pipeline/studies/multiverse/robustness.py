@@ -12,7 +12,7 @@ from pipeline.analysis.claims import OUTCOMES, family_ledger
 from pipeline.store.runs import read_family
 from pipeline.studies.multiverse.design import analysis_settings, matches, value_text
 from pipeline.studies.multiverse.runs import family_table
-from pipeline.studies.multiverse.space import Space
+from pipeline.studies.multiverse.space import Dimension, Space
 
 ROBUSTNESS_RULE = (
     "per claim and comparison: 'robust' when at least robust_share of the specifications give "
@@ -63,38 +63,8 @@ def robustness(results: pd.DataFrame, design: pd.DataFrame, space: Space
         agree = 1.0 - float(np.mean(flipped))
         label = "robust" if agree >= space.robust_share else (
             "fragile" if agree < space.fragile_share else "sensitive")
-        best, best_key, holds = None, (-1.0, -1.0), []
-        for dim in space.dimensions:
-            per_value = []
-            for value in dim.values:
-                subset = part[matches(part[dim.key], value)]
-                if not len(subset):
-                    continue
-                flip_share = float(np.mean(subset["outcome"] != default_outcome))
-                estimate = float(np.nanmedian(subset["estimate"])) if \
-                    subset["estimate"].notna().any() else float("nan")
-                outcomes = subset["outcome"].value_counts()
-                supported = float(np.mean(subset["outcome"] == "supported"))
-                if supported >= 0.5:
-                    holds.append((supported, f"{dim.key}={value_text(value)}"))
-                per_value.append((value, flip_share, estimate))
-                dim_rows.append({"claim": claim, "comparison": comparison, "dimension": dim.key,
-                                 "value": value_text(value), "default": value == dim.default,
-                                 "n_specifications": int(len(subset)),
-                                 "flipped_share": flip_share, "median_estimate": estimate,
-                                 "modal_outcome": outcomes.index[0],
-                                 "supported_share": supported})
-            if not per_value:
-                continue
-            influence = max(v[1] for v in per_value)
-            estimates = [v[2] for v in per_value if np.isfinite(v[2])]
-            spread = (max(estimates) - min(estimates)) if estimates else 0.0
-            if (influence, spread) > best_key:
-                flips = [str(v[0]) for v in per_value if v[1] >= 0.5 and v[0] != dim.default]
-                if not flips and influence > 0:
-                    # no value flips most of its specifications: name the one that flips most
-                    flips = [str(max(per_value, key=lambda v: v[1])[0])]
-                best, best_key = (dim.key, flips, spread), (influence, spread)
+        best, best_key, holds = _most_influential(part, space, default_outcome, claim,
+                                                  comparison, dim_rows)
         rows.append({"claim": claim, "comparison": comparison,
                      "default_outcome": default_outcome, "agree_share": agree, "label": label,
                      **shares, "n_specifications": int(len(part)),
@@ -105,3 +75,54 @@ def robustness(results: pd.DataFrame, design: pd.DataFrame, space: Space
                      "holds_with": "; ".join(f"{name} ({100 * share:.0f} %)" for share, name
                                              in sorted(holds, reverse=True)[:6])})
     return pd.DataFrame(rows), pd.DataFrame(dim_rows)
+
+
+def _most_influential(part: pd.DataFrame, space: Space, default_outcome: str, claim: str,
+                      comparison: str, dim_rows: list[dict]) -> tuple:
+    """Of one claim and comparison's specifications ``part``: the most influential dimension
+    ``(key, flipping values, estimate spread)`` (None without one), its ``(influence,
+    spread)``, and the ``(supported share, choice)`` pairs under which most specifications
+    support the claim; each dimension value's row is appended to ``dim_rows``."""
+    best, best_key, holds = None, (-1.0, -1.0), []
+    for dim in space.dimensions:
+        per_value = _value_effects(part, dim, default_outcome, claim, comparison, holds,
+                                   dim_rows)
+        if not per_value:
+            continue
+        influence = max(v[1] for v in per_value)
+        estimates = [v[2] for v in per_value if np.isfinite(v[2])]
+        spread = (max(estimates) - min(estimates)) if estimates else 0.0
+        if (influence, spread) > best_key:
+            flips = [str(v[0]) for v in per_value if v[1] >= 0.5 and v[0] != dim.default]
+            if not flips and influence > 0:
+                # no value flips most of its specifications: name the one that flips most
+                flips = [str(max(per_value, key=lambda v: v[1])[0])]
+            best, best_key = (dim.key, flips, spread), (influence, spread)
+    return best, best_key, holds
+
+
+def _value_effects(part: pd.DataFrame, dim: Dimension, default_outcome: str, claim: str,
+                   comparison: str, holds: list, dim_rows: list[dict]) -> list[tuple]:
+    """Per value of ``dim`` present in ``part``: ``(value, flipped share, median estimate)``;
+    the value's row appended to ``dim_rows``, and to ``holds`` when most of its
+    specifications support the claim."""
+    per_value = []
+    for value in dim.values:
+        subset = part[matches(part[dim.key], value)]
+        if not len(subset):
+            continue
+        flip_share = float(np.mean(subset["outcome"] != default_outcome))
+        estimate = float(np.nanmedian(subset["estimate"])) if \
+            subset["estimate"].notna().any() else float("nan")
+        outcomes = subset["outcome"].value_counts()
+        supported = float(np.mean(subset["outcome"] == "supported"))
+        if supported >= 0.5:
+            holds.append((supported, f"{dim.key}={value_text(value)}"))
+        per_value.append((value, flip_share, estimate))
+        dim_rows.append({"claim": claim, "comparison": comparison, "dimension": dim.key,
+                         "value": value_text(value), "default": value == dim.default,
+                         "n_specifications": int(len(subset)),
+                         "flipped_share": flip_share, "median_estimate": estimate,
+                         "modal_outcome": outcomes.index[0],
+                         "supported_share": supported})
+    return per_value

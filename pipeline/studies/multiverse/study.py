@@ -29,8 +29,6 @@ def run_multiverse(space: Space, out_dir: Path, overrides: list[str] | None = No
     from joblib import Parallel, delayed
 
     log = log if log is not None else logger.info
-    from pipeline.studies.progress import Progress
-
     out_dir = Path(out_dir)
     compose, launcher = composer(list(overrides or []))
     # the default specification is the user's configuration (its analysis settings)
@@ -47,13 +45,38 @@ def run_multiverse(space: Space, out_dir: Path, overrides: list[str] | None = No
     methods = tuple(base.claims.controls) + (base.claims.treatment,)
     folders, backends = run_simulations(design, space, out_dir, compose, log, launcher, methods)
     jobs = [(row, folders[simulation_key(row, space)]) for row in design.to_dict("records")]
-    # every metric reading a family needs, computed in one pass over its members (each member
-    # read once per analysis, not once per reading)
+    members, reads = _rescore_families(_metric_readings(jobs, space, base), out_dir, n_jobs,
+                                       log)
+    log(f"judging {len(jobs)} specifications ...")
+    results = Parallel(n_jobs=n_jobs)(
+        delayed(analyse_specification)(row, f, space, out_dir) for row, f in jobs)
+    rows = [r for block in results for r in block]
+    table = pd.DataFrame(rows).merge(design, on="spec_id")
+    robust, dims = robustness(pd.DataFrame(rows), design, space)
+    info = _multiverse_info(space, design, len(folders), backends,
+                            reads / members if members else 0.0)
+    return MultiverseResult(info, design, table, robust, dims).write(out_dir)
+
+
+def _metric_readings(jobs: list, space: Space, base) -> dict[Path, list[MetricsConfig]]:
+    """Every metric reading each family needs, over the specifications ``jobs``."""
     readings: dict[Path, list[MetricsConfig]] = {}
     for row, family_folders in jobs:
         metrics, _ = analysis_settings(row, space, base)
         for folder in family_folders.values():
             readings.setdefault(Path(folder), []).append(metrics)
+    return readings
+
+
+def _rescore_families(readings: dict[Path, list[MetricsConfig]], out_dir: Path, n_jobs: int,
+                      log) -> tuple[int, int]:
+    """Re-score every family under its readings, computed in one pass over its members (each
+    member read once per analysis, not once per reading); the number of members and of member
+    trajectories read."""
+    from joblib import Parallel, delayed
+
+    from pipeline.studies.progress import Progress
+
     members = sum(len(read_family(f, members=False).table) for f in readings)
     log(f"re-scoring {members} members of {len(readings)} families under their metric "
         "readings ...")
@@ -66,21 +89,21 @@ def run_multiverse(space: Space, out_dir: Path, overrides: list[str] | None = No
             bar.update()
     log(f"re-scoring: {reads} member trajectories read for {members} members "
         f"({len(readings)} families)")
-    log(f"judging {len(jobs)} specifications ...")
-    results = Parallel(n_jobs=n_jobs)(
-        delayed(analyse_specification)(row, f, space, out_dir) for row, f in jobs)
-    rows = [r for block in results for r in block]
-    table = pd.DataFrame(rows).merge(design, on="spec_id")
-    robust, dims = robustness(pd.DataFrame(rows), design, space)
-    info = MultiverseInfo(
+    return members, reads
+
+
+def _multiverse_info(space: Space, design: pd.DataFrame, n_simulations: int,
+                     backends: dict[str, str], member_reads_per_member: float
+                     ) -> MultiverseInfo:
+    """The multiverse's bookkeeping: its space, sizes, backends and robustness rule."""
+    return MultiverseInfo(
         name=space.name, n_specifications=int(len(design)),
-        n_simulation_configurations=len(folders), family_size=space.family_size,
+        n_simulation_configurations=n_simulations, family_size=space.family_size,
         backend=space.backend, backends=backends,
-        member_reads_per_member=reads / members if members else 0.0,
+        member_reads_per_member=member_reads_per_member,
         rule=ROBUSTNESS_RULE, robust_share=space.robust_share,
         fragile_share=space.fragile_share,
         dimensions=tuple({"key": d.key, "config_key": d.target, "stage": d.stage,
                           "values": [str(v) for v in d.values],
                           "applies_to": list(d.applies_to or []), "why": d.why}
                          for d in space.dimensions))
-    return MultiverseResult(info, design, table, robust, dims).write(out_dir)

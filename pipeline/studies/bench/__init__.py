@@ -1,0 +1,87 @@
+"""Benchmark of the controller step against the solver's floor and the peers: ``make bench``.
+
+Everything runs in one process, methods interleaved on identical inputs, each repeated:
+
+* the lateral QP for N in {10, 20, 30, 50} and 1, 3, 5 obstacles: the APF rollout, the CVXPY
+  backend (parameter update, ``problem.solve`` split into Clarabel's own time and the rest),
+  the ``clarabel_direct`` backend, and the floor — the identical QP data handed to a kept
+  Clarabel solver (``update`` + ``solve`` only);
+* peers on the same QP: CVXPY rebuilding the problem every step (as PythonRobotics does) and
+  python-control's ``control.optimal.solve_ocp`` (no obstacles, Nc = N, N = 10 and 20);
+* the kinematic LTV-QP step;
+* the lateral MPC's whole step in each frame (``controller.frame``): the APF, the frame's QP
+  data and the solve, over the sparse floor of the same QP (:func:`bench_path_frame`);
+* whole-pipeline figures: import time, one paper-scenario run, a family's throughput on both
+  cores, peak memory.
+
+Results: ``reports/bench/bench.csv`` (every sample), ``bench_summary.json`` and
+``scaling.png/svg``. No timing is asserted anywhere in the tests.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pandas as pd
+
+from pipeline.studies.bench.closed_loop import bench_closed_loop, bench_family_member
+from pipeline.studies.bench.lateral import bench_lateral
+from pipeline.studies.bench.path_frame import bench_path_frame, summarize_path_frame
+from pipeline.studies.bench.peers import bench_kinematic, bench_peers
+from pipeline.studies.bench.summary import summarize
+from pipeline.studies.bench.whole_pipeline import bench_multiverse_reads, bench_pipeline
+from pipeline.studies.results.bench import BenchResult
+
+__all__ = ["run_benchmark"]
+
+
+def run_benchmark(out: Path, steps: int = 40, repeats: int = 3, quick: bool = False,
+                  family_size: int = 200) -> BenchResult:
+    """The benchmark (see the module docstring), on one BLAS thread as the closed loop runs
+    (OpenBLAS's idle threads would otherwise spin and inflate every CPU time): its result
+    written into ``out`` and returned (with the lateral table, the command's scaling
+    figure's data)."""
+    from threadpoolctl import threadpool_limits
+
+    with threadpool_limits(limits=1, user_api="blas"):
+        return _measure(Path(out), steps, repeats, quick, family_size)
+
+
+def _measure(out: Path, steps: int, repeats: int, quick: bool, family_size: int
+             ) -> BenchResult:
+    """:func:`run_benchmark` inside its thread limit."""
+    horizons = (10,) if quick else (10, 20, 30, 50)
+    counts = (1,) if quick else (1, 3, 5)
+    lateral = pd.DataFrame(bench_lateral(horizons, counts, steps, repeats))
+    peers = pd.DataFrame(bench_peers(10 if quick else 20))
+    kinematic = pd.DataFrame(bench_kinematic(steps))
+    closed_loop = bench_closed_loop(3 if quick else 7)
+    closed_loop_python = bench_closed_loop(3 if quick else 7, compiled_kernels=False)
+    closed_loop_daqp = bench_closed_loop(3 if quick else 7, backend="daqp")
+    pipeline_figures = bench_pipeline(8 if quick else family_size,
+                                      8 if quick else 40)
+    summary = summarize(lateral, peers, kinematic, pipeline_figures, closed_loop)
+    summary["closed_loop_daqp"] = closed_loop_daqp
+    summary["closed_loop_python_kernels"] = closed_loop_python
+    summary["outside_qp_over_qp_python_kernels"] = \
+        closed_loop_python["outside_qp_us_per_step"] / closed_loop_python["qp_us_per_step"]
+    summary["outside_qp_over_qp_daqp"] = \
+        closed_loop_daqp["outside_qp_us_per_step"] / closed_loop_daqp["qp_us_per_step"]
+    member = bench_family_member(n_members=4 if quick else 8)
+    member_daqp = bench_family_member("daqp", n_members=4 if quick else 8)
+    summary["family_member"] = {"default": member, "daqp": member_daqp}
+    summary["family_member_over_sparse_floor"] = member["family_member_over_sparse_floor"]
+    summary["family_member_over_sparse_floor_daqp"] = \
+        member_daqp["family_member_over_sparse_floor"]
+    path_rows = bench_path_frame(steps, repeats)
+    summary["path_frame"] = summarize_path_frame(path_rows)
+    summary["step_over_sparse_floor_path"] = \
+        summary["path_frame"]["step_over_sparse_floor_path"]
+    summary["step_over_sparse_floor_path_daqp"] = \
+        summary["path_frame"]["step_over_sparse_floor_path_daqp"]
+    summary.update(bench_multiverse_reads())
+    summary["outside_qp_over_qp"] = closed_loop["outside_qp_us_per_step"] \
+        / closed_loop["qp_us_per_step"]
+    summary["setup_ms"] = closed_loop["setup_ms"]
+    table = pd.concat([lateral, peers, kinematic, pd.DataFrame(path_rows)], ignore_index=True)
+    return BenchResult(summary, table, lateral).write(out)
