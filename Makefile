@@ -16,7 +16,7 @@ TUNE        ?= default
 export SLURM_CI_DIR ?= /tmp/slurm-ci
 LAUNCHER    ?= sequential
 
-.PHONY: help install reproduce experiment run-paper run-kinematic run-kinematic-readings run-family run-kinematic-family run-frames speed-check report screenshot sweep verify ablation multiverse tune nmpc-check test test-slurm test-all bench clean
+.PHONY: help install lint reproduce experiment run-paper run-kinematic run-kinematic-readings run-family run-kinematic-family run-frames speed-check report screenshot sweep verify ablation multiverse tune nmpc-check test test-slurm test-all bench clean
 
 help:  ## list the targets
 	@grep -E '^[a-zA-Z_-]+:.*## ' $(MAKEFILE_LIST) | awk -F':.*## ' '{printf "  %-12s %s\n", $$1, $$2}'
@@ -92,9 +92,13 @@ bench: $(STAMP)  ## benchmark the controller step vs the Clarabel floor and the 
 verify: reproduce  ## rerun `make reproduce` and compare with reports/reference/ (tolerances in pipeline/studies/verify.py)
 	$(PY) -m pipeline.verify $(RUNS) reports/reference
 
-test: $(STAMP)  ## run the test suite on every core (PYTEST_JOBS=auto; excludes tests marked slow or slurm)
+test: lint $(STAMP)  ## lint and type-check, then run the test suite on every core (PYTEST_JOBS=auto; excludes tests marked slow or slurm)
 	@# one test file per worker at a time (--dist loadfile), so a file's shared runs are made once
 	$(PY) -m pytest -m "not slow and not slurm" -n $(PYTEST_JOBS) --dist loadfile $(PYTEST_ARGS)
+
+lint: $(STAMP)  ## ruff (pyflakes, bugbear, isort, pyupgrade, simplify, complexity) and mypy, as configured in pyproject.toml
+	$(PY) -m ruff check pipeline tests hydra_plugins examples benchmarks
+	$(PY) -m mypy
 
 test-slurm: $(STAMP)  ## start a single-node SLURM cluster (.ci/slurm-cluster), run the SLURM tests, stop it
 	.ci/slurm-cluster start

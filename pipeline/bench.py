@@ -12,10 +12,10 @@ import json
 import sys
 from pathlib import Path
 
-from pipeline.studies.results.base import written
-from pipeline.studies.results.bench import SCALING_STEM
 from pipeline.commands import run_command
 from pipeline.studies import bench as study
+from pipeline.studies.results.base import written
+from pipeline.studies.results.bench import SCALING_STEM
 
 __all__ = ["main"]
 

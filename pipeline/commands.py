@@ -13,11 +13,18 @@ from __future__ import annotations
 
 import logging
 import sys
-from typing import Callable, TypeVar
+from collections.abc import Callable
+from typing import TypeVar
 
-from pipeline.errors import (FolderBusyError, IncompleteSweepError, StudyError,
-                             describe_config_error, interrupted_exit_code, stop_on_signals,
-                             stopped_line)
+from pipeline.errors import (
+    FolderBusyError,
+    IncompleteSweepError,
+    StudyError,
+    describe_config_error,
+    interrupted_exit_code,
+    stop_on_signals,
+    stopped_line,
+)
 
 log = logging.getLogger("pipeline")
 T = TypeVar("T")

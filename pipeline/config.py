@@ -22,8 +22,15 @@ from pipeline.analysis.objectives import Objective, TuneConfig
 from pipeline.analysis.settings import ClaimsConfig, MetricsConfig
 from pipeline.errors import ConfigError
 from pipeline.loop.qp_memory import MAX_HORIZON
-from pipeline.loop.settings import (ControllerConfig, FamilyConfig, ModelConfig, ObstacleConfig,
-                                    PlannerConfig, ScenarioConfig, VehicleConfig)
+from pipeline.loop.settings import (
+    ControllerConfig,
+    FamilyConfig,
+    ModelConfig,
+    ObstacleConfig,
+    PlannerConfig,
+    ScenarioConfig,
+    VehicleConfig,
+)
 from pipeline.register import INTERPRETATION_REGISTER, RegisterEntry
 from pipeline.validation import FrozenAfterValidation, safe_name
 
@@ -230,7 +237,7 @@ def typed_config(cfg: Any) -> Any:
 
     # the hydra node is Hydra's own (some of its values exist only inside a running job)
     if "hydra" in cfg:
-        cfg = OmegaConf.masked_copy(cfg, [k for k in cfg.keys() if k != "hydra"])
+        cfg = OmegaConf.masked_copy(cfg, [k for k in cfg if k != "hydra"])
     data = OmegaConf.to_container(cfg, resolve=True)
     assert isinstance(data, dict)  # a composed config is a mapping
     data.pop("hydra", None)

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 from typing import Any
 
+
 class ConfigError(ValueError):
     """An invalid configuration value.
 
@@ -87,11 +88,7 @@ class SweepConfigError(ConfigError):
 
 def describe_config_error(exc: BaseException) -> str | None:
     """One line for a configuration error, or None if ``exc`` is not one."""
-    from hydra.errors import (ConfigCompositionException, MissingConfigException,
-                              OverrideParseException)
-    from omegaconf.errors import MissingMandatoryValue, OmegaConfBaseException
-
-    chain = []
+    chain: list[BaseException] = []
     current: BaseException | None = exc
     while current is not None and current not in chain:
         chain.append(current)
@@ -99,31 +96,51 @@ def describe_config_error(exc: BaseException) -> str | None:
     for err in chain:
         if isinstance(err, (ConfigError, NonFiniteResultError, IncompleteSweepError)):
             return str(err)
-    for err in chain:
-        if isinstance(err, MissingConfigException):
-            missing = err.missing_cfg_file or ""
-            group, _, name = missing.rpartition("/")
-            options = ", ".join(o for o in (err.options or []) if not o.endswith("_schema"))
-            options = options or "see conf/" + group
-            if group:
-                return (f"config error: {group}={name!r} is not a known option; allowed: "
-                        f"{options}")
-            return "config error: " + str(err).splitlines()[0]
-    for err in chain:
-        if isinstance(err, MissingMandatoryValue):
-            key = getattr(err, "full_key", None) or "?"
-            return f"config error: {key} is missing; allowed: a value (required, set {key}=...)"
-        if isinstance(err, OmegaConfBaseException):
-            key = getattr(err, "full_key", None) or "?"
-            message = str(getattr(err, "msg", err)).splitlines()[0]
-            return f"config error: {key}: {message}"
-    for err in chain:
-        if isinstance(err, (OverrideParseException, ConfigCompositionException)):
-            return "config error: " + " ".join(str(err).split())
-    for err in chain:
-        line = _override_under_null_line(err)
-        if line is not None:
-            return line
+    # the readers in order: the first that words any exception of the chain wins
+    for reader in (_missing_config_line, _omegaconf_line, _composition_line,
+                   _override_under_null_line):
+        for err in chain:
+            line = reader(err)
+            if line is not None:
+                return line
+    return None
+
+
+def _missing_config_line(err: BaseException) -> str | None:
+    """A config group's option that does not exist (``planner=nope``)."""
+    from hydra.errors import MissingConfigException
+
+    if not isinstance(err, MissingConfigException):
+        return None
+    missing = err.missing_cfg_file or ""
+    group, _, name = missing.rpartition("/")
+    options = ", ".join(o for o in (err.options or []) if not o.endswith("_schema"))
+    options = options or "see conf/" + group
+    if group:
+        return f"config error: {group}={name!r} is not a known option; allowed: {options}"
+    return "config error: " + str(err).splitlines()[0]
+
+
+def _omegaconf_line(err: BaseException) -> str | None:
+    """A value OmegaConf refuses (missing, wrong type), with its key."""
+    from omegaconf.errors import MissingMandatoryValue, OmegaConfBaseException
+
+    if isinstance(err, MissingMandatoryValue):
+        key = getattr(err, "full_key", None) or "?"
+        return f"config error: {key} is missing; allowed: a value (required, set {key}=...)"
+    if isinstance(err, OmegaConfBaseException):
+        key = getattr(err, "full_key", None) or "?"
+        message = str(getattr(err, "msg", err)).splitlines()[0]
+        return f"config error: {key}: {message}"
+    return None
+
+
+def _composition_line(err: BaseException) -> str | None:
+    """An override Hydra cannot parse or compose."""
+    from hydra.errors import ConfigCompositionException, OverrideParseException
+
+    if isinstance(err, (OverrideParseException, ConfigCompositionException)):
+        return "config error: " + " ".join(str(err).split())
     return None
 
 

@@ -14,14 +14,13 @@ import sys
 from pathlib import Path
 
 import hydra
-from omegaconf import DictConfig
-
 import pandas as pd
+from omegaconf import DictConfig
 
 from pipeline.analysis.objectives import objective_values
 from pipeline.analysis.tally import Tally
-from pipeline.config import CONF_DIR, register_configs, to_experiment_config
 from pipeline.commands import run_command, run_task
+from pipeline.config import CONF_DIR, register_configs, to_experiment_config
 from pipeline.store.lock import folder_lock
 from pipeline.studies.experiment import RunSummary, run_experiment, run_family
 from pipeline.studies.slurm import register_launcher
@@ -89,7 +88,7 @@ def _check_targets(experiment) -> None:
 
 def _describe(objectives, values) -> str:
     """``mean reaction_delay_s = 0.41`` for the log (what a sweeper receives)."""
-    return ", ".join(f"{o.label} = {v:.4g}" for o, v in zip(objectives, values))
+    return ", ".join(f"{o.label} = {v:.4g}" for o, v in zip(objectives, values, strict=True))
 
 
 KEPT = "completed runs and family members"

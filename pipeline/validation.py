@@ -102,7 +102,7 @@ class FrozenAfterValidation:
                 "read-only (use dataclasses.replace, or compose with an override)")
         object.__setattr__(self, name, value)
 
-    def freeze(self) -> "FrozenAfterValidation":
+    def freeze(self) -> FrozenAfterValidation:
         """Make this object and every settings object inside it read-only; returns it."""
         import dataclasses
 

@@ -5,12 +5,16 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 
-from pipeline.analysis.ablation import (REVISIONS, ablation_effects, attribution_sentences,
-                                       interpretation_flips)
-from pipeline.store.collection import interpretation_tables
+from pipeline.analysis.ablation import (
+    REVISIONS,
+    ablation_effects,
+    attribution_sentences,
+    interpretation_flips,
+)
 from pipeline.analysis.claims.catalogue import CLAIMS
-from pipeline.store.runs import write_family
 from pipeline.config import ClaimsConfig
+from pipeline.store.collection import interpretation_tables
+from pipeline.store.runs import write_family
 
 CFG = ClaimsConfig(n_resamples=199)
 

@@ -10,8 +10,13 @@ from scipy import stats
 
 from pipeline.analysis.claims.catalogue import ALL_CLAIMS, CLAIMS, SAFETY
 from pipeline.analysis.claims.ledger import claims_table, family_ledger, single_scenario_outcome
-from pipeline.analysis.claims.statistics import (compare, decide, hodges_lehmann, holm,
-                                                 probability_of_improvement)
+from pipeline.analysis.claims.statistics import (
+    compare,
+    decide,
+    hodges_lehmann,
+    holm,
+    probability_of_improvement,
+)
 from pipeline.config import ClaimsConfig
 
 CFG = ClaimsConfig(n_resamples=999)

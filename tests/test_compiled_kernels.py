@@ -14,9 +14,9 @@ import pytest
 
 from pipeline.loop.compiled import COMPILED_KERNELS, apf_rollout_kernel, single_track_rk4
 from pipeline.loop.controller import QpCache, lateral_reference
-from pipeline.loop.python_kernels import PYTHON_KERNELS
 from pipeline.loop.model import SINGLE_TRACK_CONSTANT_NAMES, single_track_constants, step_plant
 from pipeline.loop.planner import ApfPlanner, ApfSettings, apf_kernel_settings, apf_rollout
+from pipeline.loop.python_kernels import PYTHON_KERNELS
 from pipeline.loop.scenario import ObstacleSnapshot, build_scenario, family_members
 from pipeline.loop.simulate import SingleTrackPlant, simulate
 
@@ -164,7 +164,7 @@ def test_compiled_chase_gives_the_paths_bits():
                 float(rng.uniform(0.05, 0.5)), int(rng.integers(1, 14)))
         plain = chase_path_arrays(*args[:3], rollout.tolist(), *args[4:])
         fast = chase_path_kernel(*args)
-        for a, b in zip(plain, fast):
+        for a, b in zip(plain, fast, strict=True):
             assert np.array_equal(a, b), case
         clipped_seen += int(plain[3].any())
     assert clipped_seen > 30  # the curvature limit bound in many cases
@@ -176,8 +176,12 @@ def test_compiled_frame_step_and_check_give_the_same_bits():
     paths that bend and clip, stations with and without a previous plan, obstacles on both
     sides and behind, records whose window ends early, prediction steps longer than the
     sample time."""
-    from pipeline.loop.compiled import (chase_path_kernel, check_record_kernel,
-                                        frame_step_kernel, plan_poses_kernel)
+    from pipeline.loop.compiled import (
+        chase_path_kernel,
+        check_record_kernel,
+        frame_step_kernel,
+        plan_poses_kernel,
+    )
     from pipeline.loop.controller.path import frame_step_arrays, plan_poses_arrays
     from pipeline.loop.controller.prediction_check import check_record_arrays
 
@@ -200,7 +204,7 @@ def test_compiled_frame_step_and_check_give_the_same_bits():
         plain = frame_step_arrays(points.tolist(), headings.tolist(), curvature.tolist(),
                                   *settings, plan_xy.tolist(), plan_course.tolist(),
                                   obstacles.tolist())
-        for a, b in zip(plain, fast):
+        for a, b in zip(plain, fast, strict=True):
             assert np.array_equal(a, b), case
         stations = fast[3]
         poses = (stations, rng.normal(0, 0.5, 11), rng.normal(0, 0.2, 11),
@@ -208,7 +212,7 @@ def test_compiled_frame_step_and_check_give_the_same_bits():
         fast_poses = plan_poses_kernel(points, headings, curvature, ds, 14, *poses)
         plain_poses = plan_poses_arrays(points.tolist(), headings.tolist(), curvature.tolist(),
                                         ds, 14, *(p.tolist() for p in poses))
-        for a, b in zip(plain_poses, fast_poses):
+        for a, b in zip(plain_poses, fast_poses, strict=True):
             assert np.array_equal(a, b), case
         rows = 14
         xy = np.cumsum(rng.normal(0.3, 0.05, (rows, 2)), axis=0)

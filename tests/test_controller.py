@@ -8,8 +8,13 @@ import numpy as np
 import pytest
 from scipy.optimize import minimize
 
-from pipeline.loop.controller import (LateralMpc, MpcInputs, QpCache, blocking_matrix,
-                                 collision_halfplanes)
+from pipeline.loop.controller import (
+    LateralMpc,
+    MpcInputs,
+    QpCache,
+    blocking_matrix,
+    collision_halfplanes,
+)
 from pipeline.loop.controller.lateral_qp import LateralQpStructure, build_lateral_problem
 from pipeline.loop.model import build_lateral_model
 
@@ -276,9 +281,9 @@ def test_condensed_qp_equals_the_sparse_qp_where_slacks_bind(make_config, monkey
     paper scenario only.)"""
     import dataclasses
 
+    import pipeline.loop.controller.lateral as lateral
     from pipeline.loop.scenario import build_scenario, family_members
     from pipeline.loop.simulate import simulate
-    import pipeline.loop.controller.lateral as lateral
 
     cfg = make_config(overrides)
     cfg = dataclasses.replace(cfg, scenario=family_members(
@@ -473,9 +478,14 @@ def test_each_controller_kind_is_handed_its_own_typed_settings(make_config):
     controller holds them (a ``ControllerConfig`` handed to a constructor is read the same)."""
     from pipeline.errors import ConfigError
     from pipeline.loop.controller import make_controller
-    from pipeline.loop.controller_settings import (Backend, Frame, KinematicMpcSettings,
-                                                   MpcSettings, PurePursuitSettings,
-                                                   ReferenceAlignment)
+    from pipeline.loop.controller_settings import (
+        Backend,
+        Frame,
+        KinematicMpcSettings,
+        MpcSettings,
+        PurePursuitSettings,
+        ReferenceAlignment,
+    )
 
     kinds = {"method=improved": MpcSettings, "method=apf_pursuit": PurePursuitSettings,
              "experiment=kinematic": KinematicMpcSettings}

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-
 import numpy as np
 import pandas as pd
 import pytest
@@ -11,8 +10,8 @@ from pipeline.analysis.claims.catalogue import CLAIMS, OUTCOMES
 from pipeline.analysis.claims.ledger import family_ledger, outcome_counts
 from pipeline.analysis.claims.statistics import paired_differences
 from pipeline.config import ClaimsConfig
-from pipeline.studies.experiment import run_family
 from pipeline.loop.scenario import draw_family_member, family_members
+from pipeline.studies.experiment import run_family
 
 
 def test_member_depends_only_on_seed_and_index(make_config):

@@ -15,8 +15,12 @@ from scipy.integrate import solve_ivp
 from pipeline.loop.controller import KinematicLtvMpc, LateralMpc, QpCache
 from pipeline.loop.controller.lateral_qp import LateralQpStructure, build_lateral_problem
 from pipeline.loop.controller.qp import compile_affine_map
-from pipeline.loop.model import (kinematic_derivative, kinematic_plant_step, plant_derivative,
-                            step_plant)
+from pipeline.loop.model import (
+    kinematic_derivative,
+    kinematic_plant_step,
+    plant_derivative,
+    step_plant,
+)
 from pipeline.loop.planner import apf_rollout, apf_step
 from pipeline.loop.scenario import ObstacleSnapshot
 

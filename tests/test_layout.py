@@ -187,3 +187,32 @@ def test_the_package_is_a_regular_package():
     out = subprocess.run([sys.executable, "-c", "import pipeline; print(pipeline.__file__)"],
                          capture_output=True, text=True, check=True).stdout.strip()
     assert out.endswith(str(Path("pipeline") / "__init__.py"))
+
+
+def test_the_makefile_writes_where_the_layout_reads(tmp_path):
+    """Every ``$(RUNS)/<section>`` the Makefile writes is a section of ``conf/paths`` (the one
+    layout the report and the checks read), ``make reproduce``'s included; a renamed section in
+    ``conf/paths`` is what the readers then look for, and a bad one is a one-line error."""
+    import re
+
+    from pipeline.errors import ConfigError
+    from pipeline.store.layout import OutputsLayout
+
+    layout = OutputsLayout.load(tmp_path)
+    names = {getattr(layout, s) for s in layout.sections}
+    makefile = (PACKAGE.parent / "Makefile").read_text()
+    written = set(re.findall(r"\$\(RUNS\)/([a-z_]+)", makefile))
+    assert written <= names, written - names
+    assert {"paper", "kinematic", "kinematic_readings", "family", "kinematic_family",
+            "frames", "ablation", "interpretations", "multiverse", "tune", "nmpc_check",
+            "speed", "sweeps"} <= written
+    renamed = tmp_path / "paths.yaml"
+    renamed.write_text("multiverse: robustness_study\n")
+    moved = OutputsLayout.load(tmp_path, renamed)
+    assert moved.folder("multiverse") == tmp_path / "robustness_study"
+    assert moved.folder("tune") == tmp_path / "tune"
+    assert "robustness_study" in moved.not_main_runs
+    for bad in ("multiverse: ../x\n", "multiverse: a/b\n", "nonsense: x\n"):
+        renamed.write_text(bad)
+        with pytest.raises(ConfigError):
+            OutputsLayout.load(tmp_path, renamed)

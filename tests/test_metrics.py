@@ -8,9 +8,9 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from pipeline.config import MetricsConfig
 from pipeline.analysis.metrics.criteria import compute_metrics
 from pipeline.analysis.metrics.signals import TrajectoryContext, settling_time, sign_changes
+from pipeline.config import MetricsConfig
 
 
 def metrics_json(*args):

@@ -10,10 +10,19 @@ import pandas as pd
 import pytest
 
 from pipeline.config import ConfigError
-from pipeline.studies.multiverse import (CONF_DIR, Dimension, Space, build_design, composer,
-                                         family_config, load_space, qp_backend,
-                                         robustness, simulation_overrides)
 from pipeline.reporting.sections.robustness import backends_text as _backends_text
+from pipeline.studies.multiverse import (
+    CONF_DIR,
+    Dimension,
+    Space,
+    build_design,
+    composer,
+    family_config,
+    load_space,
+    qp_backend,
+    robustness,
+    simulation_overrides,
+)
 
 SPACE = Space("planted", (
     Dimension("planner.beta", "simulation", (0.25, 0.5, 1.0), ("improved",)),
@@ -109,11 +118,11 @@ def test_quick_space_end_to_end_and_resume(tmp_path):
     assert tables[0].read_bytes() == original
     pd.testing.assert_frame_equal(pd.read_csv(out / "specifications.csv"), specs)
     # the report built after it leads with robustness and has a curve per claim
-    from pipeline.reporting.page import build_report
-    from pipeline.studies.experiment import run_experiment
     from hydra import compose, initialize_config_dir
 
     from pipeline.config import to_experiment_config
+    from pipeline.reporting.page import build_report
+    from pipeline.studies.experiment import run_experiment
 
     for method in ("baseline", "improved"):
         with initialize_config_dir(config_dir=str(CONF_DIR), version_base="1.3"):

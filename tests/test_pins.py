@@ -28,11 +28,10 @@ from pathlib import Path
 import pandas as pd
 import pytest
 
-from pipeline.store.runs import read_run
-from pipeline.studies.verify import compare_tables
-
 from pipeline.report import main as report_main
 from pipeline.run import run_experiment, run_family
+from pipeline.store.runs import read_run
+from pipeline.studies.verify import compare_tables
 
 DEFAULT_CONFIG_HASH = "4fa9d218bf262e48"
 PINS = Path(__file__).parent / "data" / "pins"

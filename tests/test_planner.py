@@ -7,8 +7,13 @@ import dataclasses
 import numpy as np
 import pytest
 
-from pipeline.loop.planner import (adaptive_coefficient, apf_rollout, apf_step, plan_speed,
-                              repulsive_force)
+from pipeline.loop.planner import (
+    adaptive_coefficient,
+    apf_rollout,
+    apf_step,
+    plan_speed,
+    repulsive_force,
+)
 from pipeline.loop.scenario import ObstacleSnapshot
 
 GOAL = np.array([30.0, 0.0])

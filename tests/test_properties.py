@@ -9,10 +9,10 @@ import pandas as pd
 from hypothesis import HealthCheck, assume, given, settings
 from hypothesis import strategies as st
 
-from pipeline.config import MetricsConfig, PlannerConfig
 from pipeline.analysis.metrics.criteria import compute_metrics
 from pipeline.analysis.metrics.geometry import clearance_series
 from pipeline.analysis.metrics.signals import TrajectoryContext
+from pipeline.config import MetricsConfig, PlannerConfig
 from pipeline.loop.planner import apf_step, repulsive_force
 
 

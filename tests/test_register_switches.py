@@ -13,13 +13,19 @@ import numpy as np
 import pandas as pd
 import pytest
 
+from pipeline.analysis.metrics.criteria import compute_metrics
 from pipeline.config import INTERPRETATION_REGISTER
-from pipeline.loop.controller import (LateralMpc, Observation, blocking_matrix, collision_halfplanes,
-                                 force_heading_reference, lateral_reference)
+from pipeline.loop.controller import (
+    LateralMpc,
+    Observation,
+    blocking_matrix,
+    collision_halfplanes,
+    force_heading_reference,
+    lateral_reference,
+)
 from pipeline.loop.controller.kinematic import KinematicLtvMpc
 from pipeline.loop.model import build_lateral_model, step_plant
 from pipeline.loop.planner import adaptive_coefficient, apf_rollout, apf_step, repulsive_force
-from pipeline.analysis.metrics.criteria import compute_metrics
 from pipeline.loop.scenario import LineFrame, ObstacleSnapshot
 
 
@@ -261,8 +267,8 @@ def test_plant_substeps_and_run_length(make_config, tmp_path):
 
 
 def test_threat_margin_and_horizon_decide_what_threatens():
-    from pipeline.config import MetricsConfig
     from pipeline.analysis.metrics.signals import TrajectoryContext
+    from pipeline.config import MetricsConfig
     from tests.test_metrics import synthetic
 
     t = np.round(np.arange(0.0, 8.0 + 1e-9, 0.1), 10)
@@ -283,8 +289,8 @@ def test_threat_margin_and_horizon_decide_what_threatens():
 def test_an_obstacle_that_collides_threatened_even_beyond_the_horizon():
     """A threat later than the look-ahead that then collides: never "nothing threatened" with
     a collision; the reaction clock starts at its appearance."""
-    from pipeline.config import MetricsConfig
     from pipeline.analysis.metrics.signals import TrajectoryContext
+    from pipeline.config import MetricsConfig
     from tests.test_metrics import synthetic
 
     t = np.round(np.arange(0.0, 8.0 + 1e-9, 0.1), 10)
@@ -298,8 +304,8 @@ def test_an_obstacle_that_collides_threatened_even_beyond_the_horizon():
 
 
 def test_smoothness_window_selects_the_primary_jerk():
-    from pipeline.config import MetricsConfig
     from pipeline.analysis.metrics.signals import TrajectoryContext
+    from pipeline.config import MetricsConfig
     from tests.test_metrics import out_and_back
 
     frame = out_and_back(0.4)
@@ -315,8 +321,8 @@ def test_attribution_samples_decide_between_a_narrow_gap_and_none():
     """An obstacle half a lane ahead: with two steering samples (hard left, hard right) the
     swerve clears it, so the count of samples is what the check depends on; with the default
     nine it is avoidable too, and an obstacle appearing on the vehicle never is."""
-    from pipeline.config import MetricsConfig
     from pipeline.analysis.metrics.signals import TrajectoryContext
+    from pipeline.config import MetricsConfig
     from tests.test_metrics import synthetic
 
     t = np.round(np.arange(0.0, 8.0 + 1e-9, 0.1), 10)

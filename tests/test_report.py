@@ -168,7 +168,7 @@ def test_figure_writer_draws_in_children_the_same_files(tmp_path):
         forked = [writer.save(fig, tmp_path / "forked", f"f{i}")
                   for i, fig in enumerate(_two_figures())]
     assert writer.forked == 2 and writer.written_here == 0
-    for a, b in zip(serial, forked):
+    for a, b in zip(serial, forked, strict=True):
         assert a["png"].read_bytes() == b["png"].read_bytes()
         assert b["svg"].is_file() and b["svg"].stat().st_size > 1000
     one = FigureWriter(max_workers=1)
@@ -210,11 +210,10 @@ def test_figure_writer_redraws_what_a_dead_child_left(tmp_path, monkeypatch):
     assert writer.forked == 2 and writer.written_here == 2
     assert paths["png"].read_bytes() == expected == built["png"].read_bytes()
     # leaving a with block on an error (or Ctrl-C): the children are waited for, nothing redrawn
-    with pytest.raises(KeyboardInterrupt):
-        with FigureWriter(max_workers=2) as stopped:
-            stopped.save(_two_figures()[0], tmp_path / "stopped", "f0")
-            os.kill(stopped._running[-1][0], signal.SIGKILL)
-            raise KeyboardInterrupt
+    with pytest.raises(KeyboardInterrupt), FigureWriter(max_workers=2) as stopped:
+        stopped.save(_two_figures()[0], tmp_path / "stopped", "f0")
+        os.kill(stopped._running[-1][0], signal.SIGKILL)
+        raise KeyboardInterrupt
     assert stopped.forked == 1 and stopped.written_here == 0 and not stopped._running
     assert not (tmp_path / "stopped" / "f0.png").exists()
 

@@ -17,8 +17,8 @@ import pytest
 from pipeline.loop.controller import LateralMpc, MpcInputs, QpSolution
 from pipeline.loop.model import build_lateral_model
 from pipeline.loop.planner import apf_rollout
-from pipeline.studies.experiment import run_experiment
 from pipeline.loop.scenario import ObstacleSnapshot
+from pipeline.studies.experiment import run_experiment
 
 
 def test_injected_solver_faults_fall_back_and_the_run_completes(make_config, tmp_path,

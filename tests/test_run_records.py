@@ -11,13 +11,13 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from pipeline.reporting.page import build_report
-from pipeline.report import main as report_main
-from pipeline.studies.experiment import run_experiment, run_family
 from pipeline.analysis.metrics.results import RunMetrics
 from pipeline.errors import NonFiniteResultError, RunFolderError
+from pipeline.report import main as report_main
+from pipeline.reporting.page import build_report
 from pipeline.store.manifest import MANIFEST, check
-from pipeline.store.runs import discover, read_run, RunInfo, write_run
+from pipeline.store.runs import RunInfo, discover, read_run, write_run
+from pipeline.studies.experiment import run_experiment, run_family
 
 
 @pytest.fixture(scope="module")
@@ -168,7 +168,7 @@ def test_aggregate_lists_failed_and_stale_jobs_next_to_the_good_ones(tmp_path, m
         "hydra:\n  sweeper:\n    params:\n      method: baseline,improved,mpc_no_apf\n"
         "  overrides:\n    task: []\n")
     summary = aggregate(sweep, progress=False).summary
-    status = dict(zip(summary["job"], summary["status"]))
+    status = dict(zip(summary["job"], summary["status"], strict=True))
     assert status == {"method=baseline": "ok", "method=improved": "ok",
                       "method=velocity_aware": "stale", "method=mpc_no_apf": "skipped"}
     written = pd.read_csv(sweep / "summary.csv")

@@ -6,8 +6,8 @@ import json
 
 import pytest
 
-from pipeline.studies.experiment import run_experiment
 from pipeline.score import main as score_main
+from pipeline.studies.experiment import run_experiment
 
 
 @pytest.mark.parametrize("content, message", [

@@ -16,8 +16,13 @@ from pipeline.reporting.page import build_report
 from pipeline.store.collection import load_runs
 from pipeline.studies.aggregate import aggregate
 from pipeline.studies.experiment import run_experiment, run_family
-from pipeline.studies.multiverse import (analyse_specification, analysis_settings, build_design,
-                                         load_space, with_user_defaults)
+from pipeline.studies.multiverse import (
+    analyse_specification,
+    analysis_settings,
+    build_design,
+    load_space,
+    with_user_defaults,
+)
 
 #: a C2 margin far from the default (0.1), with the quick multiverse's statistics settings
 USER = ["claims.margins.C2=5.0", "claims.n_resamples=199", "claims.min_pairs=4"]
@@ -120,7 +125,7 @@ def test_the_report_command_ends_with_the_answer_in_words(user_runs, tmp_path, c
     lines = capsys.readouterr().out.strip().splitlines()
     last = lines[-len(ALL_CLAIMS):]
     assert [line.split(" ", 1)[0] for line in last] == [c.claim_id for c in ALL_CLAIMS]
-    for line, claim in zip(last, ALL_CLAIMS):
+    for line, claim in zip(last, ALL_CLAIMS, strict=True):
         assert claim.text in line and "vs baseline" in line and "vs baseline_matched" in line
     assert " s)" in last[1] and "m/s^3" in last[2]   # C1 in seconds, C2 in m/s^3
     # answer.txt: the collisions and the model-validity caveat first, then the same verdicts

@@ -63,7 +63,7 @@ def test_joblib_launcher_gives_identical_metrics(basic_sweep, tmp_path):
     multirun(folder, "hydra/launcher=joblib", "hydra.launcher.n_jobs=2")
     basic_jobs, joblib_jobs = job_dirs(basic_sweep), job_dirs(folder)
     assert [p.name for p in basic_jobs] == [p.name for p in joblib_jobs]
-    for a, b in zip(basic_jobs, joblib_jobs):
+    for a, b in zip(basic_jobs, joblib_jobs, strict=True):
         for name in ("metrics.json", "trajectory.csv"):
             assert (a / name).read_bytes() == (b / name).read_bytes(), (a.name, name)
 

@@ -20,8 +20,13 @@ import pytest
 from pipeline.analysis.objectives import Objective, objective_value, objective_values
 from pipeline.config import CONF_DIR
 from pipeline.errors import ConfigError
-from pipeline.studies.tune import (TuneSpace, closest_to_ideal, load_tune_space, optimize,
-                                   pareto_mask)
+from pipeline.studies.tune import (
+    TuneSpace,
+    closest_to_ideal,
+    load_tune_space,
+    optimize,
+    pareto_mask,
+)
 
 ROOT = Path(__file__).resolve().parent.parent
 
@@ -121,7 +126,7 @@ def test_the_tuner_finds_a_planted_optimum_and_respects_the_constraint():
         assert t.user_attrs["constraint"] == (1.0 if t.params["planner.beta"] > 1.2 else -1.0)
     feasible = [t for t in complete if t.user_attrs["constraint"] <= 0]
     values = np.array([t.values for t in feasible])
-    front = [t for t, keep in zip(feasible, pareto_mask(values, space.objectives)) if keep]
+    front = [t for t, keep in zip(feasible, pareto_mask(values, space.objectives), strict=True) if keep]
     assert min(abs(t.params["planner.beta"] - 0.6) for t in front) < 0.05
     assert all(t.params["planner.beta"] <= 1.2 for t in front)
 

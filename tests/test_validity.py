@@ -12,8 +12,13 @@ import pytest
 
 from pipeline.analysis.metrics.criteria import validity_block
 from pipeline.analysis.metrics.signals import TrajectoryContext
-from pipeline.analysis.validity import (VALIDITY_COLUMNS, ValidityTable, valid_in_both,
-                                        valid_scenario_ledgers, validity_row)
+from pipeline.analysis.validity import (
+    VALIDITY_COLUMNS,
+    ValidityTable,
+    valid_in_both,
+    valid_scenario_ledgers,
+    validity_row,
+)
 
 
 def planted(n=11, seed=0):

@@ -30,7 +30,7 @@ class SideStepPlanner(ApfPlanner):
         target = np.asarray(goal_m, float)
         heading = (target - position_m) / max(np.linalg.norm(target - position_m), 1e-9)
         ahead = [(float((o - position_m) @ heading), o, r) for o, r in
-                 zip(obstacles.positions_m, obstacles.radii_m)]
+                 zip(obstacles.positions_m, obstacles.radii_m, strict=True)]
         ahead = [a for a in ahead if 0.0 < a[0] < reach]
         if ahead:
             _, centre, radius = min(ahead, key=lambda a: a[0])

@@ -9,10 +9,14 @@ Pure functions over the family tables of ``experiment=ablation`` (labels ``basel
 
 from __future__ import annotations
 
+from collections.abc import Mapping
+from typing import Any
+
 import numpy as np
 import pandas as pd
 
-from pipeline.analysis.claims import ALL_CLAIMS, CLAIMS, compare, family_ledger, judge
+from pipeline.analysis.claims import ALL_CLAIMS, CLAIMS, Claim, compare, family_ledger, judge
+from pipeline.analysis.settings import ClaimsConfig
 from pipeline.analysis.tally import Tally
 
 REVISIONS = ("normalize", "step", "beta", "exponential", "step_min")
@@ -25,7 +29,7 @@ REVISION_TEXT = {
 }
 
 
-def ablation_roles(tables: dict[str, pd.DataFrame], cfg) -> tuple[str, str]:
+def ablation_roles(tables: Mapping[str, object], cfg: ClaimsConfig | None) -> tuple[str, str]:
     """The bundle and the reference of the ablation: the claims' treatment and first control
     (``claims.treatment``, ``claims.controls[0]``) when the ablation has them, else the
     paper's improved and baseline."""
@@ -36,7 +40,7 @@ def ablation_roles(tables: dict[str, pd.DataFrame], cfg) -> tuple[str, str]:
     return bundle, reference
 
 
-def ablation_effects(tables: dict[str, pd.DataFrame], cfg) -> pd.DataFrame:
+def ablation_effects(tables: dict[str, pd.DataFrame], cfg: ClaimsConfig) -> pd.DataFrame:
     """Paired effect of every configuration versus the reference (:func:`ablation_roles`:
     the first control, by default the baseline), per claim, computed as the
     claims ledger does (:func:`pipeline.analysis.claims.compare`: pairs where neither collided, missing
@@ -71,12 +75,12 @@ def ablation_effects(tables: dict[str, pd.DataFrame], cfg) -> pd.DataFrame:
     return pd.DataFrame(rows)
 
 
-def _clear(row) -> bool:
+def _clear(row: pd.Series) -> bool:
     return bool(row["ci_high"] < 0 or row["ci_low"] > 0)
 
 
 def attribution_sentences(effects: pd.DataFrame, tables: dict[str, pd.DataFrame] | None = None,
-                          cfg=None) -> dict[str, str]:
+                          cfg: ClaimsConfig | None = None) -> dict[str, str]:
     """One sentence per claim naming the revision that accounts for most of the effect, checked
     against the look-ahead-matched control.
 
@@ -106,7 +110,7 @@ def attribution_sentences(effects: pd.DataFrame, tables: dict[str, pd.DataFrame]
     return sentences
 
 
-def _attribution_sentence(claim, part: pd.DataFrame, bundle: str, binding: bool,
+def _attribution_sentence(claim: Claim, part: pd.DataFrame, bundle: str, binding: bool,
                           cap_share: float | None) -> str:
     """The attribution sentence of one claim (``part``: its effects by configuration)."""
     total = part.loc[bundle, "effect"]
@@ -132,7 +136,7 @@ def _attribution_sentence(claim, part: pd.DataFrame, bundle: str, binding: bool,
         text += _accounting_revision_text(part, large)
     else:
         text += _no_single_revision_text(part, total, binding)
-    if binding:
+    if binding and cap_share is not None:
         text += (f" The step cap binds on {100 * cap_share:.0f} % of improved's rollout "
                  "steps, so 'no normalization' and 'a larger step' are inactive there and "
                  "are not credited.")
@@ -179,14 +183,14 @@ def _no_single_revision_text(part: pd.DataFrame, total: float, binding: bool) ->
     return text
 
 
-def interpretation_flips(variants: dict[str, dict[str, pd.DataFrame]], cfg
+def interpretation_flips(variants: dict[str, dict[str, pd.DataFrame]], cfg: ClaimsConfig
                          ) -> pd.DataFrame | None:
     """Family verdicts of every interpretation variant and whether they differ from the default.
 
     ``variants``: per variant (in name order), its family tables by method (baseline and
     improved; :func:`pipeline.store.collection.interpretation_tables`).
     """
-    verdicts = {}
+    verdicts: dict[str, dict[str, Any]] = {}
     for variant, tables in variants.items():
         bundle, reference = ablation_roles(tables, cfg)
         if reference in tables and bundle in tables:

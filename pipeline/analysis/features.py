@@ -13,8 +13,9 @@ shows the baseline's phrases and the improved method the improved method's
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Any, Callable
+from typing import Any
 
 from pipeline.validation import FrozenAfterValidation, at_least
 

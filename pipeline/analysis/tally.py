@@ -4,9 +4,8 @@ validity exceedances, fallbacks, how often the APF's step cap binds."""
 
 from __future__ import annotations
 
-from typing import Any
-
 from dataclasses import asdict, dataclass
+from typing import Any
 
 import numpy as np
 import pandas as pd
@@ -66,7 +65,7 @@ class Tally:
     min_clearance_median_m: float
 
     @classmethod
-    def of(cls, table: pd.DataFrame) -> "Tally":
+    def of(cls, table: pd.DataFrame) -> Tally:
         hit = collided(table)
         avoidable = _optional_flags(table, "collision_avoidable")
         return cls(

@@ -10,8 +10,9 @@ run. ``reports/latest/tables/model_validity.csv`` is the rows' :meth:`ValidityTa
 
 from __future__ import annotations
 
+from collections.abc import Iterable
 from dataclasses import asdict, dataclass, fields
-from typing import Any, Iterable
+from typing import Any
 
 import numpy as np
 import pandas as pd

@@ -12,11 +12,12 @@ name the type without an import circle.
 
 from __future__ import annotations
 
-from typing import Any, Callable, NamedTuple
-
-from pipeline.loop.arrays import KernelValues
+from collections.abc import Callable
+from typing import Any, NamedTuple
 
 import numpy as np
+
+from pipeline.loop.arrays import KernelValues
 
 
 class Kernels(NamedTuple):

@@ -12,11 +12,9 @@ integrated with RK4 substeps.
 
 from __future__ import annotations
 
-from typing import Any
-
 from dataclasses import dataclass, field
-
 from math import atan2, cos, sin, tan, tanh
+from typing import Any
 
 import numpy as np
 
@@ -368,9 +366,9 @@ def kinematic_plant_step(state: np.ndarray, control_input: np.ndarray, wheelbase
     x = [float(v) for v in state]
     for _ in range(substeps):
         k1 = rates(*x)
-        k2 = rates(*[xi + half * ki for xi, ki in zip(x, k1)])
-        k3 = rates(*[xi + half * ki for xi, ki in zip(x, k2)])
-        k4 = rates(*[xi + h * ki for xi, ki in zip(x, k3)])
+        k2 = rates(*[xi + half * ki for xi, ki in zip(x, k1, strict=True)])
+        k3 = rates(*[xi + half * ki for xi, ki in zip(x, k2, strict=True)])
+        k4 = rates(*[xi + h * ki for xi, ki in zip(x, k3, strict=True)])
         x = [xi + sixth * (a1 + 2 * a2 + 2 * a3 + a4)
-             for xi, a1, a2, a3, a4 in zip(x, k1, k2, k3, k4)]
+             for xi, a1, a2, a3, a4 in zip(x, k1, k2, k3, k4, strict=True)]
     return np.array(x)

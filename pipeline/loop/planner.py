@@ -16,7 +16,6 @@ then the minimum-movement threshold (``step_min_m``) and the registered step cap
 from __future__ import annotations
 
 from dataclasses import dataclass
-
 from math import exp, inf, sqrt
 from typing import NamedTuple
 
@@ -209,7 +208,7 @@ def _exp_or_inf(x: float) -> float:
         return inf
 
 
-def apf_rollout_arrays(px: float, py: float, gx: float, gy: float, centres: KernelValues,
+def apf_rollout_arrays(px: float, py: float, gx: float, gy: float, centres: KernelValues,  # noqa: C901
                        velocities: KernelValues, settings: ApfSettings, horizon: int,
                        sample_time_s: float, vvx: float, vvy: float
                        ) -> tuple[KernelValues, KernelValues, KernelValues, KernelValues,

@@ -33,7 +33,7 @@ class ObstacleSnapshot:
     radii_m: np.ndarray
     visible: np.ndarray
 
-    def only_visible(self) -> "ObstacleSnapshot":
+    def only_visible(self) -> ObstacleSnapshot:
         keep = self.visible
         if np.count_nonzero(keep) == keep.size:  # all seen (the common case): nothing to drop
             return self
@@ -128,7 +128,7 @@ class Scenario:
         d = self.goal_m - self.start_m
         return self.start_m + self.speed_mps * time_s * d / np.linalg.norm(d)
 
-    def anchored(self, which: np.ndarray, vehicle_m: np.ndarray) -> "Scenario":
+    def anchored(self, which: np.ndarray, vehicle_m: np.ndarray) -> Scenario:
         """The scenario with obstacles ``which`` (bool mask) moved by the vehicle's offset from
         its nominal place at their appearance (``obstacle_anchor="vehicle"``)."""
         from dataclasses import replace

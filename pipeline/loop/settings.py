@@ -16,14 +16,33 @@ from typing import Any, Dict, List, Optional, Protocol
 from omegaconf import MISSING
 
 from pipeline.errors import ConfigError
-from pipeline.loop.controller_settings import (KIND_SETTINGS, Backend, ControllerKind, Formulation,
-                                               Frame, HalfplaneNormal, HeadingReference,
-                                               InputHold, KinematicMpcSettings, MpcSettings,
-                                               PathBeyondEnd, PathStateReference,
-                                               PurePursuitSettings, ReferenceAlignment)
+from pipeline.loop.controller_settings import (
+    KIND_SETTINGS,
+    Backend,
+    ControllerKind,
+    Formulation,
+    Frame,
+    HalfplaneNormal,
+    HeadingReference,
+    InputHold,
+    KinematicMpcSettings,
+    MpcSettings,
+    PathBeyondEnd,
+    PathStateReference,
+    PurePursuitSettings,
+    ReferenceAlignment,
+)
 from pipeline.loop.qp_memory import MAX_HORIZON, qp_memory_gib
-from pipeline.validation import (FrozenAfterValidation, at_least, between, choice, finite, pair, safe_name,
-                                 target_path)
+from pipeline.validation import (
+    FrozenAfterValidation,
+    at_least,
+    between,
+    choice,
+    finite,
+    pair,
+    safe_name,
+    target_path,
+)
 
 
 @dataclass
@@ -394,6 +413,12 @@ class ScenarioConfig(FrozenAfterValidation):
     obstacle_anchor: str = "world"
 
     def __post_init__(self) -> None:
+        # the checks in the order they always ran (the first failure is the one reported)
+        self._check_geometry()
+        self._check_timing()
+        self._check_obstacles()
+
+    def _check_geometry(self) -> None:
         pair("scenario.start_xy_m", self.start_xy_m)
         pair("scenario.goal_xy_m", self.goal_xy_m)
         finite("scenario.start_heading_rad", self.start_heading_rad)
@@ -409,6 +434,8 @@ class ScenarioConfig(FrozenAfterValidation):
         if gap > 10_000.0:
             raise ConfigError("scenario.goal_xy_m", list(self.goal_xy_m),
                               "a goal within 10 km of the start")
+
+    def _check_timing(self) -> None:
         between("scenario.speed_mps", self.speed_mps, 0.1, 40.0)
         between("scenario.sample_time_s", self.sample_time_s, 1e-3, 1.0)
         safe_name("scenario.name", self.name)
@@ -428,6 +455,8 @@ class ScenarioConfig(FrozenAfterValidation):
         if self.plant_substeps > 1000:
             raise ConfigError("scenario.plant_substeps", self.plant_substeps,
                               "an integer in [1, 1000]")
+
+    def _check_obstacles(self) -> None:
         if not self.obstacles and self.family is None and not self.allow_no_obstacles:
             raise ConfigError("scenario.obstacles", [], "a non-empty obstacle list (or "
                               "scenario.allow_no_obstacles=true for an obstacle-free run)")

@@ -14,25 +14,23 @@ into preallocated arrays and becomes one DataFrame at the end.
 
 from __future__ import annotations
 
-from typing import Any
-
 import inspect
 import sys
 from dataclasses import dataclass
 from math import atan2, cos, isfinite, sin, sqrt
+from typing import Any
 
 import numpy as np
 import pandas as pd
 
-from pipeline.loop.settings import LoopSettings
-from pipeline.loop.controller import (ControlStep, Controller, Observation, QpCache,
-                                      make_controller)
+from pipeline.loop.controller import Controller, ControlStep, Observation, QpCache, make_controller
 from pipeline.loop.controller.prediction_check import MODEL_CHECK_COLUMNS
 from pipeline.loop.kernels import Kernels
 from pipeline.loop.model import kinematic_plant_step, single_track_constants
-from pipeline.loop.python_kernels import PYTHON_KERNELS
 from pipeline.loop.planner import ApfPlanner, ApfRollout, make_planner
+from pipeline.loop.python_kernels import PYTHON_KERNELS
 from pipeline.loop.scenario import LineFrame, ObstacleSnapshot, Scenario
+from pipeline.loop.settings import LoopSettings
 from pipeline.loop.trajectory import HEAD, OBSTACLE_FIELDS, TAIL, obstacle_column
 
 
@@ -360,7 +358,7 @@ def _pose_row(time_s: float, state: np.ndarray, frame: LineFrame,
            "e_psi_rad": e_psi}
     for j, ((ox, oy), radius, seen) in enumerate(zip(snapshot.positions_m.tolist(),
                                                      snapshot.radii_m.tolist(),
-                                                     snapshot.visible.tolist())):
+                                                     snapshot.visible.tolist(), strict=True)):
         names = obstacle_names[j]
         row[names[0]], row[names[1]], row[names[2]], row[names[3]] = ox, oy, radius, seen
     return row, along, lateral, psi, e_psi

@@ -12,21 +12,35 @@ from __future__ import annotations
 
 import dataclasses
 import logging
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Callable, TypeVar
+from typing import TypeVar
 
 import pandas as pd
 
 from pipeline.analysis.validity import ValidityTable
 from pipeline.config import ClaimsConfig, ExperimentConfig
-from pipeline.store.collection import (LabelledRun, RunCollection, family_tables_by_method,
-                                       interpretation_tables, load_runs, model_validity_table,
-                                       trusted_families)
+from pipeline.store.collection import (
+    LabelledRun,
+    RunCollection,
+    family_tables_by_method,
+    interpretation_tables,
+    load_runs,
+    model_validity_table,
+    trusted_families,
+)
 from pipeline.store.layout import OutputsLayout
 from pipeline.store.runs import FamilyRecord, Skipped
-from pipeline.studies.results import (BenchResult, MultiverseResult, NmpcCheckResult,
-                                      ResultError, SpeedCheckResult, SweepSummary, TuneResult)
+from pipeline.studies.results import (
+    BenchResult,
+    MultiverseResult,
+    NmpcCheckResult,
+    ResultError,
+    SpeedCheckResult,
+    SweepSummary,
+    TuneResult,
+)
 from pipeline.studies.results.sweep import is_sweep_folder
 
 log = logging.getLogger("pipeline.reporting")
@@ -246,8 +260,9 @@ class ReportInputs:
         speed = optional(SpeedCheckResult.load, layout.folder("speed"), "speed check") \
             if SpeedCheckResult.present(layout.folder("speed")) else None
         # the model checks are read only when there is a ledger to put beside them
-        validity = optional(_validity, layout, "validity section") \
-            if family.judgeable(claims) else None
+        # (a failure is listed against the outputs root, the folder the checks come from)
+        validity = optional(lambda _root: _validity(layout), layout.root,
+                            "validity section") if family.judgeable(claims) else None
         return cls(
             run_root, layout, claims, lateral=lateral,
             kinematic=TrackRuns.of(kinematic_runs, layout.canonical) if kinematic_runs

@@ -27,6 +27,21 @@ def write_tables(inputs: ReportInputs, verdicts: Verdicts, table_dir: Path) -> N
     if inputs.kinematic is not None and verdicts.kinematic is not None:
         _track(inputs.kinematic, verdicts.kinematic, "metrics_kinematic_track.csv",
                "claims_kinematic_track.csv", table_dir)
+    _ledgers(inputs, verdicts, table_dir)
+    for sweep in inputs.sweeps:
+        _sweep(sweep, table_dir)
+    if inputs.multiverse is not None:
+        inputs.multiverse.robustness.to_csv(table_dir / "multiverse_robustness.csv",
+                                            index=False)
+    if inputs.tune is not None:
+        files = inputs.tune.table_files()
+        for name in (TRIALS, HELDOUT, LEDGER_TUNED, SETTINGS_OUTCOMES):
+            shutil.copyfile(files[name], table_dir / f"tune_{name}")
+
+
+def _ledgers(inputs: ReportInputs, verdicts: Verdicts, table_dir: Path) -> None:
+    """The family ledgers (lateral, Appendix-A track, the baseline against no APF), the
+    outcome counts, and the model-validity tables."""
     if verdicts.family is not None:
         verdicts.family.ledger.to_frame().to_csv(table_dir / "claims_ledger.csv", index=False)
         pd.DataFrame(list(verdicts.family.counts)).to_csv(table_dir / "family_outcomes.csv",
@@ -46,15 +61,6 @@ def write_tables(inputs: ReportInputs, verdicts: Verdicts, table_dir: Path) -> N
         inputs.validity.table.to_frame().to_csv(table_dir / "model_validity.csv", index=False)
         pd.DataFrame(verdicts.validity.rows()).to_csv(table_dir / "claims_model_validity.csv",
                                                       index=False)
-    for sweep in inputs.sweeps:
-        _sweep(sweep, table_dir)
-    if inputs.multiverse is not None:
-        inputs.multiverse.robustness.to_csv(table_dir / "multiverse_robustness.csv",
-                                            index=False)
-    if inputs.tune is not None:
-        files = inputs.tune.table_files()
-        for name in (TRIALS, HELDOUT, LEDGER_TUNED, SETTINGS_OUTCOMES):
-            shutil.copyfile(files[name], table_dir / f"tune_{name}")
 
 
 def has_validity(inputs: ReportInputs) -> bool:

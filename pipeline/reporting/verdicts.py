@@ -11,13 +11,17 @@ from dataclasses import dataclass, field
 
 import pandas as pd
 
-from pipeline.analysis.ablation import (ablation_effects, ablation_roles,
-                                        interpretation_flips)
-from pipeline.analysis.claims import ALL_CLAIMS, Ledger, claims_table, family_ledger, outcome_counts
+from pipeline.analysis.ablation import ablation_effects, ablation_roles, interpretation_flips
+from pipeline.analysis.claims import (
+    ALL_CLAIMS,
+    Ledger,
+    claims_table,
+    family_ledger,
+    outcome_counts,
+)
 from pipeline.analysis.validity import valid_scenario_ledgers
 from pipeline.config import ClaimsConfig
-from pipeline.reporting.inputs import (FamilyInputs, ReportInputs, TrackRuns, ordered,
-                                       reading_of)
+from pipeline.reporting.inputs import FamilyInputs, ReportInputs, TrackRuns, ordered, reading_of
 from pipeline.store.collection import LabelledRun
 
 #: The claims whose outcome is a rate (judged even where the methods never met the obstacle).

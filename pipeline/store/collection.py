@@ -8,9 +8,9 @@ cannot be read) are listed as :class:`~pipeline.store.runs.Skipped` with their r
 from __future__ import annotations
 
 import logging
-from typing import Any
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 import pandas as pd
 
@@ -19,8 +19,15 @@ from pipeline.analysis.validity import ValidityTable, validity_row
 from pipeline.config import ExperimentConfig
 from pipeline.errors import RunFolderError
 from pipeline.store.layout import OutputsLayout
-from pipeline.store.runs import (discover, FamilyRecord, member_trajectories, read_family,
-                                 read_run, RunRecord, Skipped)
+from pipeline.store.runs import (
+    FamilyRecord,
+    RunRecord,
+    Skipped,
+    discover,
+    member_trajectories,
+    read_family,
+    read_run,
+)
 
 log = logging.getLogger(__name__)
 
@@ -178,16 +185,27 @@ def load_runs(run_root: Path, skipped: list[Skipped] | None = None) -> RunCollec
                                     f"{len(skipped)} skipped, e.g. {skipped[0].folder}: "
                                     f"{skipped[0].reason})")
         raise FileNotFoundError(f"no complete run folders (with metrics.json) under {run_root}")
-    # label runs of the same method and track by what differs between them
-    groups: dict[tuple, list[RunRecord]] = {}
+    return RunCollection(_labelled_runs(records), *_labelled_families(families))
+
+
+def _labelled_runs(records: list[RunRecord]) -> list[LabelledRun]:
+    """Runs of the same method and track labelled by what differs between them."""
+    groups: dict[tuple[str, str], list[RunRecord]] = {}
     for record in records:
         groups.setdefault((record.info.track, record.info.method), []).append(record)
     labels = {}
     for (_, method), group in groups.items():
         for record, label in zip(group, label_by_difference([r.config_data for r in group],
-                                                            method)):
+                                                            method), strict=True):
             labels[id(record)] = label
-    runs = [LabelledRun(labels[id(r)], r) for r in records]
+    return [LabelledRun(labels[id(r)], r) for r in records]
+
+
+def _labelled_families(families: list[FamilyRecord]
+                       ) -> tuple[dict[str, pd.DataFrame], dict[str, dict[str, Any]],
+                                  dict[str, ExperimentConfig]]:
+    """Each family's table, ``family.json`` (with ``dir``) and settings, by label (families of
+    one method labelled by what differs between them)."""
     family_tables: dict[str, pd.DataFrame] = {}
     family_info: dict[str, dict[str, Any]] = {}
     by_method: dict[str, list[FamilyRecord]] = {}
@@ -196,12 +214,12 @@ def load_runs(run_root: Path, skipped: list[Skipped] | None = None) -> RunCollec
     family_settings: dict[str, ExperimentConfig] = {}
     for method, same_method in by_method.items():
         configs = [family.config_data or {} for family in same_method]
-        for family, label in zip(same_method, label_by_difference(configs, method)):
+        for family, label in zip(same_method, label_by_difference(configs, method), strict=True):
             family_tables[label] = family.table
             family_info[label] = {**family.info, "dir": str(family.folder)}
             if family.config is not None:  # read with its settings: always there
                 family_settings[label] = family.config
-    return RunCollection(runs, family_tables, family_info, family_settings)
+    return family_tables, family_info, family_settings
 
 
 #: The methods whose MPC models are checked (the controls and the treatment of the ledger).

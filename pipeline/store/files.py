@@ -98,7 +98,8 @@ def _csv_cells(column: pd.Series) -> list[str] | None:
     kind = column.dtype.kind
     values = column.to_numpy().tolist()
     if kind == "f":
-        return ["" if v != v else "%.10g" % v for v in values]
+        # printf's %g, the format every table was written with (byte-identical files)
+        return ["" if v != v else "%.10g" % v for v in values]  # noqa: UP031
     if kind in "biu":
         return [str(v) for v in values]
     if kind in "OUT":
@@ -127,7 +128,7 @@ def csv_text(frame: pd.DataFrame) -> str:
     if any(c is None for c in columns) or any(ch in n for n in names for ch in _CSV_SPECIAL):
         return frame.to_csv(index=False, float_format="%.10g", lineterminator="\n")
     lines = [",".join(names)]
-    lines.extend(",".join(row) for row in zip(*columns))
+    lines.extend(",".join(row) for row in zip(*columns, strict=True))
     return "\n".join(lines) + "\n"
 
 

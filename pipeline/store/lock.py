@@ -8,7 +8,6 @@ from pathlib import Path
 
 from pipeline.errors import FolderBusyError
 
-
 LOCK = ".lock"
 
 
@@ -42,7 +41,7 @@ def folder_lock(folder: Path):
                 pid = None
             if pid is not None and pid != os.getpid() and _pid_alive(pid):
                 raise FolderBusyError(f"{folder} is being written by another run (pid {pid}); "
-                                      "wait for it to finish or choose another output folder")
+                                      "wait for it to finish or choose another output folder") from None
             lock.unlink(missing_ok=True)  # left by a killed run
     else:
         raise FolderBusyError(f"{folder}: cannot take its lock ({lock})")

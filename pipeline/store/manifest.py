@@ -13,7 +13,6 @@ import pandas as pd
 
 from pipeline.store.files import write_csv_atomic, write_json_atomic
 
-
 RUN_FILES = ("config.yaml", "model.json", "trajectory.csv", "timing.json", "metrics.json")
 FAMILY_FILES = ("family_metrics.csv", "family.json")
 #: The files a run's and a family's manifest must list (a study's result names its own and

@@ -28,11 +28,22 @@ import pandas as pd
 from pipeline.analysis.metrics.results import RunMetrics
 from pipeline.config import ExperimentConfig, experiment_config_from_data
 from pipeline.errors import ConfigError, NonFiniteResultError, RunFolderError
-from pipeline.store.files import (clean_leftovers, csv_text, write_csv_atomic, write_json_atomic,
-                                  write_text_atomic)
-from pipeline.store.manifest import (FAMILY_FILES, MANIFEST, RUN_FILES, check, file_entry,
-                                     load_manifest, write_manifest)
-
+from pipeline.store.files import (
+    clean_leftovers,
+    csv_text,
+    write_csv_atomic,
+    write_json_atomic,
+    write_text_atomic,
+)
+from pipeline.store.manifest import (
+    FAMILY_FILES,
+    MANIFEST,
+    RUN_FILES,
+    check,
+    file_entry,
+    load_manifest,
+    write_manifest,
+)
 
 #: Folder names that are Hydra's or submitit's bookkeeping, never runs.
 BOOKKEEPING = (".hydra", ".submitit")
@@ -92,7 +103,7 @@ class RunInfo:
         return {f.name: getattr(self, f.name) for f in fields(self)}
 
     @classmethod
-    def from_json(cls, data: dict) -> "RunInfo":
+    def from_json(cls, data: dict) -> RunInfo:
         return cls(str(data.get("method", "")), str(data.get("scenario", "")),
                    str(data.get("track", "lateral")), str(data.get("config_hash", "")),
                    str(data.get("termination", "")), int(data.get("compile_count") or 0))
@@ -148,6 +159,14 @@ class FamilyRecord:
     config_data: dict | None
     #: ``timing.json``: what depends on the process (compilations); {} for older families
     timing: dict = field(default_factory=dict)
+
+    @property
+    def settings(self) -> ExperimentConfig:
+        """The settings the family was made with (a family read with its settings has them;
+        one read with ``settings=False`` raises :class:`RunFolderError`)."""
+        if self.config is None:
+            raise RunFolderError(f"{self.folder}: read without its settings")
+        return self.config
 
 
 @dataclass

@@ -29,7 +29,7 @@ log = logging.getLogger(__name__)
 def _job_row(job: Job, sweep_dir: Path) -> tuple[dict, pd.DataFrame | None, ClaimsConfig]:
     """A job's summary row, its per-member table (families) and the claims settings it was
     run with."""
-    from pipeline.store.runs import read_family, read_run
+    from pipeline.store.runs import RunFolderError, read_family, read_run
 
     label = str(job.folder.relative_to(sweep_dir))
     if job.kind == "single":
@@ -37,6 +37,8 @@ def _job_row(job: Job, sweep_dir: Path) -> tuple[dict, pd.DataFrame | None, Clai
         return ({"job": label, "kind": "single", "status": "ok", **job.overrides,
                  **record.flat_metrics()}, None, record.config.claims)
     family = read_family(job.folder)
+    if family.config is None:  # read with its settings: there, or RunFolderError
+        raise RunFolderError(f"{job.folder}: the family's settings cannot be read")
     info, table = family.info, family.table
     numeric = table.select_dtypes(include=["number", "bool"]).drop(columns=["member"],
                                                                     errors="ignore")
@@ -103,9 +105,8 @@ def _read_jobs(jobs: list[Job], sweep_dir: Path, skipped: list[dict], progress: 
     """Every job's summary row, the per-member tables of the family jobs and the claims
     settings of each job, by job label; a job that cannot be read is appended to
     ``skipped``."""
-    from pipeline.studies.progress import Progress
-
     from pipeline.store.runs import RunFolderError
+    from pipeline.studies.progress import Progress
 
     rows, tables, settings = [], {}, {}
     bar = Progress(len(jobs), "aggregate", "job", disable=not progress)

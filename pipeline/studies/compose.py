@@ -9,6 +9,7 @@ from typing import Any
 
 from pipeline.config import CONF_DIR
 
+
 def composer(extra: list[str]):
     """A function composing one run's config (with ``extra`` overrides), and the SLURM
     launcher's settings when ``extra`` selects ``hydra/launcher=slurm`` (else None)."""
@@ -46,7 +47,8 @@ def _slurm_launcher(extra: list[str]) -> dict | None:
     if any(o.startswith("hydra/launcher=slurm") for o in extra):
         with initialize_config_dir(config_dir=str(CONF_DIR), version_base="1.3"):
             full = compose(config_name="config", overrides=extra, return_hydra_config=True)
-        launcher = OmegaConf.to_container(full.hydra.launcher, resolve=False)
+        settings = OmegaConf.to_container(full.hydra.launcher, resolve=False)
+        launcher = settings if isinstance(settings, dict) else None
     return launcher
 
 

@@ -16,8 +16,8 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from pipeline.analysis.tally import Tally
 from pipeline.analysis.metrics import RunMetrics, TrajectoryContext, compute_metrics
+from pipeline.analysis.tally import Tally
 from pipeline.config import ExperimentConfig
 from pipeline.loop.controller import QpCache
 from pipeline.loop.model import build_lateral_model, vehicle_key
@@ -25,7 +25,7 @@ from pipeline.loop.scenario import build_scenario, family_members
 from pipeline.loop.simulate import simulate
 from pipeline.store.files import clean_leftovers
 from pipeline.store.manifest import check
-from pipeline.store.runs import read_metrics_json, RunInfo, write_family, write_run
+from pipeline.store.runs import RunInfo, read_metrics_json, write_family, write_run
 
 log = logging.getLogger(__name__)
 
@@ -109,7 +109,8 @@ def run_experiment(cfg: ExperimentConfig, out_dir: Path, resume: bool = True,
 def trajectory_context(cfg: ExperimentConfig) -> TrajectoryContext:
     """Geometry and vehicle limits the metrics need, from the run's configuration."""
     v = cfg.vehicle
-    return TrajectoryContext(tuple(cfg.scenario.start_xy_m), tuple(cfg.scenario.goal_xy_m),
+    start, goal = cfg.scenario.start_xy_m, cfg.scenario.goal_xy_m
+    return TrajectoryContext((start[0], start[1]), (goal[0], goal[1]),
                              v.footprint_radius_m, cfg.model.validity_heading_rad,
                              tyre_linear_limit=_tyre_limit(cfg.model.tyre_linear_tolerance),
                              wheelbase_m=v.wheelbase_m, steering_max_rad=v.steering_max_rad,
@@ -153,7 +154,8 @@ def config_yaml(cfg: ExperimentConfig, memo: dict | None = None) -> str:
         value = getattr(cfg, field.name)
         entry = memo.get((field.name, id(value)))
         if entry is None or entry[0] is not value:
-            section = dataclasses.asdict(value) if dataclasses.is_dataclass(value) else value
+            section = dataclasses.asdict(value) \
+                if dataclasses.is_dataclass(value) and not isinstance(value, type) else value
             entry = memo[(field.name, id(value))] = (value, dump({field.name: section}))
         parts.append(entry[1])
     return "".join(parts)
@@ -207,6 +209,8 @@ def run_family(cfg: ExperimentConfig, out_dir: Path, progress: bool = True,
 
     out_dir = Path(out_dir)
     family = cfg.scenario.family
+    if family is None:
+        raise ValueError(f"scenario {cfg.scenario.name} is not a family (scenario.family)")
     members = family_members(cfg.scenario, cfg.vehicle.footprint_radius_m)
     cache = qp_cache if qp_cache is not None else QpCache()
     compiles_before = cache.compile_count
@@ -274,6 +278,8 @@ def _write_family_folder(cfg: ExperimentConfig, out_dir: Path, table: pd.DataFra
                          n_members: int, parent_compiles: int) -> None:
     """Write the family folder: its table, its counts and the compilations of this process."""
     family = cfg.scenario.family
+    if family is None:
+        raise ValueError(f"scenario {cfg.scenario.name} is not a family (scenario.family)")
     member_compiles = int(table["compile_count"].fillna(0).sum()) if "compile_count" in table \
         else 0
     tally = Tally.of(table)

@@ -21,9 +21,8 @@ track).
 
 from __future__ import annotations
 
-import logging
-
 import dataclasses
+import logging
 import time
 from pathlib import Path
 

@@ -5,7 +5,16 @@ from __future__ import annotations
 
 import sys
 import time
-from typing import TextIO
+from typing import Any, Protocol
+
+
+class TextStream(Protocol):
+    """Where progress lines go: anything with ``write`` and ``flush`` (a file, stderr, a
+    stream that hands each line to a logger)."""
+
+    def write(self, text: str, /) -> Any: ...
+
+    def flush(self) -> Any: ...
 
 
 class Progress:
@@ -28,24 +37,24 @@ class Progress:
     """
 
     def __init__(self, total: int, desc: str, unit: str = "item", initial: int = 0,
-                 disable: bool = False, stream: TextIO | None = None,
+                 disable: bool = False, stream: TextStream | None = None,
                  every_s: float = 10.0) -> None:
         self.total, self.desc, self.unit = int(total), desc, unit
         self.done = self.start_done = int(initial)
         self.disable, self.every_s = disable, every_s
         self.stream = stream if stream is not None else sys.stderr
         self.started = self.last_line = time.perf_counter()
-        self.bar = None
+        self.bar: Any = None  # a tqdm bar on a terminal
         if not disable and getattr(self.stream, "isatty", lambda: False)():
             from tqdm import tqdm
 
             self.bar = tqdm(total=self.total, initial=self.done, desc=desc, unit=unit,
                             file=self.stream)
 
-    def __enter__(self) -> "Progress":
+    def __enter__(self) -> Progress:
         return self
 
-    def __exit__(self, *exc) -> None:
+    def __exit__(self, *exc: object) -> None:
         self.close()
 
     def time_left_s(self, now: float | None = None) -> float | None:

@@ -47,7 +47,7 @@ def parse_floats(text: str, count: tuple[int, ...], option: str) -> list[float]:
     try:
         values = [float(v) for v in text.split(",")]
     except ValueError:
-        raise TrajectoryFileError(f"{option}: expected comma-separated numbers, got {text!r}")
+        raise TrajectoryFileError(f"{option}: expected comma-separated numbers, got {text!r}") from None
     if len(values) not in count or not all(np.isfinite(values)):
         raise TrajectoryFileError(f"{option}: expected {' or '.join(map(str, count))} finite "
                                   f"numbers, got {text!r}")
@@ -71,7 +71,7 @@ def _separator(text: str, source: str) -> str:
     if not header:
         raise TrajectoryFileError(f"{source}: no header line (only comments or blank lines)")
     counts = {sep: header.count(sep) for sep in (",", ";", "\t")}
-    best = max(counts, key=counts.get)
+    best = max(counts, key=lambda sep: counts[sep])
     if counts[best] == 0:
         raise TrajectoryFileError(f"{source}: the header {header[:60]!r} has no comma, semicolon "
                                   "or tab between column names")
@@ -139,7 +139,7 @@ def _read_text(path: Path | str, stdin_text: str | None) -> tuple[str, str]:
         try:
             text = _decode(path.read_bytes(), source)
         except OSError as exc:
-            raise TrajectoryFileError(f"{path}: cannot be read ({exc.strerror})")
+            raise TrajectoryFileError(f"{path}: cannot be read ({exc.strerror})") from None
     if not text.strip():
         raise TrajectoryFileError(f"{source}: the file is empty")
     return source, text
@@ -168,9 +168,9 @@ def _read_table(text: str, sep: str, source: str, trailing: int) -> pd.DataFrame
     try:
         frame = pd.read_csv(io.StringIO(text), sep=sep, comment="#", skipinitialspace=True)
     except pd.errors.EmptyDataError:
-        raise TrajectoryFileError(f"{source}: the file is empty")
+        raise TrajectoryFileError(f"{source}: the file is empty") from None
     except pd.errors.ParserError as exc:
-        raise TrajectoryFileError(f"{source}: not a CSV table ({str(exc).splitlines()[0]})")
+        raise TrajectoryFileError(f"{source}: not a CSV table ({str(exc).splitlines()[0]})") from None
     if trailing:
         tail = frame.iloc[:, len(frame.columns) - trailing:]
         if tail.notna().any().any():
@@ -342,7 +342,8 @@ def score_quality(columns) -> tuple[dict[str, str], dict[str, str]]:
     gives only derived from the path (``derived``, how): what makes an outside method's scores
     comparable with the report's, or not."""
     present = set(columns)
-    missing, derived = {}, {}
+    missing: dict[str, str] = {}
+    derived: dict[str, str] = {}
     for column, reason, keys in NEEDS_COLUMN:
         if column not in present:
             for key in keys:
@@ -350,8 +351,8 @@ def score_quality(columns) -> tuple[dict[str, str], dict[str, str]]:
                         and "steering_rate_rad_s" in present:
                     continue
                 missing[key] = reason
-    for needed, how, keys in DERIVED_FROM_PATH:
+    for needed, how, derived_keys in DERIVED_FROM_PATH:
         if not all(c in present for c in needed):
-            for key in keys:
+            for key in derived_keys:
                 derived.setdefault(key, how)
     return missing, derived

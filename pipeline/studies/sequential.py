@@ -11,7 +11,8 @@ A job nobody checked (Optuna's sweeper launches without the check) is composed a
 
 from __future__ import annotations
 
-from typing import Any, Sequence
+from collections.abc import Sequence
+from typing import Any
 
 from hydra._internal.core_plugins.basic_launcher import BasicLauncher
 

@@ -34,7 +34,6 @@ from typing import Any, Optional, Sequence
 
 from hydra_plugins.hydra_submitit_launcher.config import SlurmQueueConf
 from hydra_plugins.hydra_submitit_launcher.submitit_launcher import SlurmLauncher
-
 from pipeline.errors import IncompleteSweepError, SweepConfigError, describe_config_error
 
 log = logging.getLogger(__name__)
@@ -161,8 +160,9 @@ def resume_command() -> str:
 def executor_for(params: dict, folder: Path):
     """A submitit SLURM executor from hydra-submitit-launcher-style settings."""
     import submitit
-    from hydra_plugins.hydra_submitit_launcher.config import BaseQueueConf
     from omegaconf import OmegaConf
+
+    from hydra_plugins.hydra_submitit_launcher.config import BaseQueueConf
 
     params = {k: v for k, v in params.items() if k not in (
         "_target_", "poll_s", "lost_after_s", "max_wait_min", "submitit_folder")}
@@ -254,7 +254,7 @@ class RobustSlurmLauncherBase(SlurmLauncher):
             log.info("\t#%d : %s", idx, " ".join(filter_overrides(overrides)))
             job_params.append((overrides, "hydra.sweep.dir", idx, f"job_id_for_{idx}",
                                Singleton.get_state()))
-        jobs = executor.map_array(self, *zip(*job_params))
+        jobs = executor.map_array(self, *zip(*job_params, strict=True))
         results, unfinished = self._wait(jobs, [o for _, o in to_submit],
                                          [i for i, _ in to_submit])
         if unfinished:

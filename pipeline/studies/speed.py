@@ -20,7 +20,6 @@ like every family):
 from __future__ import annotations
 
 import logging
-
 from pathlib import Path
 
 import pandas as pd

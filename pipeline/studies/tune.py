@@ -30,9 +30,8 @@ finished families are read back, never simulated again). Families run here or, w
 
 from __future__ import annotations
 
-import logging
-
 import json
+import logging
 import time
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
@@ -46,10 +45,10 @@ from pipeline.analysis.objectives import Objective, objective_values
 from pipeline.analysis.tally import Tally
 from pipeline.config import CONF_DIR, ExperimentConfig, schema_from_data
 from pipeline.errors import ConfigError, StudyError
-from pipeline.studies.results.tune import TuneResult, TuneSummary
 from pipeline.store.files import json_safe
 from pipeline.store.manifest import untrust
 from pipeline.store.runs import read_family
+from pipeline.studies.results.tune import TuneResult, TuneSummary
 from pipeline.validation import choice, safe_name
 
 logger = logging.getLogger(__name__)
@@ -146,7 +145,7 @@ def load_tune_space(path: Path) -> TuneSpace:
     try:
         data = yaml.safe_load(path.read_text())
     except yaml.YAMLError as exc:
-        raise ConfigError("--space", str(path), f"valid YAML ({str(exc).splitlines()[0]})")
+        raise ConfigError("--space", str(path), f"valid YAML ({str(exc).splitlines()[0]})") from None
     return schema_from_data(TuneSpace, data, "tune")
 
 
@@ -154,6 +153,7 @@ def search_space(method: str) -> tuple[dict, dict]:
     """The distributions and the reasons of ``conf/hparams_search/<method>.yaml`` (its
     ``hydra.sweeper.params``, parsed by hydra-optuna-sweeper's own parser)."""
     import yaml
+
     from hydra_plugins.hydra_optuna_sweeper._impl import create_params_from_overrides
 
     path = CONF_DIR / "hparams_search" / f"{method}.yaml"
@@ -226,7 +226,7 @@ def optimize(study, distributions: dict, evaluate: Callable[[list[dict]], list[t
         batch = [study.ask() for _ in range(min(batch_size, n_trials - complete))]
         settings = [{name: trial._suggest(name, dist) for name, dist in distributions.items()}
                     for trial in batch]
-        for trial, (values, constraint) in zip(batch, evaluate(settings)):
+        for trial, (values, constraint) in zip(batch, evaluate(settings), strict=True):
             trial.set_user_attr("constraint", float(constraint))
             study.tell(trial, list(values))
         complete += len(batch)
@@ -360,7 +360,7 @@ def trials_table(studies: dict, space: TuneSpace) -> pd.DataFrame:
             row = {"method": method, "trial": trial.number,
                    "constraint": float(trial.user_attrs.get("constraint", 0.0)),
                    "params": json.dumps(trial.params, sort_keys=True)}
-            row.update({f"train:{o.label}": v for o, v in zip(space.objectives, trial.values)})
+            row.update({f"train:{o.label}": v for o, v in zip(space.objectives, trial.values, strict=True)})
             rows.append(row)
     table = pd.DataFrame(rows)
     table["feasible"] = (table["constraint"] <= 0.0) & np.isfinite(
@@ -429,16 +429,16 @@ def judge_heldout(runner: Runner, space: TuneSpace, trials: pd.DataFrame,
             params_of[(control, compromise[control])],
             params_of[(treatment, compromise[treatment])]), "heldout"))
     tables = runner.run(jobs, "held-out families")
-    by_setting = {(j.method, j.setting): t for j, t in zip(jobs, tables)}
+    by_setting = {(j.method, j.setting): t for j, t in zip(jobs, tables, strict=True)}
     rows = []
-    for job, table in zip(jobs, tables):
+    for job, table in zip(jobs, tables, strict=True):
         values = objective_values(table, space.objectives)
         tally = Tally.of(table)
         trial = int(job.setting.split()[1]) if job.setting.startswith("trial") else None
         rows.append({"method": job.method, "setting": job.setting, "trial": trial,
                      "compromise": trial is not None and compromise.get(job.method) == trial,
                      "collisions": tally.collisions, "scenarios": tally.scenarios,
-                     **{f"heldout:{o.label}": v for o, v in zip(space.objectives, values)},
+                     **{f"heldout:{o.label}": v for o, v in zip(space.objectives, values, strict=True)},
                      "folder": str(job.folder.relative_to(runner.out_dir))})
     heldout = pd.DataFrame(rows)
     comparisons = (control,) + ((matched,) if matched else ())

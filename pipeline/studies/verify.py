@@ -20,7 +20,7 @@ from pathlib import Path
 import pandas as pd
 
 from pipeline.store.files import write_csv_atomic
-from pipeline.store.runs import discover, read_run, RunFolderError
+from pipeline.store.runs import RunFolderError, discover, read_run
 
 log = logging.getLogger(__name__)
 
@@ -73,7 +73,6 @@ def ledger_table(runs_root: Path, kinematic: bool = False) -> pd.DataFrame | Non
     from pipeline.analysis.claims import family_ledger
     from pipeline.analysis.settings import ClaimsConfig
     from pipeline.store.collection import load_runs
-
     from pipeline.store.layout import OutputsLayout
 
     if kinematic:

@@ -12,16 +12,42 @@ none).
 """
 
 # The code is in modules of one concern: catalogue, statistics, ledger.
-from pipeline.analysis.claims.catalogue import (Claim, CLAIMS, SAFETY, ALL_CLAIMS, Outcome,
-                                                OUTCOMES, OUTCOME_RULE, SINGLE_RULE)
-from pipeline.analysis.claims.statistics import (hodges_lehmann, hodges_lehmann_on,
-                                                 bootstrap_interval, probability_of_improvement,
-                                                 paired_test, WILCOXON_ENUMERATED_MAX_PAIRS,
-                                                 wilcoxon_pratt_pvalue, holm, decide,
-                                                 newcombe_paired_interval, PAIRS,
-                                                 paired_differences, PairedResult, compare, judge)
-from pipeline.analysis.claims.ledger import (single_scenario_outcome, claims_table, LEDGER_COLUMNS,
-                                             LedgerRow, Ledger, family_ledger, outcome_counts)
+from pipeline.analysis.claims.catalogue import (
+                                                ALL_CLAIMS,
+                                                CLAIMS,
+                                                OUTCOME_RULE,
+                                                OUTCOMES,
+                                                SAFETY,
+                                                SINGLE_RULE,
+                                                Claim,
+                                                Outcome,
+)
+from pipeline.analysis.claims.ledger import (
+                                                LEDGER_COLUMNS,
+                                                Ledger,
+                                                LedgerRow,
+                                                claims_table,
+                                                family_ledger,
+                                                outcome_counts,
+                                                single_scenario_outcome,
+)
+from pipeline.analysis.claims.statistics import (
+                                                PAIRS,
+                                                WILCOXON_ENUMERATED_MAX_PAIRS,
+                                                PairedResult,
+                                                bootstrap_interval,
+                                                compare,
+                                                decide,
+                                                hodges_lehmann,
+                                                hodges_lehmann_on,
+                                                holm,
+                                                judge,
+                                                newcombe_paired_interval,
+                                                paired_differences,
+                                                paired_test,
+                                                probability_of_improvement,
+                                                wilcoxon_pratt_pvalue,
+)
 
 __all__ = ["Claim", "CLAIMS", "SAFETY", "ALL_CLAIMS", "Outcome", "OUTCOMES", "OUTCOME_RULE",
            "SINGLE_RULE", "hodges_lehmann", "hodges_lehmann_on", "bootstrap_interval",

@@ -180,7 +180,7 @@ def family_ledger(tables: dict[str, pd.DataFrame], cfg: ClaimsConfig,
         block = [(claim, compare(tables[improved], tables[comparison], claim, cfg))
                  for claim in ALL_CLAIMS]
         adjusted = holm([r.p_value for _, r in block])
-        for (claim, result), p_holm in zip(block, adjusted):
+        for (claim, result), p_holm in zip(block, adjusted, strict=True):
             rows.append(_ledger_row(claim, comparison, result, p_holm, tables, cfg,
                                     paper_metrics, improved, sensitivity))
     return Ledger(tuple(rows), improved)

@@ -6,22 +6,48 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass
+from functools import partial
 from typing import Any
 
 import numpy as np
 import pandas as pd
 
-from pipeline.analysis.metrics.geometry import (ObstacleTrack, clearance_series,
-                                                collision_is_avoidable, continuous_clearance,
-                                                min_time_to_collision, obstacle_tracks,
-                                                straight_line_time_to_contact)
-from pipeline.analysis.metrics.results import (Fallbacks, ModelValidity, Progress, Reaction,
-                                               Recovery, Repulsion, RunMetrics, Safety,
-                                               SolverIterations, Smoothness, Stability, StepCap,
-                                               Threat)
-from pipeline.analysis.metrics.signals import (Signals, TrajectoryContext, band_exit_time,
-                                               max_abs, reversal_count, rms, settling_time,
-                                               sign_changes, time_derivative, trajectory_signals)
+from pipeline.analysis.metrics.geometry import (
+    ObstacleTrack,
+    clearance_series,
+    collision_is_avoidable,
+    continuous_clearance,
+    min_time_to_collision,
+    obstacle_tracks,
+    straight_line_time_to_contact,
+)
+from pipeline.analysis.metrics.results import (
+    Fallbacks,
+    ModelValidity,
+    Progress,
+    Reaction,
+    Recovery,
+    Repulsion,
+    RunMetrics,
+    Safety,
+    Smoothness,
+    SolverIterations,
+    Stability,
+    StepCap,
+    Threat,
+)
+from pipeline.analysis.metrics.signals import (
+    Signals,
+    TrajectoryContext,
+    band_exit_time,
+    max_abs,
+    reversal_count,
+    rms,
+    settling_time,
+    sign_changes,
+    time_derivative,
+    trajectory_signals,
+)
 from pipeline.analysis.settings import MetricsConfig
 
 
@@ -403,27 +429,27 @@ def compute_metrics_readings(trajectory: pd.DataFrame, context: TrajectoryContex
 
     results = []
     for thresholds in readings:
-        # each build is called at once, inside this iteration (the lambdas' names are current)
-        safety, colliding = once("safety", SAFETY_READS, thresholds, lambda: safety_block(
-            trajectory, sig, tracks, clearance, context, thresholds))
-        threat, geo = once("threat", THREAT_READS, thresholds, lambda: threat_block(
-            sig, tracks, context, thresholds, colliding))
+        # each build bound to this reading's values (partial), built only when not memoized
+        safety, colliding = once("safety", SAFETY_READS, thresholds, partial(
+            safety_block, trajectory, sig, tracks, clearance, context, thresholds))
+        threat, geo = once("threat", THREAT_READS, thresholds, partial(
+            threat_block, sig, tracks, context, thresholds, colliding))
         recovery = once("recovery", RECOVERY_READS, thresholds,
-                        lambda: recovery_block(sig, geo, thresholds))
+                        partial(recovery_block, sig, geo, thresholds))
         results.append(RunMetrics(
             threat=threat,
             reaction=once("reaction", REACTION_READS, thresholds,
-                          lambda: reaction_block(sig, geo, thresholds)),
+                          partial(reaction_block, sig, geo, thresholds)),
             smoothness=once("smoothness", SMOOTHNESS_READS, thresholds,
-                            lambda: smoothness_block(sig, threat, geo, recovery, thresholds)),
+                            partial(smoothness_block, sig, threat, geo, recovery, thresholds)),
             recovery=recovery,
             stability=once("stability", STABILITY_READS, thresholds,
-                           lambda: stability_block(sig, threat, geo, thresholds)),
+                           partial(stability_block, sig, threat, geo, thresholds)),
             safety=safety,
             progress=once("progress", PROGRESS_READS, thresholds,
-                          lambda: progress_block(sig, context, thresholds)),
+                          partial(progress_block, sig, context, thresholds)),
             repulsion=once("repulsion", REPULSION_READS, thresholds,
-                           lambda: repulsion_block(trajectory, sig, geo, clearance, thresholds)),
+                           partial(repulsion_block, trajectory, sig, geo, clearance, thresholds)),
             step_cap=step_cap, iterations=iterations, fallbacks=fallbacks,
             validity=validity))
     return results

@@ -3,10 +3,9 @@ holding them (``to_json`` / ``from_json``: ``metrics.json``), and :data:`METRIC_
 
 from __future__ import annotations
 
-from typing import Any, TypeVar
-
 import math
 from dataclasses import dataclass, fields
+from typing import Any, TypeVar
 
 import numpy as np
 
@@ -37,7 +36,7 @@ class _Block:
                       for f in fields(cls)})  # type: ignore[arg-type]
 
     @classmethod
-    def keys(cls) -> tuple[str, ...]:
+    def names(cls) -> tuple[str, ...]:
         return tuple(f.name for f in fields(cls))  # type: ignore[arg-type]
 
 
@@ -226,16 +225,16 @@ class RunMetrics:
     def value(self, name: str) -> float:
         """One metric by its name as a float (booleans as 0/1; NaN when missing or absent)."""
         for block in self.blocks():
-            if name in block.keys():
+            if name in block.names():
                 v = getattr(block, name)
                 return float(v) if v is not None else math.nan
         return math.nan
 
     @classmethod
-    def from_json(cls, data: dict[str, Any]) -> "RunMetrics":
+    def from_json(cls, data: dict[str, Any]) -> RunMetrics:
         """Read back what :meth:`to_json` wrote (keys of other records are ignored)."""
         def optional(block: type[B]) -> B | None:
-            return block.from_json(data) if any(k in data for k in block.keys()) else None
+            return block.from_json(data) if any(k in data for k in block.names()) else None
 
         return cls(Threat.from_json(data), Reaction.from_json(data),
                    Smoothness.from_json(data), Recovery.from_json(data),
@@ -247,7 +246,7 @@ class RunMetrics:
 #: Every key :meth:`RunMetrics.to_json` can write.
 METRIC_KEYS: tuple[str, ...] = tuple(k for block in (
     Threat, Reaction, Smoothness, Repulsion, StepCap, Recovery, Stability, Safety, Progress,
-    SolverIterations, Fallbacks, ModelValidity) for k in block.keys())
+    SolverIterations, Fallbacks, ModelValidity) for k in block.names())
 
 
 def _none_to_nan(value: Any) -> Any:

@@ -19,18 +19,21 @@
 
 from __future__ import annotations
 
-from pipeline.loop.controller_settings import (Backend, KinematicMpcSettings,
-                                               PurePursuitSettings)
-from pipeline.loop.kernels import Kernels
-from pipeline.loop.settings import LoopSettings
-from pipeline.loop.controller.base import ControlStep, Controller, Observation, PlanFallback
+from pipeline.loop.controller.base import Controller, ControlStep, Observation, PlanFallback
 from pipeline.loop.controller.kinematic import KinematicLtvMpc
 from pipeline.loop.controller.lateral import LateralMpc
 from pipeline.loop.controller.lateral_qp import MpcInputs, blocking_matrix
 from pipeline.loop.controller.pursuit import PurePursuit, pure_pursuit_steering_rate
 from pipeline.loop.controller.qp import OPTIMAL_STATUSES, QpCache, QpSolution
-from pipeline.loop.controller.references import (collision_halfplanes, force_heading_reference,
-                                            kinematic_halfplanes, lateral_reference)
+from pipeline.loop.controller.references import (
+    collision_halfplanes,
+    force_heading_reference,
+    kinematic_halfplanes,
+    lateral_reference,
+)
+from pipeline.loop.controller_settings import Backend, KinematicMpcSettings, PurePursuitSettings
+from pipeline.loop.kernels import Kernels
+from pipeline.loop.settings import LoopSettings
 
 __all__ = ["ControlStep", "Controller", "Observation", "PlanFallback", "KinematicLtvMpc",
            "LateralMpc", "MpcInputs", "blocking_matrix", "PurePursuit",

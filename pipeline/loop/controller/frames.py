@@ -14,9 +14,8 @@ Both hand the same QP other data; the models they predict with come from one
 
 from __future__ import annotations
 
-from typing import Any
-
 from math import atan2, pi
+from typing import Any
 
 import numpy as np
 
@@ -24,11 +23,14 @@ from pipeline.loop.controller.base import ControlStep, Observation
 from pipeline.loop.controller.lateral_qp import MpcInputs
 from pipeline.loop.controller.path import ReferencePath, heading_ramp_path, steady_state_gains
 from pipeline.loop.controller.qp import QpCache
-from pipeline.loop.controller.references import (collision_halfplanes, force_heading_reference,
-                                                 lateral_reference)
+from pipeline.loop.controller.references import (
+    collision_halfplanes,
+    force_heading_reference,
+    lateral_reference,
+)
+from pipeline.loop.controller_settings import MpcSettings
 from pipeline.loop.kernels import Kernels
 from pipeline.loop.model import LateralModel, LateralModelCache, model_speed_mps, vehicle_key
-from pipeline.loop.controller_settings import MpcSettings
 from pipeline.loop.settings import ModelConfig, VehicleConfig
 
 

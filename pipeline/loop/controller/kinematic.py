@@ -11,17 +11,17 @@ after ``Nc``; soft half-plane per obstacle slot and step
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any, TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from pipeline.loop.controller_settings import KinematicMpcSettings, settings_of
-from pipeline.loop.settings import ControllerConfig, VehicleConfig
 from pipeline.loop.controller.base import ControlStep, Observation, PlanFallback
 from pipeline.loop.controller.lateral_qp import blocking_matrix
 from pipeline.loop.controller.qp import QpCache, QpSolution, compiled_backend
 from pipeline.loop.controller.references import kinematic_halfplanes
+from pipeline.loop.controller_settings import KinematicMpcSettings, settings_of
 from pipeline.loop.planner import path_at_arc_length
+from pipeline.loop.settings import ControllerConfig, VehicleConfig
 
 if TYPE_CHECKING:
     import cvxpy as cp
@@ -44,7 +44,7 @@ class KinematicQpStructure:
 
     @classmethod
     def of(cls, c: KinematicMpcSettings | ControllerConfig,
-           vehicle: VehicleConfig) -> "KinematicQpStructure":
+           vehicle: VehicleConfig) -> KinematicQpStructure:
         return cls(c.horizon, c.control_horizon, c.max_obstacles, c.input_hold,
                    tuple(c.output_weights), tuple(c.input_weights), tuple(c.input_rate_weights),
                    (c.slack_weight_linear, c.slack_weight_quadratic),
@@ -136,7 +136,7 @@ class KinematicTrack:
         dt_s, L = self.ts, self.vehicle.wheelbase_m
         X, Y, theta, v = states[:, 0].tolist()
         N = self.horizon
-        for k, (accel, delta) in enumerate(zip(plan[0, :N].tolist(), plan[1, :N].tolist())):
+        for k, (accel, delta) in enumerate(zip(plan[0, :N].tolist(), plan[1, :N].tolist(), strict=True)):
             X, Y, theta, v = (X + dt_s * (v * np.cos(theta)), Y + dt_s * (v * np.sin(theta)),
                               theta + dt_s * (v / L * np.tan(delta)), v + dt_s * accel)
             states[:, k + 1] = (X, Y, theta, v)

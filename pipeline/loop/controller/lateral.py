@@ -15,25 +15,33 @@ kept and checked against the plant after the run
 
 from __future__ import annotations
 
-from typing import Any
-
 from math import isfinite
+from typing import Any
 
 import numpy as np
 
 from pipeline.loop.controller.base import ControlStep, Observation, PlanFallback
 from pipeline.loop.controller.frames import ModelBank, make_frame
-from pipeline.loop.controller.lateral_backends import (ClarabelCondensedQp, CompiledCondensedQp,
-                                                       DaqpCondensedQp, LateralQp)
-from pipeline.loop.controller.lateral_qp import (CondensedPrediction, LateralQpStructure,
-                                                 MpcInputs, blocking_matrix,
-                                                 build_condensed_lateral_problem,
-                                                 build_lateral_problem, condensed_data)
+from pipeline.loop.controller.lateral_backends import (
+    ClarabelCondensedQp,
+    CompiledCondensedQp,
+    DaqpCondensedQp,
+    LateralQp,
+)
+from pipeline.loop.controller.lateral_qp import (
+    CondensedPrediction,
+    LateralQpStructure,
+    MpcInputs,
+    blocking_matrix,
+    build_condensed_lateral_problem,
+    build_lateral_problem,
+    condensed_data,
+)
 from pipeline.loop.controller.prediction_check import PredictionRecord, prediction_check
 from pipeline.loop.controller.qp import QpCache, QpSolution, compiled_backend
+from pipeline.loop.controller_settings import MpcSettings, settings_of
 from pipeline.loop.kernels import Kernels
 from pipeline.loop.model import LateralModel, vehicle_key
-from pipeline.loop.controller_settings import MpcSettings, settings_of
 from pipeline.loop.settings import ControllerConfig, ModelConfig, VehicleConfig
 
 __all__ = ["LateralMpc", "LateralQpStructure", "MpcInputs", "blocking_matrix",

@@ -12,8 +12,7 @@ from typing import Any, Protocol
 import numpy as np
 
 from pipeline.loop.controller.lateral_qp import CondensedData, LateralQpStructure
-from pipeline.loop.controller.qp import CvxpyQp, DirectQp, NON_FINITE_DATA, QpSolution
-
+from pipeline.loop.controller.qp import NON_FINITE_DATA, CvxpyQp, DirectQp, QpSolution
 
 
 class LateralQp(Protocol):
@@ -119,8 +118,13 @@ class ClarabelCondensedQp:
 
         import clarabel
 
-        from pipeline.loop.controller.qp import (CLARABEL_STATUS, OPTIMAL_STATUSES, SOLVER_ERROR,
-                                                 clarabel_settings, solver_errors)
+        from pipeline.loop.controller.qp import (
+            CLARABEL_STATUS,
+            OPTIMAL_STATUSES,
+            SOLVER_ERROR,
+            clarabel_settings,
+            solver_errors,
+        )
 
         start = time.perf_counter()
         p_values, q, a_values, b = self._data(data)

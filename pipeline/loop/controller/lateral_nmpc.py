@@ -36,9 +36,9 @@ from pipeline.loop.controller.lateral import LateralMpc
 from pipeline.loop.controller.lateral_qp import LateralQpStructure, MpcInputs, blocking_matrix
 from pipeline.loop.controller.nmpc import ipopt_solve
 from pipeline.loop.controller.qp import QpCache
+from pipeline.loop.controller_settings import Backend, MpcSettings, settings_of
 from pipeline.loop.kernels import Kernels
 from pipeline.loop.model import single_track_constants
-from pipeline.loop.controller_settings import Backend, MpcSettings, settings_of
 from pipeline.loop.settings import ControllerConfig, ModelConfig, VehicleConfig
 
 

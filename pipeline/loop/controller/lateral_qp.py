@@ -33,12 +33,12 @@ kept Clarabel solver sees exactly what
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any, TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from pipeline.loop.model import LateralModel
 from pipeline.loop.controller_settings import MpcSettings
+from pipeline.loop.model import LateralModel
 from pipeline.loop.settings import ControllerConfig, VehicleConfig
 
 if TYPE_CHECKING:
@@ -85,7 +85,7 @@ class LateralQpStructure:
 
     @classmethod
     def of(cls, controller: MpcSettings | ControllerConfig,
-           vehicle: VehicleConfig) -> "LateralQpStructure":
+           vehicle: VehicleConfig) -> LateralQpStructure:
         c = controller
         return cls(c.horizon, c.control_horizon, c.max_obstacles, c.input_hold,
                    (c.q_lateral, c.q_heading, c.q_yaw_rate, c.q_steering, c.r_steering_rate,
@@ -206,7 +206,7 @@ class CondensedPrediction:
 
     @classmethod
     def of(cls, model: LateralModel, blocking: np.ndarray,
-           weights: tuple[Any, ...] = (1.0, 1.0, 1.0, 1.0, 0.0)) -> "CondensedPrediction":
+           weights: tuple[Any, ...] = (1.0, 1.0, 1.0, 1.0, 0.0)) -> CondensedPrediction:
         """Build the maps of ``model``; ``weights`` starts ``(q_y, q_psi, q_r, q_d, r_u)``."""
         from scipy.linalg import cholesky, solve_triangular
 
@@ -353,7 +353,7 @@ class CondensedData:
                                self.bound_h])
 
 
-def condensed_data(prediction: CondensedPrediction, inputs: "MpcInputs",
+def condensed_data(prediction: CondensedPrediction, inputs: MpcInputs,
                    weights: tuple[Any, ...]) -> CondensedData:
     """The condensed QP's data for one step: one product for the free response, one gather
     for the weighted errors, the half-planes folded onto ``U`` (``weights`` must be those

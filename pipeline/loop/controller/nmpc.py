@@ -23,10 +23,9 @@ and the program is small (6 moves, 30 slacks); ``fmincon``'s SQP would need a QP
 
 from __future__ import annotations
 
-from typing import Any
-
 import time
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 

@@ -44,7 +44,7 @@ from pipeline.loop.model import LateralModel
 _TINY = 1e-9
 
 
-def chase_path_arrays(px: float, py: float, heading: float, target: KernelValues,
+def chase_path_arrays(px: float, py: float, heading: float, target: KernelValues,  # noqa: C901
                       line_x: float, line_y: float, extend: bool, lookahead_m: float,
                       kappa_max: float, ds_m: float, n_intervals: int
                       ) -> tuple[KernelValues, KernelValues, KernelValues, KernelValues]:
@@ -300,7 +300,7 @@ class ReferencePath:
 
     @classmethod
     def straight(cls, start_m: ArrayLike, heading_rad: float, ds_m: float, n_intervals: int
-                 ) -> "ReferencePath":
+                 ) -> ReferencePath:
         """A straight path from ``start_m`` along ``heading_rad`` (the fixed frame's line)."""
         s = ds_m * np.arange(n_intervals + 1)
         u = np.array([cos(heading_rad), sin(heading_rad)])
@@ -350,7 +350,7 @@ class ReferencePath:
         s, d = np.broadcast_arrays(np.asarray(s_m, float), np.asarray(d_m, float))
         args = self._args()
         out = np.array([_point_at(a, b, *args) for a, b in zip(s.ravel().tolist(),
-                                                               d.ravel().tolist())])
+                                                               d.ravel().tolist(), strict=True)])
         return out.reshape(s.shape + (2,))
 
 

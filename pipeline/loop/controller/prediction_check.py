@@ -122,7 +122,7 @@ def check_record_arrays(points: KernelValues, headings: KernelValues, curvature:
              + Ad[r][4] * x[4] + Bd[r] * rate + Ed[r] * disturbance for r in range(5)]
         station_now = station_next
         ahead = j + 1
-        if ahead == half or ahead == one:
+        if ahead == half or ahead == one:  # noqa: SIM109 (a numba kernel: plain comparisons)
             slot = 0 if ahead == half else 1
             px, py = _point_at(station_now, x[0], points, headings, ds, n)
             gx, gy = px - xy[first + ahead][0], py - xy[first + ahead][1]

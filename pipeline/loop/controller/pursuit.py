@@ -4,11 +4,11 @@ from __future__ import annotations
 
 import numpy as np
 
-from pipeline.loop.controller_settings import PurePursuitSettings, settings_of
-from pipeline.loop.settings import ControllerConfig, VehicleConfig
 from pipeline.loop.controller.base import ControlStep, Observation
 from pipeline.loop.controller.references import lateral_reference
+from pipeline.loop.controller_settings import PurePursuitSettings, settings_of
 from pipeline.loop.model import model_speed_mps
+from pipeline.loop.settings import ControllerConfig, VehicleConfig
 
 
 def pure_pursuit_steering_rate(path_line_m: np.ndarray, position_line_m: np.ndarray,

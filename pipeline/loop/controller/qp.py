@@ -23,8 +23,9 @@ from __future__ import annotations
 
 import time
 import warnings
+from collections.abc import Callable, Hashable
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any, Callable, Hashable
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import scipy.sparse as sp
@@ -260,7 +261,7 @@ def _variable_offsets(chain: Any, inverse: Any, variables: dict[str, Any]
     matrix-stuffing step."""
     from cvxpy.reductions.dcp2cone.cone_matrix_stuffing import ConeMatrixStuffing
 
-    stuffing = next(inv for reduction, inv in zip(chain.reductions, inverse)
+    stuffing = next(inv for reduction, inv in zip(chain.reductions, inverse, strict=False)
                     if isinstance(reduction, ConeMatrixStuffing))
     return {name: (int(stuffing.var_offsets[v.id]), tuple(v.shape))
             for name, v in variables.items()}
@@ -372,7 +373,7 @@ class CvxpyQp:
 
         if not np.all(np.isfinite(theta)):
             return QpSolution(NON_FINITE_DATA, -1, 0.0, None)
-        for param, chunk in zip(self.parameters, np.split(theta, self.sizes)):
+        for param, chunk in zip(self.parameters, np.split(theta, self.sizes), strict=True):
             param.value = chunk.reshape(param.shape, order="F")
         start = time.perf_counter()
         try:

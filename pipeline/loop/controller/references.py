@@ -3,16 +3,18 @@ stations, and the soft avoidance half-planes (one normal rule shared by both tra
 
 from __future__ import annotations
 
-from typing import Any
-
 from math import hypot, sqrt, tan
+from typing import Any
 
 import numpy as np
 
 from pipeline.loop.arrays import KernelValues
+from pipeline.loop.controller_settings import (
+    KinematicMpcSettings,
+    MpcSettings,
+    PurePursuitSettings,
+)
 from pipeline.loop.kernels import Kernels
-from pipeline.loop.controller_settings import (KinematicMpcSettings, MpcSettings,
-                                               PurePursuitSettings)
 from pipeline.loop.settings import ControllerConfig, VehicleConfig
 
 _NORMAL_EPS_M = 1e-6
@@ -182,7 +184,7 @@ def _lateral_side_rows(stations_m: np.ndarray, y_ref_m: np.ndarray, obstacle: np
     gains, bounds = [], []
     reach_sq = reach * reach
     for station, y_ref, (ox, oy) in zip(stations_m.tolist(), y_ref_m.tolist(),
-                                        obstacle.tolist()):
+                                        obstacle.tolist(), strict=True):
         dx = station - ox
         if not abs(dx) < reach:
             gains.append(0.0)

@@ -7,15 +7,25 @@ Nothing here simulates. Modules: :mod:`.runs`, :mod:`.claims`, :mod:`.studies`,
 :mod:`.writer`, :mod:`.colors`.
 """
 
-from pipeline.reporting.figures.claims import (claim_differences_figure,
-                                               family_distribution_figure)
+from pipeline.reporting.figures.claims import claim_differences_figure, family_distribution_figure
 from pipeline.reporting.figures.colors import EXTRA_COLORS, METHOD_COLORS, method_color
-from pipeline.reporting.figures.runs import (apf_force_figure, avoidance_window,
-                                             closest_approach, overlay_figure, paths_figure,
-                                             snapshot_times, timeseries_figure)
-from pipeline.reporting.figures.studies import (SWEEP_METRICS, ablation_forest_figure,
-                                                bench_scaling_figure, pareto_front_figure,
-                                                specification_curve_figure, sweep_figure)
+from pipeline.reporting.figures.runs import (
+                                               apf_force_figure,
+                                               avoidance_window,
+                                               closest_approach,
+                                               overlay_figure,
+                                               paths_figure,
+                                               snapshot_times,
+                                               timeseries_figure,
+)
+from pipeline.reporting.figures.studies import (
+                                               SWEEP_METRICS,
+                                               ablation_forest_figure,
+                                               bench_scaling_figure,
+                                               pareto_front_figure,
+                                               specification_curve_figure,
+                                               sweep_figure,
+)
 from pipeline.reporting.figures.writer import FigureWriter, figure_paths, save_figure
 
 __all__ = ["EXTRA_COLORS", "METHOD_COLORS", "SWEEP_METRICS", "FigureWriter",

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-
 import matplotlib
 
 matplotlib.use("Agg")  # files only, no display
@@ -66,11 +65,11 @@ def family_distribution_figure(tables: dict[str, pd.DataFrame], metrics: list[st
     fig, axes = plt.subplots(1, len(metrics), figsize=(2.6 * len(metrics), 3.8),
                              layout="constrained", squeeze=False)
     methods = list(tables)
-    for ax, metric in zip(axes[0], metrics):
+    for ax, metric in zip(axes[0], metrics, strict=True):
         data = [tables[m][metric].astype(float).dropna().to_numpy() for m in methods]
         parts = ax.boxplot(data, tick_labels=methods, showfliers=True, patch_artist=True,
                            flierprops={"markersize": 2})
-        for patch, method in zip(parts["boxes"], methods):
+        for patch, method in zip(parts["boxes"], methods, strict=True):
             patch.set_facecolor(method_color(method))
             patch.set_alpha(0.5)
         ax.set_title(metric, fontsize=8)

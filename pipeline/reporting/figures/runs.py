@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-
 import matplotlib
 
 matplotlib.use("Agg")  # files only, no display
@@ -94,7 +93,7 @@ def paths_figure(runs: dict[str, pd.DataFrame], goal_xy_m: tuple[float, float],
     times = snapshot_times(frames[0], appear_time_s)
     norm = matplotlib.colors.Normalize(times[0], times[-1] if times[-1] > times[0]
                                        else times[0] + 1.0)
-    for ax, method, tr in zip(axes[:, 0], methods, frames):
+    for ax, method, tr in zip(axes[:, 0], methods, frames, strict=True):
         t = tr["time_s"].to_numpy(float)
         ax.plot(tr["X_m"], tr["Y_m"], color=method_color(method), lw=2, zorder=3)
         _draw_snapshots(ax, tr, t, times, cmap, norm, vehicle_radius_m)
@@ -232,7 +231,7 @@ def timeseries_figure(runs: dict[str, pd.DataFrame], appear_time_s: float | None
     fig, axes = plt.subplots(len(panels), 1, figsize=(width_in, 1.7 * len(panels) + 0.8),
                              sharex=True, layout="constrained", squeeze=False)
     window = avoidance_window(runs, appear_time_s)
-    for ax, (column, label) in zip(axes[:, 0], panels):
+    for ax, (column, label) in zip(axes[:, 0], panels, strict=True):
         for n, (method, tr) in enumerate(runs.items()):
             if column in tr:
                 ax.plot(tr["time_s"], tr[column], color=method_color(method),

@@ -3,7 +3,6 @@ scaling, the multiverse's specification curves."""
 
 from __future__ import annotations
 
-
 import matplotlib
 
 matplotlib.use("Agg")  # files only, no display
@@ -14,7 +13,6 @@ import pandas as pd  # noqa: E402
 from matplotlib.figure import Figure  # noqa: E402
 
 from pipeline.reporting.figures.colors import method_color  # noqa: E402
-
 
 SWEEP_METRICS = ("reaction_delay_s", "lateral_jerk_rms_mps3", "repulsion_unneeded_share",
                  "recovery_time_s", "oscillation_count", "min_clearance_m")
@@ -37,7 +35,7 @@ def sweep_figure(summary: pd.DataFrame, swept: list[str]) -> list[tuple[Figure, 
         key = params[0]
         fig, axes = plt.subplots(1, len(metrics), figsize=(2.8 * len(metrics), 3.2),
                                  layout="constrained", squeeze=False)
-        for ax, metric in zip(axes[0], metrics):
+        for ax, metric in zip(axes[0], metrics, strict=True):
             for method in methods:
                 part = summary if method == "all" else summary[summary["method"] == method]
                 x = _sortable(part[key])
@@ -59,7 +57,7 @@ def sweep_figure(summary: pd.DataFrame, swept: list[str]) -> list[tuple[Figure, 
             part = summary if method == "all" else summary[summary["method"] == method]
             fig, axes = plt.subplots(1, len(metrics), figsize=(3.0 * len(metrics), 3.0),
                                      layout="constrained", squeeze=False)
-            for ax, metric in zip(axes[0], metrics):
+            for ax, metric in zip(axes[0], metrics, strict=True):
                 grid = part.assign(_a=_sortable(part[params[0]]), _b=_sortable(part[params[1]])) \
                     .pivot_table(index="_a", columns="_b", values=metric, aggfunc="median")
                 image = ax.imshow(grid.to_numpy(float), origin="lower", aspect="auto",
@@ -86,14 +84,14 @@ def ablation_forest_figure(effects: pd.DataFrame, reference: str = "baseline",
     y = np.arange(len(configs))[::-1]
     colors = ["#1f77b4" if c == bundle else "#2ca02c" if c.startswith("baseline+")
               else "#ff7f0e" for c in configs]
-    for ax, claim in zip(axes[0], claims):
+    for ax, claim in zip(axes[0], claims, strict=True):
         part = effects[effects["claim"] == claim].set_index("configuration").reindex(configs)
         med = part["effect"].to_numpy(float)
         low, high = part["ci_low"].to_numpy(float), part["ci_high"].to_numpy(float)
         finite = np.concatenate([v[np.isfinite(v)] for v in (med, low, high)])
         span = max(np.max(np.abs(finite)) if finite.size else 1.0, 1e-9) * 1.1
         med, low, high = (np.clip(v, -span, span) for v in (med, low, high))
-        for yi, m, lo, hi, color in zip(y, med, low, high, colors):
+        for yi, m, lo, hi, color in zip(y, med, low, high, colors, strict=True):
             ax.plot([lo, hi], [yi, yi], color=color, lw=2)
             ax.plot([m], [yi], "o", color=color, ms=5)
         ax.axvline(0.0, color="k", lw=0.8)
@@ -123,7 +121,7 @@ def pareto_front_figure(points: dict[str, np.ndarray], labels: list[str],
     fig, axes = plt.subplots(1, len(pairs), figsize=(3.4 * len(pairs), 3.3),
                              layout="constrained", squeeze=False)
     markers = ("o", "s", "^", "D")
-    for ax, (a, b) in zip(axes[0], pairs):
+    for ax, (a, b) in zip(axes[0], pairs, strict=True):
         for n, (method, values) in enumerate(points.items()):
             values = np.asarray(values, float).reshape(-1, k)
             ax.scatter(values[:, a], values[:, b], s=28, marker=markers[n % len(markers)],
@@ -149,7 +147,7 @@ def bench_scaling_figure(lateral: pd.DataFrame) -> Figure:
         axes[0].plot(med.index, med["cvxpy_step_s"], marker="s", ls="--",
                      label=f"cvxpy, {n_obs} obs")
         axes[1].plot(med.index, med["floor_s"], marker="^", label=f"floor, {n_obs} obs")
-    for ax, title in zip(axes, ("controller step (APF + QP) [ms]", "Clarabel floor [ms]")):
+    for ax, title in zip(axes, ("controller step (APF + QP) [ms]", "Clarabel floor [ms]"), strict=True):
         ax.set_xlabel("horizon N")
         ax.set_title(title, fontsize=9)
         ax.grid(True, alpha=0.3)
@@ -185,7 +183,7 @@ def specification_curve_figure(specifications: pd.DataFrame, changed: pd.DataFra
                              gridspec_kw={"height_ratios": [2.2] * len(comparisons)
                                           + [0.22 * len(dims) + 0.4]})
     order = None
-    for ax, comparison in zip(axes[:-1, 0], comparisons):
+    for ax, comparison in zip(axes[:-1, 0], comparisons, strict=True):
         rows = part[part["comparison"] == comparison].copy()
         if order is None:
             rows = rows.sort_values("estimate", na_position="first").reset_index(drop=True)

@@ -138,7 +138,7 @@ class FigureWriter:
         while self._running:
             self._reap_oldest(redraw)
 
-    def __enter__(self) -> "FigureWriter":
+    def __enter__(self) -> FigureWriter:
         return self
 
     def __exit__(self, exc_type, *exc) -> None:

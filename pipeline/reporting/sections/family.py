@@ -5,17 +5,20 @@ by rule."""
 from __future__ import annotations
 
 import functools
-from typing import Any
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
 from pipeline.analysis.claims import ALL_CLAIMS, Ledger
 from pipeline.errors import RunFolderError
 from pipeline.reporting.figure import Figure, Figures
-from pipeline.reporting.figures import (claim_differences_figure, family_distribution_figure,
-                                        paths_figure)
+from pipeline.reporting.figures import (
+    claim_differences_figure,
+    family_distribution_figure,
+    paths_figure,
+)
 from pipeline.reporting.format import fmt, interval, unit
 from pipeline.reporting.gallery import gallery_members
 from pipeline.reporting.inputs import FamilyInputs, ReportInputs, ordered

@@ -12,8 +12,8 @@ from typing import Any
 
 from pipeline.analysis.features import FEATURES, FeatureConfig, feature_row, paper_likeness
 from pipeline.reporting.inputs import ReportInputs, reading_of
-from pipeline.store.collection import LabelledRun
 from pipeline.reporting.verdicts import Verdicts
+from pipeline.store.collection import LabelledRun
 
 
 @dataclass(frozen=True)

@@ -69,7 +69,7 @@ def provenance(command: str) -> Provenance:
     status = _git("status", "--porcelain")
     return Provenance(command, _git("rev-parse", "HEAD"), bool(status) and status != "unknown",
                       sys.version.split()[0], versions,
-                      dt.datetime.now(dt.timezone.utc).strftime("%Y-%m-%d %H:%M:%S UTC"),
+                      dt.datetime.now(dt.UTC).strftime("%Y-%m-%d %H:%M:%S UTC"),
                       f"{platform.system()} {platform.machine()}, {os.cpu_count()} cores")
 
 

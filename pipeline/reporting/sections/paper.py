@@ -11,8 +11,12 @@ import yaml
 
 from pipeline.analysis.claims import ALL_CLAIMS
 from pipeline.reporting.figure import Figure, Figures
-from pipeline.reporting.figures import (apf_force_figure, overlay_figure, paths_figure,
-                                        timeseries_figure)
+from pipeline.reporting.figures import (
+    apf_force_figure,
+    overlay_figure,
+    paths_figure,
+    timeseries_figure,
+)
 from pipeline.reporting.inputs import ReportInputs, TrackRuns
 from pipeline.reporting.verdicts import TrackClaims, Verdicts
 

@@ -7,8 +7,12 @@ from pathlib import Path
 
 import numpy as np
 
-from pipeline.studies.bench.inputs import (KeptClarabelFloor, compose_config, floor_times,
-                                           recorded_sparse_qps)
+from pipeline.studies.bench.inputs import (
+    KeptClarabelFloor,
+    compose_config,
+    floor_times,
+    recorded_sparse_qps,
+)
 
 
 def bench_closed_loop(repeats: int = 5, backend: str | None = None,
@@ -69,7 +73,7 @@ def bench_closed_loop(repeats: int = 5, backend: str | None = None,
             "outside_qp_us_per_step": 1e6 * float(np.median(outside_warm)) / steps,
             "setup_ms": 1e3 * float(np.median(setup)),
             "outside_qp_us_per_step_fresh_run": 1e6 * float(np.median(
-                [w - q - c for w, q, c in zip(walls, qp_s, compile_s)])) / steps}
+                [w - q - c for w, q, c in zip(walls, qp_s, compile_s, strict=True)])) / steps}
 
 
 def bench_family_member(backend: str | None = None, n_members: int = 8,

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import time
 from dataclasses import replace
+from typing import Any
 
 import numpy as np
 
@@ -13,8 +14,7 @@ def compose_config(overrides: list[str]):
     """The typed experiment config Hydra composes with ``overrides``."""
     from hydra import compose, initialize_config_dir
 
-    from pipeline.config import register_configs, to_experiment_config
-    from pipeline.config import CONF_DIR
+    from pipeline.config import CONF_DIR, register_configs, to_experiment_config
 
     register_configs()
     with initialize_config_dir(config_dir=str(CONF_DIR), version_base="1.3"):
@@ -63,14 +63,27 @@ def step_inputs(cfg, n_obstacles: int, n_steps: int, seed: int = 0) -> list:
     return out
 
 
+def qp_map(mpc: Any) -> Any:
+    """The compiled map (:class:`~pipeline.loop.controller.qp.AffineQpMap`) a lateral MPC on
+    ``clarabel_direct`` solves through (the sparse statement's, or the condensed one's)."""
+    from pipeline.loop.controller.lateral_backends import CompiledCondensedQp
+    from pipeline.loop.controller.qp import DirectQp
+
+    qp = mpc.qp.compiled if isinstance(mpc.qp, CompiledCondensedQp) else mpc.qp
+    if not isinstance(qp, DirectQp):
+        raise TypeError(f"the floor needs a clarabel_direct backend, not {type(qp).__name__}")
+    return qp.map
+
+
 class KeptClarabelFloor:
     """The floor: a kept Clarabel solver handed a QP's data (computed outside the timed region),
     timed on ``update + solve`` only, one QP at a time so that it interleaves with the step."""
 
-    def __init__(self, qp_map, max_iter: int) -> None:
+    def __init__(self, qp_map: Any, max_iter: int) -> None:
         from pipeline.loop.controller.qp import clarabel_settings
 
-        self.map, self.settings, self.solver = qp_map, clarabel_settings(max_iter), None
+        self.map, self.settings = qp_map, clarabel_settings(max_iter)
+        self.solver: Any = None  # clarabel.DefaultSolver, made at the first solve
 
     def time(self, theta: np.ndarray) -> tuple[float, float, np.ndarray]:
         """Wall and CPU time (s) of one solve, and its primal solution."""

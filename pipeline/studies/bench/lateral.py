@@ -9,8 +9,13 @@ from typing import Any
 
 import numpy as np
 
-from pipeline.studies.bench.inputs import (KeptClarabelFloor, compose_config, step_inputs,
-                                           timed_call)
+from pipeline.studies.bench.inputs import (
+    KeptClarabelFloor,
+    compose_config,
+    qp_map,
+    step_inputs,
+    timed_call,
+)
 
 
 def bench_lateral(horizons, obstacle_counts, n_steps: int, repeats: int) -> list[dict]:
@@ -77,15 +82,15 @@ class LateralCase:
         condensed_thetas = [condensed_data(mpc_direct.prediction(inputs.model), inputs,
                                            mpc_direct.weights).theta()
                             for inputs, *_ in steps]
-        offset_u = mpc_sparse.qp.map.variables["U"][0]
+        offset_u = qp_map(mpc_sparse).variables["U"][0]
         return cls(N, n_obs, ctrl, mpc_cvxpy, mpc_sparse, mpc_direct, mpc_daqp, mpc_dense,
                    steps, sparse_thetas, condensed_thetas, offset_u)
 
 
 def _time_repeat(case: LateralCase, rep: int) -> list[dict]:
     """One repeat over the case's QPs: the CVXPY pass, then every other method per QP."""
-    sparse_floor = KeptClarabelFloor(case.sparse.qp.map, case.ctrl.solver_max_iter)
-    condensed_floor = KeptClarabelFloor(case.direct.qp.compiled.map,
+    sparse_floor = KeptClarabelFloor(qp_map(case.sparse), case.ctrl.solver_max_iter)
+    condensed_floor = KeptClarabelFloor(qp_map(case.direct),
                                         case.ctrl.solver_max_iter)
     # the CVXPY backend (a peer, 2 ms of Python per QP) in a pass of its own: inside
     # the interleaving it evicted the caches before whichever step followed it, and
@@ -93,7 +98,7 @@ def _time_repeat(case: LateralCase, rep: int) -> list[dict]:
     # 5-7 us right after it, 1 us otherwise)
     through_cvxpy = []
     for theta in case.sparse_thetas:
-        solved, wall, _ = timed_call(lambda: case.cvxpy.qp.solve(theta))
+        solved, wall, _ = timed_call(lambda: case.cvxpy.qp.solve(theta))  # noqa: B023 (called at once, in this iteration)
         stats = case.cvxpy.qp.problem.solver_stats
         through_cvxpy.append((solved, wall, float(stats.solve_time or np.nan)))
     rows = []
@@ -102,11 +107,11 @@ def _time_repeat(case: LateralCase, rep: int) -> list[dict]:
         # what runs just before a solve (and what it left in the caches) is then
         # the same for every method on average
         timers = [
-            ("sparse_floor", lambda: sparse_floor.time(case.sparse_thetas[k])),
-            ("condensed_floor", lambda: condensed_floor.time(case.condensed_thetas[k])),
-            ("direct", lambda: timed_call(lambda: case.direct.solve(inputs))),
-            ("daqp", lambda: timed_call(lambda: case.daqp.solve(inputs))),
-            ("dense", lambda: timed_call(lambda: case.dense.solve(inputs)))]
+            ("sparse_floor", lambda: sparse_floor.time(case.sparse_thetas[k])),  # noqa: B023 (called at once, in this iteration)
+            ("condensed_floor", lambda: condensed_floor.time(case.condensed_thetas[k])),  # noqa: B023 (called at once, in this iteration)
+            ("direct", lambda: timed_call(lambda: case.direct.solve(inputs))),  # noqa: B023 (called at once, in this iteration)
+            ("daqp", lambda: timed_call(lambda: case.daqp.solve(inputs))),  # noqa: B023 (called at once, in this iteration)
+            ("dense", lambda: timed_call(lambda: case.dense.solve(inputs)))]  # noqa: B023 (called at once, in this iteration)
         shift = (k + rep) % len(timers)
         timed = dict((name, run()) for name, run in timers[shift:] + timers[:shift])
         rows.append(_lateral_row(case, rep, k, apf_s, apf_python_s, timed, through_cvxpy[k]))

@@ -8,7 +8,7 @@ from dataclasses import replace
 import numpy as np
 import pandas as pd
 
-from pipeline.studies.bench.inputs import KeptClarabelFloor, compose_config, timed_call
+from pipeline.studies.bench.inputs import KeptClarabelFloor, compose_config, qp_map, timed_call
 
 
 def bench_path_frame(n_steps: int, repeats: int) -> list[dict]:
@@ -52,14 +52,14 @@ def bench_path_frame(n_steps: int, repeats: int) -> list[dict]:
     for rep in range(repeats):
         gc.collect()
         gc.disable()
-        floor = KeptClarabelFloor(sparse.qp.map, ctrl.solver_max_iter)
+        floor = KeptClarabelFloor(qp_map(sparse), ctrl.solver_max_iter)
         for k, obs in enumerate(observations):
-            apf, apf_s, _ = timed_call(lambda: planner.rollout(obs.plant_state[:2], goal,
+            apf, apf_s, _ = timed_call(lambda: planner.rollout(obs.plant_state[:2], goal,  # noqa: B023 (called at once, in this iteration)
                                                                obstacle, np.array([3.0, 0.0])))
             row = {"section": "path_frame", "repeat": rep, "step": k, "apf_s": apf_s}
             for (f, b), mpc in mpcs.items():
-                (inputs, _), data_s, _ = timed_call(lambda: mpc.inputs_from(obs))
-                _, solve_s, _ = timed_call(lambda: mpc.solve(inputs))
+                (inputs, _), data_s, _ = timed_call(lambda: mpc.inputs_from(obs))  # noqa: B023 (called at once, in this iteration)
+                _, solve_s, _ = timed_call(lambda: mpc.solve(inputs))  # noqa: B023 (called at once, in this iteration)
                 row[f"{f}_{b}_data_s"], row[f"{f}_{b}_solve_s"] = data_s, solve_s
                 if b == "clarabel_direct":
                     row[f"{f}_floor_s"] = floor.time(sparse.parameter_vector(inputs))[0]

@@ -3,6 +3,8 @@ peers, the kinematic step, the goals, and the headline figures."""
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 import pandas as pd
 
@@ -63,7 +65,7 @@ def _stats(values) -> dict:
 
 def _lateral_summary(N: int, n_obs: int, part: pd.DataFrame) -> dict:
     """One QP configuration's medians, ratios over the floor, agreement and compilations."""
-    row = {"N": N, "obstacles": n_obs}
+    row: dict[str, Any] = {"N": N, "obstacles": n_obs}
     for key in LATERAL_TIMES:
         row[key[:-2] + "_median_ms"] = float(np.median(part[key]) * 1e3)
     row["cvxpy_step_over_floor"] = row["cvxpy_step_median_ms"] / row["floor_median_ms"]

@@ -34,16 +34,29 @@ re-scoring), :mod:`.robustness` (the analysis), :mod:`.study` (all of it in orde
 
 from pipeline.config import CONF_DIR
 from pipeline.studies.compose import composer
-from pipeline.studies.multiverse.design import (analysis_settings, build_design, family_config,
-                                                matches, qp_backend, simulation_key,
-                                                simulation_overrides, value_text,
-                                                with_user_defaults)
-from pipeline.studies.multiverse.robustness import (ROBUSTNESS_RULE, analyse_specification,
-                                                    robustness)
-from pipeline.studies.multiverse.runs import (family_table, rescore_family, run_families,
-                                              run_simulations)
-from pipeline.studies.multiverse.space import (METHODS, QP_BACKENDS, Dimension, Space,
-                                               load_space)
+from pipeline.studies.multiverse.design import (
+                                                analysis_settings,
+                                                build_design,
+                                                family_config,
+                                                matches,
+                                                qp_backend,
+                                                simulation_key,
+                                                simulation_overrides,
+                                                value_text,
+                                                with_user_defaults,
+)
+from pipeline.studies.multiverse.robustness import (
+                                                ROBUSTNESS_RULE,
+                                                analyse_specification,
+                                                robustness,
+)
+from pipeline.studies.multiverse.runs import (
+                                                family_table,
+                                                rescore_family,
+                                                run_families,
+                                                run_simulations,
+)
+from pipeline.studies.multiverse.space import METHODS, QP_BACKENDS, Dimension, Space, load_space
 from pipeline.studies.multiverse.study import run_multiverse
 
 __all__ = ["CONF_DIR", "METHODS", "QP_BACKENDS", "ROBUSTNESS_RULE", "Dimension", "Space",

@@ -5,12 +5,15 @@ for the analysis (metric and statistics settings)."""
 from __future__ import annotations
 
 import dataclasses
+from typing import Any
 
 import numpy as np
 import pandas as pd
 
 from pipeline.config import ClaimsConfig, ExperimentConfig, MetricsConfig
+from pipeline.errors import ConfigError
 from pipeline.studies.multiverse.space import Space
+
 
 def build_design(space: Space) -> pd.DataFrame:
     """Default, one-at-a-time changes, then a seeded sample (simulation choices from a pool).
@@ -101,7 +104,7 @@ def matches(column: pd.Series, value) -> pd.Series:
     return column.map(value_text) == value_text(value)
 
 
-def simulation_key(row: dict, space: Space) -> tuple:
+def simulation_key(row: dict[str, Any], space: Space) -> tuple[str, ...]:
     return tuple(str(row[d.key]) for d in space.of("simulation"))
 
 
@@ -109,11 +112,15 @@ def analysis_settings(row: dict, space: Space, base: ExperimentConfig
                       ) -> tuple[MetricsConfig, ClaimsConfig]:
     """The metric and statistics settings of one specification: the settings the runs were made
     with (``base``, the user's configuration) with the specification's analysis choices."""
-    metrics, claims, scale = {}, {}, 1.0
+    metrics: dict[str, Any] = {}
+    claims: dict[str, Any] = {}
+    scale = 1.0
     for dim in space.of("analysis"):
         section, _, name = dim.target.partition(".")
         value = None if value_text(row[dim.key]) == "null" else row[dim.key]
         if dim.target == "claims.margin_scale":
+            if value is None:
+                raise ConfigError("claims.margin_scale", value, "a number (the margins' factor)")
             scale = float(value)
         elif section == "metrics":
             metrics[name] = value

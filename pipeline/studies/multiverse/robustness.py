@@ -4,6 +4,7 @@ how robust the default outcome is and which choice moves it most."""
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pandas as pd
@@ -29,7 +30,7 @@ def analyse_specification(row: dict, folders: dict[str, Path], space: Space,
     """Ledger rows (C0-C5 against each control) of one specification; ``folders`` holds the
     controls' families, then the treatment's (:func:`run_simulations`' order)."""
     treatment = list(folders)[-1]
-    base = read_family(folders[treatment], members=False).config
+    base = read_family(folders[treatment], members=False).settings
     metrics, claims = analysis_settings(row, space, base)
     tables = {m: family_table(folders[m], metrics, out_dir) for m in folders}
     ledger = family_ledger(tables, claims, improved=treatment,
@@ -54,7 +55,8 @@ def robustness(results: pd.DataFrame, design: pd.DataFrame, space: Space
     """
     merged = results.merge(design, on="spec_id")
     default_id = design.loc[design["kind"] == "default", "spec_id"].iloc[0]
-    rows, dim_rows = [], []
+    rows: list[dict[str, Any]] = []
+    dim_rows: list[dict[str, Any]] = []
     for (claim, comparison), part in merged.groupby(["claim", "comparison"], sort=False):
         base = part[part["spec_id"] == default_id]
         default_outcome = base["outcome"].iloc[0] if len(base) else "n/a"
@@ -83,7 +85,9 @@ def _most_influential(part: pd.DataFrame, space: Space, default_outcome: str, cl
     ``(key, flipping values, estimate spread)`` (None without one), its ``(influence,
     spread)``, and the ``(supported share, choice)`` pairs under which most specifications
     support the claim; each dimension value's row is appended to ``dim_rows``."""
-    best, best_key, holds = None, (-1.0, -1.0), []
+    best: tuple[str, list[str], float] | None = None
+    best_key = (-1.0, -1.0)
+    holds: list[tuple[float, str]] = []
     for dim in space.dimensions:
         per_value = _value_effects(part, dim, default_outcome, claim, comparison, holds,
                                    dim_rows)

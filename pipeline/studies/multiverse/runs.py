@@ -8,11 +8,13 @@ import dataclasses
 import hashlib
 import json
 import logging
+from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 import pandas as pd
 
-from pipeline.config import MetricsConfig
+from pipeline.config import ExperimentConfig, MetricsConfig
 from pipeline.errors import IncompleteSweepError
 from pipeline.store.manifest import check, check_derived_table, write_derived_table
 from pipeline.store.runs import member_trajectories, read_family
@@ -34,9 +36,12 @@ def _family_task(cfg, folder: str) -> str:
     return folder
 
 
-def run_simulations(design: pd.DataFrame, space: Space, out_dir: Path, compose,
-                    log=logger.info, launcher: dict | None = None,
-                    methods: tuple[str, ...] = METHODS) -> dict[tuple, dict[str, Path]]:
+def run_simulations(design: pd.DataFrame, space: Space, out_dir: Path,
+                    compose: Callable[[list[str]], ExperimentConfig],
+                    log: Callable[[str], Any] = logger.info,
+                    launcher: dict[str, Any] | None = None,
+                    methods: tuple[str, ...] = METHODS
+                    ) -> tuple[dict[tuple[str, ...], dict[str, Path]], dict[str, str]]:
     """Run every distinct simulation configuration's families (resumed by config hash): here,
     or as a SLURM array when ``launcher`` holds ``hydra/launcher=slurm`` settings.
 
@@ -51,12 +56,12 @@ def run_simulations(design: pd.DataFrame, space: Space, out_dir: Path, compose,
     from pipeline.loop.controller import QpCache
 
     cache = QpCache()
-    folders: dict[tuple, dict[str, Path]] = {}
-    todo = []
-    unique = {}
+    folders: dict[tuple[str, ...], dict[str, Path]] = {}
+    todo: list[tuple[ExperimentConfig, Path]] = []
+    unique: dict[tuple[str, ...], dict[str, Any]] = {}
     for row in design.to_dict("records"):
         unique.setdefault(simulation_key(row, space), row)
-    backends: dict[str, set] = {}
+    backends: dict[str, set[str]] = {}
     for key, row in unique.items():
         folders[key] = {}
         for method in methods:
@@ -116,8 +121,7 @@ class _LogStream:
 
 def _run_on_slurm(todo: list, launcher: dict, out_dir: Path, log) -> None:
     """Submit the family runs as one SLURM array and wait (bounded, see pipeline.studies.slurm)."""
-    from pipeline.studies.slurm import (executor_for, resume_command,
-                                wait_for_tasks, wait_policy)
+    from pipeline.studies.slurm import executor_for, resume_command, wait_for_tasks, wait_policy
 
     executor = executor_for(launcher, out_dir / ".submitit" / "%j")
     jobs = executor.map_array(_family_task, [c for c, _ in todo], [str(f) for _, f in todo])
@@ -143,10 +147,11 @@ def rescore_family(folder: Path, readings: list[MetricsConfig], out_dir: Path) -
     from pipeline.studies.experiment import trajectory_context
 
     family = read_family(folder, members=False)
-    todo, seen = [], set()
+    todo: list[MetricsConfig] = []
+    seen: set[str] = set()
     for metrics in readings:
         key = _metrics_hash(metrics)
-        if metrics == family.config.metrics or key in seen:
+        if metrics == family.settings.metrics or key in seen:
             continue
         path = _rescored_path(folder, metrics, out_dir)
         reason = check_derived_table(path, {"family": folder})
@@ -158,16 +163,16 @@ def rescore_family(folder: Path, readings: list[MetricsConfig], out_dir: Path) -
         todo.append(metrics)
     if not todo:
         return 0
-    context = trajectory_context(family.config)
+    context = trajectory_context(family.settings)
     rows: list[list[dict]] = [[] for _ in todo]
     reads = 0
     for index, trajectory, previous in member_trajectories(folder):
         reads += 1
         keep = {k: previous.get(k) for k in ("method", "scenario", "track", "config_hash")}
         # every reading of this member in one pass (what no reading changes, computed once)
-        for block, scored in zip(rows, compute_metrics_readings(trajectory, context, todo)):
+        for block, scored in zip(rows, compute_metrics_readings(trajectory, context, todo), strict=True):
             block.append({"member": index, **scored.to_json(), **keep})
-    for block, metrics in zip(rows, todo):
+    for block, metrics in zip(rows, todo, strict=True):
         write_derived_table(_rescored_path(folder, metrics, out_dir), pd.DataFrame(block),
                             {"family": folder})
     return reads
@@ -177,7 +182,7 @@ def family_table(folder: Path, metrics: MetricsConfig, out_dir: Path) -> pd.Data
     """A family's per-member metrics: as run, or re-scored from the stored trajectories with
     other metric settings (cached; :func:`rescore_family` fills the cache in one pass)."""
     family = read_family(folder, members=False)
-    if family.config.metrics == metrics:
+    if family.settings.metrics == metrics:
         return family.table
     cached = _rescored_path(folder, metrics, out_dir)
     if check_derived_table(cached, {"family": folder}) is not None:

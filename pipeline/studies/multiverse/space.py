@@ -72,7 +72,8 @@ class Space:
     def __post_init__(self) -> None:
         # a space file's values arrive as YAML gives them: each setting's type is checked here
         for f in fields(self):
-            kind = {"int": int, "float": (int, float)}.get(str(f.type))
+            kinds: dict[str, type | tuple[type, ...]] = {"int": int, "float": (int, float)}
+            kind = kinds.get(str(f.type))
             value = getattr(self, f.name)
             if kind is not None and (isinstance(value, bool) or not isinstance(value, kind)):
                 raise ConfigError(f"multiverse space: {f.name}", value,

@@ -10,10 +10,17 @@ import pandas as pd
 from pipeline.config import MetricsConfig
 from pipeline.store.runs import read_family
 from pipeline.studies.compose import composer
-from pipeline.studies.multiverse.design import (analysis_settings, build_design,
-                                                simulation_key, with_user_defaults)
-from pipeline.studies.multiverse.robustness import (ROBUSTNESS_RULE, analyse_specification,
-                                                    robustness)
+from pipeline.studies.multiverse.design import (
+    analysis_settings,
+    build_design,
+    simulation_key,
+    with_user_defaults,
+)
+from pipeline.studies.multiverse.robustness import (
+    ROBUSTNESS_RULE,
+    analyse_specification,
+    robustness,
+)
 from pipeline.studies.multiverse.runs import _LogStream, rescore_family, run_simulations
 from pipeline.studies.multiverse.space import Space
 from pipeline.studies.results.multiverse import MultiverseInfo, MultiverseResult
