@@ -6,7 +6,11 @@ import json
 from pathlib import Path
 from typing import Any
 
+import pandas as pd
+
 from pipeline.errors import StudyError
+from pipeline.store.files import write_csv_atomic, write_json_atomic
+from pipeline.store.manifest import check, untrust, write_manifest
 
 
 class ResultError(StudyError, ValueError):
@@ -19,6 +23,29 @@ def written(folder: Path | None) -> Path:
     if folder is None:
         raise ResultError("the result was not written yet")
     return folder
+
+
+def write_table_and_summary(folder: Path, kind: str, table: pd.DataFrame, table_name: str,
+                            summary: dict[str, Any], summary_name: str) -> Path:
+    """A study's table and summary written into ``folder`` (untrusted while they are), then
+    its manifest (last)."""
+    folder = Path(folder)
+    folder.mkdir(parents=True, exist_ok=True)
+    untrust(folder)
+    write_csv_atomic(folder / table_name, table)
+    write_json_atomic(folder / summary_name, summary)
+    write_manifest(folder, kind, (table_name, summary_name), "")
+    return folder
+
+
+def trusted_summary(folder: Path, kind: str, files: tuple[str, ...], summary_name: str,
+                    what: str) -> Any:
+    """The summary of a study's ``folder`` after its manifest check; :class:`ResultError`
+    naming ``what`` when the folder cannot be trusted."""
+    reason = check(Path(folder), kind, required=files)
+    if reason:
+        raise ResultError(f"{what} not trusted: {reason}")
+    return read_json(Path(folder) / summary_name)
 
 
 def figure_files(folder: Path, stem: str) -> dict[str, Path] | None:

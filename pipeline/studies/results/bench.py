@@ -10,9 +10,12 @@ from typing import Any
 
 import pandas as pd
 
-from pipeline.store.files import write_csv_atomic, write_json_atomic
-from pipeline.store.manifest import check, untrust, write_manifest
-from pipeline.studies.results.base import ResultError, figure_files, read_json
+from pipeline.studies.results.base import (
+    ResultError,
+    figure_files,
+    trusted_summary,
+    write_table_and_summary,
+)
 
 TABLE = "bench.csv"
 SUMMARY = "bench_summary.json"
@@ -40,12 +43,8 @@ class BenchResult:
         return self.summary.get(key, default)
 
     def write(self, folder: Path) -> BenchResult:
-        folder = Path(folder)
-        folder.mkdir(parents=True, exist_ok=True)
-        untrust(folder)
-        write_csv_atomic(folder / TABLE, self.table)
-        write_json_atomic(folder / SUMMARY, dict(self.summary))
-        write_manifest(folder, "bench", FILES, "")
+        folder = write_table_and_summary(folder, "bench", self.table, TABLE, dict(self.summary),
+                                         SUMMARY)
         return BenchResult(self.summary, self.table, self.lateral, folder)
 
     @staticmethod
@@ -56,10 +55,7 @@ class BenchResult:
     def load(cls, folder: Path) -> BenchResult:
         """The result in ``folder``; :class:`ResultError` when it cannot be trusted."""
         folder = Path(folder)
-        reason = check(folder, "bench", required=FILES)
-        if reason:
-            raise ResultError(f"benchmark not trusted: {reason}")
-        summary = read_json(folder / SUMMARY)
+        summary = trusted_summary(folder, "bench", FILES, SUMMARY, "benchmark")
         if not isinstance(summary, dict):
             raise ResultError(f"{SUMMARY} is not a mapping")
         try:

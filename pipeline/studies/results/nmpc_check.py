@@ -9,9 +9,8 @@ from typing import Any
 
 import pandas as pd
 
-from pipeline.store.files import json_safe, write_csv_atomic, write_json_atomic
-from pipeline.store.manifest import check, untrust, write_manifest
-from pipeline.studies.results.base import ResultError, read_json
+from pipeline.store.files import json_safe
+from pipeline.studies.results.base import ResultError, trusted_summary, write_table_and_summary
 
 TABLE = "agreement.csv"
 SUMMARY = "summary.json"
@@ -37,11 +36,9 @@ class NmpcCheckResult:
     def write(self, folder: Path) -> NmpcCheckResult:
         folder = Path(folder)
         folder.mkdir(parents=True, exist_ok=True)
-        untrust(folder)
-        write_csv_atomic(folder / TABLE, self.table if self.table is not None
-                         else pd.DataFrame())
-        write_json_atomic(folder / SUMMARY, self.to_json())
-        write_manifest(folder, "nmpc_check", FILES, "")
+        table = self.table if self.table is not None else pd.DataFrame()
+        folder = write_table_and_summary(folder, "nmpc_check", table, TABLE, self.to_json(),
+                                         SUMMARY)
         return NmpcCheckResult(self.tracks, self.table, folder)
 
     @staticmethod
@@ -51,10 +48,7 @@ class NmpcCheckResult:
     @classmethod
     def load(cls, folder: Path) -> NmpcCheckResult:
         """The result in ``folder``; :class:`ResultError` when it cannot be trusted."""
-        reason = check(Path(folder), "nmpc_check", required=FILES)
-        if reason:
-            raise ResultError(f"nmpc check not trusted: {reason}")
-        data = read_json(Path(folder) / SUMMARY)
+        data = trusted_summary(folder, "nmpc_check", FILES, SUMMARY, "nmpc check")
         if not isinstance(data, dict):
             raise ResultError(f"{SUMMARY} is not a mapping")
         if not isinstance(data.get("tracks"), dict):

@@ -9,9 +9,8 @@ from typing import Any
 
 import pandas as pd
 
-from pipeline.store.files import json_safe, write_csv_atomic, write_json_atomic
-from pipeline.store.manifest import check, untrust, write_manifest
-from pipeline.studies.results.base import ResultError, read_json
+from pipeline.store.files import json_safe
+from pipeline.studies.results.base import ResultError, trusted_summary, write_table_and_summary
 
 TABLE = "speed.csv"
 SUMMARY = "summary.json"
@@ -37,12 +36,8 @@ class SpeedCheckResult:
                           "checks": list(self.checks)})
 
     def write(self, folder: Path) -> SpeedCheckResult:
-        folder = Path(folder)
-        folder.mkdir(parents=True, exist_ok=True)
-        untrust(folder)
-        write_csv_atomic(folder / TABLE, self.table)
-        write_json_atomic(folder / SUMMARY, self.to_json())
-        write_manifest(folder, "speed", FILES, "")
+        folder = write_table_and_summary(folder, "speed", self.table, TABLE, self.to_json(),
+                                         SUMMARY)
         return SpeedCheckResult(self.n_members, self.rows, self.checks, folder)
 
     @staticmethod
@@ -52,10 +47,7 @@ class SpeedCheckResult:
     @classmethod
     def load(cls, folder: Path) -> SpeedCheckResult:
         """The result in ``folder``; :class:`ResultError` when it cannot be trusted."""
-        reason = check(Path(folder), "speed", required=FILES)
-        if reason:
-            raise ResultError(f"speed check not trusted: {reason}")
-        data = read_json(Path(folder) / SUMMARY)
+        data = trusted_summary(folder, "speed", FILES, SUMMARY, "speed check")
         try:
             return cls(int(data["n_members"]), tuple(data["rows"]), tuple(data["checks"]),
                        Path(folder))
