@@ -193,7 +193,7 @@ def specification_curve_figure(specifications: pd.DataFrame, changed: pd.DataFra
         _draw_curve(ax, rows, comparison)
     first = axes[0, 0]
     first.set_title(f"{claim}: specification curve over {len(order or [])} specifications "
-                    "(estimate d = improved - comparison, 95 % CI; grey band: margin)",
+                    "(estimate d = improved - comparison, CI at 1 - alpha/7; grey band: margin)",
                     fontsize=9)
     _draw_choice_matrix(axes[-1, 0], changed, order or [], dims)
     return fig
