@@ -10,6 +10,7 @@ import pandas as pd
 import pytest
 
 from pipeline.analysis.objectives import Objective, objective_values, tuning_table
+from pipeline.config import CONF_DIR
 from pipeline.studies.tune import (
     Convergence,
     TuneSpace,
@@ -22,7 +23,6 @@ from pipeline.studies.tune import (
     make_study,
     optimize,
 )
-from pipeline.config import CONF_DIR
 
 
 @pytest.mark.parametrize("dims", [2, 3, 4])
