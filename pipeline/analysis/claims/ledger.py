@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Iterator
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
@@ -193,6 +193,10 @@ def _ledger_row(claim: Claim, comparison: str, result: PairedResult, p_holm: flo
                 paper_metrics: dict[str, Any] | None,
                 improved: str, sensitivity: bool) -> LedgerRow:
     margin = float(cfg.margins[claim.claim_id])
+    if result.n_pairs < cfg.min_pairs:
+        # too few pairs: no interval is reported, so none can seem to disagree with the outcome
+        result = replace(result, ci_low=math.nan, ci_high=math.nan, pi_low=math.nan,
+                         pi_high=math.nan, interval_method="too few pairs")
     outcome, note = judge(result, margin, cfg, claim)
     excludes_zero = bool(result.ci_high < 0.0 or result.ci_low > 0.0)
     if np.isfinite(p_holm) and (p_holm < cfg.alpha) != excludes_zero:

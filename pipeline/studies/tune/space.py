@@ -21,7 +21,7 @@ def _default_objectives() -> list[Objective]:
 
 
 def _default_bounds() -> list[list[float]]:
-    return [[0.0, 2.0], [0.0, 4.0], [0.0, 8.0]]
+    return [[0.0, 1.2], [0.5, 3.0], [2.0, 5.0]]
 
 
 #: the fields that decide which trials a replicate runs: a stored study is reused only when
