@@ -155,3 +155,57 @@ def test_a_runs_own_window_and_jerk_give_back_its_own_rms():
         assert 0.0 < start < end
         assert jerk.rms_over(start, end) == m["lateral_jerk_rms_window_mps3"]
         assert jerk.rms_over(-1.0, 1e6) == m["lateral_jerk_rms_run_mps3"]
+
+
+def test_report_shows_c2_on_the_common_window_beside_the_default(tmp_path, make_config):
+    """On a small family the report writes both readings; the common window's estimate is
+    rebuilt here from the stored trajectories with numpy alone (jerk by central differences
+    of vy_dot + vx r, the union of the two recorded windows, the Walsh-average median)."""
+    import json
+
+    from pipeline.report import build_report
+    from pipeline.run import run_experiment
+    from pipeline.studies.experiment import run_family
+
+    runs = tmp_path / "outputs"
+    for method in ("baseline", "improved"):
+        run_experiment(make_config([f"method={method}"]), runs / "paper" / method)
+        run_family(make_config([f"method={method}", "scenario=family",
+                                "scenario.family.size=12", "scenario.family.n_jobs=1"]),
+                   runs / "family" / method, progress=False)
+    page = build_report(runs, tmp_path / "report", "pytest").read_text()
+    assert 'id="c2-common-window"' in page
+    table = pd.read_csv(tmp_path / "report" / "tables" / "claims_c2_common_window.csv")
+    ledger = pd.read_csv(tmp_path / "report" / "tables" / "claims_ledger.csv")
+    assert set(table["reading"]) == {"own", "common"}
+    own = table[table["reading"] == "own"].iloc[0]
+    assert bool(own["in_ledger"])
+    c2 = ledger[(ledger["claim"] == "C2") & (ledger["comparison"] == "baseline")].iloc[0]
+    assert own["estimate"] == pytest.approx(c2["estimate"], rel=1e-12)
+
+    def member(method: str, i: int) -> tuple[pd.DataFrame, dict]:
+        folder = runs / "family" / method / f"member_{i:04d}"
+        return (pd.read_csv(folder / "trajectory.csv"),
+                json.loads((folder / "metrics.json").read_text()))
+
+    d = []
+    for i in range(12):
+        (tr_i, m_i), (tr_b, m_b) = member("improved", i), member("baseline", i)
+        if m_i["collision"] or m_b["collision"] or m_i["smoothness_window_start_s"] is None:
+            continue
+        start = min(m_i["smoothness_window_start_s"], m_b["smoothness_window_start_s"])
+        end = max(m_i["smoothness_window_end_s"], m_b["smoothness_window_end_s"])
+        values = []
+        for tr in (tr_i, tr_b):
+            t = tr["time_s"].to_numpy()
+            a_y = np.gradient(tr["vy_mps"].to_numpy(), t) + tr["vx_mps"].to_numpy() * \
+                tr["r_rad_s"].to_numpy()
+            jerk = np.gradient(a_y, t)
+            inside = (t >= start - 1e-9) & (t <= end + 1e-9)
+            values.append(np.sqrt(np.mean(jerk[inside] ** 2)))
+        d.append(values[0] - values[1])
+    d = np.asarray(d)
+    walsh = [(d[a] + d[b]) / 2 for a in range(d.size) for b in range(a, d.size)]
+    common = table[(table["reading"] == "common") & (table["comparison"] == "baseline")].iloc[0]
+    assert int(common["n_pairs"]) == d.size
+    assert common["estimate"] == pytest.approx(float(np.median(walsh)), rel=1e-6)
