@@ -56,11 +56,18 @@ from pipeline.studies.multiverse.runs import (
                                                 run_families,
                                                 run_simulations,
 )
-from pipeline.studies.multiverse.space import METHODS, QP_BACKENDS, Dimension, Space, load_space
+from pipeline.studies.multiverse.space import (
+                                                METHODS,
+                                                QP_BACKENDS,
+                                                Dimension,
+                                                Space,
+                                                hydra_value,
+                                                load_space,
+)
 from pipeline.studies.multiverse.study import run_multiverse
 
 __all__ = ["CONF_DIR", "METHODS", "QP_BACKENDS", "ROBUSTNESS_RULE", "Dimension", "Space",
-           "analyse_specification", "analysis_settings", "build_design", "composer",
+           "analyse_specification", "analysis_settings", "build_design", "composer", "hydra_value",
            "family_config", "family_table", "load_space", "matches", "qp_backend",
            "rescore_family", "robustness", "run_families", "run_multiverse",
            "run_simulations", "simulation_key", "simulation_overrides", "value_text",

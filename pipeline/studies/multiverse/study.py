@@ -110,7 +110,9 @@ def _multiverse_info(space: Space, design: pd.DataFrame, n_simulations: int,
         member_reads_per_member=member_reads_per_member,
         rule=ROBUSTNESS_RULE, robust_share=space.robust_share,
         fragile_share=space.fragile_share,
-        dimensions=tuple({"key": d.key, "config_key": d.target, "stage": d.stage,
+        dimensions=tuple({"key": d.key, "config_key": ", ".join(d.config_keys),
+                          "stage": d.stage, "group": d.group,
                           "values": [str(v) for v in d.values],
+                          "settings": [str(v) for v in d.settings or ()],
                           "applies_to": list(d.applies_to or []), "why": d.why}
                          for d in space.dimensions))
