@@ -20,6 +20,7 @@ from pipeline.analysis.claims import (
 from pipeline.analysis.metrics import LateralJerk
 from pipeline.config import ClaimsConfig
 from pipeline.errors import ConfigError
+from pipeline.studies.multiverse import CONF_DIR
 
 #: a log of 0.1 s rows over 10 s (101 rows)
 TIME_S = np.round(np.arange(101) * 0.1, 10)
@@ -209,3 +210,12 @@ def test_report_shows_c2_on_the_common_window_beside_the_default(tmp_path, make_
     common = table[(table["reading"] == "common") & (table["comparison"] == "baseline")].iloc[0]
     assert int(common["n_pairs"]) == d.size
     assert common["estimate"] == pytest.approx(float(np.median(walsh)), rel=1e-6)
+
+
+def test_the_multiverse_refuses_the_common_window_before_it_runs(tmp_path):
+    from pipeline.studies.multiverse import load_space, run_multiverse
+
+    space = load_space(CONF_DIR / "multiverse" / "quick.yaml")
+    with pytest.raises(ConfigError, match="claims.c2_window"):
+        run_multiverse(space, tmp_path / "mv", ["claims.c2_window=common"])
+    assert not (tmp_path / "mv" / "runs").exists()

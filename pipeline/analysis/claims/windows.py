@@ -28,6 +28,8 @@ import pandas as pd
 
 from pipeline.analysis.claims.catalogue import Claim
 from pipeline.analysis.metrics.results import LateralJerk
+from pipeline.analysis.settings import ClaimsConfig
+from pipeline.errors import ConfigError
 
 #: the rules that make one window of a pair's two (``claims.common_window``)
 WINDOW_RULES = ("union", "intersection")
@@ -36,6 +38,15 @@ WINDOW_START, WINDOW_END = "smoothness_window_start_s", "smoothness_window_end_s
 #: C2's primary metric on the common window (a column of the tables :func:`common_window_tables`
 #: returns)
 COMMON_C2_METRIC = "lateral_jerk_rms_common_mps3"
+
+
+def require_own_window(cfg: ClaimsConfig, study: str) -> None:
+    """Refuse ``claims.c2_window = common`` for a study that judges family tables without
+    the runs' trajectories (before it starts its work, not after)."""
+    if cfg.c2_window == "common":
+        raise ConfigError("claims.c2_window", cfg.c2_window,
+                          f"own for {study} (it judges C2 on each run's own window; the report "
+                          "shows C2 on the common window beside it)")
 
 
 def common_window(first: tuple[float, float], second: tuple[float, float],

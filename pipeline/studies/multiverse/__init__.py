@@ -4,6 +4,9 @@
 [OVERRIDE ...]`` reads a space (``conf/multiverse/<space>.yaml``): dimensions, each a config key
 with its defensible values (the first is the default) and a stage. *Simulation* dimensions change
 the runs; *analysis* dimensions (metric readings and thresholds, statistics) only re-score them.
+A simulation dimension may vary the world every method meets (``scenario.*``: speed, appearance
+time, obstacle kinds and count; ``vehicle.*``: mass and inertia, tyres), set for every method so
+pairs stay paired; its values may be lists, or labelled bundles of several keys.
 
 1. **Design**: the default specification, every one-at-a-time change, then a seeded sample until
    ``n_specifications``; sampled specifications draw their simulation choices from a pool of

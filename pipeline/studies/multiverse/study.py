@@ -7,6 +7,7 @@ from pathlib import Path
 
 import pandas as pd
 
+from pipeline.analysis.claims.windows import require_own_window
 from pipeline.config import MetricsConfig
 from pipeline.store.runs import read_family
 from pipeline.studies.compose import composer
@@ -40,6 +41,7 @@ def run_multiverse(space: Space, out_dir: Path, overrides: list[str] | None = No
     compose, launcher = composer(list(overrides or []))
     # the default specification is the user's configuration (its analysis settings)
     base = compose(["method=improved", "scenario=family"])
+    require_own_window(base.claims, "the multiverse")
     space = with_user_defaults(space, base)
     design = build_design(space)
     # not trusted until the result's manifest is written last
