@@ -356,10 +356,10 @@ def test_estimator_test_and_margins_change_the_outcome():
     sign = compare(improved, baseline, CLAIMS[0], ClaimsConfig(n_resamples=199, test="sign"))
     assert sign.p_value != hl.p_value
     row = compare(improved, baseline, CLAIMS[0], ClaimsConfig(n_resamples=199))
-    args = (row.ci_low, row.ci_high, 0.0, None, row.n_pairs,
+    args = (row.ci_low, row.ci_high, None, row.n_pairs,
             ClaimsConfig(n_resamples=199), row.pi_low, row.pi_high)
-    wide = decide(args[0], args[1], args[2], 10.0, *args[4:])[0]
-    narrow = decide(args[0], args[1], args[2], 1e-3, *args[4:])[0]
+    wide = decide(args[0], args[1], 10.0, *args[3:])[0]
+    narrow = decide(args[0], args[1], 1e-3, *args[3:])[0]
     assert wide == "equivalent" and narrow != "equivalent"
 
 

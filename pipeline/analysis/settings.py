@@ -103,7 +103,10 @@ class ClaimsConfig(FrozenAfterValidation):
     """
 
     alpha: float = 0.05
-    n_resamples: int = 999
+    # the level of every ledger interval: 1 - alpha / (claims per comparison) (bonferroni), or
+    # 1 - alpha (none); the interval is the test (a direction exactly when it excludes 0)
+    interval_adjustment: str = "bonferroni"
+    n_resamples: int = 1999
     seed: int = 0
     estimator: str = "hodges_lehmann"
     test: str = "wilcoxon"
@@ -143,6 +146,7 @@ class ClaimsConfig(FrozenAfterValidation):
                 raise ConfigError(f"claims.{key}", value, "an integer >= 0")
         if self.n_resamples < 99:
             raise ConfigError("claims.n_resamples", self.n_resamples, "an integer >= 99")
+        choice("claims.interval_adjustment", self.interval_adjustment, ("bonferroni", "none"))
         choice("claims.estimator", self.estimator, ("hodges_lehmann", "median"))
         choice("claims.test", self.test, ("wilcoxon", "sign"))
         choice("claims.pairs", self.pairs, ("neither_collided", "all"))

@@ -7,14 +7,14 @@ from __future__ import annotations
 
 import math
 from collections.abc import Iterator, Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
 import pandas as pd
 
 from pipeline.analysis.claims.catalogue import ALL_CLAIMS, Claim, Outcome
-from pipeline.analysis.claims.statistics import PairedResult, compare, holm, judge
+from pipeline.analysis.claims.statistics import PairedResult, compare, holm, interval_level, judge
 from pipeline.analysis.claims.windows import common_window_claim, common_window_tables
 from pipeline.analysis.metrics.results import LateralJerk
 from pipeline.analysis.settings import ClaimsConfig
@@ -64,7 +64,7 @@ def claims_table(metrics_by_method: dict[str, dict[str, Any]], margins: dict[str
 
 
 LEDGER_COLUMNS = ["claim", "comparison", "metric", "outcome", "estimate", "ci_low", "ci_high",
-                  "p_value", "p_holm", "prob_improvement", "pi_low", "pi_high", "n_better",
+                  "ci_level", "p_value", "p_holm", "prob_improvement", "pi_low", "pi_high", "n_better",
                   "n_tied", "n_worse", "n_missing", "n_pairs", "margin", "note",
                   "outcome_all_pairs", "estimate_all_pairs", "paper_scenario"]
 
@@ -100,7 +100,8 @@ class LedgerRow:
                 "metric": self.claim.primary_metric, "outcome": str(self.outcome),
                 "n_pairs": r.n_pairs, "n_missing": r.n_missing, "n_better": r.n_better,
                 "n_tied": r.n_tied, "n_worse": r.n_worse, "estimate": r.estimate,
-                "ci_low": r.ci_low, "ci_high": r.ci_high, "interval_method": r.interval_method,
+                "ci_low": r.ci_low, "ci_high": r.ci_high, "ci_level": r.ci_level,
+                "interval_method": r.interval_method,
                 "p_value": r.p_value, "prob_improvement": r.prob_improvement,
                 "pi_low": r.pi_low, "pi_high": r.pi_high, "p_holm": self.p_holm,
                 "margin": self.margin, "note": self.note, "margin_reason": self.margin_reason,
@@ -191,9 +192,10 @@ def family_ledger(tables: dict[str, pd.DataFrame], cfg: ClaimsConfig,
     rows: list[LedgerRow] = []
     if improved not in tables:
         return Ledger((), improved)
+    level = interval_level(cfg, len(ALL_CLAIMS))
     for comparison in [c for c in comparisons if c in tables]:
         pair = _pair_tables(tables, improved, comparison, cfg, jerks)
-        block = [(claim, compare(*pair[claim.claim_id], claim, cfg))
+        block = [(claim, compare(*pair[claim.claim_id], claim, cfg, level=level))
                  for claim in _claims_read(cfg)]
         adjusted = holm([r.p_value for _, r in block])
         for (claim, result), p_holm in zip(block, adjusted, strict=True):
@@ -234,7 +236,19 @@ def _ledger_row(claim: Claim, comparison: str, result: PairedResult, p_holm: flo
                 paper_metrics: dict[str, Any] | None,
                 improved: str, sensitivity: bool) -> LedgerRow:
     margin = float(cfg.margins[claim.claim_id])
-    outcome, note = judge(result, p_holm, margin, cfg, claim)
+    if result.n_pairs < cfg.min_pairs:
+        # too few pairs: no interval is reported, so none can seem to disagree with the outcome
+        result = replace(result, ci_low=math.nan, ci_high=math.nan, pi_low=math.nan,
+                         pi_high=math.nan, interval_method="too few pairs")
+    outcome, note = judge(result, margin, cfg, claim)
+    excludes_zero = bool(result.ci_high < 0.0 or result.ci_low > 0.0)
+    if np.isfinite(p_holm) and (p_holm < cfg.alpha) != excludes_zero:
+        test_note = (f"the paired test after Holm (p {p_holm:.2g}) "
+                     + ("finds a difference" if p_holm < cfg.alpha else "finds none")
+                     + f" at alpha {cfg.alpha:g}, the {result.ci_level:.2%} interval "
+                     + ("excludes 0" if excludes_zero else "does not")
+                     + ": the interval decides")
+        note = f"{note}; {test_note}" if note else test_note
     if not claim.is_rate and result.n_pairs and \
             result.n_floor_ties >= cfg.floor_tie_share * result.n_pairs:
         floor_note = (f"neither method shows the behaviour in {result.n_floor_ties} of "
@@ -245,9 +259,9 @@ def _ledger_row(claim: Claim, comparison: str, result: PairedResult, p_holm: flo
         all_pairs, estimate_all = outcome, result.estimate
     elif sensitivity:
         other = "all" if cfg.pairs == "neither_collided" else "neither_collided"
-        sens = compare(*pair, claim, cfg, pairs=other)
-        # the sensitivity keeps its own unadjusted test: it is a check, not a claim
-        all_pairs, _ = judge(sens, sens.p_value, margin, cfg, claim)
+        sens = compare(*pair, claim, cfg, pairs=other, level=result.ci_level)
+        # the sensitivity reads its interval at the row's level: a check, not a claim
+        all_pairs, _ = judge(sens, margin, cfg, claim)
         estimate_all = sens.estimate
     paper = None
     if paper_metrics and comparison in paper_metrics and improved in paper_metrics:

@@ -138,8 +138,8 @@ def family_section(inputs: ReportInputs, verdicts: Verdicts, figures: Figures
         figures.draw(claim_differences_figure(ledger.differences, names, intervals),
                      "claim_differences", "claims",
                      "Per-scenario paired differences improved − comparison on each claim's "
-                     "primary metric (below zero: improved better), with the estimate's 95 % "
-                     "bootstrap interval, against each comparison.",
+                     "primary metric (below zero: improved better), with the estimate's "
+                     "bootstrap interval (at the ledger's level, 1 - alpha / 7), against each comparison.",
                      "Scatter of paired differences per claim with estimate and confidence "
                      "interval"),
         figures.draw(family_distribution_figure(

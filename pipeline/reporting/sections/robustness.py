@@ -126,7 +126,7 @@ def robustness_section(inputs: ReportInputs, figures: Figures) -> RobustnessSect
         stem = MultiverseResult.curve_stem(claim.claim_id)
         figure = figures.copy(
             result.curve_figure(claim.claim_id), stem, "robustness",
-            f"{claim.claim_id} ({claim.text}): the estimate with its 95 % interval in every "
+            f"{claim.claim_id} ({claim.text}): the estimate with its interval (1 - alpha / 7) in every "
             "specification, sorted, coloured by outcome, against each comparison; below, "
             "which choices each specification changes from the default.",
             f"Specification curve of {claim.claim_id}")
