@@ -159,6 +159,15 @@ INTERPRETATION_REGISTER: tuple[RegisterEntry, ...] = (
         "a_y = vy_dot + vx r; jerk over the avoidance window (threat to recovery)",
         "vx_r (drops vy_dot); whole_run", "metrics.lateral_accel, metrics.smoothness_window"),
     RegisterEntry(
+        "C2: whose window", "Table 1: 'sharp turns after avoidance (jerky)' (no window given)",
+        "own: each run's RMS jerk over its own avoidance window (the method that recovers "
+        "later is measured over a longer, mostly quiet span, which dilutes its RMS)",
+        "common: both runs of a pair over one window made of their two, the union (from the "
+        "earlier start to the later end: every sample either own window holds, so neither "
+        "method's late jerks are cut off; the report shows this row beside the default) or "
+        "the intersection (claims.common_window)",
+        "claims.c2_window, claims.common_window"),
+    RegisterEntry(
         "C3 as Table 2's two halves (C3a, C3b)",
         "Table 2: 'strong repulsion only when needed'; baseline: 'low sensitivity for far "
         "distances'",

@@ -122,6 +122,11 @@ class ClaimsConfig(FrozenAfterValidation):
     # controls, by method name (run.method); any method, your own included
     treatment: str = "improved"
     controls: List[str] = field(default_factory=lambda: ["baseline", "baseline_matched"])
+    # C2's window: each run's own avoidance window ("own"), or one common to both runs of a
+    # pair ("common"), made of their two windows by ``common_window``: "union" (from the
+    # earlier start to the later end, both runs over the same span) or "intersection"
+    c2_window: str = "own"
+    common_window: str = "union"
 
     def __post_init__(self) -> None:
         from pipeline.validation import safe_name
@@ -145,6 +150,8 @@ class ClaimsConfig(FrozenAfterValidation):
         choice("claims.estimator", self.estimator, ("hodges_lehmann", "median"))
         choice("claims.test", self.test, ("wilcoxon", "sign"))
         choice("claims.pairs", self.pairs, ("neither_collided", "all"))
+        choice("claims.c2_window", self.c2_window, ("own", "common"))
+        choice("claims.common_window", self.common_window, ("union", "intersection"))
         at_least("claims.tie_tolerance", self.tie_tolerance, 0.0)
         unknown = sorted(set(self.margins) - set(CLAIM_IDS))
         if unknown:

@@ -6,7 +6,7 @@ outcome counts per method (:func:`outcome_counts`)."""
 from __future__ import annotations
 
 import math
-from collections.abc import Iterator
+from collections.abc import Iterator, Mapping
 from dataclasses import dataclass, replace
 from typing import Any
 
@@ -15,6 +15,8 @@ import pandas as pd
 
 from pipeline.analysis.claims.catalogue import ALL_CLAIMS, Claim, Outcome
 from pipeline.analysis.claims.statistics import PairedResult, compare, holm, interval_level, judge
+from pipeline.analysis.claims.windows import common_window_claim, common_window_tables
+from pipeline.analysis.metrics.results import LateralJerk
 from pipeline.analysis.settings import ClaimsConfig
 from pipeline.analysis.tally import Tally
 
@@ -150,11 +152,15 @@ class Ledger:
             columns=LEDGER_COLUMNS + ["interval_method", "margin_reason"])
 
 
+#: A run's lateral jerk by method and scenario (what C2 on a common window reads).
+Jerks = Mapping[str, Mapping[str, LateralJerk]]
+
+
 def family_ledger(tables: dict[str, pd.DataFrame], cfg: ClaimsConfig,
                   paper_metrics: dict[str, dict[str, Any]] | None = None,
                   improved: str = "improved",
                   comparisons: tuple[str, ...] = ("baseline", "baseline_matched"),
-                  sensitivity: bool = True) -> Ledger:
+                  sensitivity: bool = True, jerks: Jerks | None = None) -> Ledger:
     """Claims ledger over a scenario family: C0-C5 against each comparison present.
 
     Parameters
@@ -169,27 +175,64 @@ def family_ledger(tables: dict[str, pd.DataFrame], cfg: ClaimsConfig,
     sensitivity : bool
         Also judge C1-C5 on the other set of pairs (all pairs when the ledger uses those where
         neither collided).
+    jerks : mapping of method -> scenario -> LateralJerk, optional
+        Each run's lateral jerk: with ``cfg.c2_window = "common"`` C2 is judged on a window
+        common to both runs of each pair (:mod:`pipeline.analysis.claims.windows`), which
+        needs them.
 
     Returns
     -------
     Ledger
+
+    Raises
+    ------
+    ValueError
+        ``cfg.c2_window = "common"`` without the jerk of the treatment or of a comparison.
     """
     rows: list[LedgerRow] = []
     if improved not in tables:
         return Ledger((), improved)
     level = interval_level(cfg, len(ALL_CLAIMS))
     for comparison in [c for c in comparisons if c in tables]:
-        block = [(claim, compare(tables[improved], tables[comparison], claim, cfg, level=level))
-                 for claim in ALL_CLAIMS]
+        pair = _pair_tables(tables, improved, comparison, cfg, jerks)
+        block = [(claim, compare(*pair[claim.claim_id], claim, cfg, level=level))
+                 for claim in _claims_read(cfg)]
         adjusted = holm([r.p_value for _, r in block])
         for (claim, result), p_holm in zip(block, adjusted, strict=True):
-            rows.append(_ledger_row(claim, comparison, result, p_holm, tables, cfg,
-                                    paper_metrics, improved, sensitivity))
+            rows.append(_ledger_row(claim, comparison, result, p_holm, pair[claim.claim_id],
+                                    cfg, paper_metrics, improved, sensitivity))
     return Ledger(tuple(rows), improved)
 
 
+def _claims_read(cfg: ClaimsConfig) -> tuple[Claim, ...]:
+    """Every claim as ``cfg`` reads it (C2 on a common window with ``c2_window = common``)."""
+    if cfg.c2_window != "common":
+        return ALL_CLAIMS
+    return tuple(common_window_claim(c, cfg.common_window) if c.claim_id == "C2" else c
+                 for c in ALL_CLAIMS)
+
+
+def _pair_tables(tables: dict[str, pd.DataFrame], improved: str, comparison: str,
+                 cfg: ClaimsConfig, jerks: Jerks | None
+                 ) -> dict[str, tuple[pd.DataFrame, pd.DataFrame]]:
+    """Per claim, the treatment's and the comparison's tables it is judged on: the family
+    tables, C2's with its common-window column when ``cfg.c2_window = common``."""
+    pair = (tables[improved], tables[comparison])
+    out = {c.claim_id: pair for c in ALL_CLAIMS}
+    if cfg.c2_window == "common":
+        absent = [m for m in (improved, comparison) if jerks is None or m not in jerks]
+        if absent:
+            raise ValueError(f"claims.c2_window=common: no lateral jerk of {', '.join(absent)} "
+                             "(C2 on a window common to both runs of a pair reads the runs' "
+                             "trajectories)")
+        assert jerks is not None
+        out["C2"] = common_window_tables(*pair, jerks[improved], jerks[comparison],
+                                         cfg.common_window)
+    return out
+
+
 def _ledger_row(claim: Claim, comparison: str, result: PairedResult, p_holm: float,
-                tables: dict[str, pd.DataFrame], cfg: ClaimsConfig,
+                pair: tuple[pd.DataFrame, pd.DataFrame], cfg: ClaimsConfig,
                 paper_metrics: dict[str, Any] | None,
                 improved: str, sensitivity: bool) -> LedgerRow:
     margin = float(cfg.margins[claim.claim_id])
@@ -216,8 +259,7 @@ def _ledger_row(claim: Claim, comparison: str, result: PairedResult, p_holm: flo
         all_pairs, estimate_all = outcome, result.estimate
     elif sensitivity:
         other = "all" if cfg.pairs == "neither_collided" else "neither_collided"
-        sens = compare(tables[improved], tables[comparison], claim, cfg, pairs=other,
-                       level=result.ci_level)
+        sens = compare(*pair, claim, cfg, pairs=other, level=result.ci_level)
         # the sensitivity reads its interval at the row's level: a check, not a claim
         all_pairs, _ = judge(sens, margin, cfg, claim)
         estimate_all = sens.estimate
