@@ -60,6 +60,11 @@ SWITCH_TESTS = {
     "controller.path_curvature_max_1_per_m": "test_path_frame",
     "controller.path_state_reference": "test_path_frame",
     "controller.horizon_reach_m": "test_path_frame", "planner.velocity_rule": "test_path_frame",
+    "claims.interval_adjustment": "test_outcome_interval",
+    "tune.convergence_tolerance": "test_tune_convergence",
+    "tune.convergence_window": "test_tune_convergence",
+    "tune.hypervolume_bounds": "test_tune_convergence", "tune.replicates": "test_tune",
+    "tune.settled_share": "test_tune_convergence", "tune.censoring": "test_tune_convergence",
 
 
 }

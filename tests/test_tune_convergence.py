@@ -191,3 +191,21 @@ def test_objectives_read_members_as_the_ledger_does():
     assert censored == pytest.approx(((1.0 + 7.0 + 2.0) / 3, (0.2 + 0.4 + 10.0) / 3))
     dropped = objective_values(tuning_table(table, "drop"), objectives)
     assert dropped == pytest.approx(((1.0 + 2.0) / 2, (0.2 + 0.4) / 2))
+
+
+def test_the_spaces_convergence_settings_reach_the_rule():
+    """tune.convergence_window, tune.convergence_tolerance and tune.hypervolume_bounds as the
+    loop reads them (Convergence.of): another value moves the stop or the volume."""
+    history = np.concatenate([np.linspace(0.3, 0.6, 50), np.full(200, 0.6)])
+    base = Convergence.of(TuneSpace())
+    assert base.stop_at(history) != Convergence.of(TuneSpace(convergence_window=20)).stop_at(
+        history)
+    assert base.stop_at(history) != Convergence.of(
+        TuneSpace(convergence_tolerance=0.2)).stop_at(history)
+    values, feasible = np.array([[0.5, 1.5, 3.5]]), np.array([True])
+    wide = Convergence.of(TuneSpace(hypervolume_bounds=[[0.0, 2.0], [0.0, 4.0], [0.0, 8.0]]))
+    assert hypervolume_history(values, feasible, [list(b) for b in base.bounds])[0] \
+        != hypervolume_history(values, feasible, [list(b) for b in wide.bounds])[0]
+    # and tune.settled_share moves the sentence
+    assert answer_in_counts("C2", ["supported"] * 3 + ["equivalent"] * 2, 0.6)[1]
+    assert not answer_in_counts("C2", ["supported"] * 3 + ["equivalent"] * 2, 0.8)[1]
