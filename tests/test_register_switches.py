@@ -59,6 +59,7 @@ SWITCH_TESTS = {
     "controller.path_curvature_max_1_per_m": "test_path_frame",
     "controller.path_state_reference": "test_path_frame",
     "controller.horizon_reach_m": "test_path_frame", "planner.velocity_rule": "test_path_frame",
+    "controller.collision_constraints": "test_apf_alone",
 
 
 }
