@@ -68,7 +68,7 @@ def safety_sentence(rows: tuple[CollisionRow, ...], treatment: str) -> str:
     if not rows:
         return ""
     n = rows[0].scenarios
-    without = [f"{_name(r.method, treatment)} in {r.without}"
+    without = [f"{_name(r.method, treatment)} {'collides ' if i == 0 else ''}in {r.without}"
                + (f" of {n} scenarios" if i == 0 else "") for i, r in enumerate(rows)]
     text = "Without the MPC's collision constraints " + _series(without)
     if all(r.with_ is not None for r in rows):
