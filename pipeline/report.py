@@ -96,7 +96,7 @@ def _report(args, command: str) -> int:
     if answer.is_file() and answer.read_text().strip():
         # the answer in words, last, so that a command's final lines are the verdicts
         print("The answer over the scenario family (outcome vs each comparison, estimate "
-              "[95 % interval] unit; d = treatment - comparison, below 0 is better):")
+              "[interval at 1 - alpha/7] unit; d = treatment - comparison, below 0 is better):")
         print(answer.read_text().rstrip())
     if args.strict and skipped:
         print(f"error: --strict: {len(skipped)} folder(s) skipped", file=sys.stderr)

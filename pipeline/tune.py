@@ -30,16 +30,24 @@ def main(argv: list[str] | None = None) -> int:
     return run_command(lambda: _tune(args), kept="completed family runs and tables")
 
 
-def draw_pareto_fronts(result: TuneResult, space: TuneSpace) -> None:
-    """Each method's Pareto settings on the training and the held-out family, every pair of
-    objectives on shared axes, into the result's figure folder."""
-    from pipeline.reporting.figures import pareto_front_figure, save_figure
+def draw_figures(result: TuneResult, space: TuneSpace) -> None:
+    """The first replicate's Pareto settings of each method on the training and the held-out
+    family (every pair of objectives on shared axes) and every replicate's hypervolume
+    history, into the result's figure folder."""
+    from pipeline.reporting.figures import (
+        hypervolume_history_figure,
+        pareto_front_figure,
+        save_figure,
+    )
 
     for part in PARTS:
-        points = front_points(result.trials, result.heldout, space, part)
+        points = front_points(result.trials, result.heldout, space, part, replicate=0)
         save_figure(pareto_front_figure(points, [o.label for o in space.objectives],
-                                        f"{part} family"), result.figure_folder(),
-                    TuneResult.front_stem(part))
+                                        f"{part} family, replicate 0"),
+                    result.figure_folder(), TuneResult.front_stem(part))
+    save_figure(hypervolume_history_figure(list(result.summary.replicates),
+                                           space.convergence_window),
+                result.figure_folder(), TuneResult.HISTORY_STEM)
 
 
 def _tune(args) -> int:
@@ -48,9 +56,11 @@ def _tune(args) -> int:
         path = CONF_DIR / "tune" / f"{args.space}.yaml"
     space = load_tune_space(path)
     result = run_tuning(space, args.out, args.overrides, log=log.info)
-    draw_pareto_fronts(result, space)
+    draw_figures(result, space)
     for claim in result.summary.claims:
-        print(claim.sentence)
+        print(claim.answer)
+    if result.summary.label:
+        print(f"not for the headline: {result.summary.label}")
     print(f"tuning written to {Path(args.out).resolve()}")
     return 0
 

@@ -42,7 +42,7 @@ def test_planted_shift_gives_the_planted_outcome(shift, expected):
     d = shift + rng.normal(0.0, 0.005 if shift == 0.0 else 0.1, 200)
     improved, baseline = tables_with(d)
     row = compare(improved, baseline, C1, CFG)
-    outcome, _ = decide(row.ci_low, row.ci_high, row.p_value, 0.05, row.n_pairs, CFG,
+    outcome, _ = decide(row.ci_low, row.ci_high, 0.05, row.n_pairs, CFG,
                          row.pi_low, row.pi_high)
     assert outcome == expected
     assert row.ci_low < shift + 0.05 and row.ci_high > shift - 0.05
@@ -51,30 +51,37 @@ def test_planted_shift_gives_the_planted_outcome(shift, expected):
 def test_noise_without_effect_wider_than_the_margin_is_inconclusive():
     d = np.random.default_rng(2).normal(0.0, 1.0, 60)
     row = compare(*tables_with(d), C1, CFG)
-    assert decide(row.ci_low, row.ci_high, row.p_value, 0.05, row.n_pairs,
+    assert decide(row.ci_low, row.ci_high, 0.05, row.n_pairs,
                   CFG, row.pi_low, row.pi_high)[0] == "inconclusive"
 
 
 def test_real_effect_inside_the_margin_is_equivalent_and_says_so():
     d = -0.02 + np.random.default_rng(3).normal(0.0, 0.002, 200)
     row = compare(*tables_with(d), C1, CFG)
-    outcome, note = decide(row.ci_low, row.ci_high, row.p_value, 0.05, row.n_pairs,
+    outcome, note = decide(row.ci_low, row.ci_high, 0.05, row.n_pairs,
                            CFG, row.pi_low, row.pi_high)
     assert outcome == "equivalent" and "less than the margin" in note
 
 
-def test_discrete_split_with_many_ties_is_a_contradiction_not_a_zero():
-    """68 worse, 117 tied, 15 better (the C5 split of the issue): Hodges-Lehmann moves off zero,
-    the signed-rank test and the probability of improvement see it."""
+def test_discrete_split_with_many_ties_moves_the_estimate_but_an_interval_at_zero_decides():
+    """68 worse, 117 tied, 15 better (the C5 split of an earlier issue): Hodges-Lehmann moves
+    off zero, the signed-rank test and the probability of improvement see it; but the
+    estimate's interval on this lattice ends at 0, and the interval is the test (issue 40):
+    no direction, and the ledger's note says the paired test disagrees."""
     d = np.concatenate([np.ones(68), np.zeros(117), -np.ones(15)])
     row = compare(*tables_with(d, "oscillation_count"), BY_ID["C5"], CFG)
     assert (row.n_better, row.n_tied, row.n_worse) == (15, 117, 68)
     assert row.estimate == 0.5 and row.p_value < 1e-6
     assert row.prob_improvement == pytest.approx((15 + 117 / 2) / 200)
     assert row.pi_high < 0.5
-    outcome, _ = decide(row.ci_low, row.ci_high, row.p_value, 0.25, row.n_pairs, CFG,
+    assert row.ci_low == 0.0 and row.ci_high >= 0.5
+    outcome, _ = decide(row.ci_low, row.ci_high, 0.25, row.n_pairs, CFG,
                         row.pi_low, row.pi_high)
-    assert outcome == "contradicted"
+    assert outcome == "inconclusive"
+    # one more worse step off the lattice's floor and the direction is given
+    shifted = decide(row.ci_low + 0.5, row.ci_high, 0.25, row.n_pairs, CFG, row.pi_low,
+                     row.pi_high)[0]
+    assert shifted == "contradicted"
 
 
 def test_hodges_lehmann_equals_the_walsh_median_by_brute_force():
@@ -213,7 +220,7 @@ def test_estimate_and_probability_of_improvement_disagreeing_is_mixed(small, lar
     row = compare(*tables_with(d), C1, CFG)
     assert (row.prob_improvement > 0.5) == (pi_side == "better")
     assert (row.estimate > 0) == (pi_side == "better")
-    outcome, note = decide(row.ci_low, row.ci_high, row.p_value, 0.05, row.n_pairs, CFG,
+    outcome, note = decide(row.ci_low, row.ci_high, 0.05, row.n_pairs, CFG,
                            row.pi_low, row.pi_high, row.estimate, row.prob_improvement)
     assert outcome == "mixed"
     assert f"most pairs {pi_side}" in note and f"{row.prob_improvement:.2f}" in note
@@ -222,7 +229,7 @@ def test_estimate_and_probability_of_improvement_disagreeing_is_mixed(small, lar
 def test_significant_estimate_beyond_the_margin_with_pi_at_one_half_is_a_direction():
     """The family case: estimate +0.35 [0.23, 0.47], p tiny, PI's upper bound exactly 0.5:
     both point worse, so it is a contradiction, not 'inconclusive'."""
-    outcome, _ = decide(0.23, 0.47, 9e-9, 0.1, 160, CFG, 0.40, 0.50, 0.35, 0.45)
+    outcome, _ = decide(0.23, 0.47, 0.1, 160, CFG, 0.40, 0.50, 0.35, 0.45)
     assert outcome == "contradicted"
 
 

@@ -16,7 +16,9 @@ cost stated through its Cholesky factor (issue 22: the same QP, Clarabel's itera
 numbers move at the 1e-6 level); the condensed statement in ``W = R U`` coordinates (issue 22:
 the same QP without auxiliary variables, Clarabel's iterates differ); the lateral MPC in path
 coordinates (issue 38: ``controller.frame=path`` is the new default, new keys change the hash,
-every lateral number moves, and the runs carry the model-validity metrics).
+every lateral number moves, and the runs carry the model-validity metrics); intervals at
+1 - alpha/7 (issue 40: the interval is the test; every interval widens, a row with too few
+pairs reports none, no outcome moves).
 """
 
 from __future__ import annotations

@@ -51,6 +51,7 @@ SWITCH_TESTS = {
     "metrics.lateral_accel": "test_metrics", "metrics.smoothness_window": "here",
     "metrics.repulsion_need": "test_metrics", "metrics.oscillation": "test_metrics",
     "metrics.collision_check": "test_metrics", "metrics.attribution_steering_samples": "here",
+    "claims.c2_window": "test_common_window", "claims.common_window": "test_common_window",
     "claims.estimator": "here", "claims.test": "here", "claims.pairs": "test_claims",
     "claims.margins": "here", "claims.comparable_clearance_m": "here",
     "controller.backend": "test_kinematic", "planner.normalize_step": "test_kinematic",
@@ -59,6 +60,11 @@ SWITCH_TESTS = {
     "controller.path_curvature_max_1_per_m": "test_path_frame",
     "controller.path_state_reference": "test_path_frame",
     "controller.horizon_reach_m": "test_path_frame", "planner.velocity_rule": "test_path_frame",
+    "claims.interval_adjustment": "test_outcome_interval",
+    "tune.convergence_tolerance": "test_tune_convergence",
+    "tune.convergence_window": "test_tune_convergence",
+    "tune.hypervolume_bounds": "test_tune_convergence", "tune.replicates": "test_tune",
+    "tune.settled_share": "test_tune_convergence", "tune.censoring": "test_tune_convergence",
     "controller.collision_constraints": "test_apf_alone",
 
 
@@ -356,10 +362,10 @@ def test_estimator_test_and_margins_change_the_outcome():
     sign = compare(improved, baseline, CLAIMS[0], ClaimsConfig(n_resamples=199, test="sign"))
     assert sign.p_value != hl.p_value
     row = compare(improved, baseline, CLAIMS[0], ClaimsConfig(n_resamples=199))
-    args = (row.ci_low, row.ci_high, 0.0, None, row.n_pairs,
+    args = (row.ci_low, row.ci_high, None, row.n_pairs,
             ClaimsConfig(n_resamples=199), row.pi_low, row.pi_high)
-    wide = decide(args[0], args[1], args[2], 10.0, *args[4:])[0]
-    narrow = decide(args[0], args[1], args[2], 1e-3, *args[4:])[0]
+    wide = decide(args[0], args[1], 10.0, *args[3:])[0]
+    narrow = decide(args[0], args[1], 1e-3, *args[3:])[0]
     assert wide == "equivalent" and narrow != "equivalent"
 
 

@@ -21,9 +21,11 @@ from pipeline.analysis.objectives import Objective, objective_value, objective_v
 from pipeline.config import CONF_DIR
 from pipeline.errors import ConfigError
 from pipeline.studies.tune import (
+    Convergence,
     TuneSpace,
     closest_to_ideal,
     load_tune_space,
+    make_study,
     optimize,
     pareto_mask,
 )
@@ -91,9 +93,11 @@ def test_the_run_returns_its_objectives_to_hydras_optuna_sweeper(tmp_path):
 
 
 def _planted_space(n_trials: int) -> TuneSpace:
-    return TuneSpace(name="planted", n_trials=n_trials, batch_size=4, population_size=8,
+    return TuneSpace(name="planted", min_trials=n_trials, max_trials=n_trials,
+                     convergence_window=n_trials, batch_size=4, population_size=8,
                      objectives=[Objective("reaction_delay_s"),
-                                 Objective("lateral_jerk_rms_mps3")])
+                                 Objective("lateral_jerk_rms_mps3")],
+                     hypervolume_bounds=[[0.0, 4.0], [0.0, 4.0]])
 
 
 def test_the_tuner_finds_a_planted_optimum_and_respects_the_constraint():
@@ -103,10 +107,8 @@ def test_the_tuner_finds_a_planted_optimum_and_respects_the_constraint():
     import optuna
     from optuna.distributions import UniformDistribution
 
-    from pipeline.studies.tune import _study
-
     space = _planted_space(60)
-    study = _study(space, "improved", storage=None)
+    study = make_study(space, "improved", 0, storage=None)
     distributions = {"planner.beta": UniformDistribution(0.05, 2.0),
                      "planner.alpha_e": UniformDistribution(0.5, 4.0)}
 
@@ -117,7 +119,8 @@ def test_the_tuner_finds_a_planted_optimum_and_respects_the_constraint():
     def evaluate(settings):
         return [(planted(p), 1.0 if p["planner.beta"] > 1.2 else -1.0) for p in settings]
 
-    optimize(study, distributions, evaluate, space.n_trials, space.batch_size, log=lambda m: None)
+    optimize(study, distributions, evaluate, Convergence.of(space), space.batch_size,
+             log=lambda m: None)
     complete = study.get_trials(states=(optuna.trial.TrialState.COMPLETE,))
     assert len(complete) == 60
     # every trial carries the values and the constraint of its own parameters
@@ -152,24 +155,35 @@ def test_heldout_family_shares_no_scenario_with_the_training_family(make_config)
                            f"scenario.family.seed={seed}", f"scenario.family.size={size}"])
         return family_members(cfg.scenario, cfg.vehicle.footprint_radius_m)
 
-    train = members(space.training_seed, space.training_size)
     held = members(space.heldout_seed, space.heldout_size)
-    assert space.heldout_size >= 200
+    assert space.heldout_size >= 200 and space.replicates >= 5
+    train = [m for seed in space.training_seeds for m in members(seed, space.training_size)]
+    # the replicates' training families are distinct from each other, too
+    assert len({m.name for m in train}) == len(train)
     layout = lambda m: tuple((o.x_m, o.y_m, o.appear_time_s, o.radius_m) for o in m.obstacles)
     assert not {m.name for m in train} & {m.name for m in held}
     assert not {layout(m) for m in train} & {layout(m) for m in held}
     with pytest.raises(ConfigError, match="tune.heldout_seed"):
         TuneSpace(training_seed=3, heldout_seed=3)
+    with pytest.raises(ConfigError, match="tune.heldout_seed"):  # replicate 2's training seed
+        TuneSpace(training_seed=1, heldout_seed=3, replicates=5)
 
 
 def test_tuning_files_are_read_strictly(tmp_path):
     bad = tmp_path / "bad.yaml"
-    bad.write_text("name: x\nn_trials: 4\ntraining_sise: 10\n")
+    bad.write_text("name: x\nmin_trials: 4\ntraining_sise: 10\n")
     with pytest.raises(ConfigError, match="tune.training_sise"):
         load_tune_space(bad)
-    bad.write_text("name: x\nn_trials: four\n")
-    with pytest.raises(ConfigError, match="tune.n_trials"):
+    bad.write_text("name: x\nmin_trials: four\n")
+    with pytest.raises(ConfigError, match="tune.min_trials"):
         load_tune_space(bad)
+    bad.write_text("name: x\nhypervolume_bounds: [[0, 2], [4, 0], [0, 8]]\n")
+    with pytest.raises(ConfigError, match=r"tune.hypervolume_bounds\[1\]"):
+        load_tune_space(bad)
+    bad.write_text("name: x\nmin_trials: 40\nmax_trials: 20\n")
+    with pytest.raises(ConfigError, match="tune.max_trials"):
+        load_tune_space(bad)
+    bad.write_text("name: x\nn_trials: four\n")
     proc = subprocess.run([sys.executable, "-m", "pipeline.tune", "--space", str(bad),
                            "--out", str(tmp_path / "o")], cwd=ROOT, capture_output=True,
                           text=True, timeout=120)
@@ -226,18 +240,33 @@ def test_make_tune_quick_resumes_after_sigkill_and_feeds_the_report(tmp_path, ma
     done = subprocess.run(command, cwd=ROOT, capture_output=True, text=True, timeout=600)
     assert done.returncode == 0, done.stderr[-2000:]
     after = _complete_trials(out / "tune.db")
-    assert {s: len(v) for s, v in after.items()} == {"quick-improved": 4, "quick-baseline": 4}
+    space = load_tune_space(CONF_DIR / "tune" / "quick.yaml")
+    key = space.trial_key()
+    assert set(after) == {f"quick-{key}-r{r}-{m}" for r in range(2)
+                          for m in ("improved", "baseline")}
     for study, trials in before.items():
         assert set(trials) <= set(after[study])  # nothing completed was repeated or lost
     for path, mtime in manifests.items():  # families and members finished before the kill
         assert path.stat().st_mtime_ns == mtime, f"{path} was rewritten"
     trials = pd.read_csv(out / "trials.csv")
-    assert sorted(trials.groupby("method").size().tolist()) == [4, 4]
+    summary = json.loads((out / "summary.json").read_text())
+    # per replicate and method: between the minimum and the cap, as the summary says
+    for h in summary["replicates"]:
+        n = int(((trials["replicate"] == h["replicate"]) & (trials["method"] == h["method"]))
+                .sum())
+        assert 4 <= n <= 6 and n == h["trials"] == len(h["hypervolume"])
+        assert len(after[f"quick-{key}-r{h['replicate']}-{h['method']}"]) == n
     assert trials["pareto"].any() and (out / "figures" / "pareto_fronts_heldout.png").is_file()
+    assert (out / "figures" / "hypervolume_history.png").is_file()
     tuned = pd.read_csv(out / "ledger_tuned.csv")
     assert set(tuned["comparison"]) == {"baseline", "baseline_matched"}
-    summary = json.loads((out / "summary.json").read_text())
+    assert sorted(tuned["replicate"].unique()) == [0, 1]
     assert [c["claim"] for c in summary["claims"]][:2] == ["C0", "C1"]
+    # the counts are the replicates' tuned outcomes, read back from the tuned ledgers
+    for claim in summary["claims"]:
+        rows = tuned[(tuned["claim"] == claim["claim"]) & (tuned["comparison"] == "baseline")]
+        assert claim["tuned_outcomes"] == rows.sort_values("replicate")["outcome"].tolist()
+    assert summary["headline"] is False and "replicates" in summary["below_default_budget"]
 
     from pipeline.report import main as report_main
 
@@ -252,9 +281,11 @@ def test_make_tune_quick_resumes_after_sigkill_and_feeds_the_report(tmp_path, ma
     assert report_main([str(runs), "--out", str(tmp_path / "report"), "--tune", str(out),
                         "--bench", str(tmp_path / "no_bench")]) == 0
     page = (tmp_path / "report" / "index.html").read_text()
-    assert 'id="fairfight"' in page and "Tuned vs tuned" in page
-    assert "<strong>Fair fight:</strong> both methods tuned with 4 trials each" in page
-    # the answer's line per claim carries the tuned-vs-tuned outcome
-    assert "tuned vs tuned: " in page[page.index('id="answer"'):]
+    assert 'id="fairfight"' in page and "Tuned: the answer" in page
+    assert 'id="fairfight-parity"' in page and "Not used in the opening summary" in page
+    # a quick tune never writes the headline: no tuned outcome in the opening summary
+    answer_block = page[page.index('id="answer"'):page.index("</div>", page.index('id="answer"'))]
+    assert "tuned vs tuned" not in answer_block
+    assert "a tuning is in the outputs but not used here" in answer_block
     answer = (tmp_path / "report" / "answer.txt").read_text()
-    assert "when both methods are tuned with the same budget" in answer
+    assert "tuned by the same rules" not in answer

@@ -64,8 +64,7 @@ def ablation_effects(tables: dict[str, pd.DataFrame], cfg: ClaimsConfig) -> pd.D
         table = tables[label]
         for claim in CLAIMS:
             result = compare(table, baseline, claim, cfg)
-            outcome, _ = judge(result, result.p_value, cfg.margins[claim.claim_id], cfg,
-                               claim)
+            outcome, _ = judge(result, cfg.margins[claim.claim_id], cfg, claim)
             tally = Tally.of(table)
             rows.append({"configuration": label, "claim": claim.claim_id,
                          "metric": claim.primary_metric, "effect": result.estimate,

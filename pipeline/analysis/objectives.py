@@ -89,3 +89,34 @@ def objective_values(table: pd.DataFrame, objectives: list[Objective]) -> tuple[
         out.append(objective_value(pd.to_numeric(column, errors="coerce").to_numpy(float),
                                    objective))
     return tuple(out)
+
+
+#: Metrics that a run can fail to show before it ends, with the column of their clock's start
+#: and the flag that says the event happened: censored at the run's end, such a member counts
+#: with ``duration_s - start`` (a lower bound of its true value) instead of being dropped.
+CENSORED_AT_RUN_END = {"reaction_delay_s": ("threat_appear_time_s", "reacted"),
+                       "recovery_time_s": ("obstacle_passed_time_s", "recovered")}
+
+
+def tuning_table(table: pd.DataFrame, censoring: str = "run_end") -> pd.DataFrame:
+    """A family table as the tuning objectives read it, the way the ledger treats its members:
+    collided members left out (the ledger judges C1-C5 on pairs where neither collided and
+    counts collisions in C0; the tuning counts them in its safety constraint), and with
+    ``censoring="run_end"`` a member that never reacted or never recovered counted at the run's
+    end (:data:`CENSORED_AT_RUN_END`) rather than dropped (``"drop"``: left out)."""
+    out = table.copy()
+    if "collision" in out:
+        out = out[~out["collision"].astype(bool)]
+    if censoring != "run_end" or "duration_s" not in out:
+        return out
+    duration = pd.to_numeric(out["duration_s"], errors="coerce")
+    for metric, (start, flag) in CENSORED_AT_RUN_END.items():
+        if metric not in out or start not in out:
+            continue
+        value = pd.to_numeric(out[metric], errors="coerce")
+        begun = pd.to_numeric(out[start], errors="coerce")
+        missed = value.isna() & begun.notna()
+        if flag in out:
+            missed &= ~out[flag].astype(bool)
+        out[metric] = value.where(~missed, duration - begun)
+    return out

@@ -103,7 +103,10 @@ class ClaimsConfig(FrozenAfterValidation):
     """
 
     alpha: float = 0.05
-    n_resamples: int = 999
+    # the level of every ledger interval: 1 - alpha / (claims per comparison) (bonferroni), or
+    # 1 - alpha (none); the interval is the test (a direction exactly when it excludes 0)
+    interval_adjustment: str = "bonferroni"
+    n_resamples: int = 1999
     seed: int = 0
     estimator: str = "hodges_lehmann"
     test: str = "wilcoxon"
@@ -119,6 +122,11 @@ class ClaimsConfig(FrozenAfterValidation):
     # controls, by method name (run.method); any method, your own included
     treatment: str = "improved"
     controls: List[str] = field(default_factory=lambda: ["baseline", "baseline_matched"])
+    # C2's window: each run's own avoidance window ("own"), or one common to both runs of a
+    # pair ("common"), made of their two windows by ``common_window``: "union" (from the
+    # earlier start to the later end, both runs over the same span) or "intersection"
+    c2_window: str = "own"
+    common_window: str = "union"
 
     def __post_init__(self) -> None:
         from pipeline.validation import safe_name
@@ -138,9 +146,12 @@ class ClaimsConfig(FrozenAfterValidation):
                 raise ConfigError(f"claims.{key}", value, "an integer >= 0")
         if self.n_resamples < 99:
             raise ConfigError("claims.n_resamples", self.n_resamples, "an integer >= 99")
+        choice("claims.interval_adjustment", self.interval_adjustment, ("bonferroni", "none"))
         choice("claims.estimator", self.estimator, ("hodges_lehmann", "median"))
         choice("claims.test", self.test, ("wilcoxon", "sign"))
         choice("claims.pairs", self.pairs, ("neither_collided", "all"))
+        choice("claims.c2_window", self.c2_window, ("own", "common"))
+        choice("claims.common_window", self.common_window, ("union", "intersection"))
         at_least("claims.tie_tolerance", self.tie_tolerance, 0.0)
         unknown = sorted(set(self.margins) - set(CLAIM_IDS))
         if unknown:

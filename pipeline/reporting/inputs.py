@@ -19,6 +19,7 @@ from typing import TypeVar
 
 import pandas as pd
 
+from pipeline.analysis.metrics import LateralJerk
 from pipeline.analysis.validity import ValidityTable
 from pipeline.config import ClaimsConfig, ExperimentConfig
 from pipeline.store.collection import (
@@ -129,13 +130,16 @@ class TrackRuns:
 @dataclass(frozen=True)
 class FamilyInputs:
     """The scenario families of one section: every table by label, the one judged per method
-    (:attr:`primary`), their ``family.json`` and settings, and notes on what was picked."""
+    (:attr:`primary`), their ``family.json`` and settings, and notes on what was picked;
+    :attr:`jerks`: the judged runs' lateral jerk by method and scenario (what C2 on a window
+    common to both runs of a pair reads; only where :meth:`with_jerks` read them)."""
 
     tables: dict[str, pd.DataFrame]
     info: dict[str, dict]
     settings: dict[str, ExperimentConfig]
     primary: dict[str, pd.DataFrame]
     notes: tuple[str, ...]
+    jerks: dict[str, dict[str, LateralJerk]] = field(default_factory=dict)
 
     @classmethod
     def of(cls, collection: RunCollection, canonical: tuple[str, ...]) -> FamilyInputs:
@@ -151,6 +155,35 @@ class FamilyInputs:
         """Whether the ledger can be made: the treatment and a control are among the
         families."""
         return cfg.treatment in self.primary and any(c in self.primary for c in cfg.controls)
+
+    def label_of(self, method: str) -> str | None:
+        """The label of the family judged for ``method`` (None when there is none)."""
+        table = self.primary.get(method)
+        return next((label for label, t in self.tables.items() if t is table), None)
+
+    def with_jerks(self, methods: tuple[str, ...]) -> FamilyInputs:
+        """These inputs with the lateral jerk of every member of the judged families of
+        ``methods`` (each from its stored trajectory, read with the family's own metric
+        settings); a family whose table has no recorded window is left out (C2 on a common
+        window cannot be read on it)."""
+        from pipeline.analysis.claims.windows import WINDOW_START
+        from pipeline.analysis.metrics import lateral_jerk_signal
+        from pipeline.store.runs import member_trajectories
+        from pipeline.studies.experiment import trajectory_context
+
+        jerks: dict[str, dict[str, LateralJerk]] = {}
+        for method in methods:
+            label = self.label_of(method)
+            if label is None or label not in self.settings or \
+                    WINDOW_START not in self.primary[method]:
+                continue
+            settings = self.settings[label]
+            context = trajectory_context(settings)
+            jerks[method] = {
+                str(metrics.get("scenario")): lateral_jerk_signal(trajectory, context,
+                                                                  settings.metrics)
+                for _, trajectory, metrics in member_trajectories(Path(self.info[label]["dir"]))}
+        return dataclasses.replace(self, jerks=jerks)
 
 
 @dataclass(frozen=True)
@@ -252,6 +285,12 @@ class ReportInputs:
         lateral = TrackRuns.of(paper, layout.canonical)
         others = tuple(r for r in lateral_runs if r.scenario != lateral.scenario)
         family = FamilyInputs.of(collection, layout.canonical)
+        if family.judgeable(claims):
+            # C2 on a window common to both runs of a pair reads the judged runs' jerk
+            log.info("report: the lateral jerk of the judged families' members")
+            family = optional(lambda _root: family.with_jerks(
+                (claims.treatment, *claims.controls)), layout.root,
+                "C2 on a common window") or family
         kin_family_dir = layout.folder("kinematic_family")
         kinematic_family = optional(lambda folder: FamilyInputs.of(load_runs(folder, []),
                                                                    layout.canonical),
@@ -260,6 +299,13 @@ class ReportInputs:
         apf_alone = optional(lambda folder: _apf_alone(folder, layout, skipped),
                              layout.folder("apf_alone"), "APF-by-itself section") \
             if layout.folder("apf_alone").is_dir() else None
+        if apf_alone is not None and claims.c2_window == "common" \
+                and apf_alone.judgeable(claims):
+            # its ledger reads C2 as the default ledger does: on the common window
+            apf_alone = optional(lambda _root: apf_alone.with_jerks(
+                (claims.treatment, *claims.controls, "mpc_no_apf")),
+                layout.folder("apf_alone"), "C2 on a common window (APF by itself)") \
+                or apf_alone
         nmpc = optional(NmpcCheckResult.load, layout.folder("nmpc_check"), "nmpc check") \
             if NmpcCheckResult.present(layout.folder("nmpc_check")) else None
         speed = optional(SpeedCheckResult.load, layout.folder("speed"), "speed check") \

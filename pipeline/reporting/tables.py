@@ -41,8 +41,8 @@ def write_tables(inputs: ReportInputs, verdicts: Verdicts, table_dir: Path) -> N
 
 def _ledgers(inputs: ReportInputs, verdicts: Verdicts, table_dir: Path) -> None:
     """The family ledgers (lateral, Appendix-A track, the baseline against no APF, the APF by
-    itself with its collisions with and without the MPC's half-planes), the outcome counts, and
-    the model-validity tables."""
+    itself with its collisions with and without the MPC's half-planes), C2 on each run's own
+    and on a common window, the outcome counts, and the model-validity tables."""
     if verdicts.family is not None:
         verdicts.family.ledger.to_frame().to_csv(table_dir / "claims_ledger.csv", index=False)
         pd.DataFrame(list(verdicts.family.counts)).to_csv(table_dir / "family_outcomes.csv",
@@ -50,6 +50,10 @@ def _ledgers(inputs: ReportInputs, verdicts: Verdicts, table_dir: Path) -> None:
         if verdicts.family.apf_adds is not None:
             verdicts.family.apf_adds.to_frame().to_csv(
                 table_dir / "claims_ledger_baseline_vs_no_apf.csv", index=False)
+        windows = verdicts.family.c2_windows
+        if windows is not None and windows.common:
+            pd.DataFrame(windows.rows()).to_csv(table_dir / "claims_c2_common_window.csv",
+                                                index=False)
     if verdicts.kinematic_family is not None:
         kf = verdicts.kinematic_family
         kf.ledger.to_frame().to_csv(table_dir / "claims_ledger_kinematic_family.csv",

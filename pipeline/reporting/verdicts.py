@@ -6,6 +6,7 @@ and in the other frame. The sections only format these."""
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from collections.abc import Iterable
 from dataclasses import dataclass, field
@@ -16,6 +17,7 @@ from pipeline.analysis.ablation import ablation_effects, ablation_roles, interpr
 from pipeline.analysis.claims import (
     ALL_CLAIMS,
     Ledger,
+    LedgerRow,
     claims_table,
     family_ledger,
     outcome_counts,
@@ -40,14 +42,49 @@ class TrackClaims:
 
 
 @dataclass(frozen=True)
+class C2Windows:
+    """C2 on each run's own avoidance window and on a window common to both runs of a pair
+    (``claims.c2_window``; the rule ``claims.common_window``), per comparison: the ledger's
+    C2 rows under each reading, the ledger's own reading marked. ``note`` says why a reading
+    is missing (empty rows)."""
+
+    rule: str
+    in_ledger: str
+    own: tuple[LedgerRow, ...] = ()
+    common: tuple[LedgerRow, ...] = ()
+    note: str = ""
+
+    def rows(self) -> list[dict]:
+        """One row per reading and comparison (``tables/claims_c2_common_window.csv``)."""
+        out = []
+        for reading, rows in (("own", self.own), ("common", self.common)):
+            for row in rows:
+                r = row.result
+                out.append({
+                    "claim": row.claim_id, "reading": reading,
+                    "window": "each run's own avoidance window" if reading == "own"
+                    else f"the {self.rule} of both runs' avoidance windows",
+                    "in_ledger": reading == self.in_ledger, "comparison": row.comparison,
+                    "metric": row.claim.primary_metric, "outcome": str(row.outcome),
+                    "estimate": r.estimate, "ci_low": r.ci_low, "ci_high": r.ci_high,
+                    "p_holm": row.p_holm, "prob_improvement": r.prob_improvement,
+                    "pi_low": r.pi_low, "pi_high": r.pi_high, "n_better": r.n_better,
+                    "n_tied": r.n_tied, "n_worse": r.n_worse, "n_missing": r.n_missing,
+                    "n_pairs": r.n_pairs, "margin": row.margin, "note": row.note})
+        return out
+
+
+@dataclass(frozen=True)
 class FamilyVerdicts:
-    """A family's ledger, its outcome counts per method and what the baseline's APF adds
-    (the baseline against ``mpc_no_apf``; None without both)."""
+    """A family's ledger, its outcome counts per method, what the baseline's APF adds
+    (the baseline against ``mpc_no_apf``; None without both) and C2 on both windows (None
+    on a family without them)."""
 
     tables: dict[str, pd.DataFrame]
     ledger: Ledger
     counts: tuple[dict, ...]
     apf_adds: Ledger | None
+    c2_windows: C2Windows | None = None
 
 
 @dataclass(frozen=True)
@@ -121,19 +158,22 @@ class Verdicts:
             if inputs.kinematic is not None else None
         family = _family(inputs.family, cfg, inputs.lateral.metrics(), paper_ledger=True) \
             if inputs.family is not None and inputs.family.judgeable(cfg) else None
-        kinematic_family = _family(inputs.kinematic_family, cfg, None, paper_ledger=False) \
+        # C2 on a common window is read on the lateral family (whose runs' jerk is read);
+        # every other ledger reads each run's own window
+        own = dataclasses.replace(cfg, c2_window="own")
+        kinematic_family = _family(inputs.kinematic_family, own, None, paper_ledger=False) \
             if inputs.kinematic is not None and inputs.kinematic_family is not None \
             and inputs.kinematic_family.judgeable(cfg) else None
-        effects, roles = None, ablation_roles(inputs.ablation, cfg)
+        effects, roles = None, ablation_roles(inputs.ablation, own)
         if roles[1] in inputs.ablation and roles[0] in inputs.ablation:
-            effects = ablation_effects(inputs.ablation, cfg)
+            effects = ablation_effects(inputs.ablation, own)
         apf_alone = _apf_alone(inputs.apf_alone, cfg, family, inputs.family) \
             if inputs.apf_alone is not None and inputs.apf_alone.judgeable(cfg) else None
         return cls(cfg, paper, kinematic, family, kinematic_family, apf_alone,
                    _readings(inputs.kinematic, inputs.readings, cfg)
                    if inputs.kinematic is not None else (),
-                   effects, roles, interpretation_flips(inputs.interpretations, cfg),
-                   _validity(inputs.family, inputs, cfg) if inputs.family is not None
+                   effects, roles, interpretation_flips(inputs.interpretations, own),
+                   _validity(inputs.family, inputs, own) if inputs.family is not None
                    and family is not None else None)
 
 
@@ -167,30 +207,63 @@ def track_claims(runs: TrackRuns, cfg: ClaimsConfig, comparable_only: bool = Fal
 
 def _family(family: FamilyInputs, cfg: ClaimsConfig, paper_metrics: dict | None,
             paper_ledger: bool) -> FamilyVerdicts:
-    """The lateral family's ledger (with the paper scenario's column and the all-pairs
-    sensitivity), or the Appendix-A track's (without them)."""
+    """The lateral family's ledger (with the paper scenario's column, the all-pairs
+    sensitivity and C2 on both windows), or the Appendix-A track's (without them)."""
     tables = {m: family.primary[m] for m in ordered(family.primary)} if paper_ledger \
         else family.primary
+    judged = (cfg.treatment, *[c for c in cfg.controls if c in tables])
+    jerks = family.jerks if all(m in family.jerks for m in judged) else None
+    asked = cfg.c2_window
+    if jerks is None:  # C2 on a common window cannot be read: said in C2Windows' note
+        cfg = dataclasses.replace(cfg, c2_window="own")
     ledger = family_ledger(tables, cfg, paper_metrics, cfg.treatment, tuple(cfg.controls),
-                           **({} if paper_ledger else {"sensitivity": False}))
+                           sensitivity=paper_ledger, jerks=jerks)
     counts = outcome_counts({m: family.tables[m] for m in ordered(family.tables)}
                             if family.tables else tables) if paper_ledger else ()
-    apf = family_ledger(tables, cfg, None, "baseline", ("mpc_no_apf",), sensitivity=False) \
+    apf = family_ledger(tables, dataclasses.replace(cfg, c2_window="own"), None, "baseline",
+                        ("mpc_no_apf",), sensitivity=False) \
         if "baseline" in tables and "mpc_no_apf" in tables else None
-    return FamilyVerdicts(tables, ledger, tuple(counts), apf)
+    windows = _c2_windows(tables, cfg, ledger, jerks, asked) if paper_ledger else None
+    return FamilyVerdicts(tables, ledger, tuple(counts), apf, windows)
+
+
+def _c2_windows(tables: dict[str, pd.DataFrame], cfg: ClaimsConfig, ledger: Ledger,
+                jerks: dict | None, asked: str) -> C2Windows:
+    """C2's rows under each window reading (:class:`C2Windows`): the ledger's, and those of
+    the whole ledger under the other reading (its Holm adjustment over every claim)."""
+    ledger_rows = tuple(row for row in ledger if row.claim_id == "C2")
+    if jerks is None:
+        return C2Windows(cfg.common_window, "own", ledger_rows, note=(
+            "the runs' lateral jerk could not be read (or their metrics record no window): "
+            "C2 on a common window is not shown"
+            + (", and the ledger reads C2 on each run's own window although claims.c2_window "
+               "is common" if asked == "common" else "")))
+    other = "common" if cfg.c2_window == "own" else "own"
+    other_ledger = family_ledger(tables, dataclasses.replace(cfg, c2_window=other), None,
+                                 cfg.treatment, tuple(c for c in cfg.controls if c in tables),
+                                 sensitivity=False, jerks=jerks)
+    other_rows = tuple(row for row in other_ledger if row.claim_id == "C2")
+    by_reading = {cfg.c2_window: ledger_rows, other: other_rows}
+    return C2Windows(cfg.common_window, cfg.c2_window, by_reading["own"],
+                     by_reading["common"])
 
 
 def _apf_alone(family: FamilyInputs, cfg: ClaimsConfig, default: FamilyVerdicts | None,
                default_inputs: FamilyInputs | None) -> ApfAloneVerdicts:
     """The ledger without the MPC's half-planes, judged as the default one (the same
-    :func:`family_ledger`, settings and all-pairs sensitivity; no paper-scenario column:
+    :func:`family_ledger`, settings, C2 window and all-pairs sensitivity; no paper-scenario column:
     the paper scenario runs with them), plus ``mpc_no_apf`` as a comparison: what the
     treatment's APF adds over no APF at all. The counts with the half-planes are the default
     family's, given only when it is the same family (size and seed)."""
     tables = {m: family.primary[m] for m in ordered(family.primary)}
     comparisons = tuple(dict.fromkeys(c for c in (*cfg.controls, "mpc_no_apf")
                                       if c in tables and c != cfg.treatment))
-    ledger = family_ledger(tables, cfg, None, cfg.treatment, comparisons)
+    # C2 on the window the default ledger reads it on (a common one needs the runs' jerk)
+    jerks = family.jerks if all(m in family.jerks for m in (cfg.treatment, *comparisons)) \
+        else None
+    if jerks is None:
+        cfg = dataclasses.replace(cfg, c2_window="own")
+    ledger = family_ledger(tables, cfg, None, cfg.treatment, comparisons, jerks=jerks)
 
     def drawn(info: dict[str, dict]) -> set[tuple]:
         return {(i.get("size"), i.get("seed")) for i in info.values()}

@@ -8,10 +8,10 @@ paper scenario the words are *better*, *worse* or *within margin*. Statistics co
 ``scipy.stats``: the paired bootstrap interval (``bootstrap``, BCa where defined), the Wilcoxon
 signed-rank or sign test (``wilcoxon``, ``binomtest``), McNemar's exact test on discordant
 collision pairs (``binomtest``); Holm's adjustment over the six claims is written out (SciPy has
-none).
+none). C2 can be read on a window common to both runs of a pair (``claims.c2_window``).
 """
 
-# The code is in modules of one concern: catalogue, statistics, ledger.
+# The code is in modules of one concern: catalogue, statistics, ledger, windows.
 from pipeline.analysis.claims.catalogue import (
                                                 ALL_CLAIMS,
                                                 CLAIMS,
@@ -48,6 +48,14 @@ from pipeline.analysis.claims.statistics import (
                                                 probability_of_improvement,
                                                 wilcoxon_pratt_pvalue,
 )
+from pipeline.analysis.claims.windows import (
+                                                COMMON_C2_METRIC,
+                                                WINDOW_RULES,
+                                                common_window,
+                                                common_window_claim,
+                                                common_window_pairs,
+                                                common_window_tables,
+)
 
 __all__ = ["Claim", "CLAIMS", "SAFETY", "ALL_CLAIMS", "Outcome", "OUTCOMES", "OUTCOME_RULE",
            "SINGLE_RULE", "hodges_lehmann", "hodges_lehmann_on", "bootstrap_interval",
@@ -55,4 +63,5 @@ __all__ = ["Claim", "CLAIMS", "SAFETY", "ALL_CLAIMS", "Outcome", "OUTCOMES", "OU
            "wilcoxon_pratt_pvalue", "holm", "decide", "newcombe_paired_interval", "PAIRS",
            "paired_differences", "PairedResult", "compare", "judge", "single_scenario_outcome",
            "claims_table", "LEDGER_COLUMNS", "LedgerRow", "Ledger", "family_ledger",
-           "outcome_counts"]
+           "outcome_counts", "COMMON_C2_METRIC", "WINDOW_RULES", "common_window",
+           "common_window_claim", "common_window_pairs", "common_window_tables"]

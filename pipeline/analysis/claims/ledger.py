@@ -6,15 +6,17 @@ outcome counts per method (:func:`outcome_counts`)."""
 from __future__ import annotations
 
 import math
-from collections.abc import Iterator
-from dataclasses import dataclass
+from collections.abc import Iterator, Mapping
+from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
 import pandas as pd
 
 from pipeline.analysis.claims.catalogue import ALL_CLAIMS, Claim, Outcome
-from pipeline.analysis.claims.statistics import PairedResult, compare, holm, judge
+from pipeline.analysis.claims.statistics import PairedResult, compare, holm, interval_level, judge
+from pipeline.analysis.claims.windows import common_window_claim, common_window_tables
+from pipeline.analysis.metrics.results import LateralJerk
 from pipeline.analysis.settings import ClaimsConfig
 from pipeline.analysis.tally import Tally
 
@@ -62,7 +64,7 @@ def claims_table(metrics_by_method: dict[str, dict[str, Any]], margins: dict[str
 
 
 LEDGER_COLUMNS = ["claim", "comparison", "metric", "outcome", "estimate", "ci_low", "ci_high",
-                  "p_value", "p_holm", "prob_improvement", "pi_low", "pi_high", "n_better",
+                  "ci_level", "p_value", "p_holm", "prob_improvement", "pi_low", "pi_high", "n_better",
                   "n_tied", "n_worse", "n_missing", "n_pairs", "margin", "note",
                   "outcome_all_pairs", "estimate_all_pairs", "paper_scenario"]
 
@@ -98,7 +100,8 @@ class LedgerRow:
                 "metric": self.claim.primary_metric, "outcome": str(self.outcome),
                 "n_pairs": r.n_pairs, "n_missing": r.n_missing, "n_better": r.n_better,
                 "n_tied": r.n_tied, "n_worse": r.n_worse, "estimate": r.estimate,
-                "ci_low": r.ci_low, "ci_high": r.ci_high, "interval_method": r.interval_method,
+                "ci_low": r.ci_low, "ci_high": r.ci_high, "ci_level": r.ci_level,
+                "interval_method": r.interval_method,
                 "p_value": r.p_value, "prob_improvement": r.prob_improvement,
                 "pi_low": r.pi_low, "pi_high": r.pi_high, "p_holm": self.p_holm,
                 "margin": self.margin, "note": self.note, "margin_reason": self.margin_reason,
@@ -149,11 +152,15 @@ class Ledger:
             columns=LEDGER_COLUMNS + ["interval_method", "margin_reason"])
 
 
+#: A run's lateral jerk by method and scenario (what C2 on a common window reads).
+Jerks = Mapping[str, Mapping[str, LateralJerk]]
+
+
 def family_ledger(tables: dict[str, pd.DataFrame], cfg: ClaimsConfig,
                   paper_metrics: dict[str, dict[str, Any]] | None = None,
                   improved: str = "improved",
                   comparisons: tuple[str, ...] = ("baseline", "baseline_matched"),
-                  sensitivity: bool = True) -> Ledger:
+                  sensitivity: bool = True, jerks: Jerks | None = None) -> Ledger:
     """Claims ledger over a scenario family: C0-C5 against each comparison present.
 
     Parameters
@@ -168,30 +175,80 @@ def family_ledger(tables: dict[str, pd.DataFrame], cfg: ClaimsConfig,
     sensitivity : bool
         Also judge C1-C5 on the other set of pairs (all pairs when the ledger uses those where
         neither collided).
+    jerks : mapping of method -> scenario -> LateralJerk, optional
+        Each run's lateral jerk: with ``cfg.c2_window = "common"`` C2 is judged on a window
+        common to both runs of each pair (:mod:`pipeline.analysis.claims.windows`), which
+        needs them.
 
     Returns
     -------
     Ledger
+
+    Raises
+    ------
+    ValueError
+        ``cfg.c2_window = "common"`` without the jerk of the treatment or of a comparison.
     """
     rows: list[LedgerRow] = []
     if improved not in tables:
         return Ledger((), improved)
+    level = interval_level(cfg, len(ALL_CLAIMS))
     for comparison in [c for c in comparisons if c in tables]:
-        block = [(claim, compare(tables[improved], tables[comparison], claim, cfg))
-                 for claim in ALL_CLAIMS]
+        pair = _pair_tables(tables, improved, comparison, cfg, jerks)
+        block = [(claim, compare(*pair[claim.claim_id], claim, cfg, level=level))
+                 for claim in _claims_read(cfg)]
         adjusted = holm([r.p_value for _, r in block])
         for (claim, result), p_holm in zip(block, adjusted, strict=True):
-            rows.append(_ledger_row(claim, comparison, result, p_holm, tables, cfg,
-                                    paper_metrics, improved, sensitivity))
+            rows.append(_ledger_row(claim, comparison, result, p_holm, pair[claim.claim_id],
+                                    cfg, paper_metrics, improved, sensitivity))
     return Ledger(tuple(rows), improved)
 
 
+def _claims_read(cfg: ClaimsConfig) -> tuple[Claim, ...]:
+    """Every claim as ``cfg`` reads it (C2 on a common window with ``c2_window = common``)."""
+    if cfg.c2_window != "common":
+        return ALL_CLAIMS
+    return tuple(common_window_claim(c, cfg.common_window) if c.claim_id == "C2" else c
+                 for c in ALL_CLAIMS)
+
+
+def _pair_tables(tables: dict[str, pd.DataFrame], improved: str, comparison: str,
+                 cfg: ClaimsConfig, jerks: Jerks | None
+                 ) -> dict[str, tuple[pd.DataFrame, pd.DataFrame]]:
+    """Per claim, the treatment's and the comparison's tables it is judged on: the family
+    tables, C2's with its common-window column when ``cfg.c2_window = common``."""
+    pair = (tables[improved], tables[comparison])
+    out = {c.claim_id: pair for c in ALL_CLAIMS}
+    if cfg.c2_window == "common":
+        absent = [m for m in (improved, comparison) if jerks is None or m not in jerks]
+        if absent:
+            raise ValueError(f"claims.c2_window=common: no lateral jerk of {', '.join(absent)} "
+                             "(C2 on a window common to both runs of a pair reads the runs' "
+                             "trajectories)")
+        assert jerks is not None
+        out["C2"] = common_window_tables(*pair, jerks[improved], jerks[comparison],
+                                         cfg.common_window)
+    return out
+
+
 def _ledger_row(claim: Claim, comparison: str, result: PairedResult, p_holm: float,
-                tables: dict[str, pd.DataFrame], cfg: ClaimsConfig,
+                pair: tuple[pd.DataFrame, pd.DataFrame], cfg: ClaimsConfig,
                 paper_metrics: dict[str, Any] | None,
                 improved: str, sensitivity: bool) -> LedgerRow:
     margin = float(cfg.margins[claim.claim_id])
-    outcome, note = judge(result, p_holm, margin, cfg, claim)
+    if result.n_pairs < cfg.min_pairs:
+        # too few pairs: no interval is reported, so none can seem to disagree with the outcome
+        result = replace(result, ci_low=math.nan, ci_high=math.nan, pi_low=math.nan,
+                         pi_high=math.nan, interval_method="too few pairs")
+    outcome, note = judge(result, margin, cfg, claim)
+    excludes_zero = bool(result.ci_high < 0.0 or result.ci_low > 0.0)
+    if np.isfinite(p_holm) and (p_holm < cfg.alpha) != excludes_zero:
+        test_note = (f"the paired test after Holm (p {p_holm:.2g}) "
+                     + ("finds a difference" if p_holm < cfg.alpha else "finds none")
+                     + f" at alpha {cfg.alpha:g}, the {result.ci_level:.2%} interval "
+                     + ("excludes 0" if excludes_zero else "does not")
+                     + ": the interval decides")
+        note = f"{note}; {test_note}" if note else test_note
     if not claim.is_rate and result.n_pairs and \
             result.n_floor_ties >= cfg.floor_tie_share * result.n_pairs:
         floor_note = (f"neither method shows the behaviour in {result.n_floor_ties} of "
@@ -202,9 +259,9 @@ def _ledger_row(claim: Claim, comparison: str, result: PairedResult, p_holm: flo
         all_pairs, estimate_all = outcome, result.estimate
     elif sensitivity:
         other = "all" if cfg.pairs == "neither_collided" else "neither_collided"
-        sens = compare(tables[improved], tables[comparison], claim, cfg, pairs=other)
-        # the sensitivity keeps its own unadjusted test: it is a check, not a claim
-        all_pairs, _ = judge(sens, sens.p_value, margin, cfg, claim)
+        sens = compare(*pair, claim, cfg, pairs=other, level=result.ci_level)
+        # the sensitivity reads its interval at the row's level: a check, not a claim
+        all_pairs, _ = judge(sens, margin, cfg, claim)
         estimate_all = sens.estimate
     paper = None
     if paper_metrics and comparison in paper_metrics and improved in paper_metrics:

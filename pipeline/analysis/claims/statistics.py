@@ -110,10 +110,10 @@ def bootstrap_interval(d: np.ndarray, statistic: Statistic, cfg: ClaimsConfig,
     return float("nan"), float("nan"), "failed"
 
 
-def probability_of_improvement(d: np.ndarray, cfg: ClaimsConfig
+def probability_of_improvement(d: np.ndarray, cfg: ClaimsConfig, level: float = 0.95
                                ) -> tuple[float, float, float]:
     """``P(d < 0) + P(d = 0) / 2`` (ties within ``tie_tolerance``) and its percentile bootstrap
-    interval."""
+    interval at ``level``."""
     from scipy import stats
 
     d = np.asarray(d, dtype=float)
@@ -125,7 +125,7 @@ def probability_of_improvement(d: np.ndarray, cfg: ClaimsConfig
     if np.ptp(score) == 0.0:
         return value, value, value
     result = stats.bootstrap((score,), np.mean, n_resamples=cfg.n_resamples, method="percentile",
-                             vectorized=True, axis=-1,
+                             confidence_level=level, vectorized=True, axis=-1,
                              random_state=np.random.default_rng(cfg.seed + 1))
     low, high = result.confidence_interval
     return value, float(low), float(high)
@@ -194,23 +194,39 @@ def holm(p_values: list[float]) -> list[float]:
     return adjusted.tolist()
 
 
-def decide(low: float, high: float, p_adjusted: float, margin: float, n_pairs: int,
-           cfg: ClaimsConfig,
+def interval_level(cfg: ClaimsConfig, n_claims: int) -> float:
+    """The confidence level of a ledger row's interval: ``1 - alpha / n_claims`` with
+    ``claims.interval_adjustment: bonferroni`` (the claims against one comparison share the
+    family-wise error rate ``alpha``), ``1 - alpha`` with ``none``.
+
+    The interval *is* the test (:data:`OUTCOME_RULE`): a direction exactly when it excludes 0.
+    Holm's step-down, which adjusts the p-values shown beside it, has no interval it is dual to
+    (Strassburger and Bretz, Stat. Med. 2008), so the intervals carry Bonferroni's level.
+    """
+    if cfg.interval_adjustment == "none":
+        return 1.0 - cfg.alpha
+    return 1.0 - cfg.alpha / max(int(n_claims), 1)
+
+
+def decide(low: float, high: float, margin: float, n_pairs: int, cfg: ClaimsConfig,
            pi_low: float = float("nan"), pi_high: float = float("nan"),
            estimate: float = float("nan"), pi: float = float("nan")) -> tuple[Outcome, str]:
-    """Outcome and note (:data:`OUTCOME_RULE`).
+    """Outcome and note (:data:`OUTCOME_RULE`) from the estimate's interval at the ledger's
+    level (:func:`interval_level`).
 
-    Equivalence is read off the estimate's interval and the margin; significance off the
-    adjusted p. A direction needs the estimate's interval (clear of zero) and the probability of
-    improvement (its point ``pi``, or its interval's middle) to agree; when they point opposite
-    ways the outcome is "mixed". Without a probability of improvement (rates) the interval alone
-    gives the direction.
+    Equivalence is read off the interval and the margin. A direction exactly when the interval
+    excludes 0 (strictly: an interval ending at 0, as lattice metrics give, has none) and the
+    estimate is not 0; it needs the probability of improvement (its point ``pi``, or its
+    interval's middle) to agree, and is "mixed" when they point opposite ways. Without a
+    probability of improvement (rates) the interval alone gives the direction. Everything else
+    is inconclusive: a row is inconclusive exactly when its interval contains 0 and reaches
+    beyond the margin.
     """
     if n_pairs < cfg.min_pairs or not (np.isfinite(low) and np.isfinite(high)):
         return Outcome.INCONCLUSIVE, f"too few pairs ({n_pairs} < {cfg.min_pairs})"
-    significant = bool(np.isfinite(p_adjusted) and p_adjusted < cfg.alpha)
-    # the interval contains no improvement (or no worsening); a lattice interval may end at 0
-    est_better, est_worse = high <= 0 < -low, low >= 0 < high
+    has_estimate = np.isfinite(estimate)
+    est_better = high < 0.0 and (estimate < 0.0 if has_estimate else True)
+    est_worse = low > 0.0 and (estimate > 0.0 if has_estimate else True)
     if not np.isfinite(pi) and np.isfinite(pi_low) and np.isfinite(pi_high):
         pi = (pi_low + pi_high) / 2.0
     if np.isfinite(pi):
@@ -218,17 +234,17 @@ def decide(low: float, high: float, p_adjusted: float, margin: float, n_pairs: i
     else:
         pi_better, pi_worse = est_better, est_worse
     if -margin < low and high < margin:
-        if significant and est_better and pi_better:
+        if est_better and pi_better:
             return Outcome.EQUIVALENT, "improved better, by less than the margin"
-        if significant and est_worse and pi_worse:
+        if est_worse and pi_worse:
             return Outcome.EQUIVALENT, "improved worse, by less than the margin"
         return Outcome.EQUIVALENT, ""
-    if significant and est_better and pi_better:
+    if est_better and not pi_worse:
         return Outcome.SUPPORTED, ""
-    if significant and est_worse and pi_worse:
+    if est_worse and not pi_better:
         return Outcome.CONTRADICTED, ""
-    if significant and ((est_better and pi_worse) or (est_worse and pi_better)):
-        value = estimate if np.isfinite(estimate) else (low + high) / 2.0
+    if est_better or est_worse:
+        value = estimate if has_estimate else (low + high) / 2.0
         if pi_better:
             words = (f"most pairs better (P(improvement) {pi:.2f}) but the typical difference "
                      f"worse ({value:+.3g} [{low:.3g}, {high:.3g}])")
@@ -316,14 +332,18 @@ class PairedResult:
     floor_value: float = float("nan")
     #: the finite paired differences the estimate was taken on (for plots)
     differences: np.ndarray | None = field(repr=False, compare=False, default=None)
+    #: the confidence level of ``ci_low, ci_high`` and ``pi_low, pi_high``
+    ci_level: float = 0.95
 
 
 def compare(improved: pd.DataFrame, comparison: pd.DataFrame, claim: Claim, cfg: ClaimsConfig,
-            pairs: str | None = None) -> PairedResult:
-    """One claim, one comparison: estimate, interval, test, probability of improvement,
-    counts (before the Holm adjustment and the outcome)."""
+            pairs: str | None = None, level: float | None = None) -> PairedResult:
+    """One claim, one comparison: estimate, interval (at ``level``, by default
+    ``1 - claims.alpha``; a ledger passes :func:`interval_level`), test, probability of
+    improvement, counts (before the Holm adjustment and the outcome)."""
     from scipy import stats
 
+    level = 1.0 - cfg.alpha if level is None else float(level)
     merged = paired_differences(improved, comparison, claim, cfg.pairs if pairs is None
                                 else pairs)
     d_all = merged["d"].to_numpy(float)
@@ -345,24 +365,26 @@ def compare(improved: pd.DataFrame, comparison: pd.DataFrame, claim: Claim, cfg:
         events_i, events_c = values_i.astype(bool), values_c.astype(bool)
         low, high = newcombe_paired_interval(int(np.sum(events_i & events_c)),
                                              int(np.sum(events_i & ~events_c)),
-                                             int(np.sum(~events_i & events_c)), int(d.size))
+                                             int(np.sum(~events_i & events_c)), int(d.size),
+                                             level)
         method = "newcombe_paired_score"
         discordant = better + worse
         p_value = float(stats.binomtest(worse, discordant, 0.5).pvalue) if discordant else 1.0
     else:
         estimate = float(_estimator(cfg.estimator)(d)) if d.size else float("nan")
-        low, high, method = bootstrap_interval(d, _estimator(cfg.estimator, d), cfg)
+        low, high, method = bootstrap_interval(d, _estimator(cfg.estimator, d), cfg, level)
         p_value = paired_test(d, cfg) if d.size else float("nan")
-    pi, pi_low, pi_high = probability_of_improvement(d, cfg)
+    pi, pi_low, pi_high = probability_of_improvement(d, cfg, level)
     return PairedResult(int(d.size), int(d_all.size - d.size), better, tied, worse, estimate,
-                        low, high, method, p_value, pi, pi_low, pi_high, n_floor, floor, d)
+                        low, high, method, p_value, pi, pi_low, pi_high, n_floor, floor, d,
+                        level)
 
 
-def judge(result: PairedResult, p_value: float, margin: float, cfg: ClaimsConfig, claim: Claim
+def judge(result: PairedResult, margin: float, cfg: ClaimsConfig, claim: Claim
           ) -> tuple[Outcome, str]:
     """:func:`decide` on one comparison's result (a rate's direction from its interval)."""
     if claim.is_rate:
-        return decide(result.ci_low, result.ci_high, p_value, margin, result.n_pairs, cfg,
+        return decide(result.ci_low, result.ci_high, margin, result.n_pairs, cfg,
                       estimate=result.estimate)
-    return decide(result.ci_low, result.ci_high, p_value, margin, result.n_pairs, cfg,
+    return decide(result.ci_low, result.ci_high, margin, result.n_pairs, cfg,
                   result.pi_low, result.pi_high, result.estimate, result.prob_improvement)

@@ -16,8 +16,10 @@ definition. Definitions (also in the report's Methods section):
   ``threatened = False``, when no obstacle threatens.
 * **Smoothness** (C2): lateral acceleration ``a_y = vy_dot + vx r`` (``lateral_accel``; the older
   reading drops ``vy_dot``), lateral jerk ``d a_y / dt`` by central differences; RMS and max over
-  the avoidance window (appearance of the threat to recovery, or run end) and over the whole run.
-  Steering rate and curvature rate as secondaries.
+  the avoidance window (appearance of the threat to recovery, or run end; its start and end are
+  recorded) and over the whole run. Steering rate and curvature rate as secondaries. Read on a
+  window common to both runs of a pair (``claims.c2_window = common``), both runs' RMS jerk is
+  taken over the union of their two avoidance windows (:mod:`pipeline.analysis.claims.windows`).
 * **Repulsion modulation** (C3, Table 2's two halves). C3a: the repulsive impulse
   ``sum |F_rep| Ts`` applied while no obstacle threatens and none is within ``near_field_m``
   (unneeded repulsion; force holding the vehicle off a near obstacle is needed), absolute and as
@@ -65,8 +67,11 @@ from pipeline.analysis.metrics.criteria import (
                                                 STABILITY_READS,
                                                 THREAT_READS,
                                                 ThreatGeometry,
+                                                avoidance_window,
                                                 compute_metrics,
                                                 compute_metrics_readings,
+                                                lateral_acceleration,
+                                                lateral_jerk_signal,
                                                 progress_block,
                                                 reaction_block,
                                                 recovery_block,
@@ -92,6 +97,7 @@ from pipeline.analysis.metrics.geometry import (
 from pipeline.analysis.metrics.results import (
                                                 METRIC_KEYS,
                                                 Fallbacks,
+                                                LateralJerk,
                                                 ModelValidity,
                                                 Progress,
                                                 Reaction,
@@ -117,6 +123,7 @@ from pipeline.analysis.metrics.signals import (
                                                 sign_changes,
                                                 time_derivative,
                                                 trajectory_signals,
+                                                window_mask,
 )
 
 __all__ = ["TrajectoryContext", "rms", "max_abs", "sign_changes", "time_derivative",
@@ -130,4 +137,6 @@ __all__ = ["TrajectoryContext", "rms", "max_abs", "sign_changes", "time_derivati
            "smoothness_block", "repulsion_block", "stability_block", "safety_block",
            "progress_block", "validity_block", "solver_blocks", "SAFETY_READS", "THREAT_READS",
            "RECOVERY_READS", "REACTION_READS", "SMOOTHNESS_READS", "STABILITY_READS",
-           "REPULSION_READS", "PROGRESS_READS", "compute_metrics", "compute_metrics_readings"]
+           "REPULSION_READS", "PROGRESS_READS", "compute_metrics", "compute_metrics_readings",
+           "LateralJerk", "avoidance_window", "lateral_acceleration", "lateral_jerk_signal",
+           "window_mask"]

@@ -23,6 +23,7 @@ from pipeline.analysis.metrics.geometry import (
 )
 from pipeline.analysis.metrics.results import (
     Fallbacks,
+    LateralJerk,
     ModelValidity,
     Progress,
     Reaction,
@@ -47,6 +48,7 @@ from pipeline.analysis.metrics.signals import (
     sign_changes,
     time_derivative,
     trajectory_signals,
+    window_mask,
 )
 from pipeline.analysis.settings import MetricsConfig
 
@@ -166,21 +168,36 @@ def recovery_block(sig: Signals, geo: ThreatGeometry, thresholds: MetricsConfig)
     return Recovery(lateral, heading, chosen, bool(np.isfinite(chosen)))
 
 
+def lateral_acceleration(sig: Signals, thresholds: MetricsConfig) -> np.ndarray:
+    """C2's lateral acceleration (m/s^2): ``vy_dot + vx r``, or ``v r`` (``lateral_accel =
+    vx_r``, and without a lateral-velocity column)."""
+    if thresholds.lateral_accel == "vx_r" or sig.vy is None:
+        return sig.speed * sig.yaw_rate
+    return time_derivative(sig.vy, sig.t) + sig.vx * sig.yaw_rate
+
+
+def avoidance_window(sig: Signals, threat: Threat, geo: ThreatGeometry, recovery: Recovery
+                     ) -> tuple[float, float]:
+    """C2's avoidance window (s): from the appearance of the threat (of the first visible
+    obstacle when none threatened) to recovery, or the run's end; ``(nan, nan)`` when no
+    obstacle appeared."""
+    start = threat.threat_appear_time_s if geo.threatening is not None \
+        else threat.obstacle_appear_time_s
+    if not np.isfinite(start):
+        return float("nan"), float("nan")
+    end = geo.passed_time_s + recovery.recovery_time_s if recovery.recovered else sig.t[-1]
+    return float(start), float(end)
+
+
 def smoothness_block(sig: Signals, threat: Threat, geo: ThreatGeometry, recovery: Recovery,
                      thresholds: MetricsConfig) -> Smoothness:
     """C2: a_y = vy_dot + vx r (or v r), its jerk, over the avoidance window and the run."""
     t = sig.t
     lat_acc_old = sig.speed * sig.yaw_rate
-    lat_acc = time_derivative(sig.vy, t) + sig.vx * sig.yaw_rate if sig.vy is not None \
-        else lat_acc_old
-    if thresholds.lateral_accel == "vx_r":
-        lat_acc = lat_acc_old
+    lat_acc = lateral_acceleration(sig, thresholds)
     jerk = time_derivative(lat_acc, t)
-    start = threat.threat_appear_time_s if geo.threatening is not None \
-        else threat.obstacle_appear_time_s
-    end = geo.passed_time_s + recovery.recovery_time_s if recovery.recovered else t[-1]
-    window = (t >= start - 1e-9) & (t <= end + 1e-9) if np.isfinite(start) \
-        else np.zeros(len(t), dtype=bool)
+    start, end = avoidance_window(sig, threat, geo, recovery)
+    window = window_mask(t, start, end)
     curvature = sig.yaw_rate / np.maximum(sig.speed, 1e-3)
     jerk_window, jerk_run = rms(jerk[window]), rms(jerk)
     return Smoothness(
@@ -192,7 +209,17 @@ def smoothness_block(sig: Signals, threat: Threat, geo: ThreatGeometry, recovery
         lateral_jerk_rms_vx_r_mps3=rms(time_derivative(lat_acc_old, t)),
         lateral_jerk_rms_mps3=jerk_window if thresholds.smoothness_window == "avoidance"
         else jerk_run,
-        curvature_rate_rms_1_per_ms=rms(time_derivative(curvature, t)))
+        curvature_rate_rms_1_per_ms=rms(time_derivative(curvature, t)),
+        smoothness_window_start_s=start, smoothness_window_end_s=end)
+
+
+def lateral_jerk_signal(trajectory: pd.DataFrame, context: TrajectoryContext,
+                        thresholds: MetricsConfig) -> LateralJerk:
+    """One run's lateral jerk at its log times (C2's signal, ``thresholds.lateral_accel``'s
+    reading), for a window that is not the run's own (one common to both runs of a pair)."""
+    sig = trajectory_signals(trajectory, context)
+    return LateralJerk(sig.t.copy(), time_derivative(lateral_acceleration(sig, thresholds),
+                                                     sig.t))
 
 
 def repulsion_block(tr: pd.DataFrame, sig: Signals, geo: ThreatGeometry, clearance: np.ndarray,

@@ -9,6 +9,8 @@ from typing import Any, TypeVar
 
 import numpy as np
 
+from pipeline.analysis.metrics.signals import rms, window_mask
+
 
 def _nan_to_none(value: Any) -> Any:
     if isinstance(value, (float, np.floating)) and not np.isfinite(value):
@@ -76,6 +78,24 @@ class Smoothness(_Block):
     lateral_jerk_rms_vx_r_mps3: float
     lateral_jerk_rms_mps3: float
     curvature_rate_rms_1_per_ms: float
+    #: the avoidance window the ``*_window`` values are taken over (s; NaN when none): what a
+    #: window common to both runs of a pair is made of (:mod:`pipeline.analysis.claims.windows`)
+    smoothness_window_start_s: float
+    smoothness_window_end_s: float
+
+
+@dataclass(frozen=True)
+class LateralJerk:
+    """One run's lateral jerk ``d a_y / dt`` (m/s^3) at its log times (s): what C2's RMS is
+    taken of, over any window (:meth:`rms_over`), e.g. one common to both runs of a pair."""
+
+    time_s: np.ndarray
+    jerk_mps3: np.ndarray
+
+    def rms_over(self, start_s: float, end_s: float) -> float:
+        """RMS of the samples with ``start_s <= t <= end_s`` (NaN when none), the samples
+        :func:`pipeline.analysis.metrics.criteria.smoothness_block` takes its window over."""
+        return rms(self.jerk_mps3[window_mask(self.time_s, start_s, end_s)])
 
 
 @dataclass(frozen=True)

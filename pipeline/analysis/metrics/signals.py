@@ -37,6 +37,15 @@ def rms(values: np.ndarray) -> float:
     return float(np.sqrt(np.mean(v**2))) if v.size else float("nan")
 
 
+def window_mask(time_s: np.ndarray, start_s: float, end_s: float) -> np.ndarray:
+    """Rows whose time lies in ``[start_s, end_s]`` (1e-9 s of slack at both ends; none when
+    either end is NaN): the samples a windowed metric (C2's RMS jerk) is taken over."""
+    t = np.asarray(time_s, dtype=float)
+    if not (np.isfinite(start_s) and np.isfinite(end_s)):
+        return np.zeros(t.shape, dtype=bool)
+    return (t >= start_s - 1e-9) & (t <= end_s + 1e-9)
+
+
 def max_abs(values: np.ndarray) -> float:
     v = np.asarray(values, dtype=float)
     v = v[np.isfinite(v)]

@@ -46,7 +46,7 @@ def claim_differences_figure(differences: dict[tuple[str, str], np.ndarray | Non
             if np.isfinite(estimate):
                 ax.errorbar([0.45], [estimate],
                             yerr=[[max(estimate - low, 0.0)], [max(high - estimate, 0.0)]],
-                            fmt="D", color="#d62728", capsize=4, label="estimate, 95% CI")
+                            fmt="D", color="#d62728", capsize=4, label="estimate, CI (1 - alpha/7)")
             ax.set_ylim(-span, span)
             ax.set_title(f"{claim} vs {comparison}", fontsize=8)
             if r == len(comparisons) - 1:

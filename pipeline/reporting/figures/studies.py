@@ -136,6 +136,43 @@ def pareto_front_figure(points: dict[str, np.ndarray], labels: list[str],
     return fig
 
 
+def hypervolume_history_figure(histories: list[dict], window: int) -> Figure:
+    """Each method's feasible-front hypervolume against its complete trials, one line per
+    replicate, the point where it converged marked (an open end: stopped by the cap).
+
+    Parameters
+    ----------
+    histories : list of dict
+        ``{"replicate", "method", "hypervolume": [...], "converged_at": int | None}``.
+    window : int
+        The convergence window in trials (drawn as a bracket before each stop).
+    """
+    methods = list(dict.fromkeys(h["method"] for h in histories))
+    fig, axes = plt.subplots(1, len(methods), figsize=(4.2 * len(methods), 3.2),
+                             layout="constrained", squeeze=False, sharey=True)
+    for ax, method in zip(axes[0], methods, strict=True):
+        for h in (h for h in histories if h["method"] == method):
+            values = np.asarray(h["hypervolume"], float)
+            trials = np.arange(1, values.size + 1)
+            line, = ax.plot(trials, values, lw=1.1, label=f"replicate {h['replicate']}")
+            stop = h.get("converged_at")
+            if stop:
+                ax.plot([stop], [values[stop - 1]], "o", color=line.get_color(), ms=4)
+                ax.plot([max(stop - window, 1), stop], [values[stop - 1]] * 2, "-",
+                        color=line.get_color(), lw=3, alpha=0.3)
+            elif values.size:
+                ax.plot([values.size], [values[-1]], "x", color=line.get_color(), ms=6)
+        ax.set_title(f"{method}", fontsize=9, color=method_color(method))
+        ax.set_xlabel("complete trials", fontsize=8)
+        ax.tick_params(labelsize=7)
+        ax.grid(alpha=0.3)
+    axes[0][0].set_ylabel("hypervolume (fixed bounds)", fontsize=8)
+    axes[0][0].legend(fontsize=7, loc="lower right")
+    fig.suptitle(f"Front hypervolume per replicate (dot: converged, band: the last {window} "
+                 "trials; cross: stopped by the cap)", fontsize=9)
+    return fig
+
+
 def bench_scaling_figure(lateral: pd.DataFrame) -> Figure:
     """``make bench``'s scaling plot: the controller step (APF + QP; the direct and the CVXPY
     backend) and Clarabel's floor against the horizon, one line per obstacle count (the
@@ -193,7 +230,7 @@ def specification_curve_figure(specifications: pd.DataFrame, changed: pd.DataFra
         _draw_curve(ax, rows, comparison)
     first = axes[0, 0]
     first.set_title(f"{claim}: specification curve over {len(order or [])} specifications "
-                    "(estimate d = improved - comparison, 95 % CI; grey band: margin)",
+                    "(estimate d = improved - comparison, CI at 1 - alpha/7; grey band: margin)",
                     fontsize=9)
     _draw_choice_matrix(axes[-1, 0], changed, order or [], dims)
     return fig

@@ -52,7 +52,9 @@ def _rows(family: FamilySection, robustness: RobustnessSection | None,
     for row in family.ledger:
         by_claim.setdefault(row["claim"], []).append(row)
     robust = {r["claim"]: r["cells"] for r in (robustness.rows if robustness else ())}
-    tuned = {r["claim"]: r for r in (fair_fight.rows if fair_fight else ())}
+    # only a tuning at the default budget with every method converged writes the headline
+    headline = fair_fight is not None and fair_fight.headline
+    tuned = {r["claim"]: r for r in (fair_fight.rows if headline and fair_fight else ())}
     kin_family = kinematic.family if kinematic is not None else None
     first = cfg.controls[0] if cfg.controls else "baseline"
     kin = {r["claim"]: r for r in (kin_family.rows if kin_family else ())
@@ -68,7 +70,8 @@ def _rows(family: FamilySection, robustness: RobustnessSection | None,
         if cell:
             extra.append(f"{cell['agree']} of the multiverse's specifications agree")
         if claim.claim_id in tuned:
-            extra.append(f"tuned vs tuned: {tuned[claim.claim_id]['tuned']}")
+            extra.append(f"tuned vs tuned over replicates: {tuned[claim.claim_id]['counts']}"
+                         + ("" if tuned[claim.claim_id]["settled"] else " (not settled)"))
         if claim.claim_id in kin:
             extra.append(f"Appendix-A track: {kin[claim.claim_id]['outcome']}")
         out.append({"claim": claim.claim_id, "words": claim.text, "outcome": main["outcome"],
@@ -89,7 +92,7 @@ def answer_section(family: FamilySection | None, robustness: RobustnessSection |
     safety = apf_alone.sentence if apf_alone is not None else ""
     caveat = validity_caveat(family.counts)
     lines = list(family.answer)
-    if fair_fight:
+    if fair_fight and fair_fight.headline:
         lines += [c["sentence"] for c in fair_fight.rows]
     # before the verdicts: the last lines stay the verdicts in words
     lines.insert(0, "Collisions: " + ", ".join(f"{c['method']} {c['collisions']}"

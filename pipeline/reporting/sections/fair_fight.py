@@ -1,6 +1,6 @@
-"""The fair fight (``make tune``), if it was run: the budget and search spaces, per claim the
-default verdict beside the tuned-vs-tuned verdict on held-out scenarios, the settings that make
-each claim hold, the Pareto fronts on shared axes."""
+"""The fair fight (``make tune``), if it was run: the rules (convergence, replicates, parity),
+per claim the default verdict beside the tuned outcome of every replicate and their count,
+the hypervolume histories and the Pareto fronts; whether it may write the headline."""
 
 from __future__ import annotations
 
@@ -19,13 +19,40 @@ class FairFightSection:
     rows: tuple[dict, ...]
     figures: tuple[Figure, ...]
     spaces: tuple[dict, ...]
+    parity: tuple[dict, ...]
     dominance: str
     methods: tuple[str, ...]
-    compromise: dict[str, str]
+    compromise: tuple[dict, ...]
+    #: may this tuning write the opening summary (the default budget, every method converged)
+    headline: bool
+    #: why not ("" when it may)
+    label: str
 
 
 PART_WORDS = (("training", "training family (where the settings were tuned)"),
               ("heldout", "held-out family (scenarios the tuning never saw)"))
+
+
+def _figures(result: TuneResult, figures: Figures) -> list[Figure]:
+    drawn = []
+    history = figures.copy(result.history_figure(), TuneResult.HISTORY_STEM, "fair fight",
+                           "Each method's feasible-front hypervolume (fixed bounds shared by "
+                           "both methods) after every trial, one line per replicate; a dot "
+                           "marks where it converged, a cross a stop by the cap.",
+                           "Hypervolume histories of the tuned methods",
+                           figure_id="tune_hypervolume_history")
+    if history is not None:
+        drawn.append(history)
+    for part, words in PART_WORDS:
+        stem = TuneResult.front_stem(part)
+        figure = figures.copy(result.front_figure(part), stem, "fair fight",
+                              f"Replicate 0: each method's Pareto settings on the {words}, "
+                              "every pair of tuning objectives on shared axes (smaller is "
+                              "better).", f"Pareto fronts of the tuned methods, {part}",
+                              figure_id=f"tune_{stem}")
+        if figure is not None:
+            drawn.append(figure)
+    return drawn
 
 
 def fair_fight_section(inputs: ReportInputs, figures: Figures) -> FairFightSection | None:
@@ -33,39 +60,40 @@ def fair_fight_section(inputs: ReportInputs, figures: Figures) -> FairFightSecti
     if result is None:
         return None
     summary = result.summary
-    drawn = []
-    for part, words in PART_WORDS:
-        stem = TuneResult.front_stem(part)
-        figure = figures.copy(result.front_figure(part), stem, "fair fight",
-                              f"Each method's Pareto settings on the {words}, every pair of "
-                              "tuning objectives on shared axes (smaller is better).",
-                              f"Pareto fronts of the tuned methods, {part}",
-                              figure_id=f"tune_{stem}")
-        if figure is not None:
-            drawn.append(figure)
     methods = summary.methods
     dom_text = []
-    for part, words in (("training", "on the training family"),
+    for part, words in (("training", "on the training families"),
                         ("heldout", "on the held-out family")):
         d = summary.dominance.get(part)
         if d:
-            dom_text.append(f"{words}, {methods[0]}'s Pareto settings dominate "
+            dom_text.append(f"{words}, {methods[0]}'s Pareto settings (all replicates) dominate "
                             f"{d['treatment_dominates']} of {d['control_points']} of "
                             f"{methods[1]}'s, and {methods[1]}'s dominate "
                             f"{d['control_dominates']} of {d['treatment_points']} of "
                             f"{methods[0]}'s")
     rows = []
     for c in summary.claims:
-        rows.append({**c.to_json(),
-                     "tuned_fmt": f"{fmt(c.tuned_estimate)} {interval(*c.tuned_ci)} "
-                                  f"{unit(c.metric)}",
+        cells = [{"outcome": o, "estimate": f"{fmt(e)} {interval(*ci)}"}
+                 for o, e, ci in zip(c.tuned_outcomes, c.tuned_estimates, c.tuned_cis,
+                                     strict=True)]
+        rows.append({**c.to_json(), "cells": cells, "unit": unit(c.metric),
                      "default_fmt": f"{fmt(c.default_estimate)} {unit(c.metric)}",
-                     "holds": ("trials " + ", ".join(str(t) for t in c.holds_with_trials))
+                     "matched": ", ".join(c.tuned_vs_matched) or "—",
+                     "holds": ("; ".join(f"r{r} trial {t}" for r, t in c.holds_with_trials))
                      if c.holds_with_trials else "none of the judged settings"})
     spaces = tuple({"method": m, "params": [{"key": k, "range": v} for k, v in space.items()]}
                    for m, space in summary.search_spaces.items())
-    compromise = {m: ", ".join(f"{k.split('.')[-1]} = {fmt(v) if isinstance(v, float) else v}"
-                               for k, v in p.items())
-                  for m, p in summary.compromise.items()}
-    return FairFightSection(summary, tuple(rows), tuple(drawn), spaces, "; ".join(dom_text),
-                            tuple(methods), compromise)
+    parity = tuple({"method": p["method"], "dimensions": p["dimensions"],
+                    "trials": ", ".join(str(t) for t in p["trials"]),
+                    "feasible": f"{100 * p['feasible_share']:.0f} %",
+                    "converged": f"{sum(p['converged'])} of {len(p['converged'])}",
+                    "at": ", ".join("cap" if a is None else str(a) for a in p["converged_at"])}
+                   for p in summary.parity)
+    compromise = tuple(
+        {"method": m, "replicate": r,
+         "text": ", ".join(f"{k.split('.')[-1]} = {fmt(v) if isinstance(v, float) else v}"
+                           for k, v in params.items())}
+        for m, by_replicate in summary.compromise.items() for r, params in by_replicate.items())
+    return FairFightSection(summary, tuple(rows), tuple(_figures(result, figures)), spaces,
+                            parity, "; ".join(dom_text), tuple(methods), compromise,
+                            summary.headline, summary.label)

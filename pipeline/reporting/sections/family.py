@@ -53,6 +53,9 @@ class FamilySection:
     figures: tuple[Figure, ...]
     gallery: tuple[Figure, ...]
     answer: tuple[str, ...]
+    #: C2 on each run's own window and on one common to both runs of a pair, per comparison
+    c2_windows: tuple[dict, ...] = ()
+    c2_windows_note: str = ""
 
 
 def apf_adds(ledger: Ledger | None) -> ApfAdds | None:
@@ -135,8 +138,8 @@ def family_section(inputs: ReportInputs, verdicts: Verdicts, figures: Figures
         figures.draw(claim_differences_figure(ledger.differences, names, intervals),
                      "claim_differences", "claims",
                      "Per-scenario paired differences improved − comparison on each claim's "
-                     "primary metric (below zero: improved better), with the estimate's 95 % "
-                     "bootstrap interval, against each comparison.",
+                     "primary metric (below zero: improved better), with the estimate's "
+                     "bootstrap interval (at the ledger's level, 1 - alpha / 7), against each comparison.",
                      "Scatter of paired differences per claim with estimate and confidence "
                      "interval"),
         figures.draw(family_distribution_figure(
@@ -157,7 +160,10 @@ def family_section(inputs: ReportInputs, verdicts: Verdicts, figures: Figures
         solvers=_solvers(family, tables), counts=judged.counts,
         cap_note=_cap_note(judged.counts, cfg.cap_binding_share), apf_adds=adds,
         figures=tuple(drawn), gallery=tuple(_gallery(family, judged, cfg, figures)),
-        answer=tuple(answer_lines(ledger) + ([adds.sentence] if adds else [])))
+        answer=tuple(answer_lines(ledger) + ([adds.sentence] if adds else [])),
+        c2_windows=tuple({**r, "unit": unit(r["metric"])} for r in judged.c2_windows.rows())
+        if judged.c2_windows is not None else (),
+        c2_windows_note=judged.c2_windows.note if judged.c2_windows is not None else "")
 
 
 def _solvers(family: FamilyInputs, tables: dict) -> str:

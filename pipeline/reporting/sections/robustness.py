@@ -25,6 +25,9 @@ class RobustnessSection:
     rule: str
     dimensions: tuple[dict, ...]
     backends: str
+    #: per value of a scenario or vehicle dimension, each claim's usual outcome vs baseline
+    worlds: tuple[dict, ...] = ()
+    world_claims: tuple[str, ...] = ()
 
 
 def backends_text(backends: dict) -> str:
@@ -75,6 +78,45 @@ def _flipping_choices(result: MultiverseResult) -> list[dict]:
     return rows
 
 
+#: the groups of dimensions that vary the world the methods meet (not the methods)
+WORLD_GROUPS = ("scenario", "vehicle")
+
+
+def _group(dimension: dict) -> str:
+    """A dimension's group as ``space.json`` records it (inferred from its config keys for
+    a result written before groups were recorded)."""
+    if dimension.get("group"):
+        return str(dimension["group"])
+    keys = [k.strip() for k in str(dimension.get("config_key") or dimension["key"]).split(",")]
+    for group in WORLD_GROUPS:
+        if all(k.startswith(group + ".") for k in keys):
+            return group
+    return str(dimension.get("stage", ""))
+
+
+def _world_rows(result: MultiverseResult) -> tuple[list[dict], list[str]]:
+    """Against the baseline, per value of every scenario and vehicle dimension: each claim's
+    usual outcome over that value's specifications and the share that differ from the
+    default's (what the section says about the scenario distributions each claim flips
+    under); and the claims, in order."""
+    dims = result.dimensions
+    world = {d["key"]: _group(d) for d in result.info.dimensions
+             if _group(d) in WORLD_GROUPS}
+    if not len(dims) or not world:
+        return [], []
+    part = dims[(dims["comparison"] == "baseline") & dims["dimension"].isin(list(world))]
+    claims = [c.claim_id for c in ALL_CLAIMS if c.claim_id in set(part["claim"])]
+    rows: dict[tuple[str, str], dict[str, Any]] = {}
+    for r in part.to_dict("records"):
+        entry = rows.setdefault((r["dimension"], str(r["value"])), {
+            "group": world[r["dimension"]], "dimension": r["dimension"],
+            "value": str(r["value"]), "default": bool(r["default"]), "cells": {}})
+        entry["cells"][r["claim"]] = {
+            "outcome": r["modal_outcome"], "flipped": f"{100 * r['flipped_share']:.0f} %",
+            "flips": r["flipped_share"] >= 0.5, "estimate": r["median_estimate"]}
+    return list(rows.values()), claims
+
+
 def robustness_section(inputs: ReportInputs, figures: Figures) -> RobustnessSection | None:
     result = inputs.multiverse
     if result is None:
@@ -84,14 +126,16 @@ def robustness_section(inputs: ReportInputs, figures: Figures) -> RobustnessSect
         stem = MultiverseResult.curve_stem(claim.claim_id)
         figure = figures.copy(
             result.curve_figure(claim.claim_id), stem, "robustness",
-            f"{claim.claim_id} ({claim.text}): the estimate with its 95 % interval in every "
+            f"{claim.claim_id} ({claim.text}): the estimate with its interval (1 - alpha / 7) in every "
             "specification, sorted, coloured by outcome, against each comparison; below, "
             "which choices each specification changes from the default.",
             f"Specification curve of {claim.claim_id}")
         if figure is not None:
             drawn.append(figure)
     info = result.info
+    worlds, world_claims = _world_rows(result)
     return RobustnessSection(
         tuple(_cells(result)), tuple(drawn), tuple(_flipping_choices(result)),
         info.n_specifications, info.n_simulation_configurations, info.family_size, info.name,
-        info.rule, info.dimensions, backends_text(info.backends or {}))
+        info.rule, info.dimensions, backends_text(info.backends or {}), tuple(worlds),
+        tuple(world_claims))

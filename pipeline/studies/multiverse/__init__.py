@@ -4,6 +4,9 @@
 [OVERRIDE ...]`` reads a space (``conf/multiverse/<space>.yaml``): dimensions, each a config key
 with its defensible values (the first is the default) and a stage. *Simulation* dimensions change
 the runs; *analysis* dimensions (metric readings and thresholds, statistics) only re-score them.
+A simulation dimension may vary the world every method meets (``scenario.*``: speed, appearance
+time, obstacle kinds and count; ``vehicle.*``: mass and inertia, tyres), set for every method so
+pairs stay paired; its values may be lists, or labelled bundles of several keys.
 
 1. **Design**: the default specification, every one-at-a-time change, then a seeded sample until
    ``n_specifications``; sampled specifications draw their simulation choices from a pool of
@@ -56,11 +59,18 @@ from pipeline.studies.multiverse.runs import (
                                                 run_families,
                                                 run_simulations,
 )
-from pipeline.studies.multiverse.space import METHODS, QP_BACKENDS, Dimension, Space, load_space
+from pipeline.studies.multiverse.space import (
+                                                METHODS,
+                                                QP_BACKENDS,
+                                                Dimension,
+                                                Space,
+                                                hydra_value,
+                                                load_space,
+)
 from pipeline.studies.multiverse.study import run_multiverse
 
 __all__ = ["CONF_DIR", "METHODS", "QP_BACKENDS", "ROBUSTNESS_RULE", "Dimension", "Space",
-           "analyse_specification", "analysis_settings", "build_design", "composer",
+           "analyse_specification", "analysis_settings", "build_design", "composer", "hydra_value",
            "family_config", "family_table", "load_space", "matches", "qp_backend",
            "rescore_family", "robustness", "run_families", "run_multiverse",
            "run_simulations", "simulation_key", "simulation_overrides", "value_text",

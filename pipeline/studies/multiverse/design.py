@@ -12,7 +12,7 @@ import pandas as pd
 
 from pipeline.config import ClaimsConfig, ExperimentConfig, MetricsConfig
 from pipeline.errors import ConfigError
-from pipeline.studies.multiverse.space import Space
+from pipeline.studies.multiverse.space import Space, hydra_value
 
 
 def build_design(space: Space) -> pd.DataFrame:
@@ -56,12 +56,12 @@ def simulation_overrides(row: dict, space: Space, method: str) -> list[str]:
     if "scenario.family.seed" not in keys:
         overrides.append(f"scenario.family.seed={space.family_seed}")
     for dim in space.of("simulation"):
-        value = row[dim.key]
+        value = dim.setting(row[dim.key])
         if dim.applies_to and method not in dim.applies_to:
             if dim.cap and method == "baseline_matched":
-                overrides.append(f"planner.step_size={_hydra_value(value)}")
+                overrides.append(f"planner.step_size={hydra_value(value)}")
             continue
-        overrides.append(f"{dim.target}={_hydra_value(value)}")
+        overrides.extend(dim.overrides(row[dim.key]))
     return overrides
 
 
@@ -83,14 +83,6 @@ def qp_backend(cfg: ExperimentConfig) -> str:
         else "no QP"
 
 
-def _hydra_value(value) -> str:
-    if value is None:
-        return "null"
-    if isinstance(value, bool):
-        return "true" if value else "false"
-    return str(value)
-
-
 def value_text(value) -> str:
     """A dimension value as text, None and NaN alike as "null" (a design table turns None in a
     column of numbers into NaN)."""
@@ -105,7 +97,8 @@ def matches(column: pd.Series, value) -> pd.Series:
 
 
 def simulation_key(row: dict[str, Any], space: Space) -> tuple[str, ...]:
-    return tuple(str(row[d.key]) for d in space.of("simulation"))
+    """The simulation choices of a specification (what its runs depend on)."""
+    return tuple(value_text(row[d.key]) for d in space.of("simulation"))
 
 
 def analysis_settings(row: dict, space: Space, base: ExperimentConfig

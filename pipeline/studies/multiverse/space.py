@@ -23,13 +23,22 @@ QP_BACKENDS = ("clarabel_direct", "daqp", "clarabel_dense", "cvxpy")
 ANALYSIS_PREFIXES = ("metrics.", "claims.")
 
 
+#: Config sections whose keys describe the world the methods meet (the scenario distribution
+#: and the vehicle): a dimension that sets one sets it for every method, so pairs stay paired.
+SHARED_SECTIONS = ("scenario.", "vehicle.")
+
+
 @dataclass(frozen=True)
 class Dimension:
     """One choice of the multiverse: a config key and its defensible values.
 
     ``key`` names the dimension (a column of the design); ``config_key`` is the Hydra key it
     sets when that differs, e.g. the baseline's own ``planner.rho0_m`` beside the improved
-    APF's (``key: planner.rho0_m[baseline]``).
+    APF's (``key: planner.rho0_m[baseline]``). A *labelled* dimension (simulation only) holds
+    readable labels in ``values`` (what the design and the robustness tables show) and the
+    setting behind each in ``settings``: a value of ``config_key`` (a list too, e.g. a range
+    ``[1.0, 2.0]``) or a mapping of several config keys to their values (a bundle, e.g. both
+    obstacle-kind probabilities at once).
     """
 
     key: str
@@ -39,6 +48,7 @@ class Dimension:
     cap: bool = False
     why: str = ""
     config_key: str = ""
+    settings: tuple | None = None
 
     @property
     def target(self) -> str:
@@ -48,6 +58,51 @@ class Dimension:
     @property
     def default(self) -> Any:
         return self.values[0]
+
+    def setting(self, choice: Any) -> Any:
+        """The setting behind a design cell: the value itself, or a labelled choice's
+        setting."""
+        if self.settings is None:
+            return choice
+        return self.settings[[str(v) for v in self.values].index(str(choice))]
+
+    def overrides(self, choice: Any) -> list[str]:
+        """The Hydra overrides of one choice (one per key of a bundle)."""
+        value = self.setting(choice)
+        if isinstance(value, dict):
+            return [f"{k}={hydra_value(v)}" for k, v in value.items()]
+        return [f"{self.target}={hydra_value(value)}"]
+
+    @property
+    def config_keys(self) -> tuple[str, ...]:
+        """Every config key the dimension sets (a bundle's keys)."""
+        bundles = [v for v in self.settings or () if isinstance(v, dict)]
+        if not bundles:
+            return (self.target,)
+        return tuple(sorted({k for value in bundles for k in value}))
+
+    @property
+    def group(self) -> str:
+        """What the dimension varies: ``scenario`` (the scenario distribution), ``vehicle``,
+        ``method`` (planner, controller and anything else simulated) or ``analysis``
+        (readings and statistics)."""
+        if self.stage == "analysis":
+            return "analysis"
+        for section in SHARED_SECTIONS:
+            if all(k.startswith(section) for k in self.config_keys):
+                return section.rstrip(".")
+        return "method"
+
+
+def hydra_value(value: Any) -> str:
+    """A value as a Hydra override writes it (lists without spaces, None as null)."""
+    if value is None:
+        return "null"
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if isinstance(value, (list, tuple)):
+        return "[" + ",".join(hydra_value(v) for v in value) + "]"
+    return str(value)
 
 
 @dataclass(frozen=True)
@@ -93,7 +148,9 @@ class Space:
 class DimensionFile:
     """One dimension as a space file writes it: ``key`` is the config key; ``name`` (optional)
     names the dimension when it differs, e.g. the baseline's own ``planner.rho0_m`` beside the
-    improved APF's (``name: planner.rho0_m[baseline]``)."""
+    improved APF's (``name: planner.rho0_m[baseline]``). ``labels`` (simulation only) names
+    each value readably; a value that is a mapping of config keys to values (a bundle) needs
+    them and a ``name`` (its ``key`` may then be left out)."""
 
     key: str = ""
     stage: str = ""
@@ -102,6 +159,7 @@ class DimensionFile:
     applies_to: Optional[List[str]] = None
     cap: bool = False
     why: str = ""
+    labels: Optional[List[str]] = None
 
     def check(self, where: str) -> Dimension:
         """The dimension, or :class:`ConfigError` naming ``where`` (``dimensions[i]``)."""
@@ -112,12 +170,48 @@ class DimensionFile:
                               "first the default")
         key = str(self.name or self.key)
         config_key = str(self.key) if self.name else ""
+        if not key:
+            raise ConfigError(f"{where}.key", key, "a config key (or a name)")
         if self.stage == "analysis" and not (config_key or key).startswith(ANALYSIS_PREFIXES):
             raise ConfigError(f"{where}.key", key, "a metrics.* or claims.* key for an "
                               "analysis dimension")
-        return Dimension(key, self.stage, tuple(self.values),
-                         tuple(self.applies_to) if self.applies_to else None, bool(self.cap),
-                         str(self.why), config_key)
+        settings = self._settings(where, key, config_key)
+        labels = tuple(str(label) for label in self.labels or ())
+        dim = Dimension(key, self.stage, labels if settings else tuple(self.values),
+                        tuple(self.applies_to) if self.applies_to else None, bool(self.cap),
+                        str(self.why), config_key, settings)
+        shared = [k for k in dim.config_keys if k.startswith(SHARED_SECTIONS)]
+        if dim.applies_to and shared:
+            raise ConfigError(f"{where}.applies_to", list(dim.applies_to),
+                              f"none: {shared[0]} describes the world every method meets "
+                              "(set for one method only, its pairs would not be paired)")
+        return dim
+
+    def _settings(self, where: str, key: str, config_key: str) -> tuple | None:
+        """The settings behind labelled values (None for a dimension without labels)."""
+        bundles = [v for v in self.values if isinstance(v, dict)]
+        if self.labels is None:
+            if bundles:
+                raise ConfigError(f"{where}.labels", None, "a readable label per value (a "
+                                  "value that sets several keys needs one)")
+            return None
+        if self.stage != "simulation":
+            raise ConfigError(f"{where}.labels", list(self.labels), "labels on a simulation "
+                              "dimension only")
+        labels = [str(label) for label in self.labels]
+        if len(labels) != len(self.values) or len(set(labels)) != len(labels):
+            raise ConfigError(f"{where}.labels", labels, f"{len(self.values)} distinct labels, "
+                              "one per value")
+        if bundles and (len(bundles) != len(self.values) or not self.name):
+            raise ConfigError(f"{where}.values", list(self.values), "every value a mapping of "
+                              "config keys to values, and a name for the dimension")
+        for value in bundles:
+            if not value or not all(isinstance(k, str) and "." in k for k in value):
+                raise ConfigError(f"{where}.values", value, "a mapping of config keys "
+                                  "(section.key) to values")
+        if not bundles and not (config_key or key):
+            raise ConfigError(f"{where}.key", key, "the config key the values set")
+        return tuple(self.values)
 
 
 def load_space(path: Path) -> Space:

@@ -7,6 +7,7 @@ from pathlib import Path
 
 import pandas as pd
 
+from pipeline.analysis.claims.windows import require_own_window
 from pipeline.config import MetricsConfig
 from pipeline.store.runs import read_family
 from pipeline.studies.compose import composer
@@ -40,6 +41,7 @@ def run_multiverse(space: Space, out_dir: Path, overrides: list[str] | None = No
     compose, launcher = composer(list(overrides or []))
     # the default specification is the user's configuration (its analysis settings)
     base = compose(["method=improved", "scenario=family"])
+    require_own_window(base.claims, "the multiverse")
     space = with_user_defaults(space, base)
     design = build_design(space)
     # not trusted until the result's manifest is written last
@@ -110,7 +112,9 @@ def _multiverse_info(space: Space, design: pd.DataFrame, n_simulations: int,
         member_reads_per_member=member_reads_per_member,
         rule=ROBUSTNESS_RULE, robust_share=space.robust_share,
         fragile_share=space.fragile_share,
-        dimensions=tuple({"key": d.key, "config_key": d.target, "stage": d.stage,
+        dimensions=tuple({"key": d.key, "config_key": ", ".join(d.config_keys),
+                          "stage": d.stage, "group": d.group,
                           "values": [str(v) for v in d.values],
+                          "settings": [str(v) for v in d.settings or ()],
                           "applies_to": list(d.applies_to or []), "why": d.why}
                          for d in space.dimensions))

@@ -30,30 +30,36 @@ PARTS = ("training", "heldout")
 @dataclass(frozen=True)
 class TunedClaim:
     """One claim against the control on the held-out family: the verdict with our settings,
-    tuned against tuned, against the matched control, the settings under which it holds."""
+    the tuned outcome in every replicate and their count, against the matched control, the
+    replicates' settings under which it holds."""
 
     claim: str
     text: str
     metric: str
     default: str
     default_estimate: float | None
+    tuned_outcomes: tuple[str, ...]
+    tuned_estimates: tuple[float | None, ...]
+    tuned_cis: tuple[tuple[float | None, float | None], ...]
+    counts: str
+    settled: bool
     tuned: str
-    tuned_estimate: float | None
-    tuned_ci: tuple[float | None, float | None]
-    tuned_vs_matched: str | None
-    holds_with: tuple[dict, ...]
-    holds_with_trials: tuple[int, ...]
+    answer: str
+    tuned_vs_matched: tuple[str, ...]
+    holds_with_trials: tuple[tuple[int, int], ...]
     sentence: str
 
     @classmethod
     def from_json(cls, data: dict) -> TunedClaim:
-        return cls(**{**data, "tuned_ci": tuple(data["tuned_ci"]),
-                      "holds_with": tuple(data.get("holds_with", ())),
-                      "holds_with_trials": tuple(data.get("holds_with_trials", ()))})
+        return cls(**{**data, "tuned_outcomes": tuple(data["tuned_outcomes"]),
+                      "tuned_estimates": tuple(data["tuned_estimates"]),
+                      "tuned_cis": tuple(tuple(c) for c in data["tuned_cis"]),
+                      "tuned_vs_matched": tuple(data.get("tuned_vs_matched", ())),
+                      "holds_with_trials": tuple(tuple(t) for t in
+                                                 data.get("holds_with_trials", ()))})
 
     def to_json(self) -> dict:
-        return {f.name: (list(v) if isinstance(v := getattr(self, f.name), tuple) else v)
-                for f in fields(self)}
+        return json_safe({f.name: getattr(self, f.name) for f in fields(self)})
 
 
 @dataclass(frozen=True)
@@ -63,14 +69,19 @@ class TuneSummary:
     name: str
     settings: dict[str, Any]
     budget: dict[str, Any]
-    families: dict[str, dict[str, int]]
+    families: dict[str, dict[str, Any]]
     backend: str
     objectives: tuple[str, ...]
-    safety_threshold_collisions: int
+    safety_threshold_collisions: dict[str, int]
     search_spaces: dict[str, dict[str, str]]
     compromise_rule: str
+    answer_rule: str
     compromise: dict[str, dict[str, Any]]
-    trials: dict[str, dict[str, int]]
+    replicates: tuple[dict[str, Any], ...]
+    parity: tuple[dict[str, Any], ...]
+    below_default_budget: tuple[str, ...]
+    unconverged: tuple[str, ...]
+    headline: bool
     dominance: dict[str, dict[str, int]]
     claims: tuple[TunedClaim, ...]
 
@@ -79,14 +90,33 @@ class TuneSummary:
         """``[treatment, control]``."""
         return list(self.settings["methods"])
 
+    @property
+    def trials_by_method(self) -> dict[str, list[int]]:
+        """Complete trials per method, one number per replicate."""
+        return {p["method"]: list(p["trials"]) for p in self.parity}
+
+    @property
+    def label(self) -> str:
+        """Why this tuning may not write the headline ("" when it may)."""
+        reasons = []
+        if self.below_default_budget:
+            reasons.append("below the default budget (" + ", ".join(self.below_default_budget)
+                           + ")")
+        if self.unconverged:
+            reasons.append("unconverged: " + ", ".join(self.unconverged))
+        return "; ".join(reasons)
+
     @classmethod
     def from_json(cls, data: dict) -> TuneSummary:
         return cls(**{**data, "objectives": tuple(data["objectives"]),
+                      "replicates": tuple(data["replicates"]),
+                      "parity": tuple(data["parity"]),
+                      "below_default_budget": tuple(data["below_default_budget"]),
+                      "unconverged": tuple(data["unconverged"]),
                       "claims": tuple(TunedClaim.from_json(c) for c in data["claims"])})
 
     def to_json(self) -> dict:
         data = {f.name: getattr(self, f.name) for f in fields(self)}
-        data["objectives"] = list(self.objectives)
         data["claims"] = [c.to_json() for c in self.claims]
         return json_safe(data)
 
@@ -158,6 +188,15 @@ class TuneResult:
     def front_stem(part: str) -> str:
         """The file stem of the Pareto fronts on the ``part`` family."""
         return f"pareto_fronts_{part}"
+
+    #: the file stem of the hypervolume histories
+    HISTORY_STEM = "hypervolume_history"
+
+    def history_figure(self) -> dict[str, Path] | None:
+        """The hypervolume histories the command drew, if they are there."""
+        if self.folder is None:
+            return None
+        return figure_files(self.folder / FIGURES, self.HISTORY_STEM)
 
     def figure_folder(self) -> Path:
         """Where the command draws the Pareto fronts."""

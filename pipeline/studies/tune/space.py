@@ -1,0 +1,198 @@
+"""``conf/tune/<name>.yaml``: the budget, the convergence rule, the replicates, the families
+and the rules of a fair fight (:class:`TuneSpace`), and each method's search space."""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import List
+
+from pipeline.analysis.objectives import Objective
+from pipeline.config import CONF_DIR, schema_from_data
+from pipeline.errors import ConfigError
+from pipeline.store.files import json_safe
+from pipeline.validation import between, choice, safe_name
+
+
+def _default_objectives() -> list[Objective]:
+    return [Objective("reaction_delay_s", "mean", "minimize"),
+            Objective("lateral_jerk_rms_mps3", "mean", "minimize"),
+            Objective("recovery_time_s", "mean", "minimize")]
+
+
+def _default_bounds() -> list[list[float]]:
+    return [[0.0, 1.2], [0.5, 3.0], [2.0, 5.0]]
+
+
+#: the fields that decide which trials a replicate runs: a stored study is reused only when
+#: they are all the same (its name carries their hash)
+TRIAL_FIELDS = ("methods", "batch_size", "sampler_seed", "population_size", "objectives",
+                "training_seed", "training_size", "backend", "censoring")
+#: the fields whose default values are the budget a headline needs (at least as much of each)
+BUDGET_AT_LEAST = ("replicates", "min_trials", "max_trials", "convergence_window",
+                   "training_size", "heldout_size")
+
+
+@dataclass
+class TuneSpace:
+    """``conf/tune/<name>.yaml``: the budget, the convergence rule and the rules of a fair
+    fight.
+
+    ``methods`` is ``[treatment, control]``; each has ``conf/hparams_search/<method>.yaml``.
+    Each of ``replicates`` independent replicates has its own sampler seed (``sampler_seed +
+    r``) and training family (seed ``training_seed + r``); all are judged on one held-out
+    family. A method's search stops when its feasible front's hypervolume (objectives mapped by
+    the fixed ``hypervolume_bounds``, one ``[ideal, nadir]`` per objective, the same for both
+    methods) grew by at most ``convergence_tolerance`` of its value over the last
+    ``convergence_window`` trials, at ``min_trials`` at the earliest and ``max_trials`` at the
+    latest (then it is labelled unconverged). ``matched_control`` names the look-ahead-matched
+    control built from the tuned control, or "" for none.
+    """
+
+    name: str = "default"
+    methods: List[str] = field(default_factory=lambda: ["improved", "baseline"])
+    replicates: int = 5
+    min_trials: int = 80
+    max_trials: int = 300
+    convergence_window: int = 60
+    convergence_tolerance: float = 0.02
+    hypervolume_bounds: List[List[float]] = field(default_factory=_default_bounds)
+    batch_size: int = 4
+    sampler_seed: int = 0
+    population_size: int = 10
+    objectives: List[Objective] = field(default_factory=_default_objectives)
+    censoring: str = "run_end"
+    training_seed: int = 1
+    training_size: int = 40
+    heldout_seed: int = 0
+    heldout_size: int = 200
+    backend: str = "daqp"
+    compromise: str = "closest_to_ideal"
+    max_heldout_settings: int = 3
+    matched_control: str = "baseline_matched"
+    settled_share: float = 0.8
+
+    def __post_init__(self) -> None:
+        safe_name("tune.name", self.name)
+        if len(self.methods) != 2 or len(set(self.methods)) != 2:
+            raise ConfigError("tune.methods", self.methods,
+                              "two different methods: [treatment, control]")
+        for i, method in enumerate(self.methods):
+            if not (CONF_DIR / "hparams_search" / f"{method}.yaml").is_file():
+                raise ConfigError(f"tune.methods[{i}]", method, "a method with a search space "
+                                  "in conf/hparams_search/ (improved, baseline)")
+        for key, low, high in (("replicates", 1, 100), ("min_trials", 1, 10_000),
+                               ("max_trials", 1, 10_000), ("convergence_window", 1, 10_000),
+                               ("batch_size", 1, 64),
+                               ("population_size", 2, 1_000), ("training_size", 2, 100_000),
+                               ("heldout_size", 2, 100_000), ("max_heldout_settings", 1, 1_000),
+                               ("sampler_seed", 0, 2**31 - 1), ("training_seed", 0, 2**31 - 1),
+                               ("heldout_seed", 0, 2**31 - 1)):
+            value = getattr(self, key)
+            if isinstance(value, bool) or not isinstance(value, int) or not low <= value <= high:
+                raise ConfigError(f"tune.{key}", value, f"an integer in [{low}, {high}]")
+        if self.max_trials < self.min_trials:
+            raise ConfigError("tune.max_trials", self.max_trials,
+                              f"an integer >= tune.min_trials ({self.min_trials})")
+        between("tune.convergence_tolerance", self.convergence_tolerance, 0.0, 1.0)
+        between("tune.settled_share", self.settled_share, 0.5, 1.0)
+        seeds = self.training_seeds
+        if self.heldout_seed in seeds:
+            raise ConfigError("tune.heldout_seed", self.heldout_seed,
+                              f"a seed other than the replicates' training seeds "
+                              f"({seeds[0]}..{seeds[-1]}): held-out scenarios must be unseen")
+        if not self.objectives:
+            raise ConfigError("tune.objectives", [], "a list of at least one objective")
+        for i, objective in enumerate(self.objectives):
+            objective.check(f"tune.objectives[{i}]")
+        self._check_bounds()
+        choice("tune.censoring", self.censoring, ("run_end", "drop"))
+        choice("tune.backend", self.backend, ("clarabel_direct", "clarabel_dense", "daqp",
+                                              "cvxpy"))
+        choice("tune.compromise", self.compromise, ("closest_to_ideal",))
+        choice("tune.matched_control", self.matched_control, ("baseline_matched", ""))
+
+    def _check_bounds(self) -> None:
+        bounds = self.hypervolume_bounds
+        if not isinstance(bounds, list) or len(bounds) != len(self.objectives):
+            raise ConfigError("tune.hypervolume_bounds", bounds,
+                              f"one [ideal, nadir] pair per objective ({len(self.objectives)})")
+        for i, (pair, objective) in enumerate(zip(bounds, self.objectives, strict=True)):
+            ok = (isinstance(pair, list) and len(pair) == 2
+                  and all(isinstance(v, (int, float)) and not isinstance(v, bool)
+                          and abs(v) < 1e12 for v in pair))
+            better = ok and (pair[0] < pair[1] if objective.direction == "minimize"
+                             else pair[0] > pair[1])
+            if not better:
+                raise ConfigError(f"tune.hypervolume_bounds[{i}]", pair,
+                                  f"[ideal, nadir], two finite numbers with the ideal the better "
+                                  f"one ({objective.direction} {objective.metric})")
+
+    @property
+    def treatment(self) -> str:
+        return self.methods[0]
+
+    @property
+    def control(self) -> str:
+        return self.methods[1]
+
+    @property
+    def training_seeds(self) -> list[int]:
+        """Replicate ``r``'s training family seed: ``training_seed + r``."""
+        return [self.training_seed + r for r in range(self.replicates)]
+
+    def sampler_seed_of(self, replicate: int) -> int:
+        return self.sampler_seed + replicate
+
+    def trial_key(self) -> str:
+        """A short hash of everything that decides the trials (:data:`TRIAL_FIELDS`): a stored
+        study under another key is never resumed."""
+        import hashlib
+        import json
+
+        data = json_safe({k: asdict(self)[k] for k in TRIAL_FIELDS})
+        return hashlib.sha256(json.dumps(data, sort_keys=True).encode()).hexdigest()[:10]
+
+    def below_budget(self, reference: TuneSpace) -> list[str]:
+        """The budget fields in which this tuning does less than ``reference`` (the default
+        preset): a tuning below the default budget never writes the headline."""
+        short = [k for k in BUDGET_AT_LEAST if getattr(self, k) < getattr(reference, k)]
+        if self.convergence_tolerance > reference.convergence_tolerance:
+            short.append("convergence_tolerance")
+        return short
+
+
+def load_tune_space(path: Path) -> TuneSpace:
+    """Read and validate a tuning file (unknown keys, wrong types and shapes: one
+    :class:`ConfigError` naming the key, before any work starts)."""
+    import yaml
+
+    path = Path(path)
+    if not path.is_file():
+        raise ConfigError("--space", str(path), "a file in conf/tune/ or a path to one")
+    try:
+        data = yaml.safe_load(path.read_text())
+    except yaml.YAMLError as exc:
+        raise ConfigError("--space", str(path), f"valid YAML ({str(exc).splitlines()[0]})") from None
+    return schema_from_data(TuneSpace, data, "tune")
+
+
+def default_budget() -> TuneSpace:
+    """The default preset (``conf/tune/default.yaml``): the budget a headline needs."""
+    return load_tune_space(CONF_DIR / "tune" / "default.yaml")
+
+
+def search_space(method: str) -> tuple[dict, dict]:
+    """The distributions and the reasons of ``conf/hparams_search/<method>.yaml`` (its
+    ``hydra.sweeper.params``, parsed by hydra-optuna-sweeper's own parser)."""
+    import yaml
+
+    from hydra_plugins.hydra_optuna_sweeper._impl import create_params_from_overrides
+
+    path = CONF_DIR / "hparams_search" / f"{method}.yaml"
+    params = yaml.safe_load(path.read_text())["hydra"]["sweeper"]["params"]
+    distributions, fixed = create_params_from_overrides([f"{k}={v}" for k, v in params.items()])
+    if fixed:
+        raise ConfigError(f"hparams_search/{method}: hydra.sweeper.params", sorted(fixed),
+                          "ranges only (interval(...), choice(...)); fix values elsewhere")
+    return distributions, {k: str(v) for k, v in params.items()}

@@ -1,0 +1,405 @@
+"""A fair fight: every compared method tuned by the same rules on training scenarios until its
+front stops moving, in independent replicates, then judged on one held-out family
+(``make tune``, ``python -m pipeline.tune``).
+
+Benchmarking practice (Lucic et al. 2018; Melis et al. 2018) tunes every contender with the same
+effort and judges on data the tuning never saw: differences that vanish under equal tuning were
+tuning, not method. Here:
+
+1. **Rules.** Each method of ``conf/tune/<name>.yaml`` is searched by NSGA-II over its own search
+   space (``conf/hparams_search/<method>.yaml``: every free parameter of its APF, the ranges the
+   paper allows, each with its reason) until its feasible front's hypervolume converges (one
+   fixed normalisation for both methods; :class:`pipeline.studies.tune.search.Convergence`),
+   between the same minimum and cap: equal rules, not an equal count.
+2. **Replicates.** ``replicates`` independent tunings, each with its own sampler seed and its
+   own training family; the answer per claim is the count of replicates per outcome.
+3. **Training.** A trial runs its replicate's training family and returns the objectives
+   (statistics of the claims' primary metrics over the members, read as the ledger reads them:
+   :func:`pipeline.analysis.objectives.tuning_table`). Safety is a constraint: a setting whose
+   family collides more often than the untuned control's is infeasible.
+4. **Pareto sets.** Per replicate, the feasible non-dominated trials of each method and one
+   compromise setting per method (:data:`COMPROMISE_RULE`).
+5. **Held-out judgement.** The untuned methods once, and per replicate the compromises, the
+   matched control built from them and up to ``max_heldout_settings`` Pareto settings per
+   method, on one held-out family (another seed); the claims ledger compares the tuned
+   treatment with the tuned control and the matched control.
+
+Trials live in an SQLite file in the output folder, one study per replicate and method named
+by the space's trial key: an interrupted tuning resumes without repeating a completed trial;
+an edited space starts new studies. Families run here or, with ``hydra/launcher=slurm``, as
+SLURM arrays.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+from dataclasses import asdict
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+from pipeline.analysis.claims import ALL_CLAIMS, Ledger, family_ledger
+from pipeline.analysis.objectives import objective_values, tuning_table
+from pipeline.analysis.tally import Tally
+from pipeline.errors import StudyError
+from pipeline.store.files import json_safe
+from pipeline.store.manifest import untrust
+from pipeline.studies.results.tune import TuneResult, TuneSummary
+from pipeline.studies.tune.pareto import (
+    COMPROMISE_RULE,
+    distances_to_ideal,
+    front_dominance,
+    pareto_mask,
+)
+from pipeline.studies.tune.search import Convergence, Runner, make_study, optimize
+from pipeline.studies.tune.space import TuneSpace, default_budget, search_space
+
+logger = logging.getLogger(__name__)
+
+
+class NoFeasibleSettingError(StudyError):
+    """Every trial of a method collided more often than the untuned control."""
+
+
+#: How the outcome counts over replicates become a sentence (``tune.settled_share``).
+ANSWER_RULE = ("per claim, the tuned outcome (tuned treatment against tuned control on the "
+               "held-out family) in every replicate, counted; 'settled' when one outcome holds "
+               "in at least tune.settled_share of the replicates, 'not settled' otherwise; a "
+               "tuning whose budget is below the default preset's, or with any replicate's "
+               "method stopped by its cap before converging, is shown but never writes the "
+               "opening summary")
+
+
+def run_tuning(space: TuneSpace, out_dir: Path, overrides: list[str] | None = None,
+               log=logger.info) -> TuneResult:
+    """Tune every replicate until convergence, pick, judge on the held-out family; the result
+    written into ``out_dir`` (its manifest last) and returned. The figures are the command's
+    to draw."""
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    untrust(out_dir)
+    runner = Runner(space, out_dir, list(overrides or []), log)
+    spaces = {m: search_space(m) for m in space.methods}
+    base = runner.compose(["method=improved", "scenario=family"])
+    storage = f"sqlite:///{(out_dir / 'tune.db').resolve()}"
+    rule = Convergence.of(space)
+    trial_tables, histories, thresholds = [], [], {}
+    for replicate in range(space.replicates):
+        untuned = runner.run([runner.job(space.control, "default", {}, "training", replicate)],
+                             f"replicate {replicate}: untuned control")[0]
+        threshold = thresholds[replicate] = Tally.of(untuned).collisions
+        log(f"replicate {replicate}: a setting is feasible when its training family (seed "
+            f"{space.training_seeds[replicate]}) collides at most {threshold} times (the "
+            f"untuned {space.control})")
+        studies = {}
+        for method in space.methods:
+            distributions, _ = spaces[method]
+
+            def evaluate(settings: list[dict], method=method, replicate=replicate,
+                         threshold=threshold) -> list[tuple]:
+                jobs = [runner.job(method, "trial", p, "training", replicate) for p in settings]
+                tables = runner.run(jobs, f"replicate {replicate}: {method} training families")
+                return [(objective_values(tuning_table(t, space.censoring), space.objectives),
+                         Tally.of(t).collisions - threshold) for t in tables]
+
+            studies[method] = make_study(space, method, replicate, storage)
+            history, converged = optimize(studies[method], distributions, evaluate, rule,
+                                          space.batch_size, log,
+                                          label=f"replicate {replicate}, {method}: ")
+            histories.append({"replicate": replicate, "method": method,
+                              "trials": int(len(history)),
+                              "converged_at": converged, "converged": converged is not None,
+                              "hypervolume": [float(v) for v in history]})
+            log(f"replicate {replicate}, {method}: "
+                + (f"converged at {converged} trials" if converged is not None else
+                   f"stopped by the cap ({len(history)} trials) before converging")
+                + f", hypervolume {history[-1] if len(history) else 0:.4f}")
+        trial_tables.append(trials_table(studies, space, replicate))
+    trials = pd.concat(trial_tables, ignore_index=True)
+    chosen = pick_settings(trials, space)
+    judged = judge_heldout(runner, space, chosen, base.claims)
+    summary = TuneSummary.from_json(json_safe(summarize(space, spaces, thresholds, trials,
+                                                        histories, judged)))
+    return TuneResult(summary, trials, judged.heldout, judged.default.to_frame(),
+                      judged.tuned_frame(), judged.outcomes).write(out_dir)
+
+
+def trials_table(studies: dict, space: TuneSpace, replicate: int) -> pd.DataFrame:
+    """Every complete trial of every method in one replicate: parameters, training objectives,
+    collisions over the threshold, feasibility and Pareto membership."""
+    from optuna.trial import TrialState
+
+    rows = []
+    for method, study in studies.items():
+        for trial in study.get_trials(deepcopy=False, states=(TrialState.COMPLETE,)):
+            row = {"replicate": replicate, "method": method, "trial": trial.number,
+                   "constraint": float(trial.user_attrs.get("constraint", 0.0)),
+                   "params": json.dumps(trial.params, sort_keys=True)}
+            row.update({f"train:{o.label}": v
+                        for o, v in zip(space.objectives, trial.values, strict=True)})
+            rows.append(row)
+    table = pd.DataFrame(rows)
+    columns = [f"train:{o.label}" for o in space.objectives]
+    table["feasible"] = (table["constraint"] <= 0.0) & np.isfinite(
+        table[columns].to_numpy(float)).all(axis=1)
+    table["pareto"] = False
+    for method in space.methods:
+        part = table[(table["method"] == method) & table["feasible"]]
+        if len(part):
+            mask = pareto_mask(part[columns].to_numpy(), space.objectives)
+            table.loc[part.index[mask], "pareto"] = True
+    return table
+
+
+def pick_settings(trials: pd.DataFrame, space: TuneSpace) -> dict[tuple[int, str], pd.DataFrame]:
+    """Per replicate and method, the Pareto settings to judge on held-out scenarios (closest to
+    the ideal first, at most ``max_heldout_settings``) with the compromise marked."""
+    columns = [f"train:{o.label}" for o in space.objectives]
+    chosen = {}
+    for replicate, part in trials.groupby("replicate", sort=True):
+        scale = part[part["feasible"]][columns].to_numpy(float)
+        for method in space.methods:
+            front = part[(part["method"] == method) & part["pareto"]].copy()
+            if not len(front):
+                raise NoFeasibleSettingError(
+                    f"replicate {replicate}: no feasible setting of {method}: every trial "
+                    "collided more often than the untuned control; widen its search space or "
+                    "raise tune.max_trials")
+            front["distance_to_ideal"] = distances_to_ideal(front[columns].to_numpy(float),
+                                                            scale, space.objectives)
+            front = front.sort_values(["distance_to_ideal", "trial"])
+            front["compromise"] = np.arange(len(front)) == 0
+            chosen[(int(replicate), method)] = front.head(space.max_heldout_settings)
+    return chosen
+
+
+def _matched_params(control: dict, treatment: dict) -> dict:
+    """The look-ahead-matched control from the tuned control: its normalized step as long as
+    the tuned treatment's step cap (or step, when it has no cap)."""
+    params = {k: v for k, v in control.items() if k != "planner.step_size"}
+    step = treatment.get("planner.step_max_m", treatment.get("planner.step_size"))
+    if step is not None:
+        params["planner.step_size"] = step
+    return params
+
+
+class Judged:
+    """The held-out judgement: the table of judged settings, the untuned ledger, one tuned
+    ledger per replicate and the outcomes of every judged treatment setting."""
+
+    def __init__(self, heldout: pd.DataFrame, default: Ledger, tuned: dict[int, Ledger],
+                 outcomes: pd.DataFrame) -> None:
+        self.heldout, self.default, self.tuned, self.outcomes = heldout, default, tuned, outcomes
+
+    def tuned_frame(self) -> pd.DataFrame:
+        frames = [ledger.to_frame().assign(replicate=r) for r, ledger in self.tuned.items()]
+        return pd.concat(frames, ignore_index=True)
+
+
+def judge_heldout(runner: Runner, space: TuneSpace, chosen: dict[tuple[int, str], pd.DataFrame],
+                  claims_cfg) -> Judged:
+    """Held-out families of the untuned methods, every chosen Pareto setting and each
+    replicate's tuned matched control; the default ledger, a tuned ledger per replicate, and
+    per judged treatment setting its outcomes against its replicate's tuned control."""
+    treatment, control = space.treatment, space.control
+    matched = space.matched_control
+    comparisons = (control,) + ((matched,) if matched else ())
+    jobs = [runner.job(m, "default", {}, "heldout") for m in (treatment,) + comparisons]
+    compromise: dict[tuple[int, str], int] = {}
+    params_of: dict[tuple[int, str, int], dict] = {}
+    for (replicate, method), front in chosen.items():
+        for r in front.to_dict("records"):
+            params = json.loads(r["params"])
+            params_of[(replicate, method, int(r["trial"]))] = params
+            jobs.append(runner.job(method, f"trial {r['trial']}", params, "heldout", replicate))
+            if r["compromise"]:
+                compromise[(replicate, method)] = int(r["trial"])
+    replicates = sorted({r for r, _ in chosen})
+    if matched:
+        for replicate in replicates:
+            jobs.append(runner.job(matched, "tuned", _matched_params(
+                params_of[(replicate, control, compromise[(replicate, control)])],
+                params_of[(replicate, treatment, compromise[(replicate, treatment)])]),
+                "heldout", replicate))
+    tables = runner.run(jobs, "held-out families")
+    by_setting = {(j.replicate, j.method, j.setting): t for j, t in zip(jobs, tables, strict=True)}
+    rows = []
+    for job, table in zip(jobs, tables, strict=True):
+        values = objective_values(tuning_table(table, space.censoring), space.objectives)
+        tally = Tally.of(table)
+        trial = int(job.setting.split()[1]) if job.setting.startswith("trial") else None
+        rows.append({"replicate": job.replicate, "method": job.method, "setting": job.setting,
+                     "trial": trial,
+                     "compromise": trial is not None
+                     and compromise.get((job.replicate or 0, job.method)) == trial,
+                     "collisions": tally.collisions, "scenarios": tally.scenarios,
+                     **{f"heldout:{o.label}": v
+                        for o, v in zip(space.objectives, values, strict=True)},
+                     "folder": str(job.folder.relative_to(runner.out_dir))})
+    heldout = pd.DataFrame(rows)
+    default = family_ledger({m: by_setting[(None, m, "default")] for m in (treatment,)
+                             + comparisons}, claims_cfg, None, treatment, comparisons)
+    tuned, outcome_rows = {}, []
+    for replicate in replicates:
+        tables_r = {m: by_setting[(replicate, m, f"trial {compromise[(replicate, m)]}")]
+                    for m in (treatment, control)}
+        if matched:
+            tables_r[matched] = by_setting[(replicate, matched, "tuned")]
+        tuned[replicate] = family_ledger(tables_r, claims_cfg, None, treatment, comparisons)
+        for r in chosen[(replicate, treatment)].to_dict("records"):
+            ledger = family_ledger({treatment: by_setting[(replicate, treatment,
+                                                           f"trial {r['trial']}")],
+                                    control: tables_r[control]}, claims_cfg, None, treatment,
+                                   (control,), sensitivity=False)
+            for row in ledger:
+                outcome_rows.append({"replicate": replicate, "trial": r["trial"],
+                                     "compromise": bool(r["compromise"]),
+                                     "claim": row.claim_id, "outcome": str(row.outcome),
+                                     "estimate": row.result.estimate, "params": r["params"]})
+    return Judged(heldout, default, tuned, pd.DataFrame(outcome_rows))
+
+
+def answer_in_counts(claim_id: str, outcomes: list[str], settled_share: float
+                     ) -> tuple[str, bool, str | None]:
+    """The tuned answer on one claim over replicates: the sentence, whether it is settled, and
+    the settled outcome (see :data:`ANSWER_RULE`)."""
+    n = len(outcomes)
+    counts = pd.Series(outcomes, dtype=object).value_counts()
+    order = sorted(counts.items(), key=lambda kv: (-kv[1], str(kv[0])))
+    words = ", ".join(f"{outcome} {count}/{n}" for outcome, count in order)
+    top, top_count = order[0]
+    settled = top_count >= settled_share * n
+    if settled:
+        return f"{claim_id}: {words}: settled ({top}).", True, str(top)
+    return f"{claim_id}: {words}: not settled.", False, None
+
+
+def artefact_sentence(claim_id: str, default: str, settled: str | None, counts: str,
+                      n_heldout: int) -> str:
+    """Whether a claim's default verdict (against the control, on the held-out family) was a
+    tuning artefact, read off the replicates' counts."""
+    where = f"on {n_heldout} held-out scenarios"
+    if settled is None:
+        return (f"{claim_id} {where}: {default} with our settings; when both methods are tuned "
+                f"by the same rules the replicates disagree ({counts}): not settled.")
+    if settled == default:
+        return (f"{claim_id} {where}: {default} with our settings and {settled} when both "
+                f"methods are tuned by the same rules ({counts}): not a tuning artefact.")
+    return (f"{claim_id} {where}: {default} with our settings but {settled} when both methods "
+            f"are tuned by the same rules ({counts}): the default verdict was a tuning "
+            "artefact.")
+
+
+def front_points(trials: pd.DataFrame, heldout: pd.DataFrame, space: TuneSpace, part: str,
+                 replicate: int = 0) -> dict[str, np.ndarray]:
+    """Per method, one replicate's Pareto settings' objective values on the training or
+    held-out family."""
+    out = {}
+    for method in space.methods:
+        if part == "training":
+            rows = trials[(trials["method"] == method) & trials["pareto"]
+                          & (trials["replicate"] == replicate)]
+            out[method] = rows[[f"train:{o.label}" for o in space.objectives]].to_numpy(float)
+        else:
+            rows = heldout[(heldout["method"] == method) & heldout["trial"].notna()
+                           & (heldout["replicate"] == replicate)]
+            out[method] = rows[[f"heldout:{o.label}" for o in space.objectives]].to_numpy(float)
+    return out
+
+
+def summarize(space: TuneSpace, spaces: dict, thresholds: dict[int, int], trials: pd.DataFrame,
+              histories: list[dict], judged: Judged) -> dict[str, Any]:
+    """``summary.json``: the rules, the spaces, per replicate and method the trials, the
+    convergence and the hypervolume history, and per claim the default verdict beside the
+    tuned outcome of every replicate, counted."""
+    control, matched = space.control, space.matched_control
+    claims = []
+    n_replicates = len(judged.tuned)
+    for claim in ALL_CLAIMS:
+        default = judged.default.get((claim.claim_id, control))
+        per_replicate = [judged.tuned[r].get((claim.claim_id, control)) for r in sorted(judged.tuned)]
+        if default is None or any(row is None for row in per_replicate):
+            continue
+        outcomes = [str(row.outcome) for row in per_replicate if row is not None]
+        sentence, settled, settled_outcome = answer_in_counts(claim.claim_id, outcomes,
+                                                              space.settled_share)
+        counts = sentence.split(": ", 1)[1].rsplit(": ", 1)[0]
+        vs_matched = [str(judged.tuned[r][(claim.claim_id, matched)].outcome)
+                      for r in sorted(judged.tuned)
+                      if matched and judged.tuned[r].get((claim.claim_id, matched))]
+        holds = judged.outcomes[(judged.outcomes["claim"] == claim.claim_id)
+                                & (judged.outcomes["outcome"] == "supported")] \
+            if len(judged.outcomes) else judged.outcomes
+        claims.append({
+            "claim": claim.claim_id, "text": claim.text, "metric": claim.primary_metric,
+            "default": str(default.outcome), "default_estimate": default.result.estimate,
+            "tuned_outcomes": outcomes,
+            "tuned_estimates": [row.result.estimate for row in per_replicate if row],
+            "tuned_cis": [[row.result.ci_low, row.result.ci_high]
+                          for row in per_replicate if row],
+            "counts": counts, "settled": settled, "tuned": settled_outcome or "not settled",
+            "answer": sentence, "tuned_vs_matched": vs_matched,
+            "holds_with_trials": [[int(r), int(t)] for r, t in
+                                  zip(holds["replicate"], holds["trial"], strict=True)]
+            if len(holds) else [],
+            "sentence": artefact_sentence(claim.claim_id, str(default.outcome),
+                                          settled_outcome, counts, space.heldout_size)})
+    reference = default_budget()
+    short = space.below_budget(reference)
+    unconverged = [f"replicate {h['replicate']} {h['method']}" for h in histories
+                   if not h["converged"]]
+    parity = []
+    for method in space.methods:
+        rows = trials[trials["method"] == method]
+        mine = [h for h in histories if h["method"] == method]
+        parity.append({"method": method, "dimensions": len(spaces[method][0]),
+                       "trials": [h["trials"] for h in mine],
+                       "feasible_share": float(rows["feasible"].mean()) if len(rows) else 0.0,
+                       "converged": [h["converged"] for h in mine],
+                       "converged_at": [h["converged_at"] for h in mine]})
+    compromise: dict[str, dict[str, dict]] = {}
+    for (replicate, method), front in judged_chosen(trials, space).items():
+        compromise.setdefault(method, {})[str(replicate)] = front
+    return {
+        "name": space.name, "settings": json_safe(asdict(space)),
+        "budget": {"replicates": space.replicates, "min_trials": space.min_trials,
+                   "max_trials": space.max_trials, "window": space.convergence_window,
+                   "tolerance": space.convergence_tolerance,
+                   "hypervolume_bounds": space.hypervolume_bounds,
+                   "sampler": "NSGA-II (optuna)", "sampler_seeds": [
+                       space.sampler_seed_of(r) for r in range(space.replicates)],
+                   "population_size": space.population_size, "batch_size": space.batch_size,
+                   "censoring": space.censoring},
+        "families": {"training": {"seeds": space.training_seeds, "size": space.training_size},
+                     "heldout": {"seed": space.heldout_seed, "size": space.heldout_size}},
+        "backend": space.backend,
+        "objectives": [o.label + f" ({o.direction})" for o in space.objectives],
+        "safety_threshold_collisions": {str(k): v for k, v in thresholds.items()},
+        "search_spaces": {m: spaces[m][1] for m in space.methods},
+        "compromise_rule": COMPROMISE_RULE, "answer_rule": ANSWER_RULE,
+        "compromise": compromise,
+        "replicates": histories, "parity": parity,
+        "below_default_budget": short, "unconverged": unconverged,
+        "headline": not short and not unconverged and n_replicates == space.replicates,
+        "dominance": {part: front_dominance(*_fronts(trials, judged.heldout, space, part),
+                                            space.objectives)
+                      for part in ("training", "heldout")},
+        "claims": claims}
+
+
+def judged_chosen(trials: pd.DataFrame, space: TuneSpace) -> dict[tuple[int, str], dict]:
+    """Each replicate's compromise setting per method (its parameters)."""
+    return {key: json.loads(front.loc[front["compromise"], "params"].iloc[0])
+            for key, front in pick_settings(trials, space).items()}
+
+
+def _fronts(trials: pd.DataFrame, heldout: pd.DataFrame, space: TuneSpace, part: str
+            ) -> tuple[np.ndarray, np.ndarray]:
+    """Both methods' Pareto points pooled over the replicates."""
+    replicates = sorted(trials["replicate"].unique())
+    points = [front_points(trials, heldout, space, part, int(r)) for r in replicates]
+    return (np.vstack([p[space.treatment] for p in points]),
+            np.vstack([p[space.control] for p in points]))

@@ -1,0 +1,211 @@
+"""Tuning to convergence (issue 40, parts 1-3): the hypervolume against an independent
+implementation (Optuna's WFG), the convergence rule on planted fronts that keep improving in
+steps (it must not stop) and that have converged (it must stop), the answer in counts over
+replicates, the budget a headline needs, and the objectives' censoring."""
+
+from __future__ import annotations
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from pipeline.analysis.objectives import Objective, objective_values, tuning_table
+from pipeline.config import CONF_DIR
+from pipeline.studies.tune import (
+    Convergence,
+    TuneSpace,
+    answer_in_counts,
+    convergence_point,
+    default_budget,
+    hypervolume,
+    hypervolume_history,
+    load_tune_space,
+    make_study,
+    optimize,
+)
+
+
+@pytest.mark.parametrize("dims", [2, 3, 4])
+def test_hypervolume_matches_optunas_wfg(dims):
+    from optuna._hypervolume import WFG
+
+    rng = np.random.default_rng(dims)
+    for _ in range(5):
+        points = rng.random((int(rng.integers(1, 30)), dims))
+        reference = np.full(dims, 1.05)
+        assert hypervolume(points, reference) == pytest.approx(
+            WFG().compute(points, reference), rel=1e-12)
+
+
+def test_hypervolume_closed_forms():
+    # one point: a box; two boxes overlapping in a corner: inclusion-exclusion
+    assert hypervolume(np.array([[0.2, 0.5, 0.0]]), np.ones(3)) == pytest.approx(0.8 * 0.5)
+    two = np.array([[0.0, 0.5], [0.5, 0.0]])
+    assert hypervolume(two, np.ones(2)) == pytest.approx(0.5 + 0.5 - 0.25)
+    # a point beyond the reference in any objective adds nothing
+    assert hypervolume(np.array([[0.2, 1.2]]), np.ones(2)) == 0.0
+
+
+def test_hypervolume_history_is_the_feasible_prefix_volume():
+    rng = np.random.default_rng(1)
+    values = rng.uniform(0.0, 3.0, (40, 3))
+    feasible = rng.random(40) < 0.7
+    bounds = [[0.0, 2.0], [0.0, 4.0], [0.0, 8.0]]
+    history = hypervolume_history(values, feasible, bounds)
+    scale = np.array([2.0, 4.0, 8.0])
+    for n in (1, 7, 23, 40):
+        prefix = values[:n][feasible[:n]] / scale
+        assert history[n - 1] == pytest.approx(hypervolume(prefix, np.ones(3)), rel=1e-12)
+    assert np.all(np.diff(history) >= -1e-15)
+    # an infeasible trial never moves it
+    assert all(history[i] == history[i - 1] for i in range(1, 40) if not feasible[i])
+
+
+def stepped_history(n: int, plateau: int, step: float) -> np.ndarray:
+    """A front that grows by ``step`` (relative) after every ``plateau`` trials: the measured
+    shape of improved's front (plateaus of 20-40 trials between jumps)."""
+    return 0.4 * (1.0 + step) ** (np.arange(n) // plateau)
+
+
+def test_a_front_growing_in_steps_with_plateaus_shorter_than_the_window_never_stops():
+    for plateau in (20, 30, 40):
+        history = stepped_history(300, plateau, 0.05)
+        assert convergence_point(history, 80, 60, 0.02) is None
+        # the naive rule the issue measured (< 1 % over the last 20 % of the trials so far)
+        # would have stopped it inside its first long plateau
+        naive = next(n for n in range(10, 300)
+                     if history[n - 1] - history[n - 1 - max(n // 5, 1)] <= 0.01 * history[n - 1])
+        assert naive < 60
+
+
+def test_a_converged_front_stops_at_the_first_window_without_growth():
+    history = np.concatenate([np.linspace(0.3, 0.6, 50), np.full(200, 0.6)])
+    # grows until trial 50; the 60-trial window ending at n holds no growth from n = 110 on,
+    # but 1.9 % growth is allowed: the window may still hold the last 0.019 * 0.6 of growth
+    stop = convergence_point(history, 80, 60, 0.02)
+    growth = history[stop - 1] - history[stop - 1 - 60]
+    assert growth <= 0.02 * history[stop - 1]
+    earlier = stop - 1
+    assert history[earlier - 1] - history[earlier - 1 - 60] > 0.02 * history[earlier - 1]
+    assert convergence_point(np.full(100, 0.5), 80, 60, 0.02) == 80  # flat: at the minimum
+    assert convergence_point(np.zeros(200), 80, 60, 0.02) is None    # nothing feasible yet
+
+
+def _planted_run(values_of, rule: Convergence) -> tuple[np.ndarray, int | None, int]:
+    from optuna.distributions import UniformDistribution
+
+    space = TuneSpace(name="planted", min_trials=rule.min_trials, max_trials=rule.max_trials,
+                      convergence_window=rule.window, batch_size=4, population_size=8,
+                      objectives=[Objective("reaction_delay_s"),
+                                  Objective("lateral_jerk_rms_mps3")],
+                      hypervolume_bounds=[[0.0, 1.0], [0.0, 1.0]])
+    study = make_study(space, "improved", 0, storage=None)
+    count = [0]
+
+    def evaluate(settings):
+        out = []
+        for p in settings:
+            out.append((values_of(count[0], p["planner.beta"]), -1.0))
+            count[0] += 1
+        return out
+
+    history, converged = optimize(study, {"planner.beta": UniformDistribution(0.0, 1.0)},
+                                  evaluate, rule, space.batch_size, log=lambda m: None)
+    return history, converged, count[0]
+
+
+def test_the_tune_does_not_stop_early_on_a_front_that_keeps_improving():
+    """Every 32 trials the reachable front moves 10 % closer to the ideal: the tune runs to its
+    cap and says it did not converge."""
+    rule = Convergence(80, 200, 60, 0.02, ((0.0, 1.0), (0.0, 1.0)))
+
+    def values_of(k, beta):
+        shrink = 0.9 ** (k // 32)
+        return (shrink * (0.3 + 0.5 * beta), shrink * (0.8 - 0.5 * beta))
+
+    history, converged, evaluated = _planted_run(values_of, rule)
+    assert converged is None and evaluated == 200 and len(history) == 200
+
+
+def test_the_tune_stops_on_a_front_that_has_converged():
+    """The planted front is fixed: its hypervolume stops growing once the sampler has spread
+    along it, and the tune stops there, long before its cap."""
+    rule = Convergence(40, 400, 30, 0.02, ((0.0, 1.0), (0.0, 1.0)))
+    history, converged, evaluated = _planted_run(
+        lambda k, beta: (0.3 + 0.5 * beta, 0.8 - 0.5 * beta), rule)
+    assert converged is not None and 40 <= converged < 400
+    # it stopped at the batch that first met the rule, never later
+    assert evaluated == len(history) and evaluated - converged < 4
+    assert convergence_point(history[:converged - 1], 40, 30, 0.02) is None
+
+
+@pytest.mark.parametrize("outcomes, sentence, settled", [
+    (["contradicted"] * 5, "C4: contradicted 5/5: settled (contradicted).", True),
+    (["supported"] * 4 + ["equivalent"], "C2: supported 4/5, equivalent 1/5: settled "
+                                        "(supported).", True),
+    (["supported"] * 3 + ["equivalent"] * 2, "C2: supported 3/5, equivalent 2/5: not settled.",
+     False),
+])
+def test_the_answer_in_counts_follows_the_stated_rule(outcomes, sentence, settled):
+    claim = sentence.split(":")[0]
+    text, is_settled, outcome = answer_in_counts(claim, outcomes, 0.8)
+    assert text == sentence and is_settled == settled
+    assert outcome == (outcomes[0] if settled else None)
+
+
+def test_only_the_default_budget_may_write_the_headline():
+    default = default_budget()
+    assert default.below_budget(default) == []
+    assert default.replicates >= 5 and default.heldout_size >= 200
+    quick = load_tune_space(CONF_DIR / "tune" / "quick.yaml")
+    assert {"replicates", "max_trials", "heldout_size"} <= set(quick.below_budget(default))
+    looser = TuneSpace(convergence_tolerance=0.05)
+    assert looser.below_budget(default) == ["convergence_tolerance"]
+    # an edited space never resumes another's trials; the held-out size does not decide them
+    assert TuneSpace(training_size=30).trial_key() != default.trial_key()
+    assert TuneSpace(heldout_size=300).trial_key() == TuneSpace().trial_key()
+
+
+def test_both_search_spaces_hold_every_free_apf_parameter_and_rho_p():
+    from pipeline.studies.tune import search_space
+
+    improved, _ = search_space("improved")
+    baseline, _ = search_space("baseline")
+    assert "planner.rho_p_m" in improved and "planner.rho_p_m" in baseline
+    assert len(improved) == 10 and len(baseline) == 4
+
+
+def test_objectives_read_members_as_the_ledger_does():
+    """Collided members out; one that never recovers counted at the run's end (duration -
+    passing time), not dropped; with censoring=drop it is left out."""
+    table = pd.DataFrame({
+        "collision": [False, False, True, False],
+        "recovered": [True, False, True, True], "reacted": [True, True, True, False],
+        "recovery_time_s": [1.0, np.nan, 9.0, 2.0],
+        "obstacle_passed_time_s": [5.0, 6.0, 5.0, 5.0],
+        "reaction_delay_s": [0.2, 0.4, 0.1, np.nan],
+        "threat_appear_time_s": [2.0, 2.0, 2.0, 3.0],
+        "duration_s": [13.0, 13.0, 13.0, 13.0]})
+    objectives = [Objective("recovery_time_s"), Objective("reaction_delay_s")]
+    censored = objective_values(tuning_table(table, "run_end"), objectives)
+    assert censored == pytest.approx(((1.0 + 7.0 + 2.0) / 3, (0.2 + 0.4 + 10.0) / 3))
+    dropped = objective_values(tuning_table(table, "drop"), objectives)
+    assert dropped == pytest.approx(((1.0 + 2.0) / 2, (0.2 + 0.4) / 2))
+
+
+def test_the_spaces_convergence_settings_reach_the_rule():
+    """tune.convergence_window, tune.convergence_tolerance and tune.hypervolume_bounds as the
+    loop reads them (Convergence.of): another value moves the stop or the volume."""
+    history = np.concatenate([np.linspace(0.3, 0.6, 50), np.full(200, 0.6)])
+    base = Convergence.of(TuneSpace())
+    assert base.stop_at(history) != Convergence.of(TuneSpace(convergence_window=20)).stop_at(
+        history)
+    assert base.stop_at(history) != Convergence.of(
+        TuneSpace(convergence_tolerance=0.2)).stop_at(history)
+    values, feasible = np.array([[0.5, 1.5, 3.5]]), np.array([True])
+    wide = Convergence.of(TuneSpace(hypervolume_bounds=[[0.0, 2.0], [0.0, 4.0], [0.0, 8.0]]))
+    assert hypervolume_history(values, feasible, [list(b) for b in base.bounds])[0] \
+        != hypervolume_history(values, feasible, [list(b) for b in wide.bounds])[0]
+    # and tune.settled_share moves the sentence
+    assert answer_in_counts("C2", ["supported"] * 3 + ["equivalent"] * 2, 0.6)[1]
+    assert not answer_in_counts("C2", ["supported"] * 3 + ["equivalent"] * 2, 0.8)[1]
