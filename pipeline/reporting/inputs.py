@@ -302,10 +302,10 @@ class ReportInputs:
         if apf_alone is not None and claims.c2_window == "common" \
                 and apf_alone.judgeable(claims):
             # its ledger reads C2 as the default ledger does: on the common window
-            apf_alone = optional(lambda _root: apf_alone.with_jerks(
+            alone: FamilyInputs = apf_alone
+            apf_alone = optional(lambda _root: alone.with_jerks(
                 (claims.treatment, *claims.controls, "mpc_no_apf")),
-                layout.folder("apf_alone"), "C2 on a common window (APF by itself)") \
-                or apf_alone
+                layout.folder("apf_alone"), "C2 on a common window (APF by itself)") or alone
         nmpc = optional(NmpcCheckResult.load, layout.folder("nmpc_check"), "nmpc check") \
             if NmpcCheckResult.present(layout.folder("nmpc_check")) else None
         speed = optional(SpeedCheckResult.load, layout.folder("speed"), "speed check") \

@@ -16,9 +16,8 @@ from pipeline.reporting.verdicts import ApfAloneVerdicts, Verdicts
 #: The peer without an APF (the same MPC tracking a straight-to-goal reference).
 NO_APF = "mpc_no_apf"
 #: What the opening summary says when the ``apf_alone`` families are not among the outputs.
-MISSING_NOTE = ("What each APF does by itself is not measured here (no apf_alone families "
-                "without the MPC's collision constraints under the outputs; make reproduce "
-                "makes them).")
+MISSING_NOTE = ("Each APF by itself (the MPC's collision constraints off): not run here "
+                "(make reproduce runs it).")
 
 
 @dataclass(frozen=True)
