@@ -124,6 +124,8 @@ class ExperimentConfig(FrozenAfterValidation):
         data.pop("features", None)
         if data["scenario"].get("obstacle_anchor") == "world":
             data["scenario"].pop("obstacle_anchor")  # the default reading, as before the key
+        if data["controller"].get("collision_constraints") is True:
+            data["controller"].pop("collision_constraints")  # the default, as before the key
         for section in ("planner", "controller"):
             # a plug-in's class and settings change the run; their absence does not
             if data[section].get("_target_") is None:

@@ -129,6 +129,16 @@ INTERPRETATION_REGISTER: tuple[RegisterEntry, ...] = (
         "point (tangent plane; mostly longitudinal, so a lateral MPC can meet it only with slack)",
         "controller.halfplane_normal"),
     RegisterEntry(
+        "Who avoids the obstacle: the APF or the MPC's constraints",
+        "the APF plans the avoiding reference and the MPC carries 'collision avoidance "
+        "constraints from APF' (Section 3); the claims (Tables 1-2) are the APF's",
+        "on: the soft half-planes above guard every method, so the family ledger judges each "
+        "APF together with constraints all methods share",
+        "off: no half-planes on any backend or track, the APF's reference alone keeps the "
+        "vehicle off the obstacles (make reproduce's apf_alone families: the 'APF by itself' "
+        "ledger beside the default one)",
+        "controller.collision_constraints"),
+    RegisterEntry(
         "Time alignment of y_ref in nlmpcmove (kinematic track)",
         "y_ref = [p_1; ...; p_Np] with p_1 the current position, passed to nlmpcmove",
         "literal: row i is the reference of predicted step i, as nlmpcmove reads it (so step 1 "

@@ -45,7 +45,7 @@ STUDY_FILES = {
 #: The outputs root's sections: only the layout (``pipeline.store.layout``) joins them to a
 #: path.
 SECTIONS = ("paper", "kinematic", "kinematic_readings", "family", "kinematic_family", "frames",
-            "ablation", "interpretations", "multiverse", "tune", "nmpc_check", "speed",
+            "apf_alone", "ablation", "interpretations", "multiverse", "tune", "nmpc_check", "speed",
             "sweeps")
 
 
@@ -204,7 +204,7 @@ def test_the_makefile_writes_where_the_layout_reads(tmp_path):
     written = set(re.findall(r"\$\(RUNS\)/([a-z_]+)", makefile))
     assert written <= names, written - names
     assert {"paper", "kinematic", "kinematic_readings", "family", "kinematic_family",
-            "frames", "ablation", "interpretations", "multiverse", "tune", "nmpc_check",
+            "frames", "apf_alone", "ablation", "interpretations", "multiverse", "tune", "nmpc_check",
             "speed", "sweeps"} <= written
     renamed = tmp_path / "paths.yaml"
     renamed.write_text("multiverse: robustness_study\n")

@@ -65,6 +65,7 @@ SWITCH_TESTS = {
     "tune.convergence_window": "test_tune_convergence",
     "tune.hypervolume_bounds": "test_tune_convergence", "tune.replicates": "test_tune",
     "tune.settled_share": "test_tune_convergence", "tune.censoring": "test_tune_convergence",
+    "controller.collision_constraints": "test_apf_alone",
 
 
 }

@@ -146,6 +146,7 @@ class MpcSettings(_KindSettings):
     slack_weight_quadratic: float
     safety_margin_m: float
     constraint_activation_m: float
+    collision_constraints: bool
     halfplane_normal: HalfplaneNormal
     max_obstacles: int
     heading_reference: HeadingReference
@@ -200,6 +201,7 @@ class KinematicMpcSettings(_KindSettings):
     reference_alignment: ReferenceAlignment
     safety_margin_m: float
     constraint_activation_m: float
+    collision_constraints: bool
     solver_max_iter: int
 
 

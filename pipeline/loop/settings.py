@@ -189,6 +189,9 @@ class ControllerConfig(FrozenAfterValidation):
     slack_weight_quadratic: float = 1.0e3
     safety_margin_m: float = 0.2
     constraint_activation_m: float = 12.0
+    # the MPC's soft collision half-planes (every backend, both tracks); false: none, so what
+    # avoids the obstacle is the APF's reference alone ("APF by itself", make reproduce)
+    collision_constraints: bool = True
     halfplane_normal: str = "lateral_side"
     max_obstacles: int = 3
     heading_reference: str = "path_slope"
@@ -302,6 +305,9 @@ class ControllerConfig(FrozenAfterValidation):
                     "slack_weight_linear", "slack_weight_quadratic", "safety_margin_m",
                     "constraint_activation_m"):
             at_least(f"controller.{key}", getattr(self, key), 0.0)
+        if not isinstance(self.collision_constraints, bool):
+            raise ConfigError("controller.collision_constraints", self.collision_constraints,
+                              "true or false")
         at_least("controller.r_steering_rate", self.r_steering_rate, 0.0, inclusive=False)
         choice("controller.heading_reference", self.heading_reference, tuple(HeadingReference))
         between("controller.heading_ref_max_rad", self.heading_ref_max_rad, 0.0, math.pi / 2)

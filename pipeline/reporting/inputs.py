@@ -208,6 +208,8 @@ class ReportInputs:
     other_runs: tuple[LabelledRun, ...] = ()
     family: FamilyInputs | None = None
     kinematic_family: FamilyInputs | None = None
+    #: the family without the MPC's collision half-planes ("APF by itself", make reproduce)
+    apf_alone: FamilyInputs | None = None
     readings: dict[str, list[LabelledRun]] = field(default_factory=dict)
     ablation: dict[str, pd.DataFrame] = field(default_factory=dict)
     interpretations: dict[str, dict[str, pd.DataFrame]] = field(default_factory=dict)
@@ -294,6 +296,16 @@ class ReportInputs:
                                                                    layout.canonical),
                                     kin_family_dir, "kinematic family section") \
             if kin_family_dir.is_dir() else None
+        apf_alone = optional(lambda folder: _apf_alone(folder, layout, skipped),
+                             layout.folder("apf_alone"), "APF-by-itself section") \
+            if layout.folder("apf_alone").is_dir() else None
+        if apf_alone is not None and claims.c2_window == "common" \
+                and apf_alone.judgeable(claims):
+            # its ledger reads C2 as the default ledger does: on the common window
+            alone: FamilyInputs = apf_alone
+            apf_alone = optional(lambda _root: alone.with_jerks(
+                (claims.treatment, *claims.controls, "mpc_no_apf")),
+                layout.folder("apf_alone"), "C2 on a common window (APF by itself)") or alone
         nmpc = optional(NmpcCheckResult.load, layout.folder("nmpc_check"), "nmpc check") \
             if NmpcCheckResult.present(layout.folder("nmpc_check")) else None
         speed = optional(SpeedCheckResult.load, layout.folder("speed"), "speed check") \
@@ -307,7 +319,8 @@ class ReportInputs:
             kinematic=TrackRuns.of(kinematic_runs, layout.canonical) if kinematic_runs
             else None,
             other_runs=lateral.extra + others, family=family,
-            kinematic_family=kinematic_family, readings=_readings(layout),
+            kinematic_family=kinematic_family, apf_alone=apf_alone,
+            readings=_readings(layout),
             ablation=family_tables_by_method(layout.folder("ablation"), skipped),
             interpretations=interpretation_tables(layout.folder("interpretations"), skipped),
             validity=validity, sweeps=sweeps, bench=bench, multiverse=multiverse, tune=tune,
@@ -361,6 +374,28 @@ def _readings(layout: OutputsLayout) -> dict[str, list[LabelledRun]]:
         for run in load_runs(root, []).runs:
             by_variant.setdefault(run.config["run"].get("variant", "?"), []).append(run)
     return dict(sorted(by_variant.items()))
+
+
+def _apf_alone(folder: Path, layout: OutputsLayout, skipped: list[Skipped]
+               ) -> FamilyInputs | None:
+    """The families of ``folder`` made without the MPC's collision half-planes, as their
+    settings record them (``controller.collision_constraints``); a family made with them is
+    skipped with its reason (it would not be the APF by itself). None when none is left."""
+    found = load_runs(folder, skipped)
+    kept = []
+    for label, settings in found.family_settings.items():
+        if settings.controller.collision_constraints:
+            skipped.append(Skipped(Path(str(found.family_info[label].get("dir", folder))),
+                                   "APF-by-itself section: left out (made with the MPC's "
+                                   "collision half-planes on)"))
+        else:
+            kept.append(label)
+    if not kept:
+        return None
+    return FamilyInputs.of(RunCollection(
+        family_tables={k: found.family_tables[k] for k in kept},
+        family_info={k: found.family_info[k] for k in kept},
+        family_settings={k: found.family_settings[k] for k in kept}), layout.canonical)
 
 
 def _validity(layout: OutputsLayout) -> ValidityInputs:

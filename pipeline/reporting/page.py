@@ -20,6 +20,7 @@ from pipeline.reporting.inputs import ReportInputs
 from pipeline.reporting.render import Page, render
 from pipeline.reporting.sections.ablation import ablation_section
 from pipeline.reporting.sections.answer import answer_section
+from pipeline.reporting.sections.apf_alone import apf_alone_section
 from pipeline.reporting.sections.fair_fight import fair_fight_section
 from pipeline.reporting.sections.family import family_section
 from pipeline.reporting.sections.kinematic import kinematic_section
@@ -103,10 +104,12 @@ def build_page(inputs: ReportInputs, verdicts: Verdicts, figures: Figures, comma
     kinematic = kinematic_section(inputs, verdicts, figures) if paper else None
     robustness = robustness_section(inputs, figures)
     fair_fight = fair_fight_section(inputs, figures)
+    apf_alone = apf_alone_section(inputs, verdicts) if paper else None
     return Page(
         paper=paper,
-        answer=answer_section(family, robustness, fair_fight, kinematic, verdicts.claims),
-        family=family, kinematic=kinematic,
+        answer=answer_section(family, robustness, fair_fight, kinematic, verdicts.claims,
+                              apf_alone),
+        family=family, apf_alone=apf_alone, kinematic=kinematic,
         looks=looks_section(inputs, verdicts) if paper else None,
         robustness=robustness if paper else None, fair_fight=fair_fight if paper else None,
         validity=validity_section(inputs, verdicts) if paper else None,

@@ -11,6 +11,7 @@ import jinja2
 from pipeline.reporting.format import FILTERS, interval
 from pipeline.reporting.sections.ablation import AblationSection
 from pipeline.reporting.sections.answer import AnswerSection
+from pipeline.reporting.sections.apf_alone import ApfAloneSection
 from pipeline.reporting.sections.fair_fight import FairFightSection
 from pipeline.reporting.sections.family import FamilySection
 from pipeline.reporting.sections.kinematic import KinematicSection
@@ -31,6 +32,7 @@ class Page:
     paper: PaperSection | None
     answer: AnswerSection
     family: FamilySection | None
+    apf_alone: ApfAloneSection | None
     kinematic: KinematicSection | None
     looks: LooksSection | None
     robustness: RobustnessSection | None

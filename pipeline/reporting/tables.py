@@ -40,9 +40,9 @@ def write_tables(inputs: ReportInputs, verdicts: Verdicts, table_dir: Path) -> N
 
 
 def _ledgers(inputs: ReportInputs, verdicts: Verdicts, table_dir: Path) -> None:
-    """The family ledgers (lateral, Appendix-A track, the baseline against no APF), C2 on
-    each run's own and on a common window, the outcome counts, and the model-validity
-    tables."""
+    """The family ledgers (lateral, Appendix-A track, the baseline against no APF, the APF by
+    itself with its collisions with and without the MPC's half-planes), C2 on each run's own
+    and on a common window, the outcome counts, and the model-validity tables."""
     if verdicts.family is not None:
         verdicts.family.ledger.to_frame().to_csv(table_dir / "claims_ledger.csv", index=False)
         pd.DataFrame(list(verdicts.family.counts)).to_csv(table_dir / "family_outcomes.csv",
@@ -62,6 +62,16 @@ def _ledgers(inputs: ReportInputs, verdicts: Verdicts, table_dir: Path) -> None:
             kf.apf_adds.to_frame().to_csv(
                 table_dir / "claims_ledger_baseline_vs_no_apf_kinematic_family.csv",
                 index=False)
+    if verdicts.apf_alone is not None:
+        alone = verdicts.apf_alone
+        alone.ledger.to_frame().to_csv(table_dir / "claims_ledger_apf_alone.csv", index=False)
+        with_ = {c["method"]: c["collisions"] for c in alone.counts_with}
+        pd.DataFrame([{"method": c["method"], "scenarios": c["scenarios"],
+                       "collisions_without_halfplanes": c["collisions"],
+                       "collisions_unavoidable_without_halfplanes": c["collisions_unavoidable"],
+                       "collisions_with_halfplanes": with_.get(c["method"])}
+                      for c in alone.counts]).to_csv(table_dir / "apf_alone_collisions.csv",
+                                                     index=False)
     if verdicts.validity is not None and inputs.validity is not None and has_validity(inputs):
         inputs.validity.table.to_frame().to_csv(table_dir / "model_validity.csv", index=False)
         pd.DataFrame(verdicts.validity.rows()).to_csv(table_dir / "claims_model_validity.csv",

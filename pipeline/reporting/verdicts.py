@@ -1,7 +1,8 @@
 """Every ledger the report shows, computed once from its inputs: the paper scenario's claims
 on each track, the family ledgers (lateral and Appendix-A track), what the baseline's APF adds,
-the Appendix-A readings, the ablation's effects and flips, and the claims again where the
-MPC's model held and in the other frame. The sections only format these."""
+the claims with the MPC's collision half-planes off (the APF by itself), the Appendix-A
+readings, the ablation's effects and flips, and the claims again where the MPC's model held
+and in the other frame. The sections only format these."""
 
 from __future__ import annotations
 
@@ -87,6 +88,20 @@ class FamilyVerdicts:
 
 
 @dataclass(frozen=True)
+class ApfAloneVerdicts:
+    """The claims judged with the MPC's collision half-planes off (``apf_alone``): the
+    ledger (the treatment against each control and against ``mpc_no_apf``, no APF at all),
+    and the outcome counts per method without the half-planes and, from the default family,
+    with them."""
+
+    tables: dict[str, pd.DataFrame]
+    ledger: Ledger
+    comparisons: tuple[str, ...]
+    counts: tuple[dict, ...]
+    counts_with: tuple[dict, ...]
+
+
+@dataclass(frozen=True)
 class ValidityVerdicts:
     """The claims again: the default ledger without the all-pairs sensitivity, per comparison
     on the scenarios where both models held (with their number), in the other frame."""
@@ -124,6 +139,7 @@ class Verdicts:
     kinematic: TrackClaims | None = None
     family: FamilyVerdicts | None = None
     kinematic_family: FamilyVerdicts | None = None
+    apf_alone: ApfAloneVerdicts | None = None
     readings: tuple[tuple[str, dict[str, str]], ...] = ()
     ablation_effects: pd.DataFrame | None = None
     ablation_roles: tuple[str, str] = ("improved", "baseline")
@@ -151,7 +167,9 @@ class Verdicts:
         effects, roles = None, ablation_roles(inputs.ablation, own)
         if roles[1] in inputs.ablation and roles[0] in inputs.ablation:
             effects = ablation_effects(inputs.ablation, own)
-        return cls(cfg, paper, kinematic, family, kinematic_family,
+        apf_alone = _apf_alone(inputs.apf_alone, cfg, family, inputs.family) \
+            if inputs.apf_alone is not None and inputs.apf_alone.judgeable(cfg) else None
+        return cls(cfg, paper, kinematic, family, kinematic_family, apf_alone,
                    _readings(inputs.kinematic, inputs.readings, cfg)
                    if inputs.kinematic is not None else (),
                    effects, roles, interpretation_flips(inputs.interpretations, own),
@@ -228,6 +246,33 @@ def _c2_windows(tables: dict[str, pd.DataFrame], cfg: ClaimsConfig, ledger: Ledg
     by_reading = {cfg.c2_window: ledger_rows, other: other_rows}
     return C2Windows(cfg.common_window, cfg.c2_window, by_reading["own"],
                      by_reading["common"])
+
+
+def _apf_alone(family: FamilyInputs, cfg: ClaimsConfig, default: FamilyVerdicts | None,
+               default_inputs: FamilyInputs | None) -> ApfAloneVerdicts:
+    """The ledger without the MPC's half-planes, judged as the default one (the same
+    :func:`family_ledger`, settings, C2 window and all-pairs sensitivity; no paper-scenario column:
+    the paper scenario runs with them), plus ``mpc_no_apf`` as a comparison: what the
+    treatment's APF adds over no APF at all. The counts with the half-planes are the default
+    family's, given only when it is the same family (size and seed)."""
+    tables = {m: family.primary[m] for m in ordered(family.primary)}
+    comparisons = tuple(dict.fromkeys(c for c in (*cfg.controls, "mpc_no_apf")
+                                      if c in tables and c != cfg.treatment))
+    # C2 on the window the default ledger reads it on (a common one needs the runs' jerk)
+    jerks = family.jerks if all(m in family.jerks for m in (cfg.treatment, *comparisons)) \
+        else None
+    if jerks is None:
+        cfg = dataclasses.replace(cfg, c2_window="own")
+    ledger = family_ledger(tables, cfg, None, cfg.treatment, comparisons, jerks=jerks)
+
+    def drawn(info: dict[str, dict]) -> set[tuple]:
+        return {(i.get("size"), i.get("seed")) for i in info.values()}
+
+    same = default_inputs is not None and drawn(family.info) == drawn(default_inputs.info)
+    counts_with = tuple(c for c in default.counts if c["method"] in tables) \
+        if default is not None and same else ()
+    return ApfAloneVerdicts(tables, ledger, comparisons, tuple(outcome_counts(tables)),
+                            counts_with)
 
 
 def _readings(kinematic: TrackRuns, readings: dict[str, list[LabelledRun]], cfg: ClaimsConfig

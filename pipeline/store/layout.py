@@ -31,6 +31,7 @@ class OutputsLayout:
     family: str = "family"
     kinematic_family: str = "kinematic_family"
     frames: str = "frames"
+    apf_alone: str = "apf_alone"
     ablation: str = "ablation"
     interpretations: str = "interpretations"
     multiverse: str = "multiverse"
@@ -73,8 +74,8 @@ class OutputsLayout:
         """Folder names under the root that hold studies or families read by their own
         sections, never among the runs of the claims (the paper scenario, the family)."""
         return (self.sweeps, self.ablation, self.interpretations, self.multiverse, self.tune,
-                self.kinematic_readings, self.kinematic_family, self.frames, self.nmpc_check,
-                self.speed)
+                self.kinematic_readings, self.kinematic_family, self.frames, self.apf_alone,
+                self.nmpc_check, self.speed)
 
     @property
     def validity_sections(self) -> tuple[str, ...]:

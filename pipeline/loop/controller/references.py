@@ -130,6 +130,17 @@ def radial_normals(points_m: np.ndarray, centres_m: np.ndarray,
                     diff / np.maximum(dist, _NORMAL_EPS_M)[:, None], fallback)
 
 
+def constrains(distance_m: float,
+               controller: MpcSettings | KinematicMpcSettings | ControllerConfig) -> bool:
+    """Whether an obstacle ``distance_m`` from the vehicle gets collision half-planes: the
+    MPC's collision constraints are on (``controller.collision_constraints``) and it is within
+    ``controller.constraint_activation_m``. The one place both tracks' half-planes
+    (:func:`collision_halfplanes`, :func:`kinematic_halfplanes`), and so every backend, select
+    their obstacles."""
+    return controller.collision_constraints \
+        and not distance_m > controller.constraint_activation_m  # (a NaN distance: constrained)
+
+
 def collision_halfplanes(stations_m: np.ndarray, y_ref_m: np.ndarray, vehicle_line_m: np.ndarray,
                          predicted_obstacles_line_m: np.ndarray, radii_m: np.ndarray,
                          vehicle: VehicleConfig, controller: MpcSettings | ControllerConfig
@@ -146,9 +157,10 @@ def collision_halfplanes(stations_m: np.ndarray, y_ref_m: np.ndarray, vehicle_li
       predicted obstacle to ``q_k`` (:func:`radial_normals`: the tangent plane of the disk facing
       the reference point).
 
-    Obstacles farther than ``constraint_activation_m`` from the vehicle, and unused obstacle
-    slots (fewer obstacles than ``max_obstacles``), get empty rows ``0 y + s >= 0`` that cannot
-    bind, so one compiled problem serves any number of obstacles up to ``max_obstacles``.
+    Obstacles farther than ``constraint_activation_m`` from the vehicle, every obstacle when
+    ``collision_constraints`` is off (:func:`constrains`), and unused obstacle slots (fewer
+    obstacles than ``max_obstacles``) get empty rows ``0 y + s >= 0`` that cannot bind, so one
+    compiled problem serves any number of obstacles up to ``max_obstacles``.
 
     Parameters
     ----------
@@ -165,7 +177,7 @@ def collision_halfplanes(stations_m: np.ndarray, y_ref_m: np.ndarray, vehicle_li
     vx, vy = vehicle_line_m.tolist()
     for j in range(min(n_obs, M)):
         cx, cy = predicted_obstacles_line_m[0, j].tolist()
-        if hypot(cx - vx, cy - vy) > controller.constraint_activation_m:
+        if not constrains(hypot(cx - vx, cy - vy), controller):
             continue
         reach = float(radii_m[j]) + vehicle.footprint_radius_m + controller.safety_margin_m
         fallback_side = 1.0 if vy > cy else (-1.0 if vy < cy else 1.0)
@@ -217,7 +229,8 @@ def kinematic_halfplanes(predicted_states: np.ndarray, reference_m: np.ndarray,
 
     The normal points from the predicted obstacle to the APF reference point
     (:func:`radial_normals`), or to the linearization trajectory where the reference sits on the
-    obstacle; ``h = n . o_k + R``. Unused slots and far obstacles get empty rows.
+    obstacle; ``h = n . o_k + R``. Unused slots, far obstacles and every obstacle when
+    ``collision_constraints`` is off (:func:`constrains`) get empty rows.
 
     Returns
     -------
@@ -228,7 +241,8 @@ def kinematic_halfplanes(predicted_states: np.ndarray, reference_m: np.ndarray,
     n_obs = predicted_obstacles_m.shape[1] if predicted_obstacles_m.ndim == 3 else 0
     for j in range(min(n_obs, M)):
         obstacle = predicted_obstacles_m[:, j, :]
-        if np.linalg.norm(obstacle[0] - predicted_states[:2, 0]) > controller.constraint_activation_m:
+        if not constrains(float(np.linalg.norm(obstacle[0] - predicted_states[:2, 0])),
+                          controller):
             continue
         backup = radial_normals(predicted_states[:2, 1:].T, obstacle,
                                 np.array([0.0, 1.0])[None, :])

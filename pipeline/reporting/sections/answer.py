@@ -1,7 +1,8 @@
 """The answer at the top of the page and at the end of ``make reproduce``: per claim its
 outcome against the first control with the estimate and interval, the other controls'
 outcomes, and (when they ran) its robustness, the tuned-vs-tuned outcome and the Appendix-A
-track's; the collisions and the model-validity caveat."""
+track's; the collisions, what the APF and what the MPC contribute to safety, and the
+model-validity caveat."""
 
 from __future__ import annotations
 
@@ -10,6 +11,7 @@ from dataclasses import dataclass
 from pipeline.analysis.claims import ALL_CLAIMS
 from pipeline.config import ClaimsConfig
 from pipeline.reporting.format import fmt, unit
+from pipeline.reporting.sections.apf_alone import MISSING_NOTE, ApfAloneSection
 from pipeline.reporting.sections.fair_fight import FairFightSection
 from pipeline.reporting.sections.family import FamilySection
 from pipeline.reporting.sections.kinematic import KinematicSection
@@ -19,11 +21,15 @@ from pipeline.reporting.sections.robustness import RobustnessSection
 @dataclass(frozen=True)
 class AnswerSection:
     """``rows``: the page's list; ``caveat``: the model-validity caveat; ``lines``: the
-    answer in words (``answer.txt``)."""
+    answer in words (``answer.txt``); ``safety``: what the APF and what the MPC contribute to
+    safety (one sentence from the ``apf_alone`` families), or, without them, a note saying so
+    (``safety_measured`` False; the note stays off ``answer.txt``)."""
 
     rows: tuple[dict, ...]
     caveat: str
     lines: tuple[str, ...]
+    safety: str = ""
+    safety_measured: bool = False
 
 
 def validity_caveat(counts) -> str:
@@ -79,9 +85,11 @@ def _rows(family: FamilySection, robustness: RobustnessSection | None,
 
 def answer_section(family: FamilySection | None, robustness: RobustnessSection | None,
                    fair_fight: FairFightSection | None, kinematic: KinematicSection | None,
-                   cfg: ClaimsConfig) -> AnswerSection:
+                   cfg: ClaimsConfig, apf_alone: ApfAloneSection | None = None
+                   ) -> AnswerSection:
     if family is None:
         return AnswerSection((), "", ())
+    safety = apf_alone.sentence if apf_alone is not None else ""
     caveat = validity_caveat(family.counts)
     lines = list(family.answer)
     if fair_fight and fair_fight.headline:
@@ -90,6 +98,8 @@ def answer_section(family: FamilySection | None, robustness: RobustnessSection |
     lines.insert(0, "Collisions: " + ", ".join(f"{c['method']} {c['collisions']}"
                                                for c in family.counts) + "."
                  + (f" {caveat}" if caveat else ""))
+    if safety:
+        lines.insert(1, safety)
     kf = kinematic.family if kinematic is not None else None
     if kf is not None:
         lines.append(f"Appendix-A track ({kf.size} scenarios): {kf.treatment} vs baseline "
@@ -97,4 +107,4 @@ def answer_section(family: FamilySection | None, robustness: RobustnessSection |
                                  if r["comparison"] == "baseline")
                      + (f". {kf.apf_adds.sentence}" if kf.apf_adds else "."))
     return AnswerSection(tuple(_rows(family, robustness, fair_fight, kinematic, cfg)), caveat,
-                         tuple(lines))
+                         tuple(lines), safety or MISSING_NOTE, bool(safety))

@@ -97,7 +97,7 @@ def answer_lines(ledger: Ledger) -> list[str]:
     return lines
 
 
-def _grouped(ledger: Ledger) -> list[dict]:
+def ledger_groups(ledger: Ledger) -> list[dict]:
     """The ledger's records, grouped by claim (one row group per claim: ``first``, ``span``),
     each with its metric's ``unit``."""
     records = [{**r, "unit": unit(r["metric"])} for r in ledger.records()]
@@ -155,7 +155,7 @@ def family_section(inputs: ReportInputs, verdicts: Verdicts, figures: Figures
     records = ledger.records()
     return FamilySection(
         size=first["size"], seed=first["seed"], treatment=cfg.treatment,
-        methods=tuple(ordered(tables)), ledger=tuple(_grouped(ledger)),
+        methods=tuple(ordered(tables)), ledger=tuple(ledger_groups(ledger)),
         by_claim={r["claim"]: r for r in records if r["comparison"] == cfg.controls[0]},
         solvers=_solvers(family, tables), counts=judged.counts,
         cap_note=_cap_note(judged.counts, cfg.cap_binding_share), apf_adds=adds,
