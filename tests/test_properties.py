@@ -74,7 +74,8 @@ def scripted(offset_y: float, bump: float, obstacle_y: float, start: float) -> p
 
 
 CTX = TrajectoryContext((0.0, 0.0), (30.0, 0.0), 1.0)
-TIME_KEYS = {"obstacle_appear_time_s", "obstacle_passed_time_s", "threat_appear_time_s"}
+TIME_KEYS = {"obstacle_appear_time_s", "obstacle_passed_time_s", "threat_appear_time_s",
+             "smoothness_window_start_s", "smoothness_window_end_s"}
 
 
 @SETTINGS

@@ -168,8 +168,8 @@ class FamilyInputs:
         window cannot be read on it)."""
         from pipeline.analysis.claims.windows import WINDOW_START
         from pipeline.analysis.metrics import lateral_jerk_signal
+        from pipeline.analysis.metrics.context import trajectory_context
         from pipeline.store.runs import member_trajectories
-        from pipeline.studies.experiment import trajectory_context
 
         jerks: dict[str, dict[str, LateralJerk]] = {}
         for method in methods:

@@ -7,7 +7,6 @@ parallel. The Hydra entry point is :mod:`pipeline.run`.
 
 from __future__ import annotations
 
-import functools
 import gc
 import logging
 from dataclasses import dataclass
@@ -16,7 +15,8 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from pipeline.analysis.metrics import RunMetrics, TrajectoryContext, compute_metrics
+from pipeline.analysis.metrics import RunMetrics, compute_metrics
+from pipeline.analysis.metrics.context import trajectory_context
 from pipeline.analysis.tally import Tally
 from pipeline.config import ExperimentConfig
 from pipeline.loop.controller import QpCache
@@ -104,26 +104,6 @@ def run_experiment(cfg: ExperimentConfig, out_dir: Path, resume: bool = True,
     write_run(out_dir, config_text=config_yaml(cfg, yaml_memo), model=model.to_json(),
               trajectory=result.trajectory, timing=timing, metrics=metrics, info=info)
     return RunSummary(out_dir, metrics, info, skipped=False)
-
-
-def trajectory_context(cfg: ExperimentConfig) -> TrajectoryContext:
-    """Geometry and vehicle limits the metrics need, from the run's configuration."""
-    v = cfg.vehicle
-    start, goal = cfg.scenario.start_xy_m, cfg.scenario.goal_xy_m
-    return TrajectoryContext((start[0], start[1]), (goal[0], goal[1]),
-                             v.footprint_radius_m, cfg.model.validity_heading_rad,
-                             tyre_linear_limit=_tyre_limit(cfg.model.tyre_linear_tolerance),
-                             wheelbase_m=v.wheelbase_m, steering_max_rad=v.steering_max_rad,
-                             steering_rate_max_rad_s=v.steering_rate_max_rad_s,
-                             braking_mps2=v.accel_max_mps2)
-
-
-@functools.lru_cache(maxsize=16)
-def _tyre_limit(tolerance: float) -> float:
-    """:func:`~pipeline.loop.model.tyre_linear_limit`, solved once per tolerance."""
-    from pipeline.loop.model import tyre_linear_limit
-
-    return tyre_linear_limit(tolerance)
 
 
 def config_yaml(cfg: ExperimentConfig, memo: dict | None = None) -> str:

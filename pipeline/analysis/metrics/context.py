@@ -1,0 +1,32 @@
+"""A run's :class:`~pipeline.analysis.metrics.signals.TrajectoryContext` from its
+configuration: what the metrics need besides the logged table (one place for every stage that
+re-scores stored trajectories: the studies, the report, the API)."""
+
+from __future__ import annotations
+
+import functools
+from typing import Any
+
+from pipeline.analysis.metrics.signals import TrajectoryContext
+
+
+def trajectory_context(cfg: Any) -> TrajectoryContext:
+    """Geometry and vehicle limits the metrics need, from the run's configuration (a
+    :class:`pipeline.config.ExperimentConfig`; typed loosely because the configuration module,
+    which holds every stage's settings, comes after this stage)."""
+    v = cfg.vehicle
+    start, goal = cfg.scenario.start_xy_m, cfg.scenario.goal_xy_m
+    return TrajectoryContext((start[0], start[1]), (goal[0], goal[1]),
+                             v.footprint_radius_m, cfg.model.validity_heading_rad,
+                             tyre_linear_limit=_tyre_limit(cfg.model.tyre_linear_tolerance),
+                             wheelbase_m=v.wheelbase_m, steering_max_rad=v.steering_max_rad,
+                             steering_rate_max_rad_s=v.steering_rate_max_rad_s,
+                             braking_mps2=v.accel_max_mps2)
+
+
+@functools.lru_cache(maxsize=16)
+def _tyre_limit(tolerance: float) -> float:
+    """:func:`~pipeline.loop.model.tyre_linear_limit`, solved once per tolerance."""
+    from pipeline.loop.model import tyre_linear_limit
+
+    return tyre_linear_limit(tolerance)
