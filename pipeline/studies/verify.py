@@ -4,7 +4,7 @@ the command in :mod:`pipeline.verify`).
 ``reports/reference/`` holds the summary of the default ``make reproduce``:
 ``paper_metrics.csv`` (every method and track on the paper scenario) and, when the families
 were run, ``claims_ledger.csv`` (the lateral family), ``claims_ledger_kinematic_family.csv``
-(the Appendix-A track's family) and ``model_validity.csv`` (does each MPC's model hold, per
+(the Appendix-A track's family), ``claims_ledger_apf_alone.csv`` (the APF by itself) and ``model_validity.csv`` (does each MPC's model hold, per
 track, frame and method). Rows are matched by their key (track and method; claim and
 comparison), whatever their order. Numbers must agree within ``rel 1e-6 or abs 1e-6``
 (deterministic code; the slack covers floating-point differences between BLAS builds), labels
@@ -29,10 +29,12 @@ ABS_TOL = 1e-6
 PAPER_FILE = "paper_metrics.csv"
 LEDGER_FILE = "claims_ledger.csv"
 KINEMATIC_LEDGER_FILE = "claims_ledger_kinematic_family.csv"
+APF_ALONE_LEDGER_FILE = "claims_ledger_apf_alone.csv"
 VALIDITY_FILE = "model_validity.csv"
 #: the columns that name a row of each file
 KEYS = {PAPER_FILE: ("track", "method"), LEDGER_FILE: ("claim", "comparison"),
         KINEMATIC_LEDGER_FILE: ("claim", "comparison"),
+        APF_ALONE_LEDGER_FILE: ("claim", "comparison"),
         VALIDITY_FILE: ("track", "frame", "method")}
 LEDGER_COLUMNS = ["claim", "comparison", "metric", "outcome", "estimate", "ci_low", "ci_high",
                   "p_holm", "prob_improvement", "n_better", "n_tied", "n_worse", "n_missing",
@@ -67,16 +69,20 @@ def paper_metrics_table(runs_root: Path) -> pd.DataFrame:
                                               if c not in ("track", "method"))]
 
 
-def ledger_table(runs_root: Path, kinematic: bool = False) -> pd.DataFrame | None:
+def ledger_table(runs_root: Path, kinematic: bool = False, apf_alone: bool = False
+                 ) -> pd.DataFrame | None:
     """The family claims ledger, if the family was run (``kinematic``: the Appendix-A
-    track's family under ``runs_root/kinematic_family``, without the paper-scenario column)."""
+    track's family under ``runs_root/kinematic_family``, without the paper-scenario column;
+    ``apf_alone``: the families without the MPC's collision constraints, improved against
+    baseline, baseline_matched and no APF)."""
     from pipeline.analysis.claims import family_ledger
     from pipeline.analysis.settings import ClaimsConfig
     from pipeline.store.collection import load_runs
     from pipeline.store.layout import OutputsLayout
 
-    if kinematic:
-        runs_root = OutputsLayout.load(runs_root).folder("kinematic_family")
+    if kinematic or apf_alone:
+        runs_root = OutputsLayout.load(runs_root).folder(
+            "kinematic_family" if kinematic else "apf_alone")
         if not runs_root.is_dir():
             return None
     collection = load_runs(runs_root)
@@ -85,7 +91,7 @@ def ledger_table(runs_root: Path, kinematic: bool = False) -> pd.DataFrame | Non
         return None
     paper = {}
     try:
-        if not kinematic:
+        if not kinematic and not apf_alone:
             frame = paper_metrics_table(runs_root)
             paper = {r["method"]: r
                      for r in frame[frame["track"] == "lateral"].to_dict("records")}
@@ -93,7 +99,9 @@ def ledger_table(runs_root: Path, kinematic: bool = False) -> pd.DataFrame | Non
         pass
     # the claims settings the runs were made with
     cfg = collection.claims_settings("improved") or ClaimsConfig()
-    return family_ledger(tables, cfg, paper or None).to_frame().reindex(columns=LEDGER_COLUMNS)
+    comparisons = ("baseline", "baseline_matched") + (("mpc_no_apf",) if apf_alone else ())
+    return family_ledger(tables, cfg, paper or None, comparisons=comparisons).to_frame() \
+        .reindex(columns=LEDGER_COLUMNS)
 
 
 def compare_tables(fresh: pd.DataFrame, reference: pd.DataFrame, name: str,
@@ -139,8 +147,10 @@ def verify(runs_root: Path, reference_dir: Path, update: bool = False) -> list[s
     """Compare (or, with ``update``, rewrite) the reference; returns the differences."""
     reference_dir = Path(reference_dir)
     fresh = {PAPER_FILE: paper_metrics_table(runs_root)}
-    for file, kinematic in ((LEDGER_FILE, False), (KINEMATIC_LEDGER_FILE, True)):
-        ledger = ledger_table(runs_root, kinematic=kinematic)
+    for file, kinematic, alone in ((LEDGER_FILE, False, False),
+                                   (KINEMATIC_LEDGER_FILE, True, False),
+                                   (APF_ALONE_LEDGER_FILE, False, True)):
+        ledger = ledger_table(runs_root, kinematic=kinematic, apf_alone=alone)
         if ledger is not None:
             fresh[file] = ledger
     from pipeline.store.collection import model_validity_table
