@@ -243,11 +243,7 @@ def _ledger_row(claim: Claim, comparison: str, result: PairedResult, p_holm: flo
     outcome, note = judge(result, margin, cfg, claim)
     excludes_zero = bool(result.ci_high < 0.0 or result.ci_low > 0.0)
     if np.isfinite(p_holm) and (p_holm < cfg.alpha) != excludes_zero:
-        test_note = (f"the paired test after Holm (p {p_holm:.2g}) "
-                     + ("finds a difference" if p_holm < cfg.alpha else "finds none")
-                     + f" at alpha {cfg.alpha:g}, the {result.ci_level:.2%} interval "
-                     + ("excludes 0" if excludes_zero else "does not")
-                     + ": the interval decides")
+        test_note = f"Holm p {p_holm:.2g} disagrees; the interval decides"
         note = f"{note}; {test_note}" if note else test_note
     if not claim.is_rate and result.n_pairs and \
             result.n_floor_ties >= cfg.floor_tie_share * result.n_pairs:

@@ -68,7 +68,7 @@ def _rows(family: FamilySection, robustness: RobustnessSection | None,
         extra = [f"vs {r['comparison']}: {r['outcome']}" for r in others]
         cell = robust.get(claim.claim_id, {}).get(main["comparison"])
         if cell:
-            extra.append(f"{cell['agree']} of the multiverse's specifications agree")
+            extra.append(f"multiverse: {cell['agree']} agree")
         if claim.claim_id in tuned:
             extra.append(f"tuned vs tuned over replicates: {tuned[claim.claim_id]['counts']}"
                          + ("" if tuned[claim.claim_id]["settled"] else " (not settled)"))

@@ -55,7 +55,9 @@ def _cells(result: MultiverseResult) -> list[dict]:
             "agree": f"{100 * r['agree_share']:.0f} %", "moved": moved,
             "shares": ", ".join(f"{o} {100 * r[f'share_{o}']:.0f} %"
                                 for o in OUTCOMES if r.get(f"share_{o}", 0) > 0),
-            "holds_with": r["holds_with"] if isinstance(r.get("holds_with"), str)
+            # the three choices with the largest share (the whole list: the robustness table)
+            "holds_with": "; ".join(r["holds_with"].split("; ")[:3])
+            if isinstance(r.get("holds_with"), str)
             and r["holds_with"] else "no single choice"}
     return list(rows.values())
 
