@@ -242,7 +242,8 @@ def _ledger_row(claim: Claim, comparison: str, result: PairedResult, p_holm: flo
                          pi_high=math.nan, interval_method="too few pairs")
     outcome, note = judge(result, margin, cfg, claim)
     excludes_zero = bool(result.ci_high < 0.0 or result.ci_low > 0.0)
-    if np.isfinite(p_holm) and (p_holm < cfg.alpha) != excludes_zero:
+    if np.isfinite(p_holm) and result.n_pairs >= cfg.min_pairs \
+            and (p_holm < cfg.alpha) != excludes_zero:
         test_note = f"Holm p {p_holm:.2g} disagrees; the interval decides"
         note = f"{note}; {test_note}" if note else test_note
     if not claim.is_rate and result.n_pairs and \
