@@ -56,3 +56,31 @@ def test_wheel_installs_and_runs_from_an_empty_folder(tmp_path):
     for command in ("apf-mpc-report", "apf-mpc-score", "apf-mpc-tune"):
         assert subprocess.run([str(venv / "bin" / command), "--help"], cwd=empty,
                               capture_output=True, timeout=120).returncode == 0
+
+
+def _freeze(python: Path) -> set[str]:
+    """The installed distributions, normalised (pip's bookkeeping packages left out)."""
+    out = subprocess.run([str(python), "-m", "pip", "list", "--format=freeze"],
+                         capture_output=True, text=True, check=True).stdout
+    names = {line.lower().replace("_", "-") for line in out.splitlines() if "==" in line}
+    return {n for n in names if n.split("==")[0] not in ("pip", "setuptools", "wheel", "uv",
+                                                          "apf-mpc-repro")}
+
+
+def test_make_install_uses_uv_and_falls_back_to_pip_with_the_same_pins(tmp_path):
+    """``make install`` (INSTALLER=uv, the default) installs with uv; ``INSTALLER=pip`` with pip
+    alone; both give the same distributions at the same pinned versions."""
+    envs = {}
+    for installer in ("uv", "pip"):
+        venv = tmp_path / f"venv_{installer}"
+        proc = subprocess.run(["make", "install", f"VENV={venv}", f"INSTALLER={installer}"],
+                              cwd=ROOT, capture_output=True, text=True, timeout=900)
+        assert proc.returncode == 0, proc.stdout[-2000:] + proc.stderr[-2000:]
+        said = "installed with uv" if installer == "uv" else "installing with pip"
+        assert said in proc.stdout
+        assert (venv / "bin" / "uv").exists() == (installer == "uv")
+        envs[installer] = _freeze(venv / "bin" / "python")
+    assert envs["uv"] == envs["pip"] and len(envs["uv"]) > 50
+    pins = {line.strip().lower().replace("_", "-")
+            for line in (ROOT / "constraints.txt").read_text().splitlines() if "==" in line}
+    assert envs["uv"] <= pins
