@@ -94,7 +94,7 @@ def test_the_run_returns_its_objectives_to_hydras_optuna_sweeper(tmp_path):
 
 def _planted_space(n_trials: int) -> TuneSpace:
     return TuneSpace(name="planted", min_trials=n_trials, max_trials=n_trials,
-                     convergence_window=n_trials, batch_size=4, population_size=8,
+                     convergence_window=n_trials - 1, batch_size=4, population_size=8,
                      objectives=[Objective("reaction_delay_s"),
                                  Objective("lateral_jerk_rms_mps3")],
                      hypervolume_bounds=[[0.0, 4.0], [0.0, 4.0]])
@@ -182,6 +182,9 @@ def test_tuning_files_are_read_strictly(tmp_path):
         load_tune_space(bad)
     bad.write_text("name: x\nmin_trials: 40\nmax_trials: 20\n")
     with pytest.raises(ConfigError, match="tune.max_trials"):
+        load_tune_space(bad)
+    bad.write_text("name: x\nconvergence_window: 300\n")
+    with pytest.raises(ConfigError, match="tune.convergence_window"):
         load_tune_space(bad)
     bad.write_text("name: x\nn_trials: four\n")
     proc = subprocess.run([sys.executable, "-m", "pipeline.tune", "--space", str(bad),

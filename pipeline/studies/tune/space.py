@@ -94,6 +94,10 @@ class TuneSpace:
         if self.max_trials < self.min_trials:
             raise ConfigError("tune.max_trials", self.max_trials,
                               f"an integer >= tune.min_trials ({self.min_trials})")
+        if self.convergence_window >= self.max_trials:
+            raise ConfigError("tune.convergence_window", self.convergence_window,
+                              f"an integer below tune.max_trials ({self.max_trials}): a longer "
+                              "window can never be filled, so the tune could never converge")
         between("tune.convergence_tolerance", self.convergence_tolerance, 0.0, 1.0)
         between("tune.settled_share", self.settled_share, 0.5, 1.0)
         seeds = self.training_seeds
