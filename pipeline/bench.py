@@ -26,7 +26,8 @@ HEADLINE = ("closed_loop_over_floor", "step_over_floor", "step_over_sparse_floor
             "step_over_sparse_floor_cpu", "outside_qp_us_per_step", "qp_us_per_step",
             "outside_qp_over_qp", "outside_qp_over_qp_python_kernels", "setup_ms",
             "compiles_per_family", "family_scenarios_per_s", "family_member_over_sparse_floor",
-            "family_member_over_sparse_floor_daqp", "multiverse_member_reads_per_member")
+            "family_member_over_sparse_floor_daqp", "multiverse_member_reads_per_member",
+            "install_over_pip")
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -25,6 +25,7 @@ from pathlib import Path
 import pandas as pd
 
 from pipeline.studies.bench.closed_loop import bench_closed_loop, bench_family_member
+from pipeline.studies.bench.install import measure_install
 from pipeline.studies.bench.lateral import bench_lateral
 from pipeline.studies.bench.path_frame import bench_path_frame, summarize_path_frame
 from pipeline.studies.bench.peers import bench_kinematic, bench_peers
@@ -80,6 +81,7 @@ def _measure(out: Path, steps: int, repeats: int, quick: bool, family_size: int
     summary["step_over_sparse_floor_path_daqp"] = \
         summary["path_frame"]["step_over_sparse_floor_path_daqp"]
     summary.update(bench_multiverse_reads())
+    summary.update(measure_install())
     summary["outside_qp_over_qp"] = closed_loop["outside_qp_us_per_step"] \
         / closed_loop["qp_us_per_step"]
     summary["setup_ms"] = closed_loop["setup_ms"]
