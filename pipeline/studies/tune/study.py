@@ -122,7 +122,7 @@ def run_tuning(space: TuneSpace, out_dir: Path, overrides: list[str] | None = No
     chosen = pick_settings(trials, space)
     judged = judge_heldout(runner, space, chosen, base.claims)
     summary = TuneSummary.from_json(json_safe(summarize(space, spaces, thresholds, trials,
-                                                        histories, judged)))
+                                                        histories, chosen, judged)))
     return TuneResult(summary, trials, judged.heldout, judged.default.to_frame(),
                       judged.tuned_frame(), judged.outcomes).write(out_dir)
 
@@ -262,15 +262,21 @@ def judge_heldout(runner: Runner, space: TuneSpace, chosen: dict[tuple[int, str]
     return Judged(heldout, default, tuned, pd.DataFrame(outcome_rows))
 
 
+def counts_in_words(outcomes: list[str]) -> tuple[str, tuple[str, int]]:
+    """``"supported 4/5, inconclusive 1/5"`` (most frequent first) and the most frequent
+    outcome with its count."""
+    counts = pd.Series(outcomes, dtype=object).value_counts()
+    order = sorted(counts.items(), key=lambda kv: (-kv[1], str(kv[0])))
+    words = ", ".join(f"{outcome} {count}/{len(outcomes)}" for outcome, count in order)
+    return words, (str(order[0][0]), int(order[0][1]))
+
+
 def answer_in_counts(claim_id: str, outcomes: list[str], settled_share: float
                      ) -> tuple[str, bool, str | None]:
     """The tuned answer on one claim over replicates: the sentence, whether it is settled, and
     the settled outcome (see :data:`ANSWER_RULE`)."""
     n = len(outcomes)
-    counts = pd.Series(outcomes, dtype=object).value_counts()
-    order = sorted(counts.items(), key=lambda kv: (-kv[1], str(kv[0])))
-    words = ", ".join(f"{outcome} {count}/{n}" for outcome, count in order)
-    top, top_count = order[0]
+    words, (top, top_count) = counts_in_words(outcomes)
     settled = top_count >= settled_share * n
     if settled:
         return f"{claim_id}: {words}: settled ({top}).", True, str(top)
@@ -311,7 +317,8 @@ def front_points(trials: pd.DataFrame, heldout: pd.DataFrame, space: TuneSpace, 
 
 
 def summarize(space: TuneSpace, spaces: dict, thresholds: dict[int, int], trials: pd.DataFrame,
-              histories: list[dict], judged: Judged) -> dict[str, Any]:
+              histories: list[dict], chosen: dict[tuple[int, str], pd.DataFrame],
+              judged: Judged) -> dict[str, Any]:
     """``summary.json``: the rules, the spaces, per replicate and method the trials, the
     convergence and the hypervolume history, and per claim the default verdict beside the
     tuned outcome of every replicate, counted."""
@@ -326,7 +333,7 @@ def summarize(space: TuneSpace, spaces: dict, thresholds: dict[int, int], trials
         outcomes = [str(row.outcome) for row in per_replicate if row is not None]
         sentence, settled, settled_outcome = answer_in_counts(claim.claim_id, outcomes,
                                                               space.settled_share)
-        counts = sentence.split(": ", 1)[1].rsplit(": ", 1)[0]
+        counts = counts_in_words(outcomes)[0]
         vs_matched = [str(judged.tuned[r][(claim.claim_id, matched)].outcome)
                       for r in sorted(judged.tuned)
                       if matched and judged.tuned[r].get((claim.claim_id, matched))]
@@ -361,8 +368,9 @@ def summarize(space: TuneSpace, spaces: dict, thresholds: dict[int, int], trials
                        "converged": [h["converged"] for h in mine],
                        "converged_at": [h["converged_at"] for h in mine]})
     compromise: dict[str, dict[str, dict]] = {}
-    for (replicate, method), front in judged_chosen(trials, space).items():
-        compromise.setdefault(method, {})[str(replicate)] = front
+    for (replicate, method), front in chosen.items():
+        compromise.setdefault(method, {})[str(replicate)] = json.loads(
+            front.loc[front["compromise"], "params"].iloc[0])
     return {
         "name": space.name, "settings": json_safe(asdict(space)),
         "budget": {"replicates": space.replicates, "min_trials": space.min_trials,
@@ -388,12 +396,6 @@ def summarize(space: TuneSpace, spaces: dict, thresholds: dict[int, int], trials
                                             space.objectives)
                       for part in ("training", "heldout")},
         "claims": claims}
-
-
-def judged_chosen(trials: pd.DataFrame, space: TuneSpace) -> dict[tuple[int, str], dict]:
-    """Each replicate's compromise setting per method (its parameters)."""
-    return {key: json.loads(front.loc[front["compromise"], "params"].iloc[0])
-            for key, front in pick_settings(trials, space).items()}
 
 
 def _fronts(trials: pd.DataFrame, heldout: pd.DataFrame, space: TuneSpace, part: str
