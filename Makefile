@@ -15,32 +15,41 @@ SWEEP       ?= obstacle_speed
 MULTIVERSE  ?= default
 TUNE        ?= default
 export SLURM_CI_DIR ?= /tmp/slurm-ci
+# one member cache for every study (pipeline/store/member_cache.py): a family member simulated by
+# one study is restored, not simulated again, by any other with the same settings and code;
+# MEMBER_CACHE=off turns it off (make test always runs without it)
+MEMBER_CACHE ?= $(RUNS)/member_cache
+export PIPELINE_MEMBER_CACHE = $(if $(filter off,$(MEMBER_CACHE)),off,$(abspath $(MEMBER_CACHE)))
 LAUNCHER    ?= sequential
 
-.PHONY: help install lint reproduce experiment run-paper run-kinematic run-kinematic-readings run-family run-kinematic-family run-frames run-apf-alone speed-check report screenshot sweep verify ablation multiverse tune nmpc-check test test-slurm test-all bench clean
+.PHONY: help install lint reproduce experiment run-paper run-kinematic run-kinematic-readings run-family run-kinematic-family run-frames run-apf-alone speed-check report screenshot sweep verify ablation multiverse tune tune-unpruned nmpc-check test test-slurm test-all bench cache-size clean-cache clean
 
 help:  ## list the targets
 	@grep -E '^[a-zA-Z_-]+:.*## ' $(MAKEFILE_LIST) | awk -F':.*## ' '{printf "  %-12s %s\n", $$1, $$2}'
 
 # uv (from the package registry, pinned in constraints.txt) installs the same pins in about a
 # fifth of pip's time (measured: 6.5 s against 32 s with warm caches, 13 s cold); pip is the
-# fallback whenever uv cannot be installed or fails (INSTALLER=pip forces it)
+# fallback whenever uv cannot be installed or fails (INSTALLER=pip forces it). Both leave
+# compiled bytecode (uv's --compile-bytecode, as pip does by itself), and the project's own
+# modules are compiled too: where PYTHONDONTWRITEBYTECODE is set, every process (each family
+# worker) would otherwise compile every module it imports again (measured: 5 s of optuna alone)
 $(STAMP): pyproject.toml constraints.txt
 	$(PYTHON_BOOT) -m venv $(VENV)
 	@if [ "$(INSTALLER)" = uv ] && $(PY) -m pip install --quiet -c constraints.txt uv \
-	    && $(VENV)/bin/uv pip install --quiet --python $(PY) -c constraints.txt -e ".[test]"; then \
+	    && $(VENV)/bin/uv pip install --quiet --compile-bytecode --python $(PY) -c constraints.txt -e ".[test]"; then \
 	  echo "installed with uv"; \
 	else \
 	  echo "installing with pip"; \
 	  $(PY) -m pip install --quiet --upgrade pip && \
 	  $(PY) -m pip install --quiet -c constraints.txt -e ".[test]"; \
 	fi
+	$(PY) -m compileall -q pipeline hydra_plugins examples > /dev/null
 	touch $(STAMP)
 
 install: $(STAMP)  ## create .venv and install the project with pinned versions
 
 experiment: $(STAMP)  ## run every method on the paper scenario and on the scenario family
-	rm -rf $(RUNS)/paper $(RUNS)/kinematic $(RUNS)/kinematic_readings $(RUNS)/kinematic_family $(RUNS)/family $(RUNS)/frames $(RUNS)/apf_alone  # code may have changed: no reuse here
+	rm -rf $(RUNS)/paper $(RUNS)/kinematic $(RUNS)/kinematic_readings $(RUNS)/kinematic_family $(RUNS)/family $(RUNS)/frames $(RUNS)/apf_alone  # rebuilt; members come back from the member cache only for the same code and settings
 	@# all seven experiments side by side, the longest first: each family's parent has serial
 	@# stretches (Hydra's job set-up, the compilation, the tables) in which the others use the
 	@# cores (measured: 162-166 s against 173-178 s one family after the other). Each one's
@@ -90,6 +99,9 @@ tune: $(STAMP)  ## a fair fight: both methods tuned with one budget, judged on h
 	$(PY) -m pipeline.tune --space $(TUNE) --out $(RUNS)/tune
 	$(MAKE) report
 
+tune-unpruned: $(STAMP)  ## the pruning check: the default tune with every trial on its whole training family (outputs/tune_unpruned; make bench compares it with make tune's)
+	$(PY) -m pipeline.tune --space $(TUNE) --set 'rungs=[]' --set name=$(TUNE)_unpruned --out $(RUNS)/tune_unpruned
+
 nmpc-check: $(STAMP)  ## each track's linear MPC against the nonlinear MPC (CasADi) on the paper scenario and 50 family members per method, then the report
 	$(PY) -m pipeline.nmpc_check --out $(RUNS)/nmpc_check
 	$(MAKE) report
@@ -107,7 +119,7 @@ verify: reproduce  ## rerun `make reproduce` and compare with reports/reference/
 
 test: lint $(STAMP)  ## lint and type-check, then run the test suite on every core (PYTEST_JOBS=auto; excludes tests marked slow or slurm)
 	@# one test file per worker at a time (--dist loadfile), so a file's shared runs are made once
-	$(PY) -m pytest -m "not slow and not slurm" -n $(PYTEST_JOBS) --dist loadfile $(PYTEST_ARGS)
+	PIPELINE_MEMBER_CACHE=off $(PY) -m pytest -m "not slow and not slurm" -n $(PYTEST_JOBS) --dist loadfile $(PYTEST_ARGS)
 
 lint: $(STAMP)  ## ruff (pyflakes, bugbear, isort, pyupgrade, simplify, complexity) and mypy, as configured in pyproject.toml
 	$(PY) -m ruff check pipeline tests hydra_plugins examples benchmarks
@@ -115,11 +127,17 @@ lint: $(STAMP)  ## ruff (pyflakes, bugbear, isort, pyupgrade, simplify, complexi
 
 test-slurm: $(STAMP)  ## start a single-node SLURM cluster (.ci/slurm-cluster), run the SLURM tests, stop it
 	.ci/slurm-cluster start
-	SLURM_CONF=$(SLURM_CI_DIR)/slurm.conf $(PY) -m pytest -m slurm -p no:cacheprovider $(PYTEST_ARGS); \
+	PIPELINE_MEMBER_CACHE=off SLURM_CONF=$(SLURM_CI_DIR)/slurm.conf $(PY) -m pytest -m slurm -p no:cacheprovider $(PYTEST_ARGS); \
 	  status=$$?; .ci/slurm-cluster stop; exit $$status
 
 test-all: $(STAMP)  ## run every test, slow ones included (SLURM ones: make test-slurm)
 	$(PY) -m pytest -m "not slurm" $(PYTEST_ARGS)
+
+cache-size: $(STAMP)  ## what the member cache holds (members, files, MB)
+	$(PY) -m pipeline.cache size
+
+clean-cache: $(STAMP)  ## empty the member cache (every study then simulates its members again)
+	$(PY) -m pipeline.cache clean
 
 clean:  ## remove generated output (keeps .venv)
 	rm -rf outputs multirun $(REPORT)

@@ -27,7 +27,8 @@ HEADLINE = ("closed_loop_over_floor", "step_over_floor", "step_over_sparse_floor
             "outside_qp_over_qp", "outside_qp_over_qp_python_kernels", "setup_ms",
             "compiles_per_family", "family_scenarios_per_s", "family_member_over_sparse_floor",
             "family_member_over_sparse_floor_daqp", "multiverse_member_reads_per_member",
-            "install_over_pip")
+            "install_over_pip", "member_cache_reuse", "member_cache_resimulated",
+            "tune_core_utilisation", "pruned_over_unpruned_members")
 
 
 def main(argv: list[str] | None = None) -> int:

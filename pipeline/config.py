@@ -11,7 +11,7 @@ from __future__ import annotations
 import hashlib
 import json
 import math
-from dataclasses import asdict, dataclass, field, replace
+from dataclasses import asdict, dataclass, field, fields, is_dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -118,23 +118,35 @@ class ExperimentConfig(FrozenAfterValidation):
         """Stable SHA-256 (first 16 hex digits) of what a run depends on: the resolved
         configuration without ``claims`` (how runs are compared re-scores, never re-simulates),
         ``tune`` (what the run returns to a tuner) and ``features`` (how runs are described)."""
-        data = self.to_dict()
-        data.pop("claims", None)
-        data.pop("tune", None)
-        data.pop("features", None)
-        if data["scenario"].get("obstacle_anchor") == "world":
-            data["scenario"].pop("obstacle_anchor")  # the default reading, as before the key
-        if data["controller"].get("collision_constraints") is True:
-            data["controller"].pop("collision_constraints")  # the default, as before the key
-        for section in ("planner", "controller"):
-            # a plug-in's class and settings change the run; their absence does not
-            if data[section].get("_target_") is None:
-                data[section].pop("_target_", None)
-            if not data[section].get("params"):
-                data[section].pop("params", None)
-        text = json.dumps(data, sort_keys=True, default=str)
-        return hashlib.sha256(text.encode()).hexdigest()[:16]
+        return _hash_of(self.to_dict())
 
+    def member_config_hashes(self, members: list) -> list[str]:
+        """``replace(self, scenario=m).config_hash()`` for every scenario ``m`` of
+        ``members`` (a family's), with the rest of the configuration converted once (a
+        family of 40 members in a twentieth of the time)."""
+        rest = {f.name: getattr(self, f.name) for f in fields(self) if f.name != "scenario"}
+        base = {name: asdict(value) if is_dataclass(value) and not isinstance(value, type)
+                else value for name, value in rest.items()}
+        return [_hash_of({**base, "scenario": asdict(member)}) for member in members]
+
+
+def _hash_of(data: dict) -> str:
+    """:meth:`ExperimentConfig.config_hash` of ``asdict(config)`` (``data`` is not changed)."""
+    data = {k: v for k, v in data.items() if k not in ("claims", "tune", "features")}
+    for section in ("scenario", "planner", "controller"):
+        data[section] = dict(data[section])
+    if data["scenario"].get("obstacle_anchor") == "world":
+        data["scenario"].pop("obstacle_anchor")  # the default reading, as before the key
+    if data["controller"].get("collision_constraints") is True:
+        data["controller"].pop("collision_constraints")  # the default, as before the key
+    for section in ("planner", "controller"):
+        # a plug-in's class and settings change the run; their absence does not
+        if data[section].get("_target_") is None:
+            data[section].pop("_target_", None)
+        if not data[section].get("params"):
+            data[section].pop("params", None)
+    text = json.dumps(data, sort_keys=True, default=str)
+    return hashlib.sha256(text.encode()).hexdigest()[:16]
 
 
 def register_configs() -> None:

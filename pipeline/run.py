@@ -22,6 +22,7 @@ from pipeline.analysis.tally import Tally
 from pipeline.commands import run_command, run_task
 from pipeline.config import CONF_DIR, register_configs, to_experiment_config
 from pipeline.store.lock import folder_lock
+from pipeline.store.member_cache import MemberCounts
 from pipeline.studies.experiment import RunSummary, run_experiment, run_family
 from pipeline.studies.slurm import register_launcher
 
@@ -58,7 +59,11 @@ def _run(experiment, out_dir: Path) -> float | tuple[float, ...]:
     """The run or family of :func:`hydra_main`, into ``out_dir`` (locked)."""
     objectives = experiment.tune.objectives
     if experiment.scenario.family is not None:
-        table = run_family(experiment, out_dir)
+        counts = MemberCounts()
+        table = run_family(experiment, out_dir, counts=counts)
+        if counts.reused:
+            log.info("%s on %s: %s", experiment.method_name, experiment.scenario.name,
+                     counts.sentence())
         tally = Tally.of(table)
         values = objective_values(table, objectives)
         log.info("%s on %s (%d scenarios): %d collisions, %d not recovered; %s -> %s",

@@ -24,6 +24,10 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--space", default="default",
                         help="conf/tune/<name>.yaml or a path (default: default)")
     parser.add_argument("--out", type=Path, default=Path("outputs/tune"))
+    parser.add_argument("--set", dest="changes", action="append", default=[],
+                        metavar="KEY=VALUE",
+                        help="change one setting of the space (e.g. --set 'rungs=[]' for the "
+                             "unpruned check; --set name=... names the changed space)")
     parser.add_argument("overrides", nargs="*",
                         help="Hydra overrides for every run (e.g. hydra/launcher=slurm)")
     args = parser.parse_args(argv)
@@ -54,7 +58,7 @@ def _tune(args) -> int:
     path = Path(args.space)
     if not path.suffix:
         path = CONF_DIR / "tune" / f"{args.space}.yaml"
-    space = load_tune_space(path)
+    space = load_tune_space(path, args.changes)
     result = run_tuning(space, args.out, args.overrides, log=log.info)
     draw_figures(result, space)
     for claim in result.summary.claims:

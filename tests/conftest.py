@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 
 import pytest
@@ -10,6 +11,10 @@ from hydra import compose, initialize_config_dir
 from pipeline.config import ExperimentConfig, register_configs, to_experiment_config
 
 CONF_DIR = Path(__file__).resolve().parent.parent / "conf"
+
+# tests never share members through a cache of the user's (`make test` sets this too); a test of
+# the member cache hands its own MemberCache to the code under test
+os.environ["PIPELINE_MEMBER_CACHE"] = "off"
 
 #: Test files with whole runs in them, longest first (serial `pytest --durations=0` on a 2-core
 #: machine). `make test` hands whole files to its workers (``--dist loadfile``) in collection

@@ -142,3 +142,25 @@ def test_multiverse_on_slurm_equals_the_local_one(tmp_path):
     assert "submitted" in remote.stderr and "to SLURM" in remote.stderr
     for name in ("specifications.csv", "robustness.csv", "dimensions.csv"):
         assert filecmp.cmp(tmp_path / "local" / name, tmp_path / "slurm" / name, shallow=False)
+
+
+def test_tune_on_slurm_array_workers_equals_the_local_one(tmp_path):
+    """A tune whose families run as SLURM arrays (two array tasks per batch, sharing one study
+    through its one coordinator): no trial lost or run twice, and the same trials, fronts and
+    verdicts as the local tune with the same seeds."""
+    from test_tune_pruning import no_trial_lost_or_run_twice
+
+    command = [sys.executable, "-m", "pipeline.tune", "--space", "quick", "--set",
+               "replicates=1", "--set", "heldout_size=8", "--set", "max_trials=4"]
+    local = subprocess.run(command + ["--out", str(tmp_path / "local")], cwd=ROOT,
+                           capture_output=True, text=True, timeout=600)
+    assert local.returncode == 0, local.stderr[-2000:]
+    remote = subprocess.run(command + ["--out", str(tmp_path / "slurm"), *SLURM,
+                                       "hydra.launcher.array_parallelism=2"], cwd=ROOT,
+                            capture_output=True, text=True, timeout=900)
+    assert remote.returncode == 0, remote.stderr[-2000:]
+    assert re.search(r"submitted 2 family runs to SLURM", remote.stderr)
+    for name in ("trials.csv", "ledger_tuned.csv", "settings_outcomes.csv"):
+        assert filecmp.cmp(tmp_path / "local" / name, tmp_path / "slurm" / name, shallow=False)
+    for folder in ("local", "slurm"):
+        no_trial_lost_or_run_twice(tmp_path / folder)

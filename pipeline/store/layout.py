@@ -36,6 +36,8 @@ class OutputsLayout:
     interpretations: str = "interpretations"
     multiverse: str = "multiverse"
     tune: str = "tune"
+    tune_unpruned: str = "tune_unpruned"
+    member_cache: str = "member_cache"
     nmpc_check: str = "nmpc_check"
     speed: str = "speed"
     sweeps: str = "sweeps"
@@ -74,8 +76,8 @@ class OutputsLayout:
         """Folder names under the root that hold studies or families read by their own
         sections, never among the runs of the claims (the paper scenario, the family)."""
         return (self.sweeps, self.ablation, self.interpretations, self.multiverse, self.tune,
-                self.kinematic_readings, self.kinematic_family, self.frames, self.apf_alone,
-                self.nmpc_check, self.speed)
+                self.tune_unpruned, self.member_cache, self.kinematic_readings,
+                self.kinematic_family, self.frames, self.apf_alone, self.nmpc_check, self.speed)
 
     @property
     def validity_sections(self) -> tuple[str, ...]:

@@ -217,6 +217,16 @@ def write_run(folder: Path, *, config_text: str, model: dict, trajectory: pd.Dat
 FAMILY_TIMING = "timing.json"
 
 
+def family_timing(folder: Path) -> dict:
+    """A family folder's process bookkeeping (its ``timing.json``: compilations, where its
+    members came from), or {} when it has none or it cannot be read."""
+    try:
+        data = json.loads((Path(folder) / FAMILY_TIMING).read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return {}
+    return data if isinstance(data, dict) else {}
+
+
 def write_family(folder: Path, table: pd.DataFrame, info: dict, config_hash: str,
                  members: list[Path], timing: dict | None = None) -> Path:
     """Write a family folder's table, summary and (optional) process bookkeeping, then its

@@ -25,6 +25,7 @@ from pipeline.loop.scenario import build_scenario, family_members
 from pipeline.loop.simulate import simulate
 from pipeline.store.files import clean_leftovers
 from pipeline.store.manifest import check
+from pipeline.store.member_cache import MemberCache, MemberCounts
 from pipeline.store.runs import RunInfo, read_metrics_json, write_family, write_run
 
 log = logging.getLogger(__name__)
@@ -148,16 +149,22 @@ def config_yaml(cfg: ExperimentConfig, memo: dict | None = None) -> str:
 COMPILED_KERNELS_MIN_MEMBERS = 50
 
 
-def _run_chunk(jobs: list[tuple[int, ExperimentConfig, Path]], qp_cache: QpCache
-               ) -> list[tuple[int, dict]]:
+def _run_chunk(jobs: list[tuple[int, ExperimentConfig, Path]], qp_cache: QpCache,
+               member_cache: MemberCache | None = None) -> list[tuple[int, dict]]:
     """Run a few family members in one worker, all with the compiled QP shipped in
-    ``qp_cache`` (so a worker compiles nothing)."""
+    ``qp_cache`` (so a worker compiles nothing), and publish each new one to
+    ``member_cache``."""
     # loky's worker runs a full gc.collect() after each task (about 0.1 s here, over the ~250k
     # objects of numpy, scipy, cvxpy, numba...); what is alive when a task starts lives for the
     # whole worker (its imports, the kernels), so it is moved out of the collector's scans
     gc.freeze()
-    return [(index, run_experiment(member_cfg, folder, qp_cache=qp_cache).flat())
-            for index, member_cfg, folder in jobs]
+    done = []
+    for index, member_cfg, folder in jobs:
+        summary = run_experiment(member_cfg, folder, qp_cache=qp_cache)
+        if member_cache is not None and not summary.skipped:
+            member_cache.publish(member_cfg, folder)
+        done.append((index, summary.flat()))
+    return done
 
 
 def _chunks(items: list, n_workers: int, per_worker: int = 4) -> list[list]:
@@ -168,7 +175,8 @@ def _chunks(items: list, n_workers: int, per_worker: int = 4) -> list[list]:
 
 
 def run_family(cfg: ExperimentConfig, out_dir: Path, progress: bool = True,
-               qp_cache: QpCache | None = None) -> pd.DataFrame:
+               qp_cache: QpCache | None = None, member_cache: MemberCache | None = None,
+               counts: MemberCounts | None = None) -> pd.DataFrame:
     """Run every member of ``cfg.scenario.family`` (in parallel with joblib) for one method.
 
     The QP is compiled once, here, and handed to the workers with their members (chunks of
@@ -176,7 +184,10 @@ def run_family(cfg: ExperimentConfig, out_dir: Path, progress: bool = True,
     loky keeps its workers for the next family of the same process). Each member gets a
     complete run folder ``member_<index>/``; the family folder receives ``family_metrics.csv``
     (one row per member) and ``family.json`` (counts, compilations, config hash). Members
-    already complete with the same config hash are not simulated again.
+    already complete with the same config hash are not simulated again, nor are those found
+    in ``member_cache`` (:mod:`pipeline.store.member_cache`; by default the one
+    ``PIPELINE_MEMBER_CACHE`` names), which receives every member simulated here. Where the
+    members came from is added to ``counts`` and written into the family's ``timing.json``.
 
     Returns
     -------
@@ -193,12 +204,15 @@ def run_family(cfg: ExperimentConfig, out_dir: Path, progress: bool = True,
         raise ValueError(f"scenario {cfg.scenario.name} is not a family (scenario.family)")
     members = family_members(cfg.scenario, cfg.vehicle.footprint_radius_m)
     cache = qp_cache if qp_cache is not None else QpCache()
+    member_cache = member_cache if member_cache is not None else MemberCache.from_env()
     compiles_before = cache.compile_count
-    metrics_by_index, pending = _members_to_run(cfg, members, out_dir)
+    metrics_by_index, pending, here = _members_to_run(cfg, members, out_dir, member_cache, cache)
+    if counts is not None:
+        counts.add(here)
     _prepare_cache(cfg, cache, len(pending))
     chunks = _chunks(pending, family.n_jobs)
     results = Parallel(n_jobs=family.n_jobs, return_as="generator_unordered")(
-        delayed(_run_chunk)(chunk, cache) for chunk in chunks)
+        delayed(_run_chunk)(chunk, cache, member_cache) for chunk in chunks)
     with Progress(len(members), f"{cfg.method_name} family", "scenario",
                   initial=len(metrics_by_index), disable=not progress) as bar:
         for done in results:
@@ -207,29 +221,43 @@ def run_family(cfg: ExperimentConfig, out_dir: Path, progress: bool = True,
             bar.update(len(done))
     table = _member_table(metrics_by_index, len(members))
     _write_family_folder(cfg, out_dir, table, len(members),
-                         cache.compile_count - compiles_before)
+                         cache.compile_count - compiles_before, here)
     return table
 
 
-def _members_to_run(cfg: ExperimentConfig, members: list, out_dir: Path
-                    ) -> tuple[dict[int, dict], list[tuple[int, ExperimentConfig, Path]]]:
-    """The metrics of the members already complete (same config hash), by index, and the
-    ``(index, config, folder)`` of those still to run."""
+def _members_to_run(cfg: ExperimentConfig, members: list, out_dir: Path,
+                    member_cache: MemberCache | None = None, qp_cache: QpCache | None = None
+                    ) -> tuple[dict[int, dict], list[tuple[int, ExperimentConfig, Path]],
+                               MemberCounts]:
+    """The metrics of the members already complete (same config hash) or restored from
+    ``member_cache``, by index, the ``(index, config, folder)`` of those still to run, and
+    how many came from where."""
     import dataclasses
 
     metrics_by_index: dict[int, dict] = {}
     pending = []
+    counts = MemberCounts()
+    memo = (qp_cache if qp_cache is not None else QpCache()).process_local.setdefault(
+        "config_yaml", {})
+    hashes = cfg.member_config_hashes(members)
     for i, member in enumerate(members):
         member_cfg = dataclasses.replace(cfg, scenario=member)
         folder = out_dir / f"member_{i:04d}"
-        reason = check(folder, "run", member_cfg.config_hash())
+        reason = check(folder, "run", hashes[i])
         if reason is None:
             metrics_by_index[i] = read_metrics_json(folder)
+            counts.resumed += 1
+            continue
+        if member_cache is not None and member_cache.restore(
+                member_cfg, folder, config_yaml(member_cfg, memo)):
+            metrics_by_index[i] = read_metrics_json(folder)
+            counts.reused += 1
             continue
         if reason not in ("not a folder", "empty folder"):
             log.warning("re-running %s: %s", folder, reason)
         pending.append((i, member_cfg, folder))
-    return metrics_by_index, pending
+    counts.simulated = len(pending)
+    return metrics_by_index, pending, counts
 
 
 def _prepare_cache(cfg: ExperimentConfig, cache: QpCache, n_pending: int) -> None:
@@ -255,7 +283,8 @@ def _member_table(metrics_by_index: dict[int, dict], n_members: int) -> pd.DataF
 
 
 def _write_family_folder(cfg: ExperimentConfig, out_dir: Path, table: pd.DataFrame,
-                         n_members: int, parent_compiles: int) -> None:
+                         n_members: int, parent_compiles: int,
+                         counts: MemberCounts | None = None) -> None:
     """Write the family folder: its table, its counts and the compilations of this process."""
     family = cfg.scenario.family
     if family is None:
@@ -270,6 +299,69 @@ def _write_family_folder(cfg: ExperimentConfig, out_dir: Path, table: pd.DataFra
         "goal_not_reached": tally.goal_not_reached, "fallback_steps": tally.fallback_steps,
     }
     # compilations depend on the process (a resumed family compiles again): kept apart
-    timing = {"compiles": parent_compiles + member_compiles}
+    timing: dict[str, object] = {"compiles": parent_compiles + member_compiles}
+    if counts is not None:
+        timing["member_cache"] = counts.to_json()
     write_family(out_dir, table, summary, cfg.config_hash(),
                  [out_dir / f"member_{i:04d}" for i in range(n_members)], timing=timing)
+
+
+def run_families_together(todo: list[tuple[ExperimentConfig, Path]],
+                          qp_cache: QpCache | None = None,
+                          member_cache: MemberCache | None = None,
+                          counts: MemberCounts | None = None) -> None:
+    """Run several families' members in one pool of workers (a tuning batch: a few small
+    families, one after the other, would leave the cores idle between them) and write each
+    family folder as soon as its last member is in, while the others still run. Resumes and
+    restores members like :func:`run_family`; the families' ``n_jobs`` is the largest of
+    theirs.
+    """
+    from joblib import Parallel, delayed
+
+    if not todo:
+        return
+    cache = qp_cache if qp_cache is not None else QpCache()
+    member_cache = member_cache if member_cache is not None else MemberCache.from_env()
+    compiles_before = cache.compile_count
+    n_jobs = max((cfg.scenario.family.n_jobs for cfg, _ in todo if cfg.scenario.family), default=1)
+    states, work = [], []
+    for k, (cfg, folder) in enumerate(todo):
+        if cfg.scenario.family is None:
+            raise ValueError(f"scenario {cfg.scenario.name} is not a family (scenario.family)")
+        members = family_members(cfg.scenario, cfg.vehicle.footprint_radius_m)
+        done, pending, here = _members_to_run(cfg, members, Path(folder), member_cache, cache)
+        if counts is not None:
+            counts.add(here)
+        _prepare_cache(cfg, cache, len(pending))
+        states.append((cfg, Path(folder), len(members), done, here, len(pending)))
+        work += [(k, job) for job in pending]
+    compiles = cache.compile_count - compiles_before
+    left = [state[5] for state in states]
+
+    def finish(k: int) -> None:
+        cfg, folder, n_members, done, here, _ = states[k]
+        _write_family_folder(cfg, folder, _member_table(done, n_members), n_members,
+                             compiles if k == 0 else 0, here)
+
+    for k, n_left in enumerate(left):
+        if n_left == 0:
+            finish(k)
+    if not work:
+        return
+    chunks = _chunks(work, n_jobs)
+    results = Parallel(n_jobs=n_jobs, return_as="generator_unordered")(
+        delayed(_run_tagged_chunk)(chunk, cache, member_cache) for chunk in chunks)
+    for block in results:
+        for k, index, metrics in block:
+            states[k][3][index] = metrics
+            left[k] -= 1
+            if left[k] == 0:
+                finish(k)
+
+
+def _run_tagged_chunk(jobs: list[tuple[int, tuple[int, ExperimentConfig, Path]]],
+                      qp_cache: QpCache, member_cache: MemberCache | None
+                      ) -> list[tuple[int, int, dict]]:
+    """:func:`_run_chunk` over members of several families (tagged with their family)."""
+    done = _run_chunk([job for _, job in jobs], qp_cache, member_cache)
+    return [(k, index, metrics) for (k, _), (index, metrics) in zip(jobs, done, strict=True)]

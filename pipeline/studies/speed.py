@@ -25,6 +25,7 @@ from pathlib import Path
 import pandas as pd
 
 from pipeline.analysis.tally import Tally
+from pipeline.store.member_cache import MemberCounts
 from pipeline.studies.results.speed import SpeedCheckResult
 
 logger = logging.getLogger(__name__)
@@ -59,12 +60,13 @@ def speed_check(compose, out_dir: Path, n_members: int = 200, log=logger.info,
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     rows = []
+    counts = MemberCounts()
     for variant in variants:
         overrides, words = VARIANTS[variant]
         for method in METHODS:
             cfg = compose([f"method={method}", "scenario=family",
                            f"scenario.family.size={n_members}", *overrides])
-            table = run_family(cfg, out_dir / variant / method, progress=False)
+            table = run_family(cfg, out_dir / variant / method, progress=False, counts=counts)
             tally = Tally.of(table)
             rows.append({"variant": variant, "method": method, "what": words,
                          "speed_mps": cfg.scenario.speed_mps, "scenarios": tally.scenarios,
@@ -75,6 +77,7 @@ def speed_check(compose, out_dir: Path, n_members: int = 200, log=logger.info,
                          "collision_rate": tally.collisions / max(tally.scenarios, 1)})
             log(f"speed-check: {variant} {method}: {tally.collisions} collisions of "
                 f"{tally.scenarios}")
+    log(f"speed-check: {counts.sentence()}")
     checks = _checks(pd.DataFrame(rows))
     return SpeedCheckResult(n_members, tuple(rows), tuple(checks)).write(out_dir)
 

@@ -27,6 +27,8 @@ class FairFightSection:
     headline: bool
     #: why not ("" when it may)
     label: str
+    #: how its trials were stopped early, where its members came from and its use of the cores
+    cost: str
 
 
 PART_WORDS = (("training", "training family (where the settings were tuned)"),
@@ -89,7 +91,11 @@ def fair_fight_section(inputs: ReportInputs, figures: Figures) -> FairFightSecti
                     "trials": ", ".join(str(t) for t in p["trials"]),
                     "feasible": f"{100 * p['feasible_share']:.0f} %",
                     "converged": f"{sum(p['converged'])} of {len(p['converged'])}",
-                    "at": ", ".join("cap" if a is None else str(a) for a in p["converged_at"])}
+                    "at": ", ".join("cap" if a is None else str(a) for a in p["converged_at"]),
+                    "members": ", ".join("—" if m is None else f"{m:,}"
+                                         for m in p.get("members") or []) or "—",
+                    "pruned": f"{100 * p['pruned_share']:.0f} %" if "pruned_share" in p
+                    else "—"}
                    for p in summary.parity)
     compromise = tuple(
         {"method": m, "replicate": r,
@@ -98,4 +104,28 @@ def fair_fight_section(inputs: ReportInputs, figures: Figures) -> FairFightSecti
         for m, by_replicate in summary.compromise.items() for r, params in by_replicate.items())
     return FairFightSection(summary, tuple(rows), tuple(_figures(result, figures)), spaces,
                             parity, "; ".join(dom_text), tuple(methods), compromise,
-                            summary.headline, summary.label)
+                            summary.headline, summary.label, _cost(summary))
+
+
+def _cost(summary: TuneSummary) -> str:
+    """One sentence: the pruning rule, the members' origin and the use of the cores."""
+    parts = []
+    if summary.pruning_rule:
+        parts.append(f"Trials were judged on a growing share of their training family: "
+                     f"{summary.pruning_rule}.")
+    else:
+        parts.append("Every trial ran its whole training family (no pruning).")
+    members = summary.members
+    if members:
+        parts.append(f"Family members: {members.get('simulated', 0):,} simulated, "
+                     f"{members.get('reused', 0):,} restored from the member cache (the same "
+                     f"settings and code, run by another study), {members.get('resumed', 0):,} "
+                     "already complete.")
+    if summary.core_utilisation is not None:
+        parts.append(f"Use of the cores: {summary.core_utilisation:.2f} (CPU-seconds over "
+                     "wall-clock seconds times cores).")
+    heldout = summary.settings.get("heldout_backend")
+    if heldout and heldout != summary.backend:
+        parts.append(f"Training families solved the QP with {summary.backend}, the held-out "
+                     f"judgement with {heldout} (make reproduce's).")
+    return " ".join(parts)

@@ -24,11 +24,17 @@ from pathlib import Path
 
 import pandas as pd
 
+from pipeline.store.layout import OutputsLayout
 from pipeline.studies.bench.closed_loop import bench_closed_loop, bench_family_member
 from pipeline.studies.bench.install import measure_install
 from pipeline.studies.bench.lateral import bench_lateral
 from pipeline.studies.bench.path_frame import bench_path_frame, summarize_path_frame
 from pipeline.studies.bench.peers import bench_kinematic, bench_peers
+from pipeline.studies.bench.studies import (
+    measure_member_cache_reuse,
+    measure_tune_core_utilisation,
+    pruning_comparison,
+)
 from pipeline.studies.bench.summary import summarize
 from pipeline.studies.bench.whole_pipeline import bench_multiverse_reads, bench_pipeline
 from pipeline.studies.results.bench import BenchResult
@@ -82,6 +88,10 @@ def _measure(out: Path, steps: int, repeats: int, quick: bool, family_size: int
         summary["path_frame"]["step_over_sparse_floor_path_daqp"]
     summary.update(bench_multiverse_reads())
     summary.update(measure_install())
+    summary.update(measure_member_cache_reuse())
+    summary.update(measure_tune_core_utilisation(8 if quick else 16))
+    layout = OutputsLayout.load(Path("outputs"))
+    summary.update(pruning_comparison(layout.folder("tune"), layout.folder("tune_unpruned")))
     summary["outside_qp_over_qp"] = closed_loop["outside_qp_us_per_step"] \
         / closed_loop["qp_us_per_step"]
     summary["setup_ms"] = closed_loop["setup_ms"]

@@ -17,7 +17,8 @@ import pandas as pd
 from pipeline.config import ExperimentConfig, MetricsConfig
 from pipeline.errors import IncompleteSweepError
 from pipeline.store.manifest import check, check_derived_table, write_derived_table
-from pipeline.store.runs import member_trajectories, read_family
+from pipeline.store.member_cache import MemberCache, MemberCounts
+from pipeline.store.runs import family_timing, member_trajectories, read_family
 from pipeline.studies.multiverse.design import family_config, qp_backend, simulation_key
 from pipeline.studies.multiverse.space import METHODS, Space
 
@@ -28,11 +29,12 @@ def _metrics_hash(metrics: MetricsConfig) -> str:
     return hashlib.sha256(text.encode()).hexdigest()[:12]
 
 
-def _family_task(cfg, folder: str) -> str:
-    """One family run on a cluster node (resumes by config hash like a local run)."""
+def _family_task(cfg, folder: str, member_cache: MemberCache | None = None) -> str:
+    """One family run on a cluster node (resumes by config hash like a local run, shares the
+    study's member cache)."""
     from pipeline.studies.experiment import run_family
 
-    run_family(cfg, Path(folder), progress=False)
+    run_family(cfg, Path(folder), progress=False, member_cache=member_cache)
     return folder
 
 
@@ -40,10 +42,12 @@ def run_simulations(design: pd.DataFrame, space: Space, out_dir: Path,
                     compose: Callable[[list[str]], ExperimentConfig],
                     log: Callable[[str], Any] = logger.info,
                     launcher: dict[str, Any] | None = None,
-                    methods: tuple[str, ...] = METHODS
+                    methods: tuple[str, ...] = METHODS,
+                    counts: MemberCounts | None = None
                     ) -> tuple[dict[tuple[str, ...], dict[str, Path]], dict[str, str]]:
     """Run every distinct simulation configuration's families (resumed by config hash): here,
-    or as a SLURM array when ``launcher`` holds ``hydra/launcher=slurm`` settings.
+    or as a SLURM array when ``launcher`` holds ``hydra/launcher=slurm`` settings. Where their
+    members came from is added to ``counts``.
 
     Returns
     -------
@@ -75,31 +79,45 @@ def run_simulations(design: pd.DataFrame, space: Space, out_dir: Path,
     log(f"{len(unique)} simulation configurations, {len(todo)} family runs to do "
         f"({len(methods) * len(unique) - len(todo)} shared or complete); QP backend: "
         + ", ".join(f"{m} {'/'.join(sorted(b))}" for m, b in backends.items()))
-    run_families(todo, out_dir, log, launcher, cache)
+    run_families(todo, out_dir, log, launcher, cache, counts=counts)
     return folders, {m: "/".join(sorted(b)) for m, b in backends.items()}
 
 
 def run_families(todo: list, out_dir: Path, log=logger.info, launcher: dict | None = None,
-                 cache=None, label: str = "family runs") -> None:
+                 cache=None, label: str = "family runs", counts: MemberCounts | None = None,
+                 member_cache: MemberCache | None = None) -> None:
     """Run each ``(config, folder)`` family here (one after the other, each on its own joblib
     workers, sharing ``cache``'s compilations), or as one SLURM array when ``launcher`` holds
-    ``hydra/launcher=slurm`` settings; complete families are resumed, never redone."""
+    ``hydra/launcher=slurm`` settings; complete families are resumed, never redone, and
+    members found in ``member_cache`` (default: ``PIPELINE_MEMBER_CACHE``'s) are restored, not
+    simulated. Where the members came from is added to ``counts``."""
     from pipeline.loop.controller import QpCache
-    from pipeline.studies.experiment import run_family
+    from pipeline.studies.experiment import run_families_together
 
     if not todo:
         return
+    member_cache = member_cache if member_cache is not None else MemberCache.from_env()
     if launcher is not None:
-        _run_on_slurm(todo, launcher, out_dir, log)
+        _run_on_slurm(todo, launcher, out_dir, log, member_cache)
+        if counts is not None:
+            for _, folder in todo:
+                counts.add(MemberCounts.from_json(family_timing(folder).get("member_cache")))
         return
     from pipeline.studies.progress import Progress
 
     cache = cache if cache is not None else QpCache()
     with Progress(len(todo), label, "family", every_s=0.0,
                   stream=_LogStream(log)) as bar:
-        for cfg, folder in todo:
-            run_family(cfg, folder, progress=False, qp_cache=cache)
-            bar.update()
+        # a few families' members in one pool of workers: no idle cores between families
+        for start in range(0, len(todo), FAMILIES_PER_POOL):
+            group = todo[start:start + FAMILIES_PER_POOL]
+            run_families_together(group, cache, member_cache, counts)
+            bar.update(len(group))
+
+
+#: Families whose members share one pool of workers (:func:`run_families`): enough to keep
+#: the cores busy across a tuning batch, few enough that progress is reported as it goes.
+FAMILIES_PER_POOL = 8
 
 
 class _LogStream:
@@ -119,12 +137,14 @@ class _LogStream:
         return False
 
 
-def _run_on_slurm(todo: list, launcher: dict, out_dir: Path, log) -> None:
+def _run_on_slurm(todo: list, launcher: dict, out_dir: Path, log,
+                  member_cache: MemberCache | None = None) -> None:
     """Submit the family runs as one SLURM array and wait (bounded, see pipeline.studies.slurm)."""
     from pipeline.studies.slurm import executor_for, resume_command, wait_for_tasks, wait_policy
 
     executor = executor_for(launcher, out_dir / ".submitit" / "%j")
-    jobs = executor.map_array(_family_task, [c for c, _ in todo], [str(f) for _, f in todo])
+    jobs = executor.map_array(_family_task, [c for c, _ in todo], [str(f) for _, f in todo],
+                              [member_cache] * len(todo))
     log(f"submitted {len(jobs)} family runs to SLURM (array {jobs[0].job_id.split('_')[0]})")
     _, failed = wait_for_tasks(jobs, *wait_policy(launcher))
     if failed:

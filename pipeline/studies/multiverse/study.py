@@ -9,6 +9,7 @@ import pandas as pd
 
 from pipeline.analysis.claims.windows import require_own_window
 from pipeline.config import MetricsConfig
+from pipeline.store.member_cache import MemberCounts
 from pipeline.store.runs import read_family
 from pipeline.studies.compose import composer
 from pipeline.studies.multiverse.design import (
@@ -52,7 +53,10 @@ def run_multiverse(space: Space, out_dir: Path, overrides: list[str] | None = No
     # what is compared with what: the user's claims.treatment and claims.controls (last: the
     # treatment)
     methods = tuple(base.claims.controls) + (base.claims.treatment,)
-    folders, backends = run_simulations(design, space, out_dir, compose, log, launcher, methods)
+    counts = MemberCounts()
+    folders, backends = run_simulations(design, space, out_dir, compose, log, launcher, methods,
+                                        counts)
+    log(f"family runs: {counts.sentence()}")
     jobs = [(row, folders[simulation_key(row, space)]) for row in design.to_dict("records")]
     members, reads = _rescore_families(_metric_readings(jobs, space, base), out_dir, n_jobs,
                                        log)
@@ -63,7 +67,7 @@ def run_multiverse(space: Space, out_dir: Path, overrides: list[str] | None = No
     table = pd.DataFrame(rows).merge(design, on="spec_id")
     robust, dims = robustness(pd.DataFrame(rows), design, space)
     info = _multiverse_info(space, design, len(folders), backends,
-                            reads / members if members else 0.0)
+                            reads / members if members else 0.0, counts)
     return MultiverseResult(info, design, table, robust, dims).write(out_dir)
 
 
@@ -102,8 +106,8 @@ def _rescore_families(readings: dict[Path, list[MetricsConfig]], out_dir: Path, 
 
 
 def _multiverse_info(space: Space, design: pd.DataFrame, n_simulations: int,
-                     backends: dict[str, str], member_reads_per_member: float
-                     ) -> MultiverseInfo:
+                     backends: dict[str, str], member_reads_per_member: float,
+                     counts: MemberCounts | None = None) -> MultiverseInfo:
     """The multiverse's bookkeeping: its space, sizes, backends and robustness rule."""
     return MultiverseInfo(
         name=space.name, n_specifications=int(len(design)),
@@ -117,4 +121,5 @@ def _multiverse_info(space: Space, design: pd.DataFrame, n_simulations: int,
                           "values": [str(v) for v in d.values],
                           "settings": [str(v) for v in d.settings or ()],
                           "applies_to": list(d.applies_to or []), "why": d.why}
-                         for d in space.dimensions))
+                         for d in space.dimensions),
+        members=(counts or MemberCounts()).to_json())

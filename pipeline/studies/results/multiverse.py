@@ -41,6 +41,9 @@ class MultiverseInfo:
     robust_share: float
     fragile_share: float
     dimensions: tuple[dict[str, Any], ...] = field(default_factory=tuple)
+    #: where this run's family members came from: simulated, reused from the member cache,
+    #: already complete (resumed); empty for a study written before the member cache
+    members: dict[str, int] = field(default_factory=dict)
 
     def to_json(self) -> dict:
         data = {f.name: getattr(self, f.name) for f in fields(self)}

@@ -4,7 +4,7 @@ claim the default beside the tuned verdict)."""
 
 from __future__ import annotations
 
-from dataclasses import dataclass, fields
+from dataclasses import dataclass, field, fields
 from pathlib import Path
 from typing import Any
 
@@ -84,6 +84,13 @@ class TuneSummary:
     headline: bool
     dominance: dict[str, dict[str, int]]
     claims: tuple[TunedClaim, ...]
+    #: how a trial is stopped early on a share of its training family ("" before pruning)
+    pruning_rule: str = ""
+    #: where this run's members came from: simulated, reused from the member cache, resumed
+    members: dict[str, int] = field(default_factory=dict)
+    #: CPU-seconds over (wall-clock seconds x cores) of the tuning's own process and its
+    #: workers (None before it was measured)
+    core_utilisation: float | None = None
 
     @property
     def methods(self) -> list[str]:

@@ -69,10 +69,12 @@ def optimize(study, distributions: dict, evaluate: Callable[[list[dict]], list[t
     history and the trial count at which it converged (None: stopped by the cap).
 
     ``evaluate`` takes a list of parameter dicts and returns, per setting, ``(values,
-    constraint)``: the objective values and the safety constraint (<= 0 feasible). A trial
-    left running by an interrupted process is closed as failed and its parameters are asked
-    again first (their finished families are read back, not simulated). A resumed study that
-    had converged stops where it converged.
+    constraint)`` or ``(values, constraint, attrs)``: the objective values, the safety
+    constraint (<= 0 feasible) and what to keep with the trial (its rungs, the members it
+    simulated, where it was stopped).
+    A trial left running by an interrupted process is closed as failed and its parameters are
+    asked again first (their finished families are read back, not simulated). A resumed study
+    that had converged stops where it converged.
     """
     from optuna.trial import TrialState
 
@@ -90,8 +92,10 @@ def optimize(study, distributions: dict, evaluate: Callable[[list[dict]], list[t
         batch = [study.ask() for _ in range(min(batch_size, rule.max_trials - complete))]
         settings = [{name: trial._suggest(name, dist) for name, dist in distributions.items()}
                     for trial in batch]
-        for trial, (values, constraint) in zip(batch, evaluate(settings), strict=True):
+        for trial, (values, constraint, *more) in zip(batch, evaluate(settings), strict=True):
             trial.set_user_attr("constraint", float(constraint))
+            for key, value in (more[0] if more else {}).items():
+                trial.set_user_attr(key, value)
             study.tell(trial, list(values))
         complete += len(batch)
         rate = (time.perf_counter() - start) / max(complete - done_before, 1)
@@ -99,12 +103,134 @@ def optimize(study, distributions: dict, evaluate: Callable[[list[dict]], list[t
             f"{rule.max_trials}; {rate:.1f} s per trial)")
 
 
+#: The constraint value of a trial stopped at a rung because it cannot move its method's front:
+#: infeasible (never on a front, never picked), but ranked by NSGA-II before every setting that
+#: collided more often than the threshold (whose constraint is the excess count, >= 1).
+DOMINATED_AT_RUNG = 0.5
+
+#: How a trial is judged on a growing share of its training family (``tune.rungs``).
+PRUNING_RULE = ("a trial runs the first tune.rungs[0] members of its training family, then "
+                "tune.rungs[1], ..., then all of it; it stops at a rung when its collisions "
+                "there already exceed the safety threshold (it can no longer be feasible), or "
+                "when, once its method has tune.prune_after_trials complete trials, its values "
+                "on those members would raise the hypervolume of its method's complete feasible "
+                "trials, read on the same members, by at most tune.prune_gain of it (it cannot "
+                "move the front); a stopped trial is kept as infeasible with its values at that "
+                "rung. Both methods follow the same rule; the members each simulated are "
+                "counted")
+
+
+@dataclass(frozen=True)
+class Rungs:
+    """The member counts a trial is judged at (the last: the whole training family) and the
+    rule that stops it early (:data:`PRUNING_RULE`)."""
+
+    sizes: tuple[int, ...]
+    gain: float
+    after_trials: int
+    bounds: tuple[tuple[float, float], ...]
+
+    @classmethod
+    def of(cls, space: TuneSpace) -> Rungs:
+        return cls(tuple(space.rungs) + (space.training_size,), space.prune_gain,
+                   space.prune_after_trials,
+                   tuple((float(a), float(b)) for a, b in space.hypervolume_bounds))
+
+    def front_at_rungs(self, study) -> dict[int, np.ndarray]:
+        """Per early rung, the rung values of the method's complete, feasible trials that ran
+        the whole family (empty before ``after_trials`` complete trials)."""
+        from optuna.trial import TrialState
+
+        trials = list(study.get_trials(deepcopy=False, states=(TrialState.COMPLETE,)))
+        if len(trials) < self.after_trials or len(self.sizes) == 1:
+            return {}
+        full = [t for t in trials if t.user_attrs.get("pruned_at") is None
+                and float(t.user_attrs.get("constraint", 0.0)) <= 0.0]
+        out = {}
+        for n in self.sizes[:-1]:
+            rows = [t.user_attrs.get("rungs", {}).get(str(n)) for t in full]
+            rows = [r for r in rows if r is not None and np.isfinite(r).all()]
+            if rows:
+                out[n] = np.array(rows, float)
+        return out
+
+    def cannot_reach(self, values, front: np.ndarray | None) -> bool:
+        """Whether ``values`` would raise the hypervolume of ``front`` (the same members'
+        values of the complete trials) by at most ``gain`` of it."""
+        from pipeline.studies.tune.pareto import hypervolume, normalized
+
+        if front is None or not len(front) or not np.isfinite(values).all():
+            return False
+        bounds = [list(b) for b in self.bounds]
+        reference = np.ones(len(bounds))
+        points = normalized(np.asarray(front, float), bounds)
+        base = hypervolume(points, reference)
+        if base <= 0.0:
+            return False
+        grown = hypervolume(np.vstack([points, normalized(
+            np.asarray(values, float)[None, :], bounds)]), reference)
+        return bool(grown - base <= self.gain * base)
+
+
+def evaluate_in_rungs(runner: Runner, method: str, replicate: int, settings: list[dict],
+                      threshold: int, rungs: Rungs, front: dict[int, np.ndarray],
+                      measure: Callable[[pd.DataFrame], tuple[list[float], int]]
+                      ) -> list[tuple[list[float], float, dict]]:
+    """Each setting's training family, run rung by rung (all still-running settings of a rung
+    in one pool of workers) and stopped by :data:`PRUNING_RULE`; per setting ``(values,
+    constraint, attrs)`` for :func:`optimize`. ``measure`` turns a family table into the
+    objective values and the collision count."""
+    results: list[tuple[list[float], float, dict] | None] = [None] * len(settings)
+    seen: list[dict[str, list[float]]] = [{} for _ in settings]
+    alive = list(range(len(settings)))
+    for n in rungs.sizes:
+        last = n == rungs.sizes[-1]
+        jobs = [runner.job(method, "trial", settings[i], "training", replicate, members=n)
+                for i in alive]
+        where = f"replicate {replicate}: {method} training families" + (
+            "" if last else f" (first {n} members)")
+        for i, table in zip(alive, runner.run(jobs, where), strict=True):
+            values, collisions = measure(table)
+            seen[i][str(n)] = [float(v) for v in values]
+            attrs = {"rungs": seen[i], "members": n}
+            if last:
+                results[i] = (values, collisions - threshold, attrs)
+            elif collisions > threshold:
+                results[i] = (values, collisions - threshold, {**attrs, "pruned_at": n,
+                                                               "pruned_by": "collisions"})
+            elif rungs.cannot_reach(values, front.get(n)):
+                results[i] = (values, DOMINATED_AT_RUNG, {**attrs, "pruned_at": n,
+                                                          "pruned_by": "front"})
+        alive = [i for i in alive if results[i] is None]
+        if not alive:
+            break
+    return [r for r in results if r is not None]
+
+
 def _constraint(trial) -> list[float]:
     """Optuna's constraints_func: the safety constraint the evaluation stored (<= 0 feasible)."""
     return [float(trial.user_attrs.get("constraint", 0.0))]
 
 
-def make_study(space: TuneSpace, method: str, replicate: int, storage: str | None):
+def trial_storage(path: Path):
+    """The SQLite file that keeps the trials, without a disk sync on every commit (Optuna
+    commits every parameter and attribute of every trial: 5 ms each here, a fifth of a
+    pruned trial's parent time). A killed process loses nothing that was committed; only a
+    crash of the machine itself could leave the file damaged, which the next tune reports."""
+    import optuna
+    from sqlalchemy import event
+
+    storage = optuna.storages.RDBStorage(f"sqlite:///{Path(path).resolve()}")
+
+    def no_sync(connection, _record) -> None:
+        connection.execute("pragma synchronous=off")
+
+    event.listen(storage.engine, "connect", no_sync)
+    storage.engine.dispose()  # connections made before the listener: closed
+    return storage
+
+
+def make_study(space: TuneSpace, method: str, replicate: int, storage):
     """The NSGA-II study of one method in one replicate (its own sampler seed), named by the
     space's trial key so that an edited space never resumes another's trials."""
     import warnings
@@ -143,24 +269,46 @@ class Runner:
 
     def __init__(self, space: TuneSpace, out_dir: Path, overrides: list[str], log) -> None:
         from pipeline.loop.controller import QpCache
+        from pipeline.store.member_cache import MemberCache, MemberCounts
         from pipeline.studies.compose import composer
 
         self.space, self.out_dir, self.log = space, Path(out_dir), log
         self.compose, self.launcher = composer(list(overrides))
         self.cache = QpCache()
+        #: where this tuning's members came from (simulated, from the member cache, resumed)
+        self.counts = MemberCounts()
+        self.member_cache = MemberCache.from_env()
+        self._composed: dict[tuple[str, ...], ExperimentConfig] = {}
 
     def job(self, method: str, setting: str, params: dict, part: str,
-            replicate: int | None = None) -> FamilyJob:
+            replicate: int | None = None, members: int | None = None) -> FamilyJob:
+        """One family of ``method`` with ``params``: the training family of ``replicate`` or
+        the held-out family; with ``members``, only its first ``members`` members (a rung),
+        in the folder of the whole family (its members are the same runs)."""
+        import dataclasses
+
         if part == "training":
             seed, size = self.space.training_seeds[replicate or 0], self.space.training_size
+            backend = self.space.backend
         else:
             seed, size = self.space.heldout_seed, self.space.heldout_size
-        cfg = self.compose([f"method={method}", "scenario=family",
-                            f"scenario.family.seed={seed}", f"scenario.family.size={size}",
-                            f"controller.backend={self.space.backend}"]
-                           + [_override(k, v) for k, v in params.items()])
-        return FamilyJob(method, setting, cfg, self.out_dir / "runs" / part / method
-                         / cfg.config_hash(), replicate)
+            backend = self.space.heldout_backend
+        overrides = ([f"method={method}", "scenario=family", f"scenario.family.seed={seed}",
+                      f"scenario.family.size={size}", f"controller.backend={backend}"]
+                     + [_override(k, v) for k, v in params.items()])
+        # a trial's rungs are one composition (Hydra's compose is 0.05-0.1 s)
+        key = tuple(overrides)
+        cfg = self._composed.get(key)
+        if cfg is None:
+            if len(self._composed) > 64:
+                self._composed.clear()
+            cfg = self._composed[key] = self.compose(overrides)
+        folder = self.out_dir / "runs" / part / method / cfg.config_hash()
+        family = cfg.scenario.family
+        if members is not None and family is not None and members < family.size:
+            cfg = dataclasses.replace(cfg, scenario=dataclasses.replace(
+                cfg.scenario, family=dataclasses.replace(family, size=members)))
+        return FamilyJob(method, setting, cfg, folder, replicate)
 
     def run(self, jobs: list[FamilyJob], label: str) -> list[pd.DataFrame]:
         from pipeline.store.manifest import check
@@ -172,5 +320,6 @@ class Runner:
                                                 members=False) is not None:
                 todo.append((job.cfg, job.folder))
                 seen.add(job.folder)
-        run_families(todo, self.out_dir, self.log, self.launcher, self.cache, label)
+        run_families(todo, self.out_dir, self.log, self.launcher, self.cache, label,
+                     counts=self.counts, member_cache=self.member_cache)
         return [read_family(job.folder, members=False, settings=False).table for job in jobs]

@@ -27,7 +27,8 @@ def _default_bounds() -> list[list[float]]:
 #: the fields that decide which trials a replicate runs: a stored study is reused only when
 #: they are all the same (its name carries their hash)
 TRIAL_FIELDS = ("methods", "batch_size", "sampler_seed", "population_size", "objectives",
-                "training_seed", "training_size", "backend", "censoring")
+                "training_seed", "training_size", "backend", "censoring", "rungs",
+                "prune_gain", "prune_after_trials")
 #: the fields whose default values are the budget a headline needs (at least as much of each)
 BUDGET_AT_LEAST = ("replicates", "min_trials", "max_trials", "convergence_window",
                    "training_size", "heldout_size")
@@ -47,6 +48,14 @@ class TuneSpace:
     ``convergence_window`` trials, at ``min_trials`` at the earliest and ``max_trials`` at the
     latest (then it is labelled unconverged). ``matched_control`` names the look-ahead-matched
     control built from the tuned control, or "" for none.
+
+    Multi-fidelity trials (:mod:`pipeline.studies.tune.search`): a trial runs the first
+    ``rungs[0]`` members of its training family, then ``rungs[1]``, ..., then all of it, and
+    stops at a rung when it can no longer be feasible (more collisions than the threshold
+    already) or when, after ``prune_after_trials`` complete trials of its method, its values on
+    those members would raise the hypervolume of its method's complete trials read on the same
+    members by at most ``prune_gain`` of it. ``rungs: []`` runs every trial on the whole
+    family.
     """
 
     name: str = "default"
@@ -67,10 +76,14 @@ class TuneSpace:
     heldout_seed: int = 0
     heldout_size: int = 200
     backend: str = "daqp"
+    heldout_backend: str = "clarabel_direct"
     compromise: str = "closest_to_ideal"
     max_heldout_settings: int = 3
     matched_control: str = "baseline_matched"
     settled_share: float = 0.8
+    rungs: List[int] = field(default_factory=lambda: [10, 20])
+    prune_gain: float = 0.001
+    prune_after_trials: int = 20
 
     def __post_init__(self) -> None:
         safe_name("tune.name", self.name)
@@ -100,6 +113,7 @@ class TuneSpace:
                               "window can never be filled, so the tune could never converge")
         between("tune.convergence_tolerance", self.convergence_tolerance, 0.0, 1.0)
         between("tune.settled_share", self.settled_share, 0.5, 1.0)
+        self._check_rungs()
         seeds = self.training_seeds
         if self.heldout_seed in seeds:
             raise ConfigError("tune.heldout_seed", self.heldout_seed,
@@ -111,10 +125,24 @@ class TuneSpace:
             objective.check(f"tune.objectives[{i}]")
         self._check_bounds()
         choice("tune.censoring", self.censoring, ("run_end", "drop"))
-        choice("tune.backend", self.backend, ("clarabel_direct", "clarabel_dense", "daqp",
-                                              "cvxpy"))
+        for key in ("backend", "heldout_backend"):
+            choice(f"tune.{key}", getattr(self, key), ("clarabel_direct", "clarabel_dense",
+                                                       "daqp", "cvxpy"))
         choice("tune.compromise", self.compromise, ("closest_to_ideal",))
         choice("tune.matched_control", self.matched_control, ("baseline_matched", ""))
+
+    def _check_rungs(self) -> None:
+        between("tune.prune_gain", self.prune_gain, 0.0, 1.0)
+        value = self.prune_after_trials
+        if isinstance(value, bool) or not isinstance(value, int) or not 0 <= value <= 10_000:
+            raise ConfigError("tune.prune_after_trials", value, "an integer in [0, 10000]")
+        rungs = self.rungs
+        if not isinstance(rungs, list) or any(
+                isinstance(n, bool) or not isinstance(n, int) for n in rungs) \
+                or any(not 1 <= n < self.training_size for n in rungs) \
+                or any(b <= a for a, b in zip(rungs, rungs[1:], strict=False)):
+            raise ConfigError("tune.rungs", rungs, f"increasing member counts in [1, "
+                              f"{self.training_size - 1}] (below tune.training_size), or []")
 
     def _check_bounds(self) -> None:
         bounds = self.hypervolume_bounds
@@ -166,9 +194,11 @@ class TuneSpace:
         return short
 
 
-def load_tune_space(path: Path) -> TuneSpace:
+def load_tune_space(path: Path, changes: list[str] | None = None) -> TuneSpace:
     """Read and validate a tuning file (unknown keys, wrong types and shapes: one
-    :class:`ConfigError` naming the key, before any work starts)."""
+    :class:`ConfigError` naming the key, before any work starts), with ``changes``
+    (``key=value``, the value read as YAML: ``rungs=[]``) applied to it first; a changed
+    space is another space: its ``name`` gets the changes appended unless they set it."""
     import yaml
 
     path = Path(path)
@@ -178,6 +208,23 @@ def load_tune_space(path: Path) -> TuneSpace:
         data = yaml.safe_load(path.read_text())
     except yaml.YAMLError as exc:
         raise ConfigError("--space", str(path), f"valid YAML ({str(exc).splitlines()[0]})") from None
+    if changes:
+        if not isinstance(data, dict):
+            raise ConfigError("--space", str(path), "a mapping of tune settings")
+        data = dict(data)
+        names = {f for f in TuneSpace.__dataclass_fields__}
+        for change in changes:
+            key, sep, text = change.partition("=")
+            key = key.strip()
+            if not sep or key not in names:
+                raise ConfigError("--set", change, "key=value with key one of "
+                                  + ", ".join(sorted(names)))
+            try:
+                data[key] = yaml.safe_load(text)
+            except yaml.YAMLError:
+                raise ConfigError(f"--set {key}", text, "a YAML value") from None
+        if not any(c.partition("=")[0].strip() == "name" for c in changes):
+            data["name"] = f"{data.get('name', 'tune')}_changed"
     return schema_from_data(TuneSpace, data, "tune")
 
 

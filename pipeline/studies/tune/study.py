@@ -54,7 +54,16 @@ from pipeline.studies.tune.pareto import (
     front_dominance,
     pareto_mask,
 )
-from pipeline.studies.tune.search import Convergence, Runner, make_study, optimize
+from pipeline.studies.tune.search import (
+    PRUNING_RULE,
+    Convergence,
+    Rungs,
+    Runner,
+    evaluate_in_rungs,
+    make_study,
+    optimize,
+    trial_storage,
+)
 from pipeline.studies.tune.space import TuneSpace, default_budget, search_space
 
 logger = logging.getLogger(__name__)
@@ -81,11 +90,17 @@ def run_tuning(space: TuneSpace, out_dir: Path, overrides: list[str] | None = No
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     untrust(out_dir)
+    clock = CoreClock()
     runner = Runner(space, out_dir, list(overrides or []), log)
     spaces = {m: search_space(m) for m in space.methods}
     base = runner.compose(["method=improved", "scenario=family"])
-    storage = f"sqlite:///{(out_dir / 'tune.db').resolve()}"
-    rule = Convergence.of(space)
+    storage = trial_storage(out_dir / "tune.db")
+    rule, rungs = Convergence.of(space), Rungs.of(space)
+
+    def measure(table: pd.DataFrame) -> tuple[list[float], int]:
+        return (list(objective_values(tuning_table(table, space.censoring), space.objectives)),
+                Tally.of(table).collisions)
+
     trial_tables, histories, thresholds = [], [], {}
     for replicate in range(space.replicates):
         untuned = runner.run([runner.job(space.control, "default", {}, "training", replicate)],
@@ -94,16 +109,14 @@ def run_tuning(space: TuneSpace, out_dir: Path, overrides: list[str] | None = No
         log(f"replicate {replicate}: a setting is feasible when its training family (seed "
             f"{space.training_seeds[replicate]}) collides at most {threshold} times (the "
             f"untuned {space.control})")
-        studies = {}
+        studies: dict[str, Any] = {}
         for method in space.methods:
             distributions, _ = spaces[method]
 
             def evaluate(settings: list[dict], method=method, replicate=replicate,
-                         threshold=threshold) -> list[tuple]:
-                jobs = [runner.job(method, "trial", p, "training", replicate) for p in settings]
-                tables = runner.run(jobs, f"replicate {replicate}: {method} training families")
-                return [(objective_values(tuning_table(t, space.censoring), space.objectives),
-                         Tally.of(t).collisions - threshold) for t in tables]
+                         threshold=threshold, studies=studies) -> list[tuple]:
+                return evaluate_in_rungs(runner, method, replicate, settings, threshold, rungs,
+                                         rungs.front_at_rungs(studies[method]), measure)
 
             studies[method] = make_study(space, method, replicate, storage)
             history, converged = optimize(studies[method], distributions, evaluate, rule,
@@ -111,6 +124,7 @@ def run_tuning(space: TuneSpace, out_dir: Path, overrides: list[str] | None = No
                                           label=f"replicate {replicate}, {method}: ")
             histories.append({"replicate": replicate, "method": method,
                               "trials": int(len(history)),
+                              "members": members_simulated(studies[method]),
                               "converged_at": converged, "converged": converged is not None,
                               "hypervolume": [float(v) for v in history]})
             log(f"replicate {replicate}, {method}: "
@@ -121,10 +135,53 @@ def run_tuning(space: TuneSpace, out_dir: Path, overrides: list[str] | None = No
     trials = pd.concat(trial_tables, ignore_index=True)
     chosen = pick_settings(trials, space)
     judged = judge_heldout(runner, space, chosen, base.claims)
-    summary = TuneSummary.from_json(json_safe(summarize(space, spaces, thresholds, trials,
-                                                        histories, chosen, judged)))
+    log(f"family runs: {runner.counts.sentence()}")
+    data = summarize(space, spaces, thresholds, trials, histories, chosen, judged)
+    data.update(members=runner.counts.to_json(), core_utilisation=clock.utilisation())
+    summary = TuneSummary.from_json(json_safe(data))
     return TuneResult(summary, trials, judged.heldout, judged.default.to_frame(),
                       judged.tuned_frame(), judged.outcomes).write(out_dir)
+
+
+class CoreClock:
+    """CPU-seconds over (wall-clock seconds x cores) since it was made, of this process and
+    of its worker processes (joblib's workers are shut down first, so that the kernel has
+    counted their time)."""
+
+    def __init__(self) -> None:
+        import os
+        import time
+
+        self.start_wall = time.perf_counter()
+        self.start_cpu = self._cpu()
+        self.cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") \
+            else (os.cpu_count() or 1)
+
+    @staticmethod
+    def _cpu() -> float:
+        import resource
+
+        own = resource.getrusage(resource.RUSAGE_SELF)
+        children = resource.getrusage(resource.RUSAGE_CHILDREN)
+        return own.ru_utime + own.ru_stime + children.ru_utime + children.ru_stime
+
+    def utilisation(self) -> float:
+        import time
+
+        from joblib.externals.loky import get_reusable_executor
+
+        get_reusable_executor().shutdown(wait=True)
+        wall = time.perf_counter() - self.start_wall
+        return (self._cpu() - self.start_cpu) / max(wall * self.cores, 1e-9)
+
+
+def members_simulated(study) -> int:
+    """The training members a method's trials ran in one replicate (every rung counted once:
+    a later rung resumes the earlier one's members)."""
+    from optuna.trial import TrialState
+
+    return int(sum(int(t.user_attrs.get("members", 0))
+                   for t in study.get_trials(deepcopy=False, states=(TrialState.COMPLETE,))))
 
 
 def trials_table(studies: dict, space: TuneSpace, replicate: int) -> pd.DataFrame:
@@ -137,6 +194,8 @@ def trials_table(studies: dict, space: TuneSpace, replicate: int) -> pd.DataFram
         for trial in study.get_trials(deepcopy=False, states=(TrialState.COMPLETE,)):
             row = {"replicate": replicate, "method": method, "trial": trial.number,
                    "constraint": float(trial.user_attrs.get("constraint", 0.0)),
+                   "members": int(trial.user_attrs.get("members", space.training_size)),
+                   "pruned_at": trial.user_attrs.get("pruned_at"),
                    "params": json.dumps(trial.params, sort_keys=True)}
             row.update({f"train:{o.label}": v
                         for o, v in zip(space.objectives, trial.values, strict=True)})
@@ -144,7 +203,7 @@ def trials_table(studies: dict, space: TuneSpace, replicate: int) -> pd.DataFram
     table = pd.DataFrame(rows)
     columns = [f"train:{o.label}" for o in space.objectives]
     table["feasible"] = (table["constraint"] <= 0.0) & np.isfinite(
-        table[columns].to_numpy(float)).all(axis=1)
+        table[columns].to_numpy(float)).all(axis=1) & table["pruned_at"].isna()
     table["pareto"] = False
     for method in space.methods:
         part = table[(table["method"] == method) & table["feasible"]]
@@ -364,7 +423,13 @@ def summarize(space: TuneSpace, spaces: dict, thresholds: dict[int, int], trials
         mine = [h for h in histories if h["method"] == method]
         parity.append({"method": method, "dimensions": len(spaces[method][0]),
                        "trials": [h["trials"] for h in mine],
-                       "feasible_share": float(rows["feasible"].mean()) if len(rows) else 0.0,
+                       "members": [h.get("members") for h in mine],
+                       "pruned_share": float(rows["pruned_at"].notna().mean())
+                       if len(rows) else 0.0,
+                       # of the trials that ran their whole training family
+                       "feasible_share": float(rows.loc[rows["pruned_at"].isna(), "feasible"]
+                                               .mean()) if rows["pruned_at"].isna().any()
+                       else 0.0,
                        "converged": [h["converged"] for h in mine],
                        "converged_at": [h["converged_at"] for h in mine]})
     compromise: dict[str, dict[str, dict]] = {}
@@ -380,7 +445,9 @@ def summarize(space: TuneSpace, spaces: dict, thresholds: dict[int, int], trials
                    "sampler": "NSGA-II (optuna)", "sampler_seeds": [
                        space.sampler_seed_of(r) for r in range(space.replicates)],
                    "population_size": space.population_size, "batch_size": space.batch_size,
-                   "censoring": space.censoring},
+                   "censoring": space.censoring, "rungs": list(space.rungs),
+                   "prune_gain": space.prune_gain,
+                   "prune_after_trials": space.prune_after_trials},
         "families": {"training": {"seeds": space.training_seeds, "size": space.training_size},
                      "heldout": {"seed": space.heldout_seed, "size": space.heldout_size}},
         "backend": space.backend,
@@ -388,6 +455,7 @@ def summarize(space: TuneSpace, spaces: dict, thresholds: dict[int, int], trials
         "safety_threshold_collisions": {str(k): v for k, v in thresholds.items()},
         "search_spaces": {m: spaces[m][1] for m in space.methods},
         "compromise_rule": COMPROMISE_RULE, "answer_rule": ANSWER_RULE,
+        "pruning_rule": PRUNING_RULE if space.rungs else "",
         "compromise": compromise,
         "replicates": histories, "parity": parity,
         "below_default_budget": short, "unconverged": unconverged,

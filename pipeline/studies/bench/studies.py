@@ -1,0 +1,106 @@
+"""What a user waits for in the studies, measured by ``make bench``:
+
+- ``member_cache_reuse``: after a family run as ``make reproduce`` runs it, the tune's held-out
+  judgement of the untuned method (the same members on the same backend) restores them from
+  the member cache: members reused over members shared (1.0: none simulated again), with
+  ``member_cache_resimulated`` the shared members simulated again (goal 0). What is shared is
+  computed apart from the cache, from the members' config hashes.
+- ``tune_core_utilisation``: CPU-seconds over (wall-clock seconds x cores) of a small tune (one
+  replicate, 40-member training families, 16 trials per method, the default rungs), the tune's
+  own process and its workers.
+- ``pruned_over_unpruned_members``: members simulated per converged replicate by the pruned
+  default tune over the unpruned one (``make tune`` and ``make tune-unpruned``), with their
+  hypervolumes; read from those studies' summaries (None when either has not run: a converged
+  comparison takes most of an hour, more than a benchmark should).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import tempfile
+from pathlib import Path
+from typing import Any
+
+
+def measure_member_cache_reuse(members: int = 6) -> dict[str, Any]:
+    """A ``make reproduce`` family, then the tune's held-out family of the same method."""
+    from pipeline.config import CONF_DIR
+    from pipeline.loop.scenario import family_members
+    from pipeline.store.member_cache import MemberCache, MemberCounts
+    from pipeline.studies.compose import composer
+    from pipeline.studies.experiment import run_family
+    from pipeline.studies.tune import load_tune_space
+    from pipeline.studies.tune.search import Runner
+
+    with tempfile.TemporaryDirectory(prefix="bench_member_cache_") as folder:
+        root = Path(folder)
+        cache = MemberCache(root / "cache")
+        reproduce = composer([])[0](["method=improved", "scenario=family",
+                                     f"scenario.family.size={members}"])
+        run_family(reproduce, root / "reproduce", progress=False, member_cache=cache)
+        space = load_tune_space(CONF_DIR / "tune" / "default.yaml",
+                                [f"heldout_size={2 * members}"])
+        runner = Runner(space, root / "study", [], lambda _: None)
+        runner.member_cache, runner.counts = cache, MemberCounts()
+        job = runner.job("improved", "default", {}, "heldout")
+        runner.run([job], "held-out")
+
+        def hashes(cfg) -> set[str]:
+            return {dataclasses.replace(cfg, scenario=m).config_hash()
+                    for m in family_members(cfg.scenario, cfg.vehicle.footprint_radius_m)}
+
+        shared = len(hashes(reproduce) & hashes(job.cfg))
+        reused = runner.counts.reused
+    return {"member_cache_reuse": reused / shared if shared else None,
+            "member_cache_shared": shared,
+            "member_cache_resimulated": shared - reused}
+
+
+def measure_tune_core_utilisation(trials: int = 16) -> dict[str, Any]:
+    """A small tune's CPU-seconds over (wall x cores)."""
+    from pipeline.config import CONF_DIR
+    from pipeline.studies.tune import load_tune_space, run_tuning
+
+    space = load_tune_space(CONF_DIR / "tune" / "default.yaml", [
+        "name=bench", "replicates=1", f"min_trials={trials}", f"max_trials={trials}",
+        f"convergence_window={trials // 2}", "heldout_size=20", "heldout_backend=daqp",
+        "max_heldout_settings=1", "prune_after_trials=4"])
+    with tempfile.TemporaryDirectory(prefix="bench_tune_") as folder:
+        result = run_tuning(space, Path(folder), ["scenario.family.n_jobs=2"],
+                            log=lambda _: None)
+    value = result.summary.core_utilisation
+    return {"tune_core_utilisation": round(value, 3) if value is not None else None}
+
+
+def pruning_comparison(pruned: Path, unpruned: Path) -> dict[str, Any]:
+    """Members per converged replicate and hypervolume, pruned over unpruned, from two tune
+    summaries of the same space (one with ``rungs: []``); per claim both tuned answers."""
+    note = {"pruned_over_unpruned_members": None,
+            "pruning_note": f"run make tune and make tune-unpruned first ({pruned}, {unpruned})"}
+    try:
+        a = json.loads((Path(pruned) / "summary.json").read_text(encoding="utf-8"))
+        b = json.loads((Path(unpruned) / "summary.json").read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return note
+    if b["settings"].get("rungs") or not a["settings"].get("rungs"):
+        return {**note, "pruning_note": "the first summary must be pruned, the second not"}
+
+    def per_replicate(summary: dict) -> dict[tuple[int, str], dict]:
+        return {(h["replicate"], h["method"]): h for h in summary["replicates"]}
+
+    ra, rb = per_replicate(a), per_replicate(b)
+    keys = sorted(k for k in ra.keys() & rb.keys()
+                  if ra[k]["converged"] and rb[k]["converged"] and ra[k].get("members"))
+    if not keys:
+        return {**note, "pruning_note": "no replicate converged in both"}
+    members_a = sum(ra[k]["members"] for k in keys)
+    members_b = sum(rb[k]["members"] or b["settings"]["training_size"] * rb[k]["trials"]
+                    for k in keys)
+    hv = {f"{k[1]} r{k[0]}": [round(ra[k]["hypervolume"][-1], 4),
+                              round(rb[k]["hypervolume"][-1], 4)] for k in keys}
+    answers = {c["claim"]: [c["counts"], d["counts"]]
+               for c in a["claims"] for d in b["claims"] if c["claim"] == d["claim"]}
+    return {"pruned_over_unpruned_members": round(members_a / members_b, 3),
+            "pruning_hypervolume_pruned_unpruned": hv,
+            "pruning_answers_pruned_unpruned": answers, "pruning_note": ""}

@@ -1,0 +1,175 @@
+"""The member cache (pipeline.store.member_cache): a member simulated by one study is restored,
+byte for byte, by another with the same settings and code; a changed setting, other code or a
+plug-in outside the package misses; a damaged entry is recomputed; concurrent writers of one
+member leave one good entry; ``python -m pipeline.cache`` reports and cleans."""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import multiprocessing
+import shutil
+from pathlib import Path
+
+import pytest
+
+from pipeline.loop.scenario import family_members
+from pipeline.store.manifest import check
+from pipeline.store.member_cache import MemberCache, MemberCounts, environment_key
+from pipeline.studies.experiment import run_families_together, run_family
+
+
+def _family(make_config, size: int, extra: tuple[str, ...] = ()):
+    return make_config(["method=improved", "scenario=family", f"scenario.family.size={size}",
+                        "scenario.family.seed=3", "controller.backend=daqp",
+                        "scenario.family.n_jobs=1", *extra])
+
+
+def _member_hashes(cfg) -> set[str]:
+    """The members' config hashes, computed apart from the cache (the oracle of sharing)."""
+    return {dataclasses.replace(cfg, scenario=m).config_hash()
+            for m in family_members(cfg.scenario, cfg.vehicle.footprint_radius_m)}
+
+
+@pytest.fixture(scope="module")
+def populated(make_config, tmp_path_factory):
+    """A cache filled by a 4-member family, and a 6-member family run twice: once with the
+    cache and once without (the reference bytes)."""
+    root = tmp_path_factory.mktemp("member_cache")
+    cache = MemberCache(root / "cache")
+    small, large = _family(make_config, 4), _family(make_config, 6)
+    first, second = MemberCounts(), MemberCounts()
+    run_family(small, root / "first", progress=False, member_cache=cache, counts=first)
+    run_family(large, root / "second", progress=False, member_cache=cache, counts=second)
+    run_family(large, root / "uncached", progress=False, member_cache=None)
+    return root, cache, small, large, first, second
+
+
+def test_a_second_study_restores_exactly_the_shared_members(populated):
+    root, cache, small, large, first, second = populated
+    shared = len(_member_hashes(small) & _member_hashes(large))
+    assert shared == 4
+    assert (first.simulated, first.reused) == (4, 0)
+    assert (second.reused, second.simulated, second.resumed) == (shared, 2, 0)
+    # restored members are the simulated ones, byte for byte, and trusted like fresh runs
+    assert (root / "second" / "family_metrics.csv").read_bytes() == \
+        (root / "uncached" / "family_metrics.csv").read_bytes()
+    for i in range(6):
+        name = f"member_{i:04d}"
+        assert check(root / "second" / name, "run") is None
+        assert (root / "second" / name / "trajectory.csv").read_bytes() == \
+            (root / "uncached" / name / "trajectory.csv").read_bytes()
+    timing = json.loads((root / "second" / "timing.json").read_text())
+    assert timing["member_cache"] == {"resumed": 0, "reused": 4, "simulated": 2}
+    assert cache.size().entries == 6
+
+
+def test_the_key_follows_the_settings_the_code_and_nothing_else(populated, make_config,
+                                                                monkeypatch):
+    _, cache, small, large, *_ = populated
+    member = family_members(small.scenario)[1]
+    a = cache.key(dataclasses.replace(small, scenario=member))
+    assert a == cache.key(dataclasses.replace(large, scenario=member))  # family size: no
+    other = _family(make_config, 4, ("planner.beta=0.5",))
+    assert cache.key(dataclasses.replace(other, scenario=member)) != a
+    backend = _family(make_config, 4, ("controller.backend=clarabel_direct",))
+    assert cache.key(dataclasses.replace(backend, scenario=member)) != a
+    plugin = dataclasses.replace(small, planner=dataclasses.replace(
+        small.planner, _target_="my_lab.planners.Mine"))
+    assert cache.key(plugin) is None
+    import pipeline.store.member_cache as module
+
+    environment_key.cache_clear()
+    monkeypatch.setattr(module, "code_version", lambda: "other code")
+    try:
+        assert cache.key(dataclasses.replace(small, scenario=member)) != a
+    finally:
+        monkeypatch.undo()
+        environment_key.cache_clear()
+    assert cache.key(dataclasses.replace(small, scenario=member)) == a
+
+
+def test_a_damaged_entry_is_recomputed_never_trusted(populated, caplog):
+    root, cache, small, *_ = populated
+    reference = (root / "first" / "family_metrics.csv").read_bytes()
+    member = dataclasses.replace(small, scenario=family_members(small.scenario)[2])
+    entry = cache.entry(cache.key(member))
+    # a copy, so that the damage does not reach the member folders linked to the entry
+    text = (entry / "trajectory.csv").read_text()
+    (entry / "trajectory.csv").unlink()
+    (entry / "trajectory.csv").write_text(text.replace("0.", "9.", 5))
+    counts = MemberCounts()
+    with caplog.at_level("WARNING"):
+        run_family(small, root / "again", progress=False, member_cache=cache, counts=counts)
+    assert (counts.reused, counts.simulated) == (3, 1)
+    assert "not trusted" in caplog.text
+    assert (root / "again" / "family_metrics.csv").read_bytes() == reference
+    assert check(entry, "run", member.config_hash()) is None  # published again, whole
+
+
+def test_families_sharing_one_pool_equal_families_run_one_by_one(populated, make_config):
+    root, *_ = populated
+    cfgs = [_family(make_config, 3), _family(make_config, 3, ("planner.beta=0.5",))]
+    counts = MemberCounts()
+    run_families_together([(c, root / f"together_{i}") for i, c in enumerate(cfgs)],
+                          member_cache=None, counts=counts)
+    assert counts.simulated == 6
+    for i, cfg in enumerate(cfgs):
+        run_family(cfg, root / f"alone_{i}", progress=False, member_cache=None)
+        assert (root / f"together_{i}" / "family_metrics.csv").read_bytes() == \
+            (root / f"alone_{i}" / "family_metrics.csv").read_bytes()
+        assert check(root / f"together_{i}", "family", cfg.config_hash()) is None
+
+
+def _publish_at_once(barrier, cache_root: str, cfg, folder: str, queue) -> None:
+    barrier.wait()
+    queue.put(MemberCache(Path(cache_root)).publish(cfg, Path(folder)))
+
+
+def test_concurrent_writers_of_one_member_leave_one_good_entry(populated, tmp_path):
+    root, _, small, *_ = populated
+    member = dataclasses.replace(small, scenario=family_members(small.scenario)[0])
+    context = multiprocessing.get_context("fork")
+    for attempt in range(3):
+        cache_root = tmp_path / f"cache_{attempt}"
+        barrier, queue = context.Barrier(3), context.Queue()
+        workers = [context.Process(target=_publish_at_once,
+                                   args=(barrier, str(cache_root), member,
+                                         str(root / "first" / "member_0000"), queue))
+                   for _ in range(3)]
+        for worker in workers:
+            worker.start()
+        for worker in workers:
+            worker.join(60)
+        results = [queue.get(timeout=5) for _ in workers]
+        assert sorted(results) == [False, False, True]
+        cache = MemberCache(cache_root)
+        assert cache.size().entries == 1
+        assert check(cache.entry(cache.key(member)), "run", member.config_hash()) is None
+        assert not any((cache_root / "tmp").iterdir())  # no temporary left behind
+
+
+def test_the_cache_command_reports_and_cleans(populated, tmp_path, capsys):
+    from pipeline.cache import main
+
+    root, cache, *_ = populated
+    copy = tmp_path / "copy"
+    shutil.copytree(cache.root, copy)
+    assert main(["size", "--root", str(copy)]) == 0
+    assert f"{MemberCache(copy).size().entries} members" in capsys.readouterr().out
+    assert main(["clean", "--root", str(copy)]) == 0
+    assert "removed 6 members" in capsys.readouterr().out
+    assert MemberCache(copy).size().entries == 0
+    # run folders keep their own links: the family restored from the cache is still whole
+    assert check(root / "second", "family") is None
+
+
+def test_the_environment_variable_names_or_disables_the_cache(monkeypatch, tmp_path):
+    monkeypatch.setenv("PIPELINE_MEMBER_CACHE", str(tmp_path / "c"))
+    assert MemberCache.from_env() == MemberCache((tmp_path / "c").resolve())
+    for off in ("off", "", "none"):
+        monkeypatch.setenv("PIPELINE_MEMBER_CACHE", off)
+        assert MemberCache.from_env(default=tmp_path) is None
+    monkeypatch.delenv("PIPELINE_MEMBER_CACHE")
+    assert MemberCache.from_env() is None
+    assert MemberCache.from_env(default=tmp_path) == MemberCache(tmp_path.resolve())
