@@ -150,8 +150,10 @@ def test_tune_on_slurm_array_workers_equals_the_local_one(tmp_path):
     verdicts as the local tune with the same seeds."""
     from test_tune_pruning import no_trial_lost_or_run_twice
 
+    # one batch of two trials per method: each rung one array of two tasks
     command = [sys.executable, "-m", "pipeline.tune", "--space", "quick", "--set",
-               "replicates=1", "--set", "heldout_size=8", "--set", "max_trials=4"]
+               "replicates=1", "--set", "heldout_size=8", "--set", "min_trials=2", "--set",
+               "max_trials=2", "--set", "convergence_window=1"]
     local = subprocess.run(command + ["--out", str(tmp_path / "local")], cwd=ROOT,
                            capture_output=True, text=True, timeout=600)
     assert local.returncode == 0, local.stderr[-2000:]

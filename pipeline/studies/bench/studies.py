@@ -73,34 +73,56 @@ def measure_tune_core_utilisation(trials: int = 16) -> dict[str, Any]:
     return {"tune_core_utilisation": round(value, 3) if value is not None else None}
 
 
-def pruning_comparison(pruned: Path, unpruned: Path) -> dict[str, Any]:
-    """Members per converged replicate and hypervolume, pruned over unpruned, from two tune
-    summaries of the same space (one with ``rungs: []``); per claim both tuned answers."""
+def pruning_comparison(pruned: Path, unpruned: Path, tolerance: float = 0.01
+                       ) -> dict[str, Any]:
+    """Members per converged replicate, pruned over unpruned, at equal hypervolume: per
+    replicate and method converged in both, the members the pruned tune had simulated when its
+    front first reached the unpruned one's final hypervolume less ``tolerance`` (in trial
+    order), over the members the unpruned tune simulated until it converged; with each final
+    hypervolume and per claim both tuned answers. From two tune folders of the same space (the
+    second with ``rungs: []``)."""
+    import pandas as pd
+
     note = {"pruned_over_unpruned_members": None,
             "pruning_note": f"run make tune and make tune-unpruned first ({pruned}, {unpruned})"}
     try:
         a = json.loads((Path(pruned) / "summary.json").read_text(encoding="utf-8"))
         b = json.loads((Path(unpruned) / "summary.json").read_text(encoding="utf-8"))
+        trials = pd.read_csv(Path(pruned) / "trials.csv")
     except (OSError, ValueError):
         return note
     if b["settings"].get("rungs") or not a["settings"].get("rungs"):
-        return {**note, "pruning_note": "the first summary must be pruned, the second not"}
+        return {**note, "pruning_note": "the first tune must be pruned, the second not"}
 
     def per_replicate(summary: dict) -> dict[tuple[int, str], dict]:
         return {(h["replicate"], h["method"]): h for h in summary["replicates"]}
 
     ra, rb = per_replicate(a), per_replicate(b)
-    keys = sorted(k for k in ra.keys() & rb.keys()
-                  if ra[k]["converged"] and rb[k]["converged"] and ra[k].get("members"))
+    keys = sorted(k for k in ra.keys() & rb.keys() if ra[k]["converged"] and rb[k]["converged"])
     if not keys:
         return {**note, "pruning_note": "no replicate converged in both"}
-    members_a = sum(ra[k]["members"] for k in keys)
-    members_b = sum(rb[k]["members"] or b["settings"]["training_size"] * rb[k]["trials"]
-                    for k in keys)
-    hv = {f"{k[1]} r{k[0]}": [round(ra[k]["hypervolume"][-1], 4),
-                              round(rb[k]["hypervolume"][-1], 4)] for k in keys}
+    size = int(b["settings"]["training_size"])
+    rows, spent_a, spent_b = {}, 0, 0
+    for replicate, method in keys:
+        target = (1.0 - tolerance) * rb[(replicate, method)]["hypervolume"][-1]
+        history = ra[(replicate, method)]["hypervolume"]
+        members = trials[(trials["replicate"] == replicate) & (trials["method"] == method)] \
+            .sort_values("trial")["members"].cumsum().to_numpy()
+        reached = next((i for i, v in enumerate(history) if v >= target), None)
+        unpruned_members = size * int(rb[(replicate, method)]["converged_at"])
+        rows[f"{method} r{replicate}"] = {
+            "hypervolume_pruned": round(history[-1], 4),
+            "hypervolume_unpruned": round(rb[(replicate, method)]["hypervolume"][-1], 4),
+            "members_to_equal_hypervolume": None if reached is None
+            else int(members[min(reached, len(members) - 1)]),
+            "members_unpruned": unpruned_members}
+        spent_a += int(members[min(reached, len(members) - 1)]) if reached is not None \
+            else int(members[-1])
+        spent_b += unpruned_members
     answers = {c["claim"]: [c["counts"], d["counts"]]
                for c in a["claims"] for d in b["claims"] if c["claim"] == d["claim"]}
-    return {"pruned_over_unpruned_members": round(members_a / members_b, 3),
-            "pruning_hypervolume_pruned_unpruned": hv,
-            "pruning_answers_pruned_unpruned": answers, "pruning_note": ""}
+    never = [k for k, r in rows.items() if r["members_to_equal_hypervolume"] is None]
+    return {"pruned_over_unpruned_members": round(spent_a / spent_b, 3),
+            "pruning_by_replicate": rows, "pruning_answers_pruned_unpruned": answers,
+            "pruning_note": ("" if not never else "never reached the unpruned hypervolume "
+                             "(counted with all its members): " + ", ".join(never))}

@@ -322,4 +322,11 @@ class Runner:
                 seen.add(job.folder)
         run_families(todo, self.out_dir, self.log, self.launcher, self.cache, label,
                      counts=self.counts, member_cache=self.member_cache)
-        return [read_family(job.folder, members=False, settings=False).table for job in jobs]
+        tables = [read_family(job.folder, members=False, settings=False).table for job in jobs]
+        # families complete before this call: their members count as already complete
+        counted = {folder for _, folder in todo}
+        for job, table in zip(jobs, tables, strict=True):
+            if job.folder not in counted:
+                counted.add(job.folder)
+                self.counts.resumed += len(table)
+        return tables
