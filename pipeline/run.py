@@ -61,9 +61,8 @@ def _run(experiment, out_dir: Path) -> float | tuple[float, ...]:
     if experiment.scenario.family is not None:
         counts = MemberCounts()
         table = run_family(experiment, out_dir, counts=counts)
-        if counts.reused:
-            log.info("%s on %s: %s", experiment.method_name, experiment.scenario.name,
-                     counts.sentence())
+        log.info("%s on %s: %s", experiment.method_name, experiment.scenario.name,
+                 counts.sentence())
         tally = Tally.of(table)
         values = objective_values(table, objectives)
         log.info("%s on %s (%d scenarios): %d collisions, %d not recovered; %s -> %s",

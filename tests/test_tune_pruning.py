@@ -202,27 +202,26 @@ def test_members_at_equal_hypervolume_are_read_off_the_two_tunes(tmp_path):
     """Planted: the unpruned tune converged at 5 trials (5 x 40 members) with hypervolume 0.50;
     the pruned one's front first reached 0.495 (0.50 less 1 %) at its 4th trial, when it had
     simulated 40 + 10 + 10 + 40 members: 100 / 200."""
-    import json
+    from pipeline.studies.bench.studies import compare_pruning, pruning_comparison
 
-    from pipeline.studies.bench.studies import pruning_comparison
+    def summary(rungs, history, converged_at, claims) -> dict:
+        return {"settings": {"rungs": rungs, "training_size": 40},
+                "replicates": [{"replicate": 0, "method": "improved", "converged": True,
+                                "converged_at": converged_at, "hypervolume": history}],
+                "claims": [{"claim": "C1", "counts": claims}]}
 
-    def write(folder: Path, rungs, history, converged_at, claims) -> None:
-        folder.mkdir()
-        (folder / "summary.json").write_text(json.dumps({
-            "settings": {"rungs": rungs, "training_size": 40},
-            "replicates": [{"replicate": 0, "method": "improved", "converged": True,
-                            "converged_at": converged_at, "hypervolume": history}],
-            "claims": [{"claim": "C1", "counts": claims}]}))
-
-    write(tmp_path / "pruned", [10, 20], [0.1, 0.2, 0.3, 0.496, 0.52, 0.53], 6, "supported 5/5")
-    write(tmp_path / "unpruned", [], [0.1, 0.3, 0.4, 0.45, 0.50], 5, "supported 4/5")
-    pd.DataFrame({"replicate": 0, "method": "improved", "trial": range(6),
-                  "members": [40, 10, 10, 40, 20, 40]}).to_csv(tmp_path / "pruned" / "trials.csv")
-    out = pruning_comparison(tmp_path / "pruned", tmp_path / "unpruned")
+    pruned = summary([10, 20], [0.1, 0.2, 0.3, 0.496, 0.52, 0.53], 6, "supported 5/5")
+    unpruned = summary([], [0.1, 0.3, 0.4, 0.45, 0.50], 5, "supported 4/5")
+    trials = pd.DataFrame({"replicate": 0, "method": "improved", "trial": range(6),
+                           "members": [40, 10, 10, 40, 20, 40]})
+    out = compare_pruning(pruned, unpruned, trials)
     assert out["pruned_over_unpruned_members"] == 0.5
     row = out["pruning_by_replicate"]["improved r0"]
     assert row["members_to_equal_hypervolume"] == 100 and row["members_unpruned"] == 200
     assert out["pruning_answers_pruned_unpruned"] == {"C1": ["supported 5/5", "supported 4/5"]}
-    # the order of the two folders matters: an unpruned tune is never read as the pruned one
-    assert pruning_comparison(tmp_path / "unpruned", tmp_path / "pruned")[
-        "pruned_over_unpruned_members"] is None
+    # the order of the two matters: an unpruned tune is never read as the pruned one
+    assert compare_pruning(unpruned, pruned, trials)["pruned_over_unpruned_members"] is None
+    # folders that hold no trusted tune: no ratio, the reason instead
+    out = pruning_comparison(tmp_path / "a", tmp_path / "b")
+    assert out["pruned_over_unpruned_members"] is None and "make tune-unpruned" in \
+        out["pruning_note"]

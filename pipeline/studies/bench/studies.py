@@ -17,7 +17,6 @@
 from __future__ import annotations
 
 import dataclasses
-import json
 import tempfile
 from pathlib import Path
 from typing import Any
@@ -75,22 +74,27 @@ def measure_tune_core_utilisation(trials: int = 16) -> dict[str, Any]:
 
 def pruning_comparison(pruned: Path, unpruned: Path, tolerance: float = 0.01
                        ) -> dict[str, Any]:
-    """Members per converged replicate, pruned over unpruned, at equal hypervolume: per
-    replicate and method converged in both, the members the pruned tune had simulated when its
-    front first reached the unpruned one's final hypervolume less ``tolerance`` (in trial
-    order), over the members the unpruned tune simulated until it converged; with each final
-    hypervolume and per claim both tuned answers. From two tune folders of the same space (the
-    second with ``rungs: []``)."""
-    import pandas as pd
+    """:func:`compare_pruning` of two trusted tune folders of the same space (the second with
+    ``rungs: []``); None with the reason when either is missing or not trusted."""
+    from pipeline.studies.results import TuneResult
+    from pipeline.studies.results.base import ResultError
 
-    note = {"pruned_over_unpruned_members": None,
-            "pruning_note": f"run make tune and make tune-unpruned first ({pruned}, {unpruned})"}
     try:
-        a = json.loads((Path(pruned) / "summary.json").read_text(encoding="utf-8"))
-        b = json.loads((Path(unpruned) / "summary.json").read_text(encoding="utf-8"))
-        trials = pd.read_csv(Path(pruned) / "trials.csv")
-    except (OSError, ValueError):
-        return note
+        a, b = TuneResult.load(pruned), TuneResult.load(unpruned)
+    except ResultError as exc:
+        return {"pruned_over_unpruned_members": None,
+                "pruning_note": f"run make tune and make tune-unpruned first ({exc})"}
+    return compare_pruning(a.summary.to_json(), b.summary.to_json(), a.trials, tolerance)
+
+
+def compare_pruning(a: dict, b: dict, trials, tolerance: float = 0.01) -> dict[str, Any]:
+    """Members per converged replicate, pruned over unpruned, at equal hypervolume: per
+    replicate and method converged in both, the members the pruned tune (summary ``a``, its
+    ``trials`` table) had simulated when its front first reached the unpruned one's (``b``)
+    final hypervolume less ``tolerance`` (in trial order), over the members the unpruned tune
+    simulated until it converged; with each final hypervolume and per claim both tuned
+    answers."""
+    note = {"pruned_over_unpruned_members": None}
     if b["settings"].get("rungs") or not a["settings"].get("rungs"):
         return {**note, "pruning_note": "the first tune must be pruned, the second not"}
 
