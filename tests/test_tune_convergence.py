@@ -209,3 +209,24 @@ def test_the_spaces_convergence_settings_reach_the_rule():
     # and tune.settled_share moves the sentence
     assert answer_in_counts("C2", ["supported"] * 3 + ["equivalent"] * 2, 0.6)[1]
     assert not answer_in_counts("C2", ["supported"] * 3 + ["equivalent"] * 2, 0.8)[1]
+
+
+def test_convergence_counts_simulated_members_when_trials_stop_early():
+    """A front that stops growing after 100 trials converges at 100 + the window's trials when
+    every trial runs its whole family; when three in four trials stop at a quarter of it, the
+    window of 60 whole trials' work spans 60 / (1/4 + 3/4 * 1/4) = 137 trials (rounded up)."""
+    from pipeline.studies.tune.pareto import convergence_point
+
+    history = np.concatenate([np.linspace(0.1, 0.5, 100), np.full(300, 0.5)])
+    whole = convergence_point(history, 80, 60, 0.0)
+    assert whole == 160  # 60 flat trials after the last growth at trial 100
+    fractions = np.tile([1.0, 0.25, 0.25, 0.25], 100)
+    effort = np.cumsum(fractions)
+    stop = convergence_point(history, 80, 60, 0.0, effort)
+    # the last growth is at trial 100 (effort 43.75 + ...); converged once 60 whole trials of
+    # work lie between it and now
+    done_at_100 = effort[99]
+    expected = int(np.searchsorted(effort, done_at_100 + 60, side="left")) + 1
+    assert stop == expected and stop > whole
+    # without the effort the early-stopped trials would count as whole ones
+    assert convergence_point(history, 80, 60, 0.0, np.arange(1, 401.0)) == whole

@@ -127,15 +127,31 @@ def hypervolume_history(values: np.ndarray, feasible: np.ndarray,
 
 
 def convergence_point(history: np.ndarray, min_trials: int, window: int,
-                      tolerance: float) -> int | None:
-    """The first trial count ``n >= min_trials`` at which the hypervolume grew by at most
-    ``tolerance`` (relative to its value at ``n``) over the last ``window`` trials, or None.
+                      tolerance: float, effort: np.ndarray | None = None) -> int | None:
+    """The first trial count ``n`` at which the hypervolume grew by at most ``tolerance``
+    (relative to its value at ``n``) over the last ``window`` trials, at ``min_trials`` at the
+    earliest, or None.
 
-    A front with no feasible point inside the bounds (hypervolume 0) has not converged.
+    With ``effort`` (per trial, the work done until it in whole-trial equivalents: simulated
+    members over the training family's size), ``min_trials`` and ``window`` count that work,
+    not trials: a trial stopped early at a quarter of its family is a quarter of a trial, so a
+    tune that stops most trials early is not judged converged on fewer simulations than one
+    that stops none. A front with no feasible point inside the bounds (hypervolume 0) has not
+    converged.
     """
     history = np.asarray(history, float)
-    for n in range(max(min_trials, window + 1), len(history) + 1):
-        now, before = history[n - 1], history[n - 1 - window]
+    if effort is None:
+        effort = np.arange(1, len(history) + 1, dtype=float)
+    effort = np.asarray(effort, float)
+    for n in range(1, len(history) + 1):
+        done = effort[n - 1]
+        if done < min_trials or done < window + 1:
+            continue
+        # the last trial at or before `window` whole trials of work ago
+        j = int(np.searchsorted(effort, done - window, side="right")) - 1
+        if j < 0:
+            continue
+        now, before = history[n - 1], history[j]
         if now > 0.0 and now - before <= tolerance * now:
             return n
     return None

@@ -45,8 +45,18 @@ class Convergence:
             return np.zeros(0)
         return hypervolume_history(values, feasible, [list(b) for b in self.bounds])
 
-    def stop_at(self, history: np.ndarray) -> int | None:
-        return convergence_point(history, self.min_trials, self.window, self.tolerance)
+    def stop_at(self, history: np.ndarray, effort: np.ndarray | None = None) -> int | None:
+        return convergence_point(history, self.min_trials, self.window, self.tolerance, effort)
+
+    def effort(self, study, size: int) -> np.ndarray:
+        """The work done until each complete trial, in whole-trial equivalents (members
+        simulated over ``size``; a trial without a count is one whole trial)."""
+        from optuna.trial import TrialState
+
+        trials = sorted(study.get_trials(deepcopy=False, states=(TrialState.COMPLETE,)),
+                        key=lambda t: t.number)
+        members = np.array([float(t.user_attrs.get("members", size)) for t in trials])
+        return np.cumsum(members) / float(size)
 
 
 def study_values(study) -> tuple[np.ndarray, np.ndarray]:
@@ -62,8 +72,8 @@ def study_values(study) -> tuple[np.ndarray, np.ndarray]:
 
 
 def optimize(study, distributions: dict, evaluate: Callable[[list[dict]], list[tuple]],
-             rule: Convergence, batch_size: int, log=logger.info, label: str = ""
-             ) -> tuple[np.ndarray, int | None]:
+             rule: Convergence, batch_size: int, log=logger.info, label: str = "",
+             family_size: int | None = None) -> tuple[np.ndarray, int | None]:
     """Run ``study`` until its hypervolume has converged (:class:`Convergence`) or it holds
     ``rule.max_trials`` complete trials, ``batch_size`` at a time; return the hypervolume
     history and the trial count at which it converged (None: stopped by the cap).
@@ -74,7 +84,8 @@ def optimize(study, distributions: dict, evaluate: Callable[[list[dict]], list[t
     simulated, where it was stopped).
     A trial left running by an interrupted process is closed as failed and its parameters are
     asked again first (their finished families are read back, not simulated). A resumed study
-    that had converged stops where it converged.
+    that had converged stops where it converged. With ``family_size``, the rule's trial counts
+    are whole-trial equivalents of simulated members (:func:`convergence_point`).
     """
     from optuna.trial import TrialState
 
@@ -86,10 +97,13 @@ def optimize(study, distributions: dict, evaluate: Callable[[list[dict]], list[t
         history = rule.history(study)
         complete = len(history)
         done_before = complete if done_before is None else done_before
-        converged = rule.stop_at(history)
-        if converged is not None or complete >= rule.max_trials:
+        effort = rule.effort(study, family_size) if family_size else None
+        converged = rule.stop_at(history, effort)
+        spent = float(effort[-1]) if effort is not None and len(effort) else float(complete)
+        if converged is not None or spent >= rule.max_trials:
             return history, converged
-        batch = [study.ask() for _ in range(min(batch_size, rule.max_trials - complete))]
+        batch = [study.ask() for _ in range(max(1, min(batch_size,
+                                                       int(np.ceil(rule.max_trials - spent)))))]
         settings = [{name: trial._suggest(name, dist) for name, dist in distributions.items()}
                     for trial in batch]
         for trial, (values, constraint, *more) in zip(batch, evaluate(settings), strict=True):

@@ -121,7 +121,8 @@ def run_tuning(space: TuneSpace, out_dir: Path, overrides: list[str] | None = No
             studies[method] = make_study(space, method, replicate, storage)
             history, converged = optimize(studies[method], distributions, evaluate, rule,
                                           space.batch_size, log,
-                                          label=f"replicate {replicate}, {method}: ")
+                                          label=f"replicate {replicate}, {method}: ",
+                                          family_size=space.training_size)
             histories.append({"replicate": replicate, "method": method,
                               "trials": int(len(history)),
                               "members": members_simulated(studies[method]),
