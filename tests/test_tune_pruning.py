@@ -13,7 +13,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from pipeline.studies.tune.search import DOMINATED_AT_RUNG, Rungs, evaluate_in_rungs
+from pipeline.studies.tune.search import CANNOT_MOVE_FRONT_AT_RUNG, Rungs, evaluate_in_rungs
 
 BOUNDS = ((0.0, 1.2), (0.5, 3.0), (2.0, 5.0))
 FRONT_AT_10 = np.array([[0.20, 1.00, 3.00]])
@@ -75,7 +75,7 @@ def test_a_planted_dominated_trial_stops_after_its_first_rung():
     results, ran = _evaluate(_rungs())
     values, constraint, attrs = results["dominated"]
     assert attrs["pruned_at"] == 10 and attrs["pruned_by"] == "front"
-    assert attrs["members"] == 10 and constraint == DOMINATED_AT_RUNG
+    assert attrs["members"] == 10 and constraint == CANNOT_MOVE_FRONT_AT_RUNG
     assert ("dominated", 20) not in ran and ("dominated", 40) not in ran
     assert values == PLANTED["dominated"][10][0]
     # a trial that can no longer be feasible stops at its first rung as well (3 > 2 already)

@@ -120,7 +120,7 @@ def optimize(study, distributions: dict, evaluate: Callable[[list[dict]], list[t
 #: The constraint value of a trial stopped at a rung because it cannot move its method's front:
 #: infeasible (never on a front, never picked), but ranked by NSGA-II before every setting that
 #: collided more often than the threshold (whose constraint is the excess count, >= 1).
-DOMINATED_AT_RUNG = 0.5
+CANNOT_MOVE_FRONT_AT_RUNG = 0.5
 
 #: How a trial is judged on a growing share of its training family (``tune.rungs``).
 PRUNING_RULE = ("a trial runs the first tune.rungs[0] members of its training family, then "
@@ -213,7 +213,7 @@ def evaluate_in_rungs(runner: Runner, method: str, replicate: int, settings: lis
                 results[i] = (values, collisions - threshold, {**attrs, "pruned_at": n,
                                                                "pruned_by": "collisions"})
             elif rungs.cannot_reach(values, front.get(n)):
-                results[i] = (values, DOMINATED_AT_RUNG, {**attrs, "pruned_at": n,
+                results[i] = (values, CANNOT_MOVE_FRONT_AT_RUNG, {**attrs, "pruned_at": n,
                                                           "pruned_by": "front"})
         alive = [i for i in alive if results[i] is None]
         if not alive:
