@@ -18,6 +18,12 @@ from __future__ import annotations
 
 from importlib.metadata import PackageNotFoundError, version
 
+from pipeline.numerics import pin_numerical_kernels
+
+# before anything of the package imports numpy: the same kernels, so the same bits, on every
+# x86-64 machine (see pipeline.numerics)
+pin_numerical_kernels()
+
 try:
     __version__ = version("apf-mpc-repro")
 except PackageNotFoundError:  # run from a source tree that was never installed

@@ -15,7 +15,7 @@ PACKAGE = Path(__file__).resolve().parent.parent / "pipeline"
 #: Stage order (lower first). Studies compute and return typed results; the commands (the
 #: last layer) draw their figures; the report reads the results (``pipeline.studies.results``).
 LAYERS = (
-    ("pipeline", "pipeline.errors", "pipeline.validation"),
+    ("pipeline", "pipeline.errors", "pipeline.validation", "pipeline.numerics"),
     ("pipeline.loop",),
     ("pipeline.analysis",),
     ("pipeline.config", "pipeline.register"),

@@ -267,7 +267,9 @@ def apf_rollout_arrays(px: float, py: float, gx: float, gy: float, centres: Kern
                     # 1 / (1 + inf) = 0 is the right limit where exp overflows
                     h = h_max / (1.0 + _exp_or_inf(beta * (dx * dx)))
                 if polynomial:
-                    magnitude = h * (1.0 / rho_eff - 1.0 / rho0) / rho_eff**2
+                    # rho_eff * rho_eff, not rho_eff**2: CPython's ** is the C library's pow, off
+                    # by a bit from the product for some arguments, where numba multiplies
+                    magnitude = h * (1.0 / rho_eff - 1.0 / rho0) / (rho_eff * rho_eff)
                 else:
                     k_rep = k_const if constant_k else h
                     magnitude = k_rep * exp(alpha_e * (1.0 - rho_eff / rho0)) / rho_eff

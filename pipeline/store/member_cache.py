@@ -41,6 +41,7 @@ import uuid
 from dataclasses import dataclass
 from pathlib import Path
 
+from pipeline.numerics import numerical_kernels
 from pipeline.store.files import write_text_atomic
 from pipeline.store.manifest import MANIFEST, RUN_FILES, check, code_version, write_manifest
 
@@ -58,8 +59,9 @@ SHARED_FILES = tuple(name for name in RUN_FILES if name != "config.yaml")
 
 @functools.lru_cache(maxsize=1)
 def environment_key() -> str:
-    """SHA-256 (first 16 hex digits) of the code version, the numerical packages' versions and
-    the Python version: what, beside the settings, decides a member's numbers."""
+    """SHA-256 (first 16 hex digits) of the code version, the numerical packages' versions, the
+    Python version and the kernels numpy and OpenBLAS run (:func:`pipeline.numerics.
+    numerical_kernels`): what, beside the settings, decides a member's numbers."""
     from importlib import metadata
 
     versions: dict[str, str | None] = {}
@@ -69,7 +71,8 @@ def environment_key() -> str:
         except metadata.PackageNotFoundError:
             versions[name] = None
     text = json.dumps({"code": code_version(), "packages": versions,
-                       "python": sys.version.split()[0]}, sort_keys=True)
+                       "python": sys.version.split()[0], "kernels": numerical_kernels()},
+                      sort_keys=True)
     return hashlib.sha256(text.encode()).hexdigest()[:16]
 
 

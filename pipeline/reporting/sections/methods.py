@@ -18,6 +18,7 @@ from markupsafe import Markup, escape
 
 from pipeline.analysis.claims import ALL_CLAIMS, OUTCOME_RULE, SINGLE_RULE, Claim
 from pipeline.config import INTERPRETATION_REGISTER, ClaimsConfig
+from pipeline.numerics import numerical_kernels
 
 PACKAGES = ("numpy", "scipy", "pandas", "matplotlib", "control", "cvxpy", "clarabel",
             "hydra-core", "omegaconf", "jinja2")
@@ -59,7 +60,8 @@ def _git(*args: str) -> str:
 
 
 def provenance(command: str) -> Provenance:
-    """Command, git commit and dirty flag, package versions, date and machine."""
+    """Command, git commit and dirty flag, package versions, date and machine (with the numerical
+    kernels in effect, :func:`pipeline.numerics.numerical_kernels`)."""
     versions = {}
     for name in PACKAGES:
         try:
@@ -70,7 +72,8 @@ def provenance(command: str) -> Provenance:
     return Provenance(command, _git("rev-parse", "HEAD"), bool(status) and status != "unknown",
                       sys.version.split()[0], versions,
                       dt.datetime.now(dt.UTC).strftime("%Y-%m-%d %H:%M:%S UTC"),
-                      f"{platform.system()} {platform.machine()}, {os.cpu_count()} cores")
+                      f"{platform.system()} {platform.machine()}, {os.cpu_count()} cores; kernels: "
+                      + ", ".join(f"{name} {value}" for name, value in numerical_kernels().items()))
 
 
 def _lookup(config: dict, dotted: str):
