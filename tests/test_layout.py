@@ -17,6 +17,7 @@ PACKAGE = Path(__file__).resolve().parent.parent / "pipeline"
 LAYERS = (
     ("pipeline", "pipeline.errors", "pipeline.validation", "pipeline.numerics"),
     ("pipeline.loop",),
+    ("pipeline.peers",),
     ("pipeline.analysis",),
     ("pipeline.config", "pipeline.register"),
     ("pipeline.store",),
