@@ -22,7 +22,7 @@ MEMBER_CACHE ?= $(RUNS)/member_cache
 export PIPELINE_MEMBER_CACHE = $(if $(filter off,$(MEMBER_CACHE)),off,$(abspath $(MEMBER_CACHE)))
 LAUNCHER    ?= sequential
 
-.PHONY: help install lint reproduce experiment run-paper run-kinematic run-kinematic-readings run-family run-kinematic-family run-frames run-apf-alone speed-check report screenshot sweep verify ablation multiverse tune tune-unpruned nmpc-check test test-slurm test-all bench cache-size clean-cache clean
+.PHONY: help install lint reproduce experiment run-paper run-kinematic run-kinematic-readings run-family run-kinematic-family run-frames run-apf-alone run-peers run-kinematic-peers speed-check report screenshot sweep verify ablation multiverse tune tune-unpruned nmpc-check test test-slurm test-all bench cache-size clean-cache clean
 
 help:  ## list the targets
 	@grep -E '^[a-zA-Z_-]+:.*## ' $(MAKEFILE_LIST) | awk -F':.*## ' '{printf "  %-12s %s\n", $$1, $$2}'
@@ -51,13 +51,13 @@ $(STAMP): pyproject.toml constraints.txt
 install: $(STAMP)  ## create .venv and install the project with pinned versions
 
 experiment: $(STAMP)  ## run every method on the paper scenario and on the scenario family
-	rm -rf $(RUNS)/paper $(RUNS)/kinematic $(RUNS)/kinematic_readings $(RUNS)/kinematic_family $(RUNS)/family $(RUNS)/frames $(RUNS)/apf_alone  # rebuilt; members come back from the member cache only for the same code and settings
-	@# all seven experiments side by side, the longest first: each family's parent has serial
+	rm -rf $(RUNS)/paper $(RUNS)/kinematic $(RUNS)/kinematic_readings $(RUNS)/kinematic_family $(RUNS)/family $(RUNS)/frames $(RUNS)/apf_alone $(RUNS)/peers $(RUNS)/kinematic_peers  # rebuilt; members come back from the member cache only for the same code and settings
+	@# all nine experiments side by side, the longest first: each family's parent has serial
 	@# stretches (Hydra's job set-up, the compilation, the tables) in which the others use the
 	@# cores (measured: 162-166 s against 173-178 s one family after the other). Each one's
 	@# output is printed whole when it ends (-O).
-	@echo "seven experiments side by side; each one's output follows when it ends"
-	$(MAKE) --no-print-directory -j7 -O run-family run-kinematic-family run-frames run-apf-alone run-paper run-kinematic run-kinematic-readings
+	@echo "nine experiments side by side; each one's output follows when it ends"
+	$(MAKE) --no-print-directory -j9 -O run-family run-peers run-kinematic-family run-kinematic-peers run-frames run-apf-alone run-paper run-kinematic run-kinematic-readings
 
 # the experiments of `make experiment` (run side by side from there)
 run-paper run-kinematic run-kinematic-readings: run-%: $(STAMP)
@@ -71,6 +71,12 @@ run-frames: $(STAMP)
 
 run-apf-alone: $(STAMP)
 	$(PY) -m pipeline.run experiment=apf_alone hydra.sweep.dir=$(RUNS)/apf_alone scenario.family.size=$(FAMILY_SIZE)
+
+run-peers: $(STAMP)
+	$(PY) -m pipeline.run experiment=peers hydra.sweep.dir=$(RUNS)/peers scenario.family.size=$(FAMILY_SIZE)
+
+run-kinematic-peers: $(STAMP)
+	$(PY) -m pipeline.run experiment=kinematic_peers hydra.sweep.dir=$(RUNS)/kinematic_peers scenario.family.size=$(KINEMATIC_FAMILY_SIZE)
 
 run-kinematic-family: $(STAMP)
 	$(PY) -m pipeline.run experiment=kinematic_family hydra.sweep.dir=$(RUNS)/kinematic_family scenario.family.size=$(KINEMATIC_FAMILY_SIZE)

@@ -46,8 +46,8 @@ STUDY_FILES = {
 #: The outputs root's sections: only the layout (``pipeline.store.layout``) joins them to a
 #: path.
 SECTIONS = ("paper", "kinematic", "kinematic_readings", "family", "kinematic_family", "frames",
-            "apf_alone", "ablation", "interpretations", "multiverse", "tune", "nmpc_check", "speed",
-            "sweeps")
+            "apf_alone", "peers", "kinematic_peers", "ablation", "interpretations", "multiverse",
+            "tune", "nmpc_check", "speed", "sweeps")
 
 
 def module_name(path: Path) -> str:
@@ -205,8 +205,8 @@ def test_the_makefile_writes_where_the_layout_reads(tmp_path):
     written = set(re.findall(r"\$\(RUNS\)/([a-z_]+)", makefile))
     assert written <= names, written - names
     assert {"paper", "kinematic", "kinematic_readings", "family", "kinematic_family",
-            "frames", "apf_alone", "ablation", "interpretations", "multiverse", "tune", "nmpc_check",
-            "speed", "sweeps"} <= written
+            "frames", "apf_alone", "peers", "kinematic_peers", "ablation", "interpretations",
+            "multiverse", "tune", "nmpc_check", "speed", "sweeps"} <= written
     renamed = tmp_path / "paths.yaml"
     renamed.write_text("multiverse: robustness_study\n")
     moved = OutputsLayout.load(tmp_path, renamed)

@@ -50,7 +50,7 @@ T = TypeVar("T")
 
 #: Known methods first, in this order, on every table and figure.
 METHOD_ORDER = ("baseline", "baseline_matched", "improved", "velocity_aware", "mpc_no_apf",
-                "apf_pursuit")
+                "apf_pursuit", "mpc_dcbf", "cbf_filter", "vo", "dwa")
 #: What an optional input that cannot be read may raise (it is then skipped, with its reason).
 UNREADABLE = (OSError, ValueError, KeyError, TypeError, IndexError, pd.errors.ParserError)
 
@@ -210,6 +210,12 @@ class ReportInputs:
     kinematic_family: FamilyInputs | None = None
     #: the family without the MPC's collision half-planes ("APF by itself", make reproduce)
     apf_alone: FamilyInputs | None = None
+    #: the methods the paper names, on the family and on the Appendix-A track's family
+    peers: FamilyInputs | None = None
+    kinematic_peers: FamilyInputs | None = None
+    #: per track ("lateral", "kinematic") and method: the solve time per step over its
+    #: family's members, median and 95th percentile in seconds (peers and the treatment)
+    solve_times: dict[str, dict[str, tuple[float, float]]] = field(default_factory=dict)
     readings: dict[str, list[LabelledRun]] = field(default_factory=dict)
     ablation: dict[str, pd.DataFrame] = field(default_factory=dict)
     interpretations: dict[str, dict[str, pd.DataFrame]] = field(default_factory=dict)
@@ -306,6 +312,18 @@ class ReportInputs:
             apf_alone = optional(lambda _root: alone.with_jerks(
                 (claims.treatment, *claims.controls, "mpc_no_apf")),
                 layout.folder("apf_alone"), "C2 on a common window (APF by itself)") or alone
+        peers = optional(lambda folder: FamilyInputs.of(load_runs(folder, skipped),
+                                                        layout.canonical),
+                         layout.folder("peers"), "peers section") \
+            if layout.folder("peers").is_dir() else None
+        kinematic_peers = optional(lambda folder: FamilyInputs.of(load_runs(folder, skipped),
+                                                                  layout.canonical),
+                                   layout.folder("kinematic_peers"), "peers section") \
+            if layout.folder("kinematic_peers").is_dir() else None
+        solve_times = optional(lambda _root: _solve_times(
+            claims.treatment, {"lateral": (family, peers),
+                               "kinematic": (kinematic_family, kinematic_peers)}),
+            layout.root, "peers section (solve times)") or {}
         nmpc = optional(NmpcCheckResult.load, layout.folder("nmpc_check"), "nmpc check") \
             if NmpcCheckResult.present(layout.folder("nmpc_check")) else None
         speed = optional(SpeedCheckResult.load, layout.folder("speed"), "speed check") \
@@ -319,7 +337,8 @@ class ReportInputs:
             kinematic=TrackRuns.of(kinematic_runs, layout.canonical) if kinematic_runs
             else None,
             other_runs=lateral.extra + others, family=family,
-            kinematic_family=kinematic_family, apf_alone=apf_alone,
+            kinematic_family=kinematic_family, apf_alone=apf_alone, peers=peers,
+            kinematic_peers=kinematic_peers, solve_times=solve_times,
             readings=_readings(layout),
             ablation=family_tables_by_method(layout.folder("ablation"), skipped),
             interpretations=interpretation_tables(layout.folder("interpretations"), skipped),
@@ -374,6 +393,29 @@ def _readings(layout: OutputsLayout) -> dict[str, list[LabelledRun]]:
         for run in load_runs(root, []).runs:
             by_variant.setdefault(run.config["run"].get("variant", "?"), []).append(run)
     return dict(sorted(by_variant.items()))
+
+
+def _solve_times(treatment: str,
+                 tracks: dict[str, tuple[FamilyInputs | None, FamilyInputs | None]]
+                 ) -> dict[str, dict[str, tuple[float, float]]]:
+    """Per track with peers: the treatment's solve time per step over its default family and
+    each peer's over its own (:func:`~pipeline.store.runs.member_solve_times`)."""
+    from pipeline.store.runs import member_solve_times
+
+    found: dict[str, dict[str, tuple[float, float]]] = {}
+    for track, (default, peers) in tracks.items():
+        if peers is None:
+            continue
+        by_method: dict[str, tuple[float, float]] = {}
+        sources = [(treatment, default)] + [(m, peers) for m in peers.primary]
+        for method, family in sources:
+            label = family.label_of(method) if family is not None else None
+            folder = family.info.get(label, {}).get("dir") if family and label else None
+            times = member_solve_times(Path(folder)) if folder else None
+            if times is not None:
+                by_method[method] = times
+        found[track] = by_method
+    return found
 
 
 def _apf_alone(folder: Path, layout: OutputsLayout, skipped: list[Skipped]

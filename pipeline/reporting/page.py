@@ -27,6 +27,7 @@ from pipeline.reporting.sections.kinematic import kinematic_section
 from pipeline.reporting.sections.looks import looks_section
 from pipeline.reporting.sections.methods import methods_section
 from pipeline.reporting.sections.paper import paper_section
+from pipeline.reporting.sections.peers import peers_section
 from pipeline.reporting.sections.performance import performance_section
 from pipeline.reporting.sections.robustness import robustness_section
 from pipeline.reporting.sections.runs_given import runs_given_section
@@ -109,7 +110,8 @@ def build_page(inputs: ReportInputs, verdicts: Verdicts, figures: Figures, comma
         paper=paper,
         answer=answer_section(family, robustness, fair_fight, kinematic, verdicts.claims,
                               apf_alone),
-        family=family, apf_alone=apf_alone, kinematic=kinematic,
+        family=family, apf_alone=apf_alone,
+        peers=peers_section(inputs, verdicts) if paper else None, kinematic=kinematic,
         looks=looks_section(inputs, verdicts) if paper else None,
         robustness=robustness if paper else None, fair_fight=fair_fight if paper else None,
         validity=validity_section(inputs, verdicts) if paper else None,

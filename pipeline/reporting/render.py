@@ -18,6 +18,7 @@ from pipeline.reporting.sections.kinematic import KinematicSection
 from pipeline.reporting.sections.looks import LooksSection
 from pipeline.reporting.sections.methods import MethodsSection
 from pipeline.reporting.sections.paper import PaperSection
+from pipeline.reporting.sections.peers import PeersSection
 from pipeline.reporting.sections.performance import PerformanceSection
 from pipeline.reporting.sections.robustness import RobustnessSection
 from pipeline.reporting.sections.runs_given import RunsGivenSection
@@ -33,6 +34,7 @@ class Page:
     answer: AnswerSection
     family: FamilySection | None
     apf_alone: ApfAloneSection | None
+    peers: PeersSection | None
     kinematic: KinematicSection | None
     looks: LooksSection | None
     robustness: RobustnessSection | None

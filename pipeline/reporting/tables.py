@@ -72,6 +72,23 @@ def _ledgers(inputs: ReportInputs, verdicts: Verdicts, table_dir: Path) -> None:
                        "collisions_with_halfplanes": with_.get(c["method"])}
                       for c in alone.counts]).to_csv(table_dir / "apf_alone_collisions.csv",
                                                      index=False)
+    if verdicts.peers:
+        frames = []
+        for judged in verdicts.peers:
+            frame = judged.ledger.to_frame()
+            frame.insert(0, "track", judged.track)
+            frames.append(frame)
+        pd.concat(frames, ignore_index=True).to_csv(table_dir / "claims_ledger_peers.csv",
+                                                    index=False)
+        pd.DataFrame([{"track": judged.track, "method": c["method"],
+                       "scenarios": c["scenarios"], "collisions": c["collisions"],
+                       "collisions_unavoidable": c["collisions_unavoidable"],
+                       "solve_time_median_s": inputs.solve_times.get(judged.track, {}).get(
+                           c["method"], (None, None))[0],
+                       "solve_time_p95_s": inputs.solve_times.get(judged.track, {}).get(
+                           c["method"], (None, None))[1]}
+                      for judged in verdicts.peers for c in judged.counts]
+                     ).to_csv(table_dir / "peers_collisions.csv", index=False)
     if verdicts.validity is not None and inputs.validity is not None and has_validity(inputs):
         inputs.validity.table.to_frame().to_csv(table_dir / "model_validity.csv", index=False)
         pd.DataFrame(verdicts.validity.rows()).to_csv(table_dir / "claims_model_validity.csv",

@@ -102,6 +102,19 @@ class ApfAloneVerdicts:
 
 
 @dataclass(frozen=True)
+class PeerVerdicts:
+    """The treatment against the methods the paper names (``make reproduce``'s ``peers`` and
+    ``kinematic_peers`` families), on one track: the ledger (each claim, treatment vs each
+    peer, by the default ledger's rules with C2 on each run's own window) over the same
+    scenarios as the track's default ledger, and the outcome counts per method."""
+
+    track: str
+    peers: tuple[str, ...]
+    ledger: Ledger
+    counts: tuple[dict, ...]
+
+
+@dataclass(frozen=True)
 class ValidityVerdicts:
     """The claims again: the default ledger without the all-pairs sensitivity, per comparison
     on the scenarios where both models held (with their number), in the other frame."""
@@ -140,6 +153,7 @@ class Verdicts:
     family: FamilyVerdicts | None = None
     kinematic_family: FamilyVerdicts | None = None
     apf_alone: ApfAloneVerdicts | None = None
+    peers: tuple[PeerVerdicts, ...] = ()
     readings: tuple[tuple[str, dict[str, str]], ...] = ()
     ablation_effects: pd.DataFrame | None = None
     ablation_roles: tuple[str, str] = ("improved", "baseline")
@@ -169,7 +183,11 @@ class Verdicts:
             effects = ablation_effects(inputs.ablation, own)
         apf_alone = _apf_alone(inputs.apf_alone, cfg, family, inputs.family) \
             if inputs.apf_alone is not None and inputs.apf_alone.judgeable(cfg) else None
-        return cls(cfg, paper, kinematic, family, kinematic_family, apf_alone,
+        peers = tuple(judged for judged in (
+            _peers("lateral", inputs.family, inputs.peers, cfg),
+            _peers("kinematic", inputs.kinematic_family, inputs.kinematic_peers, cfg))
+            if judged is not None)
+        return cls(cfg, paper, kinematic, family, kinematic_family, apf_alone, peers,
                    _readings(inputs.kinematic, inputs.readings, cfg)
                    if inputs.kinematic is not None else (),
                    effects, roles, interpretation_flips(inputs.interpretations, own),
@@ -246,6 +264,31 @@ def _c2_windows(tables: dict[str, pd.DataFrame], cfg: ClaimsConfig, ledger: Ledg
     by_reading = {cfg.c2_window: ledger_rows, other: other_rows}
     return C2Windows(cfg.common_window, cfg.c2_window, by_reading["own"],
                      by_reading["common"])
+
+
+def _peers(track: str, default: FamilyInputs | None, peers: FamilyInputs | None,
+           cfg: ClaimsConfig) -> PeerVerdicts | None:
+    """The treatment (its default family on ``track``) against each peer of ``peers``, when
+    both are there and were drawn alike (size and seed: the pairs are the same scenarios);
+    None otherwise."""
+    if default is None or peers is None or cfg.treatment not in default.primary \
+            or not peers.primary:
+        return None
+
+    def drawn(family: FamilyInputs, method: str) -> tuple:
+        info = family.info.get(family.label_of(method) or "", {})
+        return info.get("size"), info.get("seed")
+
+    reference = drawn(default, cfg.treatment)
+    names = tuple(m for m in ordered(peers.primary) if m != cfg.treatment
+                  and drawn(peers, m) == reference)
+    if not names:
+        return None
+    tables = {cfg.treatment: default.primary[cfg.treatment],
+              **{m: peers.primary[m] for m in names}}
+    ledger = family_ledger(tables, dataclasses.replace(cfg, c2_window="own"), None,
+                           cfg.treatment, names, sensitivity=False)
+    return PeerVerdicts(track, names, ledger, tuple(outcome_counts(tables)))
 
 
 def _apf_alone(family: FamilyInputs, cfg: ClaimsConfig, default: FamilyVerdicts | None,

@@ -32,6 +32,8 @@ class OutputsLayout:
     kinematic_family: str = "kinematic_family"
     frames: str = "frames"
     apf_alone: str = "apf_alone"
+    peers: str = "peers"
+    kinematic_peers: str = "kinematic_peers"
     ablation: str = "ablation"
     interpretations: str = "interpretations"
     multiverse: str = "multiverse"
@@ -77,7 +79,8 @@ class OutputsLayout:
         sections, never among the runs of the claims (the paper scenario, the family)."""
         return (self.sweeps, self.ablation, self.interpretations, self.multiverse, self.tune,
                 self.tune_unpruned, self.member_cache, self.kinematic_readings,
-                self.kinematic_family, self.frames, self.apf_alone, self.nmpc_check, self.speed)
+                self.kinematic_family, self.frames, self.apf_alone, self.peers, self.kinematic_peers,
+                self.nmpc_check, self.speed)
 
     @property
     def validity_sections(self) -> tuple[str, ...]:

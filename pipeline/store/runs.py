@@ -23,6 +23,7 @@ import os
 from dataclasses import dataclass, field, fields
 from pathlib import Path
 
+import numpy as np
 import pandas as pd
 
 from pipeline.analysis.metrics.results import RunMetrics
@@ -320,6 +321,22 @@ def read_member(folder: Path, index: int) -> RunRecord:
         if member.name == wanted:
             return read_run(member)
     raise RunFolderError(f"{folder}: no {wanted} in the family's manifest")
+
+
+def member_solve_times(folder: Path) -> tuple[float, float] | None:
+    """The controller's solve time per step over a trusted family's members, pooled: its
+    median and 95th percentile in seconds (each member's ``timing.json``; wall time, so it
+    depends on the machine). None when no member recorded one."""
+    times: list[float] = []
+    for member in member_folders(folder):
+        try:
+            times += [float(t) for t in _read_json(member / "timing.json").get("solve_times_s")
+                      or ()]
+        except (OSError, ValueError, TypeError):
+            continue
+    if not times:
+        return None
+    return float(np.median(times)), float(np.percentile(times, 95))
 
 
 def member_trajectories(folder: Path):

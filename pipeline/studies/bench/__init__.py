@@ -28,6 +28,7 @@ from pipeline.store.layout import OutputsLayout
 from pipeline.studies.bench.closed_loop import bench_closed_loop, bench_family_member
 from pipeline.studies.bench.install import measure_install
 from pipeline.studies.bench.lateral import bench_lateral
+from pipeline.studies.bench.named_peers import bench_named_peers
 from pipeline.studies.bench.path_frame import bench_path_frame, summarize_path_frame
 from pipeline.studies.bench.peers import bench_kinematic, bench_peers
 from pipeline.studies.bench.studies import (
@@ -86,6 +87,9 @@ def _measure(out: Path, steps: int, repeats: int, quick: bool, family_size: int
         summary["path_frame"]["step_over_sparse_floor_path"]
     summary["step_over_sparse_floor_path_daqp"] = \
         summary["path_frame"]["step_over_sparse_floor_path_daqp"]
+    summary["named_peers"] = bench_named_peers(2 if quick else 5)
+    summary.update({key: value for key, value in summary["named_peers"].items()
+                    if key.startswith("peer_step_over_")})
     summary.update(bench_multiverse_reads())
     summary.update(measure_install())
     summary.update(measure_member_cache_reuse())

@@ -1,0 +1,99 @@
+"""'Against the methods the paper names': the treatment judged against MPC with
+discrete-time CBFs, the CBF-QP safety filter, velocity obstacles and (Appendix-A track) the
+dynamic window approach, on the same scenarios as each track's ledger (``make reproduce``'s
+``peers`` and ``kinematic_peers`` families; ``tables/claims_ledger_peers.csv``), with each
+method's collisions and solve time per step (``tables/peers_collisions.csv``), and who wins
+each claim."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+from pipeline.reporting.inputs import ReportInputs
+from pipeline.reporting.sections.family import ledger_groups
+from pipeline.reporting.verdicts import PeerVerdicts, Verdicts
+
+#: Each peer's name on the page and the paper it comes from.
+PEER_NAMES = {
+    "mpc_dcbf": "MPC with discrete-time CBFs (Zeng, Zhang and Sreenath, ACC 2021)",
+    "cbf_filter": "MPC without APF behind a CBF-QP safety filter (Ames et al., ECC 2019)",
+    "vo": "velocity obstacles feeding the same MPC (Fiorini and Shiller, IJRR 1998)",
+    "dwa": "the dynamic window approach (Fox, Burgard and Thrun, IEEE RAM 1997)",
+}
+
+
+@dataclass(frozen=True)
+class PeerRow:
+    """One method on one track: its scenarios, collisions and solve time per step (median,
+    95th percentile; None when its runs recorded none)."""
+
+    method: str
+    scenarios: int
+    collisions: int
+    unavoidable: int
+    solve_median_ms: float | None
+    solve_p95_ms: float | None
+
+
+@dataclass(frozen=True)
+class PeerTrack:
+    """What the page shows for one track."""
+
+    track: str
+    title: str
+    size: int
+    seed: Any
+    peers: tuple[str, ...]
+    rows: tuple[PeerRow, ...]
+    ledger: tuple[dict, ...]
+    winners: tuple[dict, ...]
+
+
+@dataclass(frozen=True)
+class PeersSection:
+    """Both tracks (the lateral one first), the treatment and the peers' names."""
+
+    treatment: str
+    tracks: tuple[PeerTrack, ...]
+    names: tuple[tuple[str, str], ...]
+
+
+def winners(judged: PeerVerdicts) -> tuple[dict, ...]:
+    """Per claim: the outcome against each peer, read as who wins: the treatment where the
+    claim is supported, the peer where it is contradicted, "neither" where they are
+    equivalent, "not settled" where the evidence does not decide."""
+    by_claim: dict[str, dict[str, str]] = {}
+    for row in judged.ledger:
+        outcome = str(row.outcome)
+        who = {"supported": judged.ledger.treatment, "contradicted": row.comparison,
+               "equivalent": "neither"}.get(outcome, "not settled")
+        by_claim.setdefault(row.claim_id, {})[row.comparison] = f"{who} ({outcome})"
+    return tuple({"claim": claim, **outcomes} for claim, outcomes in by_claim.items())
+
+
+def _track(judged: PeerVerdicts, inputs: ReportInputs) -> PeerTrack:
+    family = inputs.peers if judged.track == "lateral" else inputs.kinematic_peers
+    first: dict[str, Any] = next(iter(family.info.values()), {}) if family else {}
+    times = inputs.solve_times.get(judged.track, {})
+    rows = tuple(PeerRow(c["method"], int(c["scenarios"]), int(c["collisions"]),
+                         int(c["collisions_unavoidable"]),
+                         1e3 * times[c["method"]][0] if c["method"] in times else None,
+                         1e3 * times[c["method"]][1] if c["method"] in times else None)
+                 for c in judged.counts)
+    title = "the lateral track (the scenario family of the ledger)" if judged.track == \
+        "lateral" else "the Appendix-A track (its family)"
+    return PeerTrack(judged.track, title, int(first.get("size", rows[0].scenarios if rows
+                                                        else 0)),
+                     first.get("seed", "?"), judged.peers, rows,
+                     tuple(ledger_groups(judged.ledger)), winners(judged))
+
+
+def peers_section(inputs: ReportInputs, verdicts: Verdicts) -> PeersSection | None:
+    """The section; None when no peer family was given or could be judged."""
+    if not verdicts.peers:
+        return None
+    tracks = tuple(_track(judged, inputs) for judged in verdicts.peers)
+    shown = dict.fromkeys(m for t in tracks for m in t.peers)
+    return PeersSection(verdicts.claims.treatment, tracks,
+                        tuple((m, PEER_NAMES.get(m, m)) for m in shown))
