@@ -106,12 +106,13 @@ def build_page(inputs: ReportInputs, verdicts: Verdicts, figures: Figures, comma
     robustness = robustness_section(inputs, figures)
     fair_fight = fair_fight_section(inputs, figures)
     apf_alone = apf_alone_section(inputs, verdicts) if paper else None
+    peers = peers_section(inputs, verdicts) if paper else None
     return Page(
         paper=paper,
         answer=answer_section(family, robustness, fair_fight, kinematic, verdicts.claims,
-                              apf_alone),
+                              apf_alone, peers),
         family=family, apf_alone=apf_alone,
-        peers=peers_section(inputs, verdicts) if paper else None, kinematic=kinematic,
+        peers=peers, kinematic=kinematic,
         looks=looks_section(inputs, verdicts) if paper else None,
         robustness=robustness if paper else None, fair_fight=fair_fight if paper else None,
         validity=validity_section(inputs, verdicts) if paper else None,

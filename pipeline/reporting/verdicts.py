@@ -266,11 +266,18 @@ def _c2_windows(tables: dict[str, pd.DataFrame], cfg: ClaimsConfig, ledger: Ledg
                      by_reading["common"])
 
 
+#: The claims that read the APF's repulsive force (C3a: none while nothing is near, C3b: early
+#: when a threat appears): not judged against the methods the paper names, none of which has
+#: one (their force columns are zero: C3a would "contradict" improved for any repulsion at all).
+FORCE_CLAIMS = ("C3a", "C3b")
+
+
 def _peers(track: str, default: FamilyInputs | None, peers: FamilyInputs | None,
            cfg: ClaimsConfig) -> PeerVerdicts | None:
     """The treatment (its default family on ``track``) against each peer of ``peers``, when
-    both are there and were drawn alike (size and seed: the pairs are the same scenarios);
-    None otherwise."""
+    both are there and drawn with the same seed, the peer's family no larger than the
+    treatment's (member i is the same scenario in both: a smaller family pairs with the
+    ledger's first members); None otherwise."""
     if default is None or peers is None or cfg.treatment not in default.primary \
             or not peers.primary:
         return None
@@ -279,15 +286,23 @@ def _peers(track: str, default: FamilyInputs | None, peers: FamilyInputs | None,
         info = family.info.get(family.label_of(method) or "", {})
         return info.get("size"), info.get("seed")
 
-    reference = drawn(default, cfg.treatment)
+    size, seed = drawn(default, cfg.treatment)
     names = tuple(m for m in ordered(peers.primary) if m != cfg.treatment
-                  and drawn(peers, m) == reference)
+                  and drawn(peers, m)[1] == seed
+                  and int(drawn(peers, m)[0] or 0) <= int(size or 0))
     if not names:
         return None
-    tables = {cfg.treatment: default.primary[cfg.treatment],
+    # the treatment on the peers' scenarios only (its counts beside theirs; the pairs are the
+    # same either way)
+    shared = set().union(*(set(peers.primary[m]["scenario"]) for m in names))
+    treated = default.primary[cfg.treatment]
+    tables = {cfg.treatment: treated[treated["scenario"].isin(shared)],
               **{m: peers.primary[m] for m in names}}
     ledger = family_ledger(tables, dataclasses.replace(cfg, c2_window="own"), None,
                            cfg.treatment, names, sensitivity=False)
+    # (the intervals keep their level 1 - alpha/7 and Holm its seven claims: conservative)
+    ledger = dataclasses.replace(ledger, rows=tuple(row for row in ledger
+                                                    if row.claim_id not in FORCE_CLAIMS))
     return PeerVerdicts(track, names, ledger, tuple(outcome_counts(tables)))
 
 

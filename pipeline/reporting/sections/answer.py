@@ -15,6 +15,7 @@ from pipeline.reporting.sections.apf_alone import MISSING_NOTE, ApfAloneSection
 from pipeline.reporting.sections.fair_fight import FairFightSection
 from pipeline.reporting.sections.family import FamilySection
 from pipeline.reporting.sections.kinematic import KinematicSection
+from pipeline.reporting.sections.peers import PeersSection
 from pipeline.reporting.sections.robustness import RobustnessSection
 
 
@@ -85,8 +86,8 @@ def _rows(family: FamilySection, robustness: RobustnessSection | None,
 
 def answer_section(family: FamilySection | None, robustness: RobustnessSection | None,
                    fair_fight: FairFightSection | None, kinematic: KinematicSection | None,
-                   cfg: ClaimsConfig, apf_alone: ApfAloneSection | None = None
-                   ) -> AnswerSection:
+                   cfg: ClaimsConfig, apf_alone: ApfAloneSection | None = None,
+                   peers: PeersSection | None = None) -> AnswerSection:
     if family is None:
         return AnswerSection((), "", ())
     safety = apf_alone.sentence if apf_alone is not None else ""
@@ -106,5 +107,7 @@ def answer_section(family: FamilySection | None, robustness: RobustnessSection |
                      + "; ".join(f"{r['claim']} {r['outcome']}" for r in kf.rows
                                  if r["comparison"] == "baseline")
                      + (f". {kf.apf_adds.sentence}" if kf.apf_adds else "."))
+    if peers is not None:
+        lines += list(peers.sentences)
     return AnswerSection(tuple(_rows(family, robustness, fair_fight, kinematic, cfg)), caveat,
                          tuple(lines), safety or MISSING_NOTE, bool(safety))

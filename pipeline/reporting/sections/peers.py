@@ -34,6 +34,9 @@ class PeerRow:
     unavoidable: int
     solve_median_ms: float | None
     solve_p95_ms: float | None
+    #: the peer's own settings as its family ran them (``planner.params`` and
+    #: ``controller.params``), ``key=value`` joined; empty for the treatment
+    settings: str = ""
 
 
 @dataclass(frozen=True)
@@ -57,6 +60,8 @@ class PeersSection:
     treatment: str
     tracks: tuple[PeerTrack, ...]
     names: tuple[tuple[str, str], ...]
+    #: the opening summary's lines, one per track
+    sentences: tuple[str, ...] = ()
 
 
 def winners(judged: PeerVerdicts) -> tuple[dict, ...]:
@@ -76,10 +81,21 @@ def _track(judged: PeerVerdicts, inputs: ReportInputs) -> PeerTrack:
     family = inputs.peers if judged.track == "lateral" else inputs.kinematic_peers
     first: dict[str, Any] = next(iter(family.info.values()), {}) if family else {}
     times = inputs.solve_times.get(judged.track, {})
+
+    def settings(method: str) -> str:
+        label = family.label_of(method) if family is not None else None
+        cfg = family.settings.get(label) if family is not None and label else None
+        if cfg is None or method == judged.ledger.treatment:
+            return ""
+        params = {**{f"planner.params.{k}": v for k, v in cfg.planner.params.items()},
+                  **{f"controller.params.{k}": v for k, v in cfg.controller.params.items()}}
+        return ", ".join(f"{k}={v}" for k, v in params.items())
+
     rows = tuple(PeerRow(c["method"], int(c["scenarios"]), int(c["collisions"]),
                          int(c["collisions_unavoidable"]),
                          1e3 * times[c["method"]][0] if c["method"] in times else None,
-                         1e3 * times[c["method"]][1] if c["method"] in times else None)
+                         1e3 * times[c["method"]][1] if c["method"] in times else None,
+                         settings(c["method"]))
                  for c in judged.counts)
     title = "the lateral track (the scenario family of the ledger)" if judged.track == \
         "lateral" else "the Appendix-A track (its family)"
@@ -96,4 +112,18 @@ def peers_section(inputs: ReportInputs, verdicts: Verdicts) -> PeersSection | No
     tracks = tuple(_track(judged, inputs) for judged in verdicts.peers)
     shown = dict.fromkeys(m for t in tracks for m in t.peers)
     return PeersSection(verdicts.claims.treatment, tracks,
-                        tuple((m, PEER_NAMES.get(m, m)) for m in shown))
+                        tuple((m, PEER_NAMES.get(m, m)) for m in shown),
+                        tuple(summary_sentence(judged, t.size)
+                              for judged, t in zip(verdicts.peers, tracks, strict=True)))
+
+
+def summary_sentence(judged: PeerVerdicts, size: int) -> str:
+    """One line for the opening summary: per peer, each claim's outcome."""
+    track = "lateral track" if judged.track == "lateral" else "Appendix-A track"
+    per_peer = []
+    for peer in judged.peers:
+        outcomes = [f"{row.claim_id} {row.outcome}" for row in judged.ledger
+                    if row.comparison == peer]
+        per_peer.append(f"vs {peer} " + ", ".join(outcomes))
+    return (f"Against the methods the paper names ({track}, {size} scenarios, their presets' "
+            f"settings): {judged.ledger.treatment} " + "; ".join(per_peer) + ".")
