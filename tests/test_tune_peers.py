@@ -121,3 +121,30 @@ def test_a_tiny_tune_against_vo_judges_vo_and_keeps_improveds_trials(tmp_path):
     pd.testing.assert_frame_equal(mine, theirs)
     assert peer.summary.safety_threshold_collisions == base.summary.safety_threshold_collisions
     assert not math.isnan(float(peer.ledger_tuned["estimate"].iloc[0]))
+    _the_peers_section_reads_the_tuning(tmp_path / "outputs", peer)
+
+
+def _the_peers_section_reads_the_tuning(root, peer) -> None:
+    """The report reads ``tune_peers/<peer>`` and shows each claim tuned beside untuned."""
+    from types import SimpleNamespace
+
+    from pipeline.reporting.inputs import _Optional, _peer_tunes
+    from pipeline.reporting.render import environment
+    from pipeline.reporting.sections.peers import PeersSection, tuned_peers
+    from pipeline.store.layout import OutputsLayout
+
+    skipped: list = []
+    tunes = _peer_tunes(OutputsLayout.load(root), _Optional(skipped))
+    assert set(tunes) == {"vo"} and not skipped
+    (shown,) = tuned_peers(SimpleNamespace(peer_tunes=tunes))
+    assert (shown.peer, shown.treatment, shown.heldout, shown.replicates) == ("vo", "improved",
+                                                                               4, 1)
+    by_claim = {r["claim"]: r for r in shown.rows}
+    for c in peer.summary.claims:
+        assert by_claim[c.claim]["untuned"] == c.default
+        assert by_claim[c.claim]["tuned"] == c.tuned
+    assert "below the default budget" in shown.label
+    assert shown.settings and shown.settings[0].startswith("replicate 0: ")
+    html = environment().get_template("sections/peers.html.j2").render(
+        peers=PeersSection("improved", (), (), (), (shown,)))
+    assert 'id="peers-tuned-vo"' in html and by_claim["C1"]["counts"] in html
