@@ -24,6 +24,8 @@ INSTALLER   ?= uv
 SWEEP       ?= obstacle_speed
 MULTIVERSE  ?= default
 TUNE        ?= default
+# the lateral-track peers make tune-peers tunes against improved (dwa is on the Appendix-A track only)
+TUNE_PEERS  ?= mpc_dcbf cbf_filter vo
 export SLURM_CI_DIR ?= /tmp/slurm-ci
 # one member cache for every study (pipeline/store/member_cache.py): a family member simulated by
 # one study is restored, not simulated again, by any other with the same settings and code;
@@ -32,7 +34,7 @@ MEMBER_CACHE ?= $(RUNS)/member_cache
 export PIPELINE_MEMBER_CACHE = $(if $(filter off,$(MEMBER_CACHE)),off,$(abspath $(MEMBER_CACHE)))
 LAUNCHER    ?= sequential
 
-.PHONY: help install lint reproduce experiment run-paper run-kinematic run-kinematic-readings run-family run-kinematic-family run-frames run-apf-alone run-peers run-kinematic-peers peers speed-check report screenshot sweep verify ablation multiverse tune tune-unpruned nmpc-check test test-slurm test-all bench cache-size clean-cache clean
+.PHONY: help install lint reproduce experiment run-paper run-kinematic run-kinematic-readings run-family run-kinematic-family run-frames run-apf-alone run-peers run-kinematic-peers peers speed-check report screenshot sweep verify ablation multiverse tune tune-unpruned tune-peers nmpc-check test test-slurm test-all bench cache-size clean-cache clean
 
 help:  ## list the targets
 	@grep -E '^[a-zA-Z_-]+:.*## ' $(MAKEFILE_LIST) | awk -F':.*## ' '{printf "  %-12s %s\n", $$1, $$2}'
@@ -119,6 +121,17 @@ tune: $(STAMP)  ## a fair fight: both methods tuned with one budget, judged on h
 
 tune-unpruned: $(STAMP)  ## the pruning check: the default tune with every trial on its whole training family (outputs/tune_unpruned; make bench compares it with make tune's)
 	$(PY) -m pipeline.tune --space $(TUNE) --set 'rungs=[]' --set name=$(TUNE)_unpruned --out $(RUNS)/tune_unpruned
+
+# each peer in its own tune against improved: the same preset (budget, replicates, convergence rule,
+# pruning, held-out family) as make tune; no matched control (it is the baseline's); the feasibility
+# threshold the untuned baseline's collisions, as in make tune, so improved's trials are make tune's
+tune-peers: $(STAMP)  ## the fair fight against each lateral peer (TUNE_PEERS), tuned as make tune tunes improved and the baseline (outputs/tune_peers/<peer>), then the report
+	set -e; for peer in $(TUNE_PEERS); do \
+	  $(PY) -m pipeline.tune --space $(TUNE) --set "methods=[improved,$$peer]" \
+	    --set "matched_control=''" --set safety_reference=baseline \
+	    --set name=$(TUNE)_vs_$$peer --out $(RUNS)/tune_peers/$$peer; \
+	done
+	$(MAKE) report
 
 peers: $(STAMP)  ## the methods the paper names on both tracks' whole families (make reproduce: their first 50 / 25 scenarios), then the report
 	rm -rf $(RUNS)/peers $(RUNS)/kinematic_peers

@@ -47,7 +47,7 @@ STUDY_FILES = {
 #: path.
 SECTIONS = ("paper", "kinematic", "kinematic_readings", "family", "kinematic_family", "frames",
             "apf_alone", "peers", "kinematic_peers", "ablation", "interpretations", "multiverse",
-            "tune", "nmpc_check", "speed", "sweeps")
+            "tune", "tune_peers", "nmpc_check", "speed", "sweeps")
 
 
 def module_name(path: Path) -> str:
@@ -206,7 +206,7 @@ def test_the_makefile_writes_where_the_layout_reads(tmp_path):
     assert written <= names, written - names
     assert {"paper", "kinematic", "kinematic_readings", "family", "kinematic_family",
             "frames", "apf_alone", "peers", "kinematic_peers", "ablation", "interpretations",
-            "multiverse", "tune", "nmpc_check", "speed", "sweeps"} <= written
+            "multiverse", "tune", "tune_peers", "nmpc_check", "speed", "sweeps"} <= written
     renamed = tmp_path / "paths.yaml"
     renamed.write_text("multiverse: robustness_study\n")
     moved = OutputsLayout.load(tmp_path, renamed)

@@ -224,6 +224,9 @@ class ReportInputs:
     bench: BenchResult | None = None
     multiverse: MultiverseResult | None = None
     tune: TuneResult | None = None
+    #: per lateral peer that ``make tune-peers`` tuned against the treatment (its folder
+    #: ``tune_peers/<peer>``), that tuning
+    peer_tunes: dict[str, TuneResult] = field(default_factory=dict)
     nmpc: NmpcCheckResult | None = None
     speed: SpeedCheckResult | None = None
     skipped: tuple[Skipped, ...] = ()
@@ -343,7 +346,23 @@ class ReportInputs:
             ablation=family_tables_by_method(layout.folder("ablation"), skipped),
             interpretations=interpretation_tables(layout.folder("interpretations"), skipped),
             validity=validity, sweeps=sweeps, bench=bench, multiverse=multiverse, tune=tune,
-            nmpc=nmpc, speed=speed, skipped=tuple(skipped))
+            peer_tunes=_peer_tunes(layout, optional), nmpc=nmpc, speed=speed,
+            skipped=tuple(skipped))
+
+
+def _peer_tunes(layout: OutputsLayout, optional: _Optional) -> dict[str, TuneResult]:
+    """The tunings of ``make tune-peers``, one folder per peer (``tune_peers/<peer>``), by
+    their control; a folder that cannot be read is skipped and listed."""
+    root = layout.folder("tune_peers")
+    out: dict[str, TuneResult] = {}
+    if not root.is_dir():
+        return out
+    for folder in sorted(p for p in root.iterdir() if p.is_dir()):
+        if TuneResult.present(folder):
+            result = optional(TuneResult.load, folder, "peers section (tuned)")
+            if result is not None:
+                out[result.summary.methods[1]] = result
+    return out
 
 
 class _Optional:

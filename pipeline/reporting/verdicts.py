@@ -16,6 +16,7 @@ import pandas as pd
 from pipeline.analysis.ablation import ablation_effects, ablation_roles, interpretation_flips
 from pipeline.analysis.claims import (
     ALL_CLAIMS,
+    FORCE_CLAIMS,
     Ledger,
     LedgerRow,
     claims_table,
@@ -264,12 +265,6 @@ def _c2_windows(tables: dict[str, pd.DataFrame], cfg: ClaimsConfig, ledger: Ledg
     by_reading = {cfg.c2_window: ledger_rows, other: other_rows}
     return C2Windows(cfg.common_window, cfg.c2_window, by_reading["own"],
                      by_reading["common"])
-
-
-#: The claims that read the APF's repulsive force (C3a: none while nothing is near, C3b: early
-#: when a threat appears): not judged against the methods the paper names, none of which has
-#: one (their force columns are zero: C3a would "contradict" improved for any repulsion at all).
-FORCE_CLAIMS = ("C3a", "C3b")
 
 
 def _peers(track: str, default: FamilyInputs | None, peers: FamilyInputs | None,

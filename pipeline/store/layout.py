@@ -39,6 +39,7 @@ class OutputsLayout:
     multiverse: str = "multiverse"
     tune: str = "tune"
     tune_unpruned: str = "tune_unpruned"
+    tune_peers: str = "tune_peers"
     member_cache: str = "member_cache"
     nmpc_check: str = "nmpc_check"
     speed: str = "speed"
@@ -78,7 +79,7 @@ class OutputsLayout:
         """Folder names under the root that hold studies or families read by their own
         sections, never among the runs of the claims (the paper scenario, the family)."""
         return (self.sweeps, self.ablation, self.interpretations, self.multiverse, self.tune,
-                self.tune_unpruned, self.member_cache, self.kinematic_readings,
+                self.tune_unpruned, self.tune_peers, self.member_cache, self.kinematic_readings,
                 self.kinematic_family, self.frames, self.apf_alone, self.peers, self.kinematic_peers,
                 self.nmpc_check, self.speed)
 

@@ -15,6 +15,7 @@ none). C2 can be read on a window common to both runs of a pair (``claims.c2_win
 from pipeline.analysis.claims.catalogue import (
                                                 ALL_CLAIMS,
                                                 CLAIMS,
+                                                FORCE_CLAIMS,
                                                 OUTCOME_RULE,
                                                 OUTCOMES,
                                                 SAFETY,
@@ -57,7 +58,7 @@ from pipeline.analysis.claims.windows import (
                                                 common_window_tables,
 )
 
-__all__ = ["Claim", "CLAIMS", "SAFETY", "ALL_CLAIMS", "Outcome", "OUTCOMES", "OUTCOME_RULE",
+__all__ = ["Claim", "CLAIMS", "SAFETY", "ALL_CLAIMS", "FORCE_CLAIMS", "Outcome", "OUTCOMES", "OUTCOME_RULE",
            "SINGLE_RULE", "hodges_lehmann", "hodges_lehmann_on", "bootstrap_interval",
            "probability_of_improvement", "paired_test", "WILCOXON_ENUMERATED_MAX_PAIRS",
            "wilcoxon_pratt_pvalue", "holm", "decide", "newcombe_paired_interval", "PAIRS",

@@ -126,6 +126,11 @@ SAFETY = Claim(
 #: Every claim in the order the report shows them: safety first.
 ALL_CLAIMS: tuple[Claim, ...] = (SAFETY,) + CLAIMS
 
+#: The claims that read the APF's repulsive force (C3a: none while nothing is near, C3b: early
+#: when a threat appears): not judged against the methods the paper names, none of which has
+#: one (their force columns are zero: C3a would "contradict" improved for any repulsion at all).
+FORCE_CLAIMS = ("C3a", "C3b")
+
 
 class Outcome(StrEnum):
     """The four outcomes of a claim over a family (:data:`OUTCOME_RULE`)."""

@@ -3,7 +3,8 @@ discrete-time CBFs, the CBF-QP safety filter, velocity obstacles and (Appendix-A
 dynamic window approach, on the same scenarios as each track's ledger (``make reproduce``'s
 ``peers`` and ``kinematic_peers`` families; ``tables/claims_ledger_peers.csv``), with each
 method's collisions and solve time per step (``tables/peers_collisions.csv``), and who wins
-each claim."""
+each claim; per peer that ``make tune-peers`` tuned against the treatment, each claim's tuned
+outcome beside its untuned one on that tuning's held-out family."""
 
 from __future__ import annotations
 
@@ -54,6 +55,45 @@ class PeerTrack:
 
 
 @dataclass(frozen=True)
+class PeerTuned:
+    """One peer's tuning against the treatment (``tune_peers/<peer>``): per claim the untuned
+    outcome (both methods' presets) and the tuned one (both tuned by make tune's rules), each
+    on the tuning's held-out family."""
+
+    peer: str
+    treatment: str
+    heldout: int
+    replicates: int
+    #: why the tuning is not at the default budget or did not converge ("" when it is and did)
+    label: str
+    #: per claim: ``claim``, ``untuned``, ``tuned`` (the settled outcome or "not settled"),
+    #: ``counts`` (each replicate's outcome, counted)
+    rows: tuple[dict, ...]
+    #: the peer's tuned compromise settings, one line per replicate
+    settings: tuple[str, ...]
+
+
+def tuned_peers(inputs: ReportInputs) -> tuple[PeerTuned, ...]:
+    """Every peer tuning the report read, in :data:`PEER_NAMES`' order."""
+    out = []
+    order = {m: i for i, m in enumerate(PEER_NAMES)}
+    for peer, result in sorted(inputs.peer_tunes.items(),
+                               key=lambda kv: (order.get(kv[0], len(order)), kv[0])):
+        summary = result.summary
+        rows = tuple({"claim": c.claim, "untuned": c.default, "tuned": c.tuned,
+                      "counts": c.counts} for c in summary.claims)
+        settings = tuple(
+            f"replicate {r}: " + ", ".join(f"{k.split('.')[-1]}={v:.4g}" if isinstance(v, float)
+                                           else f"{k.split('.')[-1]}={v}"
+                                           for k, v in params.items())
+            for r, params in sorted(summary.compromise.get(peer, {}).items()))
+        replicates = len({h["replicate"] for h in summary.replicates})
+        out.append(PeerTuned(peer, summary.methods[0], int(summary.families["heldout"]["size"]),
+                             replicates, summary.label, rows, settings))
+    return tuple(out)
+
+
+@dataclass(frozen=True)
 class PeersSection:
     """Both tracks (the lateral one first), the treatment and the peers' names."""
 
@@ -62,6 +102,8 @@ class PeersSection:
     names: tuple[tuple[str, str], ...]
     #: the opening summary's lines, one per track
     sentences: tuple[str, ...] = ()
+    #: the peers tuned against the treatment (make tune-peers), each claim tuned and untuned
+    tuned: tuple[PeerTuned, ...] = ()
 
 
 def winners(judged: PeerVerdicts) -> tuple[dict, ...]:
@@ -114,7 +156,8 @@ def peers_section(inputs: ReportInputs, verdicts: Verdicts) -> PeersSection | No
     return PeersSection(verdicts.claims.treatment, tracks,
                         tuple((m, PEER_NAMES.get(m, m)) for m in shown),
                         tuple(summary_sentence(judged, t.size)
-                              for judged, t in zip(verdicts.peers, tracks, strict=True)))
+                              for judged, t in zip(verdicts.peers, tracks, strict=True)),
+                        tuned_peers(inputs))
 
 
 def summary_sentence(judged: PeerVerdicts, size: int) -> str:

@@ -47,7 +47,11 @@ class TuneSpace:
     methods) grew by at most ``convergence_tolerance`` of its value over the last
     ``convergence_window`` trials, at ``min_trials`` at the earliest and ``max_trials`` at the
     latest (then it is labelled unconverged). ``matched_control`` names the look-ahead-matched
-    control built from the tuned control, or "" for none.
+    control built from the tuned control (``baseline_matched``: only with the control
+    ``baseline``), or "" for none. A setting is feasible when its training family collides at
+    most as often as the untuned ``safety_reference``'s ("": the control's): a peer tuned
+    against improved with ``safety_reference: baseline`` keeps improved's trials those of the
+    improved-vs-baseline tune.
 
     Multi-fidelity trials (:mod:`pipeline.studies.tune.search`): a trial runs the first
     ``rungs[0]`` members of its training family, then ``rungs[1]``, ..., then all of it, and
@@ -80,6 +84,7 @@ class TuneSpace:
     compromise: str = "closest_to_ideal"
     max_heldout_settings: int = 3
     matched_control: str = "baseline_matched"
+    safety_reference: str = ""
     settled_share: float = 0.8
     rungs: List[int] = field(default_factory=lambda: [10, 20])
     prune_gain: float = 0.001
@@ -93,7 +98,9 @@ class TuneSpace:
         for i, method in enumerate(self.methods):
             if not (CONF_DIR / "hparams_search" / f"{method}.yaml").is_file():
                 raise ConfigError(f"tune.methods[{i}]", method, "a method with a search space "
-                                  "in conf/hparams_search/ (improved, baseline)")
+                                  "in conf/hparams_search/ (" + ", ".join(sorted(
+                                      p.stem for p in (CONF_DIR / "hparams_search").glob(
+                                          "*.yaml"))) + ")")
         for key, low, high in (("replicates", 1, 100), ("min_trials", 1, 10_000),
                                ("max_trials", 1, 10_000), ("convergence_window", 1, 10_000),
                                ("batch_size", 1, 64),
@@ -129,7 +136,18 @@ class TuneSpace:
             choice(f"tune.{key}", getattr(self, key), ("clarabel_direct", "clarabel_dense",
                                                        "daqp", "cvxpy"))
         choice("tune.compromise", self.compromise, ("closest_to_ideal",))
+        self._check_controls()
+
+    def _check_controls(self) -> None:
         choice("tune.matched_control", self.matched_control, ("baseline_matched", ""))
+        if self.matched_control == "baseline_matched" and self.control != "baseline":
+            raise ConfigError("tune.matched_control", self.matched_control,
+                              f"'' with the control {self.control} (baseline_matched is the "
+                              "tuned baseline with the treatment's step: control baseline only)")
+        if self.safety_reference and not (
+                CONF_DIR / "method" / f"{self.safety_reference}.yaml").is_file():
+            raise ConfigError("tune.safety_reference", self.safety_reference,
+                              "'' (the control) or a method of conf/method/")
 
     def _check_rungs(self) -> None:
         between("tune.prune_gain", self.prune_gain, 0.0, 1.0)
@@ -169,6 +187,11 @@ class TuneSpace:
         return self.methods[1]
 
     @property
+    def feasibility_reference(self) -> str:
+        """The method whose untuned training family sets the collision threshold."""
+        return self.safety_reference or self.control
+
+    @property
     def training_seeds(self) -> list[int]:
         """Replicate ``r``'s training family seed: ``training_seed + r``."""
         return [self.training_seed + r for r in range(self.replicates)]
@@ -183,6 +206,9 @@ class TuneSpace:
         import json
 
         data = json_safe({k: asdict(self)[k] for k in TRIAL_FIELDS})
+        if self.safety_reference:
+            # only when set: the keys of tunings without one (their stored studies) unchanged
+            data["safety_reference"] = self.safety_reference
         return hashlib.sha256(json.dumps(data, sort_keys=True).encode()).hexdigest()[:10]
 
     def below_budget(self, reference: TuneSpace) -> list[str]:

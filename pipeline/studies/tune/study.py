@@ -16,7 +16,8 @@ tuning, not method. Here:
 3. **Training.** A trial runs its replicate's training family and returns the objectives
    (statistics of the claims' primary metrics over the members, read as the ledger reads them:
    :func:`pipeline.analysis.objectives.tuning_table`). Safety is a constraint: a setting whose
-   family collides more often than the untuned control's is infeasible.
+   family collides more often than the untuned control's (or ``safety_reference``'s) is
+   infeasible.
 4. **Pareto sets.** Per replicate, the feasible non-dominated trials of each method and one
    compromise setting per method (:data:`COMPROMISE_RULE`).
 5. **Held-out judgement.** The untuned methods once, and per replicate the compromises, the
@@ -32,8 +33,10 @@ SLURM arrays.
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import logging
+from collections.abc import Callable
 from dataclasses import asdict
 from pathlib import Path
 from typing import Any
@@ -41,7 +44,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from pipeline.analysis.claims import ALL_CLAIMS, Ledger, family_ledger
+from pipeline.analysis.claims import ALL_CLAIMS, FORCE_CLAIMS, Ledger, family_ledger
 from pipeline.analysis.objectives import objective_values, tuning_table
 from pipeline.analysis.tally import Tally
 from pipeline.errors import StudyError
@@ -103,12 +106,14 @@ def run_tuning(space: TuneSpace, out_dir: Path, overrides: list[str] | None = No
 
     trial_tables, histories, thresholds = [], [], {}
     for replicate in range(space.replicates):
-        untuned = runner.run([runner.job(space.control, "default", {}, "training", replicate)],
-                             f"replicate {replicate}: untuned control")[0]
+        reference = space.feasibility_reference
+        untuned = runner.run([runner.job(reference, "default", {}, "training", replicate)],
+                             f"replicate {replicate}: untuned "
+                             + ("control" if reference == space.control else reference))[0]
         threshold = thresholds[replicate] = Tally.of(untuned).collisions
         log(f"replicate {replicate}: a setting is feasible when its training family (seed "
             f"{space.training_seeds[replicate]}) collides at most {threshold} times (the "
-            f"untuned {space.control})")
+            f"untuned {reference})")
         studies: dict[str, Any] = {}
         for method in space.methods:
             distributions, _ = spaces[method]
@@ -226,7 +231,7 @@ def pick_settings(trials: pd.DataFrame, space: TuneSpace) -> dict[tuple[int, str
             if not len(front):
                 raise NoFeasibleSettingError(
                     f"replicate {replicate}: no feasible setting of {method}: every trial "
-                    "collided more often than the untuned control; widen its search space or "
+                    f"collided more often than the untuned {space.feasibility_reference}; widen its search space or "
                     "raise tune.max_trials")
             front["distance_to_ideal"] = distances_to_ideal(front[columns].to_numpy(float),
                                                             scale, space.objectives)
@@ -246,6 +251,33 @@ def _matched_params(control: dict, treatment: dict) -> dict:
     return params
 
 
+def is_peer(cfg) -> bool:
+    """Whether a composed config runs one of the methods the paper names (a planner or a
+    controller of :mod:`pipeline.peers`, chosen by ``_target_``): no APF, no repulsive force."""
+    return any(str(getattr(section, "_target_", None) or "").startswith("pipeline.peers.")
+               for section in (cfg.planner, cfg.controller))
+
+
+def without_force_claims(ledger: Ledger) -> Ledger:
+    """``ledger`` without C3a/C3b (:data:`FORCE_CLAIMS`), as the report's peers ledger: a peer
+    has no repulsive force to time."""
+    return dataclasses.replace(ledger, rows=tuple(row for row in ledger
+                                                  if row.claim_id not in FORCE_CLAIMS))
+
+
+def _ledger_maker(claims_cfg, treatment: str, peer: bool) -> Callable[..., Ledger]:
+    """``family_ledger`` of the treatment against ``names``; against a peer without the force
+    claims and with each run's own C2 window (the report's peers ledger)."""
+    if peer:
+        claims_cfg = dataclasses.replace(claims_cfg, c2_window="own")
+
+    def ledger_of(tables: dict, names: tuple, **kwargs) -> Ledger:
+        ledger = family_ledger(tables, claims_cfg, None, treatment, names, **kwargs)
+        return without_force_claims(ledger) if peer else ledger
+
+    return ledger_of
+
+
 class Judged:
     """The held-out judgement: the table of judged settings, the untuned ledger, one tuned
     ledger per replicate and the outcomes of every judged treatment setting."""
@@ -263,11 +295,15 @@ def judge_heldout(runner: Runner, space: TuneSpace, chosen: dict[tuple[int, str]
                   claims_cfg) -> Judged:
     """Held-out families of the untuned methods, every chosen Pareto setting and each
     replicate's tuned matched control; the default ledger, a tuned ledger per replicate, and
-    per judged treatment setting its outcomes against its replicate's tuned control."""
+    per judged treatment setting its outcomes against its replicate's tuned control.
+
+    Against a peer (:func:`is_peer`) the ledgers are the report's peers ledger's: without the
+    APF force claims (C3a/C3b) and with each run's own C2 window."""
     treatment, control = space.treatment, space.control
     matched = space.matched_control
     comparisons = (control,) + ((matched,) if matched else ())
     jobs = [runner.job(m, "default", {}, "heldout") for m in (treatment,) + comparisons]
+    ledger_of = _ledger_maker(claims_cfg, treatment, is_peer(jobs[1].cfg))
     compromise: dict[tuple[int, str], int] = {}
     params_of: dict[tuple[int, str, int], dict] = {}
     for (replicate, method), front in chosen.items():
@@ -300,20 +336,19 @@ def judge_heldout(runner: Runner, space: TuneSpace, chosen: dict[tuple[int, str]
                         for o, v in zip(space.objectives, values, strict=True)},
                      "folder": str(job.folder.relative_to(runner.out_dir))})
     heldout = pd.DataFrame(rows)
-    default = family_ledger({m: by_setting[(None, m, "default")] for m in (treatment,)
-                             + comparisons}, claims_cfg, None, treatment, comparisons)
+    default = ledger_of({m: by_setting[(None, m, "default")] for m in (treatment,)
+                         + comparisons}, comparisons)
     tuned, outcome_rows = {}, []
     for replicate in replicates:
         tables_r = {m: by_setting[(replicate, m, f"trial {compromise[(replicate, m)]}")]
                     for m in (treatment, control)}
         if matched:
             tables_r[matched] = by_setting[(replicate, matched, "tuned")]
-        tuned[replicate] = family_ledger(tables_r, claims_cfg, None, treatment, comparisons)
+        tuned[replicate] = ledger_of(tables_r, comparisons)
         for r in chosen[(replicate, treatment)].to_dict("records"):
-            ledger = family_ledger({treatment: by_setting[(replicate, treatment,
-                                                           f"trial {r['trial']}")],
-                                    control: tables_r[control]}, claims_cfg, None, treatment,
-                                   (control,), sensitivity=False)
+            ledger = ledger_of({treatment: by_setting[(replicate, treatment,
+                                                       f"trial {r['trial']}")],
+                                control: tables_r[control]}, (control,), sensitivity=False)
             for row in ledger:
                 outcome_rows.append({"replicate": replicate, "trial": r["trial"],
                                      "compromise": bool(r["compromise"]),
