@@ -58,6 +58,9 @@ $(STAMP): pyproject.toml constraints.txt
 	  $(PY) -m pip install --quiet -c constraints.txt -e ".[test]"; \
 	fi
 	$(if $(PYTHONDONTWRITEBYTECODE),$(PY) -m compileall -q pipeline hydra_plugins examples > /dev/null,)
+	@# the loop's numba kernels into numba's cache (about 7 s): otherwise a first make reproduce's
+	@# nine experiments and their workers each compile them at once
+	$(PY) -c "from pipeline import api; api.warm_compiled_kernels()"
 	touch $(STAMP)
 
 install: $(STAMP)  ## create .venv and install the project with pinned versions

@@ -27,7 +27,23 @@ from pipeline.analysis.metrics.results import RunMetrics
 from pipeline.analysis.tally import Tally
 from pipeline.config import CONF_DIR, ExperimentConfig, register_configs, to_experiment_config
 
-__all__ = ["FamilyResult", "RunResult", "compare", "compose", "simulate", "simulate_family"]
+__all__ = ["FamilyResult", "RunResult", "compare", "compose", "simulate", "simulate_family",
+           "warm_compiled_kernels"]
+
+#: The runs whose compiled kernels ``warm_compiled_kernels`` puts in numba's cache: the path
+#: frame (the default), the fixed frame, the baseline, and the Appendix-A track.
+WARM_RUNS: tuple[tuple[str, ...], ...] = (
+    (), ("controller.frame=fixed",), ("method=baseline",),
+    ("experiment=kinematic", "planner=improved", "hydra.mode=RUN"))
+
+
+def warm_compiled_kernels() -> None:
+    """Compile the closed loop's numba kernels into numba's on-disk cache, a few steps of each
+    of :data:`WARM_RUNS` (``make install`` calls it: a first ``make reproduce`` then loads them
+    in every experiment and worker instead of compiling them in each at once)."""
+    from pipeline.studies.experiment import warm_compiled_kernels as warm
+
+    warm([compose(list(overrides)) for overrides in WARM_RUNS])
 
 
 def compose(overrides: list[str] | None = None) -> ExperimentConfig:
