@@ -376,6 +376,21 @@ class CbfSafetyFilter:
                             elapsed)
 
 
+def _attach_filter(peer: Any, controller_cfg: ControllerConfig, nominal: Any,
+                   lower: tuple[float, ...], upper: tuple[float, ...],
+                   scale: tuple[float, ...], qp_cache: QpCache | None) -> None:
+    """What both filters share: the nominal controller, the CBF-QP for inputs within
+    ``lower``..``upper`` (``scale``: the cost's units) and the compile counts of both."""
+    peer.nominal = nominal
+    structure = CbfQpStructure(lower, upper, scale, peer.settings.rows_for(peer.n_slots),
+                               (peer.settings.slack_weight_linear,
+                                peer.settings.slack_weight_quadratic))
+    peer.filter = CbfSafetyFilter(structure, controller_cfg.backend,
+                                  controller_cfg.solver_max_iter, qp_cache)
+    peer.compile_count = nominal.compile_count + peer.filter.compile_count
+    peer.compile_time_s = nominal.compile_time_s + peer.filter.compile_time_s
+
+
 def _check_kind(controller_cfg: ControllerConfig, kind: str, cls: str) -> None:
     """The nominal controller's kind and backend this filter wraps."""
     if controller_cfg.kind != kind:
@@ -434,6 +449,11 @@ class LateralCbfFilter:
     compile_time_s : float
     """
 
+    nominal: LateralMpc
+    filter: CbfSafetyFilter
+    compile_count: int
+    compile_time_s: float
+
     def __init__(self, controller_cfg: ControllerConfig, vehicle: VehicleConfig,
                  sample_time_s: float, qp_cache: QpCache | None = None) -> None:
         from pipeline.loop.simulate import run_kernels
@@ -443,17 +463,11 @@ class LateralCbfFilter:
         self.vehicle, self.ts = vehicle, float(sample_time_s)
         self.margin_m = controller_cfg.safety_margin_m
         self.n_slots = controller_cfg.max_obstacles
-        self.nominal = LateralMpc(controller_cfg, vehicle, None, sample_time_s, qp_cache,
-                                  run_kernels(qp_cache))
         rate = vehicle.steering_rate_max_rad_s
-        structure = CbfQpStructure((-rate,), (rate,), (rate,),
-                                   self.settings.rows_for(self.n_slots),
-                                   (self.settings.slack_weight_linear,
-                                    self.settings.slack_weight_quadratic))
-        self.filter = CbfSafetyFilter(structure, controller_cfg.backend,
-                                      controller_cfg.solver_max_iter, qp_cache)
-        self.compile_count = self.nominal.compile_count + self.filter.compile_count
-        self.compile_time_s = self.nominal.compile_time_s + self.filter.compile_time_s
+        _attach_filter(self, controller_cfg, LateralMpc(controller_cfg, vehicle, None,
+                                                         sample_time_s, qp_cache,
+                                                         run_kernels(qp_cache)),
+                       (-rate,), (rate,), (rate,), qp_cache)
 
     def preview(self, obs: Observation) -> tuple[np.ndarray, np.ndarray]:
         """The preview in the start-goal line's frame (see the module docstring): positions
@@ -543,6 +557,11 @@ class KinematicCbfFilter:
     qp_cache : QpCache, optional
     """
 
+    nominal: KinematicLtvMpc
+    filter: CbfSafetyFilter
+    compile_count: int
+    compile_time_s: float
+
     def __init__(self, controller_cfg: ControllerConfig, vehicle: VehicleConfig,
                  sample_time_s: float, qp_cache: QpCache | None = None) -> None:
         _check_kind(controller_cfg, "kinematic_mpc",
@@ -551,18 +570,12 @@ class KinematicCbfFilter:
         self.vehicle, self.ts = vehicle, float(sample_time_s)
         self.margin_m = controller_cfg.safety_margin_m
         self.n_slots = controller_cfg.max_obstacles
-        self.nominal = KinematicLtvMpc(controller_cfg, vehicle, sample_time_s, qp_cache)
         a_lo, a_hi = (float(v) for v in controller_cfg.accel_bounds_mps2)
         steer = vehicle.steering_max_rad
-        structure = CbfQpStructure((a_lo, -steer), (a_hi, steer),
-                                   (max(abs(a_lo), abs(a_hi)), steer),
-                                   self.settings.rows_for(self.n_slots),
-                                   (self.settings.slack_weight_linear,
-                                    self.settings.slack_weight_quadratic))
-        self.filter = CbfSafetyFilter(structure, controller_cfg.backend,
-                                      controller_cfg.solver_max_iter, qp_cache)
-        self.compile_count = self.nominal.compile_count + self.filter.compile_count
-        self.compile_time_s = self.nominal.compile_time_s + self.filter.compile_time_s
+        _attach_filter(self, controller_cfg,
+                       KinematicLtvMpc(controller_cfg, vehicle, sample_time_s, qp_cache),
+                       (a_lo, -steer), (a_hi, steer), (max(abs(a_lo), abs(a_hi)), steer),
+                       qp_cache)
         self._steps_ahead_s = np.arange(1, controller_cfg.horizon + 1) * self.ts
 
     def preview(self, state: np.ndarray, u_nom: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

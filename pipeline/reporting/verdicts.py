@@ -295,9 +295,7 @@ def _peers(track: str, default: FamilyInputs | None, peers: FamilyInputs | None,
               **{m: peers.primary[m] for m in names}}
     ledger = family_ledger(tables, dataclasses.replace(cfg, c2_window="own"), None,
                            cfg.treatment, names, sensitivity=False)
-    # (the intervals keep their level 1 - alpha/7 and Holm its seven claims: conservative)
-    ledger = dataclasses.replace(ledger, rows=tuple(row for row in ledger
-                                                    if row.claim_id not in FORCE_CLAIMS))
+    ledger = ledger.without_claims(FORCE_CLAIMS)
     return PeerVerdicts(track, names, ledger, tuple(outcome_counts(tables)))
 
 

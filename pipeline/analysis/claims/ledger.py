@@ -125,6 +125,12 @@ class Ledger:
     def __len__(self) -> int:
         return len(self.rows)
 
+    def without_claims(self, claim_ids: tuple[str, ...]) -> Ledger:
+        """This ledger without the rows of ``claim_ids`` (the intervals keep their level and
+        Holm its count: conservative)."""
+        return Ledger(tuple(row for row in self.rows if row.claim_id not in claim_ids),
+                      self.treatment)
+
     def __getitem__(self, key: tuple[str, str]) -> LedgerRow:
         for row in self.rows:
             if row.key == key:

@@ -261,8 +261,7 @@ def is_peer(cfg) -> bool:
 def without_force_claims(ledger: Ledger) -> Ledger:
     """``ledger`` without C3a/C3b (:data:`FORCE_CLAIMS`), as the report's peers ledger: a peer
     has no repulsive force to time."""
-    return dataclasses.replace(ledger, rows=tuple(row for row in ledger
-                                                  if row.claim_id not in FORCE_CLAIMS))
+    return ledger.without_claims(FORCE_CLAIMS)
 
 
 def _ledger_maker(claims_cfg, treatment: str, peer: bool) -> Callable[..., Ledger]:
