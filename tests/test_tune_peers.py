@@ -12,6 +12,7 @@ import pytest
 
 from pipeline.errors import ConfigError
 from pipeline.peers.cbf_filter import CbfFilterSettings
+from pipeline.peers.dwa import DwaSettings
 from pipeline.peers.mpc_dcbf import DcbfParams
 from pipeline.peers.velocity_obstacles import VoSettings
 from pipeline.studies.tune import TuneSpace
@@ -21,7 +22,11 @@ from pipeline.studies.tune.space import search_space
 #: the lateral peers, where each keeps its settings and the parser the peer reads them with
 PEERS = {"mpc_dcbf": ("controller", DcbfParams.of),
          "cbf_filter": ("controller", CbfFilterSettings.of),
-         "vo": ("planner", VoSettings.from_params)}
+         "vo": ("planner", VoSettings.from_params),
+         "dwa_kinematic": ("controller", DwaSettings.from_params)}
+#: the tune's settings of a tuning on the Appendix-A track (make tune-peers' KINEMATIC_TUNE_SETS)
+KINEMATIC = {"track": "kinematic", "backend": "clarabel_direct",
+             "heldout_backend": "clarabel_direct"}
 
 
 def _ends(distribution) -> list:
@@ -43,8 +48,9 @@ def test_every_parameter_of_a_peers_space_reaches_its_settings(peer, tmp_path):
     where, parse = PEERS[peer]
     distributions, reasons = search_space(peer)
     assert distributions and set(reasons) == set(distributions)
-    runner = Runner(TuneSpace(methods=["improved", peer], matched_control=""), tmp_path, [],
-                    lambda _: None)
+    track = KINEMATIC if peer.endswith("_kinematic") else {}
+    runner = Runner(TuneSpace(methods=["improved", peer], matched_control="", **track),
+                    tmp_path, [], lambda _: None)
     default = runner.job(peer, "default", {}, "training", 0)
     preset = _section(default.cfg, where)
     assert set(preset) >= {k.rsplit(".", 1)[1] for k in distributions}
@@ -76,6 +82,36 @@ def test_a_peer_as_control_gets_no_baselines_matched_control():
         TuneSpace(methods=["improved", "vo"], matched_control="", safety_reference="nothing")
     with pytest.raises(ConfigError, match="tune.methods"):
         TuneSpace(methods=["improved", "dwa"], matched_control="")
+
+
+def test_a_tuning_on_the_appendix_a_track_composes_every_family_there(tmp_path):
+    """tune.track kinematic: every method's training and held-out families (the treatment's,
+    the peer's, the safety reference's) run the kinematic bicycle MPC from rest for 100 steps
+    (make reproduce's kinematic_family), the dynamic window keeps its controller; the lateral
+    track composes the lateral MPC at cruising speed; DAQP is refused there (no such QP)."""
+    lateral = Runner(TuneSpace(methods=["improved", "vo"], matched_control=""), tmp_path, [],
+                     lambda _: None)
+    kinematic = Runner(TuneSpace(methods=["improved", "dwa_kinematic"], matched_control="",
+                                 safety_reference="baseline", **KINEMATIC),
+                       tmp_path, [], lambda _: None)
+    for method in ("improved", "baseline", "dwa_kinematic"):
+        for part in ("training", "heldout"):
+            cfg = kinematic.job(method, "default", {}, part, 0).cfg
+            assert cfg.controller.kind == "kinematic_mpc", (method, part)
+            assert (cfg.scenario.initial_speed_mps, cfg.scenario.n_steps) == (0.0, 100)
+    assert kinematic.job("dwa_kinematic", "default", {}, "training", 0).cfg.controller \
+        ._target_ == "pipeline.peers.dwa.DynamicWindow"
+    assert kinematic.job("improved", "default", {}, "training", 0).cfg.controller._target_ \
+        is None
+    flat = lateral.job("improved", "default", {}, "training", 0).cfg
+    assert flat.controller.kind == "mpc" and flat.scenario.n_steps != 100
+    assert flat.scenario.initial_speed_mps is None  # the scenario's cruising speed
+    with pytest.raises(ConfigError, match="tune.backend"):
+        TuneSpace(methods=["improved", "dwa_kinematic"], matched_control="", track="kinematic")
+    with pytest.raises(ConfigError, match="tune.track"):
+        TuneSpace(track="sideways")
+    assert TuneSpace(**KINEMATIC).trial_key() != TuneSpace(
+        backend="clarabel_direct", heldout_backend="clarabel_direct").trial_key()
 
 
 def test_the_safety_reference_keys_the_trials_only_when_set():
@@ -148,3 +184,28 @@ def _the_peers_section_reads_the_tuning(root, peer) -> None:
     html = environment().get_template("sections/peers.html.j2").render(
         peers=PeersSection("improved", (), (), (), (shown,)))
     assert 'id="peers-tuned-vo"' in html and by_claim["C1"]["counts"] in html
+
+
+def test_the_peers_section_names_the_track_of_a_tuning():
+    """A peer tuned on the Appendix-A track (dwa_kinematic) is captioned with its track and
+    ordered with its peer (dwa, last); a lateral one is not."""
+    from types import SimpleNamespace
+
+    from pipeline.reporting.render import environment
+    from pipeline.reporting.sections.peers import PeersSection, tuned_peers
+
+    def result(control: str, track: str):
+        summary = SimpleNamespace(methods=["improved", control], claims=(), compromise={},
+                                  replicates=({"replicate": 0},), label="",
+                                  families={"heldout": {"size": 200}},
+                                  settings={"track": track})
+        return SimpleNamespace(summary=summary)
+
+    shown = tuned_peers(SimpleNamespace(peer_tunes={
+        "dwa_kinematic": result("dwa_kinematic", "kinematic"), "vo": result("vo", "lateral")}))
+    assert [(p.peer, p.track) for p in shown] == [("vo", "lateral"),
+                                                  ("dwa_kinematic", "kinematic")]
+    html = environment().get_template("sections/peers.html.j2").render(
+        peers=PeersSection("improved", (), (), (), shown))
+    assert "improved against dwa_kinematic, untuned and tuned (Appendix-A track, 200" in html
+    assert "improved against vo, untuned and tuned (200 held-out" in html

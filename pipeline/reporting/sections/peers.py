@@ -71,14 +71,17 @@ class PeerTuned:
     rows: tuple[dict, ...]
     #: the peer's tuned compromise settings, one line per replicate
     settings: tuple[str, ...]
+    #: the families' track: "lateral" (Section 2's lateral MPC) or "kinematic" (Appendix A)
+    track: str = "lateral"
 
 
 def tuned_peers(inputs: ReportInputs) -> tuple[PeerTuned, ...]:
     """Every peer tuning the report read, in :data:`PEER_NAMES`' order."""
     out = []
     order = {m: i for i, m in enumerate(PEER_NAMES)}
-    for peer, result in sorted(inputs.peer_tunes.items(),
-                               key=lambda kv: (order.get(kv[0], len(order)), kv[0])):
+    # a peer on the Appendix-A track is tuned as its method preset <peer>_kinematic
+    for peer, result in sorted(inputs.peer_tunes.items(), key=lambda kv: (
+            order.get(kv[0].removesuffix("_kinematic"), len(order)), kv[0])):
         summary = result.summary
         rows = tuple({"claim": c.claim, "untuned": c.default, "tuned": c.tuned,
                       "counts": c.counts} for c in summary.claims)
@@ -89,7 +92,8 @@ def tuned_peers(inputs: ReportInputs) -> tuple[PeerTuned, ...]:
             for r, params in sorted(summary.compromise.get(peer, {}).items()))
         replicates = len({h["replicate"] for h in summary.replicates})
         out.append(PeerTuned(peer, summary.methods[0], int(summary.families["heldout"]["size"]),
-                             replicates, summary.label, rows, settings))
+                             replicates, summary.label, rows, settings,
+                             str(summary.settings.get("track", "lateral"))))
     return tuple(out)
 
 

@@ -16,7 +16,7 @@ import pandas as pd
 from pipeline.config import ExperimentConfig
 from pipeline.store.runs import read_family
 from pipeline.studies.tune.pareto import convergence_point, hypervolume_history
-from pipeline.studies.tune.space import TuneSpace
+from pipeline.studies.tune.space import TRACK_OVERRIDES, TuneSpace
 
 logger = logging.getLogger(__name__)
 
@@ -309,6 +309,7 @@ class Runner:
             backend = self.space.heldout_backend
         overrides = ([f"method={method}", "scenario=family", f"scenario.family.seed={seed}",
                       f"scenario.family.size={size}", f"controller.backend={backend}"]
+                     + list(TRACK_OVERRIDES[self.space.track])
                      + [_override(k, v) for k, v in params.items()])
         # a trial's rungs are one composition (Hydra's compose is 0.05-0.1 s)
         key = tuple(overrides)

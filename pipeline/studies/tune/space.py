@@ -29,6 +29,15 @@ def _default_bounds() -> list[list[float]]:
 TRIAL_FIELDS = ("methods", "batch_size", "sampler_seed", "population_size", "objectives",
                 "training_seed", "training_size", "backend", "censoring", "rungs",
                 "prune_gain", "prune_after_trials")
+#: the families a tuning's trials and held-out judgement run on: the lateral MPC of Section 2 at
+#: cruising speed (make reproduce's family), or the Appendix-A track (the kinematic bicycle MPC,
+#: start at rest, 100 steps: make reproduce's kinematic_family), the only track of the dynamic
+#: window approach; its overrides come after each method's preset
+TRACK_OVERRIDES: dict[str, tuple[str, ...]] = {
+    "lateral": (),
+    "kinematic": ("controller=kinematic", "scenario.initial_speed_mps=0.0",
+                  "scenario.n_steps=100"),
+}
 #: the fields whose default values are the budget a headline needs (at least as much of each)
 BUDGET_AT_LEAST = ("replicates", "min_trials", "max_trials", "convergence_window",
                    "training_size", "heldout_size")
@@ -89,6 +98,7 @@ class TuneSpace:
     rungs: List[int] = field(default_factory=lambda: [10, 20])
     prune_gain: float = 0.001
     prune_after_trials: int = 20
+    track: str = "lateral"
 
     def __post_init__(self) -> None:
         safe_name("tune.name", self.name)
@@ -132,11 +142,20 @@ class TuneSpace:
             objective.check(f"tune.objectives[{i}]")
         self._check_bounds()
         choice("tune.censoring", self.censoring, ("run_end", "drop"))
+        choice("tune.compromise", self.compromise, ("closest_to_ideal",))
+        self._check_track()
+        self._check_controls()
+
+    def _check_track(self) -> None:
+        choice("tune.track", self.track, tuple(TRACK_OVERRIDES))
         for key in ("backend", "heldout_backend"):
             choice(f"tune.{key}", getattr(self, key), ("clarabel_direct", "clarabel_dense",
                                                        "daqp", "cvxpy"))
-        choice("tune.compromise", self.compromise, ("closest_to_ideal",))
-        self._check_controls()
+            if self.track == "kinematic" and getattr(self, key) not in ("clarabel_direct",
+                                                                          "cvxpy"):
+                raise ConfigError(f"tune.{key}", getattr(self, key),
+                                  "clarabel_direct or cvxpy with tune.track kinematic (the "
+                                  "kinematic MPC's QP has no DAQP or dense form)")
 
     def _check_controls(self) -> None:
         choice("tune.matched_control", self.matched_control, ("baseline_matched", ""))
@@ -206,9 +225,11 @@ class TuneSpace:
         import json
 
         data = json_safe({k: asdict(self)[k] for k in TRIAL_FIELDS})
+        # only when set: the keys of tunings without them (their stored studies) unchanged
         if self.safety_reference:
-            # only when set: the keys of tunings without one (their stored studies) unchanged
             data["safety_reference"] = self.safety_reference
+        if self.track != "lateral":
+            data["track"] = self.track
         return hashlib.sha256(json.dumps(data, sort_keys=True).encode()).hexdigest()[:10]
 
     def below_budget(self, reference: TuneSpace) -> list[str]:
