@@ -35,12 +35,14 @@ ONCOMING_MPS = 4.0
 
 def write_scenario(path: Path, *, initial_time_step: int = 0, ego_recording: bool = True,
                    goal_steps: tuple[int, int] = (0, 100), obstacles: str = "both",
-                   planning_problem: bool = True) -> Path:
+                   planning_problem: bool = True, uncertain: bool = False) -> Path:
     """A straight two-lane road (y in [-3.5, 3.5], x in [0, 150]) written with commonroad-io:
     a parked disc (id 10, radius 0.5 at (40, 0.8)), an oncoming car (id 11, 4.5 x 1.8, on
     y = -2 from x = 90 at step 0, 4 m/s, recorded for steps 0-79), optionally the ego's own
     recording (id 12), and planning problem 100: start (5, 0) heading 0 at 10 m/s at
-    ``initial_time_step``, goal a 6 x 7 m rectangle around (80, 0) in ``goal_steps``."""
+    ``initial_time_step``, goal a 6 x 7 m rectangle around (80, 0) in ``goal_steps``; with
+    ``uncertain``, a parked car (id 13) whose position is a rectangle around (60, 2) and whose
+    orientation is an interval around pi / 2."""
     from commonroad.common.file_writer import CommonRoadFileWriter, OverwriteExistingFile
     from commonroad.common.util import Interval
     from commonroad.geometry.shape import Circle, Rectangle
@@ -75,6 +77,14 @@ def write_scenario(path: Path, *, initial_time_step: int = 0, ego_recording: boo
                          time_step=0),
             TrajectoryPrediction(Trajectory(1, states), rectangle)))
 
+    if uncertain:
+        from commonroad.common.util import AngleInterval
+
+        scenario.add_objects(StaticObstacle(
+            13, ObstacleType.PARKED_VEHICLE, Rectangle(4.0, 2.0),
+            InitialState(position=Rectangle(0.4, 0.2, center=np.array([60.0, 2.0])),
+                         orientation=AngleInterval(math.pi / 2 - 0.1, math.pi / 2 + 0.1),
+                         velocity=0.0, time_step=0)))
     if obstacles in ("both", "oncoming"):
         car(11, 90.0, -2.0, ONCOMING_MPS, math.pi)
     if ego_recording:  # the ego's own recording: at the start when the problem starts
@@ -164,6 +174,17 @@ def test_the_other_disc_reading_and_no_ego_recording(tmp_path, make_scenario_con
     assert case.ego_recording_ids == () and case.obstacle_ids == (10, 11)
     # a circle is its own disc; the car's disc has half its width
     assert case.scenario.obstacle_radius_m == pytest.approx([0.5, CAR_WIDTH_M / 2])
+
+
+@needs_extra
+def test_an_uncertain_position_and_orientation_read_as_their_middles(tmp_path,
+                                                                     make_scenario_config):
+    path = write_scenario(tmp_path / "planted.xml", obstacles="none", uncertain=True)
+    case = read_commonroad(make_scenario_config(path))
+    assert case.obstacle_ids == (13,)
+    snap = case.scenario.obstacles_at(1.0)
+    assert snap.positions_m[0] == pytest.approx([60.0, 2.0])
+    assert snap.radii_m[0] == pytest.approx(math.hypot(4.0, 2.0) / 2)
 
 
 def _trajectory(case, poses: list[tuple[float, float, float]]) -> pd.DataFrame:

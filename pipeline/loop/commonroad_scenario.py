@@ -351,10 +351,8 @@ def _tracks(scenario: Any, problem: Any, cr: CommonRoadConfig, t0: int,
     start = np.asarray(problem.initial_state.position, float)
     positions, presents, radii, ids, ego = [], [], [], [], []
     for obstacle in sorted(scenario.obstacles, key=lambda o: o.obstacle_id):
-        at_start = obstacle.state_at_time(t0)
-        if at_start is not None and getattr(at_start, "position", None) is not None and \
-                np.hypot(*(np.asarray(at_start.position, float) - start)) \
-                <= cr.ego_match_tolerance_m:
+        at_start = _position(obstacle.state_at_time(t0))
+        if at_start is not None and np.hypot(*(at_start - start)) <= cr.ego_match_tolerance_m:
             ego.append(int(obstacle.obstacle_id))
             continue
         centre, radius = disc_of_shape(obstacle.obstacle_shape, cr.obstacle_disc)
@@ -362,12 +360,13 @@ def _tracks(scenario: Any, problem: Any, cr: CommonRoadConfig, t0: int,
         present = np.zeros(n_samples, bool)
         for k in range(n_samples):
             state = obstacle.state_at_time(t0 + k)
-            if state is None or getattr(state, "position", None) is None:
+            position = _position(state)
+            if position is None:
                 continue
-            angle = float(getattr(state, "orientation", 0.0) or 0.0)
+            angle = _angle(getattr(state, "orientation", 0.0))
             c, s = math.cos(angle), math.sin(angle)
-            track[k] = np.asarray(state.position, float) + [c * centre[0] - s * centre[1],
-                                                             s * centre[0] + c * centre[1]]
+            track[k] = position + [c * centre[0] - s * centre[1],
+                                   s * centre[0] + c * centre[1]]
             present[k] = True
         if not present.any():
             continue
@@ -380,6 +379,25 @@ def _tracks(scenario: Any, problem: Any, cr: CommonRoadConfig, t0: int,
                             np.array(presents, bool).reshape(-1, n_samples),
                             np.array(radii, float))
     return tracks, tuple(ids), tuple(ego)
+
+
+def _position(state: Any) -> np.ndarray | None:
+    """A state's position (an uncertain one, a shape: its centre), or None."""
+    position = getattr(state, "position", None) if state is not None else None
+    if position is None:
+        return None
+    if hasattr(position, "center") or hasattr(position, "shapes"):
+        return _shape_centre(position)
+    return np.asarray(position, float)
+
+
+def _angle(orientation: Any) -> float:
+    """A state's orientation (an uncertain one, an interval: its middle; none: 0)."""
+    if orientation is None:
+        return 0.0
+    if hasattr(orientation, "start") and hasattr(orientation, "end"):
+        return 0.5 * (float(orientation.start) + float(orientation.end))
+    return float(orientation)
 
 
 def _fill_absent(track: np.ndarray, present: np.ndarray) -> None:
