@@ -43,7 +43,7 @@ MEMBER_CACHE ?= $(RUNS)/member_cache
 export PIPELINE_MEMBER_CACHE = $(if $(filter off,$(MEMBER_CACHE)),off,$(abspath $(MEMBER_CACHE)))
 LAUNCHER    ?= sequential
 
-.PHONY: help install lint reproduce experiment run-paper run-kinematic run-kinematic-readings run-family run-kinematic-family run-frames run-apf-alone run-peers run-kinematic-peers peers speed-check report screenshot sweep verify ablation multiverse tune tune-unpruned tune-peers nmpc-check test test-slurm test-all bench cache-size clean-cache clean
+.PHONY: help install lint reproduce experiment run-paper run-kinematic run-kinematic-readings run-family run-kinematic-family run-frames run-apf-alone run-peers run-kinematic-peers peers speed-check report screenshot sweep verify ablation multiverse tune tune-unpruned tune-peers nmpc-check test test-slurm test-all bench install-commonroad commonroad cache-size clean-cache clean
 
 help:  ## list the targets
 	@grep -E '^[a-zA-Z_-]+:.*## ' $(MAKEFILE_LIST) | awk -F':.*## ' '{printf "  %-12s %s\n", $$1, $$2}'
@@ -185,6 +185,23 @@ test-slurm: $(STAMP)  ## start a single-node SLURM cluster (.ci/slurm-cluster), 
 
 test-all: $(STAMP)  ## run every test, slow ones included (SLURM ones: make test-slurm)
 	$(PY) -m pytest -m "not slurm" $(PYTEST_ARGS)
+
+# scenario=commonroad (docs/commonroad.md): the optional extra into .venv (Polygon3 builds from
+# source: a C compiler; .ci/run installs build-essential), and both methods on one file
+install-commonroad: $(STAMP)  ## add the optional CommonRoad extra (commonroad-io, drivability checker, vehicle models) to .venv
+	@if [ -x $(VENV)/bin/uv ]; then \
+	  $(VENV)/bin/uv pip install --quiet $(COMPILE_BYTECODE) --python $(PY) -c constraints.txt -e ".[test,commonroad]"; \
+	else \
+	  $(PY) -m pip install --quiet -c constraints.txt -e ".[test,commonroad]"; \
+	fi
+
+COMMONROAD ?=
+commonroad: $(STAMP)  ## improved and baseline on a CommonRoad scenario: make commonroad COMMONROAD=path/to/scenario.xml (needs make install-commonroad)
+	@test -n "$(COMMONROAD)" || { echo "error: set COMMONROAD=path/to/scenario.xml" >&2; exit 2; }
+	@for method in improved baseline; do \
+	  $(PY) -m pipeline.run scenario=commonroad scenario.commonroad.path=$(abspath $(COMMONROAD)) \
+	    method=$$method hydra.run.dir=$(RUNS)/commonroad/$(basename $(notdir $(COMMONROAD)))/$$method || exit $$?; \
+	done
 
 cache-size: $(STAMP)  ## what the member cache holds (members, files, MB)
 	$(PY) -m pipeline.cache size

@@ -137,6 +137,8 @@ def _hash_of(data: dict) -> str:
         data[section] = dict(data[section])
     if data["scenario"].get("obstacle_anchor") == "world":
         data["scenario"].pop("obstacle_anchor")  # the default reading, as before the key
+    if data["scenario"].get("commonroad", 0) is None:
+        data["scenario"].pop("commonroad")  # not a CommonRoad scenario, as before the key
     if data["controller"].get("collision_constraints") is True:
         data["controller"].pop("collision_constraints")  # the default, as before the key
     for section in ("planner", "controller"):

@@ -48,6 +48,18 @@ def plain_value(value: Any, limit: int = 60) -> str:
     return text
 
 
+class MissingExtraError(ConfigError):
+    """A configuration that needs an optional extra which is not installed; the message is
+    the one line saying how to install it."""
+
+    def __init__(self, message: str) -> None:  # noqa: D107 - the message is the whole story
+        ValueError.__init__(self, message)
+        self.key, self.value, self.allowed = "", None, ""
+
+    def __str__(self) -> str:
+        return str(self.args[0])
+
+
 class OutputPathError(OSError):
     """An output path that a write must not replace (a folder, a device, a pipe, or an input of
     the same command). ``strerror`` says why, ``filename`` names the path."""

@@ -44,6 +44,7 @@ def hydra_main(cfg: DictConfig) -> float | tuple[float, ...]:
     out_dir = Path(HydraConfig.get().runtime.output_dir)
 
     def job() -> float | tuple[float, ...]:
+        _require_extras(cfg)
         experiment = to_experiment_config(cfg)
         _check_targets(experiment)
         with folder_lock(out_dir):
@@ -55,9 +56,21 @@ def hydra_main(cfg: DictConfig) -> float | tuple[float, ...]:
                     tracebacks=os.environ.get("PIPELINE_USER_FULL_ERROR") == "1")
 
 
+def _require_extras(cfg: DictConfig) -> None:
+    """``scenario=commonroad`` without its optional extra: the one install line, before any
+    other check of the configuration."""
+    scenario = cfg.get("scenario")
+    if scenario is not None and scenario.get("commonroad") is not None:
+        from pipeline.loop.commonroad_scenario import require_commonroad
+
+        require_commonroad()
+
+
 def _run(experiment, out_dir: Path) -> float | tuple[float, ...]:
     """The run or family of :func:`hydra_main`, into ``out_dir`` (locked)."""
     objectives = experiment.tune.objectives
+    if experiment.scenario.commonroad is not None:
+        return _run_commonroad(experiment, out_dir)
     if experiment.scenario.family is not None:
         counts = MemberCounts()
         table = run_family(experiment, out_dir, counts=counts)
@@ -76,6 +89,25 @@ def _run(experiment, out_dir: Path) -> float | tuple[float, ...]:
              "skipped (complete) " if summary.skipped else "", m["method"], m["scenario"],
              m["min_clearance_m"] if m["min_clearance_m"] is not None else float("nan"),
              m["collision"], m["time_to_goal_s"], _describe(objectives, values), out_dir)
+    return values[0] if len(values) == 1 else values
+
+
+def _run_commonroad(experiment, out_dir: Path) -> float | tuple[float, ...]:
+    """``scenario=commonroad``: the run, both collision verdicts, the road and the goal."""
+    from pipeline.studies.commonroad import run_commonroad
+
+    done = run_commonroad(experiment, out_dir)
+    v, m = done.verdicts, done.run.flat()
+    log.info("%s on %s (%d steps at %.3g m/s): collision ours %s, drivability checker on our "
+             "discs %s (agree on %d/%d steps), on the true shapes %s (agree on %d/%d steps); "
+             "min clearance ours %.3f m, true shapes %.3f m; off the road on %d steps; goal "
+             "reached by CommonRoad's definition %s, by ours %s -> %s", m["method"],
+             m["scenario"], v.steps, done.result.summary["run"]["speed_mps"], v.ours_collision,
+             v.checker_same_geometry_collision, v.agreement_same_geometry_steps, v.steps,
+             v.checker_true_shapes_collision, v.agreement_true_shapes_steps, v.steps,
+             v.min_clearance_ours_m, v.min_clearance_true_shapes_m, v.off_road_steps,
+             v.goal_reached_commonroad, m["termination"] == "goal_line", out_dir)
+    values = objective_values(pd.DataFrame([m]), experiment.tune.objectives)
     return values[0] if len(values) == 1 else values
 
 

@@ -42,6 +42,7 @@ STUDY_FILES = {
     "pipeline.studies.results.nmpc_check": ("agreement.csv",),
     "pipeline.studies.results.sweep": ("summary.csv", "swept_keys.json", "verdicts.csv",
                                        "skipped.csv"),
+    "pipeline.studies.results.commonroad": ("commonroad.json", "solution.xml"),
 }
 #: The outputs root's sections: only the layout (``pipeline.store.layout``) joins them to a
 #: path.

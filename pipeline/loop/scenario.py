@@ -40,6 +40,14 @@ class ObstacleSnapshot:
         return ObstacleSnapshot(self.positions_m[keep], self.velocities_mps[keep],
                                 self.radii_m[keep], self.visible[keep])
 
+    def nearest_first(self, point_m: np.ndarray) -> ObstacleSnapshot:
+        """The obstacles ordered by centre distance to ``point_m`` (the MPC fills its
+        ``max_obstacles`` slots in this order)."""
+        gaps = np.hypot(*(self.positions_m - np.asarray(point_m, float)[:2]).T)
+        order = np.argsort(gaps, kind="stable")
+        return ObstacleSnapshot(self.positions_m[order], self.velocities_mps[order],
+                                self.radii_m[order], self.visible[order])
+
     def predicted_positions(self, times_ahead_s: np.ndarray) -> np.ndarray:
         """Constant-velocity prediction, shape (len(times_ahead_s), n, 2)."""
         t = np.asarray(times_ahead_s, dtype=float)[:, None, None]
@@ -103,6 +111,9 @@ class Scenario:
     obstacle_radius_m: np.ndarray
     obstacle_appear_s: np.ndarray
     obstacle_anchor: str = "world"
+    #: the order in which the MPC's obstacle slots are filled: "index" (the scenario's order)
+    #: or "nearest" (nearest first; CommonRoad scenarios, with more obstacles than slots)
+    obstacle_slots: str = "index"
 
     @property
     def n_obstacles(self) -> int:

@@ -396,6 +396,54 @@ class FamilyConfig(FrozenAfterValidation):
 
 
 @dataclass
+class CommonRoadConfig(FrozenAfterValidation):
+    """``scenario=commonroad``: a CommonRoad scenario XML read by commonroad-io (the optional
+    extra ``pip install '.[commonroad]'``; docs/commonroad.md). Start, heading, speed, goal,
+    sample time and run length come from its planning problem; the obstacles from the file."""
+
+    path: str = MISSING
+    # which planning problem of the file (None: the one with the lowest id)
+    planning_problem_id: Optional[int] = None
+    # the ego's true shape for the drivability checker and the exported trajectory's vehicle
+    # (commonroad-vehicle-models' parameter sets): FORD_ESCORT, BMW_320i or VW_VANAGON
+    vehicle_type: str = "BMW_320i"
+    # the disc our planner, MPC and own check see for an obstacle's shape: circumscribed (the
+    # smallest disc holding it) or half_width (a disc of half its smaller side: under-covers)
+    obstacle_disc: str = "circumscribed"
+    # an obstacle whose centre is this close to the planning problem's initial position at its
+    # initial time step is the ego's own recording, and dropped
+    ego_match_tolerance_m: float = 0.5
+    # None: the initial state's speed (the scenario's own); a number overrides it
+    speed_mps: Optional[float] = None
+    # None: until the goal's last time step (or the file's last obstacle time step)
+    n_steps: Optional[int] = None
+
+    VEHICLE_TYPES = ("FORD_ESCORT", "BMW_320i", "VW_VANAGON")
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.path, str) or not self.path:
+            raise ConfigError("scenario.commonroad.path", self.path,
+                              "the path of a CommonRoad scenario XML file")
+        if self.planning_problem_id is not None and (
+                isinstance(self.planning_problem_id, bool)
+                or not isinstance(self.planning_problem_id, int)):
+            raise ConfigError("scenario.commonroad.planning_problem_id",
+                              self.planning_problem_id, "an integer id or null")
+        choice("scenario.commonroad.vehicle_type", self.vehicle_type, self.VEHICLE_TYPES)
+        choice("scenario.commonroad.obstacle_disc", self.obstacle_disc,
+               ("circumscribed", "half_width"))
+        between("scenario.commonroad.ego_match_tolerance_m", self.ego_match_tolerance_m,
+                0.0, 10.0)
+        if self.speed_mps is not None:
+            between("scenario.commonroad.speed_mps", self.speed_mps, 0.1, 40.0)
+        if self.n_steps is not None and (isinstance(self.n_steps, bool)
+                                         or not isinstance(self.n_steps, int)
+                                         or not 2 <= self.n_steps <= 100_000):
+            raise ConfigError("scenario.commonroad.n_steps", self.n_steps,
+                              "an integer in [2, 100000] or null")
+
+
+@dataclass
 class ScenarioConfig(FrozenAfterValidation):
     """Start, goal, speed, run length and obstacles of one closed-loop run."""
 
@@ -412,6 +460,8 @@ class ScenarioConfig(FrozenAfterValidation):
     obstacles: List[ObstacleConfig] = field(default_factory=list)
     allow_no_obstacles: bool = False
     family: Optional[FamilyConfig] = None
+    # scenario=commonroad: start, goal, timing and obstacles from a CommonRoad XML
+    commonroad: Optional[CommonRoadConfig] = None
     # "world": obstacles appear where the config puts them; "vehicle": x_m, y_m are read for a
     # vehicle at its nominal place (start + speed_mps * appear_time_s along the start-goal
     # line) and shifted with the vehicle's actual position when the obstacle appears (Figure 1:
@@ -463,7 +513,12 @@ class ScenarioConfig(FrozenAfterValidation):
                               "an integer in [1, 1000]")
 
     def _check_obstacles(self) -> None:
-        if not self.obstacles and self.family is None and not self.allow_no_obstacles:
+        if self.commonroad is not None and (self.family is not None or self.obstacles):
+            raise ConfigError("scenario.commonroad", "with family or obstacles",
+                              "a CommonRoad scenario alone (its obstacles come from its file; "
+                              "no scenario.family, no scenario.obstacles)")
+        if not self.obstacles and self.family is None and self.commonroad is None \
+                and not self.allow_no_obstacles:
             raise ConfigError("scenario.obstacles", [], "a non-empty obstacle list (or "
                               "scenario.allow_no_obstacles=true for an obstacle-free run)")
         seen = set()

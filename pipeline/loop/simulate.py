@@ -292,6 +292,8 @@ def _closed_loop(cfg: LoopSettings, scenario: Scenario, qp_cache: QpCache | None
             break
         visible = snapshot.only_visible()
         position = state[:2].copy()
+        if scenario.obstacle_slots == "nearest":
+            visible = visible.nearest_first(position)
         rollout = planner.rollout(position, scenario.goal_m, visible, plant.velocity(state))
         speed_ref = _planned_speed(planner, position, psi, visible, scenario, vehicle_radius,
                                    rollout, state, path_aware) if plans_speed else np.nan

@@ -42,6 +42,7 @@ from pipeline.studies.results import (
     SweepSummary,
     TuneResult,
 )
+from pipeline.studies.results.commonroad import CommonRoadResult
 from pipeline.studies.results.sweep import is_sweep_folder
 
 log = logging.getLogger("pipeline.reporting")
@@ -230,6 +231,8 @@ class ReportInputs:
     nmpc: NmpcCheckResult | None = None
     speed: SpeedCheckResult | None = None
     skipped: tuple[Skipped, ...] = ()
+    #: runs on CommonRoad scenarios (``make commonroad``), shown only
+    commonroad: tuple[CommonRoadResult, ...] = ()
 
     @property
     def has_runs(self) -> bool:
@@ -269,13 +272,15 @@ class ReportInputs:
         tune = optional(TuneResult.load, tune_dir, "fair fight section") \
             if TuneResult.present(tune_dir) else None
         claims = _claims(collection, treatment, controls)
+        commonroad = tuple(CommonRoadResult.load_all(layout.folder("commonroad")))
         if not collection.runs:
             if not sweeps:
                 raise FileNotFoundError(f"no single runs (the paper scenario) under {run_root}")
             return cls(run_root, layout, claims, sweeps=sweeps, bench=bench,
-                       skipped=tuple(skipped))
-        return cls._with_runs(run_root, layout, claims, collection, optional, skipped,
-                              sweeps=sweeps, bench=bench, multiverse=multiverse, tune=tune)
+                       skipped=tuple(skipped), commonroad=commonroad)
+        inputs = cls._with_runs(run_root, layout, claims, collection, optional, skipped,
+                                sweeps=sweeps, bench=bench, multiverse=multiverse, tune=tune)
+        return dataclasses.replace(inputs, commonroad=commonroad)
 
     @classmethod
     def _with_runs(cls, run_root: Path, layout: OutputsLayout, claims: ClaimsConfig,

@@ -21,6 +21,7 @@ from pipeline.reporting.render import Page, render
 from pipeline.reporting.sections.ablation import ablation_section
 from pipeline.reporting.sections.answer import answer_section
 from pipeline.reporting.sections.apf_alone import apf_alone_section
+from pipeline.reporting.sections.commonroad import commonroad_section
 from pipeline.reporting.sections.fair_fight import fair_fight_section
 from pipeline.reporting.sections.family import family_section
 from pipeline.reporting.sections.kinematic import kinematic_section
@@ -120,6 +121,7 @@ def build_page(inputs: ReportInputs, verdicts: Verdicts, figures: Figures, comma
         sweeps=tuple(sweep_section(s, figures) for s in inputs.sweeps),
         performance=performance_section(inputs, figures),
         given=runs_given_section(inputs, skipped),
+        commonroad=commonroad_section(inputs),
         methods=methods_section(verdicts.claims if paper else None,
                                 {m: r.config for m, r in inputs.lateral.by_method.items()}
                                 if inputs.lateral is not None else {}, command))

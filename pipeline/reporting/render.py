@@ -12,6 +12,7 @@ from pipeline.reporting.format import FILTERS, interval
 from pipeline.reporting.sections.ablation import AblationSection
 from pipeline.reporting.sections.answer import AnswerSection
 from pipeline.reporting.sections.apf_alone import ApfAloneSection
+from pipeline.reporting.sections.commonroad import CommonRoadSection
 from pipeline.reporting.sections.fair_fight import FairFightSection
 from pipeline.reporting.sections.family import FamilySection
 from pipeline.reporting.sections.kinematic import KinematicSection
@@ -45,6 +46,7 @@ class Page:
     performance: PerformanceSection | None
     given: RunsGivenSection
     methods: MethodsSection
+    commonroad: CommonRoadSection | None = None
 
 
 def environment() -> jinja2.Environment:

@@ -44,6 +44,7 @@ class OutputsLayout:
     nmpc_check: str = "nmpc_check"
     speed: str = "speed"
     sweeps: str = "sweeps"
+    commonroad: str = "commonroad"
 
     @classmethod
     def load(cls, root: Path, paths_file: Path = PATHS_FILE) -> OutputsLayout:
@@ -81,7 +82,7 @@ class OutputsLayout:
         return (self.sweeps, self.ablation, self.interpretations, self.multiverse, self.tune,
                 self.tune_unpruned, self.tune_peers, self.member_cache, self.kinematic_readings,
                 self.kinematic_family, self.frames, self.apf_alone, self.peers, self.kinematic_peers,
-                self.nmpc_check, self.speed)
+                self.nmpc_check, self.speed, self.commonroad)
 
     @property
     def validity_sections(self) -> tuple[str, ...]:

@@ -21,7 +21,7 @@ from pipeline.analysis.tally import Tally
 from pipeline.config import ExperimentConfig
 from pipeline.loop.controller import QpCache
 from pipeline.loop.model import build_lateral_model, vehicle_key
-from pipeline.loop.scenario import build_scenario, family_members
+from pipeline.loop.scenario import Scenario, build_scenario, family_members
 from pipeline.loop.simulate import simulate
 from pipeline.store.files import clean_leftovers
 from pipeline.store.manifest import check
@@ -47,7 +47,8 @@ class RunSummary:
 
 
 def run_experiment(cfg: ExperimentConfig, out_dir: Path, resume: bool = True,
-                   qp_cache: QpCache | None = None) -> RunSummary:
+                   qp_cache: QpCache | None = None,
+                   scenario: Scenario | None = None) -> RunSummary:
     """Simulate one configuration and write its run folder.
 
     Parameters
@@ -61,6 +62,8 @@ def run_experiment(cfg: ExperimentConfig, out_dir: Path, resume: bool = True,
         hash.
     qp_cache : QpCache, optional
         Compiled QPs shared with other runs of this process (or shipped to a worker).
+    scenario : Scenario, optional
+        The scenario to simulate (a CommonRoad file's); by default built from ``cfg.scenario``.
 
     Returns
     -------
@@ -78,7 +81,7 @@ def run_experiment(cfg: ExperimentConfig, out_dir: Path, resume: bool = True,
         if reason not in ("not a folder", "empty folder"):
             log.warning("re-running %s: %s", out_dir, reason)
 
-    scenario = build_scenario(cfg.scenario)
+    scenario = scenario if scenario is not None else build_scenario(cfg.scenario)
     qp_cache = qp_cache if qp_cache is not None else QpCache()
     # the model of the nominal speed (model.json), built once per process for a family
     model = qp_cache.memo(("model_json", vehicle_key(cfg.vehicle), cfg.scenario.speed_mps,

@@ -1,0 +1,213 @@
+"""A CommonRoad run judged twice: by our own check and by CommonRoad's drivability checker.
+
+Our check (:func:`~pipeline.analysis.metrics.geometry.clearance_series`) sees what our methods
+see: the ego as a disc of ``vehicle.footprint_radius_m`` and each obstacle as its disc. The
+drivability checker (commonroad-drivability-checker, an independent C++ collision library) is
+asked twice at every logged step:
+
+* on the same geometry (the ego's disc against the obstacles' discs as logged): where it and our
+  check disagree, one of the two checks is wrong;
+* on the true shapes (the ego as its car rectangle, ``vehicle_type``'s length and width, centred
+  on the logged position along the logged heading; the obstacles as the file's shapes at that
+  time step): where this verdict differs from ours, the disc is the reason.
+
+Beside the verdicts: the clearance between the true shapes (shapely's polygon distance; a
+circle at its full radius, not at the half radius of commonroad-io's own shapely circle), the
+steps on which the car rectangle is not inside the road (the union of the lanelets), and whether
+the goal was reached by CommonRoad's own definition (``PlanningProblem.goal_reached``: position,
+time step, and any speed or orientation interval of the goal region).
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+from pipeline.analysis.metrics.geometry import clearance_series
+from pipeline.loop.commonroad_scenario import CommonRoadCase, ego_states, shape_geometry
+from pipeline.loop.trajectory import obstacle_indices
+
+
+@dataclass(frozen=True)
+class CommonRoadVerdicts:
+    """Per-run counts over the logged steps (see the module docstring).
+
+    Attributes
+    ----------
+    steps : int
+    ours_collision_steps, checker_same_geometry_collision_steps,
+    checker_true_shapes_collision_steps : int
+        Steps on which each check sees a collision.
+    agreement_same_geometry_steps, agreement_true_shapes_steps : int
+        Steps on which the checker's verdict equals ours.
+    min_clearance_ours_m : float
+        Smallest sampled disc clearance (NaN when no obstacle is ever present).
+    min_clearance_true_shapes_m : float
+        Smallest distance between the car rectangle and an obstacle's shape (0 in contact).
+    off_road_steps : int
+        Steps on which the car rectangle is not inside the union of the lanelets.
+    goal_reached_commonroad : bool
+    goal_time_step : int or None
+        The CommonRoad time step of the last state in the goal region.
+    goal_note : str
+        Why the goal could not be judged ("" when it was).
+    """
+
+    steps: int
+    ours_collision_steps: int
+    checker_same_geometry_collision_steps: int
+    checker_true_shapes_collision_steps: int
+    agreement_same_geometry_steps: int
+    agreement_true_shapes_steps: int
+    min_clearance_ours_m: float
+    min_clearance_true_shapes_m: float
+    off_road_steps: int
+    goal_reached_commonroad: bool
+    goal_time_step: int | None
+    goal_note: str
+
+    @property
+    def ours_collision(self) -> bool:
+        return self.ours_collision_steps > 0
+
+    @property
+    def checker_same_geometry_collision(self) -> bool:
+        return self.checker_same_geometry_collision_steps > 0
+
+    @property
+    def checker_true_shapes_collision(self) -> bool:
+        return self.checker_true_shapes_collision_steps > 0
+
+    def to_json(self) -> dict[str, Any]:
+        data = asdict(self)
+        data.update(ours_collision=self.ours_collision,
+                    checker_same_geometry_collision=self.checker_same_geometry_collision,
+                    checker_true_shapes_collision=self.checker_true_shapes_collision)
+        for key in ("min_clearance_ours_m", "min_clearance_true_shapes_m"):
+            data[key] = None if not np.isfinite(data[key]) else float(data[key])
+        return data
+
+
+def ours_colliding(trajectory: pd.DataFrame, ego_radius_m: float) -> np.ndarray:
+    """Our verdict per logged step: the ego's disc overlaps a present obstacle's disc."""
+    gaps = clearance_series(trajectory, ego_radius_m)
+    return np.nan_to_num(gaps, nan=np.inf) < 0.0
+
+
+def checker_colliding_discs(trajectory: pd.DataFrame, ego_radius_m: float) -> np.ndarray:
+    """The drivability checker's verdict per logged step on our geometry (discs as logged)."""
+    from commonroad_dc import pycrcc
+
+    x, y = trajectory["X_m"].to_numpy(float), trajectory["Y_m"].to_numpy(float)
+    hits = np.zeros(len(trajectory), bool)
+    for j in obstacle_indices(trajectory.columns):
+        ox, oy = trajectory[f"obs{j}_x_m"].to_numpy(float), \
+            trajectory[f"obs{j}_y_m"].to_numpy(float)
+        radius = trajectory[f"obs{j}_radius_m"].to_numpy(float)
+        visible = trajectory[f"obs{j}_visible"].to_numpy(bool)
+        for k in np.flatnonzero(visible & ~hits):
+            ego = pycrcc.Circle(ego_radius_m, float(x[k]), float(y[k]))
+            hits[k] = ego.collide(pycrcc.Circle(float(radius[k]), float(ox[k]), float(oy[k])))
+    return hits
+
+
+def ego_rectangles(trajectory: pd.DataFrame, length_m: float, width_m: float) -> list[Any]:
+    """The car rectangle at each logged step (shapely polygons, centred on the logged
+    position, along the logged heading)."""
+    from shapely.geometry import Polygon
+
+    half = np.array([[1, 1], [-1, 1], [-1, -1], [1, -1]]) * [length_m / 2.0, width_m / 2.0]
+    out = []
+    for x, y, psi in trajectory[["X_m", "Y_m", "psi_rad"]].to_numpy(float):
+        c, s = np.cos(psi), np.sin(psi)
+        out.append(Polygon(half @ np.array([[c, s], [-s, c]]) + [x, y]))
+    return out
+
+
+def checker_colliding_shapes(case: CommonRoadCase, trajectory: pd.DataFrame,
+                             length_m: float, width_m: float) -> tuple[np.ndarray, float]:
+    """The drivability checker's verdict per logged step on the true shapes (the car rectangle
+    against every obstacle the file has at that time step, the ego's recording left out), and
+    the smallest distance between the true shapes (shapely)."""
+    from commonroad_dc import pycrcc
+    from commonroad_dc.collision.collision_detection.pycrcc_collision_dispatch import (
+        create_collision_checker,
+    )
+
+    kept = [o for o in case.commonroad_scenario.obstacles
+            if o.obstacle_id in set(case.obstacle_ids)]
+    checker = create_collision_checker(_scenario_with(case.commonroad_scenario, kept))
+    xy = trajectory[["X_m", "Y_m", "psi_rad"]].to_numpy(float)
+    hits = np.zeros(len(trajectory), bool)
+    nearest = np.inf
+    for k, ((x, y, psi), rectangle) in enumerate(zip(xy, ego_rectangles(trajectory, length_m,
+                                                                        width_m), strict=True)):
+        step = case.initial_time_step + k
+        ego = pycrcc.RectOBB(length_m / 2.0, width_m / 2.0, float(psi), float(x), float(y))
+        hits[k] = checker.time_slice(step).collide(ego)
+        for obstacle in kept:
+            occupancy = obstacle.occupancy_at_time(step)
+            if occupancy is not None:
+                nearest = min(nearest, rectangle.distance(shape_geometry(occupancy.shape)))
+    return hits, float(nearest)
+
+
+def _scenario_with(scenario: Any, obstacles: list[Any]) -> Any:
+    """A copy of ``scenario`` that holds only ``obstacles`` (the checker's input)."""
+    from commonroad.scenario.scenario import Scenario
+
+    copy = Scenario(scenario.dt, scenario.scenario_id)
+    copy.add_objects(list(obstacles))
+    return copy
+
+
+def off_road_steps(case: CommonRoadCase, trajectory: pd.DataFrame, length_m: float,
+                   width_m: float) -> int:
+    """Steps on which the car rectangle is not inside the union of the lanelets (1 mm of
+    tolerance at the lanelets' shared edges); 0 for a file without lanelets."""
+    from shapely.ops import unary_union
+
+    lanelets = case.commonroad_scenario.lanelet_network.lanelets
+    if not lanelets:
+        return 0
+    road = unary_union([lanelet.polygon.shapely_object for lanelet in lanelets]).buffer(1e-3)
+    return int(sum(not road.contains(r) for r in ego_rectangles(trajectory, length_m,
+                                                                  width_m)))
+
+
+def goal_by_commonroad(case: CommonRoadCase, trajectory: pd.DataFrame
+                       ) -> tuple[bool, int | None, str]:
+    """``PlanningProblem.goal_reached`` on our run's states: reached, the time step of the last
+    state in the goal region, and why it could not be judged ("" when it was)."""
+    from commonroad.scenario.trajectory import Trajectory
+
+    states = ego_states(trajectory, case.initial_time_step)
+    try:
+        reached, index = case.planning_problem.goal_reached(
+            Trajectory(case.initial_time_step, states))
+    except ValueError as exc:  # a goal on a state field the run does not have
+        return False, None, (str(exc).splitlines() or [""])[0][:200]
+    return bool(reached), (int(states[index].time_step) if reached else None), ""
+
+
+def judge_commonroad_run(case: CommonRoadCase, trajectory: pd.DataFrame, ego_radius_m: float,
+                         length_m: float, width_m: float) -> CommonRoadVerdicts:
+    """Both checks, the road and the goal for one logged run (see the module docstring)."""
+    ours = ours_colliding(trajectory, ego_radius_m)
+    same = checker_colliding_discs(trajectory, ego_radius_m)
+    true, true_clearance = checker_colliding_shapes(case, trajectory, length_m, width_m)
+    gaps = clearance_series(trajectory, ego_radius_m)
+    reached, goal_step, note = goal_by_commonroad(case, trajectory)
+    return CommonRoadVerdicts(
+        steps=len(trajectory), ours_collision_steps=int(ours.sum()),
+        checker_same_geometry_collision_steps=int(same.sum()),
+        checker_true_shapes_collision_steps=int(true.sum()),
+        agreement_same_geometry_steps=int((ours == same).sum()),
+        agreement_true_shapes_steps=int((ours == true).sum()),
+        min_clearance_ours_m=float(np.nanmin(gaps)) if np.isfinite(gaps).any() else np.nan,
+        min_clearance_true_shapes_m=true_clearance,
+        off_road_steps=off_road_steps(case, trajectory, length_m, width_m),
+        goal_reached_commonroad=reached, goal_time_step=goal_step, goal_note=note)

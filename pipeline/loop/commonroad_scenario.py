@@ -1,0 +1,468 @@
+"""Scenario stage of ``scenario=commonroad``: a CommonRoad scenario XML as our scenario.
+
+CommonRoad (commonroad-io, BSD-3-Clause) is the motion-planning community's scenario format.
+:func:`read_commonroad` reads a file with commonroad-io's own reader and turns it into a
+:class:`CommonRoadCase`:
+
+* the planning problem's initial state gives the start, the heading and the speed (the
+  scenario's own; no slower stand-in), its goal region the goal point (the centre of the goal's
+  shape) and, with the file's time step, the sample time and the run length;
+* every static and dynamic obstacle becomes a disc (circumscribing its shape, or of half its
+  smaller side: ``scenario.commonroad.obstacle_disc``) that moves on its recorded track, present
+  from its first to its last recorded time step; an obstacle on the ego's initial position at
+  the initial time step is the ego's own recording and is dropped;
+* the MPC fills its obstacle slots nearest first (``Scenario.obstacle_slots = "nearest"``).
+
+:func:`ego_states` and :func:`ego_solution` turn our logged run back into CommonRoad states and
+a CommonRoad solution (the kinematic single-track model's states, the trajectory a CommonRoad
+tool reads). commonroad-io is an optional extra: every function here imports it lazily, and
+:func:`require_commonroad` says in one line how to install it.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+from pipeline.errors import ConfigError, MissingExtraError
+from pipeline.loop.scenario import ObstacleSnapshot, Scenario
+from pipeline.loop.settings import CommonRoadConfig, ScenarioConfig
+
+#: The one line that says how to get ``scenario=commonroad`` (the test skip reason too).
+INSTALL_HINT = ("scenario=commonroad needs the optional extra: pip install '.[commonroad]' "
+                "(its Polygon3 builds from source: a C compiler, e.g. apt-get install "
+                "build-essential)")
+PATH_KEY = "scenario.commonroad.path"
+
+
+def commonroad_missing() -> str | None:
+    """None when commonroad-io, the drivability checker and the vehicle models import; else
+    :data:`INSTALL_HINT`."""
+    try:
+        import commonroad  # noqa: F401
+        import commonroad_dc.pycrcc  # noqa: F401
+        import vehiclemodels  # noqa: F401
+    except ImportError:
+        return INSTALL_HINT
+    return None
+
+
+def require_commonroad() -> None:
+    """Raise :class:`~pipeline.errors.MissingExtraError` (the install line) without the
+    extra."""
+    missing = commonroad_missing()
+    if missing is not None:
+        raise MissingExtraError(f"config error: {missing}")
+
+
+@dataclass(frozen=True)
+class CommonRoadScenario(Scenario):
+    """A :class:`Scenario` whose obstacles move on recorded tracks sampled every
+    ``track_step_s`` from time 0 (arrays over obstacles and samples; positions of the disc
+    centres, velocities by finite differences, ``track_present`` while the file has the
+    obstacle). Between samples positions and velocities are interpolated linearly."""
+
+    track_step_s: float = 0.1
+    track_positions_m: np.ndarray = field(default_factory=lambda: np.zeros((0, 1, 2)))
+    track_velocities_mps: np.ndarray = field(default_factory=lambda: np.zeros((0, 1, 2)))
+    track_present: np.ndarray = field(default_factory=lambda: np.zeros((0, 1), bool))
+
+    def obstacles_at(self, time_s: float) -> ObstacleSnapshot:
+        """The recorded obstacles at ``time_s``; outside its recording an obstacle is
+        invisible (at the nearest recorded place)."""
+        last = self.track_present.shape[1] - 1
+        where = max(time_s / self.track_step_s, 0.0)
+        i0 = min(int(math.floor(where + 1e-9)), last)
+        share = min(max(where - i0, 0.0), 1.0) if i0 < last else 0.0
+        if share < 1e-9:
+            share = 0.0
+        i1 = min(i0 + 1, last)
+        positions = self.track_positions_m[:, i0] * (1.0 - share) \
+            + self.track_positions_m[:, i1] * share
+        velocities = self.track_velocities_mps[:, i0] * (1.0 - share) \
+            + self.track_velocities_mps[:, i1] * share
+        visible = self.track_present[:, i0] & (self.track_present[:, i1] | (share == 0.0))
+        return ObstacleSnapshot(positions, velocities, self.obstacle_radius_m.copy(), visible)
+
+
+@dataclass(frozen=True)
+class CommonRoadCase:
+    """What :func:`read_commonroad` made of a file.
+
+    Attributes
+    ----------
+    scenario_config : ScenarioConfig
+        The configuration with start, heading, speed, goal, sample time and run length from the
+        planning problem (what the run records in its ``config.yaml``).
+    scenario : CommonRoadScenario
+        Our scenario (obstacle ``j`` is CommonRoad obstacle ``obstacle_ids[j]``).
+    commonroad_scenario, planning_problem : commonroad-io objects
+    obstacle_ids : tuple of int
+    ego_recording_ids : tuple of int
+        Obstacles dropped as the ego's own recording.
+    initial_time_step : int
+        The CommonRoad time step of our time 0.
+    file_sha256 : str
+    """
+
+    scenario_config: ScenarioConfig
+    scenario: CommonRoadScenario
+    commonroad_scenario: Any
+    planning_problem: Any
+    obstacle_ids: tuple[int, ...]
+    ego_recording_ids: tuple[int, ...]
+    initial_time_step: int
+    file_sha256: str
+
+
+def read_commonroad(cfg: ScenarioConfig) -> CommonRoadCase:
+    """Read ``cfg.commonroad.path`` (a CommonRoad scenario XML) into a :class:`CommonRoadCase`.
+
+    Raises
+    ------
+    MissingExtraError
+        Without the ``commonroad`` extra.
+    ConfigError
+        A missing file, a file that is not a CommonRoad scenario, a scenario without a (or
+        without the chosen) planning problem, or one whose ego stands still with no speed set.
+    """
+    require_commonroad()
+    cr = cfg.commonroad
+    if cr is None:
+        raise ConfigError("scenario.commonroad", None, "a commonroad block (scenario=commonroad)")
+    path = Path(cr.path)
+    scenario, problems, digest = _open(path)
+    problem = _planning_problem(problems, cr, path)
+    t0 = int(problem.initial_state.time_step)
+    start = np.asarray(problem.initial_state.position, float)
+    heading = float(problem.initial_state.orientation)
+    speed = _speed(problem, cr)
+    dt = float(scenario.dt)
+    n_steps = cr.n_steps if cr.n_steps is not None else _run_length(problem, scenario, t0)
+    goal = _goal_point(problem, start, heading, speed, dt, t0)
+    name = _safe(str(scenario.scenario_id)) or "commonroad"
+    resolved = replace(cfg, name=name, start_xy_m=[float(start[0]), float(start[1])],
+                       start_heading_rad=heading, goal_xy_m=[float(goal[0]), float(goal[1])],
+                       speed_mps=speed, initial_speed_mps=None, sample_time_s=dt,
+                       n_steps=int(n_steps), obstacles=[])
+    tracks, ids, ego_ids = _tracks(scenario, problem, cr, t0, int(n_steps) + 2)
+    ours = build_commonroad_scenario(resolved, tracks)
+    return CommonRoadCase(resolved, ours, scenario, problem, ids, ego_ids, t0, digest)
+
+
+@dataclass(frozen=True)
+class ObstacleTracks:
+    """Disc tracks on the sample grid: centres (n, K, 2), presence (n, K), radii (n,)."""
+
+    positions_m: np.ndarray
+    present: np.ndarray
+    radii_m: np.ndarray
+
+
+def build_commonroad_scenario(cfg: ScenarioConfig, tracks: ObstacleTracks) -> CommonRoadScenario:
+    """Our scenario from a resolved configuration and the obstacles' tracks (velocities by
+    finite differences of the centres where both neighbours are recorded)."""
+    n, k = tracks.present.shape
+    dt = float(cfg.sample_time_s)
+    velocities = _track_velocities(tracks, dt)
+    first = np.argmax(tracks.present, axis=1) if n else np.zeros(0, int)
+    rows = np.arange(n)
+    return CommonRoadScenario(
+        name=cfg.name, start_m=np.asarray(cfg.start_xy_m, float),
+        start_heading_rad=float(cfg.start_heading_rad), goal_m=np.asarray(cfg.goal_xy_m, float),
+        goal_tolerance_m=float(cfg.goal_tolerance_m), speed_mps=float(cfg.speed_mps),
+        initial_speed_mps=float(cfg.speed_mps), sample_time_s=dt, n_steps=int(cfg.n_steps),
+        plant_substeps=int(cfg.plant_substeps),
+        obstacle_start_m=tracks.positions_m[rows, first].reshape(-1, 2),
+        obstacle_velocity_mps=velocities[rows, first].reshape(-1, 2),
+        obstacle_radius_m=np.asarray(tracks.radii_m, float),
+        obstacle_appear_s=first.astype(float) * dt, obstacle_slots="nearest",
+        track_step_s=dt, track_positions_m=tracks.positions_m,
+        track_velocities_mps=velocities, track_present=tracks.present)
+
+
+def _track_velocities(tracks: ObstacleTracks, dt: float) -> np.ndarray:
+    """Each sample's velocity (n, K, 2): the forward difference where the next sample is
+    recorded too, else the backward one, else zero."""
+    p, present = tracks.positions_m, tracks.present
+    velocities = np.zeros(p.shape)
+    if p.shape[1] < 2:
+        return velocities
+    steps = (p[:, 1:] - p[:, :-1]) / dt
+    pairs = present[:, 1:] & present[:, :-1]
+    forward, backward = np.zeros(p.shape), np.zeros(p.shape)
+    forward[:, :-1] = np.where(pairs[..., None], steps, 0.0)
+    backward[:, 1:] = np.where(pairs[..., None], steps, 0.0)
+    has_forward = np.zeros(present.shape, bool)
+    has_forward[:, :-1] = pairs
+    velocities = np.where(has_forward[..., None], forward, backward)
+    return velocities
+
+
+def _safe(text: str) -> str:
+    """``text`` with every character outside ``[A-Za-z0-9_.+=,-]`` replaced by ``_`` (a
+    scenario name becomes a folder name), at most 100 characters."""
+    import re
+
+    return re.sub(r"[^A-Za-z0-9_.+=,-]", "_", text)[:100]
+
+
+def _open(path: Path) -> tuple[Any, Any, str]:
+    """The file's scenario, planning problem set and SHA-256; a one-line
+    :class:`ConfigError` for a missing file or one that is not a CommonRoad scenario."""
+    import hashlib
+    import warnings
+    import xml.etree.ElementTree as ET
+
+    if not path.is_file():
+        raise ConfigError(PATH_KEY, str(path), "an existing CommonRoad scenario XML file "
+                          "(no such file)")
+    data = path.read_bytes()
+    try:
+        root = ET.fromstring(data).tag
+    except ET.ParseError as exc:
+        raise ConfigError(PATH_KEY, str(path), "a CommonRoad scenario XML file (this one is "
+                          f"not XML: {exc})") from None
+    if root != "commonRoad":
+        raise ConfigError(PATH_KEY, str(path), "a CommonRoad scenario XML file (its root "
+                          f"element is <{root}>, not <commonRoad>)")
+    from commonroad.common.file_reader import CommonRoadFileReader
+
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            scenario, problems = CommonRoadFileReader(str(path)).open()
+    except Exception as exc:  # noqa: BLE001 - any reader failure is the file's fault
+        first = (str(exc).splitlines() or [""])[0][:200]
+        raise ConfigError(PATH_KEY, str(path), "a CommonRoad scenario XML file (commonroad-io "
+                          f"cannot read this one: {type(exc).__name__}: {first})") from None
+    return scenario, problems, hashlib.sha256(data).hexdigest()
+
+
+def _planning_problem(problems: Any, cr: CommonRoadConfig, path: Path) -> Any:
+    """The chosen planning problem (the lowest id when none is chosen)."""
+    found = dict(problems.planning_problem_dict) if problems is not None else {}
+    if not found:
+        raise ConfigError(PATH_KEY, str(path), "a CommonRoad scenario with a planning problem "
+                          "(this file has none: nothing says where the ego starts and goes)")
+    if cr.planning_problem_id is None:
+        return found[min(found)]
+    if cr.planning_problem_id not in found:
+        raise ConfigError("scenario.commonroad.planning_problem_id", cr.planning_problem_id,
+                          f"one of the file's planning problems {sorted(found)}")
+    return found[cr.planning_problem_id]
+
+
+def _speed(problem: Any, cr: CommonRoadConfig) -> float:
+    """The run's speed: the configured one, else the initial state's."""
+    if cr.speed_mps is not None:
+        return float(cr.speed_mps)
+    speed = float(getattr(problem.initial_state, "velocity", 0.0) or 0.0)
+    if speed < 0.1:
+        raise ConfigError("scenario.commonroad.speed_mps", None,
+                          f"a speed in [0.1, 40] m/s: planning problem "
+                          f"{problem.planning_problem_id} starts at {speed:g} m/s")
+    return speed
+
+
+def _goal_times(problem: Any) -> list[tuple[int, int]]:
+    """The goal states' time-step intervals."""
+    out = []
+    for state in problem.goal.state_list:
+        interval = getattr(state, "time_step", None)
+        if interval is not None and hasattr(interval, "end"):
+            out.append((int(interval.start), int(interval.end)))
+    return out
+
+
+def _run_length(problem: Any, scenario: Any, t0: int) -> int:
+    """Steps to the goal's last time step (or to the file's last recorded obstacle step)."""
+    times = _goal_times(problem)
+    if times:
+        return max(2, max(end for _, end in times) - t0)
+    ends = [int(o.prediction.final_time_step) for o in scenario.dynamic_obstacles
+            if o.prediction is not None]
+    return max(2, (max(ends) if ends else t0 + 100) - t0)
+
+
+def _shape_centre(shape: Any) -> np.ndarray:
+    """A goal shape's centre (a shape group's: the mean of its shapes')."""
+    if hasattr(shape, "shapes"):
+        return np.mean([_shape_centre(s) for s in shape.shapes], axis=0)
+    return np.asarray(shape.center, float)
+
+
+def _goal_point(problem: Any, start: np.ndarray, heading: float, speed: float, dt: float,
+                t0: int) -> np.ndarray:
+    """The centre of the goal's position; a goal without one (a time or speed goal only):
+    where the ego would be at the goal's last time step driving straight on."""
+    for state in problem.goal.state_list:
+        position = getattr(state, "position", None)
+        if position is not None:
+            return _shape_centre(position)
+    times = _goal_times(problem)
+    horizon_s = (max(end for _, end in times) - t0) * dt if times else 10.0
+    return start + max(speed * horizon_s, 1.0) * np.array([math.cos(heading), math.sin(heading)])
+
+
+def shape_geometry(shape: Any) -> Any:
+    """A CommonRoad shape as a shapely geometry (in the frame its coordinates are in).
+
+    A circle is drawn here at its radius: commonroad-io 2024.3's own ``Circle.shapely_object``
+    is a disc of half the radius (``buffer(radius / 2)``), the one its drawings show."""
+    from shapely.geometry import Point
+    from shapely.ops import unary_union
+
+    if hasattr(shape, "shapes"):
+        return unary_union([shape_geometry(s) for s in shape.shapes])
+    if hasattr(shape, "radius"):
+        return Point(*np.asarray(shape.center, float)).buffer(float(shape.radius), 64)
+    return shape.shapely_object
+
+
+def disc_of_shape(shape: Any, reading: str) -> tuple[np.ndarray, float]:
+    """The disc our methods see for a CommonRoad shape (in the obstacle's frame): its centre
+    and radius; ``circumscribed`` holds the shape, ``half_width`` has half its smaller side.
+
+    A circle is its own disc under both readings (commonroad-io's drawing shows circles at half
+    their radius; its geometry does not)."""
+    if hasattr(shape, "radius") and not hasattr(shape, "shapes"):
+        return np.asarray(shape.center, float), float(shape.radius)
+    geometry = shape_geometry(shape)
+    centre = np.array(geometry.centroid.coords[0])
+    if reading == "half_width":
+        box = np.array(geometry.minimum_rotated_rectangle.exterior.coords)[:4]
+        sides = np.hypot(*np.diff(np.vstack([box, box[:1]]), axis=0).T)
+        return centre, float(sides.min() / 2.0)
+    points = np.array(geometry.convex_hull.exterior.coords)
+    return centre, float(np.max(np.hypot(*(points - centre).T)))
+
+
+def _tracks(scenario: Any, problem: Any, cr: CommonRoadConfig, t0: int,
+            n_samples: int) -> tuple[ObstacleTracks, tuple[int, ...], tuple[int, ...]]:
+    """Every obstacle's disc track over ``n_samples`` time steps from ``t0``; the ids kept and
+    the ids dropped as the ego's recording (obstacles never recorded in the window are left
+    out too)."""
+    start = np.asarray(problem.initial_state.position, float)
+    positions, presents, radii, ids, ego = [], [], [], [], []
+    for obstacle in sorted(scenario.obstacles, key=lambda o: o.obstacle_id):
+        at_start = _position(obstacle.state_at_time(t0))
+        if at_start is not None and np.hypot(*(at_start - start)) <= cr.ego_match_tolerance_m:
+            ego.append(int(obstacle.obstacle_id))
+            continue
+        centre, radius = disc_of_shape(obstacle.obstacle_shape, cr.obstacle_disc)
+        track = np.zeros((n_samples, 2))
+        present = np.zeros(n_samples, bool)
+        for k in range(n_samples):
+            state = obstacle.state_at_time(t0 + k)
+            position = _position(state)
+            if position is None:
+                continue
+            angle = _angle(getattr(state, "orientation", 0.0))
+            c, s = math.cos(angle), math.sin(angle)
+            track[k] = position + [c * centre[0] - s * centre[1],
+                                   s * centre[0] + c * centre[1]]
+            present[k] = True
+        if not present.any():
+            continue
+        _fill_absent(track, present)
+        positions.append(track)
+        presents.append(present)
+        radii.append(radius)
+        ids.append(int(obstacle.obstacle_id))
+    tracks = ObstacleTracks(np.array(positions).reshape(-1, n_samples, 2),
+                            np.array(presents, bool).reshape(-1, n_samples),
+                            np.array(radii, float))
+    return tracks, tuple(ids), tuple(ego)
+
+
+def _position(state: Any) -> np.ndarray | None:
+    """A state's position (an uncertain one, a shape: its centre), or None."""
+    position = getattr(state, "position", None) if state is not None else None
+    if position is None:
+        return None
+    if hasattr(position, "center") or hasattr(position, "shapes"):
+        return _shape_centre(position)
+    return np.asarray(position, float)
+
+
+def _angle(orientation: Any) -> float:
+    """A state's orientation (an uncertain one, an interval: its middle; none: 0)."""
+    if orientation is None:
+        return 0.0
+    if hasattr(orientation, "start") and hasattr(orientation, "end"):
+        return 0.5 * (float(orientation.start) + float(orientation.end))
+    return float(orientation)
+
+
+def _fill_absent(track: np.ndarray, present: np.ndarray) -> None:
+    """Samples outside the recording take the nearest recorded place (in place)."""
+    where = np.flatnonzero(present)
+    nearest = where[np.clip(np.searchsorted(where, np.arange(present.size)), 0, where.size - 1)]
+    before = where[np.clip(np.searchsorted(where, np.arange(present.size)) - 1, 0,
+                           where.size - 1)]
+    pick = np.where(np.abs(before - np.arange(present.size))
+                    < np.abs(nearest - np.arange(present.size)), before, nearest)
+    track[~present] = track[pick[~present]]
+
+
+def ego_states(trajectory: pd.DataFrame, initial_time_step: int) -> list[Any]:
+    """Our logged run as CommonRoad states of the kinematic single-track model (position,
+    steering angle, speed, orientation, time step), one per logged step."""
+    from commonroad.scenario.state import KSState
+
+    columns = [trajectory[c].to_numpy(float) for c in ("X_m", "Y_m", "delta_rad", "vx_mps",
+                                                      "psi_rad")]
+    return [KSState(position=np.array([x, y]), steering_angle=float(delta),
+                    velocity=float(v), orientation=float(psi), time_step=initial_time_step + k)
+            for k, (x, y, delta, v, psi) in enumerate(zip(*columns, strict=True))]
+
+
+def ego_solution(case: CommonRoadCase, trajectory: pd.DataFrame, vehicle_type: str) -> Any:
+    """Our run as a CommonRoad solution (``commonroad.common.solution.Solution``): the
+    kinematic single-track model's trajectory of the planning problem, ``vehicle_type``'s
+    parameters."""
+    from commonroad.common.solution import (
+        CostFunction,
+        PlanningProblemSolution,
+        Solution,
+        VehicleModel,
+        VehicleType,
+    )
+    from commonroad.scenario.trajectory import Trajectory
+
+    states = ego_states(trajectory, case.initial_time_step)
+    solution = PlanningProblemSolution(
+        planning_problem_id=case.planning_problem.planning_problem_id,
+        vehicle_model=VehicleModel.KS, vehicle_type=VehicleType[vehicle_type],
+        cost_function=CostFunction.JB1,
+        trajectory=Trajectory(case.initial_time_step, states))
+    return Solution(case.commonroad_scenario.scenario_id, [solution])
+
+
+def write_solution(solution: Any, path: Path) -> Path:
+    """Write a CommonRoad solution as its XML (commonroad-io's writer) to ``path``."""
+    from commonroad.common.solution import CommonRoadSolutionWriter
+
+    path = Path(path)
+    CommonRoadSolutionWriter(solution).write_to_file(output_path=str(path.parent),
+                                                     filename=path.name, overwrite=True)
+    return path
+
+
+def vehicle_shape_m(vehicle_type: str) -> tuple[float, float]:
+    """Length and width of a commonroad-vehicle-models parameter set (the ego's true
+    shape)."""
+    from vehiclemodels.parameters_vehicle1 import parameters_vehicle1
+    from vehiclemodels.parameters_vehicle2 import parameters_vehicle2
+    from vehiclemodels.parameters_vehicle3 import parameters_vehicle3
+
+    make = {"FORD_ESCORT": parameters_vehicle1, "BMW_320i": parameters_vehicle2,
+            "VW_VANAGON": parameters_vehicle3}[vehicle_type]
+    params = make()
+    return float(params.l), float(params.w)

@@ -1,0 +1,60 @@
+"""'CommonRoad scenarios': one row per run of ``make commonroad`` (``outputs/commonroad``), with
+our collision verdict beside the drivability checker's, the road and the goal (shown only;
+never judged in the ledgers)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+
+@dataclass(frozen=True)
+class CommonRoadRow:
+    """One run: the file's benchmark id, the method and its verdicts (see
+    :class:`~pipeline.analysis.commonroad_check.CommonRoadVerdicts`)."""
+
+    scenario: str
+    method: str
+    speed_mps: float | None
+    steps: int
+    obstacles: int
+    collision_ours: bool
+    collision_checker_discs: bool
+    collision_checker_true_shapes: bool
+    agreement_discs: str
+    agreement_true_shapes: str
+    off_road_steps: int
+    goal_commonroad: bool
+    goal_ours: bool
+
+
+@dataclass(frozen=True)
+class CommonRoadSection:
+    rows: tuple[CommonRoadRow, ...]
+
+    @property
+    def discs_agree_everywhere(self) -> bool:
+        """Whether the checker on our discs agreed with our check on every step of every
+        run."""
+        return all(r.agreement_discs.split("/")[0] == r.agreement_discs.split("/")[1]
+                   for r in self.rows)
+
+
+def commonroad_section(inputs: Any) -> CommonRoadSection | None:
+    """The section of ``inputs.commonroad`` (the runs' results), or None without runs."""
+    rows = []
+    for result in inputs.commonroad:
+        file, run, v = (result.summary[k] for k in ("file", "run", "verdicts"))
+        steps = int(v["steps"])
+        rows.append(CommonRoadRow(
+            scenario=str(file["benchmark_id"]), method=str(run["method"]),
+            speed_mps=run.get("speed_mps"), steps=steps, obstacles=int(file["obstacles"]),
+            collision_ours=bool(v["ours_collision"]),
+            collision_checker_discs=bool(v["checker_same_geometry_collision"]),
+            collision_checker_true_shapes=bool(v["checker_true_shapes_collision"]),
+            agreement_discs=f"{v['agreement_same_geometry_steps']}/{steps}",
+            agreement_true_shapes=f"{v['agreement_true_shapes_steps']}/{steps}",
+            off_road_steps=int(v["off_road_steps"]),
+            goal_commonroad=bool(v["goal_reached_commonroad"]),
+            goal_ours=bool(run["goal_reached_ours"])))
+    return CommonRoadSection(tuple(rows)) if rows else None

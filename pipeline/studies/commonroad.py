@@ -1,0 +1,80 @@
+"""``scenario=commonroad``: one method on a CommonRoad scenario, judged by our check and by
+CommonRoad's drivability checker (docs/commonroad.md).
+
+:func:`run_commonroad` reads the file (:func:`~pipeline.loop.commonroad_scenario.
+read_commonroad`), simulates the configured method at the scenario's own speed, writes the run
+folder as any run's (:func:`~pipeline.studies.experiment.run_experiment`), then judges the run
+(:func:`~pipeline.analysis.commonroad_check.judge_commonroad_run`) and writes the verdicts and
+the ego's trajectory as a CommonRoad solution beside it
+(:class:`~pipeline.studies.results.commonroad.CommonRoadResult`).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+from pathlib import Path
+
+from pipeline.analysis.commonroad_check import CommonRoadVerdicts, judge_commonroad_run
+from pipeline.config import ExperimentConfig
+from pipeline.loop.commonroad_scenario import (
+    ego_solution,
+    read_commonroad,
+    vehicle_shape_m,
+    write_solution,
+)
+from pipeline.store.runs import read_run
+from pipeline.studies.experiment import RunSummary, run_experiment
+from pipeline.studies.results.commonroad import CommonRoadResult
+
+
+@dataclass(frozen=True)
+class CommonRoadRun:
+    """What :func:`run_commonroad` produced: the run (as any run's summary), the verdicts and
+    the written result."""
+
+    run: RunSummary
+    verdicts: CommonRoadVerdicts
+    result: CommonRoadResult
+
+
+def run_commonroad(cfg: ExperimentConfig, out_dir: Path) -> CommonRoadRun:
+    """Run ``cfg``'s method on the CommonRoad scenario of ``cfg.scenario.commonroad`` into
+    ``out_dir`` (always simulated again: the file may have changed under its path).
+
+    Raises
+    ------
+    MissingExtraError, ConfigError
+        Without the extra; a missing or unreadable file, no planning problem (one line each).
+    """
+    commonroad = cfg.scenario.commonroad
+    if commonroad is None:
+        raise ValueError("run_commonroad needs scenario=commonroad")
+    case = read_commonroad(cfg.scenario)
+    resolved = replace(cfg, scenario=case.scenario_config)
+    run = run_experiment(resolved, out_dir, resume=False, scenario=case.scenario)
+    trajectory = read_run(run.out_dir).trajectory
+    assert trajectory is not None  # read with its trajectory
+    length_m, width_m = vehicle_shape_m(commonroad.vehicle_type)
+    verdicts = judge_commonroad_run(case, trajectory, resolved.vehicle.footprint_radius_m,
+                                    length_m, width_m)
+    summary = {
+        "file": {"path": str(commonroad.path), "sha256": case.file_sha256,
+                 "benchmark_id": str(case.commonroad_scenario.scenario_id),
+                 "planning_problem_id": int(case.planning_problem.planning_problem_id),
+                 "initial_time_step": case.initial_time_step,
+                 "obstacles": len(case.obstacle_ids),
+                 "ego_recording_dropped": list(case.ego_recording_ids)},
+        "run": {"method": resolved.method_name, "termination": run.info.termination,
+                "speed_mps": resolved.scenario.speed_mps,
+                "sample_time_s": resolved.scenario.sample_time_s,
+                "goal_reached_ours": run.info.termination == "goal_line",
+                "collision_ours_continuous": bool(run.metrics.to_json().get("collision")),
+                "ego_radius_m": resolved.vehicle.footprint_radius_m,
+                "ego_length_m": length_m, "ego_width_m": width_m,
+                "vehicle_type": commonroad.vehicle_type},
+        "verdicts": verdicts.to_json(),
+    }
+    solution = ego_solution(case, trajectory, commonroad.vehicle_type)
+    result = CommonRoadResult(summary).write(run.out_dir,
+                                             lambda path: write_solution(solution, path))
+    return CommonRoadRun(run, verdicts, result)
