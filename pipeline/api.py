@@ -26,6 +26,7 @@ from pipeline.analysis.metrics.criteria import compute_metrics
 from pipeline.analysis.metrics.results import RunMetrics
 from pipeline.analysis.tally import Tally
 from pipeline.config import CONF_DIR, ExperimentConfig, register_configs, to_experiment_config
+from pipeline.errors import plain_value
 
 __all__ = ["FamilyResult", "RunResult", "compare", "compose", "simulate", "simulate_family",
            "warm_compiled_kernels"]
@@ -169,9 +170,57 @@ def compare(treatment: FamilyResult, controls: dict[str, FamilyResult] | FamilyR
     treatment's own settings."""
     if isinstance(controls, FamilyResult):
         controls = {controls.method: controls}
+    if not isinstance(treatment, FamilyResult):
+        raise TypeError(f"api.compare: the treatment is a {type(treatment).__name__}; allowed: "
+                        "a FamilyResult (api.simulate_family)")
+    if not isinstance(controls, dict) or not controls:
+        raise TypeError(f"api.compare: controls is {type(controls).__name__} "
+                        f"{'(empty)' if isinstance(controls, dict) else ''}".rstrip()
+                        + "; allowed: a FamilyResult or a dict of name -> FamilyResult")
+    for name, family in controls.items():
+        if not isinstance(family, FamilyResult):
+            raise TypeError(f"api.compare: the control {name!r} is a {type(family).__name__}; "
+                            "allowed: a FamilyResult (api.simulate_family)")
+        _check_pairable(treatment, name, family)
     names = tuple(controls)
     if treatment.method in names:
         raise ValueError(f"the treatment {treatment.method!r} is also a control")
     tables = {treatment.method: treatment.table, **{n: f.table for n, f in controls.items()}}
     return family_ledger(tables, claims if claims is not None else treatment.config.claims,
                          None, treatment.method, names)
+
+
+def track_of(config: ExperimentConfig) -> str:
+    """``kinematic`` (Appendix A's kinematic MPC) or ``lateral`` (the paper's model, and the
+    peers that drive it)."""
+    return "kinematic" if config.controller.kind == "kinematic_mpc" else "lateral"
+
+
+def _check_pairable(treatment: FamilyResult, name: str, control: FamilyResult) -> None:
+    """Refuse, in one line naming the control and the key, a control whose members are not
+    the treatment's: another track, or another scenario family (its draws or its base
+    scenario; ``scenario.family.n_jobs`` only says how it ran)."""
+    import dataclasses
+
+    ours, theirs = track_of(treatment.config), track_of(control.config)
+    if ours != theirs:
+        raise ValueError(f"api.compare: the control {name!r} is a {theirs} family and the "
+                         f"treatment {treatment.method!r} a {ours} one; allowed: families of "
+                         "one track (compose both with, or both without, "
+                         "experiment=kinematic)")
+
+    def scenario_fields(config: ExperimentConfig) -> dict:
+        scenario = config.scenario
+        family = dataclasses.asdict(scenario.family) if scenario.family is not None else {}
+        family.pop("n_jobs", None)
+        fields = {f"scenario.{k}": v for k, v in dataclasses.asdict(scenario).items()
+                  if k != "family"}
+        return {**fields, **{f"scenario.family.{k}": v for k, v in family.items()}}
+
+    mine, other = scenario_fields(treatment.config), scenario_fields(control.config)
+    for key in mine:
+        if mine[key] != other.get(key):
+            raise ValueError(f"api.compare: the control {name!r} ran another scenario family "
+                             f"({key}={plain_value(other.get(key))} against the treatment's "
+                             f"{plain_value(mine[key])}); allowed: the same family for every "
+                             "method, members paired by scenario")
