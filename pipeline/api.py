@@ -24,6 +24,7 @@ import pandas as pd
 from pipeline.analysis.claims.ledger import Ledger, family_ledger
 from pipeline.analysis.metrics.criteria import compute_metrics
 from pipeline.analysis.metrics.results import RunMetrics
+from pipeline.analysis.settings import ClaimsConfig
 from pipeline.analysis.tally import Tally
 from pipeline.config import CONF_DIR, ExperimentConfig, register_configs, to_experiment_config
 from pipeline.errors import plain_value
@@ -54,10 +55,10 @@ def compose(overrides: list[str] | None = None) -> ExperimentConfig:
     from hydra import compose as hydra_compose
     from hydra import initialize_config_dir
 
+    overrides = _override_list(overrides)
     register_configs()
     with initialize_config_dir(config_dir=str(CONF_DIR), version_base="1.3"):
-        return to_experiment_config(hydra_compose(config_name="config",
-                                                  overrides=list(overrides or [])))
+        return to_experiment_config(hydra_compose(config_name="config", overrides=overrides))
 
 
 @dataclass(frozen=True)
@@ -106,7 +107,22 @@ class FamilyResult:
 def _config(overrides: list[str] | None, config: ExperimentConfig | None) -> ExperimentConfig:
     if config is not None and overrides:
         raise ValueError("give overrides or a config, not both")
+    if config is not None and not isinstance(config, ExperimentConfig):
+        raise TypeError(f"config is a {type(config).__name__}; allowed: an ExperimentConfig "
+                        "(api.compose)")
     return config if config is not None else compose(overrides)
+
+
+def _override_list(overrides: object) -> list[str]:
+    """``overrides`` as a list of strings; a bare string (which Python would split into
+    characters) or anything else is refused in one line."""
+    if overrides is None:
+        return []
+    if isinstance(overrides, (str, bytes)) or not isinstance(overrides, (list, tuple)) \
+            or not all(isinstance(o, str) for o in overrides):
+        raise TypeError(f"overrides is {plain_value(overrides)}; allowed: a list of strings "
+                        "such as ['method=improved', 'planner.beta=0.5']")
+    return list(overrides)
 
 
 def simulate(overrides: list[str] | None = None, *, config: ExperimentConfig | None = None,
@@ -149,7 +165,7 @@ def simulate_family(overrides: list[str] | None = None, *,
     from pipeline.studies.experiment import run_family
 
     if config is None:
-        overrides = list(overrides or [])
+        overrides = _override_list(overrides)
         if not any(o.startswith("scenario=") for o in overrides):
             overrides = ["scenario=family"] + overrides
     cfg = _config(overrides, config)
@@ -182,6 +198,9 @@ def compare(treatment: FamilyResult, controls: dict[str, FamilyResult] | FamilyR
             raise TypeError(f"api.compare: the control {name!r} is a {type(family).__name__}; "
                             "allowed: a FamilyResult (api.simulate_family)")
         _check_pairable(treatment, name, family)
+    if claims is not None and not isinstance(claims, ClaimsConfig):
+        raise TypeError(f"api.compare: claims is a {type(claims).__name__}; allowed: a "
+                        "ClaimsConfig (e.g. api.compose([...]).claims) or None")
     names = tuple(controls)
     if treatment.method in names:
         raise ValueError(f"the treatment {treatment.method!r} is also a control")

@@ -311,3 +311,27 @@ def test_api_compare_refuses_what_is_not_a_family_and_allows_other_workers():
 
     _check_pairable(treatment, "baseline", _family(["method=baseline",
                                                     "scenario.family.n_jobs=1"]))
+
+
+@pytest.mark.parametrize(("call", "line"), [
+    (lambda api: api.compose("method=improved"),
+     "overrides is 'method=improved'; allowed: a list of strings such as "
+     "['method=improved', 'planner.beta=0.5']"),
+    (lambda api: api.simulate_family([3]),
+     "overrides is [3]; allowed: a list of strings such as ['method=improved', "
+     "'planner.beta=0.5']"),
+    (lambda api: api.simulate(config={"method": "improved"}),
+     "config is a dict; allowed: an ExperimentConfig (api.compose)"),
+    (lambda api: api.compare(_family(["method=improved"]), _family(["method=baseline"]),
+                             claims={"alpha": 0.05}),
+     "api.compare: claims is a dict; allowed: a ClaimsConfig (e.g. api.compose([...]).claims) "
+     "or None"),
+], ids=["bare-string", "not-strings", "config-dict", "claims-dict"])
+def test_api_inputs_of_the_wrong_kind_are_one_line(call, line):
+    """A bare string of overrides was split into characters (each a confusing Hydra error);
+    now every API input of the wrong kind is refused in one line saying what is allowed."""
+    from pipeline import api
+
+    with pytest.raises(TypeError) as info:
+        call(api)
+    assert str(info.value) == line
