@@ -9,7 +9,7 @@ The commands and the lines the user sees::
     a cluster's login node, or leave out hydra/launcher=slurm to run here; nothing was submitted
 
     $ python -m pipeline.nmpc_check --out D                              # the disk is full
-    error: D/agreement.csv: No space left on device
+    error: D/agreement.csv: cannot write its results (No space left on device)
 """
 
 from __future__ import annotations
@@ -108,7 +108,7 @@ def test_nmpc_check_on_a_full_disk_names_the_file(tmp_path, monkeypatch, capsys)
     assert command.main(["--members", "1", "--out", str(out)]) == 2
     captured = capsys.readouterr()
     assert captured.err.strip().splitlines() == [
-        f"error: {out / 'agreement.csv'}: No space left on device"]
+        f"error: {out / 'agreement.csv'}: cannot write its results (No space left on device)"]
     assert not list(out.glob("*.tmp")) and not (out / "agreement.csv").exists()
 
 
@@ -162,6 +162,19 @@ def test_a_disk_fault_without_a_file_name_is_still_one_line(capsys):
         "another output folder"]
 
 
+def test_an_output_that_is_a_file_is_one_line(tmp_path, capsys):
+    """``python -m pipeline.nmpc_check --out FILE``: before, ``error: FILE: File exists``."""
+    import pipeline.nmpc_check as command
+
+    afile = tmp_path / "afile"
+    afile.write_text("mine\n")
+    assert command.main(["--members", "1", "--out", str(afile)]) == 2
+    assert capsys.readouterr().err.strip().splitlines() == [
+        f"--out: {afile} is not a folder; allowed: a folder (new, or one this check wrote "
+        "before)"]
+    assert afile.read_text() == "mine\n"
+
+
 def test_a_read_only_output_folder_is_one_line_naming_it(tmp_path, monkeypatch, capsys):
     """``python -m pipeline.nmpc_check --out D`` with D on a read-only file system (simulated:
     the tests may run as root, whom permissions do not stop): exit 2, one line naming D."""
@@ -178,7 +191,7 @@ def test_a_read_only_output_folder_is_one_line_naming_it(tmp_path, monkeypatch, 
     out = tmp_path / "ro"
     assert command.main(["--members", "1", "--out", str(out)]) == 2
     assert capsys.readouterr().err.strip().splitlines() == [
-        f"error: {out / '.x.tmp'}: Read-only file system"]
+        f"error: {out / '.x.tmp'}: cannot write its results (Read-only file system)"]
 
 
 @pytest.mark.skipif(os.geteuid() == 0, reason="root writes into read-only folders")
