@@ -335,3 +335,46 @@ def test_api_inputs_of_the_wrong_kind_are_one_line(call, line):
     with pytest.raises(TypeError) as info:
         call(api)
     assert str(info.value) == line
+
+
+BADLY_BUILT = '''
+class NoArgs:
+    def __init__(self):
+        pass
+
+
+class NoStep:
+    def __init__(self, settings, vehicle, sample_time_s, qp_cache=None):
+        self.compile_count, self.compile_time_s = 0, 0.0
+
+
+class NoSpeed:
+    def __init__(self, settings, horizon, sample_time_s):
+        pass
+
+    def rollout(self, *args):
+        return None
+'''
+
+
+@pytest.mark.parametrize(("override", "line"), [
+    ("planner._target_=my_built.NoArgs",
+     "config error: planner._target_='my_built.NoArgs' is invalid; allowed: a class built as "
+     "Planner(settings, horizon, sample_time_s) (too many positional arguments)"),
+    ("controller._target_=my_built.NoStep",
+     "plug-in error: controller my_built.NoStep has no step(); allowed: a class with step() "
+     "(step(observation) -> ControlStep, see pipeline.loop.controller.base)"),
+    ("planner._target_=my_built.NoSpeed",
+     "plug-in error: planner my_built.NoSpeed has no speed(); allowed: a class with rollout(), "
+     "speed() (subclass pipeline.loop.planner.ApfPlanner)"),
+], ids=["constructor", "no-step", "no-speed"])
+def test_a_plugin_that_does_not_fit_the_protocol_is_refused_before_the_run(
+        tmp_path, monkeypatch, make_config, override, line):
+    from pipeline.errors import describe_config_error
+
+    (tmp_path / "my_built.py").write_text(BADLY_BUILT)
+    monkeypatch.syspath_prepend(str(tmp_path))
+    sys.modules.pop("my_built", None)
+    with pytest.raises((PluginOutputError, ValueError)) as info:
+        _simulate(make_config, [override])
+    assert describe_config_error(info.value) == line

@@ -52,6 +52,15 @@ def _array(who: str, field: str, value: Any, shape: tuple[int, ...], what: str) 
     return array
 
 
+def _has_methods(who: str, plugin: Any, names: tuple[str, ...], how: str) -> None:
+    """Refuse a plug-in that lacks a method the loop calls, before the run starts."""
+    missing = [name for name in names if not callable(getattr(plugin, name, None))]
+    if missing:
+        raise PluginOutputError(f"plug-in error: {who} has no {', '.join(m + '()' for m in missing)}; "
+                                f"allowed: a class with {', '.join(n + '()' for n in names)} "
+                                f"({how})")
+
+
 class CheckedPlanner:
     """A user's planner with its outputs checked (see the module docstring): ``rollout``'s
     path of ``horizon`` points and its forces and flags, ``speed`` in
@@ -60,6 +69,8 @@ class CheckedPlanner:
     def __init__(self, planner: Any, target: str, horizon: int, speed_max_mps: float) -> None:
         self.inner, self.who = planner, f"planner {target}"
         self.horizon, self.speed_max_mps = int(horizon), float(speed_max_mps)
+        _has_methods(self.who, planner, ("rollout", "speed"),
+                     "subclass pipeline.loop.planner.ApfPlanner")
         inner_speed = planner.speed
 
         @functools.wraps(inner_speed)  # its signature: the loop asks for path_m by it
@@ -114,6 +125,8 @@ class CheckedController:
     def __init__(self, controller: Any, target: str,
                  bounds: tuple[tuple[float, float, str], ...]) -> None:
         self.inner, self.who, self.bounds = controller, f"controller {target}", bounds
+        _has_methods(self.who, controller, ("step",),
+                     "step(observation) -> ControlStep, see pipeline.loop.controller.base")
         self._low = np.array([b[0] for b in bounds], float)
         self._high = np.array([b[1] for b in bounds], float)
         slack = BOUND_SLACK * np.maximum(np.abs(self._low), np.abs(self._high))
