@@ -56,6 +56,7 @@ def test_ctrl_c_inside_ipopt_is_an_interrupt_never_a_failed_solve(under_command)
 
     solver, n = _slow_nlp()
     assert ipopt_solve(solver, x0=np.zeros(n), lbg=-1, ubg=1)[0] == "optimal"
+    previous = signal.signal(signal.SIGINT, signal.default_int_handler)  # Python's own
     restore = stop_on_signals() if under_command else (lambda: None)
     outcomes = []
     try:
@@ -75,6 +76,7 @@ def test_ctrl_c_inside_ipopt_is_an_interrupt_never_a_failed_solve(under_command)
                 timer.join()
     finally:
         restore()
+        signal.signal(signal.SIGINT, previous)
     expected = "Interrupted" if under_command else "KeyboardInterrupt"
     assert "solver_error" not in outcomes
     assert set(outcomes) <= {expected, "optimal"} and expected in outcomes
