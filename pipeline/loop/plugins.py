@@ -80,6 +80,8 @@ class CheckedPlanner:
         self.speed = speed
 
     def __getattr__(self, name: str) -> Any:
+        if name == "inner":  # not built yet (a copy being made): no recursion
+            raise AttributeError(name)
         return getattr(self.inner, name)
 
     def rollout(self, *args: Any, **kwargs: Any) -> ApfRollout:
@@ -141,6 +143,8 @@ class CheckedController:
         return getattr(self.inner, "compile_time_s", 0.0)
 
     def __getattr__(self, name: str) -> Any:
+        if name == "inner":  # not built yet (a copy being made): no recursion
+            raise AttributeError(name)
         return getattr(self.inner, name)
 
     def step(self, observation: Observation) -> ControlStep:
