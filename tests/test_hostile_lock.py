@@ -197,3 +197,22 @@ def test_any_lock_file_content_is_taken_or_refused_in_one_line(tmp_path, content
         taken = False
     assert not (taken and foreign)
     (folder / LOCK).unlink(missing_ok=True)
+
+
+def test_two_nmpc_checks_into_one_folder_the_second_is_refused(tmp_path, capsys):
+    """``python -m pipeline.nmpc_check --out D`` while another check writes D: exit 2, one
+    line naming the first (before: both ran and their table and summary could mix)."""
+    import pipeline.nmpc_check as command
+
+    folder = tmp_path / "nmpc"
+    holder = _holder(folder)
+    try:
+        assert command.main(["--members", "1", "--track", "kinematic", "--out",
+                             str(folder)]) == 2
+    finally:
+        holder.kill()
+        holder.wait()
+    assert capsys.readouterr().err.strip().splitlines() == [
+        f"error: {folder} is being written by another run (pid {holder.pid}); wait for it "
+        "to finish or choose another output folder"]
+    assert sorted(p.name for p in folder.iterdir()) == [LOCK]  # the killed holder's file
