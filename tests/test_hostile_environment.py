@@ -221,3 +221,20 @@ def test_a_full_disk_under_sqlite_is_one_line(capsys):
     assert capsys.readouterr().err.strip().splitlines() == [
         "error: cannot write: No space left on device (database or disk is full) (ENOSPC); "
         "free some space or choose another output folder"]
+
+
+def test_the_multiverse_on_slurm_without_slurm_is_one_line(tmp_path):
+    """The multiverse and the tuning submit through the same executor: ``python -m
+    pipeline.multiverse --space quick hydra/launcher=slurm`` without SLURM is the same line,
+    exit 2, before any family is submitted."""
+    empty = tmp_path / "bin"
+    empty.mkdir()
+    proc = subprocess.run([sys.executable, "-m", "pipeline.multiverse", "--space", "quick",
+                           "--out", str(tmp_path / "mv"), "hydra/launcher=slurm"],
+                          cwd=ROOT, capture_output=True, text=True, timeout=600,
+                          env={**os.environ, "PYTHONPATH": str(ROOT), "PATH": str(empty)})
+    assert proc.returncode == 2, proc.stderr[-2000:]
+    assert _error_lines(proc.stderr)[-1] == (
+        "error: hydra/launcher=slurm needs SLURM, but sbatch, srun, squeue are not on PATH; "
+        "run on a cluster's login node, or leave out hydra/launcher=slurm to run here; "
+        "nothing was submitted")

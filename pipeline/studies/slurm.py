@@ -201,12 +201,18 @@ def resume_command() -> str:
 
 
 def executor_for(params: dict, folder: Path):
-    """A submitit SLURM executor from hydra-submitit-launcher-style settings."""
+    """A submitit SLURM executor from hydra-submitit-launcher-style settings, for a machine
+    that has SLURM (:func:`check_slurm`; the multiverse and the tuning submit through it too).
+    Its ``map_array`` turns sbatch's refusal into one line
+    (:class:`~pipeline.errors.EnvironmentFault`) instead of submitit's traceback."""
+    import functools
+
     import submitit
     from omegaconf import OmegaConf
 
     from hydra_plugins.hydra_submitit_launcher.config import BaseQueueConf
 
+    check_slurm()  # before submitit, whose executor refuses a machine without srun by a traceback
     params = {k: v for k, v in params.items() if k not in (
         "_target_", "poll_s", "lost_after_s", "max_wait_min", "submitit_folder")}
     init = {"folder": str(folder)}
@@ -216,6 +222,17 @@ def executor_for(params: dict, folder: Path):
     base = set(OmegaConf.structured(BaseQueueConf).keys())
     executor.update_parameters(**{k if k in base else f"slurm_{k}": v for k, v in params.items()
                                   if v is not None})
+    submit = executor.map_array
+
+    @functools.wraps(submit)
+    def map_array(*args, **kwargs):
+        try:
+            return submit(*args, **kwargs)
+        except Exception as exc:  # noqa: BLE001 - sbatch refused: one line, nothing submitted
+            raise EnvironmentFault(f"hydra/launcher=slurm: sbatch refused the jobs "
+                                   f"({_last_line(exc)}); nothing was submitted") from None
+
+    executor.map_array = map_array  # type: ignore[method-assign]  # guarded, same call
     return executor
 
 
@@ -299,11 +316,7 @@ class RobustSlurmLauncherBase(SlurmLauncher):
             log.info("\t#%d : %s", idx, " ".join(filter_overrides(overrides)))
             job_params.append((overrides, "hydra.sweep.dir", idx, f"job_id_for_{idx}",
                                Singleton.get_state()))
-        try:
-            jobs = executor.map_array(self, *zip(*job_params, strict=True))
-        except Exception as exc:  # noqa: BLE001 - sbatch refused: one line, nothing submitted
-            raise EnvironmentFault(f"hydra/launcher=slurm: sbatch refused the jobs "
-                                   f"({_last_line(exc)}); nothing was submitted") from None
+        jobs = executor.map_array(self, *zip(*job_params, strict=True))
         results, unfinished = self._wait(jobs, [o for _, o in to_submit],
                                          [i for i, _ in to_submit])
         if unfinished:
