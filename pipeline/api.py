@@ -24,8 +24,10 @@ import pandas as pd
 from pipeline.analysis.claims.ledger import Ledger, family_ledger
 from pipeline.analysis.metrics.criteria import compute_metrics
 from pipeline.analysis.metrics.results import RunMetrics
+from pipeline.analysis.settings import ClaimsConfig
 from pipeline.analysis.tally import Tally
 from pipeline.config import CONF_DIR, ExperimentConfig, register_configs, to_experiment_config
+from pipeline.errors import plain_value
 
 __all__ = ["FamilyResult", "RunResult", "compare", "compose", "simulate", "simulate_family",
            "warm_compiled_kernels"]
@@ -53,10 +55,10 @@ def compose(overrides: list[str] | None = None) -> ExperimentConfig:
     from hydra import compose as hydra_compose
     from hydra import initialize_config_dir
 
+    overrides = _override_list(overrides)
     register_configs()
     with initialize_config_dir(config_dir=str(CONF_DIR), version_base="1.3"):
-        return to_experiment_config(hydra_compose(config_name="config",
-                                                  overrides=list(overrides or [])))
+        return to_experiment_config(hydra_compose(config_name="config", overrides=overrides))
 
 
 @dataclass(frozen=True)
@@ -105,7 +107,22 @@ class FamilyResult:
 def _config(overrides: list[str] | None, config: ExperimentConfig | None) -> ExperimentConfig:
     if config is not None and overrides:
         raise ValueError("give overrides or a config, not both")
+    if config is not None and not isinstance(config, ExperimentConfig):
+        raise TypeError(f"config is a {type(config).__name__}; allowed: an ExperimentConfig "
+                        "(api.compose)")
     return config if config is not None else compose(overrides)
+
+
+def _override_list(overrides: object) -> list[str]:
+    """``overrides`` as a list of strings; a bare string (which Python would split into
+    characters) or anything else is refused in one line."""
+    if overrides is None:
+        return []
+    if isinstance(overrides, (str, bytes)) or not isinstance(overrides, (list, tuple)) \
+            or not all(isinstance(o, str) for o in overrides):
+        raise TypeError(f"overrides is {plain_value(overrides)}; allowed: a list of strings "
+                        "such as ['method=improved', 'planner.beta=0.5']")
+    return list(overrides)
 
 
 def simulate(overrides: list[str] | None = None, *, config: ExperimentConfig | None = None,
@@ -148,7 +165,7 @@ def simulate_family(overrides: list[str] | None = None, *,
     from pipeline.studies.experiment import run_family
 
     if config is None:
-        overrides = list(overrides or [])
+        overrides = _override_list(overrides)
         if not any(o.startswith("scenario=") for o in overrides):
             overrides = ["scenario=family"] + overrides
     cfg = _config(overrides, config)
@@ -169,9 +186,60 @@ def compare(treatment: FamilyResult, controls: dict[str, FamilyResult] | FamilyR
     treatment's own settings."""
     if isinstance(controls, FamilyResult):
         controls = {controls.method: controls}
+    if not isinstance(treatment, FamilyResult):
+        raise TypeError(f"api.compare: the treatment is a {type(treatment).__name__}; allowed: "
+                        "a FamilyResult (api.simulate_family)")
+    if not isinstance(controls, dict) or not controls:
+        raise TypeError(f"api.compare: controls is {type(controls).__name__} "
+                        f"{'(empty)' if isinstance(controls, dict) else ''}".rstrip()
+                        + "; allowed: a FamilyResult or a dict of name -> FamilyResult")
+    for name, family in controls.items():
+        if not isinstance(family, FamilyResult):
+            raise TypeError(f"api.compare: the control {name!r} is a {type(family).__name__}; "
+                            "allowed: a FamilyResult (api.simulate_family)")
+        _check_pairable(treatment, name, family)
+    if claims is not None and not isinstance(claims, ClaimsConfig):
+        raise TypeError(f"api.compare: claims is a {type(claims).__name__}; allowed: a "
+                        "ClaimsConfig (e.g. api.compose([...]).claims) or None")
     names = tuple(controls)
     if treatment.method in names:
         raise ValueError(f"the treatment {treatment.method!r} is also a control")
     tables = {treatment.method: treatment.table, **{n: f.table for n, f in controls.items()}}
     return family_ledger(tables, claims if claims is not None else treatment.config.claims,
                          None, treatment.method, names)
+
+
+def track_of(config: ExperimentConfig) -> str:
+    """``kinematic`` (Appendix A's kinematic MPC) or ``lateral`` (the paper's model, and the
+    peers that drive it)."""
+    return "kinematic" if config.controller.kind == "kinematic_mpc" else "lateral"
+
+
+def _check_pairable(treatment: FamilyResult, name: str, control: FamilyResult) -> None:
+    """Refuse, in one line naming the control and the key, a control whose members are not
+    the treatment's: another track, or another scenario family (its draws or its base
+    scenario; ``scenario.family.n_jobs`` only says how it ran)."""
+    import dataclasses
+
+    ours, theirs = track_of(treatment.config), track_of(control.config)
+    if ours != theirs:
+        raise ValueError(f"api.compare: the control {name!r} is a {theirs} family and the "
+                         f"treatment {treatment.method!r} a {ours} one; allowed: families of "
+                         "one track (compose both with, or both without, "
+                         "experiment=kinematic)")
+
+    def scenario_fields(config: ExperimentConfig) -> dict:
+        scenario = config.scenario
+        family = dataclasses.asdict(scenario.family) if scenario.family is not None else {}
+        family.pop("n_jobs", None)
+        fields = {f"scenario.{k}": v for k, v in dataclasses.asdict(scenario).items()
+                  if k != "family"}
+        return {**fields, **{f"scenario.family.{k}": v for k, v in family.items()}}
+
+    mine, other = scenario_fields(treatment.config), scenario_fields(control.config)
+    for key in mine:
+        if mine[key] != other.get(key):
+            raise ValueError(f"api.compare: the control {name!r} ran another scenario family "
+                             f"({key}={plain_value(other.get(key))} against the treatment's "
+                             f"{plain_value(mine[key])}); allowed: the same family for every "
+                             "method, members paired by scenario")

@@ -11,17 +11,22 @@ a command prints only its result (stdout) and its one error line.
 
 from __future__ import annotations
 
+import errno
 import logging
 import sys
 from collections.abc import Callable
 from typing import TypeVar
 
 from pipeline.errors import (
+    EnvironmentFault,
     FolderBusyError,
     IncompleteSweepError,
+    Interrupted,
     StudyError,
     describe_config_error,
     interrupted_exit_code,
+    raise_if_stopped,
+    signal_received,
     stop_on_signals,
     stopped_line,
 )
@@ -73,7 +78,7 @@ def cannot(what: str, default: object) -> Callable[[OSError], str]:
 EXIT_TABLE: tuple[tuple[tuple[type[BaseException], ...], Callable | None, int], ...] = (
     ((CommandError,), lambda exc: str(exc), 2),
     ((IncompleteSweepError,), lambda exc: str(exc), 2),
-    ((StudyError, FolderBusyError), lambda exc: f"error: {exc}", 2),
+    ((StudyError, FolderBusyError, EnvironmentFault), lambda exc: f"error: {exc}", 2),
     ((FileNotFoundError,), lambda exc: f"error: {exc}" if exc.filename is None
      else _os_error_line(exc), 2),
 )
@@ -91,6 +96,32 @@ def error_line(exc: BaseException, os_error: Callable[[OSError], str] | None = N
             return (line(exc) if line is not None else str(exc)), code
     if isinstance(exc, OSError) and exc.filename is not None:
         return (os_error or _os_error_line)(exc), 2
+    fault = _disk_fault(exc)
+    if fault is not None:
+        if fault.filename is not None:
+            return (os_error or _os_error_line)(fault), 2
+        return (f"error: cannot write: {fault.strerror or fault} ({errno.errorcode.get(fault.errno or 0, '?')}); "
+                "free some space or choose another output folder"), 2
+    return None
+
+
+#: What the machine, not the command, is short of: a full disk or quota, a read-only folder.
+DISK_FAULTS = (errno.ENOSPC, errno.EDQUOT, errno.EROFS, errno.EACCES, errno.EPERM, errno.EFBIG)
+
+
+def _disk_fault(exc: BaseException) -> OSError | None:
+    """The full disk or read-only folder behind ``exc`` (itself, or what it was raised from,
+    e.g. a worker's error re-raised by joblib), or None."""
+    seen: list[BaseException] = []
+    current: BaseException | None = exc
+    while current is not None and current not in seen:
+        seen.append(current)
+        if isinstance(current, OSError) and current.errno in DISK_FAULTS:
+            return current
+        if type(current).__name__ == "OperationalError" and "disk is full" in str(current):
+            # SQLite's word for it (the tuning's storage), under SQLAlchemy's wrapper
+            return OSError(errno.ENOSPC, "No space left on device (database or disk is full)")
+        current = current.__cause__ or current.__context__
     return None
 
 
@@ -118,22 +149,31 @@ def run_command(work: Callable[[], int | None], kept: str = "completed runs and 
     """
     if log_to_stderr:
         configure_logging()
-    stop_on_signals()
+    restore_signals = stop_on_signals()
     try:
-        code = work()
-    except KeyboardInterrupt as exc:
-        print(stopped_line(exc, kept), file=sys.stderr)
-        return interrupted_exit_code(exc)
-    except Exception as exc:  # noqa: BLE001 - the table decides; code errors re-raise
-        if tracebacks:
-            raise
-        found = error_line(exc, os_error)
-        if found is None:
-            if code_error is None:
+        try:
+            code = work()
+            raise_if_stopped()  # a signal whose exception was swallowed on the way
+        except KeyboardInterrupt as exc:
+            print(stopped_line(exc, kept), file=sys.stderr)
+            return interrupted_exit_code(exc)
+        except Exception as exc:  # noqa: BLE001 - the table decides; code errors re-raise
+            received = signal_received()
+            if received is not None:  # a swallowed interrupt resurfacing as another error
+                stopped = Interrupted(received)
+                print(stopped_line(stopped, kept), file=sys.stderr)
+                return interrupted_exit_code(stopped)
+            if tracebacks:
                 raise
-            found = (code_error(exc), 1)
-        print(found[0], file=sys.stderr)
-        return found[1]
+            found = error_line(exc, os_error)
+            if found is None:
+                if code_error is None:
+                    raise
+                found = (code_error(exc), 1)
+            print(found[0], file=sys.stderr)
+            return found[1]
+    finally:
+        restore_signals()
     return 0 if code is None else int(code)
 
 

@@ -7,6 +7,8 @@ configuration errors) into that line; the entry points print it and exit 2.
 
 from __future__ import annotations
 
+import contextlib
+from collections.abc import Callable, Iterator
 from typing import Any
 
 
@@ -69,6 +71,16 @@ class FolderBusyError(RuntimeError):
     """Another run is writing into the same output folder (its lock is held)."""
 
 
+class EnvironmentFault(RuntimeError):
+    """The machine cannot do what was asked (no SLURM for ``hydra/launcher=slurm``, a full
+    disk, a read-only folder); the message names what is missing and where."""
+
+
+class PluginOutputError(ValueError):
+    """A planner or controller of the user's own (``_target_``) returned something the loop
+    cannot use: the message names the plug-in, the field, what it was and what is allowed."""
+
+
 class RunFolderError(ValueError):
     """A run or family folder that cannot be trusted; the message says why."""
 
@@ -106,7 +118,8 @@ def describe_config_error(exc: BaseException) -> str | None:
         chain.append(current)
         current = current.__cause__ or current.__context__
     for err in chain:
-        if isinstance(err, (ConfigError, NonFiniteResultError, IncompleteSweepError)):
+        if isinstance(err, (ConfigError, NonFiniteResultError, IncompleteSweepError,
+                            PluginOutputError)):
             return str(err)
     # the readers in order: the first that words any exception of the chain wins
     for reader in (_missing_config_line, _omegaconf_line, _composition_line,
@@ -198,17 +211,105 @@ class Interrupted(KeyboardInterrupt):
         self.exit_code = 128 + signum
 
 
-def stop_on_signals() -> None:
-    """Turn SIGTERM (a scheduler, ``kill``) into :class:`Interrupted`, as SIGINT already is a
-    KeyboardInterrupt: the running study stops between members, joblib tears its workers
-    down, atomic writes remove their temporaries, and the command exits 143 (130 for SIGINT)
-    with one line. Without it a SIGTERM killed the parent and left its workers writing."""
-    import signal
+class SignalStop:
+    """The handler :func:`stop_on_signals` installs for SIGINT and SIGTERM: it remembers the
+    first signal (``received``) and raises :class:`Interrupted`.
 
-    def _raise(signum, frame):  # noqa: ARG001 - the signal module's signature
+    Remembering is what makes an interrupt impossible to lose: Python runs a signal handler at
+    whatever bytecode comes next, and an exception raised there can be swallowed (CasADi's
+    IPOPT turns it into a failed solve; one raised inside a weakref callback or a ``__del__``,
+    such as matplotlib's, is printed and dropped). :func:`raise_if_stopped` raises it again at
+    the next commit point and the command layer checks it when the work returns."""
+
+    def __init__(self) -> None:
+        self.received: int | None = None
+
+    def __call__(self, signum: int, frame: Any) -> None:  # noqa: ARG002 - signal's signature
+        if self.received is None:
+            self.received = signum
         raise Interrupted(signum)
 
-    signal.signal(signal.SIGTERM, _raise)
+
+def stop_on_signals() -> Callable[[], None]:
+    """Turn SIGINT (Ctrl-C) and SIGTERM (a scheduler, ``kill``) into :class:`Interrupted`
+    through a fresh :class:`SignalStop`: the running study stops between members, joblib
+    tears its workers down, atomic writes remove their temporaries, and the command exits 130
+    or 143 with one line. Without it a SIGTERM killed the parent and left its workers writing.
+    Returns the function that puts the previous handlers back (a no-op outside the main
+    thread, where signals cannot be handled)."""
+    import signal
+    import threading
+
+    if threading.current_thread() is not threading.main_thread():
+        return lambda: None
+    handler = SignalStop()
+    previous = {signum: signal.signal(signum, handler)
+                for signum in (signal.SIGINT, signal.SIGTERM)}
+
+    def restore() -> None:
+        for signum, old in previous.items():
+            if signal.getsignal(signum) is handler:
+                signal.signal(signum, old if old is not None else signal.SIG_DFL)
+
+    return restore
+
+
+def signal_received() -> int | None:
+    """The signal the current :class:`SignalStop` has received (None: none, or no handler of
+    ours is installed)."""
+    import signal
+
+    for signum in (signal.SIGINT, signal.SIGTERM):
+        handler = signal.getsignal(signum)
+        if isinstance(handler, SignalStop) and handler.received is not None:
+            return handler.received
+    return None
+
+
+def raise_if_stopped() -> None:
+    """Raise :class:`Interrupted` when a signal was received, even if the exception its
+    handler raised was swallowed on the way (called before anything is committed)."""
+    received = signal_received()
+    if received is not None:
+        raise Interrupted(received)
+
+
+@contextlib.contextmanager
+def signals_kept() -> Iterator[None]:
+    """Around a call into a C extension that swallows ``KeyboardInterrupt`` (CasADi's IPOPT
+    reports an interrupted solve as ``NonIpopt_Exception_Thrown`` and goes on): a SIGINT or
+    SIGTERM received inside is raised when the block ends, so an interrupted solve is never
+    taken for a failed one. Under :func:`stop_on_signals` this is one look at the handler;
+    elsewhere (the API, a worker process) a recording handler is put in front of the current
+    one for the block's duration (main thread only)."""
+    import signal
+    import threading
+
+    if isinstance(signal.getsignal(signal.SIGINT), SignalStop) \
+            or threading.current_thread() is not threading.main_thread():
+        yield
+        raise_if_stopped()
+        return
+    seen: list[int] = []
+    previous: dict[int, Callable[..., Any]] = {}
+    for signum in (signal.SIGINT, signal.SIGTERM):
+        old = signal.getsignal(signum)
+        if callable(old):
+            previous[signum] = old
+
+            def record(number, frame, old=old):
+                seen.append(number)
+                old(number, frame)
+
+            signal.signal(signum, record)
+    try:
+        yield
+    finally:
+        for number, handler in previous.items():
+            signal.signal(number, handler)
+    if seen:
+        previous[seen[0]](seen[0], None)  # the handler that was swallowed, once more
+        raise KeyboardInterrupt  # (a handler that did not raise: stop all the same)
 
 
 def interrupted_exit_code(exc: BaseException) -> int:

@@ -11,7 +11,7 @@ import logging
 import sys
 from pathlib import Path
 
-from pipeline.commands import CommandError, run_command
+from pipeline.commands import CommandError, cannot, run_command
 from pipeline.studies.nmpc_check import nmpc_agreement
 
 __all__ = ["main", "nmpc_agreement"]
@@ -30,7 +30,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--jobs", type=int, default=2,
                         help="worker processes (1-64, default 2)")
     args = parser.parse_args(argv)
-    return run_command(lambda: _check(args), kept="completed runs")
+    return run_command(lambda: _check(args), kept="completed runs",
+                       os_error=cannot("write its results", args.out))
 
 
 def _check(args) -> int:
@@ -42,6 +43,9 @@ def _check(args) -> int:
     if not 1 <= args.members <= 10_000:
         raise CommandError(f"--members: {args.members} is not allowed; allowed: an integer "
                            "in [1, 10000]")
+    if args.out.exists() and not args.out.is_dir():
+        raise CommandError(f"--out: {args.out} is not a folder; allowed: a folder (new, or "
+                           "one this check wrote before)")
     tracks = ("lateral", "kinematic") if args.track == "both" else (args.track,)
     result = nmpc_agreement(composer([])[0], args.out, args.members, log=log.info,
                             tracks=tracks, n_jobs=args.jobs)

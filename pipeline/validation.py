@@ -87,6 +87,22 @@ def resolve_target(key: str, value: str):
     return target
 
 
+def build_target(key: str, value: str, args: tuple, call: str):
+    """An instance of the class ``value`` names (:func:`resolve_target`), built with
+    ``args``; a class whose constructor cannot take them (``call`` says how it is called) is
+    a :class:`ConfigError` naming the key, before anything runs."""
+    import inspect
+
+    cls = resolve_target(key, value)
+    try:
+        inspect.signature(cls).bind(*args)
+    except TypeError as exc:
+        raise ConfigError(key, value, f"a class built as {call} ({exc})") from None
+    except ValueError:  # no signature to read (a builtin): let the call decide
+        pass
+    return cls(*args)
+
+
 class FrozenAfterValidation:
     """Mixin of the settings dataclasses: mutable while Hydra and OmegaConf build and check
     them, read-only once :meth:`freeze` runs (the composed :class:`ExperimentConfig` freezes

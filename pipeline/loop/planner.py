@@ -485,9 +485,10 @@ def make_planner(settings: PlannerConfig, horizon: int, sample_time_s: float,
                  kernels: Kernels | None = None) -> ApfPlanner:
     """The planner ``settings._target_`` names (a user's class), else :class:`ApfPlanner`
     (its rollout by ``kernels``: CPython's when omitted; compiled, the same bits)."""
-    from pipeline.validation import resolve_target
+    from pipeline.validation import build_target
 
     if settings._target_:
-        return resolve_target("planner._target_", settings._target_)(settings, horizon,
-                                                                     sample_time_s)
+        return build_target("planner._target_", settings._target_,
+                            (settings, horizon, sample_time_s),
+                            "Planner(settings, horizon, sample_time_s)")
     return ApfPlanner(settings, horizon, sample_time_s, kernels)

@@ -468,6 +468,10 @@ class ScenarioConfig(FrozenAfterValidation):
     # "interrupted after the mobile platform moved in three seconds")
     obstacle_anchor: str = "world"
 
+    #: The range of ``speed_mps`` and ``initial_speed_mps`` (m/s); a planner of one's own
+    #: plans its speed within it too (:mod:`pipeline.loop.plugins`).
+    SPEED_BOUNDS_MPS = (0.1, 40.0)
+
     def __post_init__(self) -> None:
         # the checks in the order they always ran (the first failure is the one reported)
         self._check_geometry()
@@ -492,11 +496,12 @@ class ScenarioConfig(FrozenAfterValidation):
                               "a goal within 10 km of the start")
 
     def _check_timing(self) -> None:
-        between("scenario.speed_mps", self.speed_mps, 0.1, 40.0)
+        between("scenario.speed_mps", self.speed_mps, *self.SPEED_BOUNDS_MPS)
         between("scenario.sample_time_s", self.sample_time_s, 1e-3, 1.0)
         safe_name("scenario.name", self.name)
         if self.initial_speed_mps is not None:
-            between("scenario.initial_speed_mps", self.initial_speed_mps, 0.0, 40.0)
+            between("scenario.initial_speed_mps", self.initial_speed_mps, 0.0,
+                    self.SPEED_BOUNDS_MPS[1])
         if self.obstacle_anchor not in ("world", "vehicle"):
             raise ConfigError("scenario.obstacle_anchor", self.obstacle_anchor,
                               "one of 'world', 'vehicle'")

@@ -325,7 +325,32 @@ def _loop_stages(cfg: LoopSettings, scenario: Scenario, qp_cache: QpCache | None
     controller = make_controller(cfg, scenario.sample_time_s, qp_cache, kernels)
     planner = make_planner(cfg.planner, cfg.controller.horizon, scenario.sample_time_s,
                            kernels)
+    if cfg.planner._target_ or cfg.controller._target_:
+        controller, planner = _checked_plugins(cfg, kinematic, controller, planner)
     return kinematic, plant, controller, planner
+
+
+def _checked_plugins(cfg: LoopSettings, kinematic: bool, controller: Controller,
+                     planner: ApfPlanner) -> tuple[Controller, ApfPlanner]:
+    """A user's planner or controller (``_target_``) behind the checks of its outputs
+    (:mod:`pipeline.loop.plugins`); the built-ins as they are."""
+    from pipeline.loop.plugins import CheckedController, CheckedPlanner
+    from pipeline.loop.settings import ScenarioConfig
+
+    if cfg.planner._target_:
+        planner = CheckedPlanner(planner, cfg.planner._target_, cfg.controller.horizon,
+                                 ScenarioConfig.SPEED_BOUNDS_MPS[1])  # type: ignore[assignment]
+    if cfg.controller._target_:
+        vehicle = cfg.vehicle
+        low, high = cfg.controller.accel_bounds_mps2
+        bounds: tuple[tuple[float, float, str], ...] = (
+            (float(low), float(high), "acceleration m/s^2"),
+            (-vehicle.steering_max_rad, vehicle.steering_max_rad, "steering angle rad")) \
+            if kinematic else ((-vehicle.steering_rate_max_rad_s,
+                                vehicle.steering_rate_max_rad_s, "steering rate rad/s"),)
+        controller = CheckedController(controller, cfg.controller._target_,
+                                       bounds)  # type: ignore[assignment]
+    return controller, planner
 
 
 def _line_constants(frame: LineFrame) -> tuple[float, float, float, float]:

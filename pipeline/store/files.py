@@ -12,7 +12,7 @@ from pathlib import Path
 
 import pandas as pd
 
-from pipeline.errors import OutputPathError
+from pipeline.errors import OutputPathError, raise_if_stopped
 
 
 def output_target(path: Path) -> Path:
@@ -60,7 +60,13 @@ def write_text_atomic(path: Path, text: str) -> None:
         with os.fdopen(fd, "w", encoding="utf-8", newline="\n") as handle:
             handle.write(text)
         os.chmod(tmp, 0o644)  # mkstemp creates 0600; results are meant to be shared
+        raise_if_stopped()  # a signal whose exception was swallowed: commit nothing
         os.replace(tmp, path)
+    except OSError as exc:
+        Path(tmp).unlink(missing_ok=True)
+        if exc.filename is None:  # a full disk while writing: name the file it was for
+            raise OSError(exc.errno, exc.strerror or str(exc), str(path)) from exc
+        raise
     except BaseException:
         Path(tmp).unlink(missing_ok=True)
         raise

@@ -172,12 +172,20 @@ def nmpc_agreement(compose, out_dir: Path, n_members: int = 50, log=logger.info,
                    ) -> NmpcCheckResult:
     """Run the comparison; its result written into ``out_dir`` and returned (see the module
     docstring)."""
+    from pipeline.store.lock import folder_lock
+
+    out_dir = Path(out_dir)
+    with folder_lock(out_dir):  # a second check into the same folder is refused at once
+        return _agreement(compose, out_dir, n_members, log, tracks, n_jobs)
+
+
+def _agreement(compose, out_dir: Path, n_members: int, log, tracks: tuple[str, ...],
+               n_jobs: int) -> NmpcCheckResult:
+    """:func:`nmpc_agreement` in its locked folder."""
     from joblib import Parallel, delayed
 
     from pipeline.studies.experiment import _chunks
 
-    out_dir = Path(out_dir)
-    out_dir.mkdir(parents=True, exist_ok=True)
     jobs = [job for track in tracks for job in _jobs(compose, track, n_members)]
     rows: list[dict] = []
     done = 0

@@ -34,7 +34,12 @@ from typing import Any, Optional, Sequence
 
 from hydra_plugins.hydra_submitit_launcher.config import SlurmQueueConf
 from hydra_plugins.hydra_submitit_launcher.submitit_launcher import SlurmLauncher
-from pipeline.errors import IncompleteSweepError, SweepConfigError, describe_config_error
+from pipeline.errors import (
+    EnvironmentFault,
+    IncompleteSweepError,
+    SweepConfigError,
+    describe_config_error,
+)
 
 log = logging.getLogger(__name__)
 
@@ -149,6 +154,44 @@ def wait_policy(params: dict) -> tuple[float, float, float]:
     return poll, lost, 60.0 * minutes
 
 
+#: The SLURM commands the launcher runs (submitit submits with sbatch, runs tasks with srun;
+#: the wait asks squeue).
+SLURM_COMMANDS = ("sbatch", "srun", "squeue")
+
+
+def _last_line(exc: BaseException) -> str:
+    """The last non-empty line of an error (sbatch's ``fatal: ...``), shortened."""
+    lines = [line.strip() for line in str(exc).splitlines() if line.strip()]
+    text = lines[-1] if lines else type(exc).__name__
+    return text if len(text) <= 200 else text[:197] + "..."
+
+
+def check_slurm() -> None:
+    """Refuse, before anything is submitted, a machine without SLURM: its commands missing
+    from ``PATH``, or a controller that does not answer (``squeue``); one line
+    (:class:`~pipeline.errors.EnvironmentFault`, exit 2) instead of submitit's traceback."""
+    import shutil
+
+    missing = [name for name in SLURM_COMMANDS if shutil.which(name) is None]
+    if missing:
+        raise EnvironmentFault(
+            f"hydra/launcher=slurm needs SLURM, but {', '.join(missing)} "
+            f"{'is' if len(missing) == 1 else 'are'} not on PATH; run on a cluster's login "
+            "node, or leave out hydra/launcher=slurm to run here; nothing was submitted")
+    try:
+        answer = subprocess.run(["squeue", "-h", "-o", "%i", "-j", "0"], capture_output=True,
+                                text=True, timeout=60)
+    except (OSError, subprocess.TimeoutExpired) as exc:
+        raise EnvironmentFault(f"hydra/launcher=slurm: squeue did not answer ({exc}); nothing "
+                               "was submitted") from None
+    refused = answer.stderr.strip()
+    if answer.returncode != 0 and "Invalid job id" not in refused:
+        raise EnvironmentFault(f"hydra/launcher=slurm: SLURM does not answer here "
+                               f"({_last_line(RuntimeError(refused or answer.stdout))}); run on "
+                               "a cluster's login node, or leave out hydra/launcher=slurm; "
+                               "nothing was submitted")
+
+
 def resume_command() -> str:
     """The command line of this process, to rerun it."""
     executable = os.path.relpath(sys.executable) if sys.executable.startswith(os.getcwd()) \
@@ -158,12 +201,18 @@ def resume_command() -> str:
 
 
 def executor_for(params: dict, folder: Path):
-    """A submitit SLURM executor from hydra-submitit-launcher-style settings."""
+    """A submitit SLURM executor from hydra-submitit-launcher-style settings, for a machine
+    that has SLURM (:func:`check_slurm`; the multiverse and the tuning submit through it too).
+    Its ``map_array`` turns sbatch's refusal into one line
+    (:class:`~pipeline.errors.EnvironmentFault`) instead of submitit's traceback."""
+    import functools
+
     import submitit
     from omegaconf import OmegaConf
 
     from hydra_plugins.hydra_submitit_launcher.config import BaseQueueConf
 
+    check_slurm()  # before submitit, whose executor refuses a machine without srun by a traceback
     params = {k: v for k, v in params.items() if k not in (
         "_target_", "poll_s", "lost_after_s", "max_wait_min", "submitit_folder")}
     init = {"folder": str(folder)}
@@ -173,6 +222,17 @@ def executor_for(params: dict, folder: Path):
     base = set(OmegaConf.structured(BaseQueueConf).keys())
     executor.update_parameters(**{k if k in base else f"slurm_{k}": v for k, v in params.items()
                                   if v is not None})
+    submit = executor.map_array
+
+    @functools.wraps(submit)
+    def map_array(*args, **kwargs):
+        try:
+            return submit(*args, **kwargs)
+        except Exception as exc:  # noqa: BLE001 - sbatch refused: one line, nothing submitted
+            raise EnvironmentFault(f"hydra/launcher=slurm: sbatch refused the jobs "
+                                   f"({_last_line(exc)}); nothing was submitted") from None
+
+    executor.map_array = map_array  # type: ignore[method-assign]  # guarded, same call
     return executor
 
 
@@ -242,6 +302,8 @@ class RobustSlurmLauncherBase(SlurmLauncher):
         from hydra.core.utils import filter_overrides
 
         to_submit, done = self._prepare(job_overrides, initial_job_idx)
+        if to_submit:
+            check_slurm()
         log.info("submitting %d of %d jobs (%d complete already, not resubmitted)",
                  len(to_submit), len(job_overrides), len(done))
         if not to_submit:

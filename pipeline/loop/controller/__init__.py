@@ -52,10 +52,11 @@ def make_controller(cfg: LoopSettings, sample_time_s: float,
     innermost arithmetic run by ``kernels`` (CPython's when omitted)."""
     if cfg.controller._target_:
         # a controller of your own: step(Observation) -> ControlStep (see base.Controller)
-        from pipeline.validation import resolve_target
+        from pipeline.validation import build_target
 
-        cls = resolve_target("controller._target_", cfg.controller._target_)
-        return cls(cfg.controller, cfg.vehicle, sample_time_s, qp_cache)
+        return build_target("controller._target_", cfg.controller._target_,
+                            (cfg.controller, cfg.vehicle, sample_time_s, qp_cache),
+                            "Controller(settings, vehicle, sample_time_s, qp_cache)")
     settings = cfg.controller.settings()
     if isinstance(settings, KinematicMpcSettings):
         if settings.backend is Backend.NMPC:

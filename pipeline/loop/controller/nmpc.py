@@ -29,6 +29,7 @@ from typing import Any
 
 import numpy as np
 
+from pipeline.errors import signals_kept
 from pipeline.loop.controller.base import ControlStep, PlanFallback
 from pipeline.loop.controller.kinematic import KinematicQpStructure, KinematicTrack
 from pipeline.loop.controller.lateral_qp import blocking_matrix
@@ -42,6 +43,9 @@ IPOPT_STATUS = {"Solve_Succeeded": "optimal", "Solved_To_Acceptable_Level": "opt
                 "Infeasible_Problem_Detected": "infeasible",
                 "Maximum_Iterations_Exceeded": "user_limit",
                 "Maximum_CpuTime_Exceeded": "user_limit"}
+#: IPOPT's statuses of a solve stopped from outside (no callback of ours ever asks it to
+#: stop): an interrupt, raised as one.
+INTERRUPTED_STATUSES = ("User_Requested_Stop",)
 
 
 def ipopt_solve(solver: Any, **arguments: Any) -> tuple[str, int, float, np.ndarray | None]:
@@ -50,14 +54,18 @@ def ipopt_solve(solver: Any, **arguments: Any) -> tuple[str, int, float, np.ndar
     CasADi raised on an evaluation error)."""
     status, iterations, values = "not_solved", -1, None
     began = time.perf_counter()
-    try:
-        result = solver(**arguments)
-        stats = solver.stats()
-        status = IPOPT_STATUS.get(stats.get("return_status", ""), "solver_error")
-        iterations = int(stats.get("iter_count", -1))
-        values = np.asarray(result["x"], dtype=float).ravel()
-    except RuntimeError:  # CasADi raises on evaluation errors (NaN in the NLP)
-        status = "error:RuntimeError"
+    with signals_kept():  # Ctrl-C inside IPOPT: an interrupt, never a failed solve
+        try:
+            result = solver(**arguments)
+            stats = solver.stats()
+            returned = stats.get("return_status", "")
+            if returned in INTERRUPTED_STATUSES:
+                raise KeyboardInterrupt(f"IPOPT stopped: {returned}")
+            status = IPOPT_STATUS.get(returned, "solver_error")
+            iterations = int(stats.get("iter_count", -1))
+            values = np.asarray(result["x"], dtype=float).ravel()
+        except RuntimeError:  # CasADi raises on evaluation errors (NaN in the NLP)
+            status = "error:RuntimeError"
     elapsed = time.perf_counter() - began
     return status, iterations, elapsed, values
 
