@@ -54,6 +54,11 @@ SOURCES = "sources.json"
 STUDY_SECTIONS = ("sweeps", "ablation", "interpretations", "multiverse", "tune",
                   "tune_unpruned", "tune_peers", "member_cache", "kinematic_readings",
                   "nmpc_check", "speed")
+#: Experiments run on another one's scenarios (the same seed, the first members): their
+#: members are shown beside that one's treatment and control (section -> its family's section).
+COMPANIONS = {"peers": "family", "kinematic_peers": "kinematic_family"}
+#: The companion family's methods shown beside a peer (when it holds them).
+COMPANION_METHODS = ("improved", "baseline")
 #: Sections shown first, in this order (any other experiment folder follows by name).
 ORDER = ("paper", "family", "kinematic", "kinematic_family", "frames", "apf_alone", "peers",
          "kinematic_peers")
@@ -299,6 +304,8 @@ def write_explorer(run_root: Path, out_dir: Path,
         if not by_method:
             continue
         indices = sorted({i for members in by_method.values() for i in members})
+        by_method, settings = _with_companions(run_root, folder.name, by_method, settings,
+                                               indices)
         written = []
         sources_path = data_root / folder.name / SOURCES
         known = _read_sources(sources_path)
@@ -326,7 +333,7 @@ def write_explorer(run_root: Path, out_dir: Path,
             write_text_atomic(sources_path, json.dumps(sources, sort_keys=True) + "\n")
         if written:
             index.experiments[folder.name] = {
-                "methods": sorted(by_method), "members": written,
+                "methods": list(by_method), "members": written,
                 "single": all(len(m) == 1 for m in by_method.values()) and written == [0]}
     html = explorer_page(index)
     write_text_atomic(out_dir / PAGE, html)
@@ -335,6 +342,41 @@ def write_explorer(run_root: Path, out_dir: Path,
              len(index.experiments), sum(len(e["members"]) for e in index.experiments.values()),
              index.data_bytes / 1e6)
     return index
+
+
+def _with_companions(run_root: Path, experiment: str, by_method: dict, settings: dict,
+                     indices: list[int]) -> tuple[dict, dict]:
+    """``by_method`` and ``settings`` with the companion family's treatment and control first
+    (:data:`COMPANIONS`; as ``<method> (<family>)``), on the members this experiment has."""
+    section = next((s for s, f in COMPANIONS.items()
+                    if _section_folder(run_root, s) == experiment), None)
+    if section is None:
+        return by_method, settings
+    family = Path(run_root) / _section_folder(run_root, COMPANIONS[section])
+    first, first_settings = {}, {}
+    for method in COMPANION_METHODS:
+        members = _method_members(family / method) if (family / method).is_dir() else None
+        if not members:
+            continue
+        members = {i: members[i] for i in indices if i in members}
+        if not members:
+            continue
+        name = f"{method} ({family.name})"
+        try:
+            first_settings[name] = MethodSettings.of(members[min(members)])
+        except RunFolderError as exc:
+            log.warning("explorer: %s", exc)
+            continue
+        first[name] = members
+    return {**first, **by_method}, {**first_settings, **settings}
+
+
+def _section_folder(run_root: Path, section: str) -> str:
+    """The folder name of a layout section (its default name when the layout is unreadable)."""
+    try:
+        return str(getattr(OutputsLayout.load(run_root), section))
+    except Exception:
+        return section
 
 
 def _runs_digest(runs: dict[str, Path]) -> str | None:
