@@ -272,8 +272,8 @@ def data_script(key: str, payload: dict) -> str:
             f"[{json.dumps(key)}] = \"{packed}\";\n")
 
 
-def write_explorer(run_root: Path, out_dir: Path,
-                   experiments: list[Path] | None = None) -> ExplorerIndex:
+def write_explorer(run_root: Path, out_dir: Path, experiments: list[Path] | None = None,
+                   jobs: int | None = None) -> ExplorerIndex:
     """Write ``out_dir/explorer.html`` and one data file per member of every experiment under
     ``run_root`` (:func:`experiment_folders`); returns what was written.
 
@@ -285,63 +285,105 @@ def write_explorer(run_root: Path, out_dir: Path,
         The report folder.
     experiments : list of Path, optional
         The experiment folders to include (default: all of :func:`experiment_folders`).
+    jobs : int, optional
+        Members written at the same time, in forked children (default: the machine's cores;
+        1: one after the other here). The files are the same.
     """
     out_dir = Path(out_dir)
     index = ExplorerIndex()
     data_root = out_dir / DATA_FOLDER
+    plans = []
     for folder in experiments if experiments is not None else experiment_folders(run_root):
-        by_method, settings = {}, {}
-        for method_dir in sorted(p for p in folder.iterdir() if p.is_dir()):
-            members = _method_members(method_dir)
-            if not members:
+        plan = _experiment_plan(run_root, folder, data_root)
+        if plan is not None:
+            plans.append(plan)
+    todo = [task for plan in plans for task in plan["tasks"] if not task["kept"]]
+    sizes = _write_members(todo, jobs)
+    for plan in plans:
+        written, sources = [], {}
+        for task in plan["tasks"]:
+            size = task["target"].stat().st_size if task["kept"] else sizes.get(task["key"])
+            if size is None:
                 continue
-            try:
-                settings[method_dir.name] = MethodSettings.of(members[min(members)])
-            except RunFolderError as exc:
-                log.warning("explorer: %s", exc)
-                continue
-            by_method[method_dir.name] = members
-        if not by_method:
-            continue
-        indices = sorted({i for members in by_method.values() for i in members})
-        by_method, settings = _with_companions(run_root, folder.name, by_method, settings,
-                                               indices)
-        written = []
-        sources_path = data_root / folder.name / SOURCES
-        known = _read_sources(sources_path)
-        sources = {}
-        for member in indices:
-            runs = {m: members[member] for m, members in by_method.items() if member in members}
-            target = data_root / folder.name / f"{member}.js"
-            digest = _runs_digest(runs)
-            if digest is not None and known.get(str(member)) == digest and target.is_file():
-                # the same runs as when it was written: kept
-                sources[str(member)] = digest
-                index.data_bytes += target.stat().st_size
-                written.append(member)
-                continue
-            payload = member_payload(folder.name, member, runs, settings)
-            if payload is None:
-                continue
-            text = data_script(payload["key"], payload)
-            write_text_atomic(target, text)
-            if digest is not None:
-                sources[str(member)] = digest
-            index.data_bytes += len(text.encode())
-            written.append(member)
+            index.data_bytes += size
+            written.append(task["member"])
+            if task["digest"] is not None:
+                sources[str(task["member"])] = task["digest"]
         if sources:
-            write_text_atomic(sources_path, json.dumps(sources, sort_keys=True) + "\n")
+            write_text_atomic(plan["sources"], json.dumps(sources, sort_keys=True) + "\n")
         if written:
-            index.experiments[folder.name] = {
-                "methods": list(by_method), "members": written,
-                "single": all(len(m) == 1 for m in by_method.values()) and written == [0]}
+            index.experiments[plan["name"]] = {
+                "methods": plan["methods"], "members": written,
+                "single": plan["single"] and written == [0]}
     html = explorer_page(index)
     write_text_atomic(out_dir / PAGE, html)
     index.page_bytes = len(html.encode())
-    log.info("explorer: %d experiments, %d members, %.1f MB of member data",
+    log.info("explorer: %d experiments, %d members (%d written), %.1f MB of member data",
              len(index.experiments), sum(len(e["members"]) for e in index.experiments.values()),
-             index.data_bytes / 1e6)
+             len(sizes), index.data_bytes / 1e6)
     return index
+
+
+def _experiment_plan(run_root: Path, folder: Path, data_root: Path) -> dict | None:
+    """One experiment's members to write: each with its runs, settings, target file and
+    whether the file already there was made from the same runs (``kept``)."""
+    by_method, settings = {}, {}
+    for method_dir in sorted(p for p in folder.iterdir() if p.is_dir()):
+        members = _method_members(method_dir)
+        if not members:
+            continue
+        try:
+            settings[method_dir.name] = MethodSettings.of(members[min(members)])
+        except RunFolderError as exc:
+            log.warning("explorer: %s", exc)
+            continue
+        by_method[method_dir.name] = members
+    if not by_method:
+        return None
+    single = all(len(m) == 1 for m in by_method.values())
+    indices = sorted({i for members in by_method.values() for i in members})
+    by_method, settings = _with_companions(run_root, folder.name, by_method, settings, indices)
+    sources = data_root / folder.name / SOURCES
+    known = _read_sources(sources)
+    tasks = []
+    for member in indices:
+        runs = {m: members[member] for m, members in by_method.items() if member in members}
+        target = data_root / folder.name / f"{member}.js"
+        digest = _runs_digest(runs)
+        kept = digest is not None and known.get(str(member)) == digest and target.is_file()
+        tasks.append({"key": f"{folder.name}/{member}", "experiment": folder.name,
+                      "member": member, "runs": runs,
+                      "settings": {m: settings[m] for m in runs}, "target": target,
+                      "digest": digest, "kept": kept})
+    return {"name": folder.name, "methods": list(by_method), "single": single,
+            "sources": sources, "tasks": tasks}
+
+
+def _write_member(task: dict) -> tuple[str, int | None]:
+    """Write one member's data file; its key and size (None: no run could be read)."""
+    payload = member_payload(task["experiment"], task["member"], task["runs"],
+                             task["settings"])
+    if payload is None:
+        return task["key"], None
+    text = data_script(payload["key"], payload)
+    write_text_atomic(task["target"], text)
+    return task["key"], len(text.encode())
+
+
+def _write_members(tasks: list[dict], jobs: int | None) -> dict[str, int]:
+    """:func:`_write_member` of every task, in ``jobs`` forked children when there are many
+    (the machine's cores by default); key -> size of each file written."""
+    import multiprocessing
+    import os
+    from concurrent.futures import ProcessPoolExecutor
+
+    jobs = jobs if jobs is not None else (os.cpu_count() or 1)
+    if jobs <= 1 or len(tasks) < 40 or "fork" not in multiprocessing.get_all_start_methods():
+        results = [_write_member(task) for task in tasks]
+    else:
+        with ProcessPoolExecutor(jobs, mp_context=multiprocessing.get_context("fork")) as pool:
+            results = list(pool.map(_write_member, tasks, chunksize=16))
+    return {key: size for key, size in results if size is not None}
 
 
 def _with_companions(run_root: Path, experiment: str, by_method: dict, settings: dict,
