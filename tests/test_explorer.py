@@ -8,6 +8,7 @@ import base64
 import gzip
 import json
 import re
+import shutil
 
 import numpy as np
 import pytest
@@ -115,8 +116,16 @@ def test_every_member_gets_a_data_file_and_the_page_lists_it(make_config, tmp_pa
                    progress=False)
     run_experiment(make_config(["method=improved"]), root / "paper" / "improved")
     (root / "multiverse").mkdir()  # a study's section: never in the explorer
+    # a peer on the family's scenarios: shown beside the family's improved and baseline
+    shutil.copytree(root / "family" / "baseline", root / "peers" / "a_peer")
     index = write_explorer(root, out)
-    assert list(index.experiments) == ["paper", "family"]
+    assert list(index.experiments) == ["paper", "family", "peers"]
+    assert index.experiments["peers"]["methods"] == ["improved (family)", "baseline (family)",
+                                                     "a_peer"]
+    _, peers = _decode(out / "explorer_data" / "peers" / "1.js")
+    assert [m["name"] for m in peers["methods"]] == ["improved (family)", "baseline (family)",
+                                                     "a_peer"]
+    assert peers["methods"][1]["x"] == peers["methods"][2]["x"]  # the same run, twice
     assert index.experiments["family"]["members"] == [0, 1, 2]
     assert explorer_href("family", 2) == "explorer.html#family/2"
     key, data = _decode(out / "explorer_data" / "family" / "2.js")

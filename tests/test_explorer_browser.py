@@ -150,3 +150,12 @@ def test_a_member_without_its_data_file_says_so_in_one_line(page, report):
     page.wait_for_function("window.explorer.data !== null && window.explorer.key === 'family/1'")
     assert page.locator("#missing").count() == 0
     assert page.refused == []
+
+
+def test_a_narrow_window_does_not_scroll_sideways(browser, report):
+    page = browser.new_page(viewport={"width": 390, "height": 844})
+    page.goto((report / "explorer.html").as_uri() + "#family/0")
+    page.wait_for_function("window.explorer && window.explorer.data !== null")
+    assert page.evaluate("document.documentElement.scrollWidth") <= 390
+    assert page.locator("canvas.scene").first.bounding_box()["width"] <= 390
+    page.close()
