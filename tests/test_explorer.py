@@ -24,16 +24,18 @@ from pipeline.studies.experiment import run_experiment, run_family
 
 @pytest.fixture(scope="module")
 def paper_runs(make_config):
-    """The paper scenario on the lateral track (path frame) and on the kinematic track."""
+    """The paper scenario on the lateral track (path frame, fixed frame) and on the kinematic
+    track."""
     out = {}
     for name, overrides in (("lateral", ["method=improved"]),
+                            ("fixed", ["method=improved", "controller.frame=fixed"]),
                             ("kinematic", ["experiment=kinematic", "method=improved"])):
         cfg = make_config(overrides)
         out[name] = (cfg, simulate(cfg, build_scenario(cfg.scenario)))
     return out
 
 
-@pytest.mark.parametrize("track", ["lateral", "kinematic"])
+@pytest.mark.parametrize("track", ["lateral", "fixed", "kinematic"])
 def test_each_plan_starts_at_the_vehicle_and_its_half_planes_exclude_the_obstacle(
         paper_runs, track):
     """Two facts any plan and any collision constraint must satisfy, checked on the recorded
