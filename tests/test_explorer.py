@@ -110,16 +110,23 @@ def _decode(path):
     return json.loads(key), json.loads(gzip.decompress(base64.b64decode(packed)))
 
 
-def test_every_member_gets_a_data_file_and_the_page_lists_it(make_config, tmp_path):
-    root, out = tmp_path / "outputs", tmp_path / "report"
+@pytest.fixture(scope="module")
+def small_outputs(tmp_path_factory, make_config):
+    """A family of three members (baseline, improved), the paper scenario, a study's folder
+    and a peer on the family's scenarios (a copy of the baseline's family)."""
+    root = tmp_path_factory.mktemp("outputs")
     for method in ("baseline", "improved"):
         run_family(make_config([f"method={method}", "scenario=family", "scenario.family.size=3",
                                 "scenario.family.n_jobs=1"]), root / "family" / method,
                    progress=False)
-    run_experiment(make_config(["method=improved"]), root / "paper" / "improved")
+        run_experiment(make_config([f"method={method}"]), root / "paper" / method)
     (root / "multiverse").mkdir()  # a study's section: never in the explorer
-    # a peer on the family's scenarios: shown beside the family's improved and baseline
     shutil.copytree(root / "family" / "baseline", root / "peers" / "a_peer")
+    return root
+
+
+def test_every_member_gets_a_data_file_and_the_page_lists_it(small_outputs, tmp_path):
+    root, out = small_outputs, tmp_path / "report"
     index = write_explorer(root, out)
     assert list(index.experiments) == ["paper", "family", "peers"]
     assert index.experiments["peers"]["methods"] == ["improved (family)", "baseline (family)",
@@ -133,6 +140,7 @@ def test_every_member_gets_a_data_file_and_the_page_lists_it(make_config, tmp_pa
     key, data = _decode(out / "explorer_data" / "family" / "2.js")
     assert key == data["key"] == "family/2"
     assert [m["name"] for m in data["methods"]] == ["baseline", "improved"]
+    assert index.experiments["paper"]["members"] == [0] and index.experiments["paper"]["single"]
     improved = data["methods"][1]
     run = read_run(root / "family" / "improved" / "member_0002")
     # positions in centimetres, the plan relative to the vehicle (its step 0 is 0, 0)
@@ -147,3 +155,18 @@ def test_every_member_gets_a_data_file_and_the_page_lists_it(make_config, tmp_pa
     before = (out / "explorer_data" / "family" / "1.js").stat().st_mtime_ns
     write_explorer(root, out)
     assert (out / "explorer_data" / "family" / "1.js").stat().st_mtime_ns == before
+
+
+def test_the_report_writes_the_explorer_and_every_link_has_its_member(small_outputs, tmp_path):
+    """``build_report`` writes ``explorer.html`` beside the page; every link of the page into
+    it (the gallery's, the peers section's) names a member whose data file is there."""
+    from pipeline.reporting.page import build_report
+
+    out = tmp_path / "report"
+    page = build_report(small_outputs, out, "pytest", figure_jobs=1).read_text()
+    links = set(re.findall(r'href="explorer\.html#([a-z_]+/[0-9]+)"', page))
+    assert (out / "explorer.html").is_file()
+    assert "peers/0" in links, links
+    assert any(link.startswith("family/") for link in links), "the gallery links its members"
+    for link in links:
+        assert (out / "explorer_data" / f"{link}.js").is_file(), link

@@ -32,7 +32,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from pipeline.errors import RunFolderError
+from pipeline.errors import ConfigError, RunFolderError
 from pipeline.store.files import write_text_atomic
 from pipeline.store.layout import OutputsLayout
 from pipeline.store.runs import (
@@ -113,7 +113,8 @@ def experiment_folders(run_root: Path) -> list[Path]:
         layout = OutputsLayout.load(run_root)
         studies = {getattr(layout, name) for name in STUDY_SECTIONS}
         order = [getattr(layout, name) for name in ORDER]
-    except Exception:  # a bad paths file is the report's to say; keep the default names
+    except (ConfigError, OSError, ValueError, TypeError):
+        # a bad paths file is the report's to say; keep the default names
         studies, order = set(STUDY_SECTIONS), list(ORDER)
     found = []
     for folder in sorted(p for p in run_root.iterdir() if p.is_dir()):
@@ -121,6 +122,8 @@ def experiment_folders(run_root: Path) -> list[Path]:
             continue
         if any(folder_kind(m) for m in folder.iterdir() if m.is_dir()):
             found.append(folder)
+    if not found and any(folder_kind(m) for m in run_root.iterdir() if m.is_dir()):
+        return [run_root]  # the report of one experiment's folder (e.g. outputs/paper)
     return sorted(found, key=lambda p: (order.index(p.name) if p.name in order else len(order),
                                         p.name))
 
@@ -417,7 +420,7 @@ def _section_folder(run_root: Path, section: str) -> str:
     """The folder name of a layout section (its default name when the layout is unreadable)."""
     try:
         return str(getattr(OutputsLayout.load(run_root), section))
-    except Exception:
+    except (ConfigError, OSError, ValueError, TypeError):
         return section
 
 
