@@ -238,7 +238,8 @@ class MethodSettings:
         return cls((float(start[0]), float(start[1])), (float(goal[0]), float(goal[1])),
                    float(cfg.vehicle.footprint_radius_m), float(cfg.vehicle.steering_max_rad),
                    float(cfg.scenario.sample_time_s), str(cfg.scenario.name),
-                   str(cfg.controller.kind))
+                   # a plug-in's class (a peer's), else the built-in kind
+                   str(cfg.controller._target_ or cfg.controller.kind).rsplit(".", 1)[-1])
 
 
 def member_payload(experiment: str, member: int, runs: dict[str, Path],
@@ -451,9 +452,13 @@ def _read_sources(path: Path) -> dict:
 
 def explorer_page(index: ExplorerIndex) -> str:
     """The explorer's HTML: its template with the index of experiments and members."""
-    from pipeline.reporting.render import environment
+    import jinja2
 
-    return environment().get_template("explorer.html.j2").render(
+    # its own environment (the page's imports this module for explorer_href)
+    env = jinja2.Environment(loader=jinja2.PackageLoader("pipeline.reporting", "templates"),
+                             autoescape=jinja2.select_autoescape(["html", "j2"]),
+                             undefined=jinja2.StrictUndefined)
+    return env.get_template("explorer.html.j2").render(
         # no "</" inside the page's script element (a folder name cannot end it)
         index_json=json.dumps(index.to_json(), separators=(",", ":")).replace("</", "<\\/"),
         data_folder=DATA_FOLDER)
