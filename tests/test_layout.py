@@ -29,7 +29,7 @@ LAYERS = (
      "pipeline.score", "pipeline.cache"),
 )
 #: Files a run or family folder holds (its layout belongs to the store).
-RUN_FOLDER_FILES = ("config.yaml", "model.json", "trajectory.csv", "timing.json",
+RUN_FOLDER_FILES = ("config.yaml", "model.json", "trajectory.csv", "timing.json", "horizon.npz",
                     "metrics.json", "family_metrics.csv", "family.json", "manifest.json")
 #: Each study's files and the module that owns them (its typed result): nobody else names them.
 STUDY_FILES = {

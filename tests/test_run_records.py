@@ -40,7 +40,7 @@ def paper(tmp_path, pristine_paper):
 def test_manifest_lists_every_file_with_size_and_hash(paper):
     manifest = json.loads((paper / "paper" / "baseline" / MANIFEST).read_text())
     assert set(manifest["files"]) == {"config.yaml", "model.json", "trajectory.csv",
-                                      "timing.json", "metrics.json"}
+                                      "timing.json", "metrics.json", "horizon.npz"}
     assert all(len(e["sha256"]) == 64 and e["bytes"] > 0 for e in manifest["files"].values())
     assert manifest["config_hash"] and manifest["code_version"]
     assert check(paper / "paper" / "baseline") is None

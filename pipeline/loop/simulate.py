@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import inspect
 import sys
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from math import atan2, cos, isfinite, sin, sqrt
 from typing import Any
 
@@ -25,6 +25,7 @@ import pandas as pd
 
 from pipeline.loop.controller import Controller, ControlStep, Observation, QpCache, make_controller
 from pipeline.loop.controller.prediction_check import MODEL_CHECK_COLUMNS
+from pipeline.loop.horizon import HorizonLog
 from pipeline.loop.kernels import Kernels
 from pipeline.loop.model import kinematic_plant_step, single_track_constants
 from pipeline.loop.planner import ApfPlanner, ApfRollout, make_planner
@@ -50,6 +51,9 @@ class SimulationResult:
     goal_reached : bool
     termination : str
         ``"goal_line"``, ``"max_steps"`` or ``"non_finite_state"``.
+    horizon : dict of str to ndarray
+        What each step planned (:mod:`pipeline.loop.horizon`; one row per trajectory row),
+        for the report's scenario explorer.
     """
 
     trajectory: pd.DataFrame
@@ -58,6 +62,7 @@ class SimulationResult:
     compile_time_s: float
     goal_reached: bool
     termination: str
+    horizon: dict[str, np.ndarray] = field(default_factory=dict)
 
 
 class SingleTrackPlant:
@@ -268,6 +273,7 @@ def _closed_loop(cfg: LoopSettings, scenario: Scenario, qp_cache: QpCache | None
     obstacle_names = [tuple(obstacle_column(j, f) for f in OBSTACLE_FIELDS)
                       for j in range(scenario.n_obstacles)]
     log = TrajectoryLog(scenario.n_steps + 1)
+    planned = HorizonLog(scenario.n_steps + 1, scenario.n_obstacles)
     solve_times = np.zeros(scenario.n_steps + 1)
     n_solves = 0
     state = plant.initial_state(scenario)
@@ -295,6 +301,7 @@ def _closed_loop(cfg: LoopSettings, scenario: Scenario, qp_cache: QpCache | None
         if scenario.obstacle_slots == "nearest":
             visible = visible.nearest_first(position)
         rollout = planner.rollout(position, scenario.goal_m, visible, plant.velocity(state))
+        planned.put(k, rollout, snapshot)
         speed_ref = _planned_speed(planner, position, psi, visible, scenario, vehicle_radius,
                                    rollout, state, path_aware) if plans_speed else np.nan
         observation = Observation(time_s, state, frame, np.array([along, lateral]), e_psi,
@@ -311,7 +318,8 @@ def _closed_loop(cfg: LoopSettings, scenario: Scenario, qp_cache: QpCache | None
     trajectory = log.frame(list(HEAD) + [c for names in obstacle_names for c in names]
                            + list(TAIL))
     return SimulationResult(trajectory, solve_times[:n_solves], controller.compile_count,
-                            controller.compile_time_s, termination == "goal_line", termination)
+                            controller.compile_time_s, termination == "goal_line", termination,
+                            planned.arrays(controller, log.rows))
 
 
 def _loop_stages(cfg: LoopSettings, scenario: Scenario, qp_cache: QpCache | None,

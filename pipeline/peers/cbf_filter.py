@@ -541,6 +541,10 @@ class LateralCbfFilter:
         applied."""
         return self.nominal.model_check(log)
 
+    def horizon_view(self, rows: int) -> dict[str, np.ndarray]:
+        """The nominal MPC's plan and half-planes (the report's scenario explorer)."""
+        return self.nominal.horizon_view(rows)
+
 
 class KinematicCbfFilter:
     """Appendix A's kinematic LTV-MPC without APF and collision half-planes, its first input
@@ -644,3 +648,7 @@ class KinematicCbfFilter:
         """The nominal MPC's prediction check (:meth:`KinematicTrack.model_check
         <pipeline.loop.controller.kinematic.KinematicTrack.model_check>`)."""
         return self.nominal.model_check(log)
+
+    def horizon_view(self, rows: int) -> dict[str, np.ndarray]:
+        """The nominal MPC's plan and half-planes (the report's scenario explorer)."""
+        return self.nominal.horizon_view(rows)

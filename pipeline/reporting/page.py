@@ -14,6 +14,7 @@ import logging
 import time
 from pathlib import Path
 
+from pipeline.reporting.explorer import write_explorer
 from pipeline.reporting.figure import Figures
 from pipeline.reporting.figures import FigureWriter
 from pipeline.reporting.inputs import ReportInputs
@@ -95,6 +96,9 @@ def build_report(run_root: Path, out_dir: Path, command: str,
     # the answer in words, for the command line (make reproduce prints it at its end)
     lines = page.answer.lines
     write_text_atomic(out_dir / "answer.txt", "\n".join(lines) + "\n" if lines else "")
+    # every member of every experiment, animated (explorer.html and its data beside the page)
+    log.info("report: the scenario explorer (%.0f s)", time.perf_counter() - started)
+    write_explorer(run_root, out_dir)
     return path
 
 

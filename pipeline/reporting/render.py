@@ -8,6 +8,7 @@ from dataclasses import dataclass, fields
 
 import jinja2
 
+from pipeline.reporting.explorer import explorer_href
 from pipeline.reporting.format import FILTERS, interval
 from pipeline.reporting.sections.ablation import AblationSection
 from pipeline.reporting.sections.answer import AnswerSection
@@ -57,6 +58,7 @@ def environment() -> jinja2.Environment:
                              undefined=jinja2.StrictUndefined)
     env.filters.update(FILTERS)
     env.globals["interval"] = interval
+    env.globals["explorer_href"] = explorer_href
     return env
 
 

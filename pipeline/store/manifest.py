@@ -14,6 +14,9 @@ import pandas as pd
 from pipeline.store.files import write_csv_atomic, write_json_atomic
 
 RUN_FILES = ("config.yaml", "model.json", "trajectory.csv", "timing.json", "metrics.json")
+#: What each step planned (the APF path, the MPC's horizon and half-planes), for the report's
+#: scenario explorer: listed in a run's manifest when present (older runs have none).
+HORIZON_FILE = "horizon.npz"
 FAMILY_FILES = ("family_metrics.csv", "family.json")
 #: The files a run's and a family's manifest must list (a study's result names its own and
 #: passes them to :func:`check`).

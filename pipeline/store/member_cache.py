@@ -43,7 +43,14 @@ from pathlib import Path
 
 from pipeline.numerics import numerical_kernels
 from pipeline.store.files import write_text_atomic
-from pipeline.store.manifest import MANIFEST, RUN_FILES, check, code_version, write_manifest
+from pipeline.store.manifest import (
+    HORIZON_FILE,
+    MANIFEST,
+    RUN_FILES,
+    check,
+    code_version,
+    write_manifest,
+)
 
 logger = logging.getLogger(__name__)
 
@@ -209,13 +216,18 @@ class MemberCache:
             folder = Path(folder)
             folder.mkdir(parents=True, exist_ok=True)
             (folder / MANIFEST).unlink(missing_ok=True)
+            # the horizon record (the report's explorer) when the entry has one
+            optional = (HORIZON_FILE,) if (entry / HORIZON_FILE).is_file() else ()
             try:
-                for name in SHARED_FILES:
+                for name in SHARED_FILES + optional:
                     _link_atomic(entry / name, folder / name)
             except FileNotFoundError:  # removed by a cleaner between the check and the link
                 return False
+            if not optional:
+                (folder / HORIZON_FILE).unlink(missing_ok=True)
         write_text_atomic(folder / "config.yaml", config_text)
-        write_manifest(folder, "run", RUN_FILES, cfg.config_hash(), {"member_cache": key})
+        write_manifest(folder, "run", RUN_FILES + optional, cfg.config_hash(),
+                       {"member_cache": key})
         return True
 
     def publish(self, cfg, folder: Path) -> bool:
@@ -231,7 +243,8 @@ class MemberCache:
             tmp = self.root / "tmp" / f"publish-{uuid.uuid4().hex}"
             tmp.mkdir(parents=True)
             try:
-                for name in (*RUN_FILES, MANIFEST):
+                optional = (HORIZON_FILE,) if (Path(folder) / HORIZON_FILE).is_file() else ()
+                for name in (*RUN_FILES, *optional, MANIFEST):
                     _link_or_copy(Path(folder) / name, tmp / name)
                 if check(tmp, "run", cfg.config_hash()) is not None:
                     return False  # the member folder changed under us: never publish it

@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import json
 import os
+import zipfile
 from dataclasses import dataclass, field, fields
 from pathlib import Path
 
@@ -32,12 +33,15 @@ from pipeline.errors import ConfigError, NonFiniteResultError, RunFolderError
 from pipeline.store.files import (
     clean_leftovers,
     csv_text,
+    npz_bytes,
+    write_bytes_atomic,
     write_csv_atomic,
     write_json_atomic,
     write_text_atomic,
 )
 from pipeline.store.manifest import (
     FAMILY_FILES,
+    HORIZON_FILE,
     MANIFEST,
     RUN_FILES,
     check,
@@ -190,11 +194,13 @@ def folder_kind(folder: Path) -> str | None:
 
 
 def write_run(folder: Path, *, config_text: str, model: dict, trajectory: pd.DataFrame,
-              timing: dict, metrics: RunMetrics, info: RunInfo) -> Path:
+              timing: dict, metrics: RunMetrics, info: RunInfo,
+              horizon: dict | None = None) -> Path:
     """Write a complete run folder: the files, then the manifest (last, atomically).
 
     An existing manifest is removed first, so a folder being rewritten is never trusted
-    half-way; leftover temporaries of a killed write are removed.
+    half-way; leftover temporaries of a killed write are removed. ``horizon`` (what each step
+    planned, :mod:`pipeline.loop.horizon`) becomes ``horizon.npz`` when given.
     """
     folder = Path(folder)
     # everything serialized (and checked) before the folder is touched
@@ -208,8 +214,30 @@ def write_run(folder: Path, *, config_text: str, model: dict, trajectory: pd.Dat
     (folder / MANIFEST).unlink(missing_ok=True)
     for name in RUN_FILES:
         write_text_atomic(folder / name, texts[name])
-    write_manifest(folder, "run", RUN_FILES, info.config_hash)
+    files: tuple[str, ...] = RUN_FILES
+    if horizon:
+        write_bytes_atomic(folder / HORIZON_FILE, npz_bytes(horizon))
+        files = RUN_FILES + (HORIZON_FILE,)
+    else:
+        (folder / HORIZON_FILE).unlink(missing_ok=True)
+    write_manifest(folder, "run", files, info.config_hash)
     return folder
+
+
+def read_horizon(folder: Path) -> dict[str, np.ndarray] | None:
+    """What each step of a run planned (``horizon.npz``: :data:`pipeline.loop.horizon.
+    HORIZON_ARRAYS`), or None when the run has none (written before it was recorded) or it
+    is not the file its manifest lists."""
+    folder = Path(folder)
+    path = folder / HORIZON_FILE
+    try:
+        entry = _read_json(folder / MANIFEST).get("files", {}).get(HORIZON_FILE)
+        if not entry or file_entry(path) != entry:
+            return None
+        with np.load(path, allow_pickle=False) as data:
+            return {name: data[name].astype(float) for name in data.files}
+    except (OSError, ValueError, RunFolderError, zipfile.BadZipFile):
+        return None
 
 
 #: What depends on the process that wrote a family (compilations), apart from its results, so
@@ -303,6 +331,20 @@ def read_run(folder: Path, trajectory: bool = True) -> RunRecord:
             raise
         raise RunFolderError(f"{folder}: unreadable ({type(exc).__name__}: "
                              f"{str(exc).splitlines()[0] if str(exc) else ''})") from None
+
+
+def read_run_trajectory(folder: Path) -> tuple[pd.DataFrame, dict]:
+    """A trusted run's trajectory and ``metrics.json`` mapping, without its settings (a
+    reader of many members of one family reads the settings once); :class:`RunFolderError`
+    when the folder is not trusted or cannot be read."""
+    folder = Path(folder)
+    reason = check(folder, "run")
+    if reason:
+        raise RunFolderError(f"{folder}: {reason}")
+    try:
+        return pd.read_csv(folder / "trajectory.csv"), _read_json(folder / "metrics.json")
+    except (OSError, ValueError, pd.errors.ParserError) as exc:
+        raise RunFolderError(f"{folder}: unreadable ({type(exc).__name__})") from None
 
 
 def member_folders(folder: Path) -> list[Path]:

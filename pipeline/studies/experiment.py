@@ -106,7 +106,8 @@ def run_experiment(cfg: ExperimentConfig, out_dir: Path, resume: bool = True,
     }
     yaml_memo = qp_cache.process_local.setdefault("config_yaml", {})
     write_run(out_dir, config_text=config_yaml(cfg, yaml_memo), model=model.to_json(),
-              trajectory=result.trajectory, timing=timing, metrics=metrics, info=info)
+              trajectory=result.trajectory, timing=timing, metrics=metrics, info=info,
+              horizon=result.horizon)
     return RunSummary(out_dir, metrics, info, skipped=False)
 
 

@@ -126,6 +126,11 @@ class FixedFrame:
     def after_step(self, step: ControlStep) -> None:
         """Nothing to keep: the line does not depend on the plan."""
 
+    @property
+    def plan_xy_m(self) -> None:
+        """The last plan's global positions: not kept in this frame (None)."""
+        return None
+
 
 class PathFrame:
     """``controller.frame=path``: the state as errors from a drivable path built from the APF
@@ -262,6 +267,12 @@ class PathFrame:
             prepare(path.points_m), prepare(path.headings_rad),
             prepare(path.curvature_1_per_m), path.ds_m, path.n_intervals, prepare(stations),
             prepare(states[0]), prepare(states[2]), prepare(states[1]), prepare(self._speeds))
+
+    @property
+    def plan_xy_m(self) -> np.ndarray | None:
+        """The last plan's global positions, shape (N + 1, 2) (:meth:`after_step`'s; None
+        after a fallback)."""
+        return self._plan_poses[0] if self._plan_poses is not None else None
 
     def plan_poses(self, poses: tuple[Any, ...] | None) -> None:
         """Set the plan poses the next step's stations start from (the nonlinear MPC keeps its

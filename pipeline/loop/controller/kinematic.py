@@ -199,6 +199,14 @@ class KinematicTrack:
                             *(plan[:2, j] - xy[k + j])))
         return out
 
+    def horizon_view(self, rows: int) -> dict[str, np.ndarray]:
+        """Each step's plan and half-planes in the global frame, one row per log row (the
+        report's scenario explorer; :func:`~pipeline.loop.horizon.kinematic_horizon_view`)."""
+        from pipeline.loop.horizon import kinematic_horizon_view
+
+        return kinematic_horizon_view(self.records, getattr(self, "halfplanes", {}), rows,
+                                      self.horizon, self.cfg.max_obstacles, self.ts)
+
 
 class KinematicLtvMpc(KinematicTrack):
     """The kinematic LTV-MPC: one compiled QP, a kept solver, linearization passes, fallback.
@@ -228,6 +236,8 @@ class KinematicLtvMpc(KinematicTrack):
         self.u_prev = np.zeros(2)
         self._steps_ahead_s = np.arange(1, controller.horizon + 1) * self.ts
         self.records = []
+        #: each solved step's half-planes by step index (:meth:`horizon_view`)
+        self.halfplanes: dict[int, tuple[Any, ...]] = {}
 
     def _linearize(self, x0: np.ndarray, plan: np.ndarray) -> tuple[np.ndarray, np.ndarray,
                                                                      np.ndarray, np.ndarray]:
@@ -262,6 +272,7 @@ class KinematicLtvMpc(KinematicTrack):
                   total_iters: int, total_time: float, log: dict[str, Any]) -> ControlStep:
         """The step of a solved plan (kept for the fallback), with the slack it needs."""
         Gx, Gy, h = halfplanes
+        self.halfplanes[len(self.records)] = halfplanes  # this step's, for horizon_view
         self.fallback.accept(plan)
         states = solution.value("X")
         # slack needed by the optimal plan (what the QP's slack variable holds)

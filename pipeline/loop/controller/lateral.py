@@ -40,6 +40,7 @@ from pipeline.loop.controller.lateral_qp import (
 from pipeline.loop.controller.prediction_check import PredictionRecord, prediction_check
 from pipeline.loop.controller.qp import QpCache, QpSolution, compiled_backend
 from pipeline.loop.controller_settings import MpcSettings, settings_of
+from pipeline.loop.horizon import lateral_horizon_view
 from pipeline.loop.kernels import Kernels
 from pipeline.loop.model import LateralModel, vehicle_key
 from pipeline.loop.settings import ControllerConfig, ModelConfig, VehicleConfig
@@ -195,7 +196,15 @@ class LateralMpc:
         model = inputs.model if inputs.model.sample_time_s == self.sample_time_s \
             else self.models.at_speed(inputs.model.speed_mps)  # the replay's, at the log's rate
         self.records.append(PredictionRecord(self.frame.record, inputs.x0, model,
-                                             inputs.disturbance_rad_s, plan_lateral_m))
+                                             inputs.disturbance_rad_s, plan_lateral_m,
+                                             inputs.constraint_gain, inputs.constraint_bound,
+                                             self.frame.plan_xy_m if plan_lateral_m is not None
+                                             else None))
+
+    def horizon_view(self, rows: int) -> dict[str, np.ndarray]:
+        """Each step's plan and half-planes in the global frame, one row per log row (the
+        report's scenario explorer; :func:`~pipeline.loop.horizon.lateral_horizon_view`)."""
+        return lateral_horizon_view(self.records, rows, self.horizon, self.cfg.max_obstacles)
 
     def model_check(self, log: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
         """How well each step's prediction held (:func:`prediction_check`), one value per row

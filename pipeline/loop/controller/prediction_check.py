@@ -41,6 +41,12 @@ class PredictionRecord:
         The previewed ``r_d``.
     plan_lateral_m : ndarray or None, shape (N + 1,)
         The QP's predicted lateral errors (None when the step fell back).
+    constraint_gain, constraint_bound : ndarray or None, shape (N, slots)
+        The step's half-planes ``G e_y + s >= h`` (the QP's own arrays; for the report's
+        explorer, :func:`pipeline.loop.horizon.lateral_horizon_view`).
+    plan_xy_m : ndarray or None, shape (N + 1, 2)
+        The plan's global positions where the frame computed them anyway (the path frame's
+        plan poses); None: computed from the plan's lateral errors when asked.
     """
 
     frame: tuple[Any, ...]
@@ -48,6 +54,9 @@ class PredictionRecord:
     model: LateralModel
     disturbance_rad_s: np.ndarray
     plan_lateral_m: np.ndarray | None
+    constraint_gain: np.ndarray | None = None
+    constraint_bound: np.ndarray | None = None
+    plan_xy_m: np.ndarray | None = None
 
     @property
     def stations_m(self) -> np.ndarray:

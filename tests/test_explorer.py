@@ -1,0 +1,172 @@
+"""The scenario explorer's data: what each step planned (recorded by the loop, kept by the
+store and the member cache) and the member data files the report writes beside
+``explorer.html`` (the page itself is driven in Chromium in ``test_explorer_browser.py``)."""
+
+from __future__ import annotations
+
+import base64
+import gzip
+import json
+import re
+import shutil
+
+import numpy as np
+import pytest
+
+from pipeline.loop.scenario import build_scenario
+from pipeline.loop.simulate import simulate
+from pipeline.reporting.explorer import explorer_href, write_explorer
+from pipeline.store.files import npz_bytes
+from pipeline.store.manifest import HORIZON_FILE, MANIFEST
+from pipeline.store.runs import read_horizon, read_run
+from pipeline.studies.experiment import run_experiment, run_family
+
+
+@pytest.fixture(scope="module")
+def paper_runs(make_config):
+    """The paper scenario on the lateral track (path frame, fixed frame) and on the kinematic
+    track."""
+    out = {}
+    for name, overrides in (("lateral", ["method=improved"]),
+                            ("fixed", ["method=improved", "controller.frame=fixed"]),
+                            ("kinematic", ["experiment=kinematic", "method=improved"])):
+        cfg = make_config(overrides)
+        out[name] = (cfg, simulate(cfg, build_scenario(cfg.scenario)))
+    return out
+
+
+@pytest.mark.parametrize("track", ["lateral", "fixed", "kinematic"])
+def test_each_plan_starts_at_the_vehicle_and_its_half_planes_exclude_the_obstacle(
+        paper_runs, track):
+    """Two facts any plan and any collision constraint must satisfy, checked on the recorded
+    global-frame arrays: the plan's step 0 is where the vehicle is (the log's X, Y), and the
+    obstacle's predicted centre at each constrained horizon step lies on the half-plane's
+    forbidden side (``cos a x + sin a y < c``)."""
+    cfg, result = paper_runs[track]
+    horizon, trajectory = result.horizon, result.trajectory
+    rows = len(trajectory)
+    assert {"apf_path_m", "plan_xy_m", "constraint_normal_rad", "constraint_offset_m",
+            "prediction_step_s", "obstacle_velocity_mps"} <= set(horizon)
+    assert all(v.shape[0] == rows for v in horizon.values())
+    plan = horizon["plan_xy_m"]
+    solved = np.isfinite(plan[:, 0, 0])
+    assert solved.sum() >= rows - 2  # every step but the last row (and none fell back here)
+    xy = trajectory[["X_m", "Y_m"]].to_numpy()
+    np.testing.assert_allclose(plan[solved, 0], xy[solved], atol=1e-9)
+    # the APF's path starts at the vehicle too
+    np.testing.assert_allclose(horizon["apf_path_m"][solved, 0], xy[solved], atol=1e-9)
+    normal, offset = horizon["constraint_normal_rad"], horizon["constraint_offset_m"]
+    active = np.argwhere(np.isfinite(normal))
+    assert len(active) >= 10, "the paper scenario's obstacle is constrained at some steps"
+    velocity = horizon["obstacle_velocity_mps"]
+    excluded = 0
+    for k, i, j in active:
+        centre = trajectory[[f"obs{j}_x_m", f"obs{j}_y_m"]].to_numpy()[k] \
+            + velocity[k, j] * horizon["prediction_step_s"][k] * (i + 1)
+        side = np.cos(normal[k, i, j]) * centre[0] + np.sin(normal[k, i, j]) * centre[1]
+        excluded += side < offset[k, i, j]
+    assert excluded == len(active)
+    # the obstacle's recorded velocity is the scenario's (0, -0.4) m/s once it is there
+    obstacle = cfg.scenario.obstacles[0]
+    np.testing.assert_allclose(velocity[-2, 0], [obstacle.vx_mps, obstacle.vy_mps])
+
+
+def test_the_horizon_record_is_stored_listed_and_read_back(make_config, tmp_path):
+    """``horizon.npz`` is in the run folder and its manifest; reading it gives the arrays
+    (float32); a changed file is not trusted; the same arrays give the same bytes."""
+    folder = tmp_path / "run"
+    run_experiment(make_config(["method=baseline"]), folder)
+    manifest = json.loads((folder / MANIFEST).read_text())
+    assert HORIZON_FILE in manifest["files"]
+    read = read_horizon(folder)
+    assert read is not None and read["plan_xy_m"].shape[1:] == (11, 2)
+    trajectory = read_run(folder).trajectory
+    np.testing.assert_allclose(read["plan_xy_m"][:-1, 0], trajectory[["X_m", "Y_m"]]
+                               .to_numpy()[:-1], atol=1e-4)
+    arrays = {"a": np.arange(6.0).reshape(3, 2), "b": np.array([np.nan, 1.5])}
+    assert npz_bytes(arrays) == npz_bytes(dict(reversed(arrays.items())))
+    (folder / HORIZON_FILE).write_bytes(npz_bytes(arrays))
+    assert read_horizon(folder) is None
+
+
+def test_the_member_cache_restores_the_horizon_record(make_config, tmp_path):
+    from pipeline.store.member_cache import MemberCache
+
+    cache = MemberCache(tmp_path / "cache")
+    cfg = make_config(["method=improved", "scenario=family", "scenario.family.size=1",
+                       "scenario.family.n_jobs=1"])
+    run_family(cfg, tmp_path / "first", progress=False, member_cache=cache)
+    run_family(cfg, tmp_path / "second", progress=False, member_cache=cache)
+    first, second = tmp_path / "first" / "member_0000", tmp_path / "second" / "member_0000"
+    assert json.loads((second / MANIFEST).read_text()).get("member_cache")
+    assert (second / HORIZON_FILE).read_bytes() == (first / HORIZON_FILE).read_bytes()
+    assert read_horizon(second) is not None
+
+
+def _decode(path):
+    text = path.read_text()
+    key, packed = re.fullmatch(r'\(window\.__explorerData = window\.__explorerData \|\| \{\}\)'
+                               r'\[("[^"]+")\] = "([A-Za-z0-9+/=]+)";\n', text).groups()
+    return json.loads(key), json.loads(gzip.decompress(base64.b64decode(packed)))
+
+
+@pytest.fixture(scope="module")
+def small_outputs(tmp_path_factory, make_config):
+    """A family of three members (baseline, improved), the paper scenario, a study's folder
+    and a peer on the family's scenarios (a copy of the baseline's family)."""
+    root = tmp_path_factory.mktemp("outputs")
+    for method in ("baseline", "improved"):
+        run_family(make_config([f"method={method}", "scenario=family", "scenario.family.size=3",
+                                "scenario.family.n_jobs=1"]), root / "family" / method,
+                   progress=False)
+        run_experiment(make_config([f"method={method}"]), root / "paper" / method)
+    (root / "multiverse").mkdir()  # a study's section: never in the explorer
+    shutil.copytree(root / "family" / "baseline", root / "peers" / "a_peer")
+    return root
+
+
+def test_every_member_gets_a_data_file_and_the_page_lists_it(small_outputs, tmp_path):
+    root, out = small_outputs, tmp_path / "report"
+    index = write_explorer(root, out)
+    assert list(index.experiments) == ["paper", "family", "peers"]
+    assert index.experiments["peers"]["methods"] == ["improved (family)", "baseline (family)",
+                                                     "a_peer"]
+    _, peers = _decode(out / "explorer_data" / "peers" / "1.js")
+    assert [m["name"] for m in peers["methods"]] == ["improved (family)", "baseline (family)",
+                                                     "a_peer"]
+    assert peers["methods"][1]["x"] == peers["methods"][2]["x"]  # the same run, twice
+    assert index.experiments["family"]["members"] == [0, 1, 2]
+    assert explorer_href("family", 2) == "explorer.html#family/2"
+    key, data = _decode(out / "explorer_data" / "family" / "2.js")
+    assert key == data["key"] == "family/2"
+    assert [m["name"] for m in data["methods"]] == ["baseline", "improved"]
+    assert index.experiments["paper"]["members"] == [0] and index.experiments["paper"]["single"]
+    improved = data["methods"][1]
+    run = read_run(root / "family" / "improved" / "member_0002")
+    # positions in centimetres, the plan relative to the vehicle (its step 0 is 0, 0)
+    assert improved["x"] == [round(v * 100) for v in run.trajectory["X_m"]]
+    assert improved["plan"][5][:2] == [0, 0] and len(improved["plan"][5]) == 22
+    assert all(len(row) == 5 for row in improved["cons"])
+    assert data["steer_max"] == pytest.approx(run.config.vehicle.steering_max_rad)
+    page = (out / "explorer.html").read_text()
+    assert '"family":{"methods":["baseline","improved"],"members":[0,1,2]' in page
+    assert "http://" not in page and "https://" not in page
+    # written again with nothing changed: the data files are kept as they were
+    before = (out / "explorer_data" / "family" / "1.js").stat().st_mtime_ns
+    write_explorer(root, out)
+    assert (out / "explorer_data" / "family" / "1.js").stat().st_mtime_ns == before
+
+
+def test_the_report_writes_the_explorer_and_every_link_has_its_member(small_outputs, tmp_path):
+    """``build_report`` writes ``explorer.html`` beside the page; every link of the page into
+    it (the gallery's, the peers section's) names a member whose data file is there."""
+    from pipeline.reporting.page import build_report
+
+    out = tmp_path / "report"
+    page = build_report(small_outputs, out, "pytest", figure_jobs=1).read_text()
+    links = set(re.findall(r'href="explorer\.html#([a-z_]+/[0-9]+)"', page))
+    assert (out / "explorer.html").is_file()
+    assert "peers/0" in links, links
+    assert any(link.startswith("family/") for link in links), "the gallery links its members"
+    for link in links:
+        assert (out / "explorer_data" / f"{link}.js").is_file(), link
