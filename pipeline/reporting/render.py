@@ -18,6 +18,7 @@ from pipeline.reporting.sections.kinematic import KinematicSection
 from pipeline.reporting.sections.looks import LooksSection
 from pipeline.reporting.sections.methods import MethodsSection
 from pipeline.reporting.sections.paper import PaperSection
+from pipeline.reporting.sections.pedestrians import PedestriansSection
 from pipeline.reporting.sections.peers import PeersSection
 from pipeline.reporting.sections.performance import PerformanceSection
 from pipeline.reporting.sections.robustness import RobustnessSection
@@ -45,6 +46,7 @@ class Page:
     performance: PerformanceSection | None
     given: RunsGivenSection
     methods: MethodsSection
+    pedestrians: PedestriansSection | None = None
 
 
 def environment() -> jinja2.Environment:
