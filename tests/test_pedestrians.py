@@ -215,7 +215,7 @@ def test_a_scene_too_small_for_the_crossing_names_the_key_and_range(make_config,
         family_members(cfg.scenario)
     line, code = _line(caught.value)
     # extent 3 m x 2 m: diagonal 3.61 m less 2 x 0.5 m margin = 2.6 m
-    assert code == 2 and "scenario.pedestrians.crossing_length_m=12.0" in line \
+    assert code == 2 and "scenario.pedestrians.crossing_length_m=10.0" in line \
         and "<= 2.6 m for scene 'plant'" in line
 
 

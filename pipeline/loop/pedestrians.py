@@ -267,12 +267,13 @@ def draw_pedestrian_member(base: ScenarioConfig, index: int,
     """Member ``index`` of the pedestrian family of ``base`` (``base.family`` gives the seed,
     ``base.pedestrians`` the ranges).
 
-    From ``numpy.random.default_rng([seed, index])``: a scene, the platform's speed, a window
-    of the recording, a pedestrian present when the platform would be halfway (its position
-    is the crossing's midpoint: the busy part) and a heading; start and goal lie
-    ``crossing_length_m / 2`` either side. A draw whose start or goal leaves the scene's
-    extent (less ``scene_margin_m``), or whose start is within both radii plus
-    ``start_clearance_m`` of a pedestrian present at t = 0, is redrawn (up to ``max_draws``).
+    From ``numpy.random.default_rng([seed, index])``: a scene (uniformly, once), then the
+    platform's speed, a window of the recording, a pedestrian present when the platform would
+    be halfway (its position is the crossing's midpoint: the busy part) and a heading; start
+    and goal lie ``crossing_length_m / 2`` either side. A draw whose start or goal leaves the
+    scene's extent (less ``scene_margin_m``), or whose start is within both radii plus
+    ``start_clearance_m`` of a pedestrian present at t = 0, is redrawn in the same scene (up to
+    ``max_draws`` times).
 
     Returns
     -------
@@ -289,8 +290,10 @@ def draw_pedestrian_member(base: ScenarioConfig, index: int,
     scenes = {name: load_scene(ped, name) for name in ped.scenes}
     for tracks in scenes.values():
         check_scene_fits(ped, tracks, duration)
+    # the scene first and once: every scene gets its share of members, whatever its
+    # rejection rate
+    tracks = scenes[ped.scenes[int(rng.integers(len(ped.scenes)))]]
     for _attempt in range(ped.max_draws):
-        tracks = scenes[ped.scenes[int(rng.integers(len(ped.scenes)))]]
         low, high = ped.platform_speed_mps
         speed = round(float(rng.uniform(low, high)), 2)
         window = float(rng.uniform(tracks.start_s, tracks.end_s - duration))
@@ -317,9 +320,9 @@ def draw_pedestrian_member(base: ScenarioConfig, index: int,
                        speed_mps=speed, family=None,
                        pedestrians=replace(ped, scene=tracks.name, window_start_s=window))
     raise ConfigError("scenario.pedestrians.crossing_length_m", ped.crossing_length_m,
-                      f"a crossing that fits scenes {list(ped.scenes)} with a free start "
+                      f"a crossing that fits scene '{tracks.name}' with a free start "
                       f"(member {index}: no fitting draw in max_draws={ped.max_draws}); a "
-                      "shorter crossing or larger scenes")
+                      "shorter crossing, more draws or another scene")
 
 
 def _inside(tracks: SceneTracks, point_m: np.ndarray, margin_m: float) -> bool:

@@ -419,14 +419,14 @@ class PedestrianConfig(FrozenAfterValidation):
     #: pedestrians whose recorded track comes this close to the start-goal segment within the
     #: run's time are simulated (and count for collisions); the others never come near
     corridor_m: float = 8.0
-    crossing_length_m: float = 12.0
+    crossing_length_m: float = 10.0
     platform_speed_mps: List[float] = field(default_factory=lambda: [1.0, 2.0])
     #: start and goal lie inside the scene's recorded extent, shrunk by this margin
     scene_margin_m: float = 0.5
     #: free space around the start at t = 0 beyond both radii
     start_clearance_m: float = 1.0
     #: draws tried per member before the scene is declared too small for the crossing
-    max_draws: int = 200
+    max_draws: int = 1000
     #: a member's drawn scene and the recording time at its t = 0 (null in the family's base)
     scene: Optional[str] = None
     window_start_s: Optional[float] = None

@@ -89,6 +89,12 @@ class TuneSpace:
     rungs: List[int] = field(default_factory=lambda: [10, 20])
     prune_gain: float = 0.001
     prune_after_trials: int = 20
+    #: the scenarios tuned and judged on: the scripted family (``family``) or the recorded
+    #: pedestrians (``pedestrians``), trained on ``training_scenes`` and judged on
+    #: ``heldout_scenes`` (disjoint: the held-out scenes are unseen by the tuning)
+    scenario: str = "family"
+    training_scenes: List[str] = field(default_factory=list)
+    heldout_scenes: List[str] = field(default_factory=list)
 
     def __post_init__(self) -> None:
         safe_name("tune.name", self.name)
@@ -137,6 +143,36 @@ class TuneSpace:
                                                        "daqp", "cvxpy"))
         choice("tune.compromise", self.compromise, ("closest_to_ideal",))
         self._check_controls()
+        self._check_scenes()
+
+    def _check_scenes(self) -> None:
+        choice("tune.scenario", self.scenario, ("family", "pedestrians"))
+        if self.scenario == "family":
+            for key in ("training_scenes", "heldout_scenes"):
+                if getattr(self, key):
+                    raise ConfigError(f"tune.{key}", list(getattr(self, key)),
+                                      "[] with tune.scenario=family (scenes are the "
+                                      "pedestrians' only)")
+            return
+        for key in ("training_scenes", "heldout_scenes"):
+            scenes = getattr(self, key)
+            if not scenes or any(not isinstance(x, str) or not x or "/" in x for x in scenes):
+                raise ConfigError(f"tune.{key}", list(scenes or []),
+                                  "a non-empty list of scene names of scenario.pedestrians "
+                                  "(track files of data/eth_ucy/ without extension)")
+        shared = sorted(set(self.training_scenes) & set(self.heldout_scenes))
+        if shared:
+            raise ConfigError("tune.heldout_scenes", list(self.heldout_scenes),
+                              f"scenes not among tune.training_scenes (shared: "
+                              f"{', '.join(shared)}): held-out scenes must be unseen")
+
+    def scenario_overrides(self, part: str) -> list[str]:
+        """The Hydra overrides that choose the scenarios of ``part`` (``training`` or
+        ``heldout``): the scripted family, or the pedestrians on that part's scenes."""
+        if self.scenario == "family":
+            return ["scenario=family"]
+        scenes = self.training_scenes if part == "training" else self.heldout_scenes
+        return ["scenario=pedestrians", f"scenario.pedestrians.scenes=[{','.join(scenes)}]"]
 
     def _check_controls(self) -> None:
         choice("tune.matched_control", self.matched_control, ("baseline_matched", ""))
