@@ -40,6 +40,21 @@ def test_the_tracks_ship_with_the_project_and_their_citations():
     assert "Pellegrini" in readme and "Crowds by example" in readme
 
 
+def test_an_installed_package_ships_the_tracks_where_the_code_reads_them():
+    """pyproject puts data/ into the wheel as pipeline/data (where ``DATA_DIR`` looks first);
+    every file of data/eth_ucy matches its package-data patterns."""
+    import fnmatch
+    import tomllib
+
+    tool = tomllib.loads((ROOT / "pyproject.toml").read_text())["tool"]["setuptools"]
+    assert "pipeline.data" in tool["packages"]
+    assert tool["package-dir"]["pipeline.data"] == "data"
+    patterns = tool["package-data"]["pipeline.data"]
+    files = [p.relative_to(ROOT / "data").as_posix() for p in (ROOT / "data").rglob("*")
+             if p.is_file()]
+    assert files and all(any(fnmatch.fnmatch(f, pat) for pat in patterns) for f in files)
+
+
 @pytest.mark.parametrize("scene", ["biwi_hotel", "crowds_zara01"])
 def test_a_recorded_track_is_replayed_exactly_at_its_sample_times(make_config, scene):
     cfg = make_config(SMALL).scenario.pedestrians
@@ -195,6 +210,16 @@ def test_a_malformed_track_file_is_one_line_naming_it(tmp_path, text, says):
     line, code = _line(caught.value)
     assert code == 2 and "\n" not in line
     assert str(path) in line and says in line and "frame, pedestrian_id, x_m, y_m" in line
+
+
+def test_two_rows_for_one_pedestrian_and_frame_are_one_line(make_config, tmp_path):
+    (tmp_path / "twice.txt").write_text("0\t1\t1.0\t2.0\n0\t1\t1.5\t2.0\n")
+    cfg = make_config(SMALL + [f"scenario.pedestrians.data_dir={tmp_path}"]).scenario
+    with pytest.raises(TrackFileError) as caught:
+        load_scene(cfg.pedestrians, "twice")
+    line, code = _line(caught.value)
+    assert code == 2 and str(tmp_path / "twice.txt") in line and "two rows for one frame" \
+        in line
 
 
 def test_a_missing_track_file_names_the_file_and_the_scenes_found(make_config, tmp_path):
