@@ -16,6 +16,8 @@ KINEMATIC_PEERS_FAMILY_SIZE ?= 25
 # experiments, where a pool of its own buys nothing and costs its start-up (measured: 43 against
 # 56 CPU-s for both); make peers runs them on both cores
 PEERS_JOBS ?= 1
+# make pedestrians: the recorded-pedestrian family (ETH/UCY), not part of make reproduce
+PEDESTRIANS_FAMILY_SIZE ?= 200
 REPORT      ?= reports/latest
 PYTEST_ARGS ?=
 PYTEST_JOBS ?= auto
@@ -43,7 +45,7 @@ MEMBER_CACHE ?= $(RUNS)/member_cache
 export PIPELINE_MEMBER_CACHE = $(if $(filter off,$(MEMBER_CACHE)),off,$(abspath $(MEMBER_CACHE)))
 LAUNCHER    ?= sequential
 
-.PHONY: help install lint reproduce experiment run-paper run-kinematic run-kinematic-readings run-family run-kinematic-family run-frames run-apf-alone run-peers run-kinematic-peers peers speed-check report screenshot sweep verify ablation multiverse tune tune-unpruned tune-peers nmpc-check test test-slurm test-all bench install-commonroad commonroad cache-size clean-cache clean
+.PHONY: help install lint reproduce experiment run-paper run-kinematic run-kinematic-readings run-family run-kinematic-family run-frames run-apf-alone run-peers run-kinematic-peers peers speed-check report screenshot sweep verify ablation multiverse pedestrians tune tune-unpruned tune-peers nmpc-check test test-slurm test-all bench install-commonroad commonroad cache-size clean-cache clean
 
 help:  ## list the targets
 	@grep -E '^[a-zA-Z_-]+:.*## ' $(MAKEFILE_LIST) | awk -F':.*## ' '{printf "  %-12s %s\n", $$1, $$2}'
@@ -121,6 +123,11 @@ ablation: $(STAMP)  ## which revision does what: ablations + interpretation vari
 	rm -rf $(RUNS)/ablation $(RUNS)/interpretations
 	$(PY) -m pipeline.run experiment=ablation hydra.sweep.dir=$(RUNS)/ablation scenario.family.size=$(FAMILY_SIZE)
 	$(PY) -m pipeline.run experiment=interpretations hydra.sweep.dir=$(RUNS)/interpretations
+	$(MAKE) report
+
+pedestrians: $(STAMP)  ## improved and baseline among recorded pedestrians (ETH/UCY, docs/pedestrians.md; 3-6 min), then the report
+	rm -rf $(RUNS)/pedestrians
+	$(PY) -m pipeline.run experiment=pedestrians hydra.sweep.dir=$(RUNS)/pedestrians scenario.family.size=$(PEDESTRIANS_FAMILY_SIZE)
 	$(MAKE) report
 
 multiverse: $(STAMP)  ## how robust is each verdict: the multiverse (MULTIVERSE=default|quick), then the report

@@ -110,6 +110,18 @@ class SweepConfigError(ConfigError):
         return str(self.args[0])
 
 
+class TrackFileError(ConfigError):
+    """A recorded-track file (``scenario=pedestrians``) that is missing or cannot be read:
+    the message names the file (and line) and what is expected."""
+
+    def __init__(self, message: str) -> None:  # noqa: D107 - the message is the whole story
+        ValueError.__init__(self, message)
+        self.key, self.value, self.allowed = "", None, ""
+
+    def __str__(self) -> str:
+        return str(self.args[0])
+
+
 def describe_config_error(exc: BaseException) -> str | None:
     """One line for a configuration error, or None if ``exc`` is not one."""
     chain: list[BaseException] = []

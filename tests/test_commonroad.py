@@ -148,7 +148,7 @@ def test_the_reader_round_trips_a_scenario_written_by_commonroad_io(
     assert case.initial_time_step == initial_time_step
     assert case.obstacle_ids == (10, 11) and case.ego_recording_ids == (12,)
     ours = case.scenario
-    assert ours.obstacle_slots == "nearest"
+    assert ours.nearest_first
     assert ours.obstacle_radius_m == pytest.approx([0.5, math.hypot(CAR_LENGTH_M,
                                                                    CAR_WIDTH_M) / 2])
     # our time t is CommonRoad's time step initial_time_step + t / dt; the car is at

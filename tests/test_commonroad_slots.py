@@ -1,5 +1,5 @@
 """The MPC's obstacle slots filled nearest first (issue 43: CommonRoad scenarios have more
-obstacles than slots; ``Scenario.obstacle_slots``). Needs no optional extra."""
+obstacles than slots; ``Scenario.nearest_first``). Needs no optional extra."""
 
 from __future__ import annotations
 
@@ -34,7 +34,7 @@ def test_one_slot_goes_to_the_near_obstacle_only_when_filled_nearest_first(make_
     far = ObstacleConfig(x_m=15.0, y_m=30.0, radius_m=0.5, appear_time_s=0.0)
     two = replace(cfg.scenario, obstacles=[far, *cfg.scenario.obstacles])
     by_index = build_scenario(two)
-    assert by_index.obstacle_slots == "index"  # the default, as before
+    assert not by_index.nearest_first  # the default, as before
     unconstrained = make_config(["method=mpc_no_apf", "controller.max_obstacles=1",
                                  "controller.collision_constraints=false"])
 
@@ -44,6 +44,6 @@ def test_one_slot_goes_to_the_near_obstacle_only_when_filled_nearest_first(make_
 
     index_path = path(cfg, by_index)
     assert np.array_equal(index_path, path(unconstrained, by_index))
-    nearest_path = path(cfg, replace(by_index, obstacle_slots="nearest"))
+    nearest_path = path(cfg, replace(by_index, nearest_first=True))
     assert np.max(np.abs(index_path[:, 1])) < 0.1  # straight on, through the obstacle
     assert np.max(np.abs(nearest_path[:, 1])) > 0.5

@@ -47,7 +47,7 @@ STUDY_FILES = {
 #: The outputs root's sections: only the layout (``pipeline.store.layout``) joins them to a
 #: path.
 SECTIONS = ("paper", "kinematic", "kinematic_readings", "family", "kinematic_family", "frames",
-            "apf_alone", "peers", "kinematic_peers", "ablation", "interpretations", "multiverse",
+            "apf_alone", "peers", "kinematic_peers", "pedestrians", "ablation", "interpretations", "multiverse",
             "tune", "tune_peers", "nmpc_check", "speed", "sweeps")
 
 

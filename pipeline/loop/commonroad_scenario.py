@@ -11,7 +11,7 @@ CommonRoad (commonroad-io, BSD-3-Clause) is the motion-planning community's scen
   smaller side: ``scenario.commonroad.obstacle_disc``) that moves on its recorded track, present
   from its first to its last recorded time step; an obstacle on the ego's initial position at
   the initial time step is the ego's own recording and is dropped;
-* the MPC fills its obstacle slots nearest first (``Scenario.obstacle_slots = "nearest"``).
+* the MPC fills its obstacle slots nearest first (``Scenario.nearest_first``).
 
 :func:`ego_states` and :func:`ego_solution` turn our logged run back into CommonRoad states and
 a CommonRoad solution (the kinematic single-track model's states, the trajectory a CommonRoad
@@ -181,7 +181,7 @@ def build_commonroad_scenario(cfg: ScenarioConfig, tracks: ObstacleTracks) -> Co
         obstacle_start_m=tracks.positions_m[rows, first].reshape(-1, 2),
         obstacle_velocity_mps=velocities[rows, first].reshape(-1, 2),
         obstacle_radius_m=np.asarray(tracks.radii_m, float),
-        obstacle_appear_s=first.astype(float) * dt, obstacle_slots="nearest",
+        obstacle_appear_s=first.astype(float) * dt, nearest_first=True,
         track_step_s=dt, track_positions_m=tracks.positions_m,
         track_velocities_mps=velocities, track_present=tracks.present)
 

@@ -1,7 +1,10 @@
 """Scenario stage: start, goal, obstacles over time, and the straight start-to-goal line frame.
 
-Obstacles are circles that are invisible until their appearance time and then move at constant
-velocity from the position at which they appear.
+Obstacles are circles. How they move is the scenario's :class:`ObstacleMotion`: by default
+(the scripted scenarios) they are invisible until their appearance time and then move at
+constant velocity from the position at which they appear; recorded pedestrians
+(:mod:`pipeline.loop.pedestrians`) move on their recorded tracks, and the vehicle sees them only
+within a sensor range (:meth:`ObstacleSnapshot.sensed_from`).
 """
 
 from __future__ import annotations
@@ -9,7 +12,7 @@ from __future__ import annotations
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from functools import cached_property
-from typing import Any
+from typing import Any, Protocol
 
 import numpy as np
 
@@ -40,18 +43,35 @@ class ObstacleSnapshot:
         return ObstacleSnapshot(self.positions_m[keep], self.velocities_mps[keep],
                                 self.radii_m[keep], self.visible[keep])
 
-    def nearest_first(self, point_m: np.ndarray) -> ObstacleSnapshot:
-        """The obstacles ordered by centre distance to ``point_m`` (the MPC fills its
-        ``max_obstacles`` slots in this order)."""
-        gaps = np.hypot(*(self.positions_m - np.asarray(point_m, float)[:2]).T)
-        order = np.argsort(gaps, kind="stable")
-        return ObstacleSnapshot(self.positions_m[order], self.velocities_mps[order],
-                                self.radii_m[order], self.visible[order])
-
     def predicted_positions(self, times_ahead_s: np.ndarray) -> np.ndarray:
         """Constant-velocity prediction, shape (len(times_ahead_s), n, 2)."""
         t = np.asarray(times_ahead_s, dtype=float)[:, None, None]
         return self.positions_m[None, :, :] + t * self.velocities_mps[None, :, :]
+
+    def sensed_from(self, position_m: np.ndarray, sensor_range_m: float) -> ObstacleSnapshot:
+        """The snapshot as a sensor at ``position_m`` sees it: visible only where also within
+        ``sensor_range_m`` (centre distance, m); positions stay the true ones."""
+        d = self.positions_m - np.asarray(position_m, dtype=float)[None, :]
+        near = np.hypot(d[:, 0], d[:, 1]) <= sensor_range_m
+        return ObstacleSnapshot(self.positions_m, self.velocities_mps, self.radii_m,
+                                self.visible & near)
+
+    def nearest_first(self, position_m: np.ndarray) -> ObstacleSnapshot:
+        """The obstacles ordered by centre distance from ``position_m`` (the MPC fills its
+        ``max_obstacles`` slots in this order; ties keep their index order)."""
+        d = self.positions_m - np.asarray(position_m, dtype=float)[None, :2]
+        order = np.argsort(np.hypot(d[:, 0], d[:, 1]), kind="stable")
+        return ObstacleSnapshot(self.positions_m[order], self.velocities_mps[order],
+                                self.radii_m[order], self.visible[order])
+
+
+class ObstacleMotion(Protocol):
+    """How a scenario's obstacles move: their true positions (n, 2), velocities (n, 2) and
+    presence (n,) at a time (s). The scripted scenarios need none (their constant-velocity
+    arrays, :meth:`Scenario.obstacles_at`); recorded pedestrians use
+    :class:`pipeline.loop.pedestrians.RecordedTrackMotion`."""
+
+    def states_at(self, time_s: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]: ...
 
 
 @dataclass(frozen=True)
@@ -111,9 +131,12 @@ class Scenario:
     obstacle_radius_m: np.ndarray
     obstacle_appear_s: np.ndarray
     obstacle_anchor: str = "world"
-    #: the order in which the MPC's obstacle slots are filled: "index" (the scenario's order)
-    #: or "nearest" (nearest first; CommonRoad scenarios, with more obstacles than slots)
-    obstacle_slots: str = "index"
+    #: None: constant velocity from the ``obstacle_*`` arrays (the scripted obstacles)
+    obstacle_motion: ObstacleMotion | None = None
+    #: the planner and the MPC see an obstacle only within this centre distance (m); None: all
+    sensor_range_m: float | None = None
+    #: hand the visible obstacles to the planner and the MPC nearest first (else index order)
+    nearest_first: bool = False
 
     @property
     def n_obstacles(self) -> int:
@@ -125,7 +148,14 @@ class Scenario:
         return LineFrame(self.start_m.copy(), float(np.arctan2(d[1], d[0])))
 
     def obstacles_at(self, time_s: float) -> ObstacleSnapshot:
-        """Obstacle positions at ``time_s``; before appearance an obstacle sits where it will appear."""
+        """Obstacle positions at ``time_s``; before appearance an obstacle sits where it will appear.
+
+        With an :attr:`obstacle_motion`, its states; visible where present (the sensor range
+        is applied by the loop, which knows where the vehicle is)."""
+        if self.obstacle_motion is not None:
+            positions, velocities, present = self.obstacle_motion.states_at(time_s)
+            return ObstacleSnapshot(positions, velocities, self.obstacle_radius_m.copy(),
+                                    present)
         elapsed = np.maximum(time_s - self.obstacle_appear_s, 0.0)[:, None]
         positions = self.obstacle_start_m + elapsed * self.obstacle_velocity_mps
         # a small tolerance so that an obstacle appearing at t = 3.0 s is seen at step 30
@@ -162,6 +192,8 @@ def build_scenario(cfg: ScenarioConfig) -> Scenario:
     -------
     Scenario
     """
+    if cfg.pedestrians is not None:
+        return _pedestrian_scenario(cfg)
     obs = cfg.obstacles
     return Scenario(
         name=cfg.name,
@@ -182,6 +214,29 @@ def build_scenario(cfg: ScenarioConfig) -> Scenario:
         obstacle_appear_s=np.array([o.appear_time_s for o in obs], dtype=float),
         obstacle_anchor=str(getattr(cfg, "obstacle_anchor", "world")),
     )
+
+
+def _pedestrian_scenario(cfg: ScenarioConfig) -> Scenario:
+    """A member of the pedestrian family: its recorded pedestrians as the obstacles (true
+    tracks), seen within the sensor range, handed to the MPC nearest first."""
+    from pipeline.loop.pedestrians import recorded_motion
+
+    ped = cfg.pedestrians
+    assert ped is not None
+    motion, n = recorded_motion(cfg)
+    start_positions, _, _ = motion.states_at(0.0)
+    return Scenario(
+        name=cfg.name, start_m=np.asarray(cfg.start_xy_m, dtype=float),
+        start_heading_rad=float(cfg.start_heading_rad),
+        goal_m=np.asarray(cfg.goal_xy_m, dtype=float),
+        goal_tolerance_m=float(cfg.goal_tolerance_m), speed_mps=float(cfg.speed_mps),
+        initial_speed_mps=float(cfg.speed_mps if cfg.initial_speed_mps is None
+                                else cfg.initial_speed_mps),
+        sample_time_s=float(cfg.sample_time_s), n_steps=int(cfg.n_steps),
+        plant_substeps=int(cfg.plant_substeps), obstacle_start_m=start_positions,
+        obstacle_velocity_mps=np.zeros((n, 2)), obstacle_radius_m=np.full(n, ped.radius_m),
+        obstacle_appear_s=np.zeros(n), obstacle_motion=motion,
+        sensor_range_m=float(ped.sensor_range_m), nearest_first=True)
 
 
 def _uniform(rng: np.random.Generator, bounds: Sequence[float]) -> float:
@@ -283,4 +338,9 @@ def family_members(base: ScenarioConfig, vehicle_radius_m: float = 1.0) -> list[
     """All ``base.family.size`` members, in index order."""
     if base.family is None:
         raise ValueError("scenario has no family block")
+    if base.pedestrians is not None:
+        from pipeline.loop.pedestrians import draw_pedestrian_member
+
+        return [draw_pedestrian_member(base, i, vehicle_radius_m)
+                for i in range(base.family.size)]
     return [draw_family_member(base, i, vehicle_radius_m) for i in range(base.family.size)]

@@ -444,6 +444,78 @@ class CommonRoadConfig(FrozenAfterValidation):
 
 
 @dataclass
+class PedestrianConfig(FrozenAfterValidation):
+    """Recorded pedestrians (ETH/UCY tracks) as the scenario's dynamic obstacles
+    (:mod:`pipeline.loop.pedestrians`; ``scenario=pedestrians``).
+
+    A family draws, per member, a scene of ``scenes``, a window of its recording, the platform's
+    speed and a crossing through the scene's busy part; the member keeps the drawn ``scene``
+    and ``window_start_s``. Pedestrians are discs of ``radius_m`` on their recorded tracks
+    (linear between samples); the planner and the MPC see one only within ``sensor_range_m``
+    of the vehicle's centre and predict it at constant velocity. They do not react.
+    """
+
+    #: folder of the track files (``<scene>.txt.gz`` or ``<scene>.txt``); relative paths are
+    #: read from the project's ``data/`` folder (``pipeline/data`` in an installed package)
+    data_dir: str = "eth_ucy"
+    scenes: List[str] = field(default_factory=lambda: ["biwi_hotel", "crowds_zara01",
+                                                       "crowds_zara02", "students001"])
+    #: recording time per frame number (s): frames are numbered 10 apart at 2.5 Hz
+    seconds_per_frame: float = 0.04
+    radius_m: float = 0.3
+    sensor_range_m: float = 6.0
+    #: pedestrians whose recorded track comes this close to the start-goal segment within the
+    #: run's time are simulated (and count for collisions); the others never come near
+    corridor_m: float = 8.0
+    crossing_length_m: float = 10.0
+    platform_speed_mps: List[float] = field(default_factory=lambda: [1.0, 2.0])
+    #: start and goal lie inside the scene's recorded extent, shrunk by this margin
+    scene_margin_m: float = 0.5
+    #: free space around the start at t = 0 beyond both radii
+    start_clearance_m: float = 1.0
+    #: draws tried per member before the scene is declared too small for the crossing
+    max_draws: int = 1000
+    #: a member's drawn scene and the recording time at its t = 0 (null in the family's base)
+    scene: Optional[str] = None
+    window_start_s: Optional[float] = None
+
+    def __post_init__(self) -> None:
+        key = "scenario.pedestrians"
+        if not isinstance(self.data_dir, str) or not self.data_dir:
+            raise ConfigError(f"{key}.data_dir", self.data_dir, "a folder path")
+        if not self.scenes or any(not isinstance(s, str) or not s or "/" in s
+                                  for s in self.scenes):
+            raise ConfigError(f"{key}.scenes", list(self.scenes or []),
+                              "a non-empty list of scene names (track files without "
+                              "extension, no '/')")
+        for name in self.scenes:
+            safe_name(f"{key}.scenes", name)
+        between(f"{key}.seconds_per_frame", self.seconds_per_frame, 1e-4, 10.0)
+        between(f"{key}.radius_m", self.radius_m, 0.01, 5.0)
+        if isinstance(self.sensor_range_m, bool) or not isinstance(self.sensor_range_m,
+                                                                   (int, float)) \
+                or not 0.0 < self.sensor_range_m <= 100.0:
+            raise ConfigError(f"{key}.sensor_range_m", self.sensor_range_m,
+                              "a number in (0, 100] (m)")
+        between(f"{key}.corridor_m", self.corridor_m, 0.0, 1000.0)
+        between(f"{key}.crossing_length_m", self.crossing_length_m, 1.0, 1000.0)
+        pair(f"{key}.platform_speed_mps", self.platform_speed_mps)
+        low, high = self.platform_speed_mps
+        if not 0.1 <= low <= high <= 40.0:
+            raise ConfigError(f"{key}.platform_speed_mps", list(self.platform_speed_mps),
+                              "[low, high] with 0.1 <= low <= high <= 40 (m/s)")
+        between(f"{key}.scene_margin_m", self.scene_margin_m, 0.0, 100.0)
+        between(f"{key}.start_clearance_m", self.start_clearance_m, 0.0, 100.0)
+        if isinstance(self.max_draws, bool) or not isinstance(self.max_draws, int) \
+                or not 1 <= self.max_draws <= 100_000:
+            raise ConfigError(f"{key}.max_draws", self.max_draws, "an integer in [1, 100000]")
+        if self.scene is not None:
+            safe_name(f"{key}.scene", self.scene)
+        if self.window_start_s is not None:
+            finite(f"{key}.window_start_s", self.window_start_s)
+
+
+@dataclass
 class ScenarioConfig(FrozenAfterValidation):
     """Start, goal, speed, run length and obstacles of one closed-loop run."""
 
@@ -467,6 +539,8 @@ class ScenarioConfig(FrozenAfterValidation):
     # line) and shifted with the vehicle's actual position when the obstacle appears (Figure 1:
     # "interrupted after the mobile platform moved in three seconds")
     obstacle_anchor: str = "world"
+    # recorded pedestrians as the dynamic obstacles (scenario=pedestrians); null: none
+    pedestrians: Optional[PedestrianConfig] = None
 
     #: The range of ``speed_mps`` and ``initial_speed_mps`` (m/s); a planner of one's own
     #: plans its speed within it too (:mod:`pipeline.loop.plugins`).
@@ -518,12 +592,13 @@ class ScenarioConfig(FrozenAfterValidation):
                               "an integer in [1, 1000]")
 
     def _check_obstacles(self) -> None:
-        if self.commonroad is not None and (self.family is not None or self.obstacles):
-            raise ConfigError("scenario.commonroad", "with family or obstacles",
+        if self.commonroad is not None and (self.family is not None or self.obstacles
+                                            or self.pedestrians is not None):
+            raise ConfigError("scenario.commonroad", "with family, obstacles or pedestrians",
                               "a CommonRoad scenario alone (its obstacles come from its file; "
-                              "no scenario.family, no scenario.obstacles)")
+                              "no scenario.family, scenario.obstacles or scenario.pedestrians)")
         if not self.obstacles and self.family is None and self.commonroad is None \
-                and not self.allow_no_obstacles:
+                and self.pedestrians is None and not self.allow_no_obstacles:
             raise ConfigError("scenario.obstacles", [], "a non-empty obstacle list (or "
                               "scenario.allow_no_obstacles=true for an obstacle-free run)")
         seen = set()

@@ -283,11 +283,14 @@ def _closed_loop(cfg: LoopSettings, scenario: Scenario, qp_cache: QpCache | None
     # (a plain flag keeps the default reading's loop free of the per-step check)
     unanchored = np.full(scenario.n_obstacles, scenario.obstacle_anchor == "vehicle")
     anchoring = bool(unanchored.any())
+    sensor_range = scenario.sensor_range_m
     for k in range(scenario.n_steps + 1):
         time_s = k * ts
         if anchoring:
             scenario, anchoring = _anchor_due(scenario, unanchored, time_s, state)
         snapshot = scenario.obstacles_at(time_s)
+        if sensor_range is not None:  # recorded pedestrians: seen only within the range
+            snapshot = snapshot.sensed_from(state[:2], sensor_range)
         row, along, lateral, psi, e_psi = _pose_row(time_s, state, frame, line, snapshot,
                                                     obstacle_names)
         ending = _termination(state, along, goal_line_x, scenario, k)
@@ -297,9 +300,9 @@ def _closed_loop(cfg: LoopSettings, scenario: Scenario, qp_cache: QpCache | None
             log.put(k, row)
             break
         visible = snapshot.only_visible()
+        if scenario.nearest_first:
+            visible = visible.nearest_first(state[:2])
         position = state[:2].copy()
-        if scenario.obstacle_slots == "nearest":
-            visible = visible.nearest_first(position)
         rollout = planner.rollout(position, scenario.goal_m, visible, plant.velocity(state))
         planned.put(k, rollout, snapshot)
         speed_ref = _planned_speed(planner, position, psi, visible, scenario, vehicle_radius,

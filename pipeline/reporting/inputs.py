@@ -214,6 +214,8 @@ class ReportInputs:
     #: the methods the paper names, on the family and on the Appendix-A track's family
     peers: FamilyInputs | None = None
     kinematic_peers: FamilyInputs | None = None
+    #: the treatment and the baseline among recorded pedestrians (make pedestrians)
+    pedestrians: FamilyInputs | None = None
     #: per track ("lateral", "kinematic") and method: the solve time per step over its
     #: family's members, median and 95th percentile in seconds (peers and the treatment)
     solve_times: dict[str, dict[str, tuple[float, float]]] = field(default_factory=dict)
@@ -328,6 +330,10 @@ class ReportInputs:
                                                                   layout.canonical),
                                    layout.folder("kinematic_peers"), "peers section") \
             if layout.folder("kinematic_peers").is_dir() else None
+        pedestrians = optional(lambda folder: FamilyInputs.of(load_runs(folder, skipped),
+                                                              layout.canonical),
+                               layout.folder("pedestrians"), "pedestrians section") \
+            if layout.folder("pedestrians").is_dir() else None
         solve_times = optional(lambda _root: _solve_times(
             claims.treatment, {"lateral": (family, peers),
                                "kinematic": (kinematic_family, kinematic_peers)}),
@@ -346,7 +352,8 @@ class ReportInputs:
             else None,
             other_runs=lateral.extra + others, family=family,
             kinematic_family=kinematic_family, apf_alone=apf_alone, peers=peers,
-            kinematic_peers=kinematic_peers, solve_times=solve_times,
+            kinematic_peers=kinematic_peers, pedestrians=pedestrians,
+            solve_times=solve_times,
             readings=_readings(layout),
             ablation=family_tables_by_method(layout.folder("ablation"), skipped),
             interpretations=interpretation_tables(layout.folder("interpretations"), skipped),

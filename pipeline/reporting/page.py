@@ -29,6 +29,7 @@ from pipeline.reporting.sections.kinematic import kinematic_section
 from pipeline.reporting.sections.looks import looks_section
 from pipeline.reporting.sections.methods import methods_section
 from pipeline.reporting.sections.paper import paper_section
+from pipeline.reporting.sections.pedestrians import pedestrians_section
 from pipeline.reporting.sections.peers import peers_section
 from pipeline.reporting.sections.performance import performance_section
 from pipeline.reporting.sections.robustness import robustness_section
@@ -118,6 +119,7 @@ def build_page(inputs: ReportInputs, verdicts: Verdicts, figures: Figures, comma
                               apf_alone, peers),
         family=family, apf_alone=apf_alone,
         peers=peers, kinematic=kinematic,
+        pedestrians=pedestrians_section(inputs, verdicts, figures) if paper else None,
         looks=looks_section(inputs, verdicts) if paper else None,
         robustness=robustness if paper else None, fair_fight=fair_fight if paper else None,
         validity=validity_section(inputs, verdicts) if paper else None,

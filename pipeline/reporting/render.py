@@ -20,6 +20,7 @@ from pipeline.reporting.sections.kinematic import KinematicSection
 from pipeline.reporting.sections.looks import LooksSection
 from pipeline.reporting.sections.methods import MethodsSection
 from pipeline.reporting.sections.paper import PaperSection
+from pipeline.reporting.sections.pedestrians import PedestriansSection
 from pipeline.reporting.sections.peers import PeersSection
 from pipeline.reporting.sections.performance import PerformanceSection
 from pipeline.reporting.sections.robustness import RobustnessSection
@@ -48,6 +49,7 @@ class Page:
     given: RunsGivenSection
     methods: MethodsSection
     commonroad: CommonRoadSection | None = None
+    pedestrians: PedestriansSection | None = None
 
 
 def environment() -> jinja2.Environment:

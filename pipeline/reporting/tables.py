@@ -89,6 +89,12 @@ def _ledgers(inputs: ReportInputs, verdicts: Verdicts, table_dir: Path) -> None:
                            c["method"], (None, None))[1]}
                       for judged in verdicts.peers for c in judged.counts]
                      ).to_csv(table_dir / "peers_collisions.csv", index=False)
+    if verdicts.pedestrians is not None:
+        verdicts.pedestrians.frame().to_csv(table_dir / "claims_ledger_pedestrians.csv",
+                                            index=False)
+        pd.DataFrame([{"scene": "all", **c} for c in verdicts.pedestrians.counts]
+                     + list(verdicts.pedestrians.scene_counts)).to_csv(
+            table_dir / "pedestrians_collisions.csv", index=False)
     if verdicts.validity is not None and inputs.validity is not None and has_validity(inputs):
         inputs.validity.table.to_frame().to_csv(table_dir / "model_validity.csv", index=False)
         pd.DataFrame(verdicts.validity.rows()).to_csv(table_dir / "claims_model_validity.csv",

@@ -116,6 +116,33 @@ class PeerVerdicts:
 
 
 @dataclass(frozen=True)
+class PedestrianVerdicts:
+    """The treatment against its controls among recorded pedestrians (``make
+    pedestrians``): the ledger over the whole family and one per scene (by the default
+    ledger's rules, C2 on each run's own window, no all-pairs sensitivity), and the outcome
+    counts per method overall and per scene. ``tables``: each method's family table with a
+    ``scene`` column."""
+
+    scenes: tuple[str, ...]
+    comparisons: tuple[str, ...]
+    ledger: Ledger
+    by_scene: tuple[tuple[str, Ledger], ...]
+    counts: tuple[dict, ...]
+    scene_counts: tuple[dict, ...]
+    tables: dict[str, pd.DataFrame]
+
+    def frame(self) -> pd.DataFrame:
+        """Every ledger as one table, a ``scene`` column first (``all``: the whole family;
+        ``tables/claims_ledger_pedestrians.csv``)."""
+        frames = []
+        for scene, ledger in (("all", self.ledger), *self.by_scene):
+            frame = ledger.to_frame()
+            frame.insert(0, "scene", scene)
+            frames.append(frame)
+        return pd.concat(frames, ignore_index=True)
+
+
+@dataclass(frozen=True)
 class ValidityVerdicts:
     """The claims again: the default ledger without the all-pairs sensitivity, per comparison
     on the scenarios where both models held (with their number), in the other frame."""
@@ -155,6 +182,7 @@ class Verdicts:
     kinematic_family: FamilyVerdicts | None = None
     apf_alone: ApfAloneVerdicts | None = None
     peers: tuple[PeerVerdicts, ...] = ()
+    pedestrians: PedestrianVerdicts | None = None
     readings: tuple[tuple[str, dict[str, str]], ...] = ()
     ablation_effects: pd.DataFrame | None = None
     ablation_roles: tuple[str, str] = ("improved", "baseline")
@@ -188,8 +216,10 @@ class Verdicts:
             _peers("lateral", inputs.family, inputs.peers, cfg),
             _peers("kinematic", inputs.kinematic_family, inputs.kinematic_peers, cfg))
             if judged is not None)
+        pedestrians = _pedestrians(inputs.pedestrians, cfg) \
+            if inputs.pedestrians is not None else None
         return cls(cfg, paper, kinematic, family, kinematic_family, apf_alone, peers,
-                   _readings(inputs.kinematic, inputs.readings, cfg)
+                   pedestrians, _readings(inputs.kinematic, inputs.readings, cfg)
                    if inputs.kinematic is not None else (),
                    effects, roles, interpretation_flips(inputs.interpretations, own),
                    _validity(inputs.family, inputs, own) if inputs.family is not None
@@ -297,6 +327,38 @@ def _peers(track: str, default: FamilyInputs | None, peers: FamilyInputs | None,
                            cfg.treatment, names, sensitivity=False)
     ledger = ledger.without_claims(FORCE_CLAIMS)
     return PeerVerdicts(track, names, ledger, tuple(outcome_counts(tables)))
+
+
+def _pedestrians(family: FamilyInputs, cfg: ClaimsConfig) -> PedestrianVerdicts | None:
+    """The pedestrian ledgers (:class:`PedestrianVerdicts`); None without the treatment and
+    a control. The scene of each member is read from its name (``scene_of``), the scenes from
+    the family's settings."""
+    from pipeline.loop.pedestrians import scene_of
+
+    if not family.judgeable(cfg):
+        return None
+    own = dataclasses.replace(cfg, c2_window="own")
+    scenes: list[str] = []
+    for settings in family.settings.values():
+        ped = settings.scenario.pedestrians
+        scenes += [s for s in (ped.scenes if ped is not None else ()) if s not in scenes]
+    tables = {}
+    for method, table in family.primary.items():
+        table = table.copy()
+        table["scene"] = [scene_of(str(name), scenes) or "?" for name in table["scenario"]]
+        tables[method] = table
+    comparisons = tuple(c for c in cfg.controls if c in tables and c != cfg.treatment)
+    present = tuple(s for s in scenes if any((t["scene"] == s).any() for t in tables.values()))
+    ledger = family_ledger(tables, own, None, cfg.treatment, comparisons, sensitivity=False)
+    by_scene = tuple((scene, family_ledger({m: t[t["scene"] == scene] for m, t in
+                                            tables.items()}, own, None, cfg.treatment,
+                                           comparisons, sensitivity=False))
+                     for scene in present)
+    scene_counts = tuple({"scene": scene, **row} for scene in present
+                         for row in outcome_counts({m: t[t["scene"] == scene]
+                                                    for m, t in tables.items()}))
+    return PedestrianVerdicts(present, comparisons, ledger, by_scene,
+                              tuple(outcome_counts(tables)), scene_counts, tables)
 
 
 def _apf_alone(family: FamilyInputs, cfg: ClaimsConfig, default: FamilyVerdicts | None,

@@ -34,6 +34,7 @@ class OutputsLayout:
     apf_alone: str = "apf_alone"
     peers: str = "peers"
     kinematic_peers: str = "kinematic_peers"
+    pedestrians: str = "pedestrians"
     ablation: str = "ablation"
     interpretations: str = "interpretations"
     multiverse: str = "multiverse"
@@ -82,7 +83,7 @@ class OutputsLayout:
         return (self.sweeps, self.ablation, self.interpretations, self.multiverse, self.tune,
                 self.tune_unpruned, self.tune_peers, self.member_cache, self.kinematic_readings,
                 self.kinematic_family, self.frames, self.apf_alone, self.peers, self.kinematic_peers,
-                self.nmpc_check, self.speed, self.commonroad)
+                self.pedestrians, self.nmpc_check, self.speed, self.commonroad)
 
     @property
     def validity_sections(self) -> tuple[str, ...]:

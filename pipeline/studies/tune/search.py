@@ -307,8 +307,9 @@ class Runner:
         else:
             seed, size = self.space.heldout_seed, self.space.heldout_size
             backend = self.space.heldout_backend
-        overrides = ([f"method={method}", "scenario=family", f"scenario.family.seed={seed}",
-                      f"scenario.family.size={size}", f"controller.backend={backend}"]
+        overrides = ([f"method={method}", *self.space.scenario_overrides(part),
+                      f"scenario.family.seed={seed}", f"scenario.family.size={size}",
+                      f"controller.backend={backend}"]
                      + list(TRACK_OVERRIDES[self.space.track])
                      + [_override(k, v) for k, v in params.items()])
         # a trial's rungs are one composition (Hydra's compose is 0.05-0.1 s)

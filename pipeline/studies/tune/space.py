@@ -99,6 +99,12 @@ class TuneSpace:
     prune_gain: float = 0.001
     prune_after_trials: int = 20
     track: str = "lateral"
+    #: the scenarios tuned and judged on: the scripted family (``family``) or the recorded
+    #: pedestrians (``pedestrians``), trained on ``training_scenes`` and judged on
+    #: ``heldout_scenes`` (disjoint: the held-out scenes are unseen by the tuning)
+    scenario: str = "family"
+    training_scenes: List[str] = field(default_factory=list)
+    heldout_scenes: List[str] = field(default_factory=list)
 
     def __post_init__(self) -> None:
         safe_name("tune.name", self.name)
@@ -145,6 +151,7 @@ class TuneSpace:
         choice("tune.compromise", self.compromise, ("closest_to_ideal",))
         self._check_track()
         self._check_controls()
+        self._check_scenes()
 
     def _check_track(self) -> None:
         choice("tune.track", self.track, tuple(TRACK_OVERRIDES))
@@ -156,6 +163,35 @@ class TuneSpace:
                 raise ConfigError(f"tune.{key}", getattr(self, key),
                                   "clarabel_direct or cvxpy with tune.track kinematic (the "
                                   "kinematic MPC's QP has no DAQP or dense form)")
+
+    def _check_scenes(self) -> None:
+        choice("tune.scenario", self.scenario, ("family", "pedestrians"))
+        if self.scenario == "family":
+            for key in ("training_scenes", "heldout_scenes"):
+                if getattr(self, key):
+                    raise ConfigError(f"tune.{key}", list(getattr(self, key)),
+                                      "[] with tune.scenario=family (scenes are the "
+                                      "pedestrians' only)")
+            return
+        for key in ("training_scenes", "heldout_scenes"):
+            scenes = getattr(self, key)
+            if not scenes or any(not isinstance(x, str) or not x or "/" in x for x in scenes):
+                raise ConfigError(f"tune.{key}", list(scenes or []),
+                                  "a non-empty list of scene names of scenario.pedestrians "
+                                  "(track files of data/eth_ucy/ without extension)")
+        shared = sorted(set(self.training_scenes) & set(self.heldout_scenes))
+        if shared:
+            raise ConfigError("tune.heldout_scenes", list(self.heldout_scenes),
+                              f"scenes not among tune.training_scenes (shared: "
+                              f"{', '.join(shared)}): held-out scenes must be unseen")
+
+    def scenario_overrides(self, part: str) -> list[str]:
+        """The Hydra overrides that choose the scenarios of ``part`` (``training`` or
+        ``heldout``): the scripted family, or the pedestrians on that part's scenes."""
+        if self.scenario == "family":
+            return ["scenario=family"]
+        scenes = self.training_scenes if part == "training" else self.heldout_scenes
+        return ["scenario=pedestrians", f"scenario.pedestrians.scenes=[{','.join(scenes)}]"]
 
     def _check_controls(self) -> None:
         choice("tune.matched_control", self.matched_control, ("baseline_matched", ""))
@@ -230,6 +266,8 @@ class TuneSpace:
             data["safety_reference"] = self.safety_reference
         if self.track != "lateral":
             data["track"] = self.track
+        if self.scenario != "family":
+            data.update(scenario=self.scenario, training_scenes=list(self.training_scenes))
         return hashlib.sha256(json.dumps(data, sort_keys=True).encode()).hexdigest()[:10]
 
     def below_budget(self, reference: TuneSpace) -> list[str]:

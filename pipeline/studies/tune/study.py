@@ -96,7 +96,7 @@ def run_tuning(space: TuneSpace, out_dir: Path, overrides: list[str] | None = No
     clock = CoreClock()
     runner = Runner(space, out_dir, list(overrides or []), log)
     spaces = {m: search_space(m) for m in space.methods}
-    base = runner.compose(["method=improved", "scenario=family"])
+    base = runner.compose(["method=improved", *space.scenario_overrides("heldout")])
     storage = trial_storage(out_dir / "tune.db")
     rule, rungs = Convergence.of(space), Rungs.of(space)
 

@@ -1,0 +1,354 @@
+"""Recorded pedestrians (ETH/UCY) as dynamic obstacles: the track files, their replay, and the
+seeded family of crossings (``scenario=pedestrians``).
+
+A track file holds tab-separated rows ``frame  pedestrian_id  x_m  y_m`` (world metres), one
+row per pedestrian and frame; frames are numbered 10 apart at 2.5 Hz, so a frame number times
+``seconds_per_frame`` (0.04 s) is the recording time. A pedestrian is a disc that exists from
+its first to its last sample and moves linearly between samples (its recorded positions are
+replayed exactly at their times); its velocity is that of the segment it is on. It does not
+react to the platform. Which pedestrians the planner and the MPC see (those within the sensor
+range) is decided in the loop (:mod:`pipeline.loop.simulate`), from these true positions.
+"""
+
+from __future__ import annotations
+
+import functools
+import gzip
+import math
+from dataclasses import dataclass, replace
+from pathlib import Path
+
+import numpy as np
+
+from pipeline.errors import ConfigError, TrackFileError
+from pipeline.loop.settings import PedestrianConfig, ScenarioConfig
+
+
+def _data_dir() -> Path:
+    """``pipeline/data`` in an installed package (the wheel ships the tracks there), else the
+    repository's ``data/`` beside the package (a checkout or an editable install)."""
+    packaged = Path(__file__).resolve().parent.parent / "data"
+    if packaged.is_dir():
+        return packaged
+    return Path(__file__).resolve().parent.parent.parent / "data"
+
+
+#: Where relative ``scenario.pedestrians.data_dir`` folders are read from.
+DATA_DIR = _data_dir()
+#: Tolerance (s) within which a time counts as a track's sample time (exact replay there).
+SAMPLE_TOLERANCE_S = 1e-9
+
+
+@dataclass(frozen=True)
+class SceneTracks:
+    """Every pedestrian of one recorded scene, resampled on its own uniform grid.
+
+    Attributes
+    ----------
+    name : str
+    path : Path
+        The file read.
+    step_s : float
+        Time between two samples of one pedestrian (s).
+    first_s : ndarray, shape (n,)
+        Recording time of each pedestrian's first sample (s).
+    counts : ndarray of int, shape (n,)
+        Samples per pedestrian.
+    positions_m : ndarray, shape (n, K, 2)
+        Samples (K = the most of any pedestrian; a shorter track repeats its last sample).
+    ids : ndarray, shape (n,)
+        The file's pedestrian ids.
+    """
+
+    name: str
+    path: Path
+    step_s: float
+    first_s: np.ndarray
+    counts: np.ndarray
+    positions_m: np.ndarray
+    ids: np.ndarray
+
+    @property
+    def start_s(self) -> float:
+        return float(self.first_s.min())
+
+    @property
+    def end_s(self) -> float:
+        return float((self.first_s + (self.counts - 1) * self.step_s).max())
+
+    @functools.cached_property
+    def extent_m(self) -> tuple[float, float, float, float]:
+        """``(x_min, x_max, y_min, y_max)`` of every recorded position."""
+        points = np.concatenate([self.positions_m[j, :c] for j, c in enumerate(self.counts)])
+        return (float(points[:, 0].min()), float(points[:, 0].max()),
+                float(points[:, 1].min()), float(points[:, 1].max()))
+
+    def motion(self, which: np.ndarray, window_start_s: float) -> RecordedTrackMotion:
+        """The pedestrians ``which`` (indices) on a clock whose 0 is ``window_start_s``."""
+        which = np.asarray(which, dtype=int)
+        return RecordedTrackMotion(self.first_s[which] - window_start_s, self.step_s,
+                                   self.counts[which], self.positions_m[which])
+
+
+@dataclass(frozen=True)
+class RecordedTrackMotion:
+    """Obstacles that move on recorded tracks (linear between samples); the scenario's
+    :class:`~pipeline.loop.scenario.ObstacleMotion` for recorded pedestrians. Times on the
+    scenario's clock (s); a pedestrian exists from its first to its last sample and holds
+    its first (last) position before (after), absent."""
+
+    first_s: np.ndarray
+    step_s: float
+    counts: np.ndarray
+    positions_m: np.ndarray
+
+    def states_at(self, time_s: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Positions (n, 2), velocities (n, 2) and presence (n,) at ``time_s``.
+
+        At a sample time the position is the sample itself (bit for bit); between samples
+        the linear interpolation; the velocity is the current segment's (the one starting at
+        a sample time; the last segment's at the last sample; zero for a one-sample track).
+        """
+        n = self.counts.shape[0]
+        last = (self.counts - 1).astype(float)
+        u = (time_s - self.first_s) / self.step_s
+        nearest = np.rint(u)
+        u = np.where(np.abs(u - nearest) * self.step_s < SAMPLE_TOLERANCE_S, nearest, u)
+        present = (u >= 0.0) & (u <= last)
+        u = np.clip(u, 0.0, last)
+        i = np.minimum(np.floor(u), np.maximum(last - 1.0, 0.0)).astype(int)
+        frac = (u - i)[:, None]
+        rows = np.arange(n)
+        here, ahead = self.positions_m[rows, i], self.positions_m[rows, i + 1]
+        # (1 - f) a + f b: exactly a at f = 0 and exactly b at f = 1 (a sample is replayed)
+        positions = (1.0 - frac) * here + frac * ahead
+        velocities = (ahead - here) / self.step_s
+        return positions, velocities, present
+
+
+def scene_path(cfg: PedestrianConfig, scene: str) -> Path:
+    """The track file of ``scene``: ``<data_dir>/<scene>.txt.gz``, else ``.txt``."""
+    folder = Path(cfg.data_dir)
+    if not folder.is_absolute():
+        folder = DATA_DIR / folder
+    for suffix in (".txt.gz", ".txt"):
+        path = folder / f"{scene}{suffix}"
+        if path.is_file():
+            return path
+    raise TrackFileError(f"data error: {folder / (scene + '.txt.gz')}: no such track file "
+                         f"(scenario.pedestrians.scenes names '{scene}'); allowed: a scene "
+                         f"with a file <scene>.txt.gz or <scene>.txt in {folder}"
+                         f"{_available(folder)}")
+
+
+def _available(folder: Path) -> str:
+    if not folder.is_dir():
+        return " (the folder does not exist)"
+    names = sorted({p.name.split(".")[0] for p in folder.glob("*.txt*")})
+    return f" (found: {', '.join(names)})" if names else " (none there)"
+
+
+def load_scene(cfg: PedestrianConfig, scene: str) -> SceneTracks:
+    """The tracks of ``scene`` (read once per process and version of the file)."""
+    path = scene_path(cfg, scene)
+    stat = path.stat()
+    return _load(path, scene, float(cfg.seconds_per_frame), (stat.st_mtime_ns, stat.st_size))
+
+
+@functools.lru_cache(maxsize=16)
+def _load(path: Path, scene: str, seconds_per_frame: float,
+          version: tuple[int, int]) -> SceneTracks:
+    """:func:`load_scene` of one file; ``version`` (modification time, size) only keys the
+    cache, so that a file written again is read again."""
+    rows = read_track_rows(path)
+    frames, ids, xy = rows[:, 0], rows[:, 1], rows[:, 2:4]
+    frame_steps = np.diff(np.unique(frames))
+    step_frames = float(frame_steps.min()) if frame_steps.size else 10.0
+    step_s = step_frames * seconds_per_frame
+    order = np.lexsort((frames, ids))
+    frames, ids, xy = frames[order], ids[order], xy[order]
+    unique_ids, starts = np.unique(ids, return_index=True)
+    ends = np.append(starts[1:], ids.size)
+    tracks, firsts, counts = [], [], []
+    for a, b in zip(starts.tolist(), ends.tolist(), strict=True):
+        f = frames[a:b]
+        if np.any(np.diff(f) <= 0):
+            raise TrackFileError(f"data error: {path}: pedestrian {ids[a]:g} has two rows for "
+                                 "one frame; allowed: one row per pedestrian and frame")
+        # on the uniform grid of this pedestrian (a gap is bridged linearly; np.interp
+        # returns a sample itself at its own frame)
+        grid = np.arange(f[0], f[-1] + 0.5 * step_frames, step_frames)
+        track = np.column_stack([np.interp(grid, f, xy[a:b, k]) for k in range(2)])
+        tracks.append(track)
+        firsts.append(f[0] * seconds_per_frame)
+        counts.append(grid.size)
+    width = max(max(counts), 2)
+    positions = np.empty((len(tracks), width, 2))
+    for j, track in enumerate(tracks):
+        positions[j, :track.shape[0]] = track
+        positions[j, track.shape[0]:] = track[-1]
+    return SceneTracks(scene, path, step_s, np.array(firsts), np.array(counts), positions,
+                       unique_ids)
+
+
+def read_track_rows(path: Path) -> np.ndarray:
+    """The rows of a track file as an array (m, 4); a malformed file is a
+    :class:`~pipeline.errors.TrackFileError` naming the file, the line and the format."""
+    fmt = "4 tab- or space-separated numbers per line (frame, pedestrian_id, x_m, y_m)"
+    try:
+        opener = gzip.open if path.name.endswith(".gz") else open
+        with opener(path, "rt") as handle:
+            lines = handle.read().splitlines()
+    except (OSError, UnicodeDecodeError, EOFError) as exc:
+        raise TrackFileError(f"data error: {path}: cannot be read ({exc}); allowed: a text "
+                             f"file (optionally gzip-compressed) of {fmt}") from None
+    values = []
+    for number, line in enumerate(lines, start=1):
+        parts = line.split()
+        if not parts:
+            continue
+        try:
+            row = [float(p) for p in parts]
+        except ValueError:
+            row = []
+        if len(row) != 4 or not all(math.isfinite(v) for v in row):
+            shown = line if len(line) <= 40 else line[:37] + "..."
+            raise TrackFileError(f"data error: {path}: line {number} ({shown!r}) is "
+                                 f"malformed; allowed: {fmt}, all finite")
+        values.append(row)
+    if not values:
+        raise TrackFileError(f"data error: {path}: no tracks; allowed: {fmt}")
+    return np.array(values)
+
+
+def pedestrians_near(tracks: SceneTracks, start_m: np.ndarray, goal_m: np.ndarray,
+                     window_start_s: float, duration_s: float, corridor_m: float) -> np.ndarray:
+    """Indices of the pedestrians present in the window whose samples in it come within
+    ``corridor_m`` of the start-goal segment (nearest first by that distance)."""
+    t = tracks.first_s[:, None] + np.arange(tracks.positions_m.shape[1])[None, :] \
+        * tracks.step_s
+    inside = (t >= window_start_s - tracks.step_s) & (t <= window_start_s + duration_s
+                                                      + tracks.step_s) \
+        & (np.arange(tracks.positions_m.shape[1])[None, :] < tracks.counts[:, None])
+    gap = segment_distance(tracks.positions_m, start_m, goal_m)
+    gap = np.where(inside, gap, np.inf).min(axis=1)
+    near = np.flatnonzero(gap <= corridor_m)
+    return near[np.argsort(gap[near], kind="stable")]
+
+
+def segment_distance(points_m: np.ndarray, a_m: np.ndarray, b_m: np.ndarray) -> np.ndarray:
+    """Distance of ``points_m`` (..., 2) to the segment from ``a_m`` to ``b_m``."""
+    d = np.asarray(b_m, float) - np.asarray(a_m, float)
+    rel = points_m - a_m
+    s = np.clip((rel @ d) / float(d @ d), 0.0, 1.0)
+    return np.linalg.norm(rel - s[..., None] * d, axis=-1)
+
+
+def check_scene_fits(cfg: PedestrianConfig, tracks: SceneTracks, duration_s: float) -> None:
+    """A scene too small for the crossing, or recorded for less time than a run lasts, is a
+    :class:`~pipeline.errors.ConfigError` naming the key and the allowed range."""
+    x0, x1, y0, y1 = tracks.extent_m
+    room = math.hypot(x1 - x0, y1 - y0) - 2.0 * cfg.scene_margin_m
+    if cfg.crossing_length_m > room:
+        raise ConfigError("scenario.pedestrians.crossing_length_m", cfg.crossing_length_m,
+                          f"<= {max(room, 0.0):.1f} m for scene '{tracks.name}' (its recorded "
+                          f"extent {x1 - x0:.1f} m x {y1 - y0:.1f} m less scene_margin_m="
+                          f"{cfg.scene_margin_m} on each side): the scene is too small for "
+                          "the crossing")
+    recorded = tracks.end_s - tracks.start_s
+    if recorded < duration_s:
+        raise ConfigError("scenario.n_steps", round(duration_s, 3),
+                          f"a run no longer than scene '{tracks.name}' is recorded "
+                          f"({recorded:.1f} s = n_steps x sample_time_s)")
+
+
+def draw_pedestrian_member(base: ScenarioConfig, index: int,
+                           vehicle_radius_m: float = 1.0) -> ScenarioConfig:
+    """Member ``index`` of the pedestrian family of ``base`` (``base.family`` gives the seed,
+    ``base.pedestrians`` the ranges).
+
+    From ``numpy.random.default_rng([seed, index])``: a scene (uniformly, once), then the
+    platform's speed, a window of the recording, a pedestrian present when the platform would
+    be halfway (its position is the crossing's midpoint: the busy part) and a heading; start
+    and goal lie ``crossing_length_m / 2`` either side. A draw whose start or goal leaves the
+    scene's extent (less ``scene_margin_m``), or whose start is within both radii plus
+    ``start_clearance_m`` of a pedestrian present at t = 0, is redrawn in the same scene (up to
+    ``max_draws`` times).
+
+    Returns
+    -------
+    ScenarioConfig
+        A plain scenario (``family = None``) named ``<base>_<scene>_s<seed>_i<index>``, with
+        ``pedestrians.scene`` and ``pedestrians.window_start_s`` set.
+    """
+    fam, ped = base.family, base.pedestrians
+    if fam is None or ped is None:
+        raise ValueError(f"scenario {base.name} has no pedestrian family to draw from")
+    rng = np.random.default_rng([fam.seed, index])
+    duration = base.n_steps * base.sample_time_s
+    half = 0.5 * ped.crossing_length_m
+    scenes = {name: load_scene(ped, name) for name in ped.scenes}
+    for tracks in scenes.values():
+        check_scene_fits(ped, tracks, duration)
+    # the scene first and once: every scene gets its share of members, whatever its
+    # rejection rate
+    tracks = scenes[ped.scenes[int(rng.integers(len(ped.scenes)))]]
+    for _attempt in range(ped.max_draws):
+        low, high = ped.platform_speed_mps
+        speed = round(float(rng.uniform(low, high)), 2)
+        window = float(rng.uniform(tracks.start_s, tracks.end_s - duration))
+        heading = float(rng.uniform(-np.pi, np.pi))
+        pick = float(rng.uniform())
+        everyone = tracks.motion(np.arange(tracks.counts.size), window)
+        mid, _, present = everyone.states_at(half / speed)
+        if not present.any():
+            continue
+        centre = mid[np.flatnonzero(present)[min(int(pick * present.sum()),
+                                                 int(present.sum()) - 1)]]
+        e = np.array([math.cos(heading), math.sin(heading)])
+        start, goal = centre - half * e, centre + half * e
+        if not (_inside(tracks, start, ped.scene_margin_m)
+                and _inside(tracks, goal, ped.scene_margin_m)):
+            continue
+        at_start, _, there = everyone.states_at(0.0)
+        clear = vehicle_radius_m + ped.radius_m + ped.start_clearance_m
+        if there.any() and np.min(np.linalg.norm(at_start[there] - start, axis=1)) < clear:
+            continue
+        return replace(base, name=f"{base.name}_{tracks.name}_s{fam.seed}_i{index:04d}",
+                       start_xy_m=[float(start[0]), float(start[1])],
+                       goal_xy_m=[float(goal[0]), float(goal[1])], start_heading_rad=heading,
+                       speed_mps=speed, family=None,
+                       pedestrians=replace(ped, scene=tracks.name, window_start_s=window))
+    raise ConfigError("scenario.pedestrians.crossing_length_m", ped.crossing_length_m,
+                      f"a crossing that fits scene '{tracks.name}' with a free start "
+                      f"(member {index}: no fitting draw in max_draws={ped.max_draws}); a "
+                      "shorter crossing, more draws or another scene")
+
+
+def _inside(tracks: SceneTracks, point_m: np.ndarray, margin_m: float) -> bool:
+    x0, x1, y0, y1 = tracks.extent_m
+    return bool(x0 + margin_m <= point_m[0] <= x1 - margin_m
+                and y0 + margin_m <= point_m[1] <= y1 - margin_m)
+
+
+def scene_of(scenario_name: str, scenes: list[str] | tuple[str, ...]) -> str | None:
+    """The scene a member's name (``<base>_<scene>_s<seed>_i<index>``) was drawn from."""
+    for scene in sorted(scenes, key=len, reverse=True):
+        if f"_{scene}_s" in scenario_name:
+            return scene
+    return None
+
+
+def recorded_motion(cfg: ScenarioConfig) -> tuple[RecordedTrackMotion, int]:
+    """A member's pedestrians (those near its crossing, :func:`pedestrians_near`) and their
+    number."""
+    ped = cfg.pedestrians
+    if ped is None or ped.scene is None or ped.window_start_s is None:
+        raise ConfigError("scenario.pedestrians.scene", None if ped is None else ped.scene,
+                          "a drawn member (scene and window_start_s set): run the family "
+                          "(scenario=pedestrians), not its base")
+    tracks = load_scene(ped, ped.scene)
+    which = pedestrians_near(tracks, np.asarray(cfg.start_xy_m, float),
+                             np.asarray(cfg.goal_xy_m, float), ped.window_start_s,
+                             cfg.n_steps * cfg.sample_time_s, ped.corridor_m)
+    return tracks.motion(which, ped.window_start_s), int(which.size)

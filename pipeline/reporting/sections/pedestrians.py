@@ -1,0 +1,163 @@
+"""'Real motion: recorded pedestrians': the claims judged on a family whose obstacles are
+recorded ETH/UCY pedestrians (``make pedestrians``), overall and per scene
+(``tables/claims_ledger_pedestrians.csv``), the collisions with them on their true tracks
+(``tables/pedestrians_collisions.csv``), a figure of one member, and every member's row linked
+to the scenario explorer (``explorer.html#pedestrians/<member_index>``)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from pipeline.reporting.figure import Figure, Figures
+from pipeline.reporting.inputs import ReportInputs
+from pipeline.reporting.sections.family import ledger_groups
+from pipeline.reporting.verdicts import PedestrianVerdicts, Verdicts
+
+#: The scenario explorer's address of a member (the explorer page sits beside index.html).
+EXPLORER_LINK = "explorer.html#pedestrians/{index}"
+
+
+@dataclass(frozen=True)
+class PedestriansSection:
+    """What the page shows (see the module docstring). ``verdicts``: per claim and comparison
+    the outcome overall and per scene; ``members``: per member its scene, each method's
+    collision and closest clearance, and its explorer link."""
+
+    treatment: str
+    comparisons: tuple[str, ...]
+    methods: tuple[str, ...]
+    size: int
+    seed: object
+    scenes: tuple[tuple[str, int], ...]
+    settings: dict
+    verdicts: tuple[dict, ...]
+    ledger: tuple[dict, ...]
+    collisions: tuple[dict, ...]
+    members: tuple[dict, ...]
+    figure: Figure | None
+    sentence: str
+
+
+def _verdict_rows(judged: PedestrianVerdicts) -> tuple[dict, ...]:
+    by_scene = dict(judged.by_scene)
+    rows = []
+    for row in judged.ledger:
+        entry = {"claim": row.claim_id, "comparison": row.comparison,
+                 "all": str(row.outcome), "n": row.result.n_pairs}
+        for scene in judged.scenes:
+            scene_row = by_scene[scene].get(row.key)
+            entry[scene] = (f"{scene_row.outcome} ({scene_row.result.n_pairs})"
+                            if scene_row is not None else "—")
+        rows.append(entry)
+    return tuple(rows)
+
+
+def _members(judged: PedestrianVerdicts, methods: tuple[str, ...]) -> tuple[dict, ...]:
+    first = judged.tables[methods[0]]
+    by_method = {m: judged.tables[m].set_index("member") for m in methods}
+    rows = []
+    for member, scene, name in zip(first["member"], first["scene"], first["scenario"],
+                                   strict=True):
+        row = {"member": int(member), "scene": scene, "scenario": name,
+               "link": EXPLORER_LINK.format(index=int(member))}
+        for m in methods:
+            t = by_method[m]
+            hit = bool(t.at[member, "collision"]) if member in t.index else None
+            clearance = float(t.at[member, "min_clearance_m"]) if member in t.index \
+                and "min_clearance_m" in t else float("nan")
+            row[m] = ("collision" if hit else "clear") if hit is not None else "—"
+            row[f"{m}_clearance"] = clearance
+        rows.append(row)
+    return tuple(rows)
+
+
+def _figure_member(judged: PedestrianVerdicts, methods: tuple[str, ...]) -> int | None:
+    """The first member where no method collided and the methods' closest clearances differ
+    most among the first 20 such (a scene where the choice of method shows); else member 0."""
+    tables = [judged.tables[m].set_index("member") for m in methods]
+    common = sorted(set.intersection(*(set(t.index) for t in tables)))
+    if not common:
+        return None
+    clear = [i for i in common if not any(bool(t.at[i, "collision"]) for t in tables)][:20]
+    if not clear:
+        return int(common[0])
+    spread = [np.ptp([float(t.at[i, "min_clearance_m"]) for t in tables]) for i in clear]
+    return int(clear[int(np.nanargmax(spread))]) if np.isfinite(spread).any() else clear[0]
+
+
+def _figure(inputs: ReportInputs, judged: PedestrianVerdicts, methods: tuple[str, ...],
+            figures: Figures) -> Figure | None:
+    from pipeline.reporting.figures.pedestrians import pedestrian_scene_figure
+    from pipeline.store.runs import read_member
+
+    family = inputs.pedestrians
+    member = _figure_member(judged, methods)
+    if family is None or member is None:
+        return None
+    runs, config = {}, None
+    for m in methods:
+        label = family.label_of(m)
+        folder = family.info.get(label or "", {}).get("dir")
+        if not folder:
+            return None
+        record = read_member(Path(folder), member)
+        runs[m] = record.trajectory
+        config = record.config
+    if config is None or any(t is None for t in runs.values()):
+        return None
+    scenario = config.scenario
+    ped = scenario.pedestrians
+    if ped is None:
+        return None
+    title = (f"member {member}: scene {ped.scene}, recording from "
+             f"{float(ped.window_start_s or 0.0):.1f} s, platform at "
+             f"{scenario.speed_mps:.2f} m/s")
+    return figures.draw(
+        pedestrian_scene_figure(runs, (scenario.start_xy_m[0], scenario.start_xy_m[1]),
+                                (scenario.goal_xy_m[0], scenario.goal_xy_m[1]),
+                                ped.sensor_range_m, config.vehicle.footprint_radius_m, title),
+        "pedestrians_scene", "pedestrians",
+        f"Member {member} of the pedestrian family (scene {ped.scene}): every simulated "
+        "pedestrian's recorded track over the run (grey; dark where the vehicle saw it, "
+        "arrow: where it was last) and each method's path, with its footprint where it "
+        "stopped.",
+        f"Recorded pedestrian tracks of scene {ped.scene} and the paths of "
+        f"{', '.join(methods)} crossing it.")
+
+
+def pedestrians_section(inputs: ReportInputs, verdicts: Verdicts, figures: Figures
+                        ) -> PedestriansSection | None:
+    """The section; None when no pedestrian family was given or could be judged."""
+    judged = verdicts.pedestrians
+    family = inputs.pedestrians
+    if judged is None or family is None:
+        return None
+    treatment = verdicts.claims.treatment
+    methods = (treatment, *judged.comparisons)
+    info = next(iter(family.info.values()), {})
+    settings_cfg = next(iter(family.settings.values()), None)
+    ped = settings_cfg.scenario.pedestrians if settings_cfg is not None else None
+    settings = {} if ped is None else {
+        "radius_m": ped.radius_m, "sensor_range_m": ped.sensor_range_m,
+        "crossing_length_m": ped.crossing_length_m,
+        "platform_speed_mps": list(ped.platform_speed_mps),
+        "vehicle_radius_m": settings_cfg.vehicle.footprint_radius_m if settings_cfg else None,
+        "max_obstacles": settings_cfg.controller.max_obstacles if settings_cfg else None}
+    scene_sizes = tuple((s, int((judged.tables[treatment]["scene"] == s).sum()))
+                        for s in judged.scenes)
+    collisions = tuple([{"scene": "all", **c} for c in judged.counts]
+                       + list(judged.scene_counts))
+    outcomes = ", ".join(f"{row.claim_id} {row.outcome}" for row in judged.ledger)
+    hits = {c["method"]: c["collisions"] for c in judged.counts}
+    sentence = (f"Among recorded pedestrians (ETH/UCY, {len(judged.tables[treatment])} "
+                f"crossings over {len(judged.scenes)} scenes), {treatment} against "
+                f"{', '.join(judged.comparisons)}: {outcomes}; collisions "
+                + ", ".join(f"{m} {hits.get(m, '?')}" for m in methods) + ".")
+    return PedestriansSection(
+        treatment, judged.comparisons, methods, int(info.get("size", 0) or 0),
+        info.get("seed", "?"), scene_sizes, settings, _verdict_rows(judged),
+        tuple(ledger_groups(judged.ledger)), collisions, _members(judged, methods),
+        _figure(inputs, judged, methods, figures), sentence)
