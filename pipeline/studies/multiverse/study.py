@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 from pathlib import Path
 
@@ -25,6 +26,7 @@ from pipeline.studies.multiverse.robustness import (
 )
 from pipeline.studies.multiverse.runs import _LogStream, rescore_family, run_simulations
 from pipeline.studies.multiverse.space import Space
+from pipeline.studies.overrides import PRESET_GROUPS, applied_overrides, refuse_controlled
 from pipeline.studies.results.multiverse import MultiverseInfo, MultiverseResult
 
 logger = logging.getLogger("pipeline.studies.multiverse")
@@ -39,6 +41,10 @@ def run_multiverse(space: Space, out_dir: Path, overrides: list[str] | None = No
 
     log = log if log is not None else logger.info
     out_dir = Path(out_dir)
+    # an override of what the multiverse sets itself (methods, its family, a simulation
+    # dimension's keys): one line, before anything is written; every other override runs for
+    # every method and is recorded in space.json
+    refuse_controlled(list(overrides or []), controlled_keys(space), "multiverse")
     compose, launcher = composer(list(overrides or []))
     # the default specification is the user's configuration (its analysis settings)
     base = compose(["method=improved", "scenario=family"])
@@ -66,9 +72,31 @@ def run_multiverse(space: Space, out_dir: Path, overrides: list[str] | None = No
     rows = [r for block in results for r in block]
     table = pd.DataFrame(rows).merge(design, on="spec_id")
     robust, dims = robustness(pd.DataFrame(rows), design, space)
-    info = _multiverse_info(space, design, len(folders), backends,
-                            reads / members if members else 0.0, counts)
+    info = dataclasses.replace(
+        _multiverse_info(space, design, len(folders), backends,
+                         reads / members if members else 0.0, counts),
+        overrides=tuple(applied_overrides(list(overrides or []))))
     return MultiverseResult(info, design, table, robust, dims).write(out_dir)
+
+
+def controlled_keys(space: Space) -> dict[str, str]:
+    """The config keys the multiverse sets in its runs, each with what to do instead of
+    overriding it (:func:`pipeline.studies.overrides.refuse_controlled`): an override would
+    replace every specification's value, so the dimension would vary nothing."""
+    keys = dict(PRESET_GROUPS)
+    keys.update({
+        "scenario.family.size": "no override: the multiverse sets its family's size (the "
+                                "space's family_size)",
+        "scenario.family.seed": "no override: the multiverse sets its family's seed (the "
+                                "space's family_seed)"})
+    for dim in space.of("simulation"):
+        for key in dim.config_keys:
+            keys.setdefault(key, f"no override: {key} is the multiverse dimension {dim.key} "
+                                 "(edit its values in the space file)")
+        if dim.cap:
+            keys.setdefault("planner.step_size", f"no override: the matched baseline's step "
+                            f"follows the dimension {dim.key}")
+    return keys
 
 
 def _metric_readings(jobs: list, space: Space, base) -> dict[Path, list[MetricsConfig]]:

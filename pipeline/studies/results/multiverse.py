@@ -44,16 +44,20 @@ class MultiverseInfo:
     #: where this run's family members came from: simulated, reused from the member cache,
     #: already complete (resumed); empty for a study written before the member cache
     members: dict[str, int] = field(default_factory=dict)
+    #: the run overrides every family of every method was composed with (none of them sets
+    #: what the multiverse controls: pipeline.studies.overrides)
+    overrides: tuple[str, ...] = ()
 
     def to_json(self) -> dict:
         data = {f.name: getattr(self, f.name) for f in fields(self)}
         data["dimensions"] = list(self.dimensions)
+        data["overrides"] = list(self.overrides)
         return data
 
     @classmethod
     def from_json(cls, data: dict[str, Any]) -> MultiverseInfo:
         names = {f.name for f in fields(cls)}
-        values: dict[str, Any] = {k: (tuple(v) if k == "dimensions" else v)
+        values: dict[str, Any] = {k: (tuple(v) if k in ("dimensions", "overrides") else v)
                                   for k, v in data.items() if k in names}
         return cls(**values)
 

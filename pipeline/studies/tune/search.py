@@ -267,6 +267,33 @@ def _override(name: str, value) -> str:
     return f"{name}={value!r}" if isinstance(value, float) else f"{name}={value}"
 
 
+def design_holds(cfg: ExperimentConfig, expected: dict, method: str) -> None:
+    """Raise :class:`ConfigError` when a composed run does not hold what the tune asked for
+    (a preset among the run overrides, e.g. a sweep or an ablation point, set one of its
+    families' seed or size, its QP backend or a tuned setting): the tune would run another
+    design than the one its summary describes."""
+    import math
+
+    from pipeline.errors import ConfigError
+
+    def value_of(key: str):
+        value = cfg
+        for part in key.split("."):
+            value = getattr(value, part, None)
+        return value
+
+    for key, want in expected.items():
+        got = value_of(key)
+        same = got == want or str(got) == str(want) or (
+            isinstance(got, (int, float)) and isinstance(want, (int, float))
+            and not isinstance(got, bool) and math.isclose(float(got), float(want),
+                                                           rel_tol=1e-12, abs_tol=0.0))
+        if not same:
+            raise ConfigError(f"tune: {method}'s run {key}", got,
+                              f"{want!r}, what the tune sets (a run override changed it: "
+                              "leave the tune's own keys to its space file)")
+
+
 @dataclass(frozen=True)
 class FamilyJob:
     """One family to run: its config and folder, and the settings it stands for."""
@@ -318,6 +345,9 @@ class Runner:
             if len(self._composed) > 64:
                 self._composed.clear()
             cfg = self._composed[key] = self.compose(overrides)
+            expected = {"scenario.family.seed": seed, "scenario.family.size": size,
+                        "controller.backend": backend, **params}
+            design_holds(cfg, expected, method)
         folder = self.out_dir / "runs" / part / method / cfg.config_hash()
         family = cfg.scenario.family
         if members is not None and family is not None and members < family.size:

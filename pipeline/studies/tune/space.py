@@ -246,15 +246,13 @@ def load_tune_space(path: Path, changes: list[str] | None = None) -> TuneSpace:
     :class:`ConfigError` naming the key, before any work starts), with ``changes``
     (``key=value``, the value read as YAML: ``rungs=[]``) applied to it first; a changed
     space is another space: its ``name`` gets the changes appended unless they set it."""
-    import yaml
+    from pipeline.store.safe_load import load_yaml, parse_yaml
 
     path = Path(path)
-    if not path.is_file():
+    if not path.exists():
         raise ConfigError("--space", str(path), "a file in conf/tune/ or a path to one")
-    try:
-        data = yaml.safe_load(path.read_text())
-    except yaml.YAMLError as exc:
-        raise ConfigError("--space", str(path), f"valid YAML ({str(exc).splitlines()[0]})") from None
+    # size, UTF-8 and alias limits: one line naming the file (pipeline.store.safe_load)
+    data = load_yaml(path, "a tune space (conf/tune/<name>.yaml)")
     if changes:
         if not isinstance(data, dict):
             raise ConfigError("--space", str(path), "a mapping of tune settings")
@@ -266,10 +264,7 @@ def load_tune_space(path: Path, changes: list[str] | None = None) -> TuneSpace:
             if not sep or key not in names:
                 raise ConfigError("--set", change, "key=value with key one of "
                                   + ", ".join(sorted(names)))
-            try:
-                data[key] = yaml.safe_load(text)
-            except yaml.YAMLError:
-                raise ConfigError(f"--set {key}", text, "a YAML value") from None
+            data[key] = parse_yaml(text, f"--set {key}", "a YAML value")
         if not any(c.partition("=")[0].strip() == "name" for c in changes):
             data["name"] = f"{data.get('name', 'tune')}_changed"
     return schema_from_data(TuneSpace, data, "tune")
@@ -283,12 +278,11 @@ def default_budget() -> TuneSpace:
 def search_space(method: str) -> tuple[dict, dict]:
     """The distributions and the reasons of ``conf/hparams_search/<method>.yaml`` (its
     ``hydra.sweeper.params``, parsed by hydra-optuna-sweeper's own parser)."""
-    import yaml
-
     from hydra_plugins.hydra_optuna_sweeper._impl import create_params_from_overrides
+    from pipeline.store.safe_load import load_yaml
 
     path = CONF_DIR / "hparams_search" / f"{method}.yaml"
-    params = yaml.safe_load(path.read_text())["hydra"]["sweeper"]["params"]
+    params = load_yaml(path, "a search space")["hydra"]["sweeper"]["params"]
     distributions, fixed = create_params_from_overrides([f"{k}={v}" for k, v in params.items()])
     if fixed:
         raise ConfigError(f"hparams_search/{method}: hydra.sweeper.params", sorted(fixed),

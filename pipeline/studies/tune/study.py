@@ -50,6 +50,7 @@ from pipeline.analysis.tally import Tally
 from pipeline.errors import StudyError
 from pipeline.store.files import json_safe
 from pipeline.store.manifest import untrust
+from pipeline.studies.overrides import PRESET_GROUPS, applied_overrides, refuse_controlled
 from pipeline.studies.results.tune import TuneResult, TuneSummary
 from pipeline.studies.tune.pareto import (
     COMPROMISE_RULE,
@@ -91,11 +92,14 @@ def run_tuning(space: TuneSpace, out_dir: Path, overrides: list[str] | None = No
     written into ``out_dir`` (its manifest last) and returned. The figures are the command's
     to draw."""
     out_dir = Path(out_dir)
+    spaces = {m: search_space(m) for m in space.methods}
+    # an override of what the tune sets itself (methods, families, tuned settings): one line,
+    # before anything is written; every other override runs on both sides and is recorded
+    refuse_controlled(list(overrides or []), controlled_keys(space, spaces), "tune")
     out_dir.mkdir(parents=True, exist_ok=True)
     untrust(out_dir)
     clock = CoreClock()
     runner = Runner(space, out_dir, list(overrides or []), log)
-    spaces = {m: search_space(m) for m in space.methods}
     base = runner.compose(["method=improved", "scenario=family"])
     storage = trial_storage(out_dir / "tune.db")
     rule, rungs = Convergence.of(space), Rungs.of(space)
@@ -143,10 +147,35 @@ def run_tuning(space: TuneSpace, out_dir: Path, overrides: list[str] | None = No
     judged = judge_heldout(runner, space, chosen, base.claims)
     log(f"family runs: {runner.counts.sentence()}")
     data = summarize(space, spaces, thresholds, trials, histories, chosen, judged)
-    data.update(members=runner.counts.to_json(), core_utilisation=clock.utilisation())
+    data.update(members=runner.counts.to_json(), core_utilisation=clock.utilisation(),
+                overrides=applied_overrides(list(overrides or [])))
     summary = TuneSummary.from_json(json_safe(data))
     return TuneResult(summary, trials, judged.heldout, judged.default.to_frame(),
                       judged.tuned_frame(), judged.outcomes).write(out_dir)
+
+
+def controlled_keys(space: TuneSpace, spaces: dict) -> dict[str, str]:
+    """The config keys the tune sets in its runs, each with what to do instead of overriding
+    it (:func:`pipeline.studies.overrides.refuse_controlled`)."""
+    keys = dict(PRESET_GROUPS)
+    keys.update({
+        "scenario.family.seed": "no override: the tune sets its families' seeds (the space's "
+                                "training_seed and heldout_seed: --set training_seed=N)",
+        "scenario.family.size": "no override: the tune sets its families' sizes (the space's "
+                                "training_size and heldout_size: --set training_size=N)",
+        "controller.backend": "no override: the tune sets its runs' QP backend (the space's "
+                              "backend and heldout_backend: --set backend=NAME)",
+        "claims.treatment": "no override: the tune compares its space's methods "
+                            "(--set 'methods=[treatment, control]')",
+        "claims.controls": "no override: the tune compares its space's methods "
+                           "(--set 'methods=[treatment, control]')",
+        "tune": "no override: the tune's settings are its space file's (--space, --set "
+                "key=value)"})
+    for method in space.methods:
+        for key in spaces[method][1]:
+            keys.setdefault(key, f"no override: {key} is tuned (conf/hparams_search/"
+                                 f"{method}.yaml)")
+    return keys
 
 
 class CoreClock:
