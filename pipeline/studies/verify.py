@@ -152,10 +152,8 @@ def compare_tables(fresh: pd.DataFrame, reference: pd.DataFrame, name: str,
         return [c for c in shared if not _same(a[c], b[c])]
 
     ours, theirs = rows_by_key(fresh), rows_by_key(reference)
-    for k, rows in theirs.items():
-        if len(rows) > 1:
-            problems.append(f"{name}: row {', '.join(k)} is in the reference {len(rows)} "
-                            "times (a duplicated row)")
+    problems += [f"{name}: row {', '.join(k)} is in the reference {len(rows)} times (a "
+                 "duplicated row)" for k, rows in theirs.items() if len(rows) > 1]
     for k in theirs.keys() - ours.keys():
         problems.append(f"{name}: row {', '.join(k)} is in the reference, not in the rerun")
     for k in ours.keys() - theirs.keys():

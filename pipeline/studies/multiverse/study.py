@@ -12,6 +12,7 @@ from pipeline.analysis.claims.windows import require_own_window
 from pipeline.config import MetricsConfig
 from pipeline.store.member_cache import MemberCounts
 from pipeline.store.runs import read_family
+from pipeline.store.study_lock import study_lock
 from pipeline.studies.compose import composer
 from pipeline.studies.multiverse.design import (
     analysis_settings,
@@ -37,15 +38,43 @@ def run_multiverse(space: Space, out_dir: Path, overrides: list[str] | None = No
     """Design, runs, re-scoring and analysis, written into ``out_dir`` (the manifest last);
     returns the result (``log``: where progress lines go, the module's logger by default).
     The specification curves are the command's to draw."""
-    from joblib import Parallel, delayed
-
     log = log if log is not None else logger.info
     out_dir = Path(out_dir)
     # an override of what the multiverse sets itself (methods, its family, a simulation
     # dimension's keys): one line, before anything is written; every other override runs for
     # every method and is recorded in space.json
     refuse_controlled(list(overrides or []), controlled_keys(space), "multiverse")
-    compose, launcher = composer(list(overrides or []))
+    # one study per folder at a time (a second is refused in one line), for as long as it runs
+    with study_lock(out_dir, f"multiverse {space.name}"):
+        return _run_multiverse(space, out_dir, list(overrides or []), n_jobs, log)
+
+
+def study_key(space: Space, overrides: list[str]) -> str:
+    """A short hash of what a multiverse's result depends on: its space, the run overrides
+    and the code version (a complete folder with the same key is the same result)."""
+    import hashlib
+    import json
+
+    from pipeline.store.files import json_safe
+    from pipeline.store.manifest import code_version
+
+    data = {"space": json_safe(dataclasses.asdict(space)), "code": code_version(),
+            "overrides": applied_overrides(overrides)}
+    return hashlib.sha256(json.dumps(data, sort_keys=True, default=str).encode()
+                          ).hexdigest()[:12]
+
+
+def _run_multiverse(space: Space, out_dir: Path, overrides: list[str], n_jobs: int,
+                    log) -> MultiverseResult:
+    from joblib import Parallel, delayed
+
+    key = study_key(space, overrides)
+    if MultiverseResult.complete_for(out_dir, key):
+        # a rerun of a complete study: its result read back, nothing rewritten
+        log(f"{out_dir}: complete for this space, overrides and code (study key {key}); "
+            "nothing to redo")
+        return MultiverseResult.load(out_dir)
+    compose, launcher = composer(overrides)
     # the default specification is the user's configuration (its analysis settings)
     base = compose(["method=improved", "scenario=family"])
     require_own_window(base.claims, "the multiverse")
@@ -75,8 +104,8 @@ def run_multiverse(space: Space, out_dir: Path, overrides: list[str] | None = No
     info = dataclasses.replace(
         _multiverse_info(space, design, len(folders), backends,
                          reads / members if members else 0.0, counts),
-        overrides=tuple(applied_overrides(list(overrides or []))))
-    return MultiverseResult(info, design, table, robust, dims).write(out_dir)
+        overrides=tuple(applied_overrides(overrides)))
+    return MultiverseResult(info, design, table, robust, dims).write(out_dir, key)
 
 
 def controlled_keys(space: Space) -> dict[str, str]:

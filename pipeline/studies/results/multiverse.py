@@ -82,8 +82,9 @@ class MultiverseResult:
         untrust(folder)
         write_csv_atomic(Path(folder) / DESIGN, design)
 
-    def write(self, folder: Path) -> MultiverseResult:
-        """Write the tables and ``space.json``, then the manifest (last)."""
+    def write(self, folder: Path, study_key: str = "") -> MultiverseResult:
+        """Write the tables and ``space.json``, then the manifest (last; with ``study_key``,
+        what the result depends on: :meth:`complete_for`)."""
         folder = Path(folder)
         folder.mkdir(parents=True, exist_ok=True)
         untrust(folder)
@@ -92,9 +93,21 @@ class MultiverseResult:
         write_csv_atomic(folder / ROBUSTNESS, self.robustness)
         write_csv_atomic(folder / DIMENSIONS, self.dimensions)
         write_json_atomic(folder / SPACE, self.info.to_json())
-        write_manifest(folder, "multiverse", FILES, self.info.name)
+        write_manifest(folder, "multiverse", FILES, self.info.name,
+                       {"study_key": study_key} if study_key else None)
         return MultiverseResult(self.info, self.design, self.specifications, self.robustness,
                                 self.dimensions, folder)
+
+    @staticmethod
+    def complete_for(folder: Path, study_key: str) -> bool:
+        """Whether ``folder`` holds a trusted result written under ``study_key`` (a rerun of
+        the same study there has nothing to redo)."""
+        from pipeline.store.manifest import load_manifest
+
+        if check(Path(folder), "multiverse", required=FILES) is not None:
+            return False
+        manifest, _ = load_manifest(Path(folder), "multiverse", FILES)
+        return manifest is not None and manifest.get("study_key") == study_key
 
     @staticmethod
     def present(folder: Path | None) -> bool:

@@ -38,6 +38,10 @@ TRACK_OVERRIDES: dict[str, tuple[str, ...]] = {
     "kinematic": ("controller=kinematic", "scenario.initial_speed_mps=0.0",
                   "scenario.n_steps=100"),
 }
+#: the budget fields that decide when each study stops: with the trial fields and the code
+#: version they key the trial store (:meth:`TuneSpace.store_key`)
+STORE_FIELDS = ("min_trials", "max_trials", "convergence_window", "convergence_tolerance",
+                "hypervolume_bounds")
 #: the fields whose default values are the budget a headline needs (at least as much of each)
 BUDGET_AT_LEAST = ("replicates", "min_trials", "max_trials", "convergence_window",
                    "training_size", "heldout_size")
@@ -231,6 +235,19 @@ class TuneSpace:
         if self.track != "lateral":
             data["track"] = self.track
         return hashlib.sha256(json.dumps(data, sort_keys=True).encode()).hexdigest()[:10]
+
+    def store_key(self) -> str:
+        """A short hash of what the stored trials of this tune depend on: its trial key, its
+        budget (:data:`STORE_FIELDS`) and the code version. A stored study made under another
+        key is never reused (:func:`pipeline.studies.tune.search.check_trial_store`)."""
+        import hashlib
+        import json
+
+        from pipeline.store.manifest import code_version
+
+        data = {"trials": self.trial_key(), "code": code_version(),
+                "budget": json_safe({k: asdict(self)[k] for k in STORE_FIELDS})}
+        return hashlib.sha256(json.dumps(data, sort_keys=True).encode()).hexdigest()[:12]
 
     def below_budget(self, reference: TuneSpace) -> list[str]:
         """The budget fields in which this tuning does less than ``reference`` (the default

@@ -50,6 +50,7 @@ from pipeline.analysis.tally import Tally
 from pipeline.errors import StudyError
 from pipeline.store.files import json_safe
 from pipeline.store.manifest import untrust
+from pipeline.store.study_lock import study_lock
 from pipeline.studies.overrides import PRESET_GROUPS, applied_overrides, refuse_controlled
 from pipeline.studies.results.tune import TuneResult, TuneSummary
 from pipeline.studies.tune.pareto import (
@@ -63,6 +64,7 @@ from pipeline.studies.tune.search import (
     Convergence,
     Rungs,
     Runner,
+    check_trial_store,
     evaluate_in_rungs,
     make_study,
     optimize,
@@ -97,9 +99,18 @@ def run_tuning(space: TuneSpace, out_dir: Path, overrides: list[str] | None = No
     # before anything is written; every other override runs on both sides and is recorded
     refuse_controlled(list(overrides or []), controlled_keys(space, spaces), "tune")
     out_dir.mkdir(parents=True, exist_ok=True)
+    # one study per folder at a time (a second is refused in one line), for as long as it runs
+    with study_lock(out_dir, f"tune {space.name}"):
+        return _run_tuning(space, out_dir, spaces, list(overrides or []), log)
+
+
+def _run_tuning(space: TuneSpace, out_dir: Path, spaces: dict, overrides: list[str],
+                log) -> TuneResult:
+    # the trial store checked before anything is written (damaged, read-only, another key)
+    check_trial_store(out_dir / "tune.db", space)
     untrust(out_dir)
     clock = CoreClock()
-    runner = Runner(space, out_dir, list(overrides or []), log)
+    runner = Runner(space, out_dir, overrides, log)
     base = runner.compose(["method=improved", "scenario=family"])
     storage = trial_storage(out_dir / "tune.db")
     rule, rungs = Convergence.of(space), Rungs.of(space)
@@ -148,7 +159,7 @@ def run_tuning(space: TuneSpace, out_dir: Path, overrides: list[str] | None = No
     log(f"family runs: {runner.counts.sentence()}")
     data = summarize(space, spaces, thresholds, trials, histories, chosen, judged)
     data.update(members=runner.counts.to_json(), core_utilisation=clock.utilisation(),
-                overrides=applied_overrides(list(overrides or [])))
+                overrides=applied_overrides(overrides), store_key=space.store_key())
     summary = TuneSummary.from_json(json_safe(data))
     return TuneResult(summary, trials, judged.heldout, judged.default.to_frame(),
                       judged.tuned_frame(), judged.outcomes).write(out_dir)
@@ -226,8 +237,12 @@ def trials_table(studies: dict, space: TuneSpace, replicate: int) -> pd.DataFram
 
     rows = []
     for method, study in studies.items():
-        for trial in study.get_trials(deepcopy=False, states=(TrialState.COMPLETE,)):
-            row = {"replicate": replicate, "method": method, "trial": trial.number,
+        complete = sorted(study.get_trials(deepcopy=False, states=(TrialState.COMPLETE,)),
+                          key=lambda t: t.number)
+        # a trial's number among its study's complete trials: the numbers of an uninterrupted
+        # tune, also after a resume (whose interrupted batch left failed trials in the store)
+        for rank, trial in enumerate(complete):
+            row = {"replicate": replicate, "method": method, "trial": rank,
                    "constraint": float(trial.user_attrs.get("constraint", 0.0)),
                    "members": int(trial.user_attrs.get("members", space.training_size)),
                    "pruned_at": trial.user_attrs.get("pruned_at"),
