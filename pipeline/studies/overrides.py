@@ -34,7 +34,8 @@ class ControlledOverrideError(ConfigError):
     """An override of a key the study sets itself; the message is one line naming it."""
 
     def __init__(self, study: str, override: str, key: str, target: str, allowed: str) -> None:
-        where = "" if key == target else f" (it sets {target})"
+        where = "" if key == target else f" (part of {target})" \
+            if key.startswith(target + ".") else f" (it sets {target})"
         ValueError.__init__(self, f"config error: {study}: the override {override} is "
                             f"refused: {key}{where} is the study's own design; allowed: "
                             f"{allowed}")

@@ -376,10 +376,18 @@ def _check_store_file(path: Path) -> bool:
     if header != SQLITE_HEADER:
         raise StudyError(f"{path}: not an SQLite file (damaged, or not a trial store); "
                          f"{START_FRESH}")
-    if not (os.access(path, os.W_OK) and os.access(path.parent, os.W_OK)):
+    if _read_only(path) or _read_only(path.parent):
         raise StudyError(f"{path}: read-only; the trial store must be writable (every trial "
                          "is recorded as it completes): make it writable or choose another --out")
     return True
+
+
+def _read_only(path: Path) -> bool:
+    """Whether ``path`` cannot be written: no write permission (its mode bits, which bind
+    the superuser's intent too) or a read-only file system."""
+    mode = path.stat().st_mode
+    return not os.access(path, os.W_OK) or not mode & 0o222 \
+        or bool(os.statvfs(path).f_flag & os.ST_RDONLY)
 
 
 def _stored_keys(path: Path) -> list[tuple[str, str | None, int]]:
