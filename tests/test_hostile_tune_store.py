@@ -114,8 +114,15 @@ def test_a_store_made_under_another_budget_or_an_older_version_is_refused(tmp_pa
         check_trial_store(db, other)
     assert str(info.value) == (
         f"{db}: holds 2 trials of {study_name(QUICK, 'improved', 0)} made under store key "
-        f"{QUICK.store_key()}, not this tune's {other.store_key()} (another budget or code "
-        "version); they are not reused: delete it (or choose another --out) to start fresh")
+        f"{QUICK.store_key()}, not this tune's {other.store_key()} (another budget, run "
+        "overrides or code version); they are not reused: delete it (or choose another --out) "
+        "to start fresh")
+    # run overrides change the runs, hence the key (the workers' count changes no number)
+    assert QUICK.store_key(["controller.horizon=12"]) != QUICK.store_key()
+    assert QUICK.store_key(["scenario.family.n_jobs=1", "hydra/launcher=slurm"]) \
+        == QUICK.store_key()
+    with pytest.raises(StudyError, match="not this tune's"):
+        check_trial_store(db, QUICK, QUICK.store_key(["controller.horizon=12"]))
     # a study without a key (written before keys) is another version
     import sqlite3
 

@@ -12,6 +12,7 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pandas as pd
@@ -322,26 +323,28 @@ def study_name(space: TuneSpace, method: str, replicate: int) -> str:
     return f"{space.name}-{space.trial_key()}-r{replicate}-{method}"
 
 
-def check_trial_store(path: Path, space: TuneSpace) -> None:
+def check_trial_store(path: Path, space: TuneSpace, store_key: str | None = None) -> None:
     """Raise :class:`StudyError` (one line naming the file, nothing written) when the trial
     store at ``path`` cannot be used as it is: a folder or a device in its place, an empty,
     damaged or truncated file, a file that is not Optuna's store, a read-only store, or a
     study of this tune made under another store key (another budget or code version:
-    :meth:`TuneSpace.store_key`), whose trials would be reused silently. A missing store is
-    fine (it is created)."""
+    :meth:`TuneSpace.store_key`; ``store_key``: this tune's, by default without run
+    overrides), whose trials would be reused silently. A missing store is fine (it is
+    created)."""
     from pipeline.errors import StudyError
 
     path = Path(path)
     if not _check_store_file(path):
         return
     names = {study_name(space, m, r) for m in space.methods for r in range(space.replicates)}
-    key = space.store_key()
+    key = store_key or space.store_key()
     for name, stored_key, n_trials in _stored_keys(path):
         if name in names and n_trials and stored_key != key:
             raise StudyError(
                 f"{path}: holds {n_trials} trials of {name} made under "
                 + (f"store key {stored_key}" if stored_key else "an older version")
-                + f", not this tune's {key} (another budget or code version); they are not "
+                + f", not this tune's {key} (another budget, run overrides or code version); "
+                  "they are not "
                   f"reused: {START_FRESH}")
 
 
@@ -421,9 +424,12 @@ def _stored_keys(path: Path) -> list[tuple[str, str | None, int]]:
     return [(name, json.loads(stored) if stored else None, int(n)) for name, stored, n in rows]
 
 
-def make_study(space: TuneSpace, method: str, replicate: int, storage):
+def make_study(space: TuneSpace, method: str, replicate: int, storage,
+               store_key: str | None = None):
     """The NSGA-II study of one method in one replicate (its own sampler seed), named by the
-    space's trial key so that an edited space never resumes another's trials."""
+    space's trial key so that an edited space never resumes another's trials, and carrying
+    the store key it is made under (``store_key``, by default the space's without run
+    overrides: :func:`check_trial_store`)."""
     import warnings
 
     import optuna
@@ -439,7 +445,7 @@ def make_study(space: TuneSpace, method: str, replicate: int, storage):
         study_name=study_name(space, method, replicate), storage=storage,
         sampler=sampler, load_if_exists=True, directions=[o.direction for o in space.objectives])
     if STORE_KEY not in study.user_attrs:
-        study.set_user_attr(STORE_KEY, space.store_key())
+        study.set_user_attr(STORE_KEY, store_key or space.store_key())
     return study
 
 
@@ -456,10 +462,10 @@ def design_holds(cfg: ExperimentConfig, expected: dict, method: str) -> None:
 
     from pipeline.errors import ConfigError
 
-    def value_of(key: str):
-        value = cfg
+    def value_of(key: str) -> Any:
+        value: Any = cfg
         for part in key.split("."):
-            value = getattr(value, part, None)
+            value = value.get(part) if isinstance(value, dict) else getattr(value, part, None)
         return value
 
     for key, want in expected.items():

@@ -236,10 +236,11 @@ class TuneSpace:
             data["track"] = self.track
         return hashlib.sha256(json.dumps(data, sort_keys=True).encode()).hexdigest()[:10]
 
-    def store_key(self) -> str:
+    def store_key(self, overrides: list[str] | tuple[str, ...] = ()) -> str:
         """A short hash of what the stored trials of this tune depend on: its trial key, its
-        budget (:data:`STORE_FIELDS`) and the code version. A stored study made under another
-        key is never reused (:func:`pipeline.studies.tune.search.check_trial_store`)."""
+        budget (:data:`STORE_FIELDS`), the run ``overrides`` (all but the workers' count,
+        which changes no number) and the code version. A stored study made under another key
+        is never reused (:func:`pipeline.studies.tune.search.check_trial_store`)."""
         import hashlib
         import json
 
@@ -247,6 +248,11 @@ class TuneSpace:
 
         data = {"trials": self.trial_key(), "code": code_version(),
                 "budget": json_safe({k: asdict(self)[k] for k in STORE_FIELDS})}
+        runs = [o for o in overrides if not o.startswith(("hydra/", "hydra."))
+                and o.split("=", 1)[0].lstrip("+~") != "scenario.family.n_jobs"]
+        if runs:
+            # only when there are some: the key of a tune without overrides stays as it was
+            data["overrides"] = runs
         return hashlib.sha256(json.dumps(data, sort_keys=True).encode()).hexdigest()[:12]
 
     def below_budget(self, reference: TuneSpace) -> list[str]:

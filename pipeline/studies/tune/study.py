@@ -107,7 +107,8 @@ def run_tuning(space: TuneSpace, out_dir: Path, overrides: list[str] | None = No
 def _run_tuning(space: TuneSpace, out_dir: Path, spaces: dict, overrides: list[str],
                 log) -> TuneResult:
     # the trial store checked before anything is written (damaged, read-only, another key)
-    check_trial_store(out_dir / "tune.db", space)
+    store_key = space.store_key(overrides)
+    check_trial_store(out_dir / "tune.db", space, store_key)
     untrust(out_dir)
     clock = CoreClock()
     runner = Runner(space, out_dir, overrides, log)
@@ -138,7 +139,7 @@ def _run_tuning(space: TuneSpace, out_dir: Path, spaces: dict, overrides: list[s
                 return evaluate_in_rungs(runner, method, replicate, settings, threshold, rungs,
                                          rungs.front_at_rungs(studies[method]), measure)
 
-            studies[method] = make_study(space, method, replicate, storage)
+            studies[method] = make_study(space, method, replicate, storage, store_key)
             history, converged = optimize(studies[method], distributions, evaluate, rule,
                                           space.batch_size, log,
                                           label=f"replicate {replicate}, {method}: ",
@@ -159,7 +160,7 @@ def _run_tuning(space: TuneSpace, out_dir: Path, spaces: dict, overrides: list[s
     log(f"family runs: {runner.counts.sentence()}")
     data = summarize(space, spaces, thresholds, trials, histories, chosen, judged)
     data.update(members=runner.counts.to_json(), core_utilisation=clock.utilisation(),
-                overrides=applied_overrides(overrides), store_key=space.store_key())
+                overrides=applied_overrides(overrides), store_key=store_key)
     summary = TuneSummary.from_json(json_safe(data))
     return TuneResult(summary, trials, judged.heldout, judged.default.to_frame(),
                       judged.tuned_frame(), judged.outcomes).write(out_dir)
