@@ -276,9 +276,10 @@ def load_tune_space(path: Path, changes: list[str] | None = None) -> TuneSpace:
         raise ConfigError("--space", str(path), "a file in conf/tune/ or a path to one")
     # size, UTF-8 and alias limits: one line naming the file (pipeline.store.safe_load)
     data = load_yaml(path, "a tune space (conf/tune/<name>.yaml)")
+    if not isinstance(data, dict):
+        raise ConfigError("--space", str(path), "a mapping of tune settings" + (
+            " (the file is empty)" if data is None else f", not a {type(data).__name__}"))
     if changes:
-        if not isinstance(data, dict):
-            raise ConfigError("--space", str(path), "a mapping of tune settings")
         data = dict(data)
         names = {f for f in TuneSpace.__dataclass_fields__}
         for change in changes:
