@@ -105,23 +105,11 @@ def _report(args, command: str) -> int:
 
 
 def methods_in(runs: Path) -> set[str]:
-    """The method names the run and family folders under ``runs`` were made with (their
-    ``family.json`` and ``metrics.json``; names only, nothing trusted or judged here)."""
-    import json
-    import os
+    """The method names the runs under ``runs`` were made with
+    (:func:`pipeline.store.runs.method_names`)."""
+    from pipeline.store.runs import method_names
 
-    names: set[str] = set()
-    for current, dirs, files in os.walk(runs):
-        dirs[:] = [d for d in dirs if not d.startswith(("member_", "."))]
-        for name in ("family.json", "metrics.json"):
-            if name in files:
-                try:
-                    method = json.loads((Path(current) / name).read_text("utf-8")).get("method")
-                except (OSError, ValueError, AttributeError):
-                    continue
-                if isinstance(method, str) and method:
-                    names.add(method)
-    return names
+    return method_names(runs)
 
 
 def _compared_methods(args) -> tuple[str, ...]:

@@ -49,31 +49,10 @@ def run_multiverse(space: Space, out_dir: Path, overrides: list[str] | None = No
         return _run_multiverse(space, out_dir, list(overrides or []), n_jobs, log)
 
 
-def study_key(space: Space, overrides: list[str]) -> str:
-    """A short hash of what a multiverse's result depends on: its space, the run overrides
-    and the code version (a complete folder with the same key is the same result)."""
-    import hashlib
-    import json
-
-    from pipeline.store.files import json_safe
-    from pipeline.store.manifest import code_version
-
-    data = {"space": json_safe(dataclasses.asdict(space)), "code": code_version(),
-            "overrides": applied_overrides(overrides)}
-    return hashlib.sha256(json.dumps(data, sort_keys=True, default=str).encode()
-                          ).hexdigest()[:12]
-
-
 def _run_multiverse(space: Space, out_dir: Path, overrides: list[str], n_jobs: int,
                     log) -> MultiverseResult:
     from joblib import Parallel, delayed
 
-    key = study_key(space, overrides)
-    if MultiverseResult.complete_for(out_dir, key):
-        # a rerun of a complete study: its result read back, nothing rewritten
-        log(f"{out_dir}: complete for this space, overrides and code (study key {key}); "
-            "nothing to redo")
-        return MultiverseResult.load(out_dir)
     compose, launcher = composer(overrides)
     # the default specification is the user's configuration (its analysis settings)
     base = compose(["method=improved", "scenario=family"])
@@ -105,7 +84,13 @@ def _run_multiverse(space: Space, out_dir: Path, overrides: list[str], n_jobs: i
         _multiverse_info(space, design, len(folders), backends,
                          reads / members if members else 0.0, counts),
         overrides=tuple(applied_overrides(overrides)))
-    return MultiverseResult(info, design, table, robust, dims).write(out_dir, key)
+    result = MultiverseResult(info, design, table, robust, dims)
+    if result.unchanged_in(out_dir):
+        # a rerun of a complete study (its caches checked and repaired on the way): the
+        # result is the one written, which is kept as it is, space.json and all
+        log(f"{out_dir}: the result is unchanged; its files are kept as written")
+        return MultiverseResult.load(out_dir)
+    return result.write(out_dir)
 
 
 def controlled_keys(space: Space) -> dict[str, str]:

@@ -9,7 +9,7 @@ from typing import Any
 
 import pandas as pd
 
-from pipeline.store.files import write_csv_atomic, write_json_atomic
+from pipeline.store.files import csv_text, write_csv_atomic, write_json_atomic
 from pipeline.store.manifest import check, untrust, write_manifest
 from pipeline.studies.results.base import ResultError, figure_files, read_json, written
 
@@ -77,14 +77,18 @@ class MultiverseResult:
     @staticmethod
     def write_design(folder: Path, design: pd.DataFrame) -> None:
         """The design alone, before any run (what an interrupted study resumes from); the
-        folder is not trusted until :meth:`write` ends."""
+        folder is not trusted until :meth:`write` ends. A trusted result with this very
+        design is left as it is (a rerun that changes nothing rewrites nothing)."""
+        path = Path(folder) / DESIGN
+        if check(Path(folder), "multiverse", required=FILES) is None \
+                and path.read_bytes() == csv_text(design).encode("utf-8"):
+            return
         Path(folder).mkdir(parents=True, exist_ok=True)
         untrust(folder)
         write_csv_atomic(Path(folder) / DESIGN, design)
 
-    def write(self, folder: Path, study_key: str = "") -> MultiverseResult:
-        """Write the tables and ``space.json``, then the manifest (last; with ``study_key``,
-        what the result depends on: :meth:`complete_for`)."""
+    def write(self, folder: Path) -> MultiverseResult:
+        """Write the tables and ``space.json``, then the manifest (last)."""
         folder = Path(folder)
         folder.mkdir(parents=True, exist_ok=True)
         untrust(folder)
@@ -93,21 +97,36 @@ class MultiverseResult:
         write_csv_atomic(folder / ROBUSTNESS, self.robustness)
         write_csv_atomic(folder / DIMENSIONS, self.dimensions)
         write_json_atomic(folder / SPACE, self.info.to_json())
-        write_manifest(folder, "multiverse", FILES, self.info.name,
-                       {"study_key": study_key} if study_key else None)
+        write_manifest(folder, "multiverse", FILES, self.info.name)
         return MultiverseResult(self.info, self.design, self.specifications, self.robustness,
                                 self.dimensions, folder)
 
-    @staticmethod
-    def complete_for(folder: Path, study_key: str) -> bool:
-        """Whether ``folder`` holds a trusted result written under ``study_key`` (a rerun of
-        the same study there has nothing to redo)."""
-        from pipeline.store.manifest import load_manifest
+    #: space.json's bookkeeping of the run that wrote it (where its members came from, how
+    #: often each was read): a rerun that finds the result unchanged keeps the first run's
+    BOOKKEEPING = ("members", "member_reads_per_member")
 
-        if check(Path(folder), "multiverse", required=FILES) is not None:
+    def unchanged_in(self, folder: Path) -> bool:
+        """Whether ``folder`` already holds this result, trusted: every table byte for byte
+        and ``space.json`` the same but for its :data:`BOOKKEEPING` (a rerun of a complete
+        study then rewrites nothing)."""
+        import json
+
+        folder = Path(folder)
+        if check(folder, "multiverse", required=FILES) is not None:
             return False
-        manifest, _ = load_manifest(Path(folder), "multiverse", FILES)
-        return manifest is not None and manifest.get("study_key") == study_key
+        for name, table in zip(FILES[:4], (self.design, self.specifications,
+                                           self.robustness, self.dimensions), strict=True):
+            if (folder / name).read_bytes() != csv_text(table).encode("utf-8"):
+                return False
+        try:
+            stored = json.loads((folder / SPACE).read_text(encoding="utf-8"))
+        except (OSError, ValueError):
+            return False
+        mine = json.loads(json.dumps(self.info.to_json(), allow_nan=False))
+        return isinstance(stored, dict) and all(
+            {k: v for k, v in data.items() if k not in self.BOOKKEEPING}
+            == {k: v for k, v in mine.items() if k not in self.BOOKKEEPING}
+            for data in (stored,))
 
     @staticmethod
     def present(folder: Path | None) -> bool:
