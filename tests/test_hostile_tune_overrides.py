@@ -133,3 +133,19 @@ def test_a_preset_that_changes_a_family_seed_is_caught_in_the_composed_run(tmp_p
     job = runner.job("improved", "trial", {"planner.beta": 0.5}, "training", 1)
     assert job.cfg.scenario.family.seed == QUICK.training_seeds[1]
     assert job.cfg.planner.beta == 0.5
+
+
+def test_the_kinematic_tracks_own_keys_are_controlled_too(tmp_path):
+    """``--set track=kinematic``: the track sets the controller, the start speed and the run
+    length; an override of any of them is one line, and a composed run holds them."""
+    from pipeline.studies.tune.search import Runner
+
+    space = load_tune_space(CONF_DIR / "tune" / "quick.yaml", [
+        "track=kinematic", "backend=clarabel_direct", "heldout_backend=clarabel_direct"])
+    controlled = controlled_keys(space, SPACES)
+    for override in ("scenario.n_steps=50", "scenario.initial_speed_mps=3", "controller=nmpc"):
+        with pytest.raises(ConfigError, match="refused"):
+            refuse_controlled([override], controlled, "tune")
+    job = Runner(space, tmp_path, [], log=lambda m: None).job("improved", "default", {},
+                                                              "heldout")
+    assert job.cfg.scenario.n_steps == 100 and job.cfg.scenario.initial_speed_mps == 0.0

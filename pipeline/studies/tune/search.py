@@ -531,8 +531,10 @@ class Runner:
             if len(self._composed) > 64:
                 self._composed.clear()
             cfg = self._composed[key] = self.compose(overrides)
+            track = dict(o.split("=", 1) for o in TRACK_OVERRIDES[self.space.track]
+                         if "." in o.split("=", 1)[0])
             expected = {"scenario.family.seed": seed, "scenario.family.size": size,
-                        "controller.backend": backend, **params}
+                        "controller.backend": backend, **track, **params}
             design_holds(cfg, expected, method)
         folder = self.out_dir / "runs" / part / method / cfg.config_hash()
         family = cfg.scenario.family

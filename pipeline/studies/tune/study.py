@@ -70,7 +70,7 @@ from pipeline.studies.tune.search import (
     optimize,
     trial_storage,
 )
-from pipeline.studies.tune.space import TuneSpace, default_budget, search_space
+from pipeline.studies.tune.space import TRACK_OVERRIDES, TuneSpace, default_budget, search_space
 
 logger = logging.getLogger(__name__)
 
@@ -183,6 +183,9 @@ def controlled_keys(space: TuneSpace, spaces: dict) -> dict[str, str]:
                            "(--set 'methods=[treatment, control]')",
         "tune": "no override: the tune's settings are its space file's (--space, --set "
                 "key=value)"})
+    for override in TRACK_OVERRIDES[space.track]:
+        keys.setdefault(override.split("=", 1)[0], f"no override: the tune's track "
+                        f"({space.track}) sets it (the space's track)")
     for method in space.methods:
         for key in spaces[method][1]:
             keys.setdefault(key, f"no override: {key} is tuned (conf/hparams_search/"
