@@ -83,7 +83,7 @@ def _report(args, command: str) -> int:
     except ConfigError as exc:
         raise CommandError(f"error: {exc}") from None
     skipped: list[Skipped] = []
-    controls = tuple(c.strip() for c in (args.controls or "").split(",") if c.strip())
+    controls = _compared_methods(args)
     try:
         path = build_report(args.runs, args.out, command, tuple(args.sweep), args.bench,
                             args.multiverse, skipped, args.tune, args.treatment, controls,
@@ -102,6 +102,42 @@ def _report(args, command: str) -> int:
         print(f"error: --strict: {len(skipped)} folder(s) skipped", file=sys.stderr)
         return 1
     return 0
+
+
+def methods_in(runs: Path) -> set[str]:
+    """The method names the runs under ``runs`` were made with
+    (:func:`pipeline.store.runs.method_names`)."""
+    from pipeline.store.runs import method_names
+
+    return method_names(runs)
+
+
+def _compared_methods(args) -> tuple[str, ...]:
+    """The controls of ``--controls`` (comma-separated); :class:`CommandError` (one line, the
+    names allowed) for an empty list, a treatment among its controls, a name given twice, or
+    a treatment or control with no runs under RUNS (it would judge nothing, silently)."""
+    controls = tuple(c.strip() for c in (args.controls or "").split(",") if c.strip())
+    if args.controls is not None and not controls:
+        raise CommandError(f"error: --controls {args.controls!r} is invalid; allowed: "
+                           "comma-separated method names, e.g. baseline,baseline_matched")
+    if args.treatment is not None and not args.treatment.strip():
+        raise CommandError("error: --treatment '' is invalid; allowed: a method name")
+    if len(set(controls)) != len(controls):
+        raise CommandError(f"error: --controls {args.controls} names a method twice; "
+                           "allowed: each method once")
+    if args.treatment is not None and args.treatment in controls:
+        raise CommandError(f"error: --treatment {args.treatment} is also in --controls "
+                           f"{args.controls}; allowed: controls other than the treatment")
+    if (args.treatment is None and not controls) or not Path(args.runs).is_dir():
+        return controls
+    known = methods_in(Path(args.runs))
+    for option, name in [("--treatment", args.treatment)] + [("--controls", c)
+                                                             for c in controls]:
+        if name is not None and name not in known:
+            raise CommandError(f"error: {option} {name}: no runs of that method under "
+                               f"{args.runs}; allowed: "
+                               + (", ".join(sorted(known)) or "none (no runs found)"))
+    return controls
 
 
 if __name__ == "__main__":

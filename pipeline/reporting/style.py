@@ -59,20 +59,16 @@ def load_figure_style(name: str) -> FigureStyle:
     import dataclasses
     from pathlib import Path
 
-    import yaml
-
     from pipeline.config import CONF_DIR
+    from pipeline.store.safe_load import load_yaml
 
     folder = Path(CONF_DIR) / "report" / "figure_style"
     path = Path(name) if name.endswith((".yaml", ".yml")) else folder / f"{name}.yaml"
-    if not path.is_file():
+    if not path.exists():
         known = sorted(p.stem for p in folder.glob("*.yaml"))
         raise ConfigError("--figure-style", name, f"one of {known} or a YAML file's path")
-    try:
-        data = yaml.safe_load(path.read_text()) or {}
-    except yaml.YAMLError as exc:
-        raise ConfigError("--figure-style", str(path),
-                          f"a readable YAML file ({str(exc).splitlines()[0]})") from None
+    # size, UTF-8 and alias limits: one line naming the file (pipeline.store.safe_load)
+    data = load_yaml(path, "a figure style (conf/report/figure_style/<name>.yaml)") or {}
     if not isinstance(data, dict):
         raise ConfigError("figure_style", type(data).__name__, "a mapping of settings")
     allowed = [f.name for f in dataclasses.fields(FigureStyle)]

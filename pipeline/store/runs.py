@@ -466,3 +466,21 @@ def discover(root: Path, exclude: tuple[str, ...] = ()) -> Discovery:
         if any(part.startswith("member_") for part in rel):
             continue
     return found
+
+
+def method_names(root: Path) -> set[str]:
+    """The method names the run and family folders under ``root`` were made with (their
+    ``family.json`` and ``metrics.json``; names only: nothing is trusted or judged here, and
+    member folders are not visited)."""
+    names: set[str] = set()
+    for current, dirs, files in os.walk(root):
+        dirs[:] = [d for d in dirs if not d.startswith(("member_", "."))]
+        for name in ("family.json", "metrics.json"):
+            if name in files:
+                try:
+                    method = json.loads((Path(current) / name).read_text("utf-8")).get("method")
+                except (OSError, ValueError, AttributeError):
+                    continue
+                if isinstance(method, str) and method:
+                    names.add(method)
+    return names

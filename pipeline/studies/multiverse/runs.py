@@ -18,7 +18,13 @@ from pipeline.config import ExperimentConfig, MetricsConfig
 from pipeline.errors import IncompleteSweepError
 from pipeline.store.manifest import check, check_derived_table, write_derived_table
 from pipeline.store.member_cache import MemberCache, MemberCounts
-from pipeline.store.runs import family_timing, member_trajectories, read_family
+from pipeline.store.runs import (
+    RunFolderError,
+    family_timing,
+    member_folders,
+    member_trajectories,
+    read_family,
+)
 from pipeline.studies.multiverse.design import family_config, qp_backend, simulation_key
 from pipeline.studies.multiverse.space import METHODS, Space
 
@@ -72,7 +78,7 @@ def run_simulations(design: pd.DataFrame, space: Space, out_dir: Path,
             cfg = family_config(row, space, method, compose)
             backends.setdefault(method, set()).add(qp_backend(cfg))
             folder = out_dir / "runs" / method / cfg.config_hash()
-            if check(folder, "family", cfg.config_hash(), members=True) is not None \
+            if family_reason(folder, cfg.config_hash()) is not None \
                     and all(folder != f for _, f in todo):
                 todo.append((cfg, folder))
             folders[key][method] = folder
@@ -81,6 +87,25 @@ def run_simulations(design: pd.DataFrame, space: Space, out_dir: Path,
         + ", ".join(f"{m} {'/'.join(sorted(b))}" for m, b in backends.items()))
     run_families(todo, out_dir, log, launcher, cache, counts=counts)
     return folders, {m: "/".join(sorted(b)) for m, b in backends.items()}
+
+
+def family_reason(folder: Path, config_hash: str) -> str | None:
+    """Why a family folder cannot be resumed as complete, or None: its manifest, each
+    member's record in it, and each member's own files against the member's manifest (a
+    member file cut or changed after the family was written sends the family back to
+    :func:`run_families`, which simulates that member again and keeps the others)."""
+    reason = check(folder, "family", config_hash, members=True)
+    if reason is not None:
+        return reason
+    try:
+        members = member_folders(folder)
+    except RunFolderError as exc:
+        return str(exc)
+    for member in members:
+        reason = check(member, "run")
+        if reason is not None:
+            return f"{member.name}: {reason}"
+    return None
 
 
 def run_families(todo: list, out_dir: Path, log=logger.info, launcher: dict | None = None,

@@ -216,17 +216,14 @@ class DimensionFile:
 
 def load_space(path: Path) -> Space:
     """Read and check a space file; a bad one raises :class:`ConfigError` (one line)."""
-    import yaml
+    from pipeline.store.safe_load import load_yaml
 
     path = Path(path)
-    if not path.is_file():
+    if not path.exists():
         raise ConfigError("multiverse space", str(path), "a file in conf/multiverse/ "
                           "(default, quick) or a path to one")
-    try:
-        data = yaml.safe_load(path.read_text()) or {}
-    except yaml.YAMLError as exc:
-        raise ConfigError("multiverse space", str(path),
-                          f"valid YAML ({str(exc).splitlines()[0]})") from None
+    # size, UTF-8 and alias limits: one line naming the file (pipeline.store.safe_load)
+    data = load_yaml(path, "a multiverse space (conf/multiverse/<name>.yaml)") or {}
     if not isinstance(data, dict):
         raise ConfigError("multiverse space", type(data).__name__,
                           "a mapping with 'dimensions' and the space's settings")

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 from pathlib import Path
 
@@ -11,6 +12,7 @@ from pipeline.analysis.claims.windows import require_own_window
 from pipeline.config import MetricsConfig
 from pipeline.store.member_cache import MemberCounts
 from pipeline.store.runs import read_family
+from pipeline.store.study_lock import study_lock
 from pipeline.studies.compose import composer
 from pipeline.studies.multiverse.design import (
     analysis_settings,
@@ -25,6 +27,7 @@ from pipeline.studies.multiverse.robustness import (
 )
 from pipeline.studies.multiverse.runs import _LogStream, rescore_family, run_simulations
 from pipeline.studies.multiverse.space import Space
+from pipeline.studies.overrides import PRESET_GROUPS, applied_overrides, refuse_controlled
 from pipeline.studies.results.multiverse import MultiverseInfo, MultiverseResult
 
 logger = logging.getLogger("pipeline.studies.multiverse")
@@ -35,11 +38,22 @@ def run_multiverse(space: Space, out_dir: Path, overrides: list[str] | None = No
     """Design, runs, re-scoring and analysis, written into ``out_dir`` (the manifest last);
     returns the result (``log``: where progress lines go, the module's logger by default).
     The specification curves are the command's to draw."""
-    from joblib import Parallel, delayed
-
     log = log if log is not None else logger.info
     out_dir = Path(out_dir)
-    compose, launcher = composer(list(overrides or []))
+    # an override of what the multiverse sets itself (methods, its family, a simulation
+    # dimension's keys): one line, before anything is written; every other override runs for
+    # every method and is recorded in space.json
+    refuse_controlled(list(overrides or []), controlled_keys(space), "multiverse")
+    # one study per folder at a time (a second is refused in one line), for as long as it runs
+    with study_lock(out_dir, f"multiverse {space.name}"):
+        return _run_multiverse(space, out_dir, list(overrides or []), n_jobs, log)
+
+
+def _run_multiverse(space: Space, out_dir: Path, overrides: list[str], n_jobs: int,
+                    log) -> MultiverseResult:
+    from joblib import Parallel, delayed
+
+    compose, launcher = composer(overrides)
     # the default specification is the user's configuration (its analysis settings)
     base = compose(["method=improved", "scenario=family"])
     require_own_window(base.claims, "the multiverse")
@@ -66,9 +80,37 @@ def run_multiverse(space: Space, out_dir: Path, overrides: list[str] | None = No
     rows = [r for block in results for r in block]
     table = pd.DataFrame(rows).merge(design, on="spec_id")
     robust, dims = robustness(pd.DataFrame(rows), design, space)
-    info = _multiverse_info(space, design, len(folders), backends,
-                            reads / members if members else 0.0, counts)
-    return MultiverseResult(info, design, table, robust, dims).write(out_dir)
+    info = dataclasses.replace(
+        _multiverse_info(space, design, len(folders), backends,
+                         reads / members if members else 0.0, counts),
+        overrides=tuple(applied_overrides(overrides)))
+    result = MultiverseResult(info, design, table, robust, dims)
+    if result.unchanged_in(out_dir):
+        # a rerun of a complete study (its caches checked and repaired on the way): the
+        # result is the one written, which is kept as it is, space.json and all
+        log(f"{out_dir}: the result is unchanged; its files are kept as written")
+        return MultiverseResult.load(out_dir)
+    return result.write(out_dir)
+
+
+def controlled_keys(space: Space) -> dict[str, str]:
+    """The config keys the multiverse sets in its runs, each with what to do instead of
+    overriding it (:func:`pipeline.studies.overrides.refuse_controlled`): an override would
+    replace every specification's value, so the dimension would vary nothing."""
+    keys = dict(PRESET_GROUPS)
+    keys.update({
+        "scenario.family.size": "no override: the multiverse sets its family's size (the "
+                                "space's family_size)",
+        "scenario.family.seed": "no override: the multiverse sets its family's seed (the "
+                                "space's family_seed)"})
+    for dim in space.of("simulation"):
+        for key in dim.config_keys:
+            keys.setdefault(key, f"no override: {key} is the multiverse dimension {dim.key} "
+                                 "(edit its values in the space file)")
+        if dim.cap:
+            keys.setdefault("planner.step_size", f"no override: the matched baseline's step "
+                            f"follows the dimension {dim.key}")
+    return keys
 
 
 def _metric_readings(jobs: list, space: Space, base) -> dict[Path, list[MetricsConfig]]:

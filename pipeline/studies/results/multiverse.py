@@ -9,7 +9,7 @@ from typing import Any
 
 import pandas as pd
 
-from pipeline.store.files import write_csv_atomic, write_json_atomic
+from pipeline.store.files import csv_text, write_csv_atomic, write_json_atomic
 from pipeline.store.manifest import check, untrust, write_manifest
 from pipeline.studies.results.base import ResultError, figure_files, read_json, written
 
@@ -44,16 +44,20 @@ class MultiverseInfo:
     #: where this run's family members came from: simulated, reused from the member cache,
     #: already complete (resumed); empty for a study written before the member cache
     members: dict[str, int] = field(default_factory=dict)
+    #: the run overrides every family of every method was composed with (none of them sets
+    #: what the multiverse controls: pipeline.studies.overrides)
+    overrides: tuple[str, ...] = ()
 
     def to_json(self) -> dict:
         data = {f.name: getattr(self, f.name) for f in fields(self)}
         data["dimensions"] = list(self.dimensions)
+        data["overrides"] = list(self.overrides)
         return data
 
     @classmethod
     def from_json(cls, data: dict[str, Any]) -> MultiverseInfo:
         names = {f.name for f in fields(cls)}
-        values: dict[str, Any] = {k: (tuple(v) if k == "dimensions" else v)
+        values: dict[str, Any] = {k: (tuple(v) if k in ("dimensions", "overrides") else v)
                                   for k, v in data.items() if k in names}
         return cls(**values)
 
@@ -73,7 +77,12 @@ class MultiverseResult:
     @staticmethod
     def write_design(folder: Path, design: pd.DataFrame) -> None:
         """The design alone, before any run (what an interrupted study resumes from); the
-        folder is not trusted until :meth:`write` ends."""
+        folder is not trusted until :meth:`write` ends. A trusted result with this very
+        design is left as it is (a rerun that changes nothing rewrites nothing)."""
+        path = Path(folder) / DESIGN
+        if check(Path(folder), "multiverse", required=FILES) is None \
+                and path.read_bytes() == csv_text(design).encode("utf-8"):
+            return
         Path(folder).mkdir(parents=True, exist_ok=True)
         untrust(folder)
         write_csv_atomic(Path(folder) / DESIGN, design)
@@ -91,6 +100,33 @@ class MultiverseResult:
         write_manifest(folder, "multiverse", FILES, self.info.name)
         return MultiverseResult(self.info, self.design, self.specifications, self.robustness,
                                 self.dimensions, folder)
+
+    #: space.json's bookkeeping of the run that wrote it (where its members came from, how
+    #: often each was read): a rerun that finds the result unchanged keeps the first run's
+    BOOKKEEPING = ("members", "member_reads_per_member")
+
+    def unchanged_in(self, folder: Path) -> bool:
+        """Whether ``folder`` already holds this result, trusted: every table byte for byte
+        and ``space.json`` the same but for its :data:`BOOKKEEPING` (a rerun of a complete
+        study then rewrites nothing)."""
+        import json
+
+        folder = Path(folder)
+        if check(folder, "multiverse", required=FILES) is not None:
+            return False
+        for name, table in zip(FILES[:4], (self.design, self.specifications,
+                                           self.robustness, self.dimensions), strict=True):
+            if (folder / name).read_bytes() != csv_text(table).encode("utf-8"):
+                return False
+        try:
+            stored = json.loads((folder / SPACE).read_text(encoding="utf-8"))
+        except (OSError, ValueError):
+            return False
+        mine = json.loads(json.dumps(self.info.to_json(), allow_nan=False))
+        return isinstance(stored, dict) and all(
+            {k: v for k, v in data.items() if k not in self.BOOKKEEPING}
+            == {k: v for k, v in mine.items() if k not in self.BOOKKEEPING}
+            for data in (stored,))
 
     @staticmethod
     def present(folder: Path | None) -> bool:

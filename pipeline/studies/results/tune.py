@@ -91,6 +91,11 @@ class TuneSummary:
     #: CPU-seconds over (wall-clock seconds x cores) of the tuning's own process and its
     #: workers (None before it was measured)
     core_utilisation: float | None = None
+    #: the run overrides every family of both methods was composed with (none of them sets
+    #: what the tune controls: pipeline.studies.overrides); empty for a tune without any
+    overrides: tuple[str, ...] = ()
+    #: the key of the trial store the trials came from (space, budget, families, code)
+    store_key: str = ""
 
     @property
     def methods(self) -> list[str]:
@@ -120,6 +125,7 @@ class TuneSummary:
                       "parity": tuple(data["parity"]),
                       "below_default_budget": tuple(data["below_default_budget"]),
                       "unconverged": tuple(data["unconverged"]),
+                      "overrides": tuple(data.get("overrides", ())),
                       "claims": tuple(TunedClaim.from_json(c) for c in data["claims"])})
 
     def to_json(self) -> dict:

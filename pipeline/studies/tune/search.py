@@ -4,11 +4,15 @@ SLURM, resumed by config hash."""
 
 from __future__ import annotations
 
+import contextlib
+import json
 import logging
+import os
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pandas as pd
@@ -82,16 +86,27 @@ def optimize(study, distributions: dict, evaluate: Callable[[list[dict]], list[t
     constraint)`` or ``(values, constraint, attrs)``: the objective values, the safety
     constraint (<= 0 feasible) and what to keep with the trial (its rungs, the members it
     simulated, where it was stopped).
-    A trial left running by an interrupted process is closed as failed and its parameters are
-    asked again first (their finished families are read back, not simulated). A resumed study
+    A trial left running by an interrupted process is closed as failed and its batch asked
+    again from the sampler's state at the batch's start (kept in the study), so that a resumed
+    study asks what the uninterrupted one asked (their finished families are read back, not
+    simulated). A resumed study
     that had converged stops where it converged. With ``family_size``, the rule's trial counts
     are whole-trial equivalents of simulated members (:func:`convergence_point`).
     """
     from optuna.trial import TrialState
 
-    for trial in study.get_trials(deepcopy=False, states=(TrialState.RUNNING,)):
+    # a batch left running by an interrupted process: its trials closed as failed and the
+    # batch asked again from the sampler's state at its start (the same settings: their
+    # finished families are read back, not simulated), so that a resumed tune asks what the
+    # uninterrupted one would have asked
+    running = study.get_trials(deepcopy=False, states=(TrialState.RUNNING,))
+    for trial in running:
         study.tell(trial.number, state=TrialState.FAIL)
-        study.enqueue_trial(dict(trial.params))
+    if not restore_sampler_state(study):
+        # no state kept for this count (a study of an older version, or a kill between two
+        # tells): the running trials' settings are asked again first
+        for trial in running:
+            study.enqueue_trial(dict(trial.params))
     start, done_before = time.perf_counter(), None
     while True:
         history = rule.history(study)
@@ -102,10 +117,12 @@ def optimize(study, distributions: dict, evaluate: Callable[[list[dict]], list[t
         spent = float(effort[-1]) if effort is not None and len(effort) else float(complete)
         if converged is not None or spent >= rule.max_trials:
             return history, converged
+        save_sampler_state(study, complete, "before")
         batch = [study.ask() for _ in range(max(1, min(batch_size,
                                                        int(np.ceil(rule.max_trials - spent)))))]
         settings = [{name: trial._suggest(name, dist) for name, dist in distributions.items()}
                     for trial in batch]
+        save_sampler_state(study, complete + len(batch), "after")
         for trial, (values, constraint, *more) in zip(batch, evaluate(settings), strict=True):
             trial.set_user_attr("constraint", float(constraint))
             for key, value in (more[0] if more else {}).items():
@@ -115,6 +132,58 @@ def optimize(study, distributions: dict, evaluate: Callable[[list[dict]], list[t
         rate = (time.perf_counter() - start) / max(complete - done_before, 1)
         log(f"{label}trials {complete} (converged at the earliest at {rule.min_trials}, cap "
             f"{rule.max_trials}; {rate:.1f} s per trial)")
+
+
+#: the study's system attribute holding its sampler's random state at the start of the last
+#: batch (with the number of complete trials then)
+SAMPLER_STATE = "pipeline:sampler_state_at_batch"
+
+
+def _random_states(sampler) -> list:
+    """The numpy random states an NSGA-II sampler draws from (its own and its random
+    sampler's), or [] for another sampler."""
+    states = [getattr(sampler, "_rng", None),
+              getattr(getattr(sampler, "_random_sampler", None), "_rng", None)]
+    return [s for s in states if isinstance(s, np.random.RandomState)]
+
+
+def save_sampler_state(study, complete: int, when: str) -> None:
+    """Keep the sampler's random state in the study: at the start of a batch (``when`` is
+    ``"before"``, ``complete`` the complete trials then) and once its settings are asked
+    (``"after"``, ``complete`` the count once the batch is told): a resumed study restores
+    the one that matches its count (:func:`restore_sampler_state`)."""
+    states = []
+    for rng in _random_states(study.sampler):
+        name, keys, pos, has_gauss, gauss = rng.get_state()
+        states.append([name, [int(k) for k in keys], int(pos), int(has_gauss), float(gauss)])
+    saved = study.system_attrs.get(SAMPLER_STATE)
+    saved = dict(saved) if isinstance(saved, dict) else {}
+    saved[when] = {"complete": int(complete), "states": states}
+    if when == "before":
+        saved.pop("after", None)
+    study.set_system_attr(SAMPLER_STATE, saved)
+
+
+def restore_sampler_state(study) -> bool:
+    """Put the sampler back in the state the uninterrupted run had with the study's present
+    number of complete trials (at the start of the interrupted batch, or once the last batch
+    was asked), when the study kept it; whether it did. With it a resumed tune asks the
+    settings the uninterrupted one asked."""
+    from optuna.trial import TrialState
+
+    saved = study.system_attrs.get(SAMPLER_STATE)
+    complete = len(study.get_trials(deepcopy=False, states=(TrialState.COMPLETE,)))
+    rngs = _random_states(study.sampler)
+    if not isinstance(saved, dict) or not rngs:
+        return False
+    for entry in (saved.get("before"), saved.get("after")):
+        if isinstance(entry, dict) and entry.get("complete") == complete \
+                and len(entry.get("states", [])) == len(rngs):
+            for rng, (name, keys, pos, has_gauss, gauss) in zip(rngs, entry["states"],
+                                                                strict=True):
+                rng.set_state((name, np.array(keys, dtype=np.uint32), pos, has_gauss, gauss))
+            return True
+    return False
 
 
 #: The constraint value of a trial stopped at a rung because it cannot move its method's front:
@@ -244,9 +313,123 @@ def trial_storage(path: Path):
     return storage
 
 
-def make_study(space: TuneSpace, method: str, replicate: int, storage):
+#: the user attribute of a study holding the store key it was made under
+STORE_KEY = "pipeline:store_key"
+SQLITE_HEADER = b"SQLite format 3\x00"
+
+
+def study_name(space: TuneSpace, method: str, replicate: int) -> str:
+    """The name of one method's study in one replicate (by the space's trial key)."""
+    return f"{space.name}-{space.trial_key()}-r{replicate}-{method}"
+
+
+def check_trial_store(path: Path, space: TuneSpace, store_key: str | None = None) -> None:
+    """Raise :class:`StudyError` (one line naming the file, nothing written) when the trial
+    store at ``path`` cannot be used as it is: a folder or a device in its place, an empty,
+    damaged or truncated file, a file that is not Optuna's store, a read-only store, or a
+    study of this tune made under another store key (another budget or code version:
+    :meth:`TuneSpace.store_key`; ``store_key``: this tune's, by default without run
+    overrides), whose trials would be reused silently. A missing store is fine (it is
+    created)."""
+    from pipeline.errors import StudyError
+
+    path = Path(path)
+    if not _check_store_file(path):
+        return
+    names = {study_name(space, m, r) for m in space.methods for r in range(space.replicates)}
+    key = store_key or space.store_key()
+    for name, stored_key, n_trials in _stored_keys(path):
+        if name in names and n_trials and stored_key != key:
+            raise StudyError(
+                f"{path}: holds {n_trials} trials of {name} made under "
+                + (f"store key {stored_key}" if stored_key else "an older version")
+                + f", not this tune's {key} (another budget, run overrides or code version); "
+                  "they are not "
+                  f"reused: {START_FRESH}")
+
+
+#: what a refused trial store's line ends with
+START_FRESH = "delete it (or choose another --out) to start fresh"
+
+
+def _check_store_file(path: Path) -> bool:
+    """Whether a trial store is there (False: none yet); :class:`StudyError` for a path that
+    is not a readable, writable SQLite file."""
+    import stat
+
+    from pipeline.errors import StudyError
+
+    try:
+        mode = path.stat().st_mode
+    except FileNotFoundError:
+        return False
+    if stat.S_ISDIR(mode):
+        raise StudyError(f"{path}: a folder, not the trial store (an SQLite file); move it "
+                         "away or choose another --out")
+    if not stat.S_ISREG(mode):
+        raise StudyError(f"{path}: not a regular file (a device or a pipe); move it away or "
+                         "choose another --out")
+    if not os.access(path, os.R_OK):
+        raise StudyError(f"{path}: the trial store cannot be read (permission denied)")
+    with open(path, "rb") as handle:
+        header = handle.read(len(SQLITE_HEADER))
+    if not header:
+        raise StudyError(f"{path}: an empty file, not a trial store (cut or damaged); "
+                         f"{START_FRESH}")
+    if header != SQLITE_HEADER:
+        raise StudyError(f"{path}: not an SQLite file (damaged, or not a trial store); "
+                         f"{START_FRESH}")
+    if _read_only(path) or _read_only(path.parent):
+        raise StudyError(f"{path}: read-only; the trial store must be writable (every trial "
+                         "is recorded as it completes): make it writable or choose another --out")
+    return True
+
+
+def _read_only(path: Path) -> bool:
+    """Whether ``path`` cannot be written: no write permission (its mode bits, which bind
+    the superuser's intent too) or a read-only file system."""
+    mode = path.stat().st_mode
+    return not os.access(path, os.W_OK) or not mode & 0o222 \
+        or bool(os.statvfs(path).f_flag & os.ST_RDONLY)
+
+
+def _stored_keys(path: Path) -> list[tuple[str, str | None, int]]:
+    """Every study in the store: its name, the store key it was made under (None before
+    keys) and its trial count, read without writing; :class:`StudyError` for a damaged,
+    truncated or foreign SQLite file."""
+    import sqlite3
+
+    from pipeline.errors import StudyError
+
+    try:
+        # plain reads (a journal left by a killed tune is rolled back, as any open would)
+        with contextlib.closing(sqlite3.connect(path, timeout=10.0)) as db:
+            check = db.execute("pragma quick_check").fetchone()
+            if not check or check[0] != "ok":
+                found = check[0] if check else "no answer"
+                raise StudyError(f"{path}: the trial store is damaged ({found}); "
+                                 f"{START_FRESH}")
+            tables = {r[0] for r in db.execute("select name from sqlite_master where "
+                                               "type = 'table'")}
+            if not {"studies", "trials", "study_user_attributes"} <= tables:
+                raise StudyError(f"{path}: an SQLite file but not Optuna's trial store; "
+                                 f"{START_FRESH}")
+            rows = db.execute(
+                "select s.study_name, a.value_json, (select count(*) from trials t where "
+                "t.study_id = s.study_id) from studies s left join study_user_attributes a "
+                "on a.study_id = s.study_id and a.key = ?", (STORE_KEY,)).fetchall()
+    except sqlite3.DatabaseError as exc:
+        raise StudyError(f"{path}: the trial store is damaged or truncated ({exc}); "
+                         f"{START_FRESH}") from None
+    return [(name, json.loads(stored) if stored else None, int(n)) for name, stored, n in rows]
+
+
+def make_study(space: TuneSpace, method: str, replicate: int, storage,
+               store_key: str | None = None):
     """The NSGA-II study of one method in one replicate (its own sampler seed), named by the
-    space's trial key so that an edited space never resumes another's trials."""
+    space's trial key so that an edited space never resumes another's trials, and carrying
+    the store key it is made under (``store_key``, by default the space's without run
+    overrides: :func:`check_trial_store`)."""
     import warnings
 
     import optuna
@@ -258,13 +441,43 @@ def make_study(space: TuneSpace, method: str, replicate: int, storage):
         sampler = optuna.samplers.NSGAIISampler(population_size=space.population_size,
                                                 seed=space.sampler_seed_of(replicate),
                                                 constraints_func=_constraint)
-    return optuna.create_study(
-        study_name=f"{space.name}-{space.trial_key()}-r{replicate}-{method}", storage=storage,
+    study = optuna.create_study(
+        study_name=study_name(space, method, replicate), storage=storage,
         sampler=sampler, load_if_exists=True, directions=[o.direction for o in space.objectives])
+    if STORE_KEY not in study.user_attrs:
+        study.set_user_attr(STORE_KEY, store_key or space.store_key())
+    return study
 
 
 def _override(name: str, value) -> str:
     return f"{name}={value!r}" if isinstance(value, float) else f"{name}={value}"
+
+
+def design_holds(cfg: ExperimentConfig, expected: dict, method: str) -> None:
+    """Raise :class:`ConfigError` when a composed run does not hold what the tune asked for
+    (a preset among the run overrides, e.g. a sweep or an ablation point, set one of its
+    families' seed or size, its QP backend or a tuned setting): the tune would run another
+    design than the one its summary describes."""
+    import math
+
+    from pipeline.errors import ConfigError
+
+    def value_of(key: str) -> Any:
+        value: Any = cfg
+        for part in key.split("."):
+            value = value.get(part) if isinstance(value, dict) else getattr(value, part, None)
+        return value
+
+    for key, want in expected.items():
+        got = value_of(key)
+        same = got == want or str(got) == str(want) or (
+            isinstance(got, (int, float)) and isinstance(want, (int, float))
+            and not isinstance(got, bool) and math.isclose(float(got), float(want),
+                                                           rel_tol=1e-12, abs_tol=0.0))
+        if not same:
+            raise ConfigError(f"tune: {method}'s run {key}", got,
+                              f"{want!r}, what the tune sets (a run override changed it: "
+                              "leave the tune's own keys to its space file)")
 
 
 @dataclass(frozen=True)
@@ -319,6 +532,11 @@ class Runner:
             if len(self._composed) > 64:
                 self._composed.clear()
             cfg = self._composed[key] = self.compose(overrides)
+            track = dict(o.split("=", 1) for o in TRACK_OVERRIDES[self.space.track]
+                         if "." in o.split("=", 1)[0])
+            expected = {"scenario.family.seed": seed, "scenario.family.size": size,
+                        "controller.backend": backend, **track, **params}
+            design_holds(cfg, expected, method)
         folder = self.out_dir / "runs" / part / method / cfg.config_hash()
         family = cfg.scenario.family
         if members is not None and family is not None and members < family.size:

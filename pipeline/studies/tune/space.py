@@ -38,6 +38,10 @@ TRACK_OVERRIDES: dict[str, tuple[str, ...]] = {
     "kinematic": ("controller=kinematic", "scenario.initial_speed_mps=0.0",
                   "scenario.n_steps=100"),
 }
+#: the budget fields that decide when each study stops: with the trial fields and the code
+#: version they key the trial store (:meth:`TuneSpace.store_key`)
+STORE_FIELDS = ("min_trials", "max_trials", "convergence_window", "convergence_tolerance",
+                "hypervolume_bounds")
 #: the fields whose default values are the budget a headline needs (at least as much of each)
 BUDGET_AT_LEAST = ("replicates", "min_trials", "max_trials", "convergence_window",
                    "training_size", "heldout_size")
@@ -270,6 +274,25 @@ class TuneSpace:
             data.update(scenario=self.scenario, training_scenes=list(self.training_scenes))
         return hashlib.sha256(json.dumps(data, sort_keys=True).encode()).hexdigest()[:10]
 
+    def store_key(self, overrides: list[str] | tuple[str, ...] = ()) -> str:
+        """A short hash of what the stored trials of this tune depend on: its trial key, its
+        budget (:data:`STORE_FIELDS`), the run ``overrides`` (all but the workers' count,
+        which changes no number) and the code version. A stored study made under another key
+        is never reused (:func:`pipeline.studies.tune.search.check_trial_store`)."""
+        import hashlib
+        import json
+
+        from pipeline.store.manifest import code_version
+
+        data = {"trials": self.trial_key(), "code": code_version(),
+                "budget": json_safe({k: asdict(self)[k] for k in STORE_FIELDS})}
+        runs = [o for o in overrides if not o.startswith(("hydra/", "hydra."))
+                and o.split("=", 1)[0].lstrip("+~") != "scenario.family.n_jobs"]
+        if runs:
+            # only when there are some: the key of a tune without overrides stays as it was
+            data["overrides"] = runs
+        return hashlib.sha256(json.dumps(data, sort_keys=True).encode()).hexdigest()[:12]
+
     def below_budget(self, reference: TuneSpace) -> list[str]:
         """The budget fields in which this tuning does less than ``reference`` (the default
         preset): a tuning below the default budget never writes the headline."""
@@ -284,18 +307,17 @@ def load_tune_space(path: Path, changes: list[str] | None = None) -> TuneSpace:
     :class:`ConfigError` naming the key, before any work starts), with ``changes``
     (``key=value``, the value read as YAML: ``rungs=[]``) applied to it first; a changed
     space is another space: its ``name`` gets the changes appended unless they set it."""
-    import yaml
+    from pipeline.store.safe_load import load_yaml, parse_yaml
 
     path = Path(path)
-    if not path.is_file():
+    if not path.exists():
         raise ConfigError("--space", str(path), "a file in conf/tune/ or a path to one")
-    try:
-        data = yaml.safe_load(path.read_text())
-    except yaml.YAMLError as exc:
-        raise ConfigError("--space", str(path), f"valid YAML ({str(exc).splitlines()[0]})") from None
+    # size, UTF-8 and alias limits: one line naming the file (pipeline.store.safe_load)
+    data = load_yaml(path, "a tune space (conf/tune/<name>.yaml)")
+    if not isinstance(data, dict):
+        raise ConfigError("--space", str(path), "a mapping of tune settings" + (
+            " (the file is empty)" if data is None else f", not a {type(data).__name__}"))
     if changes:
-        if not isinstance(data, dict):
-            raise ConfigError("--space", str(path), "a mapping of tune settings")
         data = dict(data)
         names = {f for f in TuneSpace.__dataclass_fields__}
         for change in changes:
@@ -304,10 +326,7 @@ def load_tune_space(path: Path, changes: list[str] | None = None) -> TuneSpace:
             if not sep or key not in names:
                 raise ConfigError("--set", change, "key=value with key one of "
                                   + ", ".join(sorted(names)))
-            try:
-                data[key] = yaml.safe_load(text)
-            except yaml.YAMLError:
-                raise ConfigError(f"--set {key}", text, "a YAML value") from None
+            data[key] = parse_yaml(text, f"--set {key}", "a YAML value")
         if not any(c.partition("=")[0].strip() == "name" for c in changes):
             data["name"] = f"{data.get('name', 'tune')}_changed"
     return schema_from_data(TuneSpace, data, "tune")
@@ -321,12 +340,11 @@ def default_budget() -> TuneSpace:
 def search_space(method: str) -> tuple[dict, dict]:
     """The distributions and the reasons of ``conf/hparams_search/<method>.yaml`` (its
     ``hydra.sweeper.params``, parsed by hydra-optuna-sweeper's own parser)."""
-    import yaml
-
     from hydra_plugins.hydra_optuna_sweeper._impl import create_params_from_overrides
+    from pipeline.store.safe_load import load_yaml
 
     path = CONF_DIR / "hparams_search" / f"{method}.yaml"
-    params = yaml.safe_load(path.read_text())["hydra"]["sweeper"]["params"]
+    params = load_yaml(path, "a search space")["hydra"]["sweeper"]["params"]
     distributions, fixed = create_params_from_overrides([f"{k}={v}" for k, v in params.items()])
     if fixed:
         raise ConfigError(f"hparams_search/{method}: hydra.sweeper.params", sorted(fixed),

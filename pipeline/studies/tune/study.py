@@ -50,6 +50,8 @@ from pipeline.analysis.tally import Tally
 from pipeline.errors import StudyError
 from pipeline.store.files import json_safe
 from pipeline.store.manifest import untrust
+from pipeline.store.study_lock import study_lock
+from pipeline.studies.overrides import PRESET_GROUPS, applied_overrides, refuse_controlled
 from pipeline.studies.results.tune import TuneResult, TuneSummary
 from pipeline.studies.tune.pareto import (
     COMPROMISE_RULE,
@@ -62,12 +64,13 @@ from pipeline.studies.tune.search import (
     Convergence,
     Rungs,
     Runner,
+    check_trial_store,
     evaluate_in_rungs,
     make_study,
     optimize,
     trial_storage,
 )
-from pipeline.studies.tune.space import TuneSpace, default_budget, search_space
+from pipeline.studies.tune.space import TRACK_OVERRIDES, TuneSpace, default_budget, search_space
 
 logger = logging.getLogger(__name__)
 
@@ -91,11 +94,24 @@ def run_tuning(space: TuneSpace, out_dir: Path, overrides: list[str] | None = No
     written into ``out_dir`` (its manifest last) and returned. The figures are the command's
     to draw."""
     out_dir = Path(out_dir)
+    spaces = {m: search_space(m) for m in space.methods}
+    # an override of what the tune sets itself (methods, families, tuned settings): one line,
+    # before anything is written; every other override runs on both sides and is recorded
+    refuse_controlled(list(overrides or []), controlled_keys(space, spaces), "tune")
     out_dir.mkdir(parents=True, exist_ok=True)
+    # one study per folder at a time (a second is refused in one line), for as long as it runs
+    with study_lock(out_dir, f"tune {space.name}"):
+        return _run_tuning(space, out_dir, spaces, list(overrides or []), log)
+
+
+def _run_tuning(space: TuneSpace, out_dir: Path, spaces: dict, overrides: list[str],
+                log) -> TuneResult:
+    # the trial store checked before anything is written (damaged, read-only, another key)
+    store_key = space.store_key(overrides)
+    check_trial_store(out_dir / "tune.db", space, store_key)
     untrust(out_dir)
     clock = CoreClock()
-    runner = Runner(space, out_dir, list(overrides or []), log)
-    spaces = {m: search_space(m) for m in space.methods}
+    runner = Runner(space, out_dir, overrides, log)
     base = runner.compose(["method=improved", *space.scenario_overrides("heldout")])
     storage = trial_storage(out_dir / "tune.db")
     rule, rungs = Convergence.of(space), Rungs.of(space)
@@ -123,7 +139,7 @@ def run_tuning(space: TuneSpace, out_dir: Path, overrides: list[str] | None = No
                 return evaluate_in_rungs(runner, method, replicate, settings, threshold, rungs,
                                          rungs.front_at_rungs(studies[method]), measure)
 
-            studies[method] = make_study(space, method, replicate, storage)
+            studies[method] = make_study(space, method, replicate, storage, store_key)
             history, converged = optimize(studies[method], distributions, evaluate, rule,
                                           space.batch_size, log,
                                           label=f"replicate {replicate}, {method}: ",
@@ -143,10 +159,42 @@ def run_tuning(space: TuneSpace, out_dir: Path, overrides: list[str] | None = No
     judged = judge_heldout(runner, space, chosen, base.claims)
     log(f"family runs: {runner.counts.sentence()}")
     data = summarize(space, spaces, thresholds, trials, histories, chosen, judged)
-    data.update(members=runner.counts.to_json(), core_utilisation=clock.utilisation())
+    data.update(members=runner.counts.to_json(), core_utilisation=clock.utilisation(),
+                overrides=applied_overrides(overrides), store_key=store_key)
     summary = TuneSummary.from_json(json_safe(data))
     return TuneResult(summary, trials, judged.heldout, judged.default.to_frame(),
                       judged.tuned_frame(), judged.outcomes).write(out_dir)
+
+
+def controlled_keys(space: TuneSpace, spaces: dict) -> dict[str, str]:
+    """The config keys the tune sets in its runs, each with what to do instead of overriding
+    it (:func:`pipeline.studies.overrides.refuse_controlled`)."""
+    keys = dict(PRESET_GROUPS)
+    keys.update({
+        "scenario.family.seed": "no override: the tune sets its families' seeds (the space's "
+                                "training_seed and heldout_seed: --set training_seed=N)",
+        "scenario.family.size": "no override: the tune sets its families' sizes (the space's "
+                                "training_size and heldout_size: --set training_size=N)",
+        "controller.backend": "no override: the tune sets its runs' QP backend (the space's "
+                              "backend and heldout_backend: --set backend=NAME)",
+        "claims.treatment": "no override: the tune compares its space's methods "
+                            "(--set 'methods=[treatment, control]')",
+        "claims.controls": "no override: the tune compares its space's methods "
+                           "(--set 'methods=[treatment, control]')",
+        "tune": "no override: the tune's settings are its space file's (--space, --set "
+                "key=value)"})
+    if space.scenario == "pedestrians":
+        keys["scenario.pedestrians.scenes"] = ("no override: the tune sets each part's scenes "
+                                               "(the space's training_scenes and "
+                                               "heldout_scenes)")
+    for override in TRACK_OVERRIDES[space.track]:
+        keys.setdefault(override.split("=", 1)[0], f"no override: the tune's track "
+                        f"({space.track}) sets it (the space's track)")
+    for method in space.methods:
+        for key in spaces[method][1]:
+            keys.setdefault(key, f"no override: {key} is tuned (conf/hparams_search/"
+                                 f"{method}.yaml)")
+    return keys
 
 
 class CoreClock:
@@ -197,8 +245,12 @@ def trials_table(studies: dict, space: TuneSpace, replicate: int) -> pd.DataFram
 
     rows = []
     for method, study in studies.items():
-        for trial in study.get_trials(deepcopy=False, states=(TrialState.COMPLETE,)):
-            row = {"replicate": replicate, "method": method, "trial": trial.number,
+        complete = sorted(study.get_trials(deepcopy=False, states=(TrialState.COMPLETE,)),
+                          key=lambda t: t.number)
+        # a trial's number among its study's complete trials: the numbers of an uninterrupted
+        # tune, also after a resume (whose interrupted batch left failed trials in the store)
+        for rank, trial in enumerate(complete):
+            row = {"replicate": replicate, "method": method, "trial": rank,
                    "constraint": float(trial.user_attrs.get("constraint", 0.0)),
                    "members": int(trial.user_attrs.get("members", space.training_size)),
                    "pruned_at": trial.user_attrs.get("pruned_at"),
