@@ -5,7 +5,6 @@ flip most of their specifications."""
 from __future__ import annotations
 
 from dataclasses import dataclass
-from pathlib import Path
 from typing import Any
 
 from pipeline.analysis.claims import ALL_CLAIMS, OUTCOMES
@@ -44,7 +43,7 @@ def below_default_space(family_size: int, n_specifications: int) -> str:
     from pipeline.config import CONF_DIR
 
     try:
-        default = yaml.safe_load((Path(CONF_DIR) / "multiverse" / "default.yaml").read_text())
+        default = yaml.safe_load((CONF_DIR / "multiverse" / "default.yaml").read_text())
     except (OSError, yaml.YAMLError):
         return ""
     short = [f"{key} {have} < {default[key]}" for key, have in
