@@ -44,6 +44,10 @@ export SLURM_CI_DIR ?= /tmp/slurm-ci
 MEMBER_CACHE ?= $(RUNS)/member_cache
 export PIPELINE_MEMBER_CACHE = $(if $(filter off,$(MEMBER_CACHE)),off,$(abspath $(MEMBER_CACHE)))
 LAUNCHER    ?= sequential
+# the command the report stamps under provenance: the make command that actually ran, with its
+# command-line variables (make tune TUNE=quick); exported, so that a sub-make's report (make
+# tune's $(MAKE) report) stamps the command typed, not "make report"
+export REPORT_COMMAND ?= make $(strip $(MAKECMDGOALS) $(MAKEOVERRIDES))
 
 .PHONY: help install lint reproduce experiment run-paper run-kinematic run-kinematic-readings run-family run-kinematic-family run-frames run-apf-alone run-peers run-kinematic-peers peers speed-check report screenshot sweep verify ablation multiverse pedestrians tune tune-unpruned tune-peers nmpc-check test test-slurm test-all bench install-commonroad commonroad cache-size clean-cache clean
 
@@ -108,7 +112,7 @@ run-kinematic-family: $(STAMP)
 	$(PY) -m pipeline.run experiment=kinematic_family hydra.sweep.dir=$(RUNS)/kinematic_family scenario.family.size=$(KINEMATIC_FAMILY_SIZE)
 
 report: $(STAMP)  ## rebuild the HTML report from existing run folders (no simulation)
-	$(PY) -m pipeline.report $(RUNS) --out $(REPORT) --command "make reproduce"
+	$(PY) -m pipeline.report $(RUNS) --out $(REPORT) --command "$(REPORT_COMMAND)"
 
 screenshot: $(STAMP)  ## the README's screenshot (docs/report_screenshot.png) from make reproduce's own report
 	$(PY) -m pipeline.screenshot $(REPORT)/index.html docs/report_screenshot.png
@@ -117,7 +121,7 @@ reproduce: experiment report  ## set up, run the experiment and write reports/la
 
 sweep: $(STAMP)  ## run a sweep preset (SWEEP=sensitivity|horizon|obstacle_speed, LAUNCHER=sequential|local_cores|basic)
 	$(PY) -m pipeline.run sweep=$(SWEEP) hydra/launcher=$(LAUNCHER)
-	$(PY) -m pipeline.report $(RUNS) --sweep $(RUNS)/sweeps/$(SWEEP) --out $(REPORT) --command "make sweep SWEEP=$(SWEEP)"
+	$(PY) -m pipeline.report $(RUNS) --sweep $(RUNS)/sweeps/$(SWEEP) --out $(REPORT) --command "$(REPORT_COMMAND)"
 
 ablation: $(STAMP)  ## which revision does what: ablations + interpretation variants on the family
 	rm -rf $(RUNS)/ablation $(RUNS)/interpretations

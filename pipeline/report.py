@@ -18,7 +18,7 @@ __all__ = ["build_report", "main"]
 
 
 def _parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(prog="python -m pipeline.report",
+    parser = argparse.ArgumentParser(prog="apf-mpc-report",
                                      description="Build the HTML report from run folders.")
     parser.add_argument("runs", type=Path, help="folder holding run folders (e.g. outputs/paper)")
     parser.add_argument("--out", type=Path, default=Path("reports/latest"),
@@ -46,19 +46,31 @@ def _parser() -> argparse.ArgumentParser:
     parser.add_argument("--strict", action="store_true",
                         help="exit 1 when any folder was skipped (after writing the report)")
     parser.add_argument("--command", default=None,
-                        help="command to show under provenance (default: this command line)")
+                        help="command to show under provenance (default: this command line; "
+                             "make passes the make command that ran, e.g. make tune "
+                             "TUNE=quick)")
     return parser
 
 
 def main(argv: list[str] | None = None) -> int:
     args = _parser().parse_args(argv)
-    command = args.command or "python -m pipeline.report " + " ".join(argv or sys.argv[1:])
+    command = args.command or _command_line(argv)
 
     def cannot_write(exc: OSError) -> str:
         return (f"error: --out {args.out}: cannot write the report ({exc.strerror or exc}: "
                 f"{exc.filename or args.out})")
 
     return run_command(lambda: _report(args, command), os_error=cannot_write)
+
+
+def _command_line(argv: list[str] | None) -> str:
+    """The command that ran: the installed name (``apf-mpc-report``) when that is what ran,
+    ``python -m pipeline.report`` otherwise, with its arguments."""
+    import shlex
+
+    ran = Path(sys.argv[0]).name if sys.argv and sys.argv[0] else ""
+    name = ran if ran.startswith("apf-mpc-") else "python -m pipeline.report"
+    return " ".join([name, *(shlex.quote(a) for a in (sys.argv[1:] if argv is None else argv))])
 
 
 def _report(args, command: str) -> int:

@@ -1,4 +1,5 @@
-"""The README's screenshot: ``python -m pipeline.screenshot REPORT.html OUT.png``.
+"""The README's screenshot: ``apf-mpc-screenshot REPORT.html OUT.png`` (or
+``python -m pipeline.screenshot``).
 
 Opens the report in headless Chromium at 1280 x 800 and saves the top of it (the answer in
 words and the start of the ledger) through :func:`pipeline.reporting.screenshot.take_screenshot`.
@@ -16,7 +17,7 @@ from pipeline.reporting.screenshot import take_screenshot
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="python -m pipeline.screenshot", description=__doc__,
+    parser = argparse.ArgumentParser(prog="apf-mpc-screenshot", description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("report", type=Path, help="the report's index.html")
     parser.add_argument("out", type=Path, help="the PNG to write")

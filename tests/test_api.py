@@ -1,5 +1,5 @@
-"""The Python API: the README's example runs as written, and its results equal the commands'
-(oracle: run_experiment's run folder and the report's family ledger on the same members)."""
+"""The Python API: the example of docs/own_method.md runs as written, and its results equal the
+commands' (oracle: run_experiment's run folder and the report's family ledger on the same members)."""
 
 from __future__ import annotations
 
@@ -14,10 +14,10 @@ from pipeline import api
 ROOT = Path(__file__).resolve().parent.parent
 
 
-def test_readme_api_example_runs(capsys):
-    text = (ROOT / "README.md").read_text()
+def test_the_documented_api_example_runs(capsys):
+    text = (ROOT / "docs" / "own_method.md").read_text()
     block = re.search(r"<!-- api-example -->\s*```python\n(.*?)```", text, re.S).group(1)
-    exec(compile(block, "README.md (api example)", "exec"), {})
+    exec(compile(block, "docs/own_method.md (api example)", "exec"), {})
     out = capsys.readouterr().out
     assert "goal_line" in out and "C1" in out and "baseline" in out
 

@@ -75,32 +75,57 @@ def test_report_in_headless_chromium(report):
         page.wait_for_load_state("load")
         images = page.evaluate(
             "Array.from(document.images).map(i => [i.complete, i.naturalWidth, i.alt])")
-        claims_top = page.locator("#claims").bounding_box()["y"]
         answer_box = page.locator("#answer").bounding_box()
         first_verdict = page.locator("#answer .verdict").first.bounding_box()
+        answer_figure = page.locator("#answer-figure svg").bounding_box()
+        figure_links = page.evaluate(
+            "Array.from(document.querySelectorAll('#answer-figure svg a')).map(a => "
+            "a.getAttribute('href'))")
         answer_text = page.locator("#answer").inner_text()
-        verdict_cell = page.locator("#claims ~ div table td strong").first.bounding_box()
+        # every section closed, its verdict line visible in its summary
+        summaries = page.evaluate(
+            "Array.from(document.querySelectorAll('details.section')).map(d => [d.id, d.open, "
+            "(d.querySelector(':scope > summary .verdict-line') || {offsetHeight: 0})"
+            ".offsetHeight])")
+        toc = page.evaluate("Array.from(document.querySelectorAll('nav a')).map(a => "
+                            "a.getAttribute('href').slice(1))")
+        order = page.evaluate("Array.from(document.querySelectorAll('#answer, details.section'))"
+                              ".map(e => e.id)")
+        exploratory = page.evaluate("Array.from(document.querySelectorAll("
+                                    "'details.exploratory')).map(d => d.id)")
         height_1280 = page.evaluate("document.documentElement.scrollHeight")
-        rendered = page.evaluate(
-            "Array.from(document.querySelectorAll('figure img')).filter(i => "
-            "i.closest('details') === null).map(i => [i.alt, i.getBoundingClientRect().width, "
-            "i.getBoundingClientRect().height])")
         SCREENSHOT.mkdir(parents=True, exist_ok=True)
-        page.screenshot(path=str(SCREENSHOT / "report_full.png"), full_page=True)
         page.screenshot(path=str(SCREENSHOT / "report_top.png"))
+        # a link into a closed section opens it
+        page.goto(report.as_uri() + "#fig-trajectory_pair")
+        page.wait_for_load_state("load")
+        opened = page.evaluate("document.getElementById('paths').open")
+        page.evaluate("document.querySelectorAll('details').forEach(d => d.open = true)")
+        verdict_cell = page.locator("#claims table.ledger td strong").first.bounding_box()
+        rendered = page.evaluate(
+            "Array.from(document.querySelectorAll('figure img')).map(i => [i.alt, "
+            "i.getBoundingClientRect().width, i.getBoundingClientRect().height])")
+        page.screenshot(path=str(SCREENSHOT / "report_full.png"), full_page=True)
         wide_tables = page.evaluate(TABLE_FIT)
+        features = page.locator("#figure-features").bounding_box()
         robustness_box = page.locator("#robustness-summary").bounding_box()
-        trajectory_width = page.locator("#fig-trajectory_pair img").bounding_box()["width"]
+        trajectory_box = page.locator("#fig-trajectory_pair img").bounding_box()
+        mover_links = page.evaluate(
+            "Array.from(document.querySelectorAll('#claims .movers a')).map(a => "
+            "a.getAttribute('href'))")
         narrow = browser.new_page(viewport={"width": 390, "height": 844})
         narrow.goto(report.as_uri())
+        narrow_verdict = narrow.locator("#answer .verdict").first.bounding_box()
+        narrow.screenshot(path=str(SCREENSHOT / "report_top_390.png"))
         overflow = narrow.evaluate("document.documentElement.scrollWidth")
+        narrow.evaluate("document.querySelectorAll('details').forEach(d => d.open = true)")
         # the family ledger's outcome column, scrolled to without moving sideways
-        narrow.evaluate("document.querySelector('#answer ~ div > table.ledger:not("
+        narrow.evaluate("document.querySelector('#claims table.ledger:not("
                         "#robustness-summary)').scrollIntoView()")
         outcome_box = narrow.locator(
-            "#answer ~ div > table.ledger:not(#robustness-summary) td strong").first.bounding_box()
+            "#claims table.ledger:not(#robustness-summary) td strong").first.bounding_box()
         narrow_scroll_x = narrow.evaluate(
-            "document.querySelector('#answer ~ div > table.ledger:not(#robustness-summary)')"
+            "document.querySelector('#claims table.ledger:not(#robustness-summary)')"
             ".parentElement.scrollLeft")
         narrow_tables = narrow.evaluate(TABLE_FIT)
         browser.close()
@@ -108,17 +133,32 @@ def test_report_in_headless_chromium(report):
     assert all(complete and width > 0 and alt for complete, width, alt in images), images
     assert console_errors == []
     assert all(url.startswith(("file:", "data:")) for url in requests), requests
-    # the answer in words and its first verdict are on screen without scrolling
-    assert claims_top < 900 and answer_box is not None and first_verdict["y"] < 900
+    # the answer in words, its first verdict and its figure are on the first screen at 1280 px
+    assert answer_box is not None and first_verdict["y"] < 900
+    assert answer_figure is not None and answer_figure["y"] < 900
+    assert answer_figure["x"] > first_verdict["x"]  # beside the words, not below them
+    # every interval of the figure leads to a scenario or to its ledger row
+    assert figure_links and all(h.startswith(("explorer.html#family/", "#ledger-", "#"))
+                                for h in figure_links)
+    assert any(h.startswith("explorer.html#family/") for h in figure_links)
     assert "faster obstacle-avoidance response" in answer_text and "d = " in answer_text
     assert verdict_cell is not None
     # the extra runs: named in the opening box, never judged; every figure has its size
     assert "Runs judged:" in answer_text and "planner.rho0_m=3" in answer_text
     assert all(w > 200 and h > 100 for _, w, h in rendered), rendered
-    # the page's height at 1280 px: this fixture's page measured 10,103 px (16,076 before the
-    # specification curves went into a collapsible block); make reproduce's report measured
-    # 21,312 px before the answer box and the collapsible blocks, 10,593 after
-    assert height_1280 < 11000, height_1280
+    # sections closed, each with a visible verdict line; the contents in reading order
+    assert summaries and all(not is_open for _, is_open, _ in summaries)
+    assert all(h > 0 for sid, _, h in summaries if sid not in ("series", "metrics")), summaries
+    assert [t for t in toc if t in order] == order, (toc, order)
+    # the quick multiverse is below the default space's budget: exploratory, off the answer
+    assert exploratory == ["robustness"] and "multiverse:" not in answer_text
+    assert robustness_box is not None  # in the ledger's section, marked exploratory
+    assert "Exploratory, not in this answer" in answer_text
+    # the page's height at 1280 px with its sections closed: this fixture's page measured
+    # 10,103 px before the sections closed; make reproduce's report 9,430 px (2,650 after)
+    assert height_1280 <= 8000, height_1280
+    # at 390 px the answer's first verdict is on the first screen
+    assert narrow_verdict is not None and narrow_verdict["y"] < 844
     # a narrow window does not scroll sideways (wide tables scroll inside their box), and the
     # ledger's outcome column is visible at 390 px without scrolling its table sideways
     assert overflow <= 390
@@ -128,6 +168,9 @@ def test_report_in_headless_chromium(report):
     assert [t["head"] for t in wide_tables if not t["fits"]] == []
     assert [t["head"] for t in narrow_tables
             if not (t["fits"] or (t["scrolls"] and t["last_visible"]))] == []
-    # the robustness summary follows the answer; the Figure 2/3 analogues are large
-    assert robustness_box is not None and robustness_box["y"] > first_verdict["y"]
-    assert trajectory_width >= 540
+    # the paper's described features beside the Figure 2/3 analogue, which is large
+    assert opened and features is not None and trajectory_box["width"] >= 440
+    assert features["x"] > trajectory_box["x"] or features["y"] < trajectory_box["y"] + \
+        trajectory_box["height"] + 400
+    # ledger rows link the members that move them most
+    assert mover_links and all(h.startswith("explorer.html#family/") for h in mover_links)

@@ -131,5 +131,6 @@ def test_the_report_command_ends_with_the_answer_in_words(user_runs, tmp_path, c
     # answer.txt: the collisions and the model-validity caveat first, then the same verdicts
     answer = (tmp_path / "r" / "answer.txt").read_text().splitlines()
     assert answer[-len(last):] == last
-    assert answer[0].startswith("Collisions: baseline ") and "validity bound" in answer[0]
+    assert answer[0].startswith("Collisions in ") and " scenarios each: baseline " in answer[0]
+    assert "validity bound" in answer[0]
     assert lines[-len(last) - 1] == answer[0]

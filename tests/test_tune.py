@@ -292,6 +292,6 @@ def test_make_tune_quick_resumes_after_sigkill_and_feeds_the_report(tmp_path, ma
     # a quick tune never writes the headline: no tuned outcome in the opening summary
     answer_block = page[page.index('id="answer"'):page.index("</div>", page.index('id="answer"'))]
     assert "tuned vs tuned" not in answer_block
-    assert "a tuning is in the outputs but not used here" in answer_block
+    assert "Exploratory, not in this answer:</strong> the fair fight (make tune)" in answer_block
     answer = (tmp_path / "report" / "answer.txt").read_text()
     assert "tuned by the same rules" not in answer

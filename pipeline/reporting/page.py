@@ -94,6 +94,8 @@ def build_report(run_root: Path, out_dir: Path, command: str,
     log.info("report: writing the page (%.0f s)", time.perf_counter() - started)
     path = out_dir / "index.html"
     write_text_atomic(path, render(page))
+    if page.answer.figure:  # the answer's figure beside the page, as the page inlines it
+        write_text_atomic(out_dir / "figures" / "answer_claims.svg", page.answer.figure)
     # the answer in words, for the command line (make reproduce prints it at its end)
     lines = page.answer.lines
     write_text_atomic(out_dir / "answer.txt", "\n".join(lines) + "\n" if lines else "")

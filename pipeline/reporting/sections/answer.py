@@ -6,11 +6,13 @@ model-validity caveat."""
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 from pipeline.analysis.claims import ALL_CLAIMS
 from pipeline.config import ClaimsConfig
-from pipeline.reporting.format import fmt, unit
+from pipeline.reporting.figures.answer import AnswerPanel, AnswerRow, Interval, answer_svg
+from pipeline.reporting.format import collision_words, row_effect, unit
 from pipeline.reporting.sections.apf_alone import MISSING_NOTE, ApfAloneSection
 from pipeline.reporting.sections.fair_fight import FairFightSection
 from pipeline.reporting.sections.family import FamilySection
@@ -31,6 +33,12 @@ class AnswerSection:
     lines: tuple[str, ...]
     safety: str = ""
     safety_measured: bool = False
+    #: the answer as a picture (an SVG document, every interval a link), "" without a family
+    figure: str = ""
+    #: the collisions in words, never adding up families of different sizes
+    collisions: str = ""
+    #: the studies present that may not write the opening summary, each with why
+    exploratory: tuple[str, ...] = ()
 
 
 def validity_caveat(counts) -> str:
@@ -68,7 +76,7 @@ def _rows(family: FamilySection, robustness: RobustnessSection | None,
         main, others = rows[0], rows[1:]
         extra = [f"vs {r['comparison']}: {r['outcome']}" for r in others]
         cell = robust.get(claim.claim_id, {}).get(main["comparison"])
-        if cell:
+        if cell and robustness is not None and robustness.headline:
             extra.append(f"multiverse: {cell['agree']} agree")
         if claim.claim_id in tuned:
             extra.append(f"tuned vs tuned over replicates: {tuned[claim.claim_id]['counts']}"
@@ -77,9 +85,7 @@ def _rows(family: FamilySection, robustness: RobustnessSection | None,
             extra.append(f"Appendix-A track: {kin[claim.claim_id]['outcome']}")
         out.append({"claim": claim.claim_id, "words": claim.text, "outcome": main["outcome"],
                     "comparison": main["comparison"],
-                    "effect": f"{fmt(main['estimate'])} {unit(claim.primary_metric)} "
-                              f"[{fmt(main['ci_low'])}, {fmt(main['ci_high'])}]"
-                              .replace("  ", " "),
+                    "effect": row_effect(main), "id": main.get("id", ""),
                     "extra": "; ".join(extra)})
     return out
 
@@ -95,10 +101,9 @@ def answer_section(family: FamilySection | None, robustness: RobustnessSection |
     lines = list(family.answer)
     if fair_fight and fair_fight.headline:
         lines += [c["sentence"] for c in fair_fight.rows]
+    collisions = collision_words(family.counts)
     # before the verdicts: the last lines stay the verdicts in words
-    lines.insert(0, "Collisions: " + ", ".join(f"{c['method']} {c['collisions']}"
-                                               for c in family.counts) + "."
-                 + (f" {caveat}" if caveat else ""))
+    lines.insert(0, f"Collisions {collisions}." + (f" {caveat}" if caveat else ""))
     if safety:
         lines.insert(1, safety)
     kf = kinematic.family if kinematic is not None else None
@@ -109,5 +114,80 @@ def answer_section(family: FamilySection | None, robustness: RobustnessSection |
                      + (f". {kf.apf_adds.sentence}" if kf.apf_adds else "."))
     if peers is not None:
         lines += list(peers.sentences)
+    exploratory = tuple(
+        f"{name} ({label}): shown in its own section, marked exploratory; it writes nothing "
+        "here or in answer.txt" for name, study, label in (
+            ("the fair fight (make tune)", fair_fight,
+             fair_fight.label if fair_fight is not None else ""),
+            ("the multiverse (make multiverse)", robustness,
+             robustness.label if robustness is not None else ""))
+        if study is not None and not study.headline)
     return AnswerSection(tuple(_rows(family, robustness, fair_fight, kinematic, cfg)), caveat,
-                         tuple(lines), safety or MISSING_NOTE, bool(safety))
+                         tuple(lines), safety or MISSING_NOTE, bool(safety),
+                         answer_figure(family, fair_fight, apf_alone, cfg), collisions,
+                         exploratory)
+
+
+def _interval(row: dict, href: str, what: str) -> Interval:
+    return Interval(row["estimate"], row["ci_low"], row["ci_high"], row["outcome"], href,
+                    f"{what}: {row['outcome']}, d = {row_effect(row)}"
+                    + ("; click: the scenario that moves it most" if href.startswith(
+                        "explorer") else ""))
+
+
+def _href(row: dict) -> str:
+    """The explorer link of the member that moves the row's estimate most (its own way), or
+    the row's ledger anchor."""
+    movers = row.get("movers")
+    estimate = row.get("estimate")
+    mover = movers.toward(float(estimate) if estimate is not None else math.nan) \
+        if movers is not None else None
+    return mover.href if mover is not None else f"#{row.get('id', 'claims')}"
+
+
+def _short(words: str, limit: int = 46) -> str:
+    """``words`` cut at a word boundary within ``limit`` characters (an ellipsis marks a
+    cut)."""
+    if len(words) <= limit:
+        return words
+    return words[:limit].rsplit(" ", 1)[0] + " …"
+
+
+def answer_figure(family: FamilySection, fair_fight: FairFightSection | None,
+                  apf_alone: ApfAloneSection | None, cfg: ClaimsConfig) -> str:
+    """The answer as a picture (:func:`pipeline.reporting.figures.answer.answer_svg`): per
+    claim, our settings against each control, both methods tuned (each replicate's interval,
+    counted; only a tuning that may write the headline) and the APF by itself (the MPC's
+    collision half-planes off) against the first control."""
+    tuned = {c["claim"]: c for c in (fair_fight.rows if fair_fight is not None
+                                     and fair_fight.headline else ())}
+    first = cfg.controls[0] if cfg.controls else "baseline"
+    alone = {r["claim"]: r for r in (apf_alone.ledger if apf_alone is not None else ())
+             if r["comparison"] == first}
+    panels = []
+    for claim in ALL_CLAIMS:
+        ours = [r for r in family.ledger if r["claim"] == claim.claim_id]
+        if not ours:
+            continue
+        rows = [AnswerRow(f"ours vs {r['comparison']}",
+                          (_interval(r, _href(r), f"ours vs {r['comparison']}"),), r["outcome"])
+                for r in ours]
+        if claim.claim_id in tuned:
+            t = tuned[claim.claim_id]
+            rows.append(AnswerRow(
+                f"tuned, {len(t['tuned_outcomes'])} replicates",
+                tuple(Interval(e, ci[0], ci[1], o, "#fairfight",
+                               f"tuned, replicate {i}: {o}, d = {e:.3g}")
+                      for i, (o, e, ci) in enumerate(zip(t["tuned_outcomes"],
+                                                        t["tuned_estimates"],
+                                                        t["tuned_cis"], strict=True))),
+                t["counts"]))
+        if claim.claim_id in alone:
+            r = alone[claim.claim_id]
+            rows.append(AnswerRow(f"APF alone vs {first}",
+                                  (_interval(r, _href(r), f"APF alone vs {first}"),),
+                                  r["outcome"]))
+        panels.append(AnswerPanel(claim.claim_id, _short(claim.text.split(" (")[0]),
+                                  unit(claim.primary_metric), float(ours[0]["margin"]),
+                                  tuple(rows), f"#{ours[0].get('id', 'claims')}"))
+    return answer_svg(tuple(panels)) if panels else ""

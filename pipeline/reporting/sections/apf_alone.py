@@ -10,6 +10,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from pipeline.reporting.inputs import ReportInputs
+from pipeline.reporting.movers import ledger_movers
 from pipeline.reporting.sections.family import ledger_groups
 from pipeline.reporting.verdicts import ApfAloneVerdicts, Verdicts
 
@@ -119,5 +120,7 @@ def apf_alone_section(inputs: ReportInputs, verdicts: Verdicts) -> ApfAloneSecti
     return ApfAloneSection(
         size=int(first.get("size", rows[0].scenarios if rows else 0)),
         seed=first.get("seed", "?"), treatment=judged.ledger.treatment,
-        comparisons=judged.comparisons, ledger=tuple(ledger_groups(judged.ledger)),
+        comparisons=judged.comparisons, ledger=tuple(ledger_groups(judged.ledger, ledger_movers(
+            judged.tables, judged.ledger.treatment, judged.comparisons, "apf_alone"),
+            "apf-alone-ledger")),
         collisions=rows, sentence=safety_sentence(rows, judged.ledger.treatment))

@@ -19,9 +19,10 @@ from pipeline.reporting.figures import (
     family_distribution_figure,
     paths_figure,
 )
-from pipeline.reporting.format import fmt, interval, unit
+from pipeline.reporting.format import effect, unit
 from pipeline.reporting.gallery import gallery_members
 from pipeline.reporting.inputs import FamilyInputs, ReportInputs, ordered
+from pipeline.reporting.movers import Movers, ledger_movers
 from pipeline.reporting.verdicts import FamilyVerdicts, Verdicts
 from pipeline.store.runs import read_member
 
@@ -56,6 +57,8 @@ class FamilySection:
     #: C2 on each run's own window and on one common to both runs of a pair, per comparison
     c2_windows: tuple[dict, ...] = ()
     c2_windows_note: str = ""
+    #: why the gallery is empty, in words ("" when it has members)
+    gallery_note: str = ""
 
 
 def apf_adds(ledger: Ledger | None) -> ApfAdds | None:
@@ -63,8 +66,9 @@ def apf_adds(ledger: Ledger | None) -> ApfAdds | None:
     if ledger is None:
         return None
     rows = tuple({"claim": r.claim_id, "outcome": str(r.outcome),
-                  "estimate": f"{fmt(r.result.estimate)} {interval(r.result.ci_low, r.result.ci_high)}"
-                              f" {unit(r.claim.primary_metric)}"}
+                  "estimate": effect(r.result.estimate, r.result.ci_low, r.result.ci_high,
+                                     unit(r.claim.primary_metric), r.result.n_pairs,
+                                     r.result.n_tied)}
                  for r in ledger)
     decisive = [r["claim"] for r in rows
                 if r["outcome"] in ("supported", "contradicted", "mixed")]
@@ -90,17 +94,22 @@ def answer_lines(ledger: Ledger) -> list[str]:
             if row.claim_id != claim.claim_id:
                 continue
             r = row.result
-            parts.append(f"{row.outcome} vs {row.comparison} ({fmt(r.estimate)} "
-                         f"{interval(r.ci_low, r.ci_high)} {unit(claim.primary_metric)})")
+            parts.append(f"{row.outcome} vs {row.comparison} ("
+                         + effect(r.estimate, r.ci_low, r.ci_high, unit(claim.primary_metric),
+                                  r.n_pairs, r.n_tied) + ")")
         if parts:
             lines.append(f"{claim.claim_id} {claim.text}: " + "; ".join(parts))
     return lines
 
 
-def ledger_groups(ledger: Ledger) -> list[dict]:
+def ledger_groups(ledger: Ledger, movers: dict[tuple[str, str], Movers] | None = None,
+                  anchor: str = "ledger") -> list[dict]:
     """The ledger's records, grouped by claim (one row group per claim: ``first``, ``span``),
-    each with its metric's ``unit``."""
-    records = [{**r, "unit": unit(r["metric"])} for r in ledger.records()]
+    each with its metric's ``unit``, its anchor ``id`` and (given ``movers``) the members that
+    move it most (``movers``: a :class:`~pipeline.reporting.movers.Movers`, or None)."""
+    movers = movers or {}
+    records = [{**r, "unit": unit(r["metric"]), "id": f"{anchor}-{r['claim']}-{r['comparison']}",
+                "movers": movers.get((r["claim"], r["comparison"]))} for r in ledger.records()]
     by_claim: dict[str, list[dict]] = {}
     for row in records:
         by_claim.setdefault(row["claim"], []).append(row)
@@ -153,17 +162,21 @@ def family_section(inputs: ReportInputs, verdicts: Verdicts, figures: Figures
         "seed": "?", "size": len(next(iter(tables.values())))}
     adds = apf_adds(judged.apf_adds)
     records = ledger.records()
+    gallery, gallery_note = _gallery(family, judged, cfg, figures)
     return FamilySection(
         size=first["size"], seed=first["seed"], treatment=cfg.treatment,
-        methods=tuple(ordered(tables)), ledger=tuple(ledger_groups(ledger)),
+        methods=tuple(ordered(tables)),
+        ledger=tuple(ledger_groups(ledger, ledger_movers(tables, cfg.treatment,
+                                                         ledger.comparisons, "family"))),
         by_claim={r["claim"]: r for r in records if r["comparison"] == cfg.controls[0]},
         solvers=_solvers(family, tables), counts=judged.counts,
         cap_note=_cap_note(judged.counts, cfg.cap_binding_share), apf_adds=adds,
-        figures=tuple(drawn), gallery=tuple(_gallery(family, judged, cfg, figures)),
+        figures=tuple(drawn), gallery=gallery,
         answer=tuple(answer_lines(ledger) + ([adds.sentence] if adds else [])),
         c2_windows=tuple({**r, "unit": unit(r["metric"])} for r in judged.c2_windows.rows())
         if judged.c2_windows is not None else (),
-        c2_windows_note=judged.c2_windows.note if judged.c2_windows is not None else "")
+        c2_windows_note=judged.c2_windows.note if judged.c2_windows is not None else "",
+        gallery_note=gallery_note)
 
 
 def _solvers(family: FamilyInputs, tables: dict) -> str:
@@ -177,22 +190,28 @@ def _solvers(family: FamilyInputs, tables: dict) -> str:
 
 
 def _gallery(family: FamilyInputs, judged: FamilyVerdicts, cfg, figures: Figures
-             ) -> list[Figure]:
+             ) -> tuple[tuple[Figure, ...], str]:
     """Family members picked by :func:`pipeline.reporting.gallery.gallery_members`, each drawn
     as the Figure 2/3 analogue (first control above the treatment). Members that cannot be
     read are left out."""
     if not cfg.controls:
-        return []
+        return (), "no control is named (claims.controls), so no pair of runs to draw"
     treatment, control = cfg.treatment, cfg.controls[0]
     picks = gallery_members(judged.tables, treatment, control,
                             {c.claim_id: c.primary_metric for c in ALL_CLAIMS})
+    if not picks:
+        return (), (f"no member to show: {treatment} and {control} share no scenario the "
+                    "rule can pick")
     out = []
+    unread = []
     for pick in picks:
         member = pick["member"]
         try:
-            runs = {m: read_member(Path(family.info[m]["dir"]), member)
+            # each method's judged family (an extra family of a method has its own label)
+            runs = {m: read_member(Path(family.info[family.label_of(m) or m]["dir"]), member)
                     for m in (control, treatment)}
         except (RunFolderError, KeyError, OSError):
+            unread.append(member)
             continue
         first = runs[treatment]
         # built in the writer's child (the parent goes on to the next member)
@@ -209,4 +228,8 @@ def _gallery(family: FamilyInputs, judged: FamilyVerdicts, cfg, figures: Figures
             + "; ".join(pick["why"]) + ".",
             f"Paths of {control} and {treatment} on family member {member}",
             member=member, why="; ".join(pick["why"])))
-    return out
+    note = "" if out else (
+        f"the {len(unread)} members the rule picks (" + ", ".join(map(str, unread))
+        + f") could not be read from the judged families of {control} and {treatment} "
+        "(their member folders are missing)")
+    return tuple(out), note

@@ -9,7 +9,7 @@ from dataclasses import dataclass
 import pandas as pd
 
 from pipeline.reporting.figure import Figure, Figures
-from pipeline.reporting.format import fmt, interval, unit
+from pipeline.reporting.format import collision_words, fmt, interval, unit
 from pipeline.reporting.inputs import ReportInputs, ordered
 from pipeline.reporting.sections.family import ApfAdds, apf_adds
 from pipeline.reporting.sections.paper import MetricRow, claim_rows, metric_rows, paper_figures
@@ -50,6 +50,11 @@ class KinematicFamily:
     n_agree: int
     n_compared: int
     treatment: str
+
+    @property
+    def collision_words(self) -> str:
+        """The collisions in words, never adding up families of different sizes."""
+        return collision_words([{**c, "scenarios": c["members"]} for c in self.collisions])
 
 
 @dataclass(frozen=True)

@@ -20,13 +20,14 @@ from pipeline.analysis.claims import ALL_CLAIMS, OUTCOME_RULE, SINGLE_RULE, Clai
 from pipeline.config import INTERPRETATION_REGISTER, ClaimsConfig
 from pipeline.numerics import numerical_kernels
 
-PACKAGES = ("numpy", "scipy", "pandas", "matplotlib", "control", "cvxpy", "clarabel",
-            "hydra-core", "omegaconf", "jinja2")
+PACKAGES = ("numpy", "scipy", "pandas", "matplotlib", "numba", "control", "cvxpy", "clarabel",
+            "daqp", "optuna", "hydra-core", "omegaconf", "jinja2")
 
 
 @dataclass(frozen=True)
 class Provenance:
-    """Command, git commit and dirty flag, package versions, date and machine."""
+    """Command, git commit and dirty flag (the project's tracked files modified; generated
+    folders and untracked files do not count), package versions, date and machine."""
 
     command: str
     git_commit: str
@@ -35,6 +36,10 @@ class Provenance:
     packages: dict[str, str]
     date_utc: str
     machine: str
+    #: the tracked files modified since the commit (at most :data:`MODIFIED_SHOWN` of them)
+    modified: tuple[str, ...] = ()
+    #: how many tracked files were modified in all
+    n_modified: int = 0
 
 
 @dataclass(frozen=True)
@@ -49,6 +54,23 @@ class MethodsSection:
     metrics_doc: tuple[Markup, ...]
     register: tuple[dict, ...]
     prov: Provenance
+
+
+#: how many modified tracked files provenance names
+MODIFIED_SHOWN = 10
+
+
+def tracked_changes(porcelain: str) -> tuple[str, ...]:
+    """The paths of ``git status --porcelain --untracked-files=no``'s lines (a rename's new
+    name); untracked files (``??``) never count: a generated folder is not a change to the
+    project."""
+    paths = []
+    for line in porcelain.splitlines():
+        parts = line.strip().split(maxsplit=1)
+        if len(parts) < 2 or parts[0] in ("??", "!!"):
+            continue
+        paths.append(parts[1].split(" -> ")[-1].strip('"'))
+    return tuple(paths)
 
 
 def _git(*args: str) -> str:
@@ -68,12 +90,14 @@ def provenance(command: str) -> Provenance:
             versions[name] = importlib.metadata.version(name)
         except importlib.metadata.PackageNotFoundError:
             versions[name] = "not installed"
-    status = _git("status", "--porcelain")
-    return Provenance(command, _git("rev-parse", "HEAD"), bool(status) and status != "unknown",
+    status = _git("status", "--porcelain", "--untracked-files=no")
+    changed = tracked_changes(status) if status != "unknown" else ()
+    return Provenance(command, _git("rev-parse", "HEAD"), bool(changed),
                       sys.version.split()[0], versions,
                       dt.datetime.now(dt.UTC).strftime("%Y-%m-%d %H:%M:%S UTC"),
                       f"{platform.system()} {platform.machine()}, {os.cpu_count()} cores; kernels: "
-                      + ", ".join(f"{name} {value}" for name, value in numerical_kernels().items()))
+                      + ", ".join(f"{name} {value}" for name, value in numerical_kernels().items()),
+                      changed[:MODIFIED_SHOWN], len(changed))
 
 
 def _lookup(config: dict, dotted: str):

@@ -12,6 +12,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from pipeline.reporting.inputs import ReportInputs
+from pipeline.reporting.movers import ledger_movers
 from pipeline.reporting.sections.family import ledger_groups
 from pipeline.reporting.verdicts import PeerVerdicts, Verdicts
 
@@ -148,7 +149,23 @@ def _track(judged: PeerVerdicts, inputs: ReportInputs) -> PeerTrack:
     return PeerTrack(judged.track, title, int(first.get("size", rows[0].scenarios if rows
                                                         else 0)),
                      first.get("seed", "?"), judged.peers, rows,
-                     tuple(ledger_groups(judged.ledger)), winners(judged))
+                     tuple(ledger_groups(judged.ledger, _movers(judged, inputs),
+                                         f"peers-{judged.track}-ledger")),
+                     winners(judged))
+
+
+def _movers(judged: PeerVerdicts, inputs: ReportInputs) -> dict:
+    """The members that move each claim most against each peer (opened in the peers'
+    experiment: member i is the same scenario as in the default family)."""
+    family = inputs.peers if judged.track == "lateral" else inputs.kinematic_peers
+    default = inputs.family if judged.track == "lateral" else inputs.kinematic_family
+    treatment = judged.ledger.treatment
+    if family is None or default is None or treatment not in default.primary:
+        return {}
+    tables = {treatment: default.primary[treatment],
+              **{m: family.primary[m] for m in judged.peers if m in family.primary}}
+    return ledger_movers(tables, treatment, judged.peers,
+                         "peers" if judged.track == "lateral" else "kinematic_peers")
 
 
 def peers_section(inputs: ReportInputs, verdicts: Verdicts) -> PeersSection | None:

@@ -28,6 +28,28 @@ class RobustnessSection:
     #: per value of a scenario or vehicle dimension, each claim's usual outcome vs baseline
     worlds: tuple[dict, ...] = ()
     world_claims: tuple[str, ...] = ()
+    #: may it speak in the opening summary: at least the default space's family size and
+    #: number of specifications (a smaller one, such as quick, is exploratory)
+    headline: bool = True
+    #: why not ("" when it may)
+    label: str = ""
+
+
+def below_default_space(family_size: int, n_specifications: int) -> str:
+    """Why a multiverse is below the default space's budget (``conf/multiverse/default.yaml``:
+    its family size and number of specifications), "" when it is not."""
+    import yaml
+
+    from pipeline.config import CONF_DIR
+
+    try:
+        default = yaml.safe_load((CONF_DIR / "multiverse" / "default.yaml").read_text())
+    except (OSError, yaml.YAMLError):
+        return ""
+    short = [f"{key} {have} < {default[key]}" for key, have in
+             (("family_size", family_size), ("n_specifications", n_specifications))
+             if isinstance(default.get(key), int) and have < default[key]]
+    return ("below the default space's budget (" + ", ".join(short) + ")") if short else ""
 
 
 def backends_text(backends: dict) -> str:
@@ -136,8 +158,9 @@ def robustness_section(inputs: ReportInputs, figures: Figures) -> RobustnessSect
             drawn.append(figure)
     info = result.info
     worlds, world_claims = _world_rows(result)
+    label = below_default_space(info.family_size, info.n_specifications)
     return RobustnessSection(
         tuple(_cells(result)), tuple(drawn), tuple(_flipping_choices(result)),
         info.n_specifications, info.n_simulation_configurations, info.family_size, info.name,
         info.rule, info.dimensions, backends_text(info.backends or {}), tuple(worlds),
-        tuple(world_claims))
+        tuple(world_claims), not label, label)
