@@ -30,6 +30,8 @@ TUNE        ?= default
 # (dwa exists on that track only; its method preset is dwa_kinematic)
 TUNE_PEERS  ?= mpc_dcbf cbf_filter vo
 TUNE_KINEMATIC_PEERS ?= dwa
+# the scenario the README's explorer screenshot shows (<experiment>/<member>)
+SCREENSHOT_MEMBER ?= family/0
 # a tuning on the Appendix-A track (tune.track kinematic): Clarabel for every family (the
 # kinematic MPC's QP has no DAQP form) and a hypervolume box that holds that track's values
 # (measured on make reproduce's kinematic_family and kinematic_peers: family means reaction
@@ -114,8 +116,9 @@ run-kinematic-family: $(STAMP)
 report: $(STAMP)  ## rebuild the HTML report from existing run folders (no simulation)
 	$(PY) -m pipeline.report $(RUNS) --out $(REPORT) --command "$(REPORT_COMMAND)"
 
-screenshot: $(STAMP)  ## the README's screenshot (docs/report_screenshot.png) from make reproduce's own report
-	$(PY) -m pipeline.screenshot $(REPORT)/index.html docs/report_screenshot.png
+screenshot: $(STAMP)  ## the README's screenshots (docs/report_screenshot*.png: 1280 and 390 px, and the explorer) from make reproduce's own report
+	$(PY) -m pipeline.screenshot $(REPORT)/index.html docs/report_screenshot.png \
+	  --narrow docs/report_screenshot_390.png --explorer docs/explorer_screenshot.png --member $(SCREENSHOT_MEMBER)
 
 reproduce: experiment report  ## set up, run the experiment and write reports/latest/index.html (its last lines: the verdicts in words)
 

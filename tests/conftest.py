@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import logging
 import os
 from pathlib import Path
 
@@ -30,6 +31,22 @@ def pytest_collection_modifyitems(config, items):
     """Longest files first (:data:`LONGEST_FILES_FIRST`); the order within a file is kept."""
     rank = {name: i for i, name in enumerate(LONGEST_FILES_FIRST)}
     items.sort(key=lambda item: rank.get(item.path.name, len(rank)))
+
+
+@pytest.fixture(autouse=True)
+def _root_log_handlers_restored():
+    """The root logger's handlers as they were before each test. A Hydra entry point run in a
+    test installs its job logging's stream handlers on the root logger, bound to that test's
+    captured stderr; a later test's log record then reached a closed stream and printed
+    "--- Logging error ---" with the record's text into that test's stderr."""
+    root = logging.getLogger()
+    before, level = list(root.handlers), root.level
+    yield
+    for handler in list(root.handlers):
+        # pytest's own capture handlers come and go with its phases: left to pytest
+        if handler not in before and not type(handler).__module__.startswith("_pytest"):
+            root.removeHandler(handler)
+    root.setLevel(level)
 
 
 @pytest.fixture(scope="session")

@@ -130,7 +130,7 @@ def test_nothing_is_committed_after_a_swallowed_interrupt(tmp_path):
 
 def _nmpc_check(out: Path, jobs: int) -> subprocess.Popen:
     return subprocess.Popen(
-        [sys.executable, "-m", "pipeline.nmpc_check", "--members", "1", "--track", "kinematic",
+        [sys.executable, "-m", "pipeline.nmpc_check", "--members", "4", "--track", "kinematic",
          "--jobs", str(jobs), "--out", str(out)],
         cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
         start_new_session=True,  # its own process group: Ctrl-C reaches its workers too

@@ -21,7 +21,7 @@ def test_wheel_installs_and_runs_from_an_empty_folder(tmp_path):
     # build from a copy: setuptools writes build/ beside the sources, never into the checkout
     source = tmp_path / "source"
     ignore = shutil.ignore_patterns("__pycache__", "*.pyc")
-    for folder in ("pipeline", "conf", "hydra_plugins"):
+    for folder in ("pipeline", "conf", "hydra_plugins", "data"):
         shutil.copytree(ROOT / folder, source / folder, ignore=ignore)
     for name in ("pyproject.toml", "README.md", "LICENSE"):
         shutil.copy(ROOT / name, source / name)
@@ -33,6 +33,7 @@ def test_wheel_installs_and_runs_from_an_empty_folder(tmp_path):
     names = zipfile.ZipFile(wheel).namelist()
     assert "pipeline/conf/config.yaml" in names and "pipeline/py.typed" in names
     assert any(n.startswith("pipeline/conf/hparams_search/") for n in names)
+    assert any(n.startswith("pipeline/data/eth_ucy/") and n.endswith(".txt.gz") for n in names)
     venv = tmp_path / "venv"
     subprocess.run([sys.executable, "-m", "venv", "--without-pip", str(venv)], check=True,
                    timeout=120)
