@@ -230,3 +230,34 @@ def test_convergence_counts_simulated_members_when_trials_stop_early():
     assert stop == expected and stop > whole
     # without the effort the early-stopped trials would count as whole ones
     assert convergence_point(history, 80, 60, 0.0, np.arange(1, 401.0)) == whole
+
+
+def test_a_pruned_tune_counts_and_logs_whole_trial_equivalents():
+    """With pruning the cap is on members simulated: trials that each ran a quarter of a
+    10-member family (``members`` = 2.5 of 10, planted) count a quarter each, so a cap of 20
+    whole trials takes 80 trials, and the progress line says both counts (before, it said
+    "trials 80 ... cap 20" and looked like a cap overrun)."""
+    from optuna.distributions import UniformDistribution
+
+    rule = Convergence(10, 20, 5, 0.0, ((0.0, 1.0), (0.0, 1.0)))  # any growth: not converged
+    space = TuneSpace(name="planted", min_trials=10, max_trials=20, convergence_window=5,
+                      batch_size=4, population_size=8,
+                      objectives=[Objective("reaction_delay_s"),
+                                  Objective("lateral_jerk_rms_mps3")],
+                      hypervolume_bounds=[[0.0, 1.0], [0.0, 1.0]])
+    study = make_study(space, "improved", 0, storage=None)
+    step = [0]
+
+    def evaluate(settings):
+        out = []
+        for _ in settings:
+            step[0] += 1  # a front that keeps moving: never converges
+            out.append(((0.9 ** step[0], 0.9 ** step[0]), -1.0, {"members": 2.5}))
+        return out
+
+    lines: list[str] = []
+    history, converged = optimize(study, {"planner.beta": UniformDistribution(0.0, 1.0)},
+                                  evaluate, rule, 4, log=lines.append, family_size=10)
+    assert converged is None and len(history) == 80
+    assert lines[-1].startswith("trials 80, 20 whole-trial equivalents (")
+    assert lines[0].startswith("trials 4, 1 whole-trial equivalents (")

@@ -130,8 +130,13 @@ def optimize(study, distributions: dict, evaluate: Callable[[list[dict]], list[t
             study.tell(trial, list(values))
         complete += len(batch)
         rate = (time.perf_counter() - start) / max(complete - done_before, 1)
-        log(f"{label}trials {complete} (converged at the earliest at {rule.min_trials}, cap "
-            f"{rule.max_trials}; {rate:.1f} s per trial)")
+        # with pruning the rule counts whole-trial equivalents of simulated members: a pruned
+        # trial counts for the share of its family it ran
+        effort = rule.effort(study, family_size) if family_size else None
+        counted = (f", {float(effort[-1]):.0f} whole-trial equivalents"
+                   if effort is not None and len(effort) else "")
+        log(f"{label}trials {complete}{counted} (converged at the earliest at {rule.min_trials}, "
+            f"cap {rule.max_trials}; {rate:.1f} s per trial)")
 
 
 #: the study's system attribute holding its sampler's random state at the start of the last
