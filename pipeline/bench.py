@@ -12,7 +12,7 @@ import json
 import sys
 from pathlib import Path
 
-from pipeline.commands import CommandError, run_command
+from pipeline.commands import CommandError, output_folder, run_command
 from pipeline.studies import bench as study
 from pipeline.studies.results.base import written
 from pipeline.studies.results.bench import SCALING_STEM
@@ -34,7 +34,7 @@ HEADLINE = ("closed_loop_over_floor", "step_over_floor", "step_over_sparse_floor
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="apf-mpc-bench", description=study.__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--out", type=Path, default=Path("reports/bench"))
+    parser.add_argument("--out", type=output_folder, default=Path("reports/bench"))
     parser.add_argument("--steps", type=int, default=40, help="inputs per configuration")
     parser.add_argument("--repeats", type=int, default=3)
     parser.add_argument("--quick", action="store_true", help="N=10 and 1 obstacle only")
