@@ -73,3 +73,30 @@ def test_an_nmpc_check_into_a_folder_a_study_is_writing_is_refused(tmp_path, cap
     line = _one_line(capsys)
     assert line.startswith(f"error: {out} is in use by another study ({holder}, pid "), line
     assert not (out / "summary.json").exists()
+
+
+def test_a_run_into_a_studys_folder_is_refused(tmp_path, capsys, monkeypatch):
+    """``python -m pipeline.run hydra.run.dir=TUNE`` (TUNE: a tune's folder): exit 2,
+    ``config error: hydra.run.dir='TUNE' is invalid; allowed: a new folder or one a run wrote
+    (this one holds a tune record, whose files would be replaced)`` (the run replaced the
+    tune's manifest.json with its own); the tune's files intact."""
+    import sys
+
+    from pipeline.run import main as run_main
+
+    out = tmp_path / "tune"
+    before = _record(out, "tune")
+    monkeypatch.setattr(sys, "argv", ["pipeline.run", "method=improved",
+                                      f"hydra.run.dir={out}"])
+    monkeypatch.delenv("HYDRA_FULL_ERROR", raising=False)
+    with pytest.raises(SystemExit) as info:
+        run_main()
+    assert info.value.code == 2
+    lines = [line for line in capsys.readouterr().err.splitlines() if line.strip()]
+    assert lines == [
+        f"config error: hydra.run.dir={plain_value(str(out))} is invalid; allowed: a new "
+        "folder or one a run wrote (this one holds a tune record, whose files would be "
+        "replaced)"]
+    # (Hydra itself makes .hydra/ and run.log before the job starts)
+    assert {p.name: p.read_bytes() for p in out.iterdir()
+            if p.name not in (".hydra", "run.log")} == before
