@@ -12,7 +12,7 @@ import json
 import sys
 from pathlib import Path
 
-from pipeline.commands import run_command
+from pipeline.commands import CommandError, output_folder, run_command
 from pipeline.studies import bench as study
 from pipeline.studies.results.base import written
 from pipeline.studies.results.bench import SCALING_STEM
@@ -34,7 +34,7 @@ HEADLINE = ("closed_loop_over_floor", "step_over_floor", "step_over_sparse_floor
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="apf-mpc-bench", description=study.__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--out", type=Path, default=Path("reports/bench"))
+    parser.add_argument("--out", type=output_folder, default=Path("reports/bench"))
     parser.add_argument("--steps", type=int, default=40, help="inputs per configuration")
     parser.add_argument("--repeats", type=int, default=3)
     parser.add_argument("--quick", action="store_true", help="N=10 and 1 obstacle only")
@@ -43,9 +43,24 @@ def main(argv: list[str] | None = None) -> int:
     return run_command(lambda: _bench(args))
 
 
+#: each option's allowed integers, checked before any measurement (``--steps 0`` ran 15 s of
+#: benchmark and then failed with a traceback)
+OPTION_RANGES = (("steps", 1, 100_000), ("repeats", 1, 1_000), ("family_size", 1, 100_000))
+
+
 def _bench(args) -> int:
     from pipeline.reporting.figures import bench_scaling_figure, save_figure
+    from pipeline.store.manifest import refuse_other_record
 
+    for key, low, high in OPTION_RANGES:
+        value = getattr(args, key)
+        if not low <= value <= high:
+            raise CommandError(f"error: --{key.replace('_', '-')}={value} is invalid; allowed: "
+                               f"an integer in [{low}, {high}]")
+    if args.out.exists() and not args.out.is_dir():
+        raise CommandError(f"error: --out={args.out} is invalid; allowed: a folder (new, or "
+                           "one the benchmark wrote before), not a file")
+    refuse_other_record(args.out, ("bench",))
     result = study.run_benchmark(args.out, args.steps, args.repeats, args.quick,
                                  args.family_size)
     save_figure(bench_scaling_figure(result.lateral), written(result.folder), SCALING_STEM)

@@ -11,10 +11,12 @@ a command prints only its result (stdout) and its one error line.
 
 from __future__ import annotations
 
+import argparse
 import errno
 import logging
 import sys
 from collections.abc import Callable
+from pathlib import Path
 from typing import TypeVar
 
 from pipeline.errors import (
@@ -61,6 +63,15 @@ def configure_logging(level: int = logging.INFO) -> None:
         handler.setFormatter(logging.Formatter("%(message)s"))
         log.addHandler(handler)
     log.setLevel(level)
+
+
+def output_folder(text: str) -> Path:
+    """``--out``'s argparse type: a path, never the empty one (``--out "$OUT"`` with ``OUT``
+    unset wrote a study or a report into the current folder, the repository's root)."""
+    if not text.strip():
+        raise argparse.ArgumentTypeError("'' is invalid; allowed: a folder path (an empty one "
+                                         "would write into the current folder)")
+    return Path(text)
 
 
 def _os_error_line(exc: OSError) -> str:

@@ -13,7 +13,7 @@ from pathlib import Path
 
 import pandas as pd
 
-from pipeline.commands import CommandError, run_command
+from pipeline.commands import CommandError, output_folder, run_command
 from pipeline.studies import multiverse as study
 from pipeline.studies.results import MultiverseResult
 
@@ -27,7 +27,7 @@ def main(argv: list[str] | None = None) -> int:
                                      description=study.__doc__.split("\n\n")[0])
     parser.add_argument("--space", default="default",
                         help="conf/multiverse/<name>.yaml or a path (default: default)")
-    parser.add_argument("--out", type=Path, default=Path("outputs/multiverse"))
+    parser.add_argument("--out", type=output_folder, default=Path("outputs/multiverse"))
     parser.add_argument("--jobs", type=int, default=2, help="analysis workers (default 2)")
     parser.add_argument("overrides", nargs="*", help="Hydra overrides for every run")
     args = parser.parse_args(argv)

@@ -11,7 +11,7 @@ import logging
 import sys
 from pathlib import Path
 
-from pipeline.commands import CommandError, cannot, run_command
+from pipeline.commands import CommandError, cannot, output_folder, run_command
 from pipeline.studies.nmpc_check import nmpc_agreement
 
 __all__ = ["main", "nmpc_agreement"]
@@ -24,7 +24,7 @@ def main(argv: list[str] | None = None) -> int:
                                      description=__doc__.split("\n\n")[0])
     parser.add_argument("--members", type=int, default=50,
                         help="family members per method (1-10000, default 50)")
-    parser.add_argument("--out", type=Path, default=Path("outputs/nmpc_check"))
+    parser.add_argument("--out", type=output_folder, default=Path("outputs/nmpc_check"))
     parser.add_argument("--track", choices=("both", "lateral", "kinematic"), default="both",
                         help="which track's linear MPC to check (default both)")
     parser.add_argument("--jobs", type=int, default=2,

@@ -11,7 +11,7 @@ import argparse
 import sys
 from pathlib import Path
 
-from pipeline.commands import CommandError, run_command
+from pipeline.commands import CommandError, output_folder, run_command
 from pipeline.reporting.page import build_report
 
 __all__ = ["build_report", "main"]
@@ -21,7 +21,7 @@ def _parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="apf-mpc-report",
                                      description="Build the HTML report from run folders.")
     parser.add_argument("runs", type=Path, help="folder holding run folders (e.g. outputs/paper)")
-    parser.add_argument("--out", type=Path, default=Path("reports/latest"),
+    parser.add_argument("--out", type=output_folder, default=Path("reports/latest"),
                         help="output folder (default: reports/latest)")
     parser.add_argument("--sweep", type=Path, action="append", default=[],
                         help="aggregated sweep folder to add as a Sweep section (repeatable)")

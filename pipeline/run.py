@@ -22,6 +22,7 @@ from pipeline.analysis.tally import Tally
 from pipeline.commands import run_command, run_task
 from pipeline.config import CONF_DIR, register_configs, to_experiment_config
 from pipeline.store.lock import folder_lock
+from pipeline.store.manifest import refuse_other_record
 from pipeline.store.member_cache import MemberCounts
 from pipeline.studies.experiment import RunSummary, run_experiment, run_family
 from pipeline.studies.slurm import register_launcher
@@ -47,6 +48,8 @@ def hydra_main(cfg: DictConfig) -> float | tuple[float, ...]:
         _require_extras(cfg)
         experiment = to_experiment_config(cfg)
         _check_targets(experiment)
+        # a study's folder is never a run's (a run replaced a tune's manifest.json)
+        refuse_other_record(out_dir, ("run", "family"), "hydra.run.dir")
         with folder_lock(out_dir):
             return _run(experiment, out_dir)
 

@@ -10,7 +10,7 @@ import logging
 import sys
 from pathlib import Path
 
-from pipeline.commands import CommandError, run_command
+from pipeline.commands import CommandError, output_folder, run_command
 from pipeline.studies.speed import VARIANTS, speed_check
 
 __all__ = ["main", "speed_check"]
@@ -23,7 +23,7 @@ def main(argv: list[str] | None = None) -> int:
                                      description=__doc__.split("\n\n")[0])
     parser.add_argument("--members", type=int, default=200,
                         help="family members per variant and method (1-10000, default 200)")
-    parser.add_argument("--out", type=Path, default=Path("outputs/speed"))
+    parser.add_argument("--out", type=output_folder, default=Path("outputs/speed"))
     parser.add_argument("--variants", default=",".join(VARIANTS),
                         help="comma-separated subset of: " + ", ".join(VARIANTS))
     args = parser.parse_args(argv)

@@ -8,7 +8,7 @@ import logging
 import sys
 from pathlib import Path
 
-from pipeline.commands import run_command
+from pipeline.commands import output_folder, run_command
 from pipeline.config import CONF_DIR
 from pipeline.studies.results.tune import PARTS, TuneResult
 from pipeline.studies.tune import TuneSpace, front_points, load_tune_space, run_tuning
@@ -23,7 +23,7 @@ def main(argv: list[str] | None = None) -> int:
                                      description=__doc__.split("\n\n")[0])
     parser.add_argument("--space", default="default",
                         help="conf/tune/<name>.yaml or a path (default: default)")
-    parser.add_argument("--out", type=Path, default=Path("outputs/tune"))
+    parser.add_argument("--out", type=output_folder, default=Path("outputs/tune"))
     parser.add_argument("--set", dest="changes", action="append", default=[],
                         metavar="KEY=VALUE",
                         help="change one setting of the space (e.g. --set 'rungs=[]' for the "

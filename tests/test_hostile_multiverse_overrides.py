@@ -89,3 +89,16 @@ def test_an_override_is_refused_exactly_when_it_touches_a_dimension_or_the_famil
         assert touches and len(str(exc).splitlines()) == 1 and key in str(exc)
     else:
         assert not touches
+
+
+def test_a_launcher_that_is_not_an_option_is_one_line(tmp_path, capsys):
+    """``python -m pipeline.multiverse --space quick --out D hydra/launcher=slrum``: exit 2,
+    ``config error: hydra/launcher='slrum' is not a known option; allowed: basic, joblib,
+    local_cores, robust_slurm, sequential, slurm, submitit_local, submitit_slurm`` (the
+    multiverse ignored the misspelt launcher and simulated every family here)."""
+    out = tmp_path / "D"
+    assert main(["--space", "quick", "--out", str(out), "hydra/launcher=slrum"]) == 2
+    assert capsys.readouterr().err.strip().splitlines() == [
+        "config error: hydra/launcher='slrum' is not a known option; allowed: basic, joblib, "
+        "local_cores, robust_slurm, sequential, slurm, submitit_local, submitit_slurm"]
+    assert not (out / "runs").exists()

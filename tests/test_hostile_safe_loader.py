@@ -165,3 +165,29 @@ def test_tables_empty_headless_duplicated_or_keyless_are_refused(tmp_path, text,
     path.write_text("track,method,x\nlateral,improved,1\nkinematic,improved,2\n")
     assert len(read_table(path, "a table", ("track", "method"))) == 2
     assert load_yaml(path, "a table") is not None  # a CSV line is a YAML string
+
+
+@pytest.mark.parametrize("command", sorted(WHAT))
+def test_a_key_given_twice_is_one_line_naming_it_and_its_lines(tmp_path, capsys, command):
+    """``python -m pipeline.tune --space twice.yaml`` (and the multiverse's ``--space``, the
+    report's ``--figure-style``) where the file sets ``dpi`` on lines 1 and 3: exit 2,
+    ``input error: twice.yaml: the key 'dpi' is there twice (lines 1 and 3: YAML would keep the
+    last silently); allowed: ... with each key once`` (YAML kept the last one: a space with
+    ``replicates: 2`` and, further down, ``replicates: 3`` ran 3 replicates)."""
+    path = tmp_path / "twice.yaml"
+    path.write_text("dpi: 100\nwidth_in: 6\ndpi: 300\n")
+    assert _run(command, path, tmp_path) == 2
+    assert _line(capsys) == (f"input error: {path}: the key 'dpi' is there twice (lines 1 and "
+                             "3: YAML would keep the last silently); allowed: "
+                             f"{WHAT[command]} with each key once")
+    assert not (tmp_path / "out").exists()
+
+
+def test_a_key_given_twice_in_a_set_value_or_a_nested_mapping_is_refused():
+    """``--set 'objectives=[{metric: a, metric: b}]'``: one line naming ``--set objectives``;
+    a merge key (``<<``) given twice is YAML's own and stays allowed."""
+    with pytest.raises(InputFileError, match=r"--set objectives: the key 'metric' is there "
+                       r"twice \(lines 1 and 1"):
+        parse_yaml("[{metric: a, metric: b}]", "--set objectives", "a YAML value")
+    assert parse_yaml("a: &a {x: 1}\nb: &b {y: 2}\nc: {<<: *a, <<: *b}\n", "f", "x")["c"] \
+        == {"x": 1, "y": 2}

@@ -149,3 +149,16 @@ def test_the_kinematic_tracks_own_keys_are_controlled_too(tmp_path):
     job = Runner(space, tmp_path, [], log=lambda m: None).job("improved", "default", {},
                                                               "heldout")
     assert job.cfg.scenario.n_steps == 100 and job.cfg.scenario.initial_speed_mps == 0.0
+
+
+def test_a_launcher_that_is_not_an_option_is_one_line(tmp_path, capsys):
+    """``python -m pipeline.tune --space quick --out D hydra/launcher=slrum``: exit 2,
+    ``config error: hydra/launcher='slrum' is not a known option; allowed: basic, joblib,
+    local_cores, robust_slurm, sequential, slurm, submitit_local, submitit_slurm`` (the tune
+    ignored the misspelt launcher and ran every family here)."""
+    out = tmp_path / "D"
+    assert main(["--space", "quick", "--out", str(out), "hydra/launcher=slrum"]) == 2
+    assert _one_line(capsys) == (
+        "config error: hydra/launcher='slrum' is not a known option; allowed: basic, joblib, "
+        "local_cores, robust_slurm, sequential, slurm, submitit_local, submitit_slurm")
+    assert not (out / "runs").exists()

@@ -265,14 +265,17 @@ class ReportInputs:
                                    for d in sweep_dirs) if s is not None)
         bench = optional(BenchResult.load, bench_dir, "performance section") \
             if BenchResult.present(bench_dir) else None
+        # a folder named on the command line is read (or skipped with its reason) even when it
+        # holds no result: a mistyped --tune left the section out without a word
+        named = {"multiverse": multiverse_dir is not None, "tune": tune_dir is not None}
         if multiverse_dir is None and MultiverseResult.present(layout.folder("multiverse")):
             multiverse_dir = layout.folder("multiverse")
         multiverse = optional(MultiverseResult.load, multiverse_dir, "robustness section") \
-            if MultiverseResult.present(multiverse_dir) else None
+            if named["multiverse"] or MultiverseResult.present(multiverse_dir) else None
         if tune_dir is None and TuneResult.present(layout.folder("tune")):
             tune_dir = layout.folder("tune")
         tune = optional(TuneResult.load, tune_dir, "fair fight section") \
-            if TuneResult.present(tune_dir) else None
+            if named["tune"] or TuneResult.present(tune_dir) else None
         claims = _claims(collection, treatment, controls)
         commonroad = tuple(CommonRoadResult.load_all(layout.folder("commonroad")))
         if not collection.runs:

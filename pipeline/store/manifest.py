@@ -100,6 +100,23 @@ def untrust(folder: Path) -> None:
     (Path(folder) / MANIFEST).unlink(missing_ok=True)
 
 
+def refuse_other_record(folder: Path, kinds: tuple[str, ...], option: str = "--out") -> None:
+    """Raise :class:`~pipeline.errors.ConfigError` (one line naming ``option``) when ``folder``
+    holds the record of another kind than ``kinds`` (its ``manifest.json`` says so): a study
+    written there would replace that record's ``manifest.json`` and ``summary.json`` (an
+    nmpc_check into a tune's folder did). A folder without a readable manifest is left to the
+    writer's own checks."""
+    from pipeline.errors import ConfigError
+
+    try:
+        found = json.loads((Path(folder) / MANIFEST).read_text(encoding="utf-8")).get("kind")
+    except (OSError, UnicodeDecodeError, ValueError, AttributeError):
+        return
+    if isinstance(found, str) and found not in kinds:
+        raise ConfigError(option, str(folder), f"a new folder or one a {kinds[0]} wrote (this "
+                          f"one holds a {found} record, whose files would be replaced)")
+
+
 def load_manifest(folder: Path, kind: str, required: tuple[str, ...]
                   ) -> tuple[dict | None, str | None]:
     """``manifest.json`` of ``folder`` if it is a ``kind`` manifest, else the reason (a folder

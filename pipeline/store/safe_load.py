@@ -12,6 +12,7 @@ give a silent wrong answer:
   bomb": 1 KB that expands to billions of nodes); the count is taken on the parsed node graph,
   each shared node counted once per reference without building anything, so the refusal is
   immediate and its message never expands an alias;
+- a YAML mapping that holds a key twice (YAML keeps the last one silently);
 - a table that is empty, or that holds the same key twice (a duplicated row).
 """
 
@@ -111,6 +112,35 @@ def _expanded_size(node, limit: int) -> int:
     return sizes.get(id(node), limit + 1)
 
 
+def _refuse_repeated_key(node, source: Path | str, what: str) -> None:
+    """:class:`InputFileError` for a mapping that holds a key twice (YAML keeps the last one
+    silently: ``replicates: 2`` then ``replicates: 3`` ran 3 replicates); each distinct node is
+    visited once."""
+    import yaml
+
+    seen: set[int] = set()
+    stack = [node]
+    while stack:
+        current = stack.pop()
+        if id(current) in seen:
+            continue
+        seen.add(id(current))
+        if isinstance(current, yaml.SequenceNode):
+            stack.extend(current.value)
+        elif isinstance(current, yaml.MappingNode):
+            lines: dict[str, int] = {}
+            for key, value in current.value:
+                stack.extend((key, value))
+                if not isinstance(key, yaml.ScalarNode) or key.tag == "tag:yaml.org,2002:merge":
+                    continue
+                line = key.start_mark.line + 1
+                if key.value in lines:
+                    raise InputFileError(source, f"the key {key.value!r} is there twice (lines "
+                                         f"{lines[key.value]} and {line}: YAML would keep the "
+                                         "last silently)", f"{what} with each key once")
+                lines[key.value] = line
+
+
 def load_yaml(path: Path, what: str, max_bytes: int = MAX_YAML_BYTES,
               max_nodes: int = MAX_YAML_NODES) -> Any:
     """The content of the YAML file ``path`` (None for an empty one), read safely (see the
@@ -133,6 +163,8 @@ def parse_yaml(text: str, source: Path | str, what: str,
                 raise InputFileError(source, f"its aliases expand to more than {max_nodes} "
                                      "nodes (an alias bomb, or a recursive alias)",
                                      f"{what} with few aliases")
+            if node is not None:
+                _refuse_repeated_key(node, source, what)
             return None if node is None else loader.construct_document(node)
         except yaml.YAMLError as exc:
             first = str(exc).splitlines()[0] if str(exc) else type(exc).__name__

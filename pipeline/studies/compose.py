@@ -44,11 +44,14 @@ def _slurm_launcher(extra: list[str]) -> dict | None:
     from omegaconf import OmegaConf
 
     launcher = None
-    if any(o.startswith("hydra/launcher=slurm") for o in extra):
+    # every choice of a Hydra group is composed, so that one that is not an option
+    # (hydra/launcher=slrum, which the studies ignored and ran here) is one line
+    if any(o.lstrip("+~").startswith("hydra/") for o in extra):
         with initialize_config_dir(config_dir=str(CONF_DIR), version_base="1.3"):
             full = compose(config_name="config", overrides=extra, return_hydra_config=True)
-        settings = OmegaConf.to_container(full.hydra.launcher, resolve=False)
-        launcher = settings if isinstance(settings, dict) else None
+        if any(o.startswith("hydra/launcher=slurm") for o in extra):
+            settings = OmegaConf.to_container(full.hydra.launcher, resolve=False)
+            launcher = settings if isinstance(settings, dict) else None
     return launcher
 
 

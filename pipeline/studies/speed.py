@@ -55,9 +55,11 @@ METHODS = ("improved", "baseline")
 def speed_check(compose, out_dir: Path, n_members: int = 200, log=logger.info,
                 variants: tuple[str, ...] = tuple(VARIANTS)) -> SpeedCheckResult:
     """Run every variant's families; the result written into ``out_dir`` and returned."""
+    from pipeline.store.manifest import refuse_other_record
     from pipeline.studies.experiment import run_family
 
     out_dir = Path(out_dir)
+    refuse_other_record(out_dir, ("speed",))
     out_dir.mkdir(parents=True, exist_ok=True)
     rows = []
     counts = MemberCounts()

@@ -13,6 +13,7 @@ from typing import Any, List, Optional
 
 from pipeline.config import schema_from_data
 from pipeline.errors import ConfigError
+from pipeline.validation import between
 
 #: The methods simulated by default: the claims' controls and treatment (claims.treatment,
 #: claims.controls of the user's configuration choose others).
@@ -139,6 +140,21 @@ class Space:
         if self.backend not in QP_BACKENDS:
             raise ConfigError("multiverse space: backend", self.backend,
                               f"one of {list(QP_BACKENDS)} (the lateral MPC's QP backend)")
+        self._check_ranges()
+
+    def _check_ranges(self) -> None:
+        """Each count and seed in its range, each share in [0, 1] with the fragile one at most
+        the robust one (``robust_share: 5`` labelled every verdict 'sensitive', even at 100 %
+        agreement)."""
+        for key, low, high in (("family_seed", 0, 2**31 - 1), ("sample_seed", 0, 2**31 - 1),
+                               ("simulation_pool", 1, 100_000), ("n_resamples", 99, 1_000_000),
+                               ("min_pairs", 0, 1_000_000)):
+            value = getattr(self, key)
+            if not low <= value <= high:
+                raise ConfigError(f"multiverse space: {key}", value,
+                                  f"an integer in [{low}, {high}]")
+        between("multiverse space: robust_share", self.robust_share, 0.0, 1.0)
+        between("multiverse space: fragile_share", self.fragile_share, 0.0, self.robust_share)
 
     def of(self, stage: str) -> list[Dimension]:
         return [d for d in self.dimensions if d.stage == stage]

@@ -10,6 +10,7 @@ import pandas as pd
 
 from pipeline.analysis.claims.windows import require_own_window
 from pipeline.config import MetricsConfig
+from pipeline.store.manifest import refuse_other_record
 from pipeline.store.member_cache import MemberCounts
 from pipeline.store.runs import read_family
 from pipeline.store.study_lock import study_lock
@@ -44,6 +45,7 @@ def run_multiverse(space: Space, out_dir: Path, overrides: list[str] | None = No
     # dimension's keys): one line, before anything is written; every other override runs for
     # every method and is recorded in space.json
     refuse_controlled(list(overrides or []), controlled_keys(space), "multiverse")
+    refuse_other_record(out_dir, ("multiverse",))
     # one study per folder at a time (a second is refused in one line), for as long as it runs
     with study_lock(out_dir, f"multiverse {space.name}"):
         return _run_multiverse(space, out_dir, list(overrides or []), n_jobs, log)

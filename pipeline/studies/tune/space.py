@@ -111,16 +111,17 @@ class TuneSpace:
     heldout_scenes: List[str] = field(default_factory=list)
 
     def __post_init__(self) -> None:
-        safe_name("tune.name", self.name)
+        # a null name (`--set name=`) is refused as the empty name it was typed as
+        safe_name("tune.name", "" if self.name is None else self.name)
         if len(self.methods) != 2 or len(set(self.methods)) != 2:
             raise ConfigError("tune.methods", self.methods,
                               "two different methods: [treatment, control]")
+        # names only, never a path (`../method/baseline` found a file outside the folder)
+        searchable = sorted(p.stem for p in (CONF_DIR / "hparams_search").glob("*.yaml"))
         for i, method in enumerate(self.methods):
-            if not (CONF_DIR / "hparams_search" / f"{method}.yaml").is_file():
+            if method not in searchable:
                 raise ConfigError(f"tune.methods[{i}]", method, "a method with a search space "
-                                  "in conf/hparams_search/ (" + ", ".join(sorted(
-                                      p.stem for p in (CONF_DIR / "hparams_search").glob(
-                                          "*.yaml"))) + ")")
+                                  "in conf/hparams_search/ (" + ", ".join(searchable) + ")")
         for key, low, high in (("replicates", 1, 100), ("min_trials", 1, 10_000),
                                ("max_trials", 1, 10_000), ("convergence_window", 1, 10_000),
                                ("batch_size", 1, 64),
@@ -203,8 +204,10 @@ class TuneSpace:
             raise ConfigError("tune.matched_control", self.matched_control,
                               f"'' with the control {self.control} (baseline_matched is the "
                               "tuned baseline with the treatment's step: control baseline only)")
-        if self.safety_reference and not (
-                CONF_DIR / "method" / f"{self.safety_reference}.yaml").is_file():
+        # a name of conf/method/, never a path (`../hparams_search/improved` composed a search
+        # space as the reference method)
+        if self.safety_reference and self.safety_reference not in {
+                p.stem for p in (CONF_DIR / "method").glob("*.yaml")}:
             raise ConfigError("tune.safety_reference", self.safety_reference,
                               "'' (the control) or a method of conf/method/")
 

@@ -49,7 +49,7 @@ from pipeline.analysis.objectives import objective_values, tuning_table
 from pipeline.analysis.tally import Tally
 from pipeline.errors import StudyError
 from pipeline.store.files import json_safe
-from pipeline.store.manifest import untrust
+from pipeline.store.manifest import refuse_other_record, untrust
 from pipeline.store.study_lock import study_lock
 from pipeline.studies.overrides import PRESET_GROUPS, applied_overrides, refuse_controlled
 from pipeline.studies.results.tune import TuneResult, TuneSummary
@@ -98,6 +98,7 @@ def run_tuning(space: TuneSpace, out_dir: Path, overrides: list[str] | None = No
     # an override of what the tune sets itself (methods, families, tuned settings): one line,
     # before anything is written; every other override runs on both sides and is recorded
     refuse_controlled(list(overrides or []), controlled_keys(space, spaces), "tune")
+    refuse_other_record(out_dir, ("tune",))
     out_dir.mkdir(parents=True, exist_ok=True)
     # one study per folder at a time (a second is refused in one line), for as long as it runs
     with study_lock(out_dir, f"tune {space.name}"):
