@@ -180,7 +180,8 @@ def answer_figure(family: FamilySection, fair_fight: FairFightSection | None,
                                f"tuned, replicate {i}: {o}, d = {e:.3g}")
                       for i, (o, e, ci) in enumerate(zip(t["tuned_outcomes"],
                                                         t["tuned_estimates"],
-                                                        t["tuned_cis"], strict=True))),
+                                                        t["tuned_cis"], strict=True))
+                      if e is not None),  # a replicate not judged has no interval
                 t["counts"]))
         if claim.claim_id in alone:
             r = alone[claim.claim_id]

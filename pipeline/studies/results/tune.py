@@ -96,6 +96,9 @@ class TuneSummary:
     overrides: tuple[str, ...] = ()
     #: the key of the trial store the trials came from (space, budget, families, code)
     store_key: str = ""
+    #: per replicate (its number as text), the methods without a feasible setting in it: that
+    #: replicate was not judged and counts as "no feasible setting of ..." per claim
+    without_feasible_setting: dict[str, list[str]] = field(default_factory=dict)
 
     @property
     def methods(self) -> list[str]:
@@ -116,6 +119,10 @@ class TuneSummary:
                            + ")")
         if self.unconverged:
             reasons.append("unconverged: " + ", ".join(self.unconverged))
+        if self.without_feasible_setting:
+            reasons.append("not judged: " + ", ".join(
+                f"replicate {r} (no feasible setting of {' and '.join(m)})"
+                for r, m in sorted(self.without_feasible_setting.items())))
         return "; ".join(reasons)
 
     @classmethod

@@ -83,9 +83,12 @@ class NoFeasibleSettingError(StudyError):
 ANSWER_RULE = ("per claim, the tuned outcome (tuned treatment against tuned control on the "
                "held-out family) in every replicate, counted; 'settled' when one outcome holds "
                "in at least tune.settled_share of the replicates, 'not settled' otherwise; a "
-               "tuning whose budget is below the default preset's, or with any replicate's "
-               "method stopped by its cap before converging, is shown but never writes the "
-               "opening summary")
+               "replicate in which a method has no feasible setting (every trial collided more "
+               "often than the untuned reference on its training family) is not judged and "
+               "counts as 'no feasible setting of <method>' among the replicates; a "
+               "tuning whose budget is below the default preset's, with any replicate's "
+               "method stopped by its cap before converging, or with a replicate not judged, is "
+               "shown but never writes the opening summary")
 
 
 def run_tuning(space: TuneSpace, out_dir: Path, overrides: list[str] | None = None,
@@ -157,9 +160,13 @@ def _run_tuning(space: TuneSpace, out_dir: Path, spaces: dict, overrides: list[s
         trial_tables.append(trials_table(studies, space, replicate))
     trials = pd.concat(trial_tables, ignore_index=True)
     chosen = pick_settings(trials, space)
+    without = replicates_without_setting(trials, space)
+    for replicate, methods in sorted(without.items()):
+        log(f"replicate {replicate}: {infeasible_outcome(methods)} (every trial collided more "
+            f"often than the untuned {space.feasibility_reference}): not judged, counted as such")
     judged = judge_heldout(runner, space, chosen, base.claims)
     log(f"family runs: {runner.counts.sentence()}")
-    data = summarize(space, spaces, thresholds, trials, histories, chosen, judged)
+    data = summarize(space, spaces, thresholds, trials, histories, chosen, judged, without)
     data.update(members=runner.counts.to_json(), core_utilisation=clock.utilisation(),
                 overrides=applied_overrides(overrides), store_key=store_key)
     summary = TuneSummary.from_json(json_safe(data))
@@ -272,20 +279,45 @@ def trials_table(studies: dict, space: TuneSpace, replicate: int) -> pd.DataFram
     return table
 
 
+def replicates_without_setting(trials: pd.DataFrame, space: TuneSpace) -> dict[int, list[str]]:
+    """Per replicate, the methods with no feasible setting in it (no Pareto trial: every
+    complete trial collided more often than the untuned reference, or was pruned); replicates
+    where every method has one are left out."""
+    out: dict[int, list[str]] = {}
+    for replicate, part in trials.groupby("replicate", sort=True):
+        missing = [m for m in space.methods
+                   if not ((part["method"] == m) & part["pareto"]).any()]
+        if missing:
+            out[int(replicate)] = missing
+    return out
+
+
+def infeasible_outcome(methods: list[str]) -> str:
+    """The outcome a replicate that could not be judged counts as."""
+    return "no feasible setting of " + " and ".join(methods)
+
+
 def pick_settings(trials: pd.DataFrame, space: TuneSpace) -> dict[tuple[int, str], pd.DataFrame]:
     """Per replicate and method, the Pareto settings to judge on held-out scenarios (closest to
-    the ideal first, at most ``max_heldout_settings``) with the compromise marked."""
+    the ideal first, at most ``max_heldout_settings``) with the compromise marked. A replicate
+    in which a method has no feasible setting is left out (:func:`replicates_without_setting`);
+    :class:`NoFeasibleSettingError` when that leaves none."""
     columns = [f"train:{o.label}" for o in space.objectives]
+    without = replicates_without_setting(trials, space)
+    replicates = sorted(int(r) for r in trials["replicate"].unique())
+    if all(r in without for r in replicates):
+        detail = "; ".join(f"replicate {r}: {', '.join(m)}" for r, m in sorted(without.items()))
+        raise NoFeasibleSettingError(
+            f"no replicate has a feasible setting of every method ({detail}): every trial "
+            f"collided more often than the untuned {space.feasibility_reference}; widen the "
+            "search space or raise tune.max_trials")
     chosen = {}
     for replicate, part in trials.groupby("replicate", sort=True):
+        if int(replicate) in without:
+            continue
         scale = part[part["feasible"]][columns].to_numpy(float)
         for method in space.methods:
             front = part[(part["method"] == method) & part["pareto"]].copy()
-            if not len(front):
-                raise NoFeasibleSettingError(
-                    f"replicate {replicate}: no feasible setting of {method}: every trial "
-                    f"collided more often than the untuned {space.feasibility_reference}; widen its search space or "
-                    "raise tune.max_trials")
             front["distance_to_ideal"] = distances_to_ideal(front[columns].to_numpy(float),
                                                             scale, space.objectives)
             front = front.sort_values(["distance_to_ideal", "trial"])
@@ -465,19 +497,25 @@ def front_points(trials: pd.DataFrame, heldout: pd.DataFrame, space: TuneSpace, 
 
 def summarize(space: TuneSpace, spaces: dict, thresholds: dict[int, int], trials: pd.DataFrame,
               histories: list[dict], chosen: dict[tuple[int, str], pd.DataFrame],
-              judged: Judged) -> dict[str, Any]:
+              judged: Judged, without: dict[int, list[str]] | None = None) -> dict[str, Any]:
     """``summary.json``: the rules, the spaces, per replicate and method the trials, the
     convergence and the hypervolume history, and per claim the default verdict beside the
     tuned outcome of every replicate, counted."""
     control, matched = space.control, space.matched_control
+    without = without or {}
     claims = []
     n_replicates = len(judged.tuned)
+    # every replicate, in order: the judged ones' ledgers, the others' missing methods
+    order = sorted(set(judged.tuned) | set(without))
     for claim in ALL_CLAIMS:
         default = judged.default.get((claim.claim_id, control))
-        per_replicate = [judged.tuned[r].get((claim.claim_id, control)) for r in sorted(judged.tuned)]
-        if default is None or any(row is None for row in per_replicate):
+        judged_rows = [judged.tuned[r].get((claim.claim_id, control)) for r in sorted(judged.tuned)]
+        if default is None or any(row is None for row in judged_rows):
             continue
-        outcomes = [str(row.outcome) for row in per_replicate if row is not None]
+        per_replicate = [judged.tuned[r].get((claim.claim_id, control)) if r in judged.tuned
+                         else None for r in order]
+        outcomes = [str(row.outcome) if row is not None else infeasible_outcome(without[r])
+                    for r, row in zip(order, per_replicate, strict=True)]
         sentence, settled, settled_outcome = answer_in_counts(claim.claim_id, outcomes,
                                                               space.settled_share)
         counts = counts_in_words(outcomes)[0]
@@ -491,9 +529,10 @@ def summarize(space: TuneSpace, spaces: dict, thresholds: dict[int, int], trials
             "claim": claim.claim_id, "text": claim.text, "metric": claim.primary_metric,
             "default": str(default.outcome), "default_estimate": default.result.estimate,
             "tuned_outcomes": outcomes,
-            "tuned_estimates": [row.result.estimate for row in per_replicate if row],
-            "tuned_cis": [[row.result.ci_low, row.result.ci_high]
-                          for row in per_replicate if row],
+            "tuned_estimates": [row.result.estimate if row else None
+                                for row in per_replicate],
+            "tuned_cis": [[row.result.ci_low, row.result.ci_high] if row else [None, None]
+                          for row in per_replicate],
             "counts": counts, "settled": settled, "tuned": settled_outcome or "not settled",
             "answer": sentence, "tuned_vs_matched": vs_matched,
             "holds_with_trials": [[int(r), int(t)] for r, t in
@@ -549,6 +588,7 @@ def summarize(space: TuneSpace, spaces: dict, thresholds: dict[int, int], trials
         "compromise": compromise,
         "replicates": histories, "parity": parity,
         "below_default_budget": short, "unconverged": unconverged,
+        "without_feasible_setting": {str(r): m for r, m in sorted(without.items())},
         "headline": not short and not unconverged and n_replicates == space.replicates,
         "dominance": {part: front_dominance(*_fronts(trials, judged.heldout, space, part),
                                             space.objectives)
