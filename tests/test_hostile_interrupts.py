@@ -169,3 +169,12 @@ def test_nmpc_check_interrupted_at_a_random_moment_never_exits_0(tmp_path, signu
     how = "interrupted" if signum == signal.SIGINT else "SIGTERM"
     assert err.strip().splitlines()[-1] == STOPPED.replace("interrupted", how)
     assert sorted(p.name for p in out.rglob("*")) == []
+
+
+def test_joblibs_workers_are_stopped_through_psutil():
+    """Stopping the workers on a signal goes through psutil: without it joblib's loky backend
+    kills their tree with pgrep, and a pgrep stopped by the same signal printed a traceback
+    (``AttributeError: 'Popen' object has no attribute 'kill'``) after a SIGTERM to a tune."""
+    from joblib.externals.loky.backend import utils
+
+    assert utils.psutil is not None

@@ -57,6 +57,11 @@ def test_other_peoples_files_encodings_separators_comments_and_stdin(tmp_path, c
     assert "already in the file" in capsys.readouterr().err
     assert score_main([str(path), "--obstacle", "5,0,-1"]) == 2
     assert "not positive" in capsys.readouterr().err
+    # a coordinate whose square overflows: one line, never a null clearance read as missing
+    assert score_main([str(path), "--obstacle", "1e200,2,1"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err[-1].endswith("--obstacle: '1e200,2,1' is out of range; allowed: numbers within "
+                            "+-1e+07 (m, m/s)")
 
 
 def test_out_is_atomic(tmp_path, capsys):

@@ -51,6 +51,12 @@ def parse_floats(text: str, count: tuple[int, ...], option: str) -> list[float]:
     if len(values) not in count or not all(np.isfinite(values)):
         raise TrajectoryFileError(f"{option}: expected {' or '.join(map(str, count))} finite "
                                   f"numbers, got {text!r}")
+    # the trajectory's own plausibility bound: beyond it squared distances overflow and the
+    # clearance came out null, read as "missing" (--obstacle 1e200,2,1)
+    limit = PLAUSIBLE["X_m"]
+    if any(abs(v) > limit for v in values):
+        raise TrajectoryFileError(f"{option}: {text!r} is out of range; allowed: numbers "
+                                  f"within +-{limit:.0e} (m, m/s)")
     return values
 
 
