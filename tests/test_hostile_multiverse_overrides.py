@@ -64,7 +64,10 @@ def test_overrides_every_method_shares_are_allowed(override):
     """The QP backend (space.json records each method's), the claims' methods and an
     analysis dimension's default (the user's value becomes the default specification) are
     the user's to choose."""
-    refuse_controlled([override], CONTROLLED, "multiverse")
+    try:
+        refuse_controlled([override], CONTROLLED, "multiverse")
+    except ConfigError as exc:
+        pytest.fail(f"{override} was refused: {exc}")
 
 
 _WORDS = st.sampled_from(["scenario", "family", "seed", "size", "appear_time_s", "planner",
