@@ -132,7 +132,7 @@ ablation: $(STAMP)  ## which revision does what: ablations + interpretation vari
 	$(PY) -m pipeline.run experiment=interpretations hydra.sweep.dir=$(RUNS)/interpretations
 	$(MAKE) report
 
-pedestrians: $(STAMP)  ## improved and baseline among recorded pedestrians (ETH/UCY, docs/pedestrians.md; 3-6 min), then the report
+pedestrians: $(STAMP)  ## improved and baseline among recorded pedestrians (ETH/UCY, docs/pedestrians.md; about 1 min), then the report
 	rm -rf $(RUNS)/pedestrians
 	$(PY) -m pipeline.run experiment=pedestrians hydra.sweep.dir=$(RUNS)/pedestrians scenario.family.size=$(PEDESTRIANS_FAMILY_SIZE)
 	$(MAKE) report
