@@ -91,15 +91,21 @@ def test_a_converged_front_stops_at_the_first_window_without_growth():
     assert convergence_point(np.zeros(200), 80, 60, 0.02) is None    # nothing feasible yet
 
 
-def _planted_run(values_of, rule: Convergence) -> tuple[np.ndarray, int | None, int]:
-    from optuna.distributions import UniformDistribution
-
+def _planted_study(rule: Convergence):
+    """An in-memory study of improved over two objectives in the unit box, with ``rule``'s
+    trial counts."""
     space = TuneSpace(name="planted", min_trials=rule.min_trials, max_trials=rule.max_trials,
                       convergence_window=rule.window, batch_size=4, population_size=8,
                       objectives=[Objective("reaction_delay_s"),
                                   Objective("lateral_jerk_rms_mps3")],
                       hypervolume_bounds=[[0.0, 1.0], [0.0, 1.0]])
-    study = make_study(space, "improved", 0, storage=None)
+    return make_study(space, "improved", 0, storage=None)
+
+
+def _planted_run(values_of, rule: Convergence) -> tuple[np.ndarray, int | None, int]:
+    from optuna.distributions import UniformDistribution
+
+    study = _planted_study(rule)
     count = [0]
 
     def evaluate(settings):
@@ -110,7 +116,7 @@ def _planted_run(values_of, rule: Convergence) -> tuple[np.ndarray, int | None, 
         return out
 
     history, converged = optimize(study, {"planner.beta": UniformDistribution(0.0, 1.0)},
-                                  evaluate, rule, space.batch_size, log=lambda m: None)
+                                  evaluate, rule, 4, log=lambda m: None)
     return history, converged, count[0]
 
 
@@ -240,12 +246,7 @@ def test_a_pruned_tune_counts_and_logs_whole_trial_equivalents():
     from optuna.distributions import UniformDistribution
 
     rule = Convergence(10, 20, 5, 0.0, ((0.0, 1.0), (0.0, 1.0)))  # any growth: not converged
-    space = TuneSpace(name="planted", min_trials=10, max_trials=20, convergence_window=5,
-                      batch_size=4, population_size=8,
-                      objectives=[Objective("reaction_delay_s"),
-                                  Objective("lateral_jerk_rms_mps3")],
-                      hypervolume_bounds=[[0.0, 1.0], [0.0, 1.0]])
-    study = make_study(space, "improved", 0, storage=None)
+    study = _planted_study(rule)
     step = [0]
 
     def evaluate(settings):
