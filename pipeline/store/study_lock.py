@@ -12,6 +12,7 @@ Who holds it is written beside it (``<folder>/.study.holder``) for the refusal's
 from __future__ import annotations
 
 import contextlib
+import os
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -42,8 +43,6 @@ def study_lock(folder: Path, study: str) -> Iterator[Path]:
         When another study (another process, or another lock in this one) holds it; its
         line names the folder and the holder.
     """
-    import os
-
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
     lock = FileLock(folder / STUDY_LOCK, blocking=False, thread_local=False)
