@@ -56,28 +56,36 @@ export REPORT_COMMAND ?= make $(strip $(MAKECMDGOALS) $(MAKEOVERRIDES))
 help:  ## list the targets
 	@grep -E '^[a-zA-Z_-]+:.*## ' $(MAKEFILE_LIST) | awk -F':.*## ' '{printf "  %-12s %s\n", $$1, $$2}'
 
-# uv (from the package registry, pinned in constraints.txt) installs the same pins in about a
-# fifth of pip's time (measured: 6.5 s against 32 s with warm caches, 13 s cold); pip is the
-# fallback whenever uv cannot be installed or fails (INSTALLER=pip forces it). Where
-# PYTHONDONTWRITEBYTECODE is set, Python never caches bytecode, so every process (each family
-# worker) would compile every module it imports again (measured: 5 s of optuna alone): there
-# uv compiles at install time (--compile-bytecode, as pip always does) and so are the project's
-# own modules; elsewhere Python caches them at first import
-COMPILE_BYTECODE := $(if $(PYTHONDONTWRITEBYTECODE),--compile-bytecode,)
+# uv (from the package registry, pinned in constraints.txt) installs the same pins in a fraction
+# of pip's time; pip is the fallback whenever uv cannot be installed or fails (INSTALLER=pip
+# forces it). The uv path creates the venv without pip (0.1 s instead of ensurepip's 2.7 s),
+# fetches uv with the interpreter's own pip into the venv's .uv-boot folder, and lets uv install
+# the project, pip and uv into the venv: first from uv's cache alone (--offline: 1 s where every
+# pinned package is cached; this machine's package proxy answers every revalidation as modified,
+# so an online resolution takes 2-7 s), else from the registry. Neither path compiles all of
+# site-packages twice: pip compiles everything it installs (always), uv nothing; then
+# pipeline.warm writes the bytecode of exactly the modules the commands import (where
+# PYTHONDONTWRITEBYTECODE is set, Python would otherwise compile them again in every process:
+# 5 s of optuna alone) and, on the other core, puts the loop's numba kernels in numba's cache
+# (otherwise a first make reproduce's nine experiments and their workers each compile them at
+# once). Measured on 2 cores, package caches warm: about 10 s against pip's 37 s
+# (python -m pipeline.bench: install_over_pip)
+UV_BOOT := $(VENV)/.uv-boot/bin/uv
+UV_INSTALL := --quiet --python $(PY) -c constraints.txt -e ".[test]" pip uv
 $(STAMP): pyproject.toml constraints.txt
-	$(PYTHON_BOOT) -m venv $(VENV)
-	@if [ "$(INSTALLER)" = uv ] && $(PY) -m pip install --quiet -c constraints.txt uv \
-	    && $(VENV)/bin/uv pip install --quiet $(COMPILE_BYTECODE) --python $(PY) -c constraints.txt -e ".[test]"; then \
+	@if [ "$(INSTALLER)" = uv ] && $(PYTHON_BOOT) -m venv --without-pip $(VENV) \
+	    && $(PYTHON_BOOT) -m pip install --quiet --upgrade --target $(VENV)/.uv-boot -c constraints.txt uv \
+	    && { $(UV_BOOT) pip install --offline $(UV_INSTALL) 2>/dev/null || $(UV_BOOT) pip install $(UV_INSTALL); }; then \
 	  echo "installed with uv"; \
 	else \
 	  echo "installing with pip"; \
+	  $(PYTHON_BOOT) -m venv $(VENV) && \
 	  $(PY) -m pip install --quiet --upgrade pip && \
 	  $(PY) -m pip install --quiet -c constraints.txt -e ".[test]"; \
 	fi
-	$(if $(PYTHONDONTWRITEBYTECODE),$(PY) -m compileall -q pipeline hydra_plugins examples > /dev/null,)
-	@# the loop's numba kernels into numba's cache (about 7 s): otherwise a first make reproduce's
-	@# nine experiments and their workers each compile them at once
-	$(PY) -c "from pipeline import api; api.warm_compiled_kernels()"
+	$(PY) -m compileall -q pipeline hydra_plugins examples > /dev/null
+	@$(PY) -m pipeline.warm --no-kernels & bytecode=$$!; \
+	  $(PY) -m pipeline.warm --kernels-only; kernels=$$?; wait $$bytecode && exit $$kernels
 	touch $(STAMP)
 
 install: $(STAMP)  ## create .venv and install the project with pinned versions
@@ -204,10 +212,13 @@ test-all: $(STAMP)  ## run every test, slow ones included (SLURM ones: make test
 # source: a C compiler; .ci/run installs build-essential), and both methods on one file
 install-commonroad: $(STAMP)  ## add the optional CommonRoad extra (commonroad-io, drivability checker, vehicle models) to .venv
 	@if [ -x $(VENV)/bin/uv ]; then \
-	  $(VENV)/bin/uv pip install --quiet $(COMPILE_BYTECODE) --python $(PY) -c constraints.txt -e ".[test,commonroad]"; \
+	  { $(VENV)/bin/uv pip install --offline --quiet --python $(PY) -c constraints.txt -e ".[test,commonroad]" 2>/dev/null \
+	    || $(VENV)/bin/uv pip install --quiet --python $(PY) -c constraints.txt -e ".[test,commonroad]"; }; \
 	else \
 	  $(PY) -m pip install --quiet -c constraints.txt -e ".[test,commonroad]"; \
 	fi
+	@# the extra's modules (and the project's that import it) compiled as make install's are
+	$(PY) -m pipeline.warm --no-kernels
 
 COMMONROAD ?=
 commonroad: $(STAMP)  ## improved and baseline on a CommonRoad scenario: make commonroad COMMONROAD=path/to/scenario.xml (needs make install-commonroad)
