@@ -225,3 +225,42 @@ def test_members_at_equal_hypervolume_are_read_off_the_two_tunes(tmp_path):
     out = pruning_comparison(tmp_path / "a", tmp_path / "b")
     assert out["pruned_over_unpruned_members"] is None and "make tune-unpruned" in \
         out["pruning_note"]
+
+
+def test_studies_side_by_side_tune_as_one_after_the_other(tmp_path, monkeypatch):
+    """Every study's batches at once on one pool (the local default) against each study's
+    batches one after the other (what SLURM runs, Runner.local false): the same trials, values
+    and verdicts over two replicates and both methods, nothing lost or run twice. And the
+    switch is real: the side-by-side run interleaves the studies' trials (a trial of replicate
+    1 completes before replicate 0's last), the other does not."""
+    import sqlite3
+
+    from pipeline.config import CONF_DIR
+    from pipeline.studies.tune import load_tune_space, run_tuning
+    from pipeline.studies.tune.search import Runner
+
+    space = load_tune_space(CONF_DIR / "tune" / "quick.yaml",
+                            ["heldout_size=8", "max_trials=6", "min_trials=6"])
+
+    def completion_order(folder: Path) -> list[str]:
+        with sqlite3.connect(folder / "tune.db") as db:
+            rows = db.execute("select s.study_name from trials t join studies s on "
+                              "s.study_id = t.study_id order by t.datetime_complete, "
+                              "t.trial_id").fetchall()
+        return [name for (name,) in rows]
+
+    run_tuning(space, tmp_path / "together", [], log=lambda _: None)
+    monkeypatch.setattr(Runner, "local", property(lambda self: False))
+    run_tuning(space, tmp_path / "apart", [], log=lambda _: None)
+    for name in ("trials.csv", "ledger_tuned.csv", "settings_outcomes.csv"):
+        assert (tmp_path / "together" / name).read_text() == \
+            (tmp_path / "apart" / name).read_text(), name
+    for folder in ("together", "apart"):
+        no_trial_lost_or_run_twice(tmp_path / folder)
+
+    def interleaved(order: list[str]) -> bool:
+        last_r0 = max(i for i, name in enumerate(order) if "-r0-" in name)
+        return any("-r1-" in name for name in order[:last_r0])
+
+    assert interleaved(completion_order(tmp_path / "together"))
+    assert not interleaved(completion_order(tmp_path / "apart"))

@@ -85,58 +85,97 @@ def optimize(study, distributions: dict, evaluate: Callable[[list[dict]], list[t
     ``evaluate`` takes a list of parameter dicts and returns, per setting, ``(values,
     constraint)`` or ``(values, constraint, attrs)``: the objective values, the safety
     constraint (<= 0 feasible) and what to keep with the trial (its rungs, the members it
-    simulated, where it was stopped).
+    simulated, where it was stopped). One study at a time (:class:`StudyLoop`, whose batches
+    the tune also runs side by side with other studies' on one pool of workers).
+    """
+    loop = StudyLoop(study, distributions, rule, batch_size, log, label, family_size)
+    while (settings := loop.next_batch()) is not None:
+        loop.tell(evaluate(settings))
+    return loop.history, loop.converged
+
+
+class StudyLoop:
+    """One study's tuning loop, a batch at a time: :meth:`next_batch` asks the sampler for the
+    next ``batch_size`` settings (None once the study has converged or reached the cap), and
+    :meth:`tell` records their results; :func:`optimize` alternates the two, the tune runs many
+    studies' loops side by side (:func:`run_studies_together`).
+    The asks and tells of a study are the same whichever way its batches run, so are its
+    trials.
+
     A trial left running by an interrupted process is closed as failed and its batch asked
     again from the sampler's state at the batch's start (kept in the study), so that a resumed
     study asks what the uninterrupted one asked (their finished families are read back, not
-    simulated). A resumed study
-    that had converged stops where it converged. With ``family_size``, the rule's trial counts
-    are whole-trial equivalents of simulated members (:func:`convergence_point`).
+    simulated). A resumed study that had converged stops where it converged. With
+    ``family_size``, the rule's trial counts are whole-trial equivalents of simulated members
+    (:func:`convergence_point`).
     """
-    from optuna.trial import TrialState
 
-    # a batch left running by an interrupted process: its trials closed as failed and the
-    # batch asked again from the sampler's state at its start (the same settings: their
-    # finished families are read back, not simulated), so that a resumed tune asks what the
-    # uninterrupted one would have asked
-    running = study.get_trials(deepcopy=False, states=(TrialState.RUNNING,))
-    for trial in running:
-        study.tell(trial.number, state=TrialState.FAIL)
-    if not restore_sampler_state(study):
-        # no state kept for this count (a study of an older version, or a kill between two
-        # tells): the running trials' settings are asked again first
+    def __init__(self, study, distributions: dict, rule: Convergence, batch_size: int,
+                 log=logger.info, label: str = "", family_size: int | None = None) -> None:
+        from optuna.trial import TrialState
+
+        self.study, self.distributions, self.rule = study, distributions, rule
+        self.batch_size, self.log, self.label, self.family_size = (batch_size, log, label,
+                                                                   family_size)
+        #: the hypervolume history and the convergence point, once the study has stopped
+        self.history: np.ndarray = np.zeros(0)
+        self.converged: int | None = None
+        self._batch: list = []
+        # a batch left running by an interrupted process: its trials closed as failed and the
+        # batch asked again from the sampler's state at its start (the same settings: their
+        # finished families are read back, not simulated), so that a resumed tune asks what
+        # the uninterrupted one would have asked
+        running = study.get_trials(deepcopy=False, states=(TrialState.RUNNING,))
         for trial in running:
-            study.enqueue_trial(dict(trial.params))
-    start, done_before = time.perf_counter(), None
-    while True:
-        history = rule.history(study)
+            study.tell(trial.number, state=TrialState.FAIL)
+        if not restore_sampler_state(study):
+            # no state kept for this count (a study of an older version, or a kill between two
+            # tells): the running trials' settings are asked again first
+            for trial in running:
+                study.enqueue_trial(dict(trial.params))
+        self._start = time.perf_counter()
+        self._done_before = len(self.rule.history(study))
+
+    def _effort(self) -> np.ndarray | None:
+        return self.rule.effort(self.study, self.family_size) if self.family_size else None
+
+    def next_batch(self) -> list[dict] | None:
+        """The next batch's settings (their trials asked and left running), or None once the
+        study has converged or spent its cap (then :attr:`history` and :attr:`converged`)."""
+        history = self.rule.history(self.study)
         complete = len(history)
-        done_before = complete if done_before is None else done_before
-        effort = rule.effort(study, family_size) if family_size else None
-        converged = rule.stop_at(history, effort)
+        effort = self._effort()
+        converged = self.rule.stop_at(history, effort)
         spent = float(effort[-1]) if effort is not None and len(effort) else float(complete)
-        if converged is not None or spent >= rule.max_trials:
-            return history, converged
-        save_sampler_state(study, complete, "before")
-        batch = [study.ask() for _ in range(max(1, min(batch_size,
-                                                       int(np.ceil(rule.max_trials - spent)))))]
-        settings = [{name: trial._suggest(name, dist) for name, dist in distributions.items()}
-                    for trial in batch]
-        save_sampler_state(study, complete + len(batch), "after")
-        for trial, (values, constraint, *more) in zip(batch, evaluate(settings), strict=True):
+        if converged is not None or spent >= self.rule.max_trials:
+            self.history, self.converged = history, converged
+            return None
+        save_sampler_state(self.study, complete, "before")
+        size = max(1, min(self.batch_size, int(np.ceil(self.rule.max_trials - spent))))
+        self._batch = [self.study.ask() for _ in range(size)]
+        settings = [{name: trial._suggest(name, dist)
+                     for name, dist in self.distributions.items()} for trial in self._batch]
+        save_sampler_state(self.study, complete + len(self._batch), "after")
+        return settings
+
+    def tell(self, results: list[tuple]) -> None:
+        """Record the last batch's results (per setting ``(values, constraint[, attrs])``) and
+        log the study's progress."""
+        for trial, (values, constraint, *more) in zip(self._batch, results, strict=True):
             trial.set_user_attr("constraint", float(constraint))
             for key, value in (more[0] if more else {}).items():
                 trial.set_user_attr(key, value)
-            study.tell(trial, list(values))
-        complete += len(batch)
-        rate = (time.perf_counter() - start) / max(complete - done_before, 1)
+            self.study.tell(trial, list(values))
+        self._batch = []
+        complete = len(self.rule.history(self.study))
+        rate = (time.perf_counter() - self._start) / max(complete - self._done_before, 1)
         # with pruning the rule counts whole-trial equivalents of simulated members: a pruned
         # trial counts for the share of its family it ran
-        effort = rule.effort(study, family_size) if family_size else None
+        effort = self._effort()
         counted = (f", {float(effort[-1]):.0f} whole-trial equivalents"
                    if effort is not None and len(effort) else "")
-        log(f"{label}trials {complete}{counted} (converged at the earliest at {rule.min_trials}, "
-            f"cap {rule.max_trials}; {rate:.1f} s per trial)")
+        self.log(f"{self.label}trials {complete}{counted} (converged at the earliest at "
+                 f"{self.rule.min_trials}, cap {self.rule.max_trials}; {rate:.1f} s per trial)")
 
 
 #: the study's system attribute holding its sampler's random state at the start of the last
@@ -260,39 +299,79 @@ class Rungs:
         return bool(grown - base <= self.gain * base)
 
 
+class RungTrials:
+    """One batch's settings judged rung by rung (:data:`PRUNING_RULE`): each setting runs the
+    first ``rungs.sizes[0]`` members of its training family, then the next rung's, and stops
+    at a rung or after the last; settings move on independently of each other (each is
+    judged on its own values, the batch's ``front`` and the ``threshold``), so the result is
+    the same whether a batch's rungs run together (:func:`evaluate_in_rungs`) or each setting
+    as its family comes in (the tune's studies side by side). ``measure`` turns a family table
+    into the objective values and the collision count."""
+
+    def __init__(self, settings: list[dict], threshold: int, rungs: Rungs,
+                 front: dict[int, np.ndarray],
+                 measure: Callable[[pd.DataFrame], tuple[list[float], int]]) -> None:
+        self.settings, self.threshold, self.rungs = settings, threshold, rungs
+        self.front, self.measure = front, measure
+        self._results: list[tuple[list[float], float, dict] | None] = [None] * len(settings)
+        self._seen: list[dict[str, list[float]]] = [{} for _ in settings]
+        self._rung = [0] * len(settings)
+
+    def members(self, i: int) -> int:
+        """The members setting ``i`` runs next (its present rung)."""
+        return self.rungs.sizes[self._rung[i]]
+
+    def finished(self, i: int) -> bool:
+        return self._results[i] is not None
+
+    @property
+    def done(self) -> bool:
+        return all(r is not None for r in self._results)
+
+    def record(self, i: int, table: pd.DataFrame) -> bool:
+        """Setting ``i``'s family table at its present rung; whether it is finished (else it
+        runs the next rung)."""
+        n = self.members(i)
+        last = self._rung[i] == len(self.rungs.sizes) - 1
+        values, collisions = self.measure(table)
+        self._seen[i][str(n)] = [float(v) for v in values]
+        attrs = {"rungs": self._seen[i], "members": n}
+        if last:
+            self._results[i] = (values, collisions - self.threshold, attrs)
+        elif collisions > self.threshold:
+            self._results[i] = (values, collisions - self.threshold,
+                                {**attrs, "pruned_at": n, "pruned_by": "collisions"})
+        elif self.rungs.cannot_reach(values, self.front.get(n)):
+            self._results[i] = (values, CANNOT_MOVE_FRONT_AT_RUNG,
+                                {**attrs, "pruned_at": n, "pruned_by": "front"})
+        else:
+            self._rung[i] += 1
+        return self._results[i] is not None
+
+    def results(self) -> list[tuple[list[float], float, dict]]:
+        """Per setting ``(values, constraint, attrs)`` for :meth:`StudyLoop.tell`."""
+        return [r for r in self._results if r is not None]
+
+
 def evaluate_in_rungs(runner: Runner, method: str, replicate: int, settings: list[dict],
                       threshold: int, rungs: Rungs, front: dict[int, np.ndarray],
                       measure: Callable[[pd.DataFrame], tuple[list[float], int]]
                       ) -> list[tuple[list[float], float, dict]]:
     """Each setting's training family, run rung by rung (all still-running settings of a rung
-    in one pool of workers) and stopped by :data:`PRUNING_RULE`; per setting ``(values,
-    constraint, attrs)`` for :func:`optimize`. ``measure`` turns a family table into the
-    objective values and the collision count."""
-    results: list[tuple[list[float], float, dict] | None] = [None] * len(settings)
-    seen: list[dict[str, list[float]]] = [{} for _ in settings]
+    in one pool of workers, or one SLURM array) and stopped by :data:`PRUNING_RULE`
+    (:class:`RungTrials`); per setting ``(values, constraint, attrs)`` for :func:`optimize`."""
+    batch = RungTrials(settings, threshold, rungs, front, measure)
     alive = list(range(len(settings)))
-    for n in rungs.sizes:
-        last = n == rungs.sizes[-1]
+    while alive:
+        n = batch.members(alive[0])
         jobs = [runner.job(method, "trial", settings[i], "training", replicate, members=n)
                 for i in alive]
         where = f"replicate {replicate}: {method} training families" + (
-            "" if last else f" (first {n} members)")
+            "" if n == rungs.sizes[-1] else f" (first {n} members)")
         for i, table in zip(alive, runner.run(jobs, where), strict=True):
-            values, collisions = measure(table)
-            seen[i][str(n)] = [float(v) for v in values]
-            attrs = {"rungs": seen[i], "members": n}
-            if last:
-                results[i] = (values, collisions - threshold, attrs)
-            elif collisions > threshold:
-                results[i] = (values, collisions - threshold, {**attrs, "pruned_at": n,
-                                                               "pruned_by": "collisions"})
-            elif rungs.cannot_reach(values, front.get(n)):
-                results[i] = (values, CANNOT_MOVE_FRONT_AT_RUNG, {**attrs, "pruned_at": n,
-                                                          "pruned_by": "front"})
-        alive = [i for i in alive if results[i] is None]
-        if not alive:
-            break
-    return [r for r in results if r is not None]
+            batch.record(i, table)
+        alive = [i for i in alive if not batch.finished(i)]
+    return batch.results()
 
 
 def _constraint(trial) -> list[float]:
@@ -549,6 +628,22 @@ class Runner:
                 cfg.scenario, family=dataclasses.replace(family, size=members)))
         return FamilyJob(method, setting, cfg, folder, replicate)
 
+    @property
+    def local(self) -> bool:
+        """Whether families run on this machine's cores (not as SLURM arrays)."""
+        return self.launcher is None
+
+    def pool(self, n_jobs: int):
+        """A :class:`~pipeline.studies.family_pool.FamilyPool` of ``n_jobs`` workers that
+        counts into this runner's counts and shares its caches."""
+        from pipeline.studies.family_pool import FamilyPool
+
+        return FamilyPool(n_jobs, self.cache, self.member_cache, self.counts)
+
+    def table(self, job: FamilyJob) -> pd.DataFrame:
+        """The per-member table of a complete family job (its first ``members`` members)."""
+        return read_family(job.folder, members=False, settings=False).table
+
     def run(self, jobs: list[FamilyJob], label: str) -> list[pd.DataFrame]:
         from pipeline.store.manifest import check
         from pipeline.studies.multiverse.runs import run_families
@@ -561,7 +656,7 @@ class Runner:
                 seen.add(job.folder)
         run_families(todo, self.out_dir, self.log, self.launcher, self.cache, label,
                      counts=self.counts, member_cache=self.member_cache)
-        tables = [read_family(job.folder, members=False, settings=False).table for job in jobs]
+        tables = [self.table(job) for job in jobs]
         # families complete before this call: their members count as already complete
         counted = {folder for _, folder in todo}
         for job, table in zip(jobs, tables, strict=True):
@@ -569,3 +664,60 @@ class Runner:
                 counted.add(job.folder)
                 self.counts.resumed += len(table)
         return tables
+
+
+@dataclass(frozen=True)
+class TunedStudy:
+    """One study's place in the tune: its replicate and method, its loop, and its training
+    family's feasibility threshold (collisions)."""
+
+    replicate: int
+    method: str
+    loop: StudyLoop
+    threshold: int
+
+
+def run_studies_together(runner: Runner, studies: list[TunedStudy], rungs: Rungs,
+                         measure: Callable[[pd.DataFrame], tuple[list[float], int]],
+                         n_jobs: int) -> None:
+    """Every study's batches at once on one pool of ``n_jobs`` workers, until each study has
+    converged or spent its cap (:meth:`StudyLoop.next_batch` returns None).
+
+    Each study asks its next batch as soon as its last one is told, and each setting of a
+    batch runs its next rung as soon as its family at this rung is in (:class:`RungTrials`),
+    so the workers always have members of some study to run while the parent asks, composes
+    and records. A study's asks and tells, and so its trials, are those of :func:`optimize`
+    (tested: the same trials table as the studies one after the other).
+    """
+    pool = runner.pool(n_jobs)
+
+    def start_batch(entry: TunedStudy) -> None:
+        settings = entry.loop.next_batch()
+        if settings is None:
+            return
+        batch = RungTrials(settings, entry.threshold, rungs,
+                           rungs.front_at_rungs(entry.loop.study), measure)
+        for i in range(len(settings)):
+            run_rung(entry, batch, i)
+
+    def run_rung(entry: TunedStudy, batch: RungTrials, i: int) -> None:
+        job = runner.job(entry.method, "trial", batch.settings[i], "training",
+                         entry.replicate, members=batch.members(i))
+
+        def done() -> None:
+            if not batch.record(i, runner.table(job)):
+                run_rung(entry, batch, i)
+            elif batch.done:
+                entry.loop.tell(batch.results())
+                start_batch(entry)
+
+        pool.submit(job.cfg, job.folder, done)
+
+    try:
+        for entry in studies:
+            start_batch(entry)
+        pool.run_until_idle()
+    except BaseException:
+        pool.stop()
+        raise
+    pool.close()

@@ -64,10 +64,12 @@ from pipeline.studies.tune.search import (
     Convergence,
     Rungs,
     Runner,
+    StudyLoop,
+    TunedStudy,
     check_trial_store,
     evaluate_in_rungs,
     make_study,
-    optimize,
+    run_studies_together,
     trial_storage,
 )
 from pipeline.studies.tune.space import TRACK_OVERRIDES, TuneSpace, default_budget, search_space
@@ -124,40 +126,54 @@ def _run_tuning(space: TuneSpace, out_dir: Path, spaces: dict, overrides: list[s
         return (list(objective_values(tuning_table(table, space.censoring), space.objectives)),
                 Tally.of(table).collisions)
 
-    trial_tables, histories, thresholds = [], [], {}
-    for replicate in range(space.replicates):
-        reference = space.feasibility_reference
-        untuned = runner.run([runner.job(reference, "default", {}, "training", replicate)],
-                             f"replicate {replicate}: untuned "
-                             + ("control" if reference == space.control else reference))[0]
+    # every replicate's feasibility threshold first: the untuned reference on its training
+    # family (the five families in one pool)
+    reference = space.feasibility_reference
+    untuned_jobs = [runner.job(reference, "default", {}, "training", replicate)
+                    for replicate in range(space.replicates)]
+    untuned_tables = runner.run(untuned_jobs, "untuned "
+                                + ("control" if reference == space.control else reference))
+    thresholds: dict[int, int] = {}
+    entries: list[TunedStudy] = []
+    for replicate, untuned in enumerate(untuned_tables):
         threshold = thresholds[replicate] = Tally.of(untuned).collisions
         log(f"replicate {replicate}: a setting is feasible when its training family (seed "
             f"{space.training_seeds[replicate]}) collides at most {threshold} times (the "
             f"untuned {reference})")
-        studies: dict[str, Any] = {}
         for method in space.methods:
-            distributions, _ = spaces[method]
-
-            def evaluate(settings: list[dict], method=method, replicate=replicate,
-                         threshold=threshold, studies=studies) -> list[tuple]:
-                return evaluate_in_rungs(runner, method, replicate, settings, threshold, rungs,
-                                         rungs.front_at_rungs(studies[method]), measure)
-
-            studies[method] = make_study(space, method, replicate, storage, store_key)
-            history, converged = optimize(studies[method], distributions, evaluate, rule,
-                                          space.batch_size, log,
-                                          label=f"replicate {replicate}, {method}: ",
-                                          family_size=space.training_size)
-            histories.append({"replicate": replicate, "method": method,
-                              "trials": int(len(history)),
-                              "members": members_simulated(studies[method]),
-                              "converged_at": converged, "converged": converged is not None,
-                              "hypervolume": [float(v) for v in history]})
-            log(f"replicate {replicate}, {method}: "
-                + (f"converged at {converged} trials" if converged is not None else
-                   f"stopped by the cap ({len(history)} trials) before converging")
-                + f", hypervolume {history[-1] if len(history) else 0:.4f}")
-        trial_tables.append(trials_table(studies, space, replicate))
+            study = make_study(space, method, replicate, storage, store_key)
+            loop = StudyLoop(study, spaces[method][0], rule, space.batch_size, log,
+                             label=f"replicate {replicate}, {method}: ",
+                             family_size=space.training_size)
+            entries.append(TunedStudy(replicate, method, loop, threshold))
+    if runner.local:
+        # every study's batches side by side on one pool: the cores never wait for the
+        # parent's asks, compositions and records between batches
+        n_jobs = untuned_jobs[0].cfg.scenario.family.n_jobs \
+            if untuned_jobs[0].cfg.scenario.family is not None else 1
+        run_studies_together(runner, entries, rungs, measure, n_jobs)
+    else:
+        # SLURM: each rung of a batch one array, one study after the other
+        for entry in entries:
+            while (settings := entry.loop.next_batch()) is not None:
+                entry.loop.tell(evaluate_in_rungs(
+                    runner, entry.method, entry.replicate, settings, entry.threshold, rungs,
+                    rungs.front_at_rungs(entry.loop.study), measure))
+    trial_tables, histories = [], []
+    for entry in entries:
+        history, converged = entry.loop.history, entry.loop.converged
+        histories.append({"replicate": entry.replicate, "method": entry.method,
+                          "trials": int(len(history)),
+                          "members": members_simulated(entry.loop.study),
+                          "converged_at": converged, "converged": converged is not None,
+                          "hypervolume": [float(v) for v in history]})
+        log(f"replicate {entry.replicate}, {entry.method}: "
+            + (f"converged at {converged} trials" if converged is not None else
+               f"stopped by the cap ({len(history)} trials) before converging")
+            + f", hypervolume {history[-1] if len(history) else 0:.4f}")
+    for replicate in range(space.replicates):
+        trial_tables.append(trials_table({e.method: e.loop.study for e in entries
+                                          if e.replicate == replicate}, space, replicate))
     trials = pd.concat(trial_tables, ignore_index=True)
     chosen = pick_settings(trials, space)
     without = replicates_without_setting(trials, space)

@@ -1,0 +1,185 @@
+"""Families handed in one by one and run on one pool of worker processes as they come: the
+tune's studies, side by side, keep the cores busy while the parent asks, composes and records.
+
+:func:`pipeline.studies.experiment.run_families_together` runs a known set of families and
+returns when the last is in; a tuning batch's next rung, or a study's next batch, is known only
+once its families are in, so the cores idled while the parent worked between batches (the
+tune's CPU use was 0.81-0.88 of its two cores). :class:`FamilyPool` takes a family at any time
+(:meth:`FamilyPool.submit`, with what to do once it is in), keeps every worker busy with the
+members of whatever families are pending, and runs each family's callback in the parent as its
+last member comes in (:meth:`FamilyPool.wait`). Members are resumed and restored from the member
+cache, and family folders written, exactly as :func:`~pipeline.studies.experiment.run_family`
+does (the same helpers); a family whose folder another pending family is writing (the same
+setting asked twice) waits for it and is then read back.
+"""
+
+from __future__ import annotations
+
+import concurrent.futures
+from collections import deque
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from pipeline.config import ExperimentConfig
+from pipeline.loop.controller import QpCache
+from pipeline.loop.scenario import family_members
+from pipeline.store.manifest import check
+from pipeline.store.member_cache import MemberCache, MemberCounts
+from pipeline.studies.experiment import (
+    _member_table,
+    _members_to_run,
+    _prepare_cache,
+    _run_chunk,
+    _write_family_folder,
+)
+
+#: members per task handed to a worker: a member of a training family is 30-40 ms of CPU, a
+#: task's hand-over (its pickled compiled QPs, the result) a few ms
+MEMBERS_PER_TASK = 4
+
+
+@dataclass
+class _Family:
+    """A family in the pool: what is in, what is left, what to call when it is complete."""
+
+    cfg: ExperimentConfig
+    folder: Path
+    n_members: int
+    metrics: dict[int, dict]
+    counts: MemberCounts
+    left: int
+    compiles: int
+    on_done: Callable[[], None]
+    waiting: deque = field(default_factory=deque)
+
+
+def _snapshot(cache: QpCache) -> QpCache:
+    """The cache as a task carries it: copies of its tables, which the parent may grow while
+    the pool's feeder thread pickles earlier tasks."""
+    return QpCache(entries=dict(cache.entries), memos=dict(cache.memos),
+                   compiled_kernels=cache.compiled_kernels,
+                   members_planned=cache.members_planned)
+
+
+class FamilyPool:
+    """One pool of ``n_jobs`` worker processes (joblib's reusable loky executor) running
+    the members of the families handed to :meth:`submit`, in the order they come.
+
+    Parameters
+    ----------
+    n_jobs : int
+        Worker processes.
+    qp_cache : QpCache
+        The parent's compiled QPs (each family's compiled here once, shipped with its tasks).
+    member_cache : MemberCache or None
+        Where members are restored from and published to.
+    counts : MemberCounts
+        Where the members came from (simulated, restored, resumed), added to as families start.
+    """
+
+    def __init__(self, n_jobs: int, qp_cache: QpCache, member_cache: MemberCache | None,
+                 counts: MemberCounts) -> None:
+        from joblib import Parallel
+
+        # joblib's reusable executor exactly as its Parallel makes it (the same arguments: its
+        # workers' thread limits, idle timeout, reducers), so that the held-out families'
+        # Parallel calls afterwards reuse these workers instead of restarting them (a restart
+        # costs each worker its imports, about 2 s); None with one job: tasks run here
+        self._parallel = Parallel(n_jobs=max(1, int(n_jobs)))
+        self._parallel.__enter__()
+        self.executor = getattr(self._parallel._backend, "_workers", None)
+        self.cache, self.member_cache, self.counts = qp_cache, member_cache, counts
+        self._futures: dict[concurrent.futures.Future, Path] = {}
+        self._families: dict[Path, _Family] = {}
+        self._ready: deque[Callable[[], None]] = deque()
+
+    @property
+    def busy(self) -> bool:
+        """Whether a family is pending or a callback is still to run."""
+        return bool(self._futures or self._ready or self._families)
+
+    def submit(self, cfg: ExperimentConfig, folder: Path, on_done: Callable[[], None]) -> None:
+        """Run ``cfg``'s family into ``folder`` and call ``on_done()`` (in :meth:`wait`) once
+        its folder is complete; a complete folder of the same config is read back, not run."""
+        folder = Path(folder)
+        pending = self._families.get(folder)
+        if pending is not None:  # the same folder is being written: after it
+            pending.waiting.append((cfg, on_done))
+            return
+        family = cfg.scenario.family
+        if family is None:
+            raise ValueError(f"scenario {cfg.scenario.name} is not a family (scenario.family)")
+        if check(folder, "family", cfg.config_hash(), members=False) is None:
+            self.counts.resumed += family.size
+            self._ready.append(on_done)
+            return
+        members = family_members(cfg.scenario, cfg.vehicle.footprint_radius_m)
+        metrics, todo, here = _members_to_run(cfg, members, folder, self.member_cache,
+                                              self.cache)
+        self.counts.add(here)
+        compiles_before = self.cache.compile_count
+        _prepare_cache(cfg, self.cache, len(todo))
+        state = _Family(cfg, folder, len(members), metrics, here, len(todo),
+                        self.cache.compile_count - compiles_before, on_done)
+        self._families[folder] = state
+        if not todo:
+            self._finish(state)
+            return
+        shipped = _snapshot(self.cache)
+        for start in range(0, len(todo), MEMBERS_PER_TASK):
+            chunk = todo[start:start + MEMBERS_PER_TASK]
+            if self.executor is None:
+                future: concurrent.futures.Future = concurrent.futures.Future()
+                try:
+                    future.set_result(_run_chunk(chunk, shipped, self.member_cache))
+                except Exception as exc:  # raised in wait(), as a worker's would be
+                    future.set_exception(exc)
+            else:
+                future = self.executor.submit(_run_chunk, chunk, shipped, self.member_cache)
+            self._futures[future] = folder
+
+    def _finish(self, state: _Family) -> None:
+        _write_family_folder(state.cfg, state.folder, _member_table(state.metrics,
+                                                                    state.n_members),
+                             state.n_members, state.compiles, state.counts)
+        del self._families[state.folder]
+        self._ready.append(state.on_done)
+        for cfg, on_done in state.waiting:
+            self.submit(cfg, state.folder, on_done)
+
+    def wait(self) -> None:
+        """Run the callbacks of the families that are complete; when there are none, wait
+        for the next task to come in first. A worker's exception is raised here."""
+        if not self._ready and self._futures:
+            done, _ = concurrent.futures.wait(list(self._futures),
+                                              return_when=concurrent.futures.FIRST_COMPLETED)
+            for future in done:
+                folder = self._futures.pop(future)
+                results = future.result()
+                state = self._families[folder]
+                for index, metrics in results:
+                    state.metrics[index] = metrics
+                state.left -= len(results)
+                if state.left == 0:
+                    self._finish(state)
+        while self._ready:
+            self._ready.popleft()()
+
+    def run_until_idle(self) -> None:
+        """:meth:`wait` until nothing is pending (callbacks may submit more families)."""
+        while self.busy:
+            self.wait()
+
+    def close(self) -> None:
+        """Release the executor to joblib (its workers stay for the next Parallel call)."""
+        self._parallel.__exit__(None, None, None)
+
+    def stop(self) -> None:
+        """Cancel what has not started and stop the workers (an interrupted tune)."""
+        for future in self._futures:
+            future.cancel()
+        if self.executor is not None:
+            self.executor.shutdown(wait=False, kill_workers=True)
+        self.close()
+

@@ -1,0 +1,91 @@
+"""FamilyPool (pipeline.studies.family_pool): families handed in at any time and run on one
+pool of workers give the same family folders as run_family; a family whose folder another
+pending family is writing waits for it and is read back (simulated once); a complete folder
+is not run again; a worker's exception reaches the caller."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import pytest
+
+from pipeline.loop.controller import QpCache
+from pipeline.store.member_cache import MemberCounts
+from pipeline.studies.experiment import run_family
+from pipeline.studies.family_pool import FamilyPool
+
+
+def _family(make_config, size: int, seed: int = 3):
+    return make_config(["method=improved", "scenario=family", f"scenario.family.size={size}",
+                        f"scenario.family.seed={seed}", "controller.backend=daqp",
+                        "scenario.family.n_jobs=1"])
+
+
+@pytest.mark.parametrize("n_jobs", [1, 2])
+def test_pool_writes_the_folders_run_family_writes(tmp_path, make_config, n_jobs):
+    """Two families submitted together, the second from the first's callback-free queue: each
+    folder's table and record bytes equal run_family's for the same config; the callbacks run
+    once each, in the parent."""
+    cfgs = [_family(make_config, 5, seed) for seed in (3, 4)]
+    for k, cfg in enumerate(cfgs):
+        run_family(cfg, tmp_path / "reference" / str(k), progress=False, member_cache=None)
+    counts, called = MemberCounts(), []
+    pool = FamilyPool(n_jobs, QpCache(), None, counts)
+    for k, cfg in enumerate(cfgs):
+        pool.submit(cfg, tmp_path / "pool" / str(k), lambda k=k: called.append(k))
+    pool.run_until_idle()
+    pool.close()
+    assert sorted(called) == [0, 1]
+    assert counts.simulated == 10 and counts.resumed == 0
+    for k in range(2):
+        for name in ("family_metrics.csv", "family.json"):
+            assert (tmp_path / "pool" / str(k) / name).read_bytes() == \
+                (tmp_path / "reference" / str(k) / name).read_bytes(), name
+
+
+def test_the_same_folder_twice_is_simulated_once(tmp_path, make_config):
+    """The same setting asked twice while the first is pending: the second waits, then finds
+    the folder complete and is read back (counted as already complete)."""
+    cfg = _family(make_config, 4)
+    counts, called = MemberCounts(), []
+    pool = FamilyPool(2, QpCache(), None, counts)
+    pool.submit(cfg, tmp_path / "f", lambda: called.append("first"))
+    pool.submit(cfg, tmp_path / "f", lambda: called.append("second"))
+    pool.run_until_idle()
+    pool.close()
+    assert called == ["first", "second"]
+    assert counts.simulated == 4 and counts.resumed == 4
+
+
+def test_a_rung_then_the_whole_family_simulates_each_member_once(tmp_path, make_config):
+    """A trial's rung (its first 2 members) and then its whole family (4) in the same folder:
+    the rung's members are resumed, the other two simulated; a third submission of the
+    complete folder runs nothing."""
+    whole = _family(make_config, 4)
+    rung = dataclasses.replace(whole, scenario=dataclasses.replace(
+        whole.scenario, family=dataclasses.replace(whole.scenario.family, size=2)))
+    counts = MemberCounts()
+    pool = FamilyPool(2, QpCache(), None, counts)
+    pool.submit(rung, tmp_path / "f", lambda: pool.submit(whole, tmp_path / "f", lambda: None))
+    pool.run_until_idle()
+    assert (counts.simulated, counts.resumed) == (4, 2)
+    pool.submit(whole, tmp_path / "f", lambda: None)
+    pool.run_until_idle()
+    pool.close()
+    assert (counts.simulated, counts.resumed) == (4, 6)
+
+
+def test_a_workers_exception_reaches_the_caller(tmp_path, make_config, monkeypatch):
+    """A member that raises (one job: run in the parent, as a worker would): run_until_idle
+    raises it, not submit (nothing hangs)."""
+    import pipeline.studies.family_pool as family_pool
+
+    def broken(jobs, qp_cache, member_cache=None):
+        raise RuntimeError("planted failure in a worker")
+
+    monkeypatch.setattr(family_pool, "_run_chunk", broken)
+    pool = FamilyPool(1, QpCache(), None, MemberCounts())
+    pool.submit(_family(make_config, 2), tmp_path / "f", lambda: None)
+    with pytest.raises(RuntimeError, match="planted failure"):
+        pool.run_until_idle()
+    pool.stop()
