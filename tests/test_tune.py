@@ -278,6 +278,8 @@ def test_make_tune_quick_resumes_after_sigkill_and_feeds_the_report(tmp_path, ma
         rows = tuned[(tuned["claim"] == claim["claim"]) & (tuned["comparison"] == "baseline")]
         assert claim["tuned_outcomes"] == rows.sort_values("replicate")["outcome"].tolist()
     assert summary["headline"] is False and "replicates" in summary["below_default_budget"]
+    # the resumed run's own wall-clock time and cores: less than the test's wait for it
+    assert 0 < summary["wall_s"] < 600 and summary["cores"] >= 1
 
     from pipeline.report import main as report_main
 
@@ -294,6 +296,7 @@ def test_make_tune_quick_resumes_after_sigkill_and_feeds_the_report(tmp_path, ma
     page = (tmp_path / "report" / "index.html").read_text()
     assert 'id="fairfight"' in page and "Tuned: the answer" in page
     assert 'id="fairfight-parity"' in page and "Not used in the opening summary" in page
+    assert f"It took {summary['wall_s'] / 60:.1f} minutes on {summary['cores']} cores" in page
     # a quick tune never writes the headline: no tuned outcome in the opening summary
     answer_block = page[page.index('id="answer"'):page.index("</div>", page.index('id="answer"'))]
     assert "tuned vs tuned" not in answer_block

@@ -124,6 +124,10 @@ def _cost(summary: TuneSummary) -> str:
     if summary.core_utilisation is not None:
         parts.append(f"Use of the cores: {summary.core_utilisation:.2f} (CPU-seconds over "
                      "wall-clock seconds times cores).")
+    if summary.wall_s is not None:
+        cores = f" on {summary.cores} cores" if summary.cores else ""
+        parts.append(f"It took {summary.wall_s / 60:.1f} minutes{cores} (its last run, from "
+                     "the first family to the summary).")
     heldout = summary.settings.get("heldout_backend")
     if heldout and heldout != summary.backend:
         parts.append(f"Training families solved the QP with {summary.backend}, the held-out "

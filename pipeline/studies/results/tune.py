@@ -91,6 +91,10 @@ class TuneSummary:
     #: CPU-seconds over (wall-clock seconds x cores) of the tuning's own process and its
     #: workers (None before it was measured)
     core_utilisation: float | None = None
+    #: wall-clock seconds of the tuning's last run (a resumed tune: its own run only) and the
+    #: cores it had (None before they were recorded)
+    wall_s: float | None = None
+    cores: int | None = None
     #: the run overrides every family of both methods was composed with (none of them sets
     #: what the tune controls: pipeline.studies.overrides); empty for a tune without any
     overrides: tuple[str, ...] = ()

@@ -135,6 +135,9 @@ class StudyLoop:
                 study.enqueue_trial(dict(trial.params))
         self._start = time.perf_counter()
         self._done_before = len(self.rule.history(study))
+        #: studies running side by side with this one (its progress line says so: its time
+        #: per trial is then shared)
+        self.side_by_side = 1
 
     def _effort(self) -> np.ndarray | None:
         return self.rule.effort(self.study, self.family_size) if self.family_size else None
@@ -174,8 +177,11 @@ class StudyLoop:
         effort = self._effort()
         counted = (f", {float(effort[-1]):.0f} whole-trial equivalents"
                    if effort is not None and len(effort) else "")
+        shared = (f" with {self.side_by_side} studies side by side" if self.side_by_side > 1
+                  else "")
         self.log(f"{self.label}trials {complete}{counted} (converged at the earliest at "
-                 f"{self.rule.min_trials}, cap {self.rule.max_trials}; {rate:.1f} s per trial)")
+                 f"{self.rule.min_trials}, cap {self.rule.max_trials}; {rate:.1f} s per trial"
+                 f"{shared})")
 
 
 #: the study's system attribute holding its sampler's random state at the start of the last
@@ -690,6 +696,8 @@ def run_studies_together(runner: Runner, studies: list[TunedStudy], rungs: Rungs
     (tested: the same trials table as the studies one after the other).
     """
     pool = runner.pool(n_jobs)
+    for entry in studies:
+        entry.loop.side_by_side = len(studies)
 
     def start_batch(entry: TunedStudy) -> None:
         settings = entry.loop.next_batch()

@@ -184,6 +184,7 @@ def _run_tuning(space: TuneSpace, out_dir: Path, spaces: dict, overrides: list[s
     log(f"family runs: {runner.counts.sentence()}")
     data = summarize(space, spaces, thresholds, trials, histories, chosen, judged, without)
     data.update(members=runner.counts.to_json(), core_utilisation=clock.utilisation(),
+                wall_s=round(clock.wall_s(), 1), cores=clock.cores,
                 overrides=applied_overrides(overrides), store_key=store_key)
     summary = TuneSummary.from_json(json_safe(data))
     return TuneResult(summary, trials, judged.heldout, judged.default.to_frame(),
@@ -242,6 +243,12 @@ class CoreClock:
         own = resource.getrusage(resource.RUSAGE_SELF)
         children = resource.getrusage(resource.RUSAGE_CHILDREN)
         return own.ru_utime + own.ru_stime + children.ru_utime + children.ru_stime
+
+    def wall_s(self) -> float:
+        """Wall-clock seconds since it was made."""
+        import time
+
+        return time.perf_counter() - self.start_wall
 
     def utilisation(self) -> float:
         import time
