@@ -89,3 +89,25 @@ def test_a_workers_exception_reaches_the_caller(tmp_path, make_config, monkeypat
     with pytest.raises(RuntimeError, match="planted failure"):
         pool.run_until_idle()
     pool.stop()
+
+
+def test_a_rung_of_a_complete_whole_family_is_read_not_rewritten(tmp_path, make_config):
+    """A trial asked again after an interruption runs its first rung (2 members) in a folder
+    whose whole family (4) is complete: with the whole family's hash the record is read back
+    and not rewritten; without it the rung's record would replace the whole one (the oracle)."""
+    whole = _family(make_config, 4)
+    rung = dataclasses.replace(whole, scenario=dataclasses.replace(
+        whole.scenario, family=dataclasses.replace(whole.scenario.family, size=2)))
+    counts = MemberCounts()
+    pool = FamilyPool(1, QpCache(), None, counts)
+    pool.submit(whole, tmp_path / "f", lambda: None)
+    pool.run_until_idle()
+    before = (tmp_path / "f" / "manifest.json").stat().st_mtime_ns
+    pool.submit(rung, tmp_path / "f", lambda: None, whole.config_hash())
+    pool.run_until_idle()
+    assert (tmp_path / "f" / "manifest.json").stat().st_mtime_ns == before
+    assert (counts.simulated, counts.resumed) == (4, 2)
+    pool.submit(rung, tmp_path / "f", lambda: None)
+    pool.run_until_idle()
+    pool.close()
+    assert (tmp_path / "f" / "manifest.json").stat().st_mtime_ns != before

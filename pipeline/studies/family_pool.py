@@ -99,18 +99,23 @@ class FamilyPool:
         """Whether a family is pending or a callback is still to run."""
         return bool(self._futures or self._ready or self._families)
 
-    def submit(self, cfg: ExperimentConfig, folder: Path, on_done: Callable[[], None]) -> None:
+    def submit(self, cfg: ExperimentConfig, folder: Path, on_done: Callable[[], None],
+               whole_hash: str | None = None) -> None:
         """Run ``cfg``'s family into ``folder`` and call ``on_done()`` (in :meth:`wait`) once
-        its folder is complete; a complete folder of the same config is read back, not run."""
+        its folder is complete; a complete folder of the same config, or of ``whole_hash``
+        (the whole family of which ``cfg`` is a rung: it holds these members), is read back,
+        not run."""
         folder = Path(folder)
         pending = self._families.get(folder)
         if pending is not None:  # the same folder is being written: after it
-            pending.waiting.append((cfg, on_done))
+            pending.waiting.append((cfg, on_done, whole_hash))
             return
         family = cfg.scenario.family
         if family is None:
             raise ValueError(f"scenario {cfg.scenario.name} is not a family (scenario.family)")
-        if check(folder, "family", cfg.config_hash(), members=False) is None:
+        if check(folder, "family", cfg.config_hash(), members=False) is None or (
+                whole_hash is not None
+                and check(folder, "family", whole_hash, members=False) is None):
             self.counts.resumed += family.size
             self._ready.append(on_done)
             return
@@ -145,8 +150,8 @@ class FamilyPool:
                              state.n_members, state.compiles, state.counts)
         del self._families[state.folder]
         self._ready.append(state.on_done)
-        for cfg, on_done in state.waiting:
-            self.submit(cfg, state.folder, on_done)
+        for cfg, on_done, whole_hash in state.waiting:
+            self.submit(cfg, state.folder, on_done, whole_hash)
 
     def wait(self) -> None:
         """Run the callbacks of the families that are complete; when there are none, wait

@@ -89,8 +89,7 @@ def optimize(study, distributions: dict, evaluate: Callable[[list[dict]], list[t
     the tune also runs side by side with other studies' on one pool of workers).
     """
     loop = StudyLoop(study, distributions, rule, batch_size, log, label, family_size)
-    while (settings := loop.next_batch()) is not None:
-        loop.tell(evaluate(settings))
+    loop.run(evaluate)
     return loop.history, loop.converged
 
 
@@ -160,6 +159,12 @@ class StudyLoop:
                      for name, dist in self.distributions.items()} for trial in self._batch]
         save_sampler_state(self.study, complete + len(self._batch), "after")
         return settings
+
+    def run(self, evaluate: Callable[[list[dict]], list[tuple]]) -> None:
+        """Ask, evaluate and tell batch after batch until the study stops (one study at a
+        time: :func:`optimize`, and the tune on SLURM)."""
+        while (settings := self.next_batch()) is not None:
+            self.tell(evaluate(settings))
 
     def tell(self, results: list[tuple]) -> None:
         """Record the last batch's results (per setting ``(values, constraint[, attrs])``) and
@@ -579,6 +584,9 @@ class FamilyJob:
     cfg: ExperimentConfig
     folder: Path
     replicate: int | None = None
+    #: for a rung (the first members of a family), the config hash of the whole family, whose
+    #: complete record in the same folder holds the rung's members too
+    whole_hash: str | None = None
 
 
 class Runner:
@@ -627,11 +635,13 @@ class Runner:
             expected = {"scenario.family.seed": seed, "scenario.family.size": size,
                         "controller.backend": backend, **track, **params}
             design_holds(cfg, expected, method)
-        folder = self.out_dir / "runs" / part / method / cfg.config_hash()
+        whole_hash = cfg.config_hash()
+        folder = self.out_dir / "runs" / part / method / whole_hash
         family = cfg.scenario.family
         if members is not None and family is not None and members < family.size:
             cfg = dataclasses.replace(cfg, scenario=dataclasses.replace(
                 cfg.scenario, family=dataclasses.replace(family, size=members)))
+            return FamilyJob(method, setting, cfg, folder, replicate, whole_hash)
         return FamilyJob(method, setting, cfg, folder, replicate)
 
     @property
@@ -646,18 +656,31 @@ class Runner:
 
         return FamilyPool(n_jobs, self.cache, self.member_cache, self.counts)
 
+    @staticmethod
+    def complete(job: FamilyJob) -> bool:
+        """Whether ``job``'s folder already holds its members: its own record, or (a rung)
+        the whole family's, complete. A trial asked again after an interruption then reads
+        its rung from the whole family instead of writing the rung's record over it."""
+        from pipeline.store.manifest import check
+
+        return check(job.folder, "family", job.cfg.config_hash(), members=False) is None or (
+            job.whole_hash is not None
+            and check(job.folder, "family", job.whole_hash, members=False) is None)
+
     def table(self, job: FamilyJob) -> pd.DataFrame:
         """The per-member table of a complete family job (its first ``members`` members)."""
-        return read_family(job.folder, members=False, settings=False).table
+        table = read_family(job.folder, members=False, settings=False).table
+        family = job.cfg.scenario.family
+        if family is not None and len(table) > family.size:  # a rung of a whole family
+            table = table[table["member"] < family.size].reset_index(drop=True)
+        return table
 
     def run(self, jobs: list[FamilyJob], label: str) -> list[pd.DataFrame]:
-        from pipeline.store.manifest import check
         from pipeline.studies.multiverse.runs import run_families
 
         todo, seen = [], set()
         for job in jobs:
-            if job.folder not in seen and check(job.folder, "family", job.cfg.config_hash(),
-                                                members=False) is not None:
+            if job.folder not in seen and not self.complete(job):
                 todo.append((job.cfg, job.folder))
                 seen.add(job.folder)
         run_families(todo, self.out_dir, self.log, self.launcher, self.cache, label,
@@ -719,7 +742,7 @@ def run_studies_together(runner: Runner, studies: list[TunedStudy], rungs: Rungs
                 entry.loop.tell(batch.results())
                 start_batch(entry)
 
-        pool.submit(job.cfg, job.folder, done)
+        pool.submit(job.cfg, job.folder, done, job.whole_hash)
 
     try:
         for entry in studies:

@@ -155,10 +155,13 @@ def _run_tuning(space: TuneSpace, out_dir: Path, spaces: dict, overrides: list[s
     else:
         # SLURM: each rung of a batch one array, one study after the other
         for entry in entries:
-            while (settings := entry.loop.next_batch()) is not None:
-                entry.loop.tell(evaluate_in_rungs(
-                    runner, entry.method, entry.replicate, settings, entry.threshold, rungs,
-                    rungs.front_at_rungs(entry.loop.study), measure))
+
+            def evaluate(settings: list[dict], entry: TunedStudy = entry) -> list[tuple]:
+                return evaluate_in_rungs(runner, entry.method, entry.replicate, settings,
+                                         entry.threshold, rungs,
+                                         rungs.front_at_rungs(entry.loop.study), measure)
+
+            entry.loop.run(evaluate)
     trial_tables, histories = [], []
     for entry in entries:
         history, converged = entry.loop.history, entry.loop.converged
