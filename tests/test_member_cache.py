@@ -173,3 +173,37 @@ def test_the_environment_variable_names_or_disables_the_cache(monkeypatch, tmp_p
     monkeypatch.delenv("PIPELINE_MEMBER_CACHE")
     assert MemberCache.from_env() is None
     assert MemberCache.from_env(default=tmp_path) == MemberCache(tmp_path.resolve())
+
+
+def test_restore_asks_the_config_text_only_of_a_cached_member(populated, make_config,
+                                                             tmp_path):
+    """A family hands restore its members' hashes (computed at once) and their config YAML as
+    a callable: a miss never builds the YAML, a hit writes exactly what the callable returns,
+    and the key from a given hash is the key from the config's own."""
+    root, cache, small, large, _, _ = populated
+    unseen = _family(make_config, 3, ("scenario.family.seed=4",))  # never run: misses
+    asked: list[str] = []
+
+    def text(name: str):
+        def make() -> str:
+            asked.append(name)
+            return f"{name}\n"
+        return make
+
+    hits, expected = [], []
+    for label, cfg_family in (("large", large), ("unseen", unseen)):
+        members = family_members(cfg_family.scenario, cfg_family.vehicle.footprint_radius_m)
+        hashes = cfg_family.member_config_hashes(members)
+        for i, member in enumerate(members):
+            cfg = dataclasses.replace(cfg_family, scenario=member)
+            assert hashes[i] == cfg.config_hash()
+            assert cache.key(cfg, hashes[i]) == cache.key(cfg)
+            name = f"{label}{i}"
+            hit = cache.restore(cfg, tmp_path / name, text(name), hashes[i])
+            hits.append(hit)
+            expected.append(label == "large")
+            if hit:
+                assert (tmp_path / name / "config.yaml").read_text() == f"{name}\n"
+                assert check(tmp_path / name, "run", hashes[i]) is None
+    assert hits == expected and sum(hits) == 6
+    assert asked == [f"large{i}" for i in range(6)]

@@ -145,7 +145,7 @@ def test_a_changed_space_is_another_study(tmp_path):
 
     path = CONF_DIR / "tune" / "default.yaml"
     pruned, unpruned = load_tune_space(path), load_tune_space(path, ["rungs=[]"])
-    assert pruned.rungs == [10, 20] and unpruned.rungs == []
+    assert pruned.rungs == [5, 10, 20] and unpruned.rungs == []
     assert pruned.trial_key() != unpruned.trial_key()
     assert unpruned.name == "default_changed"
     for bad in (["rungs=[20, 10]"], ["rungs=[40]"], ["prune_gain=2"], ["nope=1"],

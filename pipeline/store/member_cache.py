@@ -38,6 +38,7 @@ import os
 import shutil
 import sys
 import uuid
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -145,14 +146,15 @@ class MemberCache:
 
     # --- keys and places -------------------------------------------------------------------
 
-    def key(self, cfg) -> str | None:
+    def key(self, cfg, config_hash: str | None = None) -> str | None:
         """The member's cache key, or None when it must not be cached (a plug-in outside the
-        package: its code is not in the key)."""
+        package: its code is not in the key); ``config_hash``: ``cfg.config_hash()`` when the
+        caller has it (a family computes its members' hashes at once)."""
         for section in (cfg.planner, cfg.controller):
             target = getattr(section, "_target_", None)
             if target and not str(target).startswith("pipeline."):
                 return None
-        text = f"{cfg.config_hash()}:{environment_key()}"
+        text = f"{config_hash or cfg.config_hash()}:{environment_key()}"
         return hashlib.sha256(text.encode()).hexdigest()[:32]
 
     def entry(self, key: str) -> Path:
@@ -203,15 +205,21 @@ class MemberCache:
 
     # --- use -------------------------------------------------------------------------------
 
-    def restore(self, cfg, folder: Path, config_text: str) -> bool:
-        """Fill the member folder ``folder`` from the cache (its files, then ``config_text`` as
-        its ``config.yaml``, then its manifest, last); False when the member is not cached."""
-        key = self.key(cfg)
+    def restore(self, cfg, folder: Path, config_text: str | Callable[[], str],
+                config_hash: str | None = None) -> bool:
+        """Fill the member folder ``folder`` from the cache (its files, then ``config_text``
+        (or what it returns, asked only for a cached member) as its ``config.yaml``, then its
+        manifest, last); False when the member is not cached. ``config_hash``:
+        ``cfg.config_hash()`` when the caller has it."""
+        config_hash = config_hash or cfg.config_hash()
+        key = self.key(cfg, config_hash)
         if key is None:
             return False
         entry = self.entry(key)
+        if not entry.is_dir():  # not cached: no lock needed to say so (a miss costs a stat)
+            return False
         with self._lock():
-            if not self._trusted(entry, cfg.config_hash()):
+            if not self._trusted(entry, config_hash):
                 return False
             folder = Path(folder)
             folder.mkdir(parents=True, exist_ok=True)
@@ -225,20 +233,23 @@ class MemberCache:
                 return False
             if not optional:
                 (folder / HORIZON_FILE).unlink(missing_ok=True)
-        write_text_atomic(folder / "config.yaml", config_text)
-        write_manifest(folder, "run", RUN_FILES + optional, cfg.config_hash(),
+        write_text_atomic(folder / "config.yaml",
+                          config_text if isinstance(config_text, str) else config_text())
+        write_manifest(folder, "run", RUN_FILES + optional, config_hash,
                        {"member_cache": key})
         return True
 
-    def publish(self, cfg, folder: Path) -> bool:
+    def publish(self, cfg, folder: Path, config_hash: str | None = None) -> bool:
         """Store the complete member folder ``folder`` (its manifest written) in the cache;
-        False when it is not cacheable or already there."""
-        key = self.key(cfg)
+        False when it is not cacheable or already there. ``config_hash``:
+        ``cfg.config_hash()`` when the caller has it."""
+        config_hash = config_hash or cfg.config_hash()
+        key = self.key(cfg, config_hash)
         if key is None:
             return False
         entry = self.entry(key)
         with self._lock():
-            if entry.is_dir() and self._trusted(entry, cfg.config_hash()):
+            if entry.is_dir() and self._trusted(entry, config_hash):
                 return False
             tmp = self.root / "tmp" / f"publish-{uuid.uuid4().hex}"
             tmp.mkdir(parents=True)
@@ -246,7 +257,7 @@ class MemberCache:
                 optional = (HORIZON_FILE,) if (Path(folder) / HORIZON_FILE).is_file() else ()
                 for name in (*RUN_FILES, *optional, MANIFEST):
                     _link_or_copy(Path(folder) / name, tmp / name)
-                if check(tmp, "run", cfg.config_hash()) is not None:
+                if check(tmp, "run", config_hash) is not None:
                     return False  # the member folder changed under us: never publish it
                 entry.parent.mkdir(parents=True, exist_ok=True)
                 try:

@@ -7,6 +7,7 @@ parallel. The Hydra entry point is :mod:`pipeline.run`.
 
 from __future__ import annotations
 
+import functools
 import gc
 import logging
 from dataclasses import dataclass
@@ -266,7 +267,8 @@ def _members_to_run(cfg: ExperimentConfig, members: list, out_dir: Path,
             counts.resumed += 1
             continue
         if member_cache is not None and member_cache.restore(
-                member_cfg, folder, config_yaml(member_cfg, memo)):
+                member_cfg, folder, functools.partial(config_yaml, member_cfg, memo),
+                hashes[i]):
             metrics_by_index[i] = read_metrics_json(folder)
             counts.reused += 1
             continue

@@ -99,9 +99,9 @@ class TuneSpace:
     matched_control: str = "baseline_matched"
     safety_reference: str = ""
     settled_share: float = 0.8
-    rungs: List[int] = field(default_factory=lambda: [10, 20])
+    rungs: List[int] = field(default_factory=lambda: [5, 10, 20])
     prune_gain: float = 0.001
-    prune_after_trials: int = 20
+    prune_after_trials: int = 10
     track: str = "lateral"
     #: the scenarios tuned and judged on: the scripted family (``family``) or the recorded
     #: pedestrians (``pedestrians``), trained on ``training_scenes`` and judged on
