@@ -43,7 +43,7 @@ def _screenshot(report: Path, out: Path, narrow: Path | None = None,
         raise CommandError(f"error: no scenario explorer at {explorer_page} (the report was "
                            "written without one)")
     experiment, _, index = member.partition("/")
-    if not experiment or not index.isdigit():
+    if not experiment or not (index.isascii() and index.isdigit()):
         raise CommandError(f"error: --member must be <experiment>/<index>, e.g. family/0; "
                            f"got {member!r}")
     try:

@@ -24,7 +24,7 @@ import time
 from pathlib import Path
 
 import pytest
-from hypothesis import HealthCheck, given, settings
+from hypothesis import HealthCheck, example, given, settings
 from hypothesis import strategies as st
 
 from pipeline.errors import FolderBusyError
@@ -179,6 +179,8 @@ except FolderBusyError as exc:
                          st.text(max_size=40).map(str.encode),
                          st.builds(lambda pid, host: f"{pid} {host}\n".encode(),
                                    st.integers(0, 2**40), st.sampled_from([HOST, "other-node"]))))
+@example(content="\u00b9".encode())  # a digit to str.isdigit, not to int()
+@example(content="\u0663 other-node\n".encode())  # an Arabic-Indic three
 def test_any_lock_file_content_is_taken_or_refused_in_one_line(tmp_path, content):
     """Property: whatever a (damaged, foreign, empty) lock file holds, folder_lock either
     takes it (and then writes this process and host) or refuses in one line; it never takes
@@ -187,7 +189,9 @@ def test_any_lock_file_content_is_taken_or_refused_in_one_line(tmp_path, content
     folder.mkdir(exist_ok=True)
     (folder / LOCK).write_bytes(content)
     words = content.decode("utf-8", "replace").split()
-    foreign = len(words) > 1 and words[0].isdigit() and len(words[0]) < 12 and words[1] != HOST
+    # a pid is ASCII digits (what a lock writes); anything else is a damaged file, not a holder
+    foreign = (len(words) > 1 and words[0].isascii() and words[0].isdigit()
+               and len(words[0]) < 12 and words[1] != HOST)
     try:
         with folder_lock(folder):
             assert (folder / LOCK).read_text() == f"{os.getpid()} {HOST}\n"

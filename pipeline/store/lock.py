@@ -47,7 +47,9 @@ def _holder(fd: int) -> tuple[int | None, str | None]:
         words = os.read(fd, 512).decode("utf-8", "replace").split()
     except OSError:
         return None, None
-    pid = int(words[0]) if words and words[0].isdigit() and len(words[0]) < 12 else None
+    # ASCII digits only: str.isdigit() also takes superscripts ('\u00b9'), which int() refuses
+    first = words[0] if words else ""
+    pid = int(first) if first.isascii() and first.isdigit() and len(first) < 12 else None
     host = words[1] if len(words) > 1 else None
     return pid, host
 
