@@ -239,11 +239,10 @@ class MemberCache:
                        {"member_cache": key})
         return True
 
-    def publish(self, cfg, folder: Path, config_hash: str | None = None) -> bool:
+    def publish(self, cfg, folder: Path) -> bool:
         """Store the complete member folder ``folder`` (its manifest written) in the cache;
-        False when it is not cacheable or already there. ``config_hash``:
-        ``cfg.config_hash()`` when the caller has it."""
-        config_hash = config_hash or cfg.config_hash()
+        False when it is not cacheable or already there."""
+        config_hash = cfg.config_hash()
         key = self.key(cfg, config_hash)
         if key is None:
             return False
