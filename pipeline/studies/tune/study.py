@@ -45,8 +45,8 @@ import numpy as np
 import pandas as pd
 
 from pipeline.analysis.claims import ALL_CLAIMS, FORCE_CLAIMS, Ledger, family_ledger
-from pipeline.analysis.objectives import objective_values, tuning_table
-from pipeline.analysis.tally import Tally
+from pipeline.analysis.objectives import CENSORED_AT_RUN_END, objective_values, tuning_table
+from pipeline.analysis.tally import Tally, collided
 from pipeline.errors import StudyError
 from pipeline.store.files import json_safe
 from pipeline.store.manifest import refuse_other_record, untrust
@@ -122,9 +122,7 @@ def _run_tuning(space: TuneSpace, out_dir: Path, spaces: dict, overrides: list[s
     storage = trial_storage(out_dir / "tune.db")
     rule, rungs = Convergence.of(space), Rungs.of(space)
 
-    def measure(table: pd.DataFrame) -> tuple[list[float], int]:
-        return (list(objective_values(tuning_table(table, space.censoring), space.objectives)),
-                Tally.of(table).collisions)
+    measure = family_measure(space)
 
     # every replicate's feasibility threshold first: the untuned reference on its training
     # family (the five families in one pool)
@@ -192,6 +190,21 @@ def _run_tuning(space: TuneSpace, out_dir: Path, spaces: dict, overrides: list[s
     summary = TuneSummary.from_json(json_safe(data))
     return TuneResult(summary, trials, judged.heldout, judged.default.to_frame(),
                       judged.tuned_frame(), judged.outcomes).write(out_dir)
+
+
+def family_measure(space: TuneSpace) -> Callable[[pd.DataFrame], tuple[list[float], int]]:
+    """The function a trial's family table is judged by: its objective values (the tuning
+    table, :func:`~pipeline.analysis.objectives.tuning_table`) and its collision count.
+    Only the columns these read are copied (the parent measures every rung of every trial)."""
+    read = {"collision", "duration_s", *(o.metric for o in space.objectives),
+            *(c for start_flag in CENSORED_AT_RUN_END.values() for c in start_flag)}
+
+    def measure(table: pd.DataFrame) -> tuple[list[float], int]:
+        narrow = table[[c for c in table.columns if c in read]]
+        return (list(objective_values(tuning_table(narrow, space.censoring), space.objectives)),
+                int(collided(narrow).sum()))
+
+    return measure
 
 
 def controlled_keys(space: TuneSpace, spaces: dict) -> dict[str, str]:
