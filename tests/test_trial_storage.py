@@ -143,3 +143,29 @@ def test_a_rung_is_measured_as_the_whole_table_would_be():
         assert got[1] == want[1]
         np.testing.assert_array_equal(np.array(got[0]), np.array(want[0]))
         assert table["collision"].sum() == got[1]
+
+
+def _burn(seconds: float) -> float:
+    import time
+
+    end, total = time.process_time() + seconds, 0.0
+    while time.process_time() < end:
+        total += 1.0
+    return total
+
+
+def test_the_core_clock_does_not_count_workers_earlier_work():
+    """Workers busy before the clock starts (a benchmark's families before its tune): their
+    CPU time is not the clock's. Planted: two workers burn 3 CPU-s each, then the clock
+    watches one worker burn 0.5 s (new workers, started in the window, count their start)."""
+    from joblib import Parallel, delayed
+
+    from pipeline.studies.tune.study import CoreClock
+
+    Parallel(n_jobs=2)(delayed(_burn)(3.0) for _ in range(2))  # the workers stay alive
+    clock = CoreClock()
+    Parallel(n_jobs=2)(delayed(_burn)(0.5) for _ in range(1))
+    share = clock.utilisation()
+    counted_cpu_s = share * clock.wall_s() * clock.cores
+    assert 0.45 <= counted_cpu_s < 3.0, counted_cpu_s  # not the 6 CPU-s from before
+    assert share <= 1.0

@@ -238,15 +238,28 @@ def controlled_keys(space: TuneSpace, spaces: dict) -> dict[str, str]:
     return keys
 
 
+def _stop_reused_workers() -> None:
+    """Shut down joblib's reusable workers, if this process has them (waited for: the kernel
+    then counts their time among this process's children); none are started."""
+    from joblib.externals.loky import reusable_executor
+
+    executor = getattr(reusable_executor, "_executor", None)
+    if executor is not None:
+        executor.shutdown(wait=True)
+
+
 class CoreClock:
     """CPU-seconds over (wall-clock seconds x cores) since it was made, of this process and
     of its worker processes (joblib's workers are shut down first, so that the kernel has
-    counted their time)."""
+    counted their time). Workers left running by earlier work of the process (a benchmark's
+    families before its tune) are shut down when the clock starts: the kernel adds a child's
+    whole life to its parent's count when it ends, so their earlier work would count here."""
 
     def __init__(self) -> None:
         import os
         import time
 
+        _stop_reused_workers()
         self.start_wall = time.perf_counter()
         self.start_cpu = self._cpu()
         self.cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") \
@@ -269,9 +282,7 @@ class CoreClock:
     def utilisation(self) -> float:
         import time
 
-        from joblib.externals.loky import get_reusable_executor
-
-        get_reusable_executor().shutdown(wait=True)
+        _stop_reused_workers()
         wall = time.perf_counter() - self.start_wall
         return (self._cpu() - self.start_cpu) / max(wall * self.cores, 1e-9)
 
