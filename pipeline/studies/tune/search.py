@@ -392,15 +392,18 @@ def _constraint(trial) -> list[float]:
 
 
 def trial_storage(path: Path):
-    """The SQLite file that keeps the trials (:func:`batched_trial_storage`), without a disk
-    sync on every commit. A killed process loses nothing that was committed; only a crash of
-    the machine itself could leave the file damaged, which the next tune reports.
+    """The SQLite file that keeps the trials, written a trial at a time
+    (:class:`~pipeline.studies.tune.trial_store.BatchedTrialStorage`), without a disk sync on
+    every commit. A killed process loses nothing that was committed; only a crash of the
+    machine itself could leave the file damaged, which the next tune reports.
 
     Each thread keeps its connection (SQLAlchemy's default for an SQLite file opens one per
     Optuna session, a connect and a pragma on every ask and tell: 3 % of the tune's parent)."""
     import optuna
     from sqlalchemy import event
     from sqlalchemy.pool import SingletonThreadPool
+
+    from pipeline.studies.tune.trial_store import BatchedTrialStorage
 
     storage = optuna.storages.RDBStorage(f"sqlite:///{Path(path).resolve()}",
                                          engine_kwargs={"poolclass": SingletonThreadPool})
@@ -410,66 +413,13 @@ def trial_storage(path: Path):
 
     event.listen(storage.engine, "connect", no_sync)
     storage.engine.dispose()  # connections made before the listener: closed
-    return batched_trial_storage(storage)
-
-
-def batched_trial_storage(backend):
-    """Optuna's cached storage over ``backend`` (an ``RDBStorage``), writing a running
-    trial's parameters and attributes in one commit when asked (:func:`flush_trials`) or
-    when the trial finishes, instead of one commit per parameter and attribute (Optuna 2.10's
-    ``_CachedStorage`` commits each: a dozen per trial, a quarter of the tune parent's CPU
-    with five-member rungs). Only this process writes a running trial (the tune's parent
-    owns every study), and it reads the trial from the cache, so the trials it asks and tells
-    are the same; a running trial in the file holds its parameters once its batch is asked
-    (what an interrupted tune's resume needs), its attributes once it is told. The file is
-    read for a study's trials only while it has some this process neither owns nor saw
-    finish."""
-    from optuna.storages._cached_storage import _CachedStorage
-
-    class BatchedTrialStorage(_CachedStorage):
-        def __init__(self, backend) -> None:
-            super().__init__(backend)
-            #: the studies whose trials this process has read from the file
-            self.read_studies: set[int] = set()
-
-        def _flush_trial(self, trial_id: int) -> bool:
-            # called with the lock held after each update: only a finished trial is written
-            mapped = self._trial_id_to_study_id_and_number.get(trial_id)
-            if mapped is not None:
-                updates = self._studies[mapped[0]].updates.get(mapped[1])
-                if updates is not None and (updates.state is None
-                                            or not updates.state.is_finished()):
-                    return True
-            return super()._flush_trial(trial_id)
-
-        def read_trials_from_remote_storage(self, study_id: int) -> None:
-            # Optuna reads the file for every trial this process neither owns nor saw finish,
-            # on every read of the study (a query excluding every known trial id: it grows
-            # with the study); with one writer that is only a trial of an earlier process
-            # still open, or one enqueued and not yet asked
-            # (Optuna makes a study's cache entry before reading its trials: the studies read
-            # are counted here)
-            with self._lock:
-                study = self._studies.get(study_id)
-                if study is not None and study_id in self.read_studies and all(
-                        t._trial_id in study.owned_or_finished_trial_ids
-                        for t in study.trials.values()):
-                    return
-            super().read_trials_from_remote_storage(study_id)
-            with self._lock:
-                self.read_studies.add(study_id)
-
-        def flush(self, trial_id: int) -> bool:
-            """Write ``trial_id``'s pending updates now (one commit)."""
-            with self._lock:
-                return _CachedStorage._flush_trial(self, trial_id)
-
-    return BatchedTrialStorage(backend)
+    return BatchedTrialStorage(storage)
 
 
 def flush_trials(study, trials) -> None:
     """Write the pending updates of running ``trials`` (their parameters, once asked) to the
-    study's storage, where it defers them (:func:`batched_trial_storage`)."""
+    study's storage, where it defers them (:class:`~pipeline.studies.tune.trial_store.
+    BatchedTrialStorage`)."""
     flush = getattr(study._storage, "flush", None)
     if flush is not None:
         for trial in trials:
