@@ -71,3 +71,30 @@ def test_a_trials_config_is_hydras_whatever_section_its_values_touch(method, mon
     with pytest.raises(Exception, match="no_such_key"):
         make([f"method={method}", "scenario=family", "planner.no_such_key=1"])
     assert len(make.fallbacks) == 2
+
+
+def test_what_a_section_cannot_say_alone_is_still_hydras():
+    """Found in review: a value the schema fills from another section when it is null
+    (metrics.goal_tolerance_m follows scenario.goal_tolerance_m), a key set both as a section
+    and inside it (their order decides), and a value that interpolates (it reads the whole
+    config): each gives Hydra's config, or Hydra's error."""
+    make, _ = composer([])
+    base = ["method=improved", "scenario=family"]
+    cases = [["scenario.goal_tolerance_m=0.5000000001"],  # close: the same check passes
+             ["scenario.goal_tolerance_m=1.0"],
+             ["scenario.goal_tolerance_m=1.0", "metrics.goal_tolerance_m=1.0"],
+             ["planner.beta=0.3", "scenario.family.seed=4", "scenario.goal_tolerance_m=0.8"],
+             ["scenario.family.seed=5", "scenario.family={seed:7}", "scenario.family.seed=9"],
+             ["scenario.family={seed:7}", "scenario.family.seed=9"],
+             ["scenario.family.seed=9", "scenario.family={seed:7}"]]
+    for extra in cases:
+        fast, reference = make(base + extra), _hydra_path(base + extra)
+        assert fast == reference and fast.config_hash() == reference.config_hash(), extra
+        assert fast.metrics.goal_tolerance_m == fast.scenario.goal_tolerance_m
+    assert make.fallbacks == []
+    for extra in (["scenario.family.size=${seed}"], ["planner.step_max_m=${step_size}"],
+                  ["scenario.goal_tolerance_m=1.0", "metrics.goal_tolerance_m=0.7"]):
+        with pytest.raises(Exception) as hydra_error:
+            _hydra_path(base + extra)
+        with pytest.raises(type(hydra_error.value)):
+            make(base + extra)

@@ -5,6 +5,7 @@ multiverse, the tuning, the NMPC and speed checks all compose through it)."""
 from __future__ import annotations
 
 import copy
+from collections.abc import Sequence
 from typing import Any
 
 from pipeline.config import CONF_DIR
@@ -84,8 +85,8 @@ def _with_values(base, values: list[str], parser, base_object=None,
     """A copy of the typed ``base`` with the value overrides set, as the experiment config;
     None for a sweep override or any failure (Hydra's path then says what is wrong).
 
-    With ``base_object`` (``base`` as its dataclasses), only the sections the values touch
-    are typed again (:func:`_with_section_values`); a deep copy of the whole typed config
+    With ``base_object`` (``base`` as its dataclasses, and the values they fill:
+    :func:`followers_of`), only the sections the values touch are typed again (:func:`_with_section_values`); a deep copy of the whole typed config
     otherwise."""
     from omegaconf import OmegaConf
 
@@ -93,7 +94,9 @@ def _with_values(base, values: list[str], parser, base_object=None,
         parsed = parser.parse_overrides(values)
         if not any(o.is_sweep_override() for o in parsed):
             if base_object is not None:
-                cfg = _with_section_values(base_object, parsed, {} if memo is None else memo)
+                obj, followers = base_object
+                cfg = _with_section_values(obj, parsed, {} if memo is None else memo,
+                                           followers)
                 if cfg is not None:
                     return cfg
             cfg = copy.deepcopy(base)
@@ -109,7 +112,8 @@ def _with_values(base, values: list[str], parser, base_object=None,
 SECTION_MEMO_SIZE = 256
 
 
-def _with_section_values(base_object, parsed, memo: dict) -> Any:
+def _with_section_values(base_object, parsed, memo: dict,
+                         followers: Sequence[tuple[str, ...]] = ()) -> Any:
     """``base_object`` (the typed config's dataclasses) with each value override set in its
     section: the section (the dataclass holding the key) is typed by OmegaConf, the values
     set there (its type checks and conversions) and turned back into its dataclass (its range
@@ -118,48 +122,131 @@ def _with_section_values(base_object, parsed, memo: dict) -> Any:
     tuning composes a config for every trial). None when a key's section is not a dataclass
     (a dict, a list): the whole path then. ``memo`` keeps the sections already typed, keyed
     by the section object they were set on (held by the composer's bases: never reused for
-    another) and the values."""
+    another) and the values. ``followers``: the values the schema fills from another
+    section (:func:`followers_of`), filled again once the values are set.
+
+    The whole path (None) also for a value that interpolates and for a key set both as a
+    section and inside it."""
     import dataclasses
 
+    keys = [o.key_or_group for o in parsed]
+    values = [o.value() for o in parsed]
+    # the whole path for what a section cannot say alone: a value that interpolates (it
+    # reads the whole config), a key set both as a section and inside it (their order)
+    if any("${" in repr(v) for v in values) or any(
+            other.startswith(key + ".") for key in keys for other in keys):
+        return None
+    sections: dict[str, list[tuple[str, Any]]] = {}
+    for key, value in zip(keys, values, strict=True):
+        section, _, leaf = key.rpartition(".")
+        sections.setdefault(section, []).append((leaf, value))
+    # each top-level section rebuilt with its values, the whole config once at the end (its
+    # checks across sections see every value at once, as Hydra's path does)
+    tops: dict[str, Any] = {}
+    fields = {f.name for f in dataclasses.fields(base_object)}
+    for section, items in sections.items():
+        path = section.split(".")
+        if path[0] not in fields:
+            return None
+        chain = _chain(tops.get(path[0], getattr(base_object, path[0])), path[1:])
+        if chain is None:
+            return None
+        rebuilt = _typed_section(chain[-1], section, items, memo,
+                                 own=_section(base_object, path) is chain[-1])
+        tops[path[0]] = _rebuilt(chain, path[1:], rebuilt)
+    # a value the schema fills from another section when it is null (metrics.goal_tolerance_m
+    # follows scenario.goal_tolerance_m) is null again, unless set here: the whole config's
+    # check fills it from the values set
+    for follower in followers:
+        if ".".join(follower) in keys:
+            continue
+        if len(follower) == 1:
+            tops[follower[0]] = None
+            continue
+        chain = [tops.get(follower[0], getattr(base_object, follower[0]))]
+        for name in follower[1:-1]:
+            chain.append(getattr(chain[-1], name))
+        tops[follower[0]] = _rebuilt(chain, list(follower[1:-1]),
+                                     dataclasses.replace(chain[-1], **{follower[-1]: None}))
+    return dataclasses.replace(base_object, **tops) if tops else base_object
+
+
+def _chain(top, path: list[str]) -> list | None:
+    """The dataclasses from ``top`` down ``path`` (attribute names), or None when a step is
+    not a dataclass field or the last is not a dataclass."""
+    import dataclasses
+
+    chain = [top]
+    for name in path:
+        holder = chain[-1]
+        if not dataclasses.is_dataclass(holder) or name not in {
+                f.name for f in dataclasses.fields(holder)}:
+            return None
+        chain.append(getattr(holder, name))
+    if not dataclasses.is_dataclass(chain[-1]) or isinstance(chain[-1], type):
+        return None
+    return chain
+
+
+def _typed_section(section_object, section: str, items: list[tuple[str, Any]], memo: dict,
+                   own: bool) -> Any:
+    """``section_object`` with ``items`` (leaf, value) set through OmegaConf (its type checks
+    and conversions, then the dataclass's own checks). A section set to the same values as
+    before (a tuning's family, seed and backend on every trial) is the same dataclass: typed
+    once (OmegaConf takes ~3 ms a section), when it is ``own`` (a section of the base itself,
+    alive as long as the composer: one rebuilt here is a new object whose id a later one may
+    take)."""
     from omegaconf import OmegaConf
 
-    sections: dict[str, list[tuple[str, Any]]] = {}
-    for override in parsed:
-        section, _, leaf = override.key_or_group.rpartition(".")
-        sections.setdefault(section, []).append((leaf, override.value()))
-    config = base_object
-    for section, items in sections.items():
-        path = section.split(".") if section else []
-        chain = [config]
-        for name in path:
-            holder = chain[-1]
-            if not dataclasses.is_dataclass(holder) or name not in {
-                    f.name for f in dataclasses.fields(holder)}:
-                return None
-            chain.append(getattr(holder, name))
-        if not dataclasses.is_dataclass(chain[-1]) or isinstance(chain[-1], type):
-            return None
-        # a section set to the same values as before (a tuning's family, seed and backend
-        # on every trial) is the same dataclass: typed once (OmegaConf takes ~3 ms a section)
-        # (only a section of the base itself, alive as long as the composer: a section
-        # rebuilt here is a new object whose id a later one may take)
-        own = _section(base_object, path) is chain[-1]
-        key = (id(chain[-1]), section, repr(items))
-        rebuilt = memo.get(key) if own else None
-        if rebuilt is None:
-            node = OmegaConf.structured(chain[-1])
-            OmegaConf.set_readonly(node, False)
-            for leaf, value in items:
-                OmegaConf.update(node, leaf, value, merge=True)
-            rebuilt = OmegaConf.to_object(node)
-            if own:
-                if len(memo) >= SECTION_MEMO_SIZE:
-                    memo.clear()
-                memo[key] = rebuilt
-        for name, holder in zip(reversed(path), reversed(chain[:-1]), strict=True):
-            rebuilt = dataclasses.replace(holder, **{name: rebuilt})
-        config = rebuilt
-    return config
+    key = (id(section_object), section, repr(items))
+    rebuilt = memo.get(key) if own else None
+    if rebuilt is None:
+        node = OmegaConf.structured(section_object)
+        OmegaConf.set_readonly(node, False)
+        for leaf, value in items:
+            OmegaConf.update(node, leaf, value, merge=True)
+        rebuilt = OmegaConf.to_object(node)
+        if own:
+            if len(memo) >= SECTION_MEMO_SIZE:
+                memo.clear()
+            memo[key] = rebuilt
+    return rebuilt
+
+
+def _rebuilt(chain: list, path: list[str], section) -> Any:
+    """The config ``chain[0]`` with the section at ``path`` (``chain``: the objects along it)
+    replaced by ``section``, every dataclass above it rebuilt (their checks run again)."""
+    import dataclasses
+
+    for name, holder in zip(reversed(path), reversed(chain[:-1]), strict=True):
+        section = dataclasses.replace(holder, **{name: section})
+    return section
+
+
+def followers_of(base, base_object) -> list[tuple[str, ...]]:
+    """The paths of the values that are null in the typed config ``base`` and filled in its
+    dataclasses ``base_object`` (a schema's ``__post_init__`` fills them from another
+    section): a run's value overrides may change what they follow."""
+    import dataclasses
+
+    from omegaconf import DictConfig, OmegaConf
+
+    out: list[tuple[str, ...]] = []
+
+    def walk(node, obj, path: tuple[str, ...]) -> None:
+        for f in dataclasses.fields(obj):
+            value = getattr(obj, f.name)
+            if OmegaConf.is_missing(node, f.name) or f.name not in node:
+                continue
+            raw = node._get_node(f.name)
+            if raw is None or raw._is_none():
+                if value is not None:
+                    out.append(path + (f.name,))
+            elif dataclasses.is_dataclass(value) and isinstance(raw, DictConfig):
+                walk(raw, value, path + (f.name,))
+
+    walk(base, base_object, ())
+    return out
 
 
 def _section(config, path: list[str]):
@@ -190,7 +277,8 @@ def _run_composer(run_overrides: list[str], typed_bases: dict[tuple, Any],
         if base is not None:
             if structural not in base_objects:
                 try:
-                    base_objects[structural] = OmegaConf.to_object(base)
+                    obj = OmegaConf.to_object(base)
+                    base_objects[structural] = (obj, followers_of(base, obj))
                 except Exception:  # noqa: BLE001 - a base out of range: each run says so
                     base_objects[structural] = None
             cfg = _with_values(base, values, parser, base_objects[structural], sections)
