@@ -28,9 +28,11 @@ def composer(extra: list[str]):
     # typed schema checks every node (together most of a second); the runs of a multiverse or
     # a tuning differ mostly in values. So each set of structural overrides (config groups,
     # Hydra's own, additions, deletions) is composed and typed once, and a run's plain
-    # `dotted.key=value` overrides are set on a copy of the typed config (OmegaConf.update,
-    # merge=True, as Hydra applies them after composing; the schema checks their types).
-    # Anything else, a config with interpolations, or any failure takes Hydra's whole path.
+    # `dotted.key=value` overrides are set on the sections of the typed config they touch
+    # (OmegaConf.update, merge=True, as Hydra applies them after composing; the schema checks
+    # their types: _with_section_values), or on a deep copy of it where a section cannot say
+    # it alone. Anything else, a config with interpolations, or any failure takes Hydra's
+    # whole path.
     typed_bases: dict[tuple, Any] = {}
     fallbacks: list[list[str]] = []
     make = _run_composer(run_overrides, typed_bases, fallbacks, {})
@@ -86,8 +88,8 @@ def _with_values(base, values: list[str], parser, base_object=None,
     None for a sweep override or any failure (Hydra's path then says what is wrong).
 
     With ``base_object`` (``base`` as its dataclasses, and the values they fill:
-    :func:`followers_of`), only the sections the values touch are typed again (:func:`_with_section_values`); a deep copy of the whole typed config
-    otherwise."""
+    :func:`followers_of`), only the sections the values touch are typed again
+    (:func:`_with_section_values`); a deep copy of the whole typed config otherwise."""
     from omegaconf import OmegaConf
 
     try:
@@ -235,13 +237,11 @@ def followers_of(base, base_object) -> list[tuple[str, ...]]:
 
     def walk(node, obj, path: tuple[str, ...]) -> None:
         for f in dataclasses.fields(obj):
-            value = getattr(obj, f.name)
-            if OmegaConf.is_missing(node, f.name) or f.name not in node:
+            if f.name not in node or OmegaConf.is_missing(node, f.name):
                 continue
-            raw = node._get_node(f.name)
-            if raw is None or raw._is_none():
-                if value is not None:
-                    out.append(path + (f.name,))
+            raw, value = node[f.name], getattr(obj, f.name)
+            if raw is None and value is not None:
+                out.append(path + (f.name,))
             elif dataclasses.is_dataclass(value) and isinstance(raw, DictConfig):
                 walk(raw, value, path + (f.name,))
 
