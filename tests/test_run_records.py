@@ -46,6 +46,20 @@ def test_manifest_lists_every_file_with_size_and_hash(paper):
     assert check(paper / "paper" / "baseline") is None
 
 
+def test_a_run_without_its_horizon_record_is_the_same_run(tmp_path, paper, make_config):
+    """record_horizon=False (a tune's training members) writes every file but horizon.npz,
+    byte for byte as the run that keeps it, and a complete record without it."""
+    folder = tmp_path / "no_horizon"
+    run_experiment(make_config(["method=baseline"]), folder, record_horizon=False)
+    kept = paper / "paper" / "baseline"
+    assert not (folder / "horizon.npz").exists() and (kept / "horizon.npz").is_file()
+    for name in ("config.yaml", "model.json", "trajectory.csv", "metrics.json"):
+        assert (folder / name).read_bytes() == (kept / name).read_bytes(), name
+    assert set(json.loads((folder / MANIFEST).read_text())["files"]) == {
+        "config.yaml", "model.json", "trajectory.csv", "timing.json", "metrics.json"}
+    assert check(folder) is None
+
+
 @pytest.mark.parametrize("damage, reason", [
     ("cut", "trajectory.csv differs"), ("swap", "trajectory.csv differs"),
     ("metrics_truncated", "metrics.json differs"), ("metrics_empty", "metrics.json differs"),

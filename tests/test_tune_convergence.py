@@ -61,6 +61,62 @@ def test_hypervolume_history_is_the_feasible_prefix_volume():
     assert all(history[i] == history[i - 1] for i in range(1, 40) if not feasible[i])
 
 
+def test_the_kept_history_computes_only_new_trials_and_equals_the_prefix_volumes():
+    """The tune asks a study's history after every batch: kept between calls, it equals the
+    volume of each feasible prefix (the oracle: hypervolume of the prefix's points) with rows
+    appended, NaN rows, a row's feasibility changed and a row replaced in the middle, and it
+    computes volumes only for rows after the shared prefix where the front moved."""
+    from pipeline.studies.tune.pareto import HypervolumeHistory
+
+    rng = np.random.default_rng(7)
+    bounds = [[0.0, 2.0], [0.0, 4.0], [0.0, 8.0]]
+    scale = np.array([2.0, 4.0, 8.0])
+    values = rng.uniform(0.0, 3.0, (60, 3))
+    values[5] = np.nan  # a trial whose objective is undefined
+    feasible = rng.random(60) < 0.7
+
+    def oracle(v, f):
+        out = []
+        for n in range(1, len(v) + 1):
+            pts = v[:n][f[:n]] / scale
+            pts = pts[np.all(np.isfinite(pts), axis=1)]
+            out.append(hypervolume(pts, np.ones(3)))
+        return np.array(out)
+
+    kept = HypervolumeHistory(bounds)
+    calls = []
+    import pipeline.studies.tune.pareto as pareto
+    original = pareto.hypervolume
+
+    def counted(points, reference):
+        if np.size(reference) == 3:  # a front's volume, not one of its slices
+            calls.append(1)
+        return original(points, reference)
+
+    pareto.hypervolume = counted
+    try:
+        for n in (10, 14, 30, 60):  # growing, a batch at a time
+            expected = oracle(values[:n], feasible[:n])
+            calls.clear()
+            got = kept.of(values[:n], feasible[:n])
+            assert got == pytest.approx(expected, rel=1e-12)
+        # only the last 30 rows were computed, and only where the front moved
+        moved = int(np.sum(np.diff(expected[29:]) > 1e-12))  # the oracle sums in another order
+        assert moved <= len(calls) < 30
+        calls.clear()
+        assert np.array_equal(kept.of(values, feasible), got)
+        assert not calls  # nothing new: nothing computed
+        changed_f = feasible.copy()
+        changed_f[20] = not changed_f[20]
+        changed_v = values.copy()
+        changed_v[40] = [0.01, 0.01, 0.01]  # a trial that dominates everything before it
+        for v, f in ((values, changed_f), (changed_v, feasible), (values[:35], feasible[:35])):
+            assert kept.of(v, f) == pytest.approx(oracle(v, f), rel=1e-12)
+            assert np.array_equal(kept.of(v, f), hypervolume_history(v, f, bounds))
+    finally:
+        pareto.hypervolume = original
+
+
 def stepped_history(n: int, plateau: int, step: float) -> np.ndarray:
     """A front that grows by ``step`` (relative) after every ``plateau`` trials: the measured
     shape of improved's front (plateaus of 20-40 trials between jumps)."""

@@ -216,7 +216,7 @@ def run_kernels(qp_cache: QpCache | None) -> Kernels:
 
 
 def simulate(cfg: LoopSettings, scenario: Scenario, qp_cache: QpCache | None = None,
-             kernels: Kernels | None = None) -> SimulationResult:
+             kernels: Kernels | None = None, record_horizon: bool = True) -> SimulationResult:
     """Run the closed loop once (with BLAS on one thread, see :func:`_closed_loop`).
 
     Parameters
@@ -227,6 +227,10 @@ def simulate(cfg: LoopSettings, scenario: Scenario, qp_cache: QpCache | None = N
         Compiled QPs shared with other runs (a private cache when omitted).
     kernels : Kernels, optional
         The loop's kernels; by default :func:`run_kernels` of the cache.
+    record_horizon : bool
+        Keep what each step planned (:mod:`pipeline.loop.horizon`, the report's scenario
+        explorer); False leaves ``horizon`` empty and changes no other number (a tune's
+        training members, which no report shows: about 7 % of a member's CPU time).
 
     Returns
     -------
@@ -254,11 +258,12 @@ def simulate(cfg: LoopSettings, scenario: Scenario, qp_cache: QpCache | None = N
         qp_cache.process_local["threadpool_controller"] = (len(sys.modules), threads)
     with threads.limit(limits=1, user_api="blas"):
         return _closed_loop(cfg, scenario, qp_cache,
-                            kernels if kernels is not None else run_kernels(qp_cache))
+                            kernels if kernels is not None else run_kernels(qp_cache),
+                            record_horizon)
 
 
 def _closed_loop(cfg: LoopSettings, scenario: Scenario, qp_cache: QpCache | None,
-                 kernels: Kernels) -> SimulationResult:
+                 kernels: Kernels, record_horizon: bool = True) -> SimulationResult:
     """The loop of :func:`simulate`."""
     kinematic, plant, controller, planner = _loop_stages(cfg, scenario, qp_cache, kernels)
     vehicle_radius = cfg.vehicle.footprint_radius_m
@@ -273,7 +278,8 @@ def _closed_loop(cfg: LoopSettings, scenario: Scenario, qp_cache: QpCache | None
     obstacle_names = [tuple(obstacle_column(j, f) for f in OBSTACLE_FIELDS)
                       for j in range(scenario.n_obstacles)]
     log = TrajectoryLog(scenario.n_steps + 1)
-    planned = HorizonLog(scenario.n_steps + 1, scenario.n_obstacles)
+    planned = HorizonLog(scenario.n_steps + 1, scenario.n_obstacles) if record_horizon \
+        else None
     solve_times = np.zeros(scenario.n_steps + 1)
     n_solves = 0
     state = plant.initial_state(scenario)
@@ -304,7 +310,8 @@ def _closed_loop(cfg: LoopSettings, scenario: Scenario, qp_cache: QpCache | None
             visible = visible.nearest_first(state[:2])
         position = state[:2].copy()
         rollout = planner.rollout(position, scenario.goal_m, visible, plant.velocity(state))
-        planned.put(k, rollout, snapshot)
+        if planned is not None:
+            planned.put(k, rollout, snapshot)
         speed_ref = _planned_speed(planner, position, psi, visible, scenario, vehicle_radius,
                                    rollout, state, path_aware) if plans_speed else np.nan
         observation = Observation(time_s, state, frame, np.array([along, lateral]), e_psi,
@@ -322,7 +329,8 @@ def _closed_loop(cfg: LoopSettings, scenario: Scenario, qp_cache: QpCache | None
                            + list(TAIL))
     return SimulationResult(trajectory, solve_times[:n_solves], controller.compile_count,
                             controller.compile_time_s, termination == "goal_line", termination,
-                            planned.arrays(controller, log.rows))
+                            planned.arrays(controller, log.rows) if planned is not None
+                            else {})
 
 
 def _loop_stages(cfg: LoopSettings, scenario: Scenario, qp_cache: QpCache | None,

@@ -49,7 +49,8 @@ class RunSummary:
 
 def run_experiment(cfg: ExperimentConfig, out_dir: Path, resume: bool = True,
                    qp_cache: QpCache | None = None,
-                   scenario: Scenario | None = None) -> RunSummary:
+                   scenario: Scenario | None = None, record_horizon: bool = True
+                   ) -> RunSummary:
     """Simulate one configuration and write its run folder.
 
     Parameters
@@ -65,6 +66,10 @@ def run_experiment(cfg: ExperimentConfig, out_dir: Path, resume: bool = True,
         Compiled QPs shared with other runs of this process (or shipped to a worker).
     scenario : Scenario, optional
         The scenario to simulate (a CommonRoad file's); by default built from ``cfg.scenario``.
+    record_horizon : bool
+        Write what each step planned (``horizon.npz``, the report's scenario explorer); a
+        tune's training members go without (:attr:`~pipeline.studies.tune.TuneSpace.
+        training_horizon`). No other file changes.
 
     Returns
     -------
@@ -90,7 +95,7 @@ def run_experiment(cfg: ExperimentConfig, out_dir: Path, resume: bool = True,
                           lambda: build_lateral_model(cfg.vehicle, cfg.scenario.speed_mps,
                                                       cfg.scenario.sample_time_s,
                                                       cfg.model.b2_heading_entry))
-    result = simulate(cfg, scenario, qp_cache)
+    result = simulate(cfg, scenario, qp_cache, record_horizon=record_horizon)
     context = trajectory_context(cfg)
     metrics = compute_metrics(result.trajectory, context, cfg.metrics)
     track = "kinematic" if cfg.controller.kind == "kinematic_mpc" else "lateral"
@@ -168,17 +173,19 @@ COMPILED_KERNELS_MIN_MEMBERS = 50
 
 
 def _run_chunk(jobs: list[tuple[int, ExperimentConfig, Path]], qp_cache: QpCache,
-               member_cache: MemberCache | None = None) -> list[tuple[int, dict]]:
+               member_cache: MemberCache | None = None, record_horizon: bool = True
+               ) -> list[tuple[int, dict]]:
     """Run a few family members in one worker, all with the compiled QP shipped in
     ``qp_cache`` (so a worker compiles nothing), and publish each new one to
-    ``member_cache``."""
+    ``member_cache`` (``record_horizon``: :func:`run_experiment`'s)."""
     # loky's worker runs a full gc.collect() after each task (about 0.1 s here, over the ~250k
     # objects of numpy, scipy, cvxpy, numba...); what is alive when a task starts lives for the
     # whole worker (its imports, the kernels), so it is moved out of the collector's scans
     gc.freeze()
     done = []
     for index, member_cfg, folder in jobs:
-        summary = run_experiment(member_cfg, folder, qp_cache=qp_cache)
+        summary = run_experiment(member_cfg, folder, qp_cache=qp_cache,
+                                 record_horizon=record_horizon)
         if member_cache is not None and not summary.skipped:
             member_cache.publish(member_cfg, folder)
         done.append((index, summary.flat()))
@@ -194,7 +201,8 @@ def _chunks(items: list, n_workers: int, per_worker: int = 4) -> list[list]:
 
 def run_family(cfg: ExperimentConfig, out_dir: Path, progress: bool = True,
                qp_cache: QpCache | None = None, member_cache: MemberCache | None = None,
-               counts: MemberCounts | None = None) -> pd.DataFrame:
+               counts: MemberCounts | None = None, record_horizon: bool = True
+               ) -> pd.DataFrame:
     """Run every member of ``cfg.scenario.family`` (in parallel with joblib) for one method.
 
     The QP is compiled once, here, and handed to the workers with their members (chunks of
@@ -206,6 +214,8 @@ def run_family(cfg: ExperimentConfig, out_dir: Path, progress: bool = True,
     in ``member_cache`` (:mod:`pipeline.store.member_cache`; by default the one
     ``PIPELINE_MEMBER_CACHE`` names), which receives every member simulated here. Where the
     members came from is added to ``counts`` and written into the family's ``timing.json``.
+    ``record_horizon``: whether new members write what each step planned
+    (:func:`run_experiment`).
 
     Returns
     -------
@@ -230,7 +240,7 @@ def run_family(cfg: ExperimentConfig, out_dir: Path, progress: bool = True,
     _prepare_cache(cfg, cache, len(pending))
     chunks = _chunks(pending, family.n_jobs)
     results = Parallel(n_jobs=family.n_jobs, return_as="generator_unordered")(
-        delayed(_run_chunk)(chunk, cache, member_cache) for chunk in chunks)
+        delayed(_run_chunk)(chunk, cache, member_cache, record_horizon) for chunk in chunks)
     with Progress(len(members), f"{cfg.method_name} family", "scenario",
                   initial=len(metrics_by_index), disable=not progress) as bar:
         for done in results:
@@ -328,7 +338,8 @@ def _write_family_folder(cfg: ExperimentConfig, out_dir: Path, table: pd.DataFra
 def run_families_together(todo: list[tuple[ExperimentConfig, Path]],
                           qp_cache: QpCache | None = None,
                           member_cache: MemberCache | None = None,
-                          counts: MemberCounts | None = None) -> None:
+                          counts: MemberCounts | None = None,
+                          record_horizon: bool = True) -> None:
     """Run several families' members in one pool of workers (a tuning batch: a few small
     families, one after the other, would leave the cores idle between them) and write each
     family folder as soon as its last member is in, while the others still run. Resumes and
@@ -369,7 +380,8 @@ def run_families_together(todo: list[tuple[ExperimentConfig, Path]],
         return
     chunks = _chunks(work, n_jobs)
     results = Parallel(n_jobs=n_jobs, return_as="generator_unordered")(
-        delayed(_run_tagged_chunk)(chunk, cache, member_cache) for chunk in chunks)
+        delayed(_run_tagged_chunk)(chunk, cache, member_cache, record_horizon)
+        for chunk in chunks)
     for block in results:
         for k, index, metrics in block:
             states[k][3][index] = metrics
@@ -379,8 +391,8 @@ def run_families_together(todo: list[tuple[ExperimentConfig, Path]],
 
 
 def _run_tagged_chunk(jobs: list[tuple[int, tuple[int, ExperimentConfig, Path]]],
-                      qp_cache: QpCache, member_cache: MemberCache | None
-                      ) -> list[tuple[int, int, dict]]:
+                      qp_cache: QpCache, member_cache: MemberCache | None,
+                      record_horizon: bool = True) -> list[tuple[int, int, dict]]:
     """:func:`_run_chunk` over members of several families (tagged with their family)."""
-    done = _run_chunk([job for _, job in jobs], qp_cache, member_cache)
+    done = _run_chunk([job for _, job in jobs], qp_cache, member_cache, record_horizon)
     return [(k, index, metrics) for (k, _), (index, metrics) in zip(jobs, done, strict=True)]

@@ -100,15 +100,16 @@ class FamilyPool:
         return bool(self._futures or self._ready or self._families)
 
     def submit(self, cfg: ExperimentConfig, folder: Path, on_done: Callable[[], None],
-               whole_hash: str | None = None) -> None:
+               whole_hash: str | None = None, record_horizon: bool = True) -> None:
         """Run ``cfg``'s family into ``folder`` and call ``on_done()`` (in :meth:`wait`) once
         its folder is complete; a complete folder of the same config, or of ``whole_hash``
         (the whole family of which ``cfg`` is a rung: it holds these members), is read back,
-        not run."""
+        not run. ``record_horizon``: whether its new members write what each step planned
+        (:func:`~pipeline.studies.experiment.run_experiment`)."""
         folder = Path(folder)
         pending = self._families.get(folder)
         if pending is not None:  # the same folder is being written: after it
-            pending.waiting.append((cfg, on_done, whole_hash))
+            pending.waiting.append((cfg, on_done, whole_hash, record_horizon))
             return
         family = cfg.scenario.family
         if family is None:
@@ -137,11 +138,13 @@ class FamilyPool:
             if self.executor is None:
                 future: concurrent.futures.Future = concurrent.futures.Future()
                 try:
-                    future.set_result(_run_chunk(chunk, shipped, self.member_cache))
+                    future.set_result(_run_chunk(chunk, shipped, self.member_cache,
+                                                 record_horizon))
                 except Exception as exc:  # raised in wait(), as a worker's would be
                     future.set_exception(exc)
             else:
-                future = self.executor.submit(_run_chunk, chunk, shipped, self.member_cache)
+                future = self.executor.submit(_run_chunk, chunk, shipped, self.member_cache,
+                                              record_horizon)
             self._futures[future] = folder
 
     def _finish(self, state: _Family) -> None:
@@ -150,8 +153,8 @@ class FamilyPool:
                              state.n_members, state.compiles, state.counts)
         del self._families[state.folder]
         self._ready.append(state.on_done)
-        for cfg, on_done, whole_hash in state.waiting:
-            self.submit(cfg, state.folder, on_done, whole_hash)
+        for cfg, on_done, whole_hash, record_horizon in state.waiting:
+            self.submit(cfg, state.folder, on_done, whole_hash, record_horizon)
 
     def wait(self) -> None:
         """Run the callbacks of the families that are complete; when there are none, wait

@@ -113,17 +113,55 @@ def hypervolume_history(values: np.ndarray, feasible: np.ndarray,
                         bounds: list[list[float]]) -> np.ndarray:
     """The normalized hypervolume of the feasible trials among the first ``n``, for ``n = 1,
     2, ...`` (rows in trial order; the reference point is the nadir, 1 in every column)."""
-    scaled = normalized(values, bounds)
-    ok = np.asarray(feasible, bool) & np.all(np.isfinite(scaled), axis=1)
-    reference = np.ones(scaled.shape[1])
-    history, front = [], np.empty((0, scaled.shape[1]))
-    for i in range(len(scaled)):
-        if ok[i] and not any(dominates(p, scaled[i]) or np.array_equal(p, scaled[i])
-                             for p in front):
-            keep = [p for p in front if not dominates(scaled[i], p)]
-            front = np.vstack(keep + [scaled[i]]) if keep else scaled[i][None, :]
-        history.append(hypervolume(front, reference))
-    return np.asarray(history, float)
+    return HypervolumeHistory(bounds).of(values, feasible)
+
+
+class HypervolumeHistory:
+    """:func:`hypervolume_history`, kept between calls: a study's history is asked again after
+    every batch, and only the trials after the longest prefix it shares with the rows of the
+    last call are computed again (the front and volume after each row are kept). The volume
+    is computed only where the front changed; the numbers are those of a computation from
+    scratch (the same operations on the same front).
+
+    Parameters
+    ----------
+    bounds : list of [ideal, nadir]
+        Per objective, the normalization of :func:`normalized`.
+    """
+
+    def __init__(self, bounds: list[list[float]]) -> None:
+        self.bounds = [list(b) for b in bounds]
+        self._rows = np.empty((0, len(self.bounds)))
+        self._ok = np.zeros(0, bool)
+        self._fronts: list[np.ndarray] = []
+        self._volumes: list[float] = []
+
+    def of(self, values: np.ndarray, feasible: np.ndarray) -> np.ndarray:
+        """The history of ``values`` (rows in trial order) and their feasibility."""
+        scaled = normalized(values, self.bounds)
+        ok = np.asarray(feasible, bool) & np.all(np.isfinite(scaled), axis=1)
+        # the rows this call shares with the last one (NaN rows compare by their bits)
+        n = min(len(scaled), len(self._rows))
+        same = (np.all((scaled[:n] == self._rows[:n]) | (np.isnan(scaled[:n])
+                                                         & np.isnan(self._rows[:n])), axis=1)
+                & (ok[:n] == self._ok[:n]))
+        keep = n if same.all() else int(np.argmin(same))
+        fronts, volumes = self._fronts[:keep], self._volumes[:keep]
+        reference = np.ones(scaled.shape[1])
+        front = fronts[-1] if fronts else np.empty((0, scaled.shape[1]))
+        volume = volumes[-1] if volumes else None
+        for i in range(keep, len(scaled)):
+            if ok[i] and not any(dominates(p, scaled[i]) or np.array_equal(p, scaled[i])
+                                 for p in front):
+                kept = [p for p in front if not dominates(scaled[i], p)]
+                front = np.vstack(kept + [scaled[i]]) if kept else scaled[i][None, :]
+                volume = None
+            if volume is None:
+                volume = hypervolume(front, reference)
+            fronts.append(front)
+            volumes.append(volume)
+        self._rows, self._ok, self._fronts, self._volumes = scaled.copy(), ok, fronts, volumes
+        return np.asarray(volumes, float)
 
 
 def convergence_point(history: np.ndarray, min_trials: int, window: int,

@@ -19,7 +19,7 @@ import pandas as pd
 
 from pipeline.config import ExperimentConfig
 from pipeline.store.runs import read_family
-from pipeline.studies.tune.pareto import convergence_point, hypervolume_history
+from pipeline.studies.tune.pareto import HypervolumeHistory, convergence_point
 from pipeline.studies.tune.space import TRACK_OVERRIDES, TuneSpace
 
 logger = logging.getLogger(__name__)
@@ -42,12 +42,14 @@ class Convergence:
                    space.convergence_tolerance,
                    tuple((float(a), float(b)) for a, b in space.hypervolume_bounds))
 
-    def history(self, study) -> np.ndarray:
-        """The hypervolume after each complete trial, in trial order."""
+    def history(self, study, kept: HypervolumeHistory | None = None) -> np.ndarray:
+        """The hypervolume after each complete trial, in trial order (``kept``: the history of
+        an earlier call on the same study, which then computes only what is new)."""
         values, feasible = study_values(study)
         if not len(values):
             return np.zeros(0)
-        return hypervolume_history(values, feasible, [list(b) for b in self.bounds])
+        kept = kept if kept is not None else HypervolumeHistory([list(b) for b in self.bounds])
+        return kept.of(values, feasible)
 
     def stop_at(self, history: np.ndarray, effort: np.ndarray | None = None) -> int | None:
         return convergence_point(history, self.min_trials, self.window, self.tolerance, effort)
@@ -73,6 +75,13 @@ def study_values(study) -> tuple[np.ndarray, np.ndarray]:
     feasible = np.array([float(t.user_attrs.get("constraint", 0.0)) <= 0.0 for t in trials],
                         bool)
     return values, feasible
+
+
+def _complete_trials(study) -> int:
+    """How many of the study's trials are complete."""
+    from optuna.trial import TrialState
+
+    return len(study.get_trials(deepcopy=False, states=(TrialState.COMPLETE,)))
 
 
 def optimize(study, distributions: dict, evaluate: Callable[[list[dict]], list[tuple]],
@@ -133,7 +142,11 @@ class StudyLoop:
             for trial in running:
                 study.enqueue_trial(dict(trial.params))
         self._start = time.perf_counter()
-        self._done_before = len(self.rule.history(study))
+        #: the sampler states kept in the study (read once here, then as this loop writes them)
+        self._sampler_states: dict | None = None
+        #: the study's hypervolume history so far (only new trials are computed again)
+        self._volumes = HypervolumeHistory([list(b) for b in rule.bounds])
+        self._done_before = _complete_trials(study)
         #: studies running side by side with this one (its progress line says so: its time
         #: per trial is then shared)
         self.side_by_side = 1
@@ -144,7 +157,7 @@ class StudyLoop:
     def next_batch(self) -> list[dict] | None:
         """The next batch's settings (their trials asked and left running), or None once the
         study has converged or spent its cap (then :attr:`history` and :attr:`converged`)."""
-        history = self.rule.history(self.study)
+        history = self.rule.history(self.study, self._volumes)
         complete = len(history)
         effort = self._effort()
         converged = self.rule.stop_at(history, effort)
@@ -152,13 +165,15 @@ class StudyLoop:
         if converged is not None or spent >= self.rule.max_trials:
             self.history, self.converged = history, converged
             return None
-        save_sampler_state(self.study, complete, "before")
+        self._sampler_states = save_sampler_state(self.study, complete, "before",
+                                                  self._sampler_states)
         size = max(1, min(self.batch_size, int(np.ceil(self.rule.max_trials - spent))))
         self._batch = [self.study.ask() for _ in range(size)]
         settings = [{name: trial._suggest(name, dist)
                      for name, dist in self.distributions.items()} for trial in self._batch]
         flush_trials(self.study, self._batch)
-        save_sampler_state(self.study, complete + len(self._batch), "after")
+        self._sampler_states = save_sampler_state(self.study, complete + len(self._batch),
+                                                  "after", self._sampler_states)
         return settings
 
     def run(self, evaluate: Callable[[list[dict]], list[tuple]]) -> None:
@@ -176,7 +191,7 @@ class StudyLoop:
                 trial.set_user_attr(key, value)
             self.study.tell(trial, list(values))
         self._batch = []
-        complete = len(self.rule.history(self.study))
+        complete = _complete_trials(self.study)
         rate = (time.perf_counter() - self._start) / max(complete - self._done_before, 1)
         # with pruning the rule counts whole-trial equivalents of simulated members: a pruned
         # trial counts for the share of its family it ran
@@ -203,21 +218,26 @@ def _random_states(sampler) -> list:
     return [s for s in states if isinstance(s, np.random.RandomState)]
 
 
-def save_sampler_state(study, complete: int, when: str) -> None:
+def save_sampler_state(study, complete: int, when: str, saved: dict | None = None) -> dict:
     """Keep the sampler's random state in the study: at the start of a batch (``when`` is
     ``"before"``, ``complete`` the complete trials then) and once its settings are asked
     (``"after"``, ``complete`` the count once the batch is told): a resumed study restores
-    the one that matches its count (:func:`restore_sampler_state`)."""
+    the one that matches its count (:func:`restore_sampler_state`). ``saved``: what the last
+    call returned (the study's kept states as this process wrote them: the study is its
+    alone), so that the store is not read again; by default read from the study. Returns
+    what is now kept."""
     states = []
     for rng in _random_states(study.sampler):
         name, keys, pos, has_gauss, gauss = rng.get_state()
         states.append([name, [int(k) for k in keys], int(pos), int(has_gauss), float(gauss)])
-    saved = study.system_attrs.get(SAMPLER_STATE)
+    if saved is None:
+        saved = study.system_attrs.get(SAMPLER_STATE)
     saved = dict(saved) if isinstance(saved, dict) else {}
     saved[when] = {"complete": int(complete), "states": states}
     if when == "before":
         saved.pop("after", None)
     study.set_system_attr(SAMPLER_STATE, saved)
+    return saved
 
 
 def restore_sampler_state(study) -> bool:
@@ -380,7 +400,7 @@ def evaluate_in_rungs(runner: Runner, method: str, replicate: int, settings: lis
                 for i in alive]
         where = f"replicate {replicate}: {method} training families" + (
             "" if n == rungs.sizes[-1] else f" (first {n} members)")
-        for i, table in zip(alive, runner.run(jobs, where), strict=True):
+        for i, table in zip(alive, runner.run(jobs, where, "training"), strict=True):
             batch.record(i, table)
         alive = [i for i in alive if not batch.finished(i)]
     return batch.results()
@@ -662,6 +682,12 @@ class Runner:
             return FamilyJob(method, setting, cfg, folder, replicate, whole_hash)
         return FamilyJob(method, setting, cfg, folder, replicate)
 
+    def records_horizon(self, part: str) -> bool:
+        """Whether new members of ``part``'s families write what each step planned: the
+        held-out families always (make reproduce's members, the report's explorer), the
+        training families with ``tune.training_horizon``."""
+        return part != "training" or bool(self.space.training_horizon)
+
     @property
     def local(self) -> bool:
         """Whether families run on this machine's cores (not as SLURM arrays)."""
@@ -693,7 +719,10 @@ class Runner:
             table = table[table["member"] < family.size].reset_index(drop=True)
         return table
 
-    def run(self, jobs: list[FamilyJob], label: str) -> list[pd.DataFrame]:
+    def run(self, jobs: list[FamilyJob], label: str, part: str = "heldout"
+            ) -> list[pd.DataFrame]:
+        """Run ``jobs`` (families of ``part``: a training family's new members keep what each
+        step planned only with ``tune.training_horizon``) and return their tables."""
         from pipeline.studies.multiverse.runs import run_families
 
         todo, seen = [], set()
@@ -702,7 +731,8 @@ class Runner:
                 todo.append((job.cfg, job.folder))
                 seen.add(job.folder)
         run_families(todo, self.out_dir, self.log, self.launcher, self.cache, label,
-                     counts=self.counts, member_cache=self.member_cache)
+                     counts=self.counts, member_cache=self.member_cache,
+                     record_horizon=self.records_horizon(part))
         tables = [self.table(job) for job in jobs]
         # families complete before this call: their members count as already complete
         counted = {folder for _, folder in todo}
@@ -760,7 +790,8 @@ def run_studies_together(runner: Runner, studies: list[TunedStudy], rungs: Rungs
                 entry.loop.tell(batch.results())
                 start_batch(entry)
 
-        pool.submit(job.cfg, job.folder, done, job.whole_hash)
+        pool.submit(job.cfg, job.folder, done, job.whole_hash,
+                    record_horizon=runner.records_horizon("training"))
 
     try:
         for entry in studies:

@@ -130,7 +130,8 @@ def _run_tuning(space: TuneSpace, out_dir: Path, spaces: dict, overrides: list[s
     untuned_jobs = [runner.job(reference, "default", {}, "training", replicate)
                     for replicate in range(space.replicates)]
     untuned_tables = runner.run(untuned_jobs, "untuned "
-                                + ("control" if reference == space.control else reference))
+                                + ("control" if reference == space.control else reference),
+                                "training")
     thresholds: dict[int, int] = {}
     entries: list[TunedStudy] = []
     for replicate, untuned in enumerate(untuned_tables):
