@@ -125,8 +125,18 @@ class ExperimentConfig(FrozenAfterValidation):
     def config_hash(self) -> str:
         """Stable SHA-256 (first 16 hex digits) of what a run depends on: the resolved
         configuration without ``claims`` (how runs are compared re-scores, never re-simulates),
-        ``tune`` (what the run returns to a tuner) and ``features`` (how runs are described)."""
-        return _hash_of(self.to_dict())
+        ``tune`` (what the run returns to a tuner) and ``features`` (how runs are described).
+
+        Kept with the object once it is frozen (validated: read-only from then on, a change is
+        a new object), so that a tune asking it of one family's config several times per rung
+        computes it once."""
+        memo = self.__dict__.get("_config_hash_memo")
+        if memo is not None:
+            return memo
+        value = _hash_of(self.to_dict())
+        if self.__dict__.get("_frozen", False):
+            object.__setattr__(self, "_config_hash_memo", value)
+        return value
 
     def member_config_hashes(self, members: list) -> list[str]:
         """``replace(self, scenario=m).config_hash()`` for every scenario ``m`` of

@@ -55,6 +55,23 @@ def test_default_config_hash_is_pinned(make_config):
     assert make_config([]).config_hash() == DEFAULT_CONFIG_HASH
 
 
+def test_a_kept_config_hash_is_the_hash_of_the_settings(make_config):
+    """The hash a frozen config keeps (asked many times per tune rung) equals the hash of its
+    settings computed again, and a changed config (a new object) has its own."""
+    import dataclasses
+
+    from pipeline.config import _hash_of
+
+    cfg = make_config(["scenario=family", "scenario.family.size=7"])
+    assert cfg.config_hash() == cfg.config_hash() == _hash_of(cfg.to_dict())
+    assert cfg.__dict__.get("_config_hash_memo") == cfg.config_hash()
+    changed = dataclasses.replace(cfg, scenario=dataclasses.replace(
+        cfg.scenario, family=dataclasses.replace(cfg.scenario.family, size=8)))
+    assert changed.config_hash() == _hash_of(changed.to_dict()) != cfg.config_hash()
+    assert changed.config_hash() == make_config(["scenario=family",
+                                                 "scenario.family.size=8"]).config_hash()
+
+
 @pytest.fixture(scope="module")
 def pinned_runs(tmp_path_factory, make_config):
     root = tmp_path_factory.mktemp("pins")

@@ -34,9 +34,12 @@ from pipeline.studies.experiment import (
     _write_family_folder,
 )
 
-#: members per task handed to a worker: a member of a training family is 30-40 ms of CPU, a
-#: task's hand-over (its pickled compiled QPs, the result) a few ms
-MEMBERS_PER_TASK = 4
+#: members per task handed to a worker: a member of a training family is 25-35 ms of CPU, a
+#: task's hand-over and what a worker builds again for each task (the pickled compiled QPs,
+#: the result, BLAS's thread controller, the nominal model, the sections' YAML) 6-8 ms
+#: (measured: 5 % of the workers' CPU in make tune with 4; the tune keeps tens of trials'
+#: rungs in flight, so larger tasks leave no core idle)
+MEMBERS_PER_TASK = 8
 
 
 @dataclass
