@@ -111,3 +111,28 @@ def test_a_rung_of_a_complete_whole_family_is_read_not_rewritten(tmp_path, make_
     pool.run_until_idle()
     pool.close()
     assert (tmp_path / "f" / "manifest.json").stat().st_mtime_ns != before
+
+
+def _worker_pid() -> int:
+    import os
+
+    return os.getpid()
+
+
+def test_started_workers_are_up_at_once_and_serve_the_next_parallel_call():
+    """start_workers (the tune's first step) starts joblib's reusable workers without waiting
+    for them, and the families' Parallel calls then run on those same processes."""
+    import psutil
+    from joblib import Parallel, delayed
+
+    from pipeline.studies.family_pool import start_workers
+    from pipeline.studies.tune.study import _stop_reused_workers
+
+    _stop_reused_workers()
+    before = {p.pid for p in psutil.Process().children(recursive=True)}
+    start_workers(2)
+    started = {p.pid for p in psutil.Process().children(recursive=True)} - before
+    assert len(started) >= 2  # the workers (and loky's resource tracker, when it is new)
+    used = set(Parallel(n_jobs=2)(delayed(_worker_pid)() for _ in range(16)))
+    assert used and used <= started
+    _stop_reused_workers()

@@ -65,6 +65,32 @@ def _snapshot(cache: QpCache) -> QpCache:
                    members_planned=cache.members_planned)
 
 
+def _import_family_task() -> None:
+    """What a worker imports to run a family's task (:func:`~pipeline.studies.experiment.
+    _run_chunk`: the loop, the metrics, the store)."""
+    import pipeline.studies.experiment  # noqa: F401
+
+
+def start_workers(n_jobs: int) -> None:
+    """Start joblib's reusable workers (as :class:`FamilyPool` and ``Parallel(n_jobs)`` make
+    them, so that both find them) and have each import what a family's task needs, without
+    waiting: a tune's first families then find them ready while this process went on opening
+    its store and composing (a worker's start is about 2 s of imports, which left a core
+    idle at the start of every tune). Nothing with one job."""
+    from joblib import Parallel
+
+    n_jobs = max(1, int(n_jobs))
+    parallel = Parallel(n_jobs=n_jobs)
+    parallel.__enter__()
+    try:
+        executor = getattr(parallel._backend, "_workers", None)
+        if executor is not None:
+            for _ in range(n_jobs):
+                executor.submit(_import_family_task)
+    finally:
+        parallel.__exit__(None, None, None)  # the workers stay for the next Parallel call
+
+
 class FamilyPool:
     """One pool of ``n_jobs`` worker processes (joblib's reusable loky executor) running
     the members of the families handed to :meth:`submit`, in the order they come.

@@ -118,6 +118,16 @@ def _run_tuning(space: TuneSpace, out_dir: Path, spaces: dict, overrides: list[s
     untrust(out_dir)
     clock = CoreClock()
     runner = Runner(space, out_dir, overrides, log)
+    reference = space.feasibility_reference
+    untuned_jobs = [runner.job(reference, "default", {}, "training", replicate)
+                    for replicate in range(space.replicates)]
+    n_jobs = untuned_jobs[0].cfg.scenario.family.n_jobs \
+        if untuned_jobs[0].cfg.scenario.family is not None else 1
+    if runner.local:
+        from pipeline.studies.family_pool import start_workers
+
+        # the workers start (and import) while this process opens the store and composes
+        start_workers(n_jobs)
     base = runner.compose(["method=improved", *space.scenario_overrides("heldout")])
     storage = trial_storage(out_dir / "tune.db")
     rule, rungs = Convergence.of(space), Rungs.of(space)
@@ -126,9 +136,6 @@ def _run_tuning(space: TuneSpace, out_dir: Path, spaces: dict, overrides: list[s
 
     # every replicate's feasibility threshold first: the untuned reference on its training
     # family (the five families in one pool)
-    reference = space.feasibility_reference
-    untuned_jobs = [runner.job(reference, "default", {}, "training", replicate)
-                    for replicate in range(space.replicates)]
     untuned_tables = runner.run(untuned_jobs, "untuned "
                                 + ("control" if reference == space.control else reference),
                                 "training")
@@ -148,8 +155,6 @@ def _run_tuning(space: TuneSpace, out_dir: Path, spaces: dict, overrides: list[s
     if runner.local:
         # every study's batches side by side on one pool: the cores never wait for the
         # parent's asks, compositions and records between batches
-        n_jobs = untuned_jobs[0].cfg.scenario.family.n_jobs \
-            if untuned_jobs[0].cfg.scenario.family is not None else 1
         run_studies_together(runner, entries, rungs, measure, n_jobs)
     else:
         # SLURM: each rung of a batch one array, one study after the other
