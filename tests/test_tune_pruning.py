@@ -45,12 +45,14 @@ class _PlantedRunner:
 
     def __init__(self) -> None:
         self.ran: list[tuple[str, int]] = []
+        self.parts: set[str] = set()
 
     def job(self, method, setting, params, part, replicate=None, members=None):
         return _Job(params["name"], members)
 
-    def run(self, jobs, label):
+    def run(self, jobs, label, part="heldout"):
         self.ran += [(j.name, j.members) for j in jobs]
+        self.parts.add(part)
         return [pd.DataFrame({"planted": [PLANTED[j.name][j.members]]}) for j in jobs]
 
 
@@ -68,6 +70,8 @@ def _evaluate(rungs: Rungs, front=None):
     settings = [{"name": name} for name in PLANTED]
     results = evaluate_in_rungs(runner, "improved", 0, settings, 2, rungs,
                                 {10: FRONT_AT_10} if front is None else front, _measure)
+    # rungs are training families (their members keep no horizon record by default)
+    assert runner.parts == {"training"}
     return dict(zip(PLANTED, results, strict=True)), runner.ran
 
 
