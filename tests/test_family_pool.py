@@ -125,14 +125,13 @@ def test_started_workers_are_up_at_once_and_serve_the_next_parallel_call():
     import psutil
     from joblib import Parallel, delayed
 
-    from pipeline.studies.family_pool import start_workers
-    from pipeline.studies.tune.study import _stop_reused_workers
+    from pipeline.studies.family_pool import start_workers, stop_workers
 
-    _stop_reused_workers()
+    stop_workers()
     before = {p.pid for p in psutil.Process().children(recursive=True)}
     start_workers(2)
     started = {p.pid for p in psutil.Process().children(recursive=True)} - before
     assert len(started) >= 2  # the workers (and loky's resource tracker, when it is new)
     used = set(Parallel(n_jobs=2)(delayed(_worker_pid)() for _ in range(16)))
     assert used and used <= started
-    _stop_reused_workers()
+    stop_workers()

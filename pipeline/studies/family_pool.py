@@ -71,24 +71,41 @@ def _import_family_task() -> None:
     import pipeline.studies.experiment  # noqa: F401
 
 
-def start_workers(n_jobs: int) -> None:
-    """Start joblib's reusable workers (as :class:`FamilyPool` and ``Parallel(n_jobs)`` make
-    them, so that both find them) and have each import what a family's task needs, without
-    waiting: a tune's first families then find them ready while this process went on opening
-    its store and composing (a worker's start is about 2 s of imports, which left a core
-    idle at the start of every tune). Nothing with one job."""
+def _reusable_executor(n_jobs: int):
+    """joblib's reusable executor exactly as its ``Parallel(n_jobs)`` makes it (the same
+    arguments: its workers' thread limits, idle timeout, reducers), so that later Parallel
+    calls of the process find the same workers instead of restarting them (a restart costs
+    each worker its imports, about 2 s): the entered ``Parallel`` and the executor (None
+    with one job: tasks run here)."""
     from joblib import Parallel
 
-    n_jobs = max(1, int(n_jobs))
-    parallel = Parallel(n_jobs=n_jobs)
+    parallel = Parallel(n_jobs=max(1, int(n_jobs)))
     parallel.__enter__()
+    return parallel, getattr(parallel._backend, "_workers", None)
+
+
+def start_workers(n_jobs: int) -> None:
+    """Start joblib's reusable workers (:func:`_reusable_executor`) and have each import what
+    a family's task needs, without waiting: a tune's first families then find them ready
+    while this process went on opening its store and composing (a worker's start is about 2 s
+    of imports, which left a core idle at the start of every tune). Nothing with one job."""
+    parallel, executor = _reusable_executor(n_jobs)
     try:
-        executor = getattr(parallel._backend, "_workers", None)
         if executor is not None:
-            for _ in range(n_jobs):
+            for _ in range(max(1, int(n_jobs))):
                 executor.submit(_import_family_task)
     finally:
         parallel.__exit__(None, None, None)  # the workers stay for the next Parallel call
+
+
+def stop_workers() -> None:
+    """Shut down joblib's reusable workers, if this process has them (waited for: the kernel
+    then counts their time among this process's children); none are started."""
+    from joblib.externals.loky import reusable_executor
+
+    executor = getattr(reusable_executor, "_executor", None)
+    if executor is not None:
+        executor.shutdown(wait=True)
 
 
 class FamilyPool:
@@ -109,15 +126,8 @@ class FamilyPool:
 
     def __init__(self, n_jobs: int, qp_cache: QpCache, member_cache: MemberCache | None,
                  counts: MemberCounts) -> None:
-        from joblib import Parallel
-
-        # joblib's reusable executor exactly as its Parallel makes it (the same arguments: its
-        # workers' thread limits, idle timeout, reducers), so that the held-out families'
-        # Parallel calls afterwards reuse these workers instead of restarting them (a restart
-        # costs each worker its imports, about 2 s); None with one job: tasks run here
-        self._parallel = Parallel(n_jobs=max(1, int(n_jobs)))
-        self._parallel.__enter__()
-        self.executor = getattr(self._parallel._backend, "_workers", None)
+        # the held-out families' Parallel calls afterwards reuse these workers
+        self._parallel, self.executor = _reusable_executor(n_jobs)
         self.cache, self.member_cache, self.counts = qp_cache, member_cache, counts
         self._futures: dict[concurrent.futures.Future, Path] = {}
         self._families: dict[Path, _Family] = {}

@@ -245,10 +245,8 @@ def restore_sampler_state(study) -> bool:
     number of complete trials (at the start of the interrupted batch, or once the last batch
     was asked), when the study kept it; whether it did. With it a resumed tune asks the
     settings the uninterrupted one asked."""
-    from optuna.trial import TrialState
-
     saved = study.system_attrs.get(SAMPLER_STATE)
-    complete = len(study.get_trials(deepcopy=False, states=(TrialState.COMPLETE,)))
+    complete = _complete_trials(study)
     rngs = _random_states(study.sampler)
     if not isinstance(saved, dict) or not rngs:
         return False

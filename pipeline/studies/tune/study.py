@@ -244,16 +244,6 @@ def controlled_keys(space: TuneSpace, spaces: dict) -> dict[str, str]:
     return keys
 
 
-def _stop_reused_workers() -> None:
-    """Shut down joblib's reusable workers, if this process has them (waited for: the kernel
-    then counts their time among this process's children); none are started."""
-    from joblib.externals.loky import reusable_executor
-
-    executor = getattr(reusable_executor, "_executor", None)
-    if executor is not None:
-        executor.shutdown(wait=True)
-
-
 class CoreClock:
     """CPU-seconds over (wall-clock seconds x cores) since it was made, of this process and
     of its worker processes (joblib's workers are shut down first, so that the kernel has
@@ -265,7 +255,9 @@ class CoreClock:
         import os
         import time
 
-        _stop_reused_workers()
+        from pipeline.studies.family_pool import stop_workers
+
+        stop_workers()
         self.start_wall = time.perf_counter()
         self.start_cpu = self._cpu()
         self.cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") \
@@ -288,7 +280,9 @@ class CoreClock:
     def utilisation(self) -> float:
         import time
 
-        _stop_reused_workers()
+        from pipeline.studies.family_pool import stop_workers
+
+        stop_workers()
         wall = time.perf_counter() - self.start_wall
         return (self._cpu() - self.start_cpu) / max(wall * self.cores, 1e-9)
 
