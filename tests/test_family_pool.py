@@ -135,3 +135,41 @@ def test_started_workers_are_up_at_once_and_serve_the_next_parallel_call():
     used = set(Parallel(n_jobs=2)(delayed(_worker_pid)() for _ in range(16)))
     assert used and used <= started
     stop_workers()
+
+
+def test_a_tune_starts_its_workers_and_makes_its_studies_before_its_first_families(
+        tmp_path, monkeypatch):
+    """The tune's first step composes one family, starts the workers, and opens the store
+    and makes every study (the parent's serial start) before the untuned families run, so
+    that this work overlaps the workers' imports instead of leaving the cores idle."""
+    import optuna
+    from joblib.externals.loky import reusable_executor
+
+    from pipeline.config import CONF_DIR
+    from pipeline.studies.family_pool import stop_workers
+    from pipeline.studies.tune import load_tune_space, run_tuning
+    from pipeline.studies.tune.search import Runner
+
+    class FirstFamilies(Exception):
+        pass
+
+    seen = {}
+
+    def first_run(self, jobs, label, part="heldout"):
+        executor = getattr(reusable_executor, "_executor", None)
+        seen["workers"] = executor is not None and len(executor._processes) == 2
+        seen["studies"] = sorted(s.study_name.rsplit("-", 2)[-2] + "-" + s.study_name
+                                 .rsplit("-", 1)[-1] for s in optuna.get_all_study_summaries(
+                                     f"sqlite:///{tmp_path / 'tune' / 'tune.db'}"))
+        seen["jobs"] = (label, part, len(jobs))
+        raise FirstFamilies
+
+    stop_workers()
+    monkeypatch.setattr(Runner, "run", first_run)
+    space = load_tune_space(CONF_DIR / "tune" / "quick.yaml")
+    with pytest.raises(FirstFamilies):
+        run_tuning(space, tmp_path / "tune", ["scenario.family.n_jobs=2"], log=lambda _: None)
+    stop_workers()
+    assert seen["workers"]
+    assert seen["studies"] == ["r0-baseline", "r0-improved", "r1-baseline", "r1-improved"]
+    assert seen["jobs"] == ("untuned control", "training", 2)

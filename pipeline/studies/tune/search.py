@@ -141,7 +141,9 @@ class StudyLoop:
             # tells): the running trials' settings are asked again first
             for trial in running:
                 study.enqueue_trial(dict(trial.params))
-        self._start = time.perf_counter()
+        # the trials' rate is counted from the first ask (a loop may be made before its
+        # study's first batch can start: the tune's untuned families run in between)
+        self._start: float | None = None
         #: the sampler states kept in the study (read once here, then as this loop writes them)
         self._sampler_states: dict | None = None
         #: the study's hypervolume history so far (only new trials are computed again)
@@ -167,6 +169,8 @@ class StudyLoop:
             return None
         self._sampler_states = save_sampler_state(self.study, complete, "before",
                                                   self._sampler_states)
+        if self._start is None:
+            self._start = time.perf_counter()
         size = max(1, min(self.batch_size, int(np.ceil(self.rule.max_trials - spent))))
         self._batch = [self.study.ask() for _ in range(size)]
         settings = [{name: trial._suggest(name, dist)
@@ -192,7 +196,8 @@ class StudyLoop:
             self.study.tell(trial, list(values))
         self._batch = []
         complete = _complete_trials(self.study)
-        rate = (time.perf_counter() - self._start) / max(complete - self._done_before, 1)
+        started = self._start if self._start is not None else time.perf_counter()
+        rate = (time.perf_counter() - started) / max(complete - self._done_before, 1)
         # with pruning the rule counts whole-trial equivalents of simulated members: a pruned
         # trial counts for the share of its family it ran
         effort = self._effort()

@@ -119,20 +119,26 @@ def _run_tuning(space: TuneSpace, out_dir: Path, spaces: dict, overrides: list[s
     clock = CoreClock()
     runner = Runner(space, out_dir, overrides, log)
     reference = space.feasibility_reference
-    untuned_jobs = [runner.job(reference, "default", {}, "training", replicate)
-                    for replicate in range(space.replicates)]
+    # one composition gives the workers' number; they start (and import, about 2 s of both
+    # cores) while this process composes the rest, opens the store and makes the studies
+    untuned_jobs = [runner.job(reference, "default", {}, "training", 0)]
     n_jobs = untuned_jobs[0].cfg.scenario.family.n_jobs \
         if untuned_jobs[0].cfg.scenario.family is not None else 1
     if runner.local:
         from pipeline.studies.family_pool import start_workers
 
-        # the workers start (and import) while this process opens the store and composes
         start_workers(n_jobs)
+    untuned_jobs += [runner.job(reference, "default", {}, "training", replicate)
+                     for replicate in range(1, space.replicates)]
     base = runner.compose(["method=improved", *space.scenario_overrides("heldout")])
     storage = trial_storage(out_dir / "tune.db")
     rule, rungs = Convergence.of(space), Rungs.of(space)
-
     measure = family_measure(space)
+    loops = {(replicate, method): StudyLoop(
+                 make_study(space, method, replicate, storage, store_key), spaces[method][0],
+                 rule, space.batch_size, log, label=f"replicate {replicate}, {method}: ",
+                 family_size=space.training_size)
+             for replicate in range(space.replicates) for method in space.methods}
 
     # every replicate's feasibility threshold first: the untuned reference on its training
     # family (the five families in one pool)
@@ -146,12 +152,8 @@ def _run_tuning(space: TuneSpace, out_dir: Path, spaces: dict, overrides: list[s
         log(f"replicate {replicate}: a setting is feasible when its training family (seed "
             f"{space.training_seeds[replicate]}) collides at most {threshold} times (the "
             f"untuned {reference})")
-        for method in space.methods:
-            study = make_study(space, method, replicate, storage, store_key)
-            loop = StudyLoop(study, spaces[method][0], rule, space.batch_size, log,
-                             label=f"replicate {replicate}, {method}: ",
-                             family_size=space.training_size)
-            entries.append(TunedStudy(replicate, method, loop, threshold))
+        entries.extend(TunedStudy(replicate, method, loops[replicate, method], threshold)
+                       for method in space.methods)
     if runner.local:
         # every study's batches side by side on one pool: the cores never wait for the
         # parent's asks, compositions and records between batches
