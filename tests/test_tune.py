@@ -310,3 +310,34 @@ def test_make_tune_quick_resumes_after_sigkill_and_feeds_the_report(tmp_path, ma
     assert "Exploratory, not in this answer:</strong> the fair fight (make tune)" in answer_block
     answer = (tmp_path / "report" / "answer.txt").read_text()
     assert "tuned by the same rules" not in answer
+
+
+def test_held_out_ledgers_side_by_side_are_the_ledgers_made_here_in_order():
+    """The held-out judgement's ledgers run on the families' workers: each equal to the one
+    made in this process (seeded bootstraps), returned in the order asked, and really run
+    in the workers (a planted task reports its process)."""
+    from pipeline.analysis.claims.catalogue import CLAIMS
+    from pipeline.config import ClaimsConfig
+    from pipeline.studies.tune.study import _ledger_maker, _ledgers_side_by_side
+
+    rng = np.random.default_rng(3)
+
+    def table(shift: float) -> pd.DataFrame:
+        n = 60
+        return pd.DataFrame({"scenario": range(n), "collision": rng.random(n) < 0.1,
+                             **{c.primary_metric: rng.normal(1.0 + shift, 0.3, n)
+                                for c in CLAIMS}})
+
+    a, b, c = table(0.0), table(0.2), table(-0.1)
+    ledger_of = _ledger_maker(ClaimsConfig(n_resamples=199), "improved", False)
+    asked = [({"improved": a, "baseline": b}, ("baseline",), {}),
+             ({"improved": c, "baseline": b, "baseline_matched": a},
+              ("baseline", "baseline_matched"), {}),
+             ({"improved": b, "baseline": a}, ("baseline",), {"sensitivity": False})]
+    here = [ledger.to_frame() for ledger in _ledgers_side_by_side(ledger_of, asked, 1)]
+    there = [ledger.to_frame() for ledger in _ledgers_side_by_side(ledger_of, asked, 2)]
+    assert len(there) == 3 and len({f.to_csv() for f in here}) == 3
+    for mine, theirs in zip(here, there, strict=True):
+        pd.testing.assert_frame_equal(mine, theirs)
+    pids = _ledgers_side_by_side(lambda tables, names: os.getpid(), [({}, (), {})] * 4, 2)
+    assert os.getpid() not in pids

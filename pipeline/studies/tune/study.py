@@ -472,25 +472,50 @@ def judge_heldout(runner: Runner, space: TuneSpace, chosen: dict[tuple[int, str]
                         for o, v in zip(space.objectives, values, strict=True)},
                      "folder": str(job.folder.relative_to(runner.out_dir))})
     heldout = pd.DataFrame(rows)
-    default = ledger_of({m: by_setting[(None, m, "default")] for m in (treatment,)
-                         + comparisons}, comparisons)
-    tuned, outcome_rows = {}, []
+    # the ledgers (bootstrap intervals: the parent's last serial step) side by side on the
+    # families' workers: the default one, a tuned one per replicate, one per judged setting
+    tuned_tables = {}
     for replicate in replicates:
-        tables_r = {m: by_setting[(replicate, m, f"trial {compromise[(replicate, m)]}")]
-                    for m in (treatment, control)}
+        tuned_tables[replicate] = {
+            m: by_setting[(replicate, m, f"trial {compromise[(replicate, m)]}")]
+            for m in (treatment, control)}
         if matched:
-            tables_r[matched] = by_setting[(replicate, matched, "tuned")]
-        tuned[replicate] = ledger_of(tables_r, comparisons)
-        for r in chosen[(replicate, treatment)].to_dict("records"):
-            ledger = ledger_of({treatment: by_setting[(replicate, treatment,
-                                                       f"trial {r['trial']}")],
-                                control: tables_r[control]}, (control,), sensitivity=False)
-            for row in ledger:
-                outcome_rows.append({"replicate": replicate, "trial": r["trial"],
-                                     "compromise": bool(r["compromise"]),
-                                     "claim": row.claim_id, "outcome": str(row.outcome),
-                                     "estimate": row.result.estimate, "params": r["params"]})
+            tuned_tables[replicate][matched] = by_setting[(replicate, matched, "tuned")]
+    judged_settings = [(replicate, r) for replicate in replicates
+                       for r in chosen[(replicate, treatment)].to_dict("records")]
+    asked: list[tuple[dict, tuple, dict]] = [
+        ({m: by_setting[(None, m, "default")] for m in (treatment,) + comparisons},
+         comparisons, {})]
+    asked += [(tuned_tables[replicate], comparisons, {}) for replicate in replicates]
+    asked += [({treatment: by_setting[(replicate, treatment, f"trial {r['trial']}")],
+                control: tuned_tables[replicate][control]}, (control,), {"sensitivity": False})
+              for replicate, r in judged_settings]
+    family = jobs[0].cfg.scenario.family
+    ledgers = _ledgers_side_by_side(
+        ledger_of, asked, family.n_jobs if runner.local and family is not None else 1)
+    default = ledgers[0]
+    tuned = dict(zip(replicates, ledgers[1:1 + len(replicates)], strict=True))
+    outcome_rows = [{"replicate": replicate, "trial": r["trial"],
+                     "compromise": bool(r["compromise"]), "claim": row.claim_id,
+                     "outcome": str(row.outcome), "estimate": row.result.estimate,
+                     "params": r["params"]}
+                    for (replicate, r), ledger in zip(judged_settings,
+                                                      ledgers[1 + len(replicates):], strict=True)
+                    for row in ledger]
     return Judged(heldout, default, tuned, pd.DataFrame(outcome_rows))
+
+
+def _ledgers_side_by_side(ledger_of: Callable[..., Ledger],
+                          asked: list[tuple[dict, tuple, dict]], n_jobs: int) -> list[Ledger]:
+    """``ledger_of(tables, names, **kwargs)`` for each of ``asked``, in order, on ``n_jobs``
+    of joblib's reusable workers (the families' own; here with one job). A ledger is a pure
+    function of its tables (seeded bootstraps): the same ledgers wherever it runs."""
+    if n_jobs <= 1 or len(asked) <= 1:
+        return [ledger_of(tables, names, **kwargs) for tables, names, kwargs in asked]
+    from joblib import Parallel, delayed
+
+    return list(Parallel(n_jobs=n_jobs)(delayed(ledger_of)(tables, names, **kwargs)
+                                        for tables, names, kwargs in asked))
 
 
 def counts_in_words(outcomes: list[str]) -> tuple[str, tuple[str, int]]:
