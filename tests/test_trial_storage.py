@@ -167,5 +167,8 @@ def test_the_core_clock_does_not_count_workers_earlier_work():
     Parallel(n_jobs=2)(delayed(_burn)(0.5) for _ in range(1))
     share = clock.utilisation()
     counted_cpu_s = share * clock.wall_s() * clock.cores
-    assert 0.45 <= counted_cpu_s < 3.0, counted_cpu_s  # not the 6 CPU-s from before
+    # not the 6 CPU-s from before (counted, they would make at least 6.45); the new workers'
+    # start (an interpreter and joblib's imports each, 1-1.5 CPU-s on a loaded 2-core
+    # machine) is in the window
+    assert 0.45 <= counted_cpu_s < 5.5, counted_cpu_s
     assert share <= 1.0
