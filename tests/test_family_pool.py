@@ -158,9 +158,8 @@ def test_a_tune_starts_its_workers_and_makes_its_studies_before_its_first_famili
     def first_run(self, jobs, label, part="heldout"):
         executor = getattr(reusable_executor, "_executor", None)
         seen["workers"] = executor is not None and len(executor._processes) == 2
-        seen["studies"] = sorted(s.study_name.rsplit("-", 2)[-2] + "-" + s.study_name
-                                 .rsplit("-", 1)[-1] for s in optuna.get_all_study_summaries(
-                                     f"sqlite:///{tmp_path / 'tune' / 'tune.db'}"))
+        summaries = optuna.get_all_study_summaries(f"sqlite:///{tmp_path / 'tune' / 'tune.db'}")
+        seen["studies"] = sorted("-".join(s.study_name.rsplit("-", 2)[-2:]) for s in summaries)
         seen["jobs"] = (label, part, len(jobs))
         raise FirstFamilies
 
