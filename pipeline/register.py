@@ -71,20 +71,34 @@ INTERPRETATION_REGISTER: tuple[RegisterEntry, ...] = (
         "Section 2: state [y, vy, psi - psi_d, r, delta] with d(psi - psi_d)/dt = r - r_d, "
         "r_d 'desired yaw rate (external disturbance)': the lateral error dynamics about a "
         "desired path (Rajamani, ch. 2-3)",
-        "path: each step the APF rollout becomes a drivable path (from the vehicle along its "
-        "velocity, arcs whose curvature chases the rollout at controller.path_lookahead_m, "
-        "clipped at controller.path_curvature_max_1_per_m: the kinematic limit by default); the "
-        "state is the offset and heading error from it, its curvature is previewed as r_d, "
-        "the references are the model's equilibrium on it (r = r_d and the steering and "
-        "sideslip that hold it: controller.path_state_reference), the stations follow the "
-        "predicted speed, obstacles are projected to path coordinates; the prediction step "
-        "stretches so the horizon covers controller.horizon_reach_m at low speed",
+        "path: each step the state is the offset and heading error from a path built from the "
+        "APF rollout (which path: the next entry), its curvature is previewed as r_d, the "
+        "references are the model's equilibrium on it (r = r_d and the steering and sideslip "
+        "that hold it: controller.path_state_reference), the stations follow the predicted "
+        "speed, obstacles are projected to path coordinates; the prediction step stretches so "
+        "the horizon covers controller.horizon_reach_m at low speed",
         "fixed: the state against the start-goal line (the earlier reading: the model's "
         "small-angle bound is left in 199 of 200 runs of the improved method); "
-        "path_state_reference=zero (r and delta penalized about 0); another look-ahead or "
-        "curvature limit; horizon_reach_m=null (the horizon is Np Ts at any speed)",
-        "controller.frame, controller.path_lookahead_m, controller.path_curvature_max_1_per_m, "
-        "controller.path_state_reference, controller.horizon_reach_m"),
+        "path_state_reference=zero (r and delta penalized about 0); horizon_reach_m=null (the "
+        "horizon is Np Ts at any speed)",
+        "controller.frame, controller.path_state_reference, controller.horizon_reach_m"),
+    RegisterEntry(
+        "The path the lateral MPC follows",
+        "Section 3.1: the APF rollout is the MPC's reference, y_ref over the horizon, with "
+        "psi_apf / omega_ref from it",
+        "rollout: the rollout itself, each point at the time the vehicle would reach it (the "
+        "polyline resampled at v dt per MPC step, headings bisecting its chords, curvature the "
+        "heading's change; ended where the rollout folds back on itself, extended beyond its "
+        "end); where it asks for more curvature than the vehicle has, that is counted as the "
+        "APF's demand (path_beyond_limit) and never repaired",
+        "pursuit: a pure-pursuit chase of the rollout from the vehicle's pose at "
+        "controller.path_lookahead_m (2.5 m), its curvature clipped at the vehicle's limit "
+        "(controller.path_curvature_clip, controller.path_curvature_max_1_per_m): a layer of "
+        "ours, not the paper's, the default of the previous release; it makes the baseline's "
+        "1-m rollout and improved's 5-m one alike and cut improved's demand more (C2 moved "
+        "with the look-ahead: 1.5 m -0.003, 2.5 m -0.075, 4 m -0.35 m/s^3 over 100 members)",
+        "controller.path_reference, controller.path_lookahead_m, controller.path_curvature_clip, "
+        "controller.path_curvature_max_1_per_m"),
     RegisterEntry(
         "Velocity planning V_r = f_v(obstacles)",
         "Section 3.1: 'considers the relative position and motion of obstacles'; 'safety "
@@ -101,7 +115,7 @@ INTERPRETATION_REGISTER: tuple[RegisterEntry, ...] = (
     RegisterEntry(
         "APF path to lateral MPC reference",
         "Section 3.1: y_ref from the rollout; psi_apf = atan2(F_y, F_x), omega_ref = sat(...)",
-        "path frame: the rollout chased as a drivable path (see above); fixed frame: lateral "
+        "path frame: the rollout as the path (see above); fixed frame: lateral "
         "reference = rollout interpolated at the MPC's predicted stations, heading reference = "
         "path slope, saturated at controller.heading_ref_max_rad",
         "apf_force: heading ramps toward psi_apf at the saturated rate omega_max (in the path "

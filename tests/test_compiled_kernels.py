@@ -161,13 +161,41 @@ def test_compiled_chase_gives_the_paths_bits():
         args = (float(rollout[0, 0]), float(rollout[0, 1]), float(rng.uniform(-3, 3)),
                 rollout, float(np.cos(angle)), float(np.sin(angle)), bool(case % 3),
                 float(rng.uniform(0.5, 5.0)), float(rng.uniform(0.05, 0.5)),
-                float(rng.uniform(0.05, 0.5)), int(rng.integers(1, 14)))
+                float(rng.uniform(0.05, 0.5)), int(rng.integers(1, 14)), bool(case % 2))
         plain = chase_path_arrays(*args[:3], rollout.tolist(), *args[4:])
         fast = chase_path_kernel(*args)
         for a, b in zip(plain, fast, strict=True):
             assert np.array_equal(a, b), case
         clipped_seen += int(plain[3].any())
     assert clipped_seen > 30  # the curvature limit bound in many cases
+
+
+def test_compiled_rollout_path_gives_the_paths_bits():
+    """The rollout path (path_reference=rollout) compiled and in CPython: rollouts that
+    advance, stall (repeated points), fold back (dithering at the goal), do not advance at
+    all, and bend past the curvature limit; paths reaching beyond the rollout's end."""
+    from pipeline.loop.compiled import rollout_path_kernel
+    from pipeline.loop.controller.path import rollout_path_arrays
+
+    rng = np.random.default_rng(6)
+    beyond_seen = folded_seen = 0
+    for case in range(300):
+        n = int(rng.integers(1, 12))
+        steps = rng.normal(0.3, 0.3, (n, 2)) * rng.choice([0.0, 1.0, 1e-11], (n, 1))
+        if case % 5 == 0 and n > 3:
+            steps[n // 2:] *= np.where(np.arange(n - n // 2) % 2 == 0, -1.0, 1.0)[:, None]
+        rollout = np.cumsum(steps, axis=0) + rng.normal(0, 2, 2)
+        angle = rng.uniform(-np.pi, np.pi)
+        args = (rollout, float(np.cos(angle)), float(np.sin(angle)), bool(case % 3),
+                float(rng.uniform(0.05, 0.5)), float(rng.uniform(0.05, 0.5)),
+                int(rng.integers(1, 14)))
+        plain = rollout_path_arrays(rollout.tolist(), *args[1:])
+        fast = rollout_path_kernel(*args)
+        for a, b in zip(plain, fast, strict=True):
+            assert np.array_equal(a, b), case
+        beyond_seen += int(plain[3].any())
+        folded_seen += int(case % 5 == 0 and n > 3)
+    assert beyond_seen > 30 and folded_seen > 30
 
 
 def test_compiled_frame_step_and_check_give_the_same_bits():
@@ -190,7 +218,7 @@ def test_compiled_frame_step_and_check_give_the_same_bits():
         rollout = np.cumsum(rng.normal(0.3, 0.3, (8, 2)), axis=0)
         ds = float(rng.uniform(0.1, 0.4))
         path = chase_path_kernel(0.0, 0.0, float(rng.uniform(-1, 1)), rollout, 1.0, 0.0,
-                                 True, 2.5, 0.2, ds, 14)
+                                 True, 2.5, 0.2, ds, 14, True)
         points, headings, curvature, _ = path
         m = int(rng.choice([0, 11]))
         plan_xy = rng.normal(0, 1, (m, 2)) + np.column_stack([np.arange(m) * ds, np.zeros(m)])
@@ -198,7 +226,8 @@ def test_compiled_frame_step_and_check_give_the_same_bits():
         obstacles = rng.uniform(-3, 5, (int(rng.integers(0, 7)), 2))
         settings = (ds, 14, float(rng.normal(0, 0.1)), float(rng.normal(0, 0.1)),
                     float(rng.uniform(1, 4)), float(rng.uniform(1, 4)),
-                    float(rng.normal(1, 0.2)), float(rng.choice([0.1, 0.2])), 10, 0.5, 3.0)
+                    float(rng.normal(1, 0.2)), float(rng.choice([0.1, 0.2])), 10, 0.5, 3.0,
+                    float(rng.choice([0.05, 0.2, 5.0])))
         fast = frame_step_kernel(points, headings, curvature, *settings, plan_xy, plan_course,
                                  obstacles)
         plain = frame_step_arrays(points.tolist(), headings.tolist(), curvature.tolist(),
@@ -235,9 +264,10 @@ def test_compiled_frame_step_and_check_give_the_same_bits():
 @pytest.mark.parametrize("method", ["improved", "baseline"])
 def test_closed_loop_with_kernels_is_the_closed_loop_without(make_config, method, frame):
     """A run with the compiled kernels, counted, against the run with CPython's: every step
-    through the compiled plant, rollout and references (the path frame's chase, or the fixed
-    frame's interpolation), the same trajectory bit for bit; the cache's flag chooses them."""
-    calls = {"plant": 0, "rollout": 0, "references": 0, "chase": 0}
+    through the compiled plant, rollout and references (the path frame's rollout path, or the
+    fixed frame's interpolation), the same trajectory bit for bit; the cache's flag chooses
+    them."""
+    calls = {"plant": 0, "rollout": 0, "references": 0, "rollout_path": 0}
 
     def counting(name, kernel):
         def wrapped(*args):
@@ -249,10 +279,10 @@ def test_closed_loop_with_kernels_is_the_closed_loop_without(make_config, method
         plant_rk4=counting("plant", COMPILED_KERNELS.plant_rk4),
         apf_rollout=counting("rollout", COMPILED_KERNELS.apf_rollout),
         references=counting("references", COMPILED_KERNELS.references),
-        chase_path=counting("chase", COMPILED_KERNELS.chase_path))
+        rollout_path=counting("rollout_path", COMPILED_KERNELS.rollout_path))
     cfg = make_config([f"method={method}", "scenario=family", "scenario.family.size=3",
                        f"controller.frame={frame}"])
-    references = "chase" if frame == "path" else "references"
+    references = "rollout_path" if frame == "path" else "references"
     for member in family_members(cfg.scenario, cfg.vehicle.footprint_radius_m):
         member_cfg = replace(cfg, scenario=member)
         scenario = build_scenario(member)
@@ -292,7 +322,7 @@ def test_family_runner_turns_the_kernels_on_after_enough_members(make_config, tm
 
 
 def test_warming_puts_every_kernel_in_numbas_cache(tmp_path):
-    """``api.warm_compiled_kernels`` (what ``make install`` runs) leaves each of the seven
+    """``api.warm_compiled_kernels`` (what ``make install`` runs) leaves each of the eight
     kernels compiled in numba's on-disk cache (an empty one here, NUMBA_CACHE_DIR)."""
     import os
     import subprocess
@@ -304,6 +334,6 @@ def test_warming_puts_every_kernel_in_numbas_cache(tmp_path):
     indexed = {p.name.split("-")[0] for p in tmp_path.rglob("*.nbi")}
     assert indexed == {"model.single_track_rk4", "planner.apf_rollout_arrays",
                        "references.reference_arrays", "path.chase_path_arrays",
-                       "path.frame_step_arrays", "path.plan_poses_arrays",
+                       "path.rollout_path_arrays", "path.frame_step_arrays", "path.plan_poses_arrays",
                        "prediction_check.check_record_arrays"}, indexed
-    assert len(list(tmp_path.rglob("*.nbc"))) >= 7  # the compiled code beside each index
+    assert len(list(tmp_path.rglob("*.nbc"))) >= 8  # the compiled code beside each index

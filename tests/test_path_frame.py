@@ -1,7 +1,9 @@
 """The lateral MPC in path coordinates (controller.frame=path) against oracles: the fixed frame
-on a straight reference, the model's equilibrium on a circle, closed forms of the projection and
-of pure pursuit, the nonlinear plant for the prediction check, a second solver's optimum; and
-every register switch of the frame, flipped so that the test fails when it is ignored."""
+on a straight reference (the rollout itself as the path, and a straight path handed in), the
+rollout resampled and time-indexed by hand, the model's equilibrium on a circle, closed forms of
+the projection and of pure pursuit, the nonlinear plant for the prediction check, a second
+solver's optimum; and every register switch of the frame, flipped so that the test fails when it
+is ignored."""
 
 from __future__ import annotations
 
@@ -12,7 +14,12 @@ import numpy as np
 import pytest
 
 from pipeline.loop.controller import LateralMpc, Observation
-from pipeline.loop.controller.path import ReferencePath, chase_path_arrays, steady_state_gains
+from pipeline.loop.controller.path import (
+    ReferencePath,
+    chase_path_arrays,
+    rollout_path_arrays,
+    steady_state_gains,
+)
 from pipeline.loop.controller.prediction_check import PredictionRecord, prediction_check
 from pipeline.loop.model import build_lateral_model, step_plant
 from pipeline.loop.planner import ApfRollout, apf_rollout, plan_speed
@@ -83,22 +90,149 @@ def test_projection_on_a_circle_is_arc_length_and_radial_offset():
 
 def test_chase_is_pure_pursuit_and_clips_at_the_curvature_limit():
     """The first arc's curvature is pure pursuit's 2 sin(alpha) / |g - c| towards the point
-    the look-ahead away along the rollout; past the limit it is clipped and flagged; a
-    straight rollout ahead gives a straight path."""
+    the look-ahead away along the rollout; past the limit it is clipped and flagged (without
+    the clip: flagged, the pursuit's own curvature kept); a straight rollout ahead gives a
+    straight path."""
     rollout = np.array([[0.0, 0.0], [1.0, 1.0], [2.0, 2.0]])
     lookahead = 2.0
     goal = np.array([lookahead / np.sqrt(2), lookahead / np.sqrt(2)])
     alpha = np.arctan2(goal[1], goal[0])
+    pursuit = 2 * np.sin(alpha) / lookahead
     args = (0.0, 0.0, 0.0, rollout.tolist(), 1.0, 0.0, True, lookahead)
-    points, headings, curvature, clipped = chase_path_arrays(*args, 5.0, 0.1, 4)
-    assert curvature[0] == pytest.approx(2 * np.sin(alpha) / lookahead, rel=1e-12)
-    assert not clipped[0]
-    _, _, limited, clipped = chase_path_arrays(*args, 0.1, 0.1, 4)
-    assert limited[0] == 0.1 and clipped[0]
+    points, headings, curvature, beyond = chase_path_arrays(*args, 5.0, 0.1, 4, True)
+    assert curvature[0] == pytest.approx(pursuit, rel=1e-12)
+    assert not beyond[0]
+    _, _, limited, beyond = chase_path_arrays(*args, 0.1, 0.1, 4, True)
+    assert limited[0] == 0.1 and beyond[0]
+    _, _, unclipped, beyond = chase_path_arrays(*args, 0.1, 0.1, 4, False)
+    assert unclipped[0] == pytest.approx(pursuit, rel=1e-12) and beyond[0]
     straight = chase_path_arrays(0.0, 0.0, 0.0, [[0.0, 0.0], [1.0, 0.0]], 0.0, 1.0, True,
-                                 2.5, 0.2, 0.3, 6)
+                                 2.5, 0.2, 0.3, 6, True)
     assert np.all(straight[2] == 0.0) and np.allclose(straight[0][:, 1], 0.0)
     np.testing.assert_allclose(straight[0][:, 0], 0.3 * np.arange(7), atol=1e-12)
+
+
+def test_rollout_path_is_the_rollout_resampled_and_never_clipped():
+    """A rollout of 1 m along x, then 1 m at 60 degrees to the left: the knots every 0.25 m
+    lie on it (by hand), the interior knots' headings bisect their chords, each arc's
+    curvature is the heading's change over it (the corner's arcs far beyond a 0.2 1/m limit:
+    flagged, kept as asked), and beyond the end the path goes on along the last segment."""
+    turn = np.pi / 3
+    corner = np.array([1.0, 0.0])
+    u = np.array([np.cos(turn), np.sin(turn)])
+    rollout = [[0.0, 0.0], [0.5, 0.0], corner.tolist(), (corner + 0.5 * u).tolist(),
+               (corner + u).tolist()]
+    points, headings, curvature, beyond = rollout_path_arrays(rollout, 1.0, 0.0, True, 0.2,
+                                                              0.25, 12)
+    s = 0.25 * np.arange(13)
+    expected = np.where(s[:, None] <= 1.0, np.column_stack([s, np.zeros(13)]),
+                        corner[None, :] + (s[:, None] - 1.0) * u[None, :])
+    np.testing.assert_allclose(points, expected, atol=1e-12)
+    # chords: 0 up to the corner (knot 4), turn after it
+    np.testing.assert_allclose(headings[:4], 0.0, atol=1e-12)
+    assert headings[4] == pytest.approx(turn / 2, abs=1e-12)   # the corner's knot bisects
+    np.testing.assert_allclose(headings[5:], turn, atol=1e-12)
+    np.testing.assert_allclose(curvature, np.diff(headings) / 0.25, atol=1e-12)
+    assert curvature[3] == pytest.approx(turn / 2 / 0.25) and curvature[4] == curvature[3]
+    np.testing.assert_array_equal(beyond, np.abs(curvature) > 0.2)
+    assert beyond.sum() == 2 and curvature.max() > 10 * 0.2   # never clipped
+
+
+def test_rollout_path_ends_where_the_rollout_folds_back():
+    """A normalized-step rollout dithering about the goal (x = 30: 29.7, 30.2, 29.7 ...) ends
+    at its first fold; the path goes on along its last advancing segment (extend) or along the
+    start-goal line (hold)."""
+    rollout = [[28.2, 0.0], [28.7, 0.0], [29.2, 0.0], [29.7, 0.0], [30.2, 0.0], [29.7, 0.0],
+               [30.2, 0.0]]
+    points, headings, _, beyond = rollout_path_arrays(rollout, 1.0, 0.0, True, 0.2, 0.3, 12)
+    np.testing.assert_allclose(points[:, 0], 28.2 + 0.3 * np.arange(13), atol=1e-12)
+    assert np.all(headings == 0.0) and not beyond.any()
+    bent = [[0.0, 0.0], [0.0, 0.5], [0.0, 1.0], [0.0, 0.5]]   # heading up, then back down
+    points, _, _, _ = rollout_path_arrays(bent, 1.0, 0.0, False, 0.2, 0.5, 4)
+    np.testing.assert_allclose(points, [[0, 0], [0, 0.5], [0, 1.0], [0.5, 1.0], [1.0, 1.0]],
+                               atol=1e-12)
+
+
+@pytest.mark.parametrize("backend", ["clarabel_direct", "daqp"])
+def test_the_rollout_as_reference_is_the_fixed_frame_on_a_straight_rollout(make_config,
+                                                                           backend):
+    """The default reference (the rollout itself) on a straight rollout from the vehicle,
+    parallel to the start-goal line: the path frame's QP (built from the observation as a
+    run builds it) is the fixed frame's, shifted by the rollout's offset, and both reach the
+    same moves to 1e-9, an obstacle's half-planes included."""
+    path_cfg = make_config([f"controller.backend={backend}"])
+    assert path_cfg.controller.path_reference == "rollout"
+    fixed_cfg = make_config([f"controller.backend={backend}", "controller.frame=fixed"])
+    state = np.array([10.0, 0.4, 0.08, 3.0, 0.0, 0.0, 0.01])
+    rollout = straight_rollout([10.0, 0.4])
+    obstacles = snap([[13.0, 1.4]], [[0.0, -0.3]])
+    obs = observation(state, rollout, obstacles)
+    fixed = LateralMpc(fixed_cfg.controller, fixed_cfg.vehicle)
+    fixed_inputs, _ = fixed.inputs_from(obs)
+    mpc = LateralMpc(path_cfg.controller, path_cfg.vehicle)
+    path_inputs, _ = mpc.inputs_from(obs)
+    assert not np.count_nonzero(path_inputs.disturbance_rad_s)
+    np.testing.assert_allclose(path_inputs.x0 + [0.4, 0, 0, 0, 0], fixed_inputs.x0, atol=1e-12)
+    np.testing.assert_allclose(fixed_inputs.y_ref_m, 0.4, atol=1e-12)
+    np.testing.assert_allclose(path_inputs.constraint_gain, fixed_inputs.constraint_gain,
+                               atol=1e-12)
+    np.testing.assert_allclose(path_inputs.constraint_bound
+                               + 0.4 * path_inputs.constraint_gain,
+                               fixed_inputs.constraint_bound, atol=1e-12)
+    a, b = mpc.solve(path_inputs), fixed.solve(fixed_inputs)
+    assert np.count_nonzero(fixed_inputs.constraint_gain)  # the half-planes are there
+    np.testing.assert_allclose(a.planned_rates_rad_s, b.planned_rates_rad_s, atol=1e-9)
+
+
+def test_the_rollout_is_read_at_the_time_the_vehicle_reaches_it(make_config):
+    """Step k of the MPC is measured against the rollout's point at the arc length the vehicle
+    covers in k steps (3 m/s, 0.1 s: 0.3 k m): on a rollout with a corner 1.3 m ahead, the
+    frame's point at each station is that point of the polyline, computed by hand; the
+    vehicle's heading error is its heading against the rollout's first chord."""
+    cfg = make_config()
+    turn = 0.4
+    u = np.array([np.cos(turn), np.sin(turn)])
+    corner = np.array([11.3, 0.0])
+    rollout = straight_rollout([10.0, 0.0])
+    rollout = dataclasses.replace(rollout, path_m=np.vstack(
+        [[10.0, 0.0], [10.65, 0.0], corner, corner + 0.8 * u, corner + 1.6 * u,
+         corner + 2.4 * u]))
+    state = np.array([10.0, 0.0, 0.05, 3.0, 0.0, 0.0, 0.0])
+    mpc, inputs, _ = path_step(cfg, state, rollout, snap(np.zeros((0, 2))))
+    _, path, stations, dt = mpc.frame.record
+    assert dt == pytest.approx(0.1)
+    # v k dt up to the corner, then plus the speed a turn gains (vy r, the yaw rate at most the
+    # vehicle's limit: 0.17 1/m x 3 m/s): a few cm over the second
+    np.testing.assert_allclose(stations[:3], 0.3 * np.arange(3), atol=1e-12)
+    gained = stations - 0.3 * np.arange(11)
+    assert np.all(gained >= -1e-12) and gained.max() < 0.06
+    by_hand = np.array([[10.0 + s, 0.0] if s <= 1.3 else corner + (s - 1.3) * u
+                        for s in stations])
+    # the chords cut the corner only on the arc that straddles it (s = 1.2 .. 1.5)
+    frame_points = path.to_global(stations, np.zeros(11))
+    off_corner = np.abs(stations - 1.35) > 0.2
+    np.testing.assert_allclose(frame_points[off_corner], by_hand[off_corner], atol=1e-9)
+    assert np.max(np.hypot(*(frame_points - by_hand).T)) < 0.3 * np.sin(turn) / 2 + 1e-9
+    assert inputs.x0[0] == pytest.approx(0.0, abs=1e-12)
+    assert inputs.x0[2] == pytest.approx(0.05, abs=1e-12)
+
+
+def test_path_reference_switch_builds_the_pursuit_or_the_rollout(make_config):
+    """The same observation, a rollout pointing 0.5 rad left of the vehicle: the rollout path
+    starts along it (heading error 0 - 0.5), the pursuit path starts along the vehicle's
+    course (heading error 0, no sideslip) and bends towards it."""
+    state = np.array([10.0, 0.0, 0.0, 3.0, 0.0, 0.0, 0.0])
+    rollout = straight_rollout([10.0, 0.0])
+    rollout = dataclasses.replace(rollout, path_m=np.array(
+        [[10.0, 0.0]]) + 0.5 * np.arange(10)[:, None] * np.array([[np.cos(0.5), np.sin(0.5)]]))
+    _, along, log_along = path_step(make_config(), state, rollout, snap(np.zeros((0, 2))))
+    _, chase, log_chase = path_step(make_config(["controller.path_reference=pursuit"]), state,
+                                    rollout, snap(np.zeros((0, 2))))
+    assert along.x0[2] == pytest.approx(-0.5, abs=1e-12)
+    np.testing.assert_allclose(along.disturbance_rad_s, 0.0, atol=1e-12)   # straight: no curvature
+    assert chase.x0[2] == pytest.approx(0.0, abs=1e-12)
+    assert log_chase["path_curvature_1_per_m"] > 0.05 and np.count_nonzero(
+        chase.disturbance_rad_s)
 
 
 # --- the model on the path -----------------------------------------------------------------------
@@ -196,20 +330,25 @@ def test_the_prediction_check_against_the_nonlinear_plant(make_config):
     assert large["model_heading_error_rad"][0] == pytest.approx(0.5, abs=1e-9)
 
 
-def test_the_path_frame_keeps_the_model_inside_its_bound_where_the_fixed_frame_leaves_it(
+def test_the_pursuit_path_keeps_the_model_inside_its_bound_the_rollout_itself_does_not(
         make_config):
     """The improved APF's detour on the paper scenario: the fixed frame's heading error
-    leaves 0.35 rad, the path frame's stays inside, and its 1-s prediction is closer."""
+    leaves 0.35 rad and so does the path frame's about the rollout itself (the rollout turns
+    faster than the vehicle can: the APF's demand, why the nonlinear MPC judges); the pursuit
+    path, tangent to the vehicle and clipped at its curvature limit, keeps it inside, and its
+    1-s prediction is closer than the fixed frame's."""
     from pipeline.loop.scenario import build_scenario
     from pipeline.loop.simulate import simulate
 
     out = {}
-    for frame in ("fixed", "path"):
-        cfg = make_config(["method=improved", f"controller.frame={frame}"])
-        out[frame] = simulate(cfg, build_scenario(cfg.scenario)).trajectory
-    assert np.nanmax(out["fixed"]["model_heading_error_rad"]) > 0.35
-    assert np.nanmax(out["path"]["model_heading_error_rad"]) < 0.35
-    assert np.nanpercentile(out["path"]["model_error_1s_m"], 95) \
+    for name, overrides in (("fixed", ["controller.frame=fixed"]), ("rollout", []),
+                            ("pursuit", ["controller.path_reference=pursuit"])):
+        cfg = make_config(["method=improved", *overrides])
+        out[name] = simulate(cfg, build_scenario(cfg.scenario)).trajectory
+    heading = {k: np.nanmax(v["model_heading_error_rad"]) for k, v in out.items()}
+    assert heading["fixed"] > 0.35 and heading["rollout"] > 0.35 > heading["pursuit"]
+    assert out["rollout"]["path_beyond_limit"].mean() > 0.1
+    assert np.nanpercentile(out["pursuit"]["model_error_1s_m"], 95) \
         < 0.5 * np.nanpercentile(out["fixed"]["model_error_1s_m"], 95)
 
 
@@ -229,7 +368,9 @@ def test_frame_switch_changes_what_the_state_is_measured_against(make_config):
                                    snap([[14.0, 0.5]]))
     assert fixed_inputs.x0[0] == pytest.approx(1.0) and fixed_inputs.x0[2] == 0.4
     assert path_inputs.x0[0] == pytest.approx(0.0, abs=1e-12)
-    assert path_inputs.x0[2] == pytest.approx(0.0, abs=1e-12)  # no sideslip: vy = 0
+    first = rollout.path_m[1] - rollout.path_m[0]
+    assert np.hypot(*first) > 0.3   # the path's first chord lies on the rollout's first step
+    assert path_inputs.x0[2] == pytest.approx(0.4 - np.arctan2(first[1], first[0]), abs=1e-12)
     assert np.count_nonzero(path_inputs.disturbance_rad_s)
     assert not np.count_nonzero(fixed_inputs.disturbance_rad_s)
 
@@ -242,24 +383,41 @@ def test_lookahead_sets_the_chase_curvature(make_config):
     rollout = dataclasses.replace(rollout, path_m=np.vstack([[0.0, 0.0], rollout.path_m[1:]]))
     kappa = {}
     for lookahead in (2.5, 4.0):
-        cfg = make_config([f"controller.path_lookahead_m={lookahead}",
+        cfg = make_config(["controller.path_reference=pursuit",
+                           f"controller.path_lookahead_m={lookahead}",
                            "controller.path_curvature_max_1_per_m=5.0"])
         mpc, _, log = path_step(cfg, state, rollout, snap(np.zeros((0, 2))))
         kappa[lookahead] = log["path_curvature_1_per_m"]
     assert kappa[2.5] > kappa[4.0] > 0
 
 
-def test_curvature_limit_clips_the_path(make_config):
+def test_curvature_limit_clips_the_pursuit_path_and_only_flags_the_rollout(make_config):
+    """A rollout straight to the left of a vehicle heading along x. Pursuit: a limit of 0.1
+    1/m clips the chase's curvature and flags it, a limit of 5 does not bind, and without the
+    clip (path_curvature_clip=false) the chase's own curvature is kept and flagged. The
+    rollout itself: its first arc is straight (no curvature to clip), and the flag follows the
+    corner's demand, never cut."""
     state = np.array([0.0, 0.0, 0.0, 3.0, 0.0, 0.0, 0.0])
     rollout = straight_rollout([0.0, 0.0])
     rollout = dataclasses.replace(rollout, path_m=np.column_stack(
         [np.zeros(10), 0.5 * np.arange(10)]))  # straight to the left
-    _, _, wide = path_step(make_config(["controller.path_curvature_max_1_per_m=5.0"]), state,
-                           rollout, snap(np.zeros((0, 2))))
-    _, _, tight = path_step(make_config(["controller.path_curvature_max_1_per_m=0.1"]), state,
-                            rollout, snap(np.zeros((0, 2))))
-    assert tight["path_clipped"] and tight["path_curvature_1_per_m"] == pytest.approx(0.1)
-    assert not wide["path_clipped"] and wide["path_curvature_1_per_m"] > 0.1
+    empty = snap(np.zeros((0, 2)))
+    pursuit = "controller.path_reference=pursuit"
+    _, _, wide = path_step(make_config([pursuit, "controller.path_curvature_max_1_per_m=5.0"]),
+                           state, rollout, empty)
+    _, _, tight = path_step(make_config([pursuit, "controller.path_curvature_max_1_per_m=0.1"]),
+                            state, rollout, empty)
+    _, _, free = path_step(make_config([pursuit, "controller.path_curvature_max_1_per_m=0.1",
+                                        "controller.path_curvature_clip=false"]),
+                           state, rollout, empty)
+    assert tight["path_beyond_limit"] and tight["path_curvature_1_per_m"] == pytest.approx(0.1)
+    assert not wide["path_beyond_limit"] and wide["path_curvature_1_per_m"] > 0.1
+    assert free["path_beyond_limit"] and free["path_curvature_1_per_m"] == pytest.approx(
+        wide["path_curvature_1_per_m"])
+    mpc, inputs, own = path_step(make_config(["controller.path_curvature_max_1_per_m=0.1"]),
+                                 state, rollout, empty)
+    assert own["path_curvature_1_per_m"] == 0.0 and not own["path_beyond_limit"]
+    assert inputs.x0[2] == pytest.approx(-np.pi / 2)   # the vehicle at right angles to it
 
 
 def test_path_state_reference_zero_drops_the_equilibrium(make_config):

@@ -58,6 +58,8 @@ SWITCH_TESTS = {
     "scenario.obstacle_anchor": "here",
     "controller.frame": "test_path_frame", "controller.path_lookahead_m": "test_path_frame",
     "controller.path_curvature_max_1_per_m": "test_path_frame",
+    "controller.path_reference": "test_path_frame",
+    "controller.path_curvature_clip": "test_path_frame",
     "controller.path_state_reference": "test_path_frame",
     "controller.horizon_reach_m": "test_path_frame", "planner.velocity_rule": "test_path_frame",
     "claims.interval_adjustment": "test_outcome_interval",

@@ -27,7 +27,7 @@ def planted(n=11, seed=0):
         "time_s": 0.1 * np.arange(n),
         "model_heading_error_rad": np.r_[rng.uniform(0, 0.3, n - 2), 0.5, np.nan],
         "tyre_slip_norm": np.r_[np.full(n - 3, 0.1), 0.5, 0.6, 0.2],
-        "path_clipped": np.r_[np.ones(4, bool), np.zeros(n - 4, bool)],
+        "path_beyond_limit": np.r_[np.ones(4, bool), np.zeros(n - 4, bool)],
         "solver_status": ["optimal"] * (n - 1) + ["end"],
         "model_error_05s_m": rng.uniform(0, 0.1, n),
         "model_error_1s_m": np.r_[rng.uniform(0, 0.2, n - 3), np.nan, np.nan, np.nan],
@@ -41,7 +41,7 @@ def test_validity_block_closed_forms():
     v = validity_block(tr, context)
     assert v.share_steps_beyond_bound == pytest.approx(1 / 10)   # one of the ten known
     assert v.share_steps_tyre_nonlinear == pytest.approx(2 / 11)
-    assert v.share_steps_path_clipped == pytest.approx(4 / 10)   # the end row has no step
+    assert v.share_steps_path_beyond_limit == pytest.approx(4 / 10)   # the end row has no step
     finite = tr["model_error_1s_m"].dropna().to_numpy()
     assert v.prediction_error_1s_p95_m == pytest.approx(np.percentile(finite, 95))
     assert v.prediction_error_1s_p50_m == pytest.approx(np.median(finite))
@@ -56,7 +56,7 @@ def test_validity_row_pools_steps_and_averages_shares():
         tr = planted(seed=seed)
         metrics = {"heading_validity_exceeded": seed == 1, "model_heading_error_max_rad": 0.5,
                    "share_steps_beyond_bound": 0.1 * seed, "share_steps_tyre_nonlinear": 0.2,
-                   "share_steps_path_clipped": 0.4}
+                   "share_steps_path_beyond_limit": 0.4}
         members.append((tr, metrics))
     row = validity_row("lateral", "path", "improved", members)
     assert row.runs == 3 and row.runs_beyond_bound == 1

@@ -32,7 +32,7 @@ class ValidityRow:
     runs_beyond_bound: int
     share_steps_beyond_bound: float
     share_steps_tyre_nonlinear: float
-    share_steps_path_clipped: float
+    share_steps_path_beyond_limit: float
     prediction_error_1s_p50_m: float
     prediction_error_1s_p95_m: float
     plan_error_1s_p50_m: float
@@ -61,7 +61,7 @@ def validity_row(track: str, frame: str, method: str,
     runs = beyond = 0
     shares: dict[str, list[float]] = {"share_steps_beyond_bound": [],
                                       "share_steps_tyre_nonlinear": [],
-                                      "share_steps_path_clipped": []}
+                                      "share_steps_path_beyond_limit": []}
     model, plan = [], []
     for trajectory, metrics in members:
         runs += 1
@@ -79,7 +79,7 @@ def validity_row(track: str, frame: str, method: str,
         runs_beyond_bound=int(beyond) if any_bound else -1,
         share_steps_beyond_bound=_mean(shares["share_steps_beyond_bound"]),
         share_steps_tyre_nonlinear=_mean(shares["share_steps_tyre_nonlinear"]),
-        share_steps_path_clipped=_mean(shares["share_steps_path_clipped"]),
+        share_steps_path_beyond_limit=_mean(shares["share_steps_path_beyond_limit"]),
         prediction_error_1s_p50_m=_pooled(model, 50), prediction_error_1s_p95_m=_pooled(model, 95),
         plan_error_1s_p50_m=_pooled(plan, 50), plan_error_1s_p95_m=_pooled(plan, 95))
 

@@ -10,10 +10,10 @@ by CPython in a single run and by numba in the family runner's workers.
   rollout (about 65 us and 20 us with the call);
 * :func:`reference_kernel` is :func:`pipeline.loop.controller.references.reference_arrays`,
   the lateral MPC's references at its stations (about 35 us and 10 us with the call);
-* :func:`chase_path_kernel`, :func:`frame_step_kernel`, :func:`plan_poses_kernel` and
-  :func:`check_record_kernel` are the path frame's statements
-  (:mod:`pipeline.loop.controller.path`): the drivable path, one step's stations and obstacle
-  coordinates, a plan's poses, one step's prediction check.
+* :func:`rollout_path_kernel`, :func:`chase_path_kernel`, :func:`frame_step_kernel`,
+  :func:`plan_poses_kernel` and :func:`check_record_kernel` are the path frame's statements
+  (:mod:`pipeline.loop.controller.path`): the reference path (the rollout, or its pursuit),
+  one step's stations and obstacle coordinates, a plan's poses, one step's prediction check.
 
 Compiled without fast-math, they do the same operations in the same order on the same C
 library's ``atan2``, ``tanh``, ``exp``, ``cos`` and ``sin``, so they give the same bits (the
@@ -83,11 +83,13 @@ single_track_rk4 = _jit(model.single_track_rk4)
 apf_rollout_kernel = _jit(planner.apf_rollout_arrays)
 reference_kernel = _jit(references.reference_arrays)
 chase_path_kernel = _jit(path.chase_path_arrays)
+rollout_path_kernel = _jit(path.rollout_path_arrays)
 frame_step_kernel = _jit(path.frame_step_arrays)
 plan_poses_kernel = _jit(path.plan_poses_arrays)
 check_record_kernel = _jit(prediction_check.check_record_arrays)
 
 #: The compiled set (immutable: a named tuple of numba's dispatchers).
 COMPILED_KERNELS = Kernels(True, single_track_rk4, apf_rollout_kernel, reference_kernel,
-                           chase_path_kernel, frame_step_kernel, plan_poses_kernel,
+                           chase_path_kernel, rollout_path_kernel, frame_step_kernel,
+                           plan_poses_kernel,
                            check_record_kernel)

@@ -78,6 +78,13 @@ class Frame(StrEnum):
     FIXED = "fixed"
 
 
+class PathReference(StrEnum):
+    """``controller.path_reference``: which path the path frame measures the state against."""
+
+    ROLLOUT = "rollout"
+    PURSUIT = "pursuit"
+
+
 class PathStateReference(StrEnum):
     """``controller.path_state_reference``: the path frame's state references."""
 
@@ -98,7 +105,7 @@ CHOICES: dict[str, type[StrEnum]] = {
     "kind": ControllerKind, "backend": Backend, "formulation": Formulation,
     "input_hold": InputHold, "halfplane_normal": HalfplaneNormal,
     "heading_reference": HeadingReference, "path_beyond_end": PathBeyondEnd, "frame": Frame,
-    "path_state_reference": PathStateReference, "reference_alignment": ReferenceAlignment}
+    "path_reference": PathReference, "path_state_reference": PathStateReference, "reference_alignment": ReferenceAlignment}
 
 Settings = TypeVar("Settings", "MpcSettings", "PurePursuitSettings", "KinematicMpcSettings")
 
@@ -154,7 +161,9 @@ class MpcSettings(_KindSettings):
     yaw_rate_ref_max_rad_s: float
     path_beyond_end: PathBeyondEnd
     frame: Frame
+    path_reference: PathReference
     path_lookahead_m: float
+    path_curvature_clip: bool
     path_curvature_max_1_per_m: Optional[float]
     path_state_reference: PathStateReference
     horizon_reach_m: Optional[float]

@@ -33,9 +33,9 @@ class Kernels(NamedTuple):
         :func:`pipeline.loop.planner.apf_rollout_arrays`.
     references : callable
         :func:`pipeline.loop.controller.references.reference_arrays`.
-    chase_path, frame_step, plan_poses : callable
-        :func:`pipeline.loop.controller.path.chase_path_arrays`, ``frame_step_arrays``,
-        ``plan_poses_arrays``.
+    chase_path, rollout_path, frame_step, plan_poses : callable
+        :func:`pipeline.loop.controller.path.chase_path_arrays`, ``rollout_path_arrays``,
+        ``frame_step_arrays``, ``plan_poses_arrays``.
     check_record : callable
         :func:`pipeline.loop.controller.prediction_check.check_record_arrays`.
     """
@@ -45,6 +45,7 @@ class Kernels(NamedTuple):
     apf_rollout: Callable[..., Any]
     references: Callable[..., Any]
     chase_path: Callable[..., Any]
+    rollout_path: Callable[..., Any]
     frame_step: Callable[..., Any]
     plan_poses: Callable[..., Any]
     check_record: Callable[..., Any]

@@ -3,7 +3,12 @@ uses, and the statements :mod:`pipeline.loop.compiled` compiles."""
 
 from __future__ import annotations
 
-from pipeline.loop.controller.path import chase_path_arrays, frame_step_arrays, plan_poses_arrays
+from pipeline.loop.controller.path import (
+    chase_path_arrays,
+    frame_step_arrays,
+    plan_poses_arrays,
+    rollout_path_arrays,
+)
 from pipeline.loop.controller.prediction_check import check_record_arrays
 from pipeline.loop.controller.references import reference_arrays
 from pipeline.loop.kernels import Kernels
@@ -12,5 +17,6 @@ from pipeline.loop.planner import apf_rollout_arrays
 
 #: The CPython set (immutable: a named tuple of functions).
 PYTHON_KERNELS = Kernels(False, single_track_rk4, apf_rollout_arrays, reference_arrays,
-                         chase_path_arrays, frame_step_arrays, plan_poses_arrays,
+                         chase_path_arrays, rollout_path_arrays, frame_step_arrays,
+                         plan_poses_arrays,
                          check_record_arrays)

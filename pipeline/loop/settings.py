@@ -28,6 +28,7 @@ from pipeline.loop.controller_settings import (
     KinematicMpcSettings,
     MpcSettings,
     PathBeyondEnd,
+    PathReference,
     PathStateReference,
     PurePursuitSettings,
     ReferenceAlignment,
@@ -201,7 +202,13 @@ class ControllerConfig(FrozenAfterValidation):
     # what the lateral MPC's state is measured against: the drivable path built from the APF
     # rollout each step (path), or the start-goal line (fixed, the earlier reading)
     frame: str = "path"
+    # the path the path frame measures against: the APF rollout itself, each point at the time
+    # the vehicle reaches it (rollout, Section 3.1's y_ref), or a pure-pursuit chase of it from
+    # the vehicle at path_lookahead_m, its curvature clipped at the vehicle's limit when
+    # path_curvature_clip (pursuit: a reading of ours, not the paper's)
+    path_reference: str = "rollout"
     path_lookahead_m: float = 2.5
+    path_curvature_clip: bool = True
     path_curvature_max_1_per_m: Optional[float] = None  # None: tan(steering_max) / wheelbase
     path_state_reference: str = "steady_state"
     horizon_reach_m: Optional[float] = 3.0
@@ -315,7 +322,11 @@ class ControllerConfig(FrozenAfterValidation):
                   inclusive=False)
         choice("controller.path_beyond_end", self.path_beyond_end, tuple(PathBeyondEnd))
         choice("controller.frame", self.frame, tuple(Frame))
+        choice("controller.path_reference", self.path_reference, tuple(PathReference))
         between("controller.path_lookahead_m", self.path_lookahead_m, 0.1, 100.0)
+        if not isinstance(self.path_curvature_clip, bool):
+            raise ConfigError("controller.path_curvature_clip", self.path_curvature_clip,
+                              "true or false")
         if self.path_curvature_max_1_per_m is not None:
             between("controller.path_curvature_max_1_per_m", self.path_curvature_max_1_per_m,
                     1e-3, 10.0)

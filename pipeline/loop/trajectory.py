@@ -33,7 +33,7 @@ HEAD = REQUIRED + ("psi_rad", "vx_mps", "vy_mps", "r_rad_s", "delta_rad", "e_y_m
                    "psi_ref_rad") + APF
 #: The lateral MPC's path frame (path coordinates), the plant's tyres, and how each step's
 #: prediction held against the plant (:mod:`pipeline.loop.controller.path`).
-MODEL = ("path_clipped", "path_curvature_1_per_m", "r_d_rad_s", "tyre_slip_norm",
+MODEL = ("path_beyond_limit", "path_curvature_1_per_m", "r_d_rad_s", "tyre_slip_norm",
          "model_heading_error_rad", "model_error_05s_m", "model_error_1s_m",
          "plan_error_05s_m", "plan_error_1s_m")
 TAIL = SOLVER + MODEL

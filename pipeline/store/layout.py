@@ -32,6 +32,7 @@ class OutputsLayout:
     kinematic_family: str = "kinematic_family"
     frames: str = "frames"
     apf_alone: str = "apf_alone"
+    nmpc_family: str = "nmpc_family"
     peers: str = "peers"
     kinematic_peers: str = "kinematic_peers"
     pedestrians: str = "pedestrians"
@@ -82,7 +83,8 @@ class OutputsLayout:
         sections, never among the runs of the claims (the paper scenario, the family)."""
         return (self.sweeps, self.ablation, self.interpretations, self.multiverse, self.tune,
                 self.tune_unpruned, self.tune_peers, self.member_cache, self.kinematic_readings,
-                self.kinematic_family, self.frames, self.apf_alone, self.peers, self.kinematic_peers,
+                self.kinematic_family, self.frames, self.apf_alone, self.nmpc_family, self.peers,
+                self.kinematic_peers,
                 self.pedestrians, self.nmpc_check, self.speed, self.commonroad)
 
     @property

@@ -355,7 +355,7 @@ def validity_block(tr: pd.DataFrame, context: TrajectoryContext) -> ModelValidit
     tyre = column("tyre_slip_norm")
     stepped = tr["solver_status"].astype(str).to_numpy() != "end" if "solver_status" in tr \
         else np.ones(len(tr), bool)
-    clipped = tr["path_clipped"].to_numpy() if "path_clipped" in tr else None
+    beyond = tr["path_beyond_limit"].to_numpy() if "path_beyond_limit" in tr else None
     model_05, model_1 = _quantiles(column("model_error_05s_m")), _quantiles(column(
         "model_error_1s_m"))
     plan_1 = _quantiles(column("plan_error_1s_m"))
@@ -364,8 +364,8 @@ def validity_block(tr: pd.DataFrame, context: TrajectoryContext) -> ModelValidit
         share_steps_beyond_bound=_share(heading > context.validity_heading_rad,
                                         np.isfinite(heading)),
         share_steps_tyre_nonlinear=_share(tyre > context.tyre_linear_limit, np.isfinite(tyre)),
-        share_steps_path_clipped=_share(clipped.astype(bool), stepped)
-        if clipped is not None else float("nan"),
+        share_steps_path_beyond_limit=_share(beyond.astype(bool), stepped)
+        if beyond is not None else float("nan"),
         prediction_error_05s_p50_m=model_05[0], prediction_error_05s_p95_m=model_05[1],
         prediction_error_1s_p50_m=model_1[0], prediction_error_1s_p95_m=model_1[1],
         plan_error_1s_p50_m=plan_1[0], plan_error_1s_p95_m=plan_1[1])

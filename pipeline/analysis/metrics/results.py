@@ -173,7 +173,8 @@ class Progress(_Block):
 class ModelValidity(_Block):
     """Does the MPC's model hold where it is used? Shares of the run's steps (0-1) whose
     prediction left the small-angle bound over the next second, with a tyre beyond its linear
-    range, whose reference path was clipped at the curvature limit; the model's prediction
+    range, whose reference path asked for more curvature than the vehicle's limit (where the
+    pursuit path clips it: where the clip bound); the model's prediction
     error (replayed with the applied inputs) and the plan's, 0.5 s and 1 s ahead (m,
     median and 95th percentile over the run's steps). NaN where the run logged no such
     column (a scored trajectory, pure pursuit)."""
@@ -181,7 +182,7 @@ class ModelValidity(_Block):
     model_heading_error_max_rad: float
     share_steps_beyond_bound: float
     share_steps_tyre_nonlinear: float
-    share_steps_path_clipped: float
+    share_steps_path_beyond_limit: float
     prediction_error_05s_p50_m: float
     prediction_error_05s_p95_m: float
     prediction_error_1s_p50_m: float

@@ -3,8 +3,9 @@ frame, each turning an observation into one step's QP data (:class:`MpcInputs`).
 
 * :class:`FixedFrame` (``fixed``, the earlier reading): the position and heading against the
   start-goal line, the references interpolated on the APF rollout, ``r_d = 0``.
-* :class:`PathFrame` (``path``, the default): the offset and heading error from a drivable path
-  built from the APF rollout each step (:mod:`~pipeline.loop.controller.path`), its curvature
+* :class:`PathFrame` (``path``, the default): the offset and heading error from a reference
+  path built from the APF rollout each step (the rollout itself, or a pursuit of it:
+  ``controller.path_reference``, :mod:`~pipeline.loop.controller.path`), its curvature
   previewed as ``r_d``, the model's equilibrium on it as the references, the stations at the
   predicted speed, the obstacles in path coordinates.
 
@@ -115,9 +116,9 @@ class FixedFrame:
         s = obs.plant_state
         x0 = np.array([line_pos[1], s[4], obs.heading_line_rad, s[5], s[6]])
         log = {"y_ref_m": y_ref[0], "psi_ref_rad": psi_ref[0],
-               "path_clipped": bool(abs(np.tan(psi_ref[0])) >= np.tan(ctrl.heading_ref_max_rad)
-                                    - 1e-12) if ctrl.heading_reference == "path_slope"
-               else False}
+               "path_beyond_limit": bool(abs(np.tan(psi_ref[0]))
+                                         >= np.tan(ctrl.heading_ref_max_rad) - 1e-12)
+               if ctrl.heading_reference == "path_slope" else False}
         self.record = ("fixed", obs.frame.to_global(np.array([line_pos[0], 0.0])),
                        obs.frame.heading_rad, model.speed_mps * self._times_s,
                        self.sample_time_s)
@@ -200,7 +201,8 @@ class PathFrame:
             else (self._no_points, self._no_values)
         settings = (path.ds_m, path.n_intervals, float(st[0]), float(st[1]), speed,
                     float(obs.speed_ref_mps), float(gains[1]), dt, N,
-                    vehicle.speed_time_constant_s, vehicle.accel_max_mps2)
+                    vehicle.speed_time_constant_s, vehicle.accel_max_mps2,
+                    self.curvature_limit_1_per_m())
         prepare = kernels.prepare
         s0, d0, heading0, stations, r_d, vx, s_o, d_o = kernels.frame_step(
             prepare(path.points_m), prepare(path.headings_rad),
@@ -221,18 +223,19 @@ class PathFrame:
                                     visible.radii_m, vehicle, ctrl)
         first = obs.frame.to_line(path.points_m[1]) if N else obs.position_line_m
         log = {"y_ref_m": first[1], "psi_ref_rad": path.headings_rad[1] - obs.frame.heading_rad,
-               "path_clipped": bool(np.count_nonzero(
-                   path.clipped[:int(np.ceil(stations[-1] / path.ds_m - 1e-9))])),
+               "path_beyond_limit": bool(np.count_nonzero(
+                   path.beyond_limit[:int(np.ceil(stations[-1] / path.ds_m - 1e-9))])),
                "path_curvature_1_per_m": path.curvature_1_per_m[0], "r_d_rad_s": r_d[0]}
         self.record = ("path", path, stations, dt)
         return MpcInputs(x0, model, np.zeros(N), psi_ref, G, h, r_d, r_ref, delta_ref), log
 
     def reference_path(self, obs: Observation, ds_m: float, n_intervals: int
                        ) -> ReferencePath:
-        """The drivable path of one observation: ``n_intervals`` arcs of ``ds_m``."""
-        ctrl, vehicle, kernels = self.cfg, self.vehicle, self.kernels
-        kappa_max = ctrl.path_curvature_max_1_per_m if ctrl.path_curvature_max_1_per_m \
-            is not None else np.tan(vehicle.steering_max_rad) / vehicle.wheelbase_m
+        """The reference path of one observation: ``n_intervals`` arcs of ``ds_m``, the APF
+        rollout itself (``path_reference=rollout``) or its pursuit from the vehicle
+        (``pursuit``); Section 3.1's heading ramp with ``heading_reference=apf_force``."""
+        ctrl, kernels = self.cfg, self.kernels
+        kappa_max = self.curvature_limit_1_per_m()
         line = obs.frame.heading_rad
         st = obs.plant_state
         course = float(st[2]) + atan2(float(st[4]), max(float(st[3]), 0.1))
@@ -248,11 +251,25 @@ class PathFrame:
                                        float(ds_m), self.sample_time_s, int(n_intervals))
             return ReferencePath(*arrays, float(ds_m))
         cos_line, sin_line = obs.frame.cos_sin
-        points, headings, curvature, clipped = kernels.chase_path(
-            float(st[0]), float(st[1]), course, kernels.prepare(obs.rollout.path_m),
-            float(cos_line), float(sin_line), ctrl.path_beyond_end == "extend",
-            float(ctrl.path_lookahead_m), float(kappa_max), float(ds_m), int(n_intervals))
-        return ReferencePath(points, headings, curvature, clipped, float(ds_m))
+        extend = ctrl.path_beyond_end == "extend"
+        if ctrl.path_reference == "rollout":
+            points, headings, curvature, beyond = kernels.rollout_path(
+                kernels.prepare(obs.rollout.path_m), float(cos_line), float(sin_line), extend,
+                float(kappa_max), float(ds_m), int(n_intervals))
+        else:
+            points, headings, curvature, beyond = kernels.chase_path(
+                float(st[0]), float(st[1]), course, kernels.prepare(obs.rollout.path_m),
+                float(cos_line), float(sin_line), extend, float(ctrl.path_lookahead_m),
+                float(kappa_max), float(ds_m), int(n_intervals), ctrl.path_curvature_clip)
+        return ReferencePath(points, headings, curvature, beyond, float(ds_m))
+
+    def curvature_limit_1_per_m(self) -> float:
+        """The vehicle's curvature limit: ``controller.path_curvature_max_1_per_m``, by default
+        the kinematic one ``tan(steering_max) / wheelbase``."""
+        limit = self.cfg.path_curvature_max_1_per_m
+        vehicle = self.vehicle
+        return float(limit) if limit is not None else \
+            float(np.tan(vehicle.steering_max_rad) / vehicle.wheelbase_m)
 
     def after_step(self, step: ControlStep) -> None:
         """Keep the plan's global poses for the next step's stations (none after a

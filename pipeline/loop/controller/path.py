@@ -1,32 +1,37 @@
-"""The lateral MPC in path coordinates (``controller.frame=path``): a drivable reference path
-built from the APF rollout each step, the vehicle and the obstacles projected onto it.
+"""The lateral MPC in path coordinates (``controller.frame=path``): the reference path built
+from the APF rollout each step, the vehicle and the obstacles projected onto it.
 
 The paper's lateral model has state ``[y, vy, epsi, r, delta]`` with ``d(epsi)/dt = r - r_d``:
 the lateral *error* dynamics about a desired path (Rajamani, *Vehicle Dynamics and Control*,
 ch. 2-3), ``y`` the offset from the path, ``epsi`` the heading error and ``r_d = vx kappa`` the
 yaw rate the path itself demands. Measured against the fixed start-goal line (``frame=fixed``)
 the small-angle assumption breaks wherever the APF asks for a detour; measured against the path,
-the errors stay small however steep the detour. This module builds that path and the
-coordinates:
+the errors stay small wherever the path itself can be driven. Which path
+(``controller.path_reference``):
 
-* :func:`chase_path_arrays` turns the APF rollout into a *drivable* path: from the vehicle's
-  pose (tangent to its heading), arcs of length ``ds = v Ts`` (one per MPC step, so the
-  previewed curvature is exactly piecewise constant over each step, as the zero-order hold
-  assumes), each with the curvature of a pure-pursuit chase of the rollout at look-ahead
-  ``L`` (``kappa = 2 sin(alpha) / |g - c|``), clipped at the curvature limit. Where the clip
-  binds the APF asked for more than the vehicle can drive: :attr:`ReferencePath.clipped` counts
-  it. A rollout shorter than the chase's reach is extended along its last segment
-  (``path_beyond_end=extend``) or parallel to the start-goal line (``hold``), as the fixed
-  frame extends it.
+* :func:`rollout_path_arrays` (``rollout``, the default; Section 3.1 hands the MPC the rollout
+  as ``y_ref`` over the horizon): the APF rollout itself, a polyline from the vehicle's
+  position, resampled at arcs of ``ds = v dt`` (one per MPC step, so each point is where the
+  vehicle would be when the MPC's step reaches it), the heading at each knot the bisector of
+  its two chords and the curvature of each arc the heading's change over it. Nothing is
+  repaired: where the rollout turns faster than the vehicle can (``|kappa|`` above the
+  kinematic limit) :attr:`ReferencePath.beyond_limit` flags the arc, a property of the APF.
+* :func:`chase_path_arrays` (``pursuit``, a reading of ours): from the vehicle's pose (tangent
+  to its course), arcs of ``ds`` whose curvature is a pure-pursuit chase of the rollout at
+  look-ahead ``L`` (``kappa = 2 sin(alpha) / |g - c|``), clipped at the curvature limit
+  (``controller.path_curvature_clip``). The chase and the clip act unequally on the two APFs
+  (the baseline's 1-m rollout and improved's 5-m one read at the same look-ahead are made
+  alike), so they are a registered reading, varied in the multiverse.
+
+Either way a rollout shorter than the path's reach is extended along its last segment
+(``path_beyond_end=extend``) or parallel to the start-goal line (``hold``), as the fixed frame
+extends it. Then:
+
 * :class:`ReferencePath` projects points to path coordinates ``(s, d)`` (arc length, signed
   offset, left positive) and back, and gives the path's heading at ``s``.
 * :func:`steady_state_gains` is the model's equilibrium on a circle: with ``r = r_d`` constant,
   ``e_y = 0`` and ``u = 0``, the lateral velocity, heading error (``-vy / vx``, the sideslip)
   and steering angle that hold it there, all proportional to ``r_d``.
-
-Why a chase, not a smoothing spline through the rollout: a spline passes through the rollout's
-first point but not tangent to the vehicle, and has no curvature bound, so the heading error at
-the start and the curvature could be as large as in the fixed frame.
 """
 
 from __future__ import annotations
@@ -46,10 +51,11 @@ _TINY = 1e-9
 
 def chase_path_arrays(px: float, py: float, heading: float, target: KernelValues,  # noqa: C901
                       line_x: float, line_y: float, extend: bool, lookahead_m: float,
-                      kappa_max: float, ds_m: float, n_intervals: int
+                      kappa_max: float, ds_m: float, n_intervals: int, clip: bool
                       ) -> tuple[KernelValues, KernelValues, KernelValues, KernelValues]:
-    """The drivable path of :mod:`this module <pipeline.loop.controller.path>` on plain
-    numbers: ``points (n + 1, 2), headings (n + 1,), curvature (n,), clipped (n,)``.
+    """The pursuit path (``path_reference=pursuit``) of :mod:`this module
+    <pipeline.loop.controller.path>` on plain numbers: ``points (n + 1, 2), headings (n + 1,),
+    curvature (n,), beyond_limit (n,)``.
 
     Parameters
     ----------
@@ -67,6 +73,9 @@ def chase_path_arrays(px: float, py: float, heading: float, target: KernelValues
     lookahead_m, kappa_max, ds_m : float
         Chase look-ahead (m), curvature limit (1/m), arc length per interval (m).
     n_intervals : int
+    clip : bool
+        Clip each arc's curvature at ``kappa_max`` (flagged in ``beyond_limit`` either way);
+        a look-ahead point behind the vehicle turns it at ``kappa_max`` in both cases.
 
     This one statement runs in CPython (a single run) and compiled by numba
     (:mod:`pipeline.loop.compiled`): the same operations on the same C library's functions.
@@ -94,7 +103,7 @@ def chase_path_arrays(px: float, py: float, heading: float, target: KernelValues
     points = np.empty((n + 1, 2))
     headings = np.empty(n + 1)
     curvature = np.empty(n)
-    clipped = np.zeros(n, dtype=np.bool_)
+    beyond = np.zeros(n, dtype=np.bool_)
     cx, cy, theta = px, py, heading
     points[0, 0], points[0, 1], headings[0] = cx, cy, theta
     for k in range(n):
@@ -139,10 +148,10 @@ def chase_path_arrays(px: float, py: float, heading: float, target: KernelValues
             kappa = kappa_max if alpha > 0.0 else -kappa_max  # the point is behind: turn hard
         else:
             kappa = 2.0 * sin(alpha) / dist
-        if kappa > kappa_max:
-            kappa, clipped[k] = kappa_max, True
-        elif kappa < -kappa_max:
-            kappa, clipped[k] = -kappa_max, True
+        if kappa > kappa_max or kappa < -kappa_max:
+            beyond[k] = True
+            if clip:
+                kappa = kappa_max if kappa > 0.0 else -kappa_max
         # along the arc: chord 2 sin(kappa ds / 2) / kappa at the mid-arc heading
         half = 0.5 * kappa * ds_m
         chord = ds_m if half == 0.0 else ds_m * sin(half) / half
@@ -150,7 +159,109 @@ def chase_path_arrays(px: float, py: float, heading: float, target: KernelValues
         theta = theta + 2.0 * half
         points[k + 1, 0], points[k + 1, 1], headings[k + 1] = cx, cy, theta
         curvature[k] = kappa
-    return points, headings, curvature, clipped
+    return points, headings, curvature, beyond
+
+
+def rollout_path_arrays(target: KernelValues, line_x: float, line_y: float,  # noqa: C901
+                        extend: bool, kappa_max: float, ds_m: float, n_intervals: int
+                        ) -> tuple[KernelValues, KernelValues, KernelValues, KernelValues]:
+    """The rollout path (``path_reference=rollout``) of :mod:`this module
+    <pipeline.loop.controller.path>` on plain numbers: ``points (n + 1, 2), headings (n + 1,),
+    curvature (n,), beyond_limit (n,)``.
+
+    Parameters
+    ----------
+    target : sequence of [x, y]
+        The APF rollout (its first point is the vehicle's position, so the path starts there);
+        points that do not advance by more than 1e-9 m are dropped, and the rollout ends
+        where it folds back on itself (a step more than 90 degrees from the one before: a
+        step-limited APF dithering about the goal or a local minimum, no longer a path).
+    line_x, line_y : float
+        Unit direction of the start-goal line.
+    extend : bool
+        Beyond the rollout's (kept) last point, along its last segment that advances
+        (``path_beyond_end=extend``), else parallel to the line (``hold``, and a rollout that
+        does not advance).
+    kappa_max : float
+        The vehicle's curvature limit (1/m): arcs beyond it are flagged, never changed.
+    ds_m : float
+        Arc length per interval (m): the knots are the rollout's points at arc lengths
+        ``0, ds, 2 ds, ...`` (on the polyline: the rollout itself, resampled).
+    n_intervals : int
+
+    Notes
+    -----
+    Knot ``k``'s heading is the bisector of its two chords (the first and last knots take
+    their one chord's direction), unwrapped along the path; arc ``k``'s curvature is
+    ``(h[k+1] - h[k]) / ds``, so the heading is linear over each arc as
+    :class:`ReferencePath` reads it and its mean over the arc is the chord's direction to
+    second order. A corner of the rollout becomes one or two arcs of large curvature: that is
+    the rollout's demand, flagged where it exceeds ``kappa_max``.
+
+    This one statement runs in CPython (a single run) and compiled by numba
+    (:mod:`pipeline.loop.compiled`).
+    """
+    n_target = len(target)
+    tx = [target[0][0]]
+    ty = [target[0][1]]
+    for i in range(1, n_target):
+        x, y = target[i][0], target[i][1]
+        sx, sy = x - tx[-1], y - ty[-1]
+        if sqrt(sx * sx + sy * sy) <= _TINY:
+            continue
+        if len(tx) > 1 and sx * (tx[-1] - tx[-2]) + sy * (ty[-1] - ty[-2]) < 0.0:
+            break  # the rollout folds back on itself: its reach ends here
+        tx.append(x)
+        ty.append(y)
+    n_seg = len(tx) - 1
+    lengths = [0.0] * (n_seg + 1)
+    for i in range(n_seg):
+        sx, sy = tx[i + 1] - tx[i], ty[i + 1] - ty[i]
+        lengths[i + 1] = lengths[i] + sqrt(sx * sx + sy * sy)
+    ext_x, ext_y = line_x, line_y
+    if extend and n_seg > 0:
+        last = lengths[n_seg] - lengths[n_seg - 1]
+        ext_x, ext_y = (tx[n_seg] - tx[n_seg - 1]) / last, (ty[n_seg] - ty[n_seg - 1]) / last
+    n = n_intervals
+    points = np.empty((n + 1, 2))
+    i = 0
+    for k in range(n + 1):
+        sigma = k * ds_m
+        if sigma >= lengths[n_seg]:
+            rest = sigma - lengths[n_seg]
+            points[k, 0], points[k, 1] = tx[n_seg] + rest * ext_x, ty[n_seg] + rest * ext_y
+        else:
+            while lengths[i + 1] < sigma:
+                i += 1
+            t = (sigma - lengths[i]) / (lengths[i + 1] - lengths[i])
+            points[k, 0] = tx[i] + t * (tx[i + 1] - tx[i])
+            points[k, 1] = ty[i] + t * (ty[i + 1] - ty[i])
+    # chord directions, unwrapped along the path (a chord shorter than 1e-9 m, where the
+    # resampled rollout doubles back on itself, keeps the previous direction)
+    chords = np.empty(n)
+    previous = atan2(ext_y, ext_x) if n_seg == 0 else atan2(ty[1] - ty[0], tx[1] - tx[0])
+    for k in range(n):
+        dx, dy = points[k + 1, 0] - points[k, 0], points[k + 1, 1] - points[k, 1]
+        angle = previous if dx * dx + dy * dy < _TINY * _TINY else atan2(dy, dx)
+        while angle - previous > pi:
+            angle -= 2.0 * pi
+        while angle - previous < -pi:
+            angle += 2.0 * pi
+        chords[k] = angle
+        previous = angle
+    headings = np.empty(n + 1)
+    curvature = np.empty(n)
+    beyond = np.zeros(n, dtype=np.bool_)
+    if n == 0:
+        headings[0] = previous
+        return points, headings, curvature, beyond
+    headings[0], headings[n] = chords[0], chords[n - 1]
+    for k in range(1, n):
+        headings[k] = 0.5 * (chords[k - 1] + chords[k])
+    for k in range(n):
+        curvature[k] = (headings[k + 1] - headings[k]) / ds_m
+        beyond[k] = curvature[k] > kappa_max or curvature[k] < -kappa_max
+    return points, headings, curvature, beyond
 
 
 def heading_ramp_path(px: float, py: float, heading: float, target_heading: float,
@@ -162,7 +273,8 @@ def heading_ramp_path(px: float, py: float, heading: float, target_heading: floa
     the pose, the heading ramps towards ``psi_apf`` at ``omega_ref = sat((psi_apf - theta) /
     Ts)`` (at most ``yaw_rate_max_rad_s``), held within ``heading_limits`` (the fixed frame's
     ``heading_ref_max_rad`` about the start-goal line), one arc of ``ds_m`` per step, each
-    arc's curvature clipped at ``kappa_max``. Returns the arrays of :class:`ReferencePath`."""
+    arc's curvature clipped at ``kappa_max`` (flagged where it binds). Returns the arrays of
+    :class:`ReferencePath`."""
     error = float(wrap_angle(target_heading - heading))
     omega = min(max(error / sample_time_s, -yaw_rate_max_rad_s), yaw_rate_max_rad_s)
     k = np.arange(n_intervals + 1)
@@ -171,7 +283,7 @@ def heading_ramp_path(px: float, py: float, heading: float, target_heading: floa
         heading_limits[1] else wanted
     raw = np.diff(wanted) / ds_m
     curvature = np.clip(raw, -kappa_max, kappa_max)
-    clipped = np.abs(raw) > kappa_max
+    beyond = np.abs(raw) > kappa_max
     headings = heading + np.concatenate([[0.0], np.cumsum(curvature * ds_m)])
     half = 0.5 * curvature * ds_m
     chord = ds_m * np.sinc(half / np.pi)
@@ -179,7 +291,7 @@ def heading_ramp_path(px: float, py: float, heading: float, target_heading: floa
     steps = chord[:, None] * np.column_stack([np.cos(mid), np.sin(mid)])
     points = np.array([px, py])[None, :] + np.concatenate([np.zeros((1, 2)),
                                                            np.cumsum(steps, axis=0)])
-    return points, headings, curvature, clipped
+    return points, headings, curvature, beyond
 
 
 # --- the path's geometry on plain numbers (one statement for CPython and numba) ------------
@@ -286,8 +398,9 @@ class ReferencePath:
     points_m : ndarray, shape (K + 1, 2)
     headings_rad : ndarray, shape (K + 1,)
     curvature_1_per_m : ndarray, shape (K,)
-    clipped : ndarray of bool, shape (K,)
-        Whether the curvature limit bound on each arc.
+    beyond_limit : ndarray of bool, shape (K,)
+        Whether each arc's curvature, as the reference asked for it, exceeds the vehicle's
+        limit (on the pursuit path with the clip: where the clip bound).
     ds_m : float
         Arc length of each interval.
     """
@@ -295,7 +408,7 @@ class ReferencePath:
     points_m: np.ndarray
     headings_rad: np.ndarray
     curvature_1_per_m: np.ndarray
-    clipped: np.ndarray
+    beyond_limit: np.ndarray
     ds_m: float
 
     @classmethod
@@ -383,8 +496,8 @@ def steady_state_gains(model: LateralModel) -> np.ndarray:
 def frame_step_arrays(points: KernelValues, headings: KernelValues, curvature: KernelValues,
                       ds: float, n: int, px: float, py: float, speed: float, speed_ref: float,
                       vy_gain: float, ts: float, n_steps: int, time_constant: float,
-                      accel_max: float, plan_xy: KernelValues, plan_course: KernelValues,
-                      obstacles: KernelValues) -> tuple[Any, ...]:
+                      accel_max: float, kappa_max: float, plan_xy: KernelValues,
+                      plan_course: KernelValues, obstacles: KernelValues) -> tuple[Any, ...]:
     """One step's path-frame data on plain numbers: the vehicle's path coordinates, where it
     will be along the path at each step, the yaw rate the path then demands, and each obstacle
     point in path coordinates. Returns ``s0, d0``, the path's heading at ``s0``, and arrays
@@ -395,7 +508,9 @@ def frame_step_arrays(points: KernelValues, headings: KernelValues, curvature: K
     The stations follow the plant's speed loop (first order towards ``speed_ref`` with the
     vehicle's time constant and acceleration limit) plus its ``vy r`` term (in a turn the
     body's forward speed grows: ``vx' = a + vy r``), ``vy r`` taken at the path's steady state
-    (``vy = vy_gain r_d``, ``r = r_d``); the along-path speed is the total speed
+    (``vy = vy_gain r_d``, ``r = r_d``, the yaw rate at most ``kappa_max`` times the speed: a
+    path that turns faster than the vehicle can, as the rollout itself may, does not make the
+    vehicle gain speed it cannot); the along-path speed is the total speed
     ``sqrt(vx^2 + vy^2)`` (on the path the velocity is tangent to it). Two passes: the first
     finds ``r_d`` with the speed loop alone, the second adds ``vy r``. Taking the stations at
     a constant speed put the model's 1-s prediction up to 0.2 m behind the plant (measured on
@@ -439,6 +554,8 @@ def frame_step_arrays(points: KernelValues, headings: KernelValues, curvature: K
         v = speed if speed > 0.0 else 0.0
         for k in range(N + 1):
             rate = r_d[k if k < N else N - 1] if N > 0 else 0.0
+            rate_max = kappa_max * v
+            rate = rate_max if rate > rate_max else (-rate_max if rate < -rate_max else rate)
             vy = vy_gain * rate
             vx[k] = v
             value = sqrt(v * v + vy * vy)

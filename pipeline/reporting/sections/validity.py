@@ -84,7 +84,7 @@ def validity_section(inputs: ReportInputs, verdicts: Verdicts) -> ValiditySectio
         "beyond_runs": "—" if r.runs_beyond_bound < 0 else f"{r.runs_beyond_bound} of {r.runs}",
         "beyond_percent": 100 * r.share_steps_beyond_bound,
         "tyre_percent": 100 * r.share_steps_tyre_nonlinear,
-        "clipped_percent": 100 * r.share_steps_path_clipped,
+        "beyond_limit_percent": 100 * r.share_steps_path_beyond_limit,
         "model_p50": r.prediction_error_1s_p50_m, "model_p95": r.prediction_error_1s_p95_m,
         "plan_p50": r.plan_error_1s_p50_m, "plan_p95": r.plan_error_1s_p95_m,
         "meets": r.track == "lateral" and r.frame == "path"
