@@ -76,7 +76,8 @@ def _same_signature(function: Callable[..., Any]) -> Callable[..., Any]:
     return typer
 
 
-for _helper in (path._heading_at, path._curvature_at, path._project_point, path._point_at):
+for _helper in (path._polyline, path._heading_at, path._curvature_at, path._project_point,
+                path._point_at):
     overload(_helper)(_same_signature(_helper))
 
 single_track_rk4 = _jit(model.single_track_rk4)

@@ -49,6 +49,37 @@ from pipeline.loop.model import LateralModel
 _TINY = 1e-9
 
 
+def _polyline(target: KernelValues, line_x: float, line_y: float, extend: bool,
+              end_at_fold: bool) -> tuple[Any, Any, Any, float, float]:
+    """The APF rollout as a polyline: its points that advance by more than 1e-9 m (up to the
+    first that folds back, a step more than 90 degrees from the one before, with
+    ``end_at_fold``), their cumulative arc lengths, and the direction beyond its last point
+    (along its last segment with ``extend`` and at least one segment, else the line's):
+    ``xs, ys, lengths, ext_x, ext_y`` (sqrt, not hypot: CPython's math.hypot and the C
+    library's differ in the last bit)."""
+    tx = [target[0][0]]
+    ty = [target[0][1]]
+    for i in range(1, len(target)):
+        x, y = target[i][0], target[i][1]
+        sx, sy = x - tx[-1], y - ty[-1]
+        if sqrt(sx * sx + sy * sy) <= _TINY:
+            continue
+        if end_at_fold and len(tx) > 1 and sx * (tx[-1] - tx[-2]) + sy * (ty[-1] - ty[-2]) < 0.0:
+            break
+        tx.append(x)
+        ty.append(y)
+    n_seg = len(tx) - 1
+    lengths = [0.0] * (n_seg + 1)  # cumulative arc length at each point
+    for i in range(n_seg):
+        sx, sy = tx[i + 1] - tx[i], ty[i + 1] - ty[i]
+        lengths[i + 1] = lengths[i] + sqrt(sx * sx + sy * sy)
+    ext_x, ext_y = line_x, line_y
+    if extend and n_seg > 0:
+        last = lengths[n_seg] - lengths[n_seg - 1]
+        ext_x, ext_y = (tx[n_seg] - tx[n_seg - 1]) / last, (ty[n_seg] - ty[n_seg - 1]) / last
+    return tx, ty, lengths, ext_x, ext_y
+
+
 def chase_path_arrays(px: float, py: float, heading: float, target: KernelValues,  # noqa: C901
                       line_x: float, line_y: float, extend: bool, lookahead_m: float,
                       kappa_max: float, ds_m: float, n_intervals: int, clip: bool
@@ -80,25 +111,8 @@ def chase_path_arrays(px: float, py: float, heading: float, target: KernelValues
     This one statement runs in CPython (a single run) and compiled by numba
     (:mod:`pipeline.loop.compiled`): the same operations on the same C library's functions.
     """
-    # the rollout's points that advance, then the extension ray (sqrt, not hypot: CPython's
-    # math.hypot and the C library's differ in the last bit)
-    n_target = len(target)
-    tx = [target[0][0]]
-    ty = [target[0][1]]
-    for i in range(1, n_target):
-        x, y = target[i][0], target[i][1]
-        if sqrt((x - tx[-1]) * (x - tx[-1]) + (y - ty[-1]) * (y - ty[-1])) > _TINY:
-            tx.append(x)
-            ty.append(y)
+    tx, ty, lengths, ext_x, ext_y = _polyline(target, line_x, line_y, extend, False)
     n_seg = len(tx) - 1
-    lengths = [0.0] * (n_seg + 1)  # cumulative arc length at each target point
-    for i in range(n_seg):
-        sx, sy = tx[i + 1] - tx[i], ty[i + 1] - ty[i]
-        lengths[i + 1] = lengths[i] + sqrt(sx * sx + sy * sy)
-    ext_x, ext_y = line_x, line_y
-    if extend and n_seg > 0:
-        last = lengths[n_seg] - lengths[n_seg - 1]
-        ext_x, ext_y = (tx[n_seg] - tx[n_seg - 1]) / last, (ty[n_seg] - ty[n_seg - 1]) / last
     n = n_intervals
     points = np.empty((n + 1, 2))
     headings = np.empty(n + 1)
@@ -201,27 +215,8 @@ def rollout_path_arrays(target: KernelValues, line_x: float, line_y: float,  # n
     This one statement runs in CPython (a single run) and compiled by numba
     (:mod:`pipeline.loop.compiled`).
     """
-    n_target = len(target)
-    tx = [target[0][0]]
-    ty = [target[0][1]]
-    for i in range(1, n_target):
-        x, y = target[i][0], target[i][1]
-        sx, sy = x - tx[-1], y - ty[-1]
-        if sqrt(sx * sx + sy * sy) <= _TINY:
-            continue
-        if len(tx) > 1 and sx * (tx[-1] - tx[-2]) + sy * (ty[-1] - ty[-2]) < 0.0:
-            break  # the rollout folds back on itself: its reach ends here
-        tx.append(x)
-        ty.append(y)
+    tx, ty, lengths, ext_x, ext_y = _polyline(target, line_x, line_y, extend, True)
     n_seg = len(tx) - 1
-    lengths = [0.0] * (n_seg + 1)
-    for i in range(n_seg):
-        sx, sy = tx[i + 1] - tx[i], ty[i + 1] - ty[i]
-        lengths[i + 1] = lengths[i] + sqrt(sx * sx + sy * sy)
-    ext_x, ext_y = line_x, line_y
-    if extend and n_seg > 0:
-        last = lengths[n_seg] - lengths[n_seg - 1]
-        ext_x, ext_y = (tx[n_seg] - tx[n_seg - 1]) / last, (ty[n_seg] - ty[n_seg - 1]) / last
     n = n_intervals
     points = np.empty((n + 1, 2))
     i = 0
