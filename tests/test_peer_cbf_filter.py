@@ -1,6 +1,7 @@
 """The CBF-QP safety filter peer (pipeline.peers.cbf_filter): the nominal input untouched where
 no barrier row binds, the QP against an independent solve, the closed loop kept clear where the
-nominal MPC alone collides, both tracks through ``_target_``, bad params as one line."""
+nominal MPC alone collides, the side rule (pipeline.peers.side_rule) by hand and on an obstacle
+dead ahead, both tracks through ``_target_``, bad params as one line."""
 
 from __future__ import annotations
 
@@ -21,6 +22,11 @@ from pipeline.peers.cbf_filter import (
     KinematicCbfFilter,
     LateralCbfFilter,
 )
+from pipeline.peers.side_rule import pass_sides
+
+#: A static obstacle dead ahead: on the start-goal line (the x axis), 14 m in front of the start.
+DEAD_AHEAD = "scenario.obstacles=[{x_m: 14.0, y_m: 0.0, vx_mps: 0.0, vy_mps: 0.0, " \
+             "radius_m: 0.5, appear_time_s: 0.0}]"
 
 
 def observation(cfg, obstacles, y_m=0.5, speed_mps=3.0):
@@ -178,7 +184,11 @@ def test_both_tracks_compose_by_target_and_bad_params_are_one_line(make_config):
     assert CbfFilterSettings.of(dict(lateral.controller.params)) == CbfFilterSettings()
     for override, key in (("controller.params.decay_rate=0.0", "decay_rate"),
                           ("controller.params.preview_steps=0", "preview_steps"),
-                          ("+controller.params.horizon_s=2", "horizon_s")):
+                          ("+controller.params.horizon_s=2", "horizon_s"),
+                          ("controller.params.min_lateral_offset_ratio=1.5",
+                           "min_lateral_offset_ratio"),
+                          # the lateral filter has one input: an acceleration weight is refused
+                          ("+controller.params.accel_cost_ratio=10", "accel_cost_ratio")):
         bad = make_config(["method=cbf_filter", override])
         with pytest.raises(ValueError) as error:
             make_controller(bad, 0.1, QpCache())
@@ -189,3 +199,95 @@ def test_both_tracks_compose_by_target_and_bad_params_are_one_line(make_config):
                                "controller._target_=pipeline.peers.cbf_filter.KinematicCbfFilter"])
     with pytest.raises(ConfigError, match="controller.kind"):
         make_controller(wrong_track, 0.1, QpCache())
+
+
+def test_side_choice_by_hand_mirror_symmetric_and_the_vehicles_side_dead_ahead():
+    # a trajectory along the line (row 0: the vehicle now), three static obstacles at x = 6 m:
+    # slightly left, slightly right, dead ahead. Closest points (6, 0): lateral offsets -0.1,
+    # +0.1 and 0 (a tie): right, left, and the vehicle's side now (on the line: the left)
+    points = np.column_stack([np.arange(11.0), np.zeros(11)])
+    centres = np.broadcast_to(np.array([[6.0, 0.1], [6.0, -0.1], [6.0, 0.0]]), (11, 3, 2))
+    assert pass_sides(points, centres, points[0]).tolist() == [-1.0, 1.0, 1.0]
+    # dead ahead where the trajectory meets the obstacle's centre, the vehicle now 0.2 m to
+    # one side of it: that side; mirrored, the other
+    for y0, side in ((-0.2, -1.0), (0.2, 1.0)):
+        converging = points.copy()
+        converging[:, 1] = y0 * np.clip(1.0 - points[:, 0] / 6.0, 0.0, None)
+        assert converging[6, 1] == 0.0
+        assert pass_sides(converging, centres[:, 2:], converging[0]).tolist() == [side]
+
+
+def test_filter_rows_follow_the_side_rule_by_hand(make_config):
+    """The lateral filter's rows against the module docstring written out: the side on the
+    preview under the input applied last step, the lateral offset raised to rho R on it, the
+    row the tangent there."""
+    cfg = make_config(["method=cbf_filter"])
+    ts, params = cfg.scenario.sample_time_s, cfg.controller.params
+    rho, m = params["min_lateral_offset_ratio"], params["preview_steps"]
+    assert (rho, m) == (0.5, 10)
+    R = 0.5 + cfg.vehicle.footprint_radius_m + cfg.controller.safety_margin_m
+    signs = {}
+    for oy, applied, side in ((0.05, 0.0, -1.0), (-0.05, 0.0, 1.0), (0.0, 0.0, 1.0),
+                              (0.0, -1.0, -1.0), (0.0, 1.0, 1.0)):
+        lateral = LateralCbfFilter(cfg.controller, cfg.vehicle, ts, QpCache())
+        lateral.applied = np.array([applied])
+        obs = observation(cfg, [(7.0, oy, 0.0, 0.0, 0.5)], y_m=0.0)
+        inputs, log = lateral.nominal.frame.inputs(obs)
+        u_nom = lateral.nominal.solve(inputs, log).command
+        rows = lateral.rows(obs, u_nom)
+        free, sens = lateral.preview(obs)
+        J = sens[:, 1, 0]
+        p = free + sens @ u_nom                       # the linearization points p_i(u_nom)
+        dx, dy = p[:, 0] - 7.0, p[:, 1] - oy
+        ny_raw = side * np.maximum(side * dy, rho * R)
+        n_x, n_y = dx / np.hypot(dx, ny_raw), ny_raw / np.hypot(dx, ny_raw)
+        target = (1.0 - params["decay_rate"]) ** m * (np.hypot(7.0, oy) - R)
+        gain = n_y * J
+        bound = target - (n_x * dx + n_y * dy - R) + gain * u_nom[0]
+        np.testing.assert_allclose(rows.gain[:m, 0], gain, rtol=1e-12, atol=1e-15)
+        np.testing.assert_allclose(rows.bound[:m], bound, rtol=1e-12, atol=1e-12)
+        signs[(oy, applied)] = np.sign(rows.gain[m - 1, 0])
+    # mirror symmetry: slightly left -> steer right, slightly right -> steer left; dead ahead on
+    # the line -> the left, or the side the last applied steering rate turns to
+    assert signs == {(0.05, 0.0): -1.0, (-0.05, 0.0): 1.0, (0.0, 0.0): 1.0,
+                     (0.0, -1.0): -1.0, (0.0, 1.0): 1.0}
+    # the rule off: the plain gradient, purely longitudinal dead ahead (no steering gain)
+    off = make_config(["method=cbf_filter", "controller.params.min_lateral_offset_ratio=0"])
+    plain = LateralCbfFilter(off.controller, off.vehicle, ts, QpCache())
+    obs = observation(off, [(7.0, 0.0, 0.0, 0.0, 0.5)], y_m=0.0)
+    inputs, log = plain.nominal.frame.inputs(obs)
+    assert np.all(np.abs(plain.rows(obs, plain.nominal.solve(inputs, log).command).gain)
+                  < 1e-12)
+
+
+@pytest.mark.parametrize("track", ["lateral", "kinematic"])
+def test_dead_ahead_passes_with_the_side_rule_and_not_without(make_config, track):
+    """A static obstacle on the start-goal line 14 m ahead: with the rule the filter steers
+    round it and reaches the goal; without it the lateral filter collides (slack, no steering:
+    the CBF-QP's undesired equilibrium) and the kinematic one brakes to a standstill in front of
+    it. On the kinematic track the acceleration's cost weight is what lets the rule steer:
+    alike weights stop too."""
+    base = ["method=cbf_filter", DEAD_AHEAD] if track == "lateral" else \
+        ["experiment=kinematic", "method=cbf_filter_kinematic", DEAD_AHEAD,
+         "scenario.n_steps=160"]   # from rest, 100 steps do not reach the goal line
+    runs = {}
+    for name, extra in (("rule", []), ("off", ["controller.params.min_lateral_offset_ratio=0"]),
+                        ("alike", ["controller.params.accel_cost_ratio=1"])):
+        if track == "lateral" and name == "alike":
+            continue
+        cfg = make_config([*base, *extra])
+        run = simulate(cfg, build_scenario(cfg.scenario))
+        runs[name] = (run, clearance(run.trajectory))
+    run, h = runs["rule"]
+    assert np.isfinite(h.min()) and h.min() > 0.25 and run.goal_reached
+    assert run.trajectory["cbf_active"].any()
+    passed = np.argmin(np.abs(run.trajectory.X_m - 14.0))
+    assert run.trajectory.Y_m.iloc[passed] > 1.0          # on the left (a tie: +1)
+    off, h_off = runs["off"]
+    if track == "lateral":
+        assert h_off.min() < -0.5                           # collides
+    else:
+        assert not off.goal_reached and off.trajectory.vx_mps.iloc[-1] < 0.05
+        assert off.trajectory.X_m.iloc[-1] < 14.0 and np.abs(off.trajectory.Y_m).max() < 0.01
+        alike, _ = runs["alike"]
+        assert not alike.goal_reached and alike.trajectory.vx_mps.iloc[-1] < 0.05

@@ -13,4 +13,7 @@ stages, never the other way round).
   1998) as a planner feeding the same MPC;
 * :mod:`pipeline.peers.dwa` - the dynamic window approach (Fox, Burgard and Thrun, IEEE RAM
   1997) on the Appendix-A track.
+
+:mod:`pipeline.peers.side_rule` holds the side rule the two barrier peers share (an obstacle
+dead ahead is passed on one side, so the linearized barrier keeps a lateral gradient).
 """

@@ -40,8 +40,8 @@ first input ``u_nom`` is then replaced by the solution of::
   input); ``h_j`` is linearized in ``u`` at ``u_nom``: ``g_ij = n_ij' J_i`` with ``n_ij`` the
   unit vector from the moved obstacle to ``p_i(u_nom)``. ``h_j(p_i(u))`` is convex in ``u``
   (a distance of an affine map), so the linearized row is a conservative (inner) version of
-  the nonlinear one about any point; linearizing at ``u_nom`` picks the side of the obstacle
-  the nominal input heads for.
+  the nonlinear one about any point; without the side rule (below) linearizing at ``u_nom``
+  picks the side of the obstacle the nominal input heads for.
 
   - Lateral track (:class:`LateralCbfFilter`): the lateral MPC's discrete model ``Ad, Bd`` at
     the measured speed (the controller's model bank, sample time ``Ts``) in the start-goal
@@ -56,12 +56,41 @@ first input ``u_nom`` is then replaced by the solution of::
     (:func:`~pipeline.loop.model.kinematic_euler_step`) rolled out from the measured state with
     ``u_nom`` held, ``J_i`` the product of its Jacobians along that rollout
     (:func:`~pipeline.loop.model.kinematic_jacobians`, ``S_{i+1} = A_i S_i + B_i``).
+* **Side rule** (``params.min_lateral_offset_ratio``, ``rho``; 0 turns it off). With an
+  obstacle dead ahead, on the start-goal line in the vehicle's path, ``n_ij`` has no lateral
+  part: steering cannot raise the linearized ``h``. On the lateral track (the speed is not an
+  input) the QP then pays slack; on a static obstacle on the line 14 m ahead it paid slack on
+  24 steps, the first 0.7 s of them without steering, then with its steering rate
+  alternating between its bounds, and collided (min clearance -0.87 m) where every other
+  method of the lateral track passes. This is the CBF-QP's known undesired equilibrium on
+  symmetric geometry (Reis, Aguiar and Tabuada, "Control barrier function-based quadratic
+  programs introduce undesirable asymptotically stable equilibria", IEEE L-CSS 2021; Tan and
+  Dimarogonas, "On the undesired equilibria induced by control barrier function based
+  quadratic programs", Automatica 2024), and the fix is MPC-DCBF's side rule
+  (:mod:`pipeline.peers.side_rule`, the same functions): each obstacle is passed on one side,
+  and the linearization point's lateral offset from it is taken as at least ``rho R_j`` on
+  that side. The row becomes the tangent ``n_ij' (p_i(u) - o_ij) - R_j`` at that
+  point, which never exceeds ``h_j`` (``|n_ij| = 1``): still conservative. The side is the one
+  the preview under the input applied last step (held) is on where it comes closest to the
+  obstacle (dead ahead there: the side the vehicle is on now; a tie: the left). Not
+  ``u_nom``'s preview: the nominal MPC steers back towards the goal line, its preview crosses
+  the obstacle's line and the side flipped from step to step (measured on the same case: the
+  rate again alternating between its bounds); the input the filter applied keeps the side it
+  chose. With the rule the dead-ahead run passes at 0.63 m (slack on 2 steps).
+  On the kinematic track the rule is needed but not enough: braking slows the fall of ``h``
+  at a far smaller cost than steering (whose reach shrinks with the speed), so the QP brakes
+  to a stop in front of the obstacle, with or without the rule (as MPC-DCBF does on this
+  track). ``params.accel_cost_ratio`` (Cost, below) makes it steer first.
 * **Cost.** ``W = diag(1 / u_scale)`` with ``u_scale`` the input bound of each input (lateral:
   ``vehicle.steering_rate_max_rad_s``; kinematic: the larger magnitude of
   ``controller.accel_bounds_mps2`` and ``vehicle.steering_max_rad``), so that a change of an
-  acceleration and of a steering angle cost alike per share of their range; the slack (m of
-  ``h``) carries the linear weight ``params.slack_weight_linear`` (an exact penalty: no slack
-  where the rows can be met) and the quadratic ``params.slack_weight_quadratic``.
+  acceleration and of a steering angle cost alike per share of their range, the acceleration's
+  scale divided by ``params.accel_cost_ratio`` (kinematic preset: 10, an acceleration change
+  costs 100 times a steering change of the same share of its range: the filter steers around
+  and brakes where steering cannot meet the rows; at 1 it brakes to a standstill in front of
+  an obstacle dead ahead, the undesired equilibrium above); the slack (m of ``h``) carries the
+  linear weight ``params.slack_weight_linear`` (an exact penalty: no slack where the rows can
+  be met) and the quadratic ``params.slack_weight_quadratic``.
 * **Solver.** The QP is stated in CVXPY with ``u_nom``, the rows' gains ``G`` and bounds ``b``
   as DPP parameters, compiled once per structure (:class:`CbfQpStructure`, the cache key)
   into the loop's kept-Clarabel backend (:func:`~pipeline.loop.controller.qp.compiled_backend`;
@@ -99,7 +128,9 @@ from pipeline.loop.controller.kinematic import KinematicLtvMpc
 from pipeline.loop.controller.lateral import LateralMpc
 from pipeline.loop.controller.qp import CvxpyQp, DirectQp, QpCache, compiled_backend
 from pipeline.loop.model import kinematic_euler_step, kinematic_jacobians
+from pipeline.loop.scenario import LineFrame
 from pipeline.loop.settings import ControllerConfig, VehicleConfig
+from pipeline.peers.side_rule import sided_normals
 from pipeline.validation import between, choice, finite
 
 if TYPE_CHECKING:
@@ -128,6 +159,15 @@ class CbfFilterSettings:
         ``every_step``: a row per obstacle at each preview step ``i = 1..m``, ``h(x_{k+i}) >=
         (1 - gamma)^m h(x_k)`` (an obstacle passed within the preview is seen at its closest);
         ``terminal``: at step ``m`` only.
+    min_lateral_offset_ratio : float
+        ``rho`` in [0, 1] of the side rule (:mod:`pipeline.peers.side_rule`): least lateral
+        offset of a linearization point from the obstacle, as a share of the keep-out radius,
+        on the side it is passed; 0: no side rule (the plain gradient of ``h``).
+    accel_cost_ratio : float
+        Kinematic track, in [0.1, 100]: the acceleration's weight in the cost over the
+        steering angle's, per share of each one's range (``W = diag(ratio / a_scale,
+        1 / delta_max)``); 1: alike. The lateral track's one input (the steering rate) takes
+        only 1.
     """
 
     preview_steps: int = 10
@@ -135,6 +175,8 @@ class CbfFilterSettings:
     slack_weight_linear: float = 1.0e4
     slack_weight_quadratic: float = 1.0e3
     preview_rows: str = "every_step"
+    min_lateral_offset_ratio: float = 0.5
+    accel_cost_ratio: float = 1.0
 
     def rows_for(self, slots: int) -> int:
         """Rows of the QP for ``slots`` obstacle slots."""
@@ -163,9 +205,13 @@ class CbfFilterSettings:
                 0.0, 1e9)
         choice("controller.params.preview_rows", values["preview_rows"],
                ("every_step", "terminal"))
+        between("controller.params.min_lateral_offset_ratio",
+                values["min_lateral_offset_ratio"], 0.0, 1.0)
+        between("controller.params.accel_cost_ratio", values["accel_cost_ratio"], 0.1, 100.0)
         return cls(int(steps), float(values["decay_rate"]),
                    float(values["slack_weight_linear"]), float(values["slack_weight_quadratic"]),
-                   str(values["preview_rows"]))
+                   str(values["preview_rows"]), float(values["min_lateral_offset_ratio"]),
+                   float(values["accel_cost_ratio"]))
 
 
 @dataclass(frozen=True)
@@ -251,7 +297,8 @@ class CbfRows:
 def barrier_rows(position_m: np.ndarray, preview_positions_m: np.ndarray,
                  sensitivities: np.ndarray, u_nom: np.ndarray, obstacles_now_m: np.ndarray,
                  obstacles_preview_m: np.ndarray, reach_m: np.ndarray, n_slots: int,
-                 settings: CbfFilterSettings) -> CbfRows:
+                 settings: CbfFilterSettings, frame: LineFrame | None = None,
+                 side_preview_m: np.ndarray | None = None) -> CbfRows:
     """The linearized discrete-time CBF rows of one step (see the module docstring).
 
     Parameters
@@ -272,6 +319,12 @@ def barrier_rows(position_m: np.ndarray, preview_positions_m: np.ndarray,
     n_slots : int
         Obstacle slots ``M`` (the ``M`` obstacles of smallest ``h`` now get rows).
     settings : CbfFilterSettings
+    frame : LineFrame, optional
+        The start-goal line's frame when the positions are global (the side rule takes its
+        sides in it); None when they are in it already.
+    side_preview_m : ndarray, shape (m, 2), optional
+        The positions over the preview with the previously applied input held: the side rule
+        takes its sides on them (None: on ``p_i(u_nom)``).
 
     Returns
     -------
@@ -291,12 +344,23 @@ def barrier_rows(position_m: np.ndarray, preview_positions_m: np.ndarray,
     if used:
         # (step, obstacle) pairs: offsets from the moved obstacles to p_i(u_nom)
         offsets = preview_positions_m[steps][:, None, :] - obstacles_preview_m[steps][:, order]
-        distance = np.hypot(offsets[..., 0], offsets[..., 1])
-        safe = np.where(distance > 1e-9, distance, 1.0)
-        normal = np.where((distance > 1e-9)[..., None], offsets / safe[..., None], 0.0)
+        if settings.min_lateral_offset_ratio > 0.0:
+            # the side rule's normals (the vehicle now, then the preview); the row is the
+            # tangent n . (p - o) - R, never above h (module docstring)
+            normal = sided_normals(
+                np.concatenate([position_m[None, :], preview_positions_m]),
+                np.concatenate([obstacles_now_m[None, order], obstacles_preview_m[:, order]]),
+                reach_m[order], settings.min_lateral_offset_ratio, frame,
+                None if side_preview_m is None
+                else np.concatenate([position_m[None, :], side_preview_m]))[1:][steps]
+            projected = np.sum(normal * offsets, axis=2)
+        else:
+            projected = np.hypot(offsets[..., 0], offsets[..., 1])   # the distance itself
+            safe = np.where(projected > 1e-9, projected, 1.0)
+            normal = np.where((projected > 1e-9)[..., None], offsets / safe[..., None], 0.0)
         g = np.einsum("skc,scu->sku", normal, sensitivities[steps])     # (steps, slots, n_u)
         target = (1.0 - settings.decay_rate) ** m * h_now[order]
-        b = target[None, :] - (distance - reach_m[order][None, :]) + g @ u_nom
+        b = target[None, :] - (projected - reach_m[order][None, :]) + g @ u_nom
         gain[:used * per_slot] = g.transpose(1, 0, 2).reshape(-1, n_u)   # slot-major
         bound[:used * per_slot] = b.T.reshape(-1)
     return CbfRows(gain, bound, int(order.shape[0]), h_now[order])
@@ -460,6 +524,10 @@ class LateralCbfFilter:
 
         _check_kind(controller_cfg, "mpc", "pipeline.peers.cbf_filter.LateralCbfFilter")
         self.settings = CbfFilterSettings.of(dict(controller_cfg.params))
+        if self.settings.accel_cost_ratio != 1.0:
+            raise ConfigError("controller.params.accel_cost_ratio",
+                              controller_cfg.params["accel_cost_ratio"],
+                              "1 on the lateral track (its one input is the steering rate)")
         self.vehicle, self.ts = vehicle, float(sample_time_s)
         self.margin_m = controller_cfg.safety_margin_m
         self.n_slots = controller_cfg.max_obstacles
@@ -468,6 +536,7 @@ class LateralCbfFilter:
                                                          sample_time_s, qp_cache,
                                                          run_kernels(qp_cache)),
                        (-rate,), (rate,), (rate,), qp_cache)
+        self.applied = np.zeros(1)   # the steering rate applied last step (the side rule's)
 
     def preview(self, obs: Observation) -> tuple[np.ndarray, np.ndarray]:
         """The preview in the start-goal line's frame (see the module docstring): positions
@@ -491,7 +560,8 @@ class LateralCbfFilter:
         return free, sensitivities
 
     def rows(self, obs: Observation, u_nom: np.ndarray) -> CbfRows:
-        """This step's CBF rows at ``u_nom`` (line frame)."""
+        """This step's CBF rows at ``u_nom`` (line frame; the side rule's sides on the
+        preview with the steering rate applied last step held)."""
         free, sensitivities = self.preview(obs)
         visible = obs.obstacles
         times = self.ts * np.arange(1, self.settings.preview_steps + 1)
@@ -503,7 +573,7 @@ class LateralCbfFilter:
         reach = visible.radii_m + self.vehicle.footprint_radius_m + self.margin_m
         return barrier_rows(obs.position_line_m.astype(float), free + sensitivities @ u_nom,
                             sensitivities, u_nom, now, moved, reach, self.n_slots,
-                            self.settings)
+                            self.settings, side_preview_m=free + sensitivities @ self.applied)
 
     def step(self, obs: Observation) -> ControlStep:
         """The nominal MPC's step, its first input filtered (the nominal's frame, fallback and
@@ -531,6 +601,7 @@ class LateralCbfFilter:
         step = _filtered_step(nominal_step, result, columns, predicted)
         if result.active and not result.failed and step.fallback == "none":
             nominal.fallback.accept(step.planned)   # the applied plan, for a later fallback
+        self.applied = np.asarray(step.command, dtype=float).copy()
         nominal.frame.after_step(step)
         nominal.keep_record(inputs, step.predicted_states[0] if step.predicted_states
                             is not None and step.fallback == "none" else None)
@@ -578,7 +649,8 @@ class KinematicCbfFilter:
         steer = vehicle.steering_max_rad
         _attach_filter(self, controller_cfg,
                        KinematicLtvMpc(controller_cfg, vehicle, sample_time_s, qp_cache),
-                       (a_lo, -steer), (a_hi, steer), (max(abs(a_lo), abs(a_hi)), steer),
+                       (a_lo, -steer), (a_hi, steer),
+                       (max(abs(a_lo), abs(a_hi)) / self.settings.accel_cost_ratio, steer),
                        qp_cache)
         self._steps_ahead_s = np.arange(1, controller_cfg.horizon + 1) * self.ts
 
@@ -599,15 +671,20 @@ class KinematicCbfFilter:
         return positions, sensitivities
 
     def rows(self, obs: Observation, u_nom: np.ndarray) -> CbfRows:
-        """This step's CBF rows at ``u_nom`` (global frame)."""
+        """This step's CBF rows at ``u_nom`` (global frame; the side rule's sides on the
+        preview with the input applied last step held)."""
         state = np.asarray(obs.plant_state, dtype=float)
         positions, sensitivities = self.preview(state, u_nom)
         visible = obs.obstacles
         times = self.ts * np.arange(1, self.settings.preview_steps + 1)
         reach = visible.radii_m + self.vehicle.footprint_radius_m + self.margin_m
+        applied = self.nominal.u_prev
+        sided = self.settings.min_lateral_offset_ratio > 0.0 and visible.radii_m.shape[0] > 0 \
+            and not np.array_equal(applied, u_nom)
         return barrier_rows(state[:2], positions, sensitivities, u_nom, visible.positions_m,
                             visible.predicted_positions(times), reach, self.n_slots,
-                            self.settings)
+                            self.settings, obs.frame,
+                            self.preview(state, applied)[0] if sided else None)
 
     def step(self, obs: Observation) -> ControlStep:
         """One closed-loop step as :meth:`KinematicTrack.step

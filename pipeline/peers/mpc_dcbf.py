@@ -32,7 +32,9 @@ on now; on a tie, the left (``+1``). The linearization point's lateral offset fr
 is then taken as ``sigma_j max(sigma_j (ybar_k - o_y), rho R_j)`` (``rho`` =
 ``params.min_lateral_offset_ratio``): at least a share of the keep-out radius on the chosen side,
 so the gradient always has a lateral part and one side is kept along the horizon (any tangent
-point keeps the rows conservative, see above).
+point keeps the rows conservative, see above). The rule lives in :mod:`pipeline.peers.side_rule`
+(:func:`~pipeline.peers.side_rule.sided_normals`), shared with the CBF-QP filter
+(:mod:`pipeline.peers.cbf_filter`).
 
 Slack. Each row ``(k, j)`` has a slack ``s_kj >= 0`` weighted ``controller.slack_weight_linear
 sum(s) + controller.slack_weight_quadratic sum(s^2)`` (the built-in MPCs' weights), so the QP is
@@ -74,17 +76,15 @@ from pipeline.loop.controller.lateral_qp import blocking_matrix, condensed_data
 from pipeline.loop.controller.qp import QpCache, QpSolution, compiled_backend
 from pipeline.loop.controller.references import constrains
 from pipeline.loop.controller_settings import KinematicMpcSettings, MpcSettings, settings_of
-from pipeline.loop.scenario import LineFrame, ObstacleSnapshot
+from pipeline.loop.scenario import ObstacleSnapshot
 from pipeline.loop.settings import ControllerConfig, VehicleConfig
+from pipeline.peers.side_rule import sided_normals
 
 if TYPE_CHECKING:
     import cvxpy as cp
 
-__all__ = ["DcbfParams", "KinematicMpcDcbf", "LateralMpcDcbf", "barrier_m", "dcbf_normals",
-           "nearest_slots", "pass_sides", "build_kinematic_dcbf_problem"]
-
-#: Lateral offset (m) below which a point counts as dead ahead of an obstacle (side rule).
-_TIE_M = 1e-6
+__all__ = ["DcbfParams", "KinematicMpcDcbf", "LateralMpcDcbf", "barrier_m", "nearest_slots",
+           "build_kinematic_dcbf_problem"]
 
 
 @dataclass(frozen=True)
@@ -167,70 +167,6 @@ def nearest_slots(snapshot: ObstacleSnapshot, position_m: np.ndarray,
     order = np.argsort(distance, kind="stable")
     keep = [int(j) for j in order if constrains(float(distance[j]), controller)]
     return np.array(keep[:controller.max_obstacles], dtype=int)
-
-
-def pass_sides(points_line_m: np.ndarray, centres_line_m: np.ndarray,
-               vehicle_line_m: np.ndarray) -> np.ndarray:
-    """The side rule: the side (+1 left, -1 right of the start-goal line) each obstacle is
-    passed on.
-
-    The side the linearization trajectory is on where it comes closest to the obstacle; where
-    it is dead ahead there (lateral offset within 1e-6 m), the side the vehicle is on now
-    (against the obstacle's present centre); left on a tie.
-
-    Parameters
-    ----------
-    points_line_m : ndarray, shape (K, 2)
-        Linearization trajectory (row 0: the vehicle now), line frame.
-    centres_line_m : ndarray, shape (K, n, 2)
-        Obstacle centres at the same instants, line frame.
-    vehicle_line_m : ndarray, shape (2,)
-        Vehicle position now, line frame.
-
-    Returns
-    -------
-    ndarray, shape (n,)
-    """
-    offset = points_line_m[:, None, :] - centres_line_m
-    closest = np.argmin(np.hypot(offset[..., 0], offset[..., 1]), axis=0)
-    lateral = offset[closest, np.arange(centres_line_m.shape[1]), 1]
-    now = vehicle_line_m[1] - centres_line_m[0, :, 1]
-    side = np.where(now < -_TIE_M, -1.0, 1.0)
-    return np.where(lateral > _TIE_M, 1.0, np.where(lateral < -_TIE_M, -1.0, side))
-
-
-def dcbf_normals(points_line_m: np.ndarray, centres_line_m: np.ndarray, reach_m: np.ndarray,
-                 sides: np.ndarray, min_lateral_offset_ratio: float) -> np.ndarray:
-    """Unit gradients of ``h`` at the linearization points after the side rule (line frame).
-
-    The point's lateral offset from each obstacle is taken as ``sigma max(sigma dy, rho R)``
-    (module docstring); its longitudinal offset as it is.
-
-    Parameters
-    ----------
-    points_line_m : ndarray, shape (K, 2)
-    centres_line_m : ndarray, shape (K, n, 2)
-    reach_m : ndarray, shape (n,)
-    sides : ndarray, shape (n,)
-        :func:`pass_sides`.
-    min_lateral_offset_ratio : float
-
-    Returns
-    -------
-    ndarray, shape (K, n, 2)
-        ``n_kj``: the tangent of ``h_j`` at step ``k`` is ``n_kj . (p - o_kj) - R_j``.
-    """
-    offset = points_line_m[:, None, :] - centres_line_m
-    floor = np.maximum(min_lateral_offset_ratio * reach_m, 1e-6)[None, :]
-    lateral = sides[None, :] * np.maximum(sides[None, :] * offset[..., 1], floor)
-    vector = np.stack([offset[..., 0], lateral], axis=-1)
-    return vector / np.linalg.norm(vector, axis=-1, keepdims=True)
-
-
-def _rotation(frame: LineFrame) -> np.ndarray:
-    """Matrix taking line-frame vectors to global ones."""
-    c, s = frame.cos_sin
-    return np.array([[c, -s], [s, c]])
 
 
 class LateralMpcDcbf(LateralMpc):
@@ -317,9 +253,7 @@ class LateralMpcDcbf(LateralMpc):
         points = np.column_stack([stations_m, np.concatenate([[obs.position_line_m[1]],
                                                               lateral])])
         h0 = barrier_m(obs.position_line_m[None, :], centres[:1], reach)[0]
-        sides = pass_sides(points, centres, obs.position_line_m)
-        normals = dcbf_normals(points, centres, reach, sides,
-                               self.params.min_lateral_offset_ratio)
+        normals = sided_normals(points, centres, reach, self.params.min_lateral_offset_ratio)
         decay = 1.0 - self.params.gamma
         n_x, n_y = normals[..., 0], normals[..., 1]
         # tangent of h at step k: n_x (s_k - o_x) + n_y (y_k - o_y) - R = c_k + n_y y_k
@@ -525,13 +459,9 @@ class KinematicMpcDcbf(KinematicLtvMpc):
         centres = visible.predicted_positions(self._times_s)[:, slots, :]     # global
         reach = visible.radii_m[slots] + self.vehicle.footprint_radius_m \
             + self.cfg.safety_margin_m
-        frame = obs.frame
-        points_line = frame.to_line(states[:2].T)
-        centres_line = frame.to_line(centres)
         h0 = barrier_m(position[None, :], centres[:1], reach)[0]
-        sides = pass_sides(points_line, centres_line, points_line[0])
-        normals = dcbf_normals(points_line, centres_line, reach, sides,
-                               self.params.min_lateral_offset_ratio) @ _rotation(frame).T
+        normals = sided_normals(states[:2].T, centres, reach,
+                                self.params.min_lateral_offset_ratio, obs.frame)
         decay = 1.0 - self.params.gamma
         n = slots.size
         # tangent at step k: n_k . p_k - (n_k . o_k + R)
