@@ -242,3 +242,35 @@ def test_the_composer_gives_hydras_configs_at_a_fraction_of_the_composes():
     with pytest.raises(Exception, match="no_such_key"):
         make(["method=improved", "scenario=family", "planner.no_such_key=1"])
     assert len(make.fallbacks) == 2
+
+
+def test_reading_flips_name_the_registered_readings_that_change_an_outcome():
+    """A planted multiverse: C2 flips under one value of a registered reading (a bundle of
+    keys), C1 under a parameter that no register entry names (not a reading: left out), and
+    nothing flips C3a; the flips are exactly those the one-at-a-time specifications show."""
+    from pipeline.studies.results.multiverse import MultiverseInfo, MultiverseResult
+
+    dims = ({"name": "controller.path_reference", "key": "controller.path_reference",
+             "config_key": "controller.path_lookahead_m, controller.path_reference"},
+            {"name": "planner.beta", "key": "planner.beta", "config_key": "planner.beta"})
+    specs = []
+    for spec, kind, reference, beta in (("s0", "default", "rollout", 0.25),
+                                        ("s1", "one_at_a_time", "pursuit 2.5", 0.25),
+                                        ("s2", "one_at_a_time", "pursuit 4.0", 0.25),
+                                        ("s3", "one_at_a_time", "rollout", 1.0),
+                                        ("s4", "sampled", "pursuit 4.0", 1.0)):
+        for claim, outcome in (("C1", "inconclusive" if beta == 1.0 else "supported"),
+                               ("C2", "supported" if reference == "pursuit 4.0"
+                                else "contradicted"),
+                               ("C3a", "contradicted")):
+            specs.append({"spec_id": spec, "kind": kind, "claim": claim,
+                          "comparison": "baseline", "outcome": outcome, "estimate": 0.1,
+                          "controller.path_reference": reference, "planner.beta": beta})
+    info = MultiverseInfo("planted", 5, 1, 100, "daqp", {}, 1.0, "", 0.9, 0.5, dims)
+    empty = pd.DataFrame()
+    result = MultiverseResult(info, empty, pd.DataFrame(specs), empty, empty)
+    flips = result.reading_flips({"controller.path_reference", "controller.frame"})
+    assert [(f.claim, f.dimension, f.value, f.outcome, f.default_outcome) for f in flips] == [
+        ("C2", "controller.path_reference", "pursuit 4.0", "supported", "contradicted")]
+    assert flips[0].words == "controller.path_reference = pursuit 4.0: supported"
+    assert {f.claim for f in result.reading_flips({"planner.beta"})} == {"C1"}

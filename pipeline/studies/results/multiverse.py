@@ -63,6 +63,26 @@ class MultiverseInfo:
 
 
 @dataclass(frozen=True)
+class ReadingFlip:
+    """A registered reading under which a claim's outcome differs from the default
+    specification's: the multiverse's one-at-a-time specification that sets ``dimension``
+    to ``value`` (everything else at its default)."""
+
+    claim: str
+    comparison: str
+    dimension: str
+    value: str
+    outcome: str
+    estimate: float
+    default_outcome: str
+
+    @property
+    def words(self) -> str:
+        """``controller.path_reference = pursuit at 4.0 m (clipped): supported``."""
+        return f"{self.dimension} = {self.value}: {self.outcome}"
+
+
+@dataclass(frozen=True)
 class MultiverseResult:
     """Everything :func:`pipeline.studies.multiverse.run_multiverse` found (see the module
     docstring); ``folder`` is where it was read from (None before it is written)."""
@@ -146,6 +166,40 @@ class MultiverseResult:
             raise ResultError(f"multiverse tables cannot be read ({exc})") from None
         return cls(MultiverseInfo.from_json(read_json(folder / SPACE)), tables[DESIGN],
                    tables[SPECIFICATIONS], tables[ROBUSTNESS], tables[DIMENSIONS], folder)
+
+    def reading_flips(self, register_keys: set[str] | frozenset[str]
+                      ) -> tuple[ReadingFlip, ...]:
+        """Every claim and comparison whose outcome changes under a registered reading: each
+        one-at-a-time specification whose dimension sets a key of ``register_keys`` (the
+        interpretation register's) and whose outcome differs from the default
+        specification's, in the design's order of dimensions and values."""
+        specs = self.specifications
+        if specs.empty or "kind" not in specs:
+            return ()
+        default = specs[specs["kind"] == "default"]
+        varied = specs[specs["kind"] == "one_at_a_time"]
+        if default.empty:
+            return ()
+        base = default.iloc[0]
+        flips = []
+        for dim in self.info.dimensions:
+            name = str(dim.get("name") or dim.get("key"))
+            keys = {k.strip() for k in str(dim.get("config_key", dim.get("key", ""))).split(",")}
+            if name not in specs or not keys & set(register_keys):
+                continue
+            changed = varied[varied[name].astype(str) != str(base[name])]
+            for (claim, comparison), default_row in default.groupby(["claim", "comparison"],
+                                                                    sort=False):
+                before = str(default_row["outcome"].iloc[0])
+                rows = changed[(changed["claim"] == claim)
+                               & (changed["comparison"] == comparison)]
+                for value in dict.fromkeys(rows[name].astype(str)):
+                    row = rows[rows[name].astype(str) == value].iloc[0]
+                    if str(row["outcome"]) != before:
+                        flips.append(ReadingFlip(str(claim), str(comparison), name, value,
+                                                 str(row["outcome"]), float(row["estimate"]),
+                                                 before))
+        return tuple(flips)
 
     def curve_figure(self, claim_id: str) -> dict[str, Path] | None:
         """The specification curve of ``claim_id`` the command drew, if it is there."""
