@@ -232,12 +232,14 @@ INTERPRETATION_REGISTER: tuple[RegisterEntry, ...] = (
     RegisterEntry(
         "When a tuned method's search has converged", "(not in the paper: it tunes nothing)",
         "its feasible front's hypervolume (fixed bounds shared by both methods) grew by at most "
-        "2 % over the last 60 trials, at 80 trials at the earliest and 300 at the latest; 5 "
-        "replicates; a claim is settled when 4 of 5 agree; objectives censor a member that "
-        "never recovers at the run's end",
-        "other tolerance, window, bounds, replicates or share; censoring: drop",
+        "2 % over the last 60 trials, at 80 trials at the earliest and 300 at the latest; 10 "
+        "replicates, each judged on its own held-out family; a claim is settled when a "
+        "one-sided exact binomial test of its leading outcome's count among the judged "
+        "replicates is significant at claims.alpha (9 of 10 at 0.05); objectives censor a "
+        "member that never recovers at the run's end",
+        "other tolerance, window, bounds or replicates; another alpha; censoring: drop",
         "tune.convergence_tolerance, tune.convergence_window, tune.hypervolume_bounds, "
-        "tune.replicates, tune.settled_share, tune.censoring"),
+        "tune.replicates, tune.settled_test, tune.censoring"),
     RegisterEntry(
         "Comparable encounters (kinematic track)",
         "Appendix A's baseline reference crawls at 1 m/s",

@@ -61,6 +61,8 @@ def _tune(args) -> int:
     space = load_tune_space(path, args.changes)
     result = run_tuning(space, args.out, args.overrides, log=log.info)
     draw_figures(result, space)
+    if result.summary.settle_note:
+        print(result.summary.settle_note)
     for claim in result.summary.claims:
         print(claim.answer)
     if result.summary.label:

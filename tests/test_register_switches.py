@@ -66,7 +66,7 @@ SWITCH_TESTS = {
     "tune.convergence_tolerance": "test_tune_convergence",
     "tune.convergence_window": "test_tune_convergence",
     "tune.hypervolume_bounds": "test_tune_convergence", "tune.replicates": "test_tune",
-    "tune.settled_share": "test_tune_convergence", "tune.censoring": "test_tune_convergence",
+    "tune.settled_test": "test_tune_convergence", "tune.censoring": "test_tune_convergence",
     "controller.collision_constraints": "test_apf_alone",
 
 

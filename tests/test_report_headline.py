@@ -117,3 +117,46 @@ def test_a_quick_tune_writes_nothing_of_the_opening_summary(headline):
     assert ("tuned vs tuned" in text) == headline
     assert ("tuned, 1 replicates" in answer.figure) == headline
     assert bool(answer.exploratory) != headline
+
+
+def _tune_summary(replicates: int, **more):
+    from pipeline.studies.results.tune import TuneSummary
+
+    claim = {"claim": "C1", "text": "faster", "metric": "reaction_delay_s",
+             "default": "supported", "default_estimate": -0.3,
+             "tuned_outcomes": ["supported"] * replicates,
+             "tuned_estimates": [-0.2] * replicates, "tuned_cis": [[-0.3, -0.1]] * replicates,
+             "counts": f"supported {replicates}/{replicates}", "settled": True,
+             "tuned": "supported", "answer": "C1: ...", "tuned_vs_matched": [],
+             "holds_with_trials": [], "sentence": "C1 ..."}
+    data = {"name": "t", "settings": {"methods": ["improved", "baseline"],
+                                      "settled_share": 0.8},
+            "budget": {"replicates": replicates}, "families": {"heldout": {"seed": 0,
+                                                                           "size": 200}},
+            "backend": "daqp", "objectives": [], "safety_threshold_collisions": {},
+            "search_spaces": {}, "compromise_rule": "", "answer_rule": "", "compromise": {},
+            "replicates": [], "parity": [], "below_default_budget": [], "unconverged": [],
+            "headline": True, "dominance": {}, "claims": [{**claim, **more.pop("claim", {})}],
+            **more}
+    return TuneSummary.from_json(data)
+
+
+def test_a_tune_settled_by_the_old_share_rule_never_writes_the_headline():
+    """A summary written before the binomial test (no settle_test: its claims settled by 4 of
+    5) is read and shown, labelled, but never writes the opening summary; one settled by the
+    test does. And a tuning with too few replicates to ever settle says so (not refused):
+    4 of 4 alike is p = 1/16 > 0.05, 5 of 5 is 1/32."""
+    old = _tune_summary(5)
+    assert old.headline and not old.writes_headline
+    assert "earlier share rule (tune.settled_share)" in old.label
+    test = {"settle_test": "binomial", "settle_alpha": 0.05, "fewest_replicates_to_settle": 5,
+            "claim": {"leading": "supported", "leading_count": 5, "judged_replicates": 5,
+                      "p_value": 1 / 32}}
+    new = _tune_summary(5, **test)
+    assert new.writes_headline and new.label == "" and new.can_settle
+    assert new.settle_note == "" and new.claims[0].p_value == 1 / 32
+    four = _tune_summary(4, **test)
+    assert not four.can_settle
+    assert four.settle_note == ("With 4 replicates no claim can be settled: even 4 of 4 alike "
+                                "gives a one-sided binomial p = 0.0625 > alpha 0.05; at least 5 "
+                                "are needed.")

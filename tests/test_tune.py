@@ -155,18 +155,56 @@ def test_heldout_family_shares_no_scenario_with_the_training_family(make_config)
                            f"scenario.family.seed={seed}", f"scenario.family.size={size}"])
         return family_members(cfg.scenario, cfg.vehicle.footprint_radius_m)
 
-    held = members(space.heldout_seed, space.heldout_size)
-    assert space.heldout_size >= 200 and space.replicates >= 5
+    assert space.heldout_size >= 200 and space.replicates >= 10
+    # the documented seeds: replicate r's held-out family heldout_seed + heldout_seed_stride * r,
+    # replicate 0's make reproduce's (seed 0), every one apart from every training seed
+    assert space.heldout_seeds == [1000 * r for r in range(space.replicates)]
+    assert space.training_seeds == list(range(1, space.replicates + 1))
+    assert not set(space.heldout_seeds) & set(space.training_seeds)
+    held = [m for seed in space.heldout_seeds for m in members(seed, space.heldout_size)]
     train = [m for seed in space.training_seeds for m in members(seed, space.training_size)]
-    # the replicates' training families are distinct from each other, too
+    # the replicates' training families are distinct from each other, and so are the held-out
     assert len({m.name for m in train}) == len(train)
+    assert len({m.name for m in held}) == len(held)
     layout = lambda m: tuple((o.x_m, o.y_m, o.appear_time_s, o.radius_m) for o in m.obstacles)
     assert not {m.name for m in train} & {m.name for m in held}
     assert not {layout(m) for m in train} & {layout(m) for m in held}
+    assert len({layout(m) for m in held}) == len(held)
     with pytest.raises(ConfigError, match="tune.heldout_seed"):
         TuneSpace(training_seed=3, heldout_seed=3)
     with pytest.raises(ConfigError, match="tune.heldout_seed"):  # replicate 2's training seed
         TuneSpace(training_seed=1, heldout_seed=3, replicates=5)
+    # replicate 1's held-out seed (0 + 1000) is replicate 0's training seed: one line naming
+    # the keys
+    with pytest.raises(ConfigError) as caught:
+        TuneSpace(training_seed=1000, heldout_seed=0)
+    message = str(caught.value)
+    assert "\n" not in message and "replicate 1's held-out seed 1000 is replicate 0's " \
+        "training seed" in message
+    assert all(key in message for key in ("heldout_seed_stride", "training_seed"))
+    # the held-out seeds the brief's first idea (heldout_seed + r) would give: training seeds
+    with pytest.raises(ConfigError, match="tune.heldout_seed"):
+        TuneSpace(heldout_seed_stride=1)
+    with pytest.raises(ConfigError, match="tune.heldout_seed_stride"):
+        TuneSpace(heldout_seed_stride=0)
+
+
+def test_each_replicate_is_judged_on_its_own_heldout_family(tmp_path):
+    """The runner composes replicate r's held-out family with seed heldout_seed + stride * r
+    (the untuned methods, replicate None, on replicate 0's), its training family with
+    training_seed + r; another stride moves every held-out seed but replicate 0's."""
+    from pipeline.studies.tune.search import Runner
+
+    for stride in (1000, 77):
+        space = load_tune_space(CONF_DIR / "tune" / "quick.yaml",
+                                ["replicates=3", f"heldout_seed_stride={stride}"])
+        runner = Runner(space, tmp_path, [], log=lambda *a: None)
+
+        def seed(part: str, r: int | None, runner: Runner = runner) -> int:
+            return runner.job("improved", "default", {}, part, r).cfg.scenario.family.seed
+
+        assert [seed("heldout", r) for r in range(3)] == [0, stride, 2 * stride]
+        assert seed("heldout", None) == 0 and [seed("training", r) for r in range(3)] == [1, 2, 3]
 
 
 def test_tuning_files_are_read_strictly(tmp_path):
@@ -285,6 +323,22 @@ def test_make_tune_quick_resumes_after_sigkill_and_feeds_the_report(tmp_path, ma
         rows = tuned[(tuned["claim"] == claim["claim"]) & (tuned["comparison"] == "baseline")]
         assert claim["tuned_outcomes"] == rows.sort_values("replicate")["outcome"].tolist()
     assert summary["headline"] is False and "replicates" in summary["below_default_budget"]
+    # settled by the binomial test at the claims' alpha; 2 replicates never can, and say so:
+    # every claim's count among the judged replicates with its p-value (1/4 for 2 of 2,
+    # 3/4 for 1 of 2), not settled
+    assert (summary["settle_test"], summary["settle_alpha"]) == ("binomial", 0.05)
+    assert summary["fewest_replicates_to_settle"] == 5
+    for claim in summary["claims"]:
+        k = claim["tuned_outcomes"].count(claim["leading"])
+        assert (claim["leading_count"], claim["judged_replicates"]) == (k, 2)
+        assert claim["p_value"] == pytest.approx({2: 0.25, 1: 0.75}[k])
+        assert claim["settled"] is False and "can never settle" in claim["answer"]
+    # each replicate judged on its own held-out family (seed 1000 r), the untuned on seed 0
+    heldout = pd.read_csv(out / "heldout.csv")
+    seeds = {(None if pd.isna(r) else int(r)): set(g["family_seed"])
+             for r, g in heldout.groupby("replicate", dropna=False)}
+    assert seeds == {None: {0}, 0: {0}, 1: {1000}}
+    assert summary["families"]["heldout"]["seeds"] == [0, 1000]
     # the resumed run's own wall-clock time and cores: less than the test's wait for it
     assert 0 < summary["wall_s"] < 600 and summary["cores"] >= 1
 
@@ -303,6 +357,8 @@ def test_make_tune_quick_resumes_after_sigkill_and_feeds_the_report(tmp_path, ma
     page = (tmp_path / "report" / "index.html").read_text()
     assert 'id="fairfight"' in page and "Tuned: the answer" in page
     assert 'id="fairfight-parity"' in page and "Not used in the opening summary" in page
+    assert "Binomial test" in page and "With 2 replicates no claim can be settled" in page
+    assert "seeds 0, 1000" in page
     assert f"It took {summary['wall_s'] / 60:.1f} minutes on {summary['cores']} cores" in page
     # a quick tune never writes the headline: no tuned outcome in the opening summary
     answer_block = page[page.index('id="answer"'):page.index("</div>", page.index('id="answer"'))]

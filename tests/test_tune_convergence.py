@@ -1,7 +1,8 @@
 """Tuning to convergence (issue 40, parts 1-3): the hypervolume against an independent
 implementation (Optuna's WFG), the convergence rule on planted fronts that keep improving in
 steps (it must not stop) and that have converged (it must stop), the answer in counts over
-replicates, the budget a headline needs, and the objectives' censoring."""
+replicates settled by a one-sided exact binomial test (issue 56, item 5: against p-values
+computed by hand), the budget a headline needs, and the objectives' censoring."""
 
 from __future__ import annotations
 
@@ -201,24 +202,70 @@ def test_the_tune_stops_on_a_front_that_has_converged():
     assert convergence_point(history[:converged - 1], 40, 30, 0.02) is None
 
 
-@pytest.mark.parametrize("outcomes, sentence, settled", [
-    (["contradicted"] * 5, "C4: contradicted 5/5: settled (contradicted).", True),
-    (["supported"] * 4 + ["equivalent"], "C2: supported 4/5, equivalent 1/5: settled "
-                                        "(supported).", True),
-    (["supported"] * 3 + ["equivalent"] * 2, "C2: supported 3/5, equivalent 2/5: not settled.",
-     False),
+# P(X >= k) for X ~ Binomial(n, 1/2), by hand: sum of C(n, i) for i >= k over 2^n
+@pytest.mark.parametrize("outcomes, p_value, sentence, settled", [
+    # 9 of 10: (C(10,9) + C(10,10)) / 2^10 = 11/1024 = 0.0107 <= 0.05
+    (["supported"] * 9 + ["inconclusive"], 11 / 1024,
+     "C2: supported 9/10, inconclusive 1/10: settled (supported in 9 of 10 judged replicates, "
+     "one-sided binomial p = 0.0107 <= alpha 0.05).", True),
+    # 8 of 10: (45 + 10 + 1) / 1024 = 56/1024 = 0.0547 > 0.05 (the old share rule settled it)
+    (["supported"] * 8 + ["equivalent"] * 2, 56 / 1024,
+     "C2: supported 8/10, equivalent 2/10: not settled (supported in 8 of 10 judged "
+     "replicates, one-sided binomial p = 0.0547 > alpha 0.05).", False),
+    # 5 of 5: 1/32 = 0.03125 <= 0.05
+    (["contradicted"] * 5, 1 / 32,
+     "C4: contradicted 5/5: settled (contradicted in 5 of 5 judged replicates, one-sided "
+     "binomial p = 0.0312 <= alpha 0.05).", True),
+    # 4 of 4: 1/16 = 0.0625 > 0.05, and no count of 4 replicates can do better
+    (["contradicted"] * 4, 1 / 16,
+     "C4: contradicted 4/4: not settled (contradicted in 4 of 4 judged replicates, one-sided "
+     "binomial p = 0.0625 > alpha 0.05; 4 judged replicates can never settle at alpha 0.05: "
+     "at least 5 are needed).", False),
+    # 4 of 5 (the old rule's "settled"): (5 + 1) / 32 = 0.1875
+    (["supported"] * 4 + ["equivalent"], 6 / 32,
+     "C2: supported 4/5, equivalent 1/5: not settled (supported in 4 of 5 judged replicates, "
+     "one-sided binomial p = 0.188 > alpha 0.05).", False),
 ])
-def test_the_answer_in_counts_follows_the_stated_rule(outcomes, sentence, settled):
+def test_the_answer_in_counts_follows_the_binomial_rule(outcomes, p_value, sentence, settled):
     claim = sentence.split(":")[0]
-    text, is_settled, outcome = answer_in_counts(claim, outcomes, 0.8)
-    assert text == sentence and is_settled == settled
-    assert outcome == (outcomes[0] if settled else None)
+    answer = answer_in_counts(claim, outcomes, 0.05)
+    assert answer.p_value == pytest.approx(p_value, rel=1e-12)
+    assert answer.sentence == sentence and answer.settled == settled
+    assert answer.outcome == (outcomes[0] if settled else None)
+    assert (answer.leading, answer.count, answer.judged) == (
+        outcomes[0], outcomes.count(outcomes[0]), len(outcomes))
+
+
+def test_only_judged_replicates_count_in_the_test():
+    """A replicate that was not judged (no feasible setting) is shown in the counts but is not
+    among the n: 8 supported of 8 judged is 1/256; counted among 10 it would be 56/1024."""
+    outcomes = ["supported"] * 8 + ["no feasible setting of improved"] * 2
+    answer = answer_in_counts("C1", outcomes, 0.05, [True] * 8 + [False] * 2)
+    assert answer.p_value == pytest.approx(1 / 256) and answer.settled
+    assert (answer.count, answer.judged) == (8, 8)
+    assert "no feasible setting of improved 2/10" in answer.sentence
+    none = answer_in_counts("C1", outcomes[8:], 0.05, [False, False])
+    assert not none.settled and none.p_value is None and "no replicate judged" in none.sentence
+
+
+def test_the_fewest_replicates_that_can_settle():
+    from pipeline.studies.tune.study import cannot_settle_sentence, fewest_replicates_to_settle
+
+    # 2^-n <= alpha: 2^-4 = 0.0625 > 0.05 >= 2^-5 = 0.03125; 2^-7 = 0.0078 > 0.005 >= 2^-8
+    assert fewest_replicates_to_settle(0.05) == 5 and fewest_replicates_to_settle(0.005) == 8
+    assert fewest_replicates_to_settle(0.0625) == 4  # p <= alpha: 4 of 4 is exactly 1/16
+    assert cannot_settle_sentence(5, 0.05) == "" and cannot_settle_sentence(10, 0.05) == ""
+    assert cannot_settle_sentence(4, 0.05).startswith("4 replicates can never settle")
+    # and the presets: the default can (9 of 10), the quick one's 2 cannot and says so
+    assert default_budget().replicates >= 10
+    quick = load_tune_space(CONF_DIR / "tune" / "quick.yaml")
+    assert quick.replicates < fewest_replicates_to_settle(0.05)
 
 
 def test_only_the_default_budget_may_write_the_headline():
     default = default_budget()
     assert default.below_budget(default) == []
-    assert default.replicates >= 5 and default.heldout_size >= 200
+    assert default.replicates >= 10 and default.heldout_size >= 200
     quick = load_tune_space(CONF_DIR / "tune" / "quick.yaml")
     assert {"replicates", "max_trials", "heldout_size"} <= set(quick.below_budget(default))
     looser = TuneSpace(convergence_tolerance=0.05)
@@ -268,9 +315,29 @@ def test_the_spaces_convergence_settings_reach_the_rule():
     wide = Convergence.of(TuneSpace(hypervolume_bounds=[[0.0, 2.0], [0.0, 4.0], [0.0, 8.0]]))
     assert hypervolume_history(values, feasible, [list(b) for b in base.bounds])[0] \
         != hypervolume_history(values, feasible, [list(b) for b in wide.bounds])[0]
-    # and tune.settled_share moves the sentence
-    assert answer_in_counts("C2", ["supported"] * 3 + ["equivalent"] * 2, 0.6)[1]
-    assert not answer_in_counts("C2", ["supported"] * 3 + ["equivalent"] * 2, 0.8)[1]
+    # and the settling test reads its alpha: 9 of 10 (p = 11/1024) settles at 0.05, not at 0.01
+    nine = ["supported"] * 9 + ["equivalent"]
+    assert answer_in_counts("C2", nine, 0.05).settled
+    assert not answer_in_counts("C2", nine, 0.01).settled
+
+
+@pytest.mark.parametrize("where", ["file", "set"])
+def test_the_old_settled_share_is_refused_naming_the_test(tmp_path, where):
+    from pipeline.errors import ConfigError
+
+    path = CONF_DIR / "tune" / "quick.yaml"
+    changes = ["settled_share=0.8"] if where == "set" else []
+    if where == "file":
+        path = tmp_path / "old.yaml"
+        path.write_text((CONF_DIR / "tune" / "quick.yaml").read_text().replace(
+            "settled_test: binomial", "settled_share: 0.8"))
+    with pytest.raises(ConfigError) as caught:
+        load_tune_space(path, changes)
+    message = str(caught.value)
+    assert "\n" not in message and "tune.settled_share" in message
+    assert "tune.settled_test" in message and "binomial" in message
+    with pytest.raises(ConfigError, match="tune.settled_test"):
+        load_tune_space(CONF_DIR / "tune" / "quick.yaml", ["settled_test=share"])
 
 
 def test_convergence_counts_simulated_members_when_trials_stop_early():

@@ -93,7 +93,9 @@ def test_the_tune_counts_an_unjudged_replicate_and_never_heads_the_answer(tmp_pa
         assert claim.tuned_outcomes[1] == "no feasible setting of improved"
         assert claim.tuned_estimates[1] is None and claim.tuned_cis[1] == (None, None)
         assert "no feasible setting of improved 1/2" in claim.counts
-        assert claim.tuned == "not settled"  # 1 of 2 is below the settled share
+        # 1 of 1 judged replicate (the other is not among the n): p = 1/2, not settled
+        assert claim.tuned == "not settled" and claim.judged_replicates == 1
+        assert claim.p_value == pytest.approx(0.5)
     assert not summary.headline
     assert "not judged: replicate 1 (no feasible setting of improved)" in summary.label
     # written and read back as the report reads it
@@ -107,3 +109,23 @@ def test_the_tune_counts_an_unjudged_replicate_and_never_heads_the_answer(tmp_pa
 
     (shown,) = tuned_peers(SimpleNamespace(peer_tunes={"vo": again}))
     assert "no feasible setting of improved 1/2" in " ".join(r["counts"] for r in shown.rows)
+
+
+def test_the_tune_settles_at_the_claims_alpha_it_runs_with(tmp_path):
+    """The settling test reads the run's claims.alpha: one judged replicate is 1 of 1 alike,
+    p = 1/2, which settles at alpha 0.5 (and never at the default 0.05); the summary records
+    that alpha and that 1 replicate can settle there."""
+    import dataclasses
+
+    from pipeline.studies.tune import run_tuning
+
+    space = dataclasses.replace(_space(), replicates=1, methods=["improved", "baseline"],
+                                safety_reference="")
+    result = run_tuning(space, tmp_path / "tune",
+                        ["claims.alpha=0.5"], log=lambda *a: None)
+    summary = result.summary
+    assert (summary.settle_alpha, summary.fewest_replicates_to_settle) == (0.5, 1)
+    assert summary.can_settle and summary.claims
+    for claim in summary.claims:
+        assert claim.p_value == pytest.approx(0.5) and claim.judged_replicates == 1
+        assert claim.settled and claim.tuned == claim.tuned_outcomes[0]

@@ -1,6 +1,7 @@
-"""The fair fight (``make tune``), if it was run: the rules (convergence, replicates, parity),
-per claim the default verdict beside the tuned outcome of every replicate and their count,
-the hypervolume histories and the Pareto fronts; whether it may write the headline."""
+"""The fair fight (``make tune``), if it was run: the rules (convergence, replicates, parity,
+the test that settles a claim), per claim the default verdict beside the tuned outcome of every
+replicate, their count and the binomial test's p-value, the hypervolume histories and the
+Pareto fronts; whether it may write the headline."""
 
 from __future__ import annotations
 
@@ -29,6 +30,12 @@ class FairFightSection:
     label: str
     #: how its trials were stopped early, where its members came from and its use of the cores
     cost: str
+    #: the held-out families in words (one per replicate, or one shared by an older tuning)
+    heldout: str = ""
+    #: the rule that settles a claim, with its alpha, in words
+    settle: str = ""
+    #: "" or why no claim can be settled with this many replicates (shown, not refused)
+    settle_note: str = ""
 
 
 PART_WORDS = (("training", "training family (where the settings were tuned)"),
@@ -65,7 +72,7 @@ def fair_fight_section(inputs: ReportInputs, figures: Figures) -> FairFightSecti
     methods = summary.methods
     dom_text = []
     for part, words in (("training", "on the training families"),
-                        ("heldout", "on the held-out family")):
+                        ("heldout", "on the held-out families")):
         d = summary.dominance.get(part)
         if d:
             dom_text.append(f"{words}, {methods[0]}'s Pareto settings (all replicates) dominate "
@@ -81,6 +88,7 @@ def fair_fight_section(inputs: ReportInputs, figures: Figures) -> FairFightSecti
         rows.append({**c.to_json(), "cells": cells, "unit": unit(c.metric),
                      "default_fmt": f"{fmt(c.default_estimate)} {unit(c.metric)}",
                      "matched": ", ".join(c.tuned_vs_matched) or "—",
+                     "test": _test_cell(c),
                      # the trials themselves: tables/tune_settings_outcomes.csv
                      "holds": (f"{len(c.holds_with_trials)} settings in "
                                f"{len({r for r, _ in c.holds_with_trials})} replicates")
@@ -104,7 +112,43 @@ def fair_fight_section(inputs: ReportInputs, figures: Figures) -> FairFightSecti
         for m, by_replicate in summary.compromise.items() for r, params in by_replicate.items())
     return FairFightSection(summary, tuple(rows), tuple(_figures(result, figures)), spaces,
                             parity, "; ".join(dom_text), tuple(methods), compromise,
-                            summary.headline, summary.label, _cost(summary))
+                            summary.writes_headline, summary.label, _cost(summary),
+                            _heldout_words(summary), _settle_words(summary),
+                            summary.settle_note)
+
+
+def _test_cell(claim) -> str:
+    """The binomial test's cell: the leading outcome's count among the judged replicates and
+    its p-value ("—" for a summary written before the test)."""
+    if claim.p_value is None or claim.judged_replicates is None:
+        return "—"
+    return (f"{claim.leading} {claim.leading_count} of {claim.judged_replicates}, "
+            f"p = {claim.p_value:.3g}")
+
+
+def _heldout_words(summary: TuneSummary) -> str:
+    """Where the replicates were judged: each on its own held-out family, or (an older
+    tuning) all on one."""
+    heldout = summary.families.get("heldout", {})
+    size, seeds = heldout.get("size"), heldout.get("seeds")
+    if not seeds:
+        return f"on one held-out family shared by every replicate (seed {heldout.get('seed')}, " \
+               f"{size} scenarios)"
+    return (f"each replicate on its own held-out family of {size} scenarios (seeds "
+            f"{', '.join(str(s) for s in seeds)}: heldout_seed + heldout_seed_stride × r, none "
+            f"of them a training seed); our settings on replicate 0's (seed {seeds[0]})")
+
+
+def _settle_words(summary: TuneSummary) -> str:
+    """The rule that settles a claim, with the alpha it read."""
+    if not summary.settle_test:
+        share = summary.settings.get("settled_share")
+        return (f"settled by the earlier share rule (tune.settled_share = {share}), not by a "
+                "test")
+    return (f"tune.settled_test = {summary.settle_test}: a one-sided exact binomial test of "
+            f"the leading outcome's count among the judged replicates against even odds, at "
+            f"claims.alpha = {summary.settle_alpha:g} (from "
+            f"{summary.fewest_replicates_to_settle} judged replicates on a claim can settle)")
 
 
 def _cost(summary: TuneSummary) -> str:

@@ -29,9 +29,10 @@ PARTS = ("training", "heldout")
 
 @dataclass(frozen=True)
 class TunedClaim:
-    """One claim against the control on the held-out family: the verdict with our settings,
-    the tuned outcome in every replicate and their count, against the matched control, the
-    replicates' settings under which it holds."""
+    """One claim against the control on held-out scenarios: the verdict with our settings
+    (replicate 0's held-out family), the tuned outcome in every replicate (each on its own
+    held-out family) and their count, settled or not by the binomial test, against the
+    matched control, the replicates' settings under which it holds."""
 
     claim: str
     text: str
@@ -48,6 +49,13 @@ class TunedClaim:
     tuned_vs_matched: tuple[str, ...]
     holds_with_trials: tuple[tuple[int, int], ...]
     sentence: str
+    #: the most frequent outcome among the judged replicates, its count, their number and the
+    #: one-sided exact binomial test's p-value that settles it or not ("", None: a summary
+    #: written before the test, settled by the earlier share rule)
+    leading: str = ""
+    leading_count: int | None = None
+    judged_replicates: int | None = None
+    p_value: float | None = None
 
     @classmethod
     def from_json(cls, data: dict) -> TunedClaim:
@@ -103,6 +111,13 @@ class TuneSummary:
     #: per replicate (its number as text), the methods without a feasible setting in it: that
     #: replicate was not judged and counts as "no feasible setting of ..." per claim
     without_feasible_setting: dict[str, list[str]] = field(default_factory=dict)
+    #: how the replicates' outcomes settle a claim (``tune.settled_test``: "binomial") and the
+    #: alpha it was read at (the claims' ``alpha``); "" and None: a summary written before the
+    #: test, whose claims were settled by the earlier share rule (``tune.settled_share``)
+    settle_test: str = ""
+    settle_alpha: float | None = None
+    #: the fewest judged replicates that can settle a claim at that alpha (n of n alike)
+    fewest_replicates_to_settle: int | None = None
 
     @property
     def methods(self) -> list[str]:
@@ -115,9 +130,36 @@ class TuneSummary:
         return {p["method"]: list(p["trials"]) for p in self.parity}
 
     @property
+    def can_settle(self) -> bool:
+        """Whether this tuning's replicates are enough to settle a claim at its alpha (a
+        summary written before the binomial test: False)."""
+        return (self.fewest_replicates_to_settle is not None
+                and int(self.budget["replicates"]) >= self.fewest_replicates_to_settle)
+
+    @property
+    def settle_note(self) -> str:
+        """One sentence when no claim can be settled with this many replicates ("" when one
+        can; shown, never refused)."""
+        if not self.settle_test or self.can_settle:
+            return ""
+        n, alpha = int(self.budget["replicates"]), self.settle_alpha
+        return (f"With {n} replicates no claim can be settled: even {n} of {n} alike gives a "
+                f"one-sided binomial p = {0.5 ** n:.3g} > alpha {alpha:g}; at least "
+                f"{self.fewest_replicates_to_settle} are needed.")
+
+    @property
+    def writes_headline(self) -> bool:
+        """Whether this tuning may write the opening summary: :attr:`headline`, and its claims
+        settled by the binomial test (not by the earlier share rule)."""
+        return self.headline and bool(self.settle_test)
+
+    @property
     def label(self) -> str:
         """Why this tuning may not write the headline ("" when it may)."""
         reasons = []
+        if not self.settle_test:
+            reasons.append("its claims settled by the earlier share rule (tune.settled_share), "
+                           "not by the binomial test (tune.settled_test)")
         if self.below_default_budget:
             reasons.append("below the default budget (" + ", ".join(self.below_default_budget)
                            + ")")

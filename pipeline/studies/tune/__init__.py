@@ -1,5 +1,6 @@
 """A fair fight (``make tune``): both methods tuned by the same rules until their fronts stop
-moving, in independent replicates, judged on one held-out family
+moving, in independent replicates, each judged on its own held-out family and settled by a
+binomial test over the replicates
 (:func:`pipeline.studies.tune.study.run_tuning`; the rules: :mod:`.space`, the loop:
 :mod:`.search`, fronts and convergence: :mod:`.pareto`)."""
 

@@ -648,16 +648,17 @@ class Runner:
 
     def job(self, method: str, setting: str, params: dict, part: str,
             replicate: int | None = None, members: int | None = None) -> FamilyJob:
-        """One family of ``method`` with ``params``: the training family of ``replicate`` or
-        the held-out family; with ``members``, only its first ``members`` members (a rung),
-        in the folder of the whole family (its members are the same runs)."""
+        """One family of ``method`` with ``params``: the training or the held-out family of
+        ``replicate`` (None: replicate 0's, where the untuned methods are judged); with
+        ``members``, only its first ``members`` members (a rung), in the folder of the whole
+        family (its members are the same runs)."""
         import dataclasses
 
         if part == "training":
             seed, size = self.space.training_seeds[replicate or 0], self.space.training_size
             backend = self.space.backend
         else:
-            seed, size = self.space.heldout_seed, self.space.heldout_size
+            seed, size = self.space.heldout_seed_of(replicate or 0), self.space.heldout_size
             backend = self.space.heldout_backend
         overrides = ([f"method={method}", *self.space.scenario_overrides(part),
                       f"scenario.family.seed={seed}", f"scenario.family.size={size}",

@@ -45,6 +45,17 @@ STORE_FIELDS = ("min_trials", "max_trials", "convergence_window", "convergence_t
 #: the fields whose default values are the budget a headline needs (at least as much of each)
 BUDGET_AT_LEAST = ("replicates", "min_trials", "max_trials", "convergence_window",
                    "training_size", "heldout_size")
+#: how the replicates' outcomes settle a claim (``tune.settled_test``): ``binomial``, a
+#: one-sided exact binomial test of the leading outcome's count among the judged replicates
+#: against even odds, at the claims' ``alpha`` (:func:`pipeline.studies.tune.study.settlement`)
+SETTLE_TESTS = ("binomial",)
+#: keys a tune space no longer has, each with what took its place: one line, never a silent
+#: reading of an old file
+RETIRED_KEYS = {
+    "settled_share": "no longer a key: a claim is settled by tune.settled_test (binomial: a "
+                     "one-sided exact binomial test of the leading outcome's count among the "
+                     "judged replicates, p = 0.5, at claims.alpha); remove settled_share",
+}
 
 
 @dataclass
@@ -54,10 +65,13 @@ class TuneSpace:
 
     ``methods`` is ``[treatment, control]``; each has ``conf/hparams_search/<method>.yaml``.
     Each of ``replicates`` independent replicates has its own sampler seed (``sampler_seed +
-    r``) and training family (seed ``training_seed + r``); all are judged on one held-out
-    family. A method's search stops when its feasible front's hypervolume (objectives mapped by
-    the fixed ``hypervolume_bounds``, one ``[ideal, nadir]`` per objective, the same for both
-    methods) grew by at most ``convergence_tolerance`` of its value over the last
+    r``), training family (seed ``training_seed + r``) and held-out family (seed
+    ``heldout_seed + heldout_seed_stride * r``: replicate 0's is ``heldout_seed``, make
+    reproduce's family, on which the untuned methods are judged too); no held-out seed is a
+    training seed. A claim is settled over the replicates by ``settled_test`` at the claims'
+    alpha. A method's search stops when its feasible front's hypervolume (objectives mapped
+    by the fixed ``hypervolume_bounds``, one ``[ideal, nadir]`` per objective, the same for
+    both methods) grew by at most ``convergence_tolerance`` of its value over the last
     ``convergence_window`` trials, at ``min_trials`` at the earliest and ``max_trials`` at the
     latest (then it is labelled unconverged). ``matched_control`` names the look-ahead-matched
     control built from the tuned control (``baseline_matched``: only with the control
@@ -77,7 +91,7 @@ class TuneSpace:
 
     name: str = "default"
     methods: List[str] = field(default_factory=lambda: ["improved", "baseline"])
-    replicates: int = 5
+    replicates: int = 10
     min_trials: int = 80
     max_trials: int = 300
     convergence_window: int = 60
@@ -91,6 +105,9 @@ class TuneSpace:
     training_seed: int = 1
     training_size: int = 40
     heldout_seed: int = 0
+    #: replicate r's held-out family has seed ``heldout_seed + heldout_seed_stride * r``; 1000
+    #: keeps every held-out seed above the training seeds (``training_seed + r``, r < 100)
+    heldout_seed_stride: int = 1000
     heldout_size: int = 200
     backend: str = "daqp"
     heldout_backend: str = "clarabel_direct"
@@ -98,7 +115,7 @@ class TuneSpace:
     max_heldout_settings: int = 3
     matched_control: str = "baseline_matched"
     safety_reference: str = ""
-    settled_share: float = 0.8
+    settled_test: str = "binomial"
     rungs: List[int] = field(default_factory=lambda: [5, 10, 20])
     prune_gain: float = 0.001
     prune_after_trials: int = 10
@@ -132,7 +149,8 @@ class TuneSpace:
                                ("population_size", 2, 1_000), ("training_size", 2, 100_000),
                                ("heldout_size", 2, 100_000), ("max_heldout_settings", 1, 1_000),
                                ("sampler_seed", 0, 2**31 - 1), ("training_seed", 0, 2**31 - 1),
-                               ("heldout_seed", 0, 2**31 - 1)):
+                               ("heldout_seed", 0, 2**31 - 1),
+                               ("heldout_seed_stride", 1, 2**31 - 1)):
             value = getattr(self, key)
             if isinstance(value, bool) or not isinstance(value, int) or not low <= value <= high:
                 raise ConfigError(f"tune.{key}", value, f"an integer in [{low}, {high}]")
@@ -146,13 +164,9 @@ class TuneSpace:
         if not isinstance(self.training_horizon, bool):
             raise ConfigError("tune.training_horizon", self.training_horizon, "true or false")
         between("tune.convergence_tolerance", self.convergence_tolerance, 0.0, 1.0)
-        between("tune.settled_share", self.settled_share, 0.5, 1.0)
+        choice("tune.settled_test", self.settled_test, SETTLE_TESTS)
         self._check_rungs()
-        seeds = self.training_seeds
-        if self.heldout_seed in seeds:
-            raise ConfigError("tune.heldout_seed", self.heldout_seed,
-                              f"a seed other than the replicates' training seeds "
-                              f"({seeds[0]}..{seeds[-1]}): held-out scenarios must be unseen")
+        self._check_seeds()
         if not self.objectives:
             raise ConfigError("tune.objectives", [], "a list of at least one objective")
         for i, objective in enumerate(self.objectives):
@@ -163,6 +177,25 @@ class TuneSpace:
         self._check_track()
         self._check_controls()
         self._check_scenes()
+
+    def _check_seeds(self) -> None:
+        """Every replicate's held-out seed a valid seed and none of them a training seed
+        (held-out scenarios must be unseen by every replicate's tuning)."""
+        last = self.heldout_seed + self.heldout_seed_stride * (self.replicates - 1)
+        if last > 2**31 - 1:
+            raise ConfigError("tune.heldout_seed_stride", self.heldout_seed_stride,
+                              f"a stride that keeps the last replicate's held-out seed "
+                              f"(heldout_seed + heldout_seed_stride * {self.replicates - 1} = "
+                              f"{last}) at most {2**31 - 1}")
+        training = {seed: r for r, seed in enumerate(self.training_seeds)}
+        for r, seed in enumerate(self.heldout_seeds):
+            if seed in training:
+                raise ConfigError(
+                    "tune.heldout_seed", self.heldout_seed,
+                    f"held-out seeds (heldout_seed + heldout_seed_stride * r) apart from the "
+                    f"training seeds (training_seed + r): replicate {r}'s held-out seed {seed} "
+                    f"is replicate {training[seed]}'s training seed; change heldout_seed, "
+                    "heldout_seed_stride or training_seed")
 
     def _check_track(self) -> None:
         choice("tune.track", self.track, tuple(TRACK_OVERRIDES))
@@ -264,6 +297,15 @@ class TuneSpace:
         """Replicate ``r``'s training family seed: ``training_seed + r``."""
         return [self.training_seed + r for r in range(self.replicates)]
 
+    @property
+    def heldout_seeds(self) -> list[int]:
+        """Replicate ``r``'s held-out family seed: ``heldout_seed + heldout_seed_stride * r``
+        (replicate 0's is ``heldout_seed``, make reproduce's family by default)."""
+        return [self.heldout_seed_of(r) for r in range(self.replicates)]
+
+    def heldout_seed_of(self, replicate: int) -> int:
+        return self.heldout_seed + self.heldout_seed_stride * replicate
+
     def sampler_seed_of(self, replicate: int) -> int:
         return self.sampler_seed + replicate
 
@@ -326,12 +368,17 @@ def load_tune_space(path: Path, changes: list[str] | None = None) -> TuneSpace:
     if not isinstance(data, dict):
         raise ConfigError("--space", str(path), "a mapping of tune settings" + (
             " (the file is empty)" if data is None else f", not a {type(data).__name__}"))
+    for key, instead in RETIRED_KEYS.items():
+        if key in data:
+            raise ConfigError(f"tune.{key}", data[key], instead)
     if changes:
         data = dict(data)
         names = {f for f in TuneSpace.__dataclass_fields__}
         for change in changes:
             key, sep, text = change.partition("=")
             key = key.strip()
+            if key in RETIRED_KEYS:
+                raise ConfigError(f"tune.{key}", text, RETIRED_KEYS[key])
             if not sep or key not in names:
                 raise ConfigError("--set", change, "key=value with key one of "
                                   + ", ".join(sorted(names)))

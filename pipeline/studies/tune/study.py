@@ -1,5 +1,5 @@
 """A fair fight: every compared method tuned by the same rules on training scenarios until its
-front stops moving, in independent replicates, then judged on one held-out family
+front stops moving, in independent replicates, each then judged on its own held-out family
 (``make tune``, ``python -m pipeline.tune``).
 
 Benchmarking practice (Lucic et al. 2018; Melis et al. 2018) tunes every contender with the same
@@ -11,8 +11,11 @@ tuning, not method. Here:
    paper allows, each with its reason) until its feasible front's hypervolume converges (one
    fixed normalisation for both methods; :class:`pipeline.studies.tune.search.Convergence`),
    between the same minimum and cap: equal rules, not an equal count.
-2. **Replicates.** ``replicates`` independent tunings, each with its own sampler seed and its
-   own training family; the answer per claim is the count of replicates per outcome.
+2. **Replicates.** ``replicates`` independent tunings, each with its own sampler seed, its
+   own training family and its own held-out family (so that the replicates' agreement
+   measures the held-out sampling too, not only the tuner's randomness); the answer per claim
+   is the count of replicates per outcome, settled by a one-sided exact binomial test
+   (:func:`answer_in_counts`).
 3. **Training.** A trial runs its replicate's training family and returns the objectives
    (statistics of the claims' primary metrics over the members, read as the ledger reads them:
    :func:`pipeline.analysis.objectives.tuning_table`). Safety is a constraint: a setting whose
@@ -20,10 +23,12 @@ tuning, not method. Here:
    infeasible.
 4. **Pareto sets.** Per replicate, the feasible non-dominated trials of each method and one
    compromise setting per method (:data:`COMPROMISE_RULE`).
-5. **Held-out judgement.** The untuned methods once, and per replicate the compromises, the
+5. **Held-out judgement.** Per replicate, on that replicate's held-out family (seed
+   ``heldout_seed + heldout_seed_stride * r``, never a training seed), the compromises, the
    matched control built from them and up to ``max_heldout_settings`` Pareto settings per
-   method, on one held-out family (another seed); the claims ledger compares the tuned
-   treatment with the tuned control and the matched control.
+   method; the claims ledger compares the tuned treatment with the tuned control and the
+   matched control. The untuned methods once, on replicate 0's held-out family (seed
+   ``heldout_seed``: make reproduce's family, its members restored from the member cache).
 
 Trials live in an SQLite file in the output folder, one study per replicate and method named
 by the space's trial key: an interrupted tuning resumes without repeating a completed trial;
@@ -37,7 +42,7 @@ import dataclasses
 import json
 import logging
 from collections.abc import Callable
-from dataclasses import asdict
+from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
 
@@ -81,13 +86,17 @@ class NoFeasibleSettingError(StudyError):
     """Every trial of a method collided more often than the untuned control."""
 
 
-#: How the outcome counts over replicates become a sentence (``tune.settled_share``).
+#: How the outcome counts over replicates become a sentence (``tune.settled_test``).
 ANSWER_RULE = ("per claim, the tuned outcome (tuned treatment against tuned control on the "
-               "held-out family) in every replicate, counted; 'settled' when one outcome holds "
-               "in at least tune.settled_share of the replicates, 'not settled' otherwise; a "
-               "replicate in which a method has no feasible setting (every trial collided more "
-               "often than the untuned reference on its training family) is not judged and "
-               "counts as 'no feasible setting of <method>' among the replicates; a "
+               "replicate's own held-out family) in every replicate, counted; the leading "
+               "outcome, held in k of the n judged replicates, settles the claim when a "
+               "one-sided exact binomial test against even odds (p-value P(X >= k), X ~ "
+               "Binomial(n, 1/2): tune.settled_test = binomial) is at most claims.alpha, "
+               "'not settled' otherwise (at alpha 0.05: from 9 of 10, or 5 of 5; fewer than 5 "
+               "judged replicates can never settle); a replicate in which a method has no "
+               "feasible setting (every trial collided more often than the untuned reference "
+               "on its training family) is not judged (not among the n) and counts as 'no "
+               "feasible setting of <method>' among the replicates; a "
                "tuning whose budget is below the default preset's, with any replicate's "
                "method stopped by its cap before converging, or with a replicate not judged, is "
                "shown but never writes the opening summary")
@@ -95,7 +104,7 @@ ANSWER_RULE = ("per claim, the tuned outcome (tuned treatment against tuned cont
 
 def run_tuning(space: TuneSpace, out_dir: Path, overrides: list[str] | None = None,
                log=logger.info) -> TuneResult:
-    """Tune every replicate until convergence, pick, judge on the held-out family; the result
+    """Tune every replicate until convergence, pick, judge each on its held-out family; the result
     written into ``out_dir`` (its manifest last) and returned. The figures are the command's
     to draw."""
     out_dir = Path(out_dir)
@@ -131,6 +140,10 @@ def _run_tuning(space: TuneSpace, out_dir: Path, spaces: dict, overrides: list[s
     untuned_jobs += [runner.job(reference, "default", {}, "training", replicate)
                      for replicate in range(1, space.replicates)]
     base = runner.compose(["method=improved", *space.scenario_overrides("heldout")])
+    never = cannot_settle_sentence(space.replicates, float(base.claims.alpha))
+    if never:
+        # shown, not refused: a small tune is a first look
+        log(f"{never}: every claim will read 'not settled'")
     storage = trial_storage(out_dir / "tune.db")
     rule, rungs = Convergence.of(space), Rungs.of(space)
     measure = family_measure(space)
@@ -191,7 +204,8 @@ def _run_tuning(space: TuneSpace, out_dir: Path, spaces: dict, overrides: list[s
             f"often than the untuned {space.feasibility_reference}): not judged, counted as such")
     judged = judge_heldout(runner, space, chosen, base.claims)
     log(f"family runs: {runner.counts.sentence()}")
-    data = summarize(space, spaces, thresholds, trials, histories, chosen, judged, without)
+    data = summarize(space, spaces, thresholds, trials, histories, chosen, judged, without,
+                     alpha=float(base.claims.alpha))
     data.update(members=runner.counts.to_json(), core_utilisation=clock.utilisation(),
                 wall_s=round(clock.wall_s(), 1), cores=clock.cores,
                 overrides=applied_overrides(overrides), store_key=store_key)
@@ -429,9 +443,11 @@ class Judged:
 
 def judge_heldout(runner: Runner, space: TuneSpace, chosen: dict[tuple[int, str], pd.DataFrame],
                   claims_cfg) -> Judged:
-    """Held-out families of the untuned methods, every chosen Pareto setting and each
-    replicate's tuned matched control; the default ledger, a tuned ledger per replicate, and
-    per judged treatment setting its outcomes against its replicate's tuned control.
+    """Held-out families of the untuned methods (replicate 0's family), every chosen Pareto
+    setting and each replicate's tuned matched control (each on its replicate's own held-out
+    family); the default ledger, a tuned ledger per replicate, and per judged treatment
+    setting its outcomes against its replicate's tuned control (always on the same family:
+    the pairs are the same scenarios).
 
     Against a peer (:func:`is_peer`) the ledgers are the report's peers ledger's: without the
     APF force claims (C3a/C3b) and with each run's own C2 window."""
@@ -468,6 +484,8 @@ def judge_heldout(runner: Runner, space: TuneSpace, chosen: dict[tuple[int, str]
                      "compromise": trial is not None
                      and compromise.get((job.replicate or 0, job.method)) == trial,
                      "collisions": tally.collisions, "scenarios": tally.scenarios,
+                     # the replicate's own held-out family (the untuned: replicate 0's)
+                     "family_seed": space.heldout_seed_of(job.replicate or 0),
                      **{f"heldout:{o.label}": v
                         for o, v in zip(space.objectives, values, strict=True)},
                      "folder": str(job.folder.relative_to(runner.out_dir))})
@@ -527,23 +545,85 @@ def counts_in_words(outcomes: list[str]) -> tuple[str, tuple[str, int]]:
     return words, (str(order[0][0]), int(order[0][1]))
 
 
-def answer_in_counts(claim_id: str, outcomes: list[str], settled_share: float
-                     ) -> tuple[str, bool, str | None]:
-    """The tuned answer on one claim over replicates: the sentence, whether it is settled, and
-    the settled outcome (see :data:`ANSWER_RULE`)."""
-    n = len(outcomes)
-    words, (top, top_count) = counts_in_words(outcomes)
-    settled = top_count >= settled_share * n
+def binomial_p_value(count: int, judged: int) -> float:
+    """The one-sided exact binomial test of ``count`` successes in ``judged`` trials against
+    even odds: P(X >= count) for X ~ Binomial(judged, 1/2) (scipy's ``binomtest``,
+    alternative 'greater')."""
+    from scipy.stats import binomtest
+
+    return float(binomtest(int(count), int(judged), 0.5, alternative="greater").pvalue)
+
+
+def fewest_replicates_to_settle(alpha: float) -> int:
+    """The fewest judged replicates with which an outcome can settle a claim at ``alpha``:
+    the smallest n whose best case, n of n alike (p = 2^-n), is significant."""
+    n = 1
+    while 0.5 ** n > alpha:
+        n += 1
+    return n
+
+
+def cannot_settle_sentence(replicates: int, alpha: float) -> str:
+    """Why ``replicates`` (judged) replicates can never settle a claim at ``alpha`` ("" when
+    they can)."""
+    fewest = fewest_replicates_to_settle(alpha)
+    if replicates >= fewest:
+        return ""
+    return (f"{replicates} replicates can never settle a claim at alpha {alpha:g}: even "
+            f"{replicates} of {replicates} alike gives p = {0.5 ** replicates:.3g} (one-sided "
+            f"binomial); at least {fewest} are needed")
+
+
+@dataclass(frozen=True)
+class Settlement:
+    """One claim's tuned outcomes over the replicates, settled or not (:data:`ANSWER_RULE`):
+    the sentence, whether it is settled and on which outcome, the leading outcome among the
+    judged replicates with its count, their number, and the binomial test's p-value (None
+    when no replicate was judged)."""
+
+    sentence: str
+    settled: bool
+    outcome: str | None
+    leading: str
+    count: int
+    judged: int
+    p_value: float | None
+
+
+def answer_in_counts(claim_id: str, outcomes: list[str], alpha: float,
+                     judged: list[bool] | None = None) -> Settlement:
+    """The tuned answer on one claim over replicates (see :data:`ANSWER_RULE`): the leading
+    outcome among the judged replicates (``judged``: one flag per outcome, by default all)
+    settles the claim when :func:`binomial_p_value` of its count among them is at most
+    ``alpha``."""
+    flags = [True] * len(outcomes) if judged is None else list(judged)
+    words = counts_in_words(outcomes)[0]
+    among = [o for o, j in zip(outcomes, flags, strict=True) if j]
+    if not among:
+        return Settlement(f"{claim_id}: {words}: not settled (no replicate judged).", False,
+                          None, "", 0, 0, None)
+    top, count = counts_in_words(among)[1]
+    n = len(among)
+    p_value = binomial_p_value(count, n)
+    settled = p_value <= alpha
+    test = (f"{top} in {count} of {n} judged replicates, one-sided binomial p = "
+            f"{p_value:.3g} {'<=' if settled else '>'} alpha {alpha:g}")
     if settled:
-        return f"{claim_id}: {words}: settled ({top}).", True, str(top)
-    return f"{claim_id}: {words}: not settled.", False, None
+        return Settlement(f"{claim_id}: {words}: settled ({test}).", True, top, top, count, n,
+                          p_value)
+    fewest = fewest_replicates_to_settle(alpha)
+    never = (f"; {n} judged replicates can never settle at alpha {alpha:g}: at least {fewest} "
+             "are needed") if n < fewest else ""
+    return Settlement(f"{claim_id}: {words}: not settled ({test}{never}).", False, None, top,
+                      count, n, p_value)
 
 
 def artefact_sentence(claim_id: str, default: str, settled: str | None, counts: str,
                       n_heldout: int) -> str:
-    """Whether a claim's default verdict (against the control, on the held-out family) was a
-    tuning artefact, read off the replicates' counts."""
-    where = f"on {n_heldout} held-out scenarios"
+    """Whether a claim's default verdict (against the control, on replicate 0's held-out
+    family) was a tuning artefact, read off the replicates' counts (each on its own held-out
+    family of ``n_heldout`` scenarios)."""
+    where = f"on held-out scenarios ({n_heldout} per replicate)"
     if settled is None:
         return (f"{claim_id} {where}: {default} with our settings; when both methods are tuned "
                 f"by the same rules the replicates disagree ({counts}): not settled.")
@@ -574,10 +654,12 @@ def front_points(trials: pd.DataFrame, heldout: pd.DataFrame, space: TuneSpace, 
 
 def summarize(space: TuneSpace, spaces: dict, thresholds: dict[int, int], trials: pd.DataFrame,
               histories: list[dict], chosen: dict[tuple[int, str], pd.DataFrame],
-              judged: Judged, without: dict[int, list[str]] | None = None) -> dict[str, Any]:
+              judged: Judged, without: dict[int, list[str]] | None = None,
+              alpha: float = 0.05) -> dict[str, Any]:
     """``summary.json``: the rules, the spaces, per replicate and method the trials, the
     convergence and the hypervolume history, and per claim the default verdict beside the
-    tuned outcome of every replicate, counted."""
+    tuned outcome of every replicate, counted and settled or not by the binomial test at
+    ``alpha`` (the claims' ``alpha``)."""
     control, matched = space.control, space.matched_control
     without = without or {}
     claims = []
@@ -593,8 +675,9 @@ def summarize(space: TuneSpace, spaces: dict, thresholds: dict[int, int], trials
                          else None for r in order]
         outcomes = [str(row.outcome) if row is not None else infeasible_outcome(without[r])
                     for r, row in zip(order, per_replicate, strict=True)]
-        sentence, settled, settled_outcome = answer_in_counts(claim.claim_id, outcomes,
-                                                              space.settled_share)
+        settlement = answer_in_counts(claim.claim_id, outcomes, alpha,
+                                      [r in judged.tuned for r in order])
+        settled, settled_outcome = settlement.settled, settlement.outcome
         counts = counts_in_words(outcomes)[0]
         vs_matched = [str(judged.tuned[r][(claim.claim_id, matched)].outcome)
                       for r in sorted(judged.tuned)
@@ -611,7 +694,9 @@ def summarize(space: TuneSpace, spaces: dict, thresholds: dict[int, int], trials
             "tuned_cis": [[row.result.ci_low, row.result.ci_high] if row else [None, None]
                           for row in per_replicate],
             "counts": counts, "settled": settled, "tuned": settled_outcome or "not settled",
-            "answer": sentence, "tuned_vs_matched": vs_matched,
+            "answer": settlement.sentence, "leading": settlement.leading,
+            "leading_count": settlement.count, "judged_replicates": settlement.judged,
+            "p_value": settlement.p_value, "tuned_vs_matched": vs_matched,
             "holds_with_trials": [[int(r), int(t)] for r, t in
                                   zip(holds["replicate"], holds["trial"], strict=True)]
             if len(holds) else [],
@@ -654,13 +739,17 @@ def summarize(space: TuneSpace, spaces: dict, thresholds: dict[int, int], trials
                    "prune_after_trials": space.prune_after_trials},
         "families": {"training": {"seeds": space.training_seeds, "size": space.training_size,
                                   "track": space.track},
-                     "heldout": {"seed": space.heldout_seed, "size": space.heldout_size,
-                                 "track": space.track}},
+                     # replicate r's on seeds[r]; the untuned methods on seed (replicate 0's)
+                     "heldout": {"seed": space.heldout_seed, "seeds": space.heldout_seeds,
+                                 "stride": space.heldout_seed_stride,
+                                 "size": space.heldout_size, "track": space.track}},
         "backend": space.backend,
         "objectives": [o.label + f" ({o.direction})" for o in space.objectives],
         "safety_threshold_collisions": {str(k): v for k, v in thresholds.items()},
         "search_spaces": {m: spaces[m][1] for m in space.methods},
         "compromise_rule": COMPROMISE_RULE, "answer_rule": ANSWER_RULE,
+        "settle_test": space.settled_test, "settle_alpha": float(alpha),
+        "fewest_replicates_to_settle": fewest_replicates_to_settle(alpha),
         "pruning_rule": PRUNING_RULE if space.rungs else "",
         "compromise": compromise,
         "replicates": histories, "parity": parity,
