@@ -48,7 +48,8 @@ def main(argv: list[str] | None = None) -> int:
 def _score(args) -> int:
     from pipeline.analysis.metrics.criteria import compute_metrics
     from pipeline.analysis.metrics.signals import TrajectoryContext
-    from pipeline.config import MetricsConfig
+    from pipeline.config import MetricsConfig, ModelConfig
+    from pipeline.loop.model import tyre_linear_limit
     from pipeline.store.files import output_target, refuse_input_as_output, write_text_atomic
 
     if args.out is not None:
@@ -73,7 +74,12 @@ def _score(args) -> int:
             raise scoring.TrajectoryFileError("--vehicle-radius must be a finite number >= 0")
     except scoring.TrajectoryFileError as exc:
         raise CommandError(f"error: {exc}") from None
-    context = TrajectoryContext((start[0], start[1]), (goal[0], goal[1]), args.vehicle_radius)
+    # the model's bounds a trajectory's logged model columns are judged against: the
+    # project's defaults (model.validity_heading_rad, model.tyre_linear_tolerance)
+    model = ModelConfig()
+    context = TrajectoryContext((start[0], start[1]), (goal[0], goal[1]), args.vehicle_radius,
+                                model.validity_heading_rad,
+                                tyre_linear_limit(model.tyre_linear_tolerance))
     metrics = compute_metrics(frame, context, MetricsConfig())
     missing, derived = scoring.score_quality(frame.columns)
     values = metrics.to_json()
