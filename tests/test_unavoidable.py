@@ -295,3 +295,34 @@ def test_no_appendix_a_collision_a_peer_avoided_is_published_unavoidable():
     on_shared = improved[improved["scenario"].isin(shared) & improved["collision"].astype(bool)]
     assert not on_shared[LABEL].astype(bool).any()
     assert Tally.of(improved[improved["scenario"].isin(shared)]).collisions_unavoidable == 0
+
+
+def test_the_speed_check_labels_each_variant_across_its_two_methods(monkeypatch, tmp_path):
+    """make speed-check runs both methods on the same members per variant: improved's
+    collision that the baseline ran clean is published avoidable in speed.csv (the run's own
+    label beside it); in the other variant both collide and the run's label stands."""
+    import types
+
+    import pipeline.studies.experiment as experiment
+    from pipeline.studies.speed import speed_check
+
+    planted = {("nominal", "improved"): table([("family_s0_i0000", True, False)]),
+               ("nominal", "baseline"): table([("family_s0_i0000", False, None)]),
+               ("slow", "improved"): table([("family_s0_i0000", True, False)]),
+               ("slow", "baseline"): table([("family_s0_i0000", True, False)])}
+
+    def run_family(cfg, folder, **_):
+        return planted[(folder.parent.name, folder.name)]
+
+    def compose(overrides):
+        speed = 1.5 if "scenario.speed_mps=1.5" in overrides else 3.0
+        return types.SimpleNamespace(scenario=types.SimpleNamespace(speed_mps=speed))
+
+    monkeypatch.setattr(experiment, "run_family", run_family)
+    result = speed_check(compose, tmp_path, n_members=1, log=lambda _: None,
+                         variants=("nominal", "slow"))
+    rows = {(r["variant"], r["method"]): r for r in result.rows}
+    assert (rows[("nominal", "improved")]["collisions_unavoidable"],
+            rows[("nominal", "improved")]["collisions_unavoidable_run"]) == (0, 1)
+    assert (rows[("slow", "improved")]["collisions_unavoidable"],
+            rows[("slow", "baseline")]["collisions_unavoidable"]) == (1, 1)
