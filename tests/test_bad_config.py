@@ -39,6 +39,8 @@ CASES = [
     (["planner.repulsion_law=cubic"], "planner.repulsion_law='cubic'", "polynomial, exponential"),
     (["controller.q_lateral=-1"], "controller.q_lateral=-1.0", ">= 0.0"),
     (["metrics.threat_clearance_m=-1"], "metrics.threat_clearance_m=-1.0", "> 0.0"),
+    (["metrics.attribution_switch_samples=-1"], "metrics.attribution_switch_samples=-1",
+     "[0, 10]"),
     (["scenario=unknown_scenario"], "scenario='unknown_scenario'", "paper_sudden_obstacle"),
     (["planner=unknown"], "planner='unknown'", "baseline"),
     (["vehicle=unknown"], "vehicle='unknown'", "compact_car"),

@@ -306,7 +306,7 @@ READING_VALUES = {
     "recovery_reading": ["heading"], "oscillation": ["sign_changes_whole_run"],
     "lateral_sign_band_m": [0.1], "yaw_rate_sign_band_rad_s": [0.05],
     "collision_check": ["sampled"], "attribution_steering_samples": [5],
-    "attribution_extra_s": [1.0], "goal_tolerance_m": [1.0]}
+    "attribution_switch_samples": [0], "attribution_extra_s": [1.0], "goal_tolerance_m": [1.0]}
 
 
 @pytest.fixture(scope="module")

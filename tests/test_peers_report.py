@@ -88,6 +88,19 @@ def test_report_judges_improved_against_every_peer(outputs, tmp_path):
     lateral = counts[counts["track"] == "lateral"].set_index("method")
     assert lateral.loc["vo", "collisions"] == _collisions(outputs / "peers" / "vo")
     assert (lateral["solve_time_median_s"] > 0).all()
+    # every collision of every family once, with both labels; a collision another method
+    # avoided is never published unavoidable, and the counts are the published ones
+    labels = pd.read_csv(tmp_path / "tables" / "collision_labels.csv")
+    assert len(labels) == sum(_collisions(f.parent) for f in outputs.glob("*/*/family.json"))
+    avoided = labels["collision_avoided_by"].fillna("") != ""
+    assert not (labels["collision_unavoidable"].astype(str) == "True")[avoided].any()
+    for (track, method), row in counts.set_index(["track", "method"]).iterrows():
+        mine = labels[(labels["track"] == track) & (labels["method"] == method)]
+        if method != "improved":  # improved's row: the peers' scenarios only
+            assert row["collisions_unavoidable"] == (
+                mine["collision_unavoidable"].astype(str) == "True").sum()
+            assert row["collisions_unavoidable_run"] == (
+                mine["collision_unavoidable_run"].astype(str) == "True").sum()
     page = (tmp_path / "index.html").read_text()
     assert 'id="peers"' in page and 'href="#peers"' in page
     assert 'id="peers-kinematic-who-wins"' in page and "Fox, Burgard and Thrun" in page

@@ -51,6 +51,7 @@ SWITCH_TESTS = {
     "metrics.lateral_accel": "test_metrics", "metrics.smoothness_window": "here",
     "metrics.repulsion_need": "test_metrics", "metrics.oscillation": "test_metrics",
     "metrics.collision_check": "test_metrics", "metrics.attribution_steering_samples": "here",
+    "metrics.attribution_switch_samples": "test_unavoidable",
     "claims.c2_window": "test_common_window", "claims.common_window": "test_common_window",
     "claims.estimator": "here", "claims.test": "here", "claims.pairs": "test_claims",
     "claims.margins": "here", "claims.comparable_clearance_m": "here",

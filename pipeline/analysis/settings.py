@@ -39,6 +39,7 @@ class MetricsConfig(FrozenAfterValidation):
     yaw_rate_sign_band_rad_s: float = 0.02
     collision_check: str = "continuous"
     attribution_steering_samples: int = 9
+    attribution_switch_samples: int = 4
     attribution_extra_s: float = 2.0
     goal_tolerance_m: Optional[float] = None
 
@@ -70,6 +71,10 @@ class MetricsConfig(FrozenAfterValidation):
         if isinstance(value, bool) or not isinstance(value, int) or not 2 <= value <= 101:
             raise ConfigError("metrics.attribution_steering_samples", value,
                               "an integer in [2, 101]")
+        value = self.attribution_switch_samples
+        if isinstance(value, bool) or not isinstance(value, int) or not 0 <= value <= 10:
+            raise ConfigError("metrics.attribution_switch_samples", value,
+                              "an integer in [0, 10]")
 
 
 #: Every claim of the ledger, in order: safety first, C3 as Table 2's two halves.

@@ -1,5 +1,6 @@
 """Counts over a table of runs (one row per scenario), computed in one place: collisions (and
-whether they were avoidable), non-recoveries, scenarios without a threat, goal not reached,
+whether they were avoidable: the published label where the table carries it, see
+:mod:`pipeline.analysis.unavoidable`), non-recoveries, scenarios without a threat, goal not reached,
 validity exceedances, fallbacks, how often the APF's step cap binds."""
 
 from __future__ import annotations
@@ -25,7 +26,7 @@ def _flags(table: pd.DataFrame, column: str, default: bool = False) -> pd.Series
     return table[column].map(read).astype(bool)
 
 
-def _optional_flags(table: pd.DataFrame, column: str) -> pd.Series:
+def optional_flags(table: pd.DataFrame, column: str) -> pd.Series:
     """True / False / None (not applicable) per row."""
     if column not in table:
         return pd.Series([None] * len(table), index=table.index, dtype=object)
@@ -50,12 +51,19 @@ def not_recovered(table: pd.DataFrame) -> pd.Series:
 
 @dataclass(frozen=True)
 class Tally:
-    """Counts of one method over a table of scenarios."""
+    """Counts of one method over a table of scenarios.
+
+    ``collisions_unavoidable`` is the published label's count: where the table was labelled
+    across methods (:func:`pipeline.analysis.unavoidable.label_across_methods`) a collision
+    another method avoided on the same scenario is avoidable; ``collisions_unavoidable_run``
+    counts the runs' own labels (equal where the table was not labelled across methods).
+    """
 
     scenarios: int
     collisions: int
     collisions_avoidable: int
     collisions_unavoidable: int
+    collisions_unavoidable_run: int
     not_recovered: int
     no_threat: int
     goal_not_reached: int
@@ -67,11 +75,18 @@ class Tally:
     @classmethod
     def of(cls, table: pd.DataFrame) -> Tally:
         hit = collided(table)
-        avoidable = _optional_flags(table, "collision_avoidable")
+        # the published label (the table's collision_avoidable once labelled across methods)
+        avoidable = optional_flags(table, "collision_avoidable")
+        unavoidable = int((hit & (avoidable == False)).sum())  # noqa: E712
+        # the runs' own labels where they were kept beside it
+        run = optional_flags(table, "collision_unavoidable_run") \
+            if "collision_unavoidable_run" in table else None
         return cls(
             scenarios=int(len(table)), collisions=int(hit.sum()),
             collisions_avoidable=int((hit & (avoidable == True)).sum()),  # noqa: E712
-            collisions_unavoidable=int((hit & (avoidable == False)).sum()),  # noqa: E712
+            collisions_unavoidable=unavoidable,
+            collisions_unavoidable_run=unavoidable if run is None
+            else int((hit & (run == True)).sum()),  # noqa: E712
             not_recovered=int(not_recovered(table).sum()),
             no_threat=int((~_flags(table, "threatened", default=True)).sum()),
             goal_not_reached=int((~_flags(table, "goal_reached", default=True)).sum()),

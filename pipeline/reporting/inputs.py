@@ -11,6 +11,7 @@ settings (those the runs were made with, the command's treatment and controls ov
 from __future__ import annotations
 
 import dataclasses
+import json
 import logging
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -20,6 +21,13 @@ from typing import TypeVar
 import pandas as pd
 
 from pipeline.analysis.metrics import LateralJerk
+from pipeline.analysis.unavoidable import (
+    AVOIDED_BY,
+    LABEL,
+    RUN_LABEL,
+    collision_rows,
+    label_across_methods,
+)
 from pipeline.analysis.validity import ValidityTable
 from pipeline.config import ClaimsConfig, ExperimentConfig
 from pipeline.store.collection import (
@@ -162,6 +170,14 @@ class FamilyInputs:
         table = self.primary.get(method)
         return next((label for label, t in self.tables.items() if t is table), None)
 
+    def with_tables(self, tables: dict[str, pd.DataFrame]) -> FamilyInputs:
+        """These inputs with each table replaced by the one of the same label in ``tables``
+        (the judged ones too: :attr:`primary` keeps pointing at the tables of its labels)."""
+        new = {label: tables.get(label, table) for label, table in self.tables.items()}
+        primary = {method: new[label] if (label := self.label_of(method)) is not None
+                   else table for method, table in self.primary.items()}
+        return dataclasses.replace(self, tables=new, primary=primary)
+
     def with_jerks(self, methods: tuple[str, ...]) -> FamilyInputs:
         """These inputs with the lateral jerk of every member of the judged families of
         ``methods`` (each from its stored trajectory, read with the family's own metric
@@ -216,6 +232,10 @@ class ReportInputs:
     kinematic_peers: FamilyInputs | None = None
     #: the treatment and the baseline among recorded pedestrians (make pedestrians)
     pedestrians: FamilyInputs | None = None
+    #: every collision of those families with the run's own label, the published one (across
+    #: the methods that ran the same scenario, :mod:`pipeline.analysis.unavoidable`) and the
+    #: methods that avoided it
+    collision_labels: pd.DataFrame | None = None
     #: per track ("lateral", "kinematic") and method: the solve time per step over its
     #: family's members, median and 95th percentile in seconds (peers and the treatment)
     solve_times: dict[str, dict[str, tuple[float, float]]] = field(default_factory=dict)
@@ -337,6 +357,15 @@ class ReportInputs:
                                                               layout.canonical),
                                layout.folder("pedestrians"), "pedestrians section") \
             if layout.folder("pedestrians").is_dir() else None
+        # the published collision label: across every method that ran the same scenario
+        sections = {"family": family, "kinematic_family": kinematic_family,
+                    "apf_alone": apf_alone, "peers": peers,
+                    "kinematic_peers": kinematic_peers, "pedestrians": pedestrians}
+        labelled, collision_labels = label_collisions(sections)
+        family = labelled["family"] or family
+        kinematic_family, apf_alone = labelled["kinematic_family"], labelled["apf_alone"]
+        peers, kinematic_peers = labelled["peers"], labelled["kinematic_peers"]
+        pedestrians = labelled["pedestrians"]
         solve_times = optional(lambda _root: _solve_times(
             claims.treatment, {"lateral": (family, peers),
                                "kinematic": (kinematic_family, kinematic_peers)}),
@@ -356,13 +385,75 @@ class ReportInputs:
             other_runs=lateral.extra + others, family=family,
             kinematic_family=kinematic_family, apf_alone=apf_alone, peers=peers,
             kinematic_peers=kinematic_peers, pedestrians=pedestrians,
-            solve_times=solve_times,
+            collision_labels=collision_labels, solve_times=solve_times,
             readings=_readings(layout),
             ablation=family_tables_by_method(layout.folder("ablation"), skipped),
             interpretations=interpretation_tables(layout.folder("interpretations"), skipped),
             validity=validity, sweeps=sweeps, bench=bench, multiverse=multiverse, tune=tune,
             peer_tunes=_peer_tunes(layout, optional), nmpc=nmpc, speed=speed,
             skipped=tuple(skipped))
+
+
+def label_collisions(sections: dict[str, FamilyInputs | None]
+                     ) -> tuple[dict[str, FamilyInputs | None], pd.DataFrame]:
+    """Every family of ``sections`` (by section name: ``family``, ``peers``, ``apf_alone``, ...)
+    with the published collision label (:func:`~pipeline.analysis.unavoidable.label_across_methods`),
+    and one row per collision (section, track, method, scenario, the run's label, the
+    published one, the methods that avoided it).
+
+    The families of one track drawn from the same scenario settings (their first member's
+    scenario: seed, obstacles, timing; the family's size aside) form a pool; the judged family
+    of each method vouches for the scenarios it ran without a collision. A method is named as
+    the ledger names it; a family of the APF by itself, or a name already taken, carries its
+    section in brackets (``improved (apf_alone)``)."""
+    # per track (the pools never cross one): name -> table, and where each name comes from
+    tracks: dict[str, dict[str, pd.DataFrame]] = {}
+    vouchers: list[tuple[str, str]] = []
+    pools: dict[tuple[str, str], tuple[str, str]] = {}
+    where: dict[tuple[str, str], tuple[str, str]] = {}
+    for section, inputs in sections.items():
+        if inputs is None:
+            continue
+        judged = {id(t) for t in inputs.primary.values()}
+        for label, table in inputs.tables.items():
+            pool = _pool(inputs.settings.get(label), section, label)
+            tables = tracks.setdefault(pool[0], {})
+            name = label if section != "apf_alone" and label not in tables \
+                else f"{label} ({section})"
+            tables[name] = table
+            where[(pool[0], name)], pools[(pool[0], name)] = (section, label), pool
+            if id(table) in judged:
+                vouchers.append((pool[0], name))
+    labelled: dict[tuple[str, str], pd.DataFrame] = {}
+    frames = []
+    for track, tables in tracks.items():
+        done = label_across_methods(tables, tuple(n for t, n in vouchers if t == track),
+                                    {name: pools[(track, name)] for name in tables})
+        labelled.update({(track, name): table for name, table in done.items()})
+        rows = collision_rows(done)
+        rows.insert(0, "section", [where[(track, n)][0] for n in rows["method"]])
+        rows.insert(1, "track", track)
+        frames.append(rows)
+    out: dict[str, FamilyInputs | None] = dict(sections)
+    for section, inputs in sections.items():
+        if inputs is not None:
+            out[section] = inputs.with_tables({label: labelled[key]
+                                               for key, (s, label) in where.items()
+                                               if s == section})
+    columns = ["section", "track", "method", "scenario", RUN_LABEL, LABEL, AVOIDED_BY]
+    return out, pd.concat(frames, ignore_index=True)[columns] if frames \
+        else pd.DataFrame(columns=columns)
+
+
+def _pool(settings: ExperimentConfig | None, section: str, label: str) -> tuple[str, str]:
+    """The scenario family a table was drawn from: its track and its first member's scenario
+    (which fixes the family's seed and drawing; its size aside); a table whose settings are
+    unknown is a pool of its own."""
+    if settings is None:
+        return ("?", f"{section}/{label}")
+    track = "kinematic" if settings.controller.kind == "kinematic_mpc" else "lateral"
+    scenario = dataclasses.asdict(settings.scenario)
+    return (track, json.dumps(scenario, sort_keys=True, default=str))
 
 
 def _peer_tunes(layout: OutputsLayout, optional: _Optional) -> dict[str, TuneResult]:

@@ -28,6 +28,9 @@ def write_tables(inputs: ReportInputs, verdicts: Verdicts, table_dir: Path) -> N
         _track(inputs.kinematic, verdicts.kinematic, "metrics_kinematic_track.csv",
                "claims_kinematic_track.csv", table_dir)
     _ledgers(inputs, verdicts, table_dir)
+    if inputs.collision_labels is not None:
+        # every collision: the run's own label, the published one, who avoided it
+        inputs.collision_labels.to_csv(table_dir / "collision_labels.csv", index=False)
     for sweep in inputs.sweeps:
         _sweep(sweep, table_dir)
     if inputs.multiverse is not None:
@@ -69,6 +72,8 @@ def _ledgers(inputs: ReportInputs, verdicts: Verdicts, table_dir: Path) -> None:
         pd.DataFrame([{"method": c["method"], "scenarios": c["scenarios"],
                        "collisions_without_halfplanes": c["collisions"],
                        "collisions_unavoidable_without_halfplanes": c["collisions_unavoidable"],
+                       "collisions_unavoidable_run_without_halfplanes":
+                           c["collisions_unavoidable_run"],
                        "collisions_with_halfplanes": with_.get(c["method"])}
                       for c in alone.counts]).to_csv(table_dir / "apf_alone_collisions.csv",
                                                      index=False)
@@ -83,6 +88,7 @@ def _ledgers(inputs: ReportInputs, verdicts: Verdicts, table_dir: Path) -> None:
         pd.DataFrame([{"track": judged.track, "method": c["method"],
                        "scenarios": c["scenarios"], "collisions": c["collisions"],
                        "collisions_unavoidable": c["collisions_unavoidable"],
+                       "collisions_unavoidable_run": c["collisions_unavoidable_run"],
                        "solve_time_median_s": inputs.solve_times.get(judged.track, {}).get(
                            c["method"], (None, None))[0],
                        "solve_time_p95_s": inputs.solve_times.get(judged.track, {}).get(

@@ -118,9 +118,10 @@ SAFETY = Claim(
     paper_description="Implied throughout: avoidance must avoid.",
     paper_indicator="No collision.",
     definition="Collision from a continuous check (vehicle and obstacles interpolated between "
-               "log rows, closest approach in closed form); each collision labelled avoidable "
-               "or unavoidable by a sampled reachability check from the state at the obstacle's "
-               "appearance.",
+               "log rows, closest approach in closed form); each collision labelled unavoidable "
+               "only when a sampled reachability check from the state at the obstacle's "
+               "appearance finds no escape and no method that ran the same scenario avoided "
+               "it, avoidable otherwise.",
     kind="rate")
 
 #: Every claim in the order the report shows them: safety first.

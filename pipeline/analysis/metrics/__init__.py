@@ -39,10 +39,18 @@ definition. Definitions (also in the report's Methods section):
 * **Safety**: minimum clearance and collision from a continuous check (vehicle and obstacles
   interpolated linearly between log rows, closest approach in closed form), so a fast obstacle
   cannot pass through the vehicle between two rows; each collision is classified
-  ``collision_avoidable`` by a reachability check from the state at the obstacle's appearance:
-  steering targets across ``[-delta_max, delta_max]`` reached at the steering-rate limit, each
-  with and without full braking, on the kinematic bicycle; avoidable when any of them keeps a
-  non-negative clearance to every obstacle. Minimum time to collision.
+  ``collision_avoidable`` by a reachability check from the state at the obstacle's appearance,
+  on the kinematic bicycle within the track's actuators: steering targets across
+  ``[-delta_max, delta_max]`` (reached at the steering-rate limit on the lateral track, at once
+  on the Appendix-A track, where the steering angle is the input), each with full braking, no
+  acceleration and (on the Appendix-A track, whose controller commands it) full acceleration,
+  held throughout or switched to another such pair at one of ``attribution_switch_samples``
+  sample times (swerve and straighten out); avoidable when any of them keeps a non-negative
+  clearance to every obstacle until ``attribution_extra_s`` after the contact. That is the
+  run's own label. The report publishes a collision as *unavoidable* only when, besides, no
+  method that ran the same scenario (same track, family seed and member) avoided it
+  (:mod:`pipeline.analysis.unavoidable`): "unavoidable" means no manoeuvre tried by the oracle
+  and no method in the ledger avoided it. Minimum time to collision.
 * **Progress**: time to reach the goal line (NaN if not reached), path length (m).
 * **Solver**: median and p95 of Clarabel's iteration count, fallback count, largest heading
   error against the model's validity bound, share of rollout steps where the step cap bound.

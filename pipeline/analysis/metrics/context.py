@@ -5,6 +5,7 @@ re-scores stored trajectories: the studies, the report, the API)."""
 from __future__ import annotations
 
 import functools
+import math
 from typing import Any
 
 from pipeline.analysis.metrics.signals import TrajectoryContext
@@ -16,12 +17,19 @@ def trajectory_context(cfg: Any) -> TrajectoryContext:
     which holds every stage's settings, comes after this stage)."""
     v = cfg.vehicle
     start, goal = cfg.scenario.start_xy_m, cfg.scenario.goal_xy_m
+    # the limits the collision attribution may use are the track's actuators: on the lateral
+    # track a steering rate (limited) with the speed the planner's (braking at the vehicle's
+    # limit); on the Appendix-A track (its plugins included) a steering angle and an
+    # acceleration, both held over a sample, within the controller's bounds
+    kinematic = cfg.controller.kind == "kinematic_mpc"
+    low, high = cfg.controller.accel_bounds_mps2 if kinematic else (-v.accel_max_mps2, 0.0)
     return TrajectoryContext((start[0], start[1]), (goal[0], goal[1]),
                              v.footprint_radius_m, cfg.model.validity_heading_rad,
                              tyre_linear_limit=_tyre_limit(cfg.model.tyre_linear_tolerance),
                              wheelbase_m=v.wheelbase_m, steering_max_rad=v.steering_max_rad,
-                             steering_rate_max_rad_s=v.steering_rate_max_rad_s,
-                             braking_mps2=v.accel_max_mps2)
+                             steering_rate_max_rad_s=math.inf if kinematic
+                             else v.steering_rate_max_rad_s,
+                             braking_mps2=max(-float(low), 0.0), accel_mps2=max(float(high), 0.0))
 
 
 @functools.lru_cache(maxsize=16)

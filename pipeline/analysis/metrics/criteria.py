@@ -392,7 +392,8 @@ def solver_blocks(tr: pd.DataFrame) -> tuple[SolverIterations | None, Fallbacks 
 #: the criteria it is computed from (threat from safety's collision; recovery, reaction,
 #: stability and repulsion from the threat geometry; smoothness from recovery too): what
 #: :func:`compute_metrics_readings` shares a criterion's result between readings on.
-SAFETY_READS = ("collision_check", "attribution_steering_samples", "attribution_extra_s")
+SAFETY_READS = ("collision_check", "attribution_steering_samples", "attribution_switch_samples",
+                "attribution_extra_s")
 THREAT_READS = SAFETY_READS + ("threat_margin_m", "threat_horizon_s")
 RECOVERY_READS = THREAT_READS + ("recovery_reading", "recovery_lateral_band_m",
                                  "recovery_heading_band_rad", "recovery_heading_stop_m")

@@ -143,18 +143,60 @@ def continuous_clearance(time_s: np.ndarray, xy: np.ndarray, tracks: list[Obstac
             float(contact_t) if np.isfinite(contact_t) else float("nan"))
 
 
+def attribution_manoeuvres(context: TrajectoryContext, thresholds: MetricsConfig,
+                           switch_times_s: np.ndarray) -> dict[str, np.ndarray]:
+    """The manoeuvres the collision attribution tries, as arrays of one entry per manoeuvre.
+
+    A *primitive* is a steering target from ``linspace(-steering_max, steering_max,
+    attribution_steering_samples)`` with a longitudinal acceleration: full braking
+    (``-context.braking_mps2``, down to standstill), none, and speeding up
+    (``context.accel_mps2``) where the track's controller commands the acceleration. A
+    manoeuvre holds one primitive throughout, or one until a switch time (each of
+    ``switch_times_s``) and another one after it: swerve and straighten out, brake and turn,
+    turn one way and back.
+
+    Returns
+    -------
+    dict
+        ``target_rad``, ``accel_mps2`` (first phase), ``then_target_rad``,
+        ``then_accel_mps2`` (second phase) and ``switch_s`` (the switch time, inf for none).
+    """
+    targets = np.linspace(-context.steering_max_rad, context.steering_max_rad,
+                          thresholds.attribution_steering_samples)
+    accels = np.unique(np.array([-context.braking_mps2, 0.0, context.accel_mps2]))
+    target, accel = (g.ravel() for g in np.meshgrid(targets, accels))
+    n = target.size
+    first, then = np.meshgrid(np.arange(n), np.arange(n), indexing="ij")
+    differ = first != then
+    first, then = first[differ], then[differ]
+    switch = np.repeat(np.asarray(switch_times_s, float), first.size)
+    first, then = np.tile(first, len(switch_times_s)), np.tile(then, len(switch_times_s))
+    return {"target_rad": np.concatenate([target, target[first]]),
+            "accel_mps2": np.concatenate([accel, accel[first]]),
+            "then_target_rad": np.concatenate([target, target[then]]),
+            "then_accel_mps2": np.concatenate([accel, accel[then]]),
+            "switch_s": np.concatenate([np.full(n, np.inf), switch])}
+
+
 def collision_is_avoidable(time_s: np.ndarray, pose: np.ndarray, tracks: list[ObstacleTrack],
                            contact_obstacle: int, contact_time_s: float,
                            context: TrajectoryContext, thresholds: MetricsConfig) -> bool:
-    """Whether any admissible manoeuvre from the state at the colliding obstacle's appearance
-    keeps a non-negative clearance to every obstacle (a sampled reachability check).
+    """Whether any manoeuvre the oracle tries from the state at the colliding obstacle's
+    appearance keeps a non-negative clearance to every obstacle (a sampled reachability check).
 
-    Manoeuvres: steering targets ``linspace(-delta_max, delta_max, attribution_steering_samples)``
-    reached at the steering-rate limit and held, each at constant speed and under full braking
-    (``context.braking_mps2``, down to standstill), integrated on the kinematic bicycle
-    (``context.wheelbase_m``) in steps of 0.02 s from the appearance until the contact time plus
-    ``attribution_extra_s``. Obstacles follow their logged tracks (extrapolated at their last
-    velocity), each from its own appearance on.
+    The manoeuvres (:func:`attribution_manoeuvres`): constant steering targets and two-phase
+    steering and speed profiles, switching at ``attribution_switch_samples`` times spread
+    evenly between the appearance and the end of the check (each on the log's sample grid, so
+    a controller acting once per sample can switch there). Steering moves to its target at
+    ``context.steering_rate_max_rad_s`` (at once where the steering angle is the input: the
+    Appendix-A track); the speed changes at the phase's acceleration, never below standstill.
+    Integrated on the kinematic bicycle (``context.wheelbase_m``) in steps of 0.02 s from the
+    appearance until the contact time plus ``attribution_extra_s``. Obstacles follow their
+    logged tracks (extrapolated at their last velocity), each from its own appearance on.
+
+    ``False`` ("unavoidable") therefore means: no manoeuvre *tried* avoids it within that
+    window; it is not a proof that none exists. The report's label also asks every other
+    method that ran the same scenario (:mod:`pipeline.analysis.unavoidable`).
 
     Parameters
     ----------
@@ -174,22 +216,28 @@ def collision_is_avoidable(time_s: np.ndarray, pose: np.ndarray, tracks: list[Ob
     dt = 0.02
     end = contact_time_s + thresholds.attribution_extra_s
     steps = max(int(np.ceil((end - t[a]) / dt)), 1)
-    targets = np.linspace(-context.steering_max_rad, context.steering_max_rad,
-                          thresholds.attribution_steering_samples)
-    brake = np.array([0.0, context.braking_mps2])
-    target, decel = (g.ravel() for g in np.meshgrid(targets, brake))
-    X, Y = np.full(target.size, x0), np.full(target.size, y0)
-    psi, v, delta = np.full(target.size, psi0), np.full(target.size, v0), \
-        np.full(target.size, delta0)
-    ok = np.ones(target.size, dtype=bool)
+    m = thresholds.attribution_switch_samples
+    wanted = t[a] + (end - t[a]) * np.arange(1, m + 1) / (m + 1)
+    # each switch on the first log row at or after it (a controller acts on its samples)
+    rows = np.searchsorted(t, wanted - 1e-9, side="left")
+    switches = np.unique(t[rows[rows < len(t)]])
+    man = attribution_manoeuvres(context, thresholds, switches[switches < end])
+    size = man["switch_s"].size
+    X, Y = np.full(size, x0), np.full(size, y0)
+    psi, v, delta = np.full(size, psi0), np.full(size, v0), np.full(size, delta0)
     rate = context.steering_rate_max_rad_s * dt
     for k in range(1, steps + 1):
+        began = t[a] + (k - 1) * dt  # the input over this step is the phase it began in
+        second = began >= man["switch_s"] - 1e-9
+        target = np.where(second, man["then_target_rad"], man["target_rad"])
+        accel = np.where(second, man["then_accel_mps2"], man["accel_mps2"])
         delta = delta + np.clip(target - delta, -rate, rate)
         X = X + dt * v * np.cos(psi)
         Y = Y + dt * v * np.sin(psi)
         psi = psi + dt * v * np.tan(delta) / context.wheelbase_m
-        v = np.maximum(v - decel * dt, 0.0)
+        v = np.maximum(v + accel * dt, 0.0)
         now = t[a] + k * dt
+        ok = np.ones(X.size, dtype=bool)
         for other in tracks:
             if other.appear < 0 or now < t[other.appear] - 1e-9:
                 continue
@@ -197,6 +245,9 @@ def collision_is_avoidable(time_s: np.ndarray, pose: np.ndarray, tracks: list[Ob
             centre = other.position[i] + other.velocity[i] * (now - t[i])
             reach = other.radius[i] + context.vehicle_radius_m
             ok &= np.hypot(X - centre[0], Y - centre[1]) >= reach
-        if not ok.any():
-            return False
-    return bool(ok.any())
+        if not ok.all():  # only the manoeuvres still clear go on
+            if not ok.any():
+                return False
+            X, Y, psi, v, delta = X[ok], Y[ok], psi[ok], v[ok], delta[ok]
+            man = {key: value[ok] for key, value in man.items()}
+    return True

@@ -16,7 +16,12 @@ import pandas as pd
 class TrajectoryContext:
     """What the metrics need besides the table: geometry and limits of the run (SI units).
 
-    The limits feed the collision attribution (defaults: the compact car of ``conf/vehicle``).
+    The limits feed the collision attribution (defaults: the compact car of ``conf/vehicle``
+    on the lateral track). ``steering_rate_max_rad_s`` is infinite where the steering angle is
+    itself the input, held over a sample (the Appendix-A track); ``accel_mps2`` is the forward
+    acceleration the vehicle may use, 0 where its speed follows the planner's reference (the
+    lateral track: the controller steers only) and the controller's upper acceleration bound
+    where it commands the acceleration (the Appendix-A track).
     """
 
     start_m: tuple[float, float]
@@ -28,6 +33,7 @@ class TrajectoryContext:
     steering_max_rad: float = 0.4
     steering_rate_max_rad_s: float = 1.0
     braking_mps2: float = 3.0
+    accel_mps2: float = 0.0
 
 
 def rms(values: np.ndarray) -> float:
