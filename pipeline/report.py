@@ -107,8 +107,10 @@ def _report(args, command: str) -> int:
     answer = path.parent / "answer.txt"
     if answer.is_file() and answer.read_text().strip():
         # the answer in words, last, so that a command's final lines are the verdicts
-        print("The answer over the scenario family (outcome vs each comparison, estimate "
-              "[interval at 1 - alpha/7] unit; d = treatment - comparison, below 0 is better):")
+        print("The answer over the scenario family (per claim: the outcome against the declared "
+              "primary comparison, estimate [interval] unit, its pairs, then the judge of "
+              "record, the readings it hangs on and the secondary comparisons; d = treatment - "
+              "comparison, below 0 is better):")
         print(answer.read_text().rstrip())
     if args.strict and skipped:
         print(f"error: --strict: {len(skipped)} folder(s) skipped", file=sys.stderr)

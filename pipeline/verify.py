@@ -25,6 +25,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("runs", type=Path, help="runs folder (make reproduce's outputs)")
     parser.add_argument("reference", type=Path, nargs="?", default=Path("reports/reference"))
     parser.add_argument("--update", action="store_true", help="rewrite the reference")
+    parser.add_argument("--seeds", type=int, default=5,
+                        help="bootstrap seeds the answer's outcomes must agree under "
+                             "(claims.seed 0..N-1; 0 or 1: not checked; default 5)")
     args = parser.parse_args(argv)
     return run_command(lambda: _verify(args), os_error=cannot(
         "write" if args.update else "read", args.reference))
@@ -33,8 +36,11 @@ def main(argv: list[str] | None = None) -> int:
 def _verify(args) -> int:
     if args.reference.exists() and not args.reference.is_dir():
         raise CommandError(f"error: reference {args.reference}: a file, not a folder")
+    if not 0 <= args.seeds <= 50:
+        raise CommandError(f"error: --seeds {args.seeds}: an integer in [0, 50]")
     try:
-        problems = verify(args.runs, args.reference, args.update)
+        problems = verify(args.runs, args.reference, args.update, report_ledgers(args.runs),
+                          0 if args.update else args.seeds)
     except FileNotFoundError as exc:
         raise CommandError(f"error: {exc}") from None
     if args.update:
@@ -45,6 +51,37 @@ def _verify(args) -> int:
     print("verify: " + ("OK, matches the reference" if not problems
                         else f"{len(problems)} difference(s)"))
     return 1 if problems else 0
+
+
+def report_ledgers(runs: Path):
+    """The report's ledgers over ``runs`` under a bootstrap seed (see
+    :data:`pipeline.studies.verify.Ledgers`): the runs are read at the first call, once;
+    without a family to judge there are none."""
+    import dataclasses
+    import logging
+
+    import pandas as pd
+
+    from pipeline.reporting.inputs import ReportInputs
+    from pipeline.reporting.tables import answer_outcomes, published_ledgers
+    from pipeline.reporting.verdicts import Verdicts
+
+    read: list[ReportInputs] = []
+
+    def ledgers(seed):
+        if not read:
+            # the report's progress lines are not verify's (a skipped folder still warns)
+            logging.getLogger("pipeline.reporting").setLevel(logging.WARNING)
+            read.append(ReportInputs.load(runs))
+        inputs = read[0]
+        if inputs.family is None or not inputs.family.judgeable(inputs.claims):
+            return {}, pd.DataFrame(columns=["ledger", "claim", "comparison", "outcome"])
+        claims = inputs.claims if seed is None else dataclasses.replace(inputs.claims,
+                                                                        seed=seed)
+        verdicts = Verdicts.compute(inputs, claims)
+        return published_ledgers(verdicts), answer_outcomes(verdicts)
+
+    return ledgers
 
 
 if __name__ == "__main__":

@@ -1,8 +1,9 @@
 """Outcome and interval agree (issue 40, part 6): over hundreds of planted draws of continuous,
-lattice and rate metrics, a ledger row gives a direction exactly when its reported interval (at
-the ledger's level, 1 - alpha / 7) excludes zero, never at an estimate of 0, and is inconclusive
-exactly when that interval contains zero and reaches past the margin. Planted effects on lattice
-metrics and on rates are found; planted nulls are not given a direction."""
+lattice and rate metrics, a ledger row gives a direction exactly when its interval (at the
+ledger's level, 1 - alpha / 7; widened by its Monte-Carlo half-widths where a threshold lies
+within them, ``decision_interval``) excludes zero, never at an estimate of 0, and is
+inconclusive exactly when that interval contains zero and reaches past the margin. Planted
+effects on lattice metrics and on rates are found; planted nulls are not given a direction."""
 
 from __future__ import annotations
 
@@ -13,11 +14,11 @@ from scipy import stats
 
 from pipeline.analysis.claims.catalogue import ALL_CLAIMS, Outcome
 from pipeline.analysis.claims.ledger import family_ledger
-from pipeline.analysis.claims.statistics import compare, interval_level, judge
+from pipeline.analysis.claims.statistics import compare, decision_interval, interval_level, judge
 from pipeline.config import ClaimsConfig
 
 BY_ID = {c.claim_id: c for c in ALL_CLAIMS}
-CFG = ClaimsConfig(n_resamples=499)
+CFG = ClaimsConfig(n_resamples=999, n_resamples_refine=3999)
 LEVEL = interval_level(CFG, len(ALL_CLAIMS))
 DIRECTIONS = {Outcome.SUPPORTED, Outcome.CONTRADICTED, Outcome.MIXED}
 
@@ -93,7 +94,7 @@ def test_outcome_never_disagrees_with_its_interval_over_planted_draws(kind):
         margin = float(CFG.margins[claim_id])
         outcome, _ = judge(result, margin, CFG, claim)
         assert result.ci_level == pytest.approx(1 - 0.05 / 7)
-        check_agreement(outcome, result.ci_low, result.ci_high, result.estimate, margin,
+        check_agreement(outcome, *decision_interval(result), result.estimate, margin,
                         result.n_pairs)
         seen.add(outcome)
     # the draws reach both sides of the rule, so the agreement was tested, not assumed
@@ -173,7 +174,8 @@ def test_the_interval_adjustment_switch_sets_the_level_and_can_move_an_outcome()
                 if claim.primary_metric not in table:
                     table[claim.primary_metric] = 1.0
         strict = family_ledger(tables, CFG, comparisons=("baseline",), sensitivity=False)
-        loose = family_ledger(tables, ClaimsConfig(n_resamples=499, interval_adjustment="none"),
+        loose = family_ledger(tables, ClaimsConfig(n_resamples=999, n_resamples_refine=3999,
+                                                   interval_adjustment="none"),
                               comparisons=("baseline",), sensitivity=False)
         row_s, row_l = strict[("C1", "baseline")], loose[("C1", "baseline")]
         assert row_s.result.ci_level == pytest.approx(1 - 0.05 / 7)

@@ -74,5 +74,7 @@ def test_full_reproduction_matches_reference(tmp_path, make_config):
     for planner in ("baseline_printed", "baseline_matched", "improved", "mpc_no_apf"):
         run_family(make_config(["experiment=kinematic_family", f"planner={planner}"]),
                    tmp_path / "kinematic_family" / planner, progress=False)
-    assert verify(tmp_path, REFERENCE) == []
+    from pipeline.verify import report_ledgers
+
+    assert verify(tmp_path, REFERENCE, ledgers=report_ledgers(tmp_path)) == []
     assert (REFERENCE / "claims_ledger.csv").is_file()

@@ -111,7 +111,13 @@ class ClaimsConfig(FrozenAfterValidation):
     # the level of every ledger interval: 1 - alpha / (claims per comparison) (bonferroni), or
     # 1 - alpha (none); the interval is the test (a direction exactly when it excludes 0)
     interval_adjustment: str = "bonferroni"
-    n_resamples: int = 1999
+    n_resamples: int = 9999
+    # a bootstrap interval with a threshold of the outcome rule (0, +-margin) within an end's
+    # Monte-Carlo band (mc_band_z binomial standard errors of the end's rank) is drawn again
+    # with n_resamples_refine; still within it, the outcome reads the interval widened by the
+    # bands (the conservative reading: no other seed is likely to overturn it)
+    n_resamples_refine: int = 49999
+    mc_band_z: float = 3.0
     seed: int = 0
     estimator: str = "hodges_lehmann"
     test: str = "wilcoxon"
@@ -132,6 +138,13 @@ class ClaimsConfig(FrozenAfterValidation):
     # earlier start to the later end, both runs over the same span) or "intersection"
     c2_window: str = "own"
     common_window: str = "union"
+    # a comparison whose C1-C5 rest on fewer than this share of its scenarios (the pairs where
+    # neither method collided) says so in the headline, with its worst-rank outcome beside it
+    min_pair_share: float = 0.5
+    # the nonlinear MPC's ledger (make nmpc-family) is the judge of record when the linear
+    # MPC's model leaves its small-angle bound on more than this share of a judged method's
+    # steps (model.validity_heading_rad)
+    nmpc_judge_share: float = 0.02
 
     def __post_init__(self) -> None:
         from pipeline.validation import safe_name
@@ -151,6 +164,12 @@ class ClaimsConfig(FrozenAfterValidation):
                 raise ConfigError(f"claims.{key}", value, "an integer >= 0")
         if self.n_resamples < 99:
             raise ConfigError("claims.n_resamples", self.n_resamples, "an integer >= 99")
+        value = self.n_resamples_refine
+        if isinstance(value, bool) or not isinstance(value, int) or value < 99:
+            raise ConfigError("claims.n_resamples_refine", value, "an integer >= 99")
+        between("claims.mc_band_z", self.mc_band_z, 0.0, 10.0)
+        between("claims.min_pair_share", self.min_pair_share, 0.0, 1.0)
+        between("claims.nmpc_judge_share", self.nmpc_judge_share, 0.0, 1.0)
         choice("claims.interval_adjustment", self.interval_adjustment, ("bonferroni", "none"))
         choice("claims.estimator", self.estimator, ("hodges_lehmann", "median"))
         choice("claims.test", self.test, ("wilcoxon", "sign"))

@@ -227,6 +227,8 @@ class ReportInputs:
     kinematic_family: FamilyInputs | None = None
     #: the family without the MPC's collision half-planes ("APF by itself", make reproduce)
     apf_alone: FamilyInputs | None = None
+    #: the family under the nonlinear MPC (make nmpc-family: the judge of record)
+    nmpc_family: FamilyInputs | None = None
     #: the methods the paper names, on the family and on the Appendix-A track's family
     peers: FamilyInputs | None = None
     kinematic_peers: FamilyInputs | None = None
@@ -345,6 +347,9 @@ class ReportInputs:
             apf_alone = optional(lambda _root: alone.with_jerks(
                 (claims.treatment, *claims.controls, "mpc_no_apf")),
                 layout.folder("apf_alone"), "C2 on a common window (APF by itself)") or alone
+        nmpc_family = optional(lambda folder: _nmpc_family(folder, layout, skipped),
+                               layout.folder("nmpc_family"), "judge of record (NMPC)") \
+            if layout.folder("nmpc_family").is_dir() else None
         peers = optional(lambda folder: FamilyInputs.of(load_runs(folder, skipped),
                                                         layout.canonical),
                          layout.folder("peers"), "peers section") \
@@ -383,7 +388,8 @@ class ReportInputs:
             kinematic=TrackRuns.of(kinematic_runs, layout.canonical) if kinematic_runs
             else None,
             other_runs=lateral.extra + others, family=family,
-            kinematic_family=kinematic_family, apf_alone=apf_alone, peers=peers,
+            kinematic_family=kinematic_family, apf_alone=apf_alone,
+            nmpc_family=nmpc_family, peers=peers,
             kinematic_peers=kinematic_peers, pedestrians=pedestrians,
             collision_labels=collision_labels, solve_times=solve_times,
             readings=_readings(layout),
@@ -543,26 +549,45 @@ def _solve_times(treatment: str,
     return found
 
 
-def _apf_alone(folder: Path, layout: OutputsLayout, skipped: list[Skipped]
-               ) -> FamilyInputs | None:
-    """The families of ``folder`` made without the MPC's collision half-planes, as their
-    settings record them (``controller.collision_constraints``); a family made with them is
-    skipped with its reason (it would not be the APF by itself). None when none is left."""
+def _families_made_with(folder: Path, layout: OutputsLayout, skipped: list[Skipped],
+                        made: Callable[[ExperimentConfig], bool], refused: str
+                        ) -> FamilyInputs | None:
+    """The families of ``folder`` whose settings satisfy ``made``; any other is skipped with
+    ``refused`` as its reason. None when none is left."""
     found = load_runs(folder, skipped)
     kept = []
     for label, settings in found.family_settings.items():
-        if settings.controller.collision_constraints:
-            skipped.append(Skipped(Path(str(found.family_info[label].get("dir", folder))),
-                                   "APF-by-itself section: left out (made with the MPC's "
-                                   "collision half-planes on)"))
-        else:
+        if made(settings):
             kept.append(label)
+        else:
+            skipped.append(Skipped(Path(str(found.family_info[label].get("dir", folder))),
+                                   refused))
     if not kept:
         return None
     return FamilyInputs.of(RunCollection(
         family_tables={k: found.family_tables[k] for k in kept},
         family_info={k: found.family_info[k] for k in kept},
         family_settings={k: found.family_settings[k] for k in kept}), layout.canonical)
+
+
+def _apf_alone(folder: Path, layout: OutputsLayout, skipped: list[Skipped]
+               ) -> FamilyInputs | None:
+    """The families of ``folder`` made without the MPC's collision half-planes, as their
+    settings record them (``controller.collision_constraints``); a family made with them is
+    skipped with its reason (it would not be the APF by itself). None when none is left."""
+    return _families_made_with(
+        folder, layout, skipped, lambda settings: not settings.controller.collision_constraints,
+        "APF-by-itself section: left out (made with the MPC's collision half-planes on)")
+
+
+def _nmpc_family(folder: Path, layout: OutputsLayout, skipped: list[Skipped]
+                 ) -> FamilyInputs | None:
+    """The families of ``folder`` made with the lateral MPC on the nonlinear model, as their
+    settings record them (``controller.backend=nmpc``); any other is skipped with its reason
+    (it would not be the judge of record). None when none is left."""
+    return _families_made_with(
+        folder, layout, skipped, lambda settings: settings.controller.backend == "nmpc",
+        "judge of record: left out (not made with controller.backend=nmpc)")
 
 
 def _validity(layout: OutputsLayout) -> ValidityInputs:

@@ -20,7 +20,7 @@ from pipeline.reporting.figures import FigureWriter
 from pipeline.reporting.inputs import ReportInputs
 from pipeline.reporting.render import Page, render
 from pipeline.reporting.sections.ablation import ablation_section
-from pipeline.reporting.sections.answer import answer_section
+from pipeline.reporting.sections.answer import AnswerContext, answer_section
 from pipeline.reporting.sections.apf_alone import apf_alone_section
 from pipeline.reporting.sections.commonroad import commonroad_section
 from pipeline.reporting.sections.fair_fight import fair_fight_section
@@ -38,7 +38,7 @@ from pipeline.reporting.sections.sweeps import sweep_section
 from pipeline.reporting.sections.validity import validity_section
 from pipeline.reporting.style import FigureStyle
 from pipeline.reporting.tables import write_tables
-from pipeline.reporting.verdicts import Verdicts
+from pipeline.reporting.verdicts import Verdicts, beyond_bound_shares
 from pipeline.store.files import write_text_atomic
 from pipeline.store.runs import Skipped
 
@@ -118,7 +118,7 @@ def build_page(inputs: ReportInputs, verdicts: Verdicts, figures: Figures, comma
     return Page(
         paper=paper,
         answer=answer_section(family, robustness, fair_fight, kinematic, verdicts.claims,
-                              apf_alone, peers),
+                              apf_alone, peers, answer_context(inputs, verdicts, robustness)),
         family=family, apf_alone=apf_alone,
         peers=peers, kinematic=kinematic,
         pedestrians=pedestrians_section(inputs, verdicts, figures) if paper else None,
@@ -133,3 +133,20 @@ def build_page(inputs: ReportInputs, verdicts: Verdicts, figures: Figures, comma
         methods=methods_section(verdicts.claims if paper else None,
                                 {m: r.config for m, r in inputs.lateral.by_method.items()}
                                 if inputs.lateral is not None else {}, command))
+
+
+def answer_context(inputs: ReportInputs, verdicts: Verdicts, robustness) -> AnswerContext:
+    """What the answer reads besides the sections: the judge of record's verdicts, the
+    registered readings under which an outcome changes (from the multiverse, with the label
+    of one below its default budget) and the linear model's share of steps beyond its
+    bound per judged method."""
+    from pipeline.config import INTERPRETATION_REGISTER
+
+    flips = None
+    if inputs.multiverse is not None:
+        keys = {k.strip() for entry in INTERPRETATION_REGISTER
+                for k in entry.config_key.split(",") if not k.strip().startswith("(")}
+        flips = inputs.multiverse.reading_flips(keys)
+    label = robustness.label if robustness is not None and not robustness.headline else ""
+    return AnswerContext(verdicts.nmpc, flips, f"exploratory multiverse: {label}"
+                         if label else "", beyond_bound_shares(verdicts.family, verdicts.claims))

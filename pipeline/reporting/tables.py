@@ -13,6 +13,50 @@ from pipeline.reporting.inputs import ReportInputs, TrackRuns
 from pipeline.reporting.verdicts import TrackClaims, Verdicts
 from pipeline.studies.results.tune import HELDOUT, LEDGER_TUNED, SETTINGS_OUTCOMES, TRIALS
 
+#: the published ledgers ``make verify`` checks, by their file name under ``tables/``
+PUBLISHED_LEDGERS = ("claims_ledger.csv", "claims_ledger_kinematic_family.csv",
+                     "claims_ledger_apf_alone.csv")
+
+
+def published_ledgers(verdicts: Verdicts) -> dict[str, pd.DataFrame]:
+    """The ledgers the report publishes that ``make verify`` compares with the reference
+    (:data:`PUBLISHED_LEDGERS`, those present), after the answer's family-wise rule."""
+    found = {}
+    if verdicts.family is not None:
+        found[PUBLISHED_LEDGERS[0]] = verdicts.family.ledger.to_frame()
+    if verdicts.kinematic_family is not None:
+        found[PUBLISHED_LEDGERS[1]] = verdicts.kinematic_family.ledger.to_frame()
+    if verdicts.apf_alone is not None:
+        found[PUBLISHED_LEDGERS[2]] = verdicts.apf_alone.ledger.to_frame()
+    return found
+
+
+def answer_outcomes(verdicts: Verdicts) -> pd.DataFrame:
+    """Every row the answer publishes, its ledger named: ``ledger, claim, comparison,
+    outcome`` (what must not depend on the bootstrap's seed)."""
+    parts: list[tuple[str, object]] = []
+    if verdicts.family is not None:
+        parts.append(("family", verdicts.family.ledger))
+        if verdicts.family.apf_adds is not None:
+            parts.append(("family: baseline vs no APF", verdicts.family.apf_adds))
+        windows = verdicts.family.c2_windows
+        if windows is not None:
+            other = windows.common if windows.in_ledger == "own" else windows.own
+            parts.append(("family: C2 on the other window", other))
+    if verdicts.kinematic_family is not None:
+        parts.append(("Appendix-A family", verdicts.kinematic_family.ledger))
+        if verdicts.kinematic_family.apf_adds is not None:
+            parts.append(("Appendix-A: baseline vs no APF", verdicts.kinematic_family.apf_adds))
+    if verdicts.apf_alone is not None:
+        parts.append(("APF alone", verdicts.apf_alone.ledger))
+    parts += [(f"peers ({p.track})", p.ledger) for p in verdicts.peers]
+    if verdicts.nmpc is not None:
+        parts.append(("nonlinear MPC", verdicts.nmpc.ledger))
+    rows = [{"ledger": name, "claim": row.claim_id, "comparison": row.comparison,
+             "outcome": str(row.outcome)} for name, ledger in parts
+            for row in ledger]  # type: ignore[attr-defined]
+    return pd.DataFrame(rows, columns=["ledger", "claim", "comparison", "outcome"])
+
 
 def write_tables(inputs: ReportInputs, verdicts: Verdicts, table_dir: Path) -> None:
     """Write every table of the page into ``table_dir`` (see the module docstring)."""
@@ -57,6 +101,9 @@ def _ledgers(inputs: ReportInputs, verdicts: Verdicts, table_dir: Path) -> None:
         if windows is not None and windows.common:
             pd.DataFrame(windows.rows()).to_csv(table_dir / "claims_c2_common_window.csv",
                                                 index=False)
+    if verdicts.nmpc is not None:
+        verdicts.nmpc.ledger.to_frame().to_csv(table_dir / "claims_ledger_nmpc.csv",
+                                               index=False)
     if verdicts.kinematic_family is not None:
         kf = verdicts.kinematic_family
         kf.ledger.to_frame().to_csv(table_dir / "claims_ledger_kinematic_family.csv",

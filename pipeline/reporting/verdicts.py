@@ -19,6 +19,7 @@ from pipeline.analysis.claims import (
     FORCE_CLAIMS,
     Ledger,
     LedgerRow,
+    adjust_answer,
     claims_table,
     family_ledger,
     outcome_counts,
@@ -143,6 +144,21 @@ class PedestrianVerdicts:
 
 
 @dataclass(frozen=True)
+class NmpcVerdicts:
+    """The judge of record (``make nmpc-family``): the treatment against its controls on the
+    default family with the lateral MPC stated on the plant's nonlinear model, judged by the
+    default ledger's rules (C2 on each run's own window, the worst-rank sensitivity); its
+    collisions per method; the share of steps on which the linear MPC's model left its
+    small-angle bound, per method of the default family; and whether that makes this ledger
+    the judge of record (a share above ``claims.nmpc_judge_share``)."""
+
+    ledger: Ledger
+    counts: tuple[dict, ...]
+    linear_beyond_share: dict[str, float]
+    judge_of_record: bool
+
+
+@dataclass(frozen=True)
 class ValidityVerdicts:
     """The claims again: the default ledger without the all-pairs sensitivity, per comparison
     on the scenarios where both models held (with their number), in the other frame."""
@@ -151,15 +167,18 @@ class ValidityVerdicts:
     default: Ledger | None
     valid: dict[str, tuple[Ledger, int]]
     other: Ledger | None
+    #: the same comparisons on the nonlinear MPC (make nmpc-family), when it ran
+    nmpc: Ledger | None = None
 
     def rows(self) -> list[dict]:
         """Per claim and comparison: the outcome with its pairs, on the valid scenarios, in
-        the other frame (``tables/claims_model_validity.csv``)."""
+        the other frame, on the nonlinear MPC (``tables/claims_model_validity.csv``)."""
         rows = []
         for row in (self.default or ()):
             valid_ledger, n_valid = self.valid.get(row.comparison, (None, 0))
             valid_row = valid_ledger.get(row.key) if valid_ledger is not None else None
             other_row = self.other.get(row.key) if self.other is not None else None
+            nmpc_row = self.nmpc.get(row.key) if self.nmpc is not None else None
             rows.append({
                 "claim": row.claim_id, "comparison": row.comparison,
                 "outcome": str(row.outcome), "n": row.result.n_pairs,
@@ -167,7 +186,9 @@ class ValidityVerdicts:
                 "valid_n": valid_row.result.n_pairs if valid_row else 0,
                 "valid_scenarios": n_valid,
                 "other_outcome": str(other_row.outcome) if other_row else "—",
-                "other_n": other_row.result.n_pairs if other_row else 0})
+                "other_n": other_row.result.n_pairs if other_row else 0,
+                "nmpc_outcome": str(nmpc_row.outcome) if nmpc_row else "—",
+                "nmpc_n": nmpc_row.result.n_pairs if nmpc_row else 0})
         return rows
 
 
@@ -189,6 +210,7 @@ class Verdicts:
     flips: pd.DataFrame | None = None
     validity: ValidityVerdicts | None = None
     notes: tuple[str, ...] = field(default_factory=tuple)
+    nmpc: NmpcVerdicts | None = None
 
     @classmethod
     def compute(cls, inputs: ReportInputs, claims: ClaimsConfig | None = None) -> Verdicts:
@@ -218,12 +240,100 @@ class Verdicts:
             if judged is not None)
         pedestrians = _pedestrians(inputs.pedestrians, cfg) \
             if inputs.pedestrians is not None else None
-        return cls(cfg, paper, kinematic, family, kinematic_family, apf_alone, peers,
-                   pedestrians, _readings(inputs.kinematic, inputs.readings, cfg)
-                   if inputs.kinematic is not None else (),
-                   effects, roles, interpretation_flips(inputs.interpretations, own),
-                   _validity(inputs.family, inputs, own) if inputs.family is not None
-                   and family is not None else None)
+        nmpc = _nmpc(inputs.nmpc_family, family, cfg) \
+            if inputs.nmpc_family is not None and inputs.nmpc_family.judgeable(cfg) else None
+        validity = _validity(inputs.family, inputs, own) if inputs.family is not None \
+            and family is not None else None
+        if validity is not None and nmpc is not None:
+            validity = dataclasses.replace(validity, nmpc=nmpc.ledger)
+        verdicts = cls(cfg, paper, kinematic, family, kinematic_family, apf_alone, peers,
+                       pedestrians, _readings(inputs.kinematic, inputs.readings, cfg)
+                       if inputs.kinematic is not None else (),
+                       effects, roles, interpretation_flips(inputs.interpretations, own),
+                       validity, nmpc=nmpc)
+        return verdicts.adjusted()
+
+    def adjusted(self) -> Verdicts:
+        """These verdicts after the answer's family-wise rule
+        (:func:`~pipeline.analysis.claims.adjust_answer`): every ledger the answer publishes
+        (the family's controls, the baseline against no APF on both tracks, C2 on the other
+        window, the Appendix-A track, the APF by itself, the methods the paper names), each
+        claim's rows one Holm family, the family's first control the primary comparison. The
+        judge of record's ledger (the same comparison on the nonlinear MPC) and the checks of
+        the validity section are not new comparisons: they are left as they are."""
+        cfg = self.claims
+        named: list[tuple[str, Ledger]] = []
+        family, kin = self.family, self.kinematic_family
+        if family is not None:
+            named.append(("family", family.ledger))
+            if family.apf_adds is not None:
+                named.append(("family_apf_adds", family.apf_adds))
+            windows = family.c2_windows
+            if windows is not None:
+                other = windows.common if windows.in_ledger == "own" else windows.own
+                named.append(("family_c2_other_window", Ledger(other, cfg.treatment)))
+        if kin is not None:
+            named.append(("kinematic_family", kin.ledger))
+            if kin.apf_adds is not None:
+                named.append(("kinematic_apf_adds", kin.apf_adds))
+        if self.apf_alone is not None:
+            named.append(("apf_alone", self.apf_alone.ledger))
+        named += [(f"peers_{p.track}", p.ledger) for p in self.peers]
+        if not named or family is None:
+            return self
+        first = cfg.controls[0] if cfg.controls else "baseline"
+        new = dict(zip((name for name, _ in named),
+                       adjust_answer(named, ("family", first), cfg), strict=True))
+        family = dataclasses.replace(
+            family, ledger=new["family"], apf_adds=new.get("family_apf_adds", family.apf_adds),
+            c2_windows=_windows_after(family.c2_windows, new))
+        if kin is not None:
+            kin = dataclasses.replace(kin, ledger=new["kinematic_family"],
+                                      apf_adds=new.get("kinematic_apf_adds", kin.apf_adds))
+        apf_alone = dataclasses.replace(self.apf_alone, ledger=new["apf_alone"]) \
+            if self.apf_alone is not None else None
+        peers = tuple(dataclasses.replace(p, ledger=new[f"peers_{p.track}"]) for p in self.peers)
+        return dataclasses.replace(self, family=family, kinematic_family=kin,
+                                   apf_alone=apf_alone, peers=peers)
+
+
+def _windows_after(windows: C2Windows | None, new: dict[str, Ledger]) -> C2Windows | None:
+    """C2's two window readings with the adjusted rows: the ledger's reading from the
+    adjusted family ledger, the other from its own adjusted rows."""
+    if windows is None:
+        return None
+    in_ledger = tuple(row for row in new["family"] if row.claim_id == "C2")
+    other = new["family_c2_other_window"].rows if "family_c2_other_window" in new else ()
+    own, common = (in_ledger, other) if windows.in_ledger == "own" else (other, in_ledger)
+    return dataclasses.replace(windows, own=own if windows.own else (),
+                               common=common if windows.common else ())
+
+
+def _nmpc(nmpc: FamilyInputs, family: FamilyVerdicts | None, cfg: ClaimsConfig
+          ) -> NmpcVerdicts:
+    """The nonlinear MPC's ledger (:class:`NmpcVerdicts`): the treatment against the controls
+    present, C2 on each run's own window; the linear MPC's share of steps beyond its model's
+    bound per method from the default family's tables (``share_steps_beyond_bound``)."""
+    own = dataclasses.replace(cfg, c2_window="own")
+    tables = {m: nmpc.primary[m] for m in ordered(nmpc.primary)}
+    comparisons = tuple(c for c in cfg.controls if c in tables)
+    ledger = family_ledger(tables, own, None, cfg.treatment, comparisons)
+    beyond = beyond_bound_shares(family, cfg)
+    judge = any(share > cfg.nmpc_judge_share for share in beyond.values())
+    return NmpcVerdicts(ledger, tuple(outcome_counts(tables)), beyond, judge)
+
+
+def beyond_bound_shares(family: FamilyVerdicts | None, cfg: ClaimsConfig) -> dict[str, float]:
+    """Per judged method of the default family (the treatment and its controls), the mean
+    over its members of the share of steps on which the linear MPC's model left its
+    small-angle bound (``share_steps_beyond_bound``; absent where no member logged it)."""
+    beyond: dict[str, float] = {}
+    for method, table in (family.tables.items() if family is not None else ()):
+        if method in (cfg.treatment, *cfg.controls) and "share_steps_beyond_bound" in table:
+            share = pd.to_numeric(table["share_steps_beyond_bound"], errors="coerce")
+            if share.notna().any():
+                beyond[method] = float(share.mean())
+    return beyond
 
 
 def track_claims(runs: TrackRuns, cfg: ClaimsConfig, comparable_only: bool = False

@@ -4,17 +4,24 @@ the command in :mod:`pipeline.verify`).
 ``reports/reference/`` holds the summary of the default ``make reproduce``:
 ``paper_metrics.csv`` (every method and track on the paper scenario) and, when the families
 were run, ``claims_ledger.csv`` (the lateral family), ``claims_ledger_kinematic_family.csv``
-(the Appendix-A track's family), ``claims_ledger_apf_alone.csv`` (the APF by itself) and ``model_validity.csv`` (does each MPC's model hold, per
-track, frame and method). Rows are matched by their key (track and method; claim and
-comparison), whatever their order. Numbers must agree within ``rel 1e-6 or abs 1e-6``
-(deterministic code; the slack covers floating-point differences between BLAS builds), labels
-and verdicts exactly. ``--update`` rewrites the reference (say why in the commit).
+(the Appendix-A track's family), ``claims_ledger_apf_alone.csv`` (the APF by itself) and
+``model_validity.csv`` (does each MPC's model hold, per track, frame and method). Rows are
+matched by their key (track and method; claim and comparison), whatever their order. Numbers
+must agree within ``rel 1e-6 or abs 1e-6`` (deterministic code; the slack covers
+floating-point differences between BLAS builds), labels and verdicts exactly. ``--update``
+rewrites the reference (say why in the commit).
+
+The ledgers are the report's own (the answer's family-wise rule applied): the caller hands
+them in (:class:`Ledgers`, the command builds them from the report's verdicts); with
+``seeds``, the answer's published outcomes are judged again under that many bootstrap seeds
+(``claims.seed`` 0, 1, ...) and every row whose outcome changes is a difference.
 """
 
 from __future__ import annotations
 
 import logging
 import math
+from collections.abc import Callable
 from pathlib import Path
 
 import pandas as pd
@@ -38,9 +45,14 @@ KEYS = {PAPER_FILE: ("track", "method"), LEDGER_FILE: ("claim", "comparison"),
         KINEMATIC_LEDGER_FILE: ("claim", "comparison"),
         APF_ALONE_LEDGER_FILE: ("claim", "comparison"),
         VALIDITY_FILE: ("track", "frame", "method")}
-LEDGER_COLUMNS = ["claim", "comparison", "metric", "outcome", "estimate", "ci_low", "ci_high",
-                  "p_holm", "prob_improvement", "n_better", "n_tied", "n_worse", "n_missing",
-                  "n_pairs", "outcome_all_pairs", "paper_scenario"]
+LEDGER_COLUMNS = ["claim", "comparison", "role", "metric", "outcome", "outcome_unadjusted",
+                  "estimate", "ci_low", "ci_high", "p_holm", "p_holm_claim",
+                  "prob_improvement", "n_better", "n_tied", "n_worse", "n_missing", "n_pairs",
+                  "n_scenarios", "outcome_worst_rank", "paper_scenario"]
+
+#: The report's ledgers under one bootstrap seed (None: the runs' own claims settings):
+#: ``(published ledgers by file name, every row the answer publishes with its outcome)``.
+Ledgers = Callable[[int | None], tuple[dict[str, pd.DataFrame], pd.DataFrame]]
 
 
 def paper_metrics_table(runs_root: Path, with_folders: bool = False) -> pd.DataFrame:
@@ -84,39 +96,20 @@ def _relative(folder: Path, root: Path) -> str:
         return str(folder)
 
 
-def ledger_table(runs_root: Path, kinematic: bool = False, apf_alone: bool = False
-                 ) -> pd.DataFrame | None:
-    """The family claims ledger, if the family was run (``kinematic``: the Appendix-A
-    track's family under ``runs_root/kinematic_family``, without the paper-scenario column;
-    ``apf_alone``: the families without the MPC's collision constraints, improved against
-    baseline, baseline_matched and no APF)."""
-    from pipeline.analysis.claims import family_ledger
-    from pipeline.analysis.settings import ClaimsConfig
-    from pipeline.store.collection import load_runs
-    from pipeline.store.layout import OutputsLayout
-
-    if kinematic or apf_alone:
-        runs_root = OutputsLayout.load(runs_root).folder(
-            "kinematic_family" if kinematic else "apf_alone")
-        if not runs_root.is_dir():
-            return None
-    collection = load_runs(runs_root)
-    tables = collection.family_tables
-    if "baseline" not in tables or "improved" not in tables:
-        return None
-    paper = {}
-    try:
-        if not kinematic and not apf_alone:
-            frame = paper_metrics_table(runs_root)
-            paper = {r["method"]: r
-                     for r in frame[frame["track"] == "lateral"].to_dict("records")}
-    except FileNotFoundError:
-        pass
-    # the claims settings the runs were made with
-    cfg = collection.claims_settings("improved") or ClaimsConfig()
-    comparisons = ("baseline", "baseline_matched") + (("mpc_no_apf",) if apf_alone else ())
-    return family_ledger(tables, cfg, paper or None, comparisons=comparisons).to_frame() \
-        .reindex(columns=LEDGER_COLUMNS)
+def seed_differences(ledgers: Ledgers, seeds: int) -> list[str]:
+    """Every published row whose outcome is not the same under ``claims.seed`` 0 ..
+    ``seeds - 1`` (one line each, naming the outcomes and the seeds that gave them)."""
+    outcomes: dict[tuple[str, str, str], dict[str, list[int]]] = {}
+    for seed in range(seeds):
+        _, table = ledgers(seed)
+        for row in table.to_dict("records"):
+            key = (str(row["ledger"]), str(row["claim"]), str(row["comparison"]))
+            outcomes.setdefault(key, {}).setdefault(str(row["outcome"]), []).append(seed)
+    return [f"bootstrap seeds: {ledger} {claim} vs {comparison}: " + "; ".join(
+                f"{outcome} under seed {', '.join(map(str, found))}"
+                for outcome, found in by_outcome.items())
+            for (ledger, claim, comparison), by_outcome in outcomes.items()
+            if len(by_outcome) > 1]
 
 
 def compare_tables(fresh: pd.DataFrame, reference: pd.DataFrame, name: str,
@@ -182,18 +175,26 @@ def _same(a, b) -> bool:
     return math.isclose(fa, fb, rel_tol=REL_TOL, abs_tol=ABS_TOL)
 
 
-def verify(runs_root: Path, reference_dir: Path, update: bool = False) -> list[str]:
-    """Compare (or, with ``update``, rewrite) the reference; returns the differences."""
+def verify(runs_root: Path, reference_dir: Path, update: bool = False,
+           ledgers: Ledgers | None = None, seeds: int = 0) -> list[str]:
+    """Compare (or, with ``update``, rewrite) the reference; returns the differences.
+    ``ledgers``: the report's ledgers (see the module docstring; without them only the paper
+    scenario and the model checks are compared); ``seeds``: how many bootstrap seeds the
+    answer's outcomes must agree under (0: not checked)."""
+    from pipeline.store.safe_load import read_table
+
     reference_dir = Path(reference_dir)
     paper = paper_metrics_table(runs_root, with_folders=True)
     fresh = {PAPER_FILE: paper.drop(columns=[RUN_FOLDER])}
     row_names = {PAPER_FILE: list(paper[RUN_FOLDER])}
-    for file, kinematic, alone in ((LEDGER_FILE, False, False),
-                                   (KINEMATIC_LEDGER_FILE, True, False),
-                                   (APF_ALONE_LEDGER_FILE, False, True)):
-        ledger = ledger_table(runs_root, kinematic=kinematic, apf_alone=alone)
-        if ledger is not None:
-            fresh[file] = ledger
+    # the reference's tables are read (and refused, one line) before any ledger is computed
+    references = {} if update else {
+        name: read_table(reference_dir / name, f"a reference table ({name})", KEYS.get(name))
+        for name in KEYS if (reference_dir / name).exists()}
+    if ledgers is not None:
+        published, _ = ledgers(None)
+        for file, table in published.items():
+            fresh[file] = table.reindex(columns=LEDGER_COLUMNS)
     from pipeline.store.collection import model_validity_table
     from pipeline.store.layout import OutputsLayout
 
@@ -204,16 +205,14 @@ def verify(runs_root: Path, reference_dir: Path, update: bool = False) -> list[s
         for name, table in fresh.items():
             write_csv_atomic(reference_dir / name, table)
         return []
-    from pipeline.store.safe_load import read_table
-
-    problems = []
+    problems = seed_differences(ledgers, seeds) if ledgers is not None and seeds > 1 else []
     for name, table in fresh.items():
         path = reference_dir / name
-        if not path.exists():
+        if name not in references:
             problems.append(f"{name}: no reference file {path}")
             continue
-        # size, UTF-8, empty and duplicated rows: one line naming the file (exit 2)
-        reference = read_table(path, f"a reference table ({name})", KEYS.get(name))
+        # size, UTF-8, empty and duplicated rows were refused above (one line naming the file)
+        reference = references[name]
         # round-trip through CSV so both sides have the same types
         problems += compare_tables(pd.read_csv(pd.io.common.StringIO(
             table.to_csv(index=False, float_format="%.10g"))), reference, name,

@@ -11,7 +11,7 @@ collision pairs (``binomtest``); Holm's adjustment over the six claims is writte
 none). C2 can be read on a window common to both runs of a pair (``claims.c2_window``).
 """
 
-# The code is in modules of one concern: catalogue, statistics, ledger, windows.
+# The code is in modules of one concern: catalogue, statistics, ledger, windows, multiplicity.
 from pipeline.analysis.claims.catalogue import (
                                                 ALL_CLAIMS,
                                                 CLAIMS,
@@ -32,6 +32,7 @@ from pipeline.analysis.claims.ledger import (
                                                 outcome_counts,
                                                 single_scenario_outcome,
 )
+from pipeline.analysis.claims.multiplicity import adjust_answer, claim_level
 from pipeline.analysis.claims.statistics import (
                                                 PAIRS,
                                                 WILCOXON_ENUMERATED_MAX_PAIRS,
@@ -65,4 +66,5 @@ __all__ = ["Claim", "CLAIMS", "SAFETY", "ALL_CLAIMS", "FORCE_CLAIMS", "Outcome",
            "paired_differences", "PairedResult", "compare", "judge", "single_scenario_outcome",
            "claims_table", "LEDGER_COLUMNS", "LedgerRow", "Ledger", "family_ledger",
            "outcome_counts", "COMMON_C2_METRIC", "WINDOW_RULES", "common_window",
-           "common_window_claim", "common_window_pairs", "common_window_tables"]
+           "common_window_claim", "common_window_pairs", "common_window_tables",
+           "adjust_answer", "claim_level"]

@@ -63,15 +63,22 @@ def claims_table(metrics_by_method: dict[str, dict[str, Any]], margins: dict[str
     return rows
 
 
-LEDGER_COLUMNS = ["claim", "comparison", "metric", "outcome", "estimate", "ci_low", "ci_high",
-                  "ci_level", "p_value", "p_holm", "prob_improvement", "pi_low", "pi_high", "n_better",
-                  "n_tied", "n_worse", "n_missing", "n_pairs", "margin", "note",
-                  "outcome_all_pairs", "estimate_all_pairs", "paper_scenario"]
+LEDGER_COLUMNS = ["claim", "comparison", "role", "metric", "outcome", "outcome_unadjusted",
+                  "estimate", "ci_low", "ci_high", "ci_level", "n_resamples", "ci_low_mc",
+                  "ci_high_mc", "p_value", "p_holm", "p_holm_claim", "holm_family_size",
+                  "prob_improvement", "pi_low", "pi_high", "n_better", "n_tied", "n_worse",
+                  "n_missing", "n_pairs", "n_scenarios", "margin", "resolvable_effect", "note",
+                  "outcome_worst_rank", "estimate_worst_rank", "paper_scenario"]
 
 
 @dataclass(frozen=True)
 class LedgerRow:
-    """The verdict on one claim against one comparison."""
+    """The verdict on one claim against one comparison.
+
+    ``outcome`` is what the answer publishes: after the family-wise rule across the answer's
+    rows of the claim (:mod:`pipeline.analysis.claims.multiplicity`) where that was applied,
+    ``outcome_unadjusted`` before it (the same where it was not). ``role``: ``primary`` (the
+    declared comparison that carries the headline) or ``secondary``."""
 
     claim: Claim
     comparison: str
@@ -81,9 +88,16 @@ class LedgerRow:
     margin: float
     note: str
     margin_reason: str
-    outcome_all_pairs: Outcome | None = None
-    estimate_all_pairs: float | None = None
+    outcome_worst_rank: Outcome | None = None
+    estimate_worst_rank: float | None = None
     paper_scenario: str | None = None
+    #: scenarios in the comparison (every pair, collided or not)
+    n_scenarios: int = 0
+    role: str = "secondary"
+    outcome_unadjusted: Outcome | None = None
+    #: Holm over every row of this claim in the answer, and how many rows that is
+    p_holm_claim: float = math.nan
+    holm_family_size: int = 0
 
     @property
     def claim_id(self) -> str:
@@ -97,18 +111,24 @@ class LedgerRow:
         """The row as the ledger table writes it (:data:`LEDGER_COLUMNS` and more)."""
         r = self.result
         return {"claim": self.claim.claim_id, "comparison": self.comparison,
-                "metric": self.claim.primary_metric, "outcome": str(self.outcome),
-                "n_pairs": r.n_pairs, "n_missing": r.n_missing, "n_better": r.n_better,
+                "role": self.role, "metric": self.claim.primary_metric,
+                "outcome": str(self.outcome),
+                "outcome_unadjusted": str(self.outcome_unadjusted or self.outcome),
+                "n_pairs": r.n_pairs, "n_scenarios": self.n_scenarios,
+                "n_missing": r.n_missing, "n_better": r.n_better,
                 "n_tied": r.n_tied, "n_worse": r.n_worse, "estimate": r.estimate,
                 "ci_low": r.ci_low, "ci_high": r.ci_high, "ci_level": r.ci_level,
-                "interval_method": r.interval_method,
+                "n_resamples": r.n_resamples, "ci_low_mc": r.ci_low_mc,
+                "ci_high_mc": r.ci_high_mc, "interval_method": r.interval_method,
                 "p_value": r.p_value, "prob_improvement": r.prob_improvement,
                 "pi_low": r.pi_low, "pi_high": r.pi_high, "p_holm": self.p_holm,
-                "margin": self.margin, "note": self.note, "margin_reason": self.margin_reason,
+                "p_holm_claim": self.p_holm_claim, "holm_family_size": self.holm_family_size,
+                "margin": self.margin, "resolvable_effect": r.resolvable_effect,
+                "note": self.note, "margin_reason": self.margin_reason,
                 "paper says": self.claim.text,
-                "outcome_all_pairs": None if self.outcome_all_pairs is None
-                else str(self.outcome_all_pairs),
-                "estimate_all_pairs": self.estimate_all_pairs,
+                "outcome_worst_rank": None if self.outcome_worst_rank is None
+                else str(self.outcome_worst_rank),
+                "estimate_worst_rank": self.estimate_worst_rank,
                 "paper_scenario": self.paper_scenario}
 
 
@@ -130,6 +150,10 @@ class Ledger:
         Holm its count: conservative)."""
         return Ledger(tuple(row for row in self.rows if row.claim_id not in claim_ids),
                       self.treatment)
+
+    def with_rows(self, rows: tuple[LedgerRow, ...]) -> Ledger:
+        """This ledger with ``rows`` (the same claims and comparisons, rejudged)."""
+        return Ledger(rows, self.treatment)
 
     def __getitem__(self, key: tuple[str, str]) -> LedgerRow:
         for row in self.rows:
@@ -179,8 +203,9 @@ def family_ledger(tables: dict[str, pd.DataFrame], cfg: ClaimsConfig,
     improved : str
         The treatment; ``comparisons`` are its controls.
     sensitivity : bool
-        Also judge C1-C5 on the other set of pairs (all pairs when the ledger uses those where
-        neither collided).
+        Also judge C1-C5 on the other set of pairs: every pair with a collision ranked worst
+        (``worst_rank``, :func:`~pipeline.analysis.claims.statistics.paired_differences`) when
+        the ledger uses the pairs where neither collided, else those.
     jerks : mapping of method -> scenario -> LateralJerk, optional
         Each run's lateral jerk: with ``cfg.c2_window = "common"`` C2 is judged on a window
         common to both runs of each pair (:mod:`pipeline.analysis.claims.windows`), which
@@ -245,7 +270,8 @@ def _ledger_row(claim: Claim, comparison: str, result: PairedResult, p_holm: flo
     if result.n_pairs < cfg.min_pairs:
         # too few pairs: no interval is reported, so none can seem to disagree with the outcome
         result = replace(result, ci_low=math.nan, ci_high=math.nan, pi_low=math.nan,
-                         pi_high=math.nan, interval_method="too few pairs")
+                         pi_high=math.nan, interval_method="too few pairs",
+                         at_resolution=False)
     outcome, note = judge(result, margin, cfg, claim)
     excludes_zero = bool(result.ci_high < 0.0 or result.ci_low > 0.0)
     if np.isfinite(p_holm) and result.n_pairs >= cfg.min_pairs \
@@ -257,21 +283,23 @@ def _ledger_row(claim: Claim, comparison: str, result: PairedResult, p_holm: flo
         floor_note = (f"neither method shows the behaviour in {result.n_floor_ties} of "
                       f"{result.n_pairs} pairs (both at {result.floor_value:.3g})")
         note = f"{note}; {floor_note}" if note else floor_note
-    all_pairs, estimate_all = None, None
+    worst, estimate_worst = None, None
     if claim.is_rate:
-        all_pairs, estimate_all = outcome, result.estimate
+        worst, estimate_worst = outcome, result.estimate
     elif sensitivity:
-        other = "all" if cfg.pairs == "neither_collided" else "neither_collided"
-        sens = compare(*pair, claim, cfg, pairs=other, level=result.ci_level)
+        other = "worst_rank" if cfg.pairs == "neither_collided" else "neither_collided"
+        sens = compare(*pair, claim, cfg, pairs=other, level=result.ci_level, margin=margin)
         # the sensitivity reads its interval at the row's level: a check, not a claim
-        all_pairs, _ = judge(sens, margin, cfg, claim)
-        estimate_all = sens.estimate
+        worst, _ = judge(sens, margin, cfg, claim)
+        estimate_worst = sens.estimate
     paper = None
     if paper_metrics and comparison in paper_metrics and improved in paper_metrics:
         paper = single_scenario_outcome(claim, paper_metrics[comparison],
                                         paper_metrics[improved], margin)
+    scenarios = int(len(pair[0][["scenario"]].merge(pair[1][["scenario"]], on="scenario")))
     return LedgerRow(claim, comparison, outcome, result, p_holm, margin, note,
-                     cfg.margin_reasons[claim.claim_id], all_pairs, estimate_all, paper)
+                     cfg.margin_reasons[claim.claim_id], worst, estimate_worst, paper,
+                     scenarios, outcome_unadjusted=outcome)
 
 
 def outcome_counts(tables: dict[str, pd.DataFrame]) -> list[dict[str, Any]]:

@@ -34,15 +34,18 @@ def hodges_lehmann_on(sample: np.ndarray) -> Statistic:
 
     A resample holds the sample's distinct values ``u`` with counts ``c``; its Walsh averages
     are the sorted Walsh averages of ``u`` with weights ``c_a c_b`` (``c_a (c_a + 1) / 2`` on the
-    diagonal), so its median is a weighted median found by a cumulative sum instead of a
-    partition of ``n (n + 1) / 2`` numbers per resample. Same numbers, several times faster;
-    values outside ``sample`` fall back to the direct computation.
+    diagonal), so its median is a weighted median found by a cumulative sum, compiled and
+    stopped at the middle (:mod:`pipeline.analysis.claims.compiled`), instead of a partition of
+    ``n (n + 1) / 2`` numbers per resample. Same numbers, many times faster; values outside
+    ``sample`` fall back to the direct computation.
     """
+    from pipeline.analysis.claims.compiled import middle_ranks
+
     u = np.unique(np.asarray(sample, dtype=float))
     a, b = np.triu_indices(u.size)
     walsh = (u[a] + u[b]) / 2.0
     order = np.argsort(walsh, kind="stable")
-    walsh, a, b = walsh[order], a[order], b[order]
+    walsh, a, b = walsh[order], a[order].astype(np.intp), b[order].astype(np.intp)
     diagonal = a == b
 
     def statistic(x: Any, axis: int = -1) -> Any:
@@ -53,24 +56,9 @@ def hodges_lehmann_on(sample: np.ndarray) -> Statistic:
         if u.size == 0 or not np.array_equal(u[index], flat):
             return hodges_lehmann(x, axis=-1)
         rows = flat.shape[0]
-        # every partial sum is at most n (n + 1) / 2: 32-bit integers whenever that fits (half
-        # the memory traffic of the weights and their cumulative sum, the same integers)
-        dtype = np.int32 if n * (n + 1) // 2 < 2**31 else np.int64
         counts: np.ndarray = np.bincount((index + u.size * np.arange(rows)[:, None]).ravel(),
-                             minlength=rows * u.size).reshape(rows, u.size).astype(dtype)
-        total = n * (n + 1) // 2
-        low, high = np.empty(rows, dtype=np.intp), np.empty(rows, dtype=np.intp)
-        # a few resamples at a time: their weights stay in the CPU's cache between the passes
-        # (a quarter less time than whole batches; the same integers)
-        step = max(1, 2**18 // max(walsh.size, 1))
-        for start in range(0, rows, step):
-            part = counts[start:start + step]
-            weights = part[:, a] * part[:, b]
-            on_diagonal = part[:, a[diagonal]]
-            weights[:, diagonal] = on_diagonal * (on_diagonal + 1) // 2
-            cumulative = np.cumsum(weights, axis=1, dtype=dtype)
-            low[start:start + step] = np.argmax(cumulative > (total - 1) // 2, axis=1)
-            high[start:start + step] = np.argmax(cumulative > total // 2, axis=1)
+                             minlength=rows * u.size).reshape(rows, u.size)
+        low, high = middle_ranks(counts.astype(np.int64), a, b, diagonal, n * (n + 1) // 2)
         return ((walsh[low] + walsh[high]) / 2.0).reshape(batch_shape)
 
     return statistic
@@ -82,32 +70,110 @@ def _estimator(name: str, sample: np.ndarray | None = None) -> Statistic:
     return hodges_lehmann_on(sample) if sample is not None else hodges_lehmann
 
 
+@dataclass(frozen=True)
+class BootstrapInterval:
+    """A paired bootstrap interval and its Monte-Carlo resolution: each end's half-width of
+    the distribution-free band of the bootstrap quantile it is (the order statistics at
+    ranks ``B q +- z sqrt(B q (1 - q))``, ``q`` the end's level: BCa's adjusted level, or the
+    percentile's; ``z = claims.mc_band_z``): another seed's end lies within it about as often
+    as ``z`` says. On a lattice metric the band is 0 wide unless the level's rank lies near
+    the edge of an atom of the bootstrap distribution."""
+
+    low: float
+    high: float
+    method: str
+    n_resamples: int = 0
+    low_mc: float = 0.0
+    high_mc: float = 0.0
+
+
+def quantile_band(sorted_values: np.ndarray, level: float, z: float) -> tuple[float, float]:
+    """The order statistics that bound the ``level`` quantile of ``sorted_values`` (the
+    resamples' statistic, sorted) at ``z`` binomial standard errors of its rank: a
+    distribution-free band for a bootstrap quantile."""
+    count = int(sorted_values.size)
+    if count == 0 or not 0.0 <= level <= 1.0:
+        return float("nan"), float("nan")
+    spread = z * math.sqrt(count * level * (1.0 - level))
+    low_rank = int(np.clip(math.floor(count * level - spread) - 1, 0, count - 1))
+    high_rank = int(np.clip(math.ceil(count * level + spread) - 1, 0, count - 1))
+    return float(sorted_values[low_rank]), float(sorted_values[high_rank])
+
+
+def interval_levels(d: np.ndarray, statistic: Statistic, resampled: np.ndarray, level: float,
+                    method: str) -> tuple[float, float]:
+    """The quantile levels of the bootstrap distribution ``resampled`` that a ``method``
+    interval at ``level`` reads: ``(1 -+ level) / 2`` for the percentile interval; BCa's
+    adjusted levels (Efron and Tibshirani 1993, 14.3: the bias ``z0`` from the share of
+    resamples below the estimate, ties counted half, as ``scipy.stats.bootstrap`` counts them,
+    and the acceleration from the jackknife)."""
+    from scipy.special import ndtr, ndtri
+
+    alpha = (1.0 - level) / 2.0
+    if method != "BCa":
+        return alpha, 1.0 - alpha
+    estimate = float(np.asarray(statistic(d[None, :], axis=-1)).ravel()[0])
+    below = (np.count_nonzero(resampled < estimate) + np.count_nonzero(resampled <= estimate))
+    z0 = float(ndtri(below / (2.0 * resampled.size)))
+    n = d.size
+    others = np.broadcast_to(d, (n, n))[~np.eye(n, dtype=bool)].reshape(n, n - 1)
+    leave_one_out = np.asarray(statistic(others, axis=-1), dtype=float).ravel()
+    spread = (n - 1) * (leave_one_out.mean() - leave_one_out)
+    denominator = float(np.sum(spread ** 2) / n ** 2) ** 1.5
+    acceleration = float(np.sum(spread ** 3) / n ** 3) / denominator / 6.0 \
+        if denominator > 0 else 0.0
+    levels = []
+    for z_alpha in (float(ndtri(alpha)), -float(ndtri(alpha))):
+        shifted = z0 + z_alpha
+        levels.append(float(ndtr(z0 + shifted / (1.0 - acceleration * shifted))))
+    return levels[0], levels[1]
+
+
 def bootstrap_interval(d: np.ndarray, statistic: Statistic, cfg: ClaimsConfig,
-                       level: float = 0.95
-                       ) -> tuple[float, float, str]:
+                       level: float = 0.95, n_resamples: int | None = None
+                       ) -> BootstrapInterval:
     """Paired bootstrap interval of ``statistic`` over the differences (BCa where defined,
-    percentile otherwise); a constant sample has the degenerate interval at its value."""
+    percentile otherwise) with ``n_resamples`` (``claims.n_resamples`` when omitted) and each
+    end's Monte-Carlo half-width (:class:`BootstrapInterval`); a constant sample has the
+    degenerate interval at its value."""
     from scipy import stats
 
     d = np.asarray(d, dtype=float)
+    resamples = int(cfg.n_resamples if n_resamples is None else n_resamples)
     if d.size == 0:
-        return float("nan"), float("nan"), "none"
+        return BootstrapInterval(float("nan"), float("nan"), "none")
     if np.ptp(d) == 0.0:
-        return float(d[0]), float(d[0]), "degenerate"
+        return BootstrapInterval(float(d[0]), float(d[0]), "degenerate", resamples)
     for method in ("BCa", "percentile"):
         with np.errstate(all="ignore"):
             import warnings
 
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore")
-                result = stats.bootstrap((d,), statistic, n_resamples=cfg.n_resamples,
+                result = stats.bootstrap((d,), statistic, n_resamples=resamples,
                                          confidence_level=level, method=method, vectorized=True,
                                          axis=-1, batch=200,
                                          random_state=np.random.default_rng(cfg.seed))
-        low, high = result.confidence_interval
-        if np.isfinite(low) and np.isfinite(high):
-            return float(low), float(high), method
-    return float("nan"), float("nan"), "failed"
+                low, high = (float(v) for v in result.confidence_interval)
+                if not (np.isfinite(low) and np.isfinite(high)):
+                    continue
+                values = np.sort(np.asarray(result.bootstrap_distribution, dtype=float).ravel())
+                levels = interval_levels(d, statistic, values, level, method)
+        bands = [quantile_band(values, q, cfg.mc_band_z) for q in levels]
+        low_mc = max(low - bands[0][0], bands[0][1] - low, 0.0)
+        high_mc = max(high - bands[1][0], bands[1][1] - high, 0.0)
+        return BootstrapInterval(low, high, method, resamples, float(low_mc), float(high_mc))
+    return BootstrapInterval(float("nan"), float("nan"), "failed", resamples)
+
+
+def within_resolution(interval: BootstrapInterval, margin: float) -> bool:
+    """Whether a threshold of the outcome rule lies within an end's Monte-Carlo band: the low
+    end near ``-margin`` or 0, the high end near 0 or ``+margin`` (another bootstrap seed
+    could then give another outcome)."""
+    return any(abs(end - threshold) <= mc for end, mc, thresholds in (
+        (interval.low, interval.low_mc, (-margin, 0.0)),
+        (interval.high, interval.high_mc, (0.0, margin))) for threshold in thresholds
+        if np.isfinite(end) and mc > 0.0)
 
 
 def probability_of_improvement(d: np.ndarray, cfg: ClaimsConfig, level: float = 0.95
@@ -282,7 +348,7 @@ def newcombe_paired_interval(n_both: int, n_first_only: int, n_second_only: int,
     return float(p1 - p2 - delta), float(p1 - p2 + epsilon)
 
 
-PAIRS = ("neither_collided", "all")
+PAIRS = ("neither_collided", "all", "worst_rank")
 
 
 def paired_differences(improved: pd.DataFrame, comparison: pd.DataFrame, claim: Claim,
@@ -292,6 +358,12 @@ def paired_differences(improved: pd.DataFrame, comparison: pd.DataFrame, claim: 
 
     ``pairs="neither_collided"`` keeps, for a paired claim, the pairs where neither method
     collided (a rate claim always keeps every pair): the one place this filter is applied.
+    ``pairs="worst_rank"`` keeps every pair and ranks a collision worse than any run without
+    one: a collided run's value becomes one that is worse than every value of both methods
+    in the comparison by their range (at least 1 in the metric's units), so a pair where one
+    method collided counts for the other and a pair where both did ties (the ranking of
+    composite outcomes in clinical trials, where the worst event ranks last). Its ``d`` is a
+    rank-preserving stand-in: its sign and its pairs' order mean something, its size does not.
     """
     key = claim.primary_metric
     cols = ["scenario", key] + (["collision"] if key != "collision" else [])
@@ -299,12 +371,21 @@ def paired_differences(improved: pd.DataFrame, comparison: pd.DataFrame, claim: 
     i = pd.to_numeric(merged[f"{key}_i"], errors="coerce").to_numpy(float)
     c = pd.to_numeric(merged[f"{key}_c"], errors="coerce").to_numpy(float)
     sign = 1.0 if claim.lower_is_better else -1.0
-    merged["d"] = sign * (i - c)
     if key == "collision":
         merged["collision_i"], merged["collision_c"] = i.astype(bool), c.astype(bool)
     else:
         merged["collision_i"] = merged["collision_i"].astype(bool)
         merged["collision_c"] = merged["collision_c"].astype(bool)
+    if pairs == "worst_rank" and not claim.is_rate:
+        collided_i = merged["collision_i"].to_numpy(bool)
+        collided_c = merged["collision_c"].to_numpy(bool)
+        seen = np.concatenate([i[np.isfinite(i)], c[np.isfinite(c)]])
+        span = max(float(np.ptp(seen)), 1.0) if seen.size else 1.0
+        worst = (float(seen.max()) + span if claim.lower_is_better
+                 else float(seen.min()) - span) if seen.size else sign
+        i, c = np.where(collided_i, worst, i), np.where(collided_c, worst, c)
+        merged[f"{key}_i"], merged[f"{key}_c"] = i, c
+    merged["d"] = sign * (i - c)
     if pairs == "neither_collided" and not claim.is_rate:
         merged = merged[~(merged["collision_i"] | merged["collision_c"])]
     return merged
@@ -334,13 +415,43 @@ class PairedResult:
     differences: np.ndarray | None = field(repr=False, compare=False, default=None)
     #: the confidence level of ``ci_low, ci_high`` and ``pi_low, pi_high``
     ci_level: float = 0.95
+    #: bootstrap resamples behind the interval (0: none, a rate's closed-form interval) and
+    #: each end's Monte-Carlo half-width (:class:`BootstrapInterval`)
+    n_resamples: int = 0
+    ci_low_mc: float = 0.0
+    ci_high_mc: float = 0.0
+    #: a threshold of the outcome rule still lies within an end's Monte-Carlo band after
+    #: ``claims.n_resamples_refine`` resamples: the outcome is read off the interval widened
+    #: by its bands (the conservative reading)
+    at_resolution: bool = False
+
+    @property
+    def resolvable_effect(self) -> float:
+        """The smallest effect this interval's width can resolve at 80 % power: ``(z_{1 -
+        a/2} + z_{0.8}) SE`` with ``SE`` the interval's half-width over ``z_{1 - a/2}`` and
+        ``a = 1 - ci_level`` (a normal approximation: an effect this large puts the interval
+        clear of zero four times in five)."""
+        from scipy import stats
+
+        width = self.ci_high - self.ci_low
+        if not np.isfinite(width):
+            return float("nan")
+        z_level = float(stats.norm.ppf(0.5 + self.ci_level / 2.0))
+        return float((z_level + stats.norm.ppf(0.8)) * width / (2.0 * z_level))
 
 
 def compare(improved: pd.DataFrame, comparison: pd.DataFrame, claim: Claim, cfg: ClaimsConfig,
-            pairs: str | None = None, level: float | None = None) -> PairedResult:
+            pairs: str | None = None, level: float | None = None,
+            margin: float | None = None) -> PairedResult:
     """One claim, one comparison: estimate, interval (at ``level``, by default
     ``1 - claims.alpha``; a ledger passes :func:`interval_level`), test, probability of
-    improvement, counts (before the Holm adjustment and the outcome)."""
+    improvement, counts (before the Holm adjustment and the outcome).
+
+    A bootstrap interval with a threshold of the outcome rule (0 and +-``margin``, the
+    claim's margin by default) within an end's Monte-Carlo band is drawn again with
+    ``claims.n_resamples_refine`` resamples; if a threshold is still within a band the result
+    is marked ``at_resolution`` (:func:`judge` then reads the interval widened by its bands).
+    """
     from scipy import stats
 
     level = 1.0 - cfg.alpha if level is None else float(level)
@@ -372,19 +483,46 @@ def compare(improved: pd.DataFrame, comparison: pd.DataFrame, claim: Claim, cfg:
         p_value = float(stats.binomtest(worse, discordant, 0.5).pvalue) if discordant else 1.0
     else:
         estimate = float(_estimator(cfg.estimator)(d)) if d.size else float("nan")
-        low, high, method = bootstrap_interval(d, _estimator(cfg.estimator, d), cfg, level)
+        statistic = _estimator(cfg.estimator, d)
+        threshold = float(cfg.margins[claim.claim_id]) if margin is None else float(margin)
+        interval = bootstrap_interval(d, statistic, cfg, level)
+        if within_resolution(interval, threshold) \
+                and cfg.n_resamples_refine > interval.n_resamples:
+            interval = bootstrap_interval(d, statistic, cfg, level, cfg.n_resamples_refine)
+        low, high, method = interval.low, interval.high, interval.method
         p_value = paired_test(d, cfg) if d.size else float("nan")
+        resolution = (interval.n_resamples, interval.low_mc, interval.high_mc,
+                      within_resolution(interval, threshold))
     pi, pi_low, pi_high = probability_of_improvement(d, cfg, level)
+    if claim.is_rate:
+        resolution = (0, 0.0, 0.0, False)
     return PairedResult(int(d.size), int(d_all.size - d.size), better, tied, worse, estimate,
                         low, high, method, p_value, pi, pi_low, pi_high, n_floor, floor, d,
-                        level)
+                        level, *resolution)
+
+
+def decision_interval(result: PairedResult) -> tuple[float, float]:
+    """The interval the outcome is read off: the reported one, widened by each end's
+    Monte-Carlo half-width where the result is ``at_resolution``."""
+    if result.at_resolution:
+        return result.ci_low - result.ci_low_mc, result.ci_high + result.ci_high_mc
+    return result.ci_low, result.ci_high
 
 
 def judge(result: PairedResult, margin: float, cfg: ClaimsConfig, claim: Claim
           ) -> tuple[Outcome, str]:
-    """:func:`decide` on one comparison's result (a rate's direction from its interval)."""
+    """:func:`decide` on one comparison's result (a rate's direction from its interval); a
+    result ``at_resolution`` is read off its interval widened by each end's Monte-Carlo band
+    (what no other bootstrap seed is likely to overturn), and its note says so."""
     if claim.is_rate:
         return decide(result.ci_low, result.ci_high, margin, result.n_pairs, cfg,
                       estimate=result.estimate)
-    return decide(result.ci_low, result.ci_high, margin, result.n_pairs, cfg,
-                  result.pi_low, result.pi_high, result.estimate, result.prob_improvement)
+    low, high = decision_interval(result)
+    outcome, note = decide(low, high, margin, result.n_pairs, cfg, result.pi_low,
+                           result.pi_high, result.estimate, result.prob_improvement)
+    if result.at_resolution:
+        words = (f"at the bootstrap's resolution: after {result.n_resamples} resamples an end "
+                 f"lies within its Monte-Carlo error (+-{max(result.ci_low_mc, result.ci_high_mc):.2g}) "
+                 f"of 0 or the margin; read off [{low:.3g}, {high:.3g}]")
+        note = f"{note}; {words}" if note else words
+    return outcome, note

@@ -123,6 +123,10 @@ def analysis_settings(row: dict, space: Space, base: ExperimentConfig
     return (dataclasses.replace(base.metrics, **metrics),
             dataclasses.replace(base.claims, **{**claims, "margins": margins,
                                                 "n_resamples": space.n_resamples,
+                                                # no second draw: a specification whose
+                                                # outcome lies within its interval's
+                                                # Monte-Carlo error reads the widened interval
+                                                "n_resamples_refine": space.n_resamples,
                                                 "min_pairs": space.min_pairs}))
 
 

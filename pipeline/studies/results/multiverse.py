@@ -187,14 +187,16 @@ class MultiverseResult:
             keys = {k.strip() for k in str(dim.get("config_key", dim.get("key", ""))).split(",")}
             if name not in specs or not keys & set(register_keys):
                 continue
-            changed = varied[varied[name].astype(str) != str(base[name])]
+            # every value as text (a missing one reads "nan"), whatever the column's dtype
+            text = specs[name].map(str)
+            changed = varied[text[varied.index] != str(base[name])]
             for (claim, comparison), default_row in default.groupby(["claim", "comparison"],
                                                                     sort=False):
                 before = str(default_row["outcome"].iloc[0])
                 rows = changed[(changed["claim"] == claim)
                                & (changed["comparison"] == comparison)]
-                for value in dict.fromkeys(rows[name].astype(str)):
-                    row = rows[rows[name].astype(str) == value].iloc[0]
+                for value in dict.fromkeys(text[rows.index]):
+                    row = rows[text[rows.index] == value].iloc[0]
                     if str(row["outcome"]) != before:
                         flips.append(ReadingFlip(str(claim), str(comparison), name, value,
                                                  str(row["outcome"]), float(row["estimate"]),
