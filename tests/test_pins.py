@@ -19,7 +19,11 @@ coordinates (issue 38: ``controller.frame=path`` is the new default, new keys ch
 every lateral number moves, and the runs carry the model-validity metrics); intervals at
 1 - alpha/7 (issue 40: the interval is the test; every interval widens, a row with too few
 pairs reports none, no outcome moves); the collision oracle's two-phase manoeuvres (issue 56:
-the new key metrics.attribution_switch_samples changes the hash; no pinned number moves).
+the new key metrics.attribution_switch_samples changes the hash; no pinned number moves); the
+APF rollout itself as the lateral MPC's reference (issue 56: controller.path_reference=rollout,
+new keys change the hash, every lateral number moves) with the answer's statistics (issue 56:
+9,999 resamples and their Monte-Carlo resolution, the worst-rank sensitivity, the answer-wide
+Holm gate: new ledger columns).
 """
 
 from __future__ import annotations
@@ -36,7 +40,7 @@ from pipeline.run import run_experiment, run_family
 from pipeline.store.runs import read_run
 from pipeline.studies.verify import compare_tables
 
-DEFAULT_CONFIG_HASH = "b93a634050fc0c9d"
+DEFAULT_CONFIG_HASH = "232c8d12c1d77393"
 PINS = Path(__file__).parent / "data" / "pins"
 METHODS = ("improved", "baseline", "baseline_matched")
 UPDATE = os.environ.get("PIPELINE_UPDATE_PINS") == "1"
