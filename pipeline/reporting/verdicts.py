@@ -293,8 +293,16 @@ class Verdicts:
         apf_alone = dataclasses.replace(self.apf_alone, ledger=new["apf_alone"]) \
             if self.apf_alone is not None else None
         peers = tuple(dataclasses.replace(p, ledger=new[f"peers_{p.track}"]) for p in self.peers)
+        nmpc = self.nmpc
+        if nmpc is not None:
+            # the judge of record's rows stand in for the family's in the same families
+            named[0] = ("family", nmpc.ledger)
+            judged = adjust_answer(named, ("family", first), cfg)[0]
+            nmpc = dataclasses.replace(nmpc, ledger=judged.with_rows(tuple(
+                dataclasses.replace(row, role="judge of record" if row.role == "primary"
+                                    else row.role) for row in judged)))
         return dataclasses.replace(self, family=family, kinematic_family=kin,
-                                   apf_alone=apf_alone, peers=peers)
+                                   apf_alone=apf_alone, peers=peers, nmpc=nmpc)
 
 
 def _windows_after(windows: C2Windows | None, new: dict[str, Ledger]) -> C2Windows | None:
