@@ -98,7 +98,8 @@ def test_a_planner_from_outside_the_package_runs_and_is_judged(tmp_path):
     page = (tmp_path / "report" / "index.html").read_text()
     answer = page[page.index('id="answer"'):]
     answer = answer[:answer.index("</div>")]
-    assert "(straight against each control" in answer and "</span> vs baseline" in answer
+    assert "(straight against the declared primary comparison" in answer \
+        and "</span> vs baseline" in answer
 
 
 def test_a_controller_from_outside_the_package_and_bad_targets(tmp_path):

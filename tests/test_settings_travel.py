@@ -116,7 +116,7 @@ def test_settings_read_back_equal_a_fresh_composition(user_runs):
 def test_the_report_command_ends_with_the_answer_in_words(user_runs, tmp_path, capsys):
     """``python -m pipeline.report`` (and so ``make reproduce``) ends with one line per claim:
     the claim's words, its outcome against each comparison, the estimate with its interval
-    and unit."""
+    and unit, and its pairs."""
     from pipeline.analysis.claims.catalogue import ALL_CLAIMS
     from pipeline.report import main as report_main
 
@@ -127,10 +127,14 @@ def test_the_report_command_ends_with_the_answer_in_words(user_runs, tmp_path, c
     assert [line.split(" ", 1)[0] for line in last] == [c.claim_id for c in ALL_CLAIMS]
     for line, claim in zip(last, ALL_CLAIMS, strict=True):
         assert claim.text in line and "vs baseline" in line and "vs baseline_matched" in line
-    assert " s)" in last[1] and "m/s^3" in last[2]   # C1 in seconds, C2 in m/s^3
-    # answer.txt: the collisions and the model-validity caveat first, then the same verdicts
+    assert "] s, " in last[1] and "] m/s^3, " in last[2]   # C1 in seconds, C2 in m/s^3
+    assert all(" pairs" in line for line in last)
+    # answer.txt: the collisions and the model-validity caveat first, the primary comparison
+    # and which ledger judges, then the same verdicts; the command prints it whole, last
     answer = (tmp_path / "r" / "answer.txt").read_text().splitlines()
     assert answer[-len(last):] == last
     assert answer[0].startswith("Collisions in ") and " scenarios each: baseline " in answer[0]
     assert "validity bound" in answer[0]
-    assert lines[-len(last) - 1] == answer[0]
+    assert lines[-len(answer):] == answer
+    assert any(line.startswith("Primary comparison: improved vs baseline; every interval at ")
+               for line in answer[:-len(last)])

@@ -137,16 +137,16 @@ def build_page(inputs: ReportInputs, verdicts: Verdicts, figures: Figures, comma
 
 def answer_context(inputs: ReportInputs, verdicts: Verdicts, robustness) -> AnswerContext:
     """What the answer reads besides the sections: the judge of record's verdicts, the
-    registered readings under which an outcome changes (from the multiverse, with the label
-    of one below its default budget) and the linear model's share of steps beyond its
-    bound per judged method."""
+    registered readings under which an outcome changes (from a multiverse at its default
+    budget; one below it writes nothing here) and the linear model's share of steps beyond
+    its bound per judged method."""
     from pipeline.config import INTERPRETATION_REGISTER
 
     flips = None
-    if inputs.multiverse is not None:
+    # a multiverse below its default budget never writes the answer (its own section shows it)
+    if inputs.multiverse is not None and robustness is not None and robustness.headline:
         keys = {k.strip() for entry in INTERPRETATION_REGISTER
                 for k in entry.config_key.split(",") if not k.strip().startswith("(")}
         flips = inputs.multiverse.reading_flips(keys)
-    label = robustness.label if robustness is not None and not robustness.headline else ""
-    return AnswerContext(verdicts.nmpc, flips, f"exploratory multiverse: {label}"
-                         if label else "", beyond_bound_shares(verdicts.family, verdicts.claims))
+    return AnswerContext(verdicts.nmpc, flips, "",
+                         beyond_bound_shares(verdicts.family, verdicts.claims))

@@ -136,7 +136,7 @@ def _thin(ledger_rows: tuple[dict, ...], cfg: ClaimsConfig, what: str, compariso
 def _flip_words(flips: tuple[ReadingFlip, ...] | None, claim: str, comparison: str,
                 label: str) -> str:
     if flips is None:
-        return "hangs on a reading: not measured (make multiverse)"
+        return "hangs on a reading: not measured at the default budget (make multiverse)"
     mine = [f.words for f in flips if f.claim == claim and f.comparison == comparison]
     suffix = f" ({label})" if label else ""
     return ("hangs on a reading: " + "; ".join(mine) + suffix) if mine else \
