@@ -44,15 +44,11 @@ def warm_compiled_kernels() -> None:
     of :data:`WARM_RUNS` (``make install`` calls it: a first ``make reproduce`` then loads them
     in every experiment and worker instead of compiling them in each at once), and the
     ledgers' bootstrap kernel (:mod:`pipeline.analysis.claims.compiled`)."""
-    import numpy as np
-
-    from pipeline.analysis.claims.compiled import middle_ranks
+    from pipeline.analysis.claims.compiled import warm_kernel
     from pipeline.studies.experiment import warm_compiled_kernels as warm
 
     warm([compose(list(overrides)) for overrides in WARM_RUNS])
-    # the Hodges-Lehmann bootstrap's search (every ledger's intervals)
-    middle_ranks(np.ones((1, 2), dtype=np.int64), np.zeros(3, dtype=np.intp),
-                 np.array([0, 1, 1], dtype=np.intp), np.array([True, False, True]), 3)
+    warm_kernel()  # the Hodges-Lehmann bootstrap's search (every ledger's intervals)
 
 
 def compose(overrides: list[str] | None = None) -> ExperimentConfig:

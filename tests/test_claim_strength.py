@@ -197,26 +197,17 @@ def test_every_published_outcome_is_the_same_under_five_bootstrap_seeds():
     assert seed_differences(report_ledgers(OUTPUTS), 5) == []
 
 
-def test_the_compiled_middle_ranks_equal_numpys_cumulative_sums():
-    """The compiled search (:mod:`pipeline.analysis.claims.compiled`) and its CPython run give
-    numpy's cumulative-sum ranks, on counts with zeros and ties."""
-    from pipeline.analysis.claims.compiled import middle_ranks, middle_ranks_arrays
+def test_the_compiled_walsh_median_is_the_direct_median_bit_for_bit():
+    """The compiled search (:mod:`pipeline.analysis.claims.compiled`) gives the median of
+    every Walsh average of each resample, computed directly, bit for bit: values on a lattice
+    (ties), negative and positive, and resamples that hold few of the values."""
+    from pipeline.analysis.claims.statistics import hodges_lehmann, hodges_lehmann_on
 
     rng = np.random.default_rng(2)
-    u = 12
-    first, second = np.triu_indices(u)
-    order = rng.permutation(first.size)
-    first, second = first[order].astype(np.intp), second[order].astype(np.intp)
-    diagonal = first == second
-    n = 20
-    counts = rng.multinomial(n, np.full(u, 1 / u), size=50).astype(np.int64)
-    weights = counts[:, first] * counts[:, second]
-    weights[:, diagonal] = counts[:, first[diagonal]] * (counts[:, first[diagonal]] + 1) // 2
-    cumulative = np.cumsum(weights, axis=1)
-    total = n * (n + 1) // 2
-    expected = (np.argmax(cumulative > (total - 1) // 2, axis=1),
-                np.argmax(cumulative > total // 2, axis=1))
-    for found in (middle_ranks(counts, first, second, diagonal, total),
-                  middle_ranks_arrays(counts, first, second, diagonal, total)):
-        np.testing.assert_array_equal(found[0], expected[0])
-        np.testing.assert_array_equal(found[1], expected[1])
+    for n, spread in ((20, 0.1), (57, 1.0), (150, 3.0)):
+        sample = np.round(rng.normal(0.2, spread, n), 1)
+        resamples = rng.choice(sample, size=(200, n))
+        np.testing.assert_array_equal(hodges_lehmann_on(sample)(resamples),
+                                      hodges_lehmann(resamples))
+        sparse = rng.choice(sample[:3], size=(20, n))
+        np.testing.assert_array_equal(hodges_lehmann_on(sample)(sparse), hodges_lehmann(sparse))

@@ -50,14 +50,14 @@ def test_without_the_warm_step_nothing_is_written(tmp_path):
 
 
 def test_kernels_only_fills_numbas_cache(tmp_path):
-    """``--kernels-only`` (the other core's half of make install) leaves the nine kernels in
+    """``--kernels-only`` (the other core's half of make install) leaves the eleven kernels in
     an empty numba cache and compiles no project module list of its own."""
     env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path / "numba")}
     proc = subprocess.run([sys.executable, "-m", "pipeline.warm", "--kernels-only"], env=env,
                           capture_output=True, text=True, check=False)
     assert proc.returncode == 0, proc.stderr
     assert "numba kernels" in proc.stdout and "compiled the bytecode" not in proc.stdout
-    assert len({p.name.split("-")[0] for p in (tmp_path / "numba").rglob("*.nbi")}) == 9
+    assert len({p.name.split("-")[0] for p in (tmp_path / "numba").rglob("*.nbi")}) == 11
 
 
 @pytest.mark.parametrize("args", [["--fast"], ["--no-kernels", "--kernels-only"]])
