@@ -98,14 +98,7 @@ class ExperimentConfig(FrozenAfterValidation):
                               f"equal to scenario.goal_tolerance_m "
                               f"({self.scenario.goal_tolerance_m}) or null (follows it): the run "
                               "stops at one, the metrics judge with the other")
-        ped = self.scenario.pedestrians
-        if ped is not None and ped.sensor_range_m <= self.vehicle.footprint_radius_m \
-                + ped.radius_m:
-            raise ConfigError("scenario.pedestrians.sensor_range_m", ped.sensor_range_m,
-                              f"a number in ({self.vehicle.footprint_radius_m + ped.radius_m:g}"
-                              ", 100] (m): beyond vehicle.footprint_radius_m + "
-                              "scenario.pedestrians.radius_m, so that a pedestrian is seen "
-                              "before it touches the vehicle")
+        self.scenario.check_with_vehicle(self.vehicle.footprint_radius_m)
         if len(self.scenario.obstacles) > self.controller.max_obstacles:
             raise ConfigError("controller.max_obstacles", self.controller.max_obstacles,
                               f">= the number of obstacles ({len(self.scenario.obstacles)})")
@@ -151,14 +144,9 @@ class ExperimentConfig(FrozenAfterValidation):
 def _hash_of(data: dict) -> str:
     """:meth:`ExperimentConfig.config_hash` of ``asdict(config)`` (``data`` is not changed)."""
     data = {k: v for k, v in data.items() if k not in ("claims", "tune", "features")}
-    for section in ("scenario", "planner", "controller"):
+    for section in ("planner", "controller"):
         data[section] = dict(data[section])
-    if data["scenario"].get("obstacle_anchor") == "world":
-        data["scenario"].pop("obstacle_anchor")  # the default reading, as before the key
-    if data["scenario"].get("commonroad", 0) is None:
-        data["scenario"].pop("commonroad")  # not a CommonRoad scenario, as before the key
-    if data["scenario"].get("pedestrians", 0) is None:
-        data["scenario"].pop("pedestrians")  # no recorded pedestrians, as before the key
+    data["scenario"] = ScenarioConfig.hash_view(data["scenario"])
     if data["controller"].get("collision_constraints") is True:
         data["controller"].pop("collision_constraints")  # the default, as before the key
     for section in ("planner", "controller"):

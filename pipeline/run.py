@@ -60,20 +60,23 @@ def hydra_main(cfg: DictConfig) -> float | tuple[float, ...]:
 
 
 def _require_extras(cfg: DictConfig) -> None:
-    """``scenario=commonroad`` without its optional extra: the one install line, before any
-    other check of the configuration."""
-    scenario = cfg.get("scenario")
-    if scenario is not None and scenario.get("commonroad") is not None:
-        from pipeline.loop.commonroad_scenario import require_commonroad
+    """The scenario's source (``scenario.source._target_``) importable and a source, and its
+    optional extra (``needs_extra``, e.g. CommonRoad's) installed: one line each otherwise,
+    before any other check of the configuration."""
+    from pipeline.loop.scenario import source_extra
 
-        require_commonroad()
+    scenario = cfg.get("scenario")
+    extra = source_extra(scenario) if scenario is not None else None
+    if extra is not None:
+        extra.require()
 
 
 def _run(experiment, out_dir: Path) -> float | tuple[float, ...]:
     """The run or family of :func:`hydra_main`, into ``out_dir`` (locked)."""
     objectives = experiment.tune.objectives
-    if experiment.scenario.commonroad is not None:
-        return _run_commonroad(experiment, out_dir)
+    study = _source_study(experiment)
+    if study is not None:
+        return study(experiment, out_dir)
     if experiment.scenario.family is not None:
         counts = MemberCounts()
         table = run_family(experiment, out_dir, counts=counts)
@@ -95,23 +98,16 @@ def _run(experiment, out_dir: Path) -> float | tuple[float, ...]:
     return values[0] if len(values) == 1 else values
 
 
-def _run_commonroad(experiment, out_dir: Path) -> float | tuple[float, ...]:
-    """``scenario=commonroad``: the run, both collision verdicts, the road and the goal."""
-    from pipeline.studies.commonroad import run_commonroad
+def _source_study(experiment):
+    """The function that runs one scenario of the experiment's source in place of the plain
+    run (its ``study``, e.g. CommonRoad's run judged by the drivability checker), or None."""
+    from pipeline.loop.scenario import SOURCE_KEY, source_class
+    from pipeline.validation import resolve_target
 
-    done = run_commonroad(experiment, out_dir)
-    v, m = done.verdicts, done.run.flat()
-    log.info("%s on %s (%d steps at %.3g m/s): collision ours %s, drivability checker on our "
-             "discs %s (agree on %d/%d steps), on the true shapes %s (agree on %d/%d steps); "
-             "min clearance ours %.3f m, true shapes %.3f m; off the road on %d steps; goal "
-             "reached by CommonRoad's definition %s, by ours %s -> %s", m["method"],
-             m["scenario"], v.steps, done.result.summary["run"]["speed_mps"], v.ours_collision,
-             v.checker_same_geometry_collision, v.agreement_same_geometry_steps, v.steps,
-             v.checker_true_shapes_collision, v.agreement_true_shapes_steps, v.steps,
-             v.min_clearance_ours_m, v.min_clearance_true_shapes_m, v.off_road_steps,
-             v.goal_reached_commonroad, m["termination"] == "goal_line", out_dir)
-    values = objective_values(pd.DataFrame([m]), experiment.tune.objectives)
-    return values[0] if len(values) == 1 else values
+    if experiment.scenario.family is not None:
+        return None
+    study = getattr(source_class(experiment.scenario.source_target), "study", None)
+    return resolve_target(SOURCE_KEY, study) if study else None
 
 
 def _check_targets(experiment) -> None:

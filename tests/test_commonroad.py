@@ -187,6 +187,24 @@ def test_an_uncertain_position_and_orientation_read_as_their_middles(tmp_path,
     assert snap.radii_m[0] == pytest.approx(math.hypot(4.0, 2.0) / 2)
 
 
+@needs_extra
+def test_the_source_builds_the_scenario_the_reader_makes(tmp_path, make_scenario_config):
+    """build_scenario asks the CommonRoad source (scenario.source._target_): the file's
+    recorded obstacles, as read_commonroad makes them (before the sources, a CommonRoad
+    configuration built the scripted scenario of its empty obstacle list)."""
+    from pipeline.loop.commonroad_scenario import CommonRoadScenario
+    from pipeline.loop.scenario import build_scenario
+
+    path = write_scenario(tmp_path / "planted.xml")
+    cfg = make_scenario_config(path)
+    built, read = build_scenario(cfg), read_commonroad(cfg).scenario
+    assert isinstance(built, CommonRoadScenario) and built.n_obstacles == 2
+    for t in (0.0, 1.25, 4.0):
+        a, b = built.obstacles_at(t), read.obstacles_at(t)
+        assert np.array_equal(a.positions_m, b.positions_m)
+        assert np.array_equal(a.visible, b.visible)
+
+
 def _trajectory(case, poses: list[tuple[float, float, float]]) -> pd.DataFrame:
     """A logged run by hand: the ego at ``poses`` (x, y, heading) on consecutive steps, the
     obstacles as our scenario has them (the columns the loop logs)."""

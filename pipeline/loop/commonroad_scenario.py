@@ -24,40 +24,61 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Any
+from typing import Any, ClassVar
 
 import numpy as np
 import pandas as pd
 
-from pipeline.errors import ConfigError, MissingExtraError
-from pipeline.loop.scenario import ObstacleSnapshot, Scenario
-from pipeline.loop.settings import CommonRoadConfig, ScenarioConfig
+from pipeline.errors import ConfigError
+from pipeline.loop.scenario import Extra, ObstacleSnapshot, Scenario
+from pipeline.loop.settings import CommonRoadConfig, ScenarioConfig, ScenarioSourceConfig
 
 #: The one line that says how to get ``scenario=commonroad`` (the test skip reason too).
 INSTALL_HINT = ("scenario=commonroad needs the optional extra: pip install '.[commonroad]' "
                 "(its Polygon3 builds from source: a C compiler, e.g. apt-get install "
                 "build-essential)")
 PATH_KEY = "scenario.commonroad.path"
+#: commonroad-io, the drivability checker and the vehicle models (``pip install
+#: '.[commonroad]'``)
+COMMONROAD_EXTRA = Extra("commonroad", ("commonroad", "commonroad_dc.pycrcc", "vehiclemodels"),
+                         INSTALL_HINT)
 
 
 def commonroad_missing() -> str | None:
     """None when commonroad-io, the drivability checker and the vehicle models import; else
     :data:`INSTALL_HINT`."""
-    try:
-        import commonroad  # noqa: F401
-        import commonroad_dc.pycrcc  # noqa: F401
-        import vehiclemodels  # noqa: F401
-    except ImportError:
-        return INSTALL_HINT
-    return None
+    return COMMONROAD_EXTRA.missing()
 
 
 def require_commonroad() -> None:
     """Raise :class:`~pipeline.errors.MissingExtraError` (the install line) without the
     extra."""
-    missing = commonroad_missing()
-    if missing is not None:
-        raise MissingExtraError(f"config error: {missing}")
+    COMMONROAD_EXTRA.require()
+
+
+class CommonRoadSource:
+    """A CommonRoad file's source (``conf/scenario/commonroad.yaml``): the scenario
+    :func:`read_commonroad` makes of the file. A file is one scenario, not a family. Its run is
+    :func:`pipeline.studies.commonroad.run_and_log` (``study``): the run at the file's own
+    start, speed and goal, judged again by CommonRoad's drivability checker."""
+
+    needs_extra: ClassVar[Extra | None] = COMMONROAD_EXTRA
+    study = "pipeline.studies.commonroad.run_and_log"
+
+    def __init__(self, scenario: ScenarioConfig, vehicle_radius_m: float = 1.0) -> None:
+        if scenario.commonroad is None:
+            raise ConfigError("scenario.source._target_", ScenarioSourceConfig.COMMONROAD,
+                              "another source, or a scenario.commonroad block (scenario="
+                              "commonroad), which this source reads")
+        self.base = scenario
+
+    def build(self, cfg: ScenarioConfig) -> Scenario:
+        return read_commonroad(cfg).scenario
+
+    def member(self, seed: int, index: int) -> ScenarioConfig:
+        raise ConfigError("scenario.family", f"member {index} of seed {seed}",
+                          "no family with a CommonRoad scenario (one file is one scenario; "
+                          "run each file: make commonroad COMMONROAD=path)")
 
 
 @dataclass(frozen=True)

@@ -1,5 +1,5 @@
 """Recorded pedestrians (ETH/UCY) as dynamic obstacles: the track files, their replay, and the
-seeded family of crossings (``scenario=pedestrians``).
+seeded family of crossings (``scenario=pedestrians``; its source, :class:`PedestrianSource`).
 
 A track file holds tab-separated rows ``frame  pedestrian_id  x_m  y_m`` (world metres), one
 row per pedestrian and frame; frames are numbered 10 apart at 2.5 Hz, so a frame number times
@@ -17,11 +17,13 @@ import gzip
 import math
 from dataclasses import dataclass, replace
 from pathlib import Path
+from typing import ClassVar
 
 import numpy as np
 
 from pipeline.errors import ConfigError, TrackFileError
-from pipeline.loop.settings import PedestrianConfig, ScenarioConfig
+from pipeline.loop.scenario import Extra, Scenario, refuse_blocks, with_family_seed
+from pipeline.loop.settings import PedestrianConfig, ScenarioConfig, ScenarioSourceConfig
 
 
 def _data_dir() -> Path:
@@ -352,3 +354,51 @@ def recorded_motion(cfg: ScenarioConfig) -> tuple[RecordedTrackMotion, int]:
                              np.asarray(cfg.goal_xy_m, float), ped.window_start_s,
                              cfg.n_steps * cfg.sample_time_s, ped.corridor_m)
     return tracks.motion(which, ped.window_start_s), int(which.size)
+
+
+def pedestrian_scenario(cfg: ScenarioConfig) -> Scenario:
+    """A member of the pedestrian family: its recorded pedestrians as the obstacles (true
+    tracks), seen within the sensor range, handed to the MPC nearest first."""
+    ped = cfg.pedestrians
+    assert ped is not None
+    motion, n = recorded_motion(cfg)
+    start_positions, _, _ = motion.states_at(0.0)
+    return Scenario(
+        name=cfg.name, start_m=np.asarray(cfg.start_xy_m, dtype=float),
+        start_heading_rad=float(cfg.start_heading_rad),
+        goal_m=np.asarray(cfg.goal_xy_m, dtype=float),
+        goal_tolerance_m=float(cfg.goal_tolerance_m), speed_mps=float(cfg.speed_mps),
+        initial_speed_mps=float(cfg.speed_mps if cfg.initial_speed_mps is None
+                                else cfg.initial_speed_mps),
+        sample_time_s=float(cfg.sample_time_s), n_steps=int(cfg.n_steps),
+        plant_substeps=int(cfg.plant_substeps), obstacle_start_m=start_positions,
+        obstacle_velocity_mps=np.zeros((n, 2)), obstacle_radius_m=np.full(n, ped.radius_m),
+        obstacle_appear_s=np.zeros(n), obstacle_motion=motion,
+        sensor_range_m=float(ped.sensor_range_m), nearest_first=True)
+
+
+class PedestrianSource:
+    """The recorded pedestrians' source (``conf/scenario/pedestrians.yaml``): members drawn by
+    :func:`draw_pedestrian_member`, each built by :func:`pedestrian_scenario`. Its family
+    splits by scene: the tune trains on some scenes and judges on others
+    (``parts_key``)."""
+
+    needs_extra: ClassVar[Extra | None] = None
+    #: the list the tune splits into its training and held-out scenes
+    parts_key = "scenario.pedestrians.scenes"
+
+    def __init__(self, scenario: ScenarioConfig, vehicle_radius_m: float = 1.0) -> None:
+        target = ScenarioSourceConfig.PEDESTRIANS
+        if scenario.pedestrians is None:
+            raise ConfigError("scenario.source._target_", target, "another source, or a "
+                              "scenario.pedestrians block (scenario=pedestrians), which this "
+                              "source reads")
+        refuse_blocks(scenario, target, {"commonroad": ScenarioSourceConfig.COMMONROAD})
+        self.base, self.vehicle_radius_m = scenario, float(vehicle_radius_m)
+
+    def build(self, cfg: ScenarioConfig) -> Scenario:
+        return pedestrian_scenario(cfg)
+
+    def member(self, seed: int, index: int) -> ScenarioConfig:
+        return draw_pedestrian_member(with_family_seed(self.base, seed), index,
+                                      self.vehicle_radius_m)

@@ -5,18 +5,33 @@ Obstacles are circles. How they move is the scenario's :class:`ObstacleMotion`: 
 constant velocity from the position at which they appear; recorded pedestrians
 (:mod:`pipeline.loop.pedestrians`) move on their recorded tracks, and the vehicle sees them only
 within a sensor range (:meth:`ObstacleSnapshot.sensed_from`).
+
+Where a scenario comes from is its *source* (:class:`ScenarioSource`), chosen by
+``scenario.source._target_`` in the scenario's YAML as a planner of one's own is chosen: the
+scripted scenario and its family (:class:`ScriptedSource`, here), the recorded pedestrians
+(:class:`pipeline.loop.pedestrians.PedestrianSource`), a CommonRoad file
+(:class:`pipeline.loop.commonroad_scenario.CommonRoadSource`), or a class of one's own.
+:func:`build_scenario` and :func:`family_members` ask the source; nothing after this stage asks
+which source a scenario came from.
 """
 
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from functools import cached_property
-from typing import Any, Protocol
+from typing import Any, ClassVar, Protocol
 
 import numpy as np
 
-from pipeline.loop.settings import FamilyConfig, ObstacleConfig, ScenarioConfig
+from pipeline.errors import ConfigError, MissingExtraError
+from pipeline.loop.settings import (
+    FamilyConfig,
+    ObstacleConfig,
+    ScenarioConfig,
+    ScenarioSourceConfig,
+)
+from pipeline.validation import build_target, resolve_target
 
 
 @dataclass(frozen=True)
@@ -172,8 +187,6 @@ class Scenario:
     def anchored(self, which: np.ndarray, vehicle_m: np.ndarray) -> Scenario:
         """The scenario with obstacles ``which`` (bool mask) moved by the vehicle's offset from
         its nominal place at their appearance (``obstacle_anchor="vehicle"``)."""
-        from dataclasses import replace
-
         starts = self.obstacle_start_m.copy()
         for j in np.flatnonzero(which):
             starts[j] += np.asarray(vehicle_m, float) \
@@ -181,8 +194,93 @@ class Scenario:
         return replace(self, obstacle_start_m=starts)
 
 
+#: The key that chooses a scenario's source (what its one-line refusals name).
+SOURCE_KEY = "scenario.source._target_"
+
+
+@dataclass(frozen=True)
+class Extra:
+    """An optional extra a scenario source needs: the modules it imports and the one line that
+    says how to install it."""
+
+    name: str
+    modules: tuple[str, ...]
+    install_line: str
+
+    def missing(self) -> str | None:
+        """None when every module imports; else :attr:`install_line`."""
+        import importlib
+
+        try:
+            for module in self.modules:
+                importlib.import_module(module)
+        except ImportError:
+            return self.install_line
+        return None
+
+    def require(self) -> None:
+        """Raise :class:`~pipeline.errors.MissingExtraError` (the install line) when missing."""
+        missing = self.missing()
+        if missing is not None:
+            raise MissingExtraError(f"config error: {missing}")
+
+
+class ScenarioSource(Protocol):
+    """Where scenarios come from: one class per source, named by ``scenario.source._target_``
+    and built as ``cls(scenario_config, vehicle_radius_m)`` (the scenario's configuration, a
+    family's base for a family; the vehicle's footprint radius, m, which a draw keeps its
+    obstacles off).
+
+    Attributes read with a default when a class leaves them out: ``needs_extra`` (None),
+    ``parts_key`` (None: the tune's training and held-out families differ by seed only; a key
+    such as ``scenario.pedestrians.scenes``: a list the tune splits into disjoint parts) and
+    ``study`` (None: the plain run; else the dotted path of a function ``(cfg, out_dir) ->
+    objective value(s)`` that runs one scenario of this source in its place and judges it its
+    own way, as CommonRoad's drivability checker does).
+    """
+
+    #: The optional extra this source needs (None: none); checked before anything else.
+    needs_extra: ClassVar[Extra | None]
+
+    def build(self, cfg: ScenarioConfig) -> Scenario:
+        """The scenario the loop runs, from a scenario configuration (one member's)."""
+        ...
+
+    def member(self, seed: int, index: int) -> ScenarioConfig:
+        """Member ``index`` of the family drawn with ``seed``: a plain scenario configuration
+        (``family = None``) that :meth:`build` turns into the scenario, the same on every
+        machine and whatever the family's size. A source without families refuses."""
+        ...
+
+
+def source_class(target: str) -> type:
+    """The class ``target`` (``module.Class``) names, with the methods a source has; a
+    :class:`ConfigError` naming ``scenario.source._target_`` otherwise."""
+    cls = resolve_target(SOURCE_KEY, target)
+    missing = [name for name in ("build", "member") if not callable(getattr(cls, name, None))]
+    if missing:
+        raise ConfigError(SOURCE_KEY, target, "a scenario source: a class with build(cfg) and "
+                          "member(seed, index) (pipeline.loop.scenario.ScenarioSource; it has "
+                          f"no {', '.join(m + '()' for m in missing)})")
+    return cls
+
+
+def scenario_source(cfg: ScenarioConfig, vehicle_radius_m: float = 1.0) -> ScenarioSource:
+    """The source of ``cfg`` (:meth:`ScenarioConfig.source_target_of`), built for it."""
+    target = cfg.source_target
+    source_class(target)  # its methods, before it is built
+    return build_target(SOURCE_KEY, target, (cfg, float(vehicle_radius_m)),
+                        "cls(scenario_config, vehicle_radius_m)")
+
+
+def source_extra(scenario: Any) -> Extra | None:
+    """The optional extra the source of ``scenario`` (a scenario mapping, typed or not yet:
+    asked before the rest of the configuration is checked) needs, or None."""
+    return getattr(source_class(ScenarioConfig.source_target_of(scenario)), "needs_extra", None)
+
+
 def build_scenario(cfg: ScenarioConfig) -> Scenario:
-    """Turn the scenario config into arrays.
+    """Turn the scenario config into arrays, by its source (:class:`ScenarioSource`).
 
     Parameters
     ----------
@@ -192,8 +290,12 @@ def build_scenario(cfg: ScenarioConfig) -> Scenario:
     -------
     Scenario
     """
-    if cfg.pedestrians is not None:
-        return _pedestrian_scenario(cfg)
+    return scenario_source(cfg).build(cfg)
+
+
+def scripted_scenario(cfg: ScenarioConfig) -> Scenario:
+    """The scripted scenario of ``cfg``: its ``obstacles``, each invisible until its
+    appearance time and then at constant velocity."""
     obs = cfg.obstacles
     return Scenario(
         name=cfg.name,
@@ -216,27 +318,44 @@ def build_scenario(cfg: ScenarioConfig) -> Scenario:
     )
 
 
-def _pedestrian_scenario(cfg: ScenarioConfig) -> Scenario:
-    """A member of the pedestrian family: its recorded pedestrians as the obstacles (true
-    tracks), seen within the sensor range, handed to the MPC nearest first."""
-    from pipeline.loop.pedestrians import recorded_motion
+def with_family_seed(base: ScenarioConfig, seed: int) -> ScenarioConfig:
+    """``base`` whose family is drawn with ``seed`` (``base`` itself when it already is)."""
+    if base.family is None:
+        raise ValueError(f"scenario {base.name} has no family to draw members from")
+    if base.family.seed == seed:
+        return base
+    return replace(base, family=replace(base.family, seed=int(seed)))
 
-    ped = cfg.pedestrians
-    assert ped is not None
-    motion, n = recorded_motion(cfg)
-    start_positions, _, _ = motion.states_at(0.0)
-    return Scenario(
-        name=cfg.name, start_m=np.asarray(cfg.start_xy_m, dtype=float),
-        start_heading_rad=float(cfg.start_heading_rad),
-        goal_m=np.asarray(cfg.goal_xy_m, dtype=float),
-        goal_tolerance_m=float(cfg.goal_tolerance_m), speed_mps=float(cfg.speed_mps),
-        initial_speed_mps=float(cfg.speed_mps if cfg.initial_speed_mps is None
-                                else cfg.initial_speed_mps),
-        sample_time_s=float(cfg.sample_time_s), n_steps=int(cfg.n_steps),
-        plant_substeps=int(cfg.plant_substeps), obstacle_start_m=start_positions,
-        obstacle_velocity_mps=np.zeros((n, 2)), obstacle_radius_m=np.full(n, ped.radius_m),
-        obstacle_appear_s=np.zeros(n), obstacle_motion=motion,
-        sensor_range_m=float(ped.sensor_range_m), nearest_first=True)
+
+def refuse_blocks(cfg: ScenarioConfig, target: str, blocks: dict[str, str]) -> None:
+    """A built-in source given a block that belongs to another source (it would be ignored):
+    one line naming ``scenario.source._target_`` and the source the block needs.
+    ``blocks`` maps a block's name to that source."""
+    for block, wanted in blocks.items():
+        if getattr(cfg, block) is not None:
+            raise ConfigError(SOURCE_KEY, target, f"{wanted} for a scenario with a "
+                              f"scenario.{block} block ({target} would ignore it)")
+
+
+class ScriptedSource:
+    """The paper's scenario and its seeded family (``conf/scenario/paper_sudden_obstacle.yaml``
+    and ``family.yaml``): the configuration's obstacles, and members drawn by
+    :func:`draw_family_member`."""
+
+    needs_extra: ClassVar[Extra | None] = None
+
+    def __init__(self, scenario: ScenarioConfig, vehicle_radius_m: float = 1.0) -> None:
+        refuse_blocks(scenario, ScenarioSourceConfig.SCRIPTED,
+                      {"pedestrians": ScenarioSourceConfig.PEDESTRIANS,
+                       "commonroad": ScenarioSourceConfig.COMMONROAD})
+        self.base, self.vehicle_radius_m = scenario, float(vehicle_radius_m)
+
+    def build(self, cfg: ScenarioConfig) -> Scenario:
+        return scripted_scenario(cfg)
+
+    def member(self, seed: int, index: int) -> ScenarioConfig:
+        return draw_family_member(with_family_seed(self.base, seed), index,
+                                  self.vehicle_radius_m)
 
 
 def _uniform(rng: np.random.Generator, bounds: Sequence[float]) -> float:
@@ -268,8 +387,6 @@ def draw_family_member(base: ScenarioConfig, index: int,
     ScenarioConfig
         A plain scenario (``family = None``) named ``<base name>_s<seed>_i<index>``.
     """
-    from dataclasses import replace
-
     fam = base.family
     if fam is None:
         raise ValueError(f"scenario {base.name} has no family to draw members from")
@@ -335,12 +452,9 @@ def _further_obstacle(rng: np.random.Generator, base: ScenarioConfig, fam: Famil
 
 
 def family_members(base: ScenarioConfig, vehicle_radius_m: float = 1.0) -> list[ScenarioConfig]:
-    """All ``base.family.size`` members, in index order."""
+    """All ``base.family.size`` members, in index order (:meth:`ScenarioSource.member` of the
+    family's seed)."""
     if base.family is None:
         raise ValueError("scenario has no family block")
-    if base.pedestrians is not None:
-        from pipeline.loop.pedestrians import draw_pedestrian_member
-
-        return [draw_pedestrian_member(base, i, vehicle_radius_m)
-                for i in range(base.family.size)]
-    return [draw_family_member(base, i, vehicle_radius_m) for i in range(base.family.size)]
+    source = scenario_source(base, vehicle_radius_m)
+    return [source.member(base.family.seed, i) for i in range(base.family.size)]

@@ -527,6 +527,34 @@ class PedestrianConfig(FrozenAfterValidation):
 
 
 @dataclass
+class ScenarioSourceConfig(FrozenAfterValidation):
+    """Which scenario source builds the scenario and draws its family's members
+    (:class:`pipeline.loop.scenario.ScenarioSource`), named by Hydra's ``_target_`` as a
+    planner or a controller of one's own is.
+
+    ``_target_`` is the source's class (``module.Class``); null: the built-in source that the
+    scenario's shape implies (:meth:`ScenarioConfig.source_target_of`), which is how a
+    configuration written before the key (a run folder's ``config.yaml``) reads. ``params``
+    carries a source's own settings (a source from outside the package has no typed block of
+    its own in this schema)."""
+
+    _target_: Optional[str] = None
+    params: Dict[str, Any] = field(default_factory=dict)
+
+    #: The built-in sources: the paper's scenario and its scripted family, the recorded
+    #: pedestrians (ETH/UCY), a CommonRoad file.
+    SCRIPTED = "pipeline.loop.scenario.ScriptedSource"
+    PEDESTRIANS = "pipeline.loop.pedestrians.PedestrianSource"
+    COMMONROAD = "pipeline.loop.commonroad_scenario.CommonRoadSource"
+
+    def __post_init__(self) -> None:
+        target_path("scenario.source._target_", self._target_)
+        if not isinstance(self.params, dict):
+            raise ConfigError("scenario.source.params", self.params,
+                              "a mapping of the source's own settings")
+
+
+@dataclass
 class ScenarioConfig(FrozenAfterValidation):
     """Start, goal, speed, run length and obstacles of one closed-loop run."""
 
@@ -552,6 +580,9 @@ class ScenarioConfig(FrozenAfterValidation):
     obstacle_anchor: str = "world"
     # recorded pedestrians as the dynamic obstacles (scenario=pedestrians); null: none
     pedestrians: Optional[PedestrianConfig] = None
+    # the scenario source (scenario.source._target_): what builds the scenario and draws its
+    # family's members; null target: the built-in the blocks above imply
+    source: ScenarioSourceConfig = field(default_factory=ScenarioSourceConfig)
 
     #: The range of ``speed_mps`` and ``initial_speed_mps`` (m/s); a planner of one's own
     #: plans its speed within it too (:mod:`pipeline.loop.plugins`).
@@ -562,6 +593,60 @@ class ScenarioConfig(FrozenAfterValidation):
         self._check_geometry()
         self._check_timing()
         self._check_obstacles()
+
+    @staticmethod
+    def source_target_of(data: Any) -> str:
+        """The ``module.Class`` of the source of a scenario mapping (a dict, an OmegaConf node
+        or this schema): ``source._target_`` when set, else the built-in its shape implies (a
+        ``commonroad`` block: CommonRoad; a ``pedestrians`` block: recorded pedestrians; else
+        the scripted scenario and its family)."""
+        get = data.get if hasattr(data, "get") else lambda key: getattr(data, key, None)
+        source = get("source")
+        target = None if source is None else (
+            source.get("_target_") if hasattr(source, "get") else source._target_)
+        if target:
+            return str(target)
+        if get("commonroad") is not None:
+            return ScenarioSourceConfig.COMMONROAD
+        if get("pedestrians") is not None:
+            return ScenarioSourceConfig.PEDESTRIANS
+        return ScenarioSourceConfig.SCRIPTED
+
+    @property
+    def source_target(self) -> str:
+        """This scenario's source (:meth:`source_target_of`)."""
+        return self.source_target_of(self)
+
+    @staticmethod
+    def hash_view(data: dict[str, Any]) -> dict[str, Any]:
+        """``asdict`` of a scenario as the config hash reads it: each key added since the hash
+        was first pinned is left out while it holds the reading from before the key, so that a
+        configuration's hash does not move with the schema (a new key's other values do move
+        it)."""
+        data = dict(data)
+        source = data.get("source", 0)
+        if source is None or (isinstance(source, dict) and not source.get("params") and (
+                source.get("_target_") in (None, ScenarioConfig.source_target_of(
+                    {**data, "source": None})))):
+            data.pop("source", None)  # the built-in the shape implies, as before the key
+        if data.get("obstacle_anchor") == "world":
+            data.pop("obstacle_anchor")  # the default reading, as before the key
+        if data.get("commonroad", 0) is None:
+            data.pop("commonroad")  # not a CommonRoad scenario, as before the key
+        if data.get("pedestrians", 0) is None:
+            data.pop("pedestrians")  # no recorded pedestrians, as before the key
+        return data
+
+    def check_with_vehicle(self, footprint_radius_m: float) -> None:
+        """The checks that need the vehicle (:class:`~pipeline.config.ExperimentConfig` runs
+        them): a recorded pedestrian is seen before it touches the vehicle."""
+        ped = self.pedestrians
+        if ped is not None and ped.sensor_range_m <= footprint_radius_m + ped.radius_m:
+            raise ConfigError("scenario.pedestrians.sensor_range_m", ped.sensor_range_m,
+                              f"a number in ({footprint_radius_m + ped.radius_m:g}"
+                              ", 100] (m): beyond vehicle.footprint_radius_m + "
+                              "scenario.pedestrians.radius_m, so that a pedestrian is seen "
+                              "before it touches the vehicle")
 
     def _check_geometry(self) -> None:
         pair("scenario.start_xy_m", self.start_xy_m)
@@ -608,8 +693,9 @@ class ScenarioConfig(FrozenAfterValidation):
             raise ConfigError("scenario.commonroad", "with family, obstacles or pedestrians",
                               "a CommonRoad scenario alone (its obstacles come from its file; "
                               "no scenario.family, scenario.obstacles or scenario.pedestrians)")
-        if not self.obstacles and self.family is None and self.commonroad is None \
-                and self.pedestrians is None and not self.allow_no_obstacles:
+        # the scripted source runs the obstacle list; every other source brings its own
+        if not self.obstacles and self.family is None and not self.allow_no_obstacles \
+                and self.source_target == ScenarioSourceConfig.SCRIPTED:
             raise ConfigError("scenario.obstacles", [], "a non-empty obstacle list (or "
                               "scenario.allow_no_obstacles=true for an obstacle-free run)")
         seen = set()

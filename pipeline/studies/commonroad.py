@@ -6,15 +6,20 @@ read_commonroad`), simulates the configured method at the scenario's own speed, 
 folder as any run's (:func:`~pipeline.studies.experiment.run_experiment`), then judges the run
 (:func:`~pipeline.analysis.commonroad_check.judge_commonroad_run`) and writes the verdicts and
 the ego's trajectory as a CommonRoad solution beside it
-(:class:`~pipeline.studies.results.commonroad.CommonRoadResult`).
+(:class:`~pipeline.studies.results.commonroad.CommonRoadResult`). :func:`run_and_log` is
+that run as ``pipeline.run`` does it (the CommonRoad source's ``study``), with its log line.
 """
 
 from __future__ import annotations
 
+import logging
 from dataclasses import dataclass, replace
 from pathlib import Path
 
+import pandas as pd
+
 from pipeline.analysis.commonroad_check import CommonRoadVerdicts, judge_commonroad_run
+from pipeline.analysis.objectives import objective_values
 from pipeline.config import ExperimentConfig
 from pipeline.loop.commonroad_scenario import (
     ego_solution,
@@ -25,6 +30,8 @@ from pipeline.loop.commonroad_scenario import (
 from pipeline.store.runs import read_run
 from pipeline.studies.experiment import RunSummary, run_experiment
 from pipeline.studies.results.commonroad import CommonRoadResult
+
+log = logging.getLogger(__name__)
 
 
 @dataclass(frozen=True)
@@ -78,3 +85,22 @@ def run_commonroad(cfg: ExperimentConfig, out_dir: Path) -> CommonRoadRun:
     result = CommonRoadResult(summary).write(run.out_dir,
                                              lambda path: write_solution(solution, path))
     return CommonRoadRun(run, verdicts, result)
+
+
+def run_and_log(experiment: ExperimentConfig, out_dir: Path) -> float | tuple[float, ...]:
+    """``scenario=commonroad`` through ``pipeline.run``: the run, both collision verdicts, the
+    road and the goal, logged in one line; returns ``tune.objectives`` (one float, or a tuple
+    for several)."""
+    done = run_commonroad(experiment, out_dir)
+    v, m = done.verdicts, done.run.flat()
+    log.info("%s on %s (%d steps at %.3g m/s): collision ours %s, drivability checker on our "
+             "discs %s (agree on %d/%d steps), on the true shapes %s (agree on %d/%d steps); "
+             "min clearance ours %.3f m, true shapes %.3f m; off the road on %d steps; goal "
+             "reached by CommonRoad's definition %s, by ours %s -> %s", m["method"],
+             m["scenario"], v.steps, done.result.summary["run"]["speed_mps"], v.ours_collision,
+             v.checker_same_geometry_collision, v.agreement_same_geometry_steps, v.steps,
+             v.checker_true_shapes_collision, v.agreement_true_shapes_steps, v.steps,
+             v.min_clearance_ours_m, v.min_clearance_true_shapes_m, v.off_road_steps,
+             v.goal_reached_commonroad, m["termination"] == "goal_line", out_dir)
+    values = objective_values(pd.DataFrame([m]), experiment.tune.objectives)
+    return values[0] if len(values) == 1 else values

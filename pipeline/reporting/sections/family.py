@@ -13,6 +13,7 @@ import numpy as np
 
 from pipeline.analysis.claims import ALL_CLAIMS, Ledger
 from pipeline.errors import RunFolderError
+from pipeline.loop.scenario import build_scenario
 from pipeline.reporting.figure import Figure, Figures
 from pipeline.reporting.figures import (
     claim_differences_figure,
@@ -214,12 +215,14 @@ def _gallery(family: FamilyInputs, judged: FamilyVerdicts, cfg, figures: Figures
             unread.append(member)
             continue
         first = runs[treatment]
+        # the first obstacle's appearance, whichever source built the member's scenario
+        appear = build_scenario(first.config.scenario).obstacle_appear_s
         # built in the writer's child (the parent goes on to the next member)
         goal = first.config.scenario.goal_xy_m
         fig = functools.partial(paths_figure, {m: r.trajectory for m, r in runs.items()},
                                 (float(goal[0]), float(goal[1])),
                                 first.config.vehicle.footprint_radius_m,
-                                first.config.scenario.obstacles[0].appear_time_s,
+                                float(appear[0]) if appear.size else None,
                                 titles={m: f"{m}, member {member}" for m in runs},
                                 width_in=6.0)
         out.append(figures.draw(

@@ -124,9 +124,11 @@ class TuneSpace:
     #: the tune's trials): off, it saves about 7 % of a member's CPU and changes no number
     training_horizon: bool = False
     track: str = "lateral"
-    #: the scenarios tuned and judged on: the scripted family (``family``) or the recorded
-    #: pedestrians (``pedestrians``), trained on ``training_scenes`` and judged on
-    #: ``heldout_scenes`` (disjoint: the held-out scenes are unseen by the tuning)
+    #: the scenarios tuned and judged on: a family of conf/scenario/ (``family``, the scripted
+    #: one; ``pedestrians``, the recorded pedestrians). Where its source splits its family into
+    #: parts (its ``parts_key``: the pedestrians' scenes) the tuning trains on
+    #: ``training_scenes`` and judges on ``heldout_scenes`` (disjoint: the held-out parts are
+    #: unseen by the tuning)
     scenario: str = "family"
     training_scenes: List[str] = field(default_factory=list)
     heldout_scenes: List[str] = field(default_factory=list)
@@ -209,33 +211,42 @@ class TuneSpace:
                                   "kinematic MPC's QP has no DAQP or dense form)")
 
     def _check_scenes(self) -> None:
-        choice("tune.scenario", self.scenario, ("family", "pedestrians"))
-        if self.scenario == "family":
+        parts_key = self.parts_key
+        if parts_key is None:
             for key in ("training_scenes", "heldout_scenes"):
                 if getattr(self, key):
                     raise ConfigError(f"tune.{key}", list(getattr(self, key)),
-                                      "[] with tune.scenario=family (scenes are the "
-                                      "pedestrians' only)")
+                                      f"[] with tune.scenario={self.scenario} (its source "
+                                      "splits its family into no parts: scenes are the "
+                                      "pedestrians')")
             return
         for key in ("training_scenes", "heldout_scenes"):
             scenes = getattr(self, key)
             if not scenes or any(not isinstance(x, str) or not x or "/" in x for x in scenes):
                 raise ConfigError(f"tune.{key}", list(scenes or []),
-                                  "a non-empty list of scene names of scenario.pedestrians "
-                                  "(track files of data/eth_ucy/ without extension)")
+                                  f"a non-empty list of names for {parts_key} (e.g. track "
+                                  "files of data/eth_ucy/ without extension)")
         shared = sorted(set(self.training_scenes) & set(self.heldout_scenes))
         if shared:
             raise ConfigError("tune.heldout_scenes", list(self.heldout_scenes),
                               f"scenes not among tune.training_scenes (shared: "
                               f"{', '.join(shared)}): held-out scenes must be unseen")
 
+    @property
+    def parts_key(self) -> str | None:
+        """The key whose list the tuning splits into its training and held-out parts (the
+        source's ``parts_key``, e.g. ``scenario.pedestrians.scenes``), or None."""
+        return getattr(tuned_scenario_source(self.scenario), "parts_key", None)
+
     def scenario_overrides(self, part: str) -> list[str]:
         """The Hydra overrides that choose the scenarios of ``part`` (``training`` or
-        ``heldout``): the scripted family, or the pedestrians on that part's scenes."""
-        if self.scenario == "family":
-            return ["scenario=family"]
+        ``heldout``): the family of ``scenario``, restricted to that part's scenes where its
+        source splits its family (:attr:`parts_key`)."""
+        parts_key = self.parts_key
+        if parts_key is None:
+            return [f"scenario={self.scenario}"]
         scenes = self.training_scenes if part == "training" else self.heldout_scenes
-        return ["scenario=pedestrians", f"scenario.pedestrians.scenes=[{','.join(scenes)}]"]
+        return [f"scenario={self.scenario}", f"{parts_key}=[{','.join(scenes)}]"]
 
     def _check_controls(self) -> None:
         choice("tune.matched_control", self.matched_control, ("baseline_matched", ""))
@@ -351,6 +362,23 @@ class TuneSpace:
         if self.convergence_tolerance > reference.convergence_tolerance:
             short.append("convergence_tolerance")
         return short
+
+
+def tuned_scenario_source(name: str) -> type:
+    """The source class (:class:`pipeline.loop.scenario.ScenarioSource`) of the family
+    ``conf/scenario/<name>.yaml`` a tuning runs on: its ``source._target_``, or the built-in
+    its shape implies."""
+    from pipeline.loop.scenario import source_class
+    from pipeline.loop.settings import ScenarioConfig
+    from pipeline.store.safe_load import load_yaml
+
+    allowed = "a scenario family of conf/scenario/ (e.g. family, pedestrians)"
+    safe_name("tune.scenario", name)
+    path = CONF_DIR / "scenario" / f"{name}.yaml"
+    data = load_yaml(path, "a scenario (conf/scenario/<name>.yaml)") if path.is_file() else None
+    if not isinstance(data, dict) or not isinstance(data.get("family"), dict):
+        raise ConfigError("tune.scenario", name, allowed)
+    return source_class(ScenarioConfig.source_target_of(data))
 
 
 def load_tune_space(path: Path, changes: list[str] | None = None) -> TuneSpace:

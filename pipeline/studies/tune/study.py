@@ -246,10 +246,9 @@ def controlled_keys(space: TuneSpace, spaces: dict) -> dict[str, str]:
                            "(--set 'methods=[treatment, control]')",
         "tune": "no override: the tune's settings are its space file's (--space, --set "
                 "key=value)"})
-    if space.scenario == "pedestrians":
-        keys["scenario.pedestrians.scenes"] = ("no override: the tune sets each part's scenes "
-                                               "(the space's training_scenes and "
-                                               "heldout_scenes)")
+    if space.parts_key is not None:  # the source's parts (the pedestrians' scenes)
+        keys[space.parts_key] = ("no override: the tune sets each part's scenes (the space's "
+                                 "training_scenes and heldout_scenes)")
     for override in TRACK_OVERRIDES[space.track]:
         keys.setdefault(override.split("=", 1)[0], f"no override: the tune's track "
                         f"({space.track}) sets it (the space's track)")
