@@ -50,7 +50,7 @@ class _StderrHandler(logging.Handler):
         try:
             sys.stderr.write(self.format(record) + "\n")
             sys.stderr.flush()
-        except Exception:  # noqa: BLE001 - logging must never take a command down
+        except Exception:  # logging must never take a command down
             self.handleError(record)
 
 
@@ -168,7 +168,7 @@ def run_command(work: Callable[[], int | None], kept: str = "completed runs and 
         except KeyboardInterrupt as exc:
             print(stopped_line(exc, kept), file=sys.stderr)
             return interrupted_exit_code(exc)
-        except Exception as exc:  # noqa: BLE001 - the table decides; code errors re-raise
+        except Exception as exc:  # the table decides; code errors re-raise
             received = signal_received()
             if received is not None:  # a swallowed interrupt resurfacing as another error
                 stopped = Interrupted(received)

@@ -54,7 +54,7 @@ class MissingExtraError(ConfigError):
     """A configuration that needs an optional extra which is not installed; the message is
     the one line saying how to install it."""
 
-    def __init__(self, message: str) -> None:  # noqa: D107 - the message is the whole story
+    def __init__(self, message: str) -> None:  # the message is the whole story
         ValueError.__init__(self, message)
         self.key, self.value, self.allowed = "", None, ""
 
@@ -102,7 +102,7 @@ class IncompleteSweepError(RuntimeError):
 class SweepConfigError(ConfigError):
     """A job of a sweep has an invalid configuration (nothing was submitted)."""
 
-    def __init__(self, message: str) -> None:  # noqa: D107 - the message is the whole story
+    def __init__(self, message: str) -> None:  # the message is the whole story
         ValueError.__init__(self, message)
         self.key, self.value, self.allowed = "", None, ""
 
@@ -114,7 +114,7 @@ class TrackFileError(ConfigError):
     """A recorded-track file (``scenario=pedestrians``) that is missing or cannot be read:
     the message names the file (and line) and what is expected."""
 
-    def __init__(self, message: str) -> None:  # noqa: D107 - the message is the whole story
+    def __init__(self, message: str) -> None:  # the message is the whole story
         ValueError.__init__(self, message)
         self.key, self.value, self.allowed = "", None, ""
 
@@ -236,7 +236,7 @@ class SignalStop:
     def __init__(self) -> None:
         self.received: int | None = None
 
-    def __call__(self, signum: int, frame: Any) -> None:  # noqa: ARG002 - signal's signature
+    def __call__(self, signum: int, frame: Any) -> None:  # signal's signature
         if self.received is None:
             self.received = signum
         raise Interrupted(signum)

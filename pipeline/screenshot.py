@@ -55,7 +55,7 @@ def _screenshot(report: Path, out: Path, narrow: Path | None = None,
     except ImportError:
         raise CommandError("error: the screenshot needs Playwright (pip install -e '.[test]')"
                            ) from None
-    except Exception as exc:  # noqa: BLE001 - a browser that cannot start: one line
+    except Exception as exc:  # a browser that cannot start: one line
         raise CommandError(f"error: no screenshot ({type(exc).__name__}: "
                            f"{str(exc).splitlines()[0]})") from None
     for path in (out, narrow, explorer):

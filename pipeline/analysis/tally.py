@@ -77,16 +77,16 @@ class Tally:
         hit = collided(table)
         # the published label (the table's collision_avoidable once labelled across methods)
         avoidable = optional_flags(table, "collision_avoidable")
-        unavoidable = int((hit & (avoidable == False)).sum())  # noqa: E712
+        unavoidable = int((hit & (avoidable == False)).sum())
         # the runs' own labels where they were kept beside it
         run = optional_flags(table, "collision_unavoidable_run") \
             if "collision_unavoidable_run" in table else None
         return cls(
             scenarios=int(len(table)), collisions=int(hit.sum()),
-            collisions_avoidable=int((hit & (avoidable == True)).sum()),  # noqa: E712
+            collisions_avoidable=int((hit & (avoidable == True)).sum()),
             collisions_unavoidable=unavoidable,
             collisions_unavoidable_run=unavoidable if run is None
-            else int((hit & (run == True)).sum()),  # noqa: E712
+            else int((hit & (run == True)).sum()),
             not_recovered=int(not_recovered(table).sum()),
             no_threat=int((~_flags(table, "threatened", default=True)).sum()),
             goal_not_reached=int((~_flags(table, "goal_reached", default=True)).sum()),

@@ -258,7 +258,7 @@ def _open(path: Path) -> tuple[Any, Any, str]:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
             scenario, problems = CommonRoadFileReader(str(path)).open()
-    except Exception as exc:  # noqa: BLE001 - any reader failure is the file's fault
+    except Exception as exc:  # any reader failure is the file's fault
         first = (str(exc).splitlines() or [""])[0][:200]
         raise ConfigError(PATH_KEY, str(path), "a CommonRoad scenario XML file (commonroad-io "
                           f"cannot read this one: {type(exc).__name__}: {first})") from None

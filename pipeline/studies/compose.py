@@ -105,7 +105,7 @@ def _with_values(base, values: list[str], parser, base_object=None,
             for override in parsed:
                 OmegaConf.update(cfg, override.key_or_group, override.value(), merge=True)
             return OmegaConf.to_object(cfg)
-    except Exception:  # noqa: BLE001 - whatever is wrong, Hydra's path says it
+    except Exception:  # whatever is wrong, Hydra's path says it
         pass
     return None
 
@@ -279,7 +279,7 @@ def _run_composer(run_overrides: list[str], typed_bases: dict[tuple, Any],
                 try:
                     obj = OmegaConf.to_object(base)
                     base_objects[structural] = (obj, followers_of(base, obj))
-                except Exception:  # noqa: BLE001 - a base out of range: each run says so
+                except Exception:  # a base out of range: each run says so
                     base_objects[structural] = None
             cfg = _with_values(base, values, parser, base_objects[structural], sections)
             if cfg is not None:

@@ -117,7 +117,7 @@ def wait_for_tasks(jobs: list, poll_s: float, lost_after_s: float, max_wait_s: f
             if job.paths.result_pickle.exists():
                 try:
                     results[i] = job.results()[0]
-                except Exception as exc:  # noqa: BLE001 - a failed task is reported
+                except Exception as exc:  # a failed task is reported
                     failed[i] = f"failed: {str(exc).strip().splitlines()[-1][:200]}"
                 del pending[i]
                 continue
@@ -228,7 +228,7 @@ def executor_for(params: dict, folder: Path):
     def map_array(*args, **kwargs):
         try:
             return submit(*args, **kwargs)
-        except Exception as exc:  # noqa: BLE001 - sbatch refused: one line, nothing submitted
+        except Exception as exc:  # sbatch refused: one line, nothing submitted
             raise EnvironmentFault(f"hydra/launcher=slurm: sbatch refused the jobs "
                                    f"({_last_line(exc)}); nothing was submitted") from None
 
@@ -281,7 +281,7 @@ class RobustSlurmLauncherBase(SlurmLauncher):
                     self.config, list(overrides))
                 HydraConfig.instance().set_config(sweep_config)
                 experiment = to_experiment_config(sweep_config)
-            except Exception as exc:  # noqa: BLE001 - any composition error names the job
+            except Exception as exc:  # any composition error names the job
                 reason = describe_config_error(exc) or f"{type(exc).__name__}: {exc}"
                 raise SweepConfigError(f"{reason.rstrip()} (job #{idx}: {label}); nothing "
                                        "was submitted") from None

@@ -69,7 +69,7 @@ def current_sweep_jobs(sweep_dir: Path) -> set[frozenset] | None:
         arguments = [f"{k}={v}" for k, v in params.items()] + [str(t) for t in task]
         overrides = OverridesParser.create().parse_overrides(arguments)
         batches = BasicSweeper.split_arguments(overrides, None)
-    except Exception:  # noqa: BLE001 - another sweeper or an unreadable file: no stale check
+    except Exception:  # another sweeper or an unreadable file: no stale check
         return None
     return {frozenset(job) for batch in batches for job in batch}
 

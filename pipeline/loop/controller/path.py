@@ -176,7 +176,7 @@ def chase_path_arrays(px: float, py: float, heading: float, target: KernelValues
     return points, headings, curvature, beyond
 
 
-def rollout_path_arrays(target: KernelValues, line_x: float, line_y: float,  # noqa: C901
+def rollout_path_arrays(target: KernelValues, line_x: float, line_y: float,
                         extend: bool, kappa_max: float, ds_m: float, n_intervals: int
                         ) -> tuple[KernelValues, KernelValues, KernelValues, KernelValues]:
     """The rollout path (``path_reference=rollout``) of :mod:`this module

@@ -6,12 +6,12 @@ import matplotlib
 
 matplotlib.use("Agg")  # files only, no display
 
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
-import pandas as pd  # noqa: E402
-from matplotlib.figure import Figure  # noqa: E402
+import matplotlib.pyplot as plt
+import numpy as np
+import pandas as pd
+from matplotlib.figure import Figure
 
-from pipeline.reporting.figures.colors import method_color  # noqa: E402
+from pipeline.reporting.figures.colors import method_color
 
 
 def claim_differences_figure(differences: dict[tuple[str, str], np.ndarray | None],

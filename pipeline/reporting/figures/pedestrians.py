@@ -7,13 +7,13 @@ import matplotlib
 
 matplotlib.use("Agg")  # files only, no display
 
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
-import pandas as pd  # noqa: E402
-from matplotlib.figure import Figure  # noqa: E402
-from matplotlib.patches import Circle  # noqa: E402
+import matplotlib.pyplot as plt
+import numpy as np
+import pandas as pd
+from matplotlib.figure import Figure
+from matplotlib.patches import Circle
 
-from pipeline.reporting.figures.colors import method_color  # noqa: E402
+from pipeline.reporting.figures.colors import method_color
 
 
 def _tracks(trajectory: pd.DataFrame) -> list[tuple[np.ndarray, np.ndarray]]:

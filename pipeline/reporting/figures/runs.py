@@ -6,13 +6,13 @@ import matplotlib
 
 matplotlib.use("Agg")  # files only, no display
 
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
-import pandas as pd  # noqa: E402
-from matplotlib.figure import Figure  # noqa: E402
-from matplotlib.patches import Circle  # noqa: E402
+import matplotlib.pyplot as plt
+import numpy as np
+import pandas as pd
+from matplotlib.figure import Figure
+from matplotlib.patches import Circle
 
-from pipeline.reporting.figures.colors import EXTRA_COLORS, METHOD_COLORS, method_color  # noqa: E402,F401
+from pipeline.reporting.figures.colors import EXTRA_COLORS, METHOD_COLORS, method_color  # noqa: F401
 
 
 def _obstacle_indices(trajectory: pd.DataFrame) -> list[int]:

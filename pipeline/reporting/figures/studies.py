@@ -7,12 +7,12 @@ import matplotlib
 
 matplotlib.use("Agg")  # files only, no display
 
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
-import pandas as pd  # noqa: E402
-from matplotlib.figure import Figure  # noqa: E402
+import matplotlib.pyplot as plt
+import numpy as np
+import pandas as pd
+from matplotlib.figure import Figure
 
-from pipeline.reporting.figures.colors import method_color  # noqa: E402
+from pipeline.reporting.figures.colors import method_color
 
 SWEEP_METRICS = ("reaction_delay_s", "lateral_jerk_rms_mps3", "repulsion_unneeded_share",
                  "recovery_time_s", "oscillation_count", "min_clearance_m")
