@@ -161,7 +161,8 @@ def read_commonroad(cfg: ScenarioConfig) -> CommonRoadCase:
     problem = _planning_problem(problems, cr, path)
     t0 = int(problem.initial_state.time_step)
     start = np.asarray(problem.initial_state.position, float)
-    heading = float(problem.initial_state.orientation)
+    # wrapped once, in closed form, where it enters: [-pi, pi] (a file may hold any turn)
+    heading = math.remainder(float(problem.initial_state.orientation), 2.0 * math.pi)
     speed = _speed(problem, cr)
     dt = float(scenario.dt)
     n_steps = cr.n_steps if cr.n_steps is not None else _run_length(problem, scenario, t0)
@@ -195,7 +196,7 @@ def build_commonroad_scenario(cfg: ScenarioConfig, tracks: ObstacleTracks) -> Co
     rows = np.arange(n)
     return CommonRoadScenario(
         name=cfg.name, start_m=np.asarray(cfg.start_xy_m, float),
-        start_heading_rad=float(cfg.start_heading_rad), goal_m=np.asarray(cfg.goal_xy_m, float),
+        start_heading_rad=math.remainder(float(cfg.start_heading_rad), 2.0 * math.pi), goal_m=np.asarray(cfg.goal_xy_m, float),
         goal_tolerance_m=float(cfg.goal_tolerance_m), speed_mps=float(cfg.speed_mps),
         initial_speed_mps=float(cfg.speed_mps), sample_time_s=dt, n_steps=int(cfg.n_steps),
         plant_substeps=int(cfg.plant_substeps),

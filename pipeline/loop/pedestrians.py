@@ -365,7 +365,7 @@ def pedestrian_scenario(cfg: ScenarioConfig) -> Scenario:
     start_positions, _, _ = motion.states_at(0.0)
     return Scenario(
         name=cfg.name, start_m=np.asarray(cfg.start_xy_m, dtype=float),
-        start_heading_rad=float(cfg.start_heading_rad),
+        start_heading_rad=math.remainder(float(cfg.start_heading_rad), 2.0 * math.pi),
         goal_m=np.asarray(cfg.goal_xy_m, dtype=float),
         goal_tolerance_m=float(cfg.goal_tolerance_m), speed_mps=float(cfg.speed_mps),
         initial_speed_mps=float(cfg.speed_mps if cfg.initial_speed_mps is None

@@ -17,6 +17,7 @@ which source a scenario came from.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
 from functools import cached_property
@@ -300,7 +301,8 @@ def scripted_scenario(cfg: ScenarioConfig) -> Scenario:
     return Scenario(
         name=cfg.name,
         start_m=np.asarray(cfg.start_xy_m, dtype=float),
-        start_heading_rad=float(cfg.start_heading_rad),
+        # wrapped once, in closed form, where it enters: [-pi, pi] (the same heading)
+        start_heading_rad=math.remainder(float(cfg.start_heading_rad), 2.0 * math.pi),
         goal_m=np.asarray(cfg.goal_xy_m, dtype=float),
         goal_tolerance_m=float(cfg.goal_tolerance_m),
         speed_mps=float(cfg.speed_mps),

@@ -45,6 +45,9 @@ from pipeline.validation import (
     target_path,
 )
 
+#: |scenario.start_heading_rad| at most one turn (rad); the scenario wraps it to [-pi, pi]
+START_HEADING_LIMIT_RAD = 2.0 * math.pi
+
 
 @dataclass
 class VehicleConfig(FrozenAfterValidation):
@@ -651,7 +654,13 @@ class ScenarioConfig(FrozenAfterValidation):
     def _check_geometry(self) -> None:
         pair("scenario.start_xy_m", self.start_xy_m)
         pair("scenario.goal_xy_m", self.goal_xy_m)
-        finite("scenario.start_heading_rad", self.start_heading_rad)
+        heading = finite("scenario.start_heading_rad", self.start_heading_rad)
+        if abs(heading) > START_HEADING_LIMIT_RAD:
+            # the scenario wraps it once where it enters; beyond a turn either way the number
+            # is the same heading or degrees typed as radians (a 1e16 rad one once hung a run)
+            raise ConfigError("scenario.start_heading_rad", self.start_heading_rad,
+                              f"a number in [-{START_HEADING_LIMIT_RAD:.4f}, "
+                              f"{START_HEADING_LIMIT_RAD:.4f}] (rad, one turn either way)")
         gap = math.dist(self.start_xy_m, self.goal_xy_m)
         if gap <= self.goal_tolerance_m:
             raise ConfigError("scenario.goal_xy_m", list(self.goal_xy_m),
