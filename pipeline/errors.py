@@ -76,6 +76,11 @@ class EnvironmentFault(RuntimeError):
     disk, a read-only folder); the message names what is missing and where."""
 
 
+class NotACacheError(EnvironmentFault):
+    """A folder named as the member cache that is not one (no marker, other files): the cache
+    neither writes into it nor deletes from it."""
+
+
 class PluginOutputError(ValueError):
     """A planner or controller of the user's own (``_target_``) returned something the loop
     cannot use: the message names the plug-in, the field, what it was and what is allowed."""

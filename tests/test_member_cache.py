@@ -160,7 +160,7 @@ def test_the_cache_command_reports_and_cleans(populated, tmp_path, capsys):
     assert main(["clean", "--root", str(copy)]) == 0
     assert "removed 6 members" in capsys.readouterr().out
     assert MemberCache(copy).size().entries == 0
-    # run folders keep their own links: the family restored from the cache is still whole
+    # run folders keep their own copies: the family restored from the cache is still whole
     assert check(root / "second", "family") is None
 
 
@@ -207,3 +207,61 @@ def test_restore_asks_the_config_text_only_of_a_cached_member(populated, make_co
                 assert check(tmp_path / name, "run", hashes[i]) is None
     assert hits == expected and sum(hits) == 6
     assert asked == [f"large{i}" for i in range(6)]
+
+
+def test_no_file_of_a_run_folder_shares_its_inode_with_the_cache_or_another(populated):
+    """Restored members and entries are copies, never hard links: an in-place edit of one run
+    folder's file cannot reach another run folder or the cache (the oracle is the inode)."""
+    root, cache, *_ = populated
+    owners: dict[tuple[int, int], Path] = {}
+    files = [p for p in root.rglob("*") if p.is_file() and p.suffix in (".csv", ".json", ".npz")]
+    assert len([p for p in files if cache.root in p.parents]) >= 4 * 5  # the entries' files
+    for path in files:
+        stat = path.stat()
+        assert stat.st_nlink == 1, path
+        assert (stat.st_dev, stat.st_ino) not in owners, (path, owners.get((stat.st_dev,
+                                                                            stat.st_ino)))
+        owners[(stat.st_dev, stat.st_ino)] = path
+
+
+def test_cache_clean_refuses_a_folder_that_is_not_a_member_cache(make_config, tmp_path, capsys):
+    """``cache clean --root`` of a folder without the cache's marker deletes nothing and says so
+    in one line (it once removed that folder's members/ subtree and exited 0)."""
+    from pipeline.cache import main
+
+    other = tmp_path / "project"
+    (other / "members" / "ab").mkdir(parents=True)
+    (other / "members" / "ab" / "notes.txt").write_text("mine")
+    (other / "README.md").write_text("mine too")
+    assert main(["clean", "--root", str(other)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "not a member cache" in err[0] and "CACHEDIR.TAG" in err[0], err
+    assert (other / "members" / "ab" / "notes.txt").read_text() == "mine"
+    # the cache never writes into it either: a family pointed at it stops in one line
+    from pipeline.errors import NotACacheError
+
+    with pytest.raises(NotACacheError, match="not a member cache"):
+        run_family(_family(make_config, 1), tmp_path / "family", progress=False,
+                   member_cache=MemberCache(other))
+    assert sorted(p.name for p in other.iterdir()) == ["README.md", "members"]
+
+
+def test_cache_clean_empties_a_marked_cache_and_one_made_before_the_marker(populated, tmp_path,
+                                                                           caplog):
+    """A cache (marked, or of before the marker: .lock, members/, tmp/) is emptied with its
+    tmp/ folder and no warning (cleaning once tried to rename tmp/ into itself)."""
+    from pipeline.cache import main
+
+    _, cache, *_ = populated
+    assert (cache.root / "CACHEDIR.TAG").read_text().startswith(
+        "Signature: 8a477f597d28d172789f06886806bc55")
+    for marked in (True, False):
+        copy = tmp_path / f"copy_{marked}"
+        shutil.copytree(cache.root, copy)
+        (copy / "tmp" / "publish-left-behind").mkdir(parents=True, exist_ok=True)
+        if not marked:
+            (copy / "CACHEDIR.TAG").unlink()
+        with caplog.at_level("WARNING"):
+            assert main(["clean", "--root", str(copy)]) == 0
+        assert not [r for r in caplog.records if "could not" in r.getMessage()]
+        assert sorted(p.name for p in copy.iterdir()) == [".lock", "CACHEDIR.TAG"]

@@ -18,8 +18,12 @@ concurrent writers and on a shared file system:
   the server's byte-range locks) on ``<root>/.lock``, and cleaning holds it exclusively;
 - an entry is trusted only when its manifest matches every file (size and SHA-256), its config
   hash and its code version: a damaged entry is removed and the member simulated again;
-- a restored member gets its own files (hard links to the entry's, copies across devices) and
-  its own ``config.yaml`` and manifest, written last, like a fresh run's.
+- a restored member gets its own files (copies, reflinks where the file system makes them:
+  an edit in one run folder never reaches another or the cache; entries are copies too) and
+  its own ``config.yaml`` and manifest, written last, like a fresh run's;
+- the cache's folder carries a marker (``CACHEDIR.TAG``, the cache-directory tag backup tools
+  know) written when it is made: cleaning refuses a folder without it, so ``--root`` naming
+  some other folder deletes nothing.
 
 The wall-clock solve times in ``timing.json`` are the ones measured when the entry was made.
 ``PIPELINE_MEMBER_CACHE`` names the root (the Makefile sets ``outputs/member_cache``); empty or
@@ -42,6 +46,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
+from pipeline.errors import NotACacheError
 from pipeline.numerics import numerical_kernels
 from pipeline.store.files import write_text_atomic
 from pipeline.store.manifest import (
@@ -63,6 +68,11 @@ NUMERICAL_PACKAGES = ("numpy", "scipy", "cvxpy", "clarabel", "daqp", "numba", "c
 #: The files an entry shares with the member folders restored from it (config.yaml is written
 #: per member: it carries settings outside the config hash, such as the claims' readings).
 SHARED_FILES = tuple(name for name in RUN_FILES if name != "config.yaml")
+#: The marker a member cache's folder carries from its making (https://bford.info/cachedir/).
+MARKER = "CACHEDIR.TAG"
+MARKER_TEXT = ("Signature: 8a477f597d28d172789f06886806bc55\n"
+               "# This folder is the member cache of apf-mpc-repro (pipeline.store.member_cache):\n"
+               "# simulated family members, restored into run folders; safe to delete.\n")
 
 
 @functools.lru_cache(maxsize=1)
@@ -115,7 +125,7 @@ class MemberCounts:
 
 @dataclass(frozen=True)
 class CacheSize:
-    """What a cache holds: entries, files and bytes (a file hard-linked from run folders is
+    """What a cache holds: entries, files and bytes (a file shared with run folders is
     counted once, with the cache)."""
 
     entries: int
@@ -163,7 +173,7 @@ class MemberCache:
     @contextlib.contextmanager
     def _lock(self, exclusive: bool = False):
         """The cache's kernel lock: shared for readers and writers, exclusive for cleaning."""
-        self.root.mkdir(parents=True, exist_ok=True)
+        self._claim()
         fd = os.open(self.root / ".lock", os.O_CREAT | os.O_RDWR, 0o644)
         try:
             fcntl.flock(fd, fcntl.LOCK_EX if exclusive else fcntl.LOCK_SH)
@@ -228,8 +238,8 @@ class MemberCache:
             optional = (HORIZON_FILE,) if (entry / HORIZON_FILE).is_file() else ()
             try:
                 for name in SHARED_FILES + optional:
-                    _link_atomic(entry / name, folder / name)
-            except FileNotFoundError:  # removed by a cleaner between the check and the link
+                    _copy_atomic(entry / name, folder / name)
+            except FileNotFoundError:  # removed by a cleaner between the check and the copy
                 return False
             if not optional:
                 (folder / HORIZON_FILE).unlink(missing_ok=True)
@@ -255,7 +265,7 @@ class MemberCache:
             try:
                 optional = (HORIZON_FILE,) if (Path(folder) / HORIZON_FILE).is_file() else ()
                 for name in (*RUN_FILES, *optional, MANIFEST):
-                    _link_or_copy(Path(folder) / name, tmp / name)
+                    _copy(Path(folder) / name, tmp / name)
                 if check(tmp, "run", config_hash) is not None:
                     return False  # the member folder changed under us: never publish it
                 entry.parent.mkdir(parents=True, exist_ok=True)
@@ -288,31 +298,93 @@ class MemberCache:
                         total += stat.st_size
         return CacheSize(entries, files, total)
 
+    def is_cache(self) -> bool:
+        """Whether ``root`` is a member cache's folder (it carries :data:`MARKER`)."""
+        return (self.root / MARKER).is_file()
+
+    def _claim(self) -> None:
+        """Make ``root`` a member cache's folder, marked, when it is new or empty (or a cache
+        of before the marker: ``.lock`` and nothing but ``members/`` and ``tmp/`` beside it);
+        any other folder is not the cache's to write into.
+
+        Raises
+        ------
+        NotACacheError
+            ``root`` holds something else.
+        """
+        if self.is_cache():
+            return
+        self.root.mkdir(parents=True, exist_ok=True)
+        # hidden names are the cache's own in passing (.lock, a marker being written by a
+        # concurrent first user, .discard-*)
+        names = {p.name for p in self.root.iterdir() if not p.name.startswith(".")}
+        if names and not ((self.root / ".lock").exists() and names <= {"members", "tmp"}):
+            raise NotACacheError(
+                f"{self.root} is not a member cache (it holds other files and no {MARKER}); "
+                f"name an empty or new folder in {ENV} or --root")
+        write_text_atomic(self.root / MARKER, MARKER_TEXT)
+
     def clean(self) -> CacheSize:
         """Remove every entry (holding the lock exclusively: no study reads or writes
-        meanwhile); returns what was removed. Run folders keep their own links."""
+        meanwhile); returns what was removed. Run folders keep their own copies.
+
+        Raises
+        ------
+        NotACacheError
+            When ``root`` exists without the cache's marker: nothing is deleted."""
         if not self.root.exists():
             return CacheSize(0, 0, 0)
+        if not self.is_cache():
+            if not any(self.root.iterdir()):
+                return CacheSize(0, 0, 0)
+            try:
+                self._claim()  # a cache of before the marker
+            except NotACacheError:
+                raise NotACacheError(
+                    f"{self.root} is not a member cache (it has no {MARKER}, which the cache "
+                    "writes when it makes its folder); nothing was deleted") from None
         with self._lock(exclusive=True):
             removed = self.size()
             for name in ("members", "tmp"):
                 if (self.root / name).exists():
-                    self._discard(self.root / name)
+                    # beside, not into tmp/: tmp itself is removed the same way
+                    trash = self.root / f".discard-{uuid.uuid4().hex}"
+                    os.rename(self.root / name, trash)
+                    shutil.rmtree(trash, ignore_errors=True)
         return removed
 
 
-def _link_atomic(source: Path, target: Path) -> None:
-    """``target`` becomes a hard link to (or, across devices, a copy of) ``source``, replacing
-    whatever was there in one rename."""
+
+def _copy_atomic(source: Path, target: Path) -> None:
+    """``target`` becomes a copy of ``source`` (its own inode), replacing whatever was there
+    in one rename."""
     tmp = target.with_name(f".{target.name}.{uuid.uuid4().hex[:8]}.tmp")
-    _link_or_copy(source, tmp)
-    os.replace(tmp, target)
-
-
-def _link_or_copy(source: Path, target: Path) -> None:
     try:
-        os.link(source, target)
-    except OSError as exc:
-        if isinstance(exc, FileNotFoundError):
-            raise
-        shutil.copyfile(source, target)
+        _copy(source, tmp)
+        os.replace(tmp, target)
+    finally:
+        tmp.unlink(missing_ok=True)
+
+
+def _copy(source: Path, target: Path) -> None:
+    """Copy ``source`` to a new file ``target``: the kernel's ``copy_file_range`` (which a
+    copy-on-write file system such as btrfs or XFS answers with a reflink: no bytes copied),
+    else :func:`shutil.copyfile`. Never a hard link: the two names must be two files."""
+    with open(source, "rb") as src:
+        size = os.fstat(src.fileno()).st_size
+        with open(target, "xb") as dst:
+            try:
+                copied = 0
+                while copied < size:
+                    n = os.copy_file_range(src.fileno(), dst.fileno(), size - copied)
+                    if n == 0:
+                        break
+                    copied += n
+                if copied == size:
+                    return
+            except (AttributeError, OSError):  # no such call, or not between these files
+                pass
+            src.seek(0)
+            dst.seek(0)
+            dst.truncate()
+            shutil.copyfileobj(src, dst)
