@@ -40,21 +40,6 @@ def test_the_tracks_ship_with_the_project_and_their_citations():
     assert "Pellegrini" in readme and "Crowds by example" in readme
 
 
-def test_an_installed_package_ships_the_tracks_where_the_code_reads_them():
-    """pyproject puts data/ into the wheel as pipeline/data (where ``DATA_DIR`` looks first);
-    every file of data/eth_ucy matches its package-data patterns."""
-    import fnmatch
-    import tomllib
-
-    tool = tomllib.loads((ROOT / "pyproject.toml").read_text())["tool"]["setuptools"]
-    assert "pipeline.data" in tool["packages"]
-    assert tool["package-dir"]["pipeline.data"] == "data"
-    patterns = tool["package-data"]["pipeline.data"]
-    files = [p.relative_to(ROOT / "data").as_posix() for p in (ROOT / "data").rglob("*")
-             if p.is_file()]
-    assert files and all(any(fnmatch.fnmatch(f, pat) for pat in patterns) for f in files)
-
-
 @pytest.mark.parametrize("scene", ["biwi_hotel", "crowds_zara01"])
 def test_a_recorded_track_is_replayed_exactly_at_its_sample_times(make_config, scene):
     cfg = make_config(SMALL).scenario.pedestrians

@@ -137,6 +137,11 @@ def scene_path(cfg: PedestrianConfig, scene: str) -> Path:
         path = folder / f"{scene}{suffix}"
         if path.is_file():
             return path
+        if path.exists() or path.is_symlink():  # a folder, a pipe, a device, a broken link
+            kind = "a folder" if path.is_dir() else "not a regular file"
+            raise TrackFileError(f"data error: {path}: {kind} (scenario.pedestrians.scenes "
+                                 f"names '{scene}'); allowed: a track file <scene>.txt.gz or "
+                                 "<scene>.txt")
     raise TrackFileError(f"data error: {folder / (scene + '.txt.gz')}: no such track file "
                          f"(scenario.pedestrians.scenes names '{scene}'); allowed: a scene "
                          f"with a file <scene>.txt.gz or <scene>.txt in {folder}"
@@ -162,10 +167,9 @@ def _load(path: Path, scene: str, seconds_per_frame: float,
           version: tuple[int, int]) -> SceneTracks:
     """:func:`load_scene` of one file; ``version`` (modification time, size) only keys the
     cache, so that a file written again is read again."""
-    rows = read_track_rows(path)
+    rows, lines = _rows_and_lines(path)
     frames, ids, xy = rows[:, 0], rows[:, 1], rows[:, 2:4]
-    frame_steps = np.diff(np.unique(frames))
-    step_frames = float(frame_steps.min()) if frame_steps.size else 10.0
+    step_frames = _check_frames(path, frames, ids, lines)
     step_s = step_frames * seconds_per_frame
     order = np.lexsort((frames, ids))
     frames, ids, xy = frames[order], ids[order], xy[order]
@@ -193,9 +197,62 @@ def _load(path: Path, scene: str, seconds_per_frame: float,
                        unique_ids)
 
 
+#: A pedestrian's track may miss at most this many frame steps in a row (bridged linearly):
+#: the recordings miss none (ETH/UCY: at most 1 step between a pedestrian's rows); more is a
+#: mistyped frame number, which once made the loader allocate 58 GiB.
+MAX_GAP_STEPS = 25
+#: The tracks' array (pedestrians x frames x 2 floats) may take at most this many bytes.
+MAX_TRACKS_BYTES = 2 ** 30
+
+
+def _check_frames(path: Path, frames: np.ndarray, ids: np.ndarray, lines: np.ndarray) -> float:
+    """The file's frame step (the most common gap between its distinct frames), once every
+    frame is a whole number on its lattice, no pedestrian's track has a gap longer than
+    :data:`MAX_GAP_STEPS` and the tracks' array fits :data:`MAX_TRACKS_BYTES`; else a
+    :class:`~pipeline.errors.TrackFileError` naming the file and the line, before any array
+    of the tracks' size is made."""
+    def bad(i: int, why: str) -> TrackFileError:
+        return TrackFileError(f"data error: {path}: line {int(lines[i])} (frame {frames[i]:g}, "
+                              f"pedestrian {ids[i]:g}): {why}")
+
+    whole = frames == np.round(frames)
+    if not whole.all() or frames.min() < 0:
+        i = int(np.flatnonzero(~whole | (frames < 0))[0])
+        raise bad(i, "allowed: a whole frame number >= 0")
+    distinct = np.unique(frames)
+    gaps, counts = np.unique(np.diff(distinct), return_counts=True)
+    step = float(gaps[counts.argmax()]) if gaps.size else 10.0
+    off = np.flatnonzero((frames - distinct[0]) % step != 0)
+    if off.size:
+        raise bad(int(off[0]), f"not on the file's frame lattice ({distinct[0]:g} + k x "
+                               f"{step:g}); allowed: frames {step:g} apart (a mistyped number?)")
+    order = np.lexsort((frames, ids))
+    same = ids[order][1:] == ids[order][:-1]
+    steps = np.diff(frames[order]) / step
+    long = np.flatnonzero(same & (steps > MAX_GAP_STEPS))
+    if long.size:
+        i = int(order[long[0] + 1])
+        raise bad(i, f"{steps[long[0]]:g} frame steps after the pedestrian's previous row; "
+                     f"allowed: at most {MAX_GAP_STEPS} (a mistyped number?)")
+    unique_ids, first = np.unique(ids[order], return_index=True)
+    last = np.append(first[1:], ids.size) - 1
+    widths = (frames[order][last] - frames[order][first]) / step + 1
+    need = float(unique_ids.size) * float(widths.max()) * 2 * 8
+    if need > MAX_TRACKS_BYTES:
+        raise TrackFileError(f"data error: {path}: {unique_ids.size} pedestrians over "
+                             f"{widths.max():g} frames would take {need / 2 ** 30:.1f} GiB; "
+                             f"allowed: at most {MAX_TRACKS_BYTES / 2 ** 30:g} GiB")
+    return step
+
+
 def read_track_rows(path: Path) -> np.ndarray:
     """The rows of a track file as an array (m, 4); a malformed file is a
     :class:`~pipeline.errors.TrackFileError` naming the file, the line and the format."""
+    return _rows_and_lines(path)[0]
+
+
+def _rows_and_lines(path: Path) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`read_track_rows` and each row's line number in the file."""
     fmt = "4 tab- or space-separated numbers per line (frame, pedestrian_id, x_m, y_m)"
     try:
         opener = gzip.open if path.name.endswith(".gz") else open
@@ -204,7 +261,7 @@ def read_track_rows(path: Path) -> np.ndarray:
     except (OSError, UnicodeDecodeError, EOFError) as exc:
         raise TrackFileError(f"data error: {path}: cannot be read ({exc}); allowed: a text "
                              f"file (optionally gzip-compressed) of {fmt}") from None
-    values = []
+    values, numbers = [], []
     for number, line in enumerate(lines, start=1):
         parts = line.split()
         if not parts:
@@ -218,9 +275,10 @@ def read_track_rows(path: Path) -> np.ndarray:
             raise TrackFileError(f"data error: {path}: line {number} ({shown!r}) is "
                                  f"malformed; allowed: {fmt}, all finite")
         values.append(row)
+        numbers.append(number)
     if not values:
         raise TrackFileError(f"data error: {path}: no tracks; allowed: {fmt}")
-    return np.array(values)
+    return np.array(values), np.array(numbers)
 
 
 def pedestrians_near(tracks: SceneTracks, start_m: np.ndarray, goal_m: np.ndarray,
