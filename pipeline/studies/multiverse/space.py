@@ -7,6 +7,7 @@ the key, before any work starts)."""
 from __future__ import annotations
 
 import dataclasses
+import math
 from dataclasses import dataclass, field, fields
 from pathlib import Path
 from typing import Any, List, Optional
@@ -155,6 +156,36 @@ class Space:
                                   f"an integer in [{low}, {high}]")
         between("multiverse space: robust_share", self.robust_share, 0.0, 1.0)
         between("multiverse space: fragile_share", self.fragile_share, 0.0, self.robust_share)
+        if self.dimensions and self.n_specifications > self.drawable():
+            raise ConfigError("multiverse space: n_specifications", self.n_specifications,
+                              f"an integer in [1, {self.drawable()}] (the distinct "
+                              "specifications this space can draw: the default, each value "
+                              "one at a time, and up to simulation_pool simulation choices "
+                              "times every analysis combination)")
+
+    def drawable(self) -> int:
+        """How many distinct specifications :func:`~.design.build_design` can draw at most:
+        the default, each other value one at a time, and sampled ones from a pool of
+        ``simulation_pool`` simulation choices times every combination of the analysis
+        choices."""
+        sizes = {stage: math.prod(len(d.values) for d in self.of(stage))
+                 for stage in ("simulation", "analysis")}
+        one_at_a_time = 1 + sum(len(d.values) - 1 for d in self.dimensions)
+        return min(sizes["simulation"] * sizes["analysis"],  # every combination, at most
+                   one_at_a_time + min(sizes["simulation"], self.simulation_pool)
+                   * sizes["analysis"])
+
+    def check_methods(self, methods: tuple[str, ...]) -> None:
+        """Every ``applies_to`` names only methods the study runs (``methods``); one line
+        naming the dimension otherwise (a dimension that applies to nothing ran, silently
+        changing no run)."""
+        for i, dim in enumerate(self.dimensions):
+            unknown = [m for m in dim.applies_to or () if m not in methods]
+            if unknown:
+                raise ConfigError(f"multiverse space: dimensions[{i}].applies_to",
+                                  list(dim.applies_to or ()),
+                                  f"methods the multiverse runs: {', '.join(methods)} "
+                                  "(claims.treatment and claims.controls)")
 
     def of(self, stage: str) -> list[Dimension]:
         return [d for d in self.dimensions if d.stage == stage]

@@ -60,15 +60,16 @@ def _run_multiverse(space: Space, out_dir: Path, overrides: list[str], n_jobs: i
     base = compose(["method=improved", "scenario=family"])
     require_own_window(base.claims, "the multiverse")
     space = with_user_defaults(space, base)
+    # what is compared with what: the user's claims.treatment and claims.controls (last: the
+    # treatment)
+    methods = tuple(base.claims.controls) + (base.claims.treatment,)
+    space.check_methods(methods)
     design = build_design(space)
     # not trusted until the result's manifest is written last
     MultiverseResult.write_design(out_dir, design)
     # validate every composition before anything runs: a bad value stops here
     for row in design.to_dict("records"):
         analysis_settings(row, space, base)
-    # what is compared with what: the user's claims.treatment and claims.controls (last: the
-    # treatment)
-    methods = tuple(base.claims.controls) + (base.claims.treatment,)
     counts = MemberCounts()
     folders, backends = run_simulations(design, space, out_dir, compose, log, launcher, methods,
                                         counts)
