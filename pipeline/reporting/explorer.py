@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import base64
 import gzip
+import hashlib
 import json
 import logging
 from dataclasses import dataclass, field
@@ -48,7 +49,8 @@ log = logging.getLogger("pipeline.reporting")
 #: The explorer's page (beside ``index.html``) and the folder of its members' data.
 PAGE = "explorer.html"
 DATA_FOLDER = "explorer_data"
-#: Per experiment, the digest of the runs each member's data file was made from (reuse).
+#: Per experiment and member, the digest of the runs its data file was made from and of the
+#: file's own bytes (reuse only when both match).
 SOURCES = "sources.json"
 #: Outputs sections that hold studies, not experiments of runs (never in the explorer).
 STUDY_SECTIONS = ("sweeps", "ablation", "interpretations", "multiverse", "tune",
@@ -312,7 +314,8 @@ def write_explorer(run_root: Path, out_dir: Path, experiments: list[Path] | None
             index.data_bytes += size
             written.append(task["member"])
             if task["digest"] is not None:
-                sources[str(task["member"])] = task["digest"]
+                sources[str(task["member"])] = {"runs": task["digest"],
+                                                "file": _file_digest(task["target"])}
         if sources:
             write_text_atomic(plan["sources"], json.dumps(sources, sort_keys=True) + "\n")
         if written:
@@ -354,7 +357,11 @@ def _experiment_plan(run_root: Path, folder: Path, data_root: Path) -> dict | No
         runs = {m: members[member] for m, members in by_method.items() if member in members}
         target = data_root / folder.name / f"{member}.js"
         digest = _runs_digest(runs)
-        kept = digest is not None and known.get(str(member)) == digest and target.is_file()
+        # kept only when made from the same runs and still the bytes then written (a damaged
+        # data file is written again)
+        entry = known.get(str(member))
+        kept = digest is not None and isinstance(entry, dict) \
+            and entry.get("runs") == digest and _file_digest(target) == entry.get("file")
         tasks.append({"key": f"{folder.name}/{member}", "experiment": folder.name,
                       "member": member, "runs": runs,
                       "settings": {m: settings[m] for m in runs}, "target": target,
@@ -428,8 +435,6 @@ def _section_folder(run_root: Path, section: str) -> str:
 def _runs_digest(runs: dict[str, Path]) -> str | None:
     """SHA-256 of the runs' manifests (each names its files' hashes) and of this module's code
     version: a member's data file is written again only when one of them changed."""
-    import hashlib
-
     from pipeline.store.manifest import MANIFEST, code_version
 
     digest = hashlib.sha256(code_version().encode())
@@ -440,6 +445,14 @@ def _runs_digest(runs: dict[str, Path]) -> str | None:
     except OSError:
         return None
     return digest.hexdigest()[:32]
+
+
+def _file_digest(path: Path) -> str | None:
+    """SHA-256 (first 32 hex digits) of a data file's bytes, None when it cannot be read."""
+    try:
+        return hashlib.sha256(Path(path).read_bytes()).hexdigest()[:32]
+    except OSError:
+        return None
 
 
 def _read_sources(path: Path) -> dict:

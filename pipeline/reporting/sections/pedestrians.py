@@ -6,15 +6,20 @@ to the scenario explorer (``explorer.html#pedestrians/<member_index>``)."""
 
 from __future__ import annotations
 
+import logging
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+import pandas as pd
 
+from pipeline.errors import RunFolderError
 from pipeline.reporting.figure import Figure, Figures
-from pipeline.reporting.inputs import ReportInputs
+from pipeline.reporting.inputs import UNREADABLE, ReportInputs
 from pipeline.reporting.sections.family import ledger_groups
 from pipeline.reporting.verdicts import PedestrianVerdicts, Verdicts
+
+log = logging.getLogger(__name__)
 
 #: The scenario explorer's address of a member (the explorer page sits beside index.html).
 EXPLORER_LINK = "explorer.html#pedestrians/{index}"
@@ -39,6 +44,8 @@ class PedestriansSection:
     members: tuple[dict, ...]
     figure: Figure | None
     sentence: str
+    #: members whose run could not be read for the figure: member, folder, reason
+    damaged: tuple[dict, ...] = ()
 
 
 def _verdict_rows(judged: PedestrianVerdicts) -> tuple[dict, ...]:
@@ -89,25 +96,52 @@ def _figure_member(judged: PedestrianVerdicts, methods: tuple[str, ...]) -> int 
 
 
 def _figure(inputs: ReportInputs, judged: PedestrianVerdicts, methods: tuple[str, ...],
-            figures: Figures) -> Figure | None:
-    from pipeline.reporting.figures.pedestrians import pedestrian_scene_figure
-    from pipeline.store.runs import read_member
-
+            figures: Figures, damaged: list[dict]) -> Figure | None:
+    """The scene figure of :func:`_figure_member`'s member, else of the next member whose
+    runs can all be read; a member that cannot be read is added to ``damaged`` (its folder
+    and why) and costs only itself (it once took the whole page down)."""
     family = inputs.pedestrians
     member = _figure_member(judged, methods)
     if family is None or member is None:
         return None
-    runs, config = {}, None
-    for m in methods:
-        label = family.label_of(m)
-        folder = family.info.get(label or "", {}).get("dir")
-        if not folder:
-            return None
-        record = read_member(Path(folder), member)
-        runs[m] = record.trajectory
-        config = record.config
-    if config is None or any(t is None for t in runs.values()):
+    folders = [family.info.get(family.label_of(m) or "", {}).get("dir") for m in methods]
+    if not all(folders):
         return None
+    others = sorted(set(judged.tables[methods[0]]["member"].astype(int)) - {member})
+    for candidate in [member, *others]:
+        read = _read_members([Path(f) for f in folders], candidate, damaged)
+        if read is not None:
+            return _draw(dict(zip(methods, read[0], strict=True)), read[1], candidate,
+                         methods, figures)
+    return None
+
+
+def _read_members(folders: list[Path], member: int, damaged: list[dict]
+                  ) -> tuple[list[pd.DataFrame], object] | None:
+    """Every method's trajectory of ``member`` and the config, or None (each unreadable run
+    added to ``damaged``)."""
+    from pipeline.store.runs import read_member
+
+    runs, config, ok = [], None, True
+    for folder in folders:
+        try:
+            record = read_member(folder, member)
+        except (RunFolderError, *UNREADABLE) as exc:
+            log.warning("pedestrians: member %d of %s cannot be read: %s", member, folder, exc)
+            damaged.append({"member": member, "folder": str(folder), "reason": str(exc)})
+            ok = False
+            continue
+        runs.append(record.trajectory)
+        config = record.config
+    if not ok or config is None or any(t is None for t in runs):
+        return None
+    return runs, config
+
+
+def _draw(runs: dict, config, member: int, methods: tuple[str, ...], figures: Figures
+          ) -> Figure | None:
+    from pipeline.reporting.figures.pedestrians import pedestrian_scene_figure
+
     scenario = config.scenario
     ped = scenario.pedestrians
     if ped is None:
@@ -156,8 +190,10 @@ def pedestrians_section(inputs: ReportInputs, verdicts: Verdicts, figures: Figur
                 f"crossings over {len(judged.scenes)} scenes), {treatment} against "
                 f"{', '.join(judged.comparisons)}: {outcomes}; collisions "
                 + ", ".join(f"{m} {hits.get(m, '?')}" for m in methods) + ".")
+    damaged: list[dict] = []
+    figure = _figure(inputs, judged, methods, figures, damaged)
     return PedestriansSection(
         treatment, judged.comparisons, methods, int(info.get("size", 0) or 0),
         info.get("seed", "?"), scene_sizes, settings, _verdict_rows(judged),
         tuple(ledger_groups(judged.ledger)), collisions, _members(judged, methods),
-        _figure(inputs, judged, methods, figures), sentence)
+        figure, sentence, tuple(damaged))
