@@ -104,12 +104,13 @@ def _figure(inputs: ReportInputs, judged: PedestrianVerdicts, methods: tuple[str
     member = _figure_member(judged, methods)
     if family is None or member is None:
         return None
-    folders = [family.info.get(family.label_of(m) or "", {}).get("dir") for m in methods]
-    if not all(folders):
+    dirs = [family.info.get(family.label_of(m) or "", {}).get("dir") for m in methods]
+    if not all(dirs):
         return None
+    folders = [Path(d) for d in dirs if d]
     others = sorted(set(judged.tables[methods[0]]["member"].astype(int)) - {member})
     for candidate in [member, *others]:
-        read = _read_members([Path(f) for f in folders], candidate, damaged)
+        read = _read_members(folders, candidate, damaged)
         if read is not None:
             return _draw(dict(zip(methods, read[0], strict=True)), read[1], candidate,
                          methods, figures)
