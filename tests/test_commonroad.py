@@ -362,3 +362,20 @@ def test_bad_files_exit_2_with_one_line(monkeypatch, capsys, tmp_path, content, 
     lines = [line for line in capsys.readouterr().err.splitlines() if line.strip()]
     assert len(lines) == 1 and lines[0].startswith("config error: scenario.commonroad.path=")
     assert reason in lines[0]
+
+
+@needs_extra
+def test_a_goal_beyond_the_run_bound_is_named_as_the_files_goal(tmp_path, make_scenario_config):
+    """A goal time interval ending at step 5,000,000 was refused as ``scenario.n_steps``, a key
+    the user never set; now the line names the file (its key) and its goal, and how to run
+    fewer steps; with ``scenario.commonroad.n_steps`` set the same file reads."""
+    path = write_scenario(tmp_path / "late goal.xml", goal_steps=(0, 5_000_000))
+    with pytest.raises(ConfigError) as info:
+        read_commonroad(make_scenario_config(f"'{path}'"))
+    message = str(info.value)
+    assert info.value.key == "scenario.commonroad.path" and "late goal.xml" in message
+    assert "goal or recording ends 5000000 steps after time step 0" in message
+    assert "scenario.commonroad.n_steps" in message and "scenario.n_steps" not in \
+        message.replace("scenario.commonroad.n_steps", "")
+    case = read_commonroad(make_scenario_config(f"'{path}'", "scenario.commonroad.n_steps=50"))
+    assert case.scenario_config.n_steps == 50

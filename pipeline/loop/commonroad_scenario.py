@@ -31,7 +31,12 @@ import pandas as pd
 
 from pipeline.errors import ConfigError
 from pipeline.loop.scenario import Extra, ObstacleSnapshot, Scenario
-from pipeline.loop.settings import CommonRoadConfig, ScenarioConfig, ScenarioSourceConfig
+from pipeline.loop.settings import (
+    MAX_RUN_STEPS,
+    CommonRoadConfig,
+    ScenarioConfig,
+    ScenarioSourceConfig,
+)
 
 #: The one line that says how to get ``scenario=commonroad`` (the test skip reason too).
 INSTALL_HINT = ("scenario=commonroad needs the optional extra: pip install '.[commonroad]' "
@@ -166,6 +171,12 @@ def read_commonroad(cfg: ScenarioConfig) -> CommonRoadCase:
     speed = _speed(problem, cr)
     dt = float(scenario.dt)
     n_steps = cr.n_steps if cr.n_steps is not None else _run_length(problem, scenario, t0)
+    if n_steps > MAX_RUN_STEPS:  # the file's goal (or recording), not a key the user set
+        raise ConfigError("scenario.commonroad.path", str(path),
+                          f"a scenario whose goal ends within {MAX_RUN_STEPS} steps of its "
+                          f"initial state ({path.name}'s goal or recording ends {n_steps} steps "
+                          f"after time step {t0}), or scenario.commonroad.n_steps set to run "
+                          "fewer")
     goal = _goal_point(problem, start, heading, speed, dt, t0)
     name = _safe(str(scenario.scenario_id)) or "commonroad"
     resolved = replace(cfg, name=name, start_xy_m=[float(start[0]), float(start[1])],

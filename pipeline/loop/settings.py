@@ -47,6 +47,8 @@ from pipeline.validation import (
 
 #: |scenario.start_heading_rad| at most one turn (rad); the scenario wraps it to [-pi, pi]
 START_HEADING_LIMIT_RAD = 2.0 * math.pi
+#: A run's steps at most (scenario.n_steps, scenario.commonroad.n_steps, a CommonRoad goal)
+MAX_RUN_STEPS = 100_000
 
 
 @dataclass
@@ -452,9 +454,9 @@ class CommonRoadConfig(FrozenAfterValidation):
             between("scenario.commonroad.speed_mps", self.speed_mps, 0.1, 40.0)
         if self.n_steps is not None and (isinstance(self.n_steps, bool)
                                          or not isinstance(self.n_steps, int)
-                                         or not 2 <= self.n_steps <= 100_000):
+                                         or not 2 <= self.n_steps <= MAX_RUN_STEPS):
             raise ConfigError("scenario.commonroad.n_steps", self.n_steps,
-                              "an integer in [2, 100000] or null")
+                              f"an integer in [2, {MAX_RUN_STEPS}] or null")
 
 
 @dataclass
@@ -688,9 +690,9 @@ class ScenarioConfig(FrozenAfterValidation):
             value = getattr(self, key)
             if isinstance(value, bool) or not isinstance(value, int) or value < 1:
                 raise ConfigError(f"scenario.{key}", value, "an integer >= 1")
-        if not 2 <= self.n_steps <= 100_000:
+        if not 2 <= self.n_steps <= MAX_RUN_STEPS:
             raise ConfigError("scenario.n_steps", self.n_steps,
-                              "an integer in [2, 100000] (the simulated time must exceed "
+                              f"an integer in [2, {MAX_RUN_STEPS}] (the simulated time must exceed "
                               "sample_time_s)")
         if self.plant_substeps > 1000:
             raise ConfigError("scenario.plant_substeps", self.plant_substeps,
