@@ -46,6 +46,8 @@ def _screenshot(report: Path, out: Path, narrow: Path | None = None,
     if not experiment or not (index.isascii() and index.isdigit()):
         raise CommandError(f"error: --member must be <experiment>/<index>, e.g. family/0; "
                            f"got {member!r}")
+    if explorer is not None:
+        _require_member(report.parent, experiment, int(index))
     try:
         take_screenshot(report, out)
         if narrow is not None:
@@ -62,6 +64,26 @@ def _screenshot(report: Path, out: Path, narrow: Path | None = None,
         if path is not None:
             print(f"screenshot written to {path}")
     return 0
+
+
+def _require_member(report_dir: Path, experiment: str, index: int) -> None:
+    """One line at once when the report's explorer has no data for the member (the browser
+    once waited 30 s for it and ended in a Playwright TimeoutError)."""
+    from pipeline.reporting.explorer import DATA_FOLDER
+
+    data = report_dir / DATA_FOLDER
+    if (data / experiment / f"{index}.js").is_file():
+        return
+    have = sorted(p.name for p in data.iterdir() if p.is_dir()) if data.is_dir() else []
+    if experiment in have:
+        members = sorted(int(p.stem) for p in (data / experiment).glob("*.js")
+                         if p.stem.isdigit())
+        shown = f"{experiment} has members {members[0]}-{members[-1]}" if members \
+            else f"{experiment} has no members"
+    else:
+        shown = "experiments: " + (", ".join(have) or "none")
+    raise CommandError(f"error: --member {experiment}/{index}: the report's explorer has no "
+                       f"such member ({shown})")
 
 
 if __name__ == "__main__":

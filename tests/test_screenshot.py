@@ -28,6 +28,18 @@ def test_a_missing_report_or_a_bad_member_is_one_line(tmp_path, capsys):
                  str(tmp_path / "e.png")]) != 0
     assert "no scenario explorer" in capsys.readouterr().err
     assert not (tmp_path / "out.png").exists()
+    # a member the explorer lacks: one line at once, naming what it has (no browser started)
+    (tmp_path / "explorer.html").write_text("<!doctype html><p>explorer</p>")
+    (tmp_path / "explorer_data" / "family").mkdir(parents=True)
+    for i in range(3):
+        (tmp_path / "explorer_data" / "family" / f"{i}.js").write_text("")
+    for member, says in (("family/7", "family has members 0-2"),
+                         ("peers/0", "experiments: family")):
+        assert main([str(report), str(tmp_path / "out.png"), "--explorer",
+                     str(tmp_path / "e.png"), "--member", member]) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and f"--member {member}" in err[0] and says in err[0], err
+    assert not (tmp_path / "out.png").exists()
 
 
 @pytest.mark.skipif(CHROMIUM is None and os.environ.get("CI") != "true",
