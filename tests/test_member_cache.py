@@ -265,3 +265,28 @@ def test_cache_clean_empties_a_marked_cache_and_one_made_before_the_marker(popul
             assert main(["clean", "--root", str(copy)]) == 0
         assert not [r for r in caplog.records if "could not" in r.getMessage()]
         assert sorted(p.name for p in copy.iterdir()) == [".lock", "CACHEDIR.TAG"]
+
+
+def test_a_full_cache_disk_costs_the_cache_not_the_run(make_config, tmp_path, monkeypatch,
+                                                        caplog):
+    """The cache's disk full (ENOSPC while storing a member): the family completes and is
+    trusted, the member is simply not cached, and the warning names the cache (it once named
+    the run folder's metrics.json as if the run could not be written)."""
+    import errno
+
+    from pipeline.store import member_cache
+
+    def full(source, target):
+        raise OSError(errno.ENOSPC, "No space left on device", str(target))
+
+    monkeypatch.setattr(member_cache, "_copy", full)
+    cache = MemberCache(tmp_path / "cache")
+    counts = MemberCounts()
+    with caplog.at_level("WARNING"):
+        run_family(_family(make_config, 2), tmp_path / "family", progress=False,
+                   member_cache=cache, counts=counts)
+    assert check(tmp_path / "family", "family") is None and counts.simulated == 2
+    assert cache.size().entries == 0
+    said = [r.getMessage() for r in caplog.records if "member cache" in r.getMessage()]
+    assert said and all(str(cache.root) in s and "No space left" in s for s in said)
+    assert not any("metrics.json" in s for s in said)

@@ -261,11 +261,20 @@ class MemberCache:
             if entry.is_dir() and self._trusted(entry, config_hash):
                 return False
             tmp = self.root / "tmp" / f"publish-{uuid.uuid4().hex}"
-            tmp.mkdir(parents=True)
             try:
                 optional = (HORIZON_FILE,) if (Path(folder) / HORIZON_FILE).is_file() else ()
-                for name in (*RUN_FILES, *optional, MANIFEST):
-                    _copy(Path(folder) / name, tmp / name)
+                try:
+                    tmp.mkdir(parents=True)
+                    for name in (*RUN_FILES, *optional, MANIFEST):
+                        _copy(Path(folder) / name, tmp / name)
+                except FileNotFoundError:
+                    raise
+                except OSError as exc:
+                    # the cache's disk (full, read-only): the run is whole without it
+                    logger.warning("member cache: cannot store a member in %s (%s); the "
+                                   "run folder is complete, the member is not cached",
+                                   self.root, exc.strerror or exc)
+                    return False
                 if check(tmp, "run", config_hash) is not None:
                     return False  # the member folder changed under us: never publish it
                 entry.parent.mkdir(parents=True, exist_ok=True)
