@@ -11,8 +11,7 @@ import tempfile
 import time
 from pathlib import Path
 
-import pandas as pd
-
+# pipeline before numpy/pandas: it pins numpy's kernels (pipeline.numerics)
 from pipeline.analysis.metrics.results import RunMetrics
 from pipeline.store.runs import RunInfo, write_run
 from pipeline.studies.aggregate import aggregate
@@ -32,6 +31,8 @@ def default_config_text() -> str:
 
 def make_jobs(root: Path, n: int) -> None:
     """Complete run records (manifest included) with a two-row trajectory each."""
+    import pandas as pd
+
     metrics = json.loads((Path(__file__).parent / "sample_metrics.json").read_text())
     trajectory = pd.DataFrame({"time_s": [0.0, 0.1], "X_m": [0.0, 0.3], "Y_m": [0.0, 0.0]})
     config_text = default_config_text()
@@ -54,10 +55,10 @@ def main() -> None:
         make_jobs(root, n)
         made = time.perf_counter() - start
         start = time.perf_counter()
-        summary = aggregate(root, progress=False, figures=False)
+        table = aggregate(root, progress=False).summary
         elapsed = time.perf_counter() - start
     print(f"created {n} job folders in {made:.1f} s; aggregate: {elapsed:.2f} s "
-          f"({len(summary)} rows, {len(summary.columns)} columns)")
+          f"({len(table)} rows, {len(table.columns)} columns)")
 
 
 if __name__ == "__main__":
