@@ -18,6 +18,9 @@ KINEMATIC_PEERS_FAMILY_SIZE ?= 25
 PEERS_JOBS ?= 1
 # make pedestrians: the recorded-pedestrian family (ETH/UCY), not part of make reproduce
 PEDESTRIANS_FAMILY_SIZE ?= 200
+# the variants of make pedestrians (conf/experiment/pedestrians_<variant>.yaml) and their size
+PEDESTRIANS_VARIANTS ?= car aimed reactive
+PEDESTRIANS_VARIANT_SIZE ?= 100
 REPORT      ?= reports/latest
 PYTEST_ARGS ?=
 PYTEST_JOBS ?= auto
@@ -140,9 +143,12 @@ ablation: $(STAMP)  ## which revision does what: ablations + interpretation vari
 	$(PY) -m pipeline.run experiment=interpretations hydra.sweep.dir=$(RUNS)/interpretations
 	$(MAKE) report
 
-pedestrians: $(STAMP)  ## improved and baseline among recorded pedestrians (ETH/UCY, docs/pedestrians.md; about 1 min), then the report
-	rm -rf $(RUNS)/pedestrians
+pedestrians: $(STAMP)  ## improved and baseline among recorded pedestrians (ETH/UCY, docs/pedestrians.md): a sidewalk robot that can stop, and the variants (car, aimed crossings, reactive walkers; about 3 min), then the report
+	rm -rf $(RUNS)/pedestrians $(RUNS)/pedestrians_variants
 	$(PY) -m pipeline.run experiment=pedestrians hydra.sweep.dir=$(RUNS)/pedestrians scenario.family.size=$(PEDESTRIANS_FAMILY_SIZE)
+	for variant in $(PEDESTRIANS_VARIANTS); do \
+	  $(PY) -m pipeline.run experiment=pedestrians_$$variant hydra.sweep.dir=$(RUNS)/pedestrians_variants/$$variant scenario.family.size=$(PEDESTRIANS_VARIANT_SIZE) || exit $$?; \
+	done
 	$(MAKE) report
 
 multiverse: $(STAMP)  ## how robust is each verdict: the multiverse (MULTIVERSE=default|quick), then the report

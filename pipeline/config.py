@@ -102,7 +102,10 @@ class ExperimentConfig(FrozenAfterValidation):
         if len(self.scenario.obstacles) > self.controller.max_obstacles:
             raise ConfigError("controller.max_obstacles", self.controller.max_obstacles,
                               f">= the number of obstacles ({len(self.scenario.obstacles)})")
-        if self.planner.speed_floor_mps < self.vehicle.min_model_speed_mps:
+        # the lateral model's 1/v_x terms forbid slower references; the kinematic bicycle
+        # (Appendix A) has none and may be asked to stop
+        if self.controller.kind != "kinematic_mpc" \
+                and self.planner.speed_floor_mps < self.vehicle.min_model_speed_mps:
             raise ConfigError("planner.speed_floor_mps", self.planner.speed_floor_mps,
                               f">= vehicle.min_model_speed_mps ({self.vehicle.min_model_speed_mps})")
         self.freeze()  # checked: from here on read-only (a change is a new, checked object)

@@ -44,7 +44,18 @@ def test_the_report_judges_the_pedestrian_family_overall_and_per_scene(make_conf
         assert row["collisions"] == int(table["collision"].astype(bool).sum())
         assert row["scenarios"] == 6
     html = (out / "index.html").read_text()
-    assert 'id="pedestrians"' in html and "do not react" in html
+    assert 'id="pedestrians"' in html and "ends at its first contact" in html
+    # the field's metrics lead the section: every column the issue names, both methods
+    metrics = pd.read_csv(out / "tables" / "pedestrians_metrics.csv")
+    assert {"family", "track", "method", "crossings", "success_rate", "collision_rate",
+            "timeout_rate", "time_to_goal_median_s", "path_ratio_median",
+            "min_distance_median_m", "intrusion_time_share"} <= set(metrics.columns)
+    assert sorted(metrics["method"]) == ["baseline", "improved"]
+    for method, table in tables.items():
+        row = metrics[metrics["method"] == method].iloc[0]
+        assert row["crossings"] == 6
+        assert row["collision_rate"] == table["collision"].astype(bool).mean()
+    assert html.index('id="pedestrians-metrics"') < html.index('id="pedestrians-verdicts"')
     for index in range(6):
         assert f'href="explorer.html#pedestrians/{index}"' in html
     assert (out / "figures" / "pedestrians_scene.png").is_file()

@@ -30,7 +30,7 @@ from pipeline.loop.scenario import (
     scenario_source,
     source_extra,
 )
-from pipeline.loop.settings import ScenarioSourceConfig
+from pipeline.loop.settings import PedestrianConfig, ScenarioSourceConfig
 from pipeline.run import main
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -71,6 +71,9 @@ def test_built_in_sources_draw_and_build_the_members_drawn_before_the_protocol(m
         assert member.source == base.source  # a member keeps its family's source
         drawn = dataclasses.asdict(member)
         drawn.pop("source")  # the key the protocol added
+        if drawn.get("pedestrians") is not None:  # the keys added since (issue 59)
+            for key in PedestrianConfig.BEFORE_KEYS:
+                drawn["pedestrians"].pop(key)
         _same(json.loads(json.dumps(drawn, default=str)), row["config"], member.name)
         built = source.build(member)
         snap = built.obstacles_at(4.5)

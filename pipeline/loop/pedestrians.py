@@ -17,12 +17,12 @@ import gzip
 import math
 from dataclasses import dataclass, replace
 from pathlib import Path
-from typing import ClassVar
+from typing import Any, ClassVar
 
 import numpy as np
 
 from pipeline.errors import ConfigError, TrackFileError
-from pipeline.loop.scenario import Extra, Scenario, refuse_blocks, with_family_seed
+from pipeline.loop.scenario import Extra, ObstacleMotion, Scenario, refuse_blocks, with_family_seed
 from pipeline.loop.settings import PedestrianConfig, ScenarioConfig, ScenarioSourceConfig
 
 
@@ -81,9 +81,22 @@ class SceneTracks:
     @functools.cached_property
     def extent_m(self) -> tuple[float, float, float, float]:
         """``(x_min, x_max, y_min, y_max)`` of every recorded position."""
-        points = np.concatenate([self.positions_m[j, :c] for j, c in enumerate(self.counts)])
+        points = self.recorded_points_m
         return (float(points[:, 0].min()), float(points[:, 0].max()),
                 float(points[:, 1].min()), float(points[:, 1].max()))
+
+    @functools.cached_property
+    def recorded_points_m(self) -> np.ndarray:
+        """Every recorded position, shape (m, 2): where someone walked."""
+        return np.concatenate([self.positions_m[j, :c] for j, c in enumerate(self.counts)])
+
+    @functools.cached_property
+    def walkable(self) -> Any:
+        """A k-d tree of :attr:`recorded_points_m` (``scipy.spatial.cKDTree``): is a place
+        near where someone walked."""
+        from scipy.spatial import cKDTree
+
+        return cKDTree(self.recorded_points_m)
 
     def motion(self, which: np.ndarray, window_start_s: float) -> RecordedTrackMotion:
         """The pedestrians ``which`` (indices) on a clock whose 0 is ``window_start_s``."""
@@ -353,6 +366,8 @@ def draw_pedestrian_member(base: ScenarioConfig, index: int,
     # the scene first and once: every scene gets its share of members, whatever its
     # rejection rate
     tracks = scenes[ped.scenes[int(rng.integers(len(ped.scenes)))]]
+    if ped.draw == "scene":
+        return _draw_from_scene(base, index, tracks, rng, vehicle_radius_m)
     for _attempt in range(ped.max_draws):
         low, high = ped.platform_speed_mps
         speed = round(float(rng.uniform(low, high)), 2)
@@ -385,6 +400,49 @@ def draw_pedestrian_member(base: ScenarioConfig, index: int,
                       "shorter crossing, more draws or another scene")
 
 
+def _draw_from_scene(base: ScenarioConfig, index: int, tracks: SceneTracks,
+                     rng: np.random.Generator, vehicle_radius_m: float) -> ScenarioConfig:
+    """A ``draw: scene`` member (see :func:`draw_pedestrian_member`): the platform's speed, a
+    window, a crossing whose midpoint is a recorded position of the whole recording (a place
+    someone walked, at any time: busy, never aimed at where a walker will be) and a heading;
+    start and goal must each lie within ``walkable_radius_m`` of a recorded position and
+    inside the scene's extent, the start free at t = 0; redrawn up to ``max_draws`` times."""
+    fam, ped = base.family, base.pedestrians
+    assert fam is not None and ped is not None
+    duration = base.n_steps * base.sample_time_s
+    half = 0.5 * ped.crossing_length_m
+    points = tracks.recorded_points_m
+    for _attempt in range(ped.max_draws):
+        low, high = ped.platform_speed_mps
+        speed = round(float(rng.uniform(low, high)), 2)
+        window = float(rng.uniform(tracks.start_s, tracks.end_s - duration))
+        heading = float(rng.uniform(-np.pi, np.pi))
+        centre = points[int(rng.integers(points.shape[0]))]
+        e = np.array([math.cos(heading), math.sin(heading)])
+        start, goal = centre - half * e, centre + half * e
+        if not (_inside(tracks, start, ped.scene_margin_m)
+                and _inside(tracks, goal, ped.scene_margin_m)):
+            continue
+        gaps, _ = tracks.walkable.query(np.array([start, goal]))
+        if np.max(gaps) > ped.walkable_radius_m:
+            continue
+        everyone = tracks.motion(np.arange(tracks.counts.size), window)
+        at_start, _, there = everyone.states_at(0.0)
+        clear = vehicle_radius_m + ped.radius_m + ped.start_clearance_m
+        if there.any() and np.min(np.linalg.norm(at_start[there] - start, axis=1)) < clear:
+            continue
+        return replace(base, name=f"{base.name}_{tracks.name}_s{fam.seed}_i{index:04d}",
+                       start_xy_m=[float(start[0]), float(start[1])],
+                       goal_xy_m=[float(goal[0]), float(goal[1])], start_heading_rad=heading,
+                       speed_mps=speed, family=None,
+                       pedestrians=replace(ped, scene=tracks.name, window_start_s=window))
+    raise ConfigError("scenario.pedestrians.crossing_length_m", ped.crossing_length_m,
+                      f"a crossing that fits scene '{tracks.name}' between walked places with "
+                      f"a free start (member {index}: no fitting draw in max_draws="
+                      f"{ped.max_draws}); a shorter crossing, more draws, a larger "
+                      "walkable_radius_m or another scene")
+
+
 def _inside(tracks: SceneTracks, point_m: np.ndarray, margin_m: float) -> bool:
     x0, x1, y0, y1 = tracks.extent_m
     return bool(x0 + margin_m <= point_m[0] <= x1 - margin_m
@@ -414,13 +472,60 @@ def recorded_motion(cfg: ScenarioConfig) -> tuple[RecordedTrackMotion, int]:
     return tracks.motion(which, ped.window_start_s), int(which.size)
 
 
+@dataclass(frozen=True)
+class CrossingDifficulty:
+    """How hard a crossing is, from the recording alone (no method involved): whether the
+    straight start-goal line driven at the drawn speed meets a walker before the goal
+    (``straight_line_meets``), and whether a platform standing still at the start is touched
+    during the run's time (``standing_touched``); a touch: a present walker's centre within
+    the two radii of the platform's."""
+
+    straight_line_meets: bool
+    standing_touched: bool
+
+
+def crossing_difficulty(cfg: ScenarioConfig, vehicle_radius_m: float) -> CrossingDifficulty:
+    """:class:`CrossingDifficulty` of a drawn member ``cfg`` (its recorded walkers near the
+    crossing, :func:`recorded_motion`, sampled at the scenario's sample time)."""
+    ped = cfg.pedestrians
+    assert ped is not None
+    motion, _ = recorded_motion(cfg)
+    start, goal = np.asarray(cfg.start_xy_m, float), np.asarray(cfg.goal_xy_m, float)
+    length = float(np.linalg.norm(goal - start))
+    direction = (goal - start) / max(length, 1e-12)
+    arrive_s = length / float(cfg.speed_mps)
+    reach = vehicle_radius_m + ped.radius_m
+    meets = touched = False
+    for k in range(int(cfg.n_steps) + 1):
+        time_s = k * float(cfg.sample_time_s)
+        positions, _, present = motion.states_at(time_s)
+        if not present.any():
+            continue
+        here = positions[present]
+        if time_s <= arrive_s and not meets:
+            on_line = start + min(float(cfg.speed_mps) * time_s, length) * direction
+            meets = bool(np.min(np.hypot(*(here - on_line).T)) < reach)
+        if not touched:
+            touched = bool(np.min(np.hypot(*(here - start).T)) < reach)
+        if meets and touched:
+            break
+    return CrossingDifficulty(meets, touched)
+
+
 def pedestrian_scenario(cfg: ScenarioConfig) -> Scenario:
     """A member of the pedestrian family: its recorded pedestrians as the obstacles (true
     tracks), seen within the sensor range, handed to the MPC nearest first."""
     ped = cfg.pedestrians
     assert ped is not None
-    motion, n = recorded_motion(cfg)
-    start_positions, _, _ = motion.states_at(0.0)
+    recorded, n = recorded_motion(cfg)
+    start_positions, _, _ = recorded.states_at(0.0)
+    motion: ObstacleMotion = recorded
+    if ped.walkers == "reactive":
+        from pipeline.loop.social_force import SocialForceMotion, SocialForceSettings
+
+        motion = SocialForceMotion(recorded, float(cfg.sample_time_s), SocialForceSettings(
+            ped.social_tau_s, ped.social_lookahead_s, ped.social_strength_mps2,
+            ped.social_range_m, ped.social_max_speed_factor, ped.radius_m))
     return Scenario(
         name=cfg.name, start_m=np.asarray(cfg.start_xy_m, dtype=float),
         start_heading_rad=math.remainder(float(cfg.start_heading_rad), 2.0 * math.pi),
@@ -432,7 +537,8 @@ def pedestrian_scenario(cfg: ScenarioConfig) -> Scenario:
         plant_substeps=int(cfg.plant_substeps), obstacle_start_m=start_positions,
         obstacle_velocity_mps=np.zeros((n, 2)), obstacle_radius_m=np.full(n, ped.radius_m),
         obstacle_appear_s=np.zeros(n), obstacle_motion=motion,
-        sensor_range_m=float(ped.sensor_range_m), nearest_first=True)
+        sensor_range_m=float(ped.sensor_range_m), nearest_first=True,
+        end_at_contact=bool(ped.end_at_contact))
 
 
 class PedestrianSource:

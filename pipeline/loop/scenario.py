@@ -153,6 +153,9 @@ class Scenario:
     sensor_range_m: float | None = None
     #: hand the visible obstacles to the planner and the MPC nearest first (else index order)
     nearest_first: bool = False
+    #: end the run at the first step the vehicle's footprint overlaps a present obstacle
+    #: (termination ``contact``; among walkers: no metric on a run that drove through one)
+    end_at_contact: bool = False
 
     @property
     def n_obstacles(self) -> int:

@@ -130,7 +130,8 @@ class PlannerConfig(FrozenAfterValidation):
         target_path("planner._target_", self._target_)
         at_least("planner.braking_decel_mps2", self.braking_decel_mps2, 0.0, inclusive=False)
         at_least("planner.stop_margin_m", self.stop_margin_m, 0.0)
-        at_least("planner.speed_floor_mps", self.speed_floor_mps, 0.0, inclusive=False)
+        # 0 stops the platform (the kinematic track only: see ExperimentConfig's check)
+        at_least("planner.speed_floor_mps", self.speed_floor_mps, 0.0)
         choice("planner.velocity_rule", self.velocity_rule,
                ("predicted_clearance", "stopping_distance"))
         if isinstance(self.speed_candidates, bool) or not isinstance(self.speed_candidates, int) \
@@ -491,9 +492,42 @@ class PedestrianConfig(FrozenAfterValidation):
     start_clearance_m: float = 1.0
     #: draws tried per member before the scene is declared too small for the crossing
     max_draws: int = 1000
+    #: how a crossing is drawn: ``scene`` (its midpoint a place someone walked at any time of
+    #: the recording, start and goal where someone walked: busy, never aimed) or ``aimed``
+    #: (its midpoint where a walker will be when the platform arrives: a stress test that the
+    #: straight line hits by construction)
+    draw: str = "aimed"
+    #: ``scene`` draws: start and goal each within this distance of a recorded position
+    walkable_radius_m: float = 1.0
+    #: the run ends at the first contact with a walker (the crowd-navigation convention: no
+    #: metric on a trajectory that drove through a person)
+    end_at_contact: bool = False
+    #: ``replayed`` (on their recorded tracks) or ``reactive`` (each walker follows its
+    #: recorded route under Helbing and Molnar's social force, avoiding the platform)
+    walkers: str = "replayed"
+    #: reactive walkers: relaxation time (s) towards the desired velocity
+    social_tau_s: float = 0.5
+    #: reactive walkers: the recorded position this far ahead (s) is the walker's target
+    social_lookahead_s: float = 2.0
+    #: reactive walkers: repulsion strength A (m/s^2) and range B (m) of the exponential
+    #: social force A exp(-gap / B), from other walkers and from the platform
+    social_strength_mps2: float = 2.1
+    social_range_m: float = 0.3
+    #: reactive walkers: speed at most this factor times the recorded speed ahead
+    social_max_speed_factor: float = 1.3
+    #: the metrics count an intrusion into a walker's personal space where the surface gap
+    #: is below this (m; Francis et al. 2023 and CrowdNav's discomfort distance: 0.2-0.5 m)
+    personal_space_m: float = 0.5
     #: a member's drawn scene and the recording time at its t = 0 (null in the family's base)
     scene: Optional[str] = None
     window_start_s: Optional[float] = None
+
+    #: Keys added after the hash was pinned, with the reading from before each (left out of
+    #: the hash while they hold it; :meth:`ScenarioConfig.hash_view`).
+    BEFORE_KEYS = {"draw": "aimed", "walkable_radius_m": 1.0, "end_at_contact": False,
+                   "walkers": "replayed", "social_tau_s": 0.5, "social_lookahead_s": 2.0,
+                   "social_strength_mps2": 2.1, "social_range_m": 0.3,
+                   "social_max_speed_factor": 1.3, "personal_space_m": 0.5}
 
     def __post_init__(self) -> None:
         key = "scenario.pedestrians"
@@ -529,6 +563,16 @@ class PedestrianConfig(FrozenAfterValidation):
             safe_name(f"{key}.scene", self.scene)
         if self.window_start_s is not None:
             finite(f"{key}.window_start_s", self.window_start_s)
+        choice(f"{key}.draw", self.draw, ("scene", "aimed"))
+        between(f"{key}.walkable_radius_m", self.walkable_radius_m, 0.05, 100.0)
+        choice(f"{key}.end_at_contact", self.end_at_contact, (True, False))
+        choice(f"{key}.walkers", self.walkers, ("replayed", "reactive"))
+        between(f"{key}.social_tau_s", self.social_tau_s, 0.05, 10.0)
+        between(f"{key}.social_lookahead_s", self.social_lookahead_s, 0.1, 30.0)
+        between(f"{key}.social_strength_mps2", self.social_strength_mps2, 0.0, 100.0)
+        between(f"{key}.social_range_m", self.social_range_m, 0.01, 10.0)
+        between(f"{key}.social_max_speed_factor", self.social_max_speed_factor, 1.0, 5.0)
+        between(f"{key}.personal_space_m", self.personal_space_m, 0.0, 10.0)
 
 
 @dataclass
@@ -640,6 +684,12 @@ class ScenarioConfig(FrozenAfterValidation):
             data.pop("commonroad")  # not a CommonRoad scenario, as before the key
         if data.get("pedestrians", 0) is None:
             data.pop("pedestrians")  # no recorded pedestrians, as before the key
+        elif isinstance(data.get("pedestrians"), dict):
+            ped = dict(data["pedestrians"])
+            for name, before in PedestrianConfig.BEFORE_KEYS.items():
+                if name in ped and ped[name] == before and type(ped[name]) is type(before):
+                    ped.pop(name)  # the reading from before the key
+            data["pedestrians"] = ped
         return data
 
     def check_with_vehicle(self, footprint_radius_m: float) -> None:

@@ -290,16 +290,23 @@ def _closed_loop(cfg: LoopSettings, scenario: Scenario, qp_cache: QpCache | None
     unanchored = np.full(scenario.n_obstacles, scenario.obstacle_anchor == "vehicle")
     anchoring = bool(unanchored.any())
     sensor_range = scenario.sensor_range_m
+    end_at_contact = scenario.end_at_contact
+    # an obstacle motion that reacts to the platform (reactive walkers) is told where it is
+    reacting = scenario.obstacle_motion if hasattr(scenario.obstacle_motion, "react") \
+        else None
     for k in range(scenario.n_steps + 1):
         time_s = k * ts
         if anchoring:
             scenario, anchoring = _anchor_due(scenario, unanchored, time_s, state)
+        if reacting:  # walkers that avoid the platform learn where it is first
+            reacting.react(time_s, state[:2], vehicle_radius)
         snapshot = scenario.obstacles_at(time_s)
+        contact = end_at_contact and _in_contact(state, snapshot, vehicle_radius)
         if sensor_range is not None:  # recorded pedestrians: seen only within the range
             snapshot = snapshot.sensed_from(state[:2], sensor_range)
         row, along, lateral, psi, e_psi = _pose_row(time_s, state, frame, line, snapshot,
                                                     obstacle_names)
-        ending = _termination(state, along, goal_line_x, scenario, k)
+        ending = "contact" if contact else _termination(state, along, goal_line_x, scenario, k)
         if ending is not None:
             termination = ending
             _add_end_columns(row, plant, state, command)
@@ -457,6 +464,19 @@ def _add_model_check(controller: Controller, log: TrajectoryLog) -> None:
         # a controller without a model (pure pursuit): nothing to check, nothing left
         for name in MODEL_CHECK_COLUMNS:
             log.columns[name] = np.full(log.rows, np.nan)
+
+
+def _in_contact(state: np.ndarray, snapshot: ObstacleSnapshot, vehicle_radius_m: float
+                ) -> bool:
+    """Whether the vehicle's footprint overlaps a present obstacle (the true positions,
+    before the sensor range)."""
+    present = snapshot.visible
+    if not present.any():
+        return False
+    gap = np.hypot(snapshot.positions_m[present, 0] - state[0],
+                   snapshot.positions_m[present, 1] - state[1]) \
+        - snapshot.radii_m[present] - vehicle_radius_m
+    return bool(np.min(gap) < 0.0)
 
 
 def _termination(state: np.ndarray, along_line_m: float, goal_line_x_m: float,

@@ -234,6 +234,9 @@ class ReportInputs:
     kinematic_peers: FamilyInputs | None = None
     #: the treatment and the baseline among recorded pedestrians (make pedestrians)
     pedestrians: FamilyInputs | None = None
+    #: the same among recorded pedestrians in each variant of make pedestrians (car, aimed,
+    #: reactive: ``pedestrians_variants/<variant>/<method>``), by variant
+    pedestrian_variants: dict[str, FamilyInputs] = field(default_factory=dict)
     #: every collision of those families with the run's own label, the published one (across
     #: the methods that ran the same scenario, :mod:`pipeline.analysis.unavoidable`) and the
     #: methods that avoided it
@@ -279,7 +282,14 @@ class ReportInputs:
             sweep_dirs, collection = (run_root,) + sweep_dirs, RunCollection()
         else:
             log.info("report: reading the run folders")
-            collection = load_runs(run_root, skipped)
+            try:
+                collection = load_runs(run_root, skipped)
+            except FileNotFoundError:
+                # families alone (make pedestrians on a fresh clone): their sections are read
+                # below, the rest listed as skipped with the command that makes it
+                if not run_root.is_dir() or not _families_alone(layout):
+                    raise
+                collection = RunCollection()
         for item in skipped:
             log.warning("skipped %s: %s", item.folder, item.reason)
         optional = _Optional(skipped)
@@ -301,10 +311,16 @@ class ReportInputs:
         claims = _claims(collection, treatment, controls)
         commonroad = tuple(CommonRoadResult.load_all(layout.folder("commonroad")))
         if not collection.runs:
-            if not sweeps:
+            families = _families_alone(layout)
+            if not sweeps and not families:
                 raise FileNotFoundError(f"no single runs (the paper scenario) under {run_root}")
+            pedestrians, variants = _pedestrian_families(layout, optional, skipped) \
+                if families else (None, {})
+            if families:
+                skipped.append(Skipped(layout.folder("paper"), _ALONE_REASON))
             return cls(run_root, layout, claims, sweeps=sweeps, bench=bench,
-                       skipped=tuple(skipped), commonroad=commonroad)
+                       skipped=tuple(skipped), commonroad=commonroad,
+                       pedestrians=pedestrians, pedestrian_variants=variants)
         inputs = cls._with_runs(run_root, layout, claims, collection, optional, skipped,
                                 sweeps=sweeps, bench=bench, multiverse=multiverse, tune=tune)
         return dataclasses.replace(inputs, commonroad=commonroad)
@@ -358,10 +374,7 @@ class ReportInputs:
                                                                   layout.canonical),
                                    layout.folder("kinematic_peers"), "peers section") \
             if layout.folder("kinematic_peers").is_dir() else None
-        pedestrians = optional(lambda folder: FamilyInputs.of(load_runs(folder, skipped),
-                                                              layout.canonical),
-                               layout.folder("pedestrians"), "pedestrians section") \
-            if layout.folder("pedestrians").is_dir() else None
+        pedestrians, pedestrian_variants = _pedestrian_families(layout, optional, skipped)
         # the published collision label: across every method that ran the same scenario
         sections = {"family": family, "kinematic_family": kinematic_family,
                     "apf_alone": apf_alone, "peers": peers,
@@ -391,7 +404,7 @@ class ReportInputs:
             kinematic_family=kinematic_family, apf_alone=apf_alone,
             nmpc_family=nmpc_family, peers=peers,
             kinematic_peers=kinematic_peers, pedestrians=pedestrians,
-            collision_labels=collision_labels, solve_times=solve_times,
+            pedestrian_variants=pedestrian_variants, collision_labels=collision_labels, solve_times=solve_times,
             readings=_readings(layout),
             ablation=family_tables_by_method(layout.folder("ablation"), skipped),
             interpretations=interpretation_tables(layout.folder("interpretations"), skipped),
@@ -475,6 +488,35 @@ def _peer_tunes(layout: OutputsLayout, optional: _Optional) -> dict[str, TuneRes
             if result is not None:
                 out[result.summary.methods[1]] = result
     return out
+
+
+#: why a report of families alone has no paper-scenario sections (and how to make them)
+_ALONE_REASON = ("the paper scenario, the scenario family and the sections judged on them "
+                 "(the answer, the ledger, the checks) left out: no paper-scenario run here; "
+                 "make reproduce writes them")
+
+
+def _families_alone(layout: OutputsLayout) -> bool:
+    """Whether the outputs hold families a report can show without the paper scenario (the
+    recorded-pedestrian ones: ``make pedestrians`` on a fresh clone)."""
+    return layout.folder("pedestrians").is_dir() or layout.folder("pedestrians_variants").is_dir()
+
+
+def _pedestrian_families(layout: OutputsLayout, optional: _Optional, skipped: list[Skipped]
+                         ) -> tuple[FamilyInputs | None, dict[str, FamilyInputs]]:
+    """The recorded-pedestrian family (``pedestrians/``) and its variants
+    (``pedestrians_variants/<variant>/``), each read or skipped with its reason."""
+    pedestrians = optional(lambda folder: FamilyInputs.of(load_runs(folder, skipped),
+                                                          layout.canonical),
+                           layout.folder("pedestrians"), "pedestrians section") \
+        if layout.folder("pedestrians").is_dir() else None
+    variants_dir = layout.folder("pedestrians_variants")
+    variants = {} if not variants_dir.is_dir() else {
+        folder.name: read for folder in sorted(p for p in variants_dir.iterdir() if p.is_dir())
+        if (read := optional(lambda f: FamilyInputs.of(load_runs(f, skipped),
+                                                       layout.canonical),
+                             folder, "pedestrians section (variant)")) is not None}
+    return pedestrians, variants
 
 
 class _Optional:

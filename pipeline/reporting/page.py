@@ -121,7 +121,7 @@ def build_page(inputs: ReportInputs, verdicts: Verdicts, figures: Figures, comma
                               apf_alone, peers, answer_context(inputs, verdicts, robustness)),
         family=family, apf_alone=apf_alone,
         peers=peers, kinematic=kinematic,
-        pedestrians=pedestrians_section(inputs, verdicts, figures) if paper else None,
+        pedestrians=pedestrians_section(inputs, verdicts, figures),
         looks=looks_section(inputs, verdicts) if paper else None,
         robustness=robustness if paper else None, fair_fight=fair_fight if paper else None,
         validity=validity_section(inputs, verdicts) if paper else None,

@@ -143,15 +143,41 @@ def _ledgers(inputs: ReportInputs, verdicts: Verdicts, table_dir: Path) -> None:
                       for judged in verdicts.peers for c in judged.counts]
                      ).to_csv(table_dir / "peers_collisions.csv", index=False)
     if verdicts.pedestrians is not None:
-        verdicts.pedestrians.frame().to_csv(table_dir / "claims_ledger_pedestrians.csv",
-                                            index=False)
+        walkers = (verdicts.pedestrians, *verdicts.pedestrian_variants)
+        pd.concat([j.frame() for j in walkers], ignore_index=True).to_csv(
+            table_dir / "claims_ledger_pedestrians.csv", index=False)
         pd.DataFrame([{"scene": "all", **c} for c in verdicts.pedestrians.counts]
                      + list(verdicts.pedestrians.scene_counts)).to_csv(
             table_dir / "pedestrians_collisions.csv", index=False)
+        pedestrian_metrics_frame(walkers).to_csv(table_dir / "pedestrians_metrics.csv",
+                                                index=False)
     if verdicts.validity is not None and inputs.validity is not None and has_validity(inputs):
         inputs.validity.table.to_frame().to_csv(table_dir / "model_validity.csv", index=False)
         pd.DataFrame(verdicts.validity.rows()).to_csv(table_dir / "claims_model_validity.csv",
                                                       index=False)
+
+
+def pedestrian_metrics_frame(judged) -> pd.DataFrame:
+    """``tables/pedestrians_metrics.csv``: per family (the default and each variant) and
+    method, the crowd-navigation metrics with their intervals, after the family's description
+    (``family, track, platform, draw, walkers``) and its difficulty from the recording alone
+    (``straight_line_meets_share, standing_touched_share``, and the method's collision rate on
+    the crossings where standing still is safe)."""
+    rows = []
+    for family in judged:
+        if family.metrics is None:
+            continue
+        about = {k: family.about.get(k) for k in ("family", "track", "platform", "draw",
+                                                   "walkers")}
+        hard = family.difficulty
+        for row in family.metrics.to_dict("records"):
+            method = row.pop("method")
+            rows.append({**about, "method": method, **row,
+                         "straight_line_meets_share": hard.get("straight_line_meets_share"),
+                         "standing_touched_share": hard.get("standing_touched_share"),
+                         "collision_rate_standing_safe":
+                             hard.get(f"collision_rate_standing_safe_{method}")})
+    return pd.DataFrame(rows)
 
 
 def has_validity(inputs: ReportInputs) -> bool:

@@ -10,7 +10,9 @@ import dataclasses
 import math
 from collections.abc import Iterable
 from dataclasses import dataclass, field
+from typing import Any
 
+import numpy as np
 import pandas as pd
 
 from pipeline.analysis.ablation import ablation_effects, ablation_roles, interpretation_flips
@@ -131,14 +133,26 @@ class PedestrianVerdicts:
     counts: tuple[dict, ...]
     scene_counts: tuple[dict, ...]
     tables: dict[str, pd.DataFrame]
+    #: the family: ``family`` (default, or its variant's name), ``platform`` (the vehicle),
+    #: ``track``, ``draw`` and ``walkers``
+    about: dict = field(default_factory=dict)
+    #: the crowd-navigation metrics per method (:func:`~pipeline.analysis.crowd.crowd_metrics`)
+    metrics: pd.DataFrame | None = None
+    #: from the recording alone: the shares of crossings whose straight line meets a walker
+    #: and where a platform standing still is touched, and each method's collision rate on
+    #: the crossings where standing still is safe
+    difficulty: dict = field(default_factory=dict)
 
     def frame(self) -> pd.DataFrame:
-        """Every ledger as one table, a ``scene`` column first (``all``: the whole family;
-        ``tables/claims_ledger_pedestrians.csv``)."""
+        """Every ledger as one table, ``family`` and ``scene`` columns first (``all``: the
+        whole family; ``tables/claims_ledger_pedestrians.csv``), ``pairs`` the pairs each
+        row rests on."""
         frames = []
         for scene, ledger in (("all", self.ledger), *self.by_scene):
             frame = ledger.to_frame()
             frame.insert(0, "scene", scene)
+            frame.insert(0, "family", self.about.get("family", "default"))
+            frame["pairs"] = frame["n_pairs"]
             frames.append(frame)
         return pd.concat(frames, ignore_index=True)
 
@@ -211,13 +225,19 @@ class Verdicts:
     validity: ValidityVerdicts | None = None
     notes: tuple[str, ...] = field(default_factory=tuple)
     nmpc: NmpcVerdicts | None = None
+    #: the variants of make pedestrians (car, aimed, reactive), judged as the default one
+    pedestrian_variants: tuple[PedestrianVerdicts, ...] = ()
 
     @classmethod
     def compute(cls, inputs: ReportInputs, claims: ClaimsConfig | None = None) -> Verdicts:
         """Every ledger of ``inputs``, judged with ``claims`` (the inputs' by default)."""
         cfg = claims or inputs.claims
-        if inputs.lateral is None:  # a page of sweeps alone
-            return cls(cfg)
+        if inputs.lateral is None:  # a page of sweeps or of families alone
+            return cls(cfg, pedestrians=_pedestrians(inputs.pedestrians, cfg)
+                       if inputs.pedestrians is not None else None,
+                       pedestrian_variants=tuple(
+                           judged for name, variant in inputs.pedestrian_variants.items()
+                           if (judged := _pedestrians(variant, cfg, name)) is not None))
         paper = track_claims(inputs.lateral, cfg)
         kinematic = track_claims(inputs.kinematic, cfg, comparable_only=True) \
             if inputs.kinematic is not None else None
@@ -240,6 +260,8 @@ class Verdicts:
             if judged is not None)
         pedestrians = _pedestrians(inputs.pedestrians, cfg) \
             if inputs.pedestrians is not None else None
+        pedestrian_variants = tuple(judged for name, variant in inputs.pedestrian_variants.items()
+                                    if (judged := _pedestrians(variant, cfg, name)) is not None)
         nmpc = _nmpc(inputs.nmpc_family, family, cfg) \
             if inputs.nmpc_family is not None and inputs.nmpc_family.judgeable(cfg) else None
         validity = _validity(inputs.family, inputs, own) if inputs.family is not None \
@@ -250,7 +272,7 @@ class Verdicts:
                        pedestrians, _readings(inputs.kinematic, inputs.readings, cfg)
                        if inputs.kinematic is not None else (),
                        effects, roles, interpretation_flips(inputs.interpretations, own),
-                       validity, nmpc=nmpc)
+                       validity, nmpc=nmpc, pedestrian_variants=pedestrian_variants)
         return verdicts.adjusted()
 
     def adjusted(self) -> Verdicts:
@@ -447,10 +469,12 @@ def _peers(track: str, default: FamilyInputs | None, peers: FamilyInputs | None,
     return PeerVerdicts(track, names, ledger, tuple(outcome_counts(tables)))
 
 
-def _pedestrians(family: FamilyInputs, cfg: ClaimsConfig) -> PedestrianVerdicts | None:
-    """The pedestrian ledgers (:class:`PedestrianVerdicts`); None without the treatment and
-    a control. The scene of each member is read from its name (``scene_of``), the scenes from
-    the family's settings."""
+def _pedestrians(family: FamilyInputs, cfg: ClaimsConfig, name: str = "default"
+                 ) -> PedestrianVerdicts | None:
+    """The pedestrian ledgers (:class:`PedestrianVerdicts`) of the family ``name`` (default,
+    or a variant's); None without the treatment and a control. The scene of each member is
+    read from its name (``scene_of``), the scenes from the family's settings."""
+    from pipeline.analysis.crowd import crowd_metrics
     from pipeline.loop.pedestrians import scene_of
 
     if not family.judgeable(cfg):
@@ -475,8 +499,56 @@ def _pedestrians(family: FamilyInputs, cfg: ClaimsConfig) -> PedestrianVerdicts 
     scene_counts = tuple({"scene": scene, **row} for scene in present
                          for row in outcome_counts({m: t[t["scene"] == scene]
                                                     for m, t in tables.items()}))
+    settings = next(iter(family.settings.values()))
+    ped = settings.scenario.pedestrians
+    about = {"family": name, "platform": settings.vehicle.name,
+             "track": "kinematic" if settings.controller.kind == "kinematic_mpc" else "lateral",
+             "draw": ped.draw if ped is not None else "?",
+             "walkers": ped.walkers if ped is not None else "?"}
+    methods = (cfg.treatment, *comparisons)
+    metrics = pd.DataFrame([{"method": m, **crowd_metrics(tables[m])} for m in methods])
+    info = next(iter(family.info.values()), {})
     return PedestrianVerdicts(present, comparisons, ledger, by_scene,
-                              tuple(outcome_counts(tables)), scene_counts, tables)
+                              tuple(outcome_counts(tables)), scene_counts, tables, about,
+                              metrics, _difficulty(settings, info,
+                                                   {m: tables[m] for m in methods}))
+
+
+def _difficulty(settings: Any, info: dict, tables: dict[str, pd.DataFrame]) -> dict:
+    """The family's difficulty from the recording alone (``crossing_difficulty`` of each
+    member, drawn again: the family's base is its first member's scenario with the family's
+    name, seed and size from ``family.json`` and no drawn scene) and each method's collision
+    rate on the crossings where a platform standing still is not touched."""
+    from pipeline.loop.pedestrians import crossing_difficulty
+    from pipeline.loop.scenario import family_members
+    from pipeline.loop.settings import FamilyConfig
+
+    radius = settings.vehicle.footprint_radius_m
+    member, ped = settings.scenario, settings.scenario.pedestrians
+    if ped is None or "seed" not in info or "size" not in info:
+        return {}
+    base = dataclasses.replace(
+        member, name=str(info.get("scenario", "pedestrians")),
+        family=FamilyConfig(seed=int(info["seed"]), size=int(info["size"])),
+        pedestrians=dataclasses.replace(ped, scene=None, window_start_s=None))
+    members = family_members(base, radius)
+    judged = {m.name: crossing_difficulty(m, radius) for m in members}
+    names = [n for n in next(iter(tables.values()))["scenario"].astype(str) if n in judged]
+    if not names:
+        return {}
+    safe = {n for n in names if not judged[n].standing_touched}
+    out: dict = {"crossings": len(names),
+                 "straight_line_meets_share": float(np.mean(
+                     [judged[n].straight_line_meets for n in names])),
+                 "standing_touched_share": float(np.mean(
+                     [judged[n].standing_touched for n in names])),
+                 "standing_safe_crossings": len(safe)}
+    for method, table in tables.items():
+        rows = table[table["scenario"].astype(str).isin(safe)]
+        hits = rows["collision"].map(lambda v: str(v).lower() in ("true", "1", "1.0"))
+        out[f"collision_rate_standing_safe_{method}"] = float(hits.mean()) if len(rows) \
+            else float("nan")
+    return out
 
 
 def _apf_alone(family: FamilyInputs, cfg: ClaimsConfig, default: FamilyVerdicts | None,

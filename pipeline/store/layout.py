@@ -36,6 +36,7 @@ class OutputsLayout:
     peers: str = "peers"
     kinematic_peers: str = "kinematic_peers"
     pedestrians: str = "pedestrians"
+    pedestrians_variants: str = "pedestrians_variants"
     ablation: str = "ablation"
     interpretations: str = "interpretations"
     multiverse: str = "multiverse"
@@ -85,7 +86,7 @@ class OutputsLayout:
                 self.tune_unpruned, self.tune_peers, self.member_cache, self.kinematic_readings,
                 self.kinematic_family, self.frames, self.apf_alone, self.nmpc_family, self.peers,
                 self.kinematic_peers,
-                self.pedestrians, self.nmpc_check, self.speed, self.commonroad)
+                self.pedestrians, self.pedestrians_variants, self.nmpc_check, self.speed, self.commonroad)
 
     @property
     def validity_sections(self) -> tuple[str, ...]:

@@ -29,7 +29,15 @@ def trajectory_context(cfg: Any) -> TrajectoryContext:
                              wheelbase_m=v.wheelbase_m, steering_max_rad=v.steering_max_rad,
                              steering_rate_max_rad_s=math.inf if kinematic
                              else v.steering_rate_max_rad_s,
-                             braking_mps2=max(-float(low), 0.0), accel_mps2=max(float(high), 0.0))
+                             braking_mps2=max(-float(low), 0.0), accel_mps2=max(float(high), 0.0),
+                             personal_space_m=_personal_space(cfg.scenario),
+                             obstacle_slots=getattr(cfg.controller, "max_obstacles", None))
+
+
+def _personal_space(scenario: Any) -> float | None:
+    """The personal-space gap (m) of a scenario among walkers, else None."""
+    walkers = getattr(scenario, "pedestrians", None)
+    return float(walkers.personal_space_m) if walkers is not None else None
 
 
 @functools.lru_cache(maxsize=16)

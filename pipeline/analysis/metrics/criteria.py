@@ -5,7 +5,7 @@ settings each criterion reads. Definitions: :mod:`pipeline.analysis.metrics`."""
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from functools import partial
 from typing import Any
 
@@ -22,6 +22,7 @@ from pipeline.analysis.metrics.geometry import (
     straight_line_time_to_contact,
 )
 from pipeline.analysis.metrics.results import (
+    Crowd,
     Fallbacks,
     LateralJerk,
     ModelValidity,
@@ -402,6 +403,49 @@ REACTION_READS = THREAT_READS + ("reaction_obstacle", "reaction_interpolation",
 SMOOTHNESS_READS = RECOVERY_READS + ("lateral_accel", "smoothness_window")
 STABILITY_READS = THREAT_READS + ("oscillation", "lateral_sign_band_m",
                                   "yaw_rate_sign_band_rad_s")
+def crowd_block(sig: Signals, tracks: list[ObstacleTrack], clearance: np.ndarray,
+                safety: Safety, progress: Progress, context: TrajectoryContext
+                ) -> Crowd | None:
+    """The crowd-navigation metrics (:class:`~pipeline.analysis.metrics.results.Crowd`) of a
+    run among walkers (``context.personal_space_m`` set), else None.
+
+    A step intrudes where the surface gap to the nearest visible walker is below
+    ``personal_space_m``; the contact's relative speed is ``|v_platform - v_walker|`` on the
+    first logged step whose gap to some walker is negative (forward differences of the logged
+    positions: the walker's as logged, the platform's ``X_m, Y_m``)."""
+    if context.personal_space_m is None:
+        return None
+    t = sig.t
+    inside = np.nan_to_num(clearance, nan=np.inf) < context.personal_space_m
+    dt = np.diff(t, append=t[-1]) if t.size else t
+    entries = int(np.count_nonzero(inside[1:] & ~inside[:-1]) + (1 if inside[:1].any() else 0))
+    straight = float(np.linalg.norm(np.subtract(context.goal_m, context.start_m)))
+    relative = float("nan")
+    if safety.collision and t.size > 1:
+        velocity = np.vstack([np.diff(sig.xy, axis=0) / np.diff(t)[:, None],
+                              np.full((1, 2), np.nan)])
+        for k in range(t.size):
+            hits = [j for j, track in enumerate(tracks) if track.visible[k] and np.linalg.norm(
+                sig.xy[k] - track.position[k]) - track.radius[k] - context.vehicle_radius_m < 0]
+            if hits:
+                mine = velocity[k] if np.all(np.isfinite(velocity[k])) else velocity[k - 1]
+                relative = float(min(np.linalg.norm(mine - tracks[j].velocity[k])
+                                     for j in hits))
+                break
+    in_range = np.sum([track.visible for track in tracks], axis=0) if tracks \
+        else np.zeros(t.size)
+    beyond = float(np.mean(in_range > context.obstacle_slots)) \
+        if context.obstacle_slots is not None and t.size else 0.0
+    return Crowd(
+        timeout=bool(not progress.goal_reached and not safety.collision),
+        path_ratio=progress.path_length_m / straight if progress.goal_reached and straight > 0
+        else float("nan"),
+        personal_space_intrusion_share=float(inside.mean()) if inside.size else float("nan"),
+        personal_space_intrusion_s=float(np.sum(dt[inside])),
+        personal_space_entries=entries,
+        contact_relative_speed_mps=relative, walkers_beyond_slots_share=beyond)
+
+
 REPULSION_READS = THREAT_READS + ("repulsion_need", "near_field_m", "repulsion_onset_force",
                                   "threat_clearance_m")
 PROGRESS_READS = ("goal_tolerance_m",)
@@ -480,4 +524,8 @@ def compute_metrics_readings(trajectory: pd.DataFrame, context: TrajectoryContex
                            partial(repulsion_block, trajectory, sig, geo, clearance, thresholds)),
             step_cap=step_cap, iterations=iterations, fallbacks=fallbacks,
             validity=validity))
+        if context.personal_space_m is not None:
+            last = results[-1]
+            results[-1] = replace(last, crowd=crowd_block(sig, tracks, clearance, last.safety,
+                                                          last.progress, context))
     return results

@@ -192,6 +192,25 @@ class ModelValidity(_Block):
 
 
 @dataclass(frozen=True)
+class Crowd(_Block):
+    """Among walkers, the crowd-navigation metrics (Francis et al. 2023; CrowdNav): whether
+    the run timed out (neither the goal nor a contact before its last step), the path's length
+    over the straight start-goal line, the share of logged steps (and their time, s) inside a
+    walker's personal space (surface gap below ``personal_space_m``) and how often it was
+    entered, the speed of the platform relative to the walker at the first contact (m/s;
+    NaN without one), and the share of steps with more walkers in sensor range than the
+    controller has obstacle slots."""
+
+    timeout: bool
+    path_ratio: float
+    personal_space_intrusion_share: float
+    personal_space_intrusion_s: float
+    personal_space_entries: int
+    contact_relative_speed_mps: float
+    walkers_beyond_slots_share: float
+
+
+@dataclass(frozen=True)
 class SolverIterations(_Block):
     """Median and 95th percentile of the QP solver's iteration count."""
 
@@ -227,13 +246,14 @@ class RunMetrics:
     iterations: SolverIterations | None = None
     fallbacks: Fallbacks | None = None
     validity: ModelValidity | None = None
+    crowd: Crowd | None = None
 
     def blocks(self) -> tuple[_Block, ...]:
-        """The blocks present, in Table 1 order."""
+        """The blocks present, in Table 1 order (the crowd metrics last, among walkers)."""
         return tuple(b for b in (self.threat, self.reaction, self.smoothness, self.repulsion,
                                  self.step_cap, self.recovery, self.stability, self.safety,
                                  self.progress, self.iterations, self.fallbacks,
-                                 self.validity)
+                                 self.validity, self.crowd)
                      if b is not None)
 
     def to_json(self) -> dict[str, Any]:
@@ -261,13 +281,13 @@ class RunMetrics:
                    Smoothness.from_json(data), Recovery.from_json(data),
                    Stability.from_json(data), Safety.from_json(data), Progress.from_json(data),
                    optional(Repulsion), optional(StepCap), optional(SolverIterations),
-                   optional(Fallbacks), optional(ModelValidity))
+                   optional(Fallbacks), optional(ModelValidity), optional(Crowd))
 
 
 #: Every key :meth:`RunMetrics.to_json` can write.
 METRIC_KEYS: tuple[str, ...] = tuple(k for block in (
     Threat, Reaction, Smoothness, Repulsion, StepCap, Recovery, Stability, Safety, Progress,
-    SolverIterations, Fallbacks, ModelValidity) for k in block.names())
+    SolverIterations, Fallbacks, ModelValidity, Crowd) for k in block.names())
 
 
 def _none_to_nan(value: Any) -> Any:

@@ -34,6 +34,12 @@ class TrajectoryContext:
     steering_rate_max_rad_s: float = 1.0
     braking_mps2: float = 3.0
     accel_mps2: float = 0.0
+    #: among walkers (recorded pedestrians): the surface gap (m) below which a step intrudes
+    #: into a walker's personal space; None elsewhere (no crowd metrics)
+    personal_space_m: float | None = None
+    #: the controller's obstacle slots (the crowd metrics count the steps with more walkers
+    #: in sensor range than slots); None: unlimited
+    obstacle_slots: int | None = None
 
 
 def rms(values: np.ndarray) -> float:

@@ -46,6 +46,14 @@ class PedestriansSection:
     sentence: str
     #: members whose run could not be read for the figure: member, folder, reason
     damaged: tuple[dict, ...] = ()
+    #: the crowd-navigation metrics: one row per family (default, variants) and method
+    metrics: tuple[dict, ...] = ()
+    #: per family its description and difficulty from the recording alone
+    families: tuple[dict, ...] = ()
+    #: per variant and claim the outcome against the first comparison, with its pairs
+    variant_outcomes: tuple[dict, ...] = ()
+    #: the fewest pairs any of C1-C5 rests on in the default family
+    fewest_pairs: int | None = None
 
 
 def _verdict_rows(judged: PedestrianVerdicts) -> tuple[dict, ...]:
@@ -180,7 +188,8 @@ def pedestrians_section(inputs: ReportInputs, verdicts: Verdicts, figures: Figur
         "crossing_length_m": ped.crossing_length_m,
         "platform_speed_mps": list(ped.platform_speed_mps),
         "vehicle_radius_m": settings_cfg.vehicle.footprint_radius_m if settings_cfg else None,
-        "max_obstacles": settings_cfg.controller.max_obstacles if settings_cfg else None}
+        "max_obstacles": settings_cfg.controller.max_obstacles if settings_cfg else None,
+        "personal_space_m": ped.personal_space_m}
     scene_sizes = tuple((s, int((judged.tables[treatment]["scene"] == s).sum()))
                         for s in judged.scenes)
     collisions = tuple([{"scene": "all", **c} for c in judged.counts]
@@ -193,8 +202,24 @@ def pedestrians_section(inputs: ReportInputs, verdicts: Verdicts, figures: Figur
                 + ", ".join(f"{m} {hits.get(m, '?')}" for m in methods) + ".")
     damaged: list[dict] = []
     figure = _figure(inputs, judged, methods, figures, damaged)
+    everyone = (judged, *verdicts.pedestrian_variants)
+    from pipeline.reporting.tables import pedestrian_metrics_frame
+
+    metrics = tuple(pedestrian_metrics_frame(everyone).to_dict("records"))
+    families = tuple({**j.about, **j.difficulty, "size": len(j.tables[treatment])}
+                     for j in everyone)
+    variant_outcomes = tuple(
+        {"family": j.about.get("family"), "claim": row.claim_id,
+         "comparison": row.comparison, "outcome": str(row.outcome),
+         "pairs": row.result.n_pairs}
+        for j in everyone for row in j.ledger.rows
+        if row.comparison == (j.comparisons[0] if j.comparisons else None))
+    pairs = [row.result.n_pairs for row in judged.ledger.rows
+             if row.claim_id not in ("C0",) and row.comparison == judged.comparisons[0]] \
+        if judged.comparisons else []
     return PedestriansSection(
         treatment, judged.comparisons, methods, int(info.get("size", 0) or 0),
         info.get("seed", "?"), scene_sizes, settings, _verdict_rows(judged),
         tuple(ledger_groups(judged.ledger)), collisions, _members(judged, methods),
-        figure, sentence, tuple(damaged))
+        figure, sentence, tuple(damaged), metrics, families, variant_outcomes,
+        min(pairs) if pairs else None)
