@@ -1,0 +1,191 @@
+"""Among walkers (issue 59): the social force against a hand-computed two-agent case, each
+crossing's difficulty against a planted recording, the crowd metrics against closed forms on
+planted trajectories, the scene draw's walkable places against a brute-force search, and the
+closed loop: a platform that can stop does not touch a walker standing on its line, and a
+run ends at its first contact."""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+from scipy import stats
+
+from pipeline.analysis.crowd import crowd_metrics
+from pipeline.analysis.metrics.criteria import compute_metrics
+from pipeline.analysis.metrics.signals import TrajectoryContext
+from pipeline.analysis.settings import MetricsConfig
+from pipeline.loop.social_force import SocialForceSettings, social_accelerations
+
+
+def test_the_social_force_of_two_walkers_and_the_platform_is_the_hand_computed_one():
+    """Walker 0 at the origin walking +x at 1 m/s and wanting 1.2 m/s; walker 1 at (1, 0)
+    standing; the platform at (0, -2). By hand (A = 2, B = 0.3, tau = 0.5, radii 0.3 and
+    0.35): relaxation (1.2 - 1) / 0.5 = 0.4 along x; walker 1 pushes walker 0 by
+    2 exp((0.6 - 1) / 0.3) along -x; the platform by 2 exp((0.65 - 2) / 0.3) along +y."""
+    s = SocialForceSettings(tau_s=0.5, strength_mps2=2.0, range_m=0.3, walker_radius_m=0.3)
+    positions = np.array([[0.0, 0.0], [1.0, 0.0], [5.0, 5.0]])
+    velocities = np.array([[1.0, 0.0], [0.0, 0.0], [0.0, 0.0]])
+    desired = np.array([[1.2, 0.0], [0.0, 0.0], [0.0, 0.0]])
+    present = np.array([True, True, False])  # walker 2 is absent: it pushes no one
+    acc = social_accelerations(positions, velocities, present, desired, np.array([0.0, -2.0]),
+                               0.35, s)
+    walker = 2.0 * math.exp((0.6 - 1.0) / 0.3)
+    platform = 2.0 * math.exp((0.65 - 2.0) / 0.3)
+    assert acc[0] == pytest.approx([0.4 - walker, platform], abs=1e-12)
+    push_1 = 2.0 * math.exp((0.65 - math.hypot(1.0, 2.0)) / 0.3)
+    assert acc[1] == pytest.approx([walker + push_1 / math.hypot(1, 2),
+                                    push_1 * 2 / math.hypot(1, 2)], abs=1e-12)
+    assert acc[2] == pytest.approx([0.0, 0.0])
+
+
+def _planted_scene(folder: Path, rows: list[tuple[int, int, float, float]]) -> None:
+    folder.mkdir(parents=True, exist_ok=True)
+    (folder / "planted.txt").write_text("".join(f"{f}\t{p}\t{x}\t{y}\n" for f, p, x, y in rows))
+
+
+def _member(make_config, data_dir: Path, start, goal, speed: float, extra=(), n_steps=120):
+    """A drawn-looking member of the planted scene (window at the recording's start)."""
+    cfg = make_config(["experiment=pedestrians", "planner=improved",
+                       f"scenario.pedestrians.data_dir={data_dir}",
+                       "scenario.pedestrians.scenes=[planted]", f"scenario.n_steps={n_steps}",
+                       *extra])
+    ped = dataclasses.replace(cfg.scenario.pedestrians, scene="planted", window_start_s=0.0)
+    member = dataclasses.replace(cfg.scenario, name="planted_member", family=None,
+                                 start_xy_m=list(start), goal_xy_m=list(goal),
+                                 start_heading_rad=0.0, speed_mps=speed, pedestrians=ped)
+    return dataclasses.replace(cfg, scenario=member)
+
+
+def test_a_crossings_difficulty_is_read_from_the_recording_alone(make_config, tmp_path):
+    """Planted: walker 1 crosses the line x = 5 m going +y at 1 m/s, at y = 0 at t = 5 s;
+    walker 2 stands 3 m beside the start. A platform at 1 m/s along y = 0 is at x = 5 m at
+    5 s: the straight line meets walker 1; at 2 m/s it is past by then (at x = 10 m at 5 s
+    with the goal at 10 m: arrived), so it does not; standing still at the start is touched
+    by neither (walker 1 never comes within 0.65 m of the start, walker 2 stays 3 m off)."""
+    from pipeline.loop.pedestrians import CrossingDifficulty, crossing_difficulty
+
+    rows = [(10 * k, 1, 5.0, -5.0 + 0.4 * k) for k in range(26)]
+    rows += [(10 * k, 2, 0.0, 3.0) for k in range(26)]
+    _planted_scene(tmp_path / "scene", sorted(rows))
+    slow = _member(make_config, tmp_path / "scene", (0.0, 0.0), (10.0, 0.0), 1.0)
+    fast = _member(make_config, tmp_path / "scene", (0.0, 0.0), (10.0, 0.0), 2.0)
+    radius = slow.vehicle.footprint_radius_m
+    assert crossing_difficulty(slow.scenario, radius) == CrossingDifficulty(True, False)
+    assert crossing_difficulty(fast.scenario, radius).straight_line_meets is False
+    # walker 2 on the start: standing still is touched
+    _planted_scene(tmp_path / "touch", sorted([(10 * k, 2, 0.0, 3.0 - 0.2 * k)
+                                               for k in range(26)]))
+    touched = _member(make_config, tmp_path / "touch", (0.0, 0.0), (10.0, 0.0), 1.0)
+    assert crossing_difficulty(touched.scenario, radius).standing_touched is True
+
+
+def _straight_run(n: int = 101, walker_xy=(5.0, 0.9), walker_v=(0.0, 0.0)) -> pd.DataFrame:
+    """The platform along y = 0 at 1 m/s (10 Hz), one walker (radius 0.3)."""
+    t = np.arange(n) * 0.1
+    wx = walker_xy[0] + walker_v[0] * t
+    wy = walker_xy[1] + walker_v[1] * t
+    return pd.DataFrame({"time_s": t, "X_m": t, "Y_m": 0.0 * t, "psi_rad": 0.0 * t,
+                         "vx_mps": 1.0 + 0.0 * t, "vy_mps": 0.0 * t, "r_rad_s": 0.0 * t,
+                         "delta_rad": 0.0 * t, "e_y_m": 0.0 * t, "e_psi_rad": 0.0 * t,
+                         "obs0_x_m": wx, "obs0_y_m": wy, "obs0_radius_m": 0.3 + 0.0 * t,
+                         "obs0_visible": True})
+
+
+def test_the_crowd_metrics_are_the_closed_forms_on_planted_trajectories():
+    """A straight 10 m run at 1 m/s past a walker standing 0.9 m off the line: the surface
+    gap sqrt((x - 5)^2 + 0.81) - 0.65 is below 0.5 m exactly where |x - 5| < sqrt(1.15^2 -
+    0.81); the path ratio is 1; no timeout, no contact. A walker coming head-on at 1 m/s on
+    the line: the contact's relative speed is 2 m/s."""
+    context = TrajectoryContext((0.0, 0.0), (10.0, 0.0), 0.35, personal_space_m=0.5,
+                                obstacle_slots=3)
+    run = _straight_run()
+    crowd = compute_metrics(run, context, MetricsConfig(goal_tolerance_m=0.5)).crowd
+    assert crowd is not None
+    x = run["X_m"].to_numpy()
+    inside = np.abs(x - 5.0) < math.sqrt(1.15 ** 2 - 0.81)
+    assert crowd.personal_space_intrusion_share == pytest.approx(inside.mean())
+    assert crowd.personal_space_entries == 1 and crowd.timeout is False
+    assert crowd.path_ratio == pytest.approx(1.0)  # 10 m logged over the 10 m line
+    assert crowd.walkers_beyond_slots_share == 0.0
+    assert math.isnan(crowd.contact_relative_speed_mps)
+    head_on = compute_metrics(_straight_run(walker_xy=(8.0, 0.0), walker_v=(-1.0, 0.0)),
+                              context, MetricsConfig(goal_tolerance_m=0.5)).crowd
+    assert head_on is not None
+    assert head_on.contact_relative_speed_mps == pytest.approx(2.0, abs=1e-9)
+    # no crowd block off the pedestrians' scenarios
+    plain = TrajectoryContext((0.0, 0.0), (10.0, 0.0), 0.35)
+    assert compute_metrics(run, plain, MetricsConfig(goal_tolerance_m=0.5)).crowd is None
+
+
+def test_the_rates_intervals_are_clopper_pearson_and_the_medians_order_statistics():
+    """Oracles: the exact binomial interval from the beta quantiles; the median's interval
+    from the binomial order statistics (the 95 % interval of 20 values: the 6th and 15th)."""
+    table = pd.DataFrame({"collision": [True] * 3 + [False] * 17,
+                          "goal_reached": [False] * 3 + [True] * 15 + [False] * 2,
+                          "time_to_goal_s": np.arange(20.0), "min_clearance_m": np.arange(20.0),
+                          "path_ratio": 1.0 + np.arange(20.0) / 100,
+                          "personal_space_intrusion_share": np.linspace(0, 0.2, 20)})
+    m = crowd_metrics(table)
+    low, high = stats.beta.ppf(0.025, 3, 18), stats.beta.ppf(0.975, 4, 17)
+    assert (m["collision_rate"], m["collision_rate_low"], m["collision_rate_high"]) == \
+        pytest.approx((0.15, low, high))
+    assert m["success_rate"] == 15 / 20 and m["timeout_rate"] == 2 / 20
+    assert (m["min_distance_median_m"], m["min_distance_median_m_low"],
+            m["min_distance_median_m_high"]) == pytest.approx((9.5, 5.0, 14.0))
+    assert m["time_to_goal_median_s"] == pytest.approx(np.median(np.arange(3.0, 18.0)))
+    assert m["intrusion_time_share"] == pytest.approx(0.1)
+    assert m["intrusion_time_share_low"] < 0.1 < m["intrusion_time_share_high"]
+
+
+def test_scene_draws_start_and_goal_where_someone_walked(make_config):
+    """Every drawn start and goal lies within walkable_radius_m of a recorded position
+    (brute force over the scene's every sample), the midpoint is one; the aimed draw (the
+    stress variant) puts a walker within both radii of the straight line every time."""
+    from pipeline.loop.pedestrians import crossing_difficulty, load_scene
+    from pipeline.loop.scenario import family_members
+
+    cfg = make_config(["experiment=pedestrians", "planner=improved", "scenario.family.size=12"])
+    members = family_members(cfg.scenario, cfg.vehicle.footprint_radius_m)
+    for member in members:
+        tracks = load_scene(member.pedestrians, member.pedestrians.scene)
+        points = np.concatenate([tracks.positions_m[j, :c]
+                                 for j, c in enumerate(tracks.counts)])
+        start, goal = np.array(member.start_xy_m), np.array(member.goal_xy_m)
+        for end in (start, goal):
+            assert np.min(np.hypot(*(points - end).T)) <= 1.0 + 1e-12
+        assert np.min(np.hypot(*(points - (start + goal) / 2).T)) < 1e-9
+    aimed = make_config(["experiment=pedestrians_aimed", "planner=improved",
+                         "scenario.family.size=12"])
+    radius = aimed.vehicle.footprint_radius_m
+    assert all(crossing_difficulty(m, radius).straight_line_meets
+               for m in family_members(aimed.scenario, radius))
+
+
+def test_a_platform_that_can_stop_does_not_touch_a_walker_standing_on_its_line(make_config,
+                                                                               tmp_path):
+    """A walker stands at the middle of the 10 m crossing for the whole run: the sidewalk
+    robot on the kinematic track (improved's APF) never touches it (dead ahead on the goal
+    line the APF's forces balance: it brakes and stands 1.9 m short, the APF's classic local
+    minimum, counted as a timeout, never a contact); with its avoidance off (the straight-to-goal planner, no half-planes) it touches it,
+    and the run ends there (termination 'contact', the last logged step overlapping)."""
+    from pipeline.loop.scenario import build_scenario
+    from pipeline.loop.simulate import simulate
+
+    _planted_scene(tmp_path / "scene", [(10 * k, 1, 5.0, 0.0) for k in range(80)])
+    cfg = _member(make_config, tmp_path / "scene", (0.0, 0.0), (10.0, 0.0), 1.0)
+    result = simulate(cfg, build_scenario(cfg.scenario))
+    traj = result.trajectory
+    gap = np.hypot(traj["X_m"] - 5.0, traj["Y_m"]) - 0.3 - cfg.vehicle.footprint_radius_m
+    assert gap.min() > 0.0
+    assert abs(traj["vx_mps"].iloc[-1]) < 0.05  # it stopped
+    blind = _member(make_config, tmp_path / "scene", (0.0, 0.0), (10.0, 0.0), 1.0,
+                    extra=["planner=straight_to_goal", "controller.collision_constraints=false"])
+    traj = simulate(blind, build_scenario(blind.scenario)).trajectory
+    gap = np.hypot(traj["X_m"] - 5.0, traj["Y_m"]) - 0.3 - blind.vehicle.footprint_radius_m
+    assert gap.iloc[-1] < 0.0 and (gap.iloc[:-1] >= 0.0).all()
+    assert traj["X_m"].iloc[-1] < 5.0
