@@ -20,7 +20,7 @@ PEERS_JOBS ?= 1
 PEDESTRIANS_FAMILY_SIZE ?= 200
 # the variants of make pedestrians (conf/experiment/pedestrians_<variant>.yaml) and their size
 PEDESTRIANS_VARIANTS ?= car aimed reactive
-PEDESTRIANS_VARIANT_SIZE ?= 100
+PEDESTRIANS_VARIANT_SIZE ?= 60
 REPORT      ?= reports/latest
 PYTEST_ARGS ?=
 PYTEST_JOBS ?= auto
