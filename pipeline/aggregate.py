@@ -55,7 +55,7 @@ class AggregateCallback(Callback):
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="apf-mpc-aggregate",
+    parser = argparse.ArgumentParser(prog="apf-mpc aggregate",
                                      description="Gather a sweep folder into summary.csv.")
     parser.add_argument("sweep_dir", type=Path)
     parser.add_argument("--baseline", type=Path, default=None,

@@ -32,7 +32,7 @@ HEADLINE = ("closed_loop_over_floor", "step_over_floor", "step_over_sparse_floor
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="apf-mpc-bench", description=study.__doc__,
+    parser = argparse.ArgumentParser(prog="apf-mpc bench", description=study.__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--out", type=output_folder, default=Path("reports/bench"))
     parser.add_argument("--steps", type=int, default=40, help="inputs per configuration")

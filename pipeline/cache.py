@@ -15,7 +15,7 @@ __all__ = ["main"]
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="apf-mpc-cache",
+    parser = argparse.ArgumentParser(prog="apf-mpc cache",
                                      description=__doc__.split("\n\n")[0])
     parser.add_argument("action", choices=("size", "clean"),
                         help="size: entries, files and bytes; clean: remove every entry")

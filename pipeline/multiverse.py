@@ -23,7 +23,7 @@ log = logging.getLogger("pipeline.multiverse")
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="apf-mpc-multiverse",
+    parser = argparse.ArgumentParser(prog="apf-mpc multiverse",
                                      description=study.__doc__.split("\n\n")[0])
     parser.add_argument("--space", default="default",
                         help="conf/multiverse/<name>.yaml or a path (default: default)")

@@ -20,7 +20,7 @@ log = logging.getLogger("pipeline.nmpc_check")
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="apf-mpc-nmpc-check",
+    parser = argparse.ArgumentParser(prog="apf-mpc nmpc-check",
                                      description=__doc__.split("\n\n")[0])
     parser.add_argument("--members", type=int, default=50,
                         help="family members per method (1-10000, default 50)")

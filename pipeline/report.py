@@ -18,7 +18,7 @@ __all__ = ["build_report", "main"]
 
 
 def _parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(prog="apf-mpc-report",
+    parser = argparse.ArgumentParser(prog="apf-mpc report",
                                      description="Build the HTML report from run folders.")
     parser.add_argument("runs", type=Path, help="folder holding run folders (e.g. outputs/paper)")
     parser.add_argument("--out", type=output_folder, default=Path("reports/latest"),
@@ -64,12 +64,12 @@ def main(argv: list[str] | None = None) -> int:
 
 
 def _command_line(argv: list[str] | None) -> str:
-    """The command that ran: the installed name (``apf-mpc-report``) when that is what ran,
+    """The command that ran: ``apf-mpc report`` when the installed command ran it,
     ``python -m pipeline.report`` otherwise, with its arguments."""
     import shlex
 
     ran = Path(sys.argv[0]).name if sys.argv and sys.argv[0] else ""
-    name = ran if ran.startswith("apf-mpc-") else "python -m pipeline.report"
+    name = "apf-mpc report" if ran == "apf-mpc" else "python -m pipeline.report"
     return " ".join([name, *(shlex.quote(a) for a in (sys.argv[1:] if argv is None else argv))])
 
 

@@ -25,7 +25,7 @@ log = logging.getLogger("pipeline.score")
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="apf-mpc-score",
+    parser = argparse.ArgumentParser(prog="apf-mpc score",
                                      description=scoring.__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("trajectory", help="trajectory CSV, or - for standard input")

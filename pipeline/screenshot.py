@@ -1,4 +1,4 @@
-"""The README's screenshots: ``apf-mpc-screenshot REPORT.html OUT.png`` (or
+"""The README's screenshots: ``apf-mpc screenshot REPORT.html OUT.png`` (or
 ``python -m pipeline.screenshot``).
 
 Opens the report in headless Chromium at 1280 x 800 and saves its first screen (the answer in
@@ -19,7 +19,7 @@ from pipeline.reporting.screenshot import take_explorer_screenshot, take_screens
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="apf-mpc-screenshot", description=__doc__,
+    parser = argparse.ArgumentParser(prog="apf-mpc screenshot", description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("report", type=Path, help="the report's index.html")
     parser.add_argument("out", type=Path, help="the PNG to write (first screen at 1280 px)")

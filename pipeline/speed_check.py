@@ -19,7 +19,7 @@ log = logging.getLogger("pipeline.speed_check")
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="apf-mpc-speed-check",
+    parser = argparse.ArgumentParser(prog="apf-mpc speed-check",
                                      description=__doc__.split("\n\n")[0])
     parser.add_argument("--members", type=int, default=200,
                         help="family members per variant and method (1-10000, default 200)")

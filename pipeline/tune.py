@@ -19,7 +19,7 @@ log = logging.getLogger("pipeline.tune")
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="apf-mpc-tune",
+    parser = argparse.ArgumentParser(prog="apf-mpc tune",
                                      description=__doc__.split("\n\n")[0])
     parser.add_argument("--space", default="default",
                         help="conf/tune/<name>.yaml or a path (default: default)")

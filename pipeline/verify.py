@@ -1,4 +1,4 @@
-"""Compare fresh results with ``reports/reference/``: ``apf-mpc-verify RUNS REF`` (or
+"""Compare fresh results with ``reports/reference/``: ``apf-mpc verify RUNS REF`` (or
 ``python -m pipeline.verify``).
 
 The command: its options, then :func:`pipeline.studies.verify.verify` through the command
@@ -20,7 +20,7 @@ __all__ = ["main", "verify"]
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="apf-mpc-verify", description=__doc__,
+    parser = argparse.ArgumentParser(prog="apf-mpc verify", description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("runs", type=Path, help="runs folder (make reproduce's outputs)")
     parser.add_argument("reference", type=Path, nargs="?", default=Path("reports/reference"))

@@ -67,12 +67,13 @@ def test_the_wheel_carries_every_module_config_and_track_of_the_checkout(install
 
 
 def test_wheel_installs_and_runs_from_an_empty_folder(installed):
-    """From an empty folder, the installed ``apf-mpc-run planner=baseline`` exits 0 and writes a
+    """From an empty folder, the installed ``apf-mpc run planner=baseline`` exits 0 and writes a
     run folder with its manifest, the package and its configs read from the install; every
-    console script the package declares answers ``--help``."""
+    console script the package declares answers ``--help``, and so does every command of
+    ``apf-mpc``."""
     venv, empty, _ = installed
     python = venv / "bin" / "python"
-    proc = subprocess.run([str(python), "-m", "pipeline.run", "planner=baseline"], cwd=empty,
+    proc = subprocess.run([str(venv / "bin" / "apf-mpc"), "run", "planner=baseline"], cwd=empty,
                           capture_output=True, text=True, timeout=300)
     assert proc.returncode == 0, proc.stderr[-2000:]
     assert list(empty.glob("outputs/runs/*/baseline/*/manifest.json"))
@@ -82,10 +83,17 @@ def test_wheel_installs_and_runs_from_an_empty_folder(installed):
     assert all(str(venv) in line for line in where)
     scripts = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]["scripts"]
     assert scripts
-    for command in scripts:
-        proc = subprocess.run([str(venv / "bin" / command), "--help"], cwd=empty,
-                              capture_output=True, text=True, timeout=120)
-        assert proc.returncode == 0, (command, proc.stderr[-1000:])
+    assert list(scripts) == ["apf-mpc"]  # one command (aliases: python -m pipeline.<name>)
+    from pipeline.cli import COMMANDS
+
+    listed = subprocess.run([str(venv / "bin" / "apf-mpc"), "--help"], cwd=empty,
+                            capture_output=True, text=True, timeout=120)
+    assert listed.returncode == 0 and all(f"  {c.name}" in listed.stdout for c in COMMANDS)
+    for command in COMMANDS:
+        proc = subprocess.run([str(venv / "bin" / "apf-mpc"), command.name, "--help"],
+                              cwd=empty, capture_output=True, text=True, timeout=120)
+        assert proc.returncode == 0 and "usage" in proc.stdout.lower(), \
+            (command.name, proc.stderr[-1000:])
 
 
 def test_every_method_preset_runs_from_the_installed_wheel(installed):
