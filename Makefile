@@ -22,7 +22,7 @@ PEERS_JOBS ?= 1
 PEDESTRIANS_FAMILY_SIZE ?= 200
 # the variants of make pedestrians (conf/experiment/pedestrians_<variant>.yaml) and their size
 PEDESTRIANS_VARIANTS ?= car aimed reactive
-PEDESTRIANS_VARIANT_SIZE ?= 60
+PEDESTRIANS_VARIANTS_FAMILY_SIZE ?= 60
 REPORT      ?= reports/latest
 PYTEST_ARGS ?=
 PYTEST_JOBS ?= auto
@@ -149,7 +149,7 @@ pedestrians: $(STAMP)  ## improved and baseline among recorded pedestrians (ETH/
 	rm -rf $(RUNS)/pedestrians $(RUNS)/pedestrians_variants
 	$(APF) run experiment=pedestrians hydra.sweep.dir=$(RUNS)/pedestrians scenario.family.size=$(PEDESTRIANS_FAMILY_SIZE)
 	for variant in $(PEDESTRIANS_VARIANTS); do \
-	  $(APF) run experiment=pedestrians_$$variant hydra.sweep.dir=$(RUNS)/pedestrians_variants/$$variant scenario.family.size=$(PEDESTRIANS_VARIANT_SIZE) || exit $$?; \
+	  $(APF) run experiment=pedestrians_$$variant hydra.sweep.dir=$(RUNS)/pedestrians_variants/$$variant scenario.family.size=$(PEDESTRIANS_VARIANTS_FAMILY_SIZE) || exit $$?; \
 	done
 	$(MAKE) report
 

@@ -18,7 +18,7 @@ import pytest
 
 from pipeline.errors import plain_value
 from pipeline.nmpc_check import main as nmpc_main
-from pipeline.store.study_lock import study_lock
+from pipeline.store.lock import folder_lock
 from pipeline.tune import main as tune_main
 
 
@@ -68,7 +68,7 @@ def test_an_nmpc_check_into_a_folder_a_study_is_writing_is_refused(tmp_path, cap
     in D: exit 2, ``error: D is in use by another study (tune quick, pid N on HOST); wait for
     it to finish or choose another --out``."""
     out = tmp_path / "busy"
-    with study_lock(out, holder):
+    with folder_lock(out, holder):
         assert nmpc_main(["--members", "1", "--track", "lateral", "--out", str(out)]) == 2
     line = _one_line(capsys)
     assert line.startswith(f"error: {out} is in use by another study ({holder}, pid "), line

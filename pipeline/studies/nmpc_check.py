@@ -174,12 +174,11 @@ def nmpc_agreement(compose, out_dir: Path, n_members: int = 50, log=logger.info,
     docstring)."""
     from pipeline.store.lock import folder_lock
     from pipeline.store.manifest import refuse_other_record
-    from pipeline.store.study_lock import study_lock
 
     out_dir = Path(out_dir)
     refuse_other_record(out_dir, ("nmpc_check",))
     # a second check, or a tune or multiverse, on the same folder is refused at once
-    with folder_lock(out_dir), study_lock(out_dir, "nmpc_check"):
+    with folder_lock(out_dir, "nmpc_check"):
         return _agreement(compose, out_dir, n_members, log, tracks, n_jobs)
 
 

@@ -10,10 +10,10 @@ import pandas as pd
 
 from pipeline.analysis.claims.windows import require_own_window
 from pipeline.config import MetricsConfig
+from pipeline.store.lock import folder_lock
 from pipeline.store.manifest import refuse_other_record
 from pipeline.store.member_cache import MemberCounts
 from pipeline.store.runs import read_family
-from pipeline.store.study_lock import study_lock
 from pipeline.studies.compose import composer
 from pipeline.studies.multiverse.design import (
     analysis_settings,
@@ -47,7 +47,7 @@ def run_multiverse(space: Space, out_dir: Path, overrides: list[str] | None = No
     refuse_controlled(list(overrides or []), controlled_keys(space), "multiverse")
     refuse_other_record(out_dir, ("multiverse",))
     # one study per folder at a time (a second is refused in one line), for as long as it runs
-    with study_lock(out_dir, f"multiverse {space.name}"):
+    with folder_lock(out_dir, f"multiverse {space.name}"):
         return _run_multiverse(space, out_dir, list(overrides or []), n_jobs, log)
 
 

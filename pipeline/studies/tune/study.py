@@ -54,8 +54,8 @@ from pipeline.analysis.objectives import CENSORED_AT_RUN_END, objective_values, 
 from pipeline.analysis.tally import Tally, collided
 from pipeline.errors import StudyError
 from pipeline.store.files import json_safe
+from pipeline.store.lock import folder_lock
 from pipeline.store.manifest import refuse_other_record, untrust
-from pipeline.store.study_lock import study_lock
 from pipeline.studies.overrides import PRESET_GROUPS, applied_overrides, refuse_controlled
 from pipeline.studies.results.tune import TuneResult, TuneSummary
 from pipeline.studies.tune.pareto import (
@@ -115,7 +115,7 @@ def run_tuning(space: TuneSpace, out_dir: Path, overrides: list[str] | None = No
     refuse_other_record(out_dir, ("tune",))
     out_dir.mkdir(parents=True, exist_ok=True)
     # one study per folder at a time (a second is refused in one line), for as long as it runs
-    with study_lock(out_dir, f"tune {space.name}"):
+    with folder_lock(out_dir, f"tune {space.name}"):
         return _run_tuning(space, out_dir, spaces, list(overrides or []), log)
 
 
