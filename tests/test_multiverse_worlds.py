@@ -148,7 +148,7 @@ WORLD_SPACE = Space("planted", (
               settings=({"vehicle.mass_kg": 1500.0}, {"vehicle.mass_kg": 1800.0})),
     Dimension("planner.beta", "simulation", (0.25, 1.0), ("improved",)),
     Dimension("claims.estimator", "analysis", ("hodges_lehmann", "median")),
-), n_specifications=24, simulation_pool=6)
+), n_specifications=18, simulation_pool=6)  # all it can draw: 6 + 6 x 2
 
 
 def test_the_robustness_section_names_the_scenario_a_claim_flips_under():
