@@ -76,7 +76,12 @@ def main(argv: list[str] | None = None) -> int:
         print(f"error: apf-mpc has no command {args[0]!r}; allowed: "
               f"{', '.join(by_name)} (apf-mpc --help)", file=sys.stderr)
         return 2
-    module = importlib.import_module(command.module)
+    try:
+        module = importlib.import_module(command.module)
+    except KeyboardInterrupt:
+        # Ctrl-C while the command's imports load (numpy, Hydra, the solvers: about a
+        # second): nothing has run, nothing is written; no traceback (make -j9 printed nine)
+        return 130
     if command.hydra:
         # Hydra reads sys.argv: the module's own path first, as `python -m` sets it
         sys.argv = [str(module.__file__), *args[1:]]

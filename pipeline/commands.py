@@ -161,6 +161,7 @@ def run_command(work: Callable[[], int | None], kept: str = "completed runs and 
     if log_to_stderr:
         configure_logging()
     restore_signals = stop_on_signals()
+    restore_hook = _quiet_unraisable_interrupts()
     try:
         try:
             code = work()
@@ -185,7 +186,30 @@ def run_command(work: Callable[[], int | None], kept: str = "completed runs and 
             return found[1]
     finally:
         restore_signals()
+        restore_hook()
     return 0 if code is None else int(code)
+
+
+def _quiet_unraisable_interrupts() -> Callable[[], None]:
+    """While a command runs, an interrupt raised where Python cannot raise it (a signal
+    handled inside a ``__del__`` or a weakref callback: ``Exception ignored in ...`` and its
+    traceback) is not printed: the handler remembered it and the command stops with its one
+    line (:func:`~pipeline.errors.raise_if_stopped`). Every other unraisable exception is
+    printed as before. Returns the function that puts the previous hook back."""
+    previous = sys.unraisablehook
+
+    def hook(unraisable) -> None:
+        if isinstance(unraisable.exc_value, KeyboardInterrupt):
+            return
+        previous(unraisable)
+
+    sys.unraisablehook = hook
+
+    def restore() -> None:
+        if sys.unraisablehook is hook:
+            sys.unraisablehook = previous
+
+    return restore
 
 
 def run_task(work: Callable[[], T], **options) -> T:

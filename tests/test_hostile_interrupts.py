@@ -179,3 +179,59 @@ def test_joblibs_workers_are_stopped_through_psutil():
     from joblib.externals.loky.backend import utils
 
     assert utils.psutil is not None
+
+
+def test_an_interrupt_raised_inside_a_finalizer_prints_no_traceback():
+    """A signal handled while Python runs a ``__del__`` cannot raise there: Python printed
+    ``Exception ignored in ...`` and the interrupt's traceback (once, after a tune's SIGTERM:
+    ``pipeline.errors.Interrupted: 15``). Under a command it is not printed (the command stops
+    with its one line); any other exception in a finalizer still is. (A subprocess: pytest
+    takes the unraisable hook over in its own process.)"""
+    code = (
+        "import gc, signal, sys\n"
+        "from pipeline.commands import run_command\n"
+        "from pipeline.errors import Interrupted\n"
+        "class Finalized:\n"
+        "    def __init__(self, error): self.error = error\n"
+        "    def __del__(self): raise self.error\n"
+        "def work():\n"
+        "    quiet = Finalized(Interrupted(signal.SIGTERM)); del quiet\n"
+        "    loud = Finalized(ValueError(\"a finalizer's own bug\")); del loud\n"
+        "    gc.collect(); return 0\n"
+        "sys.exit(run_command(work))\n")
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                          timeout=120, cwd=ROOT)
+    assert proc.returncode == 0, proc.stderr
+    assert "Interrupted" not in proc.stderr and "a finalizer's own bug" in proc.stderr
+
+
+def test_a_stopped_pool_prints_nothing_from_loky_s_thread(make_config, tmp_path):
+    """A tune stopped mid-rung stops its family pool with tasks queued: every task settled by
+    the executor's shutdown before ``stop()`` returns, none cancelled (a future cancelled
+    before the shutdown made loky's manager thread raise ``InvalidStateError: CANCELLED``
+    after the command's stop line), nothing raised in any thread."""
+    import threading
+
+    from pipeline.loop.controller import QpCache
+    from pipeline.store.member_cache import MemberCounts
+    from pipeline.studies.family_pool import FamilyPool
+
+    raised: list[BaseException] = []
+    previous = threading.excepthook
+    threading.excepthook = lambda args: raised.append(args.exc_value)
+    try:
+        cfg = make_config(["method=improved", "scenario=family", "scenario.family.size=24",
+                           "controller.backend=daqp"])
+        pool = FamilyPool(2, QpCache(), None, MemberCounts())
+        pool.submit(cfg, tmp_path / "family", lambda: None)
+        futures = list(pool._futures)
+        assert len(futures) >= 2
+        pool.stop()
+        # settled by the shutdown before stop() returned, none cancelled: loky's thread has
+        # nothing left to set on a cancelled future later
+        assert all(f.done() and not f.cancelled() for f in futures)
+        time.sleep(0.5)
+    finally:
+        threading.excepthook = previous
+    assert raised == []
+    assert not pool._futures

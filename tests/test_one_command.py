@@ -60,3 +60,17 @@ def test_run_is_hydras_application_with_its_exit_codes(tmp_path, capsys):
     assert main(["run", "scenario.n_steps=-1", f"hydra.run.dir={tmp_path / 'bad'}"]) == 2
     err = capsys.readouterr().err
     assert "scenario.n_steps=-1" in err and "allowed: an integer >= 1" in err
+
+
+def test_ctrl_c_while_a_command_imports_is_exit_130_without_a_traceback(monkeypatch, capsys):
+    """Ctrl-C during a command's start-up (its imports) ended in a KeyboardInterrupt
+    traceback per process (nine under make reproduce's -j9); now exit 130, nothing printed."""
+    import importlib
+
+    def interrupted(name, *args, **kwargs):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(importlib, "import_module", interrupted)
+    assert main(["report", "outputs"]) == 130
+    captured = capsys.readouterr()
+    assert captured.err == "" and captured.out == ""

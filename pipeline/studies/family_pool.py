@@ -223,10 +223,13 @@ class FamilyPool:
         self._parallel.__exit__(None, None, None)
 
     def stop(self) -> None:
-        """Cancel what has not started and stop the workers (an interrupted tune)."""
-        for future in self._futures:
-            future.cancel()
+        """Stop the workers and drop what they had (an interrupted tune). The futures are not
+        cancelled: loky's manager thread settles each one as the executor shuts down, and
+        one cancelled first raised ``InvalidStateError: CANCELLED`` from that thread after
+        the command's stop line; the shutdown waits for the thread, so nothing is printed
+        after it."""
         if self.executor is not None:
-            self.executor.shutdown(wait=False, kill_workers=True)
+            self.executor.shutdown(wait=True, kill_workers=True)
+        self._futures.clear()
         self.close()
 
