@@ -167,6 +167,8 @@ def _run_tuning(space: TuneSpace, out_dir: Path, spaces: dict, overrides: list[s
             f"untuned {reference})")
         entries.extend(TunedStudy(replicate, method, loops[replicate, method], threshold)
                        for method in space.methods)
+    # a resumed tune's stored trials are checked against the families they came from
+    check_stored_trials(runner, entries, measure, out_dir / "tune.db")
     if runner.local:
         # every study's batches side by side on one pool: the cores never wait for the
         # parent's asks, compositions and records between batches
@@ -212,6 +214,45 @@ def _run_tuning(space: TuneSpace, out_dir: Path, spaces: dict, overrides: list[s
     summary = TuneSummary.from_json(json_safe(data))
     return TuneResult(summary, trials, judged.heldout, judged.default.to_frame(),
                       judged.tuned_frame(), judged.outcomes).write(out_dir)
+
+
+def check_stored_trials(runner: Runner, entries: list[TunedStudy],
+                        measure: Callable[[pd.DataFrame], tuple[list[float], int]],
+                        store: Path) -> None:
+    """A resumed tune's complete trials against their sources: each one's training family
+    (at the members it ran, :class:`~pipeline.studies.tune.search.Runner`'s folder, read back
+    through its manifest, or simulated again where it is gone or damaged) gives its objective
+    values again, and they must be the stored ones (to 1e-9): an edited store once changed the
+    tuned answer without a word.
+
+    Raises
+    ------
+    StudyError
+        A trial whose stored values are not its family's, in one line naming the store, the
+        trial and both values.
+    """
+    import optuna
+
+    stored = [(entry, trial) for entry in entries
+              for trial in entry.loop.study.get_trials(deepcopy=False,
+                                                       states=(optuna.trial.TrialState.COMPLETE,))]
+    if not stored:
+        return
+    jobs = [runner.job(entry.method, "trial", dict(trial.params), "training", entry.replicate,
+                       members=int(trial.user_attrs.get("members",
+                                                        runner.space.training_size)))
+            for entry, trial in stored]
+    tables = runner.run(jobs, f"{len(jobs)} stored trials, checked against their families",
+                        "training")
+    for (entry, trial), job, table in zip(stored, jobs, tables, strict=True):
+        fresh, _ = measure(table)
+        kept = [float(v) for v in trial.values]
+        if not np.allclose(fresh, kept, rtol=1e-9, atol=1e-12, equal_nan=True):
+            raise StudyError(
+                f"{store}: trial {trial.number} of replicate {entry.replicate}, "
+                f"{entry.method} holds objective values {kept} but its training family "
+                f"({job.folder}) gives {[float(v) for v in fresh]}: the store was edited or "
+                "damaged; remove it to tune again (the families are kept and reused)")
 
 
 def family_measure(space: TuneSpace) -> Callable[[pd.DataFrame], tuple[list[float], int]]:
