@@ -236,9 +236,11 @@ install-commonroad: $(STAMP)  ## add the optional CommonRoad extra (commonroad-i
 COMMONROAD ?=
 commonroad: $(STAMP)  ## improved and baseline on a CommonRoad scenario: make commonroad COMMONROAD=path/to/scenario.xml (needs make install-commonroad)
 	@test -n "$(COMMONROAD)" || { echo "error: set COMMONROAD=path/to/scenario.xml" >&2; exit 2; }
-	@for method in improved baseline; do \
-	  $(APF) run scenario=commonroad scenario.commonroad.path=$(abspath $(COMMONROAD)) \
-	    method=$$method hydra.run.dir=$(RUNS)/commonroad/$(basename $(notdir $(COMMONROAD)))/$$method || exit $$?; \
+	@# quoted for Hydra, so that a path with spaces is one value (it was a parse error)
+	@path="$$(realpath -m -- "$(COMMONROAD)")"; name="$$(basename -- "$$path")"; name="$${name%.*}"; \
+	for method in improved baseline; do \
+	  $(APF) run scenario=commonroad "scenario.commonroad.path='$$path'" \
+	    method=$$method "hydra.run.dir='$(RUNS)/commonroad/$$name/$$method'" || exit $$?; \
 	done
 
 cache-size: $(STAMP)  ## what the member cache holds (members, files, MB)

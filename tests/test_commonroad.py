@@ -379,3 +379,20 @@ def test_a_goal_beyond_the_run_bound_is_named_as_the_files_goal(tmp_path, make_s
         message.replace("scenario.commonroad.n_steps", "")
     case = read_commonroad(make_scenario_config(f"'{path}'", "scenario.commonroad.n_steps=50"))
     assert case.scenario_config.n_steps == 50
+
+
+@needs_extra
+def test_make_commonroad_takes_a_path_with_spaces(tmp_path):
+    """``make commonroad COMMONROAD='a dir/my scene.xml'`` quotes the path for Hydra (it was a
+    parse error) and names the runs' folder after the file (issue 62, item 10)."""
+    import subprocess
+
+    root = Path(__file__).resolve().parent.parent
+    (tmp_path / "a dir").mkdir()
+    path = write_scenario(tmp_path / "a dir" / "my scene.xml")
+    proc = subprocess.run(["make", "--no-print-directory", "commonroad", f"COMMONROAD={path}",
+                           f"RUNS={tmp_path / 'out'}"], cwd=root, capture_output=True,
+                          text=True, timeout=600)
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    for method in ("improved", "baseline"):
+        assert (tmp_path / "out" / "commonroad" / "my scene" / method / "manifest.json").is_file()

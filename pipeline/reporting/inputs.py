@@ -317,7 +317,7 @@ class ReportInputs:
             pedestrians, variants = _pedestrian_families(layout, optional, skipped) \
                 if families else (None, {})
             if families:
-                skipped.append(Skipped(layout.folder("paper"), _ALONE_REASON))
+                skipped.extend(_alone_skipped(layout))
             return cls(run_root, layout, claims, sweeps=sweeps, bench=bench,
                        skipped=tuple(skipped), commonroad=commonroad,
                        pedestrians=pedestrians, pedestrian_variants=variants)
@@ -496,10 +496,30 @@ _ALONE_REASON = ("the paper scenario, the scenario family and the sections judge
                  "make reproduce writes them")
 
 
+#: Sections whose folders a report lists without the paper scenario, each with why it cannot
+#: be shown alone (None: it can) and what makes what it needs.
+_ALONE_SECTIONS = {
+    "pedestrians": None, "pedestrians_variants": None, "commonroad": None,
+    "peers": "the methods the paper names are judged against improved on the scenario "
+             "family, which is not here; make reproduce writes it",
+    "kinematic_peers": "the methods the paper names (Appendix-A track) are judged against "
+                       "improved on the Appendix-A family, which is not here; make reproduce "
+                       "writes it"}
+
+
 def _families_alone(layout: OutputsLayout) -> bool:
-    """Whether the outputs hold families a report can show without the paper scenario (the
-    recorded-pedestrian ones: ``make pedestrians`` on a fresh clone)."""
-    return layout.folder("pedestrians").is_dir() or layout.folder("pedestrians_variants").is_dir()
+    """Whether the outputs hold something a report can show, or list, without the paper
+    scenario (``make pedestrians``, ``make peers`` or ``make commonroad`` on a fresh
+    clone)."""
+    return any(layout.folder(section).is_dir() for section in _ALONE_SECTIONS)
+
+
+def _alone_skipped(layout: OutputsLayout) -> list[Skipped]:
+    """The sections of a report without the paper scenario that cannot be shown, each with
+    the command that makes what it needs."""
+    return [Skipped(layout.folder("paper"), _ALONE_REASON)] + [
+        Skipped(layout.folder(section), reason) for section, reason in _ALONE_SECTIONS.items()
+        if reason is not None and layout.folder(section).is_dir()]
 
 
 def _pedestrian_families(layout: OutputsLayout, optional: _Optional, skipped: list[Skipped]

@@ -1,0 +1,42 @@
+"""A report of what exists (issue 62, item 7): ``make pedestrians`` and ``make peers`` on a
+fresh clone failed at their report step ("no complete run folders") because the report needed
+make reproduce's runs beside them. Now the report shows what it can (the pedestrian section)
+and lists what it cannot with the command that makes it."""
+
+from __future__ import annotations
+
+import pandas as pd
+
+
+def test_pedestrian_families_alone_make_a_page_with_their_section(make_config, tmp_path):
+    from pipeline.reporting.page import build_report
+    from pipeline.studies.experiment import run_family
+
+    root = tmp_path / "outputs"
+    for planner in ("baseline", "improved"):
+        run_family(make_config(["experiment=pedestrians", f"planner={planner}",
+                                "scenario.family.size=4", "scenario.family.n_jobs=1"]),
+                   root / "pedestrians" / planner, progress=False, member_cache=None)
+    out = tmp_path / "report"
+    build_report(root, out, "pytest", figure_jobs=1)
+    html = (out / "index.html").read_text()
+    assert 'id="pedestrians"' in html and 'id="pedestrians-metrics"' in html
+    assert "make reproduce writes them" in html  # the sections it cannot show, and how
+    metrics = pd.read_csv(out / "tables" / "pedestrians_metrics.csv")
+    assert sorted(metrics["method"]) == ["baseline", "improved"]
+    assert set(metrics["crossings"]) == {4}
+
+
+def test_peer_families_alone_are_listed_as_needing_the_scenario_family(make_config, tmp_path):
+    from pipeline.reporting.page import build_report
+    from pipeline.studies.experiment import run_family
+
+    root = tmp_path / "outputs"
+    run_family(make_config(["method=vo", "scenario=family", "scenario.family.size=3",
+                            "scenario.family.n_jobs=1"]), root / "peers" / "vo",
+               progress=False, member_cache=None)
+    out = tmp_path / "report"
+    build_report(root, out, "pytest", figure_jobs=1)
+    html = (out / "index.html").read_text()
+    assert "judged against improved on the scenario family, which is not here" in html
+    assert "make reproduce writes it" in html
