@@ -32,7 +32,7 @@ from pipeline.loop.settings import (
     VehicleConfig,
 )
 from pipeline.register import INTERPRETATION_REGISTER, RegisterEntry
-from pipeline.validation import FrozenAfterValidation, safe_name
+from pipeline.validation import FrozenAfterValidation, choice, safe_name
 
 __all__ = ["CONF_DIR", "ClaimsConfig", "Objective", "TuneConfig", "schema_from_data", "ConfigError", "ControllerConfig", "ExperimentConfig", "FamilyConfig",
            "INTERPRETATION_REGISTER", "MAX_HORIZON", "MetricsConfig", "ModelConfig",
@@ -59,11 +59,25 @@ class RunConfig(FrozenAfterValidation):
     seed: int = 0
     method: str = ""
     variant: str = "default"
+    # presentation (pipeline.methods): a method's label, the work it comes from, its colour
+    # (#rrggbb), its place in tables and legends and its role; never in the config hash
+    label: str = ""
+    citation: str = ""
+    color: str = ""
+    order: int = 1000
+    role: str = ""
 
     def __post_init__(self) -> None:
         if self.method:
             safe_name("run.method", self.method)
         safe_name("run.variant", self.variant)
+        if self.color and not (len(self.color) == 7 and self.color[0] == "#"
+                               and all(c in "0123456789abcdefABCDEF" for c in self.color[1:])):
+            raise ConfigError("run.color", self.color, "a colour #rrggbb, or empty")
+        choice("run.role", self.role, ("", "treatment", "control", "peer", "reference"))
+        if isinstance(self.order, bool) or not isinstance(self.order, int) \
+                or not 0 <= self.order <= 1000:
+            raise ConfigError("run.order", self.order, "an integer in [0, 1000]")
 
 
 @dataclass
@@ -147,6 +161,9 @@ class ExperimentConfig(FrozenAfterValidation):
 def _hash_of(data: dict) -> str:
     """:meth:`ExperimentConfig.config_hash` of ``asdict(config)`` (``data`` is not changed)."""
     data = {k: v for k, v in data.items() if k not in ("claims", "tune", "features")}
+    # a method's presentation (label, citation, colour, order, role) changes no run
+    data["run"] = {k: v for k, v in dict(data.get("run") or {}).items()
+                   if k not in ("label", "citation", "color", "order", "role")}
     for section in ("planner", "controller"):
         data[section] = dict(data[section])
     data["scenario"] = ScenarioConfig.hash_view(data["scenario"])

@@ -57,19 +57,18 @@ log = logging.getLogger("pipeline.reporting")
 
 T = TypeVar("T")
 
-#: Known methods first, in this order, on every table and figure.
-METHOD_ORDER = ("baseline", "baseline_matched", "improved", "velocity_aware", "mpc_no_apf",
-                "apf_pursuit", "mpc_dcbf", "cbf_filter", "vo", "dwa")
 #: What an optional input that cannot be read may raise (it is then skipped, with its reason).
 UNREADABLE = (OSError, ValueError, KeyError, TypeError, IndexError, pd.errors.ParserError)
 
 
 def ordered(methods) -> list[str]:
-    """Known methods first in their order, labelled variants right after their method."""
+    """Registered methods first in their order (``run.order`` of their presets,
+    :mod:`pipeline.methods`), labelled variants right after their method."""
+    from pipeline.methods import method_info
+
     def rank(label: str) -> tuple:
         base = label.split(" (")[0].split(" #")[0]
-        return (METHOD_ORDER.index(base) if base in METHOD_ORDER else len(METHOD_ORDER),
-                base, label != base, label)
+        return (method_info(base).order, base, label != base, label)
 
     return sorted(dict.fromkeys(methods), key=rank)
 

@@ -8,7 +8,7 @@ Nothing here simulates. Modules: :mod:`.runs`, :mod:`.claims`, :mod:`.studies`,
 """
 
 from pipeline.reporting.figures.claims import claim_differences_figure, family_distribution_figure
-from pipeline.reporting.figures.colors import EXTRA_COLORS, METHOD_COLORS, method_color
+from pipeline.reporting.figures.colors import EXTRA_COLORS, method_color
 from pipeline.reporting.figures.runs import (
                                                apf_force_figure,
                                                avoidance_window,
@@ -29,7 +29,7 @@ from pipeline.reporting.figures.studies import (
 )
 from pipeline.reporting.figures.writer import FigureWriter, figure_paths, save_figure
 
-__all__ = ["EXTRA_COLORS", "METHOD_COLORS", "SWEEP_METRICS", "FigureWriter",
+__all__ = ["EXTRA_COLORS", "SWEEP_METRICS", "FigureWriter",
            "ablation_forest_figure", "apf_force_figure", "avoidance_window",
            "bench_scaling_figure", "claim_differences_figure", "closest_approach",
            "family_distribution_figure", "figure_paths", "method_color", "overlay_figure",

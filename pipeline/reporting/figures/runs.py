@@ -12,7 +12,7 @@ import pandas as pd
 from matplotlib.figure import Figure
 from matplotlib.patches import Circle
 
-from pipeline.reporting.figures.colors import EXTRA_COLORS, METHOD_COLORS, method_color  # noqa: F401
+from pipeline.reporting.figures.colors import EXTRA_COLORS, method_color  # noqa: F401
 
 
 def _obstacle_indices(trajectory: pd.DataFrame) -> list[int]:

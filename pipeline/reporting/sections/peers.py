@@ -16,13 +16,18 @@ from pipeline.reporting.movers import ledger_movers
 from pipeline.reporting.sections.family import ledger_groups
 from pipeline.reporting.verdicts import PeerVerdicts, Verdicts
 
-#: Each peer's name on the page and the paper it comes from.
-PEER_NAMES = {
-    "mpc_dcbf": "MPC with discrete-time CBFs (Zeng, Zhang and Sreenath, ACC 2021)",
-    "cbf_filter": "MPC without APF behind a CBF-QP safety filter (Ames et al., ECC 2019)",
-    "vo": "velocity obstacles feeding the same MPC (Fiorini and Shiller, IJRR 1998)",
-    "dwa": "the dynamic window approach (Fox, Burgard and Thrun, IEEE RAM 1997)",
-}
+
+def peer_title(method: str, inputs: ReportInputs) -> str:
+    """A peer's name on the page and the work it comes from: its runs' own ``run.label`` and
+    ``run.citation`` (a peer of one's own brings them), else its preset's
+    (:mod:`pipeline.methods`)."""
+    from pipeline.methods import method_info
+
+    for family in (inputs.peers, inputs.kinematic_peers):
+        settings = family.settings.get(method) if family is not None else None
+        if settings is not None:
+            return method_info(method, settings.run).title
+    return method_info(method).title
 
 
 @dataclass(frozen=True)
@@ -77,12 +82,13 @@ class PeerTuned:
 
 
 def tuned_peers(inputs: ReportInputs) -> tuple[PeerTuned, ...]:
-    """Every peer tuning the report read, in :data:`PEER_NAMES`' order."""
+    """Every peer tuning the report read, in the methods' order (:mod:`pipeline.methods`)."""
+    from pipeline.methods import method_info
+
     out = []
-    order = {m: i for i, m in enumerate(PEER_NAMES)}
     # a peer on the Appendix-A track is tuned as its method preset <peer>_kinematic
     for peer, result in sorted(inputs.peer_tunes.items(), key=lambda kv: (
-            order.get(kv[0].removesuffix("_kinematic"), len(order)), kv[0])):
+            method_info(kv[0].removesuffix("_kinematic")).order, kv[0])):
         summary = result.summary
         rows = tuple({"claim": c.claim, "untuned": c.default, "tuned": c.tuned,
                       "counts": c.counts} for c in summary.claims)
@@ -175,7 +181,7 @@ def peers_section(inputs: ReportInputs, verdicts: Verdicts) -> PeersSection | No
     tracks = tuple(_track(judged, inputs) for judged in verdicts.peers)
     shown = dict.fromkeys(m for t in tracks for m in t.peers)
     return PeersSection(verdicts.claims.treatment, tracks,
-                        tuple((m, PEER_NAMES.get(m, m)) for m in shown),
+                        tuple((m, peer_title(m, inputs)) for m in shown),
                         tuple(summary_sentence(judged, t.size)
                               for judged, t in zip(verdicts.peers, tracks, strict=True)),
                         tuned_peers(inputs))

@@ -9,15 +9,22 @@ import numpy as np
 
 from pipeline.studies.bench.inputs import compose_config, floor_times, recorded_sparse_qps
 
-#: Per track: improved's overrides, then each peer's method preset.
-NAMED_PEERS = {
-    "lateral": (["method=improved"], {"mpc_dcbf": ["method=mpc_dcbf"],
-                                      "cbf_filter": ["method=cbf_filter"],
-                                      "vo": ["method=vo"]}),
-    "kinematic": (["experiment=kinematic", "planner=improved"],
-                  {name: ["experiment=kinematic", f"method={name}_kinematic"]
-                   for name in ("mpc_dcbf", "cbf_filter", "vo", "dwa")}),
-}
+
+def named_peers() -> dict[str, tuple[list[str], dict[str, list[str]]]]:
+    """Per track: improved's overrides, then each peer's method preset: every method whose
+    role is ``peer`` (:mod:`pipeline.methods`), on the lateral track through its preset of its
+    own name and on the Appendix-A track through ``<name>_kinematic`` (where it has one)."""
+    from pipeline.methods import method_registry
+
+    peers = sorted((info for info in method_registry().values() if info.role == "peer"),
+                   key=lambda info: info.order)
+    return {
+        "lateral": (["method=improved"], {p.name: [f"method={p.name}"] for p in peers
+                                          if p.name in p.presets}),
+        "kinematic": (["experiment=kinematic", "planner=improved"],
+                      {p.name: ["experiment=kinematic", f"method={p.name}_kinematic"]
+                       for p in peers if f"{p.name}_kinematic" in p.presets}),
+    }
 
 
 def _step_s(overrides: list[str], repeats: int) -> tuple[float, int]:
@@ -46,7 +53,7 @@ def bench_named_peers(repeats: int = 3) -> dict:
     over the sparse floor per step of improved's QPs (improved's own under
     ``improved_step_over_sparse_floor``)."""
     found: dict = {}
-    for track, (improved, peers) in NAMED_PEERS.items():
+    for track, (improved, peers) in named_peers().items():
         improved_s, _ = _step_s(improved, repeats)
         found[f"improved_step_us_{track}"] = 1e6 * improved_s
         floor_s = None
