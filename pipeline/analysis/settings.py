@@ -77,26 +77,26 @@ class MetricsConfig(FrozenAfterValidation):
                               "an integer in [0, 10]")
 
 
-#: Every claim of the ledger, in order: safety first, C3 as Table 2's two halves.
-CLAIM_IDS = ("C0", "C1", "C2", "C3a", "C3b", "C4", "C5")
+def _claim_ids() -> tuple[str, ...]:
+    """Every claim's id (the catalogue's: ``pipeline.analysis.claims.catalogue``, read when
+    a config is made: the claims package imports this module)."""
+    from pipeline.analysis.claims.catalogue import CLAIM_IDS
+
+    return CLAIM_IDS
 
 
 def _default_margins() -> dict[str, Any]:
-    return {"C0": 0.02, "C1": 0.05, "C2": 0.1, "C3a": 0.05, "C3b": 0.1, "C4": 0.1, "C5": 0.5}
+    """Each claim's margin as the catalogue states it (one place: its Claim entry)."""
+    from pipeline.analysis.claims.catalogue import ALL_CLAIMS
+
+    return {c.claim_id: c.margin for c in ALL_CLAIMS}
 
 
 def _default_margin_reasons() -> dict[str, Any]:
-    return {
-        "C0": "two percentage points of collision rate: four scenarios in 200, below what one "
-              "reading of a threshold moves",
-        "C1": "half a sample time (Ts = 0.1 s): the resolution the paper's 10 Hz loop can act on",
-        "C2": "0.1 m/s^3 of RMS lateral jerk, about 5 % of the values measured here and well "
-              "below what a passenger notices",
-        "C3a": "5 percentage points of the repulsive impulse",
-        "C3b": "one sample time (0.1 s) of time to contact at the onset of repulsion",
-        "C4": "one sample time (0.1 s) of settling time",
-        "C5": "half a reversal of the lateral error: any systematic extra reversal exceeds it",
-    }
+    """Why each claim's margin is what it is, as the catalogue states it."""
+    from pipeline.analysis.claims.catalogue import ALL_CLAIMS
+
+    return {c.claim_id: c.margin_reason for c in ALL_CLAIMS}
 
 
 @dataclass
@@ -177,12 +177,13 @@ class ClaimsConfig(FrozenAfterValidation):
         choice("claims.c2_window", self.c2_window, ("own", "common"))
         choice("claims.common_window", self.common_window, ("union", "intersection"))
         at_least("claims.tie_tolerance", self.tie_tolerance, 0.0)
-        unknown = sorted(set(self.margins) - set(CLAIM_IDS))
+        claim_ids = _claim_ids()
+        unknown = sorted(set(self.margins) - set(claim_ids))
         if unknown:
             raise ConfigError(f"claims.margins.{unknown[0]}", self.margins[unknown[0]],
-                              "a margin for one of " + ", ".join(CLAIM_IDS))
+                              "a margin for one of " + ", ".join(claim_ids))
         between("claims.floor_tie_share", self.floor_tie_share, 0.0, 1.0)
-        for claim in CLAIM_IDS:
+        for claim in claim_ids:
             if claim not in self.margins:
                 raise ConfigError(f"claims.margins.{claim}", None, "a margin >= 0 per claim")
             at_least(f"claims.margins.{claim}", self.margins[claim], 0.0)

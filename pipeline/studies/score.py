@@ -21,6 +21,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from pipeline.analysis.claims.catalogue import CLAIM_OF_METRIC
 from pipeline.loop.trajectory import OBSTACLE_COLUMN, REQUIRED, STATE
 
 #: Optional columns a scored file may carry: the state (else derived from the path) and the APF
@@ -337,10 +338,8 @@ DERIVED_FROM_PATH = (
      ("recovery_heading_s", "max_abs_heading_error_rad", "heading_step_max_rad",
       "heading_validity_exceeded")),
 )
-#: The claim whose primary metric a key is (for the messages).
-CLAIM_OF = {"collision": "C0", "reaction_delay_s": "C1", "lateral_jerk_rms_mps3": "C2",
-            "repulsion_unneeded_share": "C3a", "repulsion_onset_ttc_s": "C3b",
-            "recovery_time_s": "C4", "oscillation_count": "C5"}
+#: The claim whose primary metric a key is (for the messages): the catalogue's.
+CLAIM_OF = CLAIM_OF_METRIC
 
 
 def score_quality(columns) -> tuple[dict[str, str], dict[str, str]]:

@@ -25,6 +25,10 @@ class Claim:
     definition: str = ""
     #: "paired" (a paired difference of a metric) or "rate" (a rate of events, e.g. C0)
     kind: str = "paired"
+    #: the smallest effect of interest (units of the primary metric; C0: a rate difference),
+    #: the default of ``claims.margins.<id>``, and why it is what it is
+    margin: float = 0.0
+    margin_reason: str = ""
 
     @property
     def is_rate(self) -> bool:
@@ -45,7 +49,10 @@ CLAIMS: tuple[Claim, ...] = (
                      "vehicle's straight continuation (within both radii + threat_margin_m, "
                      "threat_horizon_s ahead) until the steering angle first leaves a band of "
                      "reaction_steering_band_rad around its value then, the crossing "
-                     "interpolated between samples; missing when nothing threatens."),
+                     "interpolated between samples; missing when nothing threatens.",
+          margin=0.05,
+          margin_reason=("half a sample time (Ts = 0.1 s): the resolution the paper's 10"
+                         " Hz loop can act on")),
     Claim("C2", "smoother steering path (no sharp turns or jerks after avoidance)",
           "lateral_jerk_rms_mps3", True,
           ("lateral_jerk_rms_run_mps3", "lateral_jerk_max_window_mps3",
@@ -57,7 +64,10 @@ CLAIMS: tuple[Claim, ...] = (
           paper_original="Sharp turns after avoidance (jerky)",
           definition="RMS of the lateral jerk d(a_y)/dt (m/s^3) with a_y = vy_dot + vx r, by "
                      "central differences, over the avoidance window (appearance of the threat "
-                     "to recovery, or run end)."),
+                     "to recovery, or run end).",
+          margin=0.1,
+          margin_reason=("0.1 m/s^3 of RMS lateral jerk, about 5 % of the values measure"
+                         "d here and well below what a passenger notices")),
     Claim("C3a", "no repulsion while nothing is near (low sensitivity far away)",
           "repulsion_unneeded_share", True,
           ("repulsion_unneeded_share_threat", "repulsive_impulse_far_share",
@@ -71,7 +81,10 @@ CLAIMS: tuple[Claim, ...] = (
           definition="Share (0-1) of the repulsive impulse sum |F_rep| Ts at the vehicle that "
                      "is applied while no obstacle threatens the straight continuation of the "
                      "current motion and none is within near_field_m (0 when no repulsion was "
-                     "applied): force spent holding the vehicle off a near obstacle is needed."),
+                     "applied): force spent holding the vehicle off a near obstacle is needed.",
+          margin=0.05,
+          margin_reason=("5 percentage points of the repulsive impulse"
+                         "")),
     Claim("C3b", "early repulsion when a threat appears",
           "repulsion_onset_ttc_s", False,
           ("repulsion_onset_clearance_m", "repulsive_force_peak"),
@@ -83,7 +96,10 @@ CLAIMS: tuple[Claim, ...] = (
           definition="Time to contact (s) of the straight continuation at the first step on "
                      "which the repulsion exceeds repulsion_onset_force while an obstacle "
                      "threatens (higher = earlier); missing when the repulsion never becomes "
-                     "significant during a threat."),
+                     "significant during a threat.",
+          margin=0.1,
+          margin_reason=("one sample time (0.1 s) of time to contact at the onset of rep"
+                         "ulsion")),
     Claim("C4", "faster, smoother goal-direction recovery after avoidance",
           "recovery_time_s", True, ("recovery_lateral_s", "recovery_heading_s",
                                     "overshoot_m"),
@@ -95,7 +111,10 @@ CLAIMS: tuple[Claim, ...] = (
           definition="Settling time (s, python-control step_info convention, absolute band "
                      "recovery_lateral_band_m) of the lateral error to the start-goal line "
                      "after every threatening obstacle is passed; missing if it never "
-                     "settles."),
+                     "settles.",
+          margin=0.1,
+          margin_reason=("one sample time (0.1 s) of settling time"
+                         "")),
     Claim("C5", "more stable path (no sharp drops, minimal oscillation)",
           "oscillation_count", True, ("oscillation_whole_run_count", "heading_step_max_rad",
                                       "overshoot_m", "max_lateral_deviation_m"),
@@ -108,7 +127,10 @@ CLAIMS: tuple[Claim, ...] = (
           definition="After the obstacle is passed, reversals of the lateral error's "
                      "direction (hysteresis lateral_sign_band_m), net of the manoeuvre: an apex "
                      "of the detour after the pass is not counted, so one out-and-back scores "
-                     "0 and an overshoot with its return 1."),
+                     "0 and an overshoot with its return 1.",
+          margin=0.5,
+          margin_reason=("half a reversal of the lateral error: any systematic extra rev"
+                         "ersal exceeds it")),
 )
 
 SAFETY = Claim(
@@ -122,10 +144,16 @@ SAFETY = Claim(
                "only when a sampled reachability check from the state at the obstacle's "
                "appearance finds no escape and no method that ran the same scenario avoided "
                "it, avoidable otherwise.",
-    kind="rate")
+    kind="rate", margin=0.02,
+    margin_reason=("two percentage points of collision rate: four scenarios in 2"
+                   "00, below what one reading of a threshold moves"))
 
 #: Every claim in the order the report shows them: safety first.
 ALL_CLAIMS: tuple[Claim, ...] = (SAFETY,) + CLAIMS
+#: Every claim's id, in that order (the ledger's rows per comparison).
+CLAIM_IDS: tuple[str, ...] = tuple(c.claim_id for c in ALL_CLAIMS)
+#: The claim whose primary metric a metric is (for messages).
+CLAIM_OF_METRIC: dict[str, str] = {c.primary_metric: c.claim_id for c in ALL_CLAIMS}
 
 #: The claims that read the APF's repulsive force (C3a: none while nothing is near, C3b: early
 #: when a threat appears): not judged against the methods the paper names, none of which has

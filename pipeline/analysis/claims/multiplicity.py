@@ -28,10 +28,10 @@ import dataclasses
 import math
 from collections.abc import Sequence
 
-from pipeline.analysis.claims.catalogue import Outcome
+from pipeline.analysis.claims.catalogue import CLAIM_IDS, Outcome
 from pipeline.analysis.claims.ledger import Ledger, LedgerRow
 from pipeline.analysis.claims.statistics import holm
-from pipeline.analysis.settings import CLAIM_IDS, ClaimsConfig
+from pipeline.analysis.settings import ClaimsConfig
 
 #: the outcomes that claim a direction (what the gate may withdraw)
 DIRECTIONS = (Outcome.SUPPORTED, Outcome.CONTRADICTED, Outcome.MIXED)
