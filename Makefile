@@ -205,9 +205,9 @@ bench: $(STAMP)  ## benchmark the controller step vs the Clarabel floor and the 
 verify: reproduce  ## rerun `make reproduce` and compare with reports/reference/ (tolerances in pipeline/studies/verify.py)
 	$(APF) verify $(RUNS) reports/reference
 
-test: lint $(STAMP)  ## lint and type-check, then run the test suite on every core (PYTEST_JOBS=auto; excludes tests marked slow or slurm)
+test: lint $(STAMP)  ## lint and type-check, then run the test suite on every core (PYTEST_JOBS=auto; excludes tests marked slow or slurm; FAST=1 also the integration tier)
 	@# one test file per worker at a time (--dist loadfile), so a file's shared runs are made once
-	PIPELINE_MEMBER_CACHE=off $(PY) -m pytest -m "not slow and not slurm" -n $(PYTEST_JOBS) --dist loadfile $(PYTEST_ARGS)
+	PIPELINE_MEMBER_CACHE=off $(PY) -m pytest -m "not slow and not slurm$(if $(FAST), and not integration,)" -n $(PYTEST_JOBS) --dist loadfile $(PYTEST_ARGS)
 
 lint: $(STAMP)  ## ruff (pyflakes, bugbear, isort, pyupgrade, simplify, complexity) and mypy, as configured in pyproject.toml
 	$(PY) -m ruff check pipeline tests hydra_plugins examples benchmarks

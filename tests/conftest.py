@@ -27,10 +27,25 @@ LONGEST_FILES_FIRST = ("test_tune.py", "test_multiverse.py", "test_hardening.py"
                        "test_install.py")
 
 
+#: The integration tier (marker ``integration``): whole studies and the machine around the
+#: package (the wheel and make install, the tune, the multiverse, the browser, make targets).
+#: CI runs it; ``make test FAST=1`` leaves it out. One list: a file named here is the tier.
+INTEGRATION_FILES = ("test_install.py", "test_tune.py", "test_tune_convergence.py",
+                     "test_tune_pruning.py", "test_tune_peers.py", "test_tune_infeasible.py",
+                     "test_tune_store_sources.py", "test_pedestrians_tune.py",
+                     "test_multiverse.py", "test_report_browser.py",
+                     "test_explorer_browser.py", "test_screenshot.py", "test_launcher.py",
+                     "test_bench_aggregate.py")
+
+
 def pytest_collection_modifyitems(config, items):
-    """Longest files first (:data:`LONGEST_FILES_FIRST`); the order within a file is kept."""
+    """Longest files first (:data:`LONGEST_FILES_FIRST`); the order within a file is kept.
+    The files of :data:`INTEGRATION_FILES` carry the ``integration`` marker."""
     rank = {name: i for i, name in enumerate(LONGEST_FILES_FIRST)}
     items.sort(key=lambda item: rank.get(item.path.name, len(rank)))
+    for item in items:
+        if item.path.name in INTEGRATION_FILES:
+            item.add_marker(pytest.mark.integration)
 
 
 @pytest.fixture(autouse=True)
