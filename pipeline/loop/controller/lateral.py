@@ -111,7 +111,7 @@ class LateralMpc:
         key = ("lateral_predictions", vehicle_key(vehicle), self.sample_time_s,
                self.model_cfg.b2_heading_entry, self.model_cfg.speed_grid_mps,
                controller.horizon, controller.control_horizon, controller.input_hold,
-               self.weights[:5])
+               self.weights.tracking)
         self._predictions: dict[tuple[Any, ...], CondensedPrediction] = \
             qp_cache.memo(key, dict) if qp_cache is not None else {}
         self.fallback = PlanFallback(controller.horizon)
@@ -133,7 +133,7 @@ class LateralMpc:
         entry = self._predictions.get(key)
         if entry is None or entry.model is not model:
             entry = self._predictions[key] = CondensedPrediction.of(model, self.blocking,
-                                                                   self.weights[:5])
+                                                                   self.weights.tracking)
         return entry
 
     def solve(self, inputs: MpcInputs, log: dict[str, Any] | None = None) -> ControlStep:

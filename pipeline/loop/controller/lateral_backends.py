@@ -85,8 +85,8 @@ class ClarabelCondensedQp:
         p_ptr = np.concatenate([[0], np.cumsum(np.arange(1, n_u + 1)), n_u * (n_u + 1) // 2
                                 + np.arange(1, n_s + 1)])
         self.p_structure = (p_idx, p_ptr, (n_u + n_s, n_u + n_s))
-        self._p_values = np.full(p_idx.size, 2.0 * structure.weights[6])
-        self._q = np.full(n_u + n_s, float(structure.weights[5]))
+        self._p_values = np.full(p_idx.size, 2.0 * structure.weights.slack_quadratic)
+        self._q = np.full(n_u + n_s, float(structure.weights.slack_linear))
         rate, dmax = structure.steering_rate_max_rad_s, structure.steering_max_rad
         self._b = np.zeros(rows)
         self._b[:2 * n_u] = rate
@@ -172,7 +172,7 @@ class DaqpCondensedQp:
         self.n_u, self.n_s, self.N = Nc, N * M, N
         n = Nc + N * M
         self.max_iter = int(max_iter)
-        w1, w2 = structure.weights[5], structure.weights[6]
+        w1, w2 = structure.weights.slack_linear, structure.weights.slack_quadratic
         self._H = 2.0 * w2 * np.eye(n)
         self._f = np.full(n, float(w1))
         self._A = np.zeros((N + N * M, n))

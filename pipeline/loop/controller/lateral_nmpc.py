@@ -80,7 +80,9 @@ def build_lateral_nlp(structure: LateralQpStructure, constants: tuple[Any, ...],
     import casadi as ca
 
     N, Nc, M = structure.horizon, structure.control_horizon, structure.max_obstacles
-    q_y, q_psi, q_r, q_d, r_u, w1, w2 = structure.weights
+    w = structure.weights
+    q_y, q_psi, q_r, q_d, r_u = w.tracking
+    w1, w2 = w.slack_linear, w.slack_quadratic
     blocking = blocking_matrix(N, Nc, structure.input_hold)
     U = ca.SX.sym("U", Nc)
     S = ca.SX.sym("S", N * M)

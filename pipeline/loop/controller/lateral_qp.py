@@ -33,7 +33,7 @@ kept Clarabel solver sees exactly what
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, NamedTuple
 
 import numpy as np
 
@@ -70,6 +70,39 @@ class MpcInputs:
             else np.zeros(self.y_ref_m.shape[0])
 
 
+class LateralWeights(NamedTuple):
+    """The lateral MPC's cost weights by name (a named tuple: numba takes it, a cache key
+    compares it as the tuple it is): the tracking weights on the lateral error, the heading
+    error, the yaw rate and the steering angle, the steering-rate weight, and the soft
+    collision constraints' linear and quadratic slack weights."""
+
+    q_lateral: float
+    q_heading: float
+    q_yaw_rate: float
+    q_steering: float
+    r_steering_rate: float
+    slack_linear: float
+    slack_quadratic: float
+
+    @classmethod
+    def of(cls, controller: Any) -> LateralWeights:
+        """The weights of a controller's settings (``q_lateral`` ... ``slack_weight_*``)."""
+        c = controller
+        return cls(float(c.q_lateral), float(c.q_heading), float(c.q_yaw_rate),
+                   float(c.q_steering), float(c.r_steering_rate),
+                   float(c.slack_weight_linear), float(c.slack_weight_quadratic))
+
+    @property
+    def tracking(self) -> tuple[float, float, float, float, float]:
+        """The five weights of the tracking cost (the condensed prediction's)."""
+        return (self.q_lateral, self.q_heading, self.q_yaw_rate, self.q_steering,
+                self.r_steering_rate)
+
+
+#: The tracking weights of an unweighted prediction (all states at 1, no rate cost).
+UNIT_TRACKING = (1.0, 1.0, 1.0, 1.0, 0.0)
+
+
 @dataclass(frozen=True)
 class LateralQpStructure:
     """Everything that enters the lateral QP as a constant: the cache key of a compilation."""
@@ -78,7 +111,7 @@ class LateralQpStructure:
     control_horizon: int
     max_obstacles: int
     input_hold: str
-    weights: tuple[Any, ...]
+    weights: LateralWeights
     steering_rate_max_rad_s: float
     steering_max_rad: float
     formulation: str = "sparse"
@@ -88,9 +121,7 @@ class LateralQpStructure:
            vehicle: VehicleConfig) -> LateralQpStructure:
         c = controller
         return cls(c.horizon, c.control_horizon, c.max_obstacles, c.input_hold,
-                   (c.q_lateral, c.q_heading, c.q_yaw_rate, c.q_steering, c.r_steering_rate,
-                    c.slack_weight_linear, c.slack_weight_quadratic),
-                   vehicle.steering_rate_max_rad_s, vehicle.steering_max_rad, c.formulation)
+                   LateralWeights.of(c), vehicle.steering_rate_max_rad_s, vehicle.steering_max_rad, c.formulation)
 
 
 def blocking_matrix(horizon: int, control_horizon: int, input_hold: str) -> np.ndarray:
@@ -109,7 +140,9 @@ def build_lateral_problem(s: LateralQpStructure) -> tuple[cp.Problem, list[Any],
     import cvxpy as cp
 
     N, Nc, M = s.horizon, s.control_horizon, s.max_obstacles
-    q_y, q_psi, q_r, q_d, r_u, w1, w2 = s.weights
+    w = s.weights
+    q_y, q_psi, q_r, q_d, r_u = w.tracking
+    w1, w2 = w.slack_linear, w.slack_quadratic
     blocking = blocking_matrix(N, Nc, s.input_hold)
     x0 = cp.Parameter(5, name="x0")
     Ad = cp.Parameter((5, 5), name="Ad")
@@ -206,8 +239,9 @@ class CondensedPrediction:
 
     @classmethod
     def of(cls, model: LateralModel, blocking: np.ndarray,
-           weights: tuple[Any, ...] = (1.0, 1.0, 1.0, 1.0, 0.0)) -> CondensedPrediction:
-        """Build the maps of ``model``; ``weights`` starts ``(q_y, q_psi, q_r, q_d, r_u)``."""
+           tracking: tuple[float, ...] = UNIT_TRACKING) -> CondensedPrediction:
+        """Build the maps of ``model``; ``tracking``: :attr:`LateralWeights.tracking`
+        ``(q_y, q_psi, q_r, q_d, r_u)``."""
         from scipy.linalg import cholesky, solve_triangular
 
         Ad, Bd = model.Ad, model.Bd[:, 0]
@@ -235,11 +269,12 @@ class CondensedPrediction:
         for k in range(n):
             power = Ad @ power
             powers[k] = power
-        root = np.sqrt(np.asarray(weights[:4], float))
+        q_y, q_psi, q_r, q_d, r_u = tracking
+        root = np.sqrt(np.array([q_y, q_psi, q_r, q_d], float))
         # rows ordered by cost term, then step: [y_1..y_N, epsi_1.., r_1.., delta_1..]
         gamma_w = (root[:, None, None] * gamma[:, COST_STATES, :].transpose(1, 0, 2)
                    ).reshape(-1, nc)
-        half_hessian = gamma_w.T @ gamma_w + float(weights[4]) * blocking @ blocking.T
+        half_hessian = gamma_w.T @ gamma_w + float(r_u) * blocking @ blocking.T
         chol = cholesky(half_hessian, lower=False)
         chol_rhs_map = solve_triangular(chol, gamma_w.T, trans="T", lower=False)
         # Fortran order: OpenBLAS multithreads a row-major gemv even this small, and its idle
@@ -281,7 +316,7 @@ def build_condensed_lateral_problem(s: LateralQpStructure) -> tuple[cp.Problem, 
     import cvxpy as cp
 
     N, Nc, M = s.horizon, s.control_horizon, s.max_obstacles
-    w1, w2 = s.weights[5], s.weights[6]
+    w1, w2 = s.weights.slack_linear, s.weights.slack_quadratic
     chol_inv = cp.Parameter((Nc, Nc), name="cost_cholesky_inverse")
     chol_rhs = cp.Parameter(Nc, name="cost_cholesky_rhs")
     gamma_d = cp.Parameter((N, Nc), name="steering_gamma_w")
@@ -354,7 +389,7 @@ class CondensedData:
 
 
 def condensed_data(prediction: CondensedPrediction, inputs: MpcInputs,
-                   weights: tuple[Any, ...]) -> CondensedData:
+                   weights: LateralWeights) -> CondensedData:
     """The condensed QP's data for one step: one product for the free response, one gather
     for the weighted errors, the half-planes folded onto ``U`` (``weights`` must be those
     ``prediction`` was built with)."""
