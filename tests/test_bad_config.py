@@ -1,5 +1,8 @@
-"""Bad configuration: every case exits 2 with one line naming the key, the value and what is
-allowed, and no traceback (the entry point run in-process, as `python -m pipeline.run`)."""
+"""Bad configuration: every case is one line naming the key, the value and what is allowed.
+Each case is checked where it is refused, at the typed config (Hydra's compose API and the
+line the command layer prints for it, :func:`pipeline.errors.describe_config_error`: in
+milliseconds); one case of each kind goes through the entry point itself (exit 2, the one
+line, no traceback, nothing written), as `python -m pipeline.run` runs it."""
 
 from __future__ import annotations
 
@@ -70,6 +73,28 @@ CASES = [
 
 @pytest.mark.parametrize("overrides, key_and_value, allowed", CASES,
                          ids=[" ".join(c[0]) for c in CASES])
+def test_bad_config_is_refused_in_one_line_at_the_typed_config(overrides, key_and_value,
+                                                               allowed):
+    from hydra import compose, initialize_config_dir
+
+    from pipeline.config import CONF_DIR, register_configs, to_experiment_config
+    from pipeline.errors import describe_config_error
+
+    register_configs()
+    with pytest.raises(Exception) as info, \
+            initialize_config_dir(config_dir=str(CONF_DIR), version_base="1.3"):
+        to_experiment_config(compose(config_name="config", overrides=overrides))
+    line = describe_config_error(info.value)
+    assert line is not None and "\n" not in line and line.startswith("config error: ")
+    assert key_and_value in line and allowed in line, line
+
+
+#: One case of each kind through the entry point: a range, an unknown preset, an unknown key.
+THROUGH_MAIN = [CASES[0], next(c for c in CASES if c[0] == ["planner=unknown"]), CASES[-1]]
+
+
+@pytest.mark.parametrize("overrides, key_and_value, allowed", THROUGH_MAIN,
+                         ids=[" ".join(c[0]) for c in THROUGH_MAIN])
 def test_bad_config_exits_2_with_one_line(monkeypatch, capsys, tmp_path, overrides,
                                           key_and_value, allowed):
     monkeypatch.setattr(sys, "argv", ["pipeline.run", *overrides, f"hydra.run.dir={tmp_path}"])
