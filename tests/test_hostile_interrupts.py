@@ -209,7 +209,8 @@ def test_a_stopped_pool_prints_nothing_from_loky_s_thread(make_config, tmp_path)
     """A tune stopped mid-rung stops its family pool with tasks queued: every task settled by
     the executor's shutdown before ``stop()`` returns, none cancelled (a future cancelled
     before the shutdown made loky's manager thread raise ``InvalidStateError: CANCELLED``
-    after the command's stop line), nothing raised in any thread."""
+    after the command's stop line); loky's own threads, racing the killed workers (a
+    ``KeyError`` on a work item under load), print nothing; any other thread still does."""
     import threading
 
     from pipeline.loop.controller import QpCache
@@ -231,7 +232,11 @@ def test_a_stopped_pool_prints_nothing_from_loky_s_thread(make_config, tmp_path)
         # nothing left to set on a cancelled future later
         assert all(f.done() and not f.cancelled() for f in futures)
         time.sleep(0.5)
+        # another thread's exception is still reported (only loky's own threads are quiet)
+        other = threading.Thread(target=lambda: (_ for _ in ()).throw(ValueError("mine")))
+        other.start()
+        other.join()
     finally:
         threading.excepthook = previous
-    assert raised == []
+    assert [type(e).__name__ for e in raised] == ["ValueError"]
     assert not pool._futures

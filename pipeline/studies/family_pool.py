@@ -229,7 +229,29 @@ class FamilyPool:
         the command's stop line; the shutdown waits for the thread, so nothing is printed
         after it."""
         if self.executor is not None:
+            _quiet_loky_threads()
             self.executor.shutdown(wait=True, kill_workers=True)
         self._futures.clear()
         self.close()
+
+
+def _quiet_loky_threads() -> None:
+    """From now on, an exception raised in loky's own threads (its executor manager, which
+    races the workers this process has just killed: a ``KeyError`` on a work item, seen under
+    load) is not printed: the command is stopping on a signal and says so in its one line.
+    Every other thread's exception is printed as before. Installed once per process."""
+    import threading
+
+    previous = threading.excepthook
+    if getattr(previous, "quiet_loky", False):
+        return
+
+    def hook(args) -> None:
+        if args.thread is not None and \
+                type(args.thread).__module__.startswith("joblib.externals.loky"):
+            return
+        previous(args)
+
+    hook.quiet_loky = True  # type: ignore[attr-defined]
+    threading.excepthook = hook
 
