@@ -10,6 +10,7 @@ after ``Nc``; soft half-plane per obstacle slot and step
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
@@ -25,6 +26,11 @@ from pipeline.loop.settings import ControllerConfig, VehicleConfig
 
 if TYPE_CHECKING:
     import cvxpy as cp
+
+
+#: The smaller QPs a kinematic MPC with more obstacle slots than these also keeps: a step
+#: solves the smallest that holds the slots its half-planes use.
+SLOT_BUCKETS = (4, 8, 16)
 
 
 @dataclass(frozen=True)
@@ -232,6 +238,13 @@ class KinematicLtvMpc(KinematicTrack):
         self.qp, self.compile_count, self.compile_time_s = compiled_backend(
             qp_cache, "kinematic", structure, lambda: build_kinematic_problem(structure),
             controller.backend, controller.solver_max_iter)
+        # the QP by its number of obstacle slots: a step whose half-planes fill fewer slots
+        # solves the smallest that holds them (empty slots are rows 0 + s >= 0: leaving them
+        # out changes no solution; among walkers, 32 slots are mostly empty)
+        self._structure, self._qp_cache = structure, qp_cache
+        self._by_slots = {structure.max_obstacles: self.qp}
+        self._slot_sizes = tuple(sorted({b for b in SLOT_BUCKETS if b < structure.max_obstacles}
+                                        | {structure.max_obstacles}))
         self.fallback = PlanFallback(controller.horizon)
         self.u_prev = np.zeros(2)
         self._steps_ahead_s = np.arange(1, controller.horizon + 1) * self.ts
@@ -266,6 +279,25 @@ class KinematicLtvMpc(KinematicTrack):
         for k in range(N):
             offsets[:, k] = states[:, k + 1] - As[k] @ states[:, k] - Bs[k] @ plan[:, k]
         return states, As, Bs, offsets
+
+    def _qp_for(self, Gx: np.ndarray, Gy: np.ndarray, h: np.ndarray) -> tuple[Any, int]:
+        """The QP with the fewest slots (of :data:`SLOT_BUCKETS` and ``max_obstacles``) that
+        holds every slot these half-planes use, and that number (compiled once, on first
+        use, through the shared cache)."""
+        used = np.flatnonzero(np.any((Gx != 0.0) | (Gy != 0.0) | (h != 0.0), axis=0))
+        need = int(used[-1]) + 1 if used.size else 1
+        slots = next(b for b in self._slot_sizes if b >= need)
+        qp = self._by_slots.get(slots)
+        if qp is None:
+            structure = dataclasses.replace(self._structure, max_obstacles=slots)
+            qp, count, seconds = compiled_backend(
+                self._qp_cache, "kinematic", structure,
+                lambda: build_kinematic_problem(structure), self.cfg.backend,
+                self.cfg.solver_max_iter)
+            self.compile_count += count
+            self.compile_time_s += seconds
+            self._by_slots[slots] = qp
+        return qp, slots
 
     def _accepted(self, plan: np.ndarray, solution: QpSolution, halfplanes: tuple[Any, ...],
                   status: str,
@@ -310,8 +342,9 @@ class KinematicLtvMpc(KinematicTrack):
                 states, As, Bs, offsets = self._linearize(x0, plan)
                 Gx, Gy, h = kinematic_halfplanes(states, reference, predicted_obstacles, radii,
                                                  self.vehicle, self.cfg)
-                solution = self.qp.solve(kinematic_theta(x0, u_prev, reference, offsets, As, Bs,
-                                                         Gx, Gy, h))
+                qp, slots = self._qp_for(Gx, Gy, h)
+                solution = qp.solve(kinematic_theta(x0, u_prev, reference, offsets, As, Bs,
+                                                    Gx[:, :slots], Gy[:, :slots], h[:, :slots]))
                 status = solution.status
                 total_iters += max(solution.iterations, 0)
                 total_time += solution.solve_time_s
