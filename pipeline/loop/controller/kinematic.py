@@ -30,7 +30,7 @@ if TYPE_CHECKING:
 
 #: The smaller QPs a kinematic MPC with more obstacle slots than these also keeps: a step
 #: solves the smallest that holds the slots its half-planes use.
-SLOT_BUCKETS = (4, 8, 16)
+SLOT_BUCKETS = (4, 8, 16, 32)
 
 
 @dataclass(frozen=True)
@@ -240,7 +240,7 @@ class KinematicLtvMpc(KinematicTrack):
             controller.backend, controller.solver_max_iter)
         # the QP by its number of obstacle slots: a step whose half-planes fill fewer slots
         # solves the smallest that holds them (empty slots are rows 0 + s >= 0: leaving them
-        # out changes no solution; among walkers, 32 slots are mostly empty)
+        # out changes no solution; among walkers, 50 slots are mostly empty)
         self._structure, self._qp_cache = structure, qp_cache
         self._by_slots = {structure.max_obstacles: self.qp}
         self._slot_sizes = tuple(sorted({b for b in SLOT_BUCKETS if b < structure.max_obstacles}
