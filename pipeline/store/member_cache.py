@@ -327,6 +327,8 @@ class MemberCache:
         # hidden names are the cache's own in passing (.lock, a marker being written by a
         # concurrent first user, .discard-*)
         names = {p.name for p in self.root.iterdir() if not p.name.startswith(".")}
+        if MARKER in names:  # another process made the folder meanwhile: it is the cache
+            return
         if names and not ((self.root / ".lock").exists() and names <= {"members", "tmp"}):
             raise NotACacheError(
                 f"{self.root} is not a member cache (it holds other files and no {MARKER}); "
