@@ -285,4 +285,33 @@ INTERPRETATION_REGISTER: tuple[RegisterEntry, ...] = (
         "under each reading sit beside it as a sensitivity",
         "planner.normalize_step, planner.step_size, controller.reference_alignment, "
         "scenario.obstacle_anchor"),
+    RegisterEntry(
+        "The platform among recorded pedestrians (a choice we add; the paper has no "
+        "pedestrians)", "a vehicle on a road with one sudden obstacle",
+        "a sidewalk robot (vehicle=sidewalk_robot: a 0.35 m disc) on the Appendix-A kinematic "
+        "track, which brakes to a stop, its reference spaced by its speed along the APF's path "
+        "(controller.reference_alignment=path_speed; literally, improved's 0.5 m step cap drove "
+        "it at 3.6-7 m/s), 50 obstacle slots, the run ended at its first contact",
+        "the compact car on the lateral track with 3 slots and crossings aimed at a walker "
+        "(experiment=pedestrians_car, a row of make pedestrians: 73 % / 87 % collisions; at its "
+        "60 crossings every claim inconclusive, C1-C5 on a handful of clean pairs)",
+        "vehicle, controller, controller.reference_alignment, controller.max_obstacles, "
+        "scenario.pedestrians.end_at_contact"),
+    RegisterEntry(
+        "How a crossing among pedestrians is drawn (a choice we add)", "-",
+        "between places someone walked at any time of the recording (scenario.pedestrians."
+        "draw=scene: the midpoint a recorded position, start and goal within "
+        "walkable_radius_m = 1 m of one); the straight line meets a walker on 66 % of crossings",
+        "aimed: the midpoint where a walker will be when the platform arrives (the straight line "
+        "meets a walker on every crossing; experiment=pedestrians_aimed, 60 crossings: the "
+        "default's outcomes but C5 equivalent)",
+        "scenario.pedestrians.draw, scenario.pedestrians.walkable_radius_m"),
+    RegisterEntry(
+        "Walkers' behaviour (a choice we add)", "-",
+        "replayed on their recorded tracks (they never react)",
+        "reactive: Helbing and Molnar's social force towards each walker's recorded position "
+        "social_lookahead_s ahead, avoiding the others and the platform "
+        "(experiment=pedestrians_reactive, 60 crossings: the default's outcomes but C1 "
+        "inconclusive)",
+        "scenario.pedestrians.walkers, scenario.pedestrians.social_*"),
 )

@@ -69,6 +69,11 @@ SWITCH_TESTS = {
     "tune.hypervolume_bounds": "test_tune_convergence", "tune.replicates": "test_tune",
     "tune.settled_test": "test_tune_convergence", "tune.censoring": "test_tune_convergence",
     "controller.collision_constraints": "test_apf_alone",
+    # among recorded pedestrians (choices we add): tests/test_crowd.py
+    "vehicle": "test_crowd", "controller": "test_crowd", "controller.max_obstacles": "test_crowd",
+    "scenario.pedestrians.end_at_contact": "test_crowd", "scenario.pedestrians.draw": "test_crowd",
+    "scenario.pedestrians.walkable_radius_m": "test_crowd",
+    "scenario.pedestrians.walkers": "test_crowd", "scenario.pedestrians.social_*": "test_crowd",
 
 
 }
