@@ -143,6 +143,14 @@ def test_every_member_gets_a_data_file_and_the_page_lists_it(small_outputs, tmp_
     assert [m["name"] for m in peers["methods"]] == ["improved (family)", "baseline (family)",
                                                      "a_peer"]
     assert peers["methods"][1]["x"] == peers["methods"][2]["x"]  # the same run, twice
+    # one colour per method in every experiment, the report's (issue 61, item 1)
+    from pipeline.reporting.figures.colors import method_color
+
+    _, family_one = _decode(out / "explorer_data" / "family" / "1.js")
+    colours = {m["name"]: m["color"] for m in family_one["methods"] + peers["methods"]}
+    assert colours["improved"] == colours["improved (family)"] == method_color("improved")
+    assert colours["baseline"] == colours["baseline (family)"] == method_color("baseline")
+    assert colours["a_peer"] == method_color("a_peer")
     assert index.experiments["family"]["members"] == [0, 1, 2]
     assert explorer_href("family", 2) == "explorer.html#family/2"
     key, data = _decode(out / "explorer_data" / "family" / "2.js")

@@ -34,6 +34,7 @@ import numpy as np
 import pandas as pd
 
 from pipeline.errors import ConfigError, RunFolderError
+from pipeline.reporting.figures.colors import method_color
 from pipeline.store.files import write_text_atomic
 from pipeline.store.layout import OutputsLayout
 from pipeline.store.runs import (
@@ -258,7 +259,10 @@ def member_payload(experiment: str, member: int, runs: dict[str, Path],
         cfg = settings[method]
         first = first or cfg
         data = method_data(trajectory, read_horizon(folder), cfg.footprint_m)
-        data.update(name=method, controller=cfg.controller,
+        # its colour in every experiment and in the report: the method's (a companion run,
+        # "improved (family)", the method's own)
+        data.update(name=method, color=method_color(method.split(" (")[0].split(" #")[0]),
+                    controller=cfg.controller,
                     collision=str(metrics.get("collision")).lower() in ("true", "1", "1.0"))
         methods.append(data)
     if not methods or first is None:
