@@ -164,6 +164,10 @@ def test_every_member_gets_a_data_file_and_the_page_lists_it(small_outputs, tmp_
     assert improved["plan"][5][:2] == [0, 0] and len(improved["plan"][5]) == 22
     assert all(len(row) == 5 for row in improved["cons"])
     assert data["steer_max"] == pytest.approx(run.config.vehicle.steering_max_rad)
+    # the member's own scenario, not member 0's (issue 61: every status line named i0000)
+    assert data["scenario"] == run.config.scenario.name and data["scenario"].endswith("i0002")
+    assert data["start"] == list(run.config.scenario.start_xy_m)
+    assert data["goal"] == list(run.config.scenario.goal_xy_m)
     page = (out / "explorer.html").read_text()
     assert '"family":{"methods":["baseline","improved"],"members":[0,1,2]' in page
     assert "http://" not in page and "https://" not in page

@@ -253,11 +253,14 @@ def member_payload(experiment: str, member: int, runs: dict[str, Path],
     for method, folder in runs.items():
         try:
             trajectory, metrics = read_run_trajectory(folder)
+            # the member's own scenario (its name, start and goal: a drawn pedestrian crossing
+            # has its own), read from its first readable run
+            own = MethodSettings.of(folder) if first is None else None
         except RunFolderError as exc:
             log.warning("explorer: %s", exc)
             continue
         cfg = settings[method]
-        first = first or cfg
+        first = first or own
         data = method_data(trajectory, read_horizon(folder), cfg.footprint_m)
         # its colour in every experiment and in the report: the method's (a companion run,
         # "improved (family)", the method's own)
