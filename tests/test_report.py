@@ -31,6 +31,8 @@ def test_report_from_runs(tmp_path, make_config):
     assert 'id="table2"' in page and "Slow and aggressive curved avoidance" in page
     assert (tmp_path / "report" / "tables" / "metrics_paper_scenario.csv").is_file()
     assert (tmp_path / "report" / "figures" / "trajectory_pair.svg").is_file()
+    # no docstring markup on the page (issue 61, item 7: ':class:' and ':func:' were shown)
+    assert not re.findall(r":(?:class|func|mod|meth|data|attr):`", page)
 
 
 def test_report_without_runs_is_a_clear_error(tmp_path, capsys):

@@ -148,7 +148,16 @@ def metrics_doc() -> list[Markup]:
     if current:
         bullets.append(" ".join(current))
     return [Markup(re.sub(r"\*\*(.+?)\*\*", r"<strong>\1</strong>",
-                          str(escape(b.replace("``", ""))))) for b in bullets]
+                          str(escape(_plain(b))))) for b in bullets]
+
+
+def _plain(text: str) -> str:
+    """A docstring's reStructuredText as plain words for the page: ``code`` unquoted and a
+    cross-reference (``:func:`pkg.mod.name```, ``:class:`~pkg.Name```) reduced to its last
+    name (the page once showed the raw markup)."""
+    text = re.sub(r":(?:class|func|mod|meth|data|attr):`~?([^`]+)`",
+                  lambda m: m.group(1).rsplit(".", 1)[-1], text)
+    return text.replace("``", "")
 
 
 def methods_section(cfg: ClaimsConfig | None, configs_by_method: dict[str, dict],
