@@ -385,15 +385,9 @@ def draw_pedestrian_member(base: ScenarioConfig, index: int,
         if not (_inside(tracks, start, ped.scene_margin_m)
                 and _inside(tracks, goal, ped.scene_margin_m)):
             continue
-        at_start, _, there = everyone.states_at(0.0)
-        clear = vehicle_radius_m + ped.radius_m + ped.start_clearance_m
-        if there.any() and np.min(np.linalg.norm(at_start[there] - start, axis=1)) < clear:
+        if not _start_is_free(everyone, start, vehicle_radius_m, ped):
             continue
-        return replace(base, name=f"{base.name}_{tracks.name}_s{fam.seed}_i{index:04d}",
-                       start_xy_m=[float(start[0]), float(start[1])],
-                       goal_xy_m=[float(goal[0]), float(goal[1])], start_heading_rad=heading,
-                       speed_mps=speed, family=None,
-                       pedestrians=replace(ped, scene=tracks.name, window_start_s=window))
+        return _drawn_member(base, index, tracks, start, goal, heading, speed, window)
     raise ConfigError("scenario.pedestrians.crossing_length_m", ped.crossing_length_m,
                       f"a crossing that fits scene '{tracks.name}' with a free start "
                       f"(member {index}: no fitting draw in max_draws={ped.max_draws}); a "
@@ -427,20 +421,38 @@ def _draw_from_scene(base: ScenarioConfig, index: int, tracks: SceneTracks,
         if np.max(gaps) > ped.walkable_radius_m:
             continue
         everyone = tracks.motion(np.arange(tracks.counts.size), window)
-        at_start, _, there = everyone.states_at(0.0)
-        clear = vehicle_radius_m + ped.radius_m + ped.start_clearance_m
-        if there.any() and np.min(np.linalg.norm(at_start[there] - start, axis=1)) < clear:
+        if not _start_is_free(everyone, start, vehicle_radius_m, ped):
             continue
-        return replace(base, name=f"{base.name}_{tracks.name}_s{fam.seed}_i{index:04d}",
-                       start_xy_m=[float(start[0]), float(start[1])],
-                       goal_xy_m=[float(goal[0]), float(goal[1])], start_heading_rad=heading,
-                       speed_mps=speed, family=None,
-                       pedestrians=replace(ped, scene=tracks.name, window_start_s=window))
+        return _drawn_member(base, index, tracks, start, goal, heading, speed, window)
     raise ConfigError("scenario.pedestrians.crossing_length_m", ped.crossing_length_m,
                       f"a crossing that fits scene '{tracks.name}' between walked places with "
                       f"a free start (member {index}: no fitting draw in max_draws="
                       f"{ped.max_draws}); a shorter crossing, more draws, a larger "
                       "walkable_radius_m or another scene")
+
+
+def _start_is_free(everyone: RecordedTrackMotion, start_m: np.ndarray,
+                   vehicle_radius_m: float, ped: PedestrianConfig) -> bool:
+    """No pedestrian present at t = 0 within both radii plus ``start_clearance_m`` of the
+    start."""
+    at_start, _, there = everyone.states_at(0.0)
+    clear = vehicle_radius_m + ped.radius_m + ped.start_clearance_m
+    return not (there.any()
+                and np.min(np.linalg.norm(at_start[there] - start_m, axis=1)) < clear)
+
+
+def _drawn_member(base: ScenarioConfig, index: int, tracks: SceneTracks, start_m: np.ndarray,
+                  goal_m: np.ndarray, heading_rad: float, speed_mps: float,
+                  window_start_s: float) -> ScenarioConfig:
+    """Member ``index`` as drawn: a plain scenario named ``<base>_<scene>_s<seed>_i<index>``
+    with its crossing, speed, scene and window."""
+    fam, ped = base.family, base.pedestrians
+    assert fam is not None and ped is not None
+    return replace(base, name=f"{base.name}_{tracks.name}_s{fam.seed}_i{index:04d}",
+                   start_xy_m=[float(start_m[0]), float(start_m[1])],
+                   goal_xy_m=[float(goal_m[0]), float(goal_m[1])],
+                   start_heading_rad=heading_rad, speed_mps=speed_mps, family=None,
+                   pedestrians=replace(ped, scene=tracks.name, window_start_s=window_start_s))
 
 
 def _inside(tracks: SceneTracks, point_m: np.ndarray, margin_m: float) -> bool:
