@@ -3,6 +3,8 @@ PYTHON_BOOT ?= $(shell command -v python3.11 || command -v python3)
 VENV        := .venv
 PY          := $(VENV)/bin/python
 STAMP       := $(VENV)/.installed
+# the one command (`apf-mpc --help` lists every study, `apf-mpc <study> --help` its arguments)
+APF         := $(VENV)/bin/apf-mpc
 RUNS        ?= outputs
 FAMILY_SIZE ?= 200
 KINEMATIC_FAMILY_SIZE ?= 50
@@ -69,7 +71,7 @@ help:  ## list the targets
 # 5 s of optuna alone) and, on the other core, puts the loop's numba kernels in numba's cache
 # (otherwise a first make reproduce's nine experiments and their workers each compile them at
 # once). Measured on 2 cores, package caches warm: about 10 s against pip's 37 s
-# (python -m pipeline.bench: install_over_pip)
+# (make bench: install_over_pip)
 UV_BOOT := $(VENV)/.uv-boot/bin/uv
 UV_INSTALL := --quiet --python $(PY) -c constraints.txt -e ".[test]" pip uv
 $(STAMP): pyproject.toml constraints.txt
@@ -101,72 +103,72 @@ experiment: $(STAMP)  ## run every method on the paper scenario and on the scena
 
 # the experiments of `make experiment` (run side by side from there)
 run-paper run-kinematic run-kinematic-readings: run-%: $(STAMP)
-	$(PY) -m pipeline.run experiment=$(subst -,_,$*) hydra.sweep.dir=$(RUNS)/$(subst -,_,$*)
+	$(APF) run experiment=$(subst -,_,$*) hydra.sweep.dir=$(RUNS)/$(subst -,_,$*)
 
 run-family: $(STAMP)
-	$(PY) -m pipeline.run experiment=family hydra.sweep.dir=$(RUNS)/family scenario.family.size=$(FAMILY_SIZE)
+	$(APF) run experiment=family hydra.sweep.dir=$(RUNS)/family scenario.family.size=$(FAMILY_SIZE)
 
 run-frames: $(STAMP)
-	$(PY) -m pipeline.run experiment=frames hydra.sweep.dir=$(RUNS)/frames scenario.family.size=$(FAMILY_SIZE)
+	$(APF) run experiment=frames hydra.sweep.dir=$(RUNS)/frames scenario.family.size=$(FAMILY_SIZE)
 
 run-apf-alone: $(STAMP)
-	$(PY) -m pipeline.run experiment=apf_alone hydra.sweep.dir=$(RUNS)/apf_alone scenario.family.size=$(FAMILY_SIZE)
+	$(APF) run experiment=apf_alone hydra.sweep.dir=$(RUNS)/apf_alone scenario.family.size=$(FAMILY_SIZE)
 
 run-peers: $(STAMP)
-	$(PY) -m pipeline.run experiment=peers hydra.sweep.dir=$(RUNS)/peers scenario.family.size=$(PEERS_FAMILY_SIZE) scenario.family.n_jobs=$(PEERS_JOBS)
+	$(APF) run experiment=peers hydra.sweep.dir=$(RUNS)/peers scenario.family.size=$(PEERS_FAMILY_SIZE) scenario.family.n_jobs=$(PEERS_JOBS)
 
 run-kinematic-peers: $(STAMP)
-	$(PY) -m pipeline.run experiment=kinematic_peers hydra.sweep.dir=$(RUNS)/kinematic_peers scenario.family.size=$(KINEMATIC_PEERS_FAMILY_SIZE) scenario.family.n_jobs=$(PEERS_JOBS)
+	$(APF) run experiment=kinematic_peers hydra.sweep.dir=$(RUNS)/kinematic_peers scenario.family.size=$(KINEMATIC_PEERS_FAMILY_SIZE) scenario.family.n_jobs=$(PEERS_JOBS)
 
 run-kinematic-family: $(STAMP)
-	$(PY) -m pipeline.run experiment=kinematic_family hydra.sweep.dir=$(RUNS)/kinematic_family scenario.family.size=$(KINEMATIC_FAMILY_SIZE)
+	$(APF) run experiment=kinematic_family hydra.sweep.dir=$(RUNS)/kinematic_family scenario.family.size=$(KINEMATIC_FAMILY_SIZE)
 
 report: $(STAMP)  ## rebuild the HTML report from existing run folders (no simulation)
-	$(PY) -m pipeline.report $(RUNS) --out $(REPORT) --command "$(REPORT_COMMAND)"
+	$(APF) report $(RUNS) --out $(REPORT) --command "$(REPORT_COMMAND)"
 
 screenshot: $(STAMP)  ## the README's screenshots (docs/report_screenshot*.png: 1280 and 390 px, and the explorer) from make reproduce's own report
-	$(PY) -m pipeline.screenshot $(REPORT)/index.html docs/report_screenshot.png \
+	$(APF) screenshot $(REPORT)/index.html docs/report_screenshot.png \
 	  --narrow docs/report_screenshot_390.png --explorer docs/explorer_screenshot.png --member $(SCREENSHOT_MEMBER)
 
 reproduce: experiment report  ## set up, run the experiment and write reports/latest/index.html (its last lines: the verdicts in words)
 
 sweep: $(STAMP)  ## run a sweep preset (SWEEP=sensitivity|horizon|obstacle_speed, LAUNCHER=sequential|local_cores|basic)
-	$(PY) -m pipeline.run sweep=$(SWEEP) hydra/launcher=$(LAUNCHER)
-	$(PY) -m pipeline.report $(RUNS) --sweep $(RUNS)/sweeps/$(SWEEP) --out $(REPORT) --command "$(REPORT_COMMAND)"
+	$(APF) run sweep=$(SWEEP) hydra/launcher=$(LAUNCHER)
+	$(APF) report $(RUNS) --sweep $(RUNS)/sweeps/$(SWEEP) --out $(REPORT) --command "$(REPORT_COMMAND)"
 
 ablation: $(STAMP)  ## which revision does what: ablations + interpretation variants on the family
 	rm -rf $(RUNS)/ablation $(RUNS)/interpretations
-	$(PY) -m pipeline.run experiment=ablation hydra.sweep.dir=$(RUNS)/ablation scenario.family.size=$(FAMILY_SIZE)
-	$(PY) -m pipeline.run experiment=interpretations hydra.sweep.dir=$(RUNS)/interpretations
+	$(APF) ablation --out $(RUNS)/ablation scenario.family.size=$(FAMILY_SIZE)
+	$(APF) run experiment=interpretations hydra.sweep.dir=$(RUNS)/interpretations
 	$(MAKE) report
 
 pedestrians: $(STAMP)  ## improved and baseline among recorded pedestrians (ETH/UCY, docs/pedestrians.md; about 1 min), then the report
 	rm -rf $(RUNS)/pedestrians
-	$(PY) -m pipeline.run experiment=pedestrians hydra.sweep.dir=$(RUNS)/pedestrians scenario.family.size=$(PEDESTRIANS_FAMILY_SIZE)
+	$(APF) pedestrians --out $(RUNS)/pedestrians scenario.family.size=$(PEDESTRIANS_FAMILY_SIZE)
 	$(MAKE) report
 
 multiverse: $(STAMP)  ## how robust is each verdict: the multiverse (MULTIVERSE=default|quick), then the report
-	$(PY) -m pipeline.multiverse --space $(MULTIVERSE) --out $(RUNS)/multiverse
+	$(APF) multiverse --space $(MULTIVERSE) --out $(RUNS)/multiverse
 	$(MAKE) report
 
 tune: $(STAMP)  ## a fair fight: both methods tuned with one budget, judged on held-out scenarios (TUNE=default|quick), then the report
-	$(PY) -m pipeline.tune --space $(TUNE) --out $(RUNS)/tune
+	$(APF) tune --space $(TUNE) --out $(RUNS)/tune
 	$(MAKE) report
 
 tune-unpruned: $(STAMP)  ## the pruning check: the default tune with every trial on its whole training family (outputs/tune_unpruned; make bench compares it with make tune's)
-	$(PY) -m pipeline.tune --space $(TUNE) --set 'rungs=[]' --set name=$(TUNE)_unpruned --out $(RUNS)/tune_unpruned
+	$(APF) tune --space $(TUNE) --set 'rungs=[]' --set name=$(TUNE)_unpruned --out $(RUNS)/tune_unpruned
 
 # each peer in its own tune against improved: the same preset (budget, replicates, convergence rule,
 # pruning, held-out family) as make tune; no matched control (it is the baseline's); the feasibility
 # threshold the untuned baseline's collisions, as in make tune, so improved's trials are make tune's
 tune-peers: $(STAMP)  ## the fair fight against each lateral peer (TUNE_PEERS) and each Appendix-A one (TUNE_KINEMATIC_PEERS), tuned as make tune tunes improved and the baseline (outputs/tune_peers/<peer>), then the report
 	set -e; for peer in $(TUNE_PEERS); do \
-	  $(PY) -m pipeline.tune --space $(TUNE) --set "methods=[improved,$$peer]" \
+	  $(APF) tune --space $(TUNE) --set "methods=[improved,$$peer]" \
 	    --set "matched_control=''" --set safety_reference=baseline \
 	    --set name=$(TUNE)_vs_$$peer --out $(RUNS)/tune_peers/$$peer; \
 	done; \
 	for peer in $(TUNE_KINEMATIC_PEERS); do \
-	  $(PY) -m pipeline.tune --space $(TUNE) --set "methods=[improved,$${peer}_kinematic]" \
+	  $(APF) tune --space $(TUNE) --set "methods=[improved,$${peer}_kinematic]" \
 	    --set "matched_control=''" --set safety_reference=baseline $(KINEMATIC_TUNE_SETS) \
 	    --set name=$(TUNE)_vs_$${peer}_kinematic --out $(RUNS)/tune_peers/$${peer}_kinematic; \
 	done
@@ -179,23 +181,25 @@ peers: $(STAMP)  ## the methods the paper names on both tracks' whole families (
 
 nmpc-family: $(STAMP)  ## the judge of record: the ledger's methods on the scenario family under the nonlinear MPC (CasADi + IPOPT, about 3 min), then the report
 	rm -rf $(RUNS)/nmpc_family
-	$(PY) -m pipeline.run experiment=nmpc_family hydra.sweep.dir=$(RUNS)/nmpc_family scenario.family.size=$(FAMILY_SIZE)
+	$(APF) nmpc-family --out $(RUNS)/nmpc_family scenario.family.size=$(FAMILY_SIZE)
 	$(MAKE) report
 
 nmpc-check: $(STAMP)  ## each track's linear MPC against the nonlinear MPC (CasADi) on the paper scenario and 50 family members per method, then the report
-	$(PY) -m pipeline.nmpc_check --out $(RUNS)/nmpc_check
+	$(APF) nmpc-check --out $(RUNS)/nmpc_check
 	$(MAKE) report
 
 speed-check: $(STAMP)  ## is slower ever less safe? both methods at 1.5 and 3 m/s and with velocity planning, then the report
-	$(PY) -m pipeline.speed_check --out $(RUNS)/speed
+	$(APF) speed-check --out $(RUNS)/speed
 	$(MAKE) report
 
+# the benchmark harness lives in the repository (benchmarks/, a study registered from outside the
+# package: $PIPELINE_STUDIES names its folder); the report reads its typed result from reports/bench
 bench: $(STAMP)  ## benchmark the controller step vs the Clarabel floor and the peers -> reports/bench/
-	$(PY) -m pipeline.bench --out reports/bench
-	$(PY) benchmarks/bench_aggregate.py 10000
+	PIPELINE_STUDIES=benchmarks PYTHONPATH=. $(APF) bench --out reports/bench
+	$(PY) -m benchmarks.bench_aggregate 10000
 
 verify: reproduce  ## rerun `make reproduce` and compare with reports/reference/ (tolerances in pipeline/studies/verify.py)
-	$(PY) -m pipeline.verify $(RUNS) reports/reference
+	$(APF) verify $(RUNS) reports/reference
 
 test: lint $(STAMP)  ## lint and type-check, then run the test suite on every core (PYTEST_JOBS=auto; excludes tests marked slow or slurm)
 	@# one test file per worker at a time (--dist loadfile), so a file's shared runs are made once
@@ -228,16 +232,13 @@ install-commonroad: $(STAMP)  ## add the optional CommonRoad extra (commonroad-i
 COMMONROAD ?=
 commonroad: $(STAMP)  ## improved and baseline on a CommonRoad scenario: make commonroad COMMONROAD=path/to/scenario.xml (needs make install-commonroad)
 	@test -n "$(COMMONROAD)" || { echo "error: set COMMONROAD=path/to/scenario.xml" >&2; exit 2; }
-	@for method in improved baseline; do \
-	  $(PY) -m pipeline.run scenario=commonroad scenario.commonroad.path=$(abspath $(COMMONROAD)) \
-	    method=$$method hydra.run.dir=$(RUNS)/commonroad/$(basename $(notdir $(COMMONROAD)))/$$method || exit $$?; \
-	done
+	$(APF) commonroad $(abspath $(COMMONROAD)) --methods improved,baseline --out $(RUNS)/commonroad
 
 cache-size: $(STAMP)  ## what the member cache holds (members, files, MB)
-	$(PY) -m pipeline.cache size
+	$(APF) cache size
 
 clean-cache: $(STAMP)  ## empty the member cache (every study then simulates its members again)
-	$(PY) -m pipeline.cache clean
+	$(APF) cache clean
 
 clean:  ## remove generated output (keeps .venv)
 	rm -rf outputs multirun $(REPORT)

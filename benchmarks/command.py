@@ -1,6 +1,9 @@
-"""Benchmark the controller step against the solver's floor: ``python -m pipeline.bench``.
+"""Benchmark the controller step against the solver's floor: ``make bench`` (``apf-mpc bench``
+with this folder on ``$PIPELINE_STUDIES`` and the repository on ``PYTHONPATH``; the harness is
+not part of the installed package, the report reads its typed result,
+:class:`pipeline.studies.results.bench.BenchResult`).
 
-The command: its options, then :func:`pipeline.studies.bench.run_benchmark` through the command
+The command: its options, then :func:`benchmarks.harness.run_benchmark` through the command
 layer (:func:`pipeline.commands.run_command`); it draws the scaling plot and prints the headline
 figures.
 """
@@ -12,8 +15,8 @@ import json
 import sys
 from pathlib import Path
 
+from benchmarks import harness as study
 from pipeline.commands import CommandError, output_folder, run_command
-from pipeline.studies import bench as study
 from pipeline.studies.results.base import written
 from pipeline.studies.results.bench import SCALING_STEM
 
@@ -32,14 +35,24 @@ HEADLINE = ("closed_loop_over_floor", "step_over_floor", "step_over_sparse_floor
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="apf-mpc-bench", description=study.__doc__,
-                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    """``python -m benchmarks.command``: ``apf-mpc bench`` (registered from this folder)."""
+    from pipeline.cli import main as apf_mpc
+
+    return apf_mpc(["bench", *(sys.argv[1:] if argv is None else argv)],
+                   extra_studies=(Path(__file__).resolve().parent,))
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    """``apf-mpc bench``'s arguments."""
     parser.add_argument("--out", type=output_folder, default=Path("reports/bench"))
     parser.add_argument("--steps", type=int, default=40, help="inputs per configuration")
     parser.add_argument("--repeats", type=int, default=3)
     parser.add_argument("--quick", action="store_true", help="N=10 and 1 obstacle only")
     parser.add_argument("--family-size", type=int, default=200)
-    args = parser.parse_args(argv)
+
+
+def run(args: argparse.Namespace) -> int:
+    """The benchmark as ``args`` say, through the command layer."""
     return run_command(lambda: _bench(args))
 
 

@@ -7,7 +7,7 @@ import time
 
 import numpy as np
 
-from pipeline.studies.bench.inputs import compose_config, floor_times, recorded_sparse_qps
+from benchmarks.harness.inputs import compose_config, floor_times, recorded_sparse_qps
 
 #: Per track: improved's overrides, then each peer's method preset.
 NAMED_PEERS = {
