@@ -16,7 +16,7 @@ ROOT = Path(__file__).resolve().parent.parent
 
 def test_wheel_installs_and_runs_from_an_empty_folder(tmp_path):
     """Build the wheel, install it (alone) into a fresh virtual environment whose dependencies
-    come from this one, and run ``apf-mpc-run planner=baseline`` from an empty folder: exit 0
+    come from this one, and run ``apf-mpc run planner=baseline`` from an empty folder: exit 0
     and a run folder with its manifest, the package and its configs read from the install."""
     # build from a copy: setuptools writes build/ beside the sources, never into the checkout
     source = tmp_path / "source"
@@ -46,7 +46,7 @@ def test_wheel_installs_and_runs_from_an_empty_folder(tmp_path):
                     "--no-deps", wheel], check=True, capture_output=True, timeout=300)
     empty = tmp_path / "empty"
     empty.mkdir()
-    proc = subprocess.run([str(venv / "bin" / "apf-mpc-run"), "planner=baseline"], cwd=empty,
+    proc = subprocess.run([str(venv / "bin" / "apf-mpc"), "run", "planner=baseline"], cwd=empty,
                           capture_output=True, text=True, timeout=300)
     assert proc.returncode == 0, proc.stderr[-2000:]
     assert list(empty.glob("outputs/runs/*/baseline/*/manifest.json"))
@@ -54,9 +54,14 @@ def test_wheel_installs_and_runs_from_an_empty_folder(tmp_path):
                             "print(c.__file__); print(c.CONF_DIR)"], cwd=empty,
                            capture_output=True, text=True, check=True).stdout.split()
     assert all(str(venv) in line for line in where)
-    for command in ("apf-mpc-report", "apf-mpc-score", "apf-mpc-tune"):
-        assert subprocess.run([str(venv / "bin" / command), "--help"], cwd=empty,
+    for study in ("report", "score", "tune"):
+        assert subprocess.run([str(venv / "bin" / "apf-mpc"), study, "--help"], cwd=empty,
                               capture_output=True, timeout=120).returncode == 0
+    # the one command lists every study of the wheel; the benchmark harness is not in it
+    listed = subprocess.run([str(venv / "bin" / "apf-mpc"), "--help"], cwd=empty,
+                            capture_output=True, text=True, timeout=120).stdout
+    assert "  tune " in listed and "  bench " not in listed
+    assert not list(site.glob("benchmarks"))
 
 
 def _freeze(python: Path) -> set[str]:
