@@ -1,4 +1,4 @@
-"""Aggregate a Hydra sweep folder: ``python -m pipeline.aggregate SWEEP_DIR``; also the sweep's
+"""Aggregate a Hydra sweep folder: ``apf-mpc aggregate SWEEP_DIR``; also the sweep's
 ``on_multirun_end`` callback (``AggregateCallback``, named by ``_target_`` in ``conf/config.yaml``).
 
 The command: its options, then :func:`pipeline.studies.aggregate.aggregate` through the command
@@ -55,13 +55,22 @@ class AggregateCallback(Callback):
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="apf-mpc aggregate",
-                                     description="Gather a sweep folder into summary.csv.")
+    """``python -m pipeline.aggregate``: ``apf-mpc aggregate``."""
+    from pipeline.cli import alias
+
+    return alias("aggregate", argv)
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    """``apf-mpc aggregate``'s arguments."""
     parser.add_argument("sweep_dir", type=Path)
     parser.add_argument("--baseline", type=Path, default=None,
                         help="baseline job folder for improved jobs without a partner")
     parser.add_argument("--no-figures", action="store_true", help="skip the figures")
-    args = parser.parse_args(argv)
+
+
+def run(args: argparse.Namespace) -> int:
+    """Aggregate as ``args`` say, through the command layer."""
     return run_command(lambda: _aggregate(args),
                        os_error=cannot("write the summary", args.sweep_dir))
 

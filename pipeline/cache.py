@@ -1,4 +1,4 @@
-"""Entry point: ``python -m pipeline.cache size|clean [--root DIR]`` (``make cache-size``,
+"""``apf-mpc cache size|clean [--root DIR]`` (``make cache-size``,
 ``make clean-cache``): what the member cache holds, or empty it
 (:mod:`pipeline.store.member_cache`)."""
 
@@ -15,13 +15,22 @@ __all__ = ["main"]
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="apf-mpc cache",
-                                     description=__doc__.split("\n\n")[0])
+    """``python -m pipeline.cache``: ``apf-mpc cache``."""
+    from pipeline.cli import alias
+
+    return alias("cache", argv)
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    """``apf-mpc cache``'s arguments."""
     parser.add_argument("action", choices=("size", "clean"),
                         help="size: entries, files and bytes; clean: remove every entry")
     parser.add_argument("--root", type=Path, default=None,
                         help=f"the cache's folder (default: ${ENV}, else outputs/member_cache)")
-    args = parser.parse_args(argv)
+
+
+def run(args: argparse.Namespace) -> int:
+    """The action ``args`` ask for, through the command layer."""
     return run_command(lambda: _act(args), kept="the cache as it was")
 
 

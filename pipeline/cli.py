@@ -1,96 +1,120 @@
-"""``apf-mpc <command> [arguments]``: every command of the pipeline behind one entry point.
+"""The one command: ``apf-mpc <study> [arguments]``, its subcommands built from the studies'
+registry (:mod:`pipeline.store.study_registry`).
 
-Each command is one row of :data:`COMMANDS` (its name, its module and what it does); the
-module's ``main`` runs it through the command layer (:func:`pipeline.commands.run_command`:
-one line and exit code 2 for a usage or configuration error, 130/143 for Ctrl-C/SIGTERM).
-``apf-mpc --help`` lists the commands, ``apf-mpc <command> --help`` gives one command's
-arguments. ``python -m pipeline.<module>`` stays as an alias of each (the Makefile's form).
-A command of one's own is a row added here and a module with ``main(argv) -> int``.
+``apf-mpc --help`` lists every registered study from the registry alone (nothing is imported);
+``apf-mpc <study> --help`` imports that study's module and shows its arguments. A study runs
+through the command layer (:func:`pipeline.commands.run_command`): its module gives
+``add_arguments(parser)`` and ``run(args) -> int``; a study that is a Hydra experiment
+(``experiment:`` in its entry) runs ``apf-mpc run experiment=<it> hydra.sweep.dir=<--out>`` with
+the overrides given. ``python -m pipeline.<name>`` stays as an alias of ``apf-mpc <name>``.
 """
 
 from __future__ import annotations
 
-import importlib
+import argparse
 import sys
-from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
 
-__all__ = ["COMMANDS", "Command", "main"]
+from pipeline.commands import output_folder
 
-
-@dataclass(frozen=True)
-class Command:
-    """One command: its name after ``apf-mpc``, the module whose ``main`` runs it, what it
-    does (one line), and whether it is a Hydra application (``run``: it reads ``sys.argv``
-    itself, Hydra overrides as its arguments)."""
-
-    name: str
-    module: str
-    summary: str
-    hydra: bool = False
+PROG = "apf-mpc"
+DESCRIPTION = ("The reproduction of Yoo & Choi (2025), Improved MPC for dynamical obstacle "
+               "avoidance: one subcommand per study (make's targets call them).")
 
 
-#: Every command, in the order ``apf-mpc --help`` lists them (the Makefile's targets in
-#: brackets run them).
-COMMANDS: tuple[Command, ...] = (
-    Command("run", "pipeline.run", "one run, a family or a Hydra sweep: Hydra overrides "
-            "(make reproduce, make pedestrians, make sweep)", hydra=True),
-    Command("report", "pipeline.report", "the HTML report from the run folders (make report)"),
-    Command("verify", "pipeline.verify", "compare the runs with reports/reference (make verify)"),
-    Command("multiverse", "pipeline.multiverse", "how robust each verdict is "
-            "(make multiverse)"),
-    Command("tune", "pipeline.tune", "both methods tuned with one budget, judged on held-out "
-            "scenarios (make tune)"),
-    Command("nmpc-check", "pipeline.nmpc_check", "each track's linear MPC against the "
-            "nonlinear MPC (make nmpc-check)"),
-    Command("speed-check", "pipeline.speed_check", "is slower ever less safe? "
-            "(make speed-check)"),
-    Command("score", "pipeline.score", "the metrics of a trajectory of your own"),
-    Command("aggregate", "pipeline.aggregate", "gather a sweep folder into summary.csv"),
-    Command("bench", "pipeline.bench", "benchmark the controller step against the solver's "
-            "floor (make bench)"),
-    Command("screenshot", "pipeline.screenshot", "the README's screenshots (make screenshot)"),
-    Command("cache", "pipeline.cache", "what the member cache holds, or empty it "
-            "(make cache-size, make clean-cache)"),
-)
+def main(argv: list[str] | None = None, extra_studies: tuple[Path, ...] = ()) -> int:
+    """``apf-mpc <study> ...``: the study's exit code (2 with one line for an unknown study or
+    a registry entry that cannot be read); ``extra_studies``: further folders of study YAMLs
+    (as ``$PIPELINE_STUDIES``)."""
+    from pipeline.errors import ConfigError
+    from pipeline.store.study_registry import load_studies
+
+    argv = list(sys.argv[1:] if argv is None else argv)
+    try:
+        studies = {s.name: s for s in load_studies(extra_studies)}
+    except ConfigError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    if not argv or argv[0] in ("-h", "--help"):
+        print(usage(studies.values()))
+        return 0 if argv else 2
+    name, rest = argv[0], argv[1:]
+    if name not in studies:
+        print(f"{PROG}: error: unknown study {name!r}; allowed: {', '.join(studies)}",
+              file=sys.stderr)
+        return 2
+    return run_study(studies[name], rest)
 
 
-def usage() -> str:
-    """``apf-mpc --help``: the commands and what each does."""
-    width = max(len(c.name) for c in COMMANDS)
-    lines = ["usage: apf-mpc <command> [arguments]   (apf-mpc <command> --help: its arguments)",
-             "", "commands:"]
-    lines += [f"  {c.name:<{width}}  {c.summary}" for c in COMMANDS]
+def usage(studies) -> str:
+    """``apf-mpc --help``: every study with its line, in the registry's order."""
+    studies = list(studies)
+    width = max((len(s.name) for s in studies), default=0) + 2
+    lines = [f"usage: {PROG} <study> [arguments]  ({PROG} <study> --help: its arguments)", "",
+             DESCRIPTION, "", "studies:"]
+    lines += [f"  {s.name.ljust(width)}{s.help}" for s in studies]
     return "\n".join(lines)
 
 
-def main(argv: list[str] | None = None) -> int:
-    """Run ``apf-mpc <command> [arguments]`` (``argv``: the arguments after ``apf-mpc``;
-    default ``sys.argv[1:]``); its exit code."""
-    args = list(sys.argv[1:] if argv is None else argv)
-    if not args or args[0] in ("-h", "--help", "help"):
-        print(usage())
-        return 0 if args else 2
-    by_name = {c.name: c for c in COMMANDS}
-    command = by_name.get(args[0])
-    if command is None:
-        print(f"error: apf-mpc has no command {args[0]!r}; allowed: "
-              f"{', '.join(by_name)} (apf-mpc --help)", file=sys.stderr)
-        return 2
+def run_study(study, argv: list[str]) -> int:
+    """Run the registered ``study`` with its arguments ``argv`` (see the module docstring)."""
+    from pipeline.store.study_registry import resolve
+
+    prog = f"{PROG} {study.name}"
+    if study.experiment is not None:
+        return _experiment(study, prog, argv)
+    from pipeline.errors import ConfigError
+
     try:
-        module = importlib.import_module(command.module)
+        module: Any = resolve(study.command, f"{study.source}: command")
     except KeyboardInterrupt:
-        # Ctrl-C while the command's imports load (numpy, Hydra, the solvers: about a
-        # second): nothing has run, nothing is written; no traceback (make -j9 printed nine)
+        # Ctrl-C while the study's imports load (numpy, Hydra, the solvers: about a second):
+        # nothing has run, nothing is written; no traceback (make -j9 printed nine)
         return 130
-    if command.hydra:
-        # Hydra reads sys.argv: the module's own path first, as `python -m` sets it
-        sys.argv = [str(module.__file__), *args[1:]]
-        try:
-            module.main()
-        except SystemExit as done:
-            return int(done.code or 0) if not isinstance(done.code, str) else 2
-        return 0
-    return int(module.main(args[1:]) or 0)
+    except ConfigError as exc:  # a registry entry naming a module that does not import
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    if not hasattr(module, "add_arguments"):  # a Hydra command: Hydra reads its arguments
+        return int(module.command(argv, prog))
+    parser = argparse.ArgumentParser(prog=prog, description=study_description(study, module),
+                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    module.add_arguments(parser)
+    return int(module.run(parser.parse_args(argv)))
+
+
+def study_description(study, module) -> str:
+    """A study's ``--help`` text: its registry line, then its module's first paragraph."""
+    doc = (module.__doc__ or "").strip().split("\n\n")[0]
+    return f"{study.help[:1].upper()}{study.help[1:]}." + (f"\n\n{doc}" if doc else "")
+
+
+def _experiment(study, prog: str, argv: list[str]) -> int:
+    """A study that is a Hydra experiment: ``apf-mpc run experiment=<it>`` into ``--out``
+    (the ``run`` study's command, found as any study's: by its name in the registry)."""
+    from pipeline.store.study_registry import resolve, study_named
+
+    runner = study_named("run")
+    try:
+        run: Any = resolve(str(runner.command), f"{runner.source}: command")
+    except KeyboardInterrupt:  # as in run_study
+        return 130
+    folder = study.folder or study.name
+    parser = argparse.ArgumentParser(
+        prog=prog, description=f"{study.help[:1].upper()}{study.help[1:]}: apf-mpc run "
+                               f"experiment={study.experiment} into --out.")
+    parser.add_argument("--out", type=output_folder, default=Path("outputs") / folder,
+                        help=f"the sweep folder (default: outputs/{folder})")
+    parser.add_argument("overrides", nargs="*",
+                        help="Hydra overrides for every run (e.g. scenario.family.size=50)")
+    args = parser.parse_args(argv)
+    return run.command([f"experiment={study.experiment}", f"hydra.sweep.dir={args.out}",
+                        *args.overrides], prog)
+
+
+def alias(name: str, argv: list[str] | None = None) -> int:
+    """``python -m pipeline.<module>``: ``apf-mpc <name>`` with the same arguments."""
+    return main([name, *(sys.argv[1:] if argv is None else argv)])
 
 
 if __name__ == "__main__":

@@ -1,4 +1,4 @@
-"""How robust is each verdict: ``python -m pipeline.multiverse [--space NAME|PATH] [--out DIR]``.
+"""How robust is each verdict: ``apf-mpc multiverse [--space NAME|PATH] [--out DIR]``.
 
 The command: its options, then :func:`pipeline.studies.multiverse.run_multiverse` through the
 command layer (:func:`pipeline.commands.run_command`).
@@ -23,14 +23,23 @@ log = logging.getLogger("pipeline.multiverse")
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="apf-mpc multiverse",
-                                     description=study.__doc__.split("\n\n")[0])
+    """``python -m pipeline.multiverse``: ``apf-mpc multiverse``."""
+    from pipeline.cli import alias
+
+    return alias("multiverse", argv)
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    """``apf-mpc multiverse``'s arguments."""
     parser.add_argument("--space", default="default",
                         help="conf/multiverse/<name>.yaml or a path (default: default)")
     parser.add_argument("--out", type=output_folder, default=Path("outputs/multiverse"))
     parser.add_argument("--jobs", type=int, default=2, help="analysis workers (default 2)")
     parser.add_argument("overrides", nargs="*", help="Hydra overrides for every run")
-    args = parser.parse_args(argv)
+
+
+def run(args: argparse.Namespace) -> int:
+    """The multiverse as ``args`` say, through the command layer."""
     return run_command(lambda: _multiverse(args))
 
 

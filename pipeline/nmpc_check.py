@@ -1,5 +1,4 @@
-"""Entry point: ``python -m pipeline.nmpc_check [--members 50] [--track both] [--out DIR]``
-(``make nmpc-check``): each track's linear MPC against the same problem on the nonlinear model
+"""``apf-mpc nmpc-check [--members 50] [--track both] [--out DIR]`` (``make nmpc-check``): each track's linear MPC against the same problem on the nonlinear model
 (:mod:`pipeline.studies.nmpc_check`), through the command layer
 (:func:`pipeline.commands.run_command`)."""
 
@@ -20,8 +19,14 @@ log = logging.getLogger("pipeline.nmpc_check")
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="apf-mpc nmpc-check",
-                                     description=__doc__.split("\n\n")[0])
+    """``python -m pipeline.nmpc_check``: ``apf-mpc nmpc-check``."""
+    from pipeline.cli import alias
+
+    return alias("nmpc-check", argv)
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    """``apf-mpc nmpc-check``'s arguments."""
     parser.add_argument("--members", type=int, default=50,
                         help="family members per method (1-10000, default 50)")
     parser.add_argument("--out", type=output_folder, default=Path("outputs/nmpc_check"))
@@ -29,7 +34,10 @@ def main(argv: list[str] | None = None) -> int:
                         help="which track's linear MPC to check (default both)")
     parser.add_argument("--jobs", type=int, default=2,
                         help="worker processes (1-64, default 2)")
-    args = parser.parse_args(argv)
+
+
+def run(args: argparse.Namespace) -> int:
+    """The check as ``args`` say, through the command layer."""
     return run_command(lambda: _check(args), kept="completed runs",
                        os_error=cannot("write its results", args.out))
 

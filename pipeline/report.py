@@ -1,4 +1,4 @@
-"""Build the HTML report from run folders: ``python -m pipeline.report RUNS [--out DIR]``.
+"""Build the HTML report from run folders: ``apf-mpc report RUNS [--out DIR]``.
 
 The command: its options, then :func:`pipeline.reporting.page.build_report` through the
 command layer (:func:`pipeline.commands.run_command`). The report only reads: it never
@@ -17,9 +17,15 @@ from pipeline.reporting.page import build_report
 __all__ = ["build_report", "main"]
 
 
-def _parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(prog="apf-mpc report",
-                                     description="Build the HTML report from run folders.")
+def main(argv: list[str] | None = None) -> int:
+    """``python -m pipeline.report``: ``apf-mpc report``."""
+    from pipeline.cli import alias
+
+    return alias("report", argv)
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    """``apf-mpc report``'s arguments."""
     parser.add_argument("runs", type=Path, help="folder holding run folders (e.g. outputs/paper)")
     parser.add_argument("--out", type=output_folder, default=Path("reports/latest"),
                         help="output folder (default: reports/latest)")
@@ -49,12 +55,11 @@ def _parser() -> argparse.ArgumentParser:
                         help="command to show under provenance (default: this command line; "
                              "make passes the make command that ran, e.g. make tune "
                              "TUNE=quick)")
-    return parser
 
 
-def main(argv: list[str] | None = None) -> int:
-    args = _parser().parse_args(argv)
-    command = args.command or _command_line(argv)
+def run(args: argparse.Namespace) -> int:
+    """The report as ``args`` say, through the command layer."""
+    command = args.command or _command_line()
 
     def cannot_write(exc: OSError) -> str:
         return (f"error: --out {args.out}: cannot write the report ({exc.strerror or exc}: "
@@ -63,14 +68,18 @@ def main(argv: list[str] | None = None) -> int:
     return run_command(lambda: _report(args, command), os_error=cannot_write)
 
 
-def _command_line(argv: list[str] | None) -> str:
-    """The command that ran: ``apf-mpc report`` when the installed command ran it,
-    ``python -m pipeline.report`` otherwise, with its arguments."""
+def _command_line() -> str:
+    """The command that ran, with its arguments: ``apf-mpc report ...`` when the installed
+    command ran, ``python -m pipeline.report ...`` otherwise."""
     import shlex
 
     ran = Path(sys.argv[0]).name if sys.argv and sys.argv[0] else ""
-    name = "apf-mpc report" if ran == "apf-mpc" else "python -m pipeline.report"
-    return " ".join([name, *(shlex.quote(a) for a in (sys.argv[1:] if argv is None else argv))])
+    words = sys.argv[1:]
+    if ran == "apf-mpc" and words[:1] == ["report"]:
+        name, words = "apf-mpc report", words[1:]
+    else:
+        name = "python -m pipeline.report"
+    return " ".join([name, *(shlex.quote(a) for a in words)])
 
 
 def _report(args, command: str) -> int:

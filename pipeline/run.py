@@ -1,4 +1,5 @@
-"""Entry point of one closed-loop run or family: ``python -m pipeline.run [hydra overrides]``.
+"""One closed-loop run, family or sweep: ``apf-mpc run [hydra overrides]`` (or
+``python -m pipeline.run``).
 
 The work is done by :func:`pipeline.studies.experiment.run_experiment` and
 :func:`~pipeline.studies.experiment.run_family` (tests and notebooks call them); ``main`` wraps
@@ -137,10 +138,29 @@ def _cannot_write(exc: OSError) -> str:
 
 
 def main() -> None:
-    """Console entry: run Hydra through the command layer
-    (:func:`pipeline.commands.run_command`): configuration errors exit 2 with one line on
-    stderr, an unwritable output folder too, Ctrl-C keeps what is complete; with
-    ``HYDRA_FULL_ERROR=1`` every error keeps its traceback."""
+    """``python -m pipeline.run``: ``apf-mpc run`` with the same Hydra overrides."""
+    from pipeline.cli import alias
+
+    sys.exit(alias("run"))
+
+
+def command(argv: list[str], prog: str = "apf-mpc run") -> int:
+    """``apf-mpc run [hydra overrides]``: Hydra reads ``argv`` (as its command line) and runs
+    through the command layer (:func:`pipeline.commands.run_command`): configuration errors
+    exit 2 with one line on stderr, an unwritable output folder too, Ctrl-C keeps what is
+    complete; with ``HYDRA_FULL_ERROR=1`` every error keeps its traceback."""
+    saved = sys.argv
+    sys.argv = [saved[0] if saved else prog, *argv]
+    try:
+        return _hydra_command()
+    except SystemExit as done:  # a configuration refusal before Hydra's job (exit 2)
+        return int(done.code or 0) if not isinstance(done.code, str) else 2
+    finally:
+        sys.argv = saved
+
+
+def _hydra_command() -> int:
+    """:func:`command` on ``sys.argv``."""
     original = os.environ.get("HYDRA_FULL_ERROR")
     user_wants_trace = original == "1"
     os.environ["PIPELINE_USER_FULL_ERROR"] = "1" if user_wants_trace else "0"
@@ -157,7 +177,7 @@ def main() -> None:
             os.environ.pop("HYDRA_FULL_ERROR", None)
         else:
             os.environ["HYDRA_FULL_ERROR"] = original
-    sys.exit(code)
+    return code
 
 
 if __name__ == "__main__":

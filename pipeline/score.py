@@ -1,4 +1,4 @@
-"""Score any trajectory CSV with the Table 1 metrics: ``python -m pipeline.score FILE.csv``.
+"""Score any trajectory CSV with the Table 1 metrics: ``apf-mpc score FILE.csv``.
 
 The command: its options, then :func:`pipeline.studies.score.load_trajectory` and the metrics
 through the command layer (:func:`pipeline.commands.run_command`). What the file cannot give is
@@ -25,9 +25,15 @@ log = logging.getLogger("pipeline.score")
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="apf-mpc score",
-                                     description=scoring.__doc__,
-                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    """``python -m pipeline.score``: ``apf-mpc score``."""
+    from pipeline.cli import alias
+
+    return alias("score", argv)
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    """``apf-mpc score``'s arguments (the description: what a file cannot give)."""
+    parser.description = f"{parser.description}\n\n{scoring.__doc__}"
     parser.add_argument("trajectory", help="trajectory CSV, or - for standard input")
     parser.add_argument("--columns", default="", help="OUR=THEIRS,... column name mapping")
     parser.add_argument("--start", default="0,0", help="start X,Y in m (default 0,0)")
@@ -37,7 +43,10 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--obstacle", action="append", default=[],
                         help="x,y,radius[,appear_s[,vx,vy]] (repeatable)")
     parser.add_argument("--out", type=Path, default=None, help="write metrics JSON here")
-    args = parser.parse_args(argv)
+
+
+def run(args: argparse.Namespace) -> int:
+    """Score as ``args`` say, through the command layer."""
 
     def cannot_write(exc: OSError) -> str:
         return f"error: --out {args.out}: cannot write ({exc.strerror})"

@@ -19,8 +19,14 @@ from pipeline.reporting.screenshot import take_explorer_screenshot, take_screens
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="apf-mpc screenshot", description=__doc__,
-                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    """``python -m pipeline.screenshot``: ``apf-mpc screenshot``."""
+    from pipeline.cli import alias
+
+    return alias("screenshot", argv)
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    """``apf-mpc screenshot``'s arguments."""
     parser.add_argument("report", type=Path, help="the report's index.html")
     parser.add_argument("out", type=Path, help="the PNG to write (first screen at 1280 px)")
     parser.add_argument("--narrow", type=Path, default=None,
@@ -29,7 +35,10 @@ def main(argv: list[str] | None = None) -> int:
                         help="also the scenario explorer at --member, to this PNG")
     parser.add_argument("--member", default="family/0",
                         help="the explorer's member, <experiment>/<index> (default family/0)")
-    args = parser.parse_args(argv)
+
+
+def run(args: argparse.Namespace) -> int:
+    """The screenshots ``args`` ask for, through the command layer."""
     return run_command(lambda: _screenshot(args.report, args.out, args.narrow, args.explorer,
                                            args.member))
 

@@ -1,5 +1,4 @@
-"""Entry point: ``python -m pipeline.speed_check [--members 200] [--out DIR]`` (``make
-speed-check``): is slower ever less safe? (:mod:`pipeline.studies.speed`), through the command
+"""``apf-mpc speed-check [--members 200] [--out DIR]`` (``make speed-check``): is slower ever less safe? (:mod:`pipeline.studies.speed`), through the command
 layer (:func:`pipeline.commands.run_command`)."""
 
 from __future__ import annotations
@@ -19,14 +18,23 @@ log = logging.getLogger("pipeline.speed_check")
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="apf-mpc speed-check",
-                                     description=__doc__.split("\n\n")[0])
+    """``python -m pipeline.speed_check``: ``apf-mpc speed-check``."""
+    from pipeline.cli import alias
+
+    return alias("speed-check", argv)
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    """``apf-mpc speed-check``'s arguments."""
     parser.add_argument("--members", type=int, default=200,
                         help="family members per variant and method (1-10000, default 200)")
     parser.add_argument("--out", type=output_folder, default=Path("outputs/speed"))
     parser.add_argument("--variants", default=",".join(VARIANTS),
                         help="comma-separated subset of: " + ", ".join(VARIANTS))
-    args = parser.parse_args(argv)
+
+
+def run(args: argparse.Namespace) -> int:
+    """The check as ``args`` say, through the command layer."""
     return run_command(lambda: _check(args), kept="completed family runs")
 
 

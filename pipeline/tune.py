@@ -1,5 +1,5 @@
-"""Entry point of the fair fight: ``python -m pipeline.tune [--space default] [--out DIR]
-[hydra overrides]`` (``make tune``). The work is :func:`pipeline.studies.tune.run_tuning`."""
+"""The fair fight: ``apf-mpc tune [--space default] [--out DIR] [hydra overrides]`` (``make
+tune``). The work is :func:`pipeline.studies.tune.run_tuning`."""
 
 from __future__ import annotations
 
@@ -19,8 +19,14 @@ log = logging.getLogger("pipeline.tune")
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="apf-mpc tune",
-                                     description=__doc__.split("\n\n")[0])
+    """``python -m pipeline.tune``: ``apf-mpc tune``."""
+    from pipeline.cli import alias
+
+    return alias("tune", argv)
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    """``apf-mpc tune``'s arguments."""
     parser.add_argument("--space", default="default",
                         help="conf/tune/<name>.yaml or a path (default: default)")
     parser.add_argument("--out", type=output_folder, default=Path("outputs/tune"))
@@ -30,7 +36,10 @@ def main(argv: list[str] | None = None) -> int:
                              "unpruned check; --set name=... names the changed space)")
     parser.add_argument("overrides", nargs="*",
                         help="Hydra overrides for every run (e.g. hydra/launcher=slurm)")
-    args = parser.parse_args(argv)
+
+
+def run(args: argparse.Namespace) -> int:
+    """Tune as ``args`` say, through the command layer."""
     return run_command(lambda: _tune(args), kept="completed family runs and tables")
 
 

@@ -20,15 +20,24 @@ __all__ = ["main", "verify"]
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="apf-mpc verify", description=__doc__,
-                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    """``python -m pipeline.verify``: ``apf-mpc verify``."""
+    from pipeline.cli import alias
+
+    return alias("verify", argv)
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    """``apf-mpc verify``'s arguments."""
     parser.add_argument("runs", type=Path, help="runs folder (make reproduce's outputs)")
     parser.add_argument("reference", type=Path, nargs="?", default=Path("reports/reference"))
     parser.add_argument("--update", action="store_true", help="rewrite the reference")
     parser.add_argument("--seeds", type=int, default=5,
                         help="bootstrap seeds the answer's outcomes must agree under "
                              "(claims.seed 0..N-1; 0 or 1: not checked; default 5)")
-    args = parser.parse_args(argv)
+
+
+def run(args: argparse.Namespace) -> int:
+    """Verify as ``args`` say, through the command layer."""
     return run_command(lambda: _verify(args), os_error=cannot(
         "write" if args.update else "read", args.reference))
 

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import pytest
 
-from pipeline.bench import main
+from benchmarks.command import main
 
 
 @pytest.mark.parametrize("option, value, line", [

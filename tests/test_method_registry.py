@@ -24,8 +24,8 @@ NAMED_PEERS_BEFORE = {
 
 
 def test_every_preset_registers_its_method_in_the_earlier_order():
+    from benchmarks.harness.named_peers import named_peers
     from pipeline.reporting.inputs import ordered
-    from pipeline.studies.bench.named_peers import named_peers
 
     registry = method_registry()
     assert set(registry) == set(ORDER_BEFORE)

@@ -206,7 +206,7 @@ def test_members_at_equal_hypervolume_are_read_off_the_two_tunes(tmp_path):
     """Planted: the unpruned tune converged at 5 trials (5 x 40 members) with hypervolume 0.50;
     the pruned one's front first reached 0.495 (0.50 less 1 %) at its 4th trial, when it had
     simulated 40 + 10 + 10 + 40 members: 100 / 200."""
-    from pipeline.studies.bench.studies import compare_pruning, pruning_comparison
+    from benchmarks.harness.studies import compare_pruning, pruning_comparison
 
     def summary(rungs, history, converged_at, claims) -> dict:
         return {"settings": {"rungs": rungs, "training_size": 40},

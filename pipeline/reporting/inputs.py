@@ -16,7 +16,7 @@ import logging
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TypeVar
+from typing import Any, TypeVar
 
 import pandas as pd
 
@@ -259,6 +259,9 @@ class ReportInputs:
     skipped: tuple[Skipped, ...] = ()
     #: runs on CommonRoad scenarios (``make commonroad``), shown only
     commonroad: tuple[CommonRoadResult, ...] = ()
+    #: every registered study's typed result found in its folder, by the study's name
+    #: (:func:`study_results`; ``nmpc``, ``speed``, ``multiverse`` and ``tune`` come from here)
+    studies: dict[str, Any] = field(default_factory=dict)
 
     @property
     def has_runs(self) -> bool:
@@ -296,17 +299,14 @@ class ReportInputs:
                                    for d in sweep_dirs) if s is not None)
         bench = optional(BenchResult.load, bench_dir, "performance section") \
             if BenchResult.present(bench_dir) else None
+        # every registered study's typed result found in its folder (by the study's name)
+        studies = study_results(layout, optional)
         # a folder named on the command line is read (or skipped with its reason) even when it
         # holds no result: a mistyped --tune left the section out without a word
-        named = {"multiverse": multiverse_dir is not None, "tune": tune_dir is not None}
-        if multiverse_dir is None and MultiverseResult.present(layout.folder("multiverse")):
-            multiverse_dir = layout.folder("multiverse")
-        multiverse = optional(MultiverseResult.load, multiverse_dir, "robustness section") \
-            if named["multiverse"] or MultiverseResult.present(multiverse_dir) else None
-        if tune_dir is None and TuneResult.present(layout.folder("tune")):
-            tune_dir = layout.folder("tune")
-        tune = optional(TuneResult.load, tune_dir, "fair fight section") \
-            if named["tune"] or TuneResult.present(tune_dir) else None
+        multiverse = studies.get("multiverse") if multiverse_dir is None else \
+            optional(MultiverseResult.load, multiverse_dir, "robustness section")
+        tune = studies.get("tune") if tune_dir is None else \
+            optional(TuneResult.load, tune_dir, "fair fight section")
         claims = _claims(collection, treatment, controls)
         commonroad = tuple(CommonRoadResult.load_all(layout.folder("commonroad")))
         if not collection.runs:
@@ -319,10 +319,12 @@ class ReportInputs:
                 skipped.extend(_alone_skipped(layout))
             return cls(run_root, layout, claims, sweeps=sweeps, bench=bench,
                        skipped=tuple(skipped), commonroad=commonroad,
-                       pedestrians=pedestrians, pedestrian_variants=variants)
+                       pedestrians=pedestrians, pedestrian_variants=variants, studies=studies)
         inputs = cls._with_runs(run_root, layout, claims, collection, optional, skipped,
                                 sweeps=sweeps, bench=bench, multiverse=multiverse, tune=tune)
-        return dataclasses.replace(inputs, commonroad=commonroad)
+        return dataclasses.replace(inputs, commonroad=commonroad, studies=studies,
+                                   nmpc=studies.get("nmpc-check"),
+                                   speed=studies.get("speed-check"))
 
     @classmethod
     def _with_runs(cls, run_root: Path, layout: OutputsLayout, claims: ClaimsConfig,
@@ -387,10 +389,6 @@ class ReportInputs:
             claims.treatment, {"lateral": (family, peers),
                                "kinematic": (kinematic_family, kinematic_peers)}),
             layout.root, "peers section (solve times)") or {}
-        nmpc = optional(NmpcCheckResult.load, layout.folder("nmpc_check"), "nmpc check") \
-            if NmpcCheckResult.present(layout.folder("nmpc_check")) else None
-        speed = optional(SpeedCheckResult.load, layout.folder("speed"), "speed check") \
-            if SpeedCheckResult.present(layout.folder("speed")) else None
         # the model checks are read only when there is a ledger to put beside them
         # (a failure is listed against the outputs root, the folder the checks come from)
         validity = optional(lambda _root: _validity(layout), layout.root,
@@ -408,7 +406,7 @@ class ReportInputs:
             ablation=family_tables_by_method(layout.folder("ablation"), skipped),
             interpretations=interpretation_tables(layout.folder("interpretations"), skipped),
             validity=validity, sweeps=sweeps, bench=bench, multiverse=multiverse, tune=tune,
-            peer_tunes=_peer_tunes(layout, optional), nmpc=nmpc, speed=speed,
+            peer_tunes=_peer_tunes(layout, optional),
             skipped=tuple(skipped))
 
 
@@ -472,6 +470,27 @@ def _pool(settings: ExperimentConfig | None, section: str, label: str) -> tuple[
     track = "kinematic" if settings.controller.kind == "kinematic_mpc" else "lateral"
     scenario = dataclasses.asdict(settings.scenario)
     return (track, json.dumps(scenario, sort_keys=True, default=str))
+
+
+def study_results(layout: OutputsLayout, optional: _Optional) -> dict[str, Any]:
+    """Each registered study's typed result (its entry's ``result``: ``present(folder)`` and
+    ``load(folder)``) from the study's folder, by the study's name; a study without a result
+    or a folder, or whose folder holds none, is absent; one that cannot be read is skipped and
+    listed (the section it feeds left out)."""
+    from pipeline.store.study_registry import load_studies, resolve
+
+    found: dict[str, Any] = {}
+    for study in load_studies():
+        if study.result is None or study.folder is None:
+            continue
+        result_type: Any = resolve(study.result, f"{study.source}: result")
+        folder = layout.folder(study.folder)
+        if result_type.present(folder):
+            what = f"{(study.section_key or study.name).replace('_', ' ')} section"
+            value = optional(result_type.load, folder, what)
+            if value is not None:
+                found[study.name] = value
+    return found
 
 
 def _peer_tunes(layout: OutputsLayout, optional: _Optional) -> dict[str, TuneResult]:

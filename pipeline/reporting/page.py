@@ -13,6 +13,7 @@ from __future__ import annotations
 import logging
 import time
 from pathlib import Path
+from typing import Any
 
 from pipeline.reporting.explorer import write_explorer
 from pipeline.reporting.figure import Figures
@@ -130,9 +131,19 @@ def build_page(inputs: ReportInputs, verdicts: Verdicts, figures: Figures, comma
         performance=performance_section(inputs, figures),
         given=runs_given_section(inputs, skipped),
         commonroad=commonroad_section(inputs),
+        study_sections=study_sections(inputs),
         methods=methods_section(verdicts.claims if paper else None,
                                 {m: r.config for m, r in inputs.lateral.by_method.items()}
                                 if inputs.lateral is not None else {}, command))
+
+
+def study_sections(inputs: ReportInputs) -> tuple[tuple[Any, Any], ...]:
+    """The sections studies from outside the package bring (their registry entry's
+    ``section``), each with the study's result (None when its folder holds none)."""
+    from pipeline.store.study_registry import StudySection, load_studies
+
+    return tuple((study, inputs.studies.get(study.name)) for study in load_studies()
+                 if isinstance(study.section, StudySection))
 
 
 def answer_context(inputs: ReportInputs, verdicts: Verdicts, robustness) -> AnswerContext:

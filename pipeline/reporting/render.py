@@ -1,13 +1,16 @@
 """The page: every section (:class:`Page`) rendered through ``templates/report.html.j2`` and
-its one template per section (``templates/sections/``), numbers through the filters of
-:mod:`pipeline.reporting.format`."""
+its one template per section (``templates/sections/``; a study's own from beside its registry
+entry), in the order of the one section list (:mod:`pipeline.reporting.contents`), which also
+gives the table of contents; numbers through the filters of :mod:`pipeline.reporting.format`."""
 
 from __future__ import annotations
 
 from dataclasses import dataclass, fields
+from typing import Any
 
 import jinja2
 
+from pipeline.reporting.contents import page_parts, study_template
 from pipeline.reporting.explorer import explorer_href
 from pipeline.reporting.format import FILTERS, interval
 from pipeline.reporting.sections.ablation import AblationSection
@@ -50,12 +53,19 @@ class Page:
     methods: MethodsSection
     commonroad: CommonRoadSection | None = None
     pedestrians: PedestriansSection | None = None
+    #: the sections of studies from outside the package: (registry entry, the study's result
+    #: or None), each shown under its section's key
+    study_sections: tuple[tuple[Any, Any], ...] = ()
 
 
-def environment() -> jinja2.Environment:
-    """The report's Jinja environment: its templates, autoescaping, strict about undefined
-    names, the number filters."""
-    env = jinja2.Environment(loader=jinja2.PackageLoader("pipeline.reporting", "templates"),
+def environment(studies: tuple = ()) -> jinja2.Environment:
+    """The report's Jinja environment: its templates (and the sections' templates of
+    ``studies``, registry entries), autoescaping, strict about undefined names, the number
+    filters."""
+    own = {study_template(s.section.key): s.section.template.read_text() for s in studies}
+    loader = jinja2.ChoiceLoader([jinja2.PackageLoader("pipeline.reporting", "templates"),
+                                  jinja2.DictLoader(own)])
+    env = jinja2.Environment(loader=loader,
                              autoescape=jinja2.select_autoescape(["html", "j2"]),
                              undefined=jinja2.StrictUndefined)
     env.filters.update(FILTERS)
@@ -66,5 +76,10 @@ def environment() -> jinja2.Environment:
 
 def render(page: Page) -> str:
     """The page's HTML (every figure must be on disk: their PNGs are inlined)."""
-    context = {f.name: getattr(page, f.name) for f in fields(page)}
-    return environment().get_template("report.html.j2").render(**context)
+    context: dict[str, Any] = {f.name: getattr(page, f.name) for f in fields(page)
+                               if f.name != "study_sections"}
+    studies = tuple(study for study, _ in page.study_sections)
+    context.update({study.section.key: value for study, value in page.study_sections})
+    head, contents, body = page_parts(context, studies)
+    return environment(studies).get_template("report.html.j2").render(
+        **context, head_sections=head, contents=contents, body_sections=body)

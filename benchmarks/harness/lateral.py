@@ -9,7 +9,7 @@ from typing import Any
 
 import numpy as np
 
-from pipeline.studies.bench.inputs import (
+from benchmarks.harness.inputs import (
     KeptClarabelFloor,
     compose_config,
     qp_map,

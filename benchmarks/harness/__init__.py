@@ -24,20 +24,20 @@ from pathlib import Path
 
 import pandas as pd
 
-from pipeline.store.layout import OutputsLayout
-from pipeline.studies.bench.closed_loop import bench_closed_loop, bench_family_member
-from pipeline.studies.bench.install import measure_install
-from pipeline.studies.bench.lateral import bench_lateral
-from pipeline.studies.bench.named_peers import bench_named_peers
-from pipeline.studies.bench.path_frame import bench_path_frame, summarize_path_frame
-from pipeline.studies.bench.peers import bench_kinematic, bench_peers
-from pipeline.studies.bench.studies import (
+from benchmarks.harness.closed_loop import bench_closed_loop, bench_family_member
+from benchmarks.harness.install import measure_install
+from benchmarks.harness.lateral import bench_lateral
+from benchmarks.harness.named_peers import bench_named_peers
+from benchmarks.harness.path_frame import bench_path_frame, summarize_path_frame
+from benchmarks.harness.peers import bench_kinematic, bench_peers
+from benchmarks.harness.studies import (
     measure_member_cache_reuse,
     measure_tune_core_utilisation,
     pruning_comparison,
 )
-from pipeline.studies.bench.summary import summarize
-from pipeline.studies.bench.whole_pipeline import bench_multiverse_reads, bench_pipeline
+from benchmarks.harness.summary import summarize
+from benchmarks.harness.whole_pipeline import bench_multiverse_reads, bench_pipeline
+from pipeline.store.layout import OutputsLayout
 from pipeline.studies.results.bench import BenchResult
 
 __all__ = ["run_benchmark"]

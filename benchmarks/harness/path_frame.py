@@ -8,7 +8,7 @@ from dataclasses import replace
 import numpy as np
 import pandas as pd
 
-from pipeline.studies.bench.inputs import KeptClarabelFloor, compose_config, qp_map, timed_call
+from benchmarks.harness.inputs import KeptClarabelFloor, compose_config, qp_map, timed_call
 
 
 def bench_path_frame(n_steps: int, repeats: int) -> list[dict]:

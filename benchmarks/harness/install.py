@@ -11,7 +11,7 @@ import time
 from pathlib import Path
 
 #: the repository (where the Makefile and constraints.txt are); absent in an installed wheel
-ROOT = Path(__file__).resolve().parents[3]
+ROOT = Path(__file__).resolve().parents[2]
 
 
 def measure_install(timeout_s: float = 1800.0) -> dict[str, float | str | None]:

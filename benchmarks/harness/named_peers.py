@@ -7,7 +7,7 @@ import time
 
 import numpy as np
 
-from pipeline.studies.bench.inputs import compose_config, floor_times, recorded_sparse_qps
+from benchmarks.harness.inputs import compose_config, floor_times, recorded_sparse_qps
 
 
 def named_peers() -> dict[str, tuple[list[str], dict[str, list[str]]]]:

@@ -7,7 +7,7 @@ from pathlib import Path
 
 import numpy as np
 
-from pipeline.studies.bench.inputs import (
+from benchmarks.harness.inputs import (
     KeptClarabelFloor,
     compose_config,
     floor_times,

@@ -8,7 +8,7 @@ from dataclasses import replace
 
 import numpy as np
 
-from pipeline.studies.bench.inputs import compose_config, step_inputs
+from benchmarks.harness.inputs import compose_config, step_inputs
 
 
 def bench_peers(n_steps: int) -> list[dict]:

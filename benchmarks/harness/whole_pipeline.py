@@ -9,8 +9,8 @@ import sys
 import time
 from pathlib import Path
 
+from benchmarks.harness.inputs import compose_config
 from pipeline.store.runs import read_family
-from pipeline.studies.bench.inputs import compose_config
 
 
 def bench_multiverse_reads() -> dict:

@@ -1,0 +1,58 @@
+"""Methods on a CommonRoad scenario file: ``apf-mpc commonroad FILE.xml [--methods
+improved,baseline] [--out outputs/commonroad]`` (``make commonroad``; docs/commonroad.md).
+
+Each method is one ``apf-mpc run scenario=commonroad`` on the file, written into
+``<out>/<file's stem>/<method>`` and judged by our check and by CommonRoad's drivability
+checker (:mod:`pipeline.studies.commonroad`); the report shows them, never judges them.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+from pipeline.commands import output_folder
+
+__all__ = ["main"]
+
+
+def main(argv: list[str] | None = None) -> int:
+    """``python -m pipeline.commonroad``: ``apf-mpc commonroad``."""
+    from pipeline.cli import alias
+
+    return alias("commonroad", argv)
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    """``apf-mpc commonroad``'s arguments."""
+    parser.add_argument("scenario", type=Path, help="a CommonRoad scenario file (.xml)")
+    parser.add_argument("--methods", default="improved,baseline",
+                        help="comma-separated methods, one run each (default improved,baseline)")
+    parser.add_argument("--out", type=output_folder, default=Path("outputs/commonroad"),
+                        help="the runs go to OUT/<file's stem>/<method> (default "
+                             "outputs/commonroad)")
+    parser.add_argument("overrides", nargs="*", help="Hydra overrides for every run")
+
+
+def run(args: argparse.Namespace) -> int:
+    """One run per method, stopping at the first that fails (its exit code)."""
+    from pipeline import run as run_module
+
+    methods = [m.strip() for m in args.methods.split(",") if m.strip()]
+    if not methods:
+        print(f"error: --methods {args.methods!r} is invalid; allowed: comma-separated method "
+              "names, e.g. improved,baseline", file=sys.stderr)
+        return 2
+    for method in methods:
+        code = run_module.command(
+            ["scenario=commonroad", f"scenario.commonroad.path={args.scenario.resolve()}",
+             f"method={method}", f"hydra.run.dir={args.out / args.scenario.stem / method}",
+             *args.overrides], "apf-mpc commonroad")
+        if code:
+            return code
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
