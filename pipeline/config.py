@@ -12,7 +12,6 @@ import hashlib
 import json
 import math
 from dataclasses import asdict, dataclass, field, fields, is_dataclass, replace
-from pathlib import Path
 from typing import Any
 
 from omegaconf import MISSING
@@ -20,6 +19,7 @@ from omegaconf import MISSING
 from pipeline.analysis.features import FeatureConfig
 from pipeline.analysis.objectives import Objective, TuneConfig
 from pipeline.analysis.settings import ClaimsConfig, MetricsConfig
+from pipeline.conf_dir import CONF_DIR
 from pipeline.errors import ConfigError
 from pipeline.loop.qp_memory import MAX_HORIZON
 from pipeline.loop.settings import (
@@ -39,17 +39,7 @@ __all__ = ["CONF_DIR", "ClaimsConfig", "Objective", "TuneConfig", "schema_from_d
            "ObstacleConfig", "PlannerConfig", "RegisterEntry", "RunConfig", "ScenarioConfig",
            "VehicleConfig", "experiment_config_from_data", "register_configs", "to_experiment_config"]
 
-def _conf_dir() -> Path:
-    """``pipeline/conf`` in an installed package (the wheel ships the configs there), else the
-    repository's ``conf/`` beside the package (a checkout or an editable install)."""
-    packaged = Path(__file__).resolve().parent / "conf"
-    if packaged.is_dir():
-        return packaged
-    return Path(__file__).resolve().parent.parent / "conf"
 
-
-#: The Hydra config folder the entry points compose from.
-CONF_DIR = _conf_dir()
 
 
 @dataclass
@@ -199,6 +189,11 @@ def experiment_config_from_data(data: dict) -> ExperimentConfig:
     about 60 ms, which an aggregate over thousands of jobs cannot afford). Unknown keys and
     values of the wrong shape raise :class:`ConfigError` naming the full key path.
     """
+    from pipeline.analysis.settings import upgrade_claims_data
+
+    if isinstance(data, dict) and isinstance(data.get("claims"), dict):
+        # a run folder written before the claim catalogue: its margins tables read as entries
+        data = {**data, "claims": upgrade_claims_data(data["claims"])}
     return _build(ExperimentConfig, data, "")
 
 

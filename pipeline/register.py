@@ -232,7 +232,7 @@ INTERPRETATION_REGISTER: tuple[RegisterEntry, ...] = (
         "margins per claim (Methods section)",
         "median / intervals at 1 - alpha (none) / sign test / all pairs / other margins",
         "claims.estimator, claims.interval_adjustment, claims.test, claims.pairs, "
-        "claims.margins"),
+        "claims.catalogue"),
     RegisterEntry(
         "When a tuned method's search has converged", "(not in the paper: it tunes nothing)",
         "its feasible front's hypervolume (fixed bounds shared by both methods) grew by at most "

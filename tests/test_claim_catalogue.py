@@ -1,6 +1,5 @@
 """The claim catalogue (issue 57, item 1, claims): a claim is one entry
-(``pipeline/analysis/claims/catalogue.py``: its metric, direction, margin and the margin's
-reason); the claims settings' margins and reasons, the ids the settings check, the score
+(``conf/claim/<id>.yaml``: its metric, direction, margin and the margin's reason); the claims settings' margins and reasons, the ids the settings check, the score
 study's metric-to-claim map and the Holm family's size read it. The oracle is what the five
 places held before, pinned here."""
 

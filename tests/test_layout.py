@@ -15,7 +15,8 @@ PACKAGE = Path(__file__).resolve().parent.parent / "pipeline"
 #: Stage order (lower first). Studies compute and return typed results; the commands (the
 #: last layer) draw their figures; the report reads the results (``pipeline.studies.results``).
 LAYERS = (
-    ("pipeline", "pipeline.errors", "pipeline.validation", "pipeline.numerics"),
+    ("pipeline", "pipeline.errors", "pipeline.validation", "pipeline.numerics",
+     "pipeline.conf_dir"),
     ("pipeline.loop",),
     ("pipeline.peers",),
     ("pipeline.analysis",),

@@ -54,7 +54,7 @@ SWITCH_TESTS = {
     "metrics.attribution_switch_samples": "test_unavoidable",
     "claims.c2_window": "test_common_window", "claims.common_window": "test_common_window",
     "claims.estimator": "here", "claims.test": "here", "claims.pairs": "test_claims",
-    "claims.margins": "here", "claims.comparable_clearance_m": "here",
+    "claims.catalogue": "here", "claims.comparable_clearance_m": "here",
     "controller.backend": "test_kinematic", "planner.normalize_step": "test_kinematic",
     "scenario.obstacle_anchor": "here",
     "controller.frame": "test_path_frame", "controller.path_lookahead_m": "test_path_frame",

@@ -25,7 +25,7 @@ from pipeline.studies.multiverse import (
 )
 
 #: a C2 margin far from the default (0.1), with the quick multiverse's statistics settings
-USER = ["claims.margins.C2=5.0", "claims.n_resamples=199", "claims.min_pairs=4"]
+USER = ["claims.catalogue.C2.margin=5.0", "claims.n_resamples=199", "claims.min_pairs=4"]
 METHODS = ("improved", "baseline", "baseline_matched")
 
 

@@ -3,6 +3,8 @@ turn paired differences into verdicts (``claims.*``, outside the run hash)."""
 
 from __future__ import annotations
 
+import dataclasses
+import functools
 from dataclasses import dataclass, field
 from typing import Any, Dict, List, Optional
 
@@ -77,34 +79,124 @@ class MetricsConfig(FrozenAfterValidation):
                               "an integer in [0, 10]")
 
 
-def _claim_ids() -> tuple[str, ...]:
-    """Every claim's id (the catalogue's: ``pipeline.analysis.claims.catalogue``, read when
-    a config is made: the claims package imports this module)."""
-    from pipeline.analysis.claims.catalogue import CLAIM_IDS
-
-    return CLAIM_IDS
+#: What a claim's id may be: it names rows, table columns and a config file.
+CLAIM_ID_PATTERN = r"[A-Za-z][A-Za-z0-9_]{0,19}"
 
 
-def _default_margins() -> dict[str, Any]:
-    """Each claim's margin as the catalogue states it (one place: its Claim entry)."""
-    from pipeline.analysis.claims.catalogue import ALL_CLAIMS
+@dataclass
+class ClaimEntry(FrozenAfterValidation):
+    """One claim of the catalogue (``conf/claim/<id>.yaml``, ``claims.catalogue.<id>``): what
+    the paper says, the metric that stands for it and which way is better, its margin (the
+    smallest effect of interest, in the metric's units) and why the margin is what it is, and
+    how the report describes it."""
 
-    return {c.claim_id: c.margin for c in ALL_CLAIMS}
+    text: str = ""
+    #: the primary metric: a key of each run's metrics.json (a column of family_metrics.csv)
+    metric: str = ""
+    #: which way of the metric is the claimed improvement: "lower" or "higher"
+    better: str = "lower"
+    #: other metrics shown beside it (never judged)
+    secondary: List[str] = field(default_factory=list)
+    #: "paired" (a paired difference of the metric) or "rate" (a rate of events, C0)
+    kind: str = "paired"
+    margin: Optional[float] = None
+    margin_reason: str = ""
+    #: the claim judges the APF's repulsive force: not judged against a method without one
+    reads_apf_force: bool = False
+    criterion: str = ""
+    paper_description: str = ""
+    paper_indicator: str = ""
+    paper_improved: str = ""
+    paper_original: str = ""
+    definition: str = ""
+
+    def check(self, claim_id: str) -> None:
+        """Range checks, each error naming ``claims.catalogue.<claim_id>.<key>``."""
+        import re
+
+        key = f"claims.catalogue.{claim_id}"
+        if not re.fullmatch(CLAIM_ID_PATTERN, str(claim_id)):
+            raise ConfigError(key, claim_id, "a claim id of 1-20 letters, digits or _, "
+                              "starting with a letter")
+        if not str(self.metric or "").strip():
+            raise ConfigError(f"{key}.metric", self.metric, "a metric name (a metrics.json key)")
+        choice(f"{key}.better", self.better, ("lower", "higher"))
+        choice(f"{key}.kind", self.kind, ("paired", "rate"))
+        if self.margin is None:
+            raise ConfigError(f"{key}.margin", None, "a margin >= 0 (the metric's units)")
+        at_least(f"{key}.margin", self.margin, 0.0)
+        if not str(self.margin_reason or "").strip():
+            raise ConfigError(f"{key}.margin_reason", self.margin_reason,
+                              "a sentence saying why the margin is what it is")
 
 
-def _default_margin_reasons() -> dict[str, Any]:
-    """Why each claim's margin is what it is, as the catalogue states it."""
-    from pipeline.analysis.claims.catalogue import ALL_CLAIMS
+@functools.lru_cache(maxsize=1)
+def _builtin_catalogue_data() -> tuple[tuple[str, dict[str, Any]], ...]:
+    """The package's claims as plain data, in the order of ``conf/config.yaml``'s defaults
+    entry ``claim: [...]``, each from ``conf/claim/<id>.yaml`` (read once)."""
+    import yaml
 
-    return {c.claim_id: c.margin_reason for c in ALL_CLAIMS}
+    from pipeline.conf_dir import CONF_DIR, CONFIG_NAME
+
+    top = yaml.safe_load((CONF_DIR / f"{CONFIG_NAME}.yaml").read_text())
+    ids: list[str] = []
+    for item in top.get("defaults", []):
+        if isinstance(item, dict) and "claim" in item:
+            ids = list(item["claim"])
+    return tuple((claim_id, yaml.safe_load((CONF_DIR / "claim" / f"{claim_id}.yaml")
+                                           .read_text())) for claim_id in ids)
+
+
+@functools.lru_cache(maxsize=1)
+def _builtin_entries() -> tuple[tuple[str, ClaimEntry], ...]:
+    entries = []
+    for claim_id, data in _builtin_catalogue_data():
+        entry = ClaimEntry(**{**data, "secondary": list(data.get("secondary", []))})
+        entry.check(claim_id)
+        entry.freeze()
+        entries.append((claim_id, entry))
+    return tuple(entries)
+
+
+def builtin_catalogue() -> dict[str, ClaimEntry]:
+    """The package's claim catalogue (``conf/claim/``, in ``conf/config.yaml``'s order, each
+    entry read-only): what a configuration with an empty ``claims.catalogue`` (one built
+    without Hydra, or read from a run folder written before the catalogue) judges."""
+    return dict(_builtin_entries())
+
+
+def upgrade_claims_data(claims: dict[str, Any]) -> dict[str, Any]:
+    """A stored ``claims`` block written before the catalogue (``margins`` and
+    ``margin_reasons`` tables, no ``catalogue``) as it reads now: the package's catalogue with
+    the stored margins and reasons. Any other block is returned unchanged."""
+    if "catalogue" in claims or not ({"margins", "margin_reasons"} & set(claims)):
+        return claims
+    claims = dict(claims)
+    margins = dict(claims.pop("margins", None) or {})
+    reasons = dict(claims.pop("margin_reasons", None) or {})
+    catalogue = {}
+    for claim_id, entry in builtin_catalogue().items():
+        data = dataclasses.asdict(entry)
+        data["margin"] = margins.pop(claim_id, data["margin"])
+        data["margin_reason"] = reasons.pop(claim_id, data["margin_reason"])
+        catalogue[claim_id] = data
+    unknown = sorted(set(margins) | set(reasons))
+    if unknown:
+        raise ConfigError(f"claims.margins.{unknown[0]}", margins.get(unknown[0]),
+                          "a margin of one of " + ", ".join(catalogue))
+    claims["catalogue"] = catalogue
+    return claims
 
 
 @dataclass
 class ClaimsConfig(FrozenAfterValidation):
     """How paired differences become one of four outcomes.
 
-    ``margins`` is each claim's smallest effect of interest (units of its primary metric; C0: a
-    collision-rate difference), declared with its reason in ``margin_reasons``.
+    ``catalogue`` holds every claim judged (:class:`ClaimEntry`, one ``conf/claim/<id>.yaml``
+    each), with its margin, the smallest effect of interest (units of its primary metric; C0: a
+    collision-rate difference), and the margin's reason (:attr:`margins`,
+    :attr:`margin_reasons`); empty, the package's (:func:`builtin_catalogue`; :attr:`entries`
+    reads either).
     """
 
     alpha: float = 0.05
@@ -124,8 +216,7 @@ class ClaimsConfig(FrozenAfterValidation):
     pairs: str = "neither_collided"
     min_pairs: int = 10
     tie_tolerance: float = 1e-9
-    margins: Dict[str, float] = field(default_factory=_default_margins)
-    margin_reasons: Dict[str, str] = field(default_factory=_default_margin_reasons)
+    catalogue: Dict[str, ClaimEntry] = field(default_factory=dict)
     comparable_clearance_m: float = 2.0
     cap_binding_share: float = 0.5
     floor_tie_share: float = 0.9
@@ -177,18 +268,46 @@ class ClaimsConfig(FrozenAfterValidation):
         choice("claims.c2_window", self.c2_window, ("own", "common"))
         choice("claims.common_window", self.common_window, ("union", "intersection"))
         at_least("claims.tie_tolerance", self.tie_tolerance, 0.0)
-        claim_ids = _claim_ids()
-        unknown = sorted(set(self.margins) - set(claim_ids))
-        if unknown:
-            raise ConfigError(f"claims.margins.{unknown[0]}", self.margins[unknown[0]],
-                              "a margin for one of " + ", ".join(claim_ids))
         between("claims.floor_tie_share", self.floor_tie_share, 0.0, 1.0)
-        for claim in claim_ids:
-            if claim not in self.margins:
-                raise ConfigError(f"claims.margins.{claim}", None, "a margin >= 0 per claim")
-            at_least(f"claims.margins.{claim}", self.margins[claim], 0.0)
-            if not str(self.margin_reasons.get(claim, "")).strip():
-                raise ConfigError(f"claims.margin_reasons.{claim}", None,
-                                  "a sentence saying why the margin is what it is")
+        for claim_id, entry in self.catalogue.items():
+            if not isinstance(entry, ClaimEntry):
+                raise ConfigError(f"claims.catalogue.{claim_id}", entry,
+                                  "a claim entry (conf/claim/<id>.yaml's keys)")
+            entry.check(claim_id)
         at_least("claims.comparable_clearance_m", self.comparable_clearance_m, 0.0)
         between("claims.cap_binding_share", self.cap_binding_share, 0.0, 1.0)
+
+    @property
+    def entries(self) -> dict[str, ClaimEntry]:
+        """Every claim judged, by id, in the catalogue's order: ``catalogue``, or the
+        package's when it is empty (the schema's default: a composed configuration holds the
+        claims its defaults list chose, ``claim: [...]``, and only those)."""
+        return self.catalogue or builtin_catalogue()
+
+    @property
+    def claim_ids(self) -> tuple[str, ...]:
+        """Every claim judged, in the catalogue's order."""
+        return tuple(self.entries)
+
+    @property
+    def margins(self) -> dict[str, float]:
+        """Each claim's margin (its catalogue entry's), by claim id."""
+        return {k: float(e.margin) for k, e in self.entries.items() if e.margin is not None}
+
+    @property
+    def margin_reasons(self) -> dict[str, str]:
+        """Why each claim's margin is what it is, by claim id."""
+        return {k: e.margin_reason for k, e in self.entries.items()}
+
+    def with_margins(self, margins: dict[str, float]) -> ClaimsConfig:
+        """These settings with the margins of ``margins`` (by claim id) replaced."""
+        return dataclasses.replace(self, catalogue={
+            k: dataclasses.replace(e, margin=margins.get(k, e.margin))
+            for k, e in self.entries.items()})
+
+    def freeze(self) -> ClaimsConfig:
+        """Read-only, the catalogue's entries too."""
+        for entry in self.catalogue.values():
+            entry.freeze()
+        super().freeze()
+        return self

@@ -79,12 +79,13 @@ def claim_movers(treatment: pd.DataFrame, comparison: pd.DataFrame, claim: Claim
 
 
 def ledger_movers(tables: dict[str, pd.DataFrame], treatment: str,
-                  comparisons: tuple[str, ...], experiment: str
-                  ) -> dict[tuple[str, str], Movers]:
-    """:func:`claim_movers` for every claim against every comparison present, keyed like the
-    ledger's rows ``(claim_id, comparison)``."""
+                  comparisons: tuple[str, ...], experiment: str,
+                  claims: tuple[Claim, ...] = ALL_CLAIMS) -> dict[tuple[str, str], Movers]:
+    """:func:`claim_movers` for every claim (``claims``: by default the package's catalogue)
+    against every comparison present, keyed like the ledger's rows ``(claim_id,
+    comparison)``."""
     if treatment not in tables:
         return {}
     return {(claim.claim_id, comparison): claim_movers(tables[treatment], tables[comparison],
                                                        claim, experiment)
-            for comparison in comparisons if comparison in tables for claim in ALL_CLAIMS}
+            for comparison in comparisons if comparison in tables for claim in claims}

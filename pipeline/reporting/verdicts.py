@@ -17,13 +17,13 @@ import pandas as pd
 
 from pipeline.analysis.ablation import ablation_effects, ablation_roles, interpretation_flips
 from pipeline.analysis.claims import (
-    ALL_CLAIMS,
-    FORCE_CLAIMS,
     Ledger,
     LedgerRow,
     adjust_answer,
+    claims_of,
     claims_table,
     family_ledger,
+    force_claims,
     outcome_counts,
 )
 from pipeline.analysis.validity import valid_scenario_ledgers
@@ -31,8 +31,11 @@ from pipeline.config import ClaimsConfig
 from pipeline.reporting.inputs import FamilyInputs, ReportInputs, TrackRuns, ordered, reading_of
 from pipeline.store.collection import LabelledRun
 
-#: The claims whose outcome is a rate (judged even where the methods never met the obstacle).
-RATE_CLAIMS = frozenset(c.claim_id for c in ALL_CLAIMS if c.is_rate)
+
+def rate_claims(cfg: ClaimsConfig) -> frozenset[str]:
+    """The claims of ``cfg`` whose outcome is a rate (judged even where the methods never met
+    the obstacle)."""
+    return frozenset(c.claim_id for c in claims_of(cfg) if c.is_rate)
 
 
 @dataclass(frozen=True)
@@ -374,7 +377,8 @@ def track_claims(runs: TrackRuns, cfg: ClaimsConfig, comparable_only: bool = Fal
     comparable"."""
     metrics = runs.metrics()
     comparisons = tuple(c for c in cfg.controls if c in runs.by_method)
-    rows = claims_table(metrics, cfg.margins, comparisons, improved=cfg.treatment)
+    rows = claims_table(metrics, cfg.margins, comparisons, improved=cfg.treatment,
+                        claims=claims_of(cfg))
     comparability = []
     if comparable_only:
         def met(method: str) -> bool:
@@ -389,7 +393,7 @@ def track_claims(runs: TrackRuns, cfg: ClaimsConfig, comparable_only: bool = Fal
             comparability.append(f"vs {comparison}: not comparable ({', '.join(far)} never "
                                  f"came within {cfg.comparable_clearance_m:g} m).")
             for row in rows:
-                if row["claim"] not in RATE_CLAIMS:
+                if row["claim"] not in rate_claims(cfg):
                     row[f"vs {comparison}"] = "not comparable"
     return TrackClaims(tuple(rows), comparisons, tuple(comparability))
 
@@ -465,7 +469,7 @@ def _peers(track: str, default: FamilyInputs | None, peers: FamilyInputs | None,
               **{m: peers.primary[m] for m in names}}
     ledger = family_ledger(tables, dataclasses.replace(cfg, c2_window="own"), None,
                            cfg.treatment, names, sensitivity=False)
-    ledger = ledger.without_claims(FORCE_CLAIMS)
+    ledger = ledger.without_claims(force_claims(cfg))
     return PeerVerdicts(track, names, ledger, tuple(outcome_counts(tables)))
 
 
@@ -590,9 +594,10 @@ def _readings(kinematic: TrackRuns, readings: dict[str, list[LabelledRun]], cfg:
         met = all((by[m].get("min_clearance_m") or math.inf) <= cfg.comparable_clearance_m
                   for m in (cfg.treatment, "baseline"))
         table = claims_table({m: by[m] for m in (cfg.treatment, "baseline")}, cfg.margins,
-                             ("baseline",), improved=cfg.treatment)
+                             ("baseline",), improved=cfg.treatment, claims=claims_of(cfg))
         return {row["claim"]: row.get("vs baseline", "n/a")
-                if met or row["claim"] in RATE_CLAIMS else "not comparable" for row in table}
+                if met or row["claim"] in rate_claims(cfg) else "not comparable"
+                for row in table}
 
     columns: list[tuple[str, dict[str, str]]] = []
     default = [r for r in kinematic.runs if r.method in (cfg.treatment, "baseline")]

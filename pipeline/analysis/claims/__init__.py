@@ -22,6 +22,8 @@ from pipeline.analysis.claims.catalogue import (
                                                 SINGLE_RULE,
                                                 Claim,
                                                 Outcome,
+                                                claims_of,
+                                                force_claims,
 )
 from pipeline.analysis.claims.ledger import (
                                                 LEDGER_COLUMNS,
@@ -59,7 +61,7 @@ from pipeline.analysis.claims.windows import (
                                                 common_window_tables,
 )
 
-__all__ = ["Claim", "CLAIMS", "SAFETY", "ALL_CLAIMS", "FORCE_CLAIMS", "Outcome", "OUTCOMES", "OUTCOME_RULE",
+__all__ = ["Claim", "CLAIMS", "SAFETY", "ALL_CLAIMS", "FORCE_CLAIMS", "claims_of", "force_claims", "Outcome", "OUTCOMES", "OUTCOME_RULE",
            "SINGLE_RULE", "hodges_lehmann", "hodges_lehmann_on", "bootstrap_interval",
            "probability_of_improvement", "paired_test", "WILCOXON_ENUMERATED_MAX_PAIRS",
            "wilcoxon_pratt_pvalue", "holm", "decide", "newcombe_paired_interval", "PAIRS",

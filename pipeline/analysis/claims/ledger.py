@@ -13,7 +13,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from pipeline.analysis.claims.catalogue import ALL_CLAIMS, Claim, Outcome
+from pipeline.analysis.claims.catalogue import ALL_CLAIMS, Claim, Outcome, claims_of
 from pipeline.analysis.claims.statistics import PairedResult, compare, holm, interval_level, judge
 from pipeline.analysis.claims.windows import common_window_claim, common_window_tables
 from pipeline.analysis.metrics.results import LateralJerk
@@ -44,10 +44,12 @@ def single_scenario_outcome(claim: Claim, comparison: dict[str, Any], improved: 
 
 def claims_table(metrics_by_method: dict[str, dict[str, Any]], margins: dict[str, float],
                  comparisons: tuple[str, ...] = ("baseline", "baseline_matched"),
-                 improved: str = "improved") -> list[dict[str, Any]]:
-    """One row per claim on one scenario: primary metric per method, outcome per comparison."""
+                 improved: str = "improved", claims: tuple[Claim, ...] = ALL_CLAIMS
+                 ) -> list[dict[str, Any]]:
+    """One row per claim (``claims``: by default the package's catalogue) on one scenario:
+    primary metric per method, outcome per comparison."""
     rows = []
-    for claim in ALL_CLAIMS:
+    for claim in claims:
         row: dict[str, Any] = {"claim": claim.claim_id, "paper says": claim.text,
                "metric": claim.primary_metric,
                "better": "lower" if claim.lower_is_better else "higher",
@@ -223,7 +225,7 @@ def family_ledger(tables: dict[str, pd.DataFrame], cfg: ClaimsConfig,
     rows: list[LedgerRow] = []
     if improved not in tables:
         return Ledger((), improved)
-    level = interval_level(cfg, len(ALL_CLAIMS))
+    level = interval_level(cfg, len(cfg.entries))
     for comparison in [c for c in comparisons if c in tables]:
         pair = _pair_tables(tables, improved, comparison, cfg, jerks)
         block = [(claim, compare(*pair[claim.claim_id], claim, cfg, level=level))
@@ -236,11 +238,12 @@ def family_ledger(tables: dict[str, pd.DataFrame], cfg: ClaimsConfig,
 
 
 def _claims_read(cfg: ClaimsConfig) -> tuple[Claim, ...]:
-    """Every claim as ``cfg`` reads it (C2 on a common window with ``c2_window = common``)."""
+    """Every claim of ``cfg``'s catalogue as it reads it (C2 on a common window with
+    ``c2_window = common``)."""
     if cfg.c2_window != "common":
-        return ALL_CLAIMS
+        return claims_of(cfg)
     return tuple(common_window_claim(c, cfg.common_window) if c.claim_id == "C2" else c
-                 for c in ALL_CLAIMS)
+                 for c in claims_of(cfg))
 
 
 def _pair_tables(tables: dict[str, pd.DataFrame], improved: str, comparison: str,
@@ -249,7 +252,7 @@ def _pair_tables(tables: dict[str, pd.DataFrame], improved: str, comparison: str
     """Per claim, the treatment's and the comparison's tables it is judged on: the family
     tables, C2's with its common-window column when ``cfg.c2_window = common``."""
     pair = (tables[improved], tables[comparison])
-    out = {c.claim_id: pair for c in ALL_CLAIMS}
+    out = {claim_id: pair for claim_id in cfg.entries}
     if cfg.c2_window == "common":
         absent = [m for m in (improved, comparison) if jerks is None or m not in jerks]
         if absent:

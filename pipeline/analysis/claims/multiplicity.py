@@ -28,7 +28,7 @@ import dataclasses
 import math
 from collections.abc import Sequence
 
-from pipeline.analysis.claims.catalogue import CLAIM_IDS, Outcome
+from pipeline.analysis.claims.catalogue import Outcome
 from pipeline.analysis.claims.ledger import Ledger, LedgerRow
 from pipeline.analysis.claims.statistics import holm
 from pipeline.analysis.settings import ClaimsConfig
@@ -38,9 +38,9 @@ DIRECTIONS = (Outcome.SUPPORTED, Outcome.CONTRADICTED, Outcome.MIXED)
 
 
 def claim_level(cfg: ClaimsConfig) -> float:
-    """Each claim's share of the answer's family-wise error rate: ``alpha / 7`` (``alpha``
-    with ``claims.interval_adjustment: none``)."""
-    return cfg.alpha if cfg.interval_adjustment == "none" else cfg.alpha / len(CLAIM_IDS)
+    """Each claim's share of the answer's family-wise error rate: ``alpha / 7`` (the
+    catalogue's claims; ``alpha`` with ``claims.interval_adjustment: none``)."""
+    return cfg.alpha if cfg.interval_adjustment == "none" else cfg.alpha / len(cfg.entries)
 
 
 def adjust_answer(ledgers: Sequence[tuple[str, Ledger]], primary: tuple[str, str],

@@ -13,7 +13,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-from pipeline.analysis.claims import ALL_CLAIMS, claim_level
+from pipeline.analysis.claims import claim_level, claims_of
 from pipeline.config import ClaimsConfig
 from pipeline.reporting.figures.answer import AnswerPanel, AnswerRow, Interval, answer_svg
 from pipeline.reporting.format import collision_words, row_effect, unit
@@ -163,7 +163,7 @@ def _rows(family: FamilySection, robustness: RobustnessSection | None,
     nmpc = {(r.claim_id, r.comparison): r for r in context.nmpc.ledger} \
         if context.nmpc is not None else {}
     out = []
-    for claim in ALL_CLAIMS:
+    for claim in claims_of(cfg):
         rows = by_claim.get(claim.claim_id)
         if not rows:
             continue
@@ -325,7 +325,7 @@ def answer_figure(family: FamilySection, fair_fight: FairFightSection | None,
     alone = {r["claim"]: r for r in (apf_alone.ledger if apf_alone is not None else ())
              if r["comparison"] == first}
     panels = []
-    for claim in ALL_CLAIMS:
+    for claim in claims_of(cfg):
         ours = [r for r in family.ledger if r["claim"] == claim.claim_id]
         if not ours:
             continue

@@ -11,7 +11,7 @@ from typing import Any
 
 import numpy as np
 
-from pipeline.analysis.claims import ALL_CLAIMS, Ledger
+from pipeline.analysis.claims import ALL_CLAIMS, Ledger, claims_of
 from pipeline.errors import RunFolderError
 from pipeline.loop.scenario import build_scenario
 from pipeline.reporting.figure import Figure, Figures
@@ -89,7 +89,11 @@ def answer_lines(ledger: Ledger) -> list[str]:
     """The answer in words: one line per claim, its outcome against each comparison with the
     estimate, its unit and interval (what ``make reproduce`` prints at its end)."""
     lines = []
-    for claim in ALL_CLAIMS:
+    # the package's claims in their order, then any other the ledger judged (a user's)
+    claims = {c.claim_id: c for c in ALL_CLAIMS}
+    for row in ledger:
+        claims.setdefault(row.claim_id, row.claim)
+    for claim in claims.values():
         parts = []
         for row in ledger:
             if row.claim_id != claim.claim_id:
@@ -142,6 +146,7 @@ def family_section(inputs: ReportInputs, verdicts: Verdicts, figures: Figures
     tables = judged.tables
     ledger = judged.ledger
     names = {c.claim_id: c.primary_metric for c in ALL_CLAIMS}
+    names.update({r.claim_id: r.claim.primary_metric for r in ledger if r.claim_id not in names})
     intervals = {row.key: (row.result.ci_low, row.result.ci_high, row.result.estimate)
                  for row in ledger}
     drawn = [
@@ -168,7 +173,8 @@ def family_section(inputs: ReportInputs, verdicts: Verdicts, figures: Figures
         size=first["size"], seed=first["seed"], treatment=cfg.treatment,
         methods=tuple(ordered(tables)),
         ledger=tuple(ledger_groups(ledger, ledger_movers(tables, cfg.treatment,
-                                                         ledger.comparisons, "family"))),
+                                                         ledger.comparisons, "family",
+                                                         claims_of(cfg)))),
         by_claim={r["claim"]: r for r in records if r["comparison"] == cfg.controls[0]},
         solvers=_solvers(family, tables), counts=judged.counts,
         cap_note=_cap_note(judged.counts, cfg.cap_binding_share), apf_adds=adds,

@@ -16,7 +16,7 @@ from pathlib import Path
 
 from markupsafe import Markup, escape
 
-from pipeline.analysis.claims import ALL_CLAIMS, OUTCOME_RULE, SINGLE_RULE, Claim
+from pipeline.analysis.claims import ALL_CLAIMS, OUTCOME_RULE, SINGLE_RULE, Claim, claims_of
 from pipeline.config import INTERPRETATION_REGISTER, ClaimsConfig
 from pipeline.numerics import numerical_kernels
 
@@ -166,9 +166,10 @@ def methods_section(cfg: ClaimsConfig | None, configs_by_method: dict[str, dict]
     page)."""
     from pipeline.reporting.format import fmt
 
+    claims = claims_of(cfg) if cfg is not None else ALL_CLAIMS
     margins = tuple({"claim": c.claim_id, "margin": fmt(cfg.margins[c.claim_id]),
-                     "reason": cfg.margin_reasons[c.claim_id]} for c in ALL_CLAIMS) \
+                     "reason": cfg.margin_reasons[c.claim_id]} for c in claims) \
         if cfg is not None else ()
-    return MethodsSection(OUTCOME_RULE, SINGLE_RULE, margins, tuple(ALL_CLAIMS),
+    return MethodsSection(OUTCOME_RULE, SINGLE_RULE, margins, tuple(claims),
                           tuple(metrics_doc()), tuple(register_rows(configs_by_method)),
                           provenance(command))

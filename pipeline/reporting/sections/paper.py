@@ -9,7 +9,7 @@ from dataclasses import dataclass
 import pandas as pd
 import yaml
 
-from pipeline.analysis.claims import ALL_CLAIMS
+from pipeline.analysis.claims import claims_of
 from pipeline.reporting.figure import Figure, Figures
 from pipeline.reporting.figures import (
     apf_force_figure,
@@ -89,7 +89,7 @@ def paper_section(inputs: ReportInputs, verdicts: Verdicts, figures: Figures
         scenario=runs.scenario, methods=tuple(runs.methods), figures=tuple(drawn),
         metric_rows=metric_rows(runs), timing_rows=timing,
         claims=claim_rows(claims, runs.methods), comparisons=claims.comparisons,
-        claim_secondary={c.claim_id: ", ".join(c.secondary_metrics) for c in ALL_CLAIMS},
+        claim_secondary={c.claim_id: ", ".join(c.secondary_metrics) for c in claims_of(cfg)},
         configs={m: yaml.safe_dump(r.config, sort_keys=False) for m, r in by_method.items()},
         hashes={m: r.record.info.config_hash for m, r in by_method.items()},
         run_dirs={m: str(r.folder) for m, r in by_method.items()})

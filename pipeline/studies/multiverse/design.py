@@ -121,13 +121,13 @@ def analysis_settings(row: dict, space: Space, base: ExperimentConfig
             claims[name] = value
     margins = {k: v * scale for k, v in base.claims.margins.items()}
     return (dataclasses.replace(base.metrics, **metrics),
-            dataclasses.replace(base.claims, **{**claims, "margins": margins,
-                                                "n_resamples": space.n_resamples,
-                                                # no second draw: a specification whose
-                                                # outcome lies within its interval's
-                                                # Monte-Carlo error reads the widened interval
-                                                "n_resamples_refine": space.n_resamples,
-                                                "min_pairs": space.min_pairs}))
+            dataclasses.replace(base.claims.with_margins(margins),
+                                **{**claims, "n_resamples": space.n_resamples,
+                                   # no second draw: a specification whose outcome lies
+                                   # within its interval's Monte-Carlo error reads the
+                                   # widened interval
+                                   "n_resamples_refine": space.n_resamples,
+                                   "min_pairs": space.min_pairs}))
 
 
 def with_user_defaults(space: Space, base: ExperimentConfig) -> Space:
