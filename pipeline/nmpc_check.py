@@ -1,4 +1,4 @@
-"""``apf-mpc nmpc-check [--members 50] [--track both] [--out DIR]`` (``make nmpc-check``): each track's linear MPC against the same problem on the nonlinear model
+"""``apf-mpc nmpc-check [--family-size 50] [--track both] [--out DIR]`` (``make nmpc-check``): each track's linear MPC against the same problem on the nonlinear model
 (:mod:`pipeline.studies.nmpc_check`), through the command layer
 (:func:`pipeline.commands.run_command`)."""
 
@@ -27,7 +27,10 @@ def main(argv: list[str] | None = None) -> int:
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     """``apf-mpc nmpc-check``'s arguments."""
-    parser.add_argument("--members", type=int, default=50,
+    # --family-size, as `apf-mpc bench` and the config's scenario.family.size name it; --members
+    # stays as its alias
+    parser.add_argument("--family-size", "--members", dest="family_size", type=int,
+                        default=50,
                         help="family members per method (1-10000, default 50)")
     parser.add_argument("--out", type=output_folder, default=Path("outputs/nmpc_check"))
     parser.add_argument("--track", choices=("both", "lateral", "kinematic"), default="both",
@@ -48,14 +51,14 @@ def _check(args) -> int:
     if not 1 <= args.jobs <= 64:
         raise CommandError(f"--jobs: {args.jobs} is not allowed; allowed: an integer in "
                            "[1, 64]")
-    if not 1 <= args.members <= 10_000:
-        raise CommandError(f"--members: {args.members} is not allowed; allowed: an integer "
+    if not 1 <= args.family_size <= 10_000:
+        raise CommandError(f"--family-size: {args.family_size} is not allowed; allowed: an integer "
                            "in [1, 10000]")
     if args.out.exists() and not args.out.is_dir():
         raise CommandError(f"--out: {args.out} is not a folder; allowed: a folder (new, or "
                            "one this check wrote before)")
     tracks = ("lateral", "kinematic") if args.track == "both" else (args.track,)
-    result = nmpc_agreement(composer([])[0], args.out, args.members, log=log.info,
+    result = nmpc_agreement(composer([])[0], args.out, args.family_size, log=log.info,
                             tracks=tracks, n_jobs=args.jobs)
     print(json.dumps({track: {k: v for k, v in part.items() if k != "verdicts"}
                       for track, part in result.to_json()["tracks"].items()}, indent=1))

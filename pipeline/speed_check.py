@@ -1,4 +1,4 @@
-"""``apf-mpc speed-check [--members 200] [--out DIR]`` (``make speed-check``): is slower ever less safe? (:mod:`pipeline.studies.speed`), through the command
+"""``apf-mpc speed-check [--family-size 200] [--out DIR]`` (``make speed-check``): is slower ever less safe? (:mod:`pipeline.studies.speed`), through the command
 layer (:func:`pipeline.commands.run_command`)."""
 
 from __future__ import annotations
@@ -26,7 +26,10 @@ def main(argv: list[str] | None = None) -> int:
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     """``apf-mpc speed-check``'s arguments."""
-    parser.add_argument("--members", type=int, default=200,
+    # --family-size, as `apf-mpc bench` and the config's scenario.family.size name it; --members
+    # stays as its alias
+    parser.add_argument("--family-size", "--members", dest="family_size", type=int,
+                        default=200,
                         help="family members per variant and method (1-10000, default 200)")
     parser.add_argument("--out", type=output_folder, default=Path("outputs/speed"))
     parser.add_argument("--variants", default=",".join(VARIANTS),
@@ -41,15 +44,15 @@ def run(args: argparse.Namespace) -> int:
 def _check(args) -> int:
     from pipeline.studies.compose import composer
 
-    if not 1 <= args.members <= 10_000:
-        raise CommandError(f"--members: {args.members} is not allowed; allowed: an integer "
+    if not 1 <= args.family_size <= 10_000:
+        raise CommandError(f"--family-size: {args.family_size} is not allowed; allowed: an integer "
                            "in [1, 10000]")
     variants = tuple(v.strip() for v in args.variants.split(",") if v.strip())
     unknown = [v for v in variants if v not in VARIANTS]
     if unknown or not variants:
         raise CommandError(f"--variants: {','.join(unknown) or '(none)'} is not allowed; "
                            "allowed: " + ", ".join(VARIANTS))
-    result = speed_check(composer([])[0], args.out, args.members, log=log.info,
+    result = speed_check(composer([])[0], args.out, args.family_size, log=log.info,
                          variants=variants)
     print(json.dumps(result.to_json()["checks"], indent=1))
     print(f"speed check written to {args.out.resolve()}")

@@ -1,4 +1,7 @@
-"""Shared fixtures: compose configs with Hydra's compose API, as the entry point does."""
+"""Shared fixtures: compose configs with Hydra's compose API, as the entry point does.
+
+The tests stand in folders by the package's stages (``loop/``, ``analysis/``, ``store/``,
+``studies/``, ``reporting/``, ``commands/``) and one tier folder, ``integration/``."""
 
 from __future__ import annotations
 
@@ -11,7 +14,7 @@ from hydra import compose, initialize_config_dir
 
 from pipeline.config import ExperimentConfig, register_configs, to_experiment_config
 
-CONF_DIR = Path(__file__).resolve().parent.parent / "conf"
+CONF_DIR = Path(__file__).resolve().parents[1] / "conf"
 
 # tests never share members through a cache of the user's (`make test` sets this too); a test of
 # the member cache hands its own MemberCache to the code under test
@@ -27,24 +30,20 @@ LONGEST_FILES_FIRST = ("test_tune.py", "test_multiverse.py", "test_hardening.py"
                        "test_install.py")
 
 
-#: The integration tier (marker ``integration``): whole studies and the machine around the
-#: package (the wheel and make install, the tune, the multiverse, the browser, make targets).
-#: CI runs it; ``make test FAST=1`` leaves it out. One list: a file named here is the tier.
-INTEGRATION_FILES = ("test_install.py", "test_tune.py", "test_tune_convergence.py",
-                     "test_tune_pruning.py", "test_tune_peers.py", "test_tune_infeasible.py",
-                     "test_tune_store_sources.py", "test_pedestrians_tune.py",
-                     "test_multiverse.py", "test_report_browser.py",
-                     "test_explorer_browser.py", "test_screenshot.py", "test_launcher.py",
-                     "test_bench_aggregate.py")
+#: The integration tier (marker ``integration``): the files of ``tests/integration/``, whole
+#: studies and the machine around the package (the wheel and make install, the tune, the
+#: multiverse, the browser, SLURM, make targets). CI runs it; ``make test FAST=1`` leaves it out.
+#: The folder is the tier: a file moved there is marked, nothing else is.
+INTEGRATION_FOLDER = Path(__file__).resolve().parent / "integration"
 
 
 def pytest_collection_modifyitems(config, items):
     """Longest files first (:data:`LONGEST_FILES_FIRST`); the order within a file is kept.
-    The files of :data:`INTEGRATION_FILES` carry the ``integration`` marker."""
+    The tests under :data:`INTEGRATION_FOLDER` carry the ``integration`` marker."""
     rank = {name: i for i, name in enumerate(LONGEST_FILES_FIRST)}
     items.sort(key=lambda item: rank.get(item.path.name, len(rank)))
     for item in items:
-        if item.path.name in INTEGRATION_FILES:
+        if INTEGRATION_FOLDER in Path(item.path).resolve().parents:
             item.add_marker(pytest.mark.integration)
 
 

@@ -34,7 +34,7 @@ if TYPE_CHECKING:
     import cvxpy as cp
 
 # CVXPY's status words, spelled out: a process that only runs compiled maps (a family's worker)
-# never imports CVXPY (a second of start-up); tests/test_controller.py holds them to CVXPY's
+# never imports CVXPY (a second of start-up); tests/loop/test_controller.py holds them to CVXPY's
 OPTIMAL, OPTIMAL_INACCURATE = "optimal", "optimal_inaccurate"
 SOLVER_ERROR = "solver_error"
 OPTIMAL_STATUSES = (OPTIMAL, OPTIMAL_INACCURATE)

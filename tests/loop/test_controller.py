@@ -1,0 +1,499 @@
+"""Lateral MPC against independent formulations: a closed-form condensed QP (numpy) and SciPy's
+SLSQP on the same condensed problem; DPP, recompilation and fallbacks."""
+
+from __future__ import annotations
+
+import cvxpy as cp
+import numpy as np
+import pytest
+from builders import make_inputs
+from scipy.optimize import minimize
+
+from pipeline.loop.controller import LateralMpc, QpCache, blocking_matrix, collision_halfplanes
+from pipeline.loop.controller.lateral_qp import LateralQpStructure, build_lateral_problem
+from pipeline.loop.model import build_lateral_model
+
+
+def condensed(model, cfg, x0, y_ref, psi_ref):
+    """Prediction X = Phi x0 + Gamma u and the quadratic cost in U (independent of cvxpy)."""
+    N, Nc = cfg.horizon, cfg.control_horizon
+    Phi = np.vstack([np.linalg.matrix_power(model.Ad, k) for k in range(1, N + 1)])
+    Gamma = np.zeros((5 * N, N))
+    for k in range(1, N + 1):
+        for i in range(k):
+            Gamma[5 * (k - 1):5 * k, i] = (np.linalg.matrix_power(model.Ad, k - 1 - i)
+                                           @ model.Bd).ravel()
+    T = blocking_matrix(N, Nc, cfg.input_hold)
+    Q = np.kron(np.eye(N), np.diag([cfg.q_lateral, 0.0, cfg.q_heading, cfg.q_yaw_rate,
+                                    cfg.q_steering]))
+    x_ref = np.zeros(5 * N)
+    x_ref[0::5], x_ref[2::5] = y_ref, psi_ref
+    M = Gamma @ T.T
+    H = M.T @ Q @ M + cfg.r_steering_rate * T @ T.T
+    g = M.T @ Q @ (Phi @ x0 - x_ref)
+    return H, g, Phi, M, T
+
+
+@pytest.fixture()
+def setup(make_config):
+    cfg = make_config()
+    model = build_lateral_model(cfg.vehicle, 3.0, 0.1)
+    return cfg, model
+
+
+def test_problem_is_dpp(setup):
+    cfg, _ = setup
+    problem, _, _ = build_lateral_problem(LateralQpStructure.of(cfg.controller, cfg.vehicle))
+    assert problem.is_dcp(dpp=True)
+
+
+@pytest.mark.parametrize("input_hold", ["hold_last", "zero_rate"])
+def test_first_input_matches_closed_form_condensed_qp(make_config, input_hold):
+    cfg = make_config([f"controller.input_hold={input_hold}"])
+    model = build_lateral_model(cfg.vehicle, 3.0, 0.1)
+    ctrl = cfg.controller
+    x0 = np.array([0.05, 0.02, -0.01, 0.01, 0.02])
+    y_ref = np.linspace(0.0, 0.15, ctrl.horizon)
+    psi_ref = np.full(ctrl.horizon, 0.03)
+    H, g, Phi, M, T = condensed(model, ctrl, x0, y_ref, psi_ref)
+    U_star = np.linalg.solve(H, -g)
+    states = Phi @ x0 + M @ U_star
+    # the oracle is the unconstrained optimum: check that no bound is active there
+    assert np.max(np.abs(U_star)) < cfg.vehicle.steering_rate_max_rad_s
+    assert np.max(np.abs(states[4::5])) < cfg.vehicle.steering_max_rad
+    step = LateralMpc(ctrl, cfg.vehicle).solve(make_inputs(model, ctrl, x0, y_ref, psi_ref))
+    assert step.fallback == "none"
+    assert step.steering_rate_rad_s == pytest.approx(U_star[0], abs=1e-4)
+    np.testing.assert_allclose(step.planned_rates_rad_s, T.T @ U_star, atol=1e-4)
+
+
+def test_first_input_matches_scipy_slsqp_with_active_bounds(setup):
+    cfg, model = setup
+    ctrl, veh = cfg.controller, cfg.vehicle
+    x0 = np.array([0.0, 0.0, 0.0, 0.0, 0.1])
+    y_ref = np.full(ctrl.horizon, 2.0)  # far reference: rate and angle bounds become active
+    psi_ref = np.full(ctrl.horizon, 0.4)
+    H, g, Phi, M, T = condensed(model, ctrl, x0, y_ref, psi_ref)
+    delta_rows = M[4::5]
+    delta_free = (Phi @ x0)[4::5]
+    cons = [{"type": "ineq", "fun": lambda U: veh.steering_max_rad - (delta_free + delta_rows @ U),
+             "jac": lambda U: -delta_rows},
+            {"type": "ineq", "fun": lambda U: veh.steering_max_rad + (delta_free + delta_rows @ U),
+             "jac": lambda U: delta_rows}]
+    res = minimize(lambda U: 0.5 * U @ H @ U + g @ U, np.zeros(ctrl.control_horizon),
+                   jac=lambda U: H @ U + g, method="SLSQP", constraints=cons,
+                   bounds=[(-veh.steering_rate_max_rad_s, veh.steering_rate_max_rad_s)]
+                   * ctrl.control_horizon, options={"ftol": 1e-12, "maxiter": 500})
+    assert res.success
+    step = LateralMpc(ctrl, veh).solve(make_inputs(model, ctrl, x0, y_ref, psi_ref))
+    assert step.steering_rate_rad_s == pytest.approx(res.x[0], abs=1e-4)
+    states = step.predicted_states
+    # constraints hold at the solution (Clarabel's tolerance)
+    assert np.max(np.abs(states[4, 1:])) <= veh.steering_max_rad + 1e-6
+    assert np.max(np.abs(step.planned_rates_rad_s)) <= veh.steering_rate_max_rad_s + 1e-6
+    assert np.max(np.abs(states[4, 1:])) == pytest.approx(veh.steering_max_rad, abs=1e-5)
+
+
+def test_halfplane_constraint_holds_without_slack_when_reachable(setup):
+    cfg, model = setup
+    ctrl, veh = cfg.controller, cfg.vehicle
+    N = ctrl.horizon
+    stations = 0.3 * np.arange(1, N + 1)
+    obstacles = np.tile(np.array([[2.9, 1.3]]), (N, 1, 1))  # static, ahead and to the left
+    y_ref = np.zeros(N)
+    G, h = collision_halfplanes(stations, y_ref, np.zeros(2), obstacles, np.array([0.2]), veh,
+                                ctrl)
+    step = LateralMpc(ctrl, veh).solve(make_inputs(model, ctrl, np.zeros(5), y_ref, np.zeros(N),
+                                                  G, h))
+    y = step.predicted_states[0, 1:]
+    # every half-plane is satisfied by the predicted lateral positions, slack ~ 0
+    assert np.all(G[:, 0] * y >= h[:, 0] - 1e-5)
+    assert step.max_slack_m < 1e-5
+    assert np.any(h[:, 0] > 0)  # the constraint was really binding somewhere
+    assert y[-1] < -0.09  # pushed to the right: the last plane asks y <= -0.097 m
+
+
+def test_parameter_changes_do_not_recompile(setup):
+    cfg, model = setup
+    ctrl = cfg.controller
+    mpc = LateralMpc(ctrl, cfg.vehicle)
+    rng = np.random.default_rng(0)
+    for speed in (2.0, 3.0, 5.0):
+        m = build_lateral_model(cfg.vehicle, speed, 0.1)
+        for _ in range(3):
+            step = mpc.solve(make_inputs(m, ctrl, rng.normal(0, 0.05, 5),
+                                        rng.normal(0, 0.3, ctrl.horizon),
+                                        rng.normal(0, 0.05, ctrl.horizon)))
+            assert step.fallback == "none"
+    assert mpc.compile_count == 1
+
+
+@pytest.mark.parametrize("backend", ["cvxpy", "clarabel_direct"])
+def test_one_compilation_serves_every_controller_of_a_structure(make_config, backend):
+    """A shared QpCache compiles a structure once; a new structure compiles again."""
+    cfg = make_config([f"controller.backend={backend}"])
+    cache = QpCache()
+    first = LateralMpc(cfg.controller, cfg.vehicle, qp_cache=cache)
+    second = LateralMpc(cfg.controller, cfg.vehicle, qp_cache=cache)
+    assert (first.compile_count, second.compile_count, cache.compile_count) == (1, 0, 1)
+    first_qp, second_qp = first.qp.compiled, second.qp.compiled  # the condensed statement
+    assert first_qp is second_qp or first_qp.map is second_qp.map
+    other = make_config([f"controller.backend={backend}", "controller.horizon=12"])
+    assert LateralMpc(other.controller, other.vehicle, qp_cache=cache).compile_count == 1
+    # the affine map travels to worker processes, CVXPY problems do not
+    import pickle
+
+    copied = pickle.loads(pickle.dumps(cache))
+    assert len(copied.entries) == (2 if backend == "clarabel_direct" else 0)
+
+
+def test_code_error_inside_the_qp_is_raised_not_recorded_as_fallback(setup):
+    """A parameter vector of the wrong shape is a bug: it raises, it is not a solver failure."""
+    cfg, model = setup
+    mpc = LateralMpc(cfg.controller, cfg.vehicle)
+    with pytest.raises(ValueError, match="parameter vector"):
+        mpc.qp.compiled.solve(np.zeros(3))
+
+
+def test_infeasible_qp_falls_back_to_safe_input_then_shifted_plan(setup):
+    cfg, model = setup
+    ctrl, veh = cfg.controller, cfg.vehicle
+    N = ctrl.horizon
+    mpc = LateralMpc(ctrl, veh)
+    bad = np.array([0.0, 0.0, 0.0, 0.0, 2.0])  # steering far beyond its bound: infeasible
+    first = mpc.solve(make_inputs(model, ctrl, bad, np.zeros(N), np.zeros(N)))
+    assert first.fallback == "safe_input"
+    assert first.status in ("infeasible", "infeasible_inaccurate")
+    assert abs(first.steering_rate_rad_s) == pytest.approx(veh.steering_rate_max_rad_s)
+    ok = mpc.solve(make_inputs(model, ctrl, np.zeros(5), np.full(N, 0.3), np.zeros(N)))
+    assert ok.fallback == "none"
+    second = mpc.solve(make_inputs(model, ctrl, bad, np.zeros(N), np.zeros(N)))
+    assert second.fallback == "shifted_plan"
+    assert second.steering_rate_rad_s == pytest.approx(ok.planned_rates_rad_s[1])
+    nan_state = mpc.solve(make_inputs(model, ctrl, np.full(5, np.nan), np.zeros(N), np.zeros(N)))
+    assert nan_state.status == "not_solved" and nan_state.fallback == "shifted_plan"
+
+
+@pytest.mark.parametrize("backend", ["cvxpy", "clarabel_direct"])
+def test_solver_exception_is_a_fallback_not_a_crash(make_config, monkeypatch, backend):
+    cfg = make_config([f"controller.backend={backend}"])
+    model = build_lateral_model(cfg.vehicle, 3.0, 0.1)
+    ctrl = cfg.controller
+    mpc = LateralMpc(ctrl, cfg.vehicle)
+
+    def boom(*args, **kwargs):
+        raise cp.error.SolverError("injected")
+
+    if backend == "cvxpy":
+        monkeypatch.setattr(mpc.qp.compiled.problem, "solve", boom)
+    else:
+        monkeypatch.setattr(mpc.qp.compiled, "_solver", type("Boom", (), {"solve": boom,
+                                                                 "update": boom})())
+    step = mpc.solve(make_inputs(model, ctrl, np.zeros(5), np.zeros(ctrl.horizon),
+                                np.zeros(ctrl.horizon)))
+    assert step.status == "error:SolverError" and step.fallback == "safe_input"
+    assert step.steering_rate_rad_s == 0.0
+
+
+def test_backends_agree_in_closed_loop_and_never_recompile(make_config, tmp_path):
+    """The clarabel_direct backend solves the same QP as CVXPY: the closed loops coincide."""
+    from pipeline.loop.scenario import build_scenario
+    from pipeline.loop.simulate import simulate
+
+    results = {}
+    for backend in ("cvxpy", "clarabel_direct"):
+        cfg = make_config(["method=improved", f"controller.backend={backend}"])
+        results[backend] = simulate(cfg, build_scenario(cfg.scenario))
+        assert results[backend].compile_count == 1
+    a, b = results["cvxpy"].trajectory, results["clarabel_direct"].trajectory
+    assert len(a) == len(b)
+    for column in ("X_m", "Y_m", "delta_rad", "steering_rate_rad_s"):
+        np.testing.assert_allclose(a[column].fillna(0), b[column].fillna(0), atol=1e-7)
+
+
+def _run_both_formulations(cfg):
+    import dataclasses
+
+    from pipeline.loop.scenario import build_scenario
+    from pipeline.loop.simulate import simulate
+
+    out = {}
+    for formulation in ("sparse", "condensed"):
+        member = dataclasses.replace(cfg, controller=dataclasses.replace(
+            cfg.controller, formulation=formulation))
+        out[formulation] = simulate(member, build_scenario(member.scenario)).trajectory
+    return out["sparse"], out["condensed"]
+
+
+def _capture_condensed_data(monkeypatch) -> list:
+    """Every step's condensed QP data of the closed loops that follow (a list filled in)."""
+    import pipeline.loop.controller.lateral as lateral
+
+    captured = []
+    original = lateral.condensed_data
+
+    def capture(*args, **kwargs):
+        captured.append(original(*args, **kwargs))
+        return captured[-1]
+
+    monkeypatch.setattr(lateral, "condensed_data", capture)
+    return captured
+
+
+@pytest.mark.parametrize("overrides", [["method=improved"], ["method=baseline"]])
+def test_condensed_qp_equals_the_sparse_qp_in_closed_loop(make_config, overrides):
+    """States eliminated or kept, the QP is the same: on the paper scenario the applied steering
+    rate agrees to 1e-6 at every step of the closed loop."""
+    sparse, condensed = _run_both_formulations(make_config(overrides))
+    assert list(sparse["solver_status"]) == list(condensed["solver_status"])
+    assert list(sparse["fallback"]) == list(condensed["fallback"])
+    for column in ("steering_rate_rad_s", "delta_rad", "Y_m", "max_slack_m"):
+        a, b = sparse[column].to_numpy(float), condensed[column].to_numpy(float)
+        assert np.allclose(a, b, atol=1e-6, equal_nan=True), column
+
+
+@pytest.mark.parametrize("overrides, member", [
+    (["method=improved", "scenario=family", "scenario.family.size=12"], 0),
+    (["method=baseline", "scenario=family", "scenario.family.size=12"], 5),
+    (["method=improved", "scenario=family", "scenario.family.size=12",
+      "controller.frame=fixed"], 0),
+    (["method=baseline", "scenario=family", "scenario.family.size=12",
+      "controller.frame=fixed"], 4)])
+def test_condensed_qp_equals_the_sparse_qp_where_slacks_bind(make_config, monkeypatch, overrides,
+                                                             member):
+    """On every QP of family members where the half-plane slacks bind (in the path frame
+    member 0 of improved, 5 of baseline: slack up to 1.4 m; in the fixed frame 0 and 4) the
+    condensed statement (``W = R U``) and the sparse QP (states as variables) reach the same
+    moves to Clarabel's tolerance (1e-5 rad/s; 1e-4 for the later moves where a slack exceeds
+    1 m: the objective is then dominated by the slack's penalty and Clarabel's tolerance is
+    relative to it), on identical data: in the path frame
+    with the previewed curvature as disturbance and the yaw-rate and steering references. (Their closed loops part where the plant's steering bound switches: a
+    1e-6 difference decides whether a step saturates, so closed loops are compared on the
+    paper scenario only.)"""
+    import dataclasses
+
+    import pipeline.loop.controller.lateral as lateral
+    from pipeline.loop.scenario import build_scenario, family_members
+    from pipeline.loop.simulate import simulate
+
+    cfg = make_config(overrides)
+    cfg = dataclasses.replace(cfg, scenario=family_members(
+        cfg.scenario, cfg.vehicle.footprint_radius_m)[member])
+    captured_inputs = []
+    original = lateral.condensed_data
+
+    def capture(prediction, inputs, weights):
+        captured_inputs.append(inputs)
+        return original(prediction, inputs, weights)
+
+    monkeypatch.setattr(lateral, "condensed_data", capture)
+    trajectory = simulate(cfg, build_scenario(cfg.scenario)).trajectory
+    assert np.nanmax(trajectory["max_slack_m"].to_numpy(float)) > 0.05  # slacks bind
+    monkeypatch.undo()  # capture no more
+    if cfg.controller.frame == "path":  # the path frame's data reach the QP
+        assert any(np.count_nonzero(i.disturbance_rad_s) for i in captured_inputs)
+        assert any(np.count_nonzero(i.delta_ref_rad) for i in captured_inputs)
+    condensed = LateralMpc(cfg.controller, cfg.vehicle)
+    sparse = LateralMpc(dataclasses.replace(cfg.controller, formulation="sparse"), cfg.vehicle)
+    assert len(captured_inputs) > 50
+    for inputs in captured_inputs:
+        a = condensed.solve(inputs)
+        b = sparse.solve(inputs)
+        assert a.status == b.status == "optimal" and a.fallback == b.fallback == "none"
+        tolerance = 1e-4 if a.max_slack_m > 1.0 else 1e-5
+        assert np.max(np.abs(a.planned_rates_rad_s - b.planned_rates_rad_s)) < tolerance
+        assert abs(a.max_slack_m - b.max_slack_m) < 1e-5
+
+
+def test_condensed_prediction_matches_the_recurrence():
+    """Gamma U + free response equals stepping x_{k+1} = A x_k + B u_k + e_k (oracle: the
+    recurrence itself, u from the move-blocking rule)."""
+    from pipeline.loop.controller.lateral_qp import CondensedPrediction, blocking_matrix
+    from pipeline.loop.model import build_lateral_model
+    from pipeline.loop.settings import VehicleConfig
+
+    vehicle = VehicleConfig(name="car", source="test")
+    model = build_lateral_model(vehicle, 3.0, 0.1, -1.0)
+    T = blocking_matrix(10, 3, "hold_last")
+    prediction = CondensedPrediction.of(model, T)
+    rng = np.random.default_rng(0)
+    x0, U, e = rng.normal(size=5), rng.normal(size=3), rng.normal(size=(5, 10))
+    x, expected = x0.copy(), []
+    for k, u in enumerate(U @ T):
+        x = model.Ad @ x + model.Bd[:, 0] * u + e[:, k]
+        expected.append(x)
+    got = prediction.free_response(x0, e) + prediction.gamma @ U
+    assert np.allclose(got, np.array(expected), atol=1e-12)
+
+
+@pytest.mark.parametrize("overrides, member", [
+    (["method=improved"], None), (["method=baseline"], None),
+    (["method=improved", "scenario=family", "scenario.family.size=12"], 0),
+    (["method=baseline", "scenario=family", "scenario.family.size=12"], 5),
+    (["method=baseline", "scenario=family", "scenario.family.size=12",
+      "controller.frame=fixed"], 4)])
+def test_daqp_backend_solves_the_same_qps_as_clarabel(make_config, overrides, member,
+                                                      monkeypatch):
+    """controller.backend=daqp solves the same condensed QP (explicit slacks) with DAQP. On
+    every QP of a closed loop (the paper scenario; family members where the half-plane slacks
+    bind) both solvers reach the same optimum: cost within 1e-6 relative, u0 within 1e-5 rad/s
+    (Clarabel's interior-point tolerance; the closed loops themselves drift apart where the
+    steering bound switches, so they are compared per QP, on identical data)."""
+    import dataclasses
+
+    import pipeline.loop.controller.lateral_backends as backends
+    import pipeline.loop.controller.lateral_qp as lateral_qp
+    from pipeline.loop.controller.qp import DirectQp, compile_affine_map
+    from pipeline.loop.scenario import build_scenario, family_members
+    from pipeline.loop.simulate import simulate
+
+    cfg = make_config(overrides)
+    if member is not None:
+        cfg = dataclasses.replace(cfg, scenario=family_members(
+            cfg.scenario, cfg.vehicle.footprint_radius_m)[member])
+    captured = _capture_condensed_data(monkeypatch)
+    trajectory = simulate(cfg, build_scenario(cfg.scenario)).trajectory
+    if member is not None:
+        assert np.nanmax(trajectory["max_slack_m"].to_numpy(float)) > 0.05  # slacks bind
+    s = lateral_qp.LateralQpStructure.of(cfg.controller, cfg.vehicle)
+    clarabel = backends.CompiledCondensedQp(
+        DirectQp(compile_affine_map(*lateral_qp.build_condensed_lateral_problem(s)), 200))
+    daqp = backends.DaqpCondensedQp(s, 200)
+    dense = backends.ClarabelCondensedQp(s, 200)  # backend clarabel_dense: the same QP again
+    T = blocking_matrix(s.horizon, s.control_horizon, s.input_hold)
+
+    def cost(data, U):
+        slack = np.maximum(0.0, data.bound_h - data.gamma_h @ U)
+        return (np.sum((data.gamma_w @ U + data.free_w) ** 2) + s.weights[4]
+                * np.sum((U @ T) ** 2) + s.weights[5] * slack.sum()
+                + s.weights[6] * np.sum(slack ** 2))
+
+    assert len(captured) > 50
+    for data in captured:
+        a = clarabel.solve(data)
+        for b in (daqp.solve(data), dense.solve(data)):
+            assert a.status == b.status == "optimal"
+            assert abs(a.values["U"][0] - b.values["U"][0]) < 1e-5
+            assert cost(data, b.values["U"]) <= cost(data, a.values["U"]) * (1 + 1e-6) + 1e-9
+            assert cost(data, a.values["U"]) <= cost(data, b.values["U"]) * (1 + 1e-6) + 1e-9
+
+
+def test_daqp_iteration_limit_and_bad_data_take_the_fallback(make_config):
+    """A DAQP solve stopped by its iteration limit is 'user_limit' and non-finite data never
+    reach it: both take the shifted-plan / safe-input fallback, as with Clarabel."""
+    from pipeline.loop.scenario import build_scenario
+    from pipeline.loop.simulate import simulate
+
+    cfg = make_config(["method=improved", "controller.backend=daqp",
+                       "controller.solver_max_iter=1"])
+    trajectory = simulate(cfg, build_scenario(cfg.scenario)).trajectory
+    limited = trajectory["solver_status"] == "user_limit"
+    assert limited.any()
+    assert set(trajectory.loc[limited, "fallback"]) <= {"shifted_plan", "safe_input"}
+    # every step applied a finite input (the last row logs the end, without one)
+    assert np.isfinite(trajectory["steering_rate_rad_s"].to_numpy(float)[:-1]).all()
+
+
+@pytest.mark.parametrize("backend", ["daqp", "clarabel_dense"])
+def test_dense_backends_need_the_condensed_lateral_mpc(make_config, backend):
+    from pipeline.errors import ConfigError
+
+    with pytest.raises(ConfigError, match=f"{backend} only with"):
+        make_config([f"controller.backend={backend}", "controller.formulation=sparse"])
+
+
+@pytest.mark.parametrize("backend", ["daqp", "clarabel_dense"])
+def test_kept_dense_workspaces_follow_speed_changes(make_config, monkeypatch, backend):
+    """The kept DAQP workspace (and the kept dense Clarabel) receive the Hessian only when the
+    model's speed changes it; with velocity planning on, the speed changes during the run, and
+    every QP's u0 equals a fresh ``daqp.solve`` of the same data (the oracle: no kept state)."""
+    import daqp
+
+    import pipeline.loop.controller.lateral_backends as backends
+    import pipeline.loop.controller.lateral_qp as lateral_qp
+    from pipeline.loop.scenario import build_scenario
+    from pipeline.loop.simulate import simulate
+
+    # the stopping-distance rule slows the vehicle on the paper scenario (the default rule
+    # keeps the nominal speed there: nothing is predicted in the way)
+    cfg = make_config(["method=improved", f"controller.backend={backend}",
+                       "planner.velocity_planning=true",
+                       "planner.velocity_rule=stopping_distance"])
+    captured = _capture_condensed_data(monkeypatch)
+    trajectory = simulate(cfg, build_scenario(cfg.scenario)).trajectory
+    assert trajectory["speed_ref_mps"].nunique() > 2  # the model changed during the run
+    assert len({id(d.hessian_u) for d in captured}) > 2
+    s = lateral_qp.LateralQpStructure.of(cfg.controller, cfg.vehicle)
+    kept = backends.DaqpCondensedQp(s, 200) if backend == "daqp" \
+        else backends.ClarabelCondensedQp(s, 200)
+    fresh = backends.DaqpCondensedQp(s, 200)
+    for data in captured:
+        got = kept.solve(data)
+        H, f = fresh.cost(data)
+        A = fresh._A.copy()
+        A[:s.horizon, :fresh.n_u], A[s.horizon:, :fresh.n_u] = data.gamma_d, data.gamma_h
+        upper, lower = fresh._upper.copy(), fresh._lower.copy()
+        base = fresh.n_u + fresh.n_s
+        upper[base:base + s.horizon] = s.steering_max_rad - data.free_d
+        lower[base:base + s.horizon] = -s.steering_max_rad - data.free_d
+        lower[base + s.horizon:] = data.bound_h
+        x, _, flag, _ = daqp.solve(H.copy(), f.copy(), A, upper, lower,
+                                   np.zeros(upper.size, np.intc))
+        assert flag == 1 and got.status == "optimal"
+        assert abs(got.values["U"][0] - x[0]) < (1e-9 if backend == "daqp" else 1e-5)
+
+
+def test_status_words_are_cvxpys_and_the_loop_imports_neither_cvxpy_nor_python_control():
+    """The QP plumbing spells CVXPY's status words out (so a worker that runs shipped maps never
+    imports CVXPY); they are CVXPY's own. And importing the run entry point imports neither
+    CVXPY nor python-control (each costs start-up to every process; they load where used)."""
+    import subprocess
+    import sys
+
+    import pipeline.loop.controller.qp as qp
+
+    assert qp.OPTIMAL_STATUSES == (cp.OPTIMAL, cp.OPTIMAL_INACCURATE)
+    assert qp.SOLVER_ERROR == cp.SOLVER_ERROR
+    assert set(qp.CLARABEL_STATUS.values()) == {cp.OPTIMAL, cp.OPTIMAL_INACCURATE, cp.INFEASIBLE,
+                                                cp.INFEASIBLE_INACCURATE, cp.UNBOUNDED,
+                                                cp.UNBOUNDED_INACCURATE, cp.USER_LIMIT}
+    assert cp.error.SolverError in qp.solver_errors()
+    code = ("import sys, pipeline.run; "
+            "print(sorted(m for m in ('cvxpy', 'control') if m in sys.modules))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.strip() == "[]"
+
+
+def test_each_controller_kind_is_handed_its_own_typed_settings(make_config):
+    """The flat ``ControllerConfig`` (Hydra's schema, hashed as it is) is read once into the
+    settings of its kind; their choices are enums equal to the YAML's words, and the built-in
+    controller holds them (a ``ControllerConfig`` handed to a constructor is read the same)."""
+    from pipeline.errors import ConfigError
+    from pipeline.loop.controller import make_controller
+    from pipeline.loop.controller_settings import (
+        Backend,
+        Frame,
+        KinematicMpcSettings,
+        MpcSettings,
+        PurePursuitSettings,
+        ReferenceAlignment,
+    )
+
+    kinds = {"method=improved": MpcSettings, "method=apf_pursuit": PurePursuitSettings,
+             "experiment=kinematic": KinematicMpcSettings}
+    for override, kind in kinds.items():
+        cfg = make_config([override])
+        settings = cfg.controller.settings()
+        assert type(settings) is kind and settings.kind == cfg.controller.kind
+        assert make_controller(cfg, 0.1).cfg == settings
+    cfg = make_config(["method=improved", "controller.frame=fixed"])
+    lateral = cfg.controller.settings()
+    assert lateral.frame is Frame.FIXED and lateral.frame == "fixed"
+    assert lateral.backend is Backend(cfg.controller.backend)
+    assert LateralMpc(cfg.controller, cfg.vehicle).cfg == lateral
+    kinematic = make_config(["experiment=kinematic",
+                             "controller.reference_alignment=path_speed"]).controller.settings()
+    assert kinematic.reference_alignment is ReferenceAlignment.PATH_SPEED
+    assert kinematic.accel_bounds_mps2 == (-3.0, 3.0)
+    with pytest.raises(ConfigError, match="one of path, fixed"):
+        make_config(["controller.frame=curved"])
