@@ -49,10 +49,12 @@ class RunConfig(FrozenAfterValidation):
     seed: int = 0
     method: str = ""
     variant: str = "default"
-    # presentation (pipeline.methods): a method's label, the work it comes from, its colour
-    # (#rrggbb), its place in tables and legends and its role; never in the config hash
+    # presentation (pipeline.methods): a method's label, the work it comes from, what it is in
+    # one sentence (the report's glossary), its colour (#rrggbb), its place in tables and
+    # legends and its role; never in the config hash
     label: str = ""
     citation: str = ""
+    description: str = ""
     color: str = ""
     order: int = 1000
     role: str = ""
@@ -151,9 +153,10 @@ class ExperimentConfig(FrozenAfterValidation):
 def _hash_of(data: dict) -> str:
     """:meth:`ExperimentConfig.config_hash` of ``asdict(config)`` (``data`` is not changed)."""
     data = {k: v for k, v in data.items() if k not in ("claims", "tune", "features")}
-    # a method's presentation (label, citation, colour, order, role) changes no run
+    # a method's presentation (label, citation, description, colour, order, role) changes no
+    # run (pipeline.methods.PRESENTATION_KEYS)
     data["run"] = {k: v for k, v in dict(data.get("run") or {}).items()
-                   if k not in ("label", "citation", "color", "order", "role")}
+                   if k not in ("label", "citation", "description", "color", "order", "role")}
     for section in ("planner", "controller"):
         data[section] = dict(data[section])
     data["scenario"] = ScenarioConfig.hash_view(data["scenario"])

@@ -19,7 +19,7 @@ from pipeline.config import CONF_DIR
 __all__ = ["PRESENTATION_KEYS", "ROLES", "MethodInfo", "method_info", "method_registry"]
 
 #: The ``run.*`` keys that describe a method and are no part of what a run depends on.
-PRESENTATION_KEYS = ("label", "citation", "color", "order", "role")
+PRESENTATION_KEYS = ("label", "citation", "description", "color", "order", "role")
 #: What a method is to the claims: the paper's treatment, a control, a peer the paper names,
 #: a reference (a method for comparison only); empty: a method of one's own.
 ROLES = ("", "treatment", "control", "peer", "reference")
@@ -41,6 +41,8 @@ class MethodInfo:
     order: int = UNORDERED
     role: str = ""
     presets: tuple[str, ...] = ()
+    #: what the method is, in one sentence (the report's glossary and its hover text)
+    description: str = ""
 
     @property
     def title(self) -> str:
@@ -65,12 +67,13 @@ def method_registry(conf_dir: Path = CONF_DIR) -> dict[str, MethodInfo]:
             found[name] = MethodInfo(
                 name, str(run.get("label") or ""), str(run.get("citation") or ""),
                 str(run.get("color") or ""), int(run.get("order", UNORDERED)),
-                str(run.get("role") or ""), (path.stem,))
+                str(run.get("role") or ""), (path.stem,), str(run.get("description") or ""))
         else:
             found[name] = MethodInfo(known.name, known.label or str(run.get("label") or ""),
                                      known.citation or str(run.get("citation") or ""),
                                      known.color or str(run.get("color") or ""), known.order,
-                                     known.role, (*known.presets, path.stem))
+                                     known.role, (*known.presets, path.stem),
+                                     known.description or str(run.get("description") or ""))
     return found
 
 
@@ -86,4 +89,5 @@ def method_info(name: str, run: object | None = None) -> MethodInfo:
         return value if value not in (None, "", UNORDERED) else default
     return MethodInfo(name, own("label", known.label), own("citation", known.citation),
                       own("color", known.color), int(own("order", known.order)),
-                      own("role", known.role), known.presets)
+                      own("role", known.role), known.presets,
+                      own("description", known.description))

@@ -10,8 +10,11 @@ from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from typing import Any
 
-#: (anchor, title) entries of the table of contents
+#: (anchor, title) entries of the table of contents; an anchor that names a page (the
+#: explorer's) is linked as that page, any other as a place on this one
 Entries = list[tuple[str, str]]
+#: the scenario explorer, beside the report's page (pipeline.reporting.explorer.PAGE)
+EXPLORER_PAGE = "explorer.html"
 
 
 @dataclass(frozen=True)
@@ -49,8 +52,9 @@ def _given(page: Mapping[str, Any]) -> Entries:
 #: Every section of the page, in its order.
 SECTIONS: tuple[ReportSection, ...] = (
     ReportSection("answer", "sections/answer.html.j2",
-                  lambda page: [("answer", "The answer")] if page.get("family") else [],
-                  paper_only=True, head=True),
+                  lambda page: [("answer", "The answer"),
+                                (EXPLORER_PAGE, "Scenario explorer: every run, animated")]
+                  if page.get("family") else [], paper_only=True, head=True),
     ReportSection("paper", "sections/claims.html.j2",
                   lambda page: [("claims", "Claims: the ledger")], paper_only=True),
     ReportSection("paper", "sections/paper.html.j2",

@@ -52,6 +52,47 @@ class AnswerSection:
     judge: str = ""
     #: comparisons whose C1-C5 rest on few of their scenarios, each with its worst-rank outcome
     thin: tuple[str, ...] = ()
+    #: every method, control, track and term the answer names, with what it is in one
+    #: sentence (the page's glossary and the names' hover text), by name
+    glossary: tuple[tuple[str, str], ...] = ()
+
+    def define(self, name: str) -> str:
+        """What ``name`` is in one sentence ("" for a name the glossary lacks)."""
+        return dict(self.glossary).get(name, "")
+
+
+#: The words of the answer that are not methods, each in one sentence.
+TERMS: tuple[tuple[str, str], ...] = (
+    ("lateral track", "The paper's setting: a single-track vehicle at constant speed whose "
+                      "steering a linear MPC computes in the APF path's own frame."),
+    ("Appendix-A track", "The paper's Appendix A: a kinematic bicycle whose acceleration and "
+                         "steering an MPC computes (MATLAB's nlmpc there, a linearized QP "
+                         "here)."),
+    ("APF alone", "The same runs with the MPC's collision half-planes switched off, so that "
+                  "only the APF's path keeps the vehicle off the obstacle."),
+    ("pairs", "Scenarios where both methods ran and neither collided: C1-C5 compare the two "
+              "runs of each pair; C0 counts collisions over every scenario."),
+    ("margin", "A claim's smallest effect of interest, in its metric's units, with its reason "
+               "(the Methods section): inside it a difference is too small to matter."),
+    ("half-planes", "The MPC's soft collision constraints: one linear bound per obstacle and "
+                    "predicted step keeping the vehicle on its side of the obstacle."),
+    ("step cap", "The longest step the improved APF's rollout takes per iteration "
+                 "(planner.step_max_m), which keeps its unnormalized rollout bounded."),
+)
+
+
+def glossary_entries(names: list[str]) -> tuple[tuple[str, str], ...]:
+    """What each method of ``names`` is (its preset's ``run.description``; a method without
+    one is left out), then every :data:`TERMS` entry."""
+    from pipeline.methods import method_info
+
+    methods = []
+    for name in dict.fromkeys(names):
+        info = method_info(name)
+        if info.description:
+            label = f"{info.label} ({info.citation})" if info.citation else info.label
+            methods.append((name, f"{label}: {info.description}" if label else info.description))
+    return tuple(methods) + TERMS
 
 
 def validity_caveat(counts) -> str:
@@ -110,7 +151,31 @@ def resolution_words(row: dict) -> str:
         needed = int(math.ceil(n * (resolvable / margin) ** 2 / 100.0) * 100)
         words += (f": it cannot be decided at this size (about {needed:,} scenarios would "
                   "resolve the margin)")
+    reach = margin_reach(row)
+    if reach:
+        words += f"; {reach}"
     return words
+
+
+def margin_reach(row: dict) -> str:
+    """For a directional outcome whose interval reaches into the margin (its end nearer zero
+    lies within +-margin): that the direction is clear but not whether the difference is
+    larger than the margin ("" otherwise)."""
+    outcome = str(row.get("outcome", ""))
+    if outcome not in ("supported", "contradicted"):
+        return ""
+    try:
+        low, high, margin = (float(row[k]) for k in ("ci_low", "ci_high", "margin"))
+    except (KeyError, TypeError, ValueError):
+        return ""
+    if not (math.isfinite(low) and math.isfinite(high)) or margin <= 0:
+        return ""
+    nearer = low if abs(low) < abs(high) else high
+    if abs(nearer) >= margin:
+        return ""
+    way = "better" if outcome == "supported" else "worse"
+    return (f"its interval reaches into the margin (its end {nearer:.2g} within {margin:g}): "
+            f"{way} than the control, perhaps by less than the margin")
 
 
 def _thin(ledger_rows: tuple[dict, ...], cfg: ClaimsConfig, what: str, comparison: str
@@ -283,9 +348,10 @@ def answer_section(family: FamilySection | None, robustness: RobustnessSection |
             ("the multiverse (make multiverse)", robustness,
              robustness.label if robustness is not None else ""))
         if study is not None and not study.headline)
+    named = [family.treatment, *cfg.controls, *(r["comparison"] for r in rows)]
     return AnswerSection(rows, caveat, tuple(lines), safety or MISSING_NOTE, bool(safety),
                          answer_figure(family, fair_fight, apf_alone, cfg), collisions,
-                         exploratory, strength, judge, thin)
+                         exploratory, strength, judge, thin, glossary_entries(named))
 
 
 def _interval(row: dict, href: str, what: str) -> Interval:

@@ -168,7 +168,7 @@ def _draw(runs: dict, config, member: int, methods: tuple[str, ...], figures: Fi
         "arrow: where it was last) and each method's path, with its footprint where it "
         "stopped.",
         f"Recorded pedestrian tracks of scene {ped.scene} and the paths of "
-        f"{', '.join(methods)} crossing it.")
+        f"{', '.join(methods)} crossing it.", member=member)
 
 
 def pedestrians_section(inputs: ReportInputs, verdicts: Verdicts, figures: Figures

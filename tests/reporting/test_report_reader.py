@@ -1,0 +1,109 @@
+"""The report for a first-time reader (issue 61, items 2, 3 and 5): the answer says when an
+interval reaches into its claim's margin; every method and term the answer names is defined
+on hover and in a glossary on the first screen; the scenario explorer is in the contents and on
+the first screen, and every paper-scenario figure has a "watch it" link to a member the
+explorer holds."""
+
+from __future__ import annotations
+
+import html
+import json
+import re
+
+import pytest
+
+from pipeline.methods import method_registry
+from pipeline.reporting.sections.answer import TERMS, margin_reach, resolution_words
+
+SIX = ["scenario.family.size=6", "scenario.family.n_jobs=1"]
+
+
+@pytest.mark.parametrize("outcome, low, high, margin, reaches", [
+    ("contradicted", 0.046, 0.069, 0.05, "worse"),     # C3a of make reproduce: 0.046 < 0.05
+    ("supported", -0.111, -0.044, 0.05, "better"),     # the near end -0.044 is inside +-0.05
+    ("contradicted", 0.20, 0.51, 0.1, ""),             # wholly beyond the margin
+    ("supported", -0.562, -0.502, 0.1, ""),
+    ("inconclusive", -0.02, 0.12, 0.02, ""),           # no direction to qualify
+    ("equivalent", -0.01, 0.01, 0.5, ""),
+    ("contradicted", 0.01, 0.2, 0.0, ""),              # no margin: nothing to reach into
+])
+def test_an_interval_reaching_into_the_margin_is_said(outcome, low, high, margin, reaches):
+    row = {"outcome": outcome, "ci_low": low, "ci_high": high, "margin": margin}
+    said = margin_reach(row)
+    if not reaches:
+        assert said == ""
+        return
+    nearer = low if abs(low) < abs(high) else high
+    assert f"{reaches} than the control" in said and f"{nearer:.2g}" in said
+    full = resolution_words({**row, "resolvable_effect": 0.015, "metric": "x", "n_pairs": 163})
+    assert full.endswith(said)
+
+
+def test_every_method_the_paper_or_we_add_says_what_it_is():
+    """A method with a role (treatment, control, peer, reference) has its one sentence."""
+    missing = [name for name, info in method_registry().items()
+               if info.role and not info.description.strip()]
+    assert missing == []
+
+
+@pytest.fixture(scope="module")
+def report(tmp_path_factory):
+    """improved and the baseline on the paper scenario and a 6-member family; the report."""
+    from hydra import compose, initialize_config_dir
+
+    from pipeline.config import CONF_DIR, register_configs, to_experiment_config
+    from pipeline.reporting.page import build_report
+    from pipeline.studies.experiment import run_experiment, run_family
+
+    def config(overrides):
+        register_configs()
+        with initialize_config_dir(config_dir=str(CONF_DIR), version_base="1.3"):
+            return to_experiment_config(compose(config_name="config", overrides=overrides))
+
+    root = tmp_path_factory.mktemp("outputs")
+    for method in ("baseline", "improved"):
+        run_experiment(config([f"method={method}"]), root / "paper" / method)
+        run_family(config([f"method={method}", "scenario=family"] + SIX),
+                   root / "family" / method, progress=False)
+    out = build_report(root, tmp_path_factory.mktemp("report"), "pytest", figure_jobs=1).parent
+    return out, (out / "index.html").read_text()
+
+
+def test_every_name_of_the_answer_is_defined_on_hover_and_in_the_glossary(report):
+    _, page = report
+    answer = page[page.index('id="answer"'):page.index('<nav aria-label="Contents">')]
+    glossary = answer[answer.index('id="glossary"'):]
+    defined = {html.unescape(m) for m in re.findall(r"<dt>([^<]+)</dt>", glossary)}
+    compared = set(re.findall(r'</span> vs (?:<abbr class="term" title="[^"]*">)?([a-z_]+)',
+                              answer))
+    assert compared and compared <= defined
+    assert {"improved", "baseline"} <= defined
+    assert {term for term, _ in TERMS} <= defined
+    # hover: each comparison of a row carries its sentence
+    for name in compared:
+        title = re.search(rf'<abbr class="term" title="([^"]+)">{name}</abbr>', answer)
+        assert title and method_registry()[name].description[:40] in html.unescape(title[1])
+
+
+def test_the_explorer_is_in_the_contents_and_on_the_first_screen(report):
+    out, page = report
+    nav = page[page.index('<nav aria-label="Contents">'):page.index("</nav>")]
+    assert '<a href="explorer.html">Scenario explorer' in nav
+    answer = page[page.index('id="answer"'):page.index('<nav aria-label="Contents">')]
+    assert re.search(r'id="explorer-link".*?href="explorer.html"', answer, re.S)
+    assert (out / "explorer.html").is_file()
+
+
+def test_every_paper_scenario_figure_links_to_a_member_the_explorer_holds(report):
+    out, page = report
+    explorer = (out / "explorer.html").read_text()
+    index = json.loads(re.search(r"window.__explorerIndex = (\{.*?\});", explorer)[1])
+    for anchor in ("paths", "series"):
+        part = page[page.index(f'id="{anchor}"'):]
+        part = part[:part.index("</details>")] if "</details>" in part else part
+        captions = re.findall(r"<figcaption>(.*?)</figcaption>", part, re.S)
+        assert captions
+        for caption in captions:
+            link = re.search(r'href="explorer.html#([a-z_]+)/(\d+)">watch it', caption)
+            assert link, caption[-200:]
+            assert int(link[2]) in index["experiments"][link[1]]["members"]
