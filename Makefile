@@ -57,7 +57,7 @@ LAUNCHER    ?= sequential
 # tune's $(MAKE) report) stamps the command typed, not "make report"
 export REPORT_COMMAND ?= make $(strip $(MAKECMDGOALS) $(MAKEOVERRIDES))
 
-.PHONY: help install lint reproduce experiment run-paper run-kinematic run-kinematic-readings run-family run-kinematic-family run-frames run-apf-alone run-peers run-kinematic-peers peers speed-check nmpc-family report screenshot sweep verify ablation multiverse pedestrians tune tune-unpruned tune-peers nmpc-check test test-slurm test-all bench install-commonroad commonroad cache-size clean-cache clean
+.PHONY: help install lint clip reproduce experiment run-paper run-kinematic run-kinematic-readings run-family run-kinematic-family run-frames run-apf-alone run-peers run-kinematic-peers peers speed-check nmpc-family report screenshot sweep verify ablation multiverse pedestrians tune tune-unpruned tune-peers nmpc-check test test-slurm test-all bench install-commonroad commonroad cache-size clean-cache clean
 
 help:  ## list the targets
 	@grep -E '^[a-zA-Z_-]+:.*## ' $(MAKEFILE_LIST) | awk -F':.*## ' '{printf "  %-12s %s\n", $$1, $$2}'
@@ -133,6 +133,11 @@ report: $(STAMP)  ## rebuild the HTML report from existing run folders (no simul
 screenshot: $(STAMP)  ## the README's screenshots (docs/report_screenshot*.png: 1280 and 390 px, and the explorer) from make reproduce's own report
 	$(APF) screenshot $(REPORT)/index.html docs/report_screenshot.png \
 	  --narrow docs/report_screenshot_390.png --explorer docs/explorer_screenshot.png --member $(SCREENSHOT_MEMBER)
+
+# the member a clip draws (make clip MEMBER=family/113: <experiment>/<index>, as the explorer names it)
+MEMBER ?= family/0
+clip: $(STAMP)  ## one member as an animated GIF for slides: make clip MEMBER=family/113 -> $(REPORT)/clips/family_113.gif (the explorer links to it)
+	$(APF) clip "$(MEMBER)" --outputs "$(RUNS)" --out "$(REPORT)/clips/$(subst /,_,$(MEMBER)).gif"
 
 reproduce: experiment report  ## set up, run the experiment and write reports/latest/index.html (its last lines: the verdicts in words)
 

@@ -34,6 +34,7 @@ import numpy as np
 import pandas as pd
 
 from pipeline.errors import ConfigError, RunFolderError
+from pipeline.reporting.clip import CLIPS_FOLDER
 from pipeline.reporting.figures.colors import method_color
 from pipeline.store.files import write_text_atomic
 from pipeline.store.layout import OutputsLayout
@@ -276,6 +277,34 @@ def member_payload(experiment: str, member: int, runs: dict[str, Path],
             "scenario": first.scenario, "methods": methods}
 
 
+def member_data(run_root: Path, experiment: str, member: int) -> dict | None:
+    """The explorer's data of one member, ``<experiment>/<member>`` under ``run_root`` (the
+    payload :func:`member_payload` builds, its companions included), read from the run
+    folders; None when the experiment or the member is not there."""
+    folder = Path(run_root) / experiment
+    if not folder.is_dir():
+        return None
+    # no data folder is written: the plan's targets are only named
+    plan = _experiment_plan(Path(run_root), folder, Path(run_root) / DATA_FOLDER)
+    task = None if plan is None else next(
+        (t for t in plan["tasks"] if t["member"] == int(member)), None)
+    if task is None:
+        return None
+    return member_payload(experiment, int(member), task["runs"], task["settings"])
+
+
+def experiment_members(run_root: Path) -> dict[str, list[int]]:
+    """Every experiment under ``run_root`` the explorer shows, with its members' indices."""
+    found = {}
+    for folder in experiment_folders(run_root):
+        indices: set[int] = set()
+        for method_dir in (p for p in folder.iterdir() if p.is_dir()):
+            indices |= set(_method_members(method_dir) or {})
+        if indices:
+            found[folder.name] = sorted(indices)
+    return found
+
+
 def data_script(key: str, payload: dict) -> str:
     """A member's data file: the payload as gzip-compressed, base64-encoded JSON assigned to
     ``window.__explorerData[key]`` (the same bytes for the same payload)."""
@@ -481,4 +510,4 @@ def explorer_page(index: ExplorerIndex) -> str:
     return env.get_template("explorer.html.j2").render(
         # no "</" inside the page's script element (a folder name cannot end it)
         index_json=json.dumps(index.to_json(), separators=(",", ":")).replace("</", "<\\/"),
-        data_folder=DATA_FOLDER)
+        data_folder=DATA_FOLDER, clips_folder=CLIPS_FOLDER)

@@ -133,6 +133,8 @@ def test_a_link_opens_its_member_from_file_with_the_network_blocked(page, report
     assert page.evaluate("window.explorer.data.member") == 3
     assert page.locator("#member").input_value() == "3"
     assert "member 3" in page.locator("#status").inner_text()
+    # the member's clip: the file make clip MEMBER=family/3 writes beside the page
+    assert page.locator("#clip").get_attribute("href") == "clips/family_3.gif"
     assert page.locator("canvas.scene").count() == 2  # baseline and improved side by side
     assert page.url.startswith("file://")
     assert page.errors == [] and page.refused == []

@@ -27,7 +27,7 @@ LAYERS = (
     ("pipeline.run", "pipeline.report", "pipeline.aggregate", "pipeline.multiverse",
      "pipeline.tune", "pipeline.api", "pipeline.nmpc_check", "pipeline.speed_check",
      "pipeline.commands", "pipeline.screenshot", "pipeline.verify", "pipeline.cli",
-     "pipeline.score", "pipeline.cache", "pipeline.commonroad"),
+     "pipeline.score", "pipeline.cache", "pipeline.commonroad", "pipeline.clip"),
 )
 #: Files a run or family folder holds (its layout belongs to the store).
 RUN_FOLDER_FILES = ("config.yaml", "model.json", "trajectory.csv", "timing.json", "horizon.npz",
