@@ -128,6 +128,19 @@ def test_report_in_headless_chromium(report):
             "document.querySelector('#claims table.ledger:not(#robustness-summary)')"
             ".parentElement.scrollLeft")
         narrow_tables = narrow.evaluate(TABLE_FIT)
+        # with every section open: the page never scrolls sideways, the answer figure's text
+        # is drawn at 11 px or more (its size times the figure's scale), and a wide table's
+        # first column stays in view when its box scrolls
+        open_scroll_x = narrow.evaluate("document.documentElement.scrollWidth")
+        answer_text_px = narrow.evaluate(
+            "(() => { const svg = document.querySelector('#answer-figure svg');"
+            " const scale = svg.getBoundingClientRect().width / svg.viewBox.baseVal.width;"
+            " return Math.min(...[...svg.querySelectorAll('text')].map("
+            "t => parseFloat(getComputedStyle(t).fontSize) * scale)); })()")
+        sticky = narrow.evaluate(
+            "[...document.querySelectorAll('.scroll > table')].every(t => { const c ="
+            " t.querySelector('tbody tr > :first-child'); return !c ||"
+            " getComputedStyle(c).position === 'sticky'; })")
         browser.close()
     assert len(images) >= 10
     assert all(complete and width > 0 and alt for complete, width, alt in images), images
@@ -161,7 +174,9 @@ def test_report_in_headless_chromium(report):
     assert narrow_verdict is not None and narrow_verdict["y"] < 844
     # a narrow window does not scroll sideways (wide tables scroll inside their box), and the
     # ledger's outcome column is visible at 390 px without scrolling its table sideways
-    assert overflow <= 390
+    assert overflow <= 390 and open_scroll_x <= 390
+    assert answer_text_px >= 11, answer_text_px
+    assert sticky
     assert narrow_scroll_x == 0 and outcome_box["x"] + outcome_box["width"] <= 390
     # at 1280 px no table hides a column; narrow, every table's last column is reachable in
     # its own scrolling box

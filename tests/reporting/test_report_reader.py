@@ -107,3 +107,39 @@ def test_every_paper_scenario_figure_links_to_a_member_the_explorer_holds(report
             link = re.search(r'href="explorer.html#([a-z_]+)/(\d+)">watch it', caption)
             assert link, caption[-200:]
             assert int(link[2]) in index["experiments"][link[1]]["members"]
+
+
+def test_a_config_is_shown_as_its_difference_from_the_reference():
+    from pipeline.reporting.sections.paper import config_diff, flat_config
+
+    reference = {"planner": {"name": "improved", "beta": 0.25, "step_max_m": 0.5},
+                 "controller": {"horizon": 10, "weights": [1, 2]}, "run": {"seed": 0}}
+    mine = {"planner": {"name": "baseline", "beta": 0.25},
+            "controller": {"horizon": 10, "weights": [1, 3]}, "run": {"seed": 0},
+            "extra": {"k": 1}}
+    assert flat_config(reference)["planner.step_max_m"] == 0.5
+    assert config_diff(mine, reference) == (
+        ("planner.name", "baseline", "improved"), ("controller.weights", "[1, 3]", "[1, 2]"),
+        ("extra.k", "1", "(none)"), ("planner.step_max_m", "(none)", "0.5"))
+    assert config_diff(reference, reference) == ()
+
+
+def test_the_register_shows_a_catalogue_by_its_margins_and_a_section_by_its_name():
+    from pipeline.reporting.sections.methods import register_value
+
+    catalogue = {"C0": {"margin": 0.02, "text": "long"}, "C1": {"margin": 0.05, "text": "x"}}
+    assert register_value(catalogue) == "C0 0.02, C1 0.05"
+    assert register_value({"name": "sidewalk_robot", "footprint_radius_m": 0.35}) == \
+        "sidewalk_robot"
+    assert register_value(0.5) == "0.5" and register_value(None) == "None"
+
+
+def test_the_provenance_shows_diffs_and_links_every_whole_config(report):
+    out, page = report
+    part = page[page.index('id="configs"'):]
+    links = re.findall(r'<a href="(configs/[a-z_]+\.yaml)">', part[:part.index("</p>")])
+    assert sorted(links) == ["configs/baseline.yaml", "configs/improved.yaml"]
+    assert all((out / link).is_file() for link in links)
+    assert "Resolved config" not in page and "<pre>" not in part
+    diff = part[part.index("<table class=\"config-diff\">"):]
+    assert "<code>planner.name</code>" in diff[:diff.index("</table>")]

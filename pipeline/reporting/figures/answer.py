@@ -134,6 +134,6 @@ def answer_svg(panels: tuple[AnswerPanel, ...], width_px: int = 500, label_px: i
     height = y + 2
     return (f'<svg xmlns="http://www.w3.org/2000/svg" viewBox="0 0 {width_px} {height}" '
             f'width="{width_px}" height="{height}" role="img" font-family="system-ui, '
-            'sans-serif"><style>.t{font-size:11.5px;font-weight:600}.s{font-size:10.5px}'
+            'sans-serif"><style>.t{font-size:11.5px;font-weight:600}.s{font-size:11px}'
             'a:hover line,a:hover circle{stroke:#000}</style>'
             + "".join(parts) + "</svg>")

@@ -109,6 +109,18 @@ def _lookup(config: dict, dotted: str):
     return node
 
 
+def register_value(value: object) -> str:
+    """A config value as the register's "used" column shows it: a claim catalogue (a mapping
+    of entries with a margin) as each claim's margin, a whole config section (a vehicle, a
+    controller) by its name, any other value as it prints."""
+    if isinstance(value, dict) and value and all(
+            isinstance(v, dict) and "margin" in v for v in value.values()):
+        return ", ".join(f"{k} {v['margin']}" for k, v in value.items())
+    if isinstance(value, dict) and "name" in value:
+        return str(value["name"])
+    return str(value)
+
+
 def register_rows(configs_by_method: dict[str, dict]) -> list[dict]:
     """Interpretation register with the value each method's run used."""
     rows = []
@@ -117,7 +129,7 @@ def register_rows(configs_by_method: dict[str, dict]) -> list[dict]:
         # the value each run used, one line per distinct value ("all runs" when they agree)
         groups: dict[str, list[str]] = {}
         for method, config in configs_by_method.items():
-            value = "; ".join(f"{_lookup(config, k)!s}" for k in keys)
+            value = "; ".join(register_value(_lookup(config, k)) for k in keys)
             groups.setdefault(value, []).append(method)
         used = [("all runs" if len(groups) == 1 else ", ".join(methods), value)
                 for value, methods in groups.items()]

@@ -4,7 +4,8 @@ one scenario, the solve times."""
 from __future__ import annotations
 
 import functools
-from dataclasses import dataclass
+from dataclasses import dataclass, field
+from pathlib import Path
 
 import pandas as pd
 import yaml
@@ -55,6 +56,48 @@ class PaperSection:
     configs: dict[str, str]
     hashes: dict[str, str]
     run_dirs: dict[str, str]
+    #: the method every other config is shown against (the treatment)
+    config_reference: str = ""
+    #: each method's config as its difference from the reference's: (key, its value, the
+    #: reference's value; "(none)" where one has no such key)
+    config_diffs: dict[str, tuple[tuple[str, str, str], ...]] = field(default_factory=dict)
+    #: each method's whole resolved config, a file beside the page (path relative to it)
+    config_files: dict[str, str] = field(default_factory=dict)
+
+
+def flat_config(data: object, prefix: str = "") -> dict[str, object]:
+    """A nested config as ``{"planner.beta": 0.25, ...}`` (lists are values)."""
+    if isinstance(data, dict):
+        out: dict[str, object] = {}
+        for key, value in data.items():
+            out.update(flat_config(value, f"{prefix}{key}."))
+        return out
+    return {prefix[:-1]: data}
+
+
+def config_diff(config: dict, reference: dict) -> tuple[tuple[str, str, str], ...]:
+    """The keys whose values differ between ``config`` and ``reference`` (in ``config``'s
+    order, then the reference's keys it lacks), each as (key, value, reference's value)."""
+    mine, theirs = flat_config(config), flat_config(reference)
+    missing = "(none)"
+    rows = [(k, str(v), str(theirs[k]) if k in theirs else missing)
+            for k, v in mine.items() if k not in theirs or theirs[k] != v]
+    rows += [(k, missing, str(v)) for k, v in theirs.items() if k not in mine]
+    return tuple(rows)
+
+
+def write_config_files(configs: dict[str, str], out_dir: Path) -> dict[str, str]:
+    """Each method's resolved config as ``configs/<method>.yaml`` beside the page; the paths
+    relative to the page."""
+    from pipeline.store.files import write_text_atomic
+
+    written = {}
+    for method, text in configs.items():
+        relative = f"configs/{method}.yaml"
+        (out_dir / "configs").mkdir(parents=True, exist_ok=True)
+        write_text_atomic(out_dir / relative, text)
+        written[method] = relative
+    return written
 
 
 def metric_rows(runs: TrackRuns) -> tuple[MetricRow, ...]:
@@ -85,14 +128,20 @@ def paper_section(inputs: ReportInputs, verdicts: Verdicts, figures: Figures
                              r.timing["solve_time_max_s"], r.timing["compile_time_s"],
                              r.metrics().get("compile_count"))
                    for m, r in by_method.items())
+    configs = {m: yaml.safe_dump(r.config, sort_keys=False) for m, r in by_method.items()}
+    reference = cfg.treatment if cfg.treatment in by_method else next(iter(by_method))
     return PaperSection(
         scenario=runs.scenario, methods=tuple(runs.methods), figures=tuple(drawn),
         metric_rows=metric_rows(runs), timing_rows=timing,
         claims=claim_rows(claims, runs.methods), comparisons=claims.comparisons,
         claim_secondary={c.claim_id: ", ".join(c.secondary_metrics) for c in claims_of(cfg)},
-        configs={m: yaml.safe_dump(r.config, sort_keys=False) for m, r in by_method.items()},
+        configs=configs,
         hashes={m: r.record.info.config_hash for m, r in by_method.items()},
-        run_dirs={m: str(r.folder) for m, r in by_method.items()})
+        run_dirs={m: str(r.folder) for m, r in by_method.items()},
+        config_reference=reference,
+        config_diffs={m: config_diff(r.config, by_method[reference].config)
+                      for m, r in by_method.items() if m != reference},
+        config_files=write_config_files(configs, figures.out_dir))
 
 
 def paper_figures(runs: TrackRuns, figures: Figures, prefix: str = "", group_prefix: str = "",
