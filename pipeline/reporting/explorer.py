@@ -246,6 +246,71 @@ class MethodSettings:
                    str(cfg.controller._target_ or cfg.controller.kind).rsplit(".", 1)[-1])
 
 
+#: The numbers the explorer shows beside a member's scenes: each claim's primary metric (the
+#: package's catalogue, C0's collision first) and the least clearance.
+def _claim_metrics() -> tuple[tuple[str, str], ...]:
+    from pipeline.analysis.claims.catalogue import ALL_CLAIMS
+
+    return tuple((c.claim_id, c.primary_metric) for c in ALL_CLAIMS) + (("", "min_clearance_m"),)
+
+
+def claim_numbers(metrics: dict) -> dict[str, float | None]:
+    """A run's claim metrics (:func:`_claim_metrics`) from its ``metrics.json``: a number
+    rounded to 4 significant digits, None where missing or not finite (collision as 0/1)."""
+    out: dict[str, float | None] = {}
+    for _, name in _claim_metrics():
+        value = metrics.get(name)
+        if isinstance(value, str):
+            value = {"true": 1.0, "false": 0.0}.get(value.strip().lower(), value)
+        try:
+            number = float(value)  # type: ignore[arg-type]
+        except (TypeError, ValueError):
+            out[name] = None
+            continue
+        out[name] = float(f"{number:.4g}") if np.isfinite(number) else None
+    return out
+
+
+def difference_pair(methods: list[str]) -> list[str]:
+    """The two methods whose per-member difference the explorer's member list sorts by: the
+    registry's treatment and its first control (by ``run.order``), else the first two."""
+    from pipeline.methods import method_info
+
+    by_role: dict[str, list[str]] = {}
+    for name in sorted(methods, key=lambda m: (method_info(m).order, m)):
+        by_role.setdefault(method_info(name).role, []).append(name)
+    pair = by_role.get("treatment", [])[:1] + by_role.get("control", [])[:1]
+    return pair if len(pair) == 2 else methods[:2]
+
+
+def member_numbers(folder: Path, methods: list[str], members: list[int]
+                   ) -> dict[str, dict[str, list]]:
+    """Per method of a family experiment, each claim metric over ``members`` (in that order;
+    None where a member has no number), from its ``family_metrics.csv``: what the explorer's
+    member list sorts and filters by. A method without the table is left out."""
+    from pipeline.store.runs import read_family
+
+    out: dict[str, dict[str, list]] = {}
+    for method in methods:
+        if folder_kind(Path(folder) / method) != "family":
+            continue
+        try:
+            frame = read_family(Path(folder) / method, members=False, settings=False
+                                ).table.set_index("member")
+        except (RunFolderError, KeyError):
+            continue
+        columns = {}
+        for _, name in _claim_metrics():
+            if name not in frame.columns:
+                continue
+            rows = [claim_numbers({name: frame.at[i, name]})[name] if i in frame.index else None
+                    for i in members]
+            columns[name] = rows
+        if columns:
+            out[method] = columns
+    return out
+
+
 def member_payload(experiment: str, member: int, runs: dict[str, Path],
                    settings: dict[str, MethodSettings]) -> dict | None:
     """Every method's data on one member (``runs``: method -> run folder, ``settings``: method
@@ -267,7 +332,8 @@ def member_payload(experiment: str, member: int, runs: dict[str, Path],
         # "improved (family)", the method's own)
         data.update(name=method, color=method_color(method.split(" (")[0].split(" #")[0]),
                     controller=cfg.controller,
-                    collision=str(metrics.get("collision")).lower() in ("true", "1", "1.0"))
+                    collision=str(metrics.get("collision")).lower() in ("true", "1", "1.0"),
+                    metrics=claim_numbers(metrics))
         methods.append(data)
     if not methods or first is None:
         return None
@@ -358,6 +424,10 @@ def write_explorer(run_root: Path, out_dir: Path, experiments: list[Path] | None
             index.experiments[plan["name"]] = {
                 "methods": plan["methods"], "members": written,
                 "single": plan["single"] and written == [0]}
+            numbers = member_numbers(run_root / plan["name"], plan["methods"], written)
+            if numbers:
+                index.experiments[plan["name"]]["numbers"] = numbers
+                index.experiments[plan["name"]]["pair"] = difference_pair(list(numbers))
     html = explorer_page(index)
     write_text_atomic(out_dir / PAGE, html)
     index.page_bytes = len(html.encode())
@@ -510,4 +580,5 @@ def explorer_page(index: ExplorerIndex) -> str:
     return env.get_template("explorer.html.j2").render(
         # no "</" inside the page's script element (a folder name cannot end it)
         index_json=json.dumps(index.to_json(), separators=(",", ":")).replace("</", "<\\/"),
-        data_folder=DATA_FOLDER, clips_folder=CLIPS_FOLDER)
+        data_folder=DATA_FOLDER, clips_folder=CLIPS_FOLDER,
+        claim_metrics_json=json.dumps([list(p) for p in _claim_metrics()]))

@@ -29,15 +29,22 @@ STEP = "Number(document.querySelector('#panels').dataset.step)"
 
 
 @pytest.fixture(scope="module")
-def report(tmp_path_factory, make_config):
-    """A small report folder: a family of four members (two methods) and the paper scenario,
-    its explorer, an ``index.html`` that links member 3, and member 2's data file removed."""
+def outputs(tmp_path_factory, make_config):
+    """A family of four members (two methods) and the paper scenario."""
     root = tmp_path_factory.mktemp("outputs")
     for method in ("baseline", "improved"):
         run_family(make_config([f"method={method}", "scenario=family", "scenario.family.size=4",
                                 "scenario.family.n_jobs=1"]), root / "family" / method,
                    progress=False)
     run_experiment(make_config(["method=improved"]), root / "paper" / "improved")
+    return root
+
+
+@pytest.fixture(scope="module")
+def report(tmp_path_factory, outputs):
+    """A small report folder: ``outputs``' explorer, an ``index.html`` that links member 3,
+    and member 2's data file removed."""
+    root = outputs
     out = tmp_path_factory.mktemp("report")
     write_explorer(root, out)
     (out / "index.html").write_text(
@@ -161,3 +168,49 @@ def test_a_narrow_window_does_not_scroll_sideways(browser, report):
     assert page.evaluate("document.documentElement.scrollWidth") <= 390
     assert page.locator("canvas.scene").first.bounding_box()["width"] <= 390
     page.close()
+
+
+def test_the_finder_lists_the_members_a_method_collided_in_and_opens_one(page, report,
+                                                                         outputs):
+    """Filter "baseline did not collide", sorted by improved - baseline minimum clearance,
+    largest first: the members and their order are those of the families' own tables; a
+    row's click opens that member, whose numbers table shows each method's metrics.json."""
+    import json
+
+    import pandas as pd
+
+    tables = {m: pd.read_csv(outputs / "family" / m / "family_metrics.csv").set_index("member")
+              for m in ("baseline", "improved")}
+    clear = [i for i in tables["baseline"].index if not bool(tables["baseline"].at[i, "collision"])]
+    d = {i: tables["improved"].at[i, "min_clearance_m"] - tables["baseline"].at[i, "min_clearance_m"]
+         for i in clear}
+    expected = sorted(clear, key=lambda i: (-d[i], i))
+    _open(page, report, "family/0")
+    page.click("#finder summary")
+    page.select_option("#filter", "baseline:clear")
+    page.select_option("#sortby", "d:min_clearance_m")
+    shown = [int(v) for v in page.eval_on_selector_all(
+        "#members tbody tr", "rows => rows.map(r => r.dataset.member)")]
+    assert shown == expected
+    assert "improved − baseline" in page.locator("#members thead").inner_text()
+    target = next(i for i in expected if i not in (0, 2))  # 2's data file is removed
+    page.locator(f'#members tbody tr[data-member="{target}"]').click()
+    page.wait_for_function(f"window.explorer.data && window.explorer.data.member === {target}")
+    metrics = json.loads((outputs / "family" / "improved" / f"member_{target:04d}" /
+                          "metrics.json").read_text())
+    row = page.locator("#numbers tbody tr", has_text="improved").inner_text()
+    assert f"{float(metrics['min_clearance_m']):.3g}" in row
+    legend = page.locator("#signal-legend").inner_text()
+    assert "baseline" in legend and "improved" in legend
+    assert page.errors == [] and page.refused == []
+
+
+def test_the_time_step_is_kept_in_the_address(page, report):
+    _open(page, report, "family/1")
+    page.goto((report / "explorer.html").as_uri() + "#family/1@12")
+    page.wait_for_function(f"{STEP} === 12")
+    page.click("#forward")
+    assert page.evaluate("location.hash") == "#family/1@13"
+    page.reload()
+    page.wait_for_function(f"window.explorer.data !== null && {STEP} === 13")
+    assert page.errors == []

@@ -87,3 +87,13 @@ def test_the_explorer_links_each_member_to_its_clip():
     page = explorer_page(ExplorerIndex())
     assert 'id="clip"' in page and '"clips/" + key.replace("/", "_") + ".gif"' in page
     assert clip_name("family", 113) == "family_113.gif"
+
+
+def test_the_member_list_sorts_by_treatment_minus_first_control():
+    """The explorer's difference column: the registry's treatment and first control (by
+    run.order), whatever order the experiment lists its methods in."""
+    from pipeline.reporting.explorer import difference_pair
+
+    assert difference_pair(["apf_pursuit", "baseline", "baseline_matched", "improved"]) == \
+        ["improved", "baseline"]
+    assert difference_pair(["x_own", "y_own"]) == ["x_own", "y_own"]
