@@ -96,7 +96,7 @@ INTERPRETATION_REGISTER: tuple[RegisterEntry, ...] = (
         "(controller.path_curvature_clip, controller.path_curvature_max_1_per_m): a layer of "
         "ours, not the paper's, the default of the previous release; it makes the baseline's "
         "1-m rollout and improved's 5-m one alike and cut improved's demand more (C2 moved "
-        "with the look-ahead: 1.5 m -0.003, 2.5 m -0.075, 4 m -0.35 m/s^3 over 100 members)",
+        "with the look-ahead: 1.5 m -0.003, 2.5 m -0.075, 4 m -0.35 m/s³ over 100 members)",
         "controller.path_reference, controller.path_lookahead_m, controller.path_curvature_clip, "
         "controller.path_curvature_max_1_per_m"),
     RegisterEntry(
@@ -274,7 +274,7 @@ INTERPRETATION_REGISTER: tuple[RegisterEntry, ...] = (
         "the rule: among the readings under which both methods meet the obstacle (within "
         "claims.comparable_clearance_m), the one whose runs match most of the paper's words "
         "about its figures (features.*; 5 of 9 here). It meets the obstacle at 0.17 m with "
-        "+-0.4 rad chattering steering (jerk RMS 45 m/s^3)",
+        "+-0.4 rad chattering steering (jerk RMS 45 m/s³)",
         "literal (ref. [18]'s normalized 0.1 m steps, row k for step k: the baseline crawls at "
         "about 0.83 m/s and never comes within 4.49 m of the obstacle; 3 of 9); path-indexed at "
         "the planned speed (controller.reference_alignment=path_speed, Section 3.1: 0.06 m; 4 "

@@ -40,14 +40,19 @@ def interval(low: Any, high: Any) -> str:
     return f"[{fmt(low)}, {fmt(high)}]"
 
 
+#: An interval narrower than this has no width the page can print at its six decimals at most
+#: (a resample whose differences are all but zero gave "0.000000 [0.000000, 0.000000]").
+MIN_WIDTH = 1e-6
+
+
 def decimals_for(low: Any, high: Any) -> int | None:
     """The decimals an interval supports: two significant digits of its width (0 to 6); None
-    for an interval that does not exist or has no width."""
+    for an interval that does not exist or has no width (below :data:`MIN_WIDTH`)."""
     try:
         width = float(high) - float(low)
     except (TypeError, ValueError):
         return None
-    if not np.isfinite(width) or width <= 0:
+    if not np.isfinite(width) or width <= MIN_WIDTH:
         return None
     return int(min(6, max(0, 1 - math.floor(math.log10(width)))))
 
@@ -85,7 +90,7 @@ def effect(estimate: Any, low: Any, high: Any, unit_name: str = "", n_pairs: Any
 
 def unit(metric: str) -> str:
     """The unit of a metric, read off its name."""
-    for suffix, name in (("_mps3", "m/s^3"), ("_rad_s", "rad/s"), ("_s", "s"), ("_m", "m")):
+    for suffix, name in (("_mps3", "m/s³"), ("_rad_s", "rad/s"), ("_s", "s"), ("_m", "m")):
         if metric.endswith(suffix):
             return name
     if metric == "collision":
@@ -93,6 +98,30 @@ def unit(metric: str) -> str:
     if "share" in metric:
         return "share"
     return "count" if metric.endswith("count") else ""
+
+
+def override_value(value: Any) -> str:
+    """A config value as a Hydra override writes it: ``null``, ``true``/``false``, else as
+    it prints."""
+    if value is None:
+        return "null"
+    if isinstance(value, (bool, np.bool_)):
+        return "true" if value else "false"
+    return str(value)
+
+
+def p_value(value: Any) -> str:
+    """A p-value as the page shows it: three significant digits, ``< 0.001`` below that
+    (never ``6.33e-08``: its digits past the test's own precision mean nothing)."""
+    if value is None:
+        return "—"
+    try:
+        number = float(value)
+    except (TypeError, ValueError):
+        return str(value)
+    if not np.isfinite(number):
+        return "—"
+    return "< 0.001" if number < 1e-3 else f"{number:.3g}"
 
 
 def ms(seconds: float | None) -> float | None:
@@ -127,4 +156,4 @@ def row_effect(row: dict) -> str:
 #: The page's filters: ``{{ x | fmt }}``, ``{{ m | unit }}``, ``{{ s | percent }}``,
 #: ``{{ row | row_effect }}``.
 FILTERS = {"fmt": fmt, "fmt_spec": fmt_spec, "unit": unit, "percent": percent, "ms": ms,
-           "row_effect": row_effect}
+           "row_effect": row_effect, "p_value": p_value}

@@ -243,14 +243,27 @@ def run_family(cfg: ExperimentConfig, out_dir: Path, progress: bool = True,
         delayed(_run_chunk)(chunk, cache, member_cache, record_horizon) for chunk in chunks)
     with Progress(len(members), f"{cfg.method_name} family", "scenario",
                   initial=len(metrics_by_index), disable=not progress) as bar:
-        for done in results:
-            for index, metrics in done:
-                metrics_by_index[index] = metrics
-            bar.update(len(done))
+        try:
+            for done in results:
+                for index, metrics in done:
+                    metrics_by_index[index] = metrics
+                bar.update(len(done))
+        except BaseException:
+            # stopped (a signal, an error): joblib has ended the workers, some perhaps in the
+            # middle of an atomic write; their temporaries go, the complete members stay
+            _clean_family_leftovers(out_dir)
+            raise
     table = _member_table(metrics_by_index, len(members))
     _write_family_folder(cfg, out_dir, table, len(members),
                          cache.compile_count - compiles_before, here)
     return table
+
+
+def _clean_family_leftovers(out_dir: Path) -> None:
+    """The hidden temporaries of killed writes (:func:`clean_leftovers`) in a family's folder
+    and its members' folders; only once no worker is left writing."""
+    for folder in (Path(out_dir), *Path(out_dir).glob("member_*")):
+        clean_leftovers(folder)
 
 
 def _members_to_run(cfg: ExperimentConfig, members: list, out_dir: Path,
@@ -382,12 +395,24 @@ def run_families_together(todo: list[tuple[ExperimentConfig, Path]],
     results = Parallel(n_jobs=n_jobs, return_as="generator_unordered")(
         delayed(_run_tagged_chunk)(chunk, cache, member_cache, record_horizon)
         for chunk in chunks)
-    for block in results:
-        for k, index, metrics in block:
-            states[k][3][index] = metrics
-            left[k] -= 1
-            if left[k] == 0:
-                finish(k)
+    _collect_blocks(results, states, left, finish)
+
+
+def _collect_blocks(results, states: list, left: list[int], finish) -> None:
+    """:func:`run_families_together`'s results as they come: each member's metrics into its
+    family, a family finished when its last member is in; stopped, no temporary of a killed
+    worker stays in any family's folder (as in :func:`run_family`)."""
+    try:
+        for block in results:
+            for k, index, metrics in block:
+                states[k][3][index] = metrics
+                left[k] -= 1
+                if left[k] == 0:
+                    finish(k)
+    except BaseException:
+        for state in states:
+            _clean_family_leftovers(state[1])
+        raise
 
 
 def _run_tagged_chunk(jobs: list[tuple[int, tuple[int, ExperimentConfig, Path]]],

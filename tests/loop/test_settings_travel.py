@@ -127,7 +127,7 @@ def test_the_report_command_ends_with_the_answer_in_words(user_runs, tmp_path, c
     assert [line.split(" ", 1)[0] for line in last] == [c.claim_id for c in ALL_CLAIMS]
     for line, claim in zip(last, ALL_CLAIMS, strict=True):
         assert claim.text in line and "vs baseline" in line and "vs baseline_matched" in line
-    assert "] s, " in last[1] and "] m/s^3, " in last[2]   # C1 in seconds, C2 in m/s^3
+    assert "] s, " in last[1] and "] m/s³, " in last[2]   # C1 in seconds, C2 in m/s³
     assert all(" pairs" in line for line in last)
     # answer.txt: the collisions and the model-validity caveat first, the primary comparison
     # and which ledger judges, then the same verdicts; the command prints it whole, last

@@ -131,7 +131,7 @@ def test_the_register_shows_a_catalogue_by_its_margins_and_a_section_by_its_name
     assert register_value(catalogue) == "C0 0.02, C1 0.05"
     assert register_value({"name": "sidewalk_robot", "footprint_radius_m": 0.35}) == \
         "sidewalk_robot"
-    assert register_value(0.5) == "0.5" and register_value(None) == "None"
+    assert register_value(0.5) == "0.5" and register_value(None) == "null (not set)"
 
 
 def test_the_provenance_shows_diffs_and_links_every_whole_config(report):
@@ -143,3 +143,31 @@ def test_the_provenance_shows_diffs_and_links_every_whole_config(report):
     assert "Resolved config" not in page and "<pre>" not in part
     diff = part[part.index("<table class=\"config-diff\">"):]
     assert "<code>planner.name</code>" in diff[:diff.index("</table>")]
+
+
+@pytest.mark.parametrize("args, text", [
+    ((0.0, -3e-7, 4e-7, "s", 163, 160), "0 s in every resample (no spread, 160 of 163 pairs tied)"),
+    ((-0.074, -0.111, -0.044, "s", 159, 0), "-0.074 [-0.111, -0.044] s"),
+])
+def test_an_interval_narrower_than_the_page_can_print_is_said_in_words(args, text):
+    from pipeline.reporting.format import effect
+
+    assert effect(*args) == text
+
+
+def test_one_number_rule_for_p_values_overrides_and_units():
+    from pipeline.reporting.format import override_value, p_value, unit
+
+    assert p_value(6.33e-8) == "< 0.001" and p_value(0.0123) == "0.0123"
+    assert p_value(None) == p_value(float("nan")) == "—"
+    assert override_value(None) == "null" and override_value(True) == "true"
+    assert override_value(0.5) == "0.5"
+    assert unit("lateral_jerk_rms_mps3") == "m/s³"
+
+
+def test_the_page_prints_no_python_none_no_six_zero_interval_and_no_caret_unit(report):
+    _, page = report
+    text = html.unescape(re.sub(r"<[^>]+>", " ", re.sub(
+        r"<(script|svg)\b.*?</\1>", "", page[page.index("<body"):], flags=re.S)))
+    assert not re.search(r"\bNone\b", text)
+    assert "0.000000 [" not in text and "m/s^3" not in text

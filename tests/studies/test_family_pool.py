@@ -172,3 +172,32 @@ def test_a_tune_starts_its_workers_and_makes_its_studies_before_its_first_famili
     assert seen["workers"]
     assert seen["studies"] == ["r0-baseline", "r0-improved", "r1-baseline", "r1-improved"]
     assert seen["jobs"] == ("untuned control", "training", 2)
+
+
+def test_a_stopped_family_leaves_no_temporary_of_a_killed_worker(tmp_path, make_config,
+                                                                 monkeypatch):
+    """A worker killed in the middle of an atomic write leaves ``.<name>.<random>.tmp``; when
+    the family stops (here: Ctrl-C while its results come), those go and the rest stays."""
+    import joblib
+
+    import pipeline.studies.experiment as experiment
+
+    out = tmp_path / "fam"
+    (out / "member_0003").mkdir(parents=True)
+    left = out / "member_0003" / ".manifest.json.k1ll3d.tmp"
+    left.write_text("half")
+    kept = out / "member_0003" / "trajectory.csv"
+    kept.write_text("t\n")
+
+    def stopped(*args, **kwargs):
+        def results(tasks):
+            list(tasks)
+            raise KeyboardInterrupt
+            yield  # a generator, as joblib's
+        return results
+
+    monkeypatch.setattr(joblib, "Parallel", stopped)  # run_family imports it when it runs
+    cfg = make_config(["scenario=family", "scenario.family.size=4", "scenario.family.n_jobs=1"])
+    with pytest.raises(KeyboardInterrupt):
+        experiment.run_family(cfg, out, progress=False)
+    assert not left.exists() and kept.read_text() == "t\n"

@@ -65,7 +65,7 @@ class Reaction(_Block):
 
 @dataclass(frozen=True)
 class Smoothness(_Block):
-    """C2: steering rate (rad/s), lateral acceleration (m/s^2), jerk (m/s^3), curvature rate."""
+    """C2: steering rate (rad/s), lateral acceleration (m/s^2), jerk (m/s³), curvature rate."""
 
     steering_rate_rms_rad_s: float
     steering_rate_max_rad_s: float
@@ -86,7 +86,7 @@ class Smoothness(_Block):
 
 @dataclass(frozen=True)
 class LateralJerk:
-    """One run's lateral jerk ``d a_y / dt`` (m/s^3) at its log times (s): what C2's RMS is
+    """One run's lateral jerk ``d a_y / dt`` (m/s³) at its log times (s): what C2's RMS is
     taken of, over any window (:meth:`rms_over`), e.g. one common to both runs of a pair."""
 
     time_s: np.ndarray

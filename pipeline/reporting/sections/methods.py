@@ -118,7 +118,7 @@ def register_value(value: object) -> str:
         return ", ".join(f"{k} {v['margin']}" for k, v in value.items())
     if isinstance(value, dict) and "name" in value:
         return str(value["name"])
-    return str(value)
+    return "null (not set)" if value is None else str(value)
 
 
 def register_rows(configs_by_method: dict[str, dict]) -> list[dict]:

@@ -80,9 +80,11 @@ def config_diff(config: dict, reference: dict) -> tuple[tuple[str, str, str], ..
     order, then the reference's keys it lacks), each as (key, value, reference's value)."""
     mine, theirs = flat_config(config), flat_config(reference)
     missing = "(none)"
-    rows = [(k, str(v), str(theirs[k]) if k in theirs else missing)
+    from pipeline.reporting.format import override_value
+
+    rows = [(k, override_value(v), override_value(theirs[k]) if k in theirs else missing)
             for k, v in mine.items() if k not in theirs or theirs[k] != v]
-    rows += [(k, missing, str(v)) for k, v in theirs.items() if k not in mine]
+    rows += [(k, missing, override_value(v)) for k, v in theirs.items() if k not in mine]
     return tuple(rows)
 
 

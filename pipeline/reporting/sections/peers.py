@@ -11,6 +11,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Any
 
+from pipeline.reporting.format import override_value
 from pipeline.reporting.inputs import ReportInputs
 from pipeline.reporting.movers import ledger_movers
 from pipeline.reporting.sections.family import ledger_groups
@@ -142,7 +143,8 @@ def _track(judged: PeerVerdicts, inputs: ReportInputs) -> PeerTrack:
             return ""
         params = {**{f"planner.params.{k}": v for k, v in cfg.planner.params.items()},
                   **{f"controller.params.{k}": v for k, v in cfg.controller.params.items()}}
-        return ", ".join(f"{k}={v}" for k, v in params.items())
+        # as Hydra overrides read them (null, true, false: not Python's None, True, False)
+        return ", ".join(f"{k}={override_value(v)}" for k, v in params.items())
 
     rows = tuple(PeerRow(c["method"], int(c["scenarios"]), int(c["collisions"]),
                          int(c["collisions_unavoidable"]),
