@@ -22,6 +22,7 @@ from pipeline.analysis.objectives import objective_values
 from pipeline.analysis.tally import Tally
 from pipeline.commands import run_command, run_task
 from pipeline.config import CONF_DIR, register_configs, to_experiment_config
+from pipeline.errors import ConfigError
 from pipeline.store.lock import folder_lock
 from pipeline.store.manifest import refuse_other_record
 from pipeline.store.member_cache import MemberCounts
@@ -46,9 +47,14 @@ def hydra_main(cfg: DictConfig) -> float | tuple[float, ...]:
     out_dir = Path(HydraConfig.get().runtime.output_dir)
 
     def job() -> float | tuple[float, ...]:
-        _require_extras(cfg)
-        experiment = to_experiment_config(cfg)
-        _check_targets(experiment)
+        try:
+            _require_extras(cfg)
+            experiment = to_experiment_config(cfg)
+            _check_targets(experiment)
+        except ConfigError:
+            # refused before anything ran: the folder Hydra made for the job goes with it
+            _drop_hydra_only_folder(out_dir)
+            raise
         # a study's folder is never a run's (a run replaced a tune's manifest.json)
         refuse_other_record(out_dir, ("run", "family"), "hydra.run.dir")
         with folder_lock(out_dir):
@@ -58,6 +64,32 @@ def hydra_main(cfg: DictConfig) -> float | tuple[float, ...]:
     # launcher's worker process is one line and exit 2 as well
     return run_task(job, kept=KEPT, os_error=_cannot_write, log_to_stderr=False,
                     tracebacks=os.environ.get("PIPELINE_USER_FULL_ERROR") == "1")
+
+
+#: What Hydra writes into a job's folder before the job runs.
+HYDRA_ONLY = {".hydra", "run.log"}
+
+
+def _drop_hydra_only_folder(out_dir: Path) -> None:
+    """Remove ``out_dir`` when it holds only what Hydra wrote for this job (``.hydra/`` and
+    ``run.log``): a refused configuration leaves no empty run folder behind. A folder holding
+    anything else (a user's ``hydra.run.dir`` with results) is left as it is."""
+    import shutil
+
+    try:
+        names = {p.name for p in out_dir.iterdir()}
+        if not names <= HYDRA_ONLY or any(p.is_symlink() for p in out_dir.iterdir()):
+            return
+        shutil.rmtree(out_dir)
+        # the parents Hydra made for it under the working folder (outputs/runs/<scenario>/
+        # <planner>/), if now empty; never a folder outside the working folder
+        here = Path.cwd().resolve()
+        for parent in out_dir.resolve().parents:
+            if parent == here or here not in parent.parents or any(parent.iterdir()):
+                break
+            parent.rmdir()
+    except OSError:
+        return
 
 
 def _require_extras(cfg: DictConfig) -> None:
