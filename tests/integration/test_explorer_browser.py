@@ -200,6 +200,9 @@ def test_the_finder_lists_the_members_a_method_collided_in_and_opens_one(page, r
                           "metrics.json").read_text())
     row = page.locator("#numbers tbody tr", has_text="improved").inner_text()
     assert f"{float(metrics['min_clearance_m']):.3g}" in row
+    # each claim's name leads to its row of the family's ledger against the control
+    assert page.locator("#numbers thead a", has_text="C1").get_attribute("href") == \
+        "index.html#ledger-C1-baseline"
     legend = page.locator("#signal-legend").inner_text()
     assert "baseline" in legend and "improved" in legend
     assert page.errors == [] and page.refused == []
