@@ -68,11 +68,9 @@ def _clip(args) -> int:
         raise CommandError(f"member: no experiment {experiment!r} under {args.outputs}; "
                            f"allowed: {', '.join(known) or 'none (make reproduce writes them)'}")
     if member not in known[experiment]:
-        members = known[experiment]
-        raise CommandError(f"member: {experiment} has no member {member}; allowed: "
-                           f"{members[0]}-{members[-1]}" if len(members) > 1 else
-                           f"member: {experiment} has no member {member}; allowed: "
-                           f"{members[0]}")
+        first, last = known[experiment][0], known[experiment][-1]
+        allowed = f"{first}-{last}" if last != first else str(first)
+        raise CommandError(f"member: {experiment} has no member {member}; allowed: {allowed}")
     payload = member_data(args.outputs, experiment, member)
     if payload is None:
         raise CommandError(f"member: {args.member}: no run of it could be read under "

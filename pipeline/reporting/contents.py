@@ -10,11 +10,13 @@ from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from typing import Any
 
+from pipeline.reporting.explorer import PAGE
+
 #: (anchor, title) entries of the table of contents; an anchor that names a page (the
 #: explorer's) is linked as that page, any other as a place on this one
 Entries = list[tuple[str, str]]
-#: the scenario explorer, beside the report's page (pipeline.reporting.explorer.PAGE)
-EXPLORER_PAGE = "explorer.html"
+#: the scenario explorer, beside the report's page
+EXPLORER_PAGE = PAGE
 
 
 @dataclass(frozen=True)

@@ -257,18 +257,19 @@ def _claim_metrics() -> tuple[tuple[str, str], ...]:
 def claim_numbers(metrics: dict) -> dict[str, float | None]:
     """A run's claim metrics (:func:`_claim_metrics`) from its ``metrics.json``: a number
     rounded to 4 significant digits, None where missing or not finite (collision as 0/1)."""
-    out: dict[str, float | None] = {}
-    for _, name in _claim_metrics():
-        value = metrics.get(name)
-        if isinstance(value, str):
-            value = {"true": 1.0, "false": 0.0}.get(value.strip().lower(), value)
-        try:
-            number = float(value)  # type: ignore[arg-type]
-        except (TypeError, ValueError):
-            out[name] = None
-            continue
-        out[name] = float(f"{number:.4g}") if np.isfinite(number) else None
-    return out
+    return {name: _number(metrics.get(name)) for _, name in _claim_metrics()}
+
+
+def _number(value: object) -> float | None:
+    """One metric value as the explorer shows it: 4 significant digits, a flag as 0/1, None
+    where missing or not finite."""
+    if isinstance(value, str):
+        value = {"true": 1.0, "false": 0.0}.get(value.strip().lower(), value)
+    try:
+        number = float(value)  # type: ignore[arg-type]
+    except (TypeError, ValueError):
+        return None
+    return float(f"{number:.4g}") if np.isfinite(number) else None
 
 
 def difference_pair(methods: list[str]) -> list[str]:
@@ -303,9 +304,8 @@ def member_numbers(folder: Path, methods: list[str], members: list[int]
         for _, name in _claim_metrics():
             if name not in frame.columns:
                 continue
-            rows = [claim_numbers({name: frame.at[i, name]})[name] if i in frame.index else None
-                    for i in members]
-            columns[name] = rows
+            columns[name] = [_number(frame.at[i, name]) if i in frame.index else None
+                             for i in members]
         if columns:
             out[method] = columns
     return out
