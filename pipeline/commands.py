@@ -129,9 +129,6 @@ def _disk_fault(exc: BaseException) -> OSError | None:
         seen.append(current)
         if isinstance(current, OSError) and current.errno in DISK_FAULTS:
             return current
-        if type(current).__name__ == "OperationalError" and "disk is full" in str(current):
-            # SQLite's word for it (the tuning's storage), under SQLAlchemy's wrapper
-            return OSError(errno.ENOSPC, "No space left on device (database or disk is full)")
         current = current.__cause__ or current.__context__
     return None
 

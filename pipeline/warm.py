@@ -35,9 +35,9 @@ from pathlib import Path
 LAZY_IMPORTS: tuple[str, ...] = (
     "matplotlib.pyplot", "matplotlib.backends.backend_agg", "matplotlib.backends.backend_svg",
     "PIL.Image", "PIL.PngImagePlugin", "scipy.stats", "scipy.optimize", "scipy.linalg",
-    "optuna", "optuna.storages", "sqlalchemy.dialects.sqlite", "cvxpy", "clarabel", "daqp",
+    "optuna", "optuna.storages.journal", "cvxpy", "clarabel", "daqp",
     "casadi", "joblib", "submitit", "hydra._internal.core_plugins.basic_launcher",
-    "hydra._internal.core_plugins.basic_sweeper", "hydra_plugins.hydra_optuna_sweeper",
+    "hydra._internal.core_plugins.basic_sweeper",
     "hydra_plugins.hydra_joblib_launcher", "hydra_plugins.hydra_submitit_launcher",
     "pytest", "_pytest.python", "_pytest.fixtures", "xdist", "xdist.remote", "hypothesis",
     "playwright.sync_api", "mypy.api", "pandas.io.formats.style",

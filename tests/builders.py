@@ -45,3 +45,14 @@ def make_inputs(model, cfg, x0, y_ref, psi_ref, G=None, h=None):
     N, M = cfg.horizon, cfg.max_obstacles
     return MpcInputs(x0, model, y_ref, psi_ref, np.zeros((N, M)) if G is None else G,
                      np.zeros((N, M)) if h is None else h, np.zeros(N))
+
+
+def stored_trials(store) -> list[tuple[str, object]]:
+    """Every trial in a tune's trial store (its journal) as a fresh Optuna reads it with its
+    own file backend: ``(study name, FrozenTrial)`` in the order the studies were made."""
+    from optuna.storages import JournalStorage
+    from optuna.storages.journal import JournalFileBackend
+
+    storage = JournalStorage(JournalFileBackend(str(store)))
+    return [(study.study_name, trial) for study in storage.get_all_studies()
+            for trial in storage.get_all_trials(study._study_id)]

@@ -1,9 +1,9 @@
 """What a run returns to a tuner: statistics of metrics over a family's members.
 
 ``tune.objectives`` lists them (metric, statistic, direction); ``python -m pipeline.run``
-returns their values (a float for one objective, a tuple for several), so Hydra sweepers such
-as hydra-optuna-sweeper can optimize any metric of the ledger, and ``make tune`` computes the
-same values with :func:`objective_values`.
+returns their values (a float for one objective, a tuple for several), so that a sweeper of
+Hydra's can rank runs by any metric of the ledger, and ``make tune`` computes the same values
+with :func:`objective_values`.
 """
 
 from __future__ import annotations

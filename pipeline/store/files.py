@@ -10,6 +10,7 @@ import os
 import tempfile
 from pathlib import Path
 
+import numpy as np
 import pandas as pd
 
 from pipeline.errors import OutputPathError, raise_if_stopped
@@ -130,6 +131,16 @@ def write_csv_atomic(path: Path, frame: pd.DataFrame) -> None:
 
 
 _CSV_SPECIAL = (",", '"', "\r", "\n")
+#: how a float is written into every table (printf's %g with 10 significant digits)
+CSV_FLOAT_FORMAT = "%.10g"
+
+
+def as_written(values: np.ndarray) -> np.ndarray:
+    """Floats as a table written by :func:`write_csv_atomic` reads back (rounded to
+    :data:`CSV_FLOAT_FORMAT`), so that a number taken from memory is the number a reader of
+    the file gets."""
+    return np.array([float(CSV_FLOAT_FORMAT % v) if v == v else np.nan
+                     for v in np.asarray(values, float).tolist()], float)
 
 
 def _csv_cells(column: pd.Series) -> list[str] | None:
@@ -139,7 +150,7 @@ def _csv_cells(column: pd.Series) -> list[str] | None:
     values = column.to_numpy().tolist()
     if kind == "f":
         # printf's %g, the format every table was written with (byte-identical files)
-        return ["" if v != v else "%.10g" % v for v in values]  # noqa: UP031
+        return ["" if v != v else CSV_FLOAT_FORMAT % v for v in values]
     if kind in "biu":
         return [str(v) for v in values]
     if kind in "OUT":
@@ -166,7 +177,7 @@ def csv_text(frame: pd.DataFrame) -> str:
     columns = [_csv_cells(frame[c]) for c in frame.columns] \
         if frame.shape[1] >= 2 and frame.columns.is_unique else [None]
     if any(c is None for c in columns) or any(ch in n for n in names for ch in _CSV_SPECIAL):
-        return frame.to_csv(index=False, float_format="%.10g", lineterminator="\n")
+        return frame.to_csv(index=False, float_format=CSV_FLOAT_FORMAT, lineterminator="\n")
     lines = [",".join(names)]
     lines.extend(",".join(row) for row in zip(*columns, strict=True))
     return "\n".join(lines) + "\n"

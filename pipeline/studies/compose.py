@@ -5,7 +5,10 @@ multiverse, the tuning, the NMPC and speed checks all compose through it)."""
 from __future__ import annotations
 
 import copy
+import functools
+import re
 from collections.abc import Sequence
+from dataclasses import dataclass
 from typing import Any
 
 from pipeline.config import CONF_DIR
@@ -93,7 +96,8 @@ def _with_values(base, values: list[str], parser, base_object=None,
     from omegaconf import OmegaConf
 
     try:
-        parsed = parser.parse_overrides(values)
+        parsed = parser.parse_overrides(values) if not isinstance(parser, OverrideReader) \
+            else parser.parse(values)
         if not any(o.is_sweep_override() for o in parsed):
             if base_object is not None:
                 obj, followers = base_object
@@ -203,6 +207,8 @@ def _typed_section(section_object, section: str, items: list[tuple[str, Any]], m
     key = (id(section_object), section, repr(items))
     rebuilt = memo.get(key) if own else None
     if rebuilt is None:
+        rebuilt = _replaced_section(section_object, items)
+    if rebuilt is None:
         node = OmegaConf.structured(section_object)
         OmegaConf.set_readonly(node, False)
         for leaf, value in items:
@@ -213,6 +219,56 @@ def _typed_section(section_object, section: str, items: list[tuple[str, Any]], m
                 memo.clear()
             memo[key] = rebuilt
     return rebuilt
+
+
+def _replaced_section(section_object, items: list[tuple[str, Any]]) -> Any:
+    """``section_object`` with ``items`` set by ``dataclasses.replace`` (its own checks run),
+    when every value already has its field's plain type (float, int, str or bool, or None
+    where the field is optional), so that OmegaConf's typing would change nothing but an int
+    set where a float is declared, which becomes that float here too; None otherwise
+    (OmegaConf's path: its checks and conversions). About 0.1 ms against OmegaConf's 3-5 ms
+    a section."""
+    import dataclasses
+
+    hints = _field_types(type(section_object))  # type: ignore[arg-type]
+    values: dict[str, Any] = {}
+    for leaf, value in items:
+        plain = _plain_type(hints.get(leaf))
+        if plain is None:
+            return None
+        kind, optional = plain
+        if value is None and optional:
+            values[leaf] = None
+        elif type(value) is kind:
+            values[leaf] = value
+        elif kind is float and type(value) is int:
+            values[leaf] = float(value)
+        else:
+            return None
+    return dataclasses.replace(section_object, **values)
+
+
+def _plain_type(hint: Any) -> tuple[type, bool] | None:
+    """``(type, optional)`` of an annotation that is a plain type or an optional one."""
+    import types
+    import typing
+
+    if hint in (float, int, str, bool):
+        return hint, False
+    args = typing.get_args(hint)
+    if typing.get_origin(hint) in (typing.Union, types.UnionType) and len(args) == 2 \
+            and type(None) in args:
+        other = args[0] if args[1] is type(None) else args[1]
+        if other in (float, int, str, bool):
+            return other, True
+    return None
+
+
+@functools.lru_cache(maxsize=64)
+def _field_types(cls: type) -> dict[str, Any]:
+    import typing
+
+    return typing.get_type_hints(cls)
 
 
 def _rebuilt(chain: list, path: list[str], section) -> Any:
@@ -256,17 +312,85 @@ def _section(config, path: list[str]):
     return config
 
 
+_PLAIN_INT = re.compile(r"[+-]?(0|[1-9][0-9]*)")
+_PLAIN_FLOAT = re.compile(r"[+-]?(((0|[1-9][0-9]*)\.[0-9]*|\.[0-9]+)([eE][+-]?[0-9]+)?"
+                          r"|(0|[1-9][0-9]*)[eE][+-]?[0-9]+)")
+_PLAIN_WORD = re.compile(r"[A-Za-z_][A-Za-z0-9_]*")
+#: words Hydra reads as another type than text (case-insensitive)
+_NOT_TEXT = {"true", "false", "null", "inf", "nan"}
+
+
+@dataclass(frozen=True)
+class PlainValueOverride:
+    """``dotted.key=value`` with a plain number or word as its value, read as Hydra reads it
+    (:class:`OverrideReader`): the parts of Hydra's ``Override`` the composer uses."""
+
+    key_or_group: str
+    plain: Any
+
+    def value(self) -> Any:
+        return self.plain
+
+    @staticmethod
+    def is_sweep_override() -> bool:
+        return False
+
+
+class OverrideReader:
+    """Hydra's override parser with two shortcuts (a tuning composes a config for every trial,
+    and the parser takes about half a millisecond an override): an override seen before is
+    read once (kept, up to ``MEMO`` of them), and ``dotted.key=value`` with a plain integer,
+    decimal number or word as its value is read directly, as Hydra's grammar reads it (a
+    decimal ``1.5``, ``1e-3`` as a float, ``3`` as an int, ``constant`` as text; ``true``,
+    ``null``, ``inf``, ``nan``, anything quoted, bracketed or otherwise special: Hydra's
+    parser)."""
+
+    MEMO = 4096
+
+    def __init__(self) -> None:
+        from hydra.core.override_parser.overrides_parser import OverridesParser
+
+        self.parser = OverridesParser.create()
+        self.memo: dict[str, Any] = {}
+
+    def parse(self, texts: Sequence[str]) -> list:
+        out = []
+        for text in texts:
+            parsed = self.memo.get(text)
+            if parsed is None:
+                parsed = self.plain(text) or self.parser.parse_overrides([text])[0]
+                if len(self.memo) >= self.MEMO:
+                    self.memo.clear()
+                self.memo[text] = parsed
+            out.append(parsed)
+        return out
+
+    @staticmethod
+    def plain(text: str) -> PlainValueOverride | None:
+        """``text`` read without the parser, or None when it is not plain."""
+        key, sep, value = text.partition("=")
+        if not sep or not _is_value_override(text) \
+                or not all(part.isidentifier() for part in key.split(".")):
+            return None
+        if _PLAIN_INT.fullmatch(value):
+            return PlainValueOverride(key, int(value))
+        if _PLAIN_FLOAT.fullmatch(value):
+            return PlainValueOverride(key, float(value))
+        if _PLAIN_WORD.fullmatch(value) and value.lower() not in _NOT_TEXT:
+            return PlainValueOverride(key, value)
+        return None
+
+
 def _run_composer(run_overrides: list[str], typed_bases: dict[tuple, Any],
                   fallbacks: list[list[str]], base_objects: dict[tuple, Any]):
     """The function composing one run's config: from its typed base where it can (its
     dataclasses kept in ``base_objects``), else by Hydra's whole path (noted in
     ``fallbacks``)."""
-    from hydra.core.override_parser.overrides_parser import OverridesParser
     from omegaconf import OmegaConf
 
     from pipeline.config import to_experiment_config
 
-    parser = OverridesParser.create()
+    parser = OverrideReader()
     sections: dict = {}
 
     def make(overrides: list[str]):

@@ -21,6 +21,8 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 
+import pandas as pd
+
 from pipeline.config import ExperimentConfig
 from pipeline.loop.controller import QpCache
 from pipeline.loop.scenario import family_members
@@ -54,6 +56,8 @@ class _Family:
     left: int
     compiles: int
     on_done: Callable[[], None]
+    #: whether its folder gets the family's record (table, summary, manifest) once complete
+    record: bool = True
     waiting: deque = field(default_factory=deque)
 
 
@@ -132,6 +136,9 @@ class FamilyPool:
         self._futures: dict[concurrent.futures.Future, Path] = {}
         self._families: dict[Path, _Family] = {}
         self._ready: deque[Callable[[], None]] = deque()
+        #: the table of each family completed here, by folder, with its config hash, until
+        #: taken (:meth:`take_table`)
+        self._tables: dict[Path, tuple[str, pd.DataFrame]] = {}
 
     @property
     def busy(self) -> bool:
@@ -139,16 +146,19 @@ class FamilyPool:
         return bool(self._futures or self._ready or self._families)
 
     def submit(self, cfg: ExperimentConfig, folder: Path, on_done: Callable[[], None],
-               whole_hash: str | None = None, record_horizon: bool = True) -> None:
+               whole_hash: str | None = None, record_horizon: bool = True,
+               record: bool = True) -> None:
         """Run ``cfg``'s family into ``folder`` and call ``on_done()`` (in :meth:`wait`) once
-        its folder is complete; a complete folder of the same config, or of ``whole_hash``
+        its members are complete; a complete folder of the same config, or of ``whole_hash``
         (the whole family of which ``cfg`` is a rung: it holds these members), is read back,
         not run. ``record_horizon``: whether its new members write what each step planned
-        (:func:`~pipeline.studies.experiment.run_experiment`)."""
+        (:func:`~pipeline.studies.experiment.run_experiment`); ``record``: whether the folder
+        gets the family's record (its table, summary and manifest; else only its members'
+        folders are written, and the table is kept for :meth:`take_table`)."""
         folder = Path(folder)
         pending = self._families.get(folder)
         if pending is not None:  # the same folder is being written: after it
-            pending.waiting.append((cfg, on_done, whole_hash, record_horizon))
+            pending.waiting.append((cfg, on_done, whole_hash, record_horizon, record))
             return
         family = cfg.scenario.family
         if family is None:
@@ -166,7 +176,7 @@ class FamilyPool:
         compiles_before = self.cache.compile_count
         _prepare_cache(cfg, self.cache, len(todo))
         state = _Family(cfg, folder, len(members), metrics, here, len(todo),
-                        self.cache.compile_count - compiles_before, on_done)
+                        self.cache.compile_count - compiles_before, on_done, record)
         self._families[folder] = state
         if not todo:
             self._finish(state)
@@ -187,13 +197,21 @@ class FamilyPool:
             self._futures[future] = folder
 
     def _finish(self, state: _Family) -> None:
-        _write_family_folder(state.cfg, state.folder, _member_table(state.metrics,
-                                                                    state.n_members),
-                             state.n_members, state.compiles, state.counts)
+        table = _member_table(state.metrics, state.n_members)
+        if state.record:
+            _write_family_folder(state.cfg, state.folder, table, state.n_members,
+                                 state.compiles, state.counts)
+        self._tables[state.folder] = (state.cfg.config_hash(), table)
         del self._families[state.folder]
         self._ready.append(state.on_done)
-        for cfg, on_done, whole_hash, record_horizon in state.waiting:
-            self.submit(cfg, state.folder, on_done, whole_hash, record_horizon)
+        for cfg, on_done, whole_hash, record_horizon, record in state.waiting:
+            self.submit(cfg, state.folder, on_done, whole_hash, record_horizon, record)
+
+    def take_table(self, folder: Path, config_hash: str) -> pd.DataFrame | None:
+        """The per-member table of the family of ``config_hash`` last completed here into
+        ``folder`` (once: it is forgotten), or None (read its record instead)."""
+        kept = self._tables.pop(Path(folder), None)
+        return kept[1] if kept is not None and kept[0] == config_hash else None
 
     def wait(self) -> None:
         """Run the callbacks of the families that are complete; when there are none, wait

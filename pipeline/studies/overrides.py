@@ -24,7 +24,8 @@ PRESET_GROUPS = {
     "run.method": "no override: each run is labelled with the method the study runs",
     "experiment": "no experiment preset: the study composes its own runs (scenario, methods, "
                   "families)",
-    "hparams_search": "no search-space preset: it selects a method and a sweeper",
+    "hparams_search": "no search-space preset: a search space is read by make tune "
+                      "(conf/hparams_search/), never composed into a run",
     "ablation": "no ablation preset: it selects a planner and a method label for every run",
     "sweep": "no sweep preset: a study's runs are its own design (make sweep runs sweeps)",
 }

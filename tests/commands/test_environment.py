@@ -209,20 +209,6 @@ def test_a_read_only_folder_for_real(tmp_path, capsys):
         out.chmod(0o755)
 
 
-def test_a_full_disk_under_sqlite_is_one_line(capsys):
-    """The tuning's storage is SQLite: a full disk reaches the command as SQLAlchemy's
-    ``OperationalError: database or disk is full``; one line, exit 2."""
-    import sqlite3
-
-    def work():
-        raise sqlite3.OperationalError("database or disk is full")
-
-    assert run_command(work) == 2
-    assert capsys.readouterr().err.strip().splitlines() == [
-        "error: cannot write: No space left on device (database or disk is full) (ENOSPC); "
-        "free some space or choose another output folder"]
-
-
 def test_the_multiverse_on_slurm_without_slurm_is_one_line(tmp_path):
     """The multiverse and the tuning submit through the same executor: ``python -m
     pipeline.multiverse --space quick hydra/launcher=slurm`` without SLURM is the same line,

@@ -29,6 +29,7 @@ from pipeline.studies.tune import (
     optimize,
     pareto_mask,
 )
+from pipeline.studies.tune.search import STORE_FILE
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -67,29 +68,23 @@ def test_bad_objectives_name_their_key(make_config, objective, key):
     assert key in message and len(message.splitlines()) == 1
 
 
-def test_the_run_returns_its_objectives_to_hydras_optuna_sweeper(tmp_path):
-    """The issue's command: four trials complete and their values are written; the best value
-    is the family statistic of its own run folder (oracle: numpy over family_metrics.csv)."""
-    out = tmp_path / "opt"
-    proc = subprocess.run(
-        [sys.executable, "-m", "pipeline.run", "-m", "hydra/sweeper=optuna",
-         "hydra.sweeper.n_trials=4", "planner.beta=interval(0.1,1.0)", "scenario=family",
-         "scenario.family.size=10", f"hydra.sweep.dir={out}"],
-        cwd=ROOT, capture_output=True, text=True, timeout=600)
-    assert proc.returncode == 0, proc.stderr[-2000:]
-    import yaml
+@pytest.mark.parametrize("beta", [0.3, 0.9])
+def test_the_run_returns_its_objectives_for_a_sweeper(tmp_path, make_config, beta):
+    """What a sweeper of Hydra's ranks runs by (``apf-mpc run -m 'planner.beta=0.3,0.9'``):
+    a family's run returns ``tune.objectives``, the statistic of its own members (oracle:
+    numpy over the family_metrics.csv it wrote)."""
+    from pipeline.run import _run
 
-    result = yaml.safe_load((out / "optimization_results.yaml").read_text())
-    trials = sorted(p for p in out.iterdir() if p.is_dir() and p.name.startswith("planner.beta"))
-    assert len(trials) == 4
-    means = {}
-    for folder in trials:
-        table = pd.read_csv(folder / "family_metrics.csv")
-        means[folder.name] = float(np.nanmean(table["reaction_delay_s"].to_numpy(float)))
+    cfg = make_config(["scenario=family", "scenario.family.size=6", f"planner.beta={beta}",
+                       "controller.backend=daqp", "+tune.objectives=[{metric: "
+                       "reaction_delay_s},{metric: recovery_time_s, statistic: median}]"])
+    values = _run(cfg, tmp_path / "run")
+    table = pd.read_csv(tmp_path / "run" / "family_metrics.csv")
     # family_metrics.csv keeps 10 significant digits
-    assert result["best_value"] == pytest.approx(min(means.values()), rel=1e-9)
-    best = min(means, key=means.get)
-    assert f"planner.beta={result['best_params']['planner.beta']}" in best
+    assert values[0] == pytest.approx(
+        float(np.nanmean(table["reaction_delay_s"].to_numpy(float))), rel=1e-9)
+    assert values[1] == pytest.approx(
+        float(np.nanmedian(table["recovery_time_s"].to_numpy(float))), rel=1e-9)
 
 
 def _planted_space(n_trials: int) -> TuneSpace:
@@ -103,14 +98,17 @@ def _planted_space(n_trials: int) -> TuneSpace:
 def test_the_tuner_finds_a_planted_optimum_and_respects_the_constraint():
     """Two planted objectives that agree on beta = 0.6 with a trade-off in alpha_e; beta > 1.2
     is infeasible (its constraint > 0). Within 60 trials the tuner's feasible Pareto set holds
-    a setting with beta within 0.1 of 0.6, and no infeasible trial is in it."""
-    import optuna
-    from optuna.distributions import UniformDistribution
+    a setting with beta within 0.1 of 0.6 for each of five sampler seeds (within 0.05 for
+    most: measured with Optuna 2.10 and 5.1 over 20 seeds, median 0.022, largest 0.076), no
+    infeasible trial is in it, and the sampler learns the constraint (fewer infeasible
+    settings asked in the last third than the 41 % of the range)."""
+    import dataclasses
 
-    space = _planted_space(60)
-    study = make_study(space, "improved", 0, storage=None)
-    distributions = {"planner.beta": UniformDistribution(0.05, 2.0),
-                     "planner.alpha_e": UniformDistribution(0.5, 4.0)}
+    import optuna
+    from optuna.distributions import FloatDistribution
+
+    distributions = {"planner.beta": FloatDistribution(0.05, 2.0),
+                     "planner.alpha_e": FloatDistribution(0.5, 4.0)}
 
     def planted(p):
         b, a = p["planner.beta"], p["planner.alpha_e"]
@@ -119,19 +117,28 @@ def test_the_tuner_finds_a_planted_optimum_and_respects_the_constraint():
     def evaluate(settings):
         return [(planted(p), 1.0 if p["planner.beta"] > 1.2 else -1.0) for p in settings]
 
-    optimize(study, distributions, evaluate, Convergence.of(space), space.batch_size,
-             log=lambda m: None)
-    complete = study.get_trials(states=(optuna.trial.TrialState.COMPLETE,))
-    assert len(complete) == 60
-    # every trial carries the values and the constraint of its own parameters
-    for t in complete:
-        assert tuple(t.values) == planted(t.params)
-        assert t.user_attrs["constraint"] == (1.0 if t.params["planner.beta"] > 1.2 else -1.0)
-    feasible = [t for t in complete if t.user_attrs["constraint"] <= 0]
-    values = np.array([t.values for t in feasible])
-    front = [t for t, keep in zip(feasible, pareto_mask(values, space.objectives), strict=True) if keep]
-    assert min(abs(t.params["planner.beta"] - 0.6) for t in front) < 0.05
-    assert all(t.params["planner.beta"] <= 1.2 for t in front)
+    nearest, late_infeasible = [], []
+    for seed in range(5):
+        space = dataclasses.replace(_planted_space(60), sampler_seed=seed)
+        study = make_study(space, "improved", 0, storage=None)
+        optimize(study, distributions, evaluate, Convergence.of(space), space.batch_size,
+                 log=lambda m: None)
+        complete = study.get_trials(states=(optuna.trial.TrialState.COMPLETE,))
+        assert len(complete) == 60
+        # every trial carries the values and the constraint of its own parameters
+        for t in complete:
+            assert tuple(t.values) == planted(t.params)
+            assert t.user_attrs["constraint"] == (1.0 if t.params["planner.beta"] > 1.2
+                                                  else -1.0)
+        feasible = [t for t in complete if t.user_attrs["constraint"] <= 0]
+        values = np.array([t.values for t in feasible])
+        front = [t for t, keep in zip(feasible, pareto_mask(values, space.objectives),
+                                      strict=True) if keep]
+        assert all(t.params["planner.beta"] <= 1.2 for t in front)
+        nearest.append(min(abs(t.params["planner.beta"] - 0.6) for t in front))
+        late_infeasible.append(np.mean([t.params["planner.beta"] > 1.2 for t in complete[40:]]))
+    assert max(nearest) < 0.1 and sorted(nearest)[2] < 0.05, nearest
+    assert np.mean(late_infeasible) < 0.41 * 0.75, late_infeasible
 
 
 def test_pareto_and_compromise_rules_on_a_hand_made_front():
@@ -232,26 +239,22 @@ def test_tuning_files_are_read_strictly(tmp_path):
     assert not (tmp_path / "o").exists()
 
 
-def _complete_trials(db: Path) -> dict[str, list[tuple[int, str]]]:
-    import sqlite3
+def _complete_trials(store: Path) -> dict[str, list[tuple[int, str]]]:
+    """Per study, its complete trials' numbers and parameters, as a fresh Optuna reads the
+    journal (its own backend)."""
+    import optuna
+    from optuna.storages import JournalStorage
+    from optuna.storages.journal import JournalFileBackend
 
-    if not db.is_file():
+    if not store.is_file():
         return {}
-    with sqlite3.connect(db) as con:
-        try:
-            rows = con.execute(
-                "select s.study_name, t.number, t.trial_id from trials t join studies s "
-                "on s.study_id = t.study_id where t.state = 'COMPLETE'").fetchall()
-            params = con.execute("select trial_id, param_name, param_value from "
-                                 "trial_params").fetchall()
-        except sqlite3.OperationalError:
-            return {}
-    by_trial: dict[int, list] = {}
-    for trial_id, name, value in params:
-        by_trial.setdefault(trial_id, []).append((name, value))
+    storage = JournalStorage(JournalFileBackend(str(store)))
     out: dict[str, list] = {}
-    for study, number, trial_id in rows:
-        out.setdefault(study, []).append((number, json.dumps(sorted(by_trial.get(trial_id, [])))))
+    for summary in optuna.get_all_study_summaries(storage):
+        study = optuna.load_study(study_name=summary.study_name, storage=storage)
+        out[summary.study_name] = [
+            (t.number, json.dumps(sorted(t.params.items())))
+            for t in study.get_trials(states=(optuna.trial.TrialState.COMPLETE,))]
     return out
 
 
@@ -267,14 +270,14 @@ def test_make_tune_quick_resumes_after_sigkill_and_feeds_the_report(tmp_path, ma
     deadline = time.time() + 300
     before = {}
     while time.time() < deadline and proc.poll() is None:
-        before = _complete_trials(out / "tune.db")
+        before = _complete_trials(out / STORE_FILE)
         if sum(len(v) for v in before.values()) >= 2:
             break
         time.sleep(0.2)
     assert proc.poll() is None, "the tuning ended before it could be interrupted"
     os.killpg(proc.pid, signal.SIGKILL)
     proc.wait()
-    before = _complete_trials(out / "tune.db")
+    before = _complete_trials(out / STORE_FILE)
     assert sum(len(v) for v in before.values()) >= 2
     # what was finished before the kill: every member, and every family complete at its
     # whole training size (a family stopped at a rung, 3 members, is extended to 6 when its
@@ -285,7 +288,7 @@ def test_make_tune_quick_resumes_after_sigkill_and_feeds_the_report(tmp_path, ma
     assert any(not p.parent.name.startswith("member_") for p in manifests)
     done = subprocess.run(command, cwd=ROOT, capture_output=True, text=True, timeout=600)
     assert done.returncode == 0, done.stderr[-2000:]
-    after = _complete_trials(out / "tune.db")
+    after = _complete_trials(out / STORE_FILE)
     space = load_tune_space(CONF_DIR / "tune" / "quick.yaml")
     key = space.trial_key()
     assert set(after) == {f"quick-{key}-r{r}-{m}" for r in range(2)

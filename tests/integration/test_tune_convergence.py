@@ -28,14 +28,14 @@ from pipeline.studies.tune import (
 
 @pytest.mark.parametrize("dims", [2, 3, 4])
 def test_hypervolume_matches_optunas_wfg(dims):
-    from optuna._hypervolume import WFG
+    from optuna._hypervolume import compute_hypervolume
 
     rng = np.random.default_rng(dims)
     for _ in range(5):
         points = rng.random((int(rng.integers(1, 30)), dims))
         reference = np.full(dims, 1.05)
         assert hypervolume(points, reference) == pytest.approx(
-            WFG().compute(points, reference), rel=1e-12)
+            compute_hypervolume(points, reference), rel=1e-12)
 
 
 def test_hypervolume_closed_forms():
@@ -160,7 +160,7 @@ def _planted_study(rule: Convergence):
 
 
 def _planted_run(values_of, rule: Convergence) -> tuple[np.ndarray, int | None, int]:
-    from optuna.distributions import UniformDistribution
+    from optuna.distributions import FloatDistribution
 
     study = _planted_study(rule)
     count = [0]
@@ -172,7 +172,7 @@ def _planted_run(values_of, rule: Convergence) -> tuple[np.ndarray, int | None, 
             count[0] += 1
         return out
 
-    history, converged = optimize(study, {"planner.beta": UniformDistribution(0.0, 1.0)},
+    history, converged = optimize(study, {"planner.beta": FloatDistribution(0.0, 1.0)},
                                   evaluate, rule, 4, log=lambda m: None)
     return history, converged, count[0]
 
@@ -366,7 +366,7 @@ def test_a_pruned_tune_counts_and_logs_whole_trial_equivalents():
     10-member family (``members`` = 2.5 of 10, planted) count a quarter each, so a cap of 20
     whole trials takes 80 trials, and the progress line says both counts (before, it said
     "trials 80 ... cap 20" and looked like a cap overrun)."""
-    from optuna.distributions import UniformDistribution
+    from optuna.distributions import FloatDistribution
 
     rule = Convergence(10, 20, 5, 0.0, ((0.0, 1.0), (0.0, 1.0)))  # any growth: not converged
     study = _planted_study(rule)
@@ -380,7 +380,7 @@ def test_a_pruned_tune_counts_and_logs_whole_trial_equivalents():
         return out
 
     lines: list[str] = []
-    history, converged = optimize(study, {"planner.beta": UniformDistribution(0.0, 1.0)},
+    history, converged = optimize(study, {"planner.beta": FloatDistribution(0.0, 1.0)},
                                   evaluate, rule, 4, log=lines.append, family_size=10)
     assert converged is None and len(history) == 80
     assert lines[-1].startswith("trials 80, 20 whole-trial equivalents (")

@@ -111,13 +111,13 @@ def test_the_gain_and_the_front_decide():
 
 def _study_with(trials: list[dict]):
     import optuna
-    from optuna.distributions import UniformDistribution
+    from optuna.distributions import FloatDistribution
 
     optuna.logging.set_verbosity(optuna.logging.WARNING)
     study = optuna.create_study(directions=["minimize"] * 3)
     for i, t in enumerate(trials):
         study.add_trial(optuna.trial.create_trial(
-            params={"x": float(i)}, distributions={"x": UniformDistribution(0, 100)},
+            params={"x": float(i)}, distributions={"x": FloatDistribution(0, 100)},
             values=t["values"], user_attrs=t["attrs"]))
     return study
 
@@ -174,14 +174,16 @@ def no_trial_lost_or_run_twice(folder: Path) -> None:
     """Every trial asked was told once (numbers 0..n-1, all complete); every member of every
     family was simulated exactly once over all rungs and families."""
     import json
-    import sqlite3
 
-    with sqlite3.connect(folder / "tune.db") as db:
-        rows = db.execute("select study_id, number, state from trials").fetchall()
-    by_study: dict[int, list[int]] = {}
-    for study, number, state in rows:
-        assert state == "COMPLETE"
-        by_study.setdefault(study, []).append(number)
+    from optuna.trial import TrialState
+
+    from pipeline.studies.tune.search import STORE_FILE
+    from tests.builders import stored_trials
+
+    by_study: dict[str, list[int]] = {}
+    for study, trial in stored_trials(folder / STORE_FILE):
+        assert trial.state == TrialState.COMPLETE
+        by_study.setdefault(study, []).append(trial.number)
     assert all(sorted(n) == list(range(len(n))) for n in by_study.values()) and by_study
     summary = json.loads((folder / "summary.json").read_text())
     members = {p.parent for p in (folder / "runs").rglob("member_*/manifest.json")}
@@ -200,6 +202,14 @@ def test_one_worker_and_two_tune_the_same_and_lose_nothing(tmp_path):
             f"{x}\n{y}" for x, y in zip(a.splitlines(), b.splitlines(), strict=False) if x != y)
     for folder in ("one", "two"):
         no_trial_lost_or_run_twice(tmp_path / folder)
+    # the coordinator's CPU per trial: measured with two workers (the members ran on them:
+    # a few to tens of ms, far below a trial's members, 6 x 25-35 ms at the least); not with
+    # one, whose members ran in the coordinator
+    import json
+
+    measured = [json.loads((tmp_path / f / "summary.json").read_text())[
+        "coordinator_ms_per_trial"] for f in ("one", "two")]
+    assert measured[0] is None and 0.5 < measured[1] < 150.0, measured
 
 
 def test_members_at_equal_hypervolume_are_read_off_the_two_tunes(tmp_path):
@@ -237,8 +247,6 @@ def test_studies_side_by_side_tune_as_one_after_the_other(tmp_path, monkeypatch)
     and verdicts over two replicates and both methods, nothing lost or run twice. And the
     switch is real: the side-by-side run interleaves the studies' trials (a trial of replicate
     1 completes before replicate 0's last), the other does not."""
-    import sqlite3
-
     from pipeline.config import CONF_DIR
     from pipeline.studies.tune import load_tune_space, run_tuning
     from pipeline.studies.tune.search import Runner
@@ -247,11 +255,12 @@ def test_studies_side_by_side_tune_as_one_after_the_other(tmp_path, monkeypatch)
                             ["heldout_size=8", "max_trials=6", "min_trials=6"])
 
     def completion_order(folder: Path) -> list[str]:
-        with sqlite3.connect(folder / "tune.db") as db:
-            rows = db.execute("select s.study_name from trials t join studies s on "
-                              "s.study_id = t.study_id order by t.datetime_complete, "
-                              "t.trial_id").fetchall()
-        return [name for (name,) in rows]
+        from pipeline.studies.tune.search import STORE_FILE
+        from tests.builders import stored_trials
+
+        trials = stored_trials(folder / STORE_FILE)
+        return [name for name, _ in sorted(trials, key=lambda e: (e[1].datetime_complete,
+                                                                  e[1]._trial_id))]
 
     run_tuning(space, tmp_path / "together", [], log=lambda _: None)
     monkeypatch.setattr(Runner, "local", property(lambda self: False))

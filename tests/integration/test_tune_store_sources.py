@@ -1,14 +1,15 @@
 """A resumed tune checks its trial store against the families the trials came from (issue 62,
-item 5): an edited objective value in ``tune.db`` once changed the tuned answer without a
+item 5): an edited objective value in the trial store once changed the tuned answer without a
 word; now the resume refuses in one line naming the trial, and an unedited store resumes."""
 
 from __future__ import annotations
 
+import json
 import shutil
-import sqlite3
 
 import pytest
 
+from pipeline.studies.tune.search import STORE_FILE
 from pipeline.tune import main
 
 ARGS = ["--space", "quick", "--set", "replicates=1", "--set", "max_trials=4",
@@ -29,14 +30,17 @@ def test_an_unedited_store_resumes_and_an_edited_one_is_refused(tuned, tmp_path,
     capsys.readouterr()
     edited = tmp_path / "edited"
     shutil.copytree(tuned, edited)
-    with sqlite3.connect(edited / "tune.db") as db:
-        row = db.execute("SELECT trial_value_id, value FROM trial_values "
-                         "ORDER BY trial_value_id LIMIT 1").fetchone()
-        db.execute("UPDATE trial_values SET value = ? WHERE trial_value_id = ?",
-                   (row[1] * 0.5 + 0.1, row[0]))
+    store = edited / STORE_FILE
+    # the first told trial's first objective value, edited in its journal line
+    lines = store.read_text().splitlines()
+    told = next(i for i, line in enumerate(lines) if json.loads(line).get("values"))
+    op = json.loads(lines[told])
+    op["values"][0] = op["values"][0] * 0.5 + 0.1
+    lines[told] = json.dumps(op, separators=(",", ":"))
+    store.write_text("".join(line + "\n" for line in lines))
     assert main([*ARGS, "--out", str(edited)]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) >= 1
     line = err[-1]
-    assert line.startswith(f"error: {edited / 'tune.db'}: trial ") and "was edited" in line
+    assert line.startswith(f"error: {store}: trial ") and "was edited" in line
     assert "gives" in line and "holds objective values" in line

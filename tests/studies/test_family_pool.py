@@ -148,7 +148,7 @@ def test_a_tune_starts_its_workers_and_makes_its_studies_before_its_first_famili
     from pipeline.config import CONF_DIR
     from pipeline.studies.family_pool import stop_workers
     from pipeline.studies.tune import load_tune_space, run_tuning
-    from pipeline.studies.tune.search import Runner
+    from pipeline.studies.tune.search import STORE_FILE, Runner, trial_storage
 
     class FirstFamilies(Exception):
         pass
@@ -158,7 +158,7 @@ def test_a_tune_starts_its_workers_and_makes_its_studies_before_its_first_famili
     def first_run(self, jobs, label, part="heldout"):
         executor = getattr(reusable_executor, "_executor", None)
         seen["workers"] = executor is not None and len(executor._processes) == 2
-        summaries = optuna.get_all_study_summaries(f"sqlite:///{tmp_path / 'tune' / 'tune.db'}")
+        summaries = optuna.get_all_study_summaries(trial_storage(tmp_path / "tune" / STORE_FILE))
         seen["studies"] = sorted("-".join(s.study_name.rsplit("-", 2)[-2:]) for s in summaries)
         seen["jobs"] = (label, part, len(jobs))
         raise FirstFamilies

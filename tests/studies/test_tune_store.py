@@ -1,8 +1,9 @@
 """Hostile class: the tune's trial store trusted by name.
 
-``tune.db`` was keyed by the space's name: an edited budget reused the old trials, a resumed
-tune after Ctrl-C picked a different compromise, a damaged, truncated, read-only or folder
-``tune.db`` gave an SQLAlchemy traceback, and two tunes in one folder collided. Now the store is
+The store (``tune.db`` then, ``tune.journal`` now) was keyed by the space's name: an edited
+budget reused the old trials, a resumed tune after Ctrl-C picked a different compromise, a
+damaged, truncated, read-only or folder store gave a traceback, and two tunes in one folder
+collided. Now the store is
 checked before anything is written (one line naming it, its bytes untouched), every study
 carries the key of its space, budget and code version (another key is refused), a resumed tune
 asks exactly what the uninterrupted one asked, and a second study on a folder is refused.
@@ -16,19 +17,25 @@ import stat
 from pathlib import Path
 
 import pytest
-from optuna.distributions import UniformDistribution
+from optuna.distributions import FloatDistribution
 from optuna.trial import TrialState
 
 from pipeline.config import CONF_DIR
 from pipeline.errors import StudyError
 from pipeline.store.lock import folder_lock
 from pipeline.studies.tune import Convergence, load_tune_space, make_study, optimize
-from pipeline.studies.tune.search import check_trial_store, study_name, trial_storage
+from pipeline.studies.tune.search import (
+    STORE_FILE,
+    STORE_KEY,
+    check_trial_store,
+    study_name,
+    trial_storage,
+)
 from pipeline.tune import main
 
 QUICK = load_tune_space(CONF_DIR / "tune" / "quick.yaml")
-DISTRIBUTIONS = {"planner.beta": UniformDistribution(0.05, 2.0),
-                 "planner.alpha_e": UniformDistribution(0.5, 4.0)}
+DISTRIBUTIONS = {"planner.beta": FloatDistribution(0.05, 2.0),
+                 "planner.alpha_e": FloatDistribution(0.5, 4.0)}
 
 
 def _planted(p: dict) -> tuple[float, float, float]:
@@ -75,19 +82,19 @@ def test_a_resumed_tune_asks_what_the_uninterrupted_one_asked(tmp_path, stop_in,
     same front and the same compromise)."""
     space = QUICK.__class__(**{**QUICK.__dict__, "min_trials": 8, "max_trials": 8,
                                "convergence_window": 4})
-    whole = _asked(_tune(tmp_path / "whole.db", space))
+    whole = _asked(_tune(tmp_path / "whole.journal", space))
     assert len(whole) == 8
     with pytest.raises(Stop):
-        _tune(tmp_path / "cut.db", space, stop_at_call=call, stop_in=stop_in)
-    resumed = _tune(tmp_path / "cut.db", space)
+        _tune(tmp_path / "cut.journal", space, stop_at_call=call, stop_in=stop_in)
+    resumed = _tune(tmp_path / "cut.journal", space)
     assert _asked(resumed) == whole
 
 
 def _store_with_trials(db: Path, space=QUICK, n: int = 2) -> None:
     study = make_study(space, "improved", 0, trial_storage(db))
     for _ in range(n):
-        trial = study.ask()
-        values = _planted({k: trial._suggest(k, d) for k, d in DISTRIBUTIONS.items()})
+        trial = study.ask(DISTRIBUTIONS)
+        values = _planted(trial.params)
         study.tell(trial, list(values))
 
 
@@ -101,7 +108,7 @@ def test_a_store_made_under_another_budget_or_an_older_version_is_refused(tmp_pa
     same, byte for byte."""
     out = tmp_path / "D"
     out.mkdir()
-    db = out / "tune.db"
+    db = out / STORE_FILE
     _store_with_trials(db)
     check_trial_store(db, QUICK)  # the same space, budget and code: resumed
     before = _digest(db)
@@ -124,10 +131,8 @@ def test_a_store_made_under_another_budget_or_an_older_version_is_refused(tmp_pa
     with pytest.raises(StudyError, match="not this tune's"):
         check_trial_store(db, QUICK, QUICK.store_key(["controller.horizon=12"]))
     # a study without a key (written before keys) is another version
-    import sqlite3
-
-    with sqlite3.connect(db) as con:
-        con.execute("delete from study_user_attributes")
+    db.write_text("".join(line + "\n" for line in db.read_text().splitlines()
+                          if STORE_KEY not in line))
     with pytest.raises(StudyError, match="made under an older version"):
         check_trial_store(db, QUICK)
 
@@ -135,43 +140,37 @@ def test_a_store_made_under_another_budget_or_an_older_version_is_refused(tmp_pa
 def _damage(kind: str, db: Path) -> None:
     if kind == "folder":
         db.mkdir()
-    elif kind == "empty":
-        db.write_bytes(b"")
-    elif kind == "not sqlite":
+    elif kind == "not a journal":
         db.write_text("these are my notes\n")
-    elif kind == "truncated":
+    elif kind == "damaged":
         _store_with_trials(db, n=6)
-        data = db.read_bytes()
-        db.write_bytes(data[:len(data) // 2])
+        lines = db.read_text().splitlines()
+        lines[len(lines) // 2] = lines[len(lines) // 2][:20]  # a line cut in the middle
+        db.write_text("".join(line + "\n" for line in lines))
     elif kind == "foreign":
-        import sqlite3
-
-        with sqlite3.connect(db) as con:
-            con.execute("create table notes (text)")
+        db.write_text('{"op_code": 99, "note": "mine"}\n')
     elif kind == "read-only":
         _store_with_trials(db)
         db.chmod(stat.S_IRUSR | stat.S_IRGRP)
 
 
 @pytest.mark.parametrize("kind, line", [
-    ("folder", "{db}: a folder, not the trial store (an SQLite file); move it away or choose "
+    ("folder", "{db}: a folder, not the trial store (a journal file); move it away or choose "
                "another --out"),
-    ("empty", "{db}: an empty file, not a trial store (cut or damaged); delete it (or choose "
-              "another --out) to start fresh"),
-    ("not sqlite", "{db}: not an SQLite file (damaged, or not a trial store); delete it (or "
-                   "choose another --out) to start fresh"),
-    ("truncated", "{db}: the trial store is damaged"),
-    ("foreign", "{db}: an SQLite file but not Optuna's trial store; delete it (or choose "
-                "another --out) to start fresh"),
+    ("not a journal", "{db}: not Optuna's journal, or damaged (line 1 is not an operation); "
+                      "delete it (or choose another --out) to start fresh"),
+    ("damaged", "{db}: not Optuna's journal, or damaged (line "),
+    ("foreign", "{db}: Optuna cannot replay the journal"),
     ("read-only", "{db}: read-only; the trial store must be writable (every trial is recorded "
                   "as it completes): make it writable or choose another --out"),
 ])
 def test_a_broken_store_is_one_line_and_never_modified(tmp_path, capsys, kind, line):
-    """``python -m pipeline.tune --space quick --out D`` with D/tune.db broken: exit 2, one
-    line ``error: D/tune.db: ...``, the store (and its folder) exactly as they were."""
+    """``python -m pipeline.tune --space quick --out D`` with D/tune.journal broken: exit 2,
+    one line ``error: D/tune.journal: ...``, the store (and its folder) exactly as they
+    were."""
     out = tmp_path / "D"
     out.mkdir()
-    db = out / "tune.db"
+    db = out / STORE_FILE
     _damage(kind, db)
     before = sorted(p.name for p in out.iterdir())
     digest = None if db.is_dir() else _digest(db)
@@ -185,6 +184,36 @@ def test_a_broken_store_is_one_line_and_never_modified(tmp_path, capsys, kind, l
         assert not os.access(db, os.W_OK) or not db.stat().st_mode & 0o222
 
 
+def test_a_cut_last_line_is_dropped_and_said_and_an_empty_store_starts_fresh(tmp_path):
+    """A crash of the machine mid-write leaves the journal's last line without its end: that
+    operation never completed, so it is dropped (the file cut back to the line before it) and
+    a line says so; the trials before it are kept. An empty journal is a new one."""
+    db = tmp_path / STORE_FILE
+    db.write_bytes(b"")
+    check_trial_store(db, QUICK)
+    _store_with_trials(db, n=3)
+    whole = db.read_bytes()
+    db.write_bytes(whole + b'{"op_code":4,"worker_id":"x","study_id":0,"dat')
+    said: list[str] = []
+    check_trial_store(db, QUICK, log=said.append)
+    assert db.read_bytes() == whole
+    assert len(said) == 1 and "last line was cut" in said[0]
+    study = make_study(QUICK, "improved", 0, trial_storage(db))
+    assert len(study.get_trials(states=(TrialState.COMPLETE,))) == 3
+
+
+def test_an_earlier_versions_sqlite_store_is_left_alone_and_said(tmp_path):
+    """A tune folder of an earlier version holds ``tune.db`` (SQLite, Optuna 2): it is never
+    read (its trials were made by other code: another store key), never removed, and a line
+    says so."""
+    old = tmp_path / "tune.db"
+    old.write_bytes(b"SQLite format 3\x00" + bytes(100))
+    said: list[str] = []
+    check_trial_store(tmp_path / STORE_FILE, QUICK, log=said.append)
+    assert old.read_bytes().startswith(b"SQLite format 3") and len(said) == 1
+    assert "not read" in said[0] and STORE_FILE in said[0]
+
+
 def test_a_second_study_on_the_same_folder_is_refused_in_one_line(tmp_path, capsys):
     """A tune (or multiverse) running in D, then ``python -m pipeline.tune --space quick --out
     D``: exit 2, ``error: D is in use by another study (tune quick, pid N); wait for it
@@ -195,7 +224,7 @@ def test_a_second_study_on_the_same_folder_is_refused_in_one_line(tmp_path, caps
         err = capsys.readouterr().err.strip().splitlines()
         assert len(err) == 1 and err[0].startswith(
             f"error: {out} is in use by another study (tune quick, pid {os.getpid()})")
-        assert not (out / "tune.db").exists()
+        assert not (out / STORE_FILE).exists()
     # released with its holder: the next study takes it
     with folder_lock(out, "tune quick"):
         pass

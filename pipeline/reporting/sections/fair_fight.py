@@ -168,6 +168,9 @@ def _cost(summary: TuneSummary) -> str:
     if summary.core_utilisation is not None:
         parts.append(f"Use of the cores: {summary.core_utilisation:.2f} (CPU-seconds over "
                      "wall-clock seconds times cores).")
+    if summary.coordinator_ms_per_trial is not None:
+        parts.append(f"The coordinator (asks, tells, compositions, records) spent "
+                     f"{summary.coordinator_ms_per_trial:.1f} ms of CPU per trial.")
     if summary.wall_s is not None:
         cores = f" on {summary.cores} cores" if summary.cores else ""
         parts.append(f"It took {summary.wall_s / 60:.1f} minutes{cores} (its last run, from "

@@ -99,6 +99,10 @@ class TuneSummary:
     #: CPU-seconds over (wall-clock seconds x cores) of the tuning's own process and its
     #: workers (None before it was measured)
     core_utilisation: float | None = None
+    #: the tuning process's own CPU milliseconds per trial told while its studies ran (asks,
+    #: tells, compositions, rung tables, records; the members run on the workers), None where
+    #: the members ran in it too (one worker) or before it was measured
+    coordinator_ms_per_trial: float | None = None
     #: wall-clock seconds of the tuning's last run (a resumed tune: its own run only) and the
     #: cores it had (None before they were recorded)
     wall_s: float | None = None

@@ -4,8 +4,6 @@ SLURM, resumed by config hash."""
 
 from __future__ import annotations
 
-import contextlib
-import json
 import logging
 import os
 import time
@@ -172,10 +170,8 @@ class StudyLoop:
         if self._start is None:
             self._start = time.perf_counter()
         size = max(1, min(self.batch_size, int(np.ceil(self.rule.max_trials - spent))))
-        self._batch = [self.study.ask() for _ in range(size)]
-        settings = [{name: trial._suggest(name, dist)
-                     for name, dist in self.distributions.items()} for trial in self._batch]
-        flush_trials(self.study, self._batch)
+        self._batch = [self.study.ask(self.distributions) for _ in range(size)]
+        settings = [dict(trial.params) for trial in self._batch]
         self._sampler_states = save_sampler_state(self.study, complete + len(self._batch),
                                                   "after", self._sampler_states)
         return settings
@@ -190,6 +186,8 @@ class StudyLoop:
         """Record the last batch's results (per setting ``(values, constraint[, attrs])``) and
         log the study's progress."""
         for trial, (values, constraint, *more) in zip(self._batch, results, strict=True):
+            # the safety constraint as NSGA-II ranks it (<= 0 feasible), and as the tables read it
+            trial.set_constraint("safety", float(constraint))
             trial.set_user_attr("constraint", float(constraint))
             for key, value in (more[0] if more else {}).items():
                 trial.set_user_attr(key, value)
@@ -210,16 +208,17 @@ class StudyLoop:
                  f"{shared})")
 
 
-#: the study's system attribute holding its sampler's random state at the start of the last
+#: the study's attribute holding its sampler's random state at the start of the last
 #: batch (with the number of complete trials then)
 SAMPLER_STATE = "pipeline:sampler_state_at_batch"
 
 
 def _random_states(sampler) -> list:
     """The numpy random states an NSGA-II sampler draws from (its own and its random
-    sampler's), or [] for another sampler."""
-    states = [getattr(sampler, "_rng", None),
-              getattr(getattr(sampler, "_random_sampler", None), "_rng", None)]
+    sampler's; Optuna keeps each in a lazily made holder), or [] for another sampler."""
+    holders = [getattr(sampler, "_rng", None),
+               getattr(getattr(sampler, "_random_sampler", None), "_rng", None)]
+    states = [getattr(h, "rng", h) for h in holders if h is not None]
     return [s for s in states if isinstance(s, np.random.RandomState)]
 
 
@@ -236,12 +235,12 @@ def save_sampler_state(study, complete: int, when: str, saved: dict | None = Non
         name, keys, pos, has_gauss, gauss = rng.get_state()
         states.append([name, [int(k) for k in keys], int(pos), int(has_gauss), float(gauss)])
     if saved is None:
-        saved = study.system_attrs.get(SAMPLER_STATE)
+        saved = study.user_attrs.get(SAMPLER_STATE)
     saved = dict(saved) if isinstance(saved, dict) else {}
     saved[when] = {"complete": int(complete), "states": states}
     if when == "before":
         saved.pop("after", None)
-    study.set_system_attr(SAMPLER_STATE, saved)
+    study.set_user_attr(SAMPLER_STATE, saved)
     return saved
 
 
@@ -250,7 +249,7 @@ def restore_sampler_state(study) -> bool:
     number of complete trials (at the start of the interrupted batch, or once the last batch
     was asked), when the study kept it; whether it did. With it a resumed tune asks the
     settings the uninterrupted one asked."""
-    saved = study.system_attrs.get(SAMPLER_STATE)
+    saved = study.user_attrs.get(SAMPLER_STATE)
     complete = _complete_trials(study)
     rngs = _random_states(study.sampler)
     if not isinstance(saved, dict) or not rngs:
@@ -409,49 +408,24 @@ def evaluate_in_rungs(runner: Runner, method: str, replicate: int, settings: lis
     return batch.results()
 
 
-def _constraint(trial) -> list[float]:
-    """Optuna's constraints_func: the safety constraint the evaluation stored (<= 0 feasible)."""
-    return [float(trial.user_attrs.get("constraint", 0.0))]
-
-
 def trial_storage(path: Path):
-    """The SQLite file that keeps the trials, written a trial at a time
-    (:class:`~pipeline.studies.tune.trial_store.BatchedTrialStorage`), without a disk sync on
-    every commit. A killed process loses nothing that was committed; only a crash of the
-    machine itself could leave the file damaged, which the next tune reports.
+    """The journal file that keeps the trials (Optuna's :class:`~optuna.storages.
+    JournalStorage` over :class:`~pipeline.studies.tune.trial_store.TrialJournal`: one line
+    per operation, appended without a disk sync). A killed process loses nothing written;
+    several processes may share it (each replays the others' lines)."""
+    from optuna.storages import JournalStorage
 
-    Each thread keeps its connection (SQLAlchemy's default for an SQLite file opens one per
-    Optuna session, a connect and a pragma on every ask and tell: 3 % of the tune's parent)."""
-    import optuna
-    from sqlalchemy import event
-    from sqlalchemy.pool import SingletonThreadPool
+    from pipeline.studies.tune.trial_store import TrialJournal
 
-    from pipeline.studies.tune.trial_store import BatchedTrialStorage
-
-    storage = optuna.storages.RDBStorage(f"sqlite:///{Path(path).resolve()}",
-                                         engine_kwargs={"poolclass": SingletonThreadPool})
-
-    def no_sync(connection, _record) -> None:
-        connection.execute("pragma synchronous=off")
-
-    event.listen(storage.engine, "connect", no_sync)
-    storage.engine.dispose()  # connections made before the listener: closed
-    return BatchedTrialStorage(storage)
-
-
-def flush_trials(study, trials) -> None:
-    """Write the pending updates of running ``trials`` (their parameters, once asked) to the
-    study's storage, where it defers them (:class:`~pipeline.studies.tune.trial_store.
-    BatchedTrialStorage`)."""
-    flush = getattr(study._storage, "flush", None)
-    if flush is not None:
-        for trial in trials:
-            flush(trial._trial_id)
+    return JournalStorage(TrialJournal(Path(path)))
 
 
 #: the user attribute of a study holding the store key it was made under
 STORE_KEY = "pipeline:store_key"
-SQLITE_HEADER = b"SQLite format 3\x00"
+#: the trial store's file in a tune's folder (an Optuna journal: :func:`trial_storage`)
+STORE_FILE = "tune.journal"
+#: the trial store of versions before Optuna 3 (an SQLite file): never read, left in place
+OLD_STORE_FILE = "tune.db"
 
 
 def study_name(space: TuneSpace, method: str, replicate: int) -> str:
@@ -459,22 +433,28 @@ def study_name(space: TuneSpace, method: str, replicate: int) -> str:
     return f"{space.name}-{space.trial_key()}-r{replicate}-{method}"
 
 
-def check_trial_store(path: Path, space: TuneSpace, store_key: str | None = None) -> None:
+def check_trial_store(path: Path, space: TuneSpace, store_key: str | None = None,
+                      log=logger.info) -> None:
     """Raise :class:`StudyError` (one line naming the file, nothing written) when the trial
-    store at ``path`` cannot be used as it is: a folder or a device in its place, an empty,
-    damaged or truncated file, a file that is not Optuna's store, a read-only store, or a
-    study of this tune made under another store key (another budget or code version:
-    :meth:`TuneSpace.store_key`; ``store_key``: this tune's, by default without run
-    overrides), whose trials would be reused silently. A missing store is fine (it is
-    created)."""
+    store at ``path`` cannot be used as it is: a folder or a device in its place, a damaged
+    file or one that is not Optuna's journal, a read-only store, or a study of this tune made
+    under another store key (another budget or code version: :meth:`TuneSpace.store_key`;
+    ``store_key``: this tune's, by default without run overrides), whose trials would be
+    reused silently. A missing or empty store is fine (it is started). A last line cut without
+    its end (a crash of the machine mid-write; a killed process never leaves one) is an
+    operation that never completed: it is dropped, and ``log`` says so."""
     from pipeline.errors import StudyError
 
     path = Path(path)
+    old = path.with_name(OLD_STORE_FILE)
+    if old.is_file():
+        log(f"{old}: the trial store of an earlier version (SQLite, Optuna 2): not read, left "
+            f"in place; the trials are kept in {path.name}")
     if not _check_store_file(path):
         return
     names = {study_name(space, m, r) for m in space.methods for r in range(space.replicates)}
     key = store_key or space.store_key()
-    for name, stored_key, n_trials in _stored_keys(path):
+    for name, stored_key, n_trials in _stored_keys(path, log):
         if name in names and n_trials and stored_key != key:
             raise StudyError(
                 f"{path}: holds {n_trials} trials of {name} made under "
@@ -490,7 +470,7 @@ START_FRESH = "delete it (or choose another --out) to start fresh"
 
 def _check_store_file(path: Path) -> bool:
     """Whether a trial store is there (False: none yet); :class:`StudyError` for a path that
-    is not a readable, writable SQLite file."""
+    is not a readable, writable file."""
     import stat
 
     from pipeline.errors import StudyError
@@ -500,21 +480,13 @@ def _check_store_file(path: Path) -> bool:
     except FileNotFoundError:
         return False
     if stat.S_ISDIR(mode):
-        raise StudyError(f"{path}: a folder, not the trial store (an SQLite file); move it "
+        raise StudyError(f"{path}: a folder, not the trial store (a journal file); move it "
                          "away or choose another --out")
     if not stat.S_ISREG(mode):
         raise StudyError(f"{path}: not a regular file (a device or a pipe); move it away or "
                          "choose another --out")
     if not os.access(path, os.R_OK):
         raise StudyError(f"{path}: the trial store cannot be read (permission denied)")
-    with open(path, "rb") as handle:
-        header = handle.read(len(SQLITE_HEADER))
-    if not header:
-        raise StudyError(f"{path}: an empty file, not a trial store (cut or damaged); "
-                         f"{START_FRESH}")
-    if header != SQLITE_HEADER:
-        raise StudyError(f"{path}: not an SQLite file (damaged, or not a trial store); "
-                         f"{START_FRESH}")
     if _read_only(path) or _read_only(path.parent):
         raise StudyError(f"{path}: read-only; the trial store must be writable (every trial "
                          "is recorded as it completes): make it writable or choose another --out")
@@ -529,35 +501,37 @@ def _read_only(path: Path) -> bool:
         or bool(os.statvfs(path).f_flag & os.ST_RDONLY)
 
 
-def _stored_keys(path: Path) -> list[tuple[str, str | None, int]]:
+def _stored_keys(path: Path, log=logger.info) -> list[tuple[str, str | None, int]]:
     """Every study in the store: its name, the store key it was made under (None before
-    keys) and its trial count, read without writing; :class:`StudyError` for a damaged,
-    truncated or foreign SQLite file."""
-    import sqlite3
+    keys) and its trial count, as Optuna replays the journal (in memory: the file is not
+    written, but for a cut last line, dropped); :class:`StudyError` for a file that is not
+    Optuna's journal or is damaged."""
+    from optuna.storages import JournalStorage
 
     from pipeline.errors import StudyError
+    from pipeline.studies.tune.trial_store import JournalCutError, LogsInMemory, read_journal
 
     try:
-        # plain reads (a journal left by a killed tune is rolled back, as any open would)
-        with contextlib.closing(sqlite3.connect(path, timeout=10.0)) as db:
-            check = db.execute("pragma quick_check").fetchone()
-            if not check or check[0] != "ok":
-                found = check[0] if check else "no answer"
-                raise StudyError(f"{path}: the trial store is damaged ({found}); "
-                                 f"{START_FRESH}")
-            tables = {r[0] for r in db.execute("select name from sqlite_master where "
-                                               "type = 'table'")}
-            if not {"studies", "trials", "study_user_attributes"} <= tables:
-                raise StudyError(f"{path}: an SQLite file but not Optuna's trial store; "
-                                 f"{START_FRESH}")
-            rows = db.execute(
-                "select s.study_name, a.value_json, (select count(*) from trials t where "
-                "t.study_id = s.study_id) from studies s left join study_user_attributes a "
-                "on a.study_id = s.study_id and a.key = ?", (STORE_KEY,)).fetchall()
-    except sqlite3.DatabaseError as exc:
-        raise StudyError(f"{path}: the trial store is damaged or truncated ({exc}); "
-                         f"{START_FRESH}") from None
-    return [(name, json.loads(stored) if stored else None, int(n)) for name, stored, n in rows]
+        logs = read_journal(path)
+    except JournalCutError as exc:
+        if not exc.last:
+            raise StudyError(f"{path}: not Optuna's journal, or damaged ({exc}); "
+                             f"{START_FRESH}") from None
+        data = path.read_bytes()
+        kept = data[:data.rfind(b"\n") + 1]
+        with open(path, "r+b") as handle:
+            handle.truncate(len(kept))
+        logs = read_journal(path)
+        log(f"{path}: its last line was cut (a write stopped midway, as a crash of the "
+            f"machine leaves it): dropped; the {len(logs)} operations before it are kept")
+    try:
+        storage = JournalStorage(LogsInMemory(logs))
+        return [(s.study_name, s.user_attrs.get(STORE_KEY),
+                 len(storage.get_all_trials(s._study_id, deepcopy=False)))
+                for s in storage.get_all_studies()]
+    except Exception as exc:  # an operation Optuna cannot replay: whatever it is, one line
+        raise StudyError(f"{path}: Optuna cannot replay the journal ({type(exc).__name__}: "
+                         f"{exc}); {START_FRESH}") from None
 
 
 def make_study(space: TuneSpace, method: str, replicate: int, storage,
@@ -566,20 +540,16 @@ def make_study(space: TuneSpace, method: str, replicate: int, storage,
     space's trial key so that an edited space never resumes another's trials, and carrying
     the store key it is made under (``store_key``, by default the space's without run
     overrides: :func:`check_trial_store`)."""
-    import warnings
-
     import optuna
 
     optuna.logging.set_verbosity(optuna.logging.WARNING)
-    with warnings.catch_warnings():
-        # constraints_func is marked experimental in optuna 2.10 (pinned); it is what we need
-        warnings.simplefilter("ignore", optuna.exceptions.ExperimentalWarning)
-        sampler = optuna.samplers.NSGAIISampler(population_size=space.population_size,
-                                                seed=space.sampler_seed_of(replicate),
-                                                constraints_func=_constraint)
+    # the safety constraint is told with each trial (Trial.set_constraint), which NSGA-II ranks by
+    sampler = optuna.samplers.NSGAIISampler(population_size=space.population_size,
+                                            seed=space.sampler_seed_of(replicate))
     study = optuna.create_study(
         study_name=study_name(space, method, replicate), storage=storage,
-        sampler=sampler, load_if_exists=True, directions=[o.direction for o in space.objectives])
+        sampler=sampler, load_if_exists=True,
+        directions=[optuna.study.StudyDirection[o.direction.upper()] for o in space.objectives])
     if STORE_KEY not in study.user_attrs:
         study.set_user_attr(STORE_KEY, store_key or space.store_key())
     return study
@@ -788,14 +758,21 @@ def run_studies_together(runner: Runner, studies: list[TunedStudy], rungs: Rungs
                          entry.replicate, members=batch.members(i))
 
         def done() -> None:
-            if not batch.record(i, runner.table(job)):
+            # the table the pool has just made (an early rung's is not written: the next rung
+            # writes the family's record over it), else the family's record read back
+            table = pool.take_table(job.folder, job.cfg.config_hash())
+            if not batch.record(i, table if table is not None else runner.table(job)):
                 run_rung(entry, batch, i)
             elif batch.done:
                 entry.loop.tell(batch.results())
                 start_batch(entry)
 
+        # an early rung's family record is left out (about 10 ms of the parent's time a rung:
+        # a table, a summary and a manifest written and read back); its members are written,
+        # so a resumed trial or a later rung reads them back
         pool.submit(job.cfg, job.folder, done, job.whole_hash,
-                    record_horizon=runner.records_horizon("training"))
+                    record_horizon=runner.records_horizon("training"),
+                    record=job.whole_hash is None)
 
     try:
         for entry in studies:

@@ -3,9 +3,11 @@ and the rules of a fair fight (:class:`TuneSpace`), and each method's search spa
 
 from __future__ import annotations
 
+import functools
+import math
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
-from typing import List
+from typing import Any, List
 
 from pipeline.analysis.objectives import Objective
 from pipeline.config import CONF_DIR, schema_from_data
@@ -235,8 +237,9 @@ class TuneSpace:
     @property
     def parts_key(self) -> str | None:
         """The key whose list the tuning splits into its training and held-out parts (the
-        source's ``parts_key``, e.g. ``scenario.pedestrians.scenes``), or None."""
-        return getattr(tuned_scenario_source(self.scenario), "parts_key", None)
+        source's ``parts_key``, e.g. ``scenario.pedestrians.scenes``), or None (read once per
+        scenario name and process: every trial's families ask)."""
+        return _parts_key(self.scenario)
 
     def scenario_overrides(self, part: str) -> list[str]:
         """The Hydra overrides that choose the scenarios of ``part`` (``training`` or
@@ -364,6 +367,11 @@ class TuneSpace:
         return short
 
 
+@functools.lru_cache(maxsize=16)
+def _parts_key(scenario: str) -> str | None:
+    return getattr(tuned_scenario_source(scenario), "parts_key", None)
+
+
 def tuned_scenario_source(name: str) -> type:
     """The source class (:class:`pipeline.loop.scenario.ScenarioSource`) of the family
     ``conf/scenario/<name>.yaml`` a tuning runs on: its ``source._target_``, or the built-in
@@ -421,16 +429,135 @@ def default_budget() -> TuneSpace:
     return load_tune_space(CONF_DIR / "tune" / "default.yaml")
 
 
-def search_space(method: str) -> tuple[dict, dict]:
-    """The distributions and the reasons of ``conf/hparams_search/<method>.yaml`` (its
-    ``hydra.sweeper.params``, parsed by hydra-optuna-sweeper's own parser)."""
-    from hydra_plugins.hydra_optuna_sweeper._impl import create_params_from_overrides
+@dataclass(frozen=True)
+class SearchRange:
+    """One tuned config key of ``conf/hparams_search/<method>.yaml`` and its range: floats
+    in ``[low, high]`` (``log``: log-uniform), integers ``low, low + step, ..., high``, or one
+    of ``choices``; ``why`` is the reason for the range (the report shows it).
+
+    In the file: ``float: [low, high]`` (and ``log: true``), ``int: [low, high]`` (and
+    ``step``), or ``choice: [a, b, ...]``; with ``why``. Both ends of a range are included.
+    """
+
+    key: str
+    kind: str
+    low: float | int | None = None
+    high: float | int | None = None
+    log: bool = False
+    step: int = 1
+    choices: tuple = ()
+    why: str = ""
+
+    KINDS = ("float", "int", "choice")
+
+    @classmethod
+    def of(cls, key: str, data: Any, where: str) -> SearchRange:
+        """The range of ``key`` from its entry ``data``, checked strictly (one
+        :class:`ConfigError` naming ``where``.``key``)."""
+        name = f"{where}.{key}"
+        if not isinstance(data, dict):
+            raise ConfigError(name, data, "a mapping: float: [low, high], int: [low, high] or "
+                              "choice: [...], with why")
+        kinds = [k for k in cls.KINDS if k in data]
+        unknown = sorted(set(data) - {*cls.KINDS, "log", "step", "why"})
+        if unknown:
+            raise ConfigError(f"{name}.{unknown[0]}", data[unknown[0]],
+                              "a key of a search range: float, int, choice, log, step, why")
+        if len(kinds) != 1:
+            raise ConfigError(name, data, "exactly one of float: [low, high], int: [low, "
+                              "high] or choice: [...]")
+        kind, why = kinds[0], data.get("why", "")
+        if not isinstance(why, str):
+            raise ConfigError(f"{name}.why", why, "a sentence (text)")
+        if kind == "choice":
+            choices = data["choice"]
+            if not isinstance(choices, list) or len(choices) < 2 or any(
+                    not isinstance(c, (str, int, float, bool)) for c in choices) \
+                    or len(set(map(repr, choices))) != len(choices):
+                raise ConfigError(f"{name}.choice", choices, "a list of at least two different "
+                                  "plain values")
+            if "log" in data or "step" in data:
+                raise ConfigError(name, data, "no log or step with choice")
+            return cls(key, kind, choices=tuple(choices), why=why.strip())
+        return cls._numeric(key, kind, data, name, why.strip())
+
+    @classmethod
+    def _numeric(cls, key: str, kind: str, data: dict, name: str, why: str) -> SearchRange:
+        bounds = data[kind]
+        number = int if kind == "int" else (int, float)
+        if not isinstance(bounds, list) or len(bounds) != 2 or any(
+                isinstance(b, bool) or not isinstance(b, number) or not math.isfinite(b)
+                for b in bounds) or not bounds[0] < bounds[1]:
+            raise ConfigError(f"{name}.{kind}", bounds, f"[low, high], two finite "
+                              f"{'integers' if kind == 'int' else 'numbers'} with low < high")
+        log = data.get("log", False)
+        if not isinstance(log, bool) or (log and bounds[0] <= 0):
+            raise ConfigError(f"{name}.log", log, "true (with low > 0) or false")
+        step = data.get("step", 1)
+        if kind == "float" and "step" in data:
+            raise ConfigError(f"{name}.step", step, "no step for a float range (int: [...] "
+                              "for integers)")
+        if isinstance(step, bool) or not isinstance(step, int) or step < 1 \
+                or (kind == "int" and (bounds[1] - bounds[0]) % step) or (log and step != 1):
+            raise ConfigError(f"{name}.step", step, f"a positive integer dividing high - low "
+                              f"({bounds[1] - bounds[0]}), 1 with log")
+        low, high = (bounds[0], bounds[1]) if kind == "int" else (float(bounds[0]),
+                                                                   float(bounds[1]))
+        return cls(key, kind, low, high, log, step, why=why)
+
+    def distribution(self):
+        """Optuna's distribution of this range."""
+        from optuna.distributions import (
+            CategoricalDistribution,
+            FloatDistribution,
+            IntDistribution,
+        )
+
+        if self.kind == "choice":
+            return CategoricalDistribution(self.choices)
+        if self.kind == "int":
+            return IntDistribution(int(self.low), int(self.high), log=self.log,  # type: ignore[arg-type]
+                                   step=self.step)
+        return FloatDistribution(float(self.low), float(self.high), log=self.log)  # type: ignore[arg-type]
+
+    def text(self) -> str:
+        """The range in words (the report's search spaces)."""
+        if self.kind == "choice":
+            return "one of " + ", ".join(str(c) for c in self.choices)
+        if self.kind == "int":
+            steps = f" in steps of {self.step}" if self.step > 1 else ""
+            return f"integers {self.low} to {self.high}{steps}" + (", log-uniform" if self.log
+                                                                   else "")
+        return f"{self.low:g} to {self.high:g}" + (", log-uniform" if self.log else "")
+
+
+def search_ranges(method: str) -> tuple[SearchRange, ...]:
+    """The ranges of ``conf/hparams_search/<method>.yaml`` (the project's schema:
+    :class:`SearchRange`), checked strictly: one :class:`ConfigError` naming the key."""
     from pipeline.store.safe_load import load_yaml
 
+    where = f"hparams_search/{method}"
     path = CONF_DIR / "hparams_search" / f"{method}.yaml"
-    params = load_yaml(path, "a search space")["hydra"]["sweeper"]["params"]
-    distributions, fixed = create_params_from_overrides([f"{k}={v}" for k, v in params.items()])
-    if fixed:
-        raise ConfigError(f"hparams_search/{method}: hydra.sweeper.params", sorted(fixed),
-                          "ranges only (interval(...), choice(...)); fix values elsewhere")
-    return distributions, {k: str(v) for k, v in params.items()}
+    data = load_yaml(path, "a search space (conf/hparams_search/<method>.yaml)")
+    if not isinstance(data, dict) or not isinstance(data.get("params"), dict) \
+            or not data["params"]:
+        raise ConfigError(f"{where}.params", None if not isinstance(data, dict)
+                          else data.get("params"), "a mapping of tuned keys to their ranges")
+    unknown = sorted(set(data) - {"method", "params"})
+    if unknown:
+        raise ConfigError(f"{where}.{unknown[0]}", data[unknown[0]],
+                          "a key of a search space: method, params")
+    if data.get("method", method) != method:
+        raise ConfigError(f"{where}.method", data["method"], f"{method} (the file's name)")
+    for key in data["params"]:
+        if not isinstance(key, str) or not all(part.isidentifier() for part in key.split(".")):
+            raise ConfigError(f"{where}.params", key, "dotted config keys (planner.beta)")
+    return tuple(SearchRange.of(k, v, f"{where}.params") for k, v in data["params"].items())
+
+
+def search_space(method: str) -> tuple[dict, dict]:
+    """The Optuna distributions of ``conf/hparams_search/<method>.yaml``, and each key's range
+    in words with its reason (:func:`search_ranges`)."""
+    ranges = search_ranges(method)
+    return ({r.key: r.distribution() for r in ranges},
+            {r.key: r.text() + (f"; {r.why}" if r.why else "") for r in ranges})

@@ -30,8 +30,8 @@ tuning, not method. Here:
    matched control. The untuned methods once, on replicate 0's held-out family (seed
    ``heldout_seed``: make reproduce's family, its members restored from the member cache).
 
-Trials live in an SQLite file in the output folder, one study per replicate and method named
-by the space's trial key: an interrupted tuning resumes without repeating a completed trial;
+Trials live in an Optuna journal in the output folder (``tune.journal``), one study per
+replicate and method named by the space's trial key: an interrupted tuning resumes without repeating a completed trial;
 an edited space starts new studies. Families run here or, with ``hydra/launcher=slurm``, as
 SLURM arrays.
 """
@@ -50,10 +50,15 @@ import numpy as np
 import pandas as pd
 
 from pipeline.analysis.claims import ALL_CLAIMS, FORCE_CLAIMS, Ledger, family_ledger
-from pipeline.analysis.objectives import CENSORED_AT_RUN_END, objective_values, tuning_table
+from pipeline.analysis.objectives import (
+    CENSORED_AT_RUN_END,
+    objective_value,
+    objective_values,
+    tuning_table,
+)
 from pipeline.analysis.tally import Tally, collided
 from pipeline.errors import StudyError
-from pipeline.store.files import json_safe
+from pipeline.store.files import as_written, json_safe
 from pipeline.store.lock import folder_lock
 from pipeline.store.manifest import refuse_other_record, untrust
 from pipeline.studies.overrides import PRESET_GROUPS, applied_overrides, refuse_controlled
@@ -66,6 +71,7 @@ from pipeline.studies.tune.pareto import (
 )
 from pipeline.studies.tune.search import (
     PRUNING_RULE,
+    STORE_FILE,
     Convergence,
     Rungs,
     Runner,
@@ -123,7 +129,7 @@ def _run_tuning(space: TuneSpace, out_dir: Path, spaces: dict, overrides: list[s
                 log) -> TuneResult:
     # the trial store checked before anything is written (damaged, read-only, another key)
     store_key = space.store_key(overrides)
-    check_trial_store(out_dir / "tune.db", space, store_key)
+    check_trial_store(out_dir / STORE_FILE, space, store_key, log)
     untrust(out_dir)
     clock = CoreClock()
     runner = Runner(space, out_dir, overrides, log)
@@ -144,7 +150,7 @@ def _run_tuning(space: TuneSpace, out_dir: Path, spaces: dict, overrides: list[s
     if never:
         # shown, not refused: a small tune is a first look
         log(f"{never}: every claim will read 'not settled'")
-    storage = trial_storage(out_dir / "tune.db")
+    storage = trial_storage(out_dir / STORE_FILE)
     rule, rungs = Convergence.of(space), Rungs.of(space)
     measure = family_measure(space)
     loops = {(replicate, method): StudyLoop(
@@ -168,11 +174,16 @@ def _run_tuning(space: TuneSpace, out_dir: Path, spaces: dict, overrides: list[s
         entries.extend(TunedStudy(replicate, method, loops[replicate, method], threshold)
                        for method in space.methods)
     # a resumed tune's stored trials are checked against the families they came from
-    check_stored_trials(runner, entries, measure, out_dir / "tune.db")
+    check_stored_trials(runner, entries, measure, out_dir / STORE_FILE)
+    coordinator_ms: float | None = None
     if runner.local:
         # every study's batches side by side on one pool: the cores never wait for the
         # parent's asks, compositions and records between batches
+        told_before, cpu_before = _complete_in(entries), CoreClock.own_cpu_s()
         run_studies_together(runner, entries, rungs, measure, n_jobs)
+        told = _complete_in(entries) - told_before
+        if n_jobs > 1 and told:  # with one worker the members ran here too
+            coordinator_ms = 1000.0 * (CoreClock.own_cpu_s() - cpu_before) / told
     else:
         # SLURM: each rung of a batch one array, one study after the other
         for entry in entries:
@@ -209,6 +220,7 @@ def _run_tuning(space: TuneSpace, out_dir: Path, spaces: dict, overrides: list[s
     data = summarize(space, spaces, thresholds, trials, histories, chosen, judged, without,
                      alpha=float(base.claims.alpha))
     data.update(members=runner.counts.to_json(), core_utilisation=clock.utilisation(),
+                coordinator_ms_per_trial=coordinator_ms,
                 wall_s=round(clock.wall_s(), 1), cores=clock.cores,
                 overrides=applied_overrides(overrides), store_key=store_key)
     summary = TuneSummary.from_json(json_safe(data))
@@ -263,11 +275,59 @@ def family_measure(space: TuneSpace) -> Callable[[pd.DataFrame], tuple[list[floa
             *(c for start_flag in CENSORED_AT_RUN_END.values() for c in start_flag)}
 
     def measure(table: pd.DataFrame) -> tuple[list[float], int]:
+        fast = _measured_in_numpy(table, space)
+        if fast is not None:
+            return fast
         narrow = table[[c for c in table.columns if c in read]]
         return (list(objective_values(tuning_table(narrow, space.censoring), space.objectives)),
                 int(collided(narrow).sum()))
 
     return measure
+
+
+def _measured_in_numpy(table: pd.DataFrame, space: TuneSpace
+                       ) -> tuple[list[float], int] | None:
+    """:func:`family_measure`'s values with numpy on the columns' arrays (a table made in
+    memory: boolean flags, numeric metrics; a tenth of pandas' time, the same numbers); None
+    for a table whose flags are not booleans or whose metrics are not numbers (pandas' path
+    reads them). Numbers are read as the family's table on disk holds them
+    (:func:`~pipeline.store.files.as_written`): a rung measured from memory and one read
+    back from its record give the same values."""
+    def array(name: str) -> np.ndarray | None:
+        if name not in table:
+            return None
+        values = table[name].to_numpy()
+        return as_written(values) if values.dtype.kind == "f" else values
+
+    collision = array("collision")
+    if collision is not None and collision.dtype != bool:
+        return None
+    kept = ~collision if collision is not None else np.ones(len(table), bool)
+    duration = array("duration_s")
+    values = []
+    for objective in space.objectives:
+        column = array(objective.metric)
+        if column is None:
+            values.append(objective_value(np.zeros(0), objective))
+            continue
+        if column.dtype.kind not in "fiu":
+            return None
+        column = column.astype(float)
+        censored = CENSORED_AT_RUN_END.get(objective.metric)
+        if space.censoring == "run_end" and duration is not None and censored is not None \
+                and censored[0] in table:
+            begun, flag = array(censored[0]), array(censored[1])
+            if begun is None:
+                return None
+            if duration.dtype.kind not in "fiu" or begun.dtype.kind not in "fiu" or (
+                    flag is not None and flag.dtype != bool):
+                return None
+            missed = np.isnan(column) & ~np.isnan(begun.astype(float))
+            if flag is not None:
+                missed &= ~flag
+            column = np.where(missed, duration.astype(float) - begun, column)
+        values.append(objective_value(column[kept], objective))
+    return values, int(collision.sum()) if collision is not None else 0
 
 
 def controlled_keys(space: TuneSpace, spaces: dict) -> dict[str, str]:
@@ -320,6 +380,14 @@ class CoreClock:
             else (os.cpu_count() or 1)
 
     @staticmethod
+    def own_cpu_s() -> float:
+        """This process's CPU-seconds (user and system), without its workers'."""
+        import resource
+
+        own = resource.getrusage(resource.RUSAGE_SELF)
+        return own.ru_utime + own.ru_stime
+
+    @staticmethod
     def _cpu() -> float:
         import resource
 
@@ -341,6 +409,14 @@ class CoreClock:
         stop_workers()
         wall = time.perf_counter() - self.start_wall
         return (self._cpu() - self.start_cpu) / max(wall * self.cores, 1e-9)
+
+
+def _complete_in(entries: list[TunedStudy]) -> int:
+    """The complete trials of every study of ``entries``."""
+    from optuna.trial import TrialState
+
+    return sum(len(e.loop.study.get_trials(deepcopy=False, states=(TrialState.COMPLETE,)))
+               for e in entries)
 
 
 def members_simulated(study) -> int:
