@@ -24,10 +24,10 @@ __all__ = ["main"]
 
 #: The headline figures the command prints (``bench_summary.json`` holds them all).
 HEADLINE = ("closed_loop_over_floor", "step_over_floor", "step_over_sparse_floor",
-            "step_over_sparse_floor_daqp", "step_over_sparse_floor_dense",
-            "step_over_sparse_floor_path", "step_over_sparse_floor_path_daqp",
-            "step_over_sparse_floor_cpu", "outside_qp_us_per_step", "qp_us_per_step",
-            "outside_qp_over_qp", "outside_qp_over_qp_python_kernels", "setup_ms",
+            "step_over_sparse_floor_daqp", "step_over_sparse_floor_path",
+            "step_over_sparse_floor_path_daqp", "step_over_sparse_floor_cpu",
+            "outside_qp_us_per_step", "qp_us_per_step", "outside_qp_over_qp",
+            "outside_qp_over_qp_python_kernels", "setup_ms",
             "compiles_per_family", "family_scenarios_per_s", "family_member_over_sparse_floor",
             "family_member_over_sparse_floor_daqp", "multiverse_member_reads_per_member",
             "install_over_pip", "member_cache_reuse", "member_cache_resimulated",

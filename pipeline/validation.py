@@ -4,6 +4,7 @@ dotted key, the value and what is allowed."""
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 from typing import Any
 
 from omegaconf import MISSING
@@ -31,9 +32,14 @@ def between(key: str, value: Any, low: float, high: float) -> None:
         raise ConfigError(key, value, f"a number in [{low}, {high}]")
 
 
-def choice(key: str, value: Any, options: tuple) -> None:
+def choice(key: str, value: Any, options: tuple, removed: Mapping[str, str] | None = None
+           ) -> None:
+    """``value`` one of ``options``; ``removed``: values that were allowed once, each with why it
+    is gone, added to the refusal of that value."""
     if value not in options:
-        raise ConfigError(key, value, "one of " + ", ".join(str(o) for o in options))
+        why = (removed or {}).get(value) if isinstance(value, str) else None
+        raise ConfigError(key, value, "one of " + ", ".join(str(o) for o in options)
+                          + (f" ({value} was removed: {why})" if why else ""))
 
 
 def safe_name(key: str, value: Any) -> None:

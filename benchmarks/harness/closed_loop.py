@@ -7,20 +7,17 @@ from pathlib import Path
 
 import numpy as np
 
-from benchmarks.harness.inputs import (
-    KeptClarabelFloor,
-    compose_config,
-    floor_times,
-    recorded_sparse_qps,
-)
+from benchmarks.harness.inputs import KeptClarabelFloor, compose_config, floor_times
+from benchmarks.harness.sparse_floor import recorded_sparse_qps
 
 
 def bench_closed_loop(repeats: int = 5, backend: str | None = None,
                       compiled_kernels: bool = True) -> dict:
     """One complete paper-scenario run of the improved method in this process (the QP compiled
     inside the timed region, a fresh cache each time), over the sparse floor of the same QPs
-    (the run's steps replayed as the sparse QP, recorded from a sparse run of the same
-    configuration: the same QPs to ~1e-7), and its time outside the QP per step.
+    (the run's steps recorded and restated with the states as variables,
+    :func:`~benchmarks.harness.sparse_floor.recorded_sparse_qps`), and its time outside the QP
+    per step.
 
     Each repeat runs twice: with a fresh cache (what one run costs, compilation, discretized
     models and the BLAS thread limit's library scan included) and again with the cache it just

@@ -1,10 +1,10 @@
 """The bench's inputs and floors: its configurations, a deterministic sequence of realistic
-QP inputs, the kept-Clarabel floor, and the sparse QPs of a closed-loop run recorded for it."""
+QP inputs and the kept-Clarabel floor (the sparse statement it is handed, and the QPs of a
+closed-loop run recorded for it: :mod:`benchmarks.harness.sparse_floor`)."""
 
 from __future__ import annotations
 
 import time
-from dataclasses import replace
 from typing import Any
 
 import numpy as np
@@ -65,7 +65,7 @@ def step_inputs(cfg, n_obstacles: int, n_steps: int, seed: int = 0) -> list:
 
 def qp_map(mpc: Any) -> Any:
     """The compiled map (:class:`~pipeline.loop.controller.qp.AffineQpMap`) a lateral MPC on
-    ``clarabel_direct`` solves through (the sparse statement's, or the condensed one's)."""
+    ``clarabel_direct`` solves through (the condensed statement's)."""
     from pipeline.loop.controller.lateral_backends import CompiledCondensedQp
     from pipeline.loop.controller.qp import DirectQp
 
@@ -117,37 +117,3 @@ def timed_call(call):
     wall, cpu = time.perf_counter(), time.process_time()
     out = call()
     return out, time.perf_counter() - wall, time.process_time() - cpu
-
-
-class RecordingMap:
-    """A compiled map that remembers every parameter vector it is applied to (the bench's way
-    to hand the floor solver exactly the QPs of a closed-loop run)."""
-
-    def __init__(self, qp_map) -> None:
-        self._map = qp_map
-        self.recorded: list[np.ndarray] = []
-
-    def data(self, theta):
-        self.recorded.append(np.array(theta, copy=True))
-        return self._map.data(theta)
-
-    def __getattr__(self, name):
-        return getattr(self._map, name)
-
-
-def recorded_sparse_qps(cfg, scenario) -> tuple[object, list]:
-    """The sparse QPs of a run of ``cfg`` (its closed loop with the states as variables, which
-    agrees with the condensed one to ~1e-7), as the compiled map and the parameter vectors."""
-    from pipeline.loop.controller import QpCache
-    from pipeline.loop.controller.lateral_qp import LateralQpStructure
-    from pipeline.loop.simulate import simulate
-
-    sparse_cfg = replace(cfg, controller=replace(cfg.controller, backend="clarabel_direct",
-                                                 formulation="sparse"))
-    cache = QpCache()
-    simulate(sparse_cfg, scenario, cache)
-    key = ("lateral", "map", LateralQpStructure.of(sparse_cfg.controller, sparse_cfg.vehicle))
-    recorder = RecordingMap(cache.entries[key])
-    cache.entries[key] = recorder
-    simulate(sparse_cfg, scenario, cache)
-    return recorder._map, recorder.recorded

@@ -16,14 +16,15 @@ from benchmarks.harness.inputs import (
     step_inputs,
     timed_call,
 )
+from benchmarks.harness.sparse_floor import sparse_map, sparse_parameter_vector
 
 
 def bench_lateral(horizons, obstacle_counts, n_steps: int, repeats: int) -> list[dict]:
     """Per QP, interleaved on identical inputs in one process (the order rotating from QP to
-    QP): the controller step of every backend (default clarabel_direct: the condensed QP stated
-    in CVXPY on a kept Clarabel; clarabel_dense: its numpy data on a kept Clarabel; daqp) and
-    each floor (the sparse QP and the condensed QP on a kept Clarabel), wall and CPU time; the
-    CVXPY backend on the sparse QP in a pass of its own over the same QPs."""
+    QP): the controller step of the backends (default clarabel_direct: the condensed QP stated
+    in CVXPY on a kept Clarabel; daqp) and each floor (the sparse QP and the condensed QP on a
+    kept Clarabel), wall and CPU time; the CVXPY backend in a pass of its own over the same
+    QPs."""
     rows = []
     for N in horizons:
         for n_obs in obstacle_counts:
@@ -42,17 +43,16 @@ def bench_lateral(horizons, obstacle_counts, n_steps: int, repeats: int) -> list
 @dataclass(frozen=True)
 class LateralCase:
     """One configuration of the lateral bench (horizon ``N``, ``n_obs`` obstacles): the lateral
-    MPC on every backend, the step inputs and their QPs' parameter vectors (sparse and
-    condensed)."""
+    MPC on every backend, the sparse floor's compiled map, the step inputs and their QPs'
+    parameter vectors (sparse and condensed)."""
 
     N: int
     n_obs: int
     ctrl: Any
     cvxpy: Any
-    sparse: Any
+    sparse_map: Any
     direct: Any
     daqp: Any
-    dense: Any
     steps: list
     sparse_thetas: list
     condensed_thetas: list
@@ -67,29 +67,23 @@ class LateralCase:
         cfg = compose_config(["method=improved", f"controller.horizon={N}",
                               f"controller.max_obstacles={max(n_obs, 1)}"])
         ctrl = cfg.controller
-        mpc_cvxpy = LateralMpc(replace(ctrl, backend="cvxpy", formulation="sparse"),
-                               cfg.vehicle)
-        mpc_sparse = LateralMpc(replace(ctrl, backend="clarabel_direct",
-                                        formulation="sparse"), cfg.vehicle)
-        mpc_direct = LateralMpc(replace(ctrl, backend="clarabel_direct",
-                                        formulation="condensed"), cfg.vehicle)
-        mpc_daqp = LateralMpc(replace(ctrl, backend="daqp", formulation="condensed"),
-                              cfg.vehicle)
-        mpc_dense = LateralMpc(replace(ctrl, backend="clarabel_dense",
-                                       formulation="condensed"), cfg.vehicle)
+        mpc_cvxpy = LateralMpc(replace(ctrl, backend="cvxpy"), cfg.vehicle)
+        mpc_direct = LateralMpc(replace(ctrl, backend="clarabel_direct"), cfg.vehicle)
+        mpc_daqp = LateralMpc(replace(ctrl, backend="daqp"), cfg.vehicle)
+        floor_map = sparse_map(ctrl, cfg.vehicle)
         steps = step_inputs(cfg, n_obs, n_steps)
-        sparse_thetas = [mpc_sparse.parameter_vector(inputs) for inputs, *_ in steps]
+        sparse_thetas = [sparse_parameter_vector(inputs) for inputs, *_ in steps]
         condensed_thetas = [condensed_data(mpc_direct.prediction(inputs.model), inputs,
                                            mpc_direct.weights).theta()
                             for inputs, *_ in steps]
-        offset_u = qp_map(mpc_sparse).variables["U"][0]
-        return cls(N, n_obs, ctrl, mpc_cvxpy, mpc_sparse, mpc_direct, mpc_daqp, mpc_dense,
-                   steps, sparse_thetas, condensed_thetas, offset_u)
+        offset_u = floor_map.variables["U"][0]
+        return cls(N, n_obs, ctrl, mpc_cvxpy, floor_map, mpc_direct, mpc_daqp, steps,
+                   sparse_thetas, condensed_thetas, offset_u)
 
 
 def _time_repeat(case: LateralCase, rep: int) -> list[dict]:
     """One repeat over the case's QPs: the CVXPY pass, then every other method per QP."""
-    sparse_floor = KeptClarabelFloor(qp_map(case.sparse), case.ctrl.solver_max_iter)
+    sparse_floor = KeptClarabelFloor(case.sparse_map, case.ctrl.solver_max_iter)
     condensed_floor = KeptClarabelFloor(qp_map(case.direct),
                                         case.ctrl.solver_max_iter)
     # the CVXPY backend (a peer, 2 ms of Python per QP) in a pass of its own: inside
@@ -97,9 +91,9 @@ def _time_repeat(case: LateralCase, rep: int) -> list[dict]:
     # charged the steps with most small numpy calls (measured: a 3x3 product took
     # 5-7 us right after it, 1 us otherwise)
     through_cvxpy = []
-    for theta in case.sparse_thetas:
-        solved, wall, _ = timed_call(lambda: case.cvxpy.qp.solve(theta))  # noqa: B023 (called at once, in this iteration)
-        stats = case.cvxpy.qp.problem.solver_stats
+    for inputs, *_ in case.steps:
+        solved, wall, _ = timed_call(lambda: case.cvxpy.solve(inputs))  # noqa: B023 (called at once, in this iteration)
+        stats = case.cvxpy.qp.compiled.problem.solver_stats
         through_cvxpy.append((solved, wall, float(stats.solve_time or np.nan)))
     rows = []
     for k, (inputs, apf_s, apf_python_s) in enumerate(case.steps):
@@ -110,8 +104,7 @@ def _time_repeat(case: LateralCase, rep: int) -> list[dict]:
             ("sparse_floor", lambda: sparse_floor.time(case.sparse_thetas[k])),  # noqa: B023 (called at once, in this iteration)
             ("condensed_floor", lambda: condensed_floor.time(case.condensed_thetas[k])),  # noqa: B023 (called at once, in this iteration)
             ("direct", lambda: timed_call(lambda: case.direct.solve(inputs))),  # noqa: B023 (called at once, in this iteration)
-            ("daqp", lambda: timed_call(lambda: case.daqp.solve(inputs))),  # noqa: B023 (called at once, in this iteration)
-            ("dense", lambda: timed_call(lambda: case.dense.solve(inputs)))]  # noqa: B023 (called at once, in this iteration)
+            ("daqp", lambda: timed_call(lambda: case.daqp.solve(inputs)))]  # noqa: B023 (called at once, in this iteration)
         shift = (k + rep) % len(timers)
         timed = dict((name, run()) for name, run in timers[shift:] + timers[:shift])
         rows.append(_lateral_row(case, rep, k, apf_s, apf_python_s, timed, through_cvxpy[k]))
@@ -125,10 +118,8 @@ def _lateral_row(case: LateralCase, rep: int, k: int, apf_s: float, apf_python_s
     fc_wall, fc_cpu, _ = timed["condensed_floor"]
     direct, d_wall, d_cpu = timed["direct"]
     daqp, q_wall, q_cpu = timed["daqp"]
-    dense, n_wall, n_cpu = timed["dense"]
     solution, c_wall, clarabel_s = through_cvxpy
-    u_cvxpy = float(np.asarray(solution.values["U"]).ravel()[0]) \
-        if solution.values is not None else np.nan
+    u_cvxpy = solution.steering_rate_rad_s if solution.fallback == "none" else np.nan
     return {
         "section": "lateral", "N": case.N, "obstacles": case.n_obs, "repeat": rep, "step": k,
         "apf_s": apf_s, "apf_python_s": apf_python_s,
@@ -139,15 +130,13 @@ def _lateral_row(case: LateralCase, rep: int, k: int, apf_s: float, apf_python_s
         "direct_s": d_wall, "direct_cpu_s": d_cpu,
         "direct_step_s": apf_s + d_wall,
         "daqp_s": q_wall, "daqp_cpu_s": q_cpu, "daqp_step_s": apf_s + q_wall,
-        "dense_s": n_wall, "dense_cpu_s": n_cpu, "dense_step_s": apf_s + n_wall,
         "default_backend": case.ctrl.backend,
         "floor_s": fs_wall, "floor_cpu_s": fs_cpu,
         "condensed_floor_s": fc_wall, "condensed_floor_cpu_s": fc_cpu,
         "u0_cvxpy": u_cvxpy, "u0_direct": direct.steering_rate_rad_s,
         "u0_daqp": daqp.steering_rate_rad_s,
-        "u0_dense": dense.steering_rate_rad_s,
         "u0_floor": float(fs_x[case.offset_u]),
         "cvxpy_status": solution.status,
-        "compiles_cvxpy": case.cvxpy.qp.compile_count,
+        "compiles_cvxpy": case.cvxpy.qp.compiled.compile_count,
         "compiles_direct": case.direct.compile_count,
         "compile_time_direct_s": case.direct.compile_time_s}

@@ -7,7 +7,8 @@ import time
 
 import numpy as np
 
-from benchmarks.harness.inputs import compose_config, floor_times, recorded_sparse_qps
+from benchmarks.harness.inputs import compose_config, floor_times
+from benchmarks.harness.sparse_floor import recorded_sparse_qps
 
 
 def named_peers() -> dict[str, tuple[list[str], dict[str, list[str]]]]:

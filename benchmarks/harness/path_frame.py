@@ -8,7 +8,8 @@ from dataclasses import replace
 import numpy as np
 import pandas as pd
 
-from benchmarks.harness.inputs import KeptClarabelFloor, compose_config, qp_map, timed_call
+from benchmarks.harness.inputs import KeptClarabelFloor, compose_config, timed_call
+from benchmarks.harness.sparse_floor import sparse_map, sparse_parameter_vector
 
 
 def bench_path_frame(n_steps: int, repeats: int) -> list[dict]:
@@ -38,7 +39,7 @@ def bench_path_frame(n_steps: int, repeats: int) -> list[dict]:
     mpcs = {(f, b): LateralMpc(replace(ctrl, frame=f, backend=b), veh, cfg.model, 0.1, cache,
                                COMPILED_KERNELS)
             for f in ("fixed", "path") for b in ("clarabel_direct", "daqp")}
-    sparse = LateralMpc(replace(ctrl, formulation="sparse"), veh, cfg.model, 0.1, cache)
+    floor_map = sparse_map(ctrl, veh)
     observations = []
     for k in range(n_steps):
         x, y = 3.0 + 0.15 * k, 0.4 * np.sin(0.15 * k)
@@ -52,7 +53,7 @@ def bench_path_frame(n_steps: int, repeats: int) -> list[dict]:
     for rep in range(repeats):
         gc.collect()
         gc.disable()
-        floor = KeptClarabelFloor(qp_map(sparse), ctrl.solver_max_iter)
+        floor = KeptClarabelFloor(floor_map, ctrl.solver_max_iter)
         for k, obs in enumerate(observations):
             apf, apf_s, _ = timed_call(lambda: planner.rollout(obs.plant_state[:2], goal,  # noqa: B023 (called at once, in this iteration)
                                                                obstacle, np.array([3.0, 0.0])))
@@ -62,7 +63,7 @@ def bench_path_frame(n_steps: int, repeats: int) -> list[dict]:
                 _, solve_s, _ = timed_call(lambda: mpc.solve(inputs))  # noqa: B023 (called at once, in this iteration)
                 row[f"{f}_{b}_data_s"], row[f"{f}_{b}_solve_s"] = data_s, solve_s
                 if b == "clarabel_direct":
-                    row[f"{f}_floor_s"] = floor.time(sparse.parameter_vector(inputs))[0]
+                    row[f"{f}_floor_s"] = floor.time(sparse_parameter_vector(inputs))[0]
             rows.append(row)
         gc.enable()
     return rows

@@ -23,8 +23,7 @@ GOALS = {"closed_loop_over_floor": "<= 2.0", "step_over_floor": "<= 1.3 (N=10, "
 LATERAL_TIMES = ("apf_s", "apf_python_s", "direct_python_step_s", "cvxpy_solve_s",
                  "cvxpy_clarabel_s", "cvxpy_step_s", "direct_s", "direct_step_s", "floor_s",
                  "daqp_s", "daqp_step_s", "condensed_floor_s", "direct_cpu_s", "daqp_cpu_s",
-                 "floor_cpu_s", "condensed_floor_cpu_s", "dense_s", "dense_step_s",
-                 "dense_cpu_s")
+                 "floor_cpu_s", "condensed_floor_cpu_s")
 
 
 def summarize(lateral: pd.DataFrame, peers: pd.DataFrame, kinematic: pd.DataFrame,
@@ -40,7 +39,6 @@ def summarize(lateral: pd.DataFrame, peers: pd.DataFrame, kinematic: pd.DataFram
             "step_over_floor": head["direct_step_over_floor"],
             "step_over_sparse_floor": head["step_over_sparse_floor"],
             "step_over_sparse_floor_daqp": head["step_over_sparse_floor_daqp"],
-            "step_over_sparse_floor_dense": head["step_over_sparse_floor_dense"],
             "step_over_sparse_floor_cpu": head["step_over_sparse_floor_cpu"],
             "outside_qp_us_per_step": closed_loop["outside_qp_us_per_step"],
             "qp_us_per_step": closed_loop["qp_us_per_step"],
@@ -72,8 +70,7 @@ def _lateral_summary(N: int, n_obs: int, part: pd.DataFrame) -> dict:
     row["direct_step_over_floor"] = row["direct_step_median_ms"] / row["floor_median_ms"]
     # per QP, interleaved: the median of the per-QP ratios (load cancels within a QP); the
     # default backend's step (the lateral MPC's configured backend)
-    default = {"clarabel_dense": "dense", "daqp": "daqp"}.get(
-        str(part["default_backend"].iloc[0]), "direct")
+    default = {"daqp": "daqp"}.get(str(part["default_backend"].iloc[0]), "direct")
     row["default_backend"] = str(part["default_backend"].iloc[0])
     row["step_over_sparse_floor"] = float(np.median(part[f"{default}_step_s"]
                                                     / part["floor_s"]))
@@ -82,8 +79,6 @@ def _lateral_summary(N: int, n_obs: int, part: pd.DataFrame) -> dict:
     # the same step with the APF rollout in Python (a single run's path)
     row["step_over_sparse_floor_python_apf"] = float(np.median(
         part["direct_python_step_s"] / part["floor_s"]))
-    row["step_over_sparse_floor_dense"] = float(np.median(part["dense_step_s"]
-                                                          / part["floor_s"]))
     row["step_over_sparse_floor_daqp"] = float(np.median(part["daqp_step_s"]
                                                          / part["floor_s"]))
     row["condensed_floor_over_sparse_floor"] = float(np.median(part["condensed_floor_s"]

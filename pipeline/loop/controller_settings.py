@@ -31,16 +31,16 @@ class Backend(StrEnum):
 
     CVXPY = "cvxpy"
     CLARABEL_DIRECT = "clarabel_direct"
-    CLARABEL_DENSE = "clarabel_dense"
     DAQP = "daqp"
     NMPC = "nmpc"
 
 
 class Formulation(StrEnum):
-    """``controller.formulation``: the lateral QP with the states as variables or condensed."""
+    """``controller.formulation``: how the lateral QP is stated; one value since the sparse
+    statement (the states as variables) was removed, no experiment used it (issue 58). The key
+    stays: it is part of every run's settings and of its config hash."""
 
     CONDENSED = "condensed"
-    SPARSE = "sparse"
 
 
 class InputHold(StrEnum):
@@ -100,6 +100,14 @@ class ReferenceAlignment(StrEnum):
     PATH_SPEED = "path_speed"
 
 
+#: Choice values that were removed, with why (issue 58: no experiment used them), so that a
+#: configuration that still names one is told so in its refusal.
+REMOVED_CHOICES: dict[str, dict[str, str]] = {
+    "controller.backend": {"clarabel_dense": "no experiment used it; clarabel_direct and daqp "
+                                             "solve the same condensed QP"},
+    "controller.formulation": {"sparse": "no experiment used it; condensed is the same QP "
+                                         "with the states eliminated"}}
+
 #: The choice fields of ``ControllerConfig`` and their enums.
 CHOICES: dict[str, type[StrEnum]] = {
     "kind": ControllerKind, "backend": Backend, "formulation": Formulation,
@@ -140,7 +148,6 @@ class MpcSettings(_KindSettings):
 
     name: str
     backend: Backend
-    formulation: Formulation
     horizon: int
     control_horizon: int
     input_hold: InputHold

@@ -18,6 +18,7 @@ from omegaconf import MISSING
 from pipeline.errors import ConfigError
 from pipeline.loop.controller_settings import (
     KIND_SETTINGS,
+    REMOVED_CHOICES,
     Backend,
     ControllerKind,
     Formulation,
@@ -183,6 +184,8 @@ class ControllerConfig(FrozenAfterValidation):
     name: str = MISSING
     kind: str = "mpc"
     backend: str = "clarabel_direct"
+    # one value (the sparse statement was removed, issue 58); kept: it is in every run's
+    # settings and config hash
     formulation: str = "condensed"
     horizon: int = 10
     control_horizon: int = 3
@@ -249,7 +252,8 @@ class ControllerConfig(FrozenAfterValidation):
     def _check_kind_and_backend(self) -> None:
         """``kind``, ``backend``, ``formulation`` and which of them go together."""
         choice("controller.kind", self.kind, tuple(ControllerKind))
-        choice("controller.backend", self.backend, tuple(Backend))
+        choice("controller.backend", self.backend, tuple(Backend),
+               REMOVED_CHOICES["controller.backend"])
         if self.backend == "nmpc" and self.kind not in ("kinematic_mpc", "mpc"):
             raise ConfigError("controller.backend", self.backend,
                               "nmpc only with controller.kind=mpc or kinematic_mpc (a "
@@ -258,12 +262,12 @@ class ControllerConfig(FrozenAfterValidation):
                 or not 1 <= self.nmpc_substeps <= 100:
             raise ConfigError("controller.nmpc_substeps", self.nmpc_substeps,
                               "an integer in [1, 100]")
-        choice("controller.formulation", self.formulation, tuple(Formulation))
-        if self.backend in ("daqp", "clarabel_dense") and (
-                self.kind != "mpc" or self.formulation != "condensed"):
+        choice("controller.formulation", self.formulation, tuple(Formulation),
+               REMOVED_CHOICES["controller.formulation"])
+        if self.backend == "daqp" and self.kind != "mpc":
             raise ConfigError("controller.backend", self.backend,
-                              f"{self.backend} only with controller.kind=mpc and "
-                              "controller.formulation=condensed (else cvxpy or clarabel_direct)")
+                              "daqp only with controller.kind=mpc (else cvxpy or "
+                              "clarabel_direct)")
 
     def _check_kinematic_and_pursuit(self) -> None:
         """The kinematic MPC's weights, bounds, passes and reference; pure pursuit's

@@ -177,7 +177,7 @@ class LateralMpcDcbf(LateralMpc):
     Parameters
     ----------
     controller : ControllerConfig or MpcSettings
-        ``kind=mpc``, ``frame=fixed``, ``formulation=condensed``, a QP backend (not nmpc);
+        ``kind=mpc``, ``frame=fixed``, a QP backend (not nmpc);
         ``params``: :class:`DcbfParams`.
     vehicle : VehicleConfig
     sample_time_s : float
@@ -199,12 +199,9 @@ class LateralMpcDcbf(LateralMpc):
         if settings.frame != "fixed":
             raise ConfigError("controller.frame", str(settings.frame),
                               "fixed (the DCBF rows are stated about the goal line)")
-        if settings.formulation != "condensed":
-            raise ConfigError("controller.formulation", str(settings.formulation),
-                              "condensed (the DCBF rows are stated on the moves)")
         if settings.backend == "nmpc":
             raise ConfigError("controller.backend", "nmpc",
-                              "clarabel_direct, cvxpy, clarabel_dense or daqp (a QP)")
+                              "clarabel_direct, cvxpy or daqp (a QP)")
         self.params = _params_of(controller)
         self.dcbf_cfg = settings
         # the frame's half-planes are not used: it is handed settings without them

@@ -15,7 +15,12 @@ NOWHERE = "/nonexistent_apf_mpc_folder"
 #: command -> rows of (arguments after the command, exit code, key, fragment)
 REFUSALS: dict[str, list[tuple[list[str], int, str, str]]] = {
     "run": [(["scenario.n_steps=-1"], 2, "scenario.n_steps=-1", "an integer >= 1"),
-            (["controller.horizon=0"], 2, "controller.horizon=0", "an integer in [1, ")],
+            (["controller.horizon=0"], 2, "controller.horizon=0", "an integer in [1, "),
+            # removed (issue 58: no experiment used them): the refusal says so
+            (["controller.backend=clarabel_dense"], 2, "controller.backend='clarabel_dense'",
+             "clarabel_direct, daqp, nmpc (clarabel_dense was removed"),
+            (["controller.formulation=sparse"], 2, "controller.formulation='sparse'",
+             "one of condensed (sparse was removed")],
     "clip": [(["paper/0", "--fps", "0"], 2, "--fps", "[1, 60]"),
              (["paper/0", "--stride", "0"], 2, "--stride", "[1, 100]"),
              (["paper"], 2, "member", "<experiment>/<index>")],

@@ -1,5 +1,6 @@
-"""Lateral MPC against independent formulations: a closed-form condensed QP (numpy) and SciPy's
-SLSQP on the same condensed problem; DPP, recompilation and fallbacks."""
+"""Lateral MPC against independent formulations: a closed-form condensed QP (numpy), SciPy's
+SLSQP on the same condensed problem and the QP with the states as variables (the bench's sparse
+floor, ``benchmarks/harness/sparse_floor.py``); DPP, recompilation and fallbacks."""
 
 from __future__ import annotations
 
@@ -10,7 +11,7 @@ from builders import make_inputs
 from scipy.optimize import minimize
 
 from pipeline.loop.controller import LateralMpc, QpCache, blocking_matrix, collision_halfplanes
-from pipeline.loop.controller.lateral_qp import LateralQpStructure, build_lateral_problem
+from pipeline.loop.controller.lateral_qp import LateralQpStructure, build_condensed_lateral_problem
 from pipeline.loop.model import build_lateral_model
 
 
@@ -43,7 +44,8 @@ def setup(make_config):
 
 def test_problem_is_dpp(setup):
     cfg, _ = setup
-    problem, _, _ = build_lateral_problem(LateralQpStructure.of(cfg.controller, cfg.vehicle))
+    problem, _, _ = build_condensed_lateral_problem(
+        LateralQpStructure.of(cfg.controller, cfg.vehicle))
     assert problem.is_dcp(dpp=True)
 
 
@@ -211,20 +213,6 @@ def test_backends_agree_in_closed_loop_and_never_recompile(make_config, tmp_path
         np.testing.assert_allclose(a[column].fillna(0), b[column].fillna(0), atol=1e-7)
 
 
-def _run_both_formulations(cfg):
-    import dataclasses
-
-    from pipeline.loop.scenario import build_scenario
-    from pipeline.loop.simulate import simulate
-
-    out = {}
-    for formulation in ("sparse", "condensed"):
-        member = dataclasses.replace(cfg, controller=dataclasses.replace(
-            cfg.controller, formulation=formulation))
-        out[formulation] = simulate(member, build_scenario(member.scenario)).trajectory
-    return out["sparse"], out["condensed"]
-
-
 def _capture_condensed_data(monkeypatch) -> list:
     """Every step's condensed QP data of the closed loops that follow (a list filled in)."""
     import pipeline.loop.controller.lateral as lateral
@@ -240,66 +228,49 @@ def _capture_condensed_data(monkeypatch) -> list:
     return captured
 
 
-@pytest.mark.parametrize("overrides", [["method=improved"], ["method=baseline"]])
-def test_condensed_qp_equals_the_sparse_qp_in_closed_loop(make_config, overrides):
-    """States eliminated or kept, the QP is the same: on the paper scenario the applied steering
-    rate agrees to 1e-6 at every step of the closed loop."""
-    sparse, condensed = _run_both_formulations(make_config(overrides))
-    assert list(sparse["solver_status"]) == list(condensed["solver_status"])
-    assert list(sparse["fallback"]) == list(condensed["fallback"])
-    for column in ("steering_rate_rad_s", "delta_rad", "Y_m", "max_slack_m"):
-        a, b = sparse[column].to_numpy(float), condensed[column].to_numpy(float)
-        assert np.allclose(a, b, atol=1e-6, equal_nan=True), column
-
-
 @pytest.mark.parametrize("overrides, member", [
+    (["method=improved"], None), (["method=baseline"], None),
     (["method=improved", "scenario=family", "scenario.family.size=12"], 0),
     (["method=baseline", "scenario=family", "scenario.family.size=12"], 5),
     (["method=improved", "scenario=family", "scenario.family.size=12",
       "controller.frame=fixed"], 0),
     (["method=baseline", "scenario=family", "scenario.family.size=12",
       "controller.frame=fixed"], 4)])
-def test_condensed_qp_equals_the_sparse_qp_where_slacks_bind(make_config, monkeypatch, overrides,
-                                                             member):
-    """On every QP of family members where the half-plane slacks bind (in the path frame
-    member 0 of improved, 5 of baseline: slack up to 1.4 m; in the fixed frame 0 and 4) the
-    condensed statement (``W = R U``) and the sparse QP (states as variables) reach the same
-    moves to Clarabel's tolerance (1e-5 rad/s; 1e-4 for the later moves where a slack exceeds
-    1 m: the objective is then dominated by the slack's penalty and Clarabel's tolerance is
-    relative to it), on identical data: in the path frame
-    with the previewed curvature as disturbance and the yaw-rate and steering references. (Their closed loops part where the plant's steering bound switches: a
-    1e-6 difference decides whether a step saturates, so closed loops are compared on the
-    paper scenario only.)"""
+def test_condensed_qp_equals_the_sparse_qp(make_config, overrides, member):
+    """On every QP of a closed loop (the paper scenario; family members where the half-plane
+    slacks bind: in the path frame member 0 of improved, 5 of baseline, slack up to 1.4 m; in
+    the fixed frame 0 and 4) the condensed statement (``W = R U``) and the same QP with the
+    states as variables (the oracle: the dynamics as equality constraints, nothing eliminated)
+    reach the same moves to Clarabel's tolerance (1e-5 rad/s; 1e-4 for the later moves where a
+    slack exceeds 1 m: the objective is then dominated by the slack's penalty and Clarabel's
+    tolerance is relative to it), on identical data: in the path frame with the previewed
+    curvature as disturbance and the yaw-rate and steering references. (Compared per QP: closed
+    loops part where the plant's steering bound switches, a 1e-6 difference decides whether a
+    step saturates.)"""
     import dataclasses
 
-    import pipeline.loop.controller.lateral as lateral
+    from benchmarks.harness.sparse_floor import SparseLateralQp, recorded_inputs
     from pipeline.loop.scenario import build_scenario, family_members
     from pipeline.loop.simulate import simulate
 
     cfg = make_config(overrides)
-    cfg = dataclasses.replace(cfg, scenario=family_members(
-        cfg.scenario, cfg.vehicle.footprint_radius_m)[member])
-    captured_inputs = []
-    original = lateral.condensed_data
-
-    def capture(prediction, inputs, weights):
-        captured_inputs.append(inputs)
-        return original(prediction, inputs, weights)
-
-    monkeypatch.setattr(lateral, "condensed_data", capture)
-    trajectory = simulate(cfg, build_scenario(cfg.scenario)).trajectory
-    assert np.nanmax(trajectory["max_slack_m"].to_numpy(float)) > 0.05  # slacks bind
-    monkeypatch.undo()  # capture no more
+    if member is not None:
+        cfg = dataclasses.replace(cfg, scenario=family_members(
+            cfg.scenario, cfg.vehicle.footprint_radius_m)[member])
+    with recorded_inputs() as captured_inputs:
+        trajectory = simulate(cfg, build_scenario(cfg.scenario)).trajectory
+    if member is not None:
+        assert np.nanmax(trajectory["max_slack_m"].to_numpy(float)) > 0.05  # slacks bind
     if cfg.controller.frame == "path":  # the path frame's data reach the QP
         assert any(np.count_nonzero(i.disturbance_rad_s) for i in captured_inputs)
         assert any(np.count_nonzero(i.delta_ref_rad) for i in captured_inputs)
     condensed = LateralMpc(cfg.controller, cfg.vehicle)
-    sparse = LateralMpc(dataclasses.replace(cfg.controller, formulation="sparse"), cfg.vehicle)
+    sparse = SparseLateralQp(cfg.controller, cfg.vehicle)
     assert len(captured_inputs) > 50
     for inputs in captured_inputs:
         a = condensed.solve(inputs)
         b = sparse.solve(inputs)
-        assert a.status == b.status == "optimal" and a.fallback == b.fallback == "none"
+        assert a.status == b.status == "optimal" and a.fallback == "none"
         tolerance = 1e-4 if a.max_slack_m > 1.0 else 1e-5
         assert np.max(np.abs(a.planned_rates_rad_s - b.planned_rates_rad_s)) < tolerance
         assert abs(a.max_slack_m - b.max_slack_m) < 1e-5
@@ -359,7 +330,6 @@ def test_daqp_backend_solves_the_same_qps_as_clarabel(make_config, overrides, me
     clarabel = backends.CompiledCondensedQp(
         DirectQp(compile_affine_map(*lateral_qp.build_condensed_lateral_problem(s)), 200))
     daqp = backends.DaqpCondensedQp(s, 200)
-    dense = backends.ClarabelCondensedQp(s, 200)  # backend clarabel_dense: the same QP again
     T = blocking_matrix(s.horizon, s.control_horizon, s.input_hold)
 
     def cost(data, U):
@@ -370,12 +340,11 @@ def test_daqp_backend_solves_the_same_qps_as_clarabel(make_config, overrides, me
 
     assert len(captured) > 50
     for data in captured:
-        a = clarabel.solve(data)
-        for b in (daqp.solve(data), dense.solve(data)):
-            assert a.status == b.status == "optimal"
-            assert abs(a.values["U"][0] - b.values["U"][0]) < 1e-5
-            assert cost(data, b.values["U"]) <= cost(data, a.values["U"]) * (1 + 1e-6) + 1e-9
-            assert cost(data, a.values["U"]) <= cost(data, b.values["U"]) * (1 + 1e-6) + 1e-9
+        a, b = clarabel.solve(data), daqp.solve(data)
+        assert a.status == b.status == "optimal"
+        assert abs(a.values["U"][0] - b.values["U"][0]) < 1e-5
+        assert cost(data, b.values["U"]) <= cost(data, a.values["U"]) * (1 + 1e-6) + 1e-9
+        assert cost(data, a.values["U"]) <= cost(data, b.values["U"]) * (1 + 1e-6) + 1e-9
 
 
 def test_daqp_iteration_limit_and_bad_data_take_the_fallback(make_config):
@@ -394,19 +363,35 @@ def test_daqp_iteration_limit_and_bad_data_take_the_fallback(make_config):
     assert np.isfinite(trajectory["steering_rate_rad_s"].to_numpy(float)[:-1]).all()
 
 
-@pytest.mark.parametrize("backend", ["daqp", "clarabel_dense"])
-def test_dense_backends_need_the_condensed_lateral_mpc(make_config, backend):
+def test_daqp_needs_the_lateral_mpc(make_config):
     from pipeline.errors import ConfigError
 
-    with pytest.raises(ConfigError, match=f"{backend} only with"):
-        make_config([f"controller.backend={backend}", "controller.formulation=sparse"])
+    with pytest.raises(ConfigError, match="daqp only with controller.kind=mpc"):
+        make_config(["controller=kinematic", "controller.backend=daqp"])
 
 
-@pytest.mark.parametrize("backend", ["daqp", "clarabel_dense"])
-def test_kept_dense_workspaces_follow_speed_changes(make_config, monkeypatch, backend):
-    """The kept DAQP workspace (and the kept dense Clarabel) receive the Hessian only when the
-    model's speed changes it; with velocity planning on, the speed changes during the run, and
-    every QP's u0 equals a fresh ``daqp.solve`` of the same data (the oracle: no kept state)."""
+@pytest.mark.parametrize("key, value, allowed", [
+    ("controller.backend", "clarabel_dense", "one of cvxpy, clarabel_direct, daqp, nmpc"),
+    ("controller.formulation", "sparse", "one of condensed")])
+def test_a_removed_choice_is_refused_naming_the_key_and_what_is_allowed(make_config, key, value,
+                                                                       allowed):
+    """``clarabel_dense`` and ``sparse`` were removed (issue 58: no experiment used them): a
+    configuration that still names one is refused in one line with the key, the values allowed
+    now, and that it was removed."""
+    from pipeline.errors import ConfigError
+
+    with pytest.raises(ConfigError) as refused:
+        make_config([f"{key}={value}"])
+    message = str(refused.value)
+    assert "\n" not in message and refused.value.key == key
+    assert f"{key}='{value}' is invalid; allowed: {allowed} ({value} was removed: no " \
+           "experiment used it" in message
+
+
+def test_kept_daqp_workspace_follows_speed_changes(make_config, monkeypatch):
+    """The kept DAQP workspace receives the Hessian only when the model's speed changes it;
+    with velocity planning on, the speed changes during the run, and every QP's u0 equals a
+    fresh ``daqp.solve`` of the same data (the oracle: no kept state)."""
     import daqp
 
     import pipeline.loop.controller.lateral_backends as backends
@@ -416,7 +401,7 @@ def test_kept_dense_workspaces_follow_speed_changes(make_config, monkeypatch, ba
 
     # the stopping-distance rule slows the vehicle on the paper scenario (the default rule
     # keeps the nominal speed there: nothing is predicted in the way)
-    cfg = make_config(["method=improved", f"controller.backend={backend}",
+    cfg = make_config(["method=improved", "controller.backend=daqp",
                        "planner.velocity_planning=true",
                        "planner.velocity_rule=stopping_distance"])
     captured = _capture_condensed_data(monkeypatch)
@@ -424,8 +409,7 @@ def test_kept_dense_workspaces_follow_speed_changes(make_config, monkeypatch, ba
     assert trajectory["speed_ref_mps"].nunique() > 2  # the model changed during the run
     assert len({id(d.hessian_u) for d in captured}) > 2
     s = lateral_qp.LateralQpStructure.of(cfg.controller, cfg.vehicle)
-    kept = backends.DaqpCondensedQp(s, 200) if backend == "daqp" \
-        else backends.ClarabelCondensedQp(s, 200)
+    kept = backends.DaqpCondensedQp(s, 200)
     fresh = backends.DaqpCondensedQp(s, 200)
     for data in captured:
         got = kept.solve(data)
@@ -440,7 +424,7 @@ def test_kept_dense_workspaces_follow_speed_changes(make_config, monkeypatch, ba
         x, _, flag, _ = daqp.solve(H.copy(), f.copy(), A, upper, lower,
                                    np.zeros(upper.size, np.intc))
         assert flag == 1 and got.status == "optimal"
-        assert abs(got.values["U"][0] - x[0]) < (1e-9 if backend == "daqp" else 1e-5)
+        assert abs(got.values["U"][0] - x[0]) < 1e-9
 
 
 def test_status_words_are_cvxpys_and_the_loop_imports_neither_cvxpy_nor_python_control():

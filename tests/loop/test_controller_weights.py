@@ -22,17 +22,14 @@ def test_each_weight_is_read_by_its_own_name(make_config):
     assert (weights.slack_linear, weights.slack_quadratic) == (6.6, 7.7)
 
 
-def test_both_condensed_backends_read_the_slack_weights_by_name(make_config):
-    """The slack block of the dense Clarabel QP (linear cost slack_linear, quadratic
-    2 slack_quadratic) and of DAQP's (f = slack_linear, H = 2 slack_quadratic): the two were
+def test_the_daqp_backend_reads_the_slack_weights_by_name(make_config):
+    """The slack block of DAQP's QP (f = slack_linear, H = 2 slack_quadratic): the two were
     read as weights[5] and weights[6]."""
-    from pipeline.loop.controller.lateral_backends import ClarabelCondensedQp, DaqpCondensedQp
+    from pipeline.loop.controller.lateral_backends import DaqpCondensedQp
 
     cfg = make_config(["method=improved", *(f"controller.{k}={v}" for k, v in PLANTED.items())])
     structure = LateralQpStructure.of(cfg.controller, cfg.vehicle)
-    dense = ClarabelCondensedQp(structure, 100)
     n_u = structure.control_horizon
-    assert np.allclose(dense._q[n_u:], 6.6) and np.allclose(dense._p_values[-dense.n_s:], 15.4)
     daqp = DaqpCondensedQp(structure, 100)
     assert np.allclose(daqp._f[n_u:], 6.6)
     assert np.allclose(np.diag(daqp._H)[n_u:], 15.4)

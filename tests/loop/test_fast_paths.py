@@ -13,7 +13,7 @@ import pytest
 from scipy.integrate import solve_ivp
 
 from pipeline.loop.controller import KinematicLtvMpc, LateralMpc, QpCache
-from pipeline.loop.controller.lateral_qp import LateralQpStructure, build_lateral_problem
+from pipeline.loop.controller.lateral_qp import LateralQpStructure, build_condensed_lateral_problem
 from pipeline.loop.controller.qp import compile_affine_map
 from pipeline.loop.model import (
     kinematic_derivative,
@@ -105,7 +105,7 @@ def test_kinematic_plant_follows_the_closed_form_circle():
                                             "controller.input_hold=zero_rate"]])
 def test_affine_map_equals_cvxpy_apply_parameters(make_config, overrides):
     cfg = make_config(overrides)
-    problem, params, variables = build_lateral_problem(
+    problem, params, variables = build_condensed_lateral_problem(
         LateralQpStructure.of(cfg.controller, cfg.vehicle))
     qp_map = compile_affine_map(problem, params, variables)
     prog = problem.get_problem_data(cp.CLARABEL)[0]["param_prob"]

@@ -24,14 +24,12 @@ from pipeline.loop.controller import collision_halfplanes, kinematic_halfplanes
 OFF = "controller.collision_constraints=false"
 ORACLE = "controller.constraint_activation_m=0"
 
-#: Every way the MPC's half-planes are stated: the lateral QP's backends and formulations, both
-#: frames, the lateral NMPC, and Appendix A's kinematic track (LTV-QP and NMPC).
+#: Every way the MPC's half-planes are stated: the lateral QP's backends, both frames, the lateral
+#: NMPC, and Appendix A's kinematic track (LTV-QP and NMPC).
 BACKENDS = {
     "clarabel_direct": ["method=mpc_no_apf"],
-    "clarabel_dense": ["method=mpc_no_apf", "controller.backend=clarabel_dense"],
     "daqp": ["method=mpc_no_apf", "controller.backend=daqp"],
     "cvxpy": ["method=mpc_no_apf", "controller.backend=cvxpy"],
-    "sparse": ["method=mpc_no_apf", "controller.formulation=sparse"],
     "fixed_frame": ["method=mpc_no_apf", "controller.frame=fixed"],
     "lateral_nmpc": ["method=mpc_no_apf", "controller.backend=nmpc"],
     "kinematic": ["experiment=kinematic", "planner=mpc_no_apf"],

@@ -23,7 +23,6 @@ import numpy as np
 from pipeline.loop.controller.base import ControlStep, Observation, PlanFallback
 from pipeline.loop.controller.frames import ModelBank, make_frame
 from pipeline.loop.controller.lateral_backends import (
-    ClarabelCondensedQp,
     CompiledCondensedQp,
     DaqpCondensedQp,
     LateralQp,
@@ -34,7 +33,6 @@ from pipeline.loop.controller.lateral_qp import (
     MpcInputs,
     blocking_matrix,
     build_condensed_lateral_problem,
-    build_lateral_problem,
     condensed_data,
 )
 from pipeline.loop.controller.prediction_check import PredictionRecord, prediction_check
@@ -93,20 +91,18 @@ class LateralMpc:
         self.models = self.bank.models
         self.frame = make_frame(controller, vehicle, self.bank, kernels)
         structure = LateralQpStructure.of(controller, vehicle)
-        self.condensed = controller.formulation == "condensed"
-        builder = build_condensed_lateral_problem if self.condensed else build_lateral_problem
         self.weights = structure.weights
         self.qp: LateralQp
-        if controller.backend in ("daqp", "clarabel_dense"):
+        if controller.backend == "daqp":
             # no compilation: the condensed data go to the solver as numpy matrices
-            dense = DaqpCondensedQp if controller.backend == "daqp" else ClarabelCondensedQp
             self.qp, self.compile_count, self.compile_time_s = \
-                dense(structure, controller.solver_max_iter), 0, 0.0
+                DaqpCondensedQp(structure, controller.solver_max_iter), 0, 0.0
         else:
             compiled, self.compile_count, self.compile_time_s = compiled_backend(
-                qp_cache, "lateral", structure, lambda: builder(structure),
-                controller.backend, controller.solver_max_iter)
-            self.qp = CompiledCondensedQp(compiled) if self.condensed else compiled
+                qp_cache, "lateral", structure,
+                lambda: build_condensed_lateral_problem(structure), controller.backend,
+                controller.solver_max_iter)
+            self.qp = CompiledCondensedQp(compiled)
         # condensed predictions by model, shared like the models (built once per speed, step)
         key = ("lateral_predictions", vehicle_key(vehicle), self.sample_time_s,
                self.model_cfg.b2_heading_entry, self.model_cfg.speed_grid_mps,
@@ -116,16 +112,6 @@ class LateralMpc:
             qp_cache.memo(key, dict) if qp_cache is not None else {}
         self.fallback = PlanFallback(controller.horizon)
         self.records: list[PredictionRecord] = []
-
-    @staticmethod
-    def parameter_vector(inputs: MpcInputs) -> np.ndarray:
-        """One step's parameter values stacked (column-major) in ``theta`` order."""
-        disturbance = inputs.model.Ed @ inputs.disturbance_rad_s[None, :]
-        return np.concatenate([
-            inputs.x0, inputs.model.Ad.ravel(order="F"), inputs.model.Bd.ravel(order="F"),
-            disturbance.ravel(order="F"), inputs.y_ref_m, inputs.psi_ref_rad,
-            inputs.yaw_rate_reference(), inputs.steering_reference(),
-            inputs.constraint_gain.ravel(order="F"), inputs.constraint_bound.ravel(order="F")])
 
     def prediction(self, model: LateralModel) -> CondensedPrediction:
         """The condensed prediction of ``model`` (built once per model: speed and step)."""
@@ -139,27 +125,19 @@ class LateralMpc:
     def solve(self, inputs: MpcInputs, log: dict[str, Any] | None = None) -> ControlStep:
         """Solve the QP for one step's data, falling back safely on any failure."""
         solution = QpSolution("not_solved", -1, 0.0, None)
-        free = prediction = None
+        data = None
         if isfinite(sum(inputs.x0.tolist())):  # inf or nan anywhere makes the sum non-finite
-            if self.condensed:
-                prediction = self.prediction(inputs.model)
-                data = condensed_data(prediction, inputs, self.weights)
-                free = data.free
-                solution = self.qp.solve(data)
-            else:
-                solution = self.qp.solve(self.parameter_vector(inputs))
-        if solution.ok:
+            data = condensed_data(self.prediction(inputs.model), inputs, self.weights)
+            solution = self.qp.solve(data)
+        if solution.ok and data is not None:
             U = solution.value("U").reshape(-1)
             plan = U @ self.blocking
             if isfinite(sum(plan.tolist())):
                 plan = plan[None, :]
                 self.fallback.accept(plan)
-                if prediction is not None:  # condensed: the states were eliminated
-                    # the eliminated states, for the log and the slack: X = free + Gamma U
-                    predicted = free + prediction.gamma @ U
-                    states = np.concatenate([inputs.x0[:, None], predicted.T], axis=1)
-                else:
-                    states = solution.value("X")
+                # the eliminated states, for the log and the slack: X = free + Gamma U
+                predicted = data.free + data.prediction.gamma @ U
+                states = np.concatenate([inputs.x0[:, None], predicted.T], axis=1)
                 # slack needed by the optimal plan (what the QP's slack variable holds); rows
                 # of idle slots and far obstacles are 0 y + s >= 0 and need none
                 slack = 0.0

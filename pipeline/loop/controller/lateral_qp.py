@@ -1,6 +1,6 @@
 """The lateral MPC's QP (paper Section 3), stated once per structure: the data one step hands
-it (:class:`MpcInputs`), the sparse statement (states as variables) and the condensed one
-(states eliminated), and the condensed data of one step (:func:`condensed_data`).
+it (:class:`MpcInputs`), the condensed statement (states eliminated) and the condensed data of
+one step (:func:`condensed_data`).
 
 The QP over ``N`` steps::
 
@@ -14,20 +14,20 @@ The QP over ``N`` steps::
 The model matrices are parameters, so one compiled problem serves every speed (velocity
 planning) and every scenario; unused obstacle slots get rows that cannot bind.
 
-``controller.formulation`` chooses how the same QP is stated. ``sparse`` keeps the states as
-variables with the dynamics as equality constraints (151 variables at N = 10, three obstacle
-slots). ``condensed`` (the default) eliminates them: ``X = free response + Gamma U`` with the
-prediction matrices of the model's speed (:class:`CondensedPrediction`, cached per speed) and
-the free response computed in numpy each step, so the QP carries only ``U`` and the slacks (33
-variables); its parameters are the weighted prediction rows and the half-planes folded onto
-``U``, so it stays DPP. Both give the same optimum (tests hold them to each other).
+The QP is stated condensed (``controller.formulation=condensed``, its one value): the states
+are eliminated, ``X = free response + Gamma U`` with the prediction matrices of the model's
+speed (:class:`CondensedPrediction`, cached per speed) and the free response computed in numpy
+each step, so the QP carries only ``U`` and the slacks (33 variables at N = 10, three obstacle
+slots); its parameters are the weighted prediction rows and the half-planes folded onto ``U``,
+so it stays DPP. The same QP with the states as variables (151 variables) is no controller's
+any more (no experiment used it, issue 58): it is the benchmark's floor and the tests' oracle
+(``benchmarks/harness/sparse_floor.py``), which hold the two to the same optimum.
 
 The condensed statement is written in the coordinates ``W = R U`` of the cost's Cholesky factor
 ``R`` (``R' R`` = half the Hessian in ``U``): the tracking cost is then ``|W|^2 + 2 r' W``, a
 constant quadratic, and every bound is a plain pair of inequalities, so CVXPY's canonical
-problem is the 33-variable, 86-row QP itself (no auxiliary variables, no equality rows) and the
-kept Clarabel solver sees exactly what
-:class:`~pipeline.loop.controller.lateral_backends.ClarabelCondensedQp` hands it.
+problem is the 33-variable, 86-row QP itself (no auxiliary variables, no equality rows), the
+one :class:`~pipeline.loop.controller.lateral_backends.DaqpCondensedQp` hands DAQP.
 """
 
 from __future__ import annotations
@@ -47,7 +47,7 @@ if TYPE_CHECKING:
 
 @dataclass(frozen=True)
 class MpcInputs:
-    """Per-step data of the lateral QP (everything that is a ``cp.Parameter``)."""
+    """Per-step data of the lateral QP (everything that changes from step to step)."""
 
     x0: np.ndarray
     model: LateralModel
@@ -114,14 +114,13 @@ class LateralQpStructure:
     weights: LateralWeights
     steering_rate_max_rad_s: float
     steering_max_rad: float
-    formulation: str = "sparse"
 
     @classmethod
     def of(cls, controller: MpcSettings | ControllerConfig,
            vehicle: VehicleConfig) -> LateralQpStructure:
         c = controller
         return cls(c.horizon, c.control_horizon, c.max_obstacles, c.input_hold,
-                   LateralWeights.of(c), vehicle.steering_rate_max_rad_s, vehicle.steering_max_rad, c.formulation)
+                   LateralWeights.of(c), vehicle.steering_rate_max_rad_s, vehicle.steering_max_rad)
 
 
 def blocking_matrix(horizon: int, control_horizon: int, input_hold: str) -> np.ndarray:
@@ -133,47 +132,6 @@ def blocking_matrix(horizon: int, control_horizon: int, input_hold: str) -> np.n
         elif input_hold == "hold_last":
             T[control_horizon - 1, k] = 1.0
     return T
-
-
-def build_lateral_problem(s: LateralQpStructure) -> tuple[cp.Problem, list[Any], dict[str, Any]]:
-    """The lateral QP in CVXPY: problem, parameters in ``theta`` order, variables to read."""
-    import cvxpy as cp
-
-    N, Nc, M = s.horizon, s.control_horizon, s.max_obstacles
-    w = s.weights
-    q_y, q_psi, q_r, q_d, r_u = w.tracking
-    w1, w2 = w.slack_linear, w.slack_quadratic
-    blocking = blocking_matrix(N, Nc, s.input_hold)
-    x0 = cp.Parameter(5, name="x0")
-    Ad = cp.Parameter((5, 5), name="Ad")
-    Bd = cp.Parameter((5, 1), name="Bd")
-    disturbance = cp.Parameter((5, N), name="Ed_times_d")
-    y_ref = cp.Parameter(N, name="y_ref")
-    psi_ref = cp.Parameter(N, name="psi_ref")
-    r_ref = cp.Parameter(N, name="r_ref")
-    delta_ref = cp.Parameter(N, name="delta_ref")
-    G = cp.Parameter((N, M), name="halfplane_gain")
-    h = cp.Parameter((N, M), name="halfplane_bound")
-    X = cp.Variable((5, N + 1), name="X")
-    U = cp.Variable(Nc, name="U")
-    S = cp.Variable((N, M), nonneg=True, name="slack")
-    u_seq = U @ blocking
-    cost = (q_y * cp.sum_squares(X[0, 1:] - y_ref) + q_psi * cp.sum_squares(X[2, 1:] - psi_ref)
-            + q_r * cp.sum_squares(X[3, 1:] - r_ref) + q_d * cp.sum_squares(X[4, 1:] - delta_ref)
-            + r_u * cp.sum_squares(u_seq) + w1 * cp.sum(S) + w2 * cp.sum_squares(S))
-    lateral = cp.reshape(X[0, 1:], (N, 1), order="F") @ np.ones((1, M))
-    constraints = [
-        X[:, 0] == x0,
-        X[:, 1:] == Ad @ X[:, :-1] + Bd @ cp.reshape(u_seq, (1, N), order="F") + disturbance,
-        cp.abs(U) <= s.steering_rate_max_rad_s,
-        cp.abs(X[4, 1:]) <= s.steering_max_rad,
-        cp.multiply(G, lateral) + S >= h,
-    ]
-    problem = cp.Problem(cp.Minimize(cost), constraints)
-    if not problem.is_dcp(dpp=True):
-        raise RuntimeError("lateral MPC is not DPP; it would recompile every step")
-    return problem, [x0, Ad, Bd, disturbance, y_ref, psi_ref, r_ref, delta_ref, G, h], \
-        {"X": X, "U": U}
 
 
 #: Rows of the state that the cost weighs (y, epsi, r, delta) and their weight's index.

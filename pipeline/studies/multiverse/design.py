@@ -71,8 +71,7 @@ def family_config(row: dict, space: Space, method: str, compose) -> ExperimentCo
     an explicit ``controller.backend`` among the run overrides wins: they come last)."""
     overrides = simulation_overrides(row, space, method)
     cfg = compose(overrides)
-    if cfg.controller.kind == "mpc" and cfg.controller.formulation == "condensed" \
-            and cfg.controller.backend != space.backend:
+    if cfg.controller.kind == "mpc" and cfg.controller.backend != space.backend:
         cfg = compose(overrides + [f"controller.backend={space.backend}"])
     return cfg
 

@@ -21,7 +21,7 @@ from pipeline.validation import between
 METHODS = ("baseline", "baseline_matched", "improved")
 STAGES = ("simulation", "analysis")
 #: the lateral MPC's QP backends a space may choose (``controller.backend``)
-QP_BACKENDS = ("clarabel_direct", "daqp", "clarabel_dense", "cvxpy")
+QP_BACKENDS = ("clarabel_direct", "daqp", "cvxpy")
 ANALYSIS_PREFIXES = ("metrics.", "claims.")
 
 

@@ -204,8 +204,7 @@ class TuneSpace:
     def _check_track(self) -> None:
         choice("tune.track", self.track, tuple(TRACK_OVERRIDES))
         for key in ("backend", "heldout_backend"):
-            choice(f"tune.{key}", getattr(self, key), ("clarabel_direct", "clarabel_dense",
-                                                       "daqp", "cvxpy"))
+            choice(f"tune.{key}", getattr(self, key), ("clarabel_direct", "daqp", "cvxpy"))
             if self.track == "kinematic" and getattr(self, key) not in ("clarabel_direct",
                                                                           "cvxpy"):
                 raise ConfigError(f"tune.{key}", getattr(self, key),
