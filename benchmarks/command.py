@@ -27,7 +27,7 @@ HEADLINE = ("closed_loop_over_floor", "step_over_floor", "step_over_sparse_floor
             "step_over_sparse_floor_daqp", "step_over_sparse_floor_path",
             "step_over_sparse_floor_path_daqp", "step_over_sparse_floor_cpu",
             "outside_qp_us_per_step", "qp_us_per_step", "outside_qp_over_qp",
-            "outside_qp_over_qp_python_kernels", "setup_ms",
+            "outside_qp_over_qp_daqp", "outside_qp_over_qp_python_kernels", "setup_ms",
             "compiles_per_family", "family_scenarios_per_s", "family_member_over_sparse_floor",
             "family_member_over_sparse_floor_daqp", "multiverse_member_reads_per_member",
             "install_over_pip", "member_cache_reuse", "member_cache_resimulated",
@@ -47,7 +47,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--out", type=output_folder, default=Path("reports/bench"))
     parser.add_argument("--steps", type=int, default=40, help="inputs per configuration")
     parser.add_argument("--repeats", type=int, default=3)
-    parser.add_argument("--quick", action="store_true", help="N=10 and 1 obstacle only")
+    parser.add_argument("--quick", action="store_true",
+                        help="a minute or so: N=10 and 1 obstacle, fewer repeats and members, "
+                             "no install or tune measurement")
     parser.add_argument("--family-size", type=int, default=200)
 
 
@@ -78,7 +80,7 @@ def _bench(args) -> int:
                                  args.family_size)
     save_figure(bench_scaling_figure(result.lateral), written(result.folder), SCALING_STEM)
     summary = result.summary
-    print(json.dumps({key: summary[key] for key in HEADLINE}, indent=1))
+    print(json.dumps({key: summary.get(key) for key in HEADLINE}, indent=1))
     print(json.dumps({"path_frame": summary["path_frame"]}, indent=1))
     print(json.dumps({"lateral_N10_1obs": summary["lateral"][0], "peers": summary["peers"],
                       "pipeline": summary["pipeline"],

@@ -16,6 +16,11 @@ Everything runs in one process, methods interleaved on identical inputs, each re
 
 Results: ``reports/bench/bench.csv`` (every sample), ``bench_summary.json`` and
 ``scaling.png/svg``. No timing is asserted anywhere in the tests.
+
+``quick`` (``python -m pipeline.bench --quick``, a minute or so on two cores; the test suite runs
+it): N = 10 and one obstacle, fewer repeats and members, and neither of the two measurements
+that take minutes: ``make install`` into two fresh venvs (``install_over_pip``) and a small
+tune (``tune_core_utilisation``), whose keys are then None with ``quick_note`` saying so.
 """
 
 from __future__ import annotations
@@ -40,7 +45,21 @@ from benchmarks.harness.whole_pipeline import bench_multiverse_reads, bench_pipe
 from pipeline.store.layout import OutputsLayout
 from pipeline.studies.results.bench import BenchResult
 
-__all__ = ["run_benchmark"]
+__all__ = ["NOT_QUICK", "QUICK_KEYS", "run_benchmark"]
+
+#: The headline figures a quick run measures (each a finite number; the ratios positive).
+QUICK_KEYS = ("closed_loop_over_floor", "step_over_floor", "step_over_sparse_floor",
+              "step_over_sparse_floor_daqp", "step_over_sparse_floor_path",
+              "step_over_sparse_floor_path_daqp", "step_over_sparse_floor_cpu",
+              "outside_qp_us_per_step", "qp_us_per_step", "outside_qp_over_qp",
+              "outside_qp_over_qp_daqp", "outside_qp_over_qp_python_kernels", "setup_ms",
+              "compiles_per_family", "family_scenarios_per_s",
+              "family_member_over_sparse_floor", "family_member_over_sparse_floor_daqp",
+              "multiverse_member_reads_per_member", "member_cache_reuse")
+#: What a quick run leaves out (minutes each), None in its summary.
+NOT_QUICK = {"install_over_pip": None, "tune_core_utilisation": None,
+             "quick_note": "--quick: make install into two fresh venvs and the small tune "
+                           "(install_over_pip, tune_core_utilisation) were not measured"}
 
 
 def run_benchmark(out: Path, steps: int = 40, repeats: int = 3, quick: bool = False,
@@ -91,9 +110,13 @@ def _measure(out: Path, steps: int, repeats: int, quick: bool, family_size: int
     summary.update({key: value for key, value in summary["named_peers"].items()
                     if key.startswith("peer_step_over_")})
     summary.update(bench_multiverse_reads())
-    summary.update(measure_install())
     summary.update(measure_member_cache_reuse())
-    summary.update(measure_tune_core_utilisation(8 if quick else 16))
+    if quick:
+        summary.update(NOT_QUICK)
+    else:
+        summary.update(measure_install())
+        summary.update(measure_tune_core_utilisation(16))
+    summary["quick"] = quick
     layout = OutputsLayout.load(Path("outputs"))
     summary.update(pruning_comparison(layout.folder("tune"), layout.folder("tune_unpruned")))
     summary["outside_qp_over_qp"] = closed_loop["outside_qp_us_per_step"] \
