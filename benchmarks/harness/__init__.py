@@ -36,6 +36,7 @@ from benchmarks.harness.named_peers import bench_named_peers
 from benchmarks.harness.path_frame import bench_path_frame, summarize_path_frame
 from benchmarks.harness.peers import bench_kinematic, bench_peers
 from benchmarks.harness.studies import (
+    measure_coordinator,
     measure_member_cache_reuse,
     measure_tune_core_utilisation,
     pruning_comparison,
@@ -55,7 +56,8 @@ QUICK_KEYS = ("closed_loop_over_floor", "step_over_floor", "step_over_sparse_flo
               "outside_qp_over_qp_daqp", "outside_qp_over_qp_python_kernels", "setup_ms",
               "compiles_per_family", "family_scenarios_per_s",
               "family_member_over_sparse_floor", "family_member_over_sparse_floor_daqp",
-              "multiverse_member_reads_per_member", "member_cache_reuse")
+              "multiverse_member_reads_per_member", "member_cache_reuse",
+              "coordinator_ms_per_trial")
 #: What a quick run leaves out (minutes each), None in its summary.
 NOT_QUICK = {"install_over_pip": None, "tune_core_utilisation": None,
              "quick_note": "--quick: make install into two fresh venvs and the small tune "
@@ -111,11 +113,16 @@ def _measure(out: Path, steps: int, repeats: int, quick: bool, family_size: int
                     if key.startswith("peer_step_over_")})
     summary.update(bench_multiverse_reads())
     summary.update(measure_member_cache_reuse())
+    summary.update(measure_coordinator())
     if quick:
         summary.update(NOT_QUICK)
     else:
         summary.update(measure_install())
-        summary.update(measure_tune_core_utilisation(16))
+        # its coordinator figure (40-member families, the default rungs) beside the quick one
+        small_tune = measure_tune_core_utilisation(16)
+        summary["tune_core_utilisation"] = small_tune["tune_core_utilisation"]
+        summary["coordinator_ms_per_trial_default_space"] = \
+            small_tune["coordinator_ms_per_trial"]
     summary["quick"] = quick
     layout = OutputsLayout.load(Path("outputs"))
     summary.update(pruning_comparison(layout.folder("tune"), layout.folder("tune_unpruned")))

@@ -5,6 +5,9 @@
   the member cache: members reused over members shared (1.0: none simulated again), with
   ``member_cache_resimulated`` the shared members simulated again (goal 0). What is shared is
   computed apart from the cache, from the members' config hashes.
+- ``coordinator_ms_per_trial``: the tune process's own CPU milliseconds per trial told while
+  its studies run (the members run on two workers): a tune of the quick space, two studies of
+  24 trials on 6-member families (``--quick`` too); the full run's small tune gives it again.
 - ``tune_core_utilisation``: CPU-seconds over (wall-clock seconds x cores) of a small tune (one
   replicate, 40-member training families, 16 trials per method, the default rungs), the tune's
   own process and its workers.
@@ -69,7 +72,28 @@ def measure_tune_core_utilisation(trials: int = 16) -> dict[str, Any]:
         result = run_tuning(space, Path(folder), ["scenario.family.n_jobs=2"],
                             log=lambda _: None)
     value = result.summary.core_utilisation
-    return {"tune_core_utilisation": round(value, 3) if value is not None else None}
+    coordinator = result.summary.coordinator_ms_per_trial
+    return {"tune_core_utilisation": round(value, 3) if value is not None else None,
+            "coordinator_ms_per_trial": round(coordinator, 2) if coordinator is not None
+            else None}
+
+
+def measure_coordinator(trials: int = 24) -> dict[str, Any]:
+    """The tune process's own CPU milliseconds per trial (asks, tells, compositions, rung
+    tables, records; the members run on two workers): a tune of the quick space with two
+    studies of ``trials`` trials each on 6-member training families (rungs at 3)."""
+    from pipeline.config import CONF_DIR
+    from pipeline.studies.tune import load_tune_space, run_tuning
+
+    space = load_tune_space(CONF_DIR / "tune" / "quick.yaml", [
+        "name=bench_coordinator", "replicates=1", f"min_trials={trials}",
+        f"max_trials={trials}", f"convergence_window={trials // 2}", "population_size=8",
+        "batch_size=4", "heldout_size=4"])
+    with tempfile.TemporaryDirectory(prefix="bench_coordinator_") as folder:
+        result = run_tuning(space, Path(folder), ["scenario.family.n_jobs=2"],
+                            log=lambda _: None)
+    value = result.summary.coordinator_ms_per_trial
+    return {"coordinator_ms_per_trial": round(value, 2) if value is not None else None}
 
 
 def pruning_comparison(pruned: Path, unpruned: Path, tolerance: float = 0.01

@@ -42,6 +42,9 @@ from pipeline.studies.experiment import (
 #: (measured: 5 % of the workers' CPU in make tune with 4; the tune keeps tens of trials'
 #: rungs in flight, so larger tasks leave no core idle)
 MEMBERS_PER_TASK = 8
+#: the tables of completed families the pool keeps for their callbacks (:meth:`FamilyPool.
+#: take_table`; a tune's families in flight are far fewer)
+KEPT_TABLES = 512
 
 
 @dataclass
@@ -136,9 +139,9 @@ class FamilyPool:
         self._futures: dict[concurrent.futures.Future, Path] = {}
         self._families: dict[Path, _Family] = {}
         self._ready: deque[Callable[[], None]] = deque()
-        #: the table of each family completed here, by folder, with its config hash, until
-        #: taken (:meth:`take_table`)
-        self._tables: dict[Path, tuple[str, pd.DataFrame]] = {}
+        #: the tables of the families completed here, by folder and config hash (the latest
+        #: ``KEPT_TABLES``: the same family may be asked for by several settings)
+        self._tables: dict[tuple[Path, str], pd.DataFrame] = {}
 
     @property
     def busy(self) -> bool:
@@ -201,17 +204,18 @@ class FamilyPool:
         if state.record:
             _write_family_folder(state.cfg, state.folder, table, state.n_members,
                                  state.compiles, state.counts)
-        self._tables[state.folder] = (state.cfg.config_hash(), table)
+        if len(self._tables) >= KEPT_TABLES:
+            self._tables.pop(next(iter(self._tables)))
+        self._tables[state.folder, state.cfg.config_hash()] = table
         del self._families[state.folder]
         self._ready.append(state.on_done)
         for cfg, on_done, whole_hash, record_horizon, record in state.waiting:
             self.submit(cfg, state.folder, on_done, whole_hash, record_horizon, record)
 
     def take_table(self, folder: Path, config_hash: str) -> pd.DataFrame | None:
-        """The per-member table of the family of ``config_hash`` last completed here into
-        ``folder`` (once: it is forgotten), or None (read its record instead)."""
-        kept = self._tables.pop(Path(folder), None)
-        return kept[1] if kept is not None and kept[0] == config_hash else None
+        """The per-member table of the family of ``config_hash`` completed here into
+        ``folder``, or None (not completed here, or long ago: read its record instead)."""
+        return self._tables.get((Path(folder), config_hash))
 
     def wait(self) -> None:
         """Run the callbacks of the families that are complete; when there are none, wait

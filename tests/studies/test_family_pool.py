@@ -57,6 +57,35 @@ def test_the_same_folder_twice_is_simulated_once(tmp_path, make_config):
     assert counts.simulated == 4 and counts.resumed == 4
 
 
+def test_a_family_without_its_record_gives_its_table_to_every_callback(tmp_path, make_config):
+    """An early rung's family is run without its record (record=False: no table, summary or
+    manifest in its folder, only its members'); the same setting asked twice while the first
+    is pending (a tune's batch can ask one setting twice): both callbacks find the table in
+    the pool (a callback that found none read the missing record: 'empty folder', found by
+    the quick bench). Oracle: run_family's table of the same config."""
+    import pandas as pd
+
+    cfg = _family(make_config, 4)
+    reference = run_family(cfg, tmp_path / "reference", progress=False, member_cache=None)
+    pool = FamilyPool(2, QpCache(), None, MemberCounts())
+    tables = []
+
+    def done() -> None:
+        tables.append(pool.take_table(tmp_path / "f", cfg.config_hash()))
+
+    pool.submit(cfg, tmp_path / "f", done, record=False)
+    pool.submit(cfg, tmp_path / "f", done, record=False)
+    pool.run_until_idle()
+    pool.close()
+    assert len(tables) == 2 and all(t is not None for t in tables)
+    for table in tables:
+        pd.testing.assert_frame_equal(table[reference.columns].reset_index(drop=True),
+                                      reference.reset_index(drop=True), check_dtype=False)
+    assert not (tmp_path / "f" / "family_metrics.csv").exists()
+    assert len(list((tmp_path / "f").glob("member_*/manifest.json"))) == 4
+    assert pool.take_table(tmp_path / "f", "another hash") is None
+
+
 def test_a_rung_then_the_whole_family_simulates_each_member_once(tmp_path, make_config):
     """A trial's rung (its first 2 members) and then its whole family (4) in the same folder:
     the rung's members are resumed, the other two simulated; a third submission of the
