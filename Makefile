@@ -32,6 +32,8 @@ INSTALLER   ?= uv
 SWEEP       ?= obstacle_speed
 MULTIVERSE  ?= default
 TUNE        ?= default
+# where make tune's families run: local (this machine), dask-local:N, dask://HOST:PORT, dask-slurm:N
+WORKERS     ?= local
 # the lateral-track peers make tune-peers tunes against improved, and the Appendix-A track's
 # (dwa exists on that track only; its method preset is dwa_kinematic)
 TUNE_PEERS  ?= mpc_dcbf cbf_filter vo
@@ -163,8 +165,8 @@ multiverse: $(STAMP)  ## how robust is each verdict: the multiverse (MULTIVERSE=
 	$(APF) multiverse --space $(MULTIVERSE) --out $(RUNS)/multiverse
 	$(MAKE) report
 
-tune: $(STAMP)  ## a fair fight: both methods tuned with one budget, judged on held-out scenarios (TUNE=default|quick), then the report
-	$(APF) tune --space $(TUNE) --out $(RUNS)/tune
+tune: $(STAMP)  ## a fair fight: both methods tuned with one budget, judged on held-out scenarios (TUNE=default|quick; WORKERS=dask-local:N|dask://HOST:PORT|dask-slurm:N for a Dask cluster), then the report
+	$(APF) tune --space $(TUNE) --workers $(WORKERS) --out $(RUNS)/tune
 	$(MAKE) report
 
 tune-unpruned: $(STAMP)  ## the pruning check: the default tune with every trial on its whole training family (outputs/tune_unpruned; make bench compares it with make tune's)
@@ -175,12 +177,12 @@ tune-unpruned: $(STAMP)  ## the pruning check: the default tune with every trial
 # threshold the untuned baseline's collisions, as in make tune, so improved's trials are make tune's
 tune-peers: $(STAMP)  ## the fair fight against each lateral peer (TUNE_PEERS) and each Appendix-A one (TUNE_KINEMATIC_PEERS), tuned as make tune tunes improved and the baseline (outputs/tune_peers/<peer>), then the report
 	set -e; for peer in $(TUNE_PEERS); do \
-	  $(APF) tune --space $(TUNE) --set "methods=[improved,$$peer]" \
+	  $(APF) tune --space $(TUNE) --workers $(WORKERS) --set "methods=[improved,$$peer]" \
 	    --set "matched_control=''" --set safety_reference=baseline \
 	    --set name=$(TUNE)_vs_$$peer --out $(RUNS)/tune_peers/$$peer; \
 	done; \
 	for peer in $(TUNE_KINEMATIC_PEERS); do \
-	  $(APF) tune --space $(TUNE) --set "methods=[improved,$${peer}_kinematic]" \
+	  $(APF) tune --space $(TUNE) --workers $(WORKERS) --set "methods=[improved,$${peer}_kinematic]" \
 	    --set "matched_control=''" --set safety_reference=baseline $(KINEMATIC_TUNE_SETS) \
 	    --set name=$(TUNE)_vs_$${peer}_kinematic --out $(RUNS)/tune_peers/$${peer}_kinematic; \
 	done

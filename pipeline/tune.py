@@ -12,6 +12,7 @@ from pipeline.commands import output_folder, run_command
 from pipeline.config import CONF_DIR
 from pipeline.studies.results.tune import PARTS, TuneResult
 from pipeline.studies.tune import TuneSpace, front_points, load_tune_space, run_tuning
+from pipeline.studies.workers import Workers
 
 __all__ = ["main", "run_tuning"]
 
@@ -34,6 +35,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         metavar="KEY=VALUE",
                         help="change one setting of the space (e.g. --set 'rungs=[]' for the "
                              "unpruned check; --set name=... names the changed space)")
+    parser.add_argument("--workers", default="local",
+                        help="where the families run: local (this machine's worker "
+                             "processes), dask-local:N, dask://HOST:PORT (a running Dask "
+                             "scheduler) or dask-slurm:N (N SLURM jobs of one Dask worker); "
+                             "the numbers are the same")
     parser.add_argument("overrides", nargs="*",
                         help="Hydra overrides for every run (e.g. hydra/launcher=slurm)")
 
@@ -68,7 +74,8 @@ def _tune(args) -> int:
     if not path.suffix:
         path = CONF_DIR / "tune" / f"{args.space}.yaml"
     space = load_tune_space(path, args.changes)
-    result = run_tuning(space, args.out, args.overrides, log=log.info)
+    workers = Workers.parse(args.workers)
+    result = run_tuning(space, args.out, args.overrides, log=log.info, workers=workers)
     draw_figures(result, space)
     if result.summary.settle_note:
         print(result.summary.settle_note)

@@ -20,6 +20,7 @@ from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 import pandas as pd
 
@@ -129,12 +130,20 @@ class FamilyPool:
         Where members are restored from and published to.
     counts : MemberCounts
         Where the members came from (simulated, restored, resumed), added to as families start.
+    executor : concurrent.futures.Executor, optional
+        Another pool's workers to run the members on (a Dask cluster's:
+        :func:`pipeline.studies.workers.dask_executor`); ``n_jobs`` is then not used.
     """
 
     def __init__(self, n_jobs: int, qp_cache: QpCache, member_cache: MemberCache | None,
-                 counts: MemberCounts) -> None:
-        # the held-out families' Parallel calls afterwards reuse these workers
-        self._parallel, self.executor = _reusable_executor(n_jobs)
+                 counts: MemberCounts,
+                 executor: concurrent.futures.Executor | None = None) -> None:
+        self.executor: Any
+        if executor is not None:  # another pool's workers (a Dask cluster's), not loky's
+            self._parallel, self.executor = None, executor
+        else:
+            # the held-out families' Parallel calls afterwards reuse these workers
+            self._parallel, self.executor = _reusable_executor(n_jobs)
         self.cache, self.member_cache, self.counts = qp_cache, member_cache, counts
         self._futures: dict[concurrent.futures.Future, Path] = {}
         self._families: dict[Path, _Family] = {}
@@ -241,8 +250,10 @@ class FamilyPool:
             self.wait()
 
     def close(self) -> None:
-        """Release the executor to joblib (its workers stay for the next Parallel call)."""
-        self._parallel.__exit__(None, None, None)
+        """Release the executor to joblib (its workers stay for the next Parallel call); an
+        executor handed in stays its owner's."""
+        if self._parallel is not None:
+            self._parallel.__exit__(None, None, None)
 
     def stop(self) -> None:
         """Stop the workers and drop what they had (an interrupted tune). The futures are not
@@ -250,9 +261,12 @@ class FamilyPool:
         one cancelled first raised ``InvalidStateError: CANCELLED`` from that thread after
         the command's stop line; the shutdown waits for the thread, so nothing is printed
         after it."""
-        if self.executor is not None:
+        if self.executor is not None and self._parallel is not None:
             _quiet_loky_threads()
             self.executor.shutdown(wait=True, kill_workers=True)
+        elif self.executor is not None:  # a cluster's: its pending tasks cancelled
+            for future in self._futures:
+                future.cancel()
         self._futures.clear()
         self.close()
 

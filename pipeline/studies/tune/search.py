@@ -615,6 +615,9 @@ class Runner:
         self.counts = MemberCounts()
         self.member_cache = MemberCache.from_env()
         self._composed: dict[tuple[str, ...], ExperimentConfig] = {}
+        #: the workers of a Dask cluster the families run on (``--workers``), or None for
+        #: this machine's loky pool (or SLURM arrays with ``hydra/launcher=slurm``)
+        self.executor: Any = None
 
     def job(self, method: str, setting: str, params: dict, part: str,
             replicate: int | None = None, members: int | None = None) -> FamilyJob:
@@ -672,7 +675,7 @@ class Runner:
         counts into this runner's counts and shares its caches."""
         from pipeline.studies.family_pool import FamilyPool
 
-        return FamilyPool(n_jobs, self.cache, self.member_cache, self.counts)
+        return FamilyPool(n_jobs, self.cache, self.member_cache, self.counts, self.executor)
 
     @staticmethod
     def complete(job: FamilyJob) -> bool:
@@ -704,9 +707,22 @@ class Runner:
             if job.folder not in seen and not self.complete(job):
                 todo.append((job.cfg, job.folder))
                 seen.add(job.folder)
-        run_families(todo, self.out_dir, self.log, self.launcher, self.cache, label,
-                     counts=self.counts, member_cache=self.member_cache,
-                     record_horizon=self.records_horizon(part))
+        if self.executor is not None:  # a Dask cluster's workers, through the family pool
+            pool = self.pool(0)
+            self.log(f"{label}: {len(todo)} families on the cluster's workers")
+            for cfg, folder in todo:
+                pool.submit(cfg, folder, lambda: None,
+                            record_horizon=self.records_horizon(part))
+            try:
+                pool.run_until_idle()
+            except BaseException:
+                pool.stop()
+                raise
+            pool.close()
+        else:
+            run_families(todo, self.out_dir, self.log, self.launcher, self.cache, label,
+                         counts=self.counts, member_cache=self.member_cache,
+                         record_horizon=self.records_horizon(part))
         tables = [self.table(job) for job in jobs]
         # families complete before this call: their members count as already complete
         counted = {folder for _, folder in todo}

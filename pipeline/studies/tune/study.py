@@ -38,6 +38,7 @@ SLURM arrays.
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import json
 import logging
@@ -57,7 +58,7 @@ from pipeline.analysis.objectives import (
     tuning_table,
 )
 from pipeline.analysis.tally import Tally, collided
-from pipeline.errors import StudyError
+from pipeline.errors import ConfigError, StudyError
 from pipeline.store.files import as_written, json_safe
 from pipeline.store.lock import folder_lock
 from pipeline.store.manifest import refuse_other_record, untrust
@@ -84,6 +85,7 @@ from pipeline.studies.tune.search import (
     trial_storage,
 )
 from pipeline.studies.tune.space import TRACK_OVERRIDES, TuneSpace, default_budget, search_space
+from pipeline.studies.workers import Workers, dask_executor
 
 logger = logging.getLogger(__name__)
 
@@ -109,11 +111,17 @@ ANSWER_RULE = ("per claim, the tuned outcome (tuned treatment against tuned cont
 
 
 def run_tuning(space: TuneSpace, out_dir: Path, overrides: list[str] | None = None,
-               log=logger.info) -> TuneResult:
+               log=logger.info, workers: Workers | None = None) -> TuneResult:
     """Tune every replicate until convergence, pick, judge each on its held-out family; the result
     written into ``out_dir`` (its manifest last) and returned. The figures are the command's
-    to draw."""
+    to draw. ``workers``: where the families run (:mod:`pipeline.studies.workers`; this
+    machine's pool by default)."""
     out_dir = Path(out_dir)
+    workers = workers or Workers()
+    if not workers.local and any(o.startswith("hydra/launcher=slurm") for o in overrides or []):
+        raise ConfigError("--workers", workers.kind, "local with hydra/launcher=slurm (SLURM "
+                          "arrays), or no hydra/launcher=slurm with a Dask cluster "
+                          "(dask-slurm:N submits its workers to SLURM itself)")
     spaces = {m: search_space(m) for m in space.methods}
     # an override of what the tune sets itself (methods, families, tuned settings): one line,
     # before anything is written; every other override runs on both sides and is recorded
@@ -121,25 +129,30 @@ def run_tuning(space: TuneSpace, out_dir: Path, overrides: list[str] | None = No
     refuse_other_record(out_dir, ("tune",))
     out_dir.mkdir(parents=True, exist_ok=True)
     # one study per folder at a time (a second is refused in one line), for as long as it runs
-    with folder_lock(out_dir, f"tune {space.name}"):
-        return _run_tuning(space, out_dir, spaces, list(overrides or []), log)
+    with folder_lock(out_dir, f"tune {space.name}"), contextlib.ExitStack() as stack:
+        executor = None
+        if not workers.local:
+            log(f"families run on {workers.describe()}")
+            executor = stack.enter_context(dask_executor(workers))
+        return _run_tuning(space, out_dir, spaces, list(overrides or []), log, executor)
 
 
 def _run_tuning(space: TuneSpace, out_dir: Path, spaces: dict, overrides: list[str],
-                log) -> TuneResult:
+                log, executor=None) -> TuneResult:
     # the trial store checked before anything is written (damaged, read-only, another key)
     store_key = space.store_key(overrides)
     check_trial_store(out_dir / STORE_FILE, space, store_key, log)
     untrust(out_dir)
     clock = CoreClock()
     runner = Runner(space, out_dir, overrides, log)
+    runner.executor = executor
     reference = space.feasibility_reference
     # one composition gives the workers' number; they start (and import, about 2 s of both
     # cores) while this process composes the rest, opens the store and makes the studies
     untuned_jobs = [runner.job(reference, "default", {}, "training", 0)]
     n_jobs = untuned_jobs[0].cfg.scenario.family.n_jobs \
         if untuned_jobs[0].cfg.scenario.family is not None else 1
-    if runner.local:
+    if runner.local and executor is None:
         from pipeline.studies.family_pool import start_workers
 
         start_workers(n_jobs)
@@ -182,7 +195,7 @@ def _run_tuning(space: TuneSpace, out_dir: Path, spaces: dict, overrides: list[s
         told_before, cpu_before = _complete_in(entries), CoreClock.own_cpu_s()
         run_studies_together(runner, entries, rungs, measure, n_jobs)
         told = _complete_in(entries) - told_before
-        if n_jobs > 1 and told:  # with one worker the members ran here too
+        if (n_jobs > 1 or executor is not None) and told:  # one local worker: members ran here
             coordinator_ms = 1000.0 * (CoreClock.own_cpu_s() - cpu_before) / told
     else:
         # SLURM: each rung of a batch one array, one study after the other
