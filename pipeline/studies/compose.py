@@ -96,8 +96,7 @@ def _with_values(base, values: list[str], parser, base_object=None,
     from omegaconf import OmegaConf
 
     try:
-        parsed = parser.parse_overrides(values) if not isinstance(parser, OverrideReader) \
-            else parser.parse(values)
+        parsed = parser.parse(values)
         if not any(o.is_sweep_override() for o in parsed):
             if base_object is not None:
                 obj, followers = base_object

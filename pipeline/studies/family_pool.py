@@ -44,7 +44,7 @@ from pipeline.studies.experiment import (
 #: rungs in flight, so larger tasks leave no core idle)
 MEMBERS_PER_TASK = 8
 #: the tables of completed families the pool keeps for their callbacks (:meth:`FamilyPool.
-#: take_table`; a tune's families in flight are far fewer)
+#: finished_table`; a tune's families in flight are far fewer)
 KEPT_TABLES = 512
 
 
@@ -166,7 +166,7 @@ class FamilyPool:
         not run. ``record_horizon``: whether its new members write what each step planned
         (:func:`~pipeline.studies.experiment.run_experiment`); ``record``: whether the folder
         gets the family's record (its table, summary and manifest; else only its members'
-        folders are written, and the table is kept for :meth:`take_table`)."""
+        folders are written, and the table is kept for :meth:`finished_table`)."""
         folder = Path(folder)
         pending = self._families.get(folder)
         if pending is not None:  # the same folder is being written: after it
@@ -221,7 +221,7 @@ class FamilyPool:
         for cfg, on_done, whole_hash, record_horizon, record in state.waiting:
             self.submit(cfg, state.folder, on_done, whole_hash, record_horizon, record)
 
-    def take_table(self, folder: Path, config_hash: str) -> pd.DataFrame | None:
+    def finished_table(self, folder: Path, config_hash: str) -> pd.DataFrame | None:
         """The per-member table of the family of ``config_hash`` completed here into
         ``folder``, or None (not completed here, or long ago: read its record instead)."""
         return self._tables.get((Path(folder), config_hash))

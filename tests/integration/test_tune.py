@@ -242,19 +242,15 @@ def test_tuning_files_are_read_strictly(tmp_path):
 def _complete_trials(store: Path) -> dict[str, list[tuple[int, str]]]:
     """Per study, its complete trials' numbers and parameters, as a fresh Optuna reads the
     journal (its own backend)."""
-    import optuna
-    from optuna.storages import JournalStorage
-    from optuna.storages.journal import JournalFileBackend
+    from optuna.trial import TrialState
 
-    if not store.is_file():
-        return {}
-    storage = JournalStorage(JournalFileBackend(str(store)))
+    from tests.builders import stored_trials
+
     out: dict[str, list] = {}
-    for summary in optuna.get_all_study_summaries(storage):
-        study = optuna.load_study(study_name=summary.study_name, storage=storage)
-        out[summary.study_name] = [
-            (t.number, json.dumps(sorted(t.params.items())))
-            for t in study.get_trials(states=(optuna.trial.TrialState.COMPLETE,))]
+    for name, trial in stored_trials(store) if store.is_file() else []:
+        if trial.state == TrialState.COMPLETE:
+            out.setdefault(name, []).append((trial.number,
+                                             json.dumps(sorted(trial.params.items()))))
     return out
 
 

@@ -71,7 +71,7 @@ def test_a_family_without_its_record_gives_its_table_to_every_callback(tmp_path,
     tables = []
 
     def done() -> None:
-        tables.append(pool.take_table(tmp_path / "f", cfg.config_hash()))
+        tables.append(pool.finished_table(tmp_path / "f", cfg.config_hash()))
 
     pool.submit(cfg, tmp_path / "f", done, record=False)
     pool.submit(cfg, tmp_path / "f", done, record=False)
@@ -83,7 +83,7 @@ def test_a_family_without_its_record_gives_its_table_to_every_callback(tmp_path,
                                       reference.reset_index(drop=True), check_dtype=False)
     assert not (tmp_path / "f" / "family_metrics.csv").exists()
     assert len(list((tmp_path / "f").glob("member_*/manifest.json"))) == 4
-    assert pool.take_table(tmp_path / "f", "another hash") is None
+    assert pool.finished_table(tmp_path / "f", "another hash") is None
 
 
 def test_a_rung_then_the_whole_family_simulates_each_member_once(tmp_path, make_config):

@@ -75,7 +75,7 @@ def study_values(study) -> tuple[np.ndarray, np.ndarray]:
     return values, feasible
 
 
-def _complete_trials(study) -> int:
+def complete_trials(study) -> int:
     """How many of the study's trials are complete."""
     from optuna.trial import TrialState
 
@@ -146,7 +146,7 @@ class StudyLoop:
         self._sampler_states: dict | None = None
         #: the study's hypervolume history so far (only new trials are computed again)
         self._volumes = HypervolumeHistory([list(b) for b in rule.bounds])
-        self._done_before = _complete_trials(study)
+        self._done_before = complete_trials(study)
         #: studies running side by side with this one (its progress line says so: its time
         #: per trial is then shared)
         self.side_by_side = 1
@@ -193,7 +193,7 @@ class StudyLoop:
                 trial.set_user_attr(key, value)
             self.study.tell(trial, list(values))
         self._batch = []
-        complete = _complete_trials(self.study)
+        complete = complete_trials(self.study)
         started = self._start if self._start is not None else time.perf_counter()
         rate = (time.perf_counter() - started) / max(complete - self._done_before, 1)
         # with pruning the rule counts whole-trial equivalents of simulated members: a pruned
@@ -250,7 +250,7 @@ def restore_sampler_state(study) -> bool:
     was asked), when the study kept it; whether it did. With it a resumed tune asks the
     settings the uninterrupted one asked."""
     saved = study.user_attrs.get(SAMPLER_STATE)
-    complete = _complete_trials(study)
+    complete = complete_trials(study)
     rngs = _random_states(study.sampler)
     if not isinstance(saved, dict) or not rngs:
         return False
@@ -776,7 +776,7 @@ def run_studies_together(runner: Runner, studies: list[TunedStudy], rungs: Rungs
         def done() -> None:
             # the table the pool has just made (an early rung's is not written: the next rung
             # writes the family's record over it), else the family's record read back
-            table = pool.take_table(job.folder, job.cfg.config_hash())
+            table = pool.finished_table(job.folder, job.cfg.config_hash())
             if not batch.record(i, table if table is not None else runner.table(job)):
                 run_rung(entry, batch, i)
             elif batch.done:

@@ -79,6 +79,7 @@ from pipeline.studies.tune.search import (
     StudyLoop,
     TunedStudy,
     check_trial_store,
+    complete_trials,
     evaluate_in_rungs,
     make_study,
     run_studies_together,
@@ -426,10 +427,7 @@ class CoreClock:
 
 def _complete_in(entries: list[TunedStudy]) -> int:
     """The complete trials of every study of ``entries``."""
-    from optuna.trial import TrialState
-
-    return sum(len(e.loop.study.get_trials(deepcopy=False, states=(TrialState.COMPLETE,)))
-               for e in entries)
+    return sum(complete_trials(e.loop.study) for e in entries)
 
 
 def members_simulated(study) -> int:
