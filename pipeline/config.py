@@ -21,6 +21,13 @@ from pipeline.analysis.objectives import Objective, TuneConfig
 from pipeline.analysis.settings import ClaimsConfig, MetricsConfig
 from pipeline.conf_dir import CONF_DIR
 from pipeline.errors import ConfigError
+from pipeline.loop.controller_settings import (
+    KIND_SETTINGS,
+    KinematicMpcSettings,
+    MpcSettings,
+    PurePursuitSettings,
+    controller_schema,
+)
 from pipeline.loop.qp_memory import MAX_HORIZON
 from pipeline.loop.settings import (
     ControllerConfig,
@@ -78,7 +85,9 @@ class ExperimentConfig(FrozenAfterValidation):
 
     vehicle: VehicleConfig = MISSING
     planner: PlannerConfig = MISSING
-    controller: ControllerConfig = MISSING
+    # one kind's schema (ControllerConfig: MpcSettings, PurePursuitSettings or
+    # KinematicMpcSettings), chosen by the section's kind (controller_schema)
+    controller: Any = field(default=MISSING, metadata={"schema_of": controller_schema})
     scenario: ScenarioConfig = MISSING
     model: ModelConfig = field(default_factory=ModelConfig)
     metrics: MetricsConfig = field(default_factory=MetricsConfig)
@@ -105,7 +114,8 @@ class ExperimentConfig(FrozenAfterValidation):
                               f"({self.scenario.goal_tolerance_m}) or null (follows it): the run "
                               "stops at one, the metrics judge with the other")
         self.scenario.check_with_vehicle(self.vehicle.footprint_radius_m)
-        if len(self.scenario.obstacles) > self.controller.max_obstacles:
+        slots = getattr(self.controller, "max_obstacles", None)  # pure pursuit has none
+        if slots is not None and len(self.scenario.obstacles) > slots:
             raise ConfigError("controller.max_obstacles", self.controller.max_obstacles,
                               f">= the number of obstacles ({len(self.scenario.obstacles)})")
         # the lateral model's 1/v_x terms forbid slower references; the kinematic bicycle
@@ -180,7 +190,12 @@ def register_configs() -> None:
     store.store(name="experiment_schema", node=ExperimentConfig)
     store.store(group="vehicle", name="vehicle_schema", node=VehicleConfig)
     store.store(group="planner", name="planner_schema", node=PlannerConfig)
-    store.store(group="controller", name="controller_schema", node=ControllerConfig)
+    # one schema per controller kind; controller_schema stays the lateral MPC's name (a
+    # controller YAML of one's own written before the split names it)
+    for name, schema in (("lateral_mpc_schema", MpcSettings), ("controller_schema", MpcSettings),
+                         ("pure_pursuit_schema", PurePursuitSettings),
+                         ("kinematic_mpc_schema", KinematicMpcSettings)):
+        store.store(group="controller", name=name, node=schema)
     store.store(group="scenario", name="scenario_schema", node=ScenarioConfig)
 
 
@@ -197,7 +212,26 @@ def experiment_config_from_data(data: dict) -> ExperimentConfig:
     if isinstance(data, dict) and isinstance(data.get("claims"), dict):
         # a run folder written before the claim catalogue: its margins tables read as entries
         data = {**data, "claims": upgrade_claims_data(data["claims"])}
+    if isinstance(data, dict) and isinstance(data.get("controller"), dict):
+        data = {**data, "controller": upgrade_controller_data(data["controller"])}
     return _build(ExperimentConfig, data, "")
+
+
+#: Every key of the one flat controller schema that run folders were written with before each
+#: kind had its own (issue 57): the union of the kinds' keys.
+FLAT_CONTROLLER_KEYS = frozenset(f.name for schema in KIND_SETTINGS.values()
+                                 for f in fields(schema))
+
+
+def upgrade_controller_data(section: dict) -> dict:
+    """A run folder's controller section as its kind's schema reads it: a section written
+    with the one flat schema (every kind's keys) keeps its kind's keys; the others were never
+    read by its controller. Any other unknown key stays, to be refused by name."""
+    schema = controller_schema(section)
+    if not set(section) <= FLAT_CONTROLLER_KEYS:
+        return section
+    own = {f.name for f in fields(schema)}
+    return {key: value for key, value in section.items() if key in own}
 
 
 def schema_from_data(schema, data: Any, path: str = ""):
@@ -221,7 +255,11 @@ def _build(schema, data: Any, path: str):
         key = f"{path}.{unknown[0]}" if path else unknown[0]
         raise ConfigError(key, data[unknown[0]], f"a key of {schema.__name__}: "
                           + ", ".join(sorted(names)))
-    values = {name: _coerce(hints[name], value, f"{path}.{name}" if path else name)
+    by_kind = {f.name: f.metadata["schema_of"] for f in dataclasses.fields(schema)
+               if "schema_of" in f.metadata}
+    values = {name: _build(by_kind[name](value), value, f"{path}.{name}" if path else name)
+              if name in by_kind else
+              _coerce(hints[name], value, f"{path}.{name}" if path else name)
               for name, value in data.items()}
     return schema(**values)
 
@@ -287,6 +325,12 @@ def typed_config(cfg: Any) -> Any:
     from omegaconf.errors import ConfigKeyError
 
     schema = OmegaConf.structured(ExperimentConfig)
+    # the controller section's schema is the one Hydra composed it with (its YAML's), so that
+    # a kind set to another is refused by that schema, naming the file of the other kind; a
+    # section composed without one is read by its kind's
+    composed = OmegaConf.get_type(cfg, "controller") if "controller" in cfg else None
+    schema.controller = OmegaConf.structured(
+        composed if composed in KIND_SETTINGS.values() else controller_schema(data.get("controller")))
     try:
         merged = OmegaConf.merge(schema, data)
     except ConfigKeyError as exc:

@@ -139,8 +139,8 @@ def describe_config_error(exc: BaseException) -> str | None:
                             PluginOutputError)):
             return str(err)
     # the readers in order: the first that words any exception of the chain wins
-    for reader in (_missing_config_line, _omegaconf_line, _composition_line,
-                   _override_under_null_line):
+    for reader in (_missing_config_line, _other_kind_key_line, _omegaconf_line,
+                   _composition_line, _override_under_null_line):
         for err in chain:
             line = reader(err)
             if line is not None:
@@ -175,6 +175,29 @@ def _omegaconf_line(err: BaseException) -> str | None:
         message = str(getattr(err, "msg", err)).splitlines()[0]
         return f"config error: {key}: {message}"
     return None
+
+
+def _other_kind_key_line(err: BaseException) -> str | None:
+    """An override of a controller key that its kind's schema does not have (a key of another
+    controller kind: ``controller.q_lateral`` on pure pursuit): the key and the keys of the
+    schema it was composed with."""
+    from omegaconf.errors import ConfigAttributeError, ConfigKeyError
+
+    if not isinstance(err, (ConfigAttributeError, ConfigKeyError)):
+        return None
+    key, schema = getattr(err, "full_key", None), getattr(err, "object_type", None)
+    if not isinstance(key, str) or not key.startswith("controller.") or schema is None:
+        return None
+    from dataclasses import fields, is_dataclass
+
+    # a controller kind's schema (pipeline.loop.controller_settings) names its kind and file
+    kind_word, kind_file = getattr(schema, "kind_word", None), getattr(schema, "kind_file", None)
+    if not isinstance(schema, type) or not is_dataclass(schema) or kind_word is None \
+            or kind_file is None:
+        return None
+    keys = ", ".join(sorted(f.name for f in fields(schema)))
+    return (f"config error: {key} is invalid; allowed: a key of {schema.__name__}, the "
+            f"schema of controller={kind_file} (kind {kind_word}): {keys}")
 
 
 def _composition_line(err: BaseException) -> str | None:

@@ -107,7 +107,7 @@ class SparseLateralQp:
 
     Parameters
     ----------
-    controller : MpcSettings or ControllerConfig
+    controller : MpcSettings
     vehicle : VehicleConfig
     max_iter : int
         Clarabel's iteration limit.

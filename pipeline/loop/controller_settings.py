@@ -1,21 +1,37 @@
-"""Each controller kind's own settings, typed (do-mpc's per-controller settings classes).
+"""Each controller kind's schema: the settings Hydra composes, checks and hashes, and the
+built-in controller of that kind is handed (do-mpc's per-controller settings classes).
 
-:class:`~pipeline.loop.settings.ControllerConfig` stays the one flat schema Hydra composes,
-checks and hashes (its keys are the YAML's). :meth:`ControllerConfig.settings()
-<pipeline.loop.settings.ControllerConfig.settings>` reads it once into the frozen settings of
-its kind, the ones the built-in controllers are handed: :class:`MpcSettings` (the lateral MPC,
-``kind=mpc``), :class:`PurePursuitSettings` (``kind=pure_pursuit``) and
-:class:`KinematicMpcSettings` (Appendix A's kinematic MPC, ``kind=kinematic_mpc``). Each holds
-the fields its controller reads, the choices as the enums below (string enums: a member equals
-its word, ``Frame.PATH == "path"``); ``ControllerConfig`` checks its words against the same
-enums.
+``controller.kind`` names the kind, and each kind has its own schema with only the keys its
+controller reads: :class:`MpcSettings` (the lateral MPC, ``kind=mpc``;
+``conf/controller/lateral_mpc.yaml``), :class:`PurePursuitSettings` (``kind=pure_pursuit``;
+``conf/controller/pure_pursuit.yaml``) and :class:`KinematicMpcSettings` (Appendix A's
+kinematic MPC, ``kind=kinematic_mpc``; ``conf/controller/kinematic.yaml``). A key of another
+kind is refused naming the key and the kind's keys (it used to be carried along, unread, and
+entered the run's hash). The choices are words checked against the enums below (string enums:
+a member equals its word, ``Frame.PATH == "path"``). :data:`ControllerConfig` is the union of
+the three, :func:`controller_schema` the schema of a kind.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass, fields
+import math
+from dataclasses import dataclass, field
 from enum import StrEnum
-from typing import Any, ClassVar, Optional, TypeVar
+from typing import Any, ClassVar, Dict, List, NamedTuple, Optional, TypeVar
+
+from omegaconf import MISSING
+
+from pipeline.errors import ConfigError
+from pipeline.loop.qp_memory import MAX_HORIZON, qp_memory_gib
+from pipeline.validation import (
+    FrozenAfterValidation,
+    at_least,
+    between,
+    choice,
+    pair,
+    safe_name,
+    target_path,
+)
 
 
 class ControllerKind(StrEnum):
@@ -115,120 +131,309 @@ CHOICES: dict[str, type[StrEnum]] = {
     "heading_reference": HeadingReference, "path_beyond_end": PathBeyondEnd, "frame": Frame,
     "path_reference": PathReference, "path_state_reference": PathStateReference, "reference_alignment": ReferenceAlignment}
 
-Settings = TypeVar("Settings", "MpcSettings", "PurePursuitSettings", "KinematicMpcSettings")
 
 
-class _KindSettings:
-    """What the three settings classes share: read from a ``ControllerConfig``."""
+@dataclass
+class _ControllerSchema(FrozenAfterValidation):
+    """What every kind's schema has: its name, its kind, and a controller of one's own.
 
-    kind: ClassVar[ControllerKind]
+    ``_target_`` (Hydra's convention) names a class ``module.Class`` built with (these
+    settings, the vehicle, the sample time, the QP cache) and stepped as
+    ``step(Observation) -> ControlStep``, on this kind's track; ``params`` are its own
+    settings. Both enter the run hash only when set."""
 
-    @classmethod
-    def of(cls: type[Settings], controller: Any) -> Settings:
-        """The fields of this class read off ``controller`` (a ``ControllerConfig``, or
-        settings with these fields), choices as their enums, lists as tuples."""
-        values: dict[str, Any] = {}
-        for f in fields(cls):
-            value = getattr(controller, f.name)
-            if f.name in CHOICES:
-                value = CHOICES[f.name](value)
-            elif isinstance(value, list):
-                value = tuple(value)
-            values[f.name] = value
-        return cls(**values)
+    kind_word: ClassVar[ControllerKind]
+    kind_file: ClassVar[str]  # its file in conf/controller/ (what a refusal points to)
+
+    name: str = MISSING
+    kind: str = "mpc"
+    _target_: Optional[str] = None
+    params: Dict[str, Any] = field(default_factory=dict)
+
+    def _check_common(self) -> None:
+        """The name, the kind (this schema's), the plug-in's path, horizons, slots and solver
+        iterations where the kind has them."""
+        target_path("controller._target_", self._target_)
+        choice("controller.kind", self.kind, tuple(ControllerKind))
+        if self.kind != self.kind_word:
+            raise ConfigError("controller.kind", self.kind,
+                              f"{self.kind_word} in {type(self).__name__} (another kind is "
+                              f"another schema: controller="
+                              f"{KIND_SETTINGS[ControllerKind(self.kind)].kind_file})")
+        safe_name("controller.name", self.name)
+        for key in ("horizon", "control_horizon", "max_obstacles", "solver_max_iter"):
+            if not hasattr(self, key):
+                continue
+            value = getattr(self, key)
+            if isinstance(value, bool) or not isinstance(value, int):
+                raise ConfigError(f"controller.{key}", value, "an integer")
+        horizon = self.horizon  # type: ignore[attr-defined]  # every kind has one
+        if not 1 <= horizon <= MAX_HORIZON:
+            slots = getattr(self, "max_obstacles", 1)
+            memory = (f" (the compiled QP grows with N: N = {horizon} would need about "
+                      f"{qp_memory_gib(horizon, slots):.3g} GiB)" if horizon > MAX_HORIZON
+                      else "")
+            raise ConfigError("controller.horizon", horizon,
+                              f"an integer in [1, {MAX_HORIZON}]{memory}")
+        if hasattr(self, "control_horizon") and not 1 <= self.control_horizon <= horizon:
+            raise ConfigError("controller.control_horizon", self.control_horizon,
+                              f"an integer in [1, controller.horizon={horizon}]")
+        if hasattr(self, "max_obstacles") and not 1 <= self.max_obstacles <= 50:
+            raise ConfigError("controller.max_obstacles", self.max_obstacles,
+                              "an integer in [1, 50]")
+        if hasattr(self, "solver_max_iter") and not 1 <= self.solver_max_iter <= 100000:
+            raise ConfigError("controller.solver_max_iter", self.solver_max_iter,
+                              "an integer in [1, 100000]")
 
 
-@dataclass(frozen=True)
-class MpcSettings(_KindSettings):
-    """The lateral MPC's settings (:class:`~pipeline.loop.controller.lateral.LateralMpc`, on
-    the nonlinear model :class:`~pipeline.loop.controller.lateral_nmpc.LateralNmpc`); the
-    meaning of each field is ``ControllerConfig``'s."""
+@dataclass
+class _MpcSchema(_ControllerSchema):
+    """What both MPC kinds have: the QP backend, horizons and move blocking, obstacle slots and
+    their soft collision half-planes, the solver's iteration limit."""
 
-    kind: ClassVar[ControllerKind] = ControllerKind.MPC
+    backend: str = "clarabel_direct"
+    horizon: int = 10
+    control_horizon: int = 3
+    input_hold: str = "hold_last"
+    max_obstacles: int = 3
+    slack_weight_linear: float = 1.0e4
+    slack_weight_quadratic: float = 1.0e3
+    safety_margin_m: float = 0.2
+    constraint_activation_m: float = 12.0
+    # the MPC's soft collision half-planes (every backend, both tracks); false: none, so what
+    # avoids the obstacle is the reference alone ("APF by itself", make reproduce)
+    collision_constraints: bool = True
+    solver_max_iter: int = 200
 
-    name: str
-    backend: Backend
-    horizon: int
-    control_horizon: int
-    input_hold: InputHold
+    def _check_mpc(self) -> None:
+        """The common checks; the backend and which kinds it goes with; the half-planes'
+        weights, margin, reach and switch; the input hold."""
+        self._check_common()
+        choice("controller.backend", self.backend, tuple(Backend),
+               REMOVED_CHOICES["controller.backend"])
+        if self.backend == "daqp" and self.kind_word != ControllerKind.MPC:
+            raise ConfigError("controller.backend", self.backend,
+                              "daqp only with controller.kind=mpc (else cvxpy or clarabel_direct)")
+        for key in ("slack_weight_linear", "slack_weight_quadratic", "safety_margin_m",
+                    "constraint_activation_m"):
+            at_least(f"controller.{key}", getattr(self, key), 0.0)
+        if not isinstance(self.collision_constraints, bool):
+            raise ConfigError("controller.collision_constraints", self.collision_constraints,
+                              "true or false")
+        choice("controller.input_hold", self.input_hold, tuple(InputHold))
+
+
+@dataclass
+class MpcSettings(_MpcSchema):
+    """The lateral MPC's schema (:class:`~pipeline.loop.controller.lateral.LateralMpc`, on
+    the nonlinear model :class:`~pipeline.loop.controller.lateral_nmpc.LateralNmpc`;
+    ``conf/controller/lateral_mpc.yaml`` says what each key means)."""
+
+    kind_word: ClassVar[ControllerKind] = ControllerKind.MPC
+    kind_file: ClassVar[str] = "lateral_mpc"
+
+    kind: str = "mpc"
+    # one value (the sparse statement was removed, issue 58); kept: it is in every run's
+    # settings and config hash
+    formulation: str = "condensed"
+    q_lateral: float = 10.0
+    q_heading: float = 5.0
+    q_yaw_rate: float = 0.1
+    q_steering: float = 0.5
+    r_steering_rate: float = 1.0
+    halfplane_normal: str = "lateral_side"
+    heading_reference: str = "path_slope"
+    heading_ref_max_rad: float = 0.5
+    yaw_rate_ref_max_rad_s: float = 0.6
+    path_beyond_end: str = "extend"
+    # what the lateral MPC's state is measured against: the drivable path built from the APF
+    # rollout each step (path), or the start-goal line (fixed, the earlier reading)
+    frame: str = "path"
+    # the path the path frame measures against: the APF rollout itself, each point at the time
+    # the vehicle reaches it (rollout, Section 3.1's y_ref), or a pure-pursuit chase of it from
+    # the vehicle at path_lookahead_m, its curvature clipped at the vehicle's limit when
+    # path_curvature_clip (pursuit: a reading of ours, not the paper's)
+    path_reference: str = "rollout"
+    path_lookahead_m: float = 2.5
+    path_curvature_clip: bool = True
+    path_curvature_max_1_per_m: Optional[float] = None  # None: tan(steering_max) / wheelbase
+    path_state_reference: str = "steady_state"
+    horizon_reach_m: Optional[float] = 3.0
+    nmpc_substeps: int = 5
+
+    def __post_init__(self) -> None:
+        self._check_mpc()
+        if isinstance(self.nmpc_substeps, bool) or not isinstance(self.nmpc_substeps, int) \
+                or not 1 <= self.nmpc_substeps <= 100:
+            raise ConfigError("controller.nmpc_substeps", self.nmpc_substeps,
+                              "an integer in [1, 100]")
+        choice("controller.formulation", self.formulation, tuple(Formulation),
+               REMOVED_CHOICES["controller.formulation"])
+        choice("controller.halfplane_normal", self.halfplane_normal, tuple(HalfplaneNormal))
+        for key in ("q_lateral", "q_heading", "q_yaw_rate", "q_steering", "r_steering_rate"):
+            at_least(f"controller.{key}", getattr(self, key), 0.0)
+        at_least("controller.r_steering_rate", self.r_steering_rate, 0.0, inclusive=False)
+        choice("controller.heading_reference", self.heading_reference, tuple(HeadingReference))
+        between("controller.heading_ref_max_rad", self.heading_ref_max_rad, 0.0, math.pi / 2)
+        at_least("controller.yaw_rate_ref_max_rad_s", self.yaw_rate_ref_max_rad_s, 0.0,
+                  inclusive=False)
+        choice("controller.path_beyond_end", self.path_beyond_end, tuple(PathBeyondEnd))
+        choice("controller.frame", self.frame, tuple(Frame))
+        choice("controller.path_reference", self.path_reference, tuple(PathReference))
+        between("controller.path_lookahead_m", self.path_lookahead_m, 0.1, 100.0)
+        if not isinstance(self.path_curvature_clip, bool):
+            raise ConfigError("controller.path_curvature_clip", self.path_curvature_clip,
+                              "true or false")
+        if self.path_curvature_max_1_per_m is not None:
+            between("controller.path_curvature_max_1_per_m", self.path_curvature_max_1_per_m,
+                    1e-3, 10.0)
+        choice("controller.path_state_reference", self.path_state_reference,
+               tuple(PathStateReference))
+        if self.horizon_reach_m is not None:
+            between("controller.horizon_reach_m", self.horizon_reach_m, 0.1, 1000.0)
+
+    @property
+    def weights(self) -> LateralWeights:
+        """The cost weights by name (:class:`LateralWeights`, a named tuple numba takes)."""
+        return LateralWeights.of(self)
+
+
+@dataclass
+class PurePursuitSettings(_ControllerSchema):
+    """Pure pursuit's schema (:class:`~pipeline.loop.controller.pursuit.PurePursuit`): the
+    look-ahead, and the horizon and references it logs as an MPC would
+    (``conf/controller/pure_pursuit.yaml``)."""
+
+    kind_word: ClassVar[ControllerKind] = ControllerKind.PURE_PURSUIT
+    kind_file: ClassVar[str] = "pure_pursuit"
+
+    kind: str = "pure_pursuit"
+    horizon: int = 10
+    lookahead_min_m: float = 2.0
+    lookahead_time_s: float = 0.8
+    heading_ref_max_rad: float = 0.5
+    path_beyond_end: str = "extend"
+
+    def __post_init__(self) -> None:
+        self._check_common()
+        at_least("controller.lookahead_min_m", self.lookahead_min_m, 0.0, inclusive=False)
+        at_least("controller.lookahead_time_s", self.lookahead_time_s, 0.0)
+        between("controller.heading_ref_max_rad", self.heading_ref_max_rad, 0.0, math.pi / 2)
+        choice("controller.path_beyond_end", self.path_beyond_end, tuple(PathBeyondEnd))
+
+
+@dataclass
+class KinematicMpcSettings(_MpcSchema):
+    """Appendix A's kinematic MPC's schema
+    (:class:`~pipeline.loop.controller.kinematic.KinematicLtvMpc`, as an NLP
+    :class:`~pipeline.loop.controller.nmpc.KinematicNmpc`; ``conf/controller/kinematic.yaml``).
+    The weights are MATLAB's lists (``mpcobj.Weights``), by name in :attr:`weights`."""
+
+    kind_word: ClassVar[ControllerKind] = ControllerKind.KINEMATIC_MPC
+    kind_file: ClassVar[str] = "kinematic"
+
+    kind: str = "kinematic_mpc"
+    output_weights: List[float] = field(default_factory=lambda: [1.0, 1.0])
+    input_weights: List[float] = field(default_factory=lambda: [0.1, 0.1])
+    input_rate_weights: List[float] = field(default_factory=lambda: [0.01, 0.01])
+    accel_bounds_mps2: List[float] = field(default_factory=lambda: [-3.0, 3.0])
+    ltv_iterations: int = 1
+    reference_alignment: str = "literal"
+
+    def __post_init__(self) -> None:
+        self._check_mpc()
+        for key in ("output_weights", "input_weights", "input_rate_weights"):
+            pair(f"controller.{key}", getattr(self, key))
+            for i, w in enumerate(getattr(self, key)):
+                at_least(f"controller.{key}[{i}]", w, 0.0)
+        pair("controller.accel_bounds_mps2", self.accel_bounds_mps2)
+        if not self.accel_bounds_mps2[0] < self.accel_bounds_mps2[1]:
+            raise ConfigError("controller.accel_bounds_mps2", list(self.accel_bounds_mps2),
+                              "[low, high] with low < high")
+        if isinstance(self.ltv_iterations, bool) or not isinstance(self.ltv_iterations, int) \
+                or not 1 <= self.ltv_iterations <= 50:
+            raise ConfigError("controller.ltv_iterations", self.ltv_iterations,
+                              "an integer in [1, 50]")
+        choice("controller.reference_alignment", self.reference_alignment,
+               tuple(ReferenceAlignment))
+
+    @property
+    def weights(self) -> KinematicWeights:
+        """The weights by name (:class:`KinematicWeights`, a named tuple numba takes)."""
+        (x, y), (a, d), (da, dd) = (self.output_weights, self.input_weights,
+                                    self.input_rate_weights)
+        return KinematicWeights(float(x), float(y), float(a), float(d), float(da), float(dd),
+                                float(self.slack_weight_linear),
+                                float(self.slack_weight_quadratic))
+
+
+class LateralWeights(NamedTuple):
+    """The lateral MPC's cost weights by name (a named tuple: numba takes it, a cache key
+    compares it as the tuple it is): the tracking weights on the lateral error, the heading
+    error, the yaw rate and the steering angle, the steering-rate weight, and the soft
+    collision constraints' linear and quadratic slack weights."""
+
     q_lateral: float
     q_heading: float
     q_yaw_rate: float
     q_steering: float
     r_steering_rate: float
-    slack_weight_linear: float
-    slack_weight_quadratic: float
-    safety_margin_m: float
-    constraint_activation_m: float
-    collision_constraints: bool
-    halfplane_normal: HalfplaneNormal
-    max_obstacles: int
-    heading_reference: HeadingReference
-    heading_ref_max_rad: float
-    yaw_rate_ref_max_rad_s: float
-    path_beyond_end: PathBeyondEnd
-    frame: Frame
-    path_reference: PathReference
-    path_lookahead_m: float
-    path_curvature_clip: bool
-    path_curvature_max_1_per_m: Optional[float]
-    path_state_reference: PathStateReference
-    horizon_reach_m: Optional[float]
-    nmpc_substeps: int
-    solver_max_iter: int
+    slack_linear: float
+    slack_quadratic: float
+
+    @classmethod
+    def of(cls, controller: Any) -> LateralWeights:
+        """The weights of a controller's settings (``q_lateral`` ... ``slack_weight_*``)."""
+        c = controller
+        return cls(float(c.q_lateral), float(c.q_heading), float(c.q_yaw_rate),
+                   float(c.q_steering), float(c.r_steering_rate),
+                   float(c.slack_weight_linear), float(c.slack_weight_quadratic))
+
+    @property
+    def tracking(self) -> tuple[float, float, float, float, float]:
+        """The five weights of the tracking cost (the condensed prediction's)."""
+        return (self.q_lateral, self.q_heading, self.q_yaw_rate, self.q_steering,
+                self.r_steering_rate)
 
 
-@dataclass(frozen=True)
-class PurePursuitSettings(_KindSettings):
-    """Pure pursuit's settings (:class:`~pipeline.loop.controller.pursuit.PurePursuit`): the
-    look-ahead, and the horizon and references it logs as an MPC would."""
+class KinematicWeights(NamedTuple):
+    """The kinematic MPC's weights by name: the outputs (x, y), the inputs (acceleration,
+    steering angle), their rates, and the soft collision constraints' slack weights."""
 
-    kind: ClassVar[ControllerKind] = ControllerKind.PURE_PURSUIT
-
-    name: str
-    horizon: int
-    lookahead_min_m: float
-    lookahead_time_s: float
-    heading_ref_max_rad: float
-    path_beyond_end: PathBeyondEnd
-
-
-@dataclass(frozen=True)
-class KinematicMpcSettings(_KindSettings):
-    """Appendix A's kinematic MPC's settings
-    (:class:`~pipeline.loop.controller.kinematic.KinematicLtvMpc`, as an NLP
-    :class:`~pipeline.loop.controller.nmpc.KinematicNmpc`)."""
-
-    kind: ClassVar[ControllerKind] = ControllerKind.KINEMATIC_MPC
-
-    name: str
-    backend: Backend
-    horizon: int
-    control_horizon: int
-    input_hold: InputHold
-    max_obstacles: int
-    output_weights: tuple[float, ...]
-    input_weights: tuple[float, ...]
-    input_rate_weights: tuple[float, ...]
-    slack_weight_linear: float
-    slack_weight_quadratic: float
-    accel_bounds_mps2: tuple[float, ...]
-    ltv_iterations: int
-    reference_alignment: ReferenceAlignment
-    safety_margin_m: float
-    constraint_activation_m: float
-    collision_constraints: bool
-    solver_max_iter: int
+    x: float
+    y: float
+    accel: float
+    steering: float
+    accel_rate: float
+    steering_rate: float
+    slack_linear: float
+    slack_quadratic: float
 
 
-#: The settings class of each controller kind.
+KindSettings = TypeVar("KindSettings", MpcSettings, PurePursuitSettings, KinematicMpcSettings)
+
+#: Any kind's schema (the type of ``ExperimentConfig.controller``).
+ControllerConfig = MpcSettings | PurePursuitSettings | KinematicMpcSettings
+
+#: The schema of each controller kind.
 KIND_SETTINGS: dict[ControllerKind, type[MpcSettings] | type[PurePursuitSettings]
                     | type[KinematicMpcSettings]] = {
     ControllerKind.MPC: MpcSettings, ControllerKind.PURE_PURSUIT: PurePursuitSettings,
     ControllerKind.KINEMATIC_MPC: KinematicMpcSettings}
 
+def controller_schema(data: Any) -> type[MpcSettings] | type[PurePursuitSettings] \
+        | type[KinematicMpcSettings]:
+    """The schema of a controller section given as a mapping: its ``kind``'s (``mpc`` when
+    the mapping names none); an unknown kind is refused naming the key and the kinds."""
+    kind = data.get("kind", "mpc") if isinstance(data, dict) else "mpc"
+    choice("controller.kind", kind, tuple(ControllerKind))
+    return KIND_SETTINGS[ControllerKind(kind)]
 
-def settings_of(controller: Any, kind: type[Settings]) -> Settings:
-    """``controller`` as the settings class ``kind``: settings of that class as they are, a
-    ``ControllerConfig`` (a test's, the bench's) read into them (:meth:`_KindSettings.of`)."""
-    return controller if isinstance(controller, kind) else kind.of(controller)
+
+def settings_of(controller: Any, kind: type[KindSettings]) -> KindSettings:
+    """``controller`` when it is settings of the schema ``kind``; else refused, naming the
+    kind it has and the one this controller needs."""
+    if isinstance(controller, kind):
+        return controller
+    raise ConfigError("controller.kind", getattr(controller, "kind", type(controller).__name__),
+                      f"{kind.kind_word} for this controller")

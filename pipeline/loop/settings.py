@@ -16,25 +16,7 @@ from typing import Any, Dict, List, Optional, Protocol
 from omegaconf import MISSING
 
 from pipeline.errors import ConfigError
-from pipeline.loop.controller_settings import (
-    KIND_SETTINGS,
-    REMOVED_CHOICES,
-    Backend,
-    ControllerKind,
-    Formulation,
-    Frame,
-    HalfplaneNormal,
-    HeadingReference,
-    InputHold,
-    KinematicMpcSettings,
-    MpcSettings,
-    PathBeyondEnd,
-    PathReference,
-    PathStateReference,
-    PurePursuitSettings,
-    ReferenceAlignment,
-)
-from pipeline.loop.qp_memory import MAX_HORIZON, qp_memory_gib
+from pipeline.loop.controller_settings import ControllerConfig as ControllerConfig
 from pipeline.validation import (
     FrozenAfterValidation,
     at_least,
@@ -175,175 +157,6 @@ class ModelConfig(FrozenAfterValidation):
         at_least("model.speed_grid_mps", self.speed_grid_mps, 0.0, inclusive=False)
         between("model.validity_heading_rad", self.validity_heading_rad, 0.0, math.pi)
         between("model.tyre_linear_tolerance", self.tyre_linear_tolerance, 1e-4, 0.9)
-
-
-@dataclass
-class ControllerConfig(FrozenAfterValidation):
-    """Lateral MPC settings (CVXPY + Clarabel)."""
-
-    name: str = MISSING
-    kind: str = "mpc"
-    backend: str = "clarabel_direct"
-    # one value (the sparse statement was removed, issue 58); kept: it is in every run's
-    # settings and config hash
-    formulation: str = "condensed"
-    horizon: int = 10
-    control_horizon: int = 3
-    input_hold: str = "hold_last"
-    q_lateral: float = 10.0
-    q_heading: float = 5.0
-    q_yaw_rate: float = 0.1
-    q_steering: float = 0.5
-    r_steering_rate: float = 1.0
-    slack_weight_linear: float = 1.0e4
-    slack_weight_quadratic: float = 1.0e3
-    safety_margin_m: float = 0.2
-    constraint_activation_m: float = 12.0
-    # the MPC's soft collision half-planes (every backend, both tracks); false: none, so what
-    # avoids the obstacle is the APF's reference alone ("APF by itself", make reproduce)
-    collision_constraints: bool = True
-    halfplane_normal: str = "lateral_side"
-    max_obstacles: int = 3
-    heading_reference: str = "path_slope"
-    heading_ref_max_rad: float = 0.5
-    yaw_rate_ref_max_rad_s: float = 0.6
-    path_beyond_end: str = "extend"
-    # what the lateral MPC's state is measured against: the drivable path built from the APF
-    # rollout each step (path), or the start-goal line (fixed, the earlier reading)
-    frame: str = "path"
-    # the path the path frame measures against: the APF rollout itself, each point at the time
-    # the vehicle reaches it (rollout, Section 3.1's y_ref), or a pure-pursuit chase of it from
-    # the vehicle at path_lookahead_m, its curvature clipped at the vehicle's limit when
-    # path_curvature_clip (pursuit: a reading of ours, not the paper's)
-    path_reference: str = "rollout"
-    path_lookahead_m: float = 2.5
-    path_curvature_clip: bool = True
-    path_curvature_max_1_per_m: Optional[float] = None  # None: tan(steering_max) / wheelbase
-    path_state_reference: str = "steady_state"
-    horizon_reach_m: Optional[float] = 3.0
-    nmpc_substeps: int = 5
-    solver_max_iter: int = 200
-    lookahead_min_m: float = 2.0
-    lookahead_time_s: float = 0.8
-    output_weights: List[float] = field(default_factory=lambda: [1.0, 1.0])
-    input_weights: List[float] = field(default_factory=lambda: [0.1, 0.1])
-    input_rate_weights: List[float] = field(default_factory=lambda: [0.01, 0.01])
-    accel_bounds_mps2: List[float] = field(default_factory=lambda: [-3.0, 3.0])
-    ltv_iterations: int = 1
-    reference_alignment: str = "literal"
-    # a controller of your own (Hydra's convention): module.Class, built with (these settings,
-    # the vehicle, the sample time, the QP cache) and stepped as step(Observation) ->
-    # ControlStep; None: the built-in chosen by ``kind``. Enter the run hash only when set.
-    _target_: Optional[str] = None
-    params: Dict[str, Any] = field(default_factory=dict)
-
-    def __post_init__(self) -> None:
-        target_path("controller._target_", self._target_)
-        self._check_kind_and_backend()
-        self._check_kinematic_and_pursuit()
-        self._check_sizes()
-        self._check_lateral()
-
-    def settings(self) -> MpcSettings | PurePursuitSettings | KinematicMpcSettings:
-        """The typed settings of this ``kind`` (:mod:`pipeline.loop.controller_settings`), the
-        ones the built-in controller is handed."""
-        return KIND_SETTINGS[ControllerKind(self.kind)].of(self)
-
-    def _check_kind_and_backend(self) -> None:
-        """``kind``, ``backend``, ``formulation`` and which of them go together."""
-        choice("controller.kind", self.kind, tuple(ControllerKind))
-        choice("controller.backend", self.backend, tuple(Backend),
-               REMOVED_CHOICES["controller.backend"])
-        if self.backend == "nmpc" and self.kind not in ("kinematic_mpc", "mpc"):
-            raise ConfigError("controller.backend", self.backend,
-                              "nmpc only with controller.kind=mpc or kinematic_mpc (a "
-                              "nonlinear program needs a model: pure pursuit has none)")
-        if isinstance(self.nmpc_substeps, bool) or not isinstance(self.nmpc_substeps, int) \
-                or not 1 <= self.nmpc_substeps <= 100:
-            raise ConfigError("controller.nmpc_substeps", self.nmpc_substeps,
-                              "an integer in [1, 100]")
-        choice("controller.formulation", self.formulation, tuple(Formulation),
-               REMOVED_CHOICES["controller.formulation"])
-        if self.backend == "daqp" and self.kind != "mpc":
-            raise ConfigError("controller.backend", self.backend,
-                              "daqp only with controller.kind=mpc (else cvxpy or "
-                              "clarabel_direct)")
-
-    def _check_kinematic_and_pursuit(self) -> None:
-        """The kinematic MPC's weights, bounds, passes and reference; pure pursuit's
-        look-ahead."""
-        for key in ("output_weights", "input_weights", "input_rate_weights"):
-            pair(f"controller.{key}", getattr(self, key))
-            for i, w in enumerate(getattr(self, key)):
-                at_least(f"controller.{key}[{i}]", w, 0.0)
-        pair("controller.accel_bounds_mps2", self.accel_bounds_mps2)
-        if not self.accel_bounds_mps2[0] < self.accel_bounds_mps2[1]:
-            raise ConfigError("controller.accel_bounds_mps2", list(self.accel_bounds_mps2),
-                              "[low, high] with low < high")
-        if isinstance(self.ltv_iterations, bool) or not isinstance(self.ltv_iterations, int) \
-                or not 1 <= self.ltv_iterations <= 50:
-            raise ConfigError("controller.ltv_iterations", self.ltv_iterations,
-                              "an integer in [1, 50]")
-        choice("controller.reference_alignment", self.reference_alignment,
-               tuple(ReferenceAlignment))
-        at_least("controller.lookahead_min_m", self.lookahead_min_m, 0.0, inclusive=False)
-        at_least("controller.lookahead_time_s", self.lookahead_time_s, 0.0)
-
-    def _check_sizes(self) -> None:
-        """Horizons, obstacle slots, solver iterations (integers in range) and the name."""
-        for key in ("horizon", "control_horizon", "max_obstacles", "solver_max_iter"):
-            value = getattr(self, key)
-            if isinstance(value, bool) or not isinstance(value, int):
-                raise ConfigError(f"controller.{key}", value, "an integer")
-        if not 1 <= self.horizon <= MAX_HORIZON:
-            memory = (f" (the compiled QP grows with N: N = {self.horizon} would need about "
-                      f"{qp_memory_gib(self.horizon, self.max_obstacles):.3g} GiB)"
-                      if self.horizon > MAX_HORIZON else "")
-            raise ConfigError("controller.horizon", self.horizon,
-                              f"an integer in [1, {MAX_HORIZON}]{memory}")
-        if not 1 <= self.control_horizon <= self.horizon:
-            raise ConfigError("controller.control_horizon", self.control_horizon,
-                              f"an integer in [1, controller.horizon={self.horizon}]")
-        if not 1 <= self.max_obstacles <= 50:
-            raise ConfigError("controller.max_obstacles", self.max_obstacles,
-                              "an integer in [1, 50]")
-        if self.solver_max_iter > 100000:
-            raise ConfigError("controller.solver_max_iter", self.solver_max_iter,
-                              "an integer in [1, 100000]")
-        safe_name("controller.name", self.name)
-        if self.solver_max_iter < 1:
-            raise ConfigError("controller.solver_max_iter", self.solver_max_iter, "an integer >= 1")
-
-    def _check_lateral(self) -> None:
-        """The input hold; the lateral MPC's weights, references, half-planes and frame."""
-        choice("controller.input_hold", self.input_hold, tuple(InputHold))
-        choice("controller.halfplane_normal", self.halfplane_normal, tuple(HalfplaneNormal))
-        for key in ("q_lateral", "q_heading", "q_yaw_rate", "q_steering", "r_steering_rate",
-                    "slack_weight_linear", "slack_weight_quadratic", "safety_margin_m",
-                    "constraint_activation_m"):
-            at_least(f"controller.{key}", getattr(self, key), 0.0)
-        if not isinstance(self.collision_constraints, bool):
-            raise ConfigError("controller.collision_constraints", self.collision_constraints,
-                              "true or false")
-        at_least("controller.r_steering_rate", self.r_steering_rate, 0.0, inclusive=False)
-        choice("controller.heading_reference", self.heading_reference, tuple(HeadingReference))
-        between("controller.heading_ref_max_rad", self.heading_ref_max_rad, 0.0, math.pi / 2)
-        at_least("controller.yaw_rate_ref_max_rad_s", self.yaw_rate_ref_max_rad_s, 0.0,
-                  inclusive=False)
-        choice("controller.path_beyond_end", self.path_beyond_end, tuple(PathBeyondEnd))
-        choice("controller.frame", self.frame, tuple(Frame))
-        choice("controller.path_reference", self.path_reference, tuple(PathReference))
-        between("controller.path_lookahead_m", self.path_lookahead_m, 0.1, 100.0)
-        if not isinstance(self.path_curvature_clip, bool):
-            raise ConfigError("controller.path_curvature_clip", self.path_curvature_clip,
-                              "true or false")
-        if self.path_curvature_max_1_per_m is not None:
-            between("controller.path_curvature_max_1_per_m", self.path_curvature_max_1_per_m,
-                    1e-3, 10.0)
-        choice("controller.path_state_reference", self.path_state_reference,
-               tuple(PathStateReference))
-        if self.horizon_reach_m is not None:
-            between("controller.horizon_reach_m", self.horizon_reach_m, 0.1, 1000.0)
 
 
 @dataclass
@@ -786,5 +599,5 @@ class LoopSettings(Protocol):
     vehicle: VehicleConfig
     model: ModelConfig
     planner: PlannerConfig
-    controller: ControllerConfig
+    controller: Any  # one kind's schema (ControllerConfig: MpcSettings, ...)
     scenario: ScenarioConfig

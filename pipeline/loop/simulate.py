@@ -368,9 +368,9 @@ def _checked_plugins(cfg: LoopSettings, kinematic: bool, controller: Controller,
                                  ScenarioConfig.SPEED_BOUNDS_MPS[1])  # type: ignore[assignment]
     if cfg.controller._target_:
         vehicle = cfg.vehicle
-        low, high = cfg.controller.accel_bounds_mps2
         bounds: tuple[tuple[float, float, str], ...] = (
-            (float(low), float(high), "acceleration m/s^2"),
+            (float(cfg.controller.accel_bounds_mps2[0]),
+             float(cfg.controller.accel_bounds_mps2[1]), "acceleration m/s^2"),
             (-vehicle.steering_max_rad, vehicle.steering_max_rad, "steering angle rad")) \
             if kinematic else ((-vehicle.steering_rate_max_rad_s,
                                 vehicle.steering_rate_max_rad_s, "steering rate rad/s"),)

@@ -118,7 +118,7 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass, replace
 from math import cos, sin
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, TypeVar
 
 import numpy as np
 
@@ -127,6 +127,7 @@ from pipeline.loop.controller.base import ControlStep, Observation
 from pipeline.loop.controller.kinematic import KinematicLtvMpc
 from pipeline.loop.controller.lateral import LateralMpc
 from pipeline.loop.controller.qp import CvxpyQp, DirectQp, QpCache, compiled_backend
+from pipeline.loop.controller_settings import KinematicMpcSettings, MpcSettings, settings_of
 from pipeline.loop.model import kinematic_euler_step, kinematic_jacobians
 from pipeline.loop.scenario import LineFrame
 from pipeline.loop.settings import ControllerConfig, VehicleConfig
@@ -440,7 +441,7 @@ class CbfSafetyFilter:
                             elapsed)
 
 
-def _attach_filter(peer: Any, controller_cfg: ControllerConfig, nominal: Any,
+def _attach_filter(peer: Any, controller_cfg: MpcSettings | KinematicMpcSettings, nominal: Any,
                    lower: tuple[float, ...], upper: tuple[float, ...],
                    scale: tuple[float, ...], qp_cache: QpCache | None) -> None:
     """What both filters share: the nominal controller, the CBF-QP for inputs within
@@ -455,14 +456,21 @@ def _attach_filter(peer: Any, controller_cfg: ControllerConfig, nominal: Any,
     peer.compile_time_s = nominal.compile_time_s + peer.filter.compile_time_s
 
 
-def _check_kind(controller_cfg: ControllerConfig, kind: str, cls: str) -> None:
-    """The nominal controller's kind and backend this filter wraps."""
-    if controller_cfg.kind != kind:
+#: The settings a filter's nominal MPC has (either track's).
+NominalSettings = TypeVar("NominalSettings", MpcSettings, KinematicMpcSettings)
+
+
+def _check_kind(controller_cfg: ControllerConfig, kind: type[NominalSettings], cls: str
+                ) -> NominalSettings:
+    """The nominal controller's settings this filter wraps: of its kind, on a QP backend."""
+    if controller_cfg.kind != kind.kind_word:
         raise ConfigError("controller.kind", controller_cfg.kind,
-                          f"{kind} with controller._target_={cls}")
-    if controller_cfg.backend == "nmpc":
-        raise ConfigError("controller.backend", controller_cfg.backend,
+                          f"{kind.kind_word} with controller._target_={cls}")
+    settings = settings_of(controller_cfg, kind)
+    if settings.backend == "nmpc":
+        raise ConfigError("controller.backend", settings.backend,
                           f"a QP backend (not nmpc) with controller._target_={cls}")
+    return settings
 
 
 def _log_columns(result: FilterResult, rows: CbfRows, correction: dict[str, float]
@@ -522,7 +530,8 @@ class LateralCbfFilter:
                  sample_time_s: float, qp_cache: QpCache | None = None) -> None:
         from pipeline.loop.simulate import run_kernels
 
-        _check_kind(controller_cfg, "mpc", "pipeline.peers.cbf_filter.LateralCbfFilter")
+        controller_cfg = _check_kind(controller_cfg, MpcSettings,
+                                     "pipeline.peers.cbf_filter.LateralCbfFilter")
         self.settings = CbfFilterSettings.of(dict(controller_cfg.params))
         if self.settings.accel_cost_ratio != 1.0:
             raise ConfigError("controller.params.accel_cost_ratio",
@@ -639,8 +648,8 @@ class KinematicCbfFilter:
 
     def __init__(self, controller_cfg: ControllerConfig, vehicle: VehicleConfig,
                  sample_time_s: float, qp_cache: QpCache | None = None) -> None:
-        _check_kind(controller_cfg, "kinematic_mpc",
-                    "pipeline.peers.cbf_filter.KinematicCbfFilter")
+        controller_cfg = _check_kind(controller_cfg, KinematicMpcSettings,
+                                     "pipeline.peers.cbf_filter.KinematicCbfFilter")
         self.settings = CbfFilterSettings.of(dict(controller_cfg.params))
         self.vehicle, self.ts = vehicle, float(sample_time_s)
         self.margin_m = controller_cfg.safety_margin_m

@@ -71,6 +71,7 @@ import numpy as np
 
 from pipeline.errors import ConfigError
 from pipeline.loop.controller.base import ControlStep, Observation
+from pipeline.loop.controller_settings import KinematicMpcSettings, settings_of
 from pipeline.loop.settings import ControllerConfig, VehicleConfig
 
 _TINY = 1e-9
@@ -291,7 +292,7 @@ class DynamicWindow:
 
     Parameters
     ----------
-    controller : ControllerConfig
+    controller : KinematicMpcSettings
         ``accel_bounds_mps2``, ``horizon`` (the length of the logged plan) and ``params``
         (:class:`DwaSettings`).
     vehicle : VehicleConfig
@@ -306,6 +307,7 @@ class DynamicWindow:
 
     def __init__(self, controller: ControllerConfig, vehicle: VehicleConfig,
                  sample_time_s: float, qp_cache: Any = None) -> None:
+        controller = settings_of(controller, KinematicMpcSettings)  # the kinematic track's
         self.settings = DwaSettings.from_params(controller.params)
         self.vehicle, self.ts = vehicle, float(sample_time_s)
         self.horizon = int(controller.horizon)

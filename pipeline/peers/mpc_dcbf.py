@@ -77,7 +77,7 @@ from pipeline.loop.controller.qp import QpCache, QpSolution, compiled_backend
 from pipeline.loop.controller.references import constrains
 from pipeline.loop.controller_settings import KinematicMpcSettings, MpcSettings, settings_of
 from pipeline.loop.scenario import ObstacleSnapshot
-from pipeline.loop.settings import ControllerConfig, VehicleConfig
+from pipeline.loop.settings import VehicleConfig
 from pipeline.peers.side_rule import sided_normals
 
 if TYPE_CHECKING:
@@ -132,7 +132,7 @@ class DcbfParams:
 
 
 def _params_of(controller: Any) -> DcbfParams:
-    """:class:`DcbfParams` of a ``ControllerConfig`` (defaults for settings without params)."""
+    """:class:`DcbfParams` of a controller's settings (defaults for settings without params)."""
     return DcbfParams.of(getattr(controller, "params", None))
 
 
@@ -176,7 +176,7 @@ class LateralMpcDcbf(LateralMpc):
 
     Parameters
     ----------
-    controller : ControllerConfig or MpcSettings
+    controller : MpcSettings
         ``kind=mpc``, ``frame=fixed``, a QP backend (not nmpc);
         ``params``: :class:`DcbfParams`.
     vehicle : VehicleConfig
@@ -189,7 +189,7 @@ class LateralMpcDcbf(LateralMpc):
     :class:`~pipeline.loop.settings.ModelConfig`'s defaults (those of ``conf/config.yaml``).
     """
 
-    def __init__(self, controller: ControllerConfig | MpcSettings, vehicle: VehicleConfig,
+    def __init__(self, controller: MpcSettings, vehicle: VehicleConfig,
                  sample_time_s: float = 0.1, qp_cache: QpCache | None = None) -> None:
         kind = getattr(controller, "kind", "mpc")
         if kind != "mpc":
@@ -392,7 +392,7 @@ class KinematicMpcDcbf(KinematicLtvMpc):
 
     Parameters
     ----------
-    controller : ControllerConfig or KinematicMpcSettings
+    controller : KinematicMpcSettings
         ``kind=kinematic_mpc``, backend ``clarabel_direct`` or ``cvxpy``; ``params``:
         :class:`DcbfParams`.
     vehicle : VehicleConfig
@@ -400,7 +400,7 @@ class KinematicMpcDcbf(KinematicLtvMpc):
     qp_cache : QpCache, optional
     """
 
-    def __init__(self, controller: ControllerConfig | KinematicMpcSettings,
+    def __init__(self, controller: KinematicMpcSettings,
                  vehicle: VehicleConfig, sample_time_s: float,
                  qp_cache: QpCache | None = None) -> None:
         kind = getattr(controller, "kind", "kinematic_mpc")

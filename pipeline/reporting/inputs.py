@@ -656,7 +656,7 @@ def _apf_alone(folder: Path, layout: OutputsLayout, skipped: list[Skipped]
     settings record them (``controller.collision_constraints``); a family made with them is
     skipped with its reason (it would not be the APF by itself). None when none is left."""
     return _families_made_with(
-        folder, layout, skipped, lambda settings: not settings.controller.collision_constraints,
+        folder, layout, skipped, lambda settings: not getattr(settings.controller, "collision_constraints", True),
         "APF-by-itself section: left out (made with the MPC's collision half-planes on)")
 
 
@@ -666,7 +666,7 @@ def _nmpc_family(folder: Path, layout: OutputsLayout, skipped: list[Skipped]
     settings record them (``controller.backend=nmpc``); any other is skipped with its reason
     (it would not be the judge of record). None when none is left."""
     return _families_made_with(
-        folder, layout, skipped, lambda settings: settings.controller.backend == "nmpc",
+        folder, layout, skipped, lambda settings: getattr(settings.controller, "backend", None) == "nmpc",
         "judge of record: left out (not made with controller.backend=nmpc)")
 
 

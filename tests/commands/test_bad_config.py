@@ -54,8 +54,14 @@ CASES = [
     (["scenario.obstacles.0.x_m=0.5", "scenario.obstacles.0.y_m=0.0",
       "scenario.obstacles.0.appear_time_s=0.0"], "scenario.obstacles[0]=[0.5, 0.0]",
      "does not overlap the vehicle"),
-    (["controller.accel_bounds_mps2=[3.0,-3.0]"], "controller.accel_bounds_mps2=[3.0, -3.0]",
-     "low < high"),
+    (["experiment=kinematic", "controller.accel_bounds_mps2=[3.0,-3.0]"],
+     "controller.accel_bounds_mps2=[3.0, -3.0]", "low < high"),
+    # a key of another controller kind: refused by the kind's schema, naming its keys
+    (["controller.accel_bounds_mps2=[-3.0,3.0]"], "controller.accel_bounds_mps2 is invalid",
+     "a key of MpcSettings"),
+    (["method=apf_pursuit", "controller.frame=fixed"], "controller.frame is invalid",
+     "controller=pure_pursuit"),
+    (["controller.kind=kinematic_mpc"], "controller.kind='kinematic_mpc'", "controller=kinematic"),
     (["scenario.obstacles=[]"], "scenario.obstacles=[]", "non-empty obstacle list"),
     # the paper scenario has no family: OmegaConf stops the override with a bare assertion
     (["scenario.family.n_jobs=1"], "scenario.family.n_jobs cannot be set: scenario.family is null",

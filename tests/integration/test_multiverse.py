@@ -162,9 +162,10 @@ def test_the_space_backend_is_the_lateral_mpcs_and_an_explicit_override_wins():
     # a run override names the backend: it wins over the space's
     user, _ = composer(["controller.backend=clarabel_direct"])
     assert family_config(row, SPACE, "baseline", user).controller.backend == "clarabel_direct"
-    # a controller without a condensed QP keeps its own backend (DAQP is no choice there)
+    # a controller without a QP has no backend at all (its kind's schema has no such key)
     pursuit = family_config(row, SPACE, "apf_pursuit", compose)
-    assert pursuit.controller.kind == "pure_pursuit" and pursuit.controller.backend != "daqp"
+    assert pursuit.controller.kind == "pure_pursuit" and not hasattr(pursuit.controller,
+                                                                     "backend")
     # what space.json records and the report says
     backends = {m: qp_backend(c) for m, c in (("improved", daqp), ("apf_pursuit", pursuit))}
     assert backends == {"improved": "daqp", "apf_pursuit": "no QP"}

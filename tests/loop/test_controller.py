@@ -448,16 +448,20 @@ def test_status_words_are_cvxpys_and_the_loop_imports_neither_cvxpy_nor_python_c
     assert out.stdout.strip() == "[]"
 
 
-def test_each_controller_kind_is_handed_its_own_typed_settings(make_config):
-    """The flat ``ControllerConfig`` (Hydra's schema, hashed as it is) is read once into the
-    settings of its kind; their choices are enums equal to the YAML's words, and the built-in
-    controller holds them (a ``ControllerConfig`` handed to a constructor is read the same)."""
+def test_each_controller_kind_has_its_own_schema(make_config):
+    """Each kind is composed into its own schema (no flat union, no copy): the built-in
+    controller holds the composed settings themselves; choices are words equal to their enums;
+    a key of another kind is refused at composition, and so is a kind that is not its
+    schema's (naming the file of the other kind); the weights read by name."""
+    from hydra.errors import ConfigCompositionException
+
     from pipeline.errors import ConfigError
     from pipeline.loop.controller import make_controller
     from pipeline.loop.controller_settings import (
-        Backend,
         Frame,
         KinematicMpcSettings,
+        KinematicWeights,
+        LateralWeights,
         MpcSettings,
         PurePursuitSettings,
         ReferenceAlignment,
@@ -467,17 +471,30 @@ def test_each_controller_kind_is_handed_its_own_typed_settings(make_config):
              "experiment=kinematic": KinematicMpcSettings}
     for override, kind in kinds.items():
         cfg = make_config([override])
-        settings = cfg.controller.settings()
-        assert type(settings) is kind and settings.kind == cfg.controller.kind
-        assert make_controller(cfg, 0.1).cfg == settings
-    cfg = make_config(["method=improved", "controller.frame=fixed"])
-    lateral = cfg.controller.settings()
-    assert lateral.frame is Frame.FIXED and lateral.frame == "fixed"
-    assert lateral.backend is Backend(cfg.controller.backend)
-    assert LateralMpc(cfg.controller, cfg.vehicle).cfg == lateral
-    kinematic = make_config(["experiment=kinematic",
-                             "controller.reference_alignment=path_speed"]).controller.settings()
-    assert kinematic.reference_alignment is ReferenceAlignment.PATH_SPEED
-    assert kinematic.accel_bounds_mps2 == (-3.0, 3.0)
+        assert type(cfg.controller) is kind and cfg.controller.kind == kind.kind_word
+        assert make_controller(cfg, 0.1).cfg is cfg.controller
+    assert not hasattr(make_config(["method=apf_pursuit"]).controller, "q_lateral")
+    assert not hasattr(make_config(["experiment=kinematic"]).controller, "frame")
+    assert not hasattr(make_config([]).controller, "accel_bounds_mps2")
+    cfg = make_config(["method=improved", "controller.frame=fixed", "controller.q_heading=7"])
+    assert cfg.controller.frame == Frame.FIXED and cfg.controller.frame == "fixed"
+    assert LateralMpc(cfg.controller, cfg.vehicle).cfg is cfg.controller
+    assert cfg.controller.weights == LateralWeights(10.0, 7.0, 0.1, 0.5, 1.0, 1.0e4, 1.0e3)
+    kinematic = make_config(["experiment=kinematic", "controller.reference_alignment=path_speed",
+                             "controller.input_weights=[0.2,0.3]"]).controller
+    assert kinematic.reference_alignment == ReferenceAlignment.PATH_SPEED
+    assert list(kinematic.accel_bounds_mps2) == [-3.0, 3.0]
+    assert kinematic.weights == KinematicWeights(1.0, 1.0, 0.2, 0.3, 0.01, 0.01, 1.0e4, 1.0e3)
     with pytest.raises(ConfigError, match="one of path, fixed"):
         make_config(["controller.frame=curved"])
+    for override in (["method=apf_pursuit", "controller.q_lateral=3"],
+                     ["experiment=kinematic", "controller.frame=fixed"],
+                     ["controller.lookahead_min_m=1"]):
+        with pytest.raises(ConfigCompositionException, match="Could not override"):
+            make_config(override)
+    with pytest.raises(ConfigError, match="controller=pure_pursuit") as refused:
+        make_config(["controller.kind=pure_pursuit"])
+    assert refused.value.key == "controller.kind"
+    with pytest.raises(ConfigError, match="for this controller"):
+        LateralMpc(make_config(["experiment=kinematic"]).controller,
+                   make_config([]).vehicle)

@@ -219,14 +219,14 @@ def test_ltv_and_nmpc_agree_near_a_straight_line(make_config):
 
 
 def test_nmpc_backend_needs_a_model(make_config):
-    """backend=nmpc on both MPC tracks (the lateral one: LateralNmpc), refused for pure
-    pursuit, which has no model to make a nonlinear program of."""
-    from pipeline.errors import ConfigError
+    """backend=nmpc on both MPC tracks (the lateral one: LateralNmpc); pure pursuit, which
+    has no model to make a nonlinear program of, has no backend key at all."""
+    from hydra.errors import ConfigCompositionException
+
     from pipeline.loop.controller import make_controller
     from pipeline.loop.controller.lateral_nmpc import LateralNmpc
 
-    with pytest.raises(ConfigError, match="nmpc only with controller.kind=mpc or "
-                                          "kinematic_mpc"):
+    with pytest.raises(ConfigCompositionException, match="controller.backend"):
         make_config(["method=apf_pursuit", "controller.backend=nmpc"])
     cfg = make_config(["controller.backend=nmpc"])
     assert isinstance(make_controller(cfg, 0.1), LateralNmpc)

@@ -100,13 +100,13 @@ def test_settings_read_back_equal_a_fresh_composition(user_runs):
     import yaml
     from omegaconf import OmegaConf
 
-    from pipeline.config import ExperimentConfig, experiment_config_from_data
+    from pipeline.config import experiment_config_from_data, to_experiment_config
     from pipeline.errors import ConfigError
 
     data = yaml.safe_load((user_runs / "family" / "baseline" / "member_0003" / "config.yaml")
                           .read_text())
     fast = experiment_config_from_data(data)
-    slow = OmegaConf.to_object(OmegaConf.merge(OmegaConf.structured(ExperimentConfig), data))
+    slow = to_experiment_config(OmegaConf.create(data))
     assert fast == slow and fast.config_hash() == slow.config_hash()
     data["scenario"]["obstacles"][0]["foo"] = 1
     with pytest.raises(ConfigError, match=r"scenario\.obstacles\[0\]\.foo"):

@@ -23,7 +23,8 @@ the new key metrics.attribution_switch_samples changes the hash; no pinned numbe
 APF rollout itself as the lateral MPC's reference (issue 56: controller.path_reference=rollout,
 new keys change the hash, every lateral number moves) with the answer's statistics (issue 56:
 9,999 resamples and their Monte-Carlo resolution, the worst-rank sensitivity, the answer-wide
-Holm gate: new ledger columns).
+Holm gate: new ledger columns); one schema per controller kind (issue 57: a run's controller
+section holds its kind's keys only, so every hash changes; no pinned number moves).
 """
 
 from __future__ import annotations
@@ -40,7 +41,7 @@ from pipeline.run import run_experiment, run_family
 from pipeline.store.runs import read_run
 from pipeline.studies.verify import compare_tables
 
-DEFAULT_CONFIG_HASH = "232c8d12c1d77393"
+DEFAULT_CONFIG_HASH = "c3169d33ead55c88"
 PINS = Path(__file__).resolve().parents[1] / "data" / "pins"
 METHODS = ("improved", "baseline", "baseline_matched")
 UPDATE = os.environ.get("PIPELINE_UPDATE_PINS") == "1"

@@ -45,11 +45,10 @@ __all__ = ["ControlStep", "Controller", "Observation", "PlanFallback", "Kinemati
 def make_controller(cfg: LoopSettings, sample_time_s: float,
                     qp_cache: QpCache | None = None, kernels: Kernels | None = None
                     ) -> Controller:
-    """The controller ``cfg.controller._target_`` names (a user's class, built with the flat
-    ``ControllerConfig``), else the built-in named by ``cfg.controller.kind``, built with the
-    settings of its kind (:meth:`ControllerConfig.settings
-    <pipeline.loop.settings.ControllerConfig.settings>`), its QP taken from ``qp_cache``, its
-    innermost arithmetic run by ``kernels`` (CPython's when omitted)."""
+    """The controller ``cfg.controller._target_`` names (a user's class, built with its
+    kind's settings), else the built-in named by ``cfg.controller.kind``, built with the
+    settings of its kind (:mod:`pipeline.loop.controller_settings`), its QP taken from
+    ``qp_cache``, its innermost arithmetic run by ``kernels`` (CPython's when omitted)."""
     if cfg.controller._target_:
         # a controller of your own: step(Observation) -> ControlStep (see base.Controller)
         from pipeline.validation import build_target
@@ -57,17 +56,17 @@ def make_controller(cfg: LoopSettings, sample_time_s: float,
         return build_target("controller._target_", cfg.controller._target_,
                             (cfg.controller, cfg.vehicle, sample_time_s, qp_cache),
                             "Controller(settings, vehicle, sample_time_s, qp_cache)")
-    settings = cfg.controller.settings()
+    settings = cfg.controller
     if isinstance(settings, KinematicMpcSettings):
-        if settings.backend is Backend.NMPC:
+        if settings.backend == Backend.NMPC:
             from pipeline.loop.controller.nmpc import KinematicNmpc
 
             return KinematicNmpc(settings, cfg.vehicle, sample_time_s, qp_cache)
         return KinematicLtvMpc(settings, cfg.vehicle, sample_time_s, qp_cache)
     if isinstance(settings, PurePursuitSettings):
-        # (ControllerConfig refuses backend=nmpc with pure pursuit)
+        # (pure pursuit has no backend: no nonlinear program without a model)
         return PurePursuit(settings, cfg.vehicle, sample_time_s, cfg.model.speed_grid_mps)
-    if settings.backend is Backend.NMPC:
+    if settings.backend == Backend.NMPC:
         from pipeline.loop.controller.lateral_nmpc import LateralNmpc
 
         return LateralNmpc(settings, cfg.vehicle, cfg.model, sample_time_s, qp_cache, kernels)

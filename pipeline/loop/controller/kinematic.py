@@ -22,7 +22,7 @@ from pipeline.loop.controller.qp import QpCache, QpSolution, compiled_backend
 from pipeline.loop.controller.references import kinematic_halfplanes
 from pipeline.loop.controller_settings import KinematicMpcSettings, settings_of
 from pipeline.loop.planner import path_at_arc_length
-from pipeline.loop.settings import ControllerConfig, VehicleConfig
+from pipeline.loop.settings import VehicleConfig
 
 if TYPE_CHECKING:
     import cvxpy as cp
@@ -49,7 +49,7 @@ class KinematicQpStructure:
     steering_max_rad: float
 
     @classmethod
-    def of(cls, c: KinematicMpcSettings | ControllerConfig,
+    def of(cls, c: KinematicMpcSettings,
            vehicle: VehicleConfig) -> KinematicQpStructure:
         return cls(c.horizon, c.control_horizon, c.max_obstacles, c.input_hold,
                    tuple(c.output_weights), tuple(c.input_weights), tuple(c.input_rate_weights),
@@ -220,13 +220,13 @@ class KinematicLtvMpc(KinematicTrack):
     Parameters
     ----------
     controller : KinematicMpcSettings
-        Its settings (a ``ControllerConfig`` is read into them).
+        Its settings (its kind's schema, as composed).
     vehicle : VehicleConfig
     sample_time_s : float
     qp_cache : QpCache, optional
     """
 
-    def __init__(self, controller: KinematicMpcSettings | ControllerConfig,
+    def __init__(self, controller: KinematicMpcSettings,
                  vehicle: VehicleConfig, sample_time_s: float,
                  qp_cache: QpCache | None = None) -> None:
         controller = settings_of(controller, KinematicMpcSettings)

@@ -41,7 +41,7 @@ from pipeline.loop.controller_settings import MpcSettings, settings_of
 from pipeline.loop.horizon import lateral_horizon_view
 from pipeline.loop.kernels import Kernels
 from pipeline.loop.model import LateralModel, vehicle_key
-from pipeline.loop.settings import ControllerConfig, ModelConfig, VehicleConfig
+from pipeline.loop.settings import ModelConfig, VehicleConfig
 
 __all__ = ["LateralMpc", "LateralQpStructure", "MpcInputs", "blocking_matrix",
            "condensed_data"]
@@ -54,7 +54,7 @@ class LateralMpc:
     Parameters
     ----------
     controller : MpcSettings
-        Its settings (a ``ControllerConfig`` is read into them).
+        Its settings (its kind's schema, as composed).
     vehicle : VehicleConfig
     model : ModelConfig
         The lateral model's settings (B2 entry, speed grid).
@@ -73,7 +73,7 @@ class LateralMpc:
         What each step predicted with (:meth:`model_check`).
     """
 
-    def __init__(self, controller: MpcSettings | ControllerConfig, vehicle: VehicleConfig,
+    def __init__(self, controller: MpcSettings, vehicle: VehicleConfig,
                  model: ModelConfig | None = None, sample_time_s: float = 0.1,
                  qp_cache: QpCache | None = None, kernels: Kernels | None = None) -> None:
         controller = settings_of(controller, MpcSettings)

@@ -39,7 +39,7 @@ from pipeline.loop.controller.qp import QpCache
 from pipeline.loop.controller_settings import Backend, MpcSettings, settings_of
 from pipeline.loop.kernels import Kernels
 from pipeline.loop.model import single_track_constants
-from pipeline.loop.settings import ControllerConfig, ModelConfig, VehicleConfig
+from pipeline.loop.settings import ModelConfig, VehicleConfig
 
 
 @dataclass(frozen=True)
@@ -140,7 +140,7 @@ class LateralNmpc(LateralMpc):
         own, once).
     """
 
-    def __init__(self, controller: MpcSettings | ControllerConfig, vehicle: VehicleConfig,
+    def __init__(self, controller: MpcSettings, vehicle: VehicleConfig,
                  model: ModelConfig | None = None, sample_time_s: float = 0.1,
                  qp_cache: QpCache | None = None, kernels: Kernels | None = None) -> None:
         controller = settings_of(controller, MpcSettings)

@@ -33,13 +33,13 @@ one :class:`~pipeline.loop.controller.lateral_backends.DaqpCondensedQp` hands DA
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any, NamedTuple
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from pipeline.loop.controller_settings import MpcSettings
+from pipeline.loop.controller_settings import LateralWeights, MpcSettings
 from pipeline.loop.model import LateralModel
-from pipeline.loop.settings import ControllerConfig, VehicleConfig
+from pipeline.loop.settings import VehicleConfig
 
 if TYPE_CHECKING:
     import cvxpy as cp
@@ -70,35 +70,6 @@ class MpcInputs:
             else np.zeros(self.y_ref_m.shape[0])
 
 
-class LateralWeights(NamedTuple):
-    """The lateral MPC's cost weights by name (a named tuple: numba takes it, a cache key
-    compares it as the tuple it is): the tracking weights on the lateral error, the heading
-    error, the yaw rate and the steering angle, the steering-rate weight, and the soft
-    collision constraints' linear and quadratic slack weights."""
-
-    q_lateral: float
-    q_heading: float
-    q_yaw_rate: float
-    q_steering: float
-    r_steering_rate: float
-    slack_linear: float
-    slack_quadratic: float
-
-    @classmethod
-    def of(cls, controller: Any) -> LateralWeights:
-        """The weights of a controller's settings (``q_lateral`` ... ``slack_weight_*``)."""
-        c = controller
-        return cls(float(c.q_lateral), float(c.q_heading), float(c.q_yaw_rate),
-                   float(c.q_steering), float(c.r_steering_rate),
-                   float(c.slack_weight_linear), float(c.slack_weight_quadratic))
-
-    @property
-    def tracking(self) -> tuple[float, float, float, float, float]:
-        """The five weights of the tracking cost (the condensed prediction's)."""
-        return (self.q_lateral, self.q_heading, self.q_yaw_rate, self.q_steering,
-                self.r_steering_rate)
-
-
 #: The tracking weights of an unweighted prediction (all states at 1, no rate cost).
 UNIT_TRACKING = (1.0, 1.0, 1.0, 1.0, 0.0)
 
@@ -116,7 +87,7 @@ class LateralQpStructure:
     steering_max_rad: float
 
     @classmethod
-    def of(cls, controller: MpcSettings | ControllerConfig,
+    def of(cls, controller: MpcSettings,
            vehicle: VehicleConfig) -> LateralQpStructure:
         c = controller
         return cls(c.horizon, c.control_horizon, c.max_obstacles, c.input_hold,

@@ -36,7 +36,7 @@ from pipeline.loop.controller.lateral_qp import blocking_matrix
 from pipeline.loop.controller.qp import QpCache
 from pipeline.loop.controller.references import kinematic_halfplanes
 from pipeline.loop.controller_settings import KinematicMpcSettings, settings_of
-from pipeline.loop.settings import ControllerConfig, VehicleConfig
+from pipeline.loop.settings import VehicleConfig
 
 #: IPOPT's return status mapped to the status words the log uses (CVXPY's).
 IPOPT_STATUS = {"Solve_Succeeded": "optimal", "Solved_To_Acceptable_Level": "optimal_inaccurate",
@@ -145,7 +145,7 @@ class KinematicNmpc(KinematicTrack):
     Parameters
     ----------
     controller : KinematicMpcSettings
-        Its settings (a ``ControllerConfig`` is read into them).
+        Its settings (its kind's schema, as composed).
     vehicle : VehicleConfig
     sample_time_s : float
     qp_cache : QpCache, optional
@@ -153,7 +153,7 @@ class KinematicNmpc(KinematicTrack):
         worker processes: each worker builds its own, once).
     """
 
-    def __init__(self, controller: KinematicMpcSettings | ControllerConfig,
+    def __init__(self, controller: KinematicMpcSettings,
                  vehicle: VehicleConfig, sample_time_s: float,
                  qp_cache: QpCache | None = None) -> None:
         controller = settings_of(controller, KinematicMpcSettings)

@@ -8,13 +8,13 @@ from pipeline.loop.controller.base import ControlStep, Observation
 from pipeline.loop.controller.references import lateral_reference
 from pipeline.loop.controller_settings import PurePursuitSettings, settings_of
 from pipeline.loop.model import model_speed_mps
-from pipeline.loop.settings import ControllerConfig, VehicleConfig
+from pipeline.loop.settings import VehicleConfig
 
 
 def pure_pursuit_steering_rate(path_line_m: np.ndarray, position_line_m: np.ndarray,
                                heading_line_rad: float, steering_rad: float, speed_mps: float,
                                vehicle: VehicleConfig,
-                               controller: PurePursuitSettings | ControllerConfig,
+                               controller: PurePursuitSettings,
                                sample_time_s: float) -> float:
     """Pure pursuit of the APF path: steering rate toward the pursuit angle.
 
@@ -51,7 +51,7 @@ class PurePursuit:
     Parameters
     ----------
     controller : PurePursuitSettings
-        Its settings (a ``ControllerConfig`` is read into them).
+        Its settings (its kind's schema, as composed).
     vehicle : VehicleConfig
     sample_time_s : float
     """
@@ -59,7 +59,7 @@ class PurePursuit:
     compile_count = 0
     compile_time_s = 0.0
 
-    def __init__(self, controller: PurePursuitSettings | ControllerConfig,
+    def __init__(self, controller: PurePursuitSettings,
                  vehicle: VehicleConfig, sample_time_s: float,
                  speed_grid_mps: float = 0.1) -> None:
         controller = settings_of(controller, PurePursuitSettings)

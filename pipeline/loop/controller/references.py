@@ -15,13 +15,13 @@ from pipeline.loop.controller_settings import (
     PurePursuitSettings,
 )
 from pipeline.loop.kernels import Kernels
-from pipeline.loop.settings import ControllerConfig, VehicleConfig
+from pipeline.loop.settings import VehicleConfig
 
 _NORMAL_EPS_M = 1e-6
 
 
 def lateral_reference(path_line_m: np.ndarray, stations_m: np.ndarray,
-                      controller: MpcSettings | PurePursuitSettings | ControllerConfig,
+                      controller: MpcSettings | PurePursuitSettings,
                       kernels: Kernels | None = None
                       ) -> tuple[np.ndarray, np.ndarray]:
     """Lateral and heading references at the MPC's predicted stations.
@@ -105,7 +105,7 @@ def reference_arrays(path_line_m: KernelValues, stations_m: KernelValues, max_sl
 
 def force_heading_reference(total_force_line: np.ndarray, heading_line_rad: float,
                             n_steps: int, sample_time_s: float,
-                            controller: MpcSettings | ControllerConfig) -> np.ndarray:
+                            controller: MpcSettings) -> np.ndarray:
     """Heading reference of Section 3.1: ramp toward ``psi_apf = atan2(F_y, F_x)`` at the
     saturated rate ``omega_ref = sat((psi_apf - theta)/Ts)``."""
     psi_apf = np.arctan2(total_force_line[1], total_force_line[0])
@@ -131,7 +131,7 @@ def radial_normals(points_m: np.ndarray, centres_m: np.ndarray,
 
 
 def constrains(distance_m: float,
-               controller: MpcSettings | KinematicMpcSettings | ControllerConfig) -> bool:
+               controller: MpcSettings | KinematicMpcSettings) -> bool:
     """Whether an obstacle ``distance_m`` from the vehicle gets collision half-planes: the
     MPC's collision constraints are on (``controller.collision_constraints``) and it is within
     ``controller.constraint_activation_m``. The one place both tracks' half-planes
@@ -143,7 +143,7 @@ def constrains(distance_m: float,
 
 def collision_halfplanes(stations_m: np.ndarray, y_ref_m: np.ndarray, vehicle_line_m: np.ndarray,
                          predicted_obstacles_line_m: np.ndarray, radii_m: np.ndarray,
-                         vehicle: VehicleConfig, controller: MpcSettings | ControllerConfig
+                         vehicle: VehicleConfig, controller: MpcSettings
                          ) -> tuple[np.ndarray, np.ndarray]:
     """Soft half-plane data ``G y_k + s >= h`` of the lateral MPC, per horizon step and obstacle.
 
@@ -223,7 +223,7 @@ def _radial_rows(stations_m: np.ndarray, y_ref_m: np.ndarray, obstacle: np.ndarr
 def kinematic_halfplanes(predicted_states: np.ndarray, reference_m: np.ndarray,
                          predicted_obstacles_m: np.ndarray, radii_m: np.ndarray,
                          vehicle: VehicleConfig,
-                         controller: KinematicMpcSettings | ControllerConfig
+                         controller: KinematicMpcSettings
                          ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Soft half-planes ``nx x_k + ny y_k + s >= h`` of the kinematic LTV-MPC (global frame).
 

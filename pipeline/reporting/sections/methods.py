@@ -100,11 +100,20 @@ def provenance(command: str) -> Provenance:
                       changed[:MODIFIED_SHOWN], len(changed))
 
 
+#: What the register shows for a key a run's settings do not have (a key of another controller
+#: kind: pure pursuit has no half-planes).
+NOT_A_KEY = "n/a (not a key of this run's settings)"
+
+
+class _Absent:
+    """A key a run's settings do not have (not a key of its controller kind's schema)."""
+
+
 def _lookup(config: dict, dotted: str):
     node = config
     for part in dotted.split("."):
         if not isinstance(node, dict) or part not in node:
-            return None
+            return _Absent()
         node = node[part]
     return node
 
@@ -118,6 +127,8 @@ def register_value(value: object) -> str:
         return ", ".join(f"{k} {v['margin']}" for k, v in value.items())
     if isinstance(value, dict) and "name" in value:
         return str(value["name"])
+    if isinstance(value, _Absent):
+        return NOT_A_KEY
     return "null (not set)" if value is None else str(value)
 
 

@@ -188,7 +188,8 @@ def pedestrians_section(inputs: ReportInputs, verdicts: Verdicts, figures: Figur
         "crossing_length_m": ped.crossing_length_m,
         "platform_speed_mps": list(ped.platform_speed_mps),
         "vehicle_radius_m": settings_cfg.vehicle.footprint_radius_m if settings_cfg else None,
-        "max_obstacles": settings_cfg.controller.max_obstacles if settings_cfg else None,
+        "max_obstacles": getattr(settings_cfg.controller, "max_obstacles", None)
+        if settings_cfg else None,
         "personal_space_m": ped.personal_space_m}
     scene_sizes = tuple((s, int((judged.tables[treatment]["scene"] == s).sum()))
                         for s in judged.scenes)

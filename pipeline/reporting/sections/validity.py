@@ -76,8 +76,9 @@ def validity_section(inputs: ReportInputs, verdicts: Verdicts) -> ValiditySectio
     families, others = inputs.validity.families, inputs.validity.other_frame
     config = families[0].config if families else None
     other = others[0].config if others else None
-    frame = config.controller.frame if config is not None else "path"
-    other_frame = other.controller.frame if other is not None else None
+    # (a kinematic or pursuit run has no frame: read as the default)
+    frame = getattr(config.controller, "frame", "path") if config is not None else "path"
+    other_frame = getattr(other.controller, "frame", None) if other is not None else None
     claim_rows = verdicts.validity.rows()
     rows = tuple({
         "track": r.track, "frame": r.frame, "method": r.method, "runs": r.runs,
