@@ -138,3 +138,35 @@ def test_the_report_command_ends_with_the_answer_in_words(user_runs, tmp_path, c
     assert lines[-len(answer):] == answer
     assert any(line.startswith("Primary comparison: improved vs baseline; every interval at ")
                for line in answer[:-len(last)])
+
+
+def test_a_run_folder_with_the_flat_controller_section_reads_as_its_kind(make_config):
+    """A config.yaml written before each controller kind had its schema (every kind's keys in
+    one section) reads back as its kind's settings with the same values; a key no schema ever
+    had is still refused by name."""
+    import dataclasses
+
+    from pipeline.config import experiment_config_from_data
+    from pipeline.errors import ConfigError
+    from pipeline.loop.controller_settings import KinematicMpcSettings, MpcSettings
+
+    flat_keys = {f.name: f.default for schema in (MpcSettings, KinematicMpcSettings)
+                 for f in dataclasses.fields(schema)
+                 if f.default is not dataclasses.MISSING}
+    for override, schema in (("method=improved", MpcSettings),
+                             ("experiment=kinematic", KinematicMpcSettings)):
+        cfg = make_config([override])
+        data = cfg.to_dict()
+        own = data["controller"]
+        # the old section: its own values over every other kind's keys
+        data["controller"] = {**flat_keys, "lookahead_min_m": 2.0, "lookahead_time_s": 0.8,
+                              "output_weights": [1.0, 1.0], "input_weights": [0.1, 0.1],
+                              "input_rate_weights": [0.01, 0.01],
+                              "accel_bounds_mps2": [-3.0, 3.0], **own}
+        assert len(data["controller"]) > len(own)
+        read = experiment_config_from_data(data)
+        assert type(read.controller) is schema and read == cfg
+        assert read.config_hash() == cfg.config_hash()
+    data["controller"] = {**own, "no_such_key": 1}
+    with pytest.raises(ConfigError, match=r"controller\.no_such_key"):
+        experiment_config_from_data(data)
