@@ -65,12 +65,23 @@ def _root_log_handlers_restored():
 
 @pytest.fixture(scope="session")
 def make_config():
-    """Factory: ``make_config(["planner=baseline", ...]) -> ExperimentConfig``."""
+    """Factory: ``make_config(["planner=baseline", ...]) -> ExperimentConfig``.
+
+    Hydra's compose costs about 0.15 s, more than a paper-scenario run; the suite asks for the
+    same few override lists hundreds of times. Each list is composed once per worker and every
+    call gets its own deep copy (a validated config is read-only, and a copy keeps one test's
+    list edits, should one make them, away from the next)."""
+    import copy
+
     register_configs()
+    composed: dict[tuple[str, ...], ExperimentConfig] = {}
 
     def _make(overrides: list[str] | None = None) -> ExperimentConfig:
-        with initialize_config_dir(config_dir=str(CONF_DIR), version_base="1.3"):
-            cfg = compose(config_name="config", overrides=list(overrides or []))
-        return to_experiment_config(cfg)
+        key = tuple(overrides or ())
+        if key not in composed:
+            with initialize_config_dir(config_dir=str(CONF_DIR), version_base="1.3"):
+                cfg = compose(config_name="config", overrides=list(key))
+            composed[key] = to_experiment_config(cfg)
+        return copy.deepcopy(composed[key])
 
     return _make

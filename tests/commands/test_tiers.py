@@ -12,22 +12,48 @@ from pathlib import Path
 TESTS = Path(__file__).resolve().parents[1]
 FOLDERS = {"loop", "analysis", "store", "studies", "reporting", "commands", "integration"}
 
+#: A plugin for one collection: every collected test's file and whether pytest marked it
+#: integration (one collection instead of one per marker expression).
+PROBE = '''
+import os
+import pytest
 
-def _collected(*marker: str) -> set[str]:
+
+@pytest.hookimpl(trylast=True)
+def pytest_collection_modifyitems(items):
+    with open(os.environ["TIER_PROBE_OUT"], "w") as out:
+        for item in items:
+            marked = item.get_closest_marker("integration") is not None
+            out.write(f"{item.nodeid.split('::')[0]}\\t{int(marked)}\\n")
+'''
+
+
+def _collected(tmp_path: Path) -> dict[str, set[bool]]:
+    """Each test file and the integration marks of its tests, as pytest collects them."""
+    (tmp_path / "tier_probe.py").write_text(PROBE)
+    out = tmp_path / "collected.tsv"
+    env = {**__import__("os").environ, "TIER_PROBE_OUT": str(out),
+           "PYTHONPATH": str(tmp_path)}
     proc = subprocess.run([sys.executable, "-m", "pytest", "--collect-only", "-q",
-                           "-p", "no:cacheprovider", *marker, str(TESTS)],
-                          capture_output=True, text=True, timeout=300, cwd=TESTS.parent)
+                           "-p", "no:cacheprovider", "-p", "tier_probe", str(TESTS)],
+                          capture_output=True, text=True, timeout=300, cwd=TESTS.parent, env=env)
     assert proc.returncode == 0, proc.stdout[-2000:] + proc.stderr[-2000:]
-    return {line.split("::")[0] for line in proc.stdout.splitlines() if "::" in line}
+    marks: dict[str, set[bool]] = {}
+    for line in out.read_text().splitlines():
+        path, marked = line.split("\t")
+        marks.setdefault(path, set()).add(marked == "1")
+    return marks
 
 
-def test_the_integration_marker_is_the_integration_folder():
-    marked = _collected("-m", "integration")
+def test_the_integration_marker_is_the_integration_folder(tmp_path):
+    marks = _collected(tmp_path)
+    marked = {path for path, m in marks.items() if True in m}
     expected = {f"tests/integration/{p.name}" for p in (TESTS / "integration").glob("test_*.py")
                 if "def test_" in p.read_text()}
     assert marked == expected and len(expected) >= 10
-    unmarked = _collected("-m", "not integration")
-    assert not {f for f in unmarked if f.startswith("tests/integration/")}
+    # every test of those files is marked, none elsewhere
+    assert all(marks[path] == {True} for path in expected)
+    unmarked = {path for path, m in marks.items() if m == {False}}
     assert {f.split("/")[1] for f in unmarked} == FOLDERS - {"integration"}
 
 
