@@ -2,6 +2,11 @@
 and its table of contents lists their entries from it (:func:`page_parts`); a study from outside
 the package adds its own section through the studies' registry (its entry's ``section``:
 ``key``, ``title``, ``template``, ``after``), placed after the section it names.
+
+The reference material (how each metric and rule is defined, the compute, the interpretation
+register, the provenance) stands on a second page beside the report, :data:`APPENDIX_PAGE`,
+linked from the contents, so that the page with the answer and its evidence reads in one go
+(issue 61: its height with every section open).
 """
 
 from __future__ import annotations
@@ -17,19 +22,23 @@ from pipeline.reporting.explorer import PAGE
 Entries = list[tuple[str, str]]
 #: the scenario explorer, beside the report's page
 EXPLORER_PAGE = PAGE
+#: the page of reference material beside the report's (the sections with ``appendix``)
+APPENDIX_PAGE = "appendix.html"
 
 
 @dataclass(frozen=True)
 class ReportSection:
     """One section: the page's value it shows (``key``), its template, its entries in the
     table of contents (from the page's values), whether it shows only beside the paper
-    scenario (a sweep-only page leaves it out) and whether it stands before the contents."""
+    scenario (a sweep-only page leaves it out), whether it stands before the contents and
+    whether it stands on the appendix page (:data:`APPENDIX_PAGE`)."""
 
     key: str
     template: str
     contents: Callable[[Mapping[str, Any]], Entries]
     paper_only: bool = False
     head: bool = False
+    appendix: bool = False
 
 
 def _when(key: str, anchor: str, title: str) -> Callable[[Mapping[str, Any]], Entries]:
@@ -61,8 +70,7 @@ SECTIONS: tuple[ReportSection, ...] = (
                   lambda page: [("claims", "Claims: the ledger")], paper_only=True),
     ReportSection("paper", "sections/paper.html.j2",
                   lambda page: [("paths", "Figures 2 and 3, face to face"),
-                                ("series", "Time series"),
-                                ("metrics", "All metrics, paper scenario")], paper_only=True),
+                                ("series", "Time series")], paper_only=True),
     ReportSection("family", "sections/family.html.j2",
                   _when("family", "family", "Scenario family"), paper_only=True),
     ReportSection("apf_alone", "sections/apf_alone.html.j2",
@@ -90,19 +98,29 @@ SECTIONS: tuple[ReportSection, ...] = (
     ReportSection("sweeps", "sections/sweeps.html.j2",
                   lambda page: [(f"sweep-{s.name}", f"Sweep: {s.name}")
                                 for s in page["sweeps"]]),
+    # reference material: the appendix page
+    ReportSection("paper", "sections/paper_metrics.html.j2",
+                  lambda page: [("metrics", "All metrics, paper scenario")], paper_only=True,
+                  appendix=True),
+    ReportSection("kinematic", "sections/kinematic_metrics.html.j2",
+                  _when("kinematic", "kinematic-metrics", "All metrics, Appendix-A track"),
+                  paper_only=True, appendix=True),
     ReportSection("methods", "sections/definitions.html.j2",
-                  lambda page: [("definitions", "Methods: metrics, margins, rules")]),
+                  lambda page: [("definitions", "Methods: metrics, margins, rules")],
+                  appendix=True),
     ReportSection("methods", "sections/compute.html.j2",
-                  lambda page: [("compute", "Compute")] if page.get("paper") else []),
+                  lambda page: [("compute", "Compute")] if page.get("paper") else [],
+                  appendix=True),
     ReportSection("performance", "sections/performance.html.j2",
                   _when("performance", "performance", "Performance")),
     ReportSection("commonroad", "sections/commonroad.html.j2",
                   _when("commonroad", "commonroad", "CommonRoad scenarios")),
     ReportSection("given", "sections/given.html.j2", _given),
     ReportSection("methods", "sections/register.html.j2",
-                  lambda page: [("register", "Interpretation register")]),
+                  lambda page: [("register", "Interpretation register")], appendix=True),
     ReportSection("methods", "sections/provenance.html.j2",
-                  lambda page: [("provenance", "Provenance and how to rebuild")]),
+                  lambda page: [("provenance", "Provenance and how to rebuild")],
+                  appendix=True),
 )
 
 
@@ -130,10 +148,13 @@ def sections(studies: tuple = ()) -> tuple[ReportSection, ...]:
 
 
 def page_parts(page: Mapping[str, Any], studies: tuple = ()
-               ) -> tuple[list[str], Entries, list[str]]:
-    """The templates before the contents, the contents' entries and the templates after them,
-    for the page's values ``page`` (the sections of ``studies`` included)."""
+               ) -> tuple[list[str], Entries, list[str], list[str]]:
+    """The templates before the contents, the contents' entries (an appendix section's as a
+    place on :data:`APPENDIX_PAGE`), the templates after them and the appendix page's
+    templates, for the page's values ``page`` (the sections of ``studies`` included)."""
     shown = [s for s in sections(studies) if page.get("paper") or not s.paper_only]
     return ([s.template for s in shown if s.head],
-            [entry for s in shown for entry in s.contents(page)],
-            [s.template for s in shown if not s.head])
+            [(f"{APPENDIX_PAGE}#{anchor}" if s.appendix else anchor, title)
+             for s in shown for anchor, title in s.contents(page)],
+            [s.template for s in shown if not s.head and not s.appendix],
+            [s.template for s in shown if s.appendix])

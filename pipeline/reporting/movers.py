@@ -25,10 +25,6 @@ class Mover:
     d: float
     href: str
 
-    @property
-    def label(self) -> str:
-        return f"#{self.member} ({self.d:+.2g})"
-
 
 @dataclass(frozen=True)
 class Movers:

@@ -15,6 +15,7 @@ import time
 from pathlib import Path
 from typing import Any
 
+from pipeline.reporting.contents import APPENDIX_PAGE
 from pipeline.reporting.explorer import write_explorer
 from pipeline.reporting.figure import Figures
 from pipeline.reporting.figures import FigureWriter
@@ -94,7 +95,9 @@ def build_report(run_root: Path, out_dir: Path, command: str,
         page = build_page(inputs, verdicts, Figures(out_dir, writer), command, skipped)
     log.info("report: writing the page (%.0f s)", time.perf_counter() - started)
     path = out_dir / "index.html"
-    write_text_atomic(path, render(page))
+    main, appendix = render(page)
+    write_text_atomic(out_dir / APPENDIX_PAGE, appendix)
+    write_text_atomic(path, main)
     if page.answer.figure:  # the answer's figure beside the page, as the page inlines it
         write_text_atomic(out_dir / "figures" / "answer_claims.svg", page.answer.figure)
     # the answer in words, for the command line (make reproduce prints it at its end)

@@ -10,7 +10,7 @@ from typing import Any
 
 import jinja2
 
-from pipeline.reporting.contents import page_parts, study_template
+from pipeline.reporting.contents import APPENDIX_PAGE, page_parts, study_template
 from pipeline.reporting.explorer import explorer_href
 from pipeline.reporting.format import FILTERS, interval
 from pipeline.reporting.sections.ablation import AblationSection
@@ -74,12 +74,20 @@ def environment(studies: tuple = ()) -> jinja2.Environment:
     return env
 
 
-def render(page: Page) -> str:
-    """The page's HTML (every figure must be on disk: their PNGs are inlined)."""
+def render(page: Page) -> tuple[str, str]:
+    """The report's page and its appendix page (:data:`~pipeline.reporting.contents.APPENDIX_PAGE`)
+    as HTML (every figure must be on disk: their PNGs are inlined)."""
     context: dict[str, Any] = {f.name: getattr(page, f.name) for f in fields(page)
                                if f.name != "study_sections"}
     studies = tuple(study for study, _ in page.study_sections)
     context.update({study.section.key: value for study, value in page.study_sections})
-    head, contents, body = page_parts(context, studies)
-    return environment(studies).get_template("report.html.j2").render(
-        **context, head_sections=head, contents=contents, body_sections=body)
+    head, contents, body, appendix = page_parts(context, studies)
+    template = environment(studies).get_template("report.html.j2")
+    main = template.render(**context, head_sections=head, contents=contents,
+                           body_sections=body, appendix_page=False)
+    # the appendix: its own sections, its contents the places on it and the way back
+    own = [(anchor.split("#", 1)[1], title) for anchor, title in contents
+           if anchor.startswith(APPENDIX_PAGE + "#")]
+    return main, template.render(**context, head_sections=[],
+                                 contents=[("index.html", "Back to the report"), *own],
+                                 body_sections=appendix, appendix_page=True)

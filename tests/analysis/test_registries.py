@@ -98,8 +98,10 @@ def test_the_planted_claim_has_its_row_and_its_number(planted_report):
     walsh = (d[:, None] + d[None, :])[np.triu_indices(d.size)] / 2.0
     assert int(row["n_pairs"]) == d.size
     assert row["estimate"] == pytest.approx(float(np.median(walsh)), abs=1e-12)
+    # the Methods' margins on the appendix page beside the report
+    assert "five centimetres of clearance, the planted test" in \
+        (out / "appendix.html").read_text()
     html = (out / "index.html").read_text()
-    assert "five centimetres of clearance, the planted test" in html  # the Methods' margins
     family = html[html.index('id="family"'):]
     assert ">C9<" in family and "keeps more room to the obstacle" in html
 

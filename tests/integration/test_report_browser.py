@@ -101,6 +101,7 @@ def test_report_in_headless_chromium(report):
         page.wait_for_load_state("load")
         opened = page.evaluate("document.getElementById('paths').open")
         page.evaluate("document.querySelectorAll('details').forEach(d => d.open = true)")
+        open_height_1280 = page.evaluate("document.documentElement.scrollHeight")
         verdict_cell = page.locator("#claims table.ledger td strong").first.bounding_box()
         rendered = page.evaluate(
             "Array.from(document.querySelectorAll('figure img')).map(i => [i.alt, "
@@ -113,6 +114,17 @@ def test_report_in_headless_chromium(report):
         mover_links = page.evaluate(
             "Array.from(document.querySelectorAll('#claims .movers a')).map(a => "
             "a.getAttribute('href'))")
+        # the contents' link to the register opens it on the appendix page
+        page.goto(report.parent.joinpath("appendix.html").as_uri() + "#register")
+        page.wait_for_load_state("load")
+        appendix_register_open = page.evaluate("document.getElementById('register').open")
+        appendix_back = page.evaluate(
+            "document.querySelector('nav a').getAttribute('href')")
+        narrow_appendix = browser.new_page(viewport={"width": 390, "height": 844})
+        narrow_appendix.goto(report.parent.joinpath("appendix.html").as_uri())
+        narrow_appendix.evaluate(
+            "document.querySelectorAll('details').forEach(d => d.open = true)")
+        appendix_overflow = narrow_appendix.evaluate("document.documentElement.scrollWidth")
         narrow = browser.new_page(viewport={"width": 390, "height": 844})
         narrow.goto(report.as_uri())
         narrow_verdict = narrow.locator("#answer .verdict").first.bounding_box()
@@ -170,6 +182,11 @@ def test_report_in_headless_chromium(report):
     # the page's height at 1280 px with its sections closed: this fixture's page measured
     # 10,103 px before the sections closed; make reproduce's report 9,430 px (2,650 after)
     assert height_1280 <= 8000, height_1280
+    # with every section open, at most 25,000 px (issue 61; make reproduce's page: 24,509 px,
+    # its reference material on the appendix page); the appendix's contents lead back
+    assert open_height_1280 <= 25000, open_height_1280
+    assert appendix_register_open and appendix_back == "index.html"
+    assert appendix_overflow <= 390, appendix_overflow  # nothing scrolls sideways there either
     # at 390 px the answer's first verdict is on the first screen
     assert narrow_verdict is not None and narrow_verdict["y"] < 844
     # a narrow window does not scroll sideways (wide tables scroll inside their box), and the

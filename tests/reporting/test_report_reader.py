@@ -135,14 +135,47 @@ def test_the_register_shows_a_catalogue_by_its_margins_and_a_section_by_its_name
 
 
 def test_the_provenance_shows_diffs_and_links_every_whole_config(report):
-    out, page = report
+    out, _ = report
+    page = (out / "appendix.html").read_text()
     part = page[page.index('id="configs"'):]
     links = re.findall(r'<a href="(configs/[a-z_]+\.yaml)">', part[:part.index("</p>")])
     assert sorted(links) == ["configs/baseline.yaml", "configs/improved.yaml"]
     assert all((out / link).is_file() for link in links)
     assert "Resolved config" not in page and "<pre>" not in part
     diff = part[part.index("<table class=\"config-diff\">"):]
-    assert "<code>planner.name</code>" in diff[:diff.index("</table>")]
+    diff = diff[:diff.index("</table>")]
+    # one table: the reference's column, then each other method's; a method's name and
+    # presentation (label, colour, ...) are no difference of what it ran
+    assert re.findall(r'<th scope="col">([a-z_]+)</th>', diff) == ["key", "improved", "baseline"]
+    assert "<code>planner.name</code>" in diff and "<code>planner.beta</code>" in diff
+    assert "run.label" not in diff and "run.color" not in diff and "run.method" not in diff
+
+
+def test_reference_material_stands_on_the_appendix_page_and_every_link_lands(report):
+    """The definitions, compute, register, provenance and all-metrics table stand on
+    appendix.html beside the report (issue 61: the open page's height), listed in the report's
+    contents as places there; every in-page link of either page lands on an id of its page, and
+    every link across lands on an id of the other."""
+    from pipeline.reporting.contents import APPENDIX_PAGE
+
+    out, page = report
+    appendix = (out / APPENDIX_PAGE).read_text()
+
+    def ids(text: str) -> set[str]:
+        return set(re.findall(r'\bid="([^"]+)"', text))
+
+    main_ids, appendix_ids = ids(page), ids(appendix)
+    for anchor in ("definitions", "rules", "register", "provenance", "configs", "metrics"):
+        assert anchor in appendix_ids and anchor not in main_ids, anchor
+    for anchor in ("answer", "claims", "paths", "series", "family"):
+        assert anchor in main_ids and anchor not in appendix_ids, anchor
+    contents = page[page.index('<nav aria-label="Contents">'):page.index("</nav>")]
+    assert 'href="appendix.html#register"' in contents and 'href="#claims"' in contents
+    assert 'href="index.html"' in appendix
+    for text, own in ((page, main_ids), (appendix, appendix_ids)):
+        assert set(re.findall(r'href="#([^"]+)"', text)) <= own
+        assert set(re.findall(r'href="appendix\.html#([^"]+)"', text)) <= appendix_ids
+        assert set(re.findall(r'href="index\.html#([^"]+)"', text)) <= main_ids
 
 
 @pytest.mark.parametrize("args, text", [

@@ -140,7 +140,9 @@ def register_rows(configs_by_method: dict[str, dict]) -> list[dict]:
         # the value each run used, one line per distinct value ("all runs" when they agree)
         groups: dict[str, list[str]] = {}
         for method, config in configs_by_method.items():
-            value = "; ".join(register_value(_lookup(config, k)) for k in keys)
+            values = [register_value(_lookup(config, k)) for k in keys]
+            # a run whose settings have none of the keys (pure pursuit's half-planes): once
+            value = NOT_A_KEY if set(values) == {NOT_A_KEY} else "; ".join(values)
             groups.setdefault(value, []).append(method)
         used = [("all runs" if len(groups) == 1 else ", ".join(methods), value)
                 for value, methods in groups.items()]

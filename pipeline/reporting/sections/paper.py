@@ -11,6 +11,7 @@ import pandas as pd
 import yaml
 
 from pipeline.analysis.claims import claims_of
+from pipeline.methods import PRESENTATION_KEYS
 from pipeline.reporting.figure import Figure, Figures
 from pipeline.reporting.figures import (
     apf_force_figure,
@@ -58,9 +59,12 @@ class PaperSection:
     run_dirs: dict[str, str]
     #: the method every other config is shown against (the treatment)
     config_reference: str = ""
-    #: each method's config as its difference from the reference's: (key, its value, the
-    #: reference's value; "(none)" where one has no such key)
-    config_diffs: dict[str, tuple[tuple[str, str, str], ...]] = field(default_factory=dict)
+    #: the other methods, in the columns of :attr:`config_diff_rows`
+    config_diff_methods: tuple[str, ...] = ()
+    #: every key where a method's config differs from the reference's, with the reference's
+    #: value and each other method's ("" where it is the reference's; "(none)" where one has
+    #: no such key); a method's name and presentation left out (:data:`NOT_RUN_KEYS`)
+    config_diff_rows: tuple[tuple[str, str, tuple[str, ...]], ...] = ()
     #: each method's whole resolved config, a file beside the page (path relative to it)
     config_files: dict[str, str] = field(default_factory=dict)
 
@@ -86,6 +90,28 @@ def config_diff(config: dict, reference: dict) -> tuple[tuple[str, str, str], ..
             for k, v in mine.items() if k not in theirs or theirs[k] != v]
     rows += [(k, missing, override_value(v)) for k, v in theirs.items() if k not in mine]
     return tuple(rows)
+
+
+#: What a method's config says that changes no run: its name and presentation (label,
+#: citation, description, colour, order, role; the glossary and the legends show them).
+NOT_RUN_KEYS = frozenset({"run.method"} | {f"run.{k}" for k in PRESENTATION_KEYS})
+
+
+def config_diff_table(configs: dict[str, dict], reference: str
+                      ) -> tuple[tuple[str, ...], tuple[tuple[str, str, tuple[str, ...]], ...]]:
+    """One table of every method's config against ``reference``'s: the other methods, and a
+    row per key where any differs (:func:`config_diff`'s order, method by method; keys in
+    :data:`NOT_RUN_KEYS` left out) with the reference's value and each method's, "" where it
+    equals the reference's."""
+    from pipeline.reporting.format import override_value
+
+    others = tuple(m for m in configs if m != reference)
+    diffs = {m: {key: value for key, value, _ in config_diff(configs[m], configs[reference])}
+             for m in others}
+    theirs = flat_config(configs[reference])
+    keys = list(dict.fromkeys(key for m in others for key in diffs[m] if key not in NOT_RUN_KEYS))
+    return others, tuple((key, override_value(theirs[key]) if key in theirs else "(none)",
+                          tuple(diffs[m].get(key, "") for m in others)) for key in keys)
 
 
 def write_config_files(configs: dict[str, str], out_dir: Path) -> dict[str, str]:
@@ -132,6 +158,8 @@ def paper_section(inputs: ReportInputs, verdicts: Verdicts, figures: Figures
                    for m, r in by_method.items())
     configs = {m: yaml.safe_dump(r.config, sort_keys=False) for m, r in by_method.items()}
     reference = cfg.treatment if cfg.treatment in by_method else next(iter(by_method))
+    diff_methods, diff_rows = config_diff_table({m: r.config for m, r in by_method.items()},
+                                                reference)
     return PaperSection(
         scenario=runs.scenario, methods=tuple(runs.methods), figures=tuple(drawn),
         metric_rows=metric_rows(runs), timing_rows=timing,
@@ -141,8 +169,7 @@ def paper_section(inputs: ReportInputs, verdicts: Verdicts, figures: Figures
         hashes={m: r.record.info.config_hash for m, r in by_method.items()},
         run_dirs={m: str(r.folder) for m, r in by_method.items()},
         config_reference=reference,
-        config_diffs={m: config_diff(r.config, by_method[reference].config)
-                      for m, r in by_method.items() if m != reference},
+        config_diff_methods=diff_methods, config_diff_rows=diff_rows,
         config_files=write_config_files(configs, figures.out_dir))
 
 
