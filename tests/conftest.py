@@ -32,7 +32,8 @@ LONGEST_FILES_FIRST = ("test_tune.py", "test_multiverse.py", "test_hardening.py"
 
 #: The integration tier (marker ``integration``): the files of ``tests/integration/``, whole
 #: studies and the machine around the package (the wheel and make install, the tune, the
-#: multiverse, the browser, SLURM, make targets). CI runs it; ``make test FAST=1`` leaves it out.
+#: multiverse, the browser, SLURM, make targets, processes signalled and plug-ins from outside
+#: the package). CI runs it; ``make test FAST=1`` leaves it out.
 #: The folder is the tier: a file moved there is marked, nothing else is.
 INTEGRATION_FOLDER = Path(__file__).resolve().parent / "integration"
 

@@ -1,13 +1,8 @@
-"""Solver faults in the closed loop, numerical edge cases, interrupted sweeps."""
+"""Solver faults in the closed loop and numerical edge cases (an interrupted sweep: tests/integration/test_processes.py)."""
 
 from __future__ import annotations
 
 import json
-import os
-import signal
-import subprocess
-import sys
-import time
 
 import cvxpy as cp
 import numpy as np
@@ -104,33 +99,3 @@ def test_far_obstacle_adds_no_constraint_and_no_repulsion(make_config, tmp_path)
     tr = pd.read_csv(tmp_path / "trajectory.csv")
     assert (tr["apf_rep_norm"].fillna(0) == 0).all()
     assert tr["e_y_m"].abs().max() < 1e-6
-
-
-SWEEP = ["-m", "method=baseline,improved", "scenario=family", "scenario.family.size=2",
-         "scenario.family.n_jobs=1", "scenario.family.seed=0,1"]
-
-
-def test_sweep_killed_with_sigkill_then_resumed_equals_an_uninterrupted_one(tmp_path):
-    clean, broken = tmp_path / "clean", tmp_path / "broken"
-    command = [sys.executable, "-m", "pipeline.run", *SWEEP]
-    subprocess.run(command + [f"hydra.sweep.dir={clean}"], check=True, capture_output=True,
-                   timeout=600)
-    proc = subprocess.Popen(command + [f"hydra.sweep.dir={broken}"], stdout=subprocess.DEVNULL,
-                            stderr=subprocess.DEVNULL, start_new_session=True)
-    deadline = time.time() + 300
-    while time.time() < deadline and not list(broken.glob("*/family.json")):
-        time.sleep(0.05)
-    os.killpg(proc.pid, signal.SIGKILL)
-    proc.wait()
-    finished_before = len(list(broken.glob("*/family.json")))
-    assert 1 <= finished_before < 4, "the kill did not land half-way"
-    subprocess.run(command + [f"hydra.sweep.dir={broken}"], check=True, capture_output=True,
-                   timeout=600)
-    assert not list(broken.rglob("*.tmp")), "a half-written file survived"
-    assert len(list(broken.glob("*/family.json"))) == 4
-    for job in sorted(clean.glob("*/family_metrics.csv")):
-        twin = broken / job.parent.name / "family_metrics.csv"
-        assert twin.read_bytes() == job.read_bytes(), job.parent.name
-    a, b = pd.read_csv(clean / "summary.csv"), pd.read_csv(broken / "summary.csv")
-    pd.testing.assert_frame_equal(a, b)
-
