@@ -358,6 +358,7 @@ def build_kinematic_dcbf_problem(s: KinematicDcbfStructure
     wy = np.asarray(b.output_weights, float)[:, None]
     wu = np.asarray(b.input_weights, float)[:, None]
     wdu = np.asarray(b.input_rate_weights, float)[:, None]
+    slack_linear, slack_quadratic = b.slack_weights  # the soft rows' (w1, w2)
     rates = cp.hstack([cp.reshape(u_seq[:, 0] - u_prev, (2, 1), order="F"),
                        u_seq[:, 1:] - u_seq[:, :-1]])
     ones = np.ones((1, M))
@@ -368,7 +369,7 @@ def build_kinematic_dcbf_problem(s: KinematicDcbfStructure
     cost = (cp.sum_squares(cp.multiply(wy, X[0:2, 1:] - ref))
             + cp.sum_squares(cp.multiply(wu, u_seq))
             + cp.sum_squares(cp.multiply(wdu, rates))
-            + b.slack_weights[0] * cp.sum(S) + b.slack_weights[1] * cp.sum_squares(S))
+            + slack_linear * cp.sum(S) + slack_quadratic * cp.sum_squares(S))
     a_lo, a_hi = b.accel_bounds_mps2
     constraints = [X[:, 0] == x0,
                    U[0, :] >= a_lo, U[0, :] <= a_hi,
