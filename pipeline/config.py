@@ -329,8 +329,9 @@ def typed_config(cfg: Any) -> Any:
     # a kind set to another is refused by that schema, naming the file of the other kind; a
     # section composed without one is read by its kind's
     composed = OmegaConf.get_type(cfg, "controller") if "controller" in cfg else None
-    schema.controller = OmegaConf.structured(
-        composed if composed in KIND_SETTINGS.values() else controller_schema(data.get("controller")))
+    kind_schema = composed if composed in KIND_SETTINGS.values() \
+        else controller_schema(data.get("controller"))
+    schema.controller = OmegaConf.structured(kind_schema)
     try:
         merged = OmegaConf.merge(schema, data)
     except ConfigKeyError as exc:

@@ -26,6 +26,13 @@ def at_least(key: str, value: Any, low: float, inclusive: bool = True) -> None:
         raise ConfigError(key, value, f"{'>=' if inclusive else '>'} {low}")
 
 
+def integer_in(key: str, value: Any, low: int, high: int, allowed: str | None = None) -> None:
+    """``value`` an integer (not a bool) in ``[low, high]``; else refused, with ``allowed``
+    as what is allowed (by default ``an integer in [low, high]``)."""
+    if isinstance(value, bool) or not isinstance(value, int) or not low <= value <= high:
+        raise ConfigError(key, value, allowed or f"an integer in [{low}, {high}]")
+
+
 def between(key: str, value: Any, low: float, high: float) -> None:
     v = finite(key, value)
     if not low <= v <= high:

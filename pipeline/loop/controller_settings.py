@@ -28,6 +28,7 @@ from pipeline.validation import (
     at_least,
     between,
     choice,
+    integer_in,
     pair,
     safe_name,
     target_path,
@@ -151,8 +152,8 @@ class _ControllerSchema(FrozenAfterValidation):
     params: Dict[str, Any] = field(default_factory=dict)
 
     def _check_common(self) -> None:
-        """The name, the kind (this schema's), the plug-in's path, horizons, slots and solver
-        iterations where the kind has them."""
+        """The name, the kind (this schema's), the plug-in's path and the horizon (every kind
+        has one: pure pursuit logs its references over it)."""
         target_path("controller._target_", self._target_)
         choice("controller.kind", self.kind, tuple(ControllerKind))
         if self.kind != self.kind_word:
@@ -161,29 +162,14 @@ class _ControllerSchema(FrozenAfterValidation):
                               f"another schema: controller="
                               f"{KIND_SETTINGS[ControllerKind(self.kind)].kind_file})")
         safe_name("controller.name", self.name)
-        for key in ("horizon", "control_horizon", "max_obstacles", "solver_max_iter"):
-            if not hasattr(self, key):
-                continue
-            value = getattr(self, key)
-            if isinstance(value, bool) or not isinstance(value, int):
-                raise ConfigError(f"controller.{key}", value, "an integer")
         horizon = self.horizon  # type: ignore[attr-defined]  # every kind has one
-        if not 1 <= horizon <= MAX_HORIZON:
+        memory = ""
+        if isinstance(horizon, int) and horizon > MAX_HORIZON:
             slots = getattr(self, "max_obstacles", 1)
             memory = (f" (the compiled QP grows with N: N = {horizon} would need about "
-                      f"{qp_memory_gib(horizon, slots):.3g} GiB)" if horizon > MAX_HORIZON
-                      else "")
-            raise ConfigError("controller.horizon", horizon,
-                              f"an integer in [1, {MAX_HORIZON}]{memory}")
-        if hasattr(self, "control_horizon") and not 1 <= self.control_horizon <= horizon:
-            raise ConfigError("controller.control_horizon", self.control_horizon,
-                              f"an integer in [1, controller.horizon={horizon}]")
-        if hasattr(self, "max_obstacles") and not 1 <= self.max_obstacles <= 50:
-            raise ConfigError("controller.max_obstacles", self.max_obstacles,
-                              "an integer in [1, 50]")
-        if hasattr(self, "solver_max_iter") and not 1 <= self.solver_max_iter <= 100000:
-            raise ConfigError("controller.solver_max_iter", self.solver_max_iter,
-                              "an integer in [1, 100000]")
+                      f"{qp_memory_gib(horizon, slots):.3g} GiB)")
+        integer_in("controller.horizon", horizon, 1, MAX_HORIZON,
+                   f"an integer in [1, {MAX_HORIZON}]{memory}")
 
 
 @dataclass
@@ -206,9 +192,14 @@ class _MpcSchema(_ControllerSchema):
     solver_max_iter: int = 200
 
     def _check_mpc(self) -> None:
-        """The common checks; the backend and which kinds it goes with; the half-planes'
-        weights, margin, reach and switch; the input hold."""
+        """The common checks; the control horizon, slots and iterations; the backend and which
+        kinds it goes with; the half-planes' weights, margin, reach and switch; the input
+        hold."""
         self._check_common()
+        integer_in("controller.control_horizon", self.control_horizon, 1, self.horizon,
+                   f"an integer in [1, controller.horizon={self.horizon}]")
+        integer_in("controller.max_obstacles", self.max_obstacles, 1, 50)
+        integer_in("controller.solver_max_iter", self.solver_max_iter, 1, 100000)
         choice("controller.backend", self.backend, tuple(Backend),
                REMOVED_CHOICES["controller.backend"])
         if self.backend == "daqp" and self.kind_word != ControllerKind.MPC:
@@ -263,10 +254,7 @@ class MpcSettings(_MpcSchema):
 
     def __post_init__(self) -> None:
         self._check_mpc()
-        if isinstance(self.nmpc_substeps, bool) or not isinstance(self.nmpc_substeps, int) \
-                or not 1 <= self.nmpc_substeps <= 100:
-            raise ConfigError("controller.nmpc_substeps", self.nmpc_substeps,
-                              "an integer in [1, 100]")
+        integer_in("controller.nmpc_substeps", self.nmpc_substeps, 1, 100)
         choice("controller.formulation", self.formulation, tuple(Formulation),
                REMOVED_CHOICES["controller.formulation"])
         choice("controller.halfplane_normal", self.halfplane_normal, tuple(HalfplaneNormal))
@@ -350,10 +338,7 @@ class KinematicMpcSettings(_MpcSchema):
         if not self.accel_bounds_mps2[0] < self.accel_bounds_mps2[1]:
             raise ConfigError("controller.accel_bounds_mps2", list(self.accel_bounds_mps2),
                               "[low, high] with low < high")
-        if isinstance(self.ltv_iterations, bool) or not isinstance(self.ltv_iterations, int) \
-                or not 1 <= self.ltv_iterations <= 50:
-            raise ConfigError("controller.ltv_iterations", self.ltv_iterations,
-                              "an integer in [1, 50]")
+        integer_in("controller.ltv_iterations", self.ltv_iterations, 1, 50)
         choice("controller.reference_alignment", self.reference_alignment,
                tuple(ReferenceAlignment))
 

@@ -148,13 +148,15 @@ def sections(studies: tuple = ()) -> tuple[ReportSection, ...]:
 
 
 def page_parts(page: Mapping[str, Any], studies: tuple = ()
-               ) -> tuple[list[str], Entries, list[str], list[str]]:
-    """The templates before the contents, the contents' entries (an appendix section's as a
-    place on :data:`APPENDIX_PAGE`), the templates after them and the appendix page's
-    templates, for the page's values ``page`` (the sections of ``studies`` included)."""
+               ) -> tuple[list[str], Entries, list[str], list[str], Entries]:
+    """For the page's values ``page`` (the sections of ``studies`` included): the templates
+    before the contents, the contents' entries (an appendix section's as a place on
+    :data:`APPENDIX_PAGE`), the templates after them, and the appendix page's templates and
+    entries."""
     shown = [s for s in sections(studies) if page.get("paper") or not s.paper_only]
     return ([s.template for s in shown if s.head],
             [(f"{APPENDIX_PAGE}#{anchor}" if s.appendix else anchor, title)
              for s in shown for anchor, title in s.contents(page)],
             [s.template for s in shown if not s.head and not s.appendix],
-            [s.template for s in shown if s.appendix])
+            [s.template for s in shown if s.appendix],
+            [entry for s in shown if s.appendix for entry in s.contents(page)])

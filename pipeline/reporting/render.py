@@ -10,7 +10,7 @@ from typing import Any
 
 import jinja2
 
-from pipeline.reporting.contents import APPENDIX_PAGE, page_parts, study_template
+from pipeline.reporting.contents import page_parts, study_template
 from pipeline.reporting.explorer import explorer_href
 from pipeline.reporting.format import FILTERS, interval
 from pipeline.reporting.sections.ablation import AblationSection
@@ -81,13 +81,12 @@ def render(page: Page) -> tuple[str, str]:
                                if f.name != "study_sections"}
     studies = tuple(study for study, _ in page.study_sections)
     context.update({study.section.key: value for study, value in page.study_sections})
-    head, contents, body, appendix = page_parts(context, studies)
+    head, contents, body, appendix, appendix_contents = page_parts(context, studies)
     template = environment(studies).get_template("report.html.j2")
     main = template.render(**context, head_sections=head, contents=contents,
                            body_sections=body, appendix_page=False)
     # the appendix: its own sections, its contents the places on it and the way back
-    own = [(anchor.split("#", 1)[1], title) for anchor, title in contents
-           if anchor.startswith(APPENDIX_PAGE + "#")]
-    return main, template.render(**context, head_sections=[],
-                                 contents=[("index.html", "Back to the report"), *own],
-                                 body_sections=appendix, appendix_page=True)
+    return main, template.render(
+        **context, head_sections=[],
+        contents=[("index.html", "Back to the report"), *appendix_contents],
+        body_sections=appendix, appendix_page=True)

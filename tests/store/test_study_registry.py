@@ -155,10 +155,10 @@ def test_a_planted_study_without_its_result_shows_no_section(planted, monkeypatc
     study = next(s for s in load_studies() if s.name == "gate-count")
     assert isinstance(study.section, StudySection)
     page = {"paper": None, "sweeps": (), "given": _Given(), "gate_count": None}
-    _, contents, body, _ = page_parts(page, (study,))
+    _, contents, body, _, _ = page_parts(page, (study,))
     assert "gate-count" not in [a for a, _ in contents]
     page["gate_count"] = object()
-    _, contents, body, _ = page_parts(page, (study,))
+    _, contents, body, _, _ = page_parts(page, (study,))
     assert ("gate-count", "Gate count") in contents
     assert "study/gate_count.html.j2" in body
 

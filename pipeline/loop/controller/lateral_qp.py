@@ -91,7 +91,7 @@ class LateralQpStructure:
            vehicle: VehicleConfig) -> LateralQpStructure:
         c = controller
         return cls(c.horizon, c.control_horizon, c.max_obstacles, c.input_hold,
-                   LateralWeights.of(c), vehicle.steering_rate_max_rad_s, vehicle.steering_max_rad)
+                   c.weights, vehicle.steering_rate_max_rad_s, vehicle.steering_max_rad)
 
 
 def blocking_matrix(horizon: int, control_horizon: int, input_hold: str) -> np.ndarray:
