@@ -86,3 +86,48 @@ def make_config():
         return copy.deepcopy(composed[key])
 
     return _make
+
+
+def _file_states(root: Path) -> dict[str, tuple[int, int]]:
+    """Every file under ``root`` with its size and modification time (ns)."""
+    return {str(path.relative_to(root)): (path.stat().st_size, path.stat().st_mtime_ns)
+            for path in sorted(root.rglob("*")) if path.is_file()}
+
+
+@pytest.fixture(scope="session")
+def small_reproduce(tmp_path_factory, make_config) -> Path:
+    """``make reproduce`` in small, made once per worker: the paper scenario and a 6-member
+    family (``scenario=family``) of baseline and improved, in ``<root>/paper/<method>`` and
+    ``<root>/family/<method>``; returns ``<root>``.
+
+    Read-only: a test that changes, adds or damages files copies the folder first
+    (``shutil.copytree``). The teardown fails the session, naming the files, when any file in it
+    changed, so a test cannot hand the next one a changed folder. The report, the tables'
+    and the record tests read it (tests/reporting/test_report_reader.py, test_report_methods.py,
+    test_report_folders.py, tests/studies/test_run_records.py); a test that needs other
+    members (peers, pedestrians, a 30-step run for a clip, a three-member explorer) makes its
+    own."""
+    from pipeline.studies.experiment import run_experiment, run_family
+
+    root = tmp_path_factory.mktemp("small_reproduce") / "outputs"
+    for method in ("baseline", "improved"):
+        run_experiment(make_config([f"method={method}"]), root / "paper" / method)
+        run_family(make_config([f"method={method}", "scenario=family",
+                                "scenario.family.size=6", "scenario.family.n_jobs=1"]),
+                   root / "family" / method, progress=False, member_cache=None)
+    before = _file_states(root)
+    yield root
+    after = _file_states(root)
+    changed = sorted(name for name in set(before) | set(after)
+                     if before.get(name) != after.get(name))
+    assert not changed, f"a test changed the shared small_reproduce folder: {changed[:10]}"
+
+
+@pytest.fixture(scope="session")
+def small_report(small_reproduce, tmp_path_factory) -> Path:
+    """The report of :func:`small_reproduce` (its folder, with ``index.html``), made once per
+    worker; read-only like the runs."""
+    from pipeline.reporting.page import build_report
+
+    return build_report(small_reproduce, tmp_path_factory.mktemp("small_report"), "pytest",
+                        figure_jobs=1).parent

@@ -119,15 +119,12 @@ def _decode(path):
 
 
 @pytest.fixture(scope="module")
-def small_outputs(tmp_path_factory, make_config):
-    """A family of three members (baseline, improved), the paper scenario, a study's folder
-    and a peer on the family's scenarios (a copy of the baseline's family)."""
-    root = tmp_path_factory.mktemp("outputs")
-    for method in ("baseline", "improved"):
-        run_family(make_config([f"method={method}", "scenario=family", "scenario.family.size=3",
-                                "scenario.family.n_jobs=1"]), root / "family" / method,
-                   progress=False)
-        run_experiment(make_config([f"method={method}"]), root / "paper" / method)
+def small_outputs(tmp_path_factory, small_reproduce):
+    """The session's :func:`small_reproduce` (a family of six members and the paper scenario,
+    baseline and improved), copied with a study's folder and a peer on the family's scenarios
+    (a copy of the baseline's family) added."""
+    root = tmp_path_factory.mktemp("explorer") / "outputs"
+    shutil.copytree(small_reproduce, root)
     (root / "multiverse").mkdir()  # a study's section: never in the explorer
     shutil.copytree(root / "family" / "baseline", root / "peers" / "a_peer")
     return root
@@ -151,7 +148,7 @@ def test_every_member_gets_a_data_file_and_the_page_lists_it(small_outputs, tmp_
     assert colours["improved"] == colours["improved (family)"] == method_color("improved")
     assert colours["baseline"] == colours["baseline (family)"] == method_color("baseline")
     assert colours["a_peer"] == method_color("a_peer")
-    assert index.experiments["family"]["members"] == [0, 1, 2]
+    assert index.experiments["family"]["members"] == [0, 1, 2, 3, 4, 5]
     assert explorer_href("family", 2) == "explorer.html#family/2"
     key, data = _decode(out / "explorer_data" / "family" / "2.js")
     assert key == data["key"] == "family/2"
@@ -169,7 +166,7 @@ def test_every_member_gets_a_data_file_and_the_page_lists_it(small_outputs, tmp_
     assert data["start"] == list(run.config.scenario.start_xy_m)
     assert data["goal"] == list(run.config.scenario.goal_xy_m)
     page = (out / "explorer.html").read_text()
-    assert '"family":{"methods":["baseline","improved"],"members":[0,1,2]' in page
+    assert '"family":{"methods":["baseline","improved"],"members":[0,1,2,3,4,5]' in page
     assert "http://" not in page and "https://" not in page
     # written again with nothing changed: the data files are kept as they were
     before = (out / "explorer_data" / "family" / "1.js").stat().st_mtime_ns

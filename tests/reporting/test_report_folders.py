@@ -14,14 +14,13 @@ from pathlib import Path
 import pytest
 
 from pipeline.report import main
-from pipeline.studies.experiment import run_experiment
 
 
 @pytest.fixture(scope="module")
-def runs(tmp_path_factory, make_config) -> Path:
-    root = tmp_path_factory.mktemp("report_runs")
-    run_experiment(make_config(["method=improved"]), root / "paper" / "improved")
-    return root
+def runs(small_reproduce) -> Path:
+    """The session's :func:`small_reproduce` (read-only): the paper scenario and a family of
+    improved and the baseline."""
+    return small_reproduce
 
 
 @pytest.mark.parametrize("option, line", [

@@ -17,15 +17,13 @@ from hypothesis import strategies as st
 
 from pipeline.commands import CommandError
 from pipeline.report import _compared_methods, main, methods_in
-from pipeline.studies.experiment import run_experiment
 
 
 @pytest.fixture(scope="module")
-def runs(tmp_path_factory, make_config) -> Path:
-    root = tmp_path_factory.mktemp("report_runs")
-    for method in ("improved", "baseline"):
-        run_experiment(make_config([f"method={method}"]), root / "paper" / method)
-    return root
+def runs(small_reproduce) -> Path:
+    """The session's :func:`small_reproduce` (read-only): the paper scenario and a family of
+    improved and the baseline."""
+    return small_reproduce
 
 
 @pytest.mark.parametrize("options, line", [

@@ -47,26 +47,10 @@ def test_every_method_the_paper_or_we_add_says_what_it_is():
 
 
 @pytest.fixture(scope="module")
-def report(tmp_path_factory):
-    """improved and the baseline on the paper scenario and a 6-member family; the report."""
-    from hydra import compose, initialize_config_dir
-
-    from pipeline.config import CONF_DIR, register_configs, to_experiment_config
-    from pipeline.reporting.page import build_report
-    from pipeline.studies.experiment import run_experiment, run_family
-
-    def config(overrides):
-        register_configs()
-        with initialize_config_dir(config_dir=str(CONF_DIR), version_base="1.3"):
-            return to_experiment_config(compose(config_name="config", overrides=overrides))
-
-    root = tmp_path_factory.mktemp("outputs")
-    for method in ("baseline", "improved"):
-        run_experiment(config([f"method={method}"]), root / "paper" / method)
-        run_family(config([f"method={method}", "scenario=family"] + SIX),
-                   root / "family" / method, progress=False)
-    out = build_report(root, tmp_path_factory.mktemp("report"), "pytest", figure_jobs=1).parent
-    return out, (out / "index.html").read_text()
+def report(small_report):
+    """The report of improved and the baseline on the paper scenario and a 6-member family
+    (the session's :func:`small_report`)."""
+    return small_report, (small_report / "index.html").read_text()
 
 
 def test_every_name_of_the_answer_is_defined_on_hover_and_in_the_glossary(report):

@@ -21,19 +21,17 @@ from pipeline.studies.experiment import run_experiment, run_family
 
 
 @pytest.fixture(scope="module")
-def pristine_paper(tmp_path_factory, make_config):
-    """The paper scenario's baseline and improved runs, made once for the module."""
-    root = tmp_path_factory.mktemp("pristine") / "outputs"
-    for method in ("baseline", "improved"):
-        run_experiment(make_config([f"method={method}"]), root / "paper" / method)
-    return root
+def pristine_paper(small_reproduce):
+    """The paper scenario's baseline and improved runs: those of the session's
+    :func:`small_reproduce`, read-only (a test damages its own copy, :func:`paper`)."""
+    return small_reproduce
 
 
 @pytest.fixture()
 def paper(tmp_path, pristine_paper):
     """A test's own copy of :func:`pristine_paper` (files and their times), free to damage."""
     root = tmp_path / "outputs"
-    shutil.copytree(pristine_paper, root)
+    shutil.copytree(pristine_paper / "paper", root / "paper")
     return root
 
 
