@@ -46,7 +46,7 @@ def run(args: argparse.Namespace) -> int:
         return 2
     for method in methods:
         code = run_module.command(
-            ["scenario=commonroad", f"scenario.commonroad.path={args.scenario.resolve()}",
+            ["experiment=commonroad", f"scenario.commonroad.path={args.scenario}",
              f"method={method}", f"hydra.run.dir={args.out / args.scenario.stem / method}",
              *args.overrides], "apf-mpc commonroad")
         if code:

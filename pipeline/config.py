@@ -170,6 +170,7 @@ def _hash_of(data: dict) -> str:
     for section in ("planner", "controller"):
         data[section] = dict(data[section])
     data["scenario"] = ScenarioConfig.hash_view(data["scenario"])
+    data["vehicle"] = VehicleConfig.hash_view(data["vehicle"])
     if data["controller"].get("collision_constraints") is True:
         data["controller"].pop("collision_constraints")  # the default, as before the key
     for section in ("planner", "controller"):

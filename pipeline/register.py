@@ -314,4 +314,26 @@ INTERPRETATION_REGISTER: tuple[RegisterEntry, ...] = (
         "(experiment=pedestrians_reactive, 60 crossings: the default's outcomes but C1 "
         "inconclusive)",
         "scenario.pedestrians.walkers, scenario.pedestrians.social_*"),
+    RegisterEntry(
+        "Shapes on CommonRoad's roads (a choice we add; the paper's obstacles are discs)",
+        "a vehicle and round obstacles",
+        "every rectangle covered by scenario.commonroad.cover_discs = 3 equal discs along its "
+        "long side (each obstacle disc its own half-plane, 24 slots filled nearest first); the "
+        "ego likewise (vehicle.footprint_discs: the lateral MPC keeps out the ego disc nearest "
+        "to each obstacle along the path, the checks measure from every disc; the kinematic "
+        "track and the peers see the ego as one disc of the cover's radius). Our check is the "
+        "stricter: the discs bulge up to 0.27 m beyond a car's sides",
+        "circumscribed: one disc holding each shape and the ego one vehicle.footprint_radius_m "
+        "disc (earlier releases: a car 2.4 m round, a car in the next lane 'collided'); "
+        "half_width (under-covers)",
+        "scenario.commonroad.obstacle_disc, scenario.commonroad.cover_discs, "
+        "vehicle.footprint_discs, vehicle.footprint_span_m"),
+    RegisterEntry(
+        "Success on a CommonRoad file (a choice we add)", "-",
+        "the file's own criterion: its goal region reached (position, time step, orientation "
+        "and speed intervals; CommonRoad's goal_reached) without contact on the true shapes; "
+        "the run still ends at our goal line or the goal's last time step, and where the two "
+        "goals differ the report says why",
+        "our goal line (the paper's scenario: the run ends on crossing it)",
+        "scenario.commonroad.n_steps"),
 )

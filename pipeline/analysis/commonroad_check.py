@@ -1,7 +1,9 @@
 """A CommonRoad run judged twice: by our own check and by CommonRoad's drivability checker.
 
 Our check (:func:`~pipeline.analysis.metrics.geometry.clearance_series`) sees what our methods
-see: the ego as a disc of ``vehicle.footprint_radius_m`` and each obstacle as its disc. The
+see: the ego as its discs (``vehicle.footprint_radius_m`` at ``vehicle.footprint_discs``
+centres along its heading; under ``obstacle_disc=cover`` its rectangle's cover) and each
+obstacle as its discs. The
 drivability checker (commonroad-drivability-checker, an independent C++ collision library) is
 asked twice at every logged step:
 
@@ -20,13 +22,14 @@ time step, and any speed or orientation interval of the goal region).
 
 from __future__ import annotations
 
+import math
 from dataclasses import asdict, dataclass
 from typing import Any
 
 import numpy as np
 import pandas as pd
 
-from pipeline.analysis.metrics.geometry import clearance_series
+from pipeline.analysis.metrics.geometry import clearance_series, ego_disc_view
 from pipeline.loop.commonroad_scenario import CommonRoadCase, ego_states, shape_geometry
 from pipeline.loop.trajectory import obstacle_indices
 
@@ -54,6 +57,11 @@ class CommonRoadVerdicts:
         The CommonRoad time step of the last state in the goal region.
     goal_note : str
         Why the goal could not be judged ("" when it was).
+    goal_line_reached : bool
+        Whether the run ended at our goal line (shown beside the file's goal).
+    goal_disagreement : str
+        Why the file's goal and our goal line disagree ("" when they agree:
+        :func:`goal_disagreement`).
     """
 
     steps: int
@@ -68,6 +76,14 @@ class CommonRoadVerdicts:
     goal_reached_commonroad: bool
     goal_time_step: int | None
     goal_note: str
+    goal_line_reached: bool = False
+    goal_disagreement: str = ""
+
+    @property
+    def success(self) -> bool:
+        """The file's criterion: its goal region reached (position, time, orientation and speed
+        intervals) without touching anything on the true shapes."""
+        return self.goal_reached_commonroad and not self.checker_true_shapes_collision
 
     @property
     def ours_collision(self) -> bool:
@@ -85,23 +101,29 @@ class CommonRoadVerdicts:
         data = asdict(self)
         data.update(ours_collision=self.ours_collision,
                     checker_same_geometry_collision=self.checker_same_geometry_collision,
-                    checker_true_shapes_collision=self.checker_true_shapes_collision)
+                    checker_true_shapes_collision=self.checker_true_shapes_collision,
+                    success=self.success)
         for key in ("min_clearance_ours_m", "min_clearance_true_shapes_m"):
             data[key] = None if not np.isfinite(data[key]) else float(data[key])
         return data
 
 
-def ours_colliding(trajectory: pd.DataFrame, ego_radius_m: float) -> np.ndarray:
-    """Our verdict per logged step: the ego's disc overlaps a present obstacle's disc."""
-    gaps = clearance_series(trajectory, ego_radius_m)
+def ours_colliding(trajectory: pd.DataFrame, ego_radius_m: float,
+                   ego_offsets_m: tuple[float, ...] = (0.0,)) -> np.ndarray:
+    """Our verdict per logged step: one of the ego's discs (``ego_offsets_m`` ahead of the
+    logged position along its heading) overlaps a present obstacle's disc."""
+    gaps = clearance_series(ego_disc_view(trajectory, ego_offsets_m), ego_radius_m)
     return np.nan_to_num(gaps, nan=np.inf) < 0.0
 
 
-def checker_colliding_discs(trajectory: pd.DataFrame, ego_radius_m: float) -> np.ndarray:
-    """The drivability checker's verdict per logged step on our geometry (discs as logged)."""
+def checker_colliding_discs(trajectory: pd.DataFrame, ego_radius_m: float,
+                            ego_offsets_m: tuple[float, ...] = (0.0,)) -> np.ndarray:
+    """The drivability checker's verdict per logged step on our geometry (the ego's discs and
+    the obstacles' discs as logged)."""
     from commonroad_dc import pycrcc
 
     x, y = trajectory["X_m"].to_numpy(float), trajectory["Y_m"].to_numpy(float)
+    psi = trajectory["psi_rad"].to_numpy(float)
     hits = np.zeros(len(trajectory), bool)
     for j in obstacle_indices(trajectory.columns):
         ox, oy = trajectory[f"obs{j}_x_m"].to_numpy(float), \
@@ -109,8 +131,11 @@ def checker_colliding_discs(trajectory: pd.DataFrame, ego_radius_m: float) -> np
         radius = trajectory[f"obs{j}_radius_m"].to_numpy(float)
         visible = trajectory[f"obs{j}_visible"].to_numpy(bool)
         for k in np.flatnonzero(visible & ~hits):
-            ego = pycrcc.Circle(ego_radius_m, float(x[k]), float(y[k]))
-            hits[k] = ego.collide(pycrcc.Circle(float(radius[k]), float(ox[k]), float(oy[k])))
+            other = pycrcc.Circle(float(radius[k]), float(ox[k]), float(oy[k]))
+            c, s = float(np.cos(psi[k])), float(np.sin(psi[k]))
+            hits[k] = any(pycrcc.Circle(ego_radius_m, float(x[k]) + d * c,
+                                        float(y[k]) + d * s).collide(other)
+                          for d in ego_offsets_m)
     return hits
 
 
@@ -193,13 +218,68 @@ def goal_by_commonroad(case: CommonRoadCase, trajectory: pd.DataFrame
     return bool(reached), (int(states[index].time_step) if reached else None), ""
 
 
+#: The goal region's conditions, in the order they are named when none of a step's holds
+GOAL_CONDITIONS = ("position", "time_step", "orientation", "velocity")
+
+
+def goal_conditions_met(case: CommonRoadCase, trajectory: pd.DataFrame
+                        ) -> dict[str, np.ndarray]:
+    """For each condition the goal region sets (:data:`GOAL_CONDITIONS`), on which logged steps
+    it holds (any of the goal's states; a condition no goal state sets holds everywhere)."""
+    states = ego_states(trajectory, case.initial_time_step)
+    met = {name: np.zeros(len(states), bool) for name in GOAL_CONDITIONS}
+    for goal in case.planning_problem.goal.state_list:
+        for name in GOAL_CONDITIONS:
+            condition = getattr(goal, name, None)
+            for k, state in enumerate(states):
+                if condition is None:
+                    met[name][k] = True
+                elif name == "position":
+                    met[name][k] |= bool(condition.contains_point(np.asarray(state.position)))
+                elif name == "orientation":  # the heading taken into [start, start + 2 pi)
+                    turned = condition.start + (float(state.orientation) - condition.start) \
+                        % (2 * math.pi)
+                    met[name][k] |= bool(condition.start <= turned <= condition.end)
+                else:
+                    met[name][k] |= bool(condition.contains(getattr(state, name)))
+    return met
+
+
+def goal_disagreement(case: CommonRoadCase, trajectory: pd.DataFrame, reached_file: bool,
+                      reached_line: bool) -> str:
+    """Why the file's goal (the success criterion) and our goal line disagree for one run, in
+    one sentence ("" when they agree): the steps in the goal area and the condition they
+    missed, or the step the goal region was reached while our goal line was not."""
+    if reached_file == reached_line:
+        return ""
+    t0 = case.initial_time_step
+    met = goal_conditions_met(case, trajectory)
+    if reached_file:
+        every = np.logical_and.reduce([met[name] for name in GOAL_CONDITIONS])
+        first = int(np.flatnonzero(every)[0]) if every.any() else 0
+        return (f"the goal region reached at time step {t0 + first}; the run ended "
+                f"({len(trajectory)} steps) before our goal line")
+    inside = np.flatnonzero(met["position"])
+    if inside.size == 0:
+        return "never inside the goal area; our goal line crossed"
+    missed = [name for name in GOAL_CONDITIONS[1:] if not met[name][inside].any()]
+    span = f"time steps {t0 + int(inside[0])}-{t0 + int(inside[-1])}"
+    if missed:
+        return f"inside the goal area on {span}, never within its {' and '.join(missed)} interval"
+    return f"inside the goal area on {span}, never with every condition at once"
+
+
 def judge_commonroad_run(case: CommonRoadCase, trajectory: pd.DataFrame, ego_radius_m: float,
-                         length_m: float, width_m: float) -> CommonRoadVerdicts:
-    """Both checks, the road and the goal for one logged run (see the module docstring)."""
-    ours = ours_colliding(trajectory, ego_radius_m)
-    same = checker_colliding_discs(trajectory, ego_radius_m)
+                         length_m: float, width_m: float,
+                         ego_offsets_m: tuple[float, ...] = (0.0,),
+                         goal_line_reached: bool = False) -> CommonRoadVerdicts:
+    """Both checks, the road and the goal for one logged run (see the module docstring); the
+    ego as discs of ``ego_radius_m`` at ``ego_offsets_m`` along its heading; whether the run
+    ended at our goal line (``goal_line_reached``), shown beside the file's goal."""
+    ours = ours_colliding(trajectory, ego_radius_m, ego_offsets_m)
+    same = checker_colliding_discs(trajectory, ego_radius_m, ego_offsets_m)
     true, true_clearance = checker_colliding_shapes(case, trajectory, length_m, width_m)
-    gaps = clearance_series(trajectory, ego_radius_m)
+    gaps = clearance_series(ego_disc_view(trajectory, ego_offsets_m), ego_radius_m)
     reached, goal_step, note = goal_by_commonroad(case, trajectory)
     return CommonRoadVerdicts(
         steps=len(trajectory), ours_collision_steps=int(ours.sum()),
@@ -210,4 +290,7 @@ def judge_commonroad_run(case: CommonRoadCase, trajectory: pd.DataFrame, ego_rad
         min_clearance_ours_m=float(np.nanmin(gaps)) if np.isfinite(gaps).any() else np.nan,
         min_clearance_true_shapes_m=true_clearance,
         off_road_steps=off_road_steps(case, trajectory, length_m, width_m),
-        goal_reached_commonroad=reached, goal_time_step=goal_step, goal_note=note)
+        goal_reached_commonroad=reached, goal_time_step=goal_step, goal_note=note,
+        goal_line_reached=goal_line_reached,
+        goal_disagreement="" if note else goal_disagreement(case, trajectory, reached,
+                                                            goal_line_reached))

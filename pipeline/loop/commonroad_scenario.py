@@ -36,6 +36,7 @@ from pipeline.loop.settings import (
     CommonRoadConfig,
     ScenarioConfig,
     ScenarioSourceConfig,
+    VehicleConfig,
 )
 
 #: The one line that says how to get ``scenario=commonroad`` (the test skip reason too).
@@ -178,7 +179,8 @@ def read_commonroad(cfg: ScenarioConfig) -> CommonRoadCase:
                           f"after time step {t0}), or scenario.commonroad.n_steps set to run "
                           "fewer")
     goal = _goal_point(problem, start, heading, speed, dt, t0)
-    name = _safe(str(scenario.scenario_id)) or "commonroad"
+    # named by the file (its benchmark id may be another file's: the result records it beside)
+    name = _safe(path.stem) or "commonroad"
     resolved = replace(cfg, name=name, start_xy_m=[float(start[0]), float(start[1])],
                        start_heading_rad=heading, goal_xy_m=[float(goal[0]), float(goal[1])],
                        speed_mps=speed, initial_speed_mps=None, sample_time_s=dt,
@@ -376,11 +378,33 @@ def disc_of_shape(shape: Any, reading: str) -> tuple[np.ndarray, float]:
     return centre, float(np.max(np.hypot(*(points - centre).T)))
 
 
+def discs_of_shape(shape: Any, reading: str, n_discs: int = 3
+                   ) -> list[tuple[np.ndarray, float]]:
+    """The discs our methods see for a CommonRoad shape (in the obstacle's frame), each a
+    centre and a radius: under ``cover`` the shape's smallest bounding rectangle covered by
+    ``n_discs`` discs along its long side (:func:`~pipeline.loop.cover.cover_centres`; a
+    circle is its own disc), else the one disc of :func:`disc_of_shape`."""
+    if reading != "cover":
+        return [disc_of_shape(shape, reading)]
+    if hasattr(shape, "radius") and not hasattr(shape, "shapes"):
+        return [(np.asarray(shape.center, float), float(shape.radius))]
+    from pipeline.loop.cover import cover_centres
+
+    box = np.array(shape_geometry(shape).minimum_rotated_rectangle.exterior.coords)[:4]
+    centre = box.mean(axis=0)
+    sides = np.diff(np.vstack([box, box[:1]]), axis=0)[:2]     # two adjacent sides
+    lengths = np.hypot(sides[:, 0], sides[:, 1])
+    along = sides[0] / lengths[0] if lengths[0] > 0 else np.array([1.0, 0.0])
+    across = np.array([-along[1], along[0]])
+    local, radius = cover_centres(float(lengths[0]), float(lengths[1]), n_discs)
+    return [(centre + x * along + y * across, radius) for x, y in local]
+
+
 def _tracks(scenario: Any, problem: Any, cr: CommonRoadConfig, t0: int,
             n_samples: int) -> tuple[ObstacleTracks, tuple[int, ...], tuple[int, ...]]:
-    """Every obstacle's disc track over ``n_samples`` time steps from ``t0``; the ids kept and
-    the ids dropped as the ego's recording (obstacles never recorded in the window are left
-    out too)."""
+    """Every obstacle's disc tracks over ``n_samples`` time steps from ``t0`` (one per disc of
+    :func:`discs_of_shape`); the CommonRoad id of each track and the ids dropped as the ego's
+    recording (obstacles never recorded in the window are left out too)."""
     start = np.asarray(problem.initial_state.position, float)
     positions, presents, radii, ids, ego = [], [], [], [], []
     for obstacle in sorted(scenario.obstacles, key=lambda o: o.obstacle_id):
@@ -388,8 +412,8 @@ def _tracks(scenario: Any, problem: Any, cr: CommonRoadConfig, t0: int,
         if at_start is not None and np.hypot(*(at_start - start)) <= cr.ego_match_tolerance_m:
             ego.append(int(obstacle.obstacle_id))
             continue
-        centre, radius = disc_of_shape(obstacle.obstacle_shape, cr.obstacle_disc)
-        track = np.zeros((n_samples, 2))
+        discs = discs_of_shape(obstacle.obstacle_shape, cr.obstacle_disc, cr.cover_discs)
+        centres = np.zeros((len(discs), n_samples, 2))
         present = np.zeros(n_samples, bool)
         for k in range(n_samples):
             state = obstacle.state_at_time(t0 + k)
@@ -398,20 +422,21 @@ def _tracks(scenario: Any, problem: Any, cr: CommonRoadConfig, t0: int,
                 continue
             angle = _angle(getattr(state, "orientation", 0.0))
             c, s = math.cos(angle), math.sin(angle)
-            track[k] = position + [c * centre[0] - s * centre[1],
-                                   s * centre[0] + c * centre[1]]
+            for i, (centre, _) in enumerate(discs):
+                centres[i, k] = position + [c * centre[0] - s * centre[1],
+                                            s * centre[0] + c * centre[1]]
             present[k] = True
         if not present.any():
             continue
-        _fill_absent(track, present)
-        positions.append(track)
-        presents.append(present)
-        radii.append(radius)
-        ids.append(int(obstacle.obstacle_id))
-    tracks = ObstacleTracks(np.array(positions).reshape(-1, n_samples, 2),
-                            np.array(presents, bool).reshape(-1, n_samples),
-                            np.array(radii, float))
-    return tracks, tuple(ids), tuple(ego)
+        for i, (_, radius) in enumerate(discs):
+            _fill_absent(centres[i], present)
+            positions.append(centres[i])
+            presents.append(present.copy())
+            radii.append(radius)
+            ids.append(int(obstacle.obstacle_id))
+    return ObstacleTracks(np.array(positions).reshape(-1, n_samples, 2),
+                          np.array(presents, bool).reshape(-1, n_samples),
+                          np.array(radii, float)), tuple(ids), tuple(ego)
 
 
 def _position(state: Any) -> np.ndarray | None:
@@ -486,6 +511,22 @@ def write_solution(solution: Any, path: Path) -> Path:
     CommonRoadSolutionWriter(solution).write_to_file(output_path=str(path.parent),
                                                      filename=path.name, overwrite=True)
     return path
+
+
+def ego_cover_vehicle(vehicle: VehicleConfig, cr: CommonRoadConfig) -> VehicleConfig:
+    """The vehicle as ``scenario.commonroad`` shapes the ego: under ``obstacle_disc=cover``
+    ``vehicle_type``'s rectangle covered by ``cover_discs`` discs (``footprint_radius_m``,
+    ``footprint_discs`` and ``footprint_span_m`` set from it, as the file sets the start and
+    the speed); under the earlier readings the vehicle as configured."""
+    if cr.obstacle_disc != "cover":
+        return vehicle
+    from pipeline.loop.cover import rectangle_cover
+
+    length_m, width_m = vehicle_shape_m(cr.vehicle_type)
+    offsets, radius = rectangle_cover(length_m, width_m, cr.cover_discs)
+    return replace(vehicle, footprint_radius_m=round(radius, 9),
+                   footprint_discs=cr.cover_discs,
+                   footprint_span_m=round(float(offsets[-1] - offsets[0]), 9))
 
 
 def vehicle_shape_m(vehicle_type: str) -> tuple[float, float]:

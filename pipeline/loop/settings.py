@@ -23,6 +23,7 @@ from pipeline.validation import (
     between,
     choice,
     finite,
+    integer_in,
     pair,
     safe_name,
     target_path,
@@ -53,6 +54,11 @@ class VehicleConfig(FrozenAfterValidation):
     min_model_speed_mps: float = 1.0
     speed_time_constant_s: float = 0.5
     accel_max_mps2: float = 3.0
+    # the ego as several discs of footprint_radius_m along its heading (a car's rectangle
+    # covered, pipeline.loop.cover): how many, and the distance between the first and the last
+    # centre, centred on the logged position; 1 and 0: one disc (the paper's reading)
+    footprint_discs: int = 1
+    footprint_span_m: float = 0.0
 
     #: Physical range of each parameter (a road vehicle, from a cart to a truck).
     BOUNDS = {"mass_kg": (10.0, 1e5), "yaw_inertia_kg_m2": (1.0, 1e7),
@@ -67,7 +73,33 @@ class VehicleConfig(FrozenAfterValidation):
         for key, (low, high) in self.BOUNDS.items():
             between(f"vehicle.{key}", getattr(self, key), low, high)
         between("vehicle.steering_max_rad", self.steering_max_rad, 1e-3, 1.2)
+        integer_in("vehicle.footprint_discs", self.footprint_discs, 1, 8)
+        between("vehicle.footprint_span_m", self.footprint_span_m, 0.0, 50.0)
+        if self.footprint_discs == 1 and self.footprint_span_m != 0.0:
+            raise ConfigError("vehicle.footprint_span_m", self.footprint_span_m,
+                              "0 with vehicle.footprint_discs=1 (one disc spans nothing)")
         safe_name("vehicle.name", self.name)
+
+    #: The keys added after the config hash was first pinned, with the reading from before
+    #: them (left out of the hash while they hold it: :meth:`hash_view`)
+    BEFORE_KEYS = {"footprint_discs": 1, "footprint_span_m": 0.0}
+
+    @staticmethod
+    def hash_view(data: dict[str, Any]) -> dict[str, Any]:
+        """``asdict`` of a vehicle as the config hash reads it: a key of :data:`BEFORE_KEYS`
+        holding the reading from before it is left out (one disc hashes as before the keys)."""
+        data = dict(data)
+        for name, before in VehicleConfig.BEFORE_KEYS.items():
+            if name in data and data[name] == before and type(data[name]) is type(before):
+                data.pop(name)
+        return data
+
+    @property
+    def footprint_offsets_m(self) -> Any:
+        """The ego's disc centres along its heading (m, ndarray; ``[0.0]`` for one disc)."""
+        from pipeline.loop.cover import footprint_offsets_m
+
+        return footprint_offsets_m(self.footprint_discs, self.footprint_span_m)
 
     @property
     def wheelbase_m(self) -> float:
@@ -241,9 +273,15 @@ class CommonRoadConfig(FrozenAfterValidation):
     # the ego's true shape for the drivability checker and the exported trajectory's vehicle
     # (commonroad-vehicle-models' parameter sets): FORD_ESCORT, BMW_320i or VW_VANAGON
     vehicle_type: str = "BMW_320i"
-    # the disc our planner, MPC and own check see for an obstacle's shape: circumscribed (the
-    # smallest disc holding it) or half_width (a disc of half its smaller side: under-covers)
-    obstacle_disc: str = "circumscribed"
+    # the discs our planner, MPC and own check see for an obstacle's shape and for the ego:
+    # cover (the shape's bounding rectangle covered by cover_discs equal discs along its long
+    # side, each its own obstacle with its own half-plane; the ego's rectangle, vehicle_type's,
+    # likewise: vehicle.footprint_* are set from it), circumscribed (one disc holding the shape;
+    # the ego a vehicle.footprint_radius_m disc: earlier releases' reading) or half_width (a
+    # disc of half its smaller side: under-covers)
+    obstacle_disc: str = "cover"
+    # discs per rectangle under obstacle_disc=cover (1: the circumscribed disc)
+    cover_discs: int = 3
     # an obstacle whose centre is this close to the planning problem's initial position at its
     # initial time step is the ego's own recording, and dropped
     ego_match_tolerance_m: float = 0.5
@@ -265,7 +303,8 @@ class CommonRoadConfig(FrozenAfterValidation):
                               self.planning_problem_id, "an integer id or null")
         choice("scenario.commonroad.vehicle_type", self.vehicle_type, self.VEHICLE_TYPES)
         choice("scenario.commonroad.obstacle_disc", self.obstacle_disc,
-               ("circumscribed", "half_width"))
+               ("cover", "circumscribed", "half_width"))
+        integer_in("scenario.commonroad.cover_discs", self.cover_discs, 1, 8)
         between("scenario.commonroad.ego_match_tolerance_m", self.ego_match_tolerance_m,
                 0.0, 10.0)
         if self.speed_mps is not None:
@@ -499,6 +538,11 @@ class ScenarioConfig(FrozenAfterValidation):
             data.pop("obstacle_anchor")  # the default reading, as before the key
         if data.get("commonroad", 0) is None:
             data.pop("commonroad")  # not a CommonRoad scenario, as before the key
+        elif isinstance(data.get("commonroad"), dict) \
+                and data["commonroad"].get("obstacle_disc") != "cover":
+            # read only under the cover: an earlier reading hashes as before the key
+            data["commonroad"] = {k: v for k, v in data["commonroad"].items()
+                                  if k != "cover_discs"}
         if data.get("pedestrians", 0) is None:
             data.pop("pedestrians")  # no recorded pedestrians, as before the key
         elif isinstance(data.get("pedestrians"), dict):

@@ -22,6 +22,7 @@ from pipeline.analysis.commonroad_check import CommonRoadVerdicts, judge_commonr
 from pipeline.analysis.objectives import objective_values
 from pipeline.config import ExperimentConfig
 from pipeline.loop.commonroad_scenario import (
+    ego_cover_vehicle,
     ego_solution,
     read_commonroad,
     vehicle_shape_m,
@@ -57,26 +58,36 @@ def run_commonroad(cfg: ExperimentConfig, out_dir: Path) -> CommonRoadRun:
     if commonroad is None:
         raise ValueError("run_commonroad needs scenario=commonroad")
     case = read_commonroad(cfg.scenario)
-    resolved = replace(cfg, scenario=case.scenario_config)
+    # the ego as the file's reading shapes it (under the cover: vehicle_type's rectangle)
+    resolved = replace(cfg, scenario=case.scenario_config,
+                       vehicle=ego_cover_vehicle(cfg.vehicle, commonroad))
     run = run_experiment(resolved, out_dir, resume=False, scenario=case.scenario)
     trajectory = read_run(run.out_dir).trajectory
     assert trajectory is not None  # read with its trajectory
     length_m, width_m = vehicle_shape_m(commonroad.vehicle_type)
-    verdicts = judge_commonroad_run(case, trajectory, resolved.vehicle.footprint_radius_m,
-                                    length_m, width_m)
+    vehicle = resolved.vehicle
+    verdicts = judge_commonroad_run(case, trajectory, vehicle.footprint_radius_m,
+                                    length_m, width_m,
+                                    tuple(float(c) for c in vehicle.footprint_offsets_m),
+                                    goal_line_reached=run.info.termination == "goal_line")
     summary = {
         "file": {"path": str(commonroad.path), "sha256": case.file_sha256,
                  "benchmark_id": str(case.commonroad_scenario.scenario_id),
                  "planning_problem_id": int(case.planning_problem.planning_problem_id),
                  "initial_time_step": case.initial_time_step,
-                 "obstacles": len(case.obstacle_ids),
+                 "obstacles": len(set(case.obstacle_ids)),
+                 "obstacle_discs": len(case.obstacle_ids),
+                 "obstacle_disc": commonroad.obstacle_disc,
+                 "cover_discs": commonroad.cover_discs,
                  "ego_recording_dropped": list(case.ego_recording_ids)},
         "run": {"method": resolved.method_name, "termination": run.info.termination,
                 "speed_mps": resolved.scenario.speed_mps,
                 "sample_time_s": resolved.scenario.sample_time_s,
                 "goal_reached_ours": run.info.termination == "goal_line",
                 "collision_ours_continuous": bool(run.metrics.to_json().get("collision")),
-                "ego_radius_m": resolved.vehicle.footprint_radius_m,
+                "ego_radius_m": vehicle.footprint_radius_m,
+                "ego_discs": vehicle.footprint_discs,
+                "ego_disc_span_m": vehicle.footprint_span_m,
                 "ego_length_m": length_m, "ego_width_m": width_m,
                 "vehicle_type": commonroad.vehicle_type},
         "verdicts": verdicts.to_json(),
@@ -96,11 +107,12 @@ def run_and_log(experiment: ExperimentConfig, out_dir: Path) -> float | tuple[fl
     log.info("%s on %s (%d steps at %.3g m/s): collision ours %s, drivability checker on our "
              "discs %s (agree on %d/%d steps), on the true shapes %s (agree on %d/%d steps); "
              "min clearance ours %.3f m, true shapes %.3f m; off the road on %d steps; goal "
-             "reached by CommonRoad's definition %s, by ours %s -> %s", m["method"],
+             "reached by CommonRoad's definition %s, by ours %s; success (the file's goal, no "
+             "contact on the true shapes) %s -> %s", m["method"],
              m["scenario"], v.steps, done.result.summary["run"]["speed_mps"], v.ours_collision,
              v.checker_same_geometry_collision, v.agreement_same_geometry_steps, v.steps,
              v.checker_true_shapes_collision, v.agreement_true_shapes_steps, v.steps,
              v.min_clearance_ours_m, v.min_clearance_true_shapes_m, v.off_road_steps,
-             v.goal_reached_commonroad, m["termination"] == "goal_line", out_dir)
+             v.goal_reached_commonroad, m["termination"] == "goal_line", v.success, out_dir)
     values = objective_values(pd.DataFrame([m]), experiment.tune.objectives)
     return values[0] if len(values) == 1 else values

@@ -138,9 +138,11 @@ def test_the_reader_round_trips_a_scenario_written_by_commonroad_io(
         tmp_path, make_scenario_config, initial_time_step):
     path = write_scenario(tmp_path / "planted.xml", initial_time_step=initial_time_step,
                           goal_steps=(0, 100))
-    case = read_commonroad(make_scenario_config(path))
+    case = read_commonroad(make_scenario_config(path, "scenario.commonroad.obstacle_disc="
+                                                "circumscribed"))
     cfg = case.scenario_config
-    assert cfg.name == "ZAM_Planted-1"
+    # named by the file's stem (a file's benchmark id may be another file's name)
+    assert cfg.name == "planted" and str(case.commonroad_scenario.scenario_id) == "ZAM_Planted-1"
     assert cfg.start_xy_m == [5.0, 0.0] and cfg.start_heading_rad == 0.0
     assert cfg.goal_xy_m == [80.0, 0.0]
     assert cfg.speed_mps == 10.0 and cfg.sample_time_s == 0.1
@@ -167,6 +169,37 @@ def test_the_reader_round_trips_a_scenario_written_by_commonroad_io(
 
 
 @needs_extra
+def test_the_cover_makes_each_car_three_discs_along_its_heading(tmp_path, make_scenario_config,
+                                                                make_config):
+    """scenario.commonroad.obstacle_disc=cover (the default): the parked circle stays one disc;
+    the oncoming car (heading pi, centre 90 - 4 t) is three discs of radius hypot(0.75, 0.9)
+    at its centre and 1.5 m ahead and behind, each its own obstacle with the car's id; the ego
+    is BMW_320i's rectangle covered the same way."""
+    from pipeline.loop.commonroad_scenario import ego_cover_vehicle, vehicle_shape_m
+    from pipeline.loop.cover import rectangle_cover
+
+    path = write_scenario(tmp_path / "planted.xml", goal_steps=(0, 100))
+    cfg = make_scenario_config(path)
+    assert cfg.commonroad.obstacle_disc == "cover" and cfg.commonroad.cover_discs == 3
+    case = read_commonroad(cfg)
+    assert case.obstacle_ids == (10, 11, 11, 11)
+    radius = math.hypot(CAR_LENGTH_M / 6, CAR_WIDTH_M / 2)
+    assert case.scenario.obstacle_radius_m == pytest.approx([0.5, radius, radius, radius])
+    snap = case.scenario.obstacles_at(1.0)
+    centre = 90.0 - ONCOMING_MPS * 1.0
+    # (the file holds the heading pi to its written digits: 1e-4 m across 1.5 m)
+    assert sorted(snap.positions_m[1:, 0]) == pytest.approx([centre - 1.5, centre, centre + 1.5],
+                                                            abs=1e-3)
+    assert snap.positions_m[1:, 1] == pytest.approx([-2.0] * 3, abs=1e-3)
+    vehicle = ego_cover_vehicle(make_config([]).vehicle, cfg.commonroad)
+    length, width = vehicle_shape_m("BMW_320i")
+    offsets, ego_radius = rectangle_cover(length, width, 3)
+    assert vehicle.footprint_discs == 3
+    assert vehicle.footprint_radius_m == pytest.approx(ego_radius)
+    assert vehicle.footprint_offsets_m == pytest.approx(offsets)
+
+
+@needs_extra
 def test_the_other_disc_reading_and_no_ego_recording(tmp_path, make_scenario_config):
     path = write_scenario(tmp_path / "planted.xml", ego_recording=False)
     case = read_commonroad(make_scenario_config(path, "scenario.commonroad.obstacle_disc="
@@ -180,7 +213,8 @@ def test_the_other_disc_reading_and_no_ego_recording(tmp_path, make_scenario_con
 def test_an_uncertain_position_and_orientation_read_as_their_middles(tmp_path,
                                                                      make_scenario_config):
     path = write_scenario(tmp_path / "planted.xml", obstacles="none", uncertain=True)
-    case = read_commonroad(make_scenario_config(path))
+    case = read_commonroad(make_scenario_config(path, "scenario.commonroad.obstacle_disc="
+                                                "circumscribed"))
     assert case.obstacle_ids == (13,)
     snap = case.scenario.obstacles_at(1.0)
     assert snap.positions_m[0] == pytest.approx([60.0, 2.0])
@@ -198,7 +232,8 @@ def test_the_source_builds_the_scenario_the_reader_makes(tmp_path, make_scenario
     path = write_scenario(tmp_path / "planted.xml")
     cfg = make_scenario_config(path)
     built, read = build_scenario(cfg), read_commonroad(cfg).scenario
-    assert isinstance(built, CommonRoadScenario) and built.n_obstacles == 2
+    # the parked circle and the car's three discs
+    assert isinstance(built, CommonRoadScenario) and built.n_obstacles == 4
     for t in (0.0, 1.25, 4.0):
         a, b = built.obstacles_at(t), read.obstacles_at(t)
         assert np.array_equal(a.positions_m, b.positions_m)
@@ -266,6 +301,29 @@ def test_the_goal_by_commonroads_definition_checks_the_time_too(
     trajectory = _trajectory(case, [(5.0, 0.0, 0.0), (70.0, 0.0, 0.0), (78.0, 1.0, 0.0),
                                     (82.0, -1.0, 0.0)])
     assert goal_by_commonroad(case, trajectory) == (reached, 3 if reached else None, "")
+
+
+@needs_extra
+def test_why_the_files_goal_and_our_goal_line_differ_is_said(tmp_path, make_scenario_config):
+    """In the goal area at steps 2-3 but its time interval [10, 100] never met: the reason
+    names the steps and the interval; reached at step 2 while our goal line was not: said so;
+    both agree: no reason."""
+    from pipeline.analysis.commonroad_check import goal_conditions_met, goal_disagreement
+
+    poses = [(5.0, 0.0, 0.0), (70.0, 0.0, 0.0), (78.0, 1.0, 0.0), (82.0, -1.0, 0.0)]
+    late = read_commonroad(make_scenario_config(
+        write_scenario(tmp_path / "late.xml", goal_steps=(10, 100))))
+    trajectory = _trajectory(late, poses)
+    met = goal_conditions_met(late, trajectory)
+    assert met["position"].tolist() == [False, False, True, True]
+    assert not met["time_step"].any() and met["velocity"].all()
+    assert goal_disagreement(late, trajectory, False, True) == (
+        "inside the goal area on time steps 2-3, never within its time_step interval")
+    on_time = read_commonroad(make_scenario_config(
+        write_scenario(tmp_path / "on_time.xml", goal_steps=(0, 100))))
+    assert goal_disagreement(on_time, _trajectory(on_time, poses), True, False).startswith(
+        "the goal region reached at time step 2;")
+    assert goal_disagreement(on_time, _trajectory(on_time, poses), True, True) == ""
 
 
 @needs_extra

@@ -74,6 +74,10 @@ SWITCH_TESTS = {
     "scenario.pedestrians.end_at_contact": "test_crowd", "scenario.pedestrians.draw": "test_crowd",
     "scenario.pedestrians.walkable_radius_m": "test_crowd",
     "scenario.pedestrians.walkers": "test_crowd", "scenario.pedestrians.social_*": "test_crowd",
+    # on CommonRoad's roads (choices we add): tests/loop/test_cover.py, test_commonroad.py
+    "scenario.commonroad.obstacle_disc": "test_commonroad",
+    "scenario.commonroad.cover_discs": "test_commonroad", "vehicle.footprint_discs": "test_cover",
+    "vehicle.footprint_span_m": "test_cover", "scenario.commonroad.n_steps": "test_commonroad",
 
 
 }

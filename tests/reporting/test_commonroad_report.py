@@ -39,6 +39,36 @@ def test_the_section_lists_every_run_with_both_verdicts(tmp_path):
     assert "agreed on every" in html and "77/80" in html
 
 
+def test_the_files_criterion_the_shapes_and_why_the_goals_differ_are_shown(tmp_path):
+    """A result of the cover reading: named by its file's stem with its benchmark id beside,
+    the shapes read, success by the file's criterion (its goal, no contact on the true
+    shapes), the least true gap and the reason the goals differ."""
+    summary = {
+        "file": {"path": "scenes/DEU_Crit-1_1_T-1.xml", "benchmark_id": "DEU_Test-1_1_T-1",
+                 "obstacles": 2, "obstacle_discs": 6, "obstacle_disc": "cover",
+                 "cover_discs": 3},
+        "run": {"method": "improved", "speed_mps": 10.0, "goal_reached_ours": True},
+        "verdicts": {"steps": 80, "ours_collision": False,
+                     "checker_same_geometry_collision": False,
+                     "checker_true_shapes_collision": False,
+                     "agreement_same_geometry_steps": 80, "agreement_true_shapes_steps": 80,
+                     "off_road_steps": 0, "goal_reached_commonroad": False, "success": False,
+                     "min_clearance_true_shapes_m": 1.25,
+                     "goal_disagreement": "inside the goal area on time steps 40-44, never "
+                                          "within its time_step interval"}}
+    CommonRoadResult(summary).write(tmp_path / "DEU_Crit-1_1_T-1" / "improved",
+                                    lambda path: path.write_text("<x/>"))
+    section = commonroad_section(SimpleNamespace(
+        commonroad=tuple(CommonRoadResult.load_all(tmp_path))))
+    row, = section.rows
+    assert row.scenario == "DEU_Crit-1_1_T-1 (id DEU_Test-1_1_T-1)"
+    assert (row.shapes, row.success, row.min_clearance_true_shapes_m) == \
+        ("cover (3 discs)", False, 1.25)
+    html = environment().get_template("sections/commonroad.html.j2").render(
+        commonroad=section)
+    assert "never within its time_step interval" in html and ">1.25<" in html
+
+
 def test_a_disagreement_on_the_same_discs_is_said_and_no_runs_no_section(tmp_path):
     _result(tmp_path / "ZAM_Planted-1" / "improved", "improved", 79, False)
     section = commonroad_section(SimpleNamespace(

@@ -31,7 +31,8 @@ def trajectory_context(cfg: Any) -> TrajectoryContext:
                              else v.steering_rate_max_rad_s,
                              braking_mps2=max(-float(low), 0.0), accel_mps2=max(float(high), 0.0),
                              personal_space_m=_personal_space(cfg.scenario),
-                             obstacle_slots=getattr(cfg.controller, "max_obstacles", None))
+                             obstacle_slots=getattr(cfg.controller, "max_obstacles", None),
+                             vehicle_offsets_m=tuple(float(c) for c in v.footprint_offsets_m))
 
 
 def _personal_space(scenario: Any) -> float | None:

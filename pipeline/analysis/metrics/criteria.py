@@ -17,6 +17,7 @@ from pipeline.analysis.metrics.geometry import (
     clearance_series,
     collision_is_avoidable,
     continuous_clearance,
+    ego_disc_view,
     min_time_to_collision,
     obstacle_tracks,
     straight_line_time_to_contact,
@@ -483,6 +484,8 @@ def compute_metrics_readings(trajectory: pd.DataFrame, context: TrajectoryContex
     list of RunMetrics
         In the order of ``readings``.
     """
+    # an ego of several discs: every distance from the disc nearest to each obstacle
+    trajectory = ego_disc_view(trajectory, context.vehicle_offsets_m)
     sig = trajectory_signals(trajectory, context)
     tracks = obstacle_tracks(trajectory)
     clearance = clearance_series(trajectory, context.vehicle_radius_m)

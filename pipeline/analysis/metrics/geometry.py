@@ -19,6 +19,29 @@ def obstacle_count(trajectory: pd.DataFrame) -> int:
     return len(obstacle_indices(trajectory.columns))
 
 
+def ego_disc_view(trajectory: pd.DataFrame, offsets_m: tuple[float, ...]) -> pd.DataFrame:
+    """The logged table as the ego's reference point sees an ego of several discs along its
+    heading (``vehicle.footprint_discs``, centres ``offsets_m`` ahead of the logged position):
+    each obstacle's logged centre at each step moved by minus the heading's offset of the ego
+    disc nearest to it, so that every distance the metrics take from the logged position is the
+    distance from that disc (``|p + c h - o| = |p - (o - c h)|``). One disc at the logged
+    position (``(0.0,)``): the table itself."""
+    offsets = np.asarray(offsets_m, float)
+    if offsets.shape == (1,) and offsets[0] == 0.0:
+        return trajectory
+    xy = float_columns(trajectory, "X_m", "Y_m")
+    psi = trajectory["psi_rad"].to_numpy(float)
+    heading = np.stack([np.cos(psi), np.sin(psi)], axis=1)
+    centres = xy[:, None, :] + offsets[None, :, None] * heading[:, None, :]   # (K, n, 2)
+    view = trajectory.copy()
+    for j in obstacle_indices(trajectory.columns):
+        obstacle = float_columns(trajectory, f"obs{j}_x_m", f"obs{j}_y_m")
+        nearest = np.argmin(np.linalg.norm(centres - obstacle[:, None, :], axis=2), axis=1)
+        moved = obstacle - offsets[nearest][:, None] * heading
+        view[f"obs{j}_x_m"], view[f"obs{j}_y_m"] = moved[:, 0], moved[:, 1]
+    return view
+
+
 def clearance_series(trajectory: pd.DataFrame, vehicle_radius_m: float) -> np.ndarray:
     """Per-step clearance to the nearest visible obstacle (NaN while none is visible)."""
     xy = float_columns(trajectory, "X_m", "Y_m")

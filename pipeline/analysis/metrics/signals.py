@@ -40,6 +40,9 @@ class TrajectoryContext:
     #: the controller's obstacle slots (the crowd metrics count the steps with more walkers
     #: in sensor range than slots); None: unlimited
     obstacle_slots: int | None = None
+    #: the ego's disc centres along its heading (m; ``vehicle.footprint_discs``): one disc at
+    #: the logged position unless the ego is a covered rectangle
+    vehicle_offsets_m: tuple[float, ...] = (0.0,)
 
 
 def rms(values: np.ndarray) -> float:

@@ -175,6 +175,7 @@ def collision_halfplanes(stations_m: np.ndarray, y_ref_m: np.ndarray, vehicle_li
     G, h = np.zeros((N, M)), np.zeros((N, M))
     n_obs = predicted_obstacles_line_m.shape[1] if predicted_obstacles_line_m.ndim == 3 else 0
     vx, vy = vehicle_line_m.tolist()
+    offsets = vehicle.footprint_offsets_m if vehicle.footprint_discs > 1 else None
     for j in range(min(n_obs, M)):
         cx, cy = predicted_obstacles_line_m[0, j].tolist()
         if not constrains(hypot(cx - vx, cy - vy), controller):
@@ -183,9 +184,28 @@ def collision_halfplanes(stations_m: np.ndarray, y_ref_m: np.ndarray, vehicle_li
         fallback_side = 1.0 if vy > cy else (-1.0 if vy < cy else 1.0)
         rows = _lateral_side_rows if controller.halfplane_normal == "lateral_side" \
             else _radial_rows
-        G[:, j], h[:, j] = rows(stations_m, y_ref_m, predicted_obstacles_line_m[:, j, :], reach,
-                                fallback_side)
+        obstacle = predicted_obstacles_line_m[:, j, :]
+        if offsets is not None:
+            obstacle = nearest_ego_disc_shift(stations_m, obstacle, offsets)
+        G[:, j], h[:, j] = rows(stations_m, y_ref_m, obstacle, reach, fallback_side)
     return G, h
+
+
+def nearest_ego_disc_shift(stations_m: np.ndarray, obstacle: np.ndarray,
+                           offsets_m: np.ndarray) -> np.ndarray:
+    """An obstacle's centres at the stations (N, 2) as the ego's reference point sees them when
+    the ego is several discs along its heading (``vehicle.footprint_discs``, centres
+    ``offsets_m`` ahead of the reference point): each station's obstacle moved back along the
+    path by the offset of the ego disc nearest to it along the path, so that the half-plane
+    about the reference point keeps that disc out (the disc at ``station + c`` clears the
+    obstacle at ``o`` exactly when the reference point clears ``o - c``). The ego's heading is
+    taken along the path (the frame's small-angle reading); the nearest disc along the path
+    is the one whose keep-out is widest at that station."""
+    ahead = obstacle[:, 0][:, None] - stations_m[:, None]            # (N, 1)
+    nearest = np.argmin(np.abs(ahead - offsets_m[None, :]), axis=1)    # (N,)
+    shifted = obstacle.copy()
+    shifted[:, 0] = obstacle[:, 0] - offsets_m[nearest]
+    return shifted
 
 
 def _lateral_side_rows(stations_m: np.ndarray, y_ref_m: np.ndarray, obstacle: np.ndarray,

@@ -5,6 +5,7 @@ never judged in the ledgers)."""
 from __future__ import annotations
 
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any
 
 
@@ -26,6 +27,14 @@ class CommonRoadRow:
     off_road_steps: int
     goal_commonroad: bool
     goal_ours: bool
+    #: the file's criterion: its goal reached, no contact on the true shapes (None: a result
+    #: written before the criterion)
+    success: bool | None = None
+    min_clearance_true_shapes_m: float | None = None
+    #: why the file's goal and our goal line disagree ("" when they agree)
+    goal_disagreement: str = ""
+    #: how the shapes were read: "cover (3 discs)", "circumscribed", ...
+    shapes: str = ""
 
 
 @dataclass(frozen=True)
@@ -46,8 +55,16 @@ def commonroad_section(inputs: Any) -> CommonRoadSection | None:
     for result in inputs.commonroad:
         file, run, v = (result.summary[k] for k in ("file", "run", "verdicts"))
         steps = int(v["steps"])
+        # named by the file (its benchmark id, when another, beside it)
+        stem = Path(str(file["path"])).stem if file.get("path") else \
+            (result.folder.parent.name if result.folder is not None else "")
+        name = stem if str(file["benchmark_id"]) in (stem, "") \
+            else f"{stem} (id {file['benchmark_id']})"
+        reading = str(file.get("obstacle_disc", "circumscribed"))
+        shapes = f"cover ({file.get('cover_discs')} discs)" if reading == "cover" else reading
+        clearance = v.get("min_clearance_true_shapes_m")
         rows.append(CommonRoadRow(
-            scenario=str(file["benchmark_id"]), method=str(run["method"]),
+            scenario=name, method=str(run["method"]),
             speed_mps=run.get("speed_mps"), steps=steps, obstacles=int(file["obstacles"]),
             collision_ours=bool(v["ours_collision"]),
             collision_checker_discs=bool(v["checker_same_geometry_collision"]),
@@ -56,5 +73,9 @@ def commonroad_section(inputs: Any) -> CommonRoadSection | None:
             agreement_true_shapes=f"{v['agreement_true_shapes_steps']}/{steps}",
             off_road_steps=int(v["off_road_steps"]),
             goal_commonroad=bool(v["goal_reached_commonroad"]),
-            goal_ours=bool(run["goal_reached_ours"])))
+            goal_ours=bool(run["goal_reached_ours"]),
+            success=bool(v["success"]) if "success" in v else None,
+            min_clearance_true_shapes_m=float(clearance) if clearance is not None else None,
+            goal_disagreement=str(v.get("goal_disagreement") or v.get("goal_note") or ""),
+            shapes=shapes))
     return CommonRoadSection(tuple(rows)) if rows else None
