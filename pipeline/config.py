@@ -119,11 +119,14 @@ class ExperimentConfig(FrozenAfterValidation):
             raise ConfigError("controller.max_obstacles", self.controller.max_obstacles,
                               f">= the number of obstacles ({len(self.scenario.obstacles)})")
         # the lateral model's 1/v_x terms forbid slower references; the kinematic bicycle
-        # (Appendix A) has none and may be asked to stop
-        if self.controller.kind != "kinematic_mpc" \
+        # (Appendix A) has none and may be asked to stop, and so may the lateral track when it
+        # hands over to the kinematic single-track below vehicle.kinematic_below_mps
+        if self.controller.kind != "kinematic_mpc" and self.vehicle.kinematic_below_mps is None \
                 and self.planner.speed_floor_mps < self.vehicle.min_model_speed_mps:
             raise ConfigError("planner.speed_floor_mps", self.planner.speed_floor_mps,
-                              f">= vehicle.min_model_speed_mps ({self.vehicle.min_model_speed_mps})")
+                              f">= vehicle.min_model_speed_mps ({self.vehicle.min_model_speed_mps}),"
+                              " or any with vehicle.kinematic_below_mps set (the hand-over to "
+                              "the kinematic model)")
         self.freeze()  # checked: from here on read-only (a change is a new, checked object)
 
     @property

@@ -329,6 +329,15 @@ INTERPRETATION_REGISTER: tuple[RegisterEntry, ...] = (
         "scenario.commonroad.obstacle_disc, scenario.commonroad.cover_discs, "
         "vehicle.footprint_discs, vehicle.footprint_span_m"),
     RegisterEntry(
+        "Braking to a stop on the lateral track (a choice we add; the paper's speed never "
+        "falls below the model's)", "the lateral model has 1/v_x terms",
+        "off (vehicle.kinematic_below_mps = null): the speed floor stays at "
+        "vehicle.min_model_speed_mps and the plant keeps its tyre law at every speed",
+        "a hand-over speed: below it the plant and the MPC's model are the kinematic "
+        "single-track (no slip, no 1/v_x term), so planner.speed_floor_mps may be 0 (a car that "
+        "cannot pass a wall stops 1 m short of it instead of driving through)",
+        "vehicle.kinematic_below_mps"),
+    RegisterEntry(
         "Success on a CommonRoad file (a choice we add)", "-",
         "the file's own criterion: its goal region reached (position, time step, orientation "
         "and speed intervals; CommonRoad's goal_reached) without contact on the true shapes; "

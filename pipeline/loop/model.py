@@ -49,9 +49,12 @@ class LateralModel:
     Ed: np.ndarray
     speed_mps: float
     sample_time_s: float
+    #: the kinematic single-track (below ``vehicle.kinematic_below_mps``), not the dynamic one
+    kinematic: bool = False
 
     def to_json(self) -> dict[str, Any]:
-        return {
+        extra = {"model": "kinematic single-track"} if self.kinematic else {}
+        return {**extra,
             "state": list(LATERAL_STATE_NAMES),
             "input": "delta_dot_rad_s",
             "disturbance": "r_d_rad_s",
@@ -94,21 +97,43 @@ def lateral_matrices(vehicle: VehicleConfig, speed_mps: float,
     return A, B1, B2
 
 
+def kinematic_lateral_matrices(vehicle: VehicleConfig, speed_mps: float,
+                               b2_heading_entry: float = -1.0
+                               ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Continuous-time ``A, B1, B2`` of the kinematic single-track in the lateral model's state
+    ``[y, vy, epsi, r, delta]`` (below ``vehicle.kinematic_below_mps``): no tyre slip, so the
+    lateral velocity and the yaw rate follow the steering angle, ``vy = b vx delta / L`` and
+    ``r = vx delta / L`` (small angles), driven by the steering rate; ``y' = vy + vx epsi``,
+    ``epsi' = r - r_d``. No 1/vx term: it holds down to a stop."""
+    vx = float(speed_mps)
+    b, L = vehicle.cg_to_rear_m, vehicle.wheelbase_m
+    A = np.zeros((5, 5))
+    A[0, 1], A[0, 2], A[2, 3] = 1.0, vx, 1.0
+    B1 = np.array([[0.0], [b * vx / L], [0.0], [vx / L], [1.0]])
+    B2 = np.array([[0.0], [0.0], [float(b2_heading_entry)], [0.0], [0.0]])
+    return A, B1, B2
+
+
 def build_lateral_model(vehicle: VehicleConfig, speed_mps: float, sample_time_s: float,
                         b2_heading_entry: float = -1.0) -> LateralModel:
     """Build the lateral model with python-control and discretize it (zero-order hold).
 
-    The speed is floored at ``vehicle.min_model_speed_mps`` because the model has 1/vx terms.
+    The speed is floored at ``vehicle.min_model_speed_mps`` because the model has 1/vx terms;
+    below ``vehicle.kinematic_below_mps`` (when set) the model is the kinematic single-track
+    (:func:`kinematic_lateral_matrices`), as the plant is there.
     """
     speed = max(float(speed_mps), vehicle.min_model_speed_mps)
-    A, B1, B2 = lateral_matrices(vehicle, speed, b2_heading_entry)
+    kinematic = vehicle.kinematic_below_mps is not None and speed < vehicle.kinematic_below_mps
+    A, B1, B2 = kinematic_lateral_matrices(vehicle, speed, b2_heading_entry) if kinematic \
+        else lateral_matrices(vehicle, speed, b2_heading_entry)
     import control  # here: python-control costs half a second of start-up to every importer
 
     sys_c = control.ss(A, np.hstack([B1, B2]), np.eye(5), np.zeros((5, 2)))
     sys_d = control.c2d(sys_c, sample_time_s, method="zoh")
     Bd_all = np.asarray(sys_d.B)
     return LateralModel(A=A, B1=B1, B2=B2, Ad=np.asarray(sys_d.A), Bd=Bd_all[:, :1],
-                        Ed=Bd_all[:, 1:], speed_mps=speed, sample_time_s=float(sample_time_s))
+                        Ed=Bd_all[:, 1:], speed_mps=speed, sample_time_s=float(sample_time_s),
+                        kinematic=kinematic)
 
 
 def model_speed_mps(speed_mps: float, floor_mps: float, grid_mps: float) -> float:
@@ -169,7 +194,7 @@ def _single_track_constants(vehicle: VehicleConfig) -> tuple[float, ...]:
 SINGLE_TRACK_CONSTANT_NAMES = (
     "mass_kg", "yaw_inertia_kg_m2", "cg_to_front_m", "cg_to_rear_m", "cornering_front_n_per_rad",
     "cornering_rear_n_per_rad", "force_limit_front_n", "force_limit_rear_n",
-    "speed_time_constant_s", "accel_max_mps2", "steering_max_rad")
+    "speed_time_constant_s", "accel_max_mps2", "steering_max_rad", "kinematic_below_mps")
 
 
 def single_track_constants(vehicle: VehicleConfig) -> tuple[float, ...]:
@@ -178,7 +203,8 @@ def single_track_constants(vehicle: VehicleConfig) -> tuple[float, ...]:
     speed loop's time constant and acceleration limit and the steering bound."""
     return tuple(float(c) for c in _single_track_constants(vehicle)) + (
         float(vehicle.speed_time_constant_s), float(vehicle.accel_max_mps2),
-        float(vehicle.steering_max_rad))
+        float(vehicle.steering_max_rad),
+        float(vehicle.kinematic_below_mps) if vehicle.kinematic_below_mps is not None else 0.0)
 
 
 def plant_derivative(state: np.ndarray, steering_rate_rad_s: float, speed_target_mps: float,
@@ -264,6 +290,7 @@ def single_track_rk4(state: KernelValues, constants: KernelValues, rate_cmd: flo
     m, iz, a, b = constants[0], constants[1], constants[2], constants[3]
     cf, cr, lim_f, lim_r = constants[4], constants[5], constants[6], constants[7]
     tau, acc_max, d_max = constants[8], constants[9], constants[10]
+    kinematic_below, wheelbase = constants[11], a + b
     # the steering rate is cut to 0 at the steering bound (the same rule in every stage)
     rate_at_upper = rate_cmd if rate_cmd <= 0 else 0.0
     rate_at_lower = rate_cmd if rate_cmd >= 0 else 0.0
@@ -272,6 +299,15 @@ def single_track_rk4(state: KernelValues, constants: KernelValues, rate_cmd: flo
     X, Y, psi, vx = state[0], state[1], state[2], state[3]
     vy, r, delta = state[4], state[5], state[6]
     for _ in range(substeps):
+        if vx < kinematic_below:
+            # below the hand-over speed: the kinematic single-track (no tyre slip; the tyre
+            # law's 1/vx stiffness would need ever smaller steps), vy and r held to the steering
+            kinematic_substep = single_track_kinematic_substep(
+                X, Y, psi, vx, delta, rate_cmd, target, tau, acc_max, d_max, b, wheelbase, h)
+            X, Y, psi, vx = kinematic_substep[0], kinematic_substep[1], kinematic_substep[2], \
+                kinematic_substep[3]
+            vy, r, delta = kinematic_substep[4], kinematic_substep[5], kinematic_substep[6]
+            continue
         k2 = k3 = k4 = k5 = k6 = 0.0   # the previous stage's slopes (X, Y never feed back)
         s0 = s1 = s2 = s3 = s4 = s5 = s6 = 0.0
         for stage in range(4):
@@ -301,6 +337,40 @@ def single_track_rk4(state: KernelValues, constants: KernelValues, rate_cmd: flo
     out[0], out[1], out[2], out[3] = X, Y, psi, vx
     out[4], out[5], out[6] = vy, r, delta
     return out
+
+
+def single_track_kinematic_substep(X: float, Y: float, psi: float, vx: float, delta: float,
+                                   rate_cmd: float, target: float, tau: float, acc_max: float,
+                                   d_max: float, b: float, wheelbase: float, h: float
+                                   ) -> tuple[float, float, float, float, float, float, float]:
+    """One RK4 substep of :func:`single_track_rk4` below the hand-over speed: the kinematic
+    single-track about the centre of gravity (side slip ``beta = atan(b tan delta / L)``,
+    yaw rate ``vx tan delta / L``), the same speed loop and steering actuator; returns
+    ``X, Y, psi, vx, vy, r, delta`` with ``vy = vx tan beta`` and ``r`` the kinematic ones."""
+    rate_at_upper = rate_cmd if rate_cmd <= 0 else 0.0
+    rate_at_lower = rate_cmd if rate_cmd >= 0 else 0.0
+    s0 = s1 = s2 = s3 = s6 = 0.0
+    k2 = k3 = k6 = 0.0
+    for stage in range(4):
+        fraction = 0.0 if stage == 0 else (0.5 if stage < 3 else 1.0)
+        weight = 2.0 if stage == 1 or stage == 2 else 1.0
+        step = fraction * h
+        p, u, d = psi + step * k2, vx + step * k3, delta + step * k6
+        accel = (target - u) / tau
+        accel = acc_max if accel > acc_max else (-acc_max if accel < -acc_max else accel)
+        k6 = rate_at_upper if d >= d_max else (rate_at_lower if d <= -d_max else rate_cmd)
+        tan_d = tan(d)
+        side = atan2(b * tan_d, wheelbase)
+        k0, k1 = u * cos(p + side) / cos(side), u * sin(p + side) / cos(side)
+        k2, k3 = u * tan_d / wheelbase, accel
+        s0, s1, s2, s3, s6 = s0 + weight * k0, s1 + weight * k1, s2 + weight * k2, \
+            s3 + weight * k3, s6 + weight * k6
+    sixth = h / 6.0
+    X, Y, psi, vx = X + sixth * s0, Y + sixth * s1, psi + sixth * s2, vx + sixth * s3
+    delta = delta + sixth * s6
+    delta = d_max if delta > d_max else (-d_max if delta < -d_max else delta)
+    tan_d = tan(delta)
+    return X, Y, psi, vx, vx * b * tan_d / wheelbase, vx * tan_d / wheelbase, delta
 
 
 #: Kinematic bicycle (paper Appendix A): state [x, y, theta, v], input [a, delta].

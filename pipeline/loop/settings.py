@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import Any, Dict, List, Optional, Protocol
+from typing import Any, ClassVar, Dict, List, Optional, Protocol
 
 from omegaconf import MISSING
 
@@ -59,6 +59,11 @@ class VehicleConfig(FrozenAfterValidation):
     # centre, centred on the logged position; 1 and 0: one disc (the paper's reading)
     footprint_discs: int = 1
     footprint_span_m: float = 0.0
+    # below this speed the plant and the lateral MPC's model are the kinematic single-track
+    # (no tyre slip, no 1/v_x terms), so the lateral track may brake to a stop
+    # (planner.speed_floor_mps down to 0); None: the dynamic model at every speed, floored at
+    # min_model_speed_mps (earlier releases)
+    kinematic_below_mps: Optional[float] = None
 
     #: Physical range of each parameter (a road vehicle, from a cart to a truck).
     BOUNDS = {"mass_kg": (10.0, 1e5), "yaw_inertia_kg_m2": (1.0, 1e7),
@@ -75,6 +80,9 @@ class VehicleConfig(FrozenAfterValidation):
         between("vehicle.steering_max_rad", self.steering_max_rad, 1e-3, 1.2)
         integer_in("vehicle.footprint_discs", self.footprint_discs, 1, 8)
         between("vehicle.footprint_span_m", self.footprint_span_m, 0.0, 50.0)
+        if self.kinematic_below_mps is not None:
+            between("vehicle.kinematic_below_mps", self.kinematic_below_mps,
+                    self.min_model_speed_mps, 20.0)
         if self.footprint_discs == 1 and self.footprint_span_m != 0.0:
             raise ConfigError("vehicle.footprint_span_m", self.footprint_span_m,
                               "0 with vehicle.footprint_discs=1 (one disc spans nothing)")
@@ -82,7 +90,8 @@ class VehicleConfig(FrozenAfterValidation):
 
     #: The keys added after the config hash was first pinned, with the reading from before
     #: them (left out of the hash while they hold it: :meth:`hash_view`)
-    BEFORE_KEYS = {"footprint_discs": 1, "footprint_span_m": 0.0}
+    BEFORE_KEYS: ClassVar[dict[str, Any]] = {"footprint_discs": 1, "footprint_span_m": 0.0,
+                                             "kinematic_below_mps": None}
 
     @staticmethod
     def hash_view(data: dict[str, Any]) -> dict[str, Any]:

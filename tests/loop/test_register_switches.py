@@ -78,6 +78,7 @@ SWITCH_TESTS = {
     "scenario.commonroad.obstacle_disc": "test_commonroad",
     "scenario.commonroad.cover_discs": "test_commonroad", "vehicle.footprint_discs": "test_cover",
     "vehicle.footprint_span_m": "test_cover", "scenario.commonroad.n_steps": "test_commonroad",
+    "vehicle.kinematic_below_mps": "test_handover",
 
 
 }

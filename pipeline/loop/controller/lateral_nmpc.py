@@ -59,7 +59,8 @@ def single_track_ode(ca: Any, x: Any, rate: Any, speed_target: Any,
                      constants: tuple[float, ...]) -> Any:
     """:func:`~pipeline.loop.model.plant_derivative` in CasADi symbols (the steering bound is a
     constraint of the program, not a cut of the rate)."""
-    m, iz, a, b, cf, cr, lim_f, lim_r, tau, acc_max, _ = constants
+    # the dynamic plant (its hand-over to the kinematic one below a speed is not modelled)
+    m, iz, a, b, cf, cr, lim_f, lim_r, tau, acc_max = constants[:10]
     vx, vy, r, delta, psi = x[3], x[4], x[5], x[6], x[2]
     vx_safe = ca.fmax(vx, 0.1)
     fy_front = lim_f * ca.tanh(cf * (delta - ca.atan2(vy + a * r, vx_safe)) / lim_f)
