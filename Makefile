@@ -22,7 +22,7 @@ PEERS_JOBS ?= 1
 # make pedestrians: the recorded-pedestrian family (ETH/UCY), not part of make reproduce
 PEDESTRIANS_FAMILY_SIZE ?= 200
 # the variants of make pedestrians (conf/experiment/pedestrians_<variant>.yaml) and their size
-PEDESTRIANS_VARIANTS ?= car aimed reactive
+PEDESTRIANS_VARIANTS ?= car aimed reactive lateral
 PEDESTRIANS_VARIANTS_FAMILY_SIZE ?= 60
 REPORT      ?= reports/latest
 PYTEST_ARGS ?=

@@ -294,7 +294,10 @@ INTERPRETATION_REGISTER: tuple[RegisterEntry, ...] = (
         "it at 3.6-7 m/s), 50 obstacle slots, the run ended at its first contact",
         "the compact car on the lateral track with 3 slots and crossings aimed at a walker "
         "(experiment=pedestrians_car, a row of make pedestrians: 73 % / 87 % collisions; at its "
-        "60 crossings every claim inconclusive, C1-C5 on a handful of clean pairs)",
+        "60 crossings every claim inconclusive, C1-C5 on a handful of clean pairs); the robot "
+        "on the lateral track braking to a stop (experiment=pedestrians_lateral: the hand-over "
+        "to the kinematic single-track below 0.6 m/s, velocity planning to a floor of 0; 60 "
+        "crossings: 17 % / 42 % collisions)",
         "vehicle, controller, controller.reference_alignment, controller.max_obstacles, "
         "scenario.pedestrians.end_at_contact"),
     RegisterEntry(
