@@ -341,6 +341,15 @@ INTERPRETATION_REGISTER: tuple[RegisterEntry, ...] = (
         "cannot pass a wall stops 1 m short of it instead of driving through)",
         "vehicle.kinematic_below_mps"),
     RegisterEntry(
+        "What the ego sees on a CommonRoad road (a choice we add; the paper's obstacle "
+        "appears at a scripted time)", "an obstacle that appears suddenly",
+        "obstacles within scenario.commonroad.sensor_range_m = 60 m (centre distance) whose "
+        "line of sight from the ego crosses no static obstacle's rectangle (a parked car hides "
+        "what stands behind it); anything within the ego's reach is seen",
+        "occlusion=false, sensor_range_m=null: every present obstacle seen from its first "
+        "recorded step (earlier releases: nothing appeared)",
+        "scenario.commonroad.sensor_range_m, scenario.commonroad.occlusion"),
+    RegisterEntry(
         "Success on a CommonRoad file (a choice we add)", "-",
         "the file's own criterion: its goal region reached (position, time step, orientation "
         "and speed intervals; CommonRoad's goal_reached) without contact on the true shapes; "

@@ -98,6 +98,28 @@ class CommonRoadScenario(Scenario):
     track_positions_m: np.ndarray = field(default_factory=lambda: np.zeros((0, 1, 2)))
     track_velocities_mps: np.ndarray = field(default_factory=lambda: np.zeros((0, 1, 2)))
     track_present: np.ndarray = field(default_factory=lambda: np.zeros((0, 1), bool))
+    #: the static obstacles' rectangles that hide what is behind them (k, 4, 2; corners
+    #: counter-clockwise), and for each obstacle disc the rectangle that is its own (-1: none)
+    occluders_m: np.ndarray = field(default_factory=lambda: np.zeros((0, 4, 2)))
+    occluder_of: np.ndarray = field(default_factory=lambda: np.zeros(0, int))
+
+    @property
+    def senses(self) -> bool:
+        return self.sensor_range_m is not None or self.occluders_m.shape[0] > 0
+
+    def sense(self, snapshot: ObstacleSnapshot, position_m: np.ndarray,
+              reach_m: float) -> ObstacleSnapshot:
+        """What the ego at ``position_m`` sees: within the sensor range, and not hidden behind
+        a static obstacle (:func:`occluded`); an obstacle within the ego's reach (``reach_m``
+        plus its radius) is always seen."""
+        seen = Scenario.sense(self, snapshot, position_m, reach_m)
+        if self.occluders_m.shape[0] == 0 or not seen.visible.any():
+            return seen
+        position = np.asarray(position_m, float)
+        near = np.hypot(*(snapshot.positions_m - position).T) <= reach_m + snapshot.radii_m
+        hidden = occluded(position, snapshot.positions_m, self.occluders_m, self.occluder_of)
+        return ObstacleSnapshot(snapshot.positions_m, snapshot.velocities_mps, snapshot.radii_m,
+                                seen.visible & (near | ~hidden))
 
     def obstacles_at(self, time_s: float) -> ObstacleSnapshot:
         """The recorded obstacles at ``time_s``; outside its recording an obstacle is
@@ -115,6 +137,50 @@ class CommonRoadScenario(Scenario):
             + self.track_velocities_mps[:, i1] * share
         visible = self.track_present[:, i0] & (self.track_present[:, i1] | (share == 0.0))
         return ObstacleSnapshot(positions, velocities, self.obstacle_radius_m.copy(), visible)
+
+
+def occluded(viewer_m: np.ndarray, targets_m: np.ndarray, occluders_m: np.ndarray,
+             own: np.ndarray) -> np.ndarray:
+    """Whether the segment from ``viewer_m`` to each target (n, 2) crosses one of the convex
+    ``occluders_m`` (k, 4, 2; corners counter-clockwise) other than the target's own
+    (``own``: its index, -1 for none); an occluder holding the viewer hides nothing (the
+    Cyrus-Beck clip of the segment against each occluder's four edge half-planes)."""
+    corners = occluders_m                                   # (k, 4, 2)
+    edges = np.roll(corners, -1, axis=1) - corners          # (k, 4, 2)
+    normals = np.stack([edges[..., 1], -edges[..., 0]], axis=-1)   # outward for CCW
+    start = np.einsum("ked,ked->ke", normals, viewer_m[None, None, :] - corners)   # (k, 4)
+    direction = targets_m - viewer_m[None, :]               # (n, 2)
+    rate = np.einsum("ked,nd->nke", normals, direction)     # (n, k, 4)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        crossing = -start[None] / rate                      # where the segment meets each edge
+    entering = np.where(rate < 0, crossing, -np.inf).max(axis=2)
+    leaving = np.where(rate > 0, crossing, np.inf).min(axis=2)
+    parallel_outside = ((rate == 0) & (start[None] > 0)).any(axis=2)
+    low, high = np.maximum(entering, 0.0), np.minimum(leaving, 1.0)
+    blocked = (low <= high) & ~parallel_outside             # (n, k)
+    blocked &= ~(start <= 0).all(axis=1)[None, :]           # the viewer inside: hides nothing
+    blocked[np.arange(targets_m.shape[0])[own >= 0], own[own >= 0]] = False
+    return blocked.any(axis=1)
+
+
+def occluder_rectangles(scenario: Any, t0: int, ids: tuple[int, ...]
+                        ) -> tuple[np.ndarray, np.ndarray]:
+    """The static obstacles' rectangles (their shapes' smallest bounding rectangles at time
+    step ``t0``, corners counter-clockwise) and, for each obstacle disc of ``ids``, the index
+    of its own rectangle (-1 when it is not a static obstacle's)."""
+    rectangles: list[np.ndarray] = []
+    index: dict[int, int] = {}
+    for obstacle in sorted(scenario.static_obstacles, key=lambda o: o.obstacle_id):
+        occupancy = obstacle.occupancy_at_time(t0)
+        if occupancy is None:
+            continue
+        box = np.array(shape_geometry(occupancy.shape).minimum_rotated_rectangle
+                       .exterior.coords)[:4]
+        area = np.sum(box[:, 0] * np.roll(box[:, 1], -1) - np.roll(box[:, 0], -1) * box[:, 1])
+        index[int(obstacle.obstacle_id)] = len(rectangles)
+        rectangles.append(box if area > 0 else box[::-1])
+    own = np.array([index.get(i, -1) for i in ids], int)
+    return np.array(rectangles, float).reshape(-1, 4, 2), own
 
 
 @dataclass(frozen=True)
@@ -187,6 +253,10 @@ def read_commonroad(cfg: ScenarioConfig) -> CommonRoadCase:
                        n_steps=int(n_steps), obstacles=[])
     tracks, ids, ego_ids = _tracks(scenario, problem, cr, t0, int(n_steps) + 2)
     ours = build_commonroad_scenario(resolved, tracks)
+    occluders, own = occluder_rectangles(scenario, t0, ids) if cr.occlusion \
+        else (np.zeros((0, 4, 2)), np.full(len(ids), -1))
+    ours = replace(ours, sensor_range_m=cr.sensor_range_m, occluders_m=occluders,
+                   occluder_of=own)
     return CommonRoadCase(resolved, ours, scenario, problem, ids, ego_ids, t0, digest)
 
 

@@ -183,6 +183,21 @@ class Scenario:
                                 self.obstacle_radius_m.copy(), visible)
 
 
+    @property
+    def senses(self) -> bool:
+        """Whether the loop must ask :meth:`sense` what is seen (a sensor range here; a
+        scenario with occluders too)."""
+        return self.sensor_range_m is not None
+
+    def sense(self, snapshot: ObstacleSnapshot, position_m: np.ndarray,
+              reach_m: float) -> ObstacleSnapshot:
+        """``snapshot`` as the vehicle at ``position_m`` sees it: within
+        :attr:`sensor_range_m` (centre distance). ``reach_m``: the vehicle's reach from
+        ``position_m`` (a scenario that hides obstacles never hides one within it)."""
+        if self.sensor_range_m is None:
+            return snapshot
+        return snapshot.sensed_from(position_m, self.sensor_range_m)
+
     def nominal_position_m(self, time_s: float) -> np.ndarray:
         """Where a vehicle at ``speed_mps`` along the start-goal line would be at ``time_s``."""
         d = self.goal_m - self.start_m

@@ -291,6 +291,12 @@ class CommonRoadConfig(FrozenAfterValidation):
     obstacle_disc: str = "cover"
     # discs per rectangle under obstacle_disc=cover (1: the circumscribed disc)
     cover_discs: int = 3
+    # what the ego sees: obstacles within this centre distance (m; None: every present one)
+    sensor_range_m: Optional[float] = None
+    # a static obstacle (a parked car) hides what stands behind it: an obstacle is seen while
+    # the line from the ego to its centre crosses no static obstacle's rectangle (anything
+    # within the ego's reach is seen)
+    occlusion: bool = False
     # an obstacle whose centre is this close to the planning problem's initial position at its
     # initial time step is the ego's own recording, and dropped
     ego_match_tolerance_m: float = 0.5
@@ -314,6 +320,10 @@ class CommonRoadConfig(FrozenAfterValidation):
         choice("scenario.commonroad.obstacle_disc", self.obstacle_disc,
                ("cover", "circumscribed", "half_width"))
         integer_in("scenario.commonroad.cover_discs", self.cover_discs, 1, 8)
+        if self.sensor_range_m is not None:
+            between("scenario.commonroad.sensor_range_m", self.sensor_range_m, 1.0, 1000.0)
+        if not isinstance(self.occlusion, bool):
+            raise ConfigError("scenario.commonroad.occlusion", self.occlusion, "true or false")
         between("scenario.commonroad.ego_match_tolerance_m", self.ego_match_tolerance_m,
                 0.0, 10.0)
         if self.speed_mps is not None:
@@ -552,6 +562,12 @@ class ScenarioConfig(FrozenAfterValidation):
             # read only under the cover: an earlier reading hashes as before the key
             data["commonroad"] = {k: v for k, v in data["commonroad"].items()
                                   if k != "cover_discs"}
+        if isinstance(data.get("commonroad"), dict):
+            cr = dict(data["commonroad"])
+            for key, earlier in (("sensor_range_m", None), ("occlusion", False)):
+                if key in cr and cr[key] is earlier:
+                    cr.pop(key)  # sees everything present, as before the key
+            data["commonroad"] = cr
         if data.get("pedestrians", 0) is None:
             data.pop("pedestrians")  # no recorded pedestrians, as before the key
         elif isinstance(data.get("pedestrians"), dict):

@@ -289,7 +289,9 @@ def _closed_loop(cfg: LoopSettings, scenario: Scenario, qp_cache: QpCache | None
     # (a plain flag keeps the default reading's loop free of the per-step check)
     unanchored = np.full(scenario.n_obstacles, scenario.obstacle_anchor == "vehicle")
     anchoring = bool(unanchored.any())
-    sensor_range = scenario.sensor_range_m
+    senses = scenario.senses
+    # the vehicle's reach from its logged position: its discs' farthest edge
+    reach = vehicle_radius + 0.5 * cfg.vehicle.footprint_span_m
     end_at_contact = scenario.end_at_contact
     # an obstacle motion that reacts to the platform (reactive walkers) is told where it is
     reacting = scenario.obstacle_motion if hasattr(scenario.obstacle_motion, "react") \
@@ -302,8 +304,8 @@ def _closed_loop(cfg: LoopSettings, scenario: Scenario, qp_cache: QpCache | None
             reacting.react(time_s, state[:2], vehicle_radius)
         snapshot = scenario.obstacles_at(time_s)
         contact = end_at_contact and _in_contact(state, snapshot, vehicle_radius)
-        if sensor_range is not None:  # recorded pedestrians: seen only within the range
-            snapshot = snapshot.sensed_from(state[:2], sensor_range)
+        if senses:  # a sensor range (recorded pedestrians), occlusion (CommonRoad)
+            snapshot = scenario.sense(snapshot, state[:2], reach)
         row, along, lateral, psi, e_psi = _pose_row(time_s, state, frame, line, snapshot,
                                                     obstacle_names)
         ending = "contact" if contact else _termination(state, along, goal_line_x, scenario, k)

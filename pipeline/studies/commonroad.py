@@ -16,12 +16,14 @@ import logging
 from dataclasses import dataclass, replace
 from pathlib import Path
 
+import numpy as np
 import pandas as pd
 
 from pipeline.analysis.commonroad_check import CommonRoadVerdicts, judge_commonroad_run
 from pipeline.analysis.objectives import objective_values
 from pipeline.config import ExperimentConfig
 from pipeline.loop.commonroad_scenario import (
+    CommonRoadCase,
     ego_cover_vehicle,
     ego_solution,
     read_commonroad,
@@ -92,10 +94,25 @@ def run_commonroad(cfg: ExperimentConfig, out_dir: Path) -> CommonRoadRun:
                 "vehicle_type": commonroad.vehicle_type},
         "verdicts": verdicts.to_json(),
     }
+    summary["run"]["obstacles_seen_late"] = seen_late(case, trajectory)
     solution = ego_solution(case, trajectory, commonroad.vehicle_type)
     result = CommonRoadResult(summary).write(run.out_dir,
                                              lambda path: write_solution(solution, path))
     return CommonRoadRun(run, verdicts, result)
+
+
+def seen_late(case: CommonRoadCase, trajectory: pd.DataFrame) -> int:
+    """How many of the file's obstacles the ego first saw after the run's first step (out of
+    range or hidden behind a static obstacle at first: what "appears" on a road)."""
+    from pipeline.loop.trajectory import obstacle_indices
+
+    first: dict[int, int] = {}
+    for j in obstacle_indices(trajectory.columns):
+        visible = np.flatnonzero(trajectory[f"obs{j}_visible"].to_numpy(bool))
+        if visible.size:
+            cr_id = case.obstacle_ids[j]
+            first[cr_id] = min(first.get(cr_id, visible[0]), int(visible[0]))
+    return sum(1 for step in first.values() if step > 0)
 
 
 def run_and_log(experiment: ExperimentConfig, out_dir: Path) -> float | tuple[float, ...]:

@@ -454,3 +454,88 @@ def test_make_commonroad_takes_a_path_with_spaces(tmp_path):
     assert proc.returncode == 0, proc.stderr[-2000:]
     for method in ("improved", "baseline"):
         assert (tmp_path / "out" / "commonroad" / "my scene" / method / "manifest.json").is_file()
+
+
+def test_a_line_of_sight_is_blocked_exactly_where_it_crosses_the_rectangle():
+    """Closed form: from (0, 0) the segment to (10, h) crosses the square x in [4, 6],
+    y in [-1, 1] iff 4 |h| / 10 <= 1; a target inside its own rectangle is not hidden by it;
+    a viewer inside a rectangle is hidden nothing by it."""
+    from pipeline.loop.commonroad_scenario import occluded
+
+    square = np.array([[[4.0, -1.0], [6.0, -1.0], [6.0, 1.0], [4.0, 1.0]]])
+    heights = np.linspace(-4.0, 4.0, 81)
+    targets = np.stack([np.full(81, 10.0), heights], axis=1)
+    hidden = occluded(np.zeros(2), targets, square, np.full(81, -1))
+    assert hidden.tolist() == (np.abs(heights) * 0.4 <= 1.0 + 1e-12).tolist()
+    inside = np.array([[5.0, 0.0], [12.0, 0.0]])
+    assert occluded(np.zeros(2), inside, square, np.array([0, -1])).tolist() == [False, True]
+    assert not occluded(np.array([5.0, 0.5]), targets, square, np.full(81, -1)).any()
+
+
+@needs_extra
+def test_a_walker_behind_a_parked_car_is_seen_once_the_line_of_sight_clears(
+        tmp_path, make_scenario_config):
+    """A parked car (x in [18, 22.5], y in [1.5, 3.3]) and a walker crossing at x = 25 from
+    y = 6 towards the road: from the ego at (0, 0) the line to the walker at (25, y) crosses
+    the car iff 22.5 y / 25 >= 1.5 and 18 y / 25 <= 3.3 (closed form: y in [1.667, 4.583]);
+    within the ego's reach a walker is always seen; without occlusion it is seen throughout."""
+    import warnings
+
+    from commonroad.common.file_writer import CommonRoadFileWriter, OverwriteExistingFile
+    from commonroad.common.util import Interval
+    from commonroad.geometry.shape import Circle, Rectangle
+    from commonroad.planning.goal import GoalRegion
+    from commonroad.planning.planning_problem import PlanningProblem, PlanningProblemSet
+    from commonroad.prediction.prediction import TrajectoryPrediction
+    from commonroad.scenario.obstacle import DynamicObstacle, ObstacleType, StaticObstacle
+    from commonroad.scenario.scenario import Scenario, ScenarioID, Tag
+    from commonroad.scenario.state import CustomState, InitialState
+    from commonroad.scenario.trajectory import Trajectory
+
+    scenario = Scenario(dt=0.1, scenario_id=ScenarioID(country_id="ZAM", map_name="Hidden",
+                                                        map_id=1))
+    scenario.add_objects(StaticObstacle(20, ObstacleType.PARKED_VEHICLE, Rectangle(4.5, 1.8),
+                                        InitialState(position=np.array([20.25, 2.4]),
+                                                     orientation=0.0, velocity=0.0,
+                                                     time_step=0)))
+    states = [CustomState(position=np.array([25.0, 6.0 - 0.15 * k]), orientation=-math.pi / 2,
+                          velocity=1.5, time_step=k) for k in range(1, 60)]
+    scenario.add_objects(DynamicObstacle(
+        21, ObstacleType.PEDESTRIAN, Circle(0.3),
+        InitialState(position=np.array([25.0, 6.0]), orientation=-math.pi / 2, velocity=1.5,
+                     time_step=0),
+        TrajectoryPrediction(Trajectory(1, states), Circle(0.3))))
+    goal = GoalRegion([CustomState(position=Rectangle(6.0, 7.0, center=np.array([60.0, 0.0])),
+                                   time_step=Interval(0, 59))])
+    problem = PlanningProblem(100, InitialState(position=np.array([-30.0, 0.0]),
+                                                orientation=0.0, velocity=5.0, time_step=0,
+                                                yaw_rate=0.0, slip_angle=0.0), goal)
+    path = tmp_path / "hidden.xml"
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        CommonRoadFileWriter(scenario, PlanningProblemSet([problem]), author="tests",
+                             affiliation="tests", source="tests", tags={Tag.URBAN}
+                             ).write_to_file(str(path), OverwriteExistingFile.ALWAYS)
+    case = read_commonroad(make_scenario_config(path))
+    ours = case.scenario
+    assert ours.senses and ours.occluders_m.shape == (1, 4, 2)
+    walker = [j for j, i in enumerate(case.obstacle_ids) if i == 21]
+    assert len(walker) == 1
+    seen, heights = [], []
+    for k in range(60):
+        snap = ours.obstacles_at(0.1 * k)
+        heights.append(float(snap.positions_m[walker[0], 1]))
+        seen.append(bool(ours.sense(snap, np.zeros(2), 1.0).visible[walker[0]]))
+    heights_arr = np.array(heights)
+    expected = ~((22.5 * heights_arr / 25 >= 1.5) & (18 * heights_arr / 25 <= 3.3))
+    assert seen == expected.tolist() and not all(seen) and any(seen)
+    # the parked car's own discs are never hidden by it
+    parked = [j for j, i in enumerate(case.obstacle_ids) if i == 20]
+    assert ours.sense(ours.obstacles_at(0.0), np.zeros(2), 1.0).visible[parked].all()
+    # within the ego's reach (its centre distance <= reach + radius): seen though behind
+    snap = ours.obstacles_at(0.1 * 15)        # the walker at y = 3.75, 25.3 m from (0, 0)
+    assert not ours.sense(snap, np.zeros(2), 24.9).visible[walker[0]]
+    assert ours.sense(snap, np.zeros(2), 25.1).visible[walker[0]]
+    plain = read_commonroad(make_scenario_config(path, "scenario.commonroad.occlusion=false",
+                                                 "scenario.commonroad.sensor_range_m=null"))
+    assert not plain.scenario.senses

@@ -79,6 +79,8 @@ SWITCH_TESTS = {
     "scenario.commonroad.cover_discs": "test_commonroad", "vehicle.footprint_discs": "test_cover",
     "vehicle.footprint_span_m": "test_cover", "scenario.commonroad.n_steps": "test_commonroad",
     "vehicle.kinematic_below_mps": "test_handover",
+    "scenario.commonroad.sensor_range_m": "test_commonroad",
+    "scenario.commonroad.occlusion": "test_commonroad",
 
 
 }

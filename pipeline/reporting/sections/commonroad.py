@@ -35,6 +35,8 @@ class CommonRoadRow:
     goal_disagreement: str = ""
     #: how the shapes were read: "cover (3 discs)", "circumscribed", ...
     shapes: str = ""
+    #: obstacles first seen after the first step (out of range or hidden at first)
+    seen_late: int | None = None
 
 
 @dataclass(frozen=True)
@@ -77,5 +79,5 @@ def commonroad_section(inputs: Any) -> CommonRoadSection | None:
             success=bool(v["success"]) if "success" in v else None,
             min_clearance_true_shapes_m=float(clearance) if clearance is not None else None,
             goal_disagreement=str(v.get("goal_disagreement") or v.get("goal_note") or ""),
-            shapes=shapes))
+            shapes=shapes, seen_late=run.get("obstacles_seen_late")))
     return CommonRoadSection(tuple(rows)) if rows else None
