@@ -350,6 +350,16 @@ INTERPRETATION_REGISTER: tuple[RegisterEntry, ...] = (
         "recorded step (earlier releases: nothing appeared)",
         "scenario.commonroad.sensor_range_m, scenario.commonroad.occlusion"),
     RegisterEntry(
+        "Where the attraction pulls on a CommonRoad road (a choice we add; the paper's road "
+        "is straight)", "the goal attracts",
+        "straight towards the goal point (scenario.commonroad.route_lookahead_m = null)",
+        "along the road: the point route_lookahead_m ahead on the route's lanelet centreline "
+        "(the shortest lanelet path to the goal's lanelet). On the public files it trades: at "
+        "20 m ZAM_Tjunction's improved reaches the goal (133 -> 60 steps off the road) but "
+        "US101-23_1's baseline no longer does, at 40 m neither reaches it; no road-edge "
+        "constraint in the MPC",
+        "scenario.commonroad.route_lookahead_m"),
+    RegisterEntry(
         "Success on a CommonRoad file (a choice we add)", "-",
         "the file's own criterion: its goal region reached (position, time step, orientation "
         "and speed intervals; CommonRoad's goal_reached) without contact on the true shapes; "

@@ -103,6 +103,24 @@ class CommonRoadScenario(Scenario):
     occluders_m: np.ndarray = field(default_factory=lambda: np.zeros((0, 4, 2)))
     occluder_of: np.ndarray = field(default_factory=lambda: np.zeros(0, int))
 
+    #: the route's lanelet centreline (P, 2; empty: none) and how far ahead along it the
+    #: attraction pulls (``scenario.commonroad.route_lookahead_m``)
+    route_m: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)))
+    route_lookahead_m: float = 0.0
+
+    @property
+    def follows_road(self) -> bool:
+        return self.route_m.shape[0] >= 2
+
+    def attraction_goal_m(self, position_m: np.ndarray) -> np.ndarray:
+        """The point :attr:`route_lookahead_m` along the route ahead of the ego's projection
+        on it (:func:`point_ahead_on`); past the route's end, the goal point."""
+        if not self.follows_road:
+            return self.goal_m
+        ahead = point_ahead_on(self.route_m, np.asarray(position_m, float),
+                               self.route_lookahead_m)
+        return self.goal_m if ahead is None else ahead
+
     @property
     def senses(self) -> bool:
         return self.sensor_range_m is not None or self.occluders_m.shape[0] > 0
@@ -137,6 +155,107 @@ class CommonRoadScenario(Scenario):
             + self.track_velocities_mps[:, i1] * share
         visible = self.track_present[:, i0] & (self.track_present[:, i1] | (share == 0.0))
         return ObstacleSnapshot(positions, velocities, self.obstacle_radius_m.copy(), visible)
+
+
+def point_ahead_on(polyline_m: np.ndarray, position_m: np.ndarray, distance_m: float
+                   ) -> np.ndarray | None:
+    """The point ``distance_m`` along ``polyline_m`` beyond the projection of ``position_m`` on
+    it (the nearest point of the nearest segment); None past its end."""
+    starts, ends = polyline_m[:-1], polyline_m[1:]
+    segments = ends - starts
+    lengths = np.hypot(segments[:, 0], segments[:, 1])
+    share = np.clip(np.einsum("sd,sd->s", position_m[None, :] - starts, segments)
+                    / np.maximum(lengths ** 2, 1e-12), 0.0, 1.0)
+    nearest = starts + share[:, None] * segments
+    k = int(np.argmin(np.hypot(*(nearest - position_m[None, :]).T)))
+    along = np.concatenate([[0.0], np.cumsum(lengths)])
+    target = along[k] + share[k] * lengths[k] + distance_m
+    if target > along[-1]:
+        return None
+    i = min(int(np.searchsorted(along, target, side="right")) - 1, lengths.size - 1)
+    t = (target - along[i]) / lengths[i] if lengths[i] > 0 else 0.0
+    return starts[i] + t * segments[i]
+
+
+def route_centreline(network: Any, start_m: np.ndarray, goal_m: np.ndarray | None,
+                     straight_on_m: float = 300.0) -> np.ndarray:
+    """The route's centreline (P, 2): the centre vertices of the shortest lanelet path
+    (:func:`_shortest_lanelet_path`) from the start's lanelet to the goal point's; without a
+    goal point (a goal of time alone) the successors that turn least, for ``straight_on_m``
+    (:func:`_straight_on`). Empty when the start is on no lanelet or no path leads to the goal.
+    (commonroad-route-planner does this too, but needs osqp 0.6, which our cvxpy cannot take.)"""
+    starts = network.find_lanelet_by_position([np.asarray(start_m, float)])[0]
+    if not starts:
+        return np.zeros((0, 2))
+    if goal_m is None:
+        path = _straight_on(network, starts[0], straight_on_m)
+    else:
+        goals = set(network.find_lanelet_by_position([np.asarray(goal_m, float)])[0])
+        path = _shortest_lanelet_path(network, starts, goals)
+    points: list[np.ndarray] = []
+    for lanelet_id, lane_change in path:
+        centre = np.asarray(network.find_lanelet_by_id(lanelet_id).center_vertices, float)
+        if lane_change and points:
+            # join the neighbour where its centre is nearest to the last point
+            last = points[-1][-1]
+            centre = centre[int(np.argmin(np.hypot(*(centre - last).T))):]
+        elif points:
+            centre = centre[1:]  # its first vertex is the predecessor's last
+        if centre.shape[0]:
+            points.append(centre)
+    return np.concatenate(points) if points else np.zeros((0, 2))
+
+
+def _shortest_lanelet_path(network: Any, starts: list[int], goals: set[int]
+                           ) -> list[tuple[int, bool]]:
+    """Dijkstra by length over successors; a change to a same-direction neighbour costs
+    nothing. The lanelets of the path, each with whether it was entered by a lane change
+    (empty: no path)."""
+    import heapq
+
+    queue: list[tuple[float, int, list[tuple[int, bool]]]] = \
+        [(0.0, i, [(i, False)]) for i in starts]
+    done: set[int] = set()
+    while queue:
+        cost, here, steps = heapq.heappop(queue)
+        if here in goals:
+            return steps
+        if here in done:
+            continue
+        done.add(here)
+        this = network.find_lanelet_by_id(here)
+        length = float(this.distance[-1])
+        for nxt in this.successor or []:
+            heapq.heappush(queue, (cost + length, nxt, steps + [(nxt, False)]))
+        for nxt, same in ((this.adj_left, this.adj_left_same_direction),
+                          (this.adj_right, this.adj_right_same_direction)):
+            if nxt is not None and same:
+                heapq.heappush(queue, (cost, nxt, steps + [(nxt, True)]))
+    return []
+
+
+def _straight_on(network: Any, start: int, length_m: float) -> list[tuple[int, bool]]:
+    """From ``start`` the successor whose first heading turns least from the lanelet's last,
+    until ``length_m`` is covered or no successor is left."""
+    here, total = start, 0.0
+    path = [(here, False)]
+    while total < length_m:
+        this = network.find_lanelet_by_id(here)
+        total += float(this.distance[-1])
+        if not this.successor:
+            break
+        end = this.center_vertices[-1] - this.center_vertices[-2]
+        heading = math.atan2(end[1], end[0])
+        here = min(this.successor, key=lambda i: abs(math.remainder(
+            _direction(network.find_lanelet_by_id(i).center_vertices) - heading, 2 * math.pi)))
+        path.append((here, False))
+    return path
+
+
+def _direction(centre: np.ndarray) -> float:
+    """The heading (rad) of a centreline's first segment."""
+    d = np.asarray(centre[1], float) - np.asarray(centre[0], float)
+    return math.atan2(d[1], d[0])
 
 
 def occluded(viewer_m: np.ndarray, targets_m: np.ndarray, occluders_m: np.ndarray,
@@ -255,8 +374,15 @@ def read_commonroad(cfg: ScenarioConfig) -> CommonRoadCase:
     ours = build_commonroad_scenario(resolved, tracks)
     occluders, own = occluder_rectangles(scenario, t0, ids) if cr.occlusion \
         else (np.zeros((0, 4, 2)), np.full(len(ids), -1))
+    route = np.zeros((0, 2))
+    if cr.route_lookahead_m is not None:
+        has_goal_point = any(getattr(g, "position", None) is not None
+                             for g in problem.goal.state_list)
+        route = route_centreline(scenario.lanelet_network, start,
+                                 goal if has_goal_point else None)
     ours = replace(ours, sensor_range_m=cr.sensor_range_m, occluders_m=occluders,
-                   occluder_of=own)
+                   occluder_of=own, route_m=route,
+                   route_lookahead_m=float(cr.route_lookahead_m or 0.0))
     return CommonRoadCase(resolved, ours, scenario, problem, ids, ego_ids, t0, digest)
 
 

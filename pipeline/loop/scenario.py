@@ -183,6 +183,17 @@ class Scenario:
                                 self.obstacle_radius_m.copy(), visible)
 
 
+    def attraction_goal_m(self, position_m: np.ndarray) -> np.ndarray:
+        """Where the planner's attraction pulls the vehicle at ``position_m``: the goal here
+        (a scenario with a road may pull along it)."""
+        return self.goal_m
+
+    @property
+    def follows_road(self) -> bool:
+        """Whether :meth:`attraction_goal_m` moves with the vehicle (the loop asks it each
+        step)."""
+        return False
+
     @property
     def senses(self) -> bool:
         """Whether the loop must ask :meth:`sense` what is seen (a sensor range here; a

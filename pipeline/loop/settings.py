@@ -297,6 +297,10 @@ class CommonRoadConfig(FrozenAfterValidation):
     # the line from the ego to its centre crosses no static obstacle's rectangle (anything
     # within the ego's reach is seen)
     occlusion: bool = False
+    # the planner's attraction pulls towards the point this far (m) along the route's lanelet
+    # centreline ahead of the ego (the route: the shortest lanelet path from the start's lanelet
+    # to the goal's); None: straight towards the goal point (earlier releases)
+    route_lookahead_m: Optional[float] = None
     # an obstacle whose centre is this close to the planning problem's initial position at its
     # initial time step is the ego's own recording, and dropped
     ego_match_tolerance_m: float = 0.5
@@ -322,6 +326,8 @@ class CommonRoadConfig(FrozenAfterValidation):
         integer_in("scenario.commonroad.cover_discs", self.cover_discs, 1, 8)
         if self.sensor_range_m is not None:
             between("scenario.commonroad.sensor_range_m", self.sensor_range_m, 1.0, 1000.0)
+        if self.route_lookahead_m is not None:
+            between("scenario.commonroad.route_lookahead_m", self.route_lookahead_m, 1.0, 500.0)
         if not isinstance(self.occlusion, bool):
             raise ConfigError("scenario.commonroad.occlusion", self.occlusion, "true or false")
         between("scenario.commonroad.ego_match_tolerance_m", self.ego_match_tolerance_m,
@@ -564,7 +570,8 @@ class ScenarioConfig(FrozenAfterValidation):
                                   if k != "cover_discs"}
         if isinstance(data.get("commonroad"), dict):
             cr = dict(data["commonroad"])
-            for key, earlier in (("sensor_range_m", None), ("occlusion", False)):
+            for key, earlier in (("sensor_range_m", None), ("occlusion", False),
+                                 ("route_lookahead_m", None)):
                 if key in cr and cr[key] is earlier:
                     cr.pop(key)  # sees everything present, as before the key
             data["commonroad"] = cr

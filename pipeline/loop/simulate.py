@@ -289,7 +289,7 @@ def _closed_loop(cfg: LoopSettings, scenario: Scenario, qp_cache: QpCache | None
     # (a plain flag keeps the default reading's loop free of the per-step check)
     unanchored = np.full(scenario.n_obstacles, scenario.obstacle_anchor == "vehicle")
     anchoring = bool(unanchored.any())
-    senses = scenario.senses
+    senses, follows_road = scenario.senses, scenario.follows_road
     # the vehicle's reach from its logged position: its discs' farthest edge
     reach = vehicle_radius + 0.5 * cfg.vehicle.footprint_span_m
     end_at_contact = scenario.end_at_contact
@@ -318,7 +318,8 @@ def _closed_loop(cfg: LoopSettings, scenario: Scenario, qp_cache: QpCache | None
         if scenario.nearest_first:
             visible = visible.nearest_first(state[:2])
         position = state[:2].copy()
-        rollout = planner.rollout(position, scenario.goal_m, visible, plant.velocity(state))
+        goal = scenario.attraction_goal_m(position) if follows_road else scenario.goal_m
+        rollout = planner.rollout(position, goal, visible, plant.velocity(state))
         if planned is not None:
             planned.put(k, rollout, snapshot)
         speed_ref = _planned_speed(planner, position, psi, visible, scenario, vehicle_radius,

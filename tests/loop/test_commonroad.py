@@ -539,3 +539,66 @@ def test_a_walker_behind_a_parked_car_is_seen_once_the_line_of_sight_clears(
     plain = read_commonroad(make_scenario_config(path, "scenario.commonroad.occlusion=false",
                                                  "scenario.commonroad.sensor_range_m=null"))
     assert not plain.scenario.senses
+
+
+def test_the_point_ahead_on_a_route_is_measured_along_it():
+    """An L-shaped route (0, 0) -> (10, 0) -> (10, 10): from (4, 1) (projection (4, 0)) 3 m
+    ahead is (7, 0), 8 m ahead (10, 2) round the corner; past the end, None."""
+    from pipeline.loop.commonroad_scenario import point_ahead_on
+
+    route = np.array([[0.0, 0.0], [10.0, 0.0], [10.0, 10.0]])
+    assert point_ahead_on(route, np.array([4.0, 1.0]), 3.0) == pytest.approx([7.0, 0.0])
+    assert point_ahead_on(route, np.array([4.0, 1.0]), 8.0) == pytest.approx([10.0, 2.0])
+    assert point_ahead_on(route, np.array([4.0, 1.0]), 17.0) is None
+
+
+@needs_extra
+def test_the_route_is_the_shortest_lanelet_path_and_the_attraction_follows_it(
+        tmp_path, make_scenario_config):
+    """The planted road (one lanelet, y in [-3.5, 3.5], its centre y = 0) holds start and goal:
+    the route is its centreline; with route_lookahead_m = 20 the attraction from (5, 1) is the
+    point 20 m along it beyond the projection (5, 0), (25, 0); without the key, the goal
+    point."""
+    from pipeline.loop.commonroad_scenario import route_centreline
+
+    path = write_scenario(tmp_path / "planted.xml")
+    case = read_commonroad(make_scenario_config(path, "scenario.commonroad.route_lookahead_m=20"))
+    network = case.commonroad_scenario.lanelet_network
+    route = route_centreline(network, np.array([5.0, 1.0]), np.array([80.0, 1.0]))
+    assert route[0] == pytest.approx([0.0, 0.0]) and route[-1] == pytest.approx([150.0, 0.0])
+    ours = case.scenario
+    assert ours.follows_road
+    assert ours.attraction_goal_m(np.array([5.0, 1.0])) == pytest.approx([25.0, 0.0])
+    plain = read_commonroad(make_scenario_config(path)).scenario
+    assert not plain.follows_road
+    assert plain.attraction_goal_m(np.array([5.0, 0.0])).tolist() == plain.goal_m.tolist()
+    # no lanelet under the start: no route
+    assert route_centreline(network, np.array([5.0, -20.0]), None).shape == (0, 2)
+
+
+@needs_extra
+def test_the_route_changes_lane_to_reach_a_goal_in_the_other_lane():
+    """Two lanes of two lanelets each (right: 1 -> 2, centre y = 0; left: 3 -> 4, centre
+    y = 3.5; 1 and 3 neighbours in the same direction): from x = 5 in the right lane to a goal
+    in lanelet 4 the route is lanelet 1 up to the point nearest the start of the change, then
+    the left lane (it ends at (100, 3.5)); to a goal in lanelet 2 it stays right."""
+    from commonroad.scenario.lanelet import Lanelet, LaneletNetwork
+
+    from pipeline.loop.commonroad_scenario import route_centreline
+
+    def lane(lanelet_id, x0, y, successor, left=None):
+        xs = np.linspace(x0, x0 + 50.0, 11)
+        return Lanelet(np.stack([xs, np.full(11, y + 1.75)], 1),
+                       np.stack([xs, np.full(11, y)], 1),
+                       np.stack([xs, np.full(11, y - 1.75)], 1), lanelet_id,
+                       successor=successor, adjacent_left=left,
+                       adjacent_left_same_direction=True if left else None)
+
+    network = LaneletNetwork.create_from_lanelet_list([
+        lane(1, 0.0, 0.0, [2], left=3), lane(2, 50.0, 0.0, []),
+        lane(3, 0.0, 3.5, [4]), lane(4, 50.0, 3.5, [])])
+    left = route_centreline(network, np.array([5.0, 0.0]), np.array([90.0, 3.5]))
+    assert left[0] == pytest.approx([0.0, 0.0]) and left[-1] == pytest.approx([100.0, 3.5])
+    assert (left[1:, 0] >= left[:-1, 0] - 1e-9).all()   # never back along the road
+    right = route_centreline(network, np.array([5.0, 0.0]), np.array([90.0, 0.0]))
+    assert right[-1] == pytest.approx([100.0, 0.0]) and np.allclose(right[:, 1], 0.0)

@@ -81,6 +81,7 @@ SWITCH_TESTS = {
     "vehicle.kinematic_below_mps": "test_handover",
     "scenario.commonroad.sensor_range_m": "test_commonroad",
     "scenario.commonroad.occlusion": "test_commonroad",
+    "scenario.commonroad.route_lookahead_m": "test_commonroad",
 
 
 }
