@@ -223,46 +223,56 @@ GOAL_CONDITIONS = ("position", "time_step", "orientation", "velocity")
 
 
 def goal_conditions_met(case: CommonRoadCase, trajectory: pd.DataFrame
-                        ) -> dict[str, np.ndarray]:
-    """For each condition the goal region sets (:data:`GOAL_CONDITIONS`), on which logged steps
-    it holds (any of the goal's states; a condition no goal state sets holds everywhere)."""
+                        ) -> list[dict[str, np.ndarray]]:
+    """For each of the goal region's states, on which logged steps each condition
+    (:data:`GOAL_CONDITIONS`) holds; a condition that goal state does not set holds on every
+    step. The goal is reached on a step where every condition of one goal state holds."""
     states = ego_states(trajectory, case.initial_time_step)
-    met = {name: np.zeros(len(states), bool) for name in GOAL_CONDITIONS}
+    out = []
     for goal in case.planning_problem.goal.state_list:
+        met = {name: np.ones(len(states), bool) for name in GOAL_CONDITIONS}
         for name in GOAL_CONDITIONS:
             condition = getattr(goal, name, None)
+            if condition is None:
+                continue
             for k, state in enumerate(states):
-                if condition is None:
-                    met[name][k] = True
-                elif name == "position":
-                    met[name][k] |= bool(condition.contains_point(np.asarray(state.position)))
+                if name == "position":
+                    met[name][k] = bool(condition.contains_point(np.asarray(state.position)))
                 elif name == "orientation":  # the heading taken into [start, start + 2 pi)
                     turned = condition.start + (float(state.orientation) - condition.start) \
                         % (2 * math.pi)
-                    met[name][k] |= bool(condition.start <= turned <= condition.end)
+                    met[name][k] = bool(condition.start <= turned <= condition.end)
                 else:
-                    met[name][k] |= bool(condition.contains(getattr(state, name)))
-    return met
+                    met[name][k] = bool(condition.contains(getattr(state, name)))
+        out.append(met)
+    return out
 
 
 def goal_disagreement(case: CommonRoadCase, trajectory: pd.DataFrame, reached_file: bool,
                       reached_line: bool) -> str:
     """Why the file's goal (the success criterion) and our goal line disagree for one run, in
-    one sentence ("" when they agree): the steps in the goal area and the condition they
-    missed, or the step the goal region was reached while our goal line was not."""
+    one sentence ("" when they agree): the steps in the goal area and the conditions they
+    missed (of the goal state that missed fewest), or the step the goal region was reached
+    while our goal line was not."""
     if reached_file == reached_line:
         return ""
     t0 = case.initial_time_step
-    met = goal_conditions_met(case, trajectory)
+    per_state = goal_conditions_met(case, trajectory)
     if reached_file:
-        every = np.logical_and.reduce([met[name] for name in GOAL_CONDITIONS])
+        every = np.logical_or.reduce([np.logical_and.reduce([met[n] for n in GOAL_CONDITIONS])
+                                      for met in per_state])
         first = int(np.flatnonzero(every)[0]) if every.any() else 0
         return (f"the goal region reached at time step {t0 + first}; the run ended "
                 f"({len(trajectory)} steps) before our goal line")
-    inside = np.flatnonzero(met["position"])
-    if inside.size == 0:
+    candidates = []
+    for met in per_state:
+        inside = np.flatnonzero(met["position"])
+        if inside.size:
+            missed = [n for n in GOAL_CONDITIONS[1:] if not met[n][inside].any()]
+            candidates.append((len(missed), inside, missed))
+    if not candidates:
         return "never inside the goal area; our goal line crossed"
-    missed = [name for name in GOAL_CONDITIONS[1:] if not met[name][inside].any()]
+    _, inside, missed = min(candidates, key=lambda c: c[0])
     span = f"time steps {t0 + int(inside[0])}-{t0 + int(inside[-1])}"
     if missed:
         return f"inside the goal area on {span}, never within its {' and '.join(missed)} interval"

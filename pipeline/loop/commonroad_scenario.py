@@ -128,16 +128,16 @@ class CommonRoadScenario(Scenario):
     def sense(self, snapshot: ObstacleSnapshot, position_m: np.ndarray,
               reach_m: float) -> ObstacleSnapshot:
         """What the ego at ``position_m`` sees: within the sensor range, and not hidden behind
-        a static obstacle (:func:`occluded`); an obstacle within the ego's reach (``reach_m``
-        plus its radius) is always seen."""
-        seen = Scenario.sense(self, snapshot, position_m, reach_m)
-        if self.occluders_m.shape[0] == 0 or not seen.visible.any():
-            return seen
+        a static obstacle (:func:`occluded`); a present obstacle within the ego's reach
+        (``reach_m`` plus its radius) is always seen, whatever the range."""
         position = np.asarray(position_m, float)
         near = np.hypot(*(snapshot.positions_m - position).T) <= reach_m + snapshot.radii_m
-        hidden = occluded(position, snapshot.positions_m, self.occluders_m, self.occluder_of)
+        seen = Scenario.sense(self, snapshot, position_m, reach_m).visible
+        if self.occluders_m.shape[0] and seen.any():
+            seen = seen & ~occluded(position, snapshot.positions_m, self.occluders_m,
+                                    self.occluder_of)
         return ObstacleSnapshot(snapshot.positions_m, snapshot.velocities_mps, snapshot.radii_m,
-                                seen.visible & (near | ~hidden))
+                                snapshot.visible & (near | seen))
 
     def obstacles_at(self, time_s: float) -> ObstacleSnapshot:
         """The recorded obstacles at ``time_s``; outside its recording an obstacle is
@@ -180,7 +180,8 @@ def point_ahead_on(polyline_m: np.ndarray, position_m: np.ndarray, distance_m: f
 def route_centreline(network: Any, start_m: np.ndarray, goal_m: np.ndarray | None,
                      straight_on_m: float = 300.0) -> np.ndarray:
     """The route's centreline (P, 2): the centre vertices of the shortest lanelet path
-    (:func:`_shortest_lanelet_path`) from the start's lanelet to the goal point's; without a
+    (:func:`_shortest_lanelet_path`) from the start's lanelet to the goal point's, a lane
+    change made at the start of the lanelet it leaves; without a
     goal point (a goal of time alone) the successors that turn least, for ``straight_on_m``
     (:func:`_straight_on`). Empty when the start is on no lanelet or no path leads to the goal.
     (commonroad-route-planner does this too, but needs osqp 0.6, which our cvxpy cannot take.)"""
@@ -196,9 +197,11 @@ def route_centreline(network: Any, start_m: np.ndarray, goal_m: np.ndarray | Non
     for lanelet_id, lane_change in path:
         centre = np.asarray(network.find_lanelet_by_id(lanelet_id).center_vertices, float)
         if lane_change and points:
-            # join the neighbour where its centre is nearest to the last point
-            last = points[-1][-1]
-            centre = centre[int(np.argmin(np.hypot(*(centre - last).T))):]
+            # change lanes at once: keep the lanelet left only up to its first vertex and join
+            # the neighbour where its centre is nearest to that vertex
+            left_from = points.pop()[:1]
+            points.append(left_from)
+            centre = centre[int(np.argmin(np.hypot(*(centre - left_from[0]).T))):]
         elif points:
             centre = centre[1:]  # its first vertex is the predecessor's last
         if centre.shape[0]:
@@ -209,8 +212,9 @@ def route_centreline(network: Any, start_m: np.ndarray, goal_m: np.ndarray | Non
 def _shortest_lanelet_path(network: Any, starts: list[int], goals: set[int]
                            ) -> list[tuple[int, bool]]:
     """Dijkstra by length over successors; a change to a same-direction neighbour costs
-    nothing. The lanelets of the path, each with whether it was entered by a lane change
-    (empty: no path)."""
+    nothing (the route changes at the start of the lanelet it leaves, whose length the
+    neighbour's then stands for). The lanelets of the path, each with whether it was entered
+    by a lane change (empty: no path)."""
     import heapq
 
     queue: list[tuple[float, int, list[tuple[int, bool]]]] = \

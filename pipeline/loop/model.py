@@ -12,6 +12,7 @@ integrated with RK4 substeps.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 from math import atan2, cos, sin, tan, tanh
 from typing import Any
@@ -204,7 +205,8 @@ def single_track_constants(vehicle: VehicleConfig) -> tuple[float, ...]:
     return tuple(float(c) for c in _single_track_constants(vehicle)) + (
         float(vehicle.speed_time_constant_s), float(vehicle.accel_max_mps2),
         float(vehicle.steering_max_rad),
-        float(vehicle.kinematic_below_mps) if vehicle.kinematic_below_mps is not None else 0.0)
+        float(vehicle.kinematic_below_mps) if vehicle.kinematic_below_mps is not None
+        else -math.inf)  # off: no speed is below it
 
 
 def plant_derivative(state: np.ndarray, steering_rate_rad_s: float, speed_target_mps: float,

@@ -314,7 +314,7 @@ def test_why_the_files_goal_and_our_goal_line_differ_is_said(tmp_path, make_scen
     late = read_commonroad(make_scenario_config(
         write_scenario(tmp_path / "late.xml", goal_steps=(10, 100))))
     trajectory = _trajectory(late, poses)
-    met = goal_conditions_met(late, trajectory)
+    met, = goal_conditions_met(late, trajectory)
     assert met["position"].tolist() == [False, False, True, True]
     assert not met["time_step"].any() and met["velocity"].all()
     assert goal_disagreement(late, trajectory, False, True) == (
@@ -536,6 +536,10 @@ def test_a_walker_behind_a_parked_car_is_seen_once_the_line_of_sight_clears(
     snap = ours.obstacles_at(0.1 * 15)        # the walker at y = 3.75, 25.3 m from (0, 0)
     assert not ours.sense(snap, np.zeros(2), 24.9).visible[walker[0]]
     assert ours.sense(snap, np.zeros(2), 25.1).visible[walker[0]]
+    # ... whatever the sensor range
+    from dataclasses import replace
+    assert replace(ours, sensor_range_m=1.0).sense(snap, np.zeros(2), 25.1).visible[walker[0]]
+    assert not replace(ours, sensor_range_m=1.0).sense(snap, np.zeros(2), 1.0).visible[walker[0]]
     plain = read_commonroad(make_scenario_config(path, "scenario.commonroad.occlusion=false",
                                                  "scenario.commonroad.sensor_range_m=null"))
     assert not plain.scenario.senses
@@ -580,8 +584,8 @@ def test_the_route_is_the_shortest_lanelet_path_and_the_attraction_follows_it(
 def test_the_route_changes_lane_to_reach_a_goal_in_the_other_lane():
     """Two lanes of two lanelets each (right: 1 -> 2, centre y = 0; left: 3 -> 4, centre
     y = 3.5; 1 and 3 neighbours in the same direction): from x = 5 in the right lane to a goal
-    in lanelet 4 the route is lanelet 1 up to the point nearest the start of the change, then
-    the left lane (it ends at (100, 3.5)); to a goal in lanelet 2 it stays right."""
+    in lanelet 4 the route changes lanes at once (from lanelet 1's first vertex to the left
+    lane, which it follows to (100, 3.5)); to a goal in lanelet 2 it stays right."""
     from commonroad.scenario.lanelet import Lanelet, LaneletNetwork
 
     from pipeline.loop.commonroad_scenario import route_centreline
@@ -599,6 +603,8 @@ def test_the_route_changes_lane_to_reach_a_goal_in_the_other_lane():
         lane(3, 0.0, 3.5, [4]), lane(4, 50.0, 3.5, [])])
     left = route_centreline(network, np.array([5.0, 0.0]), np.array([90.0, 3.5]))
     assert left[0] == pytest.approx([0.0, 0.0]) and left[-1] == pytest.approx([100.0, 3.5])
+    # the change is made at once (at the start of lanelet 1), not at its end
+    assert left[1] == pytest.approx([0.0, 3.5]) and np.allclose(left[1:, 1], 3.5)
     assert (left[1:, 0] >= left[:-1, 0] - 1e-9).all()   # never back along the road
     right = route_centreline(network, np.array([5.0, 0.0]), np.array([90.0, 0.0]))
     assert right[-1] == pytest.approx([100.0, 0.0]) and np.allclose(right[:, 1], 0.0)

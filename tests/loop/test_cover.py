@@ -122,6 +122,22 @@ def test_the_metrics_measure_from_the_nearest_ego_disc():
                    for ox, oy, r in obstacles)
         assert got[k] == pytest.approx(want, abs=1e-12)
     assert ego_disc_view(table, (0.0,)) is table
+    # the positions stay as logged: a static obstacle passed by the ego keeps zero velocity
+    view = ego_disc_view(table, offsets)
+    for column in ("obs0_x_m", "obs0_y_m", "obs1_x_m", "obs1_y_m"):
+        assert view[column].tolist() == table[column].tolist()
+
+
+def test_an_obstacle_passed_by_a_long_ego_keeps_its_velocity():
+    """The ego at 10 m/s along y = 2 past a static disc at the origin: the obstacle tracks the
+    metrics difference from the view have zero velocity at every step (moving the obstacle by
+    the nearest disc's offset gave 15 m/s on the steps the nearest disc changed)."""
+    from pipeline.analysis.metrics.geometry import obstacle_tracks
+
+    poses = [(-5.0 + 1.0 * k, 2.0, 0.0) for k in range(11)]
+    view = ego_disc_view(_table(poses, [(0.0, 0.0, 0.5)]), (-1.5, 0.0, 1.5))
+    track, = obstacle_tracks(view)
+    assert np.allclose(track.velocity, 0.0)
 
 
 def test_a_car_in_the_next_lane_does_not_collide_with_one_in_its_own():

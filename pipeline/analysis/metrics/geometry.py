@@ -20,12 +20,14 @@ def obstacle_count(trajectory: pd.DataFrame) -> int:
 
 
 def ego_disc_view(trajectory: pd.DataFrame, offsets_m: tuple[float, ...]) -> pd.DataFrame:
-    """The logged table as the ego's reference point sees an ego of several discs along its
+    """The logged table as the ego's logged position sees an ego of several discs along its
     heading (``vehicle.footprint_discs``, centres ``offsets_m`` ahead of the logged position):
-    each obstacle's logged centre at each step moved by minus the heading's offset of the ego
-    disc nearest to it, so that every distance the metrics take from the logged position is the
-    distance from that disc (``|p + c h - o| = |p - (o - c h)|``). One disc at the logged
-    position (``(0.0,)``): the table itself."""
+    each obstacle's radius at each step grown by how much nearer its nearest ego disc is than
+    the logged position, ``r + |p - o| - min_c |p + c h - o|``, so that every gap the metrics
+    take from the logged position is the gap from that disc. The positions stay as logged (the
+    obstacles' velocities, differenced from them, stay true); a radius is floored at 0, which
+    can only happen deep inside a contact. One disc at the logged position (``(0.0,)``): the
+    table itself."""
     offsets = np.asarray(offsets_m, float)
     if offsets.shape == (1,) and offsets[0] == 0.0:
         return trajectory
@@ -36,9 +38,10 @@ def ego_disc_view(trajectory: pd.DataFrame, offsets_m: tuple[float, ...]) -> pd.
     view = trajectory.copy()
     for j in obstacle_indices(trajectory.columns):
         obstacle = float_columns(trajectory, f"obs{j}_x_m", f"obs{j}_y_m")
-        nearest = np.argmin(np.linalg.norm(centres - obstacle[:, None, :], axis=2), axis=1)
-        moved = obstacle - offsets[nearest][:, None] * heading
-        view[f"obs{j}_x_m"], view[f"obs{j}_y_m"] = moved[:, 0], moved[:, 1]
+        nearest = np.min(np.linalg.norm(centres - obstacle[:, None, :], axis=2), axis=1)
+        logged = np.linalg.norm(xy - obstacle, axis=1)
+        radius = trajectory[f"obs{j}_radius_m"].to_numpy(float)
+        view[f"obs{j}_radius_m"] = np.maximum(radius + logged - nearest, 0.0)
     return view
 
 
