@@ -323,8 +323,9 @@ INTERPRETATION_REGISTER: tuple[RegisterEntry, ...] = (
         "every rectangle covered by scenario.commonroad.cover_discs = 3 equal discs along its "
         "long side (each obstacle disc its own half-plane, 24 slots filled nearest first); the "
         "ego likewise (vehicle.footprint_discs: the lateral MPC keeps out the ego disc nearest "
-        "to each obstacle along the path, the checks measure from every disc; the kinematic "
-        "track and the peers see the ego as one disc of the cover's radius). Our check is the "
+        "to each obstacle along the path, the kinematic track the one nearest at each predicted "
+        "pose, the checks measure from every disc; the peers see the ego as one disc of the "
+        "cover's radius). Our check is the "
         "stricter: the discs bulge up to 0.27 m beyond a car's sides",
         "circumscribed: one disc holding each shape and the ego one vehicle.footprint_radius_m "
         "disc (earlier releases: a car 2.4 m round, a car in the next lane 'collided'); "

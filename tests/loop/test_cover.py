@@ -183,3 +183,33 @@ def test_a_rotated_rectangle_is_covered_along_its_long_side():
     centres = np.array([c for c, _ in discs])
     assert np.allclose(np.sort(centres[:, 1]), [0.5, 2.0, 3.5], atol=1e-9)
     assert np.allclose(centres[:, 0], 1.0, atol=1e-9)
+
+
+def test_the_kinematic_half_planes_keep_the_nearest_ego_disc_out(make_config):
+    """Appendix-A track, heading 0, an obstacle straight ahead of every predicted pose: the
+    front disc (1.5 m ahead) is the nearest, so the three-disc planes are the one-disc planes
+    of the obstacle moved back by 1.5 m (translation: the same normals, bounds 1.5 n_x lower);
+    one disc gives the one-disc planes themselves."""
+    from dataclasses import replace
+
+    from pipeline.loop.controller.references import kinematic_halfplanes
+
+    cfg = make_config(["experiment=kinematic", "controller.max_obstacles=1"])
+    N = cfg.controller.horizon
+    xs = np.linspace(0.0, 0.3 * N, N + 1)
+    states = np.stack([xs, np.zeros(N + 1), np.zeros(N + 1), np.full(N + 1, 3.0)])
+    reference = np.stack([xs[1:], np.full(N, 0.2)])
+    obstacle = np.stack([xs[1:] + 6.0, np.full(N, 0.5)], axis=1)[:, None, :]
+    vehicle = replace(cfg.vehicle, footprint_radius_m=1.17, footprint_discs=3,
+                      footprint_span_m=3.0)
+    one = replace(cfg.vehicle, footprint_radius_m=1.17)
+    Gx, Gy, h = kinematic_halfplanes(states, reference, obstacle, np.array([0.5]), vehicle,
+                                     cfg.controller)
+    moved = obstacle - np.array([1.5, 0.0])
+    Gx1, Gy1, h1 = kinematic_halfplanes(states, reference, moved, np.array([0.5]), one,
+                                        cfg.controller)
+    assert np.count_nonzero(Gx) == N
+    assert np.allclose(Gx, Gx1) and np.allclose(Gy, Gy1) and np.allclose(h, h1)
+    Gx0, _, h0 = kinematic_halfplanes(states, reference, obstacle, np.array([0.5]), one,
+                                      cfg.controller)
+    assert not np.allclose(h0, h)

@@ -249,8 +249,10 @@ def kinematic_halfplanes(predicted_states: np.ndarray, reference_m: np.ndarray,
 
     The normal points from the predicted obstacle to the APF reference point
     (:func:`radial_normals`), or to the linearization trajectory where the reference sits on the
-    obstacle; ``h = n . o_k + R``. Unused slots, far obstacles and every obstacle when
-    ``collision_constraints`` is off (:func:`constrains`) get empty rows.
+    obstacle; ``h = n . o_k + R``. An ego of several discs (``vehicle.footprint_discs``) keeps
+    out the disc nearest to the obstacle at each predicted pose (the obstacle taken as
+    ``o_k - c h_k``, ``h_k`` the rollout's heading). Unused slots, far obstacles and every
+    obstacle when ``collision_constraints`` is off (:func:`constrains`) get empty rows.
 
     Returns
     -------
@@ -259,11 +261,21 @@ def kinematic_halfplanes(predicted_states: np.ndarray, reference_m: np.ndarray,
     N, M = reference_m.shape[1], controller.max_obstacles
     Gx, Gy, h = np.zeros((N, M)), np.zeros((N, M)), np.zeros((N, M))
     n_obs = predicted_obstacles_m.shape[1] if predicted_obstacles_m.ndim == 3 else 0
+    discs = vehicle.footprint_offsets_m if vehicle.footprint_discs > 1 else None
     for j in range(min(n_obs, M)):
         obstacle = predicted_obstacles_m[:, j, :]
         if not constrains(float(np.linalg.norm(obstacle[0] - predicted_states[:2, 0])),
                           controller):
             continue
+        if discs is not None:
+            # an ego of several discs: the obstacle as the reference point sees the ego disc
+            # nearest to it at each predicted pose (o - c h, the heading of the rollout)
+            heading = np.stack([np.cos(predicted_states[2, 1:]),
+                                np.sin(predicted_states[2, 1:])], axis=1)       # (N, 2)
+            centres = predicted_states[:2, 1:].T[:, None, :] \
+                + discs[None, :, None] * heading[:, None, :]                    # (N, n, 2)
+            nearest = np.argmin(np.linalg.norm(centres - obstacle[:, None, :], axis=2), axis=1)
+            obstacle = obstacle - discs[nearest][:, None] * heading
         backup = radial_normals(predicted_states[:2, 1:].T, obstacle,
                                 np.array([0.0, 1.0])[None, :])
         normal = radial_normals(reference_m.T, obstacle, backup)
