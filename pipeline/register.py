@@ -357,8 +357,8 @@ INTERPRETATION_REGISTER: tuple[RegisterEntry, ...] = (
         "along the road: the point route_lookahead_m ahead on the route's lanelet centreline "
         "(the shortest lanelet path to the goal's lanelet). On the public files it trades: at "
         "20 m ZAM_Tjunction's improved reaches the goal (133 -> 60 steps off the road) but "
-        "US101-23_1's baseline no longer does, at 40 m neither reaches it; no road-edge "
-        "constraint in the MPC",
+        "US101-23_1's baseline no longer does; at 40 m the junction's turn is missed again; no "
+        "road-edge constraint in the MPC",
         "scenario.commonroad.route_lookahead_m"),
     RegisterEntry(
         "Success on a CommonRoad file (a choice we add)", "-",
