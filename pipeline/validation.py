@@ -33,6 +33,21 @@ def integer_in(key: str, value: Any, low: int, high: int, allowed: str | None = 
         raise ConfigError(key, value, allowed or f"an integer in [{low}, {high}]")
 
 
+def flag(key: str, value: Any) -> None:
+    """``value`` a bool (a YAML true or false); else refused."""
+    if not isinstance(value, bool):
+        raise ConfigError(key, value, "true or false")
+
+
+def without_earlier_readings(data: Mapping[str, Any], before: Mapping[str, Any]
+                             ) -> dict[str, Any]:
+    """``data`` (a settings section as the config hash reads it) without each key of
+    ``before`` that holds the reading from before the key existed (equal and of the same type),
+    so that a configuration's hash does not move when the key is added."""
+    return {k: v for k, v in data.items()
+            if not (k in before and v == before[k] and type(v) is type(before[k]))}
+
+
 def between(key: str, value: Any, low: float, high: float) -> None:
     v = finite(key, value)
     if not low <= v <= high:

@@ -199,9 +199,8 @@ def route_centreline(network: Any, start_m: np.ndarray, goal_m: np.ndarray | Non
         if lane_change and points:
             # change lanes at once: keep the lanelet left only up to its first vertex and join
             # the neighbour where its centre is nearest to that vertex
-            left_from = points.pop()[:1]
-            points.append(left_from)
-            centre = centre[int(np.argmin(np.hypot(*(centre - left_from[0]).T))):]
+            points[-1] = points[-1][:1]
+            centre = centre[int(np.argmin(np.hypot(*(centre - points[-1][0]).T))):]
         elif points:
             centre = centre[1:]  # its first vertex is the predecessor's last
         if centre.shape[0]:

@@ -28,6 +28,7 @@ from pipeline.validation import (
     at_least,
     between,
     choice,
+    flag,
     integer_in,
     pair,
     safe_name,
@@ -208,9 +209,7 @@ class _MpcSchema(_ControllerSchema):
         for key in ("slack_weight_linear", "slack_weight_quadratic", "safety_margin_m",
                     "constraint_activation_m"):
             at_least(f"controller.{key}", getattr(self, key), 0.0)
-        if not isinstance(self.collision_constraints, bool):
-            raise ConfigError("controller.collision_constraints", self.collision_constraints,
-                              "true or false")
+        flag("controller.collision_constraints", self.collision_constraints)
         choice("controller.input_hold", self.input_hold, tuple(InputHold))
 
 
@@ -269,9 +268,7 @@ class MpcSettings(_MpcSchema):
         choice("controller.frame", self.frame, tuple(Frame))
         choice("controller.path_reference", self.path_reference, tuple(PathReference))
         between("controller.path_lookahead_m", self.path_lookahead_m, 0.1, 100.0)
-        if not isinstance(self.path_curvature_clip, bool):
-            raise ConfigError("controller.path_curvature_clip", self.path_curvature_clip,
-                              "true or false")
+        flag("controller.path_curvature_clip", self.path_curvature_clip)
         if self.path_curvature_max_1_per_m is not None:
             between("controller.path_curvature_max_1_per_m", self.path_curvature_max_1_per_m,
                     1e-3, 10.0)

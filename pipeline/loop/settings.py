@@ -23,10 +23,12 @@ from pipeline.validation import (
     between,
     choice,
     finite,
+    flag,
     integer_in,
     pair,
     safe_name,
     target_path,
+    without_earlier_readings,
 )
 
 #: |scenario.start_heading_rad| at most one turn (rad); the scenario wraps it to [-pi, pi]
@@ -97,11 +99,7 @@ class VehicleConfig(FrozenAfterValidation):
     def hash_view(data: dict[str, Any]) -> dict[str, Any]:
         """``asdict`` of a vehicle as the config hash reads it: a key of :data:`BEFORE_KEYS`
         holding the reading from before it is left out (one disc hashes as before the keys)."""
-        data = dict(data)
-        for name, before in VehicleConfig.BEFORE_KEYS.items():
-            if name in data and data[name] == before and type(data[name]) is type(before):
-                data.pop(name)
-        return data
+        return without_earlier_readings(data, VehicleConfig.BEFORE_KEYS)
 
     @property
     def footprint_offsets_m(self) -> Any:
@@ -310,6 +308,10 @@ class CommonRoadConfig(FrozenAfterValidation):
     n_steps: Optional[int] = None
 
     VEHICLE_TYPES = ("FORD_ESCORT", "BMW_320i", "VW_VANAGON")
+    #: The keys added after the config hash was first pinned, with the reading from before
+    #: them: everything present seen, straight to the goal (left out of the hash while held)
+    BEFORE_KEYS: ClassVar[dict[str, Any]] = {"sensor_range_m": None, "occlusion": False,
+                                             "route_lookahead_m": None}
 
     def __post_init__(self) -> None:
         if not isinstance(self.path, str) or not self.path:
@@ -328,8 +330,7 @@ class CommonRoadConfig(FrozenAfterValidation):
             between("scenario.commonroad.sensor_range_m", self.sensor_range_m, 1.0, 1000.0)
         if self.route_lookahead_m is not None:
             between("scenario.commonroad.route_lookahead_m", self.route_lookahead_m, 1.0, 500.0)
-        if not isinstance(self.occlusion, bool):
-            raise ConfigError("scenario.commonroad.occlusion", self.occlusion, "true or false")
+        flag("scenario.commonroad.occlusion", self.occlusion)
         between("scenario.commonroad.ego_match_tolerance_m", self.ego_match_tolerance_m,
                 0.0, 10.0)
         if self.speed_mps is not None:
@@ -569,20 +570,13 @@ class ScenarioConfig(FrozenAfterValidation):
             data["commonroad"] = {k: v for k, v in data["commonroad"].items()
                                   if k != "cover_discs"}
         if isinstance(data.get("commonroad"), dict):
-            cr = dict(data["commonroad"])
-            for key, earlier in (("sensor_range_m", None), ("occlusion", False),
-                                 ("route_lookahead_m", None)):
-                if key in cr and cr[key] is earlier:
-                    cr.pop(key)  # sees everything present, as before the key
-            data["commonroad"] = cr
+            data["commonroad"] = without_earlier_readings(data["commonroad"],
+                                                          CommonRoadConfig.BEFORE_KEYS)
         if data.get("pedestrians", 0) is None:
             data.pop("pedestrians")  # no recorded pedestrians, as before the key
         elif isinstance(data.get("pedestrians"), dict):
-            ped = dict(data["pedestrians"])
-            for name, before in PedestrianConfig.BEFORE_KEYS.items():
-                if name in ped and ped[name] == before and type(ped[name]) is type(before):
-                    ped.pop(name)  # the reading from before the key
-            data["pedestrians"] = ped
+            data["pedestrians"] = without_earlier_readings(data["pedestrians"],
+                                                           PedestrianConfig.BEFORE_KEYS)
         return data
 
     def check_with_vehicle(self, footprint_radius_m: float) -> None:

@@ -481,7 +481,7 @@ def steady_state_gains(model: LateralModel) -> np.ndarray:
     if model.kinematic:
         # no slip: delta = L r / vx and vy = b r hold the yaw rate (vy = b vx delta / L)
         vx = A[0, 2]
-        wheelbase = model.B1[3, 0] and vx / model.B1[3, 0]
+        wheelbase = vx / model.B1[3, 0]   # B1's yaw-rate row is vx / L
         vy = model.B1[1, 0] / model.B1[3, 0]
         return np.array([0.0, vy, -vy / vx, 1.0, wheelbase / vx])
     # unknowns vy (1) and delta (4), with r = 1 and y = epsi-independent rows 1 and 3

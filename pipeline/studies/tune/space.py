@@ -13,7 +13,7 @@ from pipeline.analysis.objectives import Objective
 from pipeline.config import CONF_DIR, schema_from_data
 from pipeline.errors import ConfigError
 from pipeline.store.files import json_safe
-from pipeline.validation import between, choice, safe_name
+from pipeline.validation import between, choice, flag, safe_name
 
 
 def _default_objectives() -> list[Objective]:
@@ -165,8 +165,7 @@ class TuneSpace:
             raise ConfigError("tune.convergence_window", self.convergence_window,
                               f"an integer below tune.max_trials ({self.max_trials}): a longer "
                               "window can never be filled, so the tune could never converge")
-        if not isinstance(self.training_horizon, bool):
-            raise ConfigError("tune.training_horizon", self.training_horizon, "true or false")
+        flag("tune.training_horizon", self.training_horizon)
         between("tune.convergence_tolerance", self.convergence_tolerance, 0.0, 1.0)
         choice("tune.settled_test", self.settled_test, SETTLE_TESTS)
         self._check_rungs()
