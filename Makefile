@@ -24,6 +24,8 @@ PEDESTRIANS_FAMILY_SIZE ?= 200
 # the variants of make pedestrians (conf/experiment/pedestrians_<variant>.yaml) and their size
 PEDESTRIANS_VARIANTS ?= car aimed reactive lateral
 PEDESTRIANS_VARIANTS_FAMILY_SIZE ?= 60
+# make euro-ncap: tests per method (the protocol's grid of 5 cases x 11 speeds, twice)
+EURO_NCAP_FAMILY_SIZE ?= 110
 REPORT      ?= reports/latest
 PYTEST_ARGS ?=
 PYTEST_JOBS ?= auto
@@ -59,7 +61,7 @@ LAUNCHER    ?= sequential
 # tune's $(MAKE) report) stamps the command typed, not "make report"
 export REPORT_COMMAND ?= make $(strip $(MAKECMDGOALS) $(MAKEOVERRIDES))
 
-.PHONY: help install lint clip reproduce experiment run-paper run-kinematic run-kinematic-readings run-family run-kinematic-family run-frames run-apf-alone run-peers run-kinematic-peers peers speed-check nmpc-family report screenshot sweep verify ablation multiverse pedestrians tune tune-unpruned tune-peers nmpc-check test test-slurm test-all bench install-commonroad commonroad cache-size clean-cache clean
+.PHONY: help install lint clip reproduce experiment run-paper run-kinematic run-kinematic-readings run-family run-kinematic-family run-frames run-apf-alone run-peers run-kinematic-peers peers speed-check nmpc-family report screenshot sweep verify ablation multiverse pedestrians euro-ncap tune tune-unpruned tune-peers nmpc-check test test-slurm test-all bench install-commonroad commonroad cache-size clean-cache clean
 
 help:  ## list the targets
 	@grep -E '^[a-zA-Z_-]+:.*## ' $(MAKEFILE_LIST) | awk -F':.*## ' '{printf "  %-12s %s\n", $$1, $$2}'
@@ -159,6 +161,10 @@ pedestrians: $(STAMP)  ## improved and baseline among recorded pedestrians (ETH/
 	for variant in $(PEDESTRIANS_VARIANTS); do \
 	  $(APF) run experiment=pedestrians_$$variant hydra.sweep.dir=$(RUNS)/pedestrians_variants/$$variant scenario.family.size=$(PEDESTRIANS_VARIANTS_FAMILY_SIZE) || exit $$?; \
 	done
+	$(MAKE) report
+
+euro-ncap: $(STAMP)  ## the methods on Euro NCAP's AEB/LSS VRU crossings (a child from between parked cars, adults, a cyclist; both tracks; docs/euro_ncap.md), then the report
+	$(APF) euro-ncap --family-size $(EURO_NCAP_FAMILY_SIZE) --out $(RUNS)/euro_ncap
 	$(MAKE) report
 
 multiverse: $(STAMP)  ## how robust is each verdict: the multiverse (MULTIVERSE=default|quick), then the report

@@ -368,4 +368,43 @@ INTERPRETATION_REGISTER: tuple[RegisterEntry, ...] = (
         "goals differ the report says why",
         "our goal line (the paper's scenario: the run ends on crossing it)",
         "scenario.commonroad.n_steps"),
+    RegisterEntry(
+        "The Euro NCAP tests (a choice we add; the paper's sudden obstacle is what they test)",
+        "an obstacle that appears suddenly in front of a car",
+        "our reading of Euro NCAP's AEB/LSS VRU protocol (to be checked against it): five "
+        "cases, CPNC-50 (a child from between two parked cars, near side), CPFA-50 (an adult "
+        "from the far side), CPNA-25/-75 (an adult from the near side) and CBNAO-50 (a cyclist "
+        "from behind a parked car); test speeds 10-60 km/h in 5 km/h steps, each test driven "
+        "within 1 km/h of its grid speed; impact positions as fractions of the ego's 1.8 m "
+        "width from the side the road user comes from",
+        "any subset of the cases, other speed grids and tolerances",
+        "scenario.source.params.cases, scenario.source.params.ego_speeds_kmh, "
+        "scenario.source.params.speed_tolerance_kmh"),
+    RegisterEntry(
+        "The Euro NCAP road users and obstructions (a choice we add)", "-",
+        "child 5 km/h (a 0.25 m disc), adults 5 km/h near side and 8 km/h far side (0.3 m), "
+        "cyclist 15 km/h (a 1.9 x 0.6 m bicycle covered by discs); starting 4 m (near) or "
+        "6 m (far) from the ego's centreline, standing still until the ego has driven "
+        "lead_time_s = 1 s, then at constant speed (the protocol's acceleration left out); "
+        "parked cars 4.5 x 1.8 m, 1 m outside the ego's side, hiding what is behind them",
+        "other speeds, sizes, starts and gaps; occlusion=false",
+        "scenario.source.params.child_speed_kmh, scenario.source.params.adult_far_speed_kmh, "
+        "scenario.source.params.cyclist_speed_kmh, scenario.source.params.near_start_m, "
+        "scenario.source.params.lead_time_s, scenario.source.params.parked_lateral_gap_m, "
+        "scenario.source.params.occlusion"),
+    RegisterEntry(
+        "The Euro NCAP outcome and the road (a choice we add)", "-",
+        "the protocol's: the road user hit or not, and the ego's speed at the impact (a test "
+        "ends there); contact with a parked car and the steps the ego's 4.5 x 1.8 m rectangle "
+        "spends beyond the road's edges (its lane and an oncoming lane, 3.5 m each) reported "
+        "beside it; no road-edge constraint bounds any plan",
+        "oncoming_lane=false (one lane); end_at_contact=false",
+        "scenario.source.params.lane_width_m, scenario.source.params.oncoming_lane, "
+        "scenario.source.params.end_at_contact"),
+    RegisterEntry(
+        "Which methods run the Euro NCAP tests (a choice we add)", "-",
+        "on both tracks improved, the baseline, MPC-DCBF and the CBF filter; velocity "
+        "obstacles and the dynamic window are left out: their candidate speed and speed limit "
+        "are set for the paper's 3 m/s and the tests drive 10-60 km/h",
+        "-", "(none: the methods make euro-ncap runs)"),
 )

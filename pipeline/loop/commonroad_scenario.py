@@ -130,14 +130,9 @@ class CommonRoadScenario(Scenario):
         """What the ego at ``position_m`` sees: within the sensor range, and not hidden behind
         a static obstacle (:func:`occluded`); a present obstacle within the ego's reach
         (``reach_m`` plus its radius) is always seen, whatever the range."""
-        position = np.asarray(position_m, float)
-        near = np.hypot(*(snapshot.positions_m - position).T) <= reach_m + snapshot.radii_m
-        seen = Scenario.sense(self, snapshot, position_m, reach_m).visible
-        if self.occluders_m.shape[0] and seen.any():
-            seen = seen & ~occluded(position, snapshot.positions_m, self.occluders_m,
-                                    self.occluder_of)
-        return ObstacleSnapshot(snapshot.positions_m, snapshot.velocities_mps, snapshot.radii_m,
-                                snapshot.visible & (near | seen))
+        return sight_view(snapshot, position_m, reach_m,
+                          Scenario.sense(self, snapshot, position_m, reach_m).visible,
+                          self.occluders_m, self.occluder_of)
 
     def obstacles_at(self, time_s: float) -> ObstacleSnapshot:
         """The recorded obstacles at ``time_s``; outside its recording an obstacle is
@@ -259,6 +254,22 @@ def _direction(centre: np.ndarray) -> float:
     """The heading (rad) of a centreline's first segment."""
     d = np.asarray(centre[1], float) - np.asarray(centre[0], float)
     return math.atan2(d[1], d[0])
+
+
+def sight_view(snapshot: ObstacleSnapshot, position_m: np.ndarray, reach_m: float,
+               in_range: np.ndarray, occluders_m: np.ndarray, own: np.ndarray
+               ) -> ObstacleSnapshot:
+    """``snapshot`` as the ego at ``position_m`` sees it: present, ``in_range`` (the sensor
+    range's mask) and not hidden behind an occluder (:func:`occluded`), or within the ego's
+    reach (``reach_m`` plus the obstacle's radius: never hidden, so no contact escapes the
+    check). Positions stay the true ones."""
+    position = np.asarray(position_m, float)
+    near = np.hypot(*(snapshot.positions_m - position).T) <= reach_m + snapshot.radii_m
+    seen = in_range
+    if occluders_m.shape[0] and seen.any():
+        seen = seen & ~occluded(position, snapshot.positions_m, occluders_m, own)
+    return ObstacleSnapshot(snapshot.positions_m, snapshot.velocities_mps, snapshot.radii_m,
+                            snapshot.visible & (near | seen))
 
 
 def occluded(viewer_m: np.ndarray, targets_m: np.ndarray, occluders_m: np.ndarray,

@@ -293,6 +293,8 @@ def _closed_loop(cfg: LoopSettings, scenario: Scenario, qp_cache: QpCache | None
     # the vehicle's reach from its logged position: its discs' farthest edge
     reach = vehicle_radius + 0.5 * cfg.vehicle.footprint_span_m
     end_at_contact = scenario.end_at_contact
+    # an ego of several discs along its heading touches where any of them does
+    disc_offsets = cfg.vehicle.footprint_offsets_m if cfg.vehicle.footprint_discs > 1 else None
     # an obstacle motion that reacts to the platform (reactive walkers) is told where it is
     reacting = scenario.obstacle_motion if hasattr(scenario.obstacle_motion, "react") \
         else None
@@ -303,7 +305,7 @@ def _closed_loop(cfg: LoopSettings, scenario: Scenario, qp_cache: QpCache | None
         if reacting:  # walkers that avoid the platform learn where it is first
             reacting.react(time_s, state[:2], vehicle_radius)
         snapshot = scenario.obstacles_at(time_s)
-        contact = end_at_contact and _in_contact(state, snapshot, vehicle_radius)
+        contact = end_at_contact and _in_contact(state, snapshot, vehicle_radius, disc_offsets)
         if senses:  # a sensor range (recorded pedestrians), occlusion (CommonRoad)
             snapshot = scenario.sense(snapshot, state[:2], reach)
         row, along, lateral, psi, e_psi = _pose_row(time_s, state, frame, line, snapshot,
@@ -469,16 +471,23 @@ def _add_model_check(controller: Controller, log: TrajectoryLog) -> None:
             log.columns[name] = np.full(log.rows, np.nan)
 
 
-def _in_contact(state: np.ndarray, snapshot: ObstacleSnapshot, vehicle_radius_m: float
-                ) -> bool:
+def _in_contact(state: np.ndarray, snapshot: ObstacleSnapshot, vehicle_radius_m: float,
+                disc_offsets_m: np.ndarray | None = None) -> bool:
     """Whether the vehicle's footprint overlaps a present obstacle (the true positions,
-    before the sensor range)."""
+    before the sensor range): its disc at the logged position, or with ``disc_offsets_m``
+    (``vehicle.footprint_discs`` > 1) any of its discs along its heading."""
     present = snapshot.visible
     if not present.any():
         return False
-    gap = np.hypot(snapshot.positions_m[present, 0] - state[0],
-                   snapshot.positions_m[present, 1] - state[1]) \
-        - snapshot.radii_m[present] - vehicle_radius_m
+    ox, oy = snapshot.positions_m[present, 0], snapshot.positions_m[present, 1]
+    radii = snapshot.radii_m[present]
+    if disc_offsets_m is None:
+        gap = np.hypot(ox - state[0], oy - state[1]) - radii - vehicle_radius_m
+        return bool(np.min(gap) < 0.0)
+    cx = state[0] + disc_offsets_m * cos(state[2])
+    cy = state[1] + disc_offsets_m * sin(state[2])
+    gap = np.hypot(ox[:, None] - cx[None, :], oy[:, None] - cy[None, :]) \
+        - radii[:, None] - vehicle_radius_m
     return bool(np.min(gap) < 0.0)
 
 

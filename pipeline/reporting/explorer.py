@@ -57,7 +57,7 @@ SOURCES = "sources.json"
 #: Outputs sections that hold studies, not experiments of runs (never in the explorer).
 STUDY_SECTIONS = ("sweeps", "ablation", "interpretations", "multiverse", "tune",
                   "tune_unpruned", "tune_peers", "member_cache", "kinematic_readings",
-                  "nmpc_check", "speed")
+                  "nmpc_check", "speed", "euro_ncap")
 #: Experiments run on another one's scenarios (the same seed, the first members): their
 #: members are shown beside that one's treatment and control (section -> its family's section).
 COMPANIONS = {"peers": "family", "kinematic_peers": "kinematic_family"}
@@ -126,7 +126,8 @@ def experiment_folders(run_root: Path) -> list[Path]:
             continue
         if any(folder_kind(m) for m in folder.iterdir() if m.is_dir()):
             found.append(folder)
-    if not found and any(folder_kind(m) for m in run_root.iterdir() if m.is_dir()):
+    if not found and any(folder_kind(m) for m in run_root.iterdir()
+                         if m.is_dir() and m.name not in studies):
         return [run_root]  # the report of one experiment's folder (e.g. outputs/paper)
     return sorted(found, key=lambda p: (order.index(p.name) if p.name in order else len(order),
                                         p.name))

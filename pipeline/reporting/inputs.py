@@ -517,7 +517,7 @@ _ALONE_REASON = ("the paper scenario, the scenario family and the sections judge
 #: Sections whose folders a report lists without the paper scenario, each with why it cannot
 #: be shown alone (None: it can) and what makes what it needs.
 _ALONE_SECTIONS = {
-    "pedestrians": None, "pedestrians_variants": None, "commonroad": None,
+    "pedestrians": None, "pedestrians_variants": None, "commonroad": None, "euro_ncap": None,
     "peers": "the methods the paper names are judged against improved on the scenario "
              "family, which is not here; make reproduce writes it",
     "kinematic_peers": "the methods the paper names (Appendix-A track) are judged against "
@@ -527,8 +527,8 @@ _ALONE_SECTIONS = {
 
 def _families_alone(layout: OutputsLayout) -> bool:
     """Whether the outputs hold something a report can show, or list, without the paper
-    scenario (``make pedestrians``, ``make peers`` or ``make commonroad`` on a fresh
-    clone)."""
+    scenario (``make pedestrians``, ``make peers``, ``make commonroad`` or ``make euro-ncap``
+    on a fresh clone)."""
     return any(layout.folder(section).is_dir() for section in _ALONE_SECTIONS)
 
 

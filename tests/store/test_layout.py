@@ -27,7 +27,8 @@ LAYERS = (
     ("pipeline.run", "pipeline.report", "pipeline.aggregate", "pipeline.multiverse",
      "pipeline.tune", "pipeline.api", "pipeline.nmpc_check", "pipeline.speed_check",
      "pipeline.commands", "pipeline.screenshot", "pipeline.verify", "pipeline.cli",
-     "pipeline.score", "pipeline.cache", "pipeline.commonroad", "pipeline.clip"),
+     "pipeline.score", "pipeline.cache", "pipeline.commonroad", "pipeline.clip",
+     "pipeline.euro_ncap"),
 )
 #: Files a run or family folder holds (its layout belongs to the store).
 RUN_FOLDER_FILES = ("config.yaml", "model.json", "trajectory.csv", "timing.json", "horizon.npz",
@@ -44,6 +45,7 @@ STUDY_FILES = {
     "pipeline.studies.results.sweep": ("summary.csv", "swept_keys.json", "verdicts.csv",
                                        "skipped.csv"),
     "pipeline.studies.results.commonroad": ("commonroad.json", "solution.xml"),
+    "pipeline.studies.results.euro_ncap": ("euro_ncap.csv",),
 }
 #: The outputs root's sections: only the layout (``pipeline.store.layout``) joins them to a
 #: path.

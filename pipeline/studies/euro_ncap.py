@@ -1,0 +1,181 @@
+"""The Euro NCAP crossings (``make euro-ncap``, ``apf-mpc euro-ncap``): the methods on the
+seeded family of Euro NCAP's AEB/LSS VRU tests (:mod:`pipeline.loop.euro_ncap`), on both
+tracks, judged by the protocol's own outcome and by the claims.
+
+Each method runs the same family (resumable, like every family) into
+``<out>/<track>/<method>``: on the lateral track the paper's two methods and the peers that
+need no speed setting of their own (``mpc_dcbf``, ``cbf_filter``); on the Appendix-A
+kinematic track the same with the kinematic MPC (references spaced at the test speed,
+``controller.reference_alignment=path_speed``). Velocity obstacles and the dynamic window
+are left out: their candidate speed and their speed limit are set for the paper's 3 m/s,
+and the tests drive 10-60 km/h (a reading, registered). The ego is the protocol's car: a
+rectangle covered by discs (:func:`~pipeline.loop.euro_ncap.ego_vehicle`), with obstacle
+slots for every disc of a test (``controller.max_obstacles``).
+
+``euro_ncap.csv`` has one row per test and method: the case, the test speed, the impact
+position, the protocol's outcome (:func:`~pipeline.loop.euro_ncap.protocol_outcome`: the road
+user hit or not and the ego's speed at the impact), contact with a parked car and the steps
+off the road; ``summary.json`` per track, method and case the tests avoided and the impact
+speeds, and per track the claims ledger of improved against the baseline (C0-C5, on each
+run's own window, as among recorded pedestrians).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import logging
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+from pipeline.store.member_cache import MemberCounts
+from pipeline.studies.results.euro_ncap import EuroNcapResult
+
+logger = logging.getLogger(__name__)
+
+#: The methods per track: (folder name, overrides). The kinematic track's improved and
+#: baseline are Appendix A's kinematic MPC with each APF.
+TRACKS: dict[str, tuple[tuple[str, tuple[str, ...]], ...]] = {
+    "lateral": (("improved", ("method=improved",)), ("baseline", ("method=baseline",)),
+                ("mpc_dcbf", ("method=mpc_dcbf",)), ("cbf_filter", ("method=cbf_filter",))),
+    "kinematic": (("improved", ("method=improved", "controller=kinematic")),
+                  ("baseline", ("method=baseline", "controller=kinematic")),
+                  ("mpc_dcbf", ("method=mpc_dcbf_kinematic",)),
+                  ("cbf_filter", ("method=cbf_filter_kinematic",))),
+}
+#: What the tests need of every method: an obstacle slot for each disc of a test (a cyclist's
+#: three and two parked cars' six) and, on the kinematic track, references at the test speed.
+SLOTS = 9
+TRACK_OVERRIDES = {"lateral": (f"controller.max_obstacles={SLOTS}",),
+                   "kinematic": (f"controller.max_obstacles={SLOTS}",
+                                 "controller.reference_alignment=path_speed")}
+
+
+def euro_ncap(compose: Callable[[list[str]], Any], out_dir: Path, n_members: int = 110,
+              tracks: tuple[str, ...] = tuple(TRACKS), log: Callable[[str], None] = logger.info,
+              extra: tuple[str, ...] = ()) -> EuroNcapResult:
+    """Run every method of ``tracks`` on the family; the result written into ``out_dir`` and
+    returned. ``extra``: overrides for every run (e.g. ``scenario.source.params.cases=[...]``)."""
+    from pipeline.loop.euro_ncap import EuroNcapSettings, ego_vehicle
+    from pipeline.store.manifest import refuse_other_record
+    from pipeline.studies.experiment import run_family
+
+    out_dir = Path(out_dir)
+    refuse_other_record(out_dir, ("euro_ncap",))
+    # every run's configuration first: a bad value is refused before anything is written
+    runs: dict[str, list[tuple[str, Any]]] = {}
+    settings = None
+    for track in tracks:
+        runs[track] = []
+        for name, overrides in TRACKS[track]:
+            cfg = compose([*overrides, "scenario=euro_ncap", f"scenario.family.size={n_members}",
+                           *TRACK_OVERRIDES[track], *extra])
+            settings = EuroNcapSettings.of(dict(cfg.scenario.source.params))
+            runs[track].append((name, dataclasses.replace(
+                cfg, vehicle=ego_vehicle(cfg.vehicle, settings))))
+    out_dir.mkdir(parents=True, exist_ok=True)
+    counts = MemberCounts()
+    rows: list[dict] = []
+    ledgers: list[dict] = []
+    for track, configs in runs.items():
+        tables: dict[str, pd.DataFrame] = {}
+        for name, cfg in configs:
+            folder = out_dir / track / name
+            tables[name] = run_family(cfg, folder, progress=False, counts=counts)
+            rows += _outcomes(cfg, folder, track, name, settings)
+            hits = sum(r["hit"] for r in rows if r["track"] == track and r["method"] == name)
+            log(f"euro-ncap: {track} {name}: {hits} of {n_members} tests hit the road user")
+        ledgers += _ledger(tables, configs[0][1].claims, track)
+    log(f"euro-ncap: {counts.sentence()}")
+    table = pd.DataFrame(rows)
+    return EuroNcapResult(n_members, tuple(rows), tuple(_by_case(table)), tuple(ledgers),
+                          settings.to_params() if settings is not None else {}).write(out_dir)
+
+
+def _outcomes(cfg: Any, folder: Path, track: str, method: str, settings: Any) -> list[dict]:
+    """The protocol's outcome of every member of the family in ``folder``."""
+    from pipeline.loop.euro_ncap import protocol_outcome
+    from pipeline.loop.scenario import build_scenario, family_members
+    from pipeline.store.runs import read_member
+
+    out = []
+    for index, member in enumerate(family_members(cfg.scenario, cfg.vehicle.footprint_radius_m)):
+        params = member.source.params
+        record = read_member(folder, index)
+        scenario = build_scenario(member)
+        outcome = protocol_outcome(record.trajectory, int(getattr(scenario, "user_discs", 1)),
+                                   cfg.vehicle, settings)
+        out.append({"track": track, "method": method, "member": index,
+                    "scenario": member.name, "case": params["case"],
+                    "nominal_speed_kmh": float(params["nominal_speed_kmh"]),
+                    "speed_kmh": float(params["ego_speed_kmh"]),
+                    "impact_fraction": float(params["impact_fraction"]),
+                    "hit": outcome.hit, "impact_speed_kmh": outcome.impact_speed_kmh,
+                    "impact_time_s": outcome.impact_time_s,
+                    "parked_car_contact": outcome.other_contact,
+                    "steps_off_road": outcome.steps_off_road,
+                    "least_gap_m": outcome.least_gap_m,
+                    "termination": record.info.termination})
+    return out
+
+
+def _by_case(table: pd.DataFrame) -> list[dict]:
+    """Per track, method and case (and ``all``): tests, tests avoided, the mean and largest
+    impact speed of the hits, tests with a parked car touched, tests that left the road."""
+    out: list[dict] = []
+    if table.empty:
+        return out
+    for (track, method), part in table.groupby(["track", "method"], sort=False):
+        for case, rows in [("all", part), *part.groupby("case", sort=False)]:
+            hits = rows[rows["hit"]]
+            out.append({"track": track, "method": method, "case": case,
+                        "tests": int(len(rows)), "avoided": int((~rows["hit"]).sum()),
+                        "avoided_share": float((~rows["hit"]).mean()),
+                        "impact_speed_mean_kmh": float(hits["impact_speed_kmh"].mean())
+                        if len(hits) else float("nan"),
+                        "impact_speed_max_kmh": float(hits["impact_speed_kmh"].max())
+                        if len(hits) else float("nan"),
+                        "avoided_up_to_kmh": _avoided_up_to(rows),
+                        "parked_car_contacts": int(rows["parked_car_contact"].sum()),
+                        "tests_off_road": int((rows["steps_off_road"] > 0).sum())})
+    return out
+
+
+def _avoided_up_to(rows: pd.DataFrame) -> float:
+    """The highest nominal test speed (km/h) up to which every test was avoided (NaN when the
+    slowest was hit)."""
+    speeds = sorted(rows["nominal_speed_kmh"].unique())
+    best = float("nan")
+    for speed in speeds:
+        if rows[rows["nominal_speed_kmh"] == speed]["hit"].any():
+            break
+        best = float(speed)
+    return best
+
+
+def _ledger(tables: dict[str, pd.DataFrame], claims_cfg: Any, track: str) -> list[dict]:
+    """The claims (C0-C5) of improved against the baseline on one track, on each run's own
+    window (``c2_window=own``, as among recorded pedestrians: no shared jerk window)."""
+    from pipeline.analysis.claims.ledger import family_ledger
+
+    if "improved" not in tables or "baseline" not in tables:
+        return []
+    own = dataclasses.replace(claims_cfg, c2_window="own")
+    ledger = family_ledger({m: tables[m] for m in ("improved", "baseline")}, own, None,
+                           "improved", ("baseline",), sensitivity=False)
+    return [{"track": track, "claim": row.claim_id, "comparison": row.comparison,
+             "outcome": str(row.outcome), "pairs": int(row.result.n_pairs),
+             "estimate": _finite(row.result.estimate), "ci_low": _finite(row.result.ci_low),
+             "ci_high": _finite(row.result.ci_high)}
+            for row in ledger]
+
+
+def _finite(value: Any) -> float | None:
+    try:
+        value = float(value)
+    except (TypeError, ValueError):
+        return None
+    return value if np.isfinite(value) else None

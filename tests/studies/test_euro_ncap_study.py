@@ -1,0 +1,59 @@
+"""``apf-mpc euro-ncap`` (:mod:`pipeline.studies.euro_ncap`): a small family on the lateral
+track writes every test's protocol outcome, the counts per case and the ledger; the result
+reads back; the report shows its section without the paper scenario; a second run resumes
+every member."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pandas as pd
+
+from pipeline.cli import main
+from pipeline.studies.results.euro_ncap import EuroNcapResult
+
+
+def test_a_small_family_writes_outcomes_counts_and_ledger_and_the_report_shows_them(
+        tmp_path, monkeypatch, capsys):
+    monkeypatch.setenv("PIPELINE_MEMBER_CACHE", "off")
+    out = tmp_path / "outputs" / "euro_ncap"
+    assert main(["euro-ncap", "--family-size", "5", "--tracks", "lateral", "--out", str(out),
+                 "scenario.source.params.cases=[CPNA-25,CPFA-50]"]) == 0
+    printed = capsys.readouterr().out
+    assert "lateral improved:" in printed and "of 5 tests avoided" in printed
+    result = EuroNcapResult.load(out)
+    table = result.table
+    assert len(table) == 5 * 4 and set(table["method"]) == {"improved", "baseline", "mpc_dcbf",
+                                                            "cbf_filter"}
+    assert set(table["case"]) <= {"CPNA-25", "CPFA-50"}
+    # an impact speed exactly where the road user was hit; the test speed within 1 km/h
+    assert (table["hit"] == table["impact_speed_kmh"].notna()).all()
+    assert (np.abs(table["speed_kmh"] - table["nominal_speed_kmh"]) <= 1.0).all()
+    # the counts are the table's
+    for row in result.summary_rows("lateral"):
+        part = table[table["method"] == row["method"]]
+        assert row["tests"] == 5 and row["avoided"] == int((~part["hit"]).sum())
+    # every family member's run folder is there, and its trajectory ended at the impact
+    for _, row in table[table["hit"]].iterrows():
+        members = pd.read_csv(out / "lateral" / row["method"] / "family_metrics.csv")
+        assert bool(members.loc[members["scenario"] == row["scenario"], "collision"].iloc[0])
+        assert row["termination"] == "contact"
+    ledger = {(r["track"], r["claim"]) for r in result.ledger}
+    assert ledger == {("lateral", c) for c in ("C0", "C1", "C2", "C3a", "C3b", "C4", "C5")}
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["settings"]["cases"] == ["CPNA-25", "CPFA-50"]
+
+    # again: every member complete with the same config hash, nothing simulated
+    assert main(["euro-ncap", "--family-size", "5", "--tracks", "lateral", "--out", str(out),
+                 "scenario.source.params.cases=[CPNA-25,CPFA-50]"]) == 0
+    pd.testing.assert_frame_equal(EuroNcapResult.load(out).table, result.table)
+
+    # the report of this folder alone shows the section with each method's row
+    report = tmp_path / "report"
+    assert main(["report", str(tmp_path / "outputs"), "--out", str(report)]) == 0
+    html = (report / "index.html").read_text()
+    assert 'id="euro-ncap-lateral"' in html and 'id="euro-ncap-claims"' in html
+    for method in ("improved", "baseline", "mpc_dcbf", "cbf_filter"):
+        row = next(r for r in result.summary_rows("lateral") if r["method"] == method)
+        assert f"<strong>{row['avoided']}/5</strong>" in html
