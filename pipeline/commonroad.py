@@ -48,10 +48,35 @@ def run(args: argparse.Namespace) -> int:
         code = run_module.command(
             ["experiment=commonroad", f"scenario.commonroad.path={args.scenario}",
              f"method={method}", f"hydra.run.dir={args.out / args.scenario.stem / method}",
-             *args.overrides], "apf-mpc commonroad")
+             *road_overrides(method, args.scenario, args.overrides), *args.overrides], "apf-mpc commonroad")
         if code:
             return code
     return 0
+
+
+#: The road's edges in the lateral MPC on a CommonRoad road (controller.road_edge_weight): the
+#: collision rows' weight, for every method whose MPC can take them (the lateral MPC in the
+#: path frame, no controller of one's own); the peers' controllers see no road.
+ROAD_EDGE_WEIGHT = 1.0
+
+
+def road_overrides(method: str, scenario: Path, overrides: list[str]) -> list[str]:
+    """``controller.road_edge_weight`` for ``method`` unless the user set it or its controller
+    cannot take it (another kind, the fixed frame, the nonlinear MPC, a plug-in)."""
+    if any(o.startswith("controller.road_edge_weight=") for o in overrides):
+        return []
+    from pipeline import api
+    from pipeline.errors import ConfigError
+
+    try:
+        ctrl = api.compose(["experiment=commonroad", f"method={method}",
+                            f"scenario.commonroad.path={scenario}",
+                            *[o for o in overrides if not o.startswith("hydra")]]).controller
+    except (ConfigError, ValueError):
+        return []  # the run itself says what is wrong, in its one line
+    takes = getattr(ctrl, "kind", "") == "mpc" and getattr(ctrl, "frame", "") == "path" \
+        and not ctrl._target_ and getattr(ctrl, "backend", "") != "nmpc"
+    return [f"controller.road_edge_weight={ROAD_EDGE_WEIGHT}"] if takes else []
 
 
 if __name__ == "__main__":

@@ -176,6 +176,8 @@ def _hash_of(data: dict) -> str:
     data["vehicle"] = VehicleConfig.hash_view(data["vehicle"])
     if data["controller"].get("collision_constraints") is True:
         data["controller"].pop("collision_constraints")  # the default, as before the key
+    if "road_edge_weight" in data["controller"] and data["controller"]["road_edge_weight"] is None:
+        data["controller"].pop("road_edge_weight")  # no road in the MPC, as before the key
     for section in ("planner", "controller"):
         # a plug-in's class and settings change the run; their absence does not
         if data[section].get("_target_") is None:

@@ -369,6 +369,17 @@ INTERPRETATION_REGISTER: tuple[RegisterEntry, ...] = (
         "our goal line (the paper's scenario: the run ends on crossing it)",
         "scenario.commonroad.n_steps"),
     RegisterEntry(
+        "The road's edges in the MPC (a choice we add; the paper's road has no edges)", "-",
+        "on a road (CommonRoad's lanelets, a Euro NCAP test's two lanes) the lateral MPC's path "
+        "frame gets two more soft half-planes per step keeping the ego's disc plus the safety "
+        "margin inside the road along the path's normal, their rows weighted as a collision "
+        "row (controller.road_edge_weight = 1; the paper's scenario: null, none). Only the "
+        "lateral MPC in the path frame takes them: the peers' controllers and the kinematic "
+        "MPC see no road. On the public CommonRoad files: steps off the road 17 -> 5-6 "
+        "(Guetersloh), 6 -> 0 (US101-23_1, whose baseline then misses the goal), 133 -> 52 "
+        "(ZAM_Tjunction, both then reach its goal)",
+        "null: no road in the MPC (earlier releases)", "controller.road_edge_weight"),
+    RegisterEntry(
         "The Euro NCAP tests (a choice we add; the paper's sudden obstacle is what they test)",
         "an obstacle that appears suddenly in front of a car",
         "our reading of Euro NCAP's AEB/LSS VRU protocol (to be checked against it): five "

@@ -394,9 +394,14 @@ def read_commonroad(cfg: ScenarioConfig) -> CommonRoadCase:
                              for g in problem.goal.state_list)
         route = route_centreline(scenario.lanelet_network, start,
                                  goal if has_goal_point else None)
+    # the road as its lanelets' polygons (left bound, then the right bound backwards): what
+    # the lateral MPC keeps the ego on with controller.road_edge_weight
+    road = tuple(np.vstack([np.asarray(lanelet.left_vertices, float),
+                            np.asarray(lanelet.right_vertices, float)[::-1]])
+                 for lanelet in scenario.lanelet_network.lanelets)
     ours = replace(ours, sensor_range_m=cr.sensor_range_m, occluders_m=occluders,
                    occluder_of=own, route_m=route,
-                   route_lookahead_m=float(cr.route_lookahead_m or 0.0))
+                   route_lookahead_m=float(cr.route_lookahead_m or 0.0), road_polygons_m=road)
     return CommonRoadCase(resolved, ours, scenario, problem, ids, ego_ids, t0, digest)
 
 

@@ -250,6 +250,10 @@ class MpcSettings(_MpcSchema):
     path_state_reference: str = "steady_state"
     horizon_reach_m: Optional[float] = 3.0
     nmpc_substeps: int = 5
+    # the road's edges as two more soft half-planes per step (path frame; a scenario with a
+    # road: Euro NCAP, CommonRoad), their rows scaled by this factor against the collision
+    # half-planes' slack weights; null: no road in the MPC (the paper's scenario has none)
+    road_edge_weight: Optional[float] = None
 
     def __post_init__(self) -> None:
         self._check_mpc()
@@ -276,6 +280,26 @@ class MpcSettings(_MpcSchema):
                tuple(PathStateReference))
         if self.horizon_reach_m is not None:
             between("controller.horizon_reach_m", self.horizon_reach_m, 0.1, 1000.0)
+        if self.road_edge_weight is not None:
+            between("controller.road_edge_weight", self.road_edge_weight, 1e-3, 1e3)
+            if self.frame != "path":
+                raise ConfigError("controller.road_edge_weight", self.road_edge_weight,
+                                  "null with controller.frame=fixed (the road's rows are "
+                                  "stated in the path frame)")
+            if self._target_:
+                raise ConfigError("controller.road_edge_weight", self.road_edge_weight,
+                                  "null with a controller of one's own (controller._target_ "
+                                  f"{self._target_}: its QP has no road rows)")
+            if self.backend == "nmpc":
+                raise ConfigError("controller.road_edge_weight", self.road_edge_weight,
+                                  "null with controller.backend=nmpc (the nonlinear MPC has "
+                                  "no road rows)")
+
+    @property
+    def road_slots(self) -> int:
+        """Half-plane slots the road's edges take beyond the obstacles' (2 with
+        ``road_edge_weight``, else 0)."""
+        return 2 if self.road_edge_weight is not None else 0
 
     @property
     def weights(self) -> LateralWeights:

@@ -405,8 +405,11 @@ class EuroNcapSource:
                               np.repeat(np.arange(parked.shape[0]), discs_per_car)]).astype(int)
         s = self.settings
         plain = {f.name: getattr(scripted, f.name) for f in fields(Scenario)}
+        right, left = s.road_edges_m
+        road = np.array([[-50.0, right], [geometry.goal_x_m + 50.0, right],
+                         [geometry.goal_x_m + 50.0, left], [-50.0, left]])
         plain.update(sensor_range_m=s.sensor_range_m, nearest_first=True,
-                     end_at_contact=s.end_at_contact)
+                     end_at_contact=s.end_at_contact, road_polygons_m=(road,))
         return EuroNcapScenario(**plain, user_discs=n_user,
                                 occluders_m=parked if s.occlusion else np.zeros((0, 4, 2)),
                                 occluder_of=own if s.occlusion else np.zeros(0, int))

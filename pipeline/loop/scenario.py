@@ -156,6 +156,9 @@ class Scenario:
     #: end the run at the first step the vehicle's footprint overlaps a present obstacle
     #: (termination ``contact``; among walkers: no metric on a run that drove through one)
     end_at_contact: bool = False
+    #: the road as polygons (global, m; each (P, 2)): what the lateral MPC keeps the ego on
+    #: with ``controller.road_edge_weight``; empty: no road (the scripted scenarios)
+    road_polygons_m: tuple[np.ndarray, ...] = ()
 
     @property
     def n_obstacles(self) -> int:

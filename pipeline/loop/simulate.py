@@ -293,6 +293,7 @@ def _closed_loop(cfg: LoopSettings, scenario: Scenario, qp_cache: QpCache | None
     # the vehicle's reach from its logged position: its discs' farthest edge
     reach = vehicle_radius + 0.5 * cfg.vehicle.footprint_span_m
     end_at_contact = scenario.end_at_contact
+    road = scenario.road_polygons_m
     # an ego of several discs along its heading touches where any of them does
     disc_offsets = cfg.vehicle.footprint_offsets_m if cfg.vehicle.footprint_discs > 1 else None
     # an obstacle motion that reacts to the platform (reactive walkers) is told where it is
@@ -327,7 +328,7 @@ def _closed_loop(cfg: LoopSettings, scenario: Scenario, qp_cache: QpCache | None
         speed_ref = _planned_speed(planner, position, psi, visible, scenario, vehicle_radius,
                                    rollout, state, path_aware) if plans_speed else np.nan
         observation = Observation(time_s, state, frame, np.array([along, lateral]), e_psi,
-                                  rollout, visible, speed_ref)
+                                  rollout, visible, speed_ref, road)
         step: ControlStep = controller.step(observation)
         if cfg.controller.kind != "pure_pursuit":
             solve_times[n_solves] = step.solve_time_s

@@ -36,10 +36,13 @@ from pipeline.studies.results.euro_ncap import EuroNcapResult
 
 logger = logging.getLogger(__name__)
 
+#: The road's edges in the lateral MPC (its path frame; the peers' controllers and the
+#: kinematic MPC see no road), as on a CommonRoad road (pipeline.commonroad.ROAD_EDGE_WEIGHT).
+ROAD = "controller.road_edge_weight=1.0"
 #: The methods per track: (folder name, overrides). The kinematic track's improved and
 #: baseline are Appendix A's kinematic MPC with each APF.
 TRACKS: dict[str, tuple[tuple[str, tuple[str, ...]], ...]] = {
-    "lateral": (("improved", ("method=improved",)), ("baseline", ("method=baseline",)),
+    "lateral": (("improved", ("method=improved", ROAD)), ("baseline", ("method=baseline", ROAD)),
                 ("mpc_dcbf", ("method=mpc_dcbf",)), ("cbf_filter", ("method=cbf_filter",))),
     "kinematic": (("improved", ("method=improved", "controller=kinematic")),
                   ("baseline", ("method=baseline", "controller=kinematic")),

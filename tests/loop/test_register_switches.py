@@ -82,6 +82,7 @@ SWITCH_TESTS = {
     "scenario.commonroad.sensor_range_m": "test_commonroad",
     "scenario.commonroad.occlusion": "test_commonroad",
     "scenario.commonroad.route_lookahead_m": "test_commonroad",
+    "controller.road_edge_weight": "test_road",
     **{f"scenario.source.params.{key}": "test_euro_ncap" for key in (
         "cases", "ego_speeds_kmh", "speed_tolerance_kmh", "child_speed_kmh",
         "adult_far_speed_kmh", "cyclist_speed_kmh", "near_start_m", "lead_time_s",

@@ -38,6 +38,8 @@ class Observation:
         Visible obstacles only.
     speed_ref_mps : float
         Planned speed (the lateral model is built at this speed).
+    road_polygons_m : tuple of ndarray
+        The road (:mod:`pipeline.loop.controller.road`); empty where the scenario has none.
     """
 
     time_s: float
@@ -48,6 +50,9 @@ class Observation:
     rollout: ApfRollout
     obstacles: ObstacleSnapshot
     speed_ref_mps: float
+    #: the road as polygons (a scenario's ``road_polygons_m``; empty: none), for the lateral
+    #: MPC's road-edge rows (``controller.road_edge_weight``)
+    road_polygons_m: tuple[np.ndarray, ...] = ()
 
 
 @dataclass(frozen=True)

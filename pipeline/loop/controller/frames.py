@@ -221,6 +221,8 @@ class PathFrame:
         projected[:, :, 0], projected[:, :, 1] = s_o.reshape(N, n_obs), d_o.reshape(N, n_obs)
         G, h = collision_halfplanes(stations[1:], np.zeros(N), np.array([s0, d0]), projected,
                                     visible.radii_m, vehicle, ctrl)
+        if ctrl.road_edge_weight is not None:
+            G, h = self._with_road(G, h, path, stations[1:], obs.road_polygons_m)
         first = obs.frame.to_line(path.points_m[1]) if N else obs.position_line_m
         log = {"y_ref_m": first[1], "psi_ref_rad": path.headings_rad[1] - obs.frame.heading_rad,
                "path_beyond_limit": bool(np.count_nonzero(
@@ -228,6 +230,21 @@ class PathFrame:
                "path_curvature_1_per_m": path.curvature_1_per_m[0], "r_d_rad_s": r_d[0]}
         self.record = ("path", path, stations, dt)
         return MpcInputs(x0, model, np.zeros(N), psi_ref, G, h, r_d, r_ref, delta_ref), log
+
+    def _with_road(self, G: np.ndarray, h: np.ndarray, path: ReferencePath,
+                   stations: np.ndarray, road: tuple[np.ndarray, ...]
+                   ) -> tuple[np.ndarray, np.ndarray]:
+        """``G, h`` with the road's two columns after the obstacles'
+        (:func:`~pipeline.loop.controller.road.road_halfplanes`: the ego's disc plus the
+        safety margin inside the road's edges along the path's normal at each station)."""
+        from pipeline.loop.controller.road import road_halfplanes
+
+        points = path.to_global(stations, np.zeros_like(stations))
+        G_road, h_road = road_halfplanes(points, path.heading_at(stations), road,
+                                         self.vehicle.footprint_radius_m
+                                         + self.cfg.safety_margin_m,
+                                         float(self.cfg.road_edge_weight or 0.0))
+        return np.hstack([G, G_road]), np.hstack([h, h_road])
 
     def reference_path(self, obs: Observation, ds_m: float, n_intervals: int
                        ) -> ReferencePath:

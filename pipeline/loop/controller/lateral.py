@@ -141,10 +141,11 @@ class LateralMpc:
                 # slack needed by the optimal plan (what the QP's slack variable holds); rows
                 # of idle slots and far obstacles are 0 y + s >= 0 and need none
                 slack = 0.0
-                if np.count_nonzero(inputs.constraint_gain) \
-                        or np.count_nonzero(inputs.constraint_bound):
+                slots = self.cfg.max_obstacles  # the obstacles' (the road's after them)
+                gain, bound = inputs.constraint_gain[:, :slots], inputs.constraint_bound[:, :slots]
+                if np.count_nonzero(gain) or np.count_nonzero(bound):
                     lateral = states[0, 1:][:, None]
-                    slack = (inputs.constraint_bound - inputs.constraint_gain * lateral).max()
+                    slack = (bound - gain * lateral).max()
                 return ControlStep(plan[:, 0].copy(), plan, states, solution.status,
                                    solution.iterations, solution.solve_time_s, "none",
                                    float(max(slack, 0.0)), log or {})

@@ -90,7 +90,9 @@ class LateralQpStructure:
     def of(cls, controller: MpcSettings,
            vehicle: VehicleConfig) -> LateralQpStructure:
         c = controller
-        return cls(c.horizon, c.control_horizon, c.max_obstacles, c.input_hold,
+        # the road's edges (controller.road_edge_weight) take two slots beyond the obstacles'
+        return cls(c.horizon, c.control_horizon, c.max_obstacles + getattr(c, "road_slots", 0),
+                   c.input_hold,
                    c.weights, vehicle.steering_rate_max_rad_s, vehicle.steering_max_rad)
 
 
