@@ -163,7 +163,7 @@ pedestrians: $(STAMP)  ## improved and baseline among recorded pedestrians (ETH/
 	done
 	$(MAKE) report
 
-euro-ncap: $(STAMP)  ## the methods on Euro NCAP's AEB/LSS VRU crossings (a child from between parked cars, adults, a cyclist; both tracks; docs/euro_ncap.md), then the report
+euro-ncap: $(STAMP)  ## the methods on Euro NCAP's AEB/LSS VRU crossings (a child from between parked cars, adults, a cyclist; both tracks and braking; docs/euro_ncap.md), then the report
 	$(APF) euro-ncap --family-size $(EURO_NCAP_FAMILY_SIZE) --out $(RUNS)/euro_ncap
 	$(MAKE) report
 

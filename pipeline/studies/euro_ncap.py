@@ -4,7 +4,9 @@ tracks, judged by the protocol's own outcome and by the claims.
 
 Each method runs the same family (resumable, like every family) into
 ``<out>/<track>/<method>``: on the lateral track the paper's two methods and the peers that
-need no speed setting of their own (``mpc_dcbf``, ``cbf_filter``); on the Appendix-A
+need no speed setting of their own (``mpc_dcbf``, ``cbf_filter``); on the lateral track with
+braking (``lateral_braking``, a reading: velocity planning to a stop, :data:`BRAKING`) the
+paper's two methods; on the Appendix-A
 kinematic track the same with the kinematic MPC (references spaced at the test speed,
 ``controller.reference_alignment=path_speed``). Velocity obstacles and the dynamic window
 are left out: their candidate speed and their speed limit are set for the paper's 3 m/s,
@@ -39,11 +41,20 @@ logger = logging.getLogger(__name__)
 #: The road's edges in the lateral MPC (its path frame; the peers' controllers and the
 #: kinematic MPC see no road), as on a CommonRoad road (pipeline.commonroad.ROAD_EDGE_WEIGHT).
 ROAD = "controller.road_edge_weight=1.0"
+#: Braking (a reading, the protocol's tests are built for it; the paper's MPC steers at a
+#: constant speed): velocity planning by the stopping distance down to a stop at the
+#: vehicle's acceleration limit (3 m/s^2), the plant and the MPC's model handing over to the
+#: kinematic single-track below 2 m/s (as CommonRoad's braking reading).
+BRAKING = ("planner.velocity_planning=true", "planner.velocity_rule=stopping_distance",
+           "planner.speed_floor_mps=0", "planner.braking_decel_mps2=3.0",
+           "planner.stop_margin_m=1.0", "vehicle.kinematic_below_mps=2.0")
 #: The methods per track: (folder name, overrides). The kinematic track's improved and
 #: baseline are Appendix A's kinematic MPC with each APF.
 TRACKS: dict[str, tuple[tuple[str, tuple[str, ...]], ...]] = {
     "lateral": (("improved", ("method=improved", ROAD)), ("baseline", ("method=baseline", ROAD)),
                 ("mpc_dcbf", ("method=mpc_dcbf",)), ("cbf_filter", ("method=cbf_filter",))),
+    "lateral_braking": (("improved", ("method=improved", ROAD, *BRAKING)),
+                        ("baseline", ("method=baseline", ROAD, *BRAKING))),
     "kinematic": (("improved", ("method=improved", "controller=kinematic")),
                   ("baseline", ("method=baseline", "controller=kinematic")),
                   ("mpc_dcbf", ("method=mpc_dcbf_kinematic",)),
@@ -53,6 +64,7 @@ TRACKS: dict[str, tuple[tuple[str, tuple[str, ...]], ...]] = {
 #: three and two parked cars' six) and, on the kinematic track, references at the test speed.
 SLOTS = 9
 TRACK_OVERRIDES = {"lateral": (f"controller.max_obstacles={SLOTS}",),
+                   "lateral_braking": (f"controller.max_obstacles={SLOTS}",),
                    "kinematic": (f"controller.max_obstacles={SLOTS}",
                                  "controller.reference_alignment=path_speed")}
 

@@ -29,7 +29,7 @@ REFUSALS: dict[str, list[tuple[list[str], int, str, str]]] = {
     "speed-check": [(["--family-size", "0"], 2, "--family-size", "[1, 10000]"),
                     (["--variants", "nope"], 2, "--variants", "nominal")],
     "euro-ncap": [(["--family-size", "0"], 2, "--family-size", "[1, 10000]"),
-                  (["--tracks", "nope"], 2, "--tracks", "lateral, kinematic"),
+                  (["--tracks", "nope"], 2, "--tracks", "lateral, lateral_braking, kinematic"),
                   (["scenario.source.params.cases=[CPXX-50]"], 2,
                    "scenario.source.params.cases", "distinct cases from CPNC-50"),
                   (["scenario.source.params.lead_time_s=-1"], 2,

@@ -18,14 +18,22 @@ def test_a_small_family_writes_outcomes_counts_and_ledger_and_the_report_shows_t
         tmp_path, monkeypatch, capsys):
     monkeypatch.setenv("PIPELINE_MEMBER_CACHE", "off")
     out = tmp_path / "outputs" / "euro_ncap"
-    assert main(["euro-ncap", "--family-size", "5", "--tracks", "lateral", "--out", str(out),
-                 "scenario.source.params.cases=[CPNA-25,CPFA-50]"]) == 0
+    assert main(["euro-ncap", "--family-size", "5", "--tracks", "lateral,lateral_braking",
+                 "--out", str(out), "scenario.source.params.cases=[CPNA-25,CPFA-50]"]) == 0
     printed = capsys.readouterr().out
     assert "lateral improved:" in printed and "of 5 tests avoided" in printed
     result = EuroNcapResult.load(out)
     table = result.table
-    assert len(table) == 5 * 4 and set(table["method"]) == {"improved", "baseline", "mpc_dcbf",
+    assert len(table) == 5 * 6 and set(table["method"]) == {"improved", "baseline", "mpc_dcbf",
                                                             "cbf_filter"}
+    # the braking track brakes: a member's speed falls below its test speed's 90 %
+    from pipeline.store.runs import read_member
+
+    braking = [read_member(out / "lateral_braking" / "improved", i).trajectory for i in range(5)]
+    steady = [read_member(out / "lateral" / "improved", i).trajectory for i in range(5)]
+    assert any(t["vx_mps"].min() < 0.9 * t["vx_mps"].iloc[0] for t in braking)
+    assert all(t["vx_mps"].min() > 0.9 * t["vx_mps"].iloc[0] for t in steady)
+    table = table[table["track"] == "lateral"]
     assert set(table["case"]) <= {"CPNA-25", "CPFA-50"}
     # an impact speed exactly where the road user was hit; the test speed within 1 km/h
     assert (table["hit"] == table["impact_speed_kmh"].notna()).all()
@@ -40,13 +48,14 @@ def test_a_small_family_writes_outcomes_counts_and_ledger_and_the_report_shows_t
         assert bool(members.loc[members["scenario"] == row["scenario"], "collision"].iloc[0])
         assert row["termination"] == "contact"
     ledger = {(r["track"], r["claim"]) for r in result.ledger}
-    assert ledger == {("lateral", c) for c in ("C0", "C1", "C2", "C3a", "C3b", "C4", "C5")}
+    assert ledger == {(track, c) for c in ("C0", "C1", "C2", "C3a", "C3b", "C4", "C5")
+                      for track in ("lateral", "lateral_braking")}
     summary = json.loads((out / "summary.json").read_text())
     assert summary["settings"]["cases"] == ["CPNA-25", "CPFA-50"]
 
     # again: every member complete with the same config hash, nothing simulated
-    assert main(["euro-ncap", "--family-size", "5", "--tracks", "lateral", "--out", str(out),
-                 "scenario.source.params.cases=[CPNA-25,CPFA-50]"]) == 0
+    assert main(["euro-ncap", "--family-size", "5", "--tracks", "lateral,lateral_braking",
+                 "--out", str(out), "scenario.source.params.cases=[CPNA-25,CPFA-50]"]) == 0
     pd.testing.assert_frame_equal(EuroNcapResult.load(out).table, result.table)
 
     # the report of this folder alone shows the section with each method's row
