@@ -375,8 +375,8 @@ INTERPRETATION_REGISTER: tuple[RegisterEntry, ...] = (
         "margin inside the road along the path's normal, their rows weighted as a collision "
         "row (controller.road_edge_weight = 1; the paper's scenario: null, none). Only the "
         "lateral MPC in the path frame takes them: the peers' controllers and the kinematic "
-        "MPC see no road. On the public CommonRoad files: steps off the road 17 -> 5-6 "
-        "(Guetersloh), 6 -> 0 (US101-23_1, whose baseline then misses the goal), 133 -> 52 "
+        "MPC see no road. On the public CommonRoad files: steps off the road 17 -> 4-5 "
+        "(Guetersloh), 6 -> 0 (US101-23_1, whose improved then touches a car), 133 -> 50 "
         "(ZAM_Tjunction, both then reach its goal)",
         "null: no road in the MPC (earlier releases)", "controller.road_edge_weight"),
     RegisterEntry(
@@ -405,11 +405,14 @@ INTERPRETATION_REGISTER: tuple[RegisterEntry, ...] = (
         "scenario.source.params.occlusion"),
     RegisterEntry(
         "The Euro NCAP outcome and the road (a choice we add)", "-",
-        "the protocol's: the road user hit or not, and the ego's speed at the impact (a test "
-        "ends there); contact with a parked car and the steps the ego's 4.5 x 1.8 m rectangle "
-        "spends beyond the road's edges (its lane and an oncoming lane, 3.5 m each) reported "
-        "beside it; no road-edge constraint bounds any plan",
-        "oncoming_lane=false (one lane); end_at_contact=false",
+        "the protocol's, on the true shapes (the car's 4.5 x 1.8 m rectangle, the road user's "
+        "disc or the bicycle's rectangle, the parked cars' rectangles): the road user hit or "
+        "not, and the ego's speed at the first overlap; contact with a parked car and the "
+        "steps the rectangle spends beyond the road's edges (its lane and an oncoming lane, "
+        "3.5 m each) reported beside it. The run goes on after it (end_at_contact=false): its "
+        "own check sees the disc covers, which reach 0.27 m beyond the car's sides",
+        "oncoming_lane=false (one lane); end_at_contact=true (the run ends at the covers' "
+        "first contact)",
         "scenario.source.params.lane_width_m, scenario.source.params.oncoming_lane, "
         "scenario.source.params.end_at_contact"),
     RegisterEntry(

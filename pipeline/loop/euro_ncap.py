@@ -24,7 +24,9 @@ discs as every rectangle is, :mod:`pipeline.loop.cover`) that also hide what is 
 :func:`~pipeline.loop.commonroad_scenario.sight_view`).
 
 The protocol's outcome of a test is whether the road user is hit and, if so, the ego's speed
-at the impact (:func:`protocol_outcome`). Nothing here asks which method drove.
+at the impact (:func:`protocol_outcome`), judged on the true shapes (the car's rectangle, the
+road user's disc or the bicycle's rectangle, the parked cars' rectangles); the MPC and the
+run's own collision check see their disc covers. Nothing here asks which method drove.
 """
 
 from __future__ import annotations
@@ -108,7 +110,7 @@ class EuroNcapSettings:
     oncoming_lane: bool = True
     sensor_range_m: float = 60.0
     occlusion: bool = True
-    end_at_contact: bool = True
+    end_at_contact: bool = False
     step_margin: float = 1.5
 
     #: Allowed ranges of the numeric keys (inclusive).
@@ -142,7 +144,17 @@ class EuroNcapSettings:
             if name in drawn:
                 continue
             values[name] = _checked(name, value)
-        return cls(**values)
+        settings = cls(**values)
+        # a road user starts outside the ego's path, and beyond the parked cars' far side
+        least = settings.ego_width_m / 2.0 + settings.parked_lateral_gap_m \
+            + settings.parked_car_width_m
+        for key in ("near_start_m", "far_start_m"):
+            if getattr(settings, key) <= least:
+                raise ConfigError(f"{KEY}.{key}", getattr(settings, key),
+                                  f"a number in ({least:g}, 30] (m): beyond ego_width_m / 2 + "
+                                  "parked_lateral_gap_m + parked_car_width_m, where a road user "
+                                  "starts")
+        return settings
 
     def speed_mps(self, road_user: str, side: str) -> float:
         """The road user's crossing speed (m/s)."""
@@ -450,9 +462,10 @@ def ego_vehicle(vehicle: Any, settings: EuroNcapSettings) -> Any:
 
 @dataclass(frozen=True)
 class ProtocolOutcome:
-    """The protocol's outcome of one run: whether the road user was hit, when and at what ego
-    speed (km/h; NaN when avoided), and the fewest steps the ego's rectangle spent off the
-    road."""
+    """The protocol's outcome of one run, on the true shapes: whether the road user was hit,
+    when and at what ego speed (km/h; NaN when avoided), whether a parked car was touched, the
+    steps the ego's rectangle spent off the road, and the least gap to the road user (m; 0
+    once they overlap)."""
 
     hit: bool
     impact_time_s: float
@@ -462,38 +475,102 @@ class ProtocolOutcome:
     least_gap_m: float
 
 
-def protocol_outcome(trajectory: Any, user_discs: int, vehicle: Any,
-                     settings: EuroNcapSettings) -> ProtocolOutcome:
-    """The outcome of a run's ``trajectory`` (its logged columns): the first step where an ego
-    disc overlaps one of the road user's ``user_discs`` discs (its true position), the ego's
-    speed there, whether it touched anything else (a parked car), and the steps on which its
-    rectangle (``ego_length_m`` x ``ego_width_m`` about its logged position) reaches beyond
-    the road's edges (:attr:`EuroNcapSettings.road_edges_m`)."""
-    from pipeline.loop.cover import footprint_offsets_m
+def rectangle_corners(centre_x: np.ndarray, centre_y: np.ndarray, heading: np.ndarray,
+                      length_m: float, width_m: float) -> np.ndarray:
+    """Corners (T, 4, 2), counter-clockwise, of a ``length_m`` x ``width_m`` rectangle centred
+    at each ``(centre_x, centre_y)`` with its long side along ``heading``."""
+    c, s = np.cos(heading), np.sin(heading)
+    local = np.array([[-1.0, -1.0], [1.0, -1.0], [1.0, 1.0], [-1.0, 1.0]]) \
+        * np.array([length_m / 2.0, width_m / 2.0])
+    x = centre_x[:, None] + c[:, None] * local[None, :, 0] - s[:, None] * local[None, :, 1]
+    y = centre_y[:, None] + s[:, None] * local[None, :, 0] + c[:, None] * local[None, :, 1]
+    return np.stack([x, y], axis=-1)
 
+
+def _point_segment_distance(points: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Distances (T, P, E) from points (T, P, 2) to segments ``a -> b`` (T, E, 2)."""
+    ab = (b - a)[:, None, :, :]                                     # (T, 1, E, 2)
+    ap = points[:, :, None, :] - a[:, None, :, :]                    # (T, P, E, 2)
+    t = np.clip(np.sum(ap * ab, axis=-1) / np.maximum(np.sum(ab * ab, axis=-1), 1e-18),
+                0.0, 1.0)
+    return np.linalg.norm(ap - t[..., None] * ab, axis=-1)
+
+
+def polygon_gap(first: np.ndarray, second: np.ndarray) -> np.ndarray:
+    """Per step the gap (m) between two convex polygons (T, 4, 2) each (counter-clockwise):
+    0 where they overlap (no separating axis among their edges' normals), else the least
+    vertex-to-edge distance."""
+    overlap = np.ones(first.shape[0], bool)
+    for poly in (first, second):
+        edges = np.roll(poly, -1, axis=1) - poly                       # (T, 4, 2)
+        normals = np.stack([edges[..., 1], -edges[..., 0]], axis=-1)   # outward for CCW
+        for e in range(4):
+            n = normals[:, e, :]                                        # (T, 2)
+            p1 = np.einsum("tkd,td->tk", first, n)
+            p2 = np.einsum("tkd,td->tk", second, n)
+            separated = (p1.max(axis=1) < p2.min(axis=1)) | (p2.max(axis=1) < p1.min(axis=1))
+            overlap &= ~separated
+    gap = np.minimum(
+        _point_segment_distance(first, second, np.roll(second, -1, axis=1)).min(axis=(1, 2)),
+        _point_segment_distance(second, first, np.roll(first, -1, axis=1)).min(axis=(1, 2)))
+    return np.where(overlap, 0.0, gap)
+
+
+def disc_gap(rectangle: np.ndarray, heading: np.ndarray, length_m: float, width_m: float,
+             centre: np.ndarray, radius_m: float) -> np.ndarray:
+    """Per step the gap (m) between rectangles (T, 4, 2; ``length_m`` x ``width_m`` along
+    ``heading``) and discs at ``centre`` (T, 2): the distance from the disc's centre to the
+    rectangle, less the radius (negative inside)."""
+    middle = rectangle.mean(axis=1)
+    d = centre - middle
+    c, s = np.cos(heading), np.sin(heading)
+    along, across = c * d[:, 0] + s * d[:, 1], -s * d[:, 0] + c * d[:, 1]
+    qx = np.maximum(np.abs(along) - length_m / 2.0, 0.0)
+    qy = np.maximum(np.abs(across) - width_m / 2.0, 0.0)
+    inside = (np.abs(along) <= length_m / 2.0) & (np.abs(across) <= width_m / 2.0)
+    return np.where(inside, -radius_m, np.hypot(qx, qy) - radius_m)
+
+
+def protocol_outcome(trajectory: Any, geometry: Encounter, settings: EuroNcapSettings
+                     ) -> ProtocolOutcome:
+    """The outcome of a run's ``trajectory`` (its logged columns) on the true shapes: the
+    ego's ``ego_length_m`` x ``ego_width_m`` rectangle about its logged position against the
+    road user (a disc, or the bicycle's ``cyclist_length_m`` x ``cyclist_width_m`` rectangle
+    across the road, at the centre of its logged discs) and the parked cars' rectangles
+    (``geometry.parked_m``); the first step they overlap, the ego's speed there (its
+    ``hypot(vx, vy)``), and, up to that step (the test ends there), whether a parked car was
+    touched and the steps its rectangle reaches beyond the road's edges
+    (:attr:`EuroNcapSettings.road_edges_m`)."""
     t = trajectory
     x, y, psi = (t[c].to_numpy(float) for c in ("X_m", "Y_m", "psi_rad"))
-    offsets = footprint_offsets_m(int(vehicle.footprint_discs), float(vehicle.footprint_span_m))
-    ego_x = x[:, None] + offsets[None, :] * np.cos(psi)[:, None]      # (T, n)
-    ego_y = y[:, None] + offsets[None, :] * np.sin(psi)[:, None]
-    n_obstacles = sum(1 for c in t.columns if c.startswith("obs") and c.endswith("_x_m"))
-    gaps = np.full((len(t), max(n_obstacles, 1)), np.inf)
-    for j in range(n_obstacles):
-        ox, oy, r = (t[f"obs{j}_{f}"].to_numpy(float) for f in ("x_m", "y_m", "radius_m"))
-        d = np.hypot(ego_x - ox[:, None], ego_y - oy[:, None]).min(axis=1)
-        gaps[:, j] = d - r - float(vehicle.footprint_radius_m)
-    user = gaps[:, :user_discs].min(axis=1)
-    hit_steps = np.flatnonzero(user < 0.0)
-    other = bool(n_obstacles > user_discs and (gaps[:, user_discs:] < 0.0).any())
-    half_l, half_w = settings.ego_length_m / 2.0, settings.ego_width_m / 2.0
-    reach = half_l * np.abs(np.sin(psi)) + half_w * np.abs(np.cos(psi))
+    length, width = settings.ego_length_m, settings.ego_width_m
+    ego = rectangle_corners(x, y, psi, length, width)
+    n_user = geometry.user_discs.shape[0]
+    centre = np.mean([t[[f"obs{j}_x_m", f"obs{j}_y_m"]].to_numpy(float) for j in range(n_user)],
+                     axis=0)                                                 # (T, 2)
+    if geometry.case.road_user == "cyclist":
+        bike = rectangle_corners(centre[:, 0], centre[:, 1], np.full(len(t), np.pi / 2.0),
+                                 settings.cyclist_length_m, settings.cyclist_width_m)
+        user = polygon_gap(ego, bike)
+    else:
+        user = np.maximum(disc_gap(ego, psi, length, width, centre, geometry.user_radius_m),
+                          0.0)
+    hit_steps = np.flatnonzero(user <= 0.0)
+    # the test ends at the impact (the run goes on: what it does after is not the test's)
+    end = int(hit_steps[0]) + 1 if hit_steps.size else len(t)
+    other = False
+    for corners in geometry.parked_m:
+        parked = np.broadcast_to(corners, ego.shape)[:end]
+        other = other or bool((polygon_gap(ego[:end], parked) <= 0.0).any())
+    half_l, half_w = length / 2.0, width / 2.0
+    reach = half_l * np.abs(np.sin(psi[:end])) + half_w * np.abs(np.cos(psi[:end]))
     right, left = settings.road_edges_m
-    off = int(np.count_nonzero((y - reach < right) | (y + reach > left)))
+    off = int(np.count_nonzero((y[:end] - reach < right) | (y[:end] + reach > left)))
+    least = float(np.min(user)) if user.size else float("nan")
     if hit_steps.size:
         k = int(hit_steps[0])
         speed = float(np.hypot(t["vx_mps"].to_numpy(float)[k],
                                np.nan_to_num(t["vy_mps"].to_numpy(float)[k])))
         return ProtocolOutcome(True, float(t["time_s"].to_numpy(float)[k]), speed / KMH, other,
-                               off, float(np.min(user)))
-    return ProtocolOutcome(False, float("nan"), float("nan"), other, off,
-                           float(np.min(user)) if user.size else float("nan"))
+                               off, least)
+    return ProtocolOutcome(False, float("nan"), float("nan"), other, off, least)

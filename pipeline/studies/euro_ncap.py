@@ -60,13 +60,18 @@ TRACKS: dict[str, tuple[tuple[str, tuple[str, ...]], ...]] = {
                   ("mpc_dcbf", ("method=mpc_dcbf_kinematic",)),
                   ("cbf_filter", ("method=cbf_filter_kinematic",))),
 }
-#: What the tests need of every method: an obstacle slot for each disc of a test (a cyclist's
-#: three and two parked cars' six) and, on the kinematic track, references at the test speed.
-SLOTS = 9
-TRACK_OVERRIDES = {"lateral": (f"controller.max_obstacles={SLOTS}",),
-                   "lateral_braking": (f"controller.max_obstacles={SLOTS}",),
-                   "kinematic": (f"controller.max_obstacles={SLOTS}",
-                                 "controller.reference_alignment=path_speed")}
+#: What the tests need of a track beyond every method's obstacle slot per disc of a test (a
+#: cyclist's cover_discs and two parked cars' twice as many, :func:`slots`): on the kinematic
+#: track, references at the test speed.
+TRACK_OVERRIDES: dict[str, tuple[str, ...]] = {
+    "lateral": (), "lateral_braking": (),
+    "kinematic": ("controller.reference_alignment=path_speed",)}
+
+
+def slots(cover_discs: int) -> int:
+    """Obstacle slots for every disc a test can hold: the road user's cover (a cyclist's) and
+    two parked cars' (``3 cover_discs``)."""
+    return 3 * int(cover_discs)
 
 
 def euro_ncap(compose: Callable[[list[str]], Any], out_dir: Path, n_members: int = 110,
@@ -82,12 +87,14 @@ def euro_ncap(compose: Callable[[list[str]], Any], out_dir: Path, n_members: int
     refuse_other_record(out_dir, ("euro_ncap",))
     # every run's configuration first: a bad value is refused before anything is written
     runs: dict[str, list[tuple[str, Any]]] = {}
-    settings = None
+    settings = EuroNcapSettings.of(dict(compose(["scenario=euro_ncap", *extra])
+                                        .scenario.source.params))
+    slot_count = f"controller.max_obstacles={slots(settings.cover_discs)}"
     for track in tracks:
         runs[track] = []
         for name, overrides in TRACKS[track]:
             cfg = compose([*overrides, "scenario=euro_ncap", f"scenario.family.size={n_members}",
-                           *TRACK_OVERRIDES[track], *extra])
+                           slot_count, *TRACK_OVERRIDES[track], *extra])
             settings = EuroNcapSettings.of(dict(cfg.scenario.source.params))
             runs[track].append((name, dataclasses.replace(
                 cfg, vehicle=ego_vehicle(cfg.vehicle, settings))))
@@ -112,17 +119,17 @@ def euro_ncap(compose: Callable[[list[str]], Any], out_dir: Path, n_members: int
 
 def _outcomes(cfg: Any, folder: Path, track: str, method: str, settings: Any) -> list[dict]:
     """The protocol's outcome of every member of the family in ``folder``."""
-    from pipeline.loop.euro_ncap import protocol_outcome
-    from pipeline.loop.scenario import build_scenario, family_members
+    from pipeline.loop.euro_ncap import CASES, encounter, protocol_outcome
+    from pipeline.loop.scenario import family_members
     from pipeline.store.runs import read_member
 
     out = []
     for index, member in enumerate(family_members(cfg.scenario, cfg.vehicle.footprint_radius_m)):
         params = member.source.params
         record = read_member(folder, index)
-        scenario = build_scenario(member)
-        outcome = protocol_outcome(record.trajectory, int(getattr(scenario, "user_discs", 1)),
-                                   cfg.vehicle, settings)
+        outcome = protocol_outcome(record.trajectory, encounter(
+            settings, CASES[params["case"]], float(params["ego_speed_kmh"]),
+            float(params["impact_fraction"]), float(member.sample_time_s)), settings)
         out.append({"track": track, "method": method, "member": index,
                     "scenario": member.name, "case": params["case"],
                     "nominal_speed_kmh": float(params["nominal_speed_kmh"]),

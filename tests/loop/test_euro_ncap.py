@@ -137,6 +137,7 @@ def test_the_speed_grid_and_cases_are_what_the_family_draws(base):
     ("cover_discs", 2.5, "an integer"),
     ("occlusion", "yes", "true or false"),
     ("typo_m", 1.0, "one of the Euro NCAP keys"),
+    ("near_start_m", 2.0, "a number in (3.7, 30]"),
 ])
 def test_a_bad_value_is_refused_naming_its_key(base, key, value, allowed):
     with pytest.raises(ConfigError) as refusal:
@@ -187,39 +188,65 @@ def planted_run(xs, ys, psis, speed_mps, obstacles):
     return pd.DataFrame(t)
 
 
-def test_the_protocol_outcome_of_planted_runs(base):
-    """An ego of three discs (4.5 x 1.8 m) driving at 10 m/s along y = 0 towards a 0.3 m road
-    user at (20, 0): its front disc (1.5 m ahead, radius sqrt(0.75^2 + 0.9^2)) first overlaps
-    it where x + 1.5 + 1.1715 + 0.3 > 20, at x > 17.0285, i.e. step 171 of 0.1 m steps; a
-    parked car beside the road never touched."""
+def test_the_protocol_outcome_of_planted_runs_on_the_true_shapes():
+    """The 4.5 x 1.8 m car driving along y = 0 at 10 m/s, 0.1 m per step: an adult (0.3 m
+    disc) at (20, 0) is first overlapped where x + 2.25 >= 19.7, step 175; one at (20, 1.25)
+    stays 1.25 - 0.9 - 0.3 = 0.05 m from the car's side (its disc cover, 0.27 m wider, would
+    touch it); a bicycle (1.9 x 0.6 m across the road) centred at (20, 0) from step 175 too; a
+    parked car on the path is touched, one beside the road is not."""
     s = EuroNcapSettings()
-    vehicle = ego_vehicle(base.vehicle, s)
-    assert vehicle.footprint_radius_m == pytest.approx(math.hypot(0.75, 0.9))
+    adult = encounter(s, CASES["CPNA-25"], 36.0, 0.25, 0.1)
     xs = 0.1 * np.arange(200)
-    run = planted_run(xs, np.zeros(200), np.zeros(200), 10.0, [(20.0, 0.0, 0.3),
-                                                                (10.0, -6.0, 1.0)])
-    out = protocol_outcome(run, 1, vehicle, s)
-    first = 20.0 - 1.5 - vehicle.footprint_radius_m - 0.3
-    assert out.hit and out.impact_time_s == pytest.approx(0.1 * (math.floor(first / 0.1) + 1))
-    assert out.impact_speed_kmh == pytest.approx(36.0)
+    zeros = np.zeros(200)
+    out = protocol_outcome(planted_run(xs, zeros, zeros, 10.0, [(20.0, 0.0, 0.3)]), adult, s)
+    assert out.hit and out.impact_time_s == pytest.approx(17.5)
+    assert out.impact_speed_kmh == pytest.approx(36.0) and out.least_gap_m == 0.0
     assert not out.other_contact and out.steps_off_road == 0
+    beside = protocol_outcome(planted_run(xs, zeros, zeros, 10.0, [(20.0, 1.25, 0.3)]), adult, s)
+    assert not beside.hit and math.isnan(beside.impact_speed_kmh)
+    assert beside.least_gap_m == pytest.approx(0.05)
+    bike = encounter(s, CASES["CBNAO-50"], 36.0, 0.5, 0.1)
+    discs = [(20.0, dy, bike.user_radius_m) for dy in bike.user_discs[:, 1]]
+    ridden = protocol_outcome(planted_run(xs, zeros, zeros, 10.0, discs), bike, s)
+    assert ridden.hit and ridden.impact_time_s == pytest.approx(17.5)
+    assert not ridden.other_contact   # its parked car stands beside the road, 1 m off the side
+    on_path = dataclasses.replace(adult, parked_m=np.array(
+        [[[15.0, -0.5], [19.5, -0.5], [19.5, 1.3], [15.0, 1.3]]]))
+    assert protocol_outcome(planted_run(xs, zeros, zeros, 10.0, [(50.0, 50.0, 0.3)]), on_path,
+                            s).other_contact
     # at y = 4 the rectangle reaches 4.9 (within the left edge, 1.75 + 3.5 = 5.25); turned 90
     # degrees it reaches 2.25 m to each side, beyond it; a narrower road or one lane: beyond
+    far = [(50.0, 50.0, 0.3)]
     ys = np.full(200, 4.0)
-    turned = planted_run(xs, ys, np.full(200, math.pi / 2), 10.0, [(50.0, 50.0, 0.3)])
-    assert protocol_outcome(turned, 1, vehicle, s).steps_off_road == 200
-    straight = planted_run(xs, ys, np.zeros(200), 10.0, [(50.0, 50.0, 0.3)])
-    assert protocol_outcome(straight, 1, vehicle, s).steps_off_road == 0
-    narrow = dataclasses.replace(s, lane_width_m=3.0)
-    assert protocol_outcome(straight, 1, vehicle, narrow).steps_off_road == 200
-    one_lane = dataclasses.replace(s, oncoming_lane=False)
-    assert protocol_outcome(straight, 1, vehicle, one_lane).steps_off_road == 200
-    assert not protocol_outcome(straight, 1, vehicle, s).hit
+    assert protocol_outcome(planted_run(xs, ys, np.full(200, math.pi / 2), 10.0, far), adult,
+                            s).steps_off_road == 200
+    straight = planted_run(xs, ys, zeros, 10.0, far)
+    assert protocol_outcome(straight, adult, s).steps_off_road == 0
+    assert protocol_outcome(straight, adult,
+                            dataclasses.replace(s, lane_width_m=3.0)).steps_off_road == 200
+    assert protocol_outcome(straight, adult,
+                            dataclasses.replace(s, oncoming_lane=False)).steps_off_road == 200
+
+
+def test_the_true_shapes_gap_against_a_closed_form():
+    """polygon_gap: two unit squares 0.5 m apart side by side, then overlapping; disc_gap: a
+    disc of 0.3 m 1 m beyond a rectangle's corner diagonally."""
+    from pipeline.loop.euro_ncap import disc_gap, polygon_gap, rectangle_corners
+
+    one = np.ones(1)
+    a = rectangle_corners(0.0 * one, 0.0 * one, 0.0 * one, 1.0, 1.0)
+    b = rectangle_corners(1.5 * one, 0.0 * one, 0.0 * one, 1.0, 1.0)
+    assert polygon_gap(a, b) == pytest.approx([0.5])
+    c = rectangle_corners(0.9 * one, 0.2 * one, 0.3 * one, 1.0, 1.0)
+    assert polygon_gap(a, c) == pytest.approx([0.0])
+    rect = rectangle_corners(0.0 * one, 0.0 * one, 0.0 * one, 4.0, 2.0)
+    corner = np.array([[2.0 + 1.0 / math.sqrt(2), 1.0 + 1.0 / math.sqrt(2)]])
+    assert disc_gap(rect, 0.0 * one, 4.0, 2.0, corner, 0.3) == pytest.approx([0.7])
 
 
 def test_a_test_ends_at_its_impact_on_any_of_the_egos_discs(make_config, base):
-    """end_at_contact: the run stops at the first step any ego disc touches (the front one
-    here, before the centre disc could); with end_at_contact=false it drives on."""
+    """end_at_contact=true: the run stops at the first step any ego disc touches (the front one
+    here, before the centre disc could); with false (the default) it drives on."""
     from pipeline.loop.simulate import simulate
 
     settings = EuroNcapSettings.of(dict(base.scenario.source.params))
@@ -231,10 +258,13 @@ def test_a_test_ends_at_its_impact_on_any_of_the_egos_discs(make_config, base):
         _, member, scenario = member_with(base, "CPNA-75", 40.0, end_at_contact=end)
         run = simulate(dataclasses.replace(cfg, scenario=member), scenario)
         ends[end] = run
-        outcome = protocol_outcome(run.trajectory, scenario.user_discs, cfg.vehicle, settings)
+        geometry = encounter(settings, CASES["CPNA-75"], 40.0, 0.75, 0.1)
+        outcome = protocol_outcome(run.trajectory, geometry, settings)
         assert outcome.hit
     assert ends[True].termination == "contact"
     assert ends[False].termination != "contact"
+    # the default: the run goes on (its check sees the covers); the outcome is the true shapes'
+    assert not settings.end_at_contact
     last = ends[True].trajectory.iloc[-1]
     # the front disc overlaps, the centre disc alone would not
     centre_gap = math.hypot(last["obs0_x_m"] - last["X_m"], last["obs0_y_m"] - last["Y_m"]) \

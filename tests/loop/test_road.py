@@ -23,10 +23,13 @@ def test_the_roads_reach_along_the_normal_in_closed_form():
     points = np.array([[0.0, 0.0], [10.0, 1.0], [20.0, -1.0]])
     for heading in (0.0, 0.5):
         normals = np.tile([-math.sin(heading), math.cos(heading)], (3, 1))
-        low, high = road_interval(points, normals, TWO_LANES)
-        # the normal line y = y0 + t cos(heading) meets the edges at t = (edge - y0) / cos
+        low, high, stretch_low, stretch_high = road_interval(points, normals, TWO_LANES)
+        # the normal line y = y0 + t cos(heading) meets the edges at t = (edge - y0) / cos, at
+        # an angle whose sine is cos(heading): a disc touches them 1 / cos farther along it
         assert low == pytest.approx((-1.75 - points[:, 1]) / math.cos(heading))
         assert high == pytest.approx((5.25 - points[:, 1]) / math.cos(heading))
+        assert stretch_low == pytest.approx(1.0 / math.cos(heading))
+        assert stretch_high == pytest.approx(1.0 / math.cos(heading))
 
 
 def test_adjacent_lanelets_are_one_road_and_a_station_off_it_takes_the_nearest():
@@ -36,7 +39,7 @@ def test_adjacent_lanelets_are_one_road_and_a_station_off_it_takes_the_nearest()
              np.array([[0.0, 10.0], [50.0, 10.0], [50.0, 13.0], [0.0, 13.0]]))
     points = np.array([[10.0, 0.0], [10.0, 8.0], [70.0, 0.0]])
     normals = np.tile([0.0, 1.0], (3, 1))
-    low, high = road_interval(points, normals, lanes)
+    low, high, _, _ = road_interval(points, normals, lanes)
     assert (low[0], high[0]) == pytest.approx((-1.75, 5.25))
     assert (low[1], high[1]) == pytest.approx((2.0, 5.0))       # y 10..13 seen from y = 8
     assert np.isnan(low[2]) and np.isnan(high[2])               # beyond the road's end
@@ -50,6 +53,14 @@ def test_the_rows_keep_the_disc_inside_and_are_empty_without_a_road():
     assert h.ravel() == pytest.approx([3 * -1.55, -3 * 3.05] * 2)
     G0, h0 = road_halfplanes(points, headings, (), reach_m=1.2, weight=3.0)
     assert not G0.any() and not h0.any()
+    # at 0.6 rad to the road the disc needs reach / cos(0.6) along the normal (the review's
+    # case: -0.46 exact where the unstretched bound said -0.75)
+    _, h_slant = road_halfplanes(np.array([[0.0, 0.0]]), np.array([0.6]), TWO_LANES,
+                                 reach_m=1.2, weight=1.0)
+    assert h_slant[0, 0] == pytest.approx((-1.75 + 1.2) / math.cos(0.6))
+    # the disc at that offset along the normal touches the edge: its centre 1.2 m above it
+    d = h_slant[0, 0]
+    assert d * math.cos(0.6) - (-1.75) == pytest.approx(1.2)
 
 
 def narrow_road_run(make_config, overrides, width=2.4):
