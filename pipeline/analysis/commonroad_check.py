@@ -11,7 +11,9 @@ asked twice at every logged step:
   check disagree, one of the two checks is wrong;
 * on the true shapes (the ego as its car rectangle, ``vehicle_type``'s length and width, centred
   on the logged position along the logged heading; the obstacles as the file's shapes at that
-  time step): where this verdict differs from ours, the disc is the reason.
+  time step): where this verdict differs from our disc check, the disc is the reason; beside
+  it our own check on the same true shapes (shapely's polygon distance 0, GEOS: a library
+  independent of the checker's), which the checker's must equal on every step.
 
 Beside the verdicts: the clearance between the true shapes (shapely's polygon distance; a
 circle at its full radius, not at the half radius of commonroad-io's own shapely circle), the
@@ -78,6 +80,14 @@ class CommonRoadVerdicts:
     goal_note: str
     goal_line_reached: bool = False
     goal_disagreement: str = ""
+    #: our own check on the true shapes (shapely's distance 0 between the car rectangle and
+    #: an obstacle's shape) and the steps on which the checker's true-shape verdict equals it
+    ours_true_shapes_collision_steps: int = 0
+    agreement_ours_true_shapes_steps: int = 0
+
+    @property
+    def ours_true_shapes_collision(self) -> bool:
+        return self.ours_true_shapes_collision_steps > 0
 
     @property
     def success(self) -> bool:
@@ -100,6 +110,7 @@ class CommonRoadVerdicts:
     def to_json(self) -> dict[str, Any]:
         data = asdict(self)
         data.update(ours_collision=self.ours_collision,
+                    ours_true_shapes_collision=self.ours_true_shapes_collision,
                     checker_same_geometry_collision=self.checker_same_geometry_collision,
                     checker_true_shapes_collision=self.checker_true_shapes_collision,
                     success=self.success)
@@ -153,10 +164,12 @@ def ego_rectangles(trajectory: pd.DataFrame, length_m: float, width_m: float) ->
 
 
 def checker_colliding_shapes(case: CommonRoadCase, trajectory: pd.DataFrame,
-                             length_m: float, width_m: float) -> tuple[np.ndarray, float]:
+                             length_m: float, width_m: float
+                             ) -> tuple[np.ndarray, float, np.ndarray]:
     """The drivability checker's verdict per logged step on the true shapes (the car rectangle
-    against every obstacle the file has at that time step, the ego's recording left out), and
-    the smallest distance between the true shapes (shapely)."""
+    against every obstacle the file has at that time step, the ego's recording left out), the
+    smallest distance between the true shapes, and our own verdict on them per step: the
+    shapes' distance 0 (shapely, GEOS: a geometry library independent of the checker's)."""
     from commonroad_dc import pycrcc
     from commonroad_dc.collision.collision_detection.pycrcc_collision_dispatch import (
         create_collision_checker,
@@ -167,6 +180,7 @@ def checker_colliding_shapes(case: CommonRoadCase, trajectory: pd.DataFrame,
     checker = create_collision_checker(_scenario_with(case.commonroad_scenario, kept))
     xy = trajectory[["X_m", "Y_m", "psi_rad"]].to_numpy(float)
     hits = np.zeros(len(trajectory), bool)
+    ours = np.zeros(len(trajectory), bool)
     nearest = np.inf
     for k, ((x, y, psi), rectangle) in enumerate(zip(xy, ego_rectangles(trajectory, length_m,
                                                                         width_m), strict=True)):
@@ -176,8 +190,10 @@ def checker_colliding_shapes(case: CommonRoadCase, trajectory: pd.DataFrame,
         for obstacle in kept:
             occupancy = obstacle.occupancy_at_time(step)
             if occupancy is not None:
-                nearest = min(nearest, rectangle.distance(shape_geometry(occupancy.shape)))
-    return hits, float(nearest)
+                gap = rectangle.distance(shape_geometry(occupancy.shape))
+                nearest = min(nearest, gap)
+                ours[k] = ours[k] or gap <= 0.0
+    return hits, float(nearest), ours
 
 
 def _scenario_with(scenario: Any, obstacles: list[Any]) -> Any:
@@ -288,7 +304,8 @@ def judge_commonroad_run(case: CommonRoadCase, trajectory: pd.DataFrame, ego_rad
     ended at our goal line (``goal_line_reached``), shown beside the file's goal."""
     ours = ours_colliding(trajectory, ego_radius_m, ego_offsets_m)
     same = checker_colliding_discs(trajectory, ego_radius_m, ego_offsets_m)
-    true, true_clearance = checker_colliding_shapes(case, trajectory, length_m, width_m)
+    true, true_clearance, ours_true = checker_colliding_shapes(case, trajectory, length_m,
+                                                               width_m)
     gaps = clearance_series(ego_disc_view(trajectory, ego_offsets_m), ego_radius_m)
     reached, goal_step, note = goal_by_commonroad(case, trajectory)
     return CommonRoadVerdicts(
@@ -302,5 +319,7 @@ def judge_commonroad_run(case: CommonRoadCase, trajectory: pd.DataFrame, ego_rad
         off_road_steps=off_road_steps(case, trajectory, length_m, width_m),
         goal_reached_commonroad=reached, goal_time_step=goal_step, goal_note=note,
         goal_line_reached=goal_line_reached,
+        ours_true_shapes_collision_steps=int(ours_true.sum()),
+        agreement_ours_true_shapes_steps=int((ours_true == true).sum()),
         goal_disagreement="" if note else goal_disagreement(case, trajectory, reached,
                                                             goal_line_reached))

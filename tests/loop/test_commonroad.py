@@ -280,10 +280,12 @@ def test_our_check_and_the_drivability_checker_agree_on_planted_geometry(
     ours = ours_colliding(trajectory, 1.0)
     assert ours.tolist() == [True, False, True, False, True]
     assert checker_colliding_discs(trajectory, 1.0).tolist() == ours.tolist()
-    true, _ = checker_colliding_shapes(case, trajectory, CAR_LENGTH_M, CAR_WIDTH_M)
+    true, _, ours_true = checker_colliding_shapes(case, trajectory, CAR_LENGTH_M, CAR_WIDTH_M)
     assert true.tolist() == [False, True, True, False, True]
-    _, clearance = checker_colliding_shapes(case, trajectory.iloc[[3]].reset_index(drop=True),
-                                            CAR_LENGTH_M, CAR_WIDTH_M)
+    # our own check on the true shapes (shapely) says the same on every planted pose
+    assert ours_true.tolist() == true.tolist()
+    _, clearance, _ = checker_colliding_shapes(
+        case, trajectory.iloc[[3]].reset_index(drop=True), CAR_LENGTH_M, CAR_WIDTH_M)
     # (the drawn circle is a polygon through the disc's lowest point)
     assert clearance == pytest.approx(6.0 - CAR_WIDTH_M / 2 - 0.5, abs=1e-9)
     assert off_road_steps(case, trajectory, CAR_LENGTH_M, CAR_WIDTH_M) == 1

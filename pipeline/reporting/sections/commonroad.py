@@ -37,11 +37,25 @@ class CommonRoadRow:
     shapes: str = ""
     #: obstacles first seen after the first step (out of range or hidden at first)
     seen_late: int | None = None
+    #: our own check on the true shapes and the steps the checker's equals it (None: a
+    #: result written before it)
+    collision_ours_true_shapes: bool | None = None
+    agreement_ours_true_shapes: str = ""
 
 
 @dataclass(frozen=True)
 class CommonRoadSection:
     rows: tuple[CommonRoadRow, ...]
+
+    @property
+    def true_shapes_agree_everywhere(self) -> bool | None:
+        """Whether our check on the true shapes and the checker's agreed on every step of
+        every run (None when no run has our true-shape check)."""
+        rows = [r for r in self.rows if r.agreement_ours_true_shapes]
+        if not rows:
+            return None
+        return all(r.agreement_ours_true_shapes.split("/")[0]
+                   == r.agreement_ours_true_shapes.split("/")[1] for r in rows)
 
     @property
     def discs_agree_everywhere(self) -> bool:
@@ -79,5 +93,9 @@ def commonroad_section(inputs: Any) -> CommonRoadSection | None:
             success=bool(v["success"]) if "success" in v else None,
             min_clearance_true_shapes_m=float(clearance) if clearance is not None else None,
             goal_disagreement=str(v.get("goal_disagreement") or v.get("goal_note") or ""),
-            shapes=shapes, seen_late=run.get("obstacles_seen_late")))
+            shapes=shapes, seen_late=run.get("obstacles_seen_late"),
+            collision_ours_true_shapes=bool(v["ours_true_shapes_collision"])
+            if "ours_true_shapes_collision" in v else None,
+            agreement_ours_true_shapes=f"{v['agreement_ours_true_shapes_steps']}/{steps}"
+            if "agreement_ours_true_shapes_steps" in v else ""))
     return CommonRoadSection(tuple(rows)) if rows else None
