@@ -346,7 +346,9 @@ INTERPRETATION_REGISTER: tuple[RegisterEntry, ...] = (
         "appears at a scripted time)", "an obstacle that appears suddenly",
         "obstacles within scenario.commonroad.sensor_range_m = 60 m (centre distance) whose "
         "line of sight from the ego crosses no static obstacle's rectangle (a parked car hides "
-        "what stands behind it); anything within the ego's reach is seen",
+        "what stands behind it); anything within the ego's reach is seen. The sight line "
+        "starts at the ego's logged position (its centre, not its front or a sensor's mount; "
+        "the same for the Euro NCAP tests' parked cars)",
         "occlusion=false, sensor_range_m=null: every present obstacle seen from its first "
         "recorded step (earlier releases: nothing appeared)",
         "scenario.commonroad.sensor_range_m, scenario.commonroad.occlusion"),
