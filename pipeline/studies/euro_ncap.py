@@ -18,8 +18,8 @@ slots for every disc of a test (``controller.max_obstacles``).
 position, the protocol's outcome (:func:`~pipeline.loop.euro_ncap.protocol_outcome`: the road
 user hit or not and the ego's speed at the impact), contact with a parked car and the steps
 off the road; ``summary.json`` per track, method and case the tests avoided and the impact
-speeds, and per track the claims ledger of improved against the baseline (C0-C5, on each
-run's own window, as among recorded pedestrians).
+speeds, and per track the claims ledger of improved against the baseline and each peer (C0-C5,
+on each run's own window, as among recorded pedestrians).
 """
 
 from __future__ import annotations
@@ -179,20 +179,25 @@ def _avoided_up_to(rows: pd.DataFrame) -> float:
 
 
 def _ledger(tables: dict[str, pd.DataFrame], claims_cfg: Any, track: str) -> list[dict]:
-    """The claims (C0-C5) of improved against the baseline on one track, on each run's own
-    window (``c2_window=own``, as among recorded pedestrians: no shared jerk window)."""
+    """The claims (C0-C5) of improved against each other method of one track (the baseline
+    first, then the peers), on each run's own window (``c2_window=own``, as among recorded
+    pedestrians: no shared jerk window). Each comparison is its own ledger (Holm over its
+    claims), so the peers do not change the verdict against the baseline."""
     from pipeline.analysis.claims.ledger import family_ledger
 
-    if "improved" not in tables or "baseline" not in tables:
+    if "improved" not in tables:
         return []
     own = dataclasses.replace(claims_cfg, c2_window="own")
-    ledger = family_ledger({m: tables[m] for m in ("improved", "baseline")}, own, None,
-                           "improved", ("baseline",), sensitivity=False)
-    return [{"track": track, "claim": row.claim_id, "comparison": row.comparison,
-             "outcome": str(row.outcome), "pairs": int(row.result.n_pairs),
-             "estimate": _finite(row.result.estimate), "ci_low": _finite(row.result.ci_low),
-             "ci_high": _finite(row.result.ci_high)}
-            for row in ledger]
+    out = []
+    for comparison in [m for m in tables if m != "improved"]:
+        ledger = family_ledger({m: tables[m] for m in ("improved", comparison)}, own, None,
+                               "improved", (comparison,), sensitivity=False)
+        out += [{"track": track, "claim": row.claim_id, "comparison": row.comparison,
+                 "outcome": str(row.outcome), "pairs": int(row.result.n_pairs),
+                 "estimate": _finite(row.result.estimate),
+                 "ci_low": _finite(row.result.ci_low), "ci_high": _finite(row.result.ci_high)}
+                for row in ledger]
+    return out
 
 
 def _finite(value: Any) -> float | None:

@@ -49,9 +49,12 @@ def test_a_small_family_writes_outcomes_counts_and_ledger_and_the_report_shows_t
         members = pd.read_csv(out / "lateral" / row["method"] / "family_metrics.csv")
         assert bool(members.loc[members["scenario"] == row["scenario"], "collision"].iloc[0])
         assert row["termination"] != "contact"
-    ledger = {(r["track"], r["claim"]) for r in result.ledger}
-    assert ledger == {(track, c) for c in ("C0", "C1", "C2", "C3a", "C3b", "C4", "C5")
-                      for track in ("lateral", "lateral_braking")}
+    ledger = {(r["track"], r["comparison"], r["claim"]) for r in result.ledger}
+    claims = ("C0", "C1", "C2", "C3a", "C3b", "C4", "C5")
+    assert ledger == {("lateral", against, c) for c in claims
+                      for against in ("baseline", "mpc_dcbf", "cbf_filter")} \
+        | {("lateral_braking", "baseline", c) for c in claims}
+    assert result.comparisons("lateral") == ("baseline", "mpc_dcbf", "cbf_filter")
     summary = json.loads((out / "summary.json").read_text())
     assert summary["settings"]["cases"] == ["CPNA-25", "CPFA-50"]
 
@@ -65,6 +68,8 @@ def test_a_small_family_writes_outcomes_counts_and_ledger_and_the_report_shows_t
     assert main(["report", str(tmp_path / "outputs"), "--out", str(report)]) == 0
     html = (report / "index.html").read_text()
     assert 'id="euro-ncap-lateral"' in html and 'id="euro-ncap-claims"' in html
+    claims_table = html[html.index('id="euro-ncap-claims"'):]
+    assert "<td>mpc_dcbf</td>" in claims_table and "<td>baseline</td>" in claims_table
     for method in ("improved", "baseline", "mpc_dcbf", "cbf_filter"):
         row = next(r for r in result.summary_rows("lateral") if r["method"] == method)
         assert f"<strong>{row['avoided']}/5</strong>" in html

@@ -64,6 +64,10 @@ class EuroNcapResult:
         """The per-method rows of ``by_case`` for ``track`` and ``case``."""
         return [r for r in self.by_case if r["track"] == track and r["case"] == case]
 
+    def comparisons(self, track: str) -> tuple[str, ...]:
+        """The methods improved is judged against on ``track`` (the ledger's order)."""
+        return tuple(dict.fromkeys(r["comparison"] for r in self.ledger if r["track"] == track))
+
     @property
     def tracks(self) -> tuple[str, ...]:
         return tuple(dict.fromkeys(r["track"] for r in self.by_case))
