@@ -74,6 +74,27 @@ def output_folder(text: str) -> Path:
     return Path(text)
 
 
+def checked_family_size(value: int) -> int:
+    """``--family-size`` of a study command: an integer in [1, 10000] (else the one-line
+    refusal)."""
+    if not 1 <= value <= 10_000:
+        raise CommandError(f"--family-size: {value} is not allowed; allowed: an integer in "
+                           "[1, 10000]")
+    return value
+
+
+def comma_choices(option: str, text: str, allowed: tuple[str, ...]) -> tuple[str, ...]:
+    """A comma-separated subset of ``allowed`` given to ``option`` (``--variants``,
+    ``--tracks``): the names in their given order, or the one-line refusal naming the unknown
+    ones (``(none)`` for an empty list)."""
+    names = tuple(name.strip() for name in text.split(",") if name.strip())
+    unknown = [name for name in names if name not in allowed]
+    if unknown or not names:
+        raise CommandError(f"{option}: {','.join(unknown) or '(none)'} is not allowed; "
+                           "allowed: " + ", ".join(allowed))
+    return names
+
+
 def _os_error_line(exc: OSError) -> str:
     return f"error: {exc.filename}: {exc.strerror or type(exc).__name__}"
 

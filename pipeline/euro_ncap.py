@@ -10,7 +10,7 @@ import logging
 import sys
 from pathlib import Path
 
-from pipeline.commands import CommandError, output_folder, run_command
+from pipeline.commands import checked_family_size, comma_choices, output_folder, run_command
 from pipeline.studies.euro_ncap import TRACKS
 
 __all__ = ["main"]
@@ -47,14 +47,8 @@ def _study(args: argparse.Namespace) -> int:
     from pipeline.studies.compose import composer
     from pipeline.studies.euro_ncap import euro_ncap
 
-    if not 1 <= args.family_size <= 10_000:
-        raise CommandError(f"--family-size: {args.family_size} is not allowed; allowed: an "
-                           "integer in [1, 10000]")
-    tracks = tuple(t.strip() for t in args.tracks.split(",") if t.strip())
-    unknown = [t for t in tracks if t not in TRACKS]
-    if unknown or not tracks:
-        raise CommandError(f"--tracks: {','.join(unknown) or '(none)'} is not allowed; "
-                           "allowed: " + ", ".join(TRACKS))
+    checked_family_size(args.family_size)
+    tracks = comma_choices("--tracks", args.tracks, tuple(TRACKS))
     result = euro_ncap(composer([])[0], args.out, args.family_size,
                        tracks, log=log.info, extra=tuple(args.overrides))
     for track in result.tracks:

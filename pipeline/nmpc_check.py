@@ -10,7 +10,7 @@ import logging
 import sys
 from pathlib import Path
 
-from pipeline.commands import CommandError, cannot, output_folder, run_command
+from pipeline.commands import CommandError, cannot, checked_family_size, output_folder, run_command
 from pipeline.studies.nmpc_check import nmpc_agreement
 
 __all__ = ["main", "nmpc_agreement"]
@@ -51,9 +51,7 @@ def _check(args) -> int:
     if not 1 <= args.jobs <= 64:
         raise CommandError(f"--jobs: {args.jobs} is not allowed; allowed: an integer in "
                            "[1, 64]")
-    if not 1 <= args.family_size <= 10_000:
-        raise CommandError(f"--family-size: {args.family_size} is not allowed; allowed: an integer "
-                           "in [1, 10000]")
+    checked_family_size(args.family_size)
     if args.out.exists() and not args.out.is_dir():
         raise CommandError(f"--out: {args.out} is not a folder; allowed: a folder (new, or "
                            "one this check wrote before)")

@@ -9,7 +9,7 @@ import logging
 import sys
 from pathlib import Path
 
-from pipeline.commands import CommandError, output_folder, run_command
+from pipeline.commands import checked_family_size, comma_choices, output_folder, run_command
 from pipeline.studies.speed import VARIANTS, speed_check
 
 __all__ = ["main", "speed_check"]
@@ -44,14 +44,8 @@ def run(args: argparse.Namespace) -> int:
 def _check(args) -> int:
     from pipeline.studies.compose import composer
 
-    if not 1 <= args.family_size <= 10_000:
-        raise CommandError(f"--family-size: {args.family_size} is not allowed; allowed: an integer "
-                           "in [1, 10000]")
-    variants = tuple(v.strip() for v in args.variants.split(",") if v.strip())
-    unknown = [v for v in variants if v not in VARIANTS]
-    if unknown or not variants:
-        raise CommandError(f"--variants: {','.join(unknown) or '(none)'} is not allowed; "
-                           "allowed: " + ", ".join(VARIANTS))
+    checked_family_size(args.family_size)
+    variants = comma_choices("--variants", args.variants, tuple(VARIANTS))
     result = speed_check(composer([])[0], args.out, args.family_size, log=log.info,
                          variants=variants)
     print(json.dumps(result.to_json()["checks"], indent=1))

@@ -38,6 +38,7 @@ from typing import Any, ClassVar
 import numpy as np
 
 from pipeline.errors import ConfigError
+from pipeline.loop.commonroad_scenario import sight_view
 from pipeline.loop.cover import cover_centres
 from pipeline.loop.scenario import (
     Extra,
@@ -46,7 +47,8 @@ from pipeline.loop.scenario import (
     refuse_blocks,
     with_family_seed,
 )
-from pipeline.loop.settings import ObstacleConfig, ScenarioConfig
+from pipeline.loop.settings import ObstacleConfig, ScenarioConfig, ScenarioSourceConfig
+from pipeline.validation import flag
 
 #: The source's class as ``scenario.source._target_`` names it.
 TARGET = "pipeline.loop.euro_ncap.EuroNcapSource"
@@ -115,7 +117,8 @@ class EuroNcapSettings:
 
     #: Allowed ranges of the numeric keys (inclusive).
     RANGES: ClassVar[dict[str, tuple[float, float]]] = {
-        "speed_tolerance_kmh": (0.0, 5.0), "ego_length_m": (1.0, 20.0), "ego_width_m": (0.5, 3.0), "cover_discs": (1, 10),
+        "speed_tolerance_kmh": (0.0, 5.0), "ego_length_m": (1.0, 20.0),
+        "ego_width_m": (0.5, 3.0), "cover_discs": (1, 10),
         "child_speed_kmh": (0.5, 30.0), "adult_near_speed_kmh": (0.5, 30.0),
         "adult_far_speed_kmh": (0.5, 30.0), "cyclist_speed_kmh": (0.5, 60.0),
         "child_radius_m": (0.05, 1.0), "adult_radius_m": (0.05, 1.0),
@@ -194,8 +197,7 @@ def _checked(name: str, value: Any) -> Any:
             raise ConfigError(key, value, "a non-empty list of speeds in [5, 130] km/h")
         return tuple(float(v) for v in speeds)
     if name in EuroNcapSettings.FLAGS:
-        if not isinstance(value, bool):
-            raise ConfigError(key, value, "true or false")
+        flag(key, value)
         return value
     low, high = EuroNcapSettings.RANGES[name]
     if isinstance(value, bool) or not isinstance(value, (int, float)) \
@@ -335,8 +337,6 @@ class EuroNcapScenario(Scenario):
               reach_m: float) -> ObstacleSnapshot:
         """What the ego at ``position_m`` sees: within the sensor range and not behind a parked
         car; anything within its reach is always seen (no contact escapes the check)."""
-        from pipeline.loop.commonroad_scenario import sight_view
-
         return sight_view(snapshot, position_m, reach_m,
                           Scenario.sense(self, snapshot, position_m, reach_m).visible,
                           self.occluders_m, self.occluder_of)
@@ -349,9 +349,8 @@ class EuroNcapSource:
     needs_extra: ClassVar[Extra | None] = None
 
     def __init__(self, scenario: ScenarioConfig, vehicle_radius_m: float = 1.0) -> None:
-        refuse_blocks(scenario, TARGET, {"pedestrians": "pipeline.loop.pedestrians."
-                                         "PedestrianSource", "commonroad":
-                                         "pipeline.loop.commonroad_scenario.CommonRoadSource"})
+        refuse_blocks(scenario, TARGET, {"pedestrians": ScenarioSourceConfig.PEDESTRIANS,
+                                         "commonroad": ScenarioSourceConfig.COMMONROAD})
         self.base = scenario
         self.settings = EuroNcapSettings.of(dict(scenario.source.params))
 
