@@ -31,7 +31,8 @@ HEADLINE = ("closed_loop_over_floor", "step_over_floor", "step_over_sparse_floor
             "compiles_per_family", "family_scenarios_per_s", "family_member_over_sparse_floor",
             "family_member_over_sparse_floor_daqp", "multiverse_member_reads_per_member",
             "install_over_pip", "member_cache_reuse", "member_cache_resimulated",
-            "tune_core_utilisation", "coordinator_ms_per_trial", "pruned_over_unpruned_members")
+            "tune_core_utilisation", "coordinator_ms_per_trial", "pruned_over_unpruned_members",
+            "engine_members_per_cpu_s_over_member_loop")
 
 
 def main(argv: list[str] | None = None) -> int:

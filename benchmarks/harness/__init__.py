@@ -30,6 +30,7 @@ from pathlib import Path
 import pandas as pd
 
 from benchmarks.harness.closed_loop import bench_closed_loop, bench_family_member
+from benchmarks.harness.engine import bench_engine
 from benchmarks.harness.install import measure_install
 from benchmarks.harness.lateral import bench_lateral
 from benchmarks.harness.named_peers import bench_named_peers
@@ -57,7 +58,7 @@ QUICK_KEYS = ("closed_loop_over_floor", "step_over_floor", "step_over_sparse_flo
               "compiles_per_family", "family_scenarios_per_s",
               "family_member_over_sparse_floor", "family_member_over_sparse_floor_daqp",
               "multiverse_member_reads_per_member", "member_cache_reuse",
-              "coordinator_ms_per_trial")
+              "coordinator_ms_per_trial", "engine_members_per_cpu_s_over_member_loop")
 #: What a quick run leaves out (minutes each), None in its summary.
 NOT_QUICK = {"install_over_pip": None, "tune_core_utilisation": None,
              "quick_note": "--quick: make install into two fresh venvs and the small tune "
@@ -102,6 +103,9 @@ def _measure(out: Path, steps: int, repeats: int, quick: bool, family_size: int
     summary["family_member_over_sparse_floor"] = member["family_member_over_sparse_floor"]
     summary["family_member_over_sparse_floor_daqp"] = \
         member_daqp["family_member_over_sparse_floor"]
+    summary["engine"] = bench_engine(40 if quick else family_size, 2 if quick else 3)
+    summary["engine_members_per_cpu_s_over_member_loop"] = \
+        summary["engine"]["engine_members_per_cpu_s_over_member_loop"]
     path_rows = bench_path_frame(steps, repeats)
     summary["path_frame"] = summarize_path_frame(path_rows)
     summary["step_over_sparse_floor_path"] = \

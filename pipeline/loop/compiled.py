@@ -5,7 +5,8 @@ by CPython in a single run and by numba in the family runner's workers.
 
 * :func:`single_track_rk4` is :func:`pipeline.loop.model.single_track_rk4`, the nonlinear
   single-track plant's RK4 step (about 120 us per step as Python floats on a 2-core machine
-  here, about 9 us compiled);
+  here, about 9 us compiled), and :func:`single_track_rk4_rows` the same for every member the
+  lockstep engine steps at once (:mod:`pipeline.loop.engine`);
 * :func:`apf_rollout_kernel` is :func:`pipeline.loop.planner.apf_rollout_arrays`, the APF
   rollout (about 65 us and 20 us with the call);
 * :func:`reference_kernel` is :func:`pipeline.loop.controller.references.reference_arrays`,
@@ -77,10 +78,11 @@ def _same_signature(function: Callable[..., Any]) -> Callable[..., Any]:
 
 
 for _helper in (path._polyline, path._heading_at, path._curvature_at, path._project_point,
-                path._point_at, model.single_track_kinematic_substep):
+                path._point_at, model.single_track_kinematic_substep, model.single_track_rk4):
     overload(_helper)(_same_signature(_helper))
 
 single_track_rk4 = _jit(model.single_track_rk4)
+single_track_rk4_rows = _jit(model.single_track_rk4_rows)
 apf_rollout_kernel = _jit(planner.apf_rollout_arrays)
 reference_kernel = _jit(references.reference_arrays)
 chase_path_kernel = _jit(path.chase_path_arrays)
@@ -93,4 +95,4 @@ check_record_kernel = _jit(prediction_check.check_record_arrays)
 COMPILED_KERNELS = Kernels(True, single_track_rk4, apf_rollout_kernel, reference_kernel,
                            chase_path_kernel, rollout_path_kernel, frame_step_kernel,
                            plan_poses_kernel,
-                           check_record_kernel)
+                           check_record_kernel, single_track_rk4_rows)

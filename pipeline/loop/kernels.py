@@ -38,6 +38,9 @@ class Kernels(NamedTuple):
         ``frame_step_arrays``, ``plan_poses_arrays``.
     check_record : callable
         :func:`pipeline.loop.controller.prediction_check.check_record_arrays`.
+    plant_rk4_rows : callable
+        :func:`pipeline.loop.model.single_track_rk4_rows`: the plants of the members the
+        lockstep engine steps at once (:mod:`pipeline.loop.engine`).
     """
 
     compiled: bool
@@ -49,6 +52,7 @@ class Kernels(NamedTuple):
     frame_step: Callable[..., Any]
     plan_poses: Callable[..., Any]
     check_record: Callable[..., Any]
+    plant_rk4_rows: Callable[..., Any]
 
     def prepare(self, values: object) -> KernelValues:
         """``values`` as this set's callables take them: a contiguous float array for numba, a

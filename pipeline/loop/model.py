@@ -341,6 +341,35 @@ def single_track_rk4(state: KernelValues, constants: KernelValues, rate_cmd: flo
     return out
 
 
+
+def single_track_rk4_rows(states: np.ndarray, constants: np.ndarray, rates_cmd: np.ndarray,
+                          targets: np.ndarray, dt_s: np.ndarray, substeps: np.ndarray
+                          ) -> np.ndarray:
+    """:func:`single_track_rk4` for each row: the plants of several members stepped at once
+    by the lockstep engine (:mod:`pipeline.loop.engine`), each with its own constants, steering
+    rate, speed target, sample period and substeps.
+
+    The same statement per row, so the same bits as a member stepped alone (compiled by numba
+    in :mod:`pipeline.loop.compiled`, one call for the whole batch instead of one per member).
+
+    Parameters
+    ----------
+    states : ndarray, shape (n, 7)
+    constants : ndarray, shape (n, 12)
+        :func:`single_track_constants` of each row's vehicle.
+    rates_cmd, targets, dt_s : ndarray, shape (n,)
+    substeps : ndarray of int, shape (n,)
+
+    Returns
+    -------
+    ndarray, shape (n, 7)
+    """
+    out = np.empty((states.shape[0], 7))
+    for i in range(states.shape[0]):
+        out[i] = single_track_rk4(states[i], constants[i], rates_cmd[i], targets[i], dt_s[i],
+                                  substeps[i])
+    return out
+
 def single_track_kinematic_substep(X: float, Y: float, psi: float, vx: float, delta: float,
                                    rate_cmd: float, target: float, tau: float, acc_max: float,
                                    d_max: float, b: float, wheelbase: float, h: float

@@ -12,11 +12,11 @@ from pipeline.loop.controller.path import (
 from pipeline.loop.controller.prediction_check import check_record_arrays
 from pipeline.loop.controller.references import reference_arrays
 from pipeline.loop.kernels import Kernels
-from pipeline.loop.model import single_track_rk4
+from pipeline.loop.model import single_track_rk4, single_track_rk4_rows
 from pipeline.loop.planner import apf_rollout_arrays
 
 #: The CPython set (immutable: a named tuple of functions).
 PYTHON_KERNELS = Kernels(False, single_track_rk4, apf_rollout_arrays, reference_arrays,
                          chase_path_arrays, rollout_path_arrays, frame_step_arrays,
                          plan_poses_arrays,
-                         check_record_arrays)
+                         check_record_arrays, single_track_rk4_rows)

@@ -14,8 +14,6 @@ into preallocated arrays and becomes one DataFrame at the end.
 
 from __future__ import annotations
 
-import inspect
-import sys
 from dataclasses import dataclass, field
 from math import atan2, cos, isfinite, sin, sqrt
 from typing import Any
@@ -23,16 +21,14 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from pipeline.loop.controller import Controller, ControlStep, Observation, QpCache, make_controller
+from pipeline.loop.controller import Controller, ControlStep, QpCache, make_controller
 from pipeline.loop.controller.prediction_check import MODEL_CHECK_COLUMNS
-from pipeline.loop.horizon import HorizonLog
 from pipeline.loop.kernels import Kernels
 from pipeline.loop.model import kinematic_plant_step, single_track_constants
 from pipeline.loop.planner import ApfPlanner, ApfRollout, make_planner
 from pipeline.loop.python_kernels import PYTHON_KERNELS
 from pipeline.loop.scenario import LineFrame, ObstacleSnapshot, Scenario
 from pipeline.loop.settings import LoopSettings
-from pipeline.loop.trajectory import HEAD, OBSTACLE_FIELDS, TAIL, obstacle_column
 
 
 @dataclass(frozen=True)
@@ -72,7 +68,7 @@ class SingleTrackPlant:
                  kernels: Kernels | None = None) -> None:
         self.vehicle, self.ts, self.substeps = cfg.vehicle, scenario.sample_time_s, \
             scenario.plant_substeps
-        self._rate_max = cfg.vehicle.steering_rate_max_rad_s
+        self.rate_max_rad_s = cfg.vehicle.steering_rate_max_rad_s
         kernels = kernels if kernels is not None else PYTHON_KERNELS
         # model.single_track_rk4 by the kernels: plain floats in for CPython (what step_plant
         # calls), arrays for numba; the same bits
@@ -100,7 +96,7 @@ class SingleTrackPlant:
 
     def step(self, state: np.ndarray, command: np.ndarray, speed_ref_mps: float) -> np.ndarray:
         """:func:`~pipeline.loop.model.step_plant` with this plant's constants hoisted."""
-        rate_max = self._rate_max
+        rate_max = self.rate_max_rad_s
         rate = min(max(float(command[0]), -rate_max), rate_max)
         return self._kernel(state if self.compiled else state.tolist(), self._constants, rate,
                             float(speed_ref_mps), self.ts, self.substeps)
@@ -217,7 +213,8 @@ def run_kernels(qp_cache: QpCache | None) -> Kernels:
 
 def simulate(cfg: LoopSettings, scenario: Scenario, qp_cache: QpCache | None = None,
              kernels: Kernels | None = None, record_horizon: bool = True) -> SimulationResult:
-    """Run the closed loop once (with BLAS on one thread, see :func:`_closed_loop`).
+    """Run the closed loop once: a family of one through the lockstep engine
+    (:func:`pipeline.loop.engine.simulate_members`, with BLAS on one thread).
 
     Parameters
     ----------
@@ -244,106 +241,10 @@ def simulate(cfg: LoopSettings, scenario: Scenario, qp_cache: QpCache | None = N
         solver_iterations, fallback, max_slack_m``; ``ltv_passes, ltv_change`` on the kinematic
         track).
     """
-    from threadpoolctl import ThreadpoolController
+    # one member through the lockstep engine: the same loop a family's members go through
+    from pipeline.loop.engine import simulate_members
 
-    # every product in the loop is tiny: OpenBLAS would still start threads for some of them
-    # and leave them spinning on the other core (measured: twice the CPU time of a run). The
-    # controller (a scan of the loaded libraries, ~2 ms) is kept in the cache's process-local
-    # part, so a family's members pay it once per worker; it is built again whenever modules
-    # were imported since (a new module may have loaded another BLAS, e.g. scipy.linalg's)
-    qp_cache = qp_cache if qp_cache is not None else QpCache()
-    modules, threads = qp_cache.process_local.get("threadpool_controller", (-1, None))
-    if modules != len(sys.modules):
-        threads = ThreadpoolController()
-        qp_cache.process_local["threadpool_controller"] = (len(sys.modules), threads)
-    with threads.limit(limits=1, user_api="blas"):
-        return _closed_loop(cfg, scenario, qp_cache,
-                            kernels if kernels is not None else run_kernels(qp_cache),
-                            record_horizon)
-
-
-def _closed_loop(cfg: LoopSettings, scenario: Scenario, qp_cache: QpCache | None,
-                 kernels: Kernels, record_horizon: bool = True) -> SimulationResult:
-    """The loop of :func:`simulate`."""
-    kinematic, plant, controller, planner = _loop_stages(cfg, scenario, qp_cache, kernels)
-    vehicle_radius = cfg.vehicle.footprint_radius_m
-    # a planner of one's own may keep speed()'s earlier signature (no path, no speed)
-    path_aware = "path_m" in inspect.signature(planner.speed).parameters
-    # the kinematic track uses the speed only for reference_alignment=path_speed (Section 3.1)
-    plans_speed = not kinematic or cfg.controller.reference_alignment == "path_speed"
-    ts = scenario.sample_time_s
-    frame = scenario.line_frame
-    line = _line_constants(frame)
-    goal_line_x = float(frame.to_line(scenario.goal_m)[0])
-    obstacle_names = [tuple(obstacle_column(j, f) for f in OBSTACLE_FIELDS)
-                      for j in range(scenario.n_obstacles)]
-    log = TrajectoryLog(scenario.n_steps + 1)
-    planned = HorizonLog(scenario.n_steps + 1, scenario.n_obstacles) if record_horizon \
-        else None
-    solve_times = np.zeros(scenario.n_steps + 1)
-    n_solves = 0
-    state = plant.initial_state(scenario)
-    command: np.ndarray | None = None
-    termination = "max_steps"
-    # obstacle_anchor="vehicle": each obstacle is placed relative to the vehicle when it appears
-    # (a plain flag keeps the default reading's loop free of the per-step check)
-    unanchored = np.full(scenario.n_obstacles, scenario.obstacle_anchor == "vehicle")
-    anchoring = bool(unanchored.any())
-    senses, follows_road = scenario.senses, scenario.follows_road
-    # the vehicle's reach from its logged position: its discs' farthest edge
-    reach = vehicle_radius + 0.5 * cfg.vehicle.footprint_span_m
-    end_at_contact = scenario.end_at_contact
-    road = scenario.road_polygons_m
-    # an ego of several discs along its heading touches where any of them does
-    disc_offsets = cfg.vehicle.footprint_offsets_m if cfg.vehicle.footprint_discs > 1 else None
-    # an obstacle motion that reacts to the platform (reactive walkers) is told where it is
-    reacting = scenario.obstacle_motion if hasattr(scenario.obstacle_motion, "react") \
-        else None
-    for k in range(scenario.n_steps + 1):
-        time_s = k * ts
-        if anchoring:
-            scenario, anchoring = _anchor_due(scenario, unanchored, time_s, state)
-        if reacting:  # walkers that avoid the platform learn where it is first
-            reacting.react(time_s, state[:2], vehicle_radius)
-        snapshot = scenario.obstacles_at(time_s)
-        contact = end_at_contact and _in_contact(state, snapshot, vehicle_radius, disc_offsets)
-        if senses:  # a sensor range (recorded pedestrians), occlusion (CommonRoad)
-            snapshot = scenario.sense(snapshot, state[:2], reach)
-        row, along, lateral, psi, e_psi = _pose_row(time_s, state, frame, line, snapshot,
-                                                    obstacle_names)
-        ending = "contact" if contact else _termination(state, along, goal_line_x, scenario, k)
-        if ending is not None:
-            termination = ending
-            _add_end_columns(row, plant, state, command)
-            log.put(k, row)
-            break
-        visible = snapshot.only_visible()
-        if scenario.nearest_first:
-            visible = visible.nearest_first(state[:2])
-        position = state[:2].copy()
-        goal = scenario.attraction_goal_m(position) if follows_road else scenario.goal_m
-        rollout = planner.rollout(position, goal, visible, plant.velocity(state))
-        if planned is not None:
-            planned.put(k, rollout, snapshot)
-        speed_ref = _planned_speed(planner, position, psi, visible, scenario, vehicle_radius,
-                                   rollout, state, path_aware) if plans_speed else np.nan
-        observation = Observation(time_s, state, frame, np.array([along, lateral]), e_psi,
-                                  rollout, visible, speed_ref, road)
-        step: ControlStep = controller.step(observation)
-        if cfg.controller.kind != "pure_pursuit":
-            solve_times[n_solves] = step.solve_time_s
-            n_solves += 1
-        _add_step_columns(row, plant, state, step, command, kinematic, speed_ref, rollout)
-        log.put(k, row)
-        command = step.command
-        state = plant.step(state, command, speed_ref)
-    _add_model_check(controller, log)
-    trajectory = log.frame(list(HEAD) + [c for names in obstacle_names for c in names]
-                           + list(TAIL))
-    return SimulationResult(trajectory, solve_times[:n_solves], controller.compile_count,
-                            controller.compile_time_s, termination == "goal_line", termination,
-                            planned.arrays(controller, log.rows) if planned is not None
-                            else {})
+    return simulate_members([(cfg, scenario)], qp_cache, kernels, record_horizon)[0]
 
 
 def _loop_stages(cfg: LoopSettings, scenario: Scenario, qp_cache: QpCache | None,

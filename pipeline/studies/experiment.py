@@ -23,7 +23,7 @@ from pipeline.config import ExperimentConfig
 from pipeline.loop.controller import QpCache
 from pipeline.loop.model import build_lateral_model, vehicle_key
 from pipeline.loop.scenario import Scenario, build_scenario, family_members
-from pipeline.loop.simulate import simulate
+from pipeline.loop.simulate import SimulationResult, simulate
 from pipeline.store.files import clean_leftovers
 from pipeline.store.manifest import check
 from pipeline.store.member_cache import MemberCache, MemberCounts
@@ -78,24 +78,43 @@ def run_experiment(cfg: ExperimentConfig, out_dir: Path, resume: bool = True,
     out_dir = Path(out_dir)
     config_hash = cfg.config_hash()
     if resume:
-        reason = check(out_dir, "run", config_hash)
-        if reason is None:
-            clean_leftovers(out_dir)  # temporaries of a write killed after the manifest
-            previous = read_metrics_json(out_dir)
-            return RunSummary(out_dir, RunMetrics.from_json(previous), RunInfo.from_json(previous),
-                              skipped=True)
-        if reason not in ("not a folder", "empty folder"):
-            log.warning("re-running %s: %s", out_dir, reason)
+        resumed = _resumed(cfg, out_dir, config_hash)
+        if resumed is not None:
+            return resumed
 
     scenario = scenario if scenario is not None else build_scenario(cfg.scenario)
     qp_cache = qp_cache if qp_cache is not None else QpCache()
+    result = simulate(cfg, scenario, qp_cache, record_horizon=record_horizon)
+    return record_run(cfg, out_dir, result, qp_cache, config_hash)
+
+
+def _resumed(cfg: ExperimentConfig, out_dir: Path, config_hash: str) -> RunSummary | None:
+    """The summary of a complete run folder of the same config hash (its leftover
+    temporaries removed), or None (a folder of other settings or an incomplete one is said
+    and run again)."""
+    reason = check(out_dir, "run", config_hash)
+    if reason is None:
+        clean_leftovers(out_dir)  # temporaries of a write killed after the manifest
+        previous = read_metrics_json(out_dir)
+        return RunSummary(out_dir, RunMetrics.from_json(previous), RunInfo.from_json(previous),
+                          skipped=True)
+    if reason not in ("not a folder", "empty folder"):
+        log.warning("re-running %s: %s", out_dir, reason)
+    return None
+
+
+def record_run(cfg: ExperimentConfig, out_dir: Path, result: SimulationResult,
+               qp_cache: QpCache, config_hash: str | None = None) -> RunSummary:
+    """A simulated run's metrics, and its run folder written (:func:`~pipeline.store.runs.
+    write_run`): what :func:`run_experiment` does after the closed loop."""
+    out_dir = Path(out_dir)
+    config_hash = config_hash if config_hash is not None else cfg.config_hash()
     # the model of the nominal speed (model.json), built once per process for a family
     model = qp_cache.memo(("model_json", vehicle_key(cfg.vehicle), cfg.scenario.speed_mps,
                            cfg.scenario.sample_time_s, cfg.model.b2_heading_entry),
                           lambda: build_lateral_model(cfg.vehicle, cfg.scenario.speed_mps,
                                                       cfg.scenario.sample_time_s,
                                                       cfg.model.b2_heading_entry))
-    result = simulate(cfg, scenario, qp_cache, record_horizon=record_horizon)
     context = trajectory_context(cfg)
     metrics = compute_metrics(result.trajectory, context, cfg.metrics)
     track = "kinematic" if cfg.controller.kind == "kinematic_mpc" else "lateral"
@@ -115,6 +134,27 @@ def run_experiment(cfg: ExperimentConfig, out_dir: Path, resume: bool = True,
               trajectory=result.trajectory, timing=timing, metrics=metrics, info=info,
               horizon=result.horizon)
     return RunSummary(out_dir, metrics, info, skipped=False)
+
+
+def run_members(jobs: list[tuple[ExperimentConfig, Path]], qp_cache: QpCache,
+                record_horizon: bool = True) -> list[RunSummary]:
+    """:func:`run_experiment` for several members at once: those not already complete are
+    stepped together by the lockstep engine (:func:`pipeline.loop.engine.simulate_members`),
+    then each one's metrics and folder written. Summaries in the order of ``jobs``."""
+    from pipeline.loop.engine import simulate_members
+
+    summaries: list[RunSummary | None] = []
+    todo: list[tuple[int, ExperimentConfig, Path, str]] = []
+    for cfg, out_dir in jobs:
+        config_hash = cfg.config_hash()
+        summaries.append(_resumed(cfg, Path(out_dir), config_hash))
+        if summaries[-1] is None:
+            todo.append((len(summaries) - 1, cfg, Path(out_dir), config_hash))
+    results = simulate_members([(cfg, build_scenario(cfg.scenario)) for _, cfg, _, _ in todo],
+                               qp_cache, record_horizon=record_horizon)
+    for (position, cfg, out_dir, config_hash), result in zip(todo, results, strict=True):
+        summaries[position] = record_run(cfg, out_dir, result, qp_cache, config_hash)
+    return [summary for summary in summaries if summary is not None]
 
 
 def warm_compiled_kernels(configs: list[ExperimentConfig], n_steps: int = 5) -> None:
@@ -175,17 +215,18 @@ COMPILED_KERNELS_MIN_MEMBERS = 50
 def _run_chunk(jobs: list[tuple[int, ExperimentConfig, Path]], qp_cache: QpCache,
                member_cache: MemberCache | None = None, record_horizon: bool = True
                ) -> list[tuple[int, dict]]:
-    """Run a few family members in one worker, all with the compiled QP shipped in
-    ``qp_cache`` (so a worker compiles nothing), and publish each new one to
-    ``member_cache`` (``record_horizon``: :func:`run_experiment`'s)."""
+    """Run a few family members in one worker, stepped together (:func:`run_members`), all
+    with the compiled QP shipped in ``qp_cache`` (so a worker compiles nothing), and publish
+    each new one to ``member_cache`` (``record_horizon``: :func:`run_experiment`'s)."""
     # loky's worker runs a full gc.collect() after each task (about 0.1 s here, over the ~250k
     # objects of numpy, scipy, cvxpy, numba...); what is alive when a task starts lives for the
     # whole worker (its imports, the kernels), so it is moved out of the collector's scans
     gc.freeze()
+    # the chunk's members stepped together by the lockstep engine
+    summaries = run_members([(member_cfg, folder) for _, member_cfg, folder in jobs],
+                            qp_cache, record_horizon)
     done = []
-    for index, member_cfg, folder in jobs:
-        summary = run_experiment(member_cfg, folder, qp_cache=qp_cache,
-                                 record_horizon=record_horizon)
+    for (index, member_cfg, folder), summary in zip(jobs, summaries, strict=True):
         if member_cache is not None and not summary.skipped:
             member_cache.publish(member_cfg, folder)
         done.append((index, summary.flat()))

@@ -275,8 +275,13 @@ def test_closed_loop_with_kernels_is_the_closed_loop_without(make_config, method
             return kernel(*args)
         return wrapped
 
+    def counting_rows(states, *args):
+        # the lockstep engine steps the compiled plants of all its members in one call
+        calls["plant"] += states.shape[0]
+        return COMPILED_KERNELS.plant_rk4_rows(states, *args)
+
     counted = COMPILED_KERNELS._replace(
-        plant_rk4=counting("plant", COMPILED_KERNELS.plant_rk4),
+        plant_rk4=counting("plant", COMPILED_KERNELS.plant_rk4), plant_rk4_rows=counting_rows,
         apf_rollout=counting("rollout", COMPILED_KERNELS.apf_rollout),
         references=counting("references", COMPILED_KERNELS.references),
         rollout_path=counting("rollout_path", COMPILED_KERNELS.rollout_path))

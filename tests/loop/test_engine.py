@@ -1,0 +1,185 @@
+"""The lockstep engine against the per-member loop it replaced (tests/loop/oracle_loop.py):
+members stepped together give each member's run alone, bit for bit, on every backend and
+track; a member that ends early leaves the batch without touching the others' numbers; a
+plug-in steps in the same batch as the built-ins; the batched plant is the plant row by row;
+a family chunk through the engine writes what one member at a time wrote."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from pipeline.loop.controller import QpCache
+from pipeline.loop.engine import MemberLoop, simulate_members, step_members
+from pipeline.loop.scenario import build_scenario, family_members
+from tests.loop.oracle_loop import oracle_simulate
+
+ROOT = Path(__file__).resolve().parents[2]
+
+
+def _members(make_config, overrides, size):
+    cfg = make_config([*overrides, "scenario=family", f"scenario.family.size={size}"])
+    members = family_members(cfg.scenario, cfg.vehicle.footprint_radius_m)
+    return [(replace(cfg, scenario=member), build_scenario(member)) for member in members]
+
+
+def _same_run(engine, oracle, atol: float = 0.0) -> None:
+    """The same run: bit for bit, or within ``atol`` in every number (the cvxpy backend,
+    whose one compiled problem is shared by all members: its solves differ from one order of
+    calls to another by about 1e-22, solver noise on values that are 0)."""
+    assert engine.termination == oracle.termination
+    assert engine.goal_reached == oracle.goal_reached
+    # wall-clock columns (the CBF filter's solve time) are not part of the run
+    clock = [name for name in oracle.trajectory.columns if name.endswith("solve_time_s")]
+    engine = replace(engine, trajectory=engine.trajectory.drop(columns=clock))
+    oracle = replace(oracle, trajectory=oracle.trajectory.drop(columns=clock))
+    if atol == 0.0:
+        assert engine.trajectory.equals(oracle.trajectory)
+    else:
+        assert list(engine.trajectory.columns) == list(oracle.trajectory.columns)
+        for name in oracle.trajectory.columns:
+            ours, theirs = engine.trajectory[name], oracle.trajectory[name]
+            if theirs.dtype.kind == "f":
+                assert np.allclose(ours, theirs, rtol=0.0, atol=atol, equal_nan=True), name
+            else:
+                assert ours.equals(theirs), name
+    assert engine.horizon.keys() == oracle.horizon.keys()
+    for name, values in oracle.horizon.items():
+        assert np.allclose(engine.horizon[name], values, rtol=0.0, atol=atol,
+                           equal_nan=True), name
+
+
+@pytest.mark.parametrize("compiled", [True, False])
+@pytest.mark.parametrize("overrides", [
+    ["method=improved", "controller.backend=daqp"],
+    ["method=improved"],                                   # clarabel_direct
+    ["method=baseline", "controller.backend=cvxpy"],
+    ["method=improved", "controller.frame=fixed"],
+    ["method=improved", "controller.path_reference=pursuit"],
+    ["method=mpc_dcbf"],
+    ["method=cbf_filter"],
+    ["method=apf_pursuit"],
+])
+def test_members_stepped_together_are_each_member_alone(make_config, overrides, compiled):
+    """Six members of a family stepped in one batch (each with its own controller, solver
+    workspace and fallback) against each run alone through the oracle loop: the same
+    trajectories, horizons and terminations, bit for bit (their step counts differ, so
+    members leave the batch at different steps)."""
+    runs = _members(make_config, overrides, 6)
+    cache = QpCache(compiled_kernels=compiled)
+    together = simulate_members(runs, cache)
+    lengths = set()
+    for (cfg, scenario), engine in zip(runs, together, strict=True):
+        oracle = oracle_simulate(cfg, scenario, QpCache(compiled_kernels=compiled))
+        _same_run(engine, oracle, 1e-12 if getattr(cfg.controller, "backend", "") == "cvxpy" else 0.0)
+        lengths.add(len(engine.trajectory))
+    assert len(lengths) > 1  # members left the batch at different steps
+
+
+def test_kinematic_members_stepped_together_are_each_alone(make_config):
+    runs = _members(make_config, ["method=improved", "controller=kinematic",
+                                  "scenario.n_steps=60"], 3)
+    together = simulate_members(runs, QpCache(compiled_kernels=True))
+    for (cfg, scenario), engine in zip(runs, together, strict=True):
+        _same_run(engine, oracle_simulate(cfg, scenario, QpCache(compiled_kernels=True)))
+
+
+def test_members_of_different_settings_in_one_batch(make_config):
+    """A tune's batch: members of several trials (other weights, another method, another
+    backend) stepped together, each the run of its own settings."""
+    runs = (_members(make_config, ["method=improved", "controller.backend=daqp"], 2)
+            + _members(make_config, ["method=baseline", "controller.q_lateral=3.0"], 2)
+            + _members(make_config, ["method=improved", "vehicle.steering_rate_max_rad_s=0.3"],
+                       2))
+    together = simulate_members(runs, QpCache(compiled_kernels=True))
+    for (cfg, scenario), engine in zip(runs, together, strict=True):
+        _same_run(engine, oracle_simulate(cfg, scenario, QpCache(compiled_kernels=True)))
+
+
+def test_a_member_that_ends_early_leaves_the_others_untouched(make_config):
+    """One member whose run ends at its fifth step (n_steps=4) in a batch with two full ones:
+    the two are the same bits as without it, and it is its own run alone."""
+    runs = _members(make_config, ["method=improved", "controller.backend=daqp"], 3)
+    short_cfg = replace(runs[1][0], scenario=replace(runs[1][0].scenario, n_steps=4))
+    short = (short_cfg, build_scenario(short_cfg.scenario))
+    cache = QpCache(compiled_kernels=True)
+    with_short = simulate_members([runs[0], short, runs[2]], cache)
+    without = simulate_members([runs[0], runs[2]], QpCache(compiled_kernels=True))
+    assert len(with_short[1].trajectory) == 5 and with_short[1].termination == "max_steps"
+    assert len(with_short[0].trajectory) > 5
+    _same_run(with_short[0], without[0])
+    _same_run(with_short[2], without[1])
+    _same_run(with_short[1], oracle_simulate(*short, QpCache(compiled_kernels=True)))
+
+
+def test_a_plugin_steps_in_the_batch_as_alone(make_config, monkeypatch):
+    """A planner of one's own (``planner._target_``: the README's example, behind the plug-in
+    checks) and a controller of one's own (the CBF filter is one, by ``controller._target_``)
+    beside built-in members in one batch: each run is its run alone."""
+    monkeypatch.syspath_prepend(str(ROOT / "examples" / "my_planner"))
+    runs = (_members(make_config, ["method=improved", "planner._target_=my_planner.SideStepPlanner",
+                                   "+planner.params={reach_m: 8.0, offset_m: 2.0}"], 2)
+            + _members(make_config, ["method=cbf_filter"], 2)
+            + _members(make_config, ["method=improved", "controller.backend=daqp"], 2))
+    assert runs[0][0].planner._target_ and runs[2][0].controller._target_
+    together = simulate_members(runs, QpCache(compiled_kernels=True))
+    for (cfg, scenario), engine in zip(runs, together, strict=True):
+        _same_run(engine, oracle_simulate(cfg, scenario, QpCache(compiled_kernels=True)))
+
+
+def test_batched_plant_is_the_plant_row_by_row(make_config):
+    """:func:`single_track_rk4_rows` (one compiled call) against the compiled and the CPython
+    single-row step, bit for bit, each row with its own constants, rate, target, period and
+    substeps."""
+    from pipeline.loop.compiled import COMPILED_KERNELS
+    from pipeline.loop.model import single_track_constants
+    from pipeline.loop.python_kernels import PYTHON_KERNELS
+
+    rng = np.random.default_rng(3)
+    vehicles = [make_config().vehicle,
+                make_config(["vehicle.mass_kg=2100", "vehicle.kinematic_below_mps=2.0"]).vehicle]
+    n = 40
+    states = np.column_stack([rng.normal(0, 20, n), rng.normal(0, 3, n), rng.normal(0, .5, n),
+                              rng.uniform(0.0, 25.0, n), rng.normal(0, .8, n),
+                              rng.normal(0, .5, n), rng.normal(0, .3, n)])
+    constants = np.array([single_track_constants(vehicles[i % 2]) for i in range(n)])
+    rates, targets = rng.normal(0, .4, n), rng.uniform(0, 25, n)
+    periods = np.where(np.arange(n) % 3 == 0, 0.05, 0.1)
+    substeps = rng.integers(1, 8, n)
+    batch = COMPILED_KERNELS.plant_rk4_rows(states, constants, rates, targets, periods, substeps)
+    python = PYTHON_KERNELS.plant_rk4_rows(states, constants, rates, targets, periods, substeps)
+    for i in range(n):
+        one = COMPILED_KERNELS.plant_rk4(states[i], constants[i], float(rates[i]),
+                                         float(targets[i]), float(periods[i]), int(substeps[i]))
+        plain = PYTHON_KERNELS.plant_rk4(states[i].tolist(), constants[i].tolist(),
+                                         float(rates[i]), float(targets[i]), float(periods[i]),
+                                         int(substeps[i]))
+        assert np.array_equal(batch[i], one) and np.array_equal(python[i], plain)
+        assert np.array_equal(one, plain)
+
+
+def test_engine_steps_every_member_once_per_step(make_config):
+    """The lockstep: at step k every member still running is observed and controlled once,
+    a member that has ended is never called again, and the plants of the compiled members
+    are stepped in one call per step."""
+    runs = _members(make_config, ["method=improved", "controller.backend=daqp"], 4)
+    cache = QpCache(compiled_kernels=True)
+    from pipeline.loop.engine import run_kernels
+
+    kernels = run_kernels(cache)
+    calls = {"rows": []}
+
+    def rows(states, *args):
+        calls["rows"].append(states.shape[0])
+        return kernels.plant_rk4_rows(states, *args)
+
+    members = [MemberLoop(cfg, scenario, cache, kernels._replace(plant_rk4_rows=rows))
+               for cfg, scenario in runs]
+    results = step_members(members)
+    lengths = [len(r.trajectory) for r in results]
+    # rows stepped at step k: the members whose log goes past row k
+    expected = [sum(length > k + 1 for length in lengths) for k in range(max(lengths) - 1)]
+    assert calls["rows"] == [e for e in expected if e]
