@@ -14,7 +14,9 @@ by CPython in a single run and by numba in the family runner's workers.
 * :func:`rollout_path_kernel`, :func:`chase_path_kernel`, :func:`frame_step_kernel`,
   :func:`plan_poses_kernel` and :func:`check_record_kernel` are the path frame's statements
   (:mod:`pipeline.loop.controller.path`): the reference path (the rollout, or its pursuit),
-  one step's stations and obstacle coordinates, a plan's poses, one step's prediction check.
+  one step's stations and obstacle coordinates, a plan's poses, one step's prediction check;
+  :func:`halfplane_kernel` its collision half-planes
+  (:func:`pipeline.loop.controller.references.lateral_side_halfplane_arrays`).
 
 Compiled without fast-math, they do the same operations in the same order on the same C
 library's ``atan2``, ``tanh``, ``exp``, ``cos`` and ``sin``, so they give the same bits (the
@@ -90,9 +92,10 @@ rollout_path_kernel = _jit(path.rollout_path_arrays)
 frame_step_kernel = _jit(path.frame_step_arrays)
 plan_poses_kernel = _jit(path.plan_poses_arrays)
 check_record_kernel = _jit(prediction_check.check_record_arrays)
+halfplane_kernel = _jit(references.lateral_side_halfplane_arrays)
 
 #: The compiled set (immutable: a named tuple of numba's dispatchers).
 COMPILED_KERNELS = Kernels(True, single_track_rk4, apf_rollout_kernel, reference_kernel,
                            chase_path_kernel, rollout_path_kernel, frame_step_kernel,
                            plan_poses_kernel,
-                           check_record_kernel, single_track_rk4_rows)
+                           check_record_kernel, single_track_rk4_rows, halfplane_kernel)

@@ -41,6 +41,8 @@ class Kernels(NamedTuple):
     plant_rk4_rows : callable
         :func:`pipeline.loop.model.single_track_rk4_rows`: the plants of the members the
         lockstep engine steps at once (:mod:`pipeline.loop.engine`).
+    halfplanes : callable
+        :func:`pipeline.loop.controller.references.lateral_side_halfplane_arrays`.
     """
 
     compiled: bool
@@ -53,6 +55,7 @@ class Kernels(NamedTuple):
     plan_poses: Callable[..., Any]
     check_record: Callable[..., Any]
     plant_rk4_rows: Callable[..., Any]
+    halfplanes: Callable[..., Any]
 
     def prepare(self, values: object) -> KernelValues:
         """``values`` as this set's callables take them: a contiguous float array for numba, a

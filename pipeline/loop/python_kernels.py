@@ -10,7 +10,7 @@ from pipeline.loop.controller.path import (
     rollout_path_arrays,
 )
 from pipeline.loop.controller.prediction_check import check_record_arrays
-from pipeline.loop.controller.references import reference_arrays
+from pipeline.loop.controller.references import lateral_side_halfplane_arrays, reference_arrays
 from pipeline.loop.kernels import Kernels
 from pipeline.loop.model import single_track_rk4, single_track_rk4_rows
 from pipeline.loop.planner import apf_rollout_arrays
@@ -19,4 +19,5 @@ from pipeline.loop.planner import apf_rollout_arrays
 PYTHON_KERNELS = Kernels(False, single_track_rk4, apf_rollout_arrays, reference_arrays,
                          chase_path_arrays, rollout_path_arrays, frame_step_arrays,
                          plan_poses_arrays,
-                         check_record_arrays, single_track_rk4_rows)
+                         check_record_arrays, single_track_rk4_rows,
+                         lateral_side_halfplane_arrays)

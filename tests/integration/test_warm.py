@@ -70,8 +70,10 @@ def test_a_wrong_argument_is_one_line(args):
 
 
 def test_warming_puts_every_kernel_in_numbas_cache(tmp_path):
-    """``api.warm_compiled_kernels`` (what ``make install`` runs) leaves each of the eight loop
-    kernels and the ledgers' bootstrap kernel compiled in numba's on-disk cache (an empty one here, NUMBA_CACHE_DIR)."""
+    """``api.warm_compiled_kernels`` (what ``make install`` runs) leaves each of the nine loop
+    kernels the runs call (the plant as the lockstep engine steps it, its rows at once; the
+    path frame's half-planes) and the ledgers' bootstrap kernel compiled in numba's on-disk
+    cache (an empty one here, NUMBA_CACHE_DIR)."""
     import os
     import subprocess
     import sys
@@ -80,10 +82,11 @@ def test_warming_puts_every_kernel_in_numbas_cache(tmp_path):
     subprocess.run([sys.executable, "-c", "from pipeline import api; "
                     "api.warm_compiled_kernels()"], env=env, check=True, capture_output=True)
     indexed = {p.name.split("-")[0] for p in tmp_path.rglob("*.nbi")}
-    assert indexed == {"model.single_track_rk4", "planner.apf_rollout_arrays",
+    assert indexed == {"model.single_track_rk4_rows", "planner.apf_rollout_arrays",
+                       "references.lateral_side_halfplane_arrays",
                        "references.reference_arrays", "path.chase_path_arrays",
                        "path.rollout_path_arrays", "path.frame_step_arrays",
                        "compiled.walsh_medians", "compiled._count_at_most",
                        "compiled._order_statistic", "path.plan_poses_arrays",
                        "prediction_check.check_record_arrays"}, indexed
-    assert len(list(tmp_path.rglob("*.nbc"))) >= 11  # the compiled code beside each index
+    assert len(list(tmp_path.rglob("*.nbc"))) >= 12  # the compiled code beside each index

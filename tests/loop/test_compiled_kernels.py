@@ -324,3 +324,51 @@ def test_family_runner_turns_the_kernels_on_after_enough_members(make_config, tm
     # the same members, the same numbers, with and without the kernels (times aside)
     timing = [c for c in plain if "time" in c or "compile" in c]
     assert len(plain) == 3 and plain.drop(columns=timing).equals(fast.drop(columns=timing))
+
+
+@pytest.mark.parametrize("constrained", [True, False])
+def test_halfplane_kernel_is_collision_halfplanes(make_config, constrained):
+    """The path frame's half-planes by the kernels' statement (CPython's and numba's) against
+    :func:`collision_halfplanes` (lateral_side, one disc), bit for bit: obstacles beyond the
+    slots, beyond the activation distance, at a NaN distance, straddling the station's reach,
+    a reference exactly on an obstacle's centre (the fallback side), a vehicle level with
+    one."""
+    from pipeline.loop.compiled import halfplane_kernel
+    from pipeline.loop.controller.references import (
+        collision_halfplanes,
+        lateral_side_halfplane_arrays,
+    )
+
+    cfg = make_config(["method=improved"])
+    ctrl = replace(cfg.controller, collision_constraints=constrained)
+    vehicle = cfg.vehicle
+    rng = np.random.default_rng(11)
+    N = ctrl.horizon
+    cases = 0
+    for trial in range(300):
+        n_obs = int(rng.integers(0, 6))
+        stations = np.sort(rng.uniform(0.0, 12.0, N))
+        s_o = rng.uniform(-2.0, 16.0, N * n_obs)
+        d_o = rng.normal(0.0, 1.5, N * n_obs)
+        if n_obs and trial % 7 == 0:
+            d_o[::2] = 0.0                       # on the reference: the fallback side
+        if n_obs and trial % 11 == 0:
+            s_o[0] = np.nan                      # a NaN distance: constrained
+        radii = rng.uniform(0.2, 1.0, n_obs)
+        s0, d0 = 0.0, (0.0 if trial % 5 == 0 else float(rng.normal(0, 0.5)))
+        projected = np.stack([s_o.reshape(N, n_obs), d_o.reshape(N, n_obs)], axis=2)
+        G, h = collision_halfplanes(stations, np.zeros(N), np.array([s0, d0]), projected,
+                                    radii, vehicle, ctrl)
+        args = (np.zeros(N), s0, d0)
+        settings = (ctrl.max_obstacles, vehicle.footprint_radius_m, ctrl.safety_margin_m,
+                    ctrl.constraint_activation_m, ctrl.collision_constraints)
+        fast = halfplane_kernel(stations, *args, s_o, d_o, n_obs, radii, *settings)
+        plain = lateral_side_halfplane_arrays(stations.tolist(), args[0].tolist(), s0, d0,
+                                              s_o.tolist(), d_o.tolist(), n_obs,
+                                              radii.tolist(), *settings)
+        for ours in (fast, plain):
+            assert np.array_equal(ours[0], G, equal_nan=True), trial
+            assert np.array_equal(ours[1], h, equal_nan=True), trial
+            assert np.array_equal(np.signbit(ours[1]), np.signbit(h)), trial
+        cases += bool(np.count_nonzero(G))
+    assert cases > (100 if constrained else -1) and (constrained or cases == 0)

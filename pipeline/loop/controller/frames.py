@@ -152,6 +152,11 @@ class PathFrame:
         self._speeds = np.zeros(0)              # the last step's predicted speeds
         self._step_times: dict[float, np.ndarray] = {}  # prediction times by step
         self._no_points, self._no_values = np.zeros((0, 2)), np.zeros(0)
+        # the half-planes by the kernels' statement where it is the rule (lateral_side, an ego
+        # of one disc: every default run), else by collision_halfplanes
+        self._halfplanes_kernel = controller.halfplane_normal == "lateral_side" \
+            and vehicle.footprint_discs == 1
+        self._zeros = self.kernels.prepare(np.zeros(controller.horizon))
 
     def prediction_step(self, speed_mps: float, speed_ref_mps: float) -> float:
         """The prediction step (s): the sample time, stretched where the horizon would cover
@@ -217,10 +222,18 @@ class PathFrame:
             psi_ref, r_ref, delta_ref = refs[2], refs[3], refs[4]
         else:
             psi_ref = r_ref = delta_ref = np.zeros(N)
-        projected = np.empty((N, n_obs, 2))
-        projected[:, :, 0], projected[:, :, 1] = s_o.reshape(N, n_obs), d_o.reshape(N, n_obs)
-        G, h = collision_halfplanes(stations[1:], np.zeros(N), np.array([s0, d0]), projected,
-                                    visible.radii_m, vehicle, ctrl)
+        if self._halfplanes_kernel:  # lateral_side, one disc: the kernel's statement
+            G, h = kernels.halfplanes(
+                prepare(stations[1:]), self._zeros, s0, d0, prepare(s_o), prepare(d_o), n_obs,
+                prepare(visible.radii_m),
+                ctrl.max_obstacles, vehicle.footprint_radius_m, ctrl.safety_margin_m,
+                ctrl.constraint_activation_m, ctrl.collision_constraints)
+        else:
+            projected = np.empty((N, n_obs, 2))
+            projected[:, :, 0] = s_o.reshape(N, n_obs)
+            projected[:, :, 1] = d_o.reshape(N, n_obs)
+            G, h = collision_halfplanes(stations[1:], np.zeros(N), np.array([s0, d0]),
+                                        projected, visible.radii_m, vehicle, ctrl)
         if ctrl.road_edge_weight is not None:
             G, h = self._with_road(G, h, path, stations[1:], obs.road_polygons_m)
         first = obs.frame.to_line(path.points_m[1]) if N else obs.position_line_m

@@ -191,6 +191,48 @@ def collision_halfplanes(stations_m: np.ndarray, y_ref_m: np.ndarray, vehicle_li
     return G, h
 
 
+def lateral_side_halfplane_arrays(stations_m: KernelValues, y_ref_m: KernelValues,
+                                  vehicle_x: float, vehicle_y: float, obstacle_s: KernelValues,
+                                  obstacle_d: KernelValues, n_obstacles: int,
+                                  radii_m: KernelValues, n_slots: int, vehicle_reach_m: float,
+                                  margin_m: float, activation_m: float, constrained: bool
+                                  ) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`collision_halfplanes` with ``halfplane_normal = lateral_side`` and an ego of one
+    disc, on plain numbers (what the path frame runs each step, compiled by numba in
+    :mod:`pipeline.loop.compiled`: the same operations in the same order, so the same bits).
+
+    ``obstacle_s``, ``obstacle_d`` are the obstacles' path coordinates at the steps, step-major
+    (``k n_obstacles + j``); ``vehicle_reach_m`` the ego disc's radius, ``margin_m`` the safety
+    margin, ``activation_m`` ``controller.constraint_activation_m``, ``constrained``
+    ``controller.collision_constraints``. Returns ``G, h`` of shape ``(len(stations),
+    n_slots)``."""
+    n = len(stations_m)
+    G, h = np.zeros((n, n_slots)), np.zeros((n, n_slots))
+    for j in range(min(n_obstacles, n_slots)):
+        cx, cy = obstacle_s[j], obstacle_d[j]
+        distance = hypot(cx - vehicle_x, cy - vehicle_y)
+        # constrains(): on, and not farther than the activation distance (NaN: constrained)
+        if not constrained or distance > activation_m:
+            continue
+        reach = radii_m[j] + vehicle_reach_m + margin_m
+        fallback_side = 1.0 if vehicle_y > cy else (-1.0 if vehicle_y < cy else 1.0)
+        reach_sq = reach * reach
+        for k in range(n):
+            ox, oy = obstacle_s[k * n_obstacles + j], obstacle_d[k * n_obstacles + j]
+            dx = stations_m[k] - ox
+            if not abs(dx) < reach:
+                continue
+            above = y_ref_m[k] - oy
+            side = 1.0 if above > 0 else (-1.0 if above < 0 else
+                                          (fallback_side if above == 0 else above))
+            G[k, j] = side
+            gap = reach_sq - dx * dx
+            if gap < 0.0:  # max(gap, 0.0) as CPython takes it (a NaN or -0.0 stays)
+                gap = 0.0
+            h[k, j] = side * oy + sqrt(gap)
+    return G, h
+
+
 def nearest_ego_disc_shift(stations_m: np.ndarray, obstacle: np.ndarray,
                            offsets_m: np.ndarray) -> np.ndarray:
     """An obstacle's centres at the stations (N, 2) as the ego's reference point sees them when
