@@ -16,7 +16,9 @@ by CPython in a single run and by numba in the family runner's workers.
   (:mod:`pipeline.loop.controller.path`): the reference path (the rollout, or its pursuit),
   one step's stations and obstacle coordinates, a plan's poses, one step's prediction check;
   :func:`halfplane_kernel` its collision half-planes
-  (:func:`pipeline.loop.controller.references.lateral_side_halfplane_arrays`).
+  (:func:`pipeline.loop.controller.references.lateral_side_halfplane_arrays`), and
+  :func:`path_frame_rows_kernel`, :func:`plan_poses_rows_kernel` the same for every lateral MPC
+  the lockstep engine steps at once (:mod:`pipeline.loop.controller.path_rows`).
 
 Compiled without fast-math, they do the same operations in the same order on the same C
 library's ``atan2``, ``tanh``, ``exp``, ``cos`` and ``sin``, so they give the same bits (the
@@ -41,7 +43,7 @@ from numba import njit
 from numba.extending import overload
 
 from pipeline.loop import model, planner
-from pipeline.loop.controller import path, prediction_check, references
+from pipeline.loop.controller import path, path_rows, prediction_check, references
 from pipeline.loop.kernels import Kernels
 
 
@@ -80,7 +82,9 @@ def _same_signature(function: Callable[..., Any]) -> Callable[..., Any]:
 
 
 for _helper in (path._polyline, path._heading_at, path._curvature_at, path._project_point,
-                path._point_at, model.single_track_kinematic_substep, model.single_track_rk4):
+                path._point_at, model.single_track_kinematic_substep, model.single_track_rk4,
+                path.rollout_path_arrays, path.frame_step_arrays, path.plan_poses_arrays,
+                references.lateral_side_halfplane_arrays):
     overload(_helper)(_same_signature(_helper))
 
 single_track_rk4 = _jit(model.single_track_rk4)
@@ -93,9 +97,12 @@ frame_step_kernel = _jit(path.frame_step_arrays)
 plan_poses_kernel = _jit(path.plan_poses_arrays)
 check_record_kernel = _jit(prediction_check.check_record_arrays)
 halfplane_kernel = _jit(references.lateral_side_halfplane_arrays)
+path_frame_rows_kernel = _jit(path_rows.path_frame_rows)
+plan_poses_rows_kernel = _jit(path_rows.plan_poses_rows)
 
 #: The compiled set (immutable: a named tuple of numba's dispatchers).
 COMPILED_KERNELS = Kernels(True, single_track_rk4, apf_rollout_kernel, reference_kernel,
                            chase_path_kernel, rollout_path_kernel, frame_step_kernel,
                            plan_poses_kernel,
-                           check_record_kernel, single_track_rk4_rows, halfplane_kernel)
+                           check_record_kernel, single_track_rk4_rows, halfplane_kernel,
+                           path_frame_rows_kernel, plan_poses_rows_kernel)

@@ -31,6 +31,7 @@ from typing import Any
 import numpy as np
 
 from pipeline.loop.controller import ControlStep, Observation, QpCache
+from pipeline.loop.controller.lateral_rows import batch_key, lateral_steps
 from pipeline.loop.horizon import HorizonLog
 from pipeline.loop.kernels import Kernels
 from pipeline.loop.model import SINGLE_TRACK_CONSTANT_NAMES, single_track_constants
@@ -113,8 +114,13 @@ class MemberLoop:
         self.reacting = scenario.obstacle_motion \
             if hasattr(scenario.obstacle_motion, "react") else None
         self.counts_solves = cfg.controller.kind != "pure_pursuit"
-        #: this step's pending observation (set by observe, used by control)
+        #: this step's pending observation (set by observe, used by plan) and plan (set by
+        #: plan, used by apply)
         self._pending: tuple[Any, ...] | None = None
+        self._planned: tuple[Any, ...] | None = None
+        #: the key of the members whose controllers are stepped together
+        #: (:func:`~pipeline.loop.controller.lateral_rows.batch_key`); None: stepped alone
+        self.batch_key = batch_key(self.controller, kernels)
         #: the single-track plant's part of the batched step (its constants, steering-rate
         #: bound, sample period and substeps); None: its plant is stepped alone
         self.batch_plant: tuple[np.ndarray, float, float, int] | None = None
@@ -150,11 +156,16 @@ class MemberLoop:
         return True
 
     def control(self) -> None:
-        """The planner's and controller's part of the observed step, and its log row."""
+        """The planner's and controller's part of the observed step, and its log row (the
+        controller stepped alone)."""
+        self.apply(self.controller.step(self.plan()))
+
+    def plan(self) -> Observation:
+        """The planner's part of the observed step: the APF rollout and the speed rule; the
+        controller's observation."""
         if self._pending is None:
-            raise RuntimeError("control() before observe()")
+            raise RuntimeError("plan() before observe()")
         k, time_s, snapshot, row, along, lateral, psi, e_psi = self._pending
-        self._pending = None
         scenario, state, planner = self.scenario, self.state, self.planner
         visible = snapshot.only_visible()
         if scenario.nearest_first:
@@ -168,13 +179,20 @@ class MemberLoop:
         speed_ref = _planned_speed(planner, position, psi, visible, scenario,
                                    self.vehicle_radius, rollout, state, self.path_aware) \
             if self.plans_speed else np.nan
-        observation = Observation(time_s, state, self.frame, np.array([along, lateral]), e_psi,
-                                  rollout, visible, speed_ref, scenario.road_polygons_m)
-        step: ControlStep = self.controller.step(observation)
+        self._planned = (k, row, rollout, speed_ref)
+        return Observation(time_s, state, self.frame, np.array([along, lateral]), e_psi,
+                           rollout, visible, speed_ref, scenario.road_polygons_m)
+
+    def apply(self, step: ControlStep) -> None:
+        """The controller's step taken: its solve time and the step's log row."""
+        if self._planned is None:
+            raise RuntimeError("apply() before plan()")
+        k, row, rollout, speed_ref = self._planned
+        self._pending = self._planned = None
         if self.counts_solves:
             self.solve_times[self.n_solves] = step.solve_time_s
             self.n_solves += 1
-        _add_step_columns(row, self.plant, state, step, self.command, self.kinematic,
+        _add_step_columns(row, self.plant, self.state, step, self.command, self.kinematic,
                           speed_ref, rollout)
         self.log.put(k, row)
         self.command, self.speed_ref = step.command, float(speed_ref)
@@ -235,11 +253,30 @@ def step_members(members: Sequence[MemberLoop]) -> list[SimulationResult]:
     k = 0
     while active:
         active = [member for member in active if member.observe(k)]
-        for member in active:
-            member.control()
+        _control(active)
         _advance_plants(active)
         k += 1
     return [member.result() for member in members]
+
+
+def _control(members: Sequence[MemberLoop]) -> None:
+    """Every member's planner and controller: the lateral MPCs of one batch key stepped
+    together (:func:`~pipeline.loop.controller.lateral_rows.lateral_steps`), the others alone."""
+    groups: dict[tuple[Any, ...], list[MemberLoop]] = {}
+    for member in members:
+        if member.batch_key is None:
+            member.control()
+        else:
+            groups.setdefault(member.batch_key, []).append(member)
+    for group in groups.values():
+        if len(group) == 1:
+            group[0].control()
+            continue
+        observations = [member.plan() for member in group]
+        steps = lateral_steps([member.controller for member in group],  # type: ignore[misc]
+                              observations, group[0].kernels)
+        for member, step in zip(group, steps, strict=True):
+            member.apply(step)
 
 
 def simulate_members(runs: Sequence[tuple[LoopSettings, Scenario]],

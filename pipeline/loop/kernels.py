@@ -43,6 +43,9 @@ class Kernels(NamedTuple):
         lockstep engine steps at once (:mod:`pipeline.loop.engine`).
     halfplanes : callable
         :func:`pipeline.loop.controller.references.lateral_side_halfplane_arrays`.
+    path_frame_rows, plan_poses_rows : callable
+        :func:`pipeline.loop.controller.path_rows.path_frame_rows` and ``plan_poses_rows``:
+        the path frame of the lateral MPCs the lockstep engine steps at once.
     """
 
     compiled: bool
@@ -56,6 +59,8 @@ class Kernels(NamedTuple):
     check_record: Callable[..., Any]
     plant_rk4_rows: Callable[..., Any]
     halfplanes: Callable[..., Any]
+    path_frame_rows: Callable[..., Any]
+    plan_poses_rows: Callable[..., Any]
 
     def prepare(self, values: object) -> KernelValues:
         """``values`` as this set's callables take them: a contiguous float array for numba, a

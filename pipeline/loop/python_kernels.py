@@ -9,6 +9,7 @@ from pipeline.loop.controller.path import (
     plan_poses_arrays,
     rollout_path_arrays,
 )
+from pipeline.loop.controller.path_rows import path_frame_rows, plan_poses_rows
 from pipeline.loop.controller.prediction_check import check_record_arrays
 from pipeline.loop.controller.references import lateral_side_halfplane_arrays, reference_arrays
 from pipeline.loop.kernels import Kernels
@@ -20,4 +21,4 @@ PYTHON_KERNELS = Kernels(False, single_track_rk4, apf_rollout_arrays, reference_
                          chase_path_arrays, rollout_path_arrays, frame_step_arrays,
                          plan_poses_arrays,
                          check_record_arrays, single_track_rk4_rows,
-                         lateral_side_halfplane_arrays)
+                         lateral_side_halfplane_arrays, path_frame_rows, plan_poses_rows)

@@ -165,9 +165,16 @@ def warm_compiled_kernels(configs: list[ExperimentConfig], n_steps: int = 5) -> 
     (measured on a fresh clone: 28 CPU-s)."""
     from dataclasses import replace
 
+    from pipeline.loop.engine import simulate_members
+
     for cfg in configs:
         short = replace(cfg, scenario=replace(cfg.scenario, n_steps=n_steps))
-        simulate(short, build_scenario(short.scenario), QpCache(compiled_kernels=True))
+        scenario = build_scenario(short.scenario)
+        # alone and two together: the lockstep engine's batched kernels as well as a lone
+        # member's (a worker's task steps its members together)
+        simulate(short, scenario, QpCache(compiled_kernels=True))
+        simulate_members([(short, scenario), (short, build_scenario(short.scenario))],
+                         QpCache(compiled_kernels=True))
 
 
 def config_yaml(cfg: ExperimentConfig, memo: dict | None = None) -> str:

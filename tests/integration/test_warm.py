@@ -50,14 +50,14 @@ def test_without_the_warm_step_nothing_is_written(tmp_path):
 
 
 def test_kernels_only_fills_numbas_cache(tmp_path):
-    """``--kernels-only`` (the other core's half of make install) leaves the eleven kernels in
-    an empty numba cache and compiles no project module list of its own."""
+    """``--kernels-only`` (the other core's half of make install) leaves the fourteen kernels
+    in an empty numba cache and compiles no project module list of its own."""
     env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path / "numba")}
     proc = subprocess.run([sys.executable, "-m", "pipeline.warm", "--kernels-only"], env=env,
                           capture_output=True, text=True, check=False)
     assert proc.returncode == 0, proc.stderr
     assert "numba kernels" in proc.stdout and "compiled the bytecode" not in proc.stdout
-    assert len({p.name.split("-")[0] for p in (tmp_path / "numba").rglob("*.nbi")}) == 11
+    assert len({p.name.split("-")[0] for p in (tmp_path / "numba").rglob("*.nbi")}) == 14
 
 
 @pytest.mark.parametrize("args", [["--fast"], ["--no-kernels", "--kernels-only"]])
@@ -70,10 +70,10 @@ def test_a_wrong_argument_is_one_line(args):
 
 
 def test_warming_puts_every_kernel_in_numbas_cache(tmp_path):
-    """``api.warm_compiled_kernels`` (what ``make install`` runs) leaves each of the nine loop
-    kernels the runs call (the plant as the lockstep engine steps it, its rows at once; the
-    path frame's half-planes) and the ledgers' bootstrap kernel compiled in numba's on-disk
-    cache (an empty one here, NUMBA_CACHE_DIR)."""
+    """``api.warm_compiled_kernels`` (what ``make install`` runs) leaves each of the eleven
+    loop kernels the runs call (a lone member's and the lockstep engine's batched ones: the
+    plants' rows, the path frames' and plans' rows) and the ledgers' bootstrap kernel
+    compiled in numba's on-disk cache (an empty one here, NUMBA_CACHE_DIR)."""
     import os
     import subprocess
     import sys
@@ -88,5 +88,6 @@ def test_warming_puts_every_kernel_in_numbas_cache(tmp_path):
                        "path.rollout_path_arrays", "path.frame_step_arrays",
                        "compiled.walsh_medians", "compiled._count_at_most",
                        "compiled._order_statistic", "path.plan_poses_arrays",
-                       "prediction_check.check_record_arrays"}, indexed
-    assert len(list(tmp_path.rglob("*.nbc"))) >= 12  # the compiled code beside each index
+                       "prediction_check.check_record_arrays", "path_rows.path_frame_rows",
+                       "path_rows.plan_poses_rows"}, indexed
+    assert len(list(tmp_path.rglob("*.nbc"))) >= 14  # the compiled code beside each index

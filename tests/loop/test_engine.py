@@ -183,3 +183,77 @@ def test_engine_steps_every_member_once_per_step(make_config):
     # rows stepped at step k: the members whose log goes past row k
     expected = [sum(length > k + 1 for length in lengths) for k in range(max(lengths) - 1)]
     assert calls["rows"] == [e for e in expected if e]
+
+
+def test_default_lateral_mpcs_share_one_path_frame_call_per_step(make_config):
+    """The members whose controller is the default statement have their path frames computed
+    in one compiled call per step (and their plans' poses in another), the others (the fixed
+    frame here) step alone: every member's run is still its run alone."""
+    runs = _members(make_config, ["method=improved", "controller.backend=daqp"], 3) \
+        + _members(make_config, ["method=baseline", "controller.frame=fixed"], 2)
+    cache = QpCache(compiled_kernels=True)
+    from pipeline.loop.engine import run_kernels
+
+    kernels = run_kernels(cache)
+    rows = []
+
+    def path_frame_rows(targets, *args):
+        rows.append(targets.shape[0])
+        return kernels.path_frame_rows(targets, *args)
+
+    counted = kernels._replace(path_frame_rows=path_frame_rows)
+    together = simulate_members(runs, cache, counted)
+    lengths = [len(result.trajectory) for result in together[:3]]
+    # one call per step while two or more default members run (a lone one steps alone)
+    assert rows and set(rows) <= {2, 3}
+    assert len(rows) == sum(sum(length > k + 1 for length in lengths) >= 2
+                            for k in range(max(lengths)))
+    for (cfg, scenario), engine in zip(runs, together, strict=True):
+        _same_run(engine, oracle_simulate(cfg, scenario, QpCache(compiled_kernels=True)))
+
+
+def test_path_frame_rows_are_each_members_path_frame(make_config):
+    """The CPython statement of the batched path frame against the compiled one and against
+    each member's own path-frame step (already held equal to the loop): one batch step of
+    three members with different obstacles, speeds and last plans."""
+    from pipeline.loop.compiled import COMPILED_KERNELS
+    from pipeline.loop.python_kernels import PYTHON_KERNELS
+
+    rng = np.random.default_rng(5)
+    n, N, M = 3, 10, 3
+    targets = np.cumsum(rng.uniform(0.1, 0.4, (n, N, 2)), axis=1)
+    n_obs = np.array([0, 2, 4])
+    starts = np.concatenate([[0], np.cumsum(N * n_obs)])
+    obstacles = rng.uniform(0.0, 6.0, (starts[-1], 2))
+    radii = rng.uniform(0.3, 0.8, int(n_obs.sum()))
+    plans_xy, plans_course = np.zeros((n, N + 1, 2)), np.zeros((n, N + 1))
+    plans_xy[1] = targets[1, 0] + np.cumsum(np.full((N + 1, 2), [0.3, 0.0]), axis=0)
+    plan_lengths = np.array([0, N + 1, 0])
+    args = (targets, np.tile([1.0, 0.0], (n, 1)), np.array([True, True, False]),
+            np.full(n, 0.2), np.array([0.3, 0.25, 0.5]), np.array([12, 14, 11]),
+            targets[:, 0].copy(), np.array([3.0, 2.5, 5.0]), np.array([3.0, 3.0, 4.0]),
+            np.full(n, 0.1), np.array([0.1, 0.1, 0.12]), N, np.full(n, 0.5), np.full(n, 2.0),
+            plans_xy, plans_course, plan_lengths, obstacles, starts, radii, M,
+            np.full(n, 0.9), np.full(n, 0.2), np.full(n, 12.0), np.array([True, True, True]))
+    fast = COMPILED_KERNELS.path_frame_rows(*args)
+    plain = PYTHON_KERNELS.path_frame_rows(*args)
+    for ours, theirs in zip(fast, plain, strict=True):
+        assert np.array_equal(ours, theirs, equal_nan=True)
+    for i in range(n):
+        m = int(args[5][i])
+        p, hd, cv, bd = COMPILED_KERNELS.rollout_path(targets[i], 1.0, 0.0, bool(args[2][i]),
+                                                      0.2, float(args[4][i]), m)
+        assert np.array_equal(fast[0][i, :m + 1], p) and np.array_equal(fast[3][i, :m], bd)
+        s0, d0, h0, st, rd, vx, s_o, d_o = COMPILED_KERNELS.frame_step(
+            p, hd, cv, float(args[4][i]), m, *targets[i, 0], float(args[7][i]),
+            float(args[8][i]), 0.1, float(args[10][i]), N, 0.5, 2.0, 0.2,
+            plans_xy[i, :plan_lengths[i]], plans_course[i, :plan_lengths[i]],
+            obstacles[starts[i]:starts[i + 1]])
+        assert np.array_equal(fast[4][i], [s0, d0, h0]) and np.array_equal(fast[5][i], st)
+        assert np.array_equal(fast[8][starts[i]:starts[i + 1]], s_o)
+        G, h = COMPILED_KERNELS.halfplanes(st[1:], np.zeros(N), s0, d0, s_o, d_o,
+                                           int(n_obs[i]),
+                                           radii[starts[i] // N:starts[i] // N + n_obs[i]],
+                                           M, 0.9, 0.2, 12.0, True)
+        assert np.array_equal(fast[10][i], G) and np.array_equal(fast[11][i], h)
+    assert np.count_nonzero(fast[10])  # some half-planes bind

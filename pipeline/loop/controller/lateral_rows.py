@@ -1,0 +1,195 @@
+"""The lateral MPCs of many members stepped together: what the lockstep engine
+(:mod:`pipeline.loop.engine`) runs each step for the members whose controller is the default
+statement (path frame on the rollout itself, the half-planes' lateral-side rule, one disc, no
+road; compiled kernels).
+
+:func:`lateral_steps` is, for each member, :meth:`LateralMpc.step
+<pipeline.loop.controller.lateral.LateralMpc.step>` with the path frame's arithmetic of all
+members in one compiled call (:func:`~pipeline.loop.controller.path_rows.path_frame_rows`)
+and the plans' poses in another (:func:`~pipeline.loop.controller.path_rows.plan_poses_rows`);
+each member's state (its fallback, kept plan, records) stays in its own controller, and every
+number is the one the member's own step gives (the same statements in the same order; the
+tests hold the two equal bit for bit). Any other controller steps alone.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from math import pi
+from typing import Any
+
+import numpy as np
+
+from pipeline.loop.controller.base import ControlStep, Observation
+from pipeline.loop.controller.frames import PathFrame
+from pipeline.loop.controller.lateral import LateralMpc
+from pipeline.loop.controller.lateral_qp import MpcInputs
+from pipeline.loop.controller.path import ReferencePath
+from pipeline.loop.kernels import Kernels
+
+__all__ = ["batch_key", "lateral_steps"]
+
+
+def batch_key(controller: object, kernels: Kernels) -> tuple[Any, ...] | None:
+    """The key of the members whose lateral MPCs :func:`lateral_steps` steps together (the
+    same horizon and obstacle slots), or None where ``controller`` steps alone: another
+    controller, a frame, path, reference or half-plane rule other than the default's, an ego
+    of several discs, the road's rows, CPython's kernels."""
+    if type(controller) is not LateralMpc or not kernels.compiled:
+        return None
+    frame, cfg = controller.frame, controller.cfg
+    if type(frame) is not PathFrame or cfg.path_reference != "rollout" \
+            or cfg.heading_reference != "path_slope" \
+            or cfg.path_state_reference != "steady_state" or cfg.road_edge_weight is not None \
+            or cfg.halfplane_normal != "lateral_side" or controller.vehicle.footprint_discs != 1 \
+            or cfg.horizon < 1:
+        return None
+    return ("lateral_rows", cfg.horizon, cfg.max_obstacles)
+
+
+def lateral_steps(controllers: Sequence[LateralMpc], observations: Sequence[Observation],
+                  kernels: Kernels) -> list[ControlStep]:
+    """One step of each controller (all of one :func:`batch_key`) on its observation."""
+    n = len(controllers)
+    N = controllers[0].horizon
+    M = controllers[0].cfg.max_obstacles
+    # what each member's PathFrame.inputs computes before its kernels
+    targets = np.empty((n, N, 2))
+    line_cos_sin, extend = np.empty((n, 2)), np.empty(n, dtype=np.bool_)
+    kappa, ds, speeds, speed_refs = np.empty(n), np.empty(n), np.empty(n), np.empty(n)
+    vy_gains, steps_s, n_intervals = np.empty(n), np.empty(n), np.empty(n, dtype=np.int64)
+    positions, time_constants, accel_max = np.empty((n, 2)), np.empty(n), np.empty(n)
+    plans_xy, plans_course = np.zeros((n, N + 1, 2)), np.zeros((n, N + 1))
+    plan_lengths = np.zeros(n, dtype=np.int64)
+    reach, margins, activation = np.empty(n), np.empty(n), np.empty(n)
+    constrained = np.empty(n, dtype=np.bool_)
+    starts = np.zeros(n + 1, dtype=np.int64)
+    obstacle_blocks, radius_blocks = [], []
+    step_times = []
+    for i, (mpc, obs) in enumerate(zip(controllers, observations, strict=True)):
+        frame, vehicle, cfg = mpc.frame, mpc.vehicle, mpc.cfg
+        assert isinstance(frame, PathFrame)
+        st = obs.plant_state
+        speed = max(float(st[3]), vehicle.min_model_speed_mps)
+        speed_ref = float(obs.speed_ref_mps)
+        dt = frame.prediction_step(speed, speed_ref)
+        stretch = max(speed, speed_ref) + vehicle.accel_max_mps2 * dt
+        n_intervals[i] = int(np.ceil(N * stretch / speed)) + 1
+        targets[i] = obs.rollout.path_m
+        line_cos_sin[i] = obs.frame.cos_sin
+        extend[i] = cfg.path_beyond_end == "extend"
+        kappa[i] = frame.curvature_limit_1_per_m()
+        ds[i] = float(speed * dt)
+        speeds[i], speed_refs[i], steps_s[i] = speed, speed_ref, dt
+        vy_gains[i] = float(frame.bank.gains(frame.bank.at(speed))[1])
+        positions[i, 0], positions[i, 1] = float(st[0]), float(st[1])
+        time_constants[i], accel_max[i] = vehicle.speed_time_constant_s, vehicle.accel_max_mps2
+        poses = frame._plan_poses
+        if poses is not None:
+            length = poses[0].shape[0]
+            plans_xy[i, :length], plans_course[i, :length] = poses[0], poses[1]
+            plan_lengths[i] = length
+        visible = obs.obstacles
+        times = frame._step_times.get(dt)
+        if times is None:
+            times = frame._step_times[dt] = dt * np.arange(1, N + 1)
+        step_times.append(dt)
+        if visible.radii_m.shape[0]:
+            obstacle_blocks.append(visible.predicted_positions(times).reshape(-1, 2))
+            radius_blocks.append(visible.radii_m)
+        starts[i + 1] = starts[i] + N * visible.radii_m.shape[0]
+        reach[i], margins[i] = vehicle.footprint_radius_m, cfg.safety_margin_m
+        activation[i], constrained[i] = cfg.constraint_activation_m, cfg.collision_constraints
+    obstacles = np.ascontiguousarray(np.concatenate(obstacle_blocks)) if obstacle_blocks \
+        else np.zeros((0, 2))
+    radii = np.ascontiguousarray(np.concatenate(radius_blocks), dtype=float) \
+        if radius_blocks else np.zeros(0)
+    (points, headings, curvature, beyond, frame_values, stations, r_d, vx, obstacle_s,
+     obstacle_d, G, h) = kernels.path_frame_rows(
+        targets, line_cos_sin, extend, kappa, ds, n_intervals, positions, speeds, speed_refs,
+        vy_gains, steps_s, N, time_constants, accel_max, plans_xy, plans_course, plan_lengths,
+        obstacles, starts, radii, M, reach, margins, activation, constrained)
+    steps, inputs_of = [], []
+    for i, (mpc, obs) in enumerate(zip(controllers, observations, strict=True)):
+        inputs, log = _inputs(mpc, obs, i, points, headings, curvature, beyond, frame_values,
+                              stations, r_d, vx, G, h, float(ds[i]), int(n_intervals[i]),
+                              step_times[i])
+        steps.append(mpc.solve(inputs, log))
+        inputs_of.append(inputs)
+    _after_steps(controllers, steps, kernels)
+    for mpc, inputs, step in zip(controllers, inputs_of, steps, strict=True):
+        mpc.keep_record(inputs, step.predicted_states[0] if step.predicted_states is not None
+                        and step.fallback == "none" else None)
+    return steps
+
+
+def _inputs(mpc: LateralMpc, obs: Observation, i: int, points: np.ndarray,
+            headings: np.ndarray, curvature: np.ndarray, beyond: np.ndarray,
+            frame_values: np.ndarray, stations: np.ndarray, r_d: np.ndarray, vx: np.ndarray,
+            G: np.ndarray, h: np.ndarray, ds: float, n_intervals: int, dt: float
+            ) -> tuple[MpcInputs, dict[str, Any]]:
+    """Member ``i``'s QP data from the batched arithmetic: what
+    :meth:`~pipeline.loop.controller.frames.PathFrame.inputs_about` does after its kernels."""
+    frame = mpc.frame
+    assert isinstance(frame, PathFrame)
+    N = mpc.horizon
+    st = obs.plant_state
+    path = ReferencePath(points[i, :n_intervals + 1], headings[i, :n_intervals + 1],
+                         curvature[i, :n_intervals], beyond[i, :n_intervals], ds)
+    s0, d0, heading0 = frame_values[i].tolist()
+    member_stations, member_r_d, member_vx = stations[i], r_d[i], vx[i]
+    frame._speeds = member_vx
+    model = frame.bank.at(sum(member_vx.tolist()) / member_vx.shape[0], dt)
+    heading_error = (float(st[2]) - heading0 + pi) % (2.0 * pi) - pi
+    x0 = np.array([d0, st[4], heading_error, st[5], st[6]])
+    refs = frame.bank.gains(model)[:, None] * member_r_d[None, :]
+    first = obs.frame.to_line(path.points_m[1])
+    log = {"y_ref_m": first[1], "psi_ref_rad": path.headings_rad[1] - obs.frame.heading_rad,
+           "path_beyond_limit": bool(np.count_nonzero(
+               path.beyond_limit[:int(np.ceil(member_stations[-1] / path.ds_m - 1e-9))])),
+           "path_curvature_1_per_m": path.curvature_1_per_m[0], "r_d_rad_s": member_r_d[0]}
+    frame.record = ("path", path, member_stations, dt)
+    return MpcInputs(x0, model, np.zeros(N), refs[2], G[i], h[i], member_r_d, refs[3],
+                     refs[4]), log
+
+
+def _after_steps(controllers: Sequence[LateralMpc], steps: Sequence[ControlStep],
+                 kernels: Kernels) -> None:
+    """:meth:`PathFrame.after_step <pipeline.loop.controller.frames.PathFrame.after_step>` of
+    every member, the plans' poses in one call."""
+    solved = [i for i, step in enumerate(steps)
+              if step.predicted_states is not None and step.fallback == "none"]
+    frames = [mpc.frame for mpc in controllers]
+    for frame in frames:
+        assert isinstance(frame, PathFrame)
+        frame.plan_poses(None)
+    if not solved:
+        return
+    n = len(solved)
+    widest = max(mpc_path(controllers[i]).n_intervals for i in solved)
+    m = steps[solved[0]].predicted_states.shape[1]  # type: ignore[union-attr]
+    points, headings = np.zeros((n, widest + 1, 2)), np.zeros((n, widest + 1))
+    curvature, ds = np.zeros((n, widest)), np.empty(n)
+    n_intervals = np.empty(n, dtype=np.int64)
+    stations, lateral, heading_error = np.empty((n, m)), np.empty((n, m)), np.empty((n, m))
+    vy, vx = np.empty((n, m)), np.empty((n, m))
+    for row, i in enumerate(solved):
+        frame = controllers[i].frame
+        assert isinstance(frame, PathFrame)
+        _, path, member_stations, _ = frame.record
+        k = path.n_intervals
+        points[row, :k + 1], headings[row, :k + 1] = path.points_m, path.headings_rad
+        curvature[row, :k], ds[row], n_intervals[row] = path.curvature_1_per_m, path.ds_m, k
+        states = steps[i].predicted_states
+        assert states is not None
+        stations[row], lateral[row], heading_error[row] = member_stations, states[0], states[2]
+        vy[row], vx[row] = states[1], frame._speeds
+    xy, course = kernels.plan_poses_rows(points, headings, curvature, ds, n_intervals,
+                                         stations, lateral, heading_error, vy, vx)
+    for row, i in enumerate(solved):
+        frames[i].plan_poses((xy[row], course[row]))  # type: ignore[union-attr]
+
+
+def mpc_path(mpc: LateralMpc) -> ReferencePath:
+    """The reference path of ``mpc``'s last step (its frame's record)."""
+    return mpc.frame.record[1]
