@@ -103,7 +103,7 @@ def _measure(out: Path, steps: int, repeats: int, quick: bool, family_size: int
     summary["family_member_over_sparse_floor"] = member["family_member_over_sparse_floor"]
     summary["family_member_over_sparse_floor_daqp"] = \
         member_daqp["family_member_over_sparse_floor"]
-    summary["engine"] = bench_engine(40 if quick else family_size, 2 if quick else 3)
+    summary["engine"] = bench_engine(24 if quick else family_size, 2 if quick else 3)
     summary["engine_members_per_cpu_s_over_member_loop"] = \
         summary["engine"]["engine_members_per_cpu_s_over_member_loop"]
     path_rows = bench_path_frame(steps, repeats)

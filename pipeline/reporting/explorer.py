@@ -58,6 +58,9 @@ SOURCES = "sources.json"
 STUDY_SECTIONS = ("sweeps", "ablation", "interpretations", "multiverse", "tune",
                   "tune_unpruned", "tune_peers", "member_cache", "kinematic_readings",
                   "nmpc_check", "speed", "euro_ncap")
+#: Study sections whose subfolders are experiments of their own (a study of several tracks,
+#: each a folder of method families: ``make euro-ncap``'s), shown as ``<section>-<track>``.
+NESTED_SECTIONS = ("euro_ncap",)
 #: Experiments run on another one's scenarios (the same seed, the first members): their
 #: members are shown beside that one's treatment and control (section -> its family's section).
 COMPANIONS = {"peers": "family", "kinematic_peers": "kinematic_family"}
@@ -131,6 +134,26 @@ def experiment_folders(run_root: Path) -> list[Path]:
         return [run_root]  # the report of one experiment's folder (e.g. outputs/paper)
     return sorted(found, key=lambda p: (order.index(p.name) if p.name in order else len(order),
                                         p.name))
+
+
+def experiment_entries(run_root: Path) -> list[tuple[str, Path]]:
+    """Every experiment the explorer shows, as ``(name, folder)``: those of
+    :func:`experiment_folders` by their folder's name, then each track of a
+    :data:`NESTED_SECTIONS` study as ``<section>-<track>`` (its name in the page's addresses,
+    ``explorer.html#euro_ncap-lateral/3``)."""
+    run_root = Path(run_root)
+    entries = [(folder.name, folder) for folder in experiment_folders(run_root)]
+    if entries == [(run_root.name, run_root)] or not run_root.is_dir():
+        return entries  # the report of one experiment's folder
+    for section in NESTED_SECTIONS:
+        top = run_root / _section_folder(run_root, section)
+        if not top.is_dir():
+            continue
+        for track in sorted(p for p in top.iterdir()
+                            if p.is_dir() and not p.name.startswith(".")):
+            if any(folder_kind(m) for m in track.iterdir() if m.is_dir()):
+                entries.append((f"{top.name}-{track.name}", track))
+    return entries
 
 
 def _method_members(method_dir: Path) -> dict[int, Path] | None:
@@ -348,11 +371,11 @@ def member_data(run_root: Path, experiment: str, member: int) -> dict | None:
     """The explorer's data of one member, ``<experiment>/<member>`` under ``run_root`` (the
     payload :func:`member_payload` builds, its companions included), read from the run
     folders; None when the experiment or the member is not there."""
-    folder = Path(run_root) / experiment
+    folder = dict(experiment_entries(run_root)).get(experiment, Path(run_root) / experiment)
     if not folder.is_dir():
         return None
     # no data folder is written: the plan's targets are only named
-    plan = _experiment_plan(Path(run_root), folder, Path(run_root) / DATA_FOLDER)
+    plan = _experiment_plan(Path(run_root), folder, Path(run_root) / DATA_FOLDER, experiment)
     task = None if plan is None else next(
         (t for t in plan["tasks"] if t["member"] == int(member)), None)
     if task is None:
@@ -363,12 +386,12 @@ def member_data(run_root: Path, experiment: str, member: int) -> dict | None:
 def experiment_members(run_root: Path) -> dict[str, list[int]]:
     """Every experiment under ``run_root`` the explorer shows, with its members' indices."""
     found = {}
-    for folder in experiment_folders(run_root):
+    for name, folder in experiment_entries(run_root):
         indices: set[int] = set()
         for method_dir in (p for p in folder.iterdir() if p.is_dir()):
             indices |= set(_method_members(method_dir) or {})
         if indices:
-            found[folder.name] = sorted(indices)
+            found[name] = sorted(indices)
     return found
 
 
@@ -384,7 +407,7 @@ def data_script(key: str, payload: dict) -> str:
 def write_explorer(run_root: Path, out_dir: Path, experiments: list[Path] | None = None,
                    jobs: int | None = None) -> ExplorerIndex:
     """Write ``out_dir/explorer.html`` and one data file per member of every experiment under
-    ``run_root`` (:func:`experiment_folders`); returns what was written.
+    ``run_root`` (:func:`experiment_entries`); returns what was written.
 
     Parameters
     ----------
@@ -393,7 +416,7 @@ def write_explorer(run_root: Path, out_dir: Path, experiments: list[Path] | None
     out_dir : Path
         The report folder.
     experiments : list of Path, optional
-        The experiment folders to include (default: all of :func:`experiment_folders`).
+        The experiment folders to include (default: all of :func:`experiment_entries`).
     jobs : int, optional
         Members written at the same time, in forked children (default: the machine's cores;
         1: one after the other here). The files are the same.
@@ -402,8 +425,10 @@ def write_explorer(run_root: Path, out_dir: Path, experiments: list[Path] | None
     index = ExplorerIndex()
     data_root = out_dir / DATA_FOLDER
     plans = []
-    for folder in experiments if experiments is not None else experiment_folders(run_root):
-        plan = _experiment_plan(run_root, folder, data_root)
+    entries = [(folder.name, folder) for folder in experiments] if experiments is not None \
+        else experiment_entries(run_root)
+    for name, folder in entries:
+        plan = _experiment_plan(run_root, folder, data_root, name)
         if plan is not None:
             plans.append(plan)
     todo = [task for plan in plans for task in plan["tasks"] if not task["kept"]]
@@ -425,7 +450,7 @@ def write_explorer(run_root: Path, out_dir: Path, experiments: list[Path] | None
             index.experiments[plan["name"]] = {
                 "methods": plan["methods"], "members": written,
                 "single": plan["single"] and written == [0]}
-            numbers = member_numbers(run_root / plan["name"], plan["methods"], written)
+            numbers = member_numbers(plan["folder"], plan["methods"], written)
             if numbers:
                 index.experiments[plan["name"]]["numbers"] = numbers
                 index.experiments[plan["name"]]["pair"] = difference_pair(list(numbers))
@@ -438,9 +463,12 @@ def write_explorer(run_root: Path, out_dir: Path, experiments: list[Path] | None
     return index
 
 
-def _experiment_plan(run_root: Path, folder: Path, data_root: Path) -> dict | None:
+def _experiment_plan(run_root: Path, folder: Path, data_root: Path, name: str | None = None
+                     ) -> dict | None:
     """One experiment's members to write: each with its runs, settings, target file and
-    whether the file already there was made from the same runs (``kept``)."""
+    whether the file already there was made from the same runs (``kept``); ``name``: the
+    experiment's name in the page (its folder's by default)."""
+    name = name if name is not None else folder.name
     by_method, settings = {}, {}
     for method_dir in sorted(p for p in folder.iterdir() if p.is_dir()):
         members = _method_members(method_dir)
@@ -456,24 +484,24 @@ def _experiment_plan(run_root: Path, folder: Path, data_root: Path) -> dict | No
         return None
     single = all(len(m) == 1 for m in by_method.values())
     indices = sorted({i for members in by_method.values() for i in members})
-    by_method, settings = _with_companions(run_root, folder.name, by_method, settings, indices)
-    sources = data_root / folder.name / SOURCES
+    by_method, settings = _with_companions(run_root, name, by_method, settings, indices)
+    sources = data_root / name / SOURCES
     known = _read_sources(sources)
     tasks = []
     for member in indices:
         runs = {m: members[member] for m, members in by_method.items() if member in members}
-        target = data_root / folder.name / f"{member}.js"
+        target = data_root / name / f"{member}.js"
         digest = _runs_digest(runs)
         # kept only when made from the same runs and still the bytes then written (a damaged
         # data file is written again)
         entry = known.get(str(member))
         kept = digest is not None and isinstance(entry, dict) \
             and entry.get("runs") == digest and _file_digest(target) == entry.get("file")
-        tasks.append({"key": f"{folder.name}/{member}", "experiment": folder.name,
+        tasks.append({"key": f"{name}/{member}", "experiment": name,
                       "member": member, "runs": runs,
                       "settings": {m: settings[m] for m in runs}, "target": target,
                       "digest": digest, "kept": kept})
-    return {"name": folder.name, "methods": list(by_method), "single": single,
+    return {"name": name, "folder": folder, "methods": list(by_method), "single": single,
             "sources": sources, "tasks": tasks}
 
 

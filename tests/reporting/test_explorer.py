@@ -187,3 +187,36 @@ def test_the_report_writes_the_explorer_and_every_link_has_its_member(small_outp
     assert any(link.startswith("family/") for link in links), "the gallery links its members"
     for link in links:
         assert (out / "explorer_data" / f"{link}.js").is_file(), link
+
+
+def test_a_study_of_tracks_shows_each_track_as_an_experiment(small_reproduce, tmp_path):
+    """``make euro-ncap``'s folder (``euro_ncap/<track>/<method>``: a study, not an
+    experiment) is shown track by track as ``euro_ncap-<track>``: its members get data files
+    under that name, its address opens them, its table numbers come from its own families; a
+    track folder without families is not listed."""
+    from pipeline.reporting.explorer import experiment_entries, experiment_members, member_data
+
+    root = tmp_path / "outputs"
+    shutil.copytree(small_reproduce / "family", root / "family")
+    for method in ("baseline", "improved"):
+        shutil.copytree(small_reproduce / "family" / method,
+                        root / "euro_ncap" / "lateral" / method)
+    (root / "euro_ncap" / "kinematic").mkdir()  # no families yet
+    entries = experiment_entries(root)
+    assert [name for name, _ in entries] == ["family", "euro_ncap-lateral"]
+    assert entries[1][1] == root / "euro_ncap" / "lateral"
+    assert experiment_members(root)["euro_ncap-lateral"] == [0, 1, 2, 3, 4, 5]
+    out = tmp_path / "report"
+    index = write_explorer(root, out)
+    assert list(index.experiments) == ["family", "euro_ncap-lateral"]
+    assert index.experiments["euro_ncap-lateral"]["methods"] == ["baseline", "improved"]
+    assert index.experiments["euro_ncap-lateral"]["numbers"]["improved"]
+    key, data = _decode(out / "explorer_data" / "euro_ncap-lateral" / "3.js")
+    assert key == data["key"] == "euro_ncap-lateral/3"
+    _, family = _decode(out / "explorer_data" / "family" / "3.js")
+    assert data["methods"][1]["x"] == family["methods"][1]["x"]  # the same runs
+    direct = member_data(root, "euro_ncap-lateral", 3)
+    assert direct is not None and direct["key"] == "euro_ncap-lateral/3"
+    assert member_data(root, "euro_ncap-kinematic", 0) is None
+    assert '"euro_ncap-lateral":{"methods":["baseline","improved"]' in \
+        (out / "explorer.html").read_text()
