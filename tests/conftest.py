@@ -20,14 +20,18 @@ CONF_DIR = Path(__file__).resolve().parents[1] / "conf"
 # the member cache hands its own MemberCache to the code under test
 os.environ["PIPELINE_MEMBER_CACHE"] = "off"
 
-#: Test files with whole runs in them, longest first (serial `pytest --durations=0` on a 2-core
-#: machine). `make test` hands whole files to its workers (``--dist loadfile``) in collection
+#: Test files with whole runs in them, longest first (their tests' summed times in a `make test`
+#: run's junit report on a 2-core machine, 2026-12-06). `make test` hands whole files to its workers (``--dist loadfile``) in collection
 #: order; starting the longest first keeps one worker from running a long file alone at the end.
-LONGEST_FILES_FIRST = ("test_tune.py", "test_multiverse.py", "test_hardening.py",
-                       "test_report_browser.py", "test_extensions.py", "test_features.py",
-                       "test_run_records.py", "test_sweeps.py", "test_report.py",
-                       "test_robustness.py", "test_pins.py", "test_properties.py",
-                       "test_install.py")
+LONGEST_FILES_FIRST = ("test_install.py", "test_tune_pruning.py", "test_apf_alone.py",
+                       "test_processes.py", "test_bench_quick.py", "test_tune.py",
+                       "test_warm.py", "test_multiverse.py", "test_report_browser.py",
+                       "test_tune_workers.py", "test_scenario_sources.py", "test_sweeps.py",
+                       "test_extensions.py", "test_run_records.py",
+                       "test_tune_store_sources.py", "test_peers_report.py",
+                       "test_engine.py", "test_hardening.py", "test_features.py",
+                       "test_report.py", "test_robustness.py", "test_pins.py",
+                       "test_properties.py")
 
 
 #: The integration tier (marker ``integration``): the files of ``tests/integration/``, whole

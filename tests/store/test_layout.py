@@ -4,6 +4,7 @@ import circle, the analysis half has short functions, and only the store opens r
 from __future__ import annotations
 
 import ast
+import functools
 import subprocess
 import sys
 from pathlib import Path
@@ -69,6 +70,13 @@ def layer(name: str) -> int:
 
 
 def modules() -> dict[str, ast.Module]:
+    """Every module of the package, parsed (once per test process: about 0.9 s each time, and
+    some thirty tests ask; the trees are only read)."""
+    return dict(_parsed_modules())
+
+
+@functools.lru_cache(maxsize=1)
+def _parsed_modules() -> dict[str, ast.Module]:
     return {module_name(p): ast.parse(p.read_text(), str(p)) for p in PACKAGE.rglob("*.py")}
 
 
