@@ -34,7 +34,7 @@ from pipeline.loop.controller import ControlStep, Observation, QpCache
 from pipeline.loop.controller.lateral_rows import batch_key, lateral_steps
 from pipeline.loop.horizon import HorizonLog
 from pipeline.loop.kernels import Kernels
-from pipeline.loop.model import SINGLE_TRACK_CONSTANT_NAMES, single_track_constants
+from pipeline.loop.model import SINGLE_TRACK_CONSTANT_NAMES
 from pipeline.loop.scenario import Scenario
 from pipeline.loop.settings import LoopSettings
 from pipeline.loop.simulate import (
@@ -125,8 +125,8 @@ class MemberLoop:
         #: bound, sample period and substeps); None: its plant is stepped alone
         self.batch_plant: tuple[np.ndarray, float, float, int] | None = None
         if isinstance(self.plant, SingleTrackPlant) and kernels.compiled:
-            self.batch_plant = (np.array(single_track_constants(cfg.vehicle)),
-                                self.plant.rate_max_rad_s, self.plant.ts, self.plant.substeps)
+            self.batch_plant = (np.asarray(self.plant.constants), self.plant.rate_max_rad_s,
+                                self.plant.ts, self.plant.substeps)
 
     def observe(self, k: int) -> bool:
         """Step ``k``'s observation; False when the run ends here (its last row logged)."""

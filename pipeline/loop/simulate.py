@@ -75,7 +75,8 @@ class SingleTrackPlant:
         self.compiled = kernels.compiled
         self._kernel = kernels.plant_rk4
         constants = single_track_constants(cfg.vehicle)
-        self._constants = np.array(constants) if kernels.compiled else constants
+        #: single_track_constants as the kernels take them (an array compiled, a tuple in CPython)
+        self.constants = np.array(constants) if kernels.compiled else constants
         self._tyres = (constants[2], constants[3], constants[4], constants[5], constants[6],
                        constants[7])
 
@@ -98,7 +99,7 @@ class SingleTrackPlant:
         """:func:`~pipeline.loop.model.step_plant` with this plant's constants hoisted."""
         rate_max = self.rate_max_rad_s
         rate = min(max(float(command[0]), -rate_max), rate_max)
-        return self._kernel(state if self.compiled else state.tolist(), self._constants, rate,
+        return self._kernel(state if self.compiled else state.tolist(), self.constants, rate,
                             float(speed_ref_mps), self.ts, self.substeps)
 
 

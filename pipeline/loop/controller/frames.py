@@ -175,12 +175,25 @@ class PathFrame:
     def inputs(self, obs: Observation) -> tuple[MpcInputs, dict[str, Any]]:
         """The QP data in path coordinates about the drivable path from the vehicle's pose
         towards the APF rollout (:meth:`reference_path`; :meth:`inputs_about`)."""
-        N, vehicle = self.horizon, self.vehicle
+        _, dt, ds, n_intervals = self.step_geometry(obs)
+        return self.inputs_about(obs, self.reference_path(obs, ds, n_intervals), dt)
+
+    def step_geometry(self, obs: Observation) -> tuple[float, float, float, int]:
+        """One step's model speed, prediction step, path arc and number of path intervals:
+        ``speed, dt, ds, n_intervals`` (the path reaches what the horizon can cover at the
+        faster of the measured and the planned speed, accelerating)."""
+        vehicle = self.vehicle
         speed = max(float(obs.plant_state[3]), vehicle.min_model_speed_mps)
         dt = self.prediction_step(speed, float(obs.speed_ref_mps))
         reach = max(speed, float(obs.speed_ref_mps)) + vehicle.accel_max_mps2 * dt
-        path = self.reference_path(obs, speed * dt, int(np.ceil(N * reach / speed)) + 1)
-        return self.inputs_about(obs, path, dt)
+        return speed, dt, speed * dt, int(np.ceil(self.horizon * reach / speed)) + 1
+
+    def horizon_times(self, dt: float) -> np.ndarray:
+        """The prediction times ``dt, 2 dt, ..., N dt`` (kept per step length)."""
+        times = self._step_times.get(dt)
+        if times is None:
+            times = self._step_times[dt] = dt * np.arange(1, self.horizon + 1)
+        return times
 
     def inputs_about(self, obs: Observation, path: ReferencePath, dt: float
                      ) -> tuple[MpcInputs, dict[str, Any]]:
@@ -197,11 +210,8 @@ class PathFrame:
         gains = self.bank.gains(self.bank.at(speed))
         visible = obs.obstacles
         n_obs = visible.radii_m.shape[0]
-        times = self._step_times.get(dt)
-        if times is None:
-            times = self._step_times[dt] = dt * np.arange(1, N + 1)
-        obstacles = visible.predicted_positions(times).reshape(-1, 2) if n_obs \
-            else self._no_points
+        obstacles = visible.predicted_positions(self.horizon_times(dt)).reshape(-1, 2) \
+            if n_obs else self._no_points
         plan_xy, plan_course = self._plan_poses if self._plan_poses is not None \
             else (self._no_points, self._no_values)
         settings = (path.ds_m, path.n_intervals, float(st[0]), float(st[1]), speed,
@@ -213,15 +223,6 @@ class PathFrame:
             prepare(path.points_m), prepare(path.headings_rad),
             prepare(path.curvature_1_per_m), *settings, prepare(plan_xy), prepare(plan_course),
             prepare(obstacles))
-        self._speeds = vx
-        model = self.bank.at(sum(vx.tolist()) / vx.shape[0], dt)
-        heading_error = (float(st[2]) - heading0 + pi) % (2.0 * pi) - pi
-        x0 = np.array([d0, st[4], heading_error, st[5], st[6]])
-        if ctrl.path_state_reference == "steady_state":
-            refs = self.bank.gains(model)[:, None] * r_d[None, :]  # the state holding r_d
-            psi_ref, r_ref, delta_ref = refs[2], refs[3], refs[4]
-        else:
-            psi_ref = r_ref = delta_ref = np.zeros(N)
         if self._halfplanes_kernel:  # lateral_side, one disc: the kernel's statement
             G, h = kernels.halfplanes(
                 prepare(stations[1:]), self._zeros, s0, d0, prepare(s_o), prepare(d_o), n_obs,
@@ -236,6 +237,28 @@ class PathFrame:
                                         projected, visible.radii_m, vehicle, ctrl)
         if ctrl.road_edge_weight is not None:
             G, h = self._with_road(G, h, path, stations[1:], obs.road_polygons_m)
+        return self.finish_inputs(obs, path, dt, (d0, heading0), stations, r_d, vx, G, h)
+
+    def finish_inputs(self, obs: Observation, path: ReferencePath, dt: float,
+                      offset_heading: tuple[float, float], stations: np.ndarray,
+                      r_d: np.ndarray, vx: np.ndarray, G: np.ndarray, h: np.ndarray
+                      ) -> tuple[MpcInputs, dict[str, Any]]:
+        """The QP data and log once the frame's arithmetic is done (:meth:`inputs_about`'s, or
+        the lockstep engine's for many members at once,
+        :mod:`~pipeline.loop.controller.lateral_rows`): the model of the predicted speeds,
+        the state as errors from the path (``offset_heading``: the vehicle's offset from it
+        and the path's heading there), the references, the step's record."""
+        N, st = self.horizon, obs.plant_state
+        d0, heading0 = offset_heading
+        self._speeds = vx
+        model = self.bank.at(sum(vx.tolist()) / vx.shape[0], dt)
+        heading_error = (float(st[2]) - heading0 + pi) % (2.0 * pi) - pi
+        x0 = np.array([d0, st[4], heading_error, st[5], st[6]])
+        if self.cfg.path_state_reference == "steady_state":
+            refs = self.bank.gains(model)[:, None] * r_d[None, :]  # the state holding r_d
+            psi_ref, r_ref, delta_ref = refs[2], refs[3], refs[4]
+        else:
+            psi_ref = r_ref = delta_ref = np.zeros(N)
         first = obs.frame.to_line(path.points_m[1]) if N else obs.position_line_m
         log = {"y_ref_m": first[1], "psi_ref_rad": path.headings_rad[1] - obs.frame.heading_rad,
                "path_beyond_limit": bool(np.count_nonzero(
@@ -243,6 +266,17 @@ class PathFrame:
                "path_curvature_1_per_m": path.curvature_1_per_m[0], "r_d_rad_s": r_d[0]}
         self.record = ("path", path, stations, dt)
         return MpcInputs(x0, model, np.zeros(N), psi_ref, G, h, r_d, r_ref, delta_ref), log
+
+    @property
+    def predicted_speeds(self) -> np.ndarray:
+        """The last step's predicted speeds along the path (its stations' ``vx``)."""
+        return self._speeds
+
+    @property
+    def last_plan_poses(self) -> tuple[Any, ...] | None:
+        """The last plan's global poses and courses (None after a fallback or before a plan):
+        the next step's stations start from them."""
+        return self._plan_poses
 
     def _with_road(self, G: np.ndarray, h: np.ndarray, path: ReferencePath,
                    stations: np.ndarray, road: tuple[np.ndarray, ...]

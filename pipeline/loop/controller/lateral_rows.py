@@ -15,7 +15,6 @@ tests hold the two equal bit for bit). Any other controller steps alone.
 from __future__ import annotations
 
 from collections.abc import Sequence
-from math import pi
 from typing import Any
 
 import numpy as np
@@ -70,32 +69,26 @@ def lateral_steps(controllers: Sequence[LateralMpc], observations: Sequence[Obse
         frame, vehicle, cfg = mpc.frame, mpc.vehicle, mpc.cfg
         assert isinstance(frame, PathFrame)
         st = obs.plant_state
-        speed = max(float(st[3]), vehicle.min_model_speed_mps)
+        speed, dt, ds[i], n_intervals[i] = frame.step_geometry(obs)
         speed_ref = float(obs.speed_ref_mps)
-        dt = frame.prediction_step(speed, speed_ref)
-        stretch = max(speed, speed_ref) + vehicle.accel_max_mps2 * dt
-        n_intervals[i] = int(np.ceil(N * stretch / speed)) + 1
         targets[i] = obs.rollout.path_m
         line_cos_sin[i] = obs.frame.cos_sin
         extend[i] = cfg.path_beyond_end == "extend"
         kappa[i] = frame.curvature_limit_1_per_m()
-        ds[i] = float(speed * dt)
         speeds[i], speed_refs[i], steps_s[i] = speed, speed_ref, dt
         vy_gains[i] = float(frame.bank.gains(frame.bank.at(speed))[1])
         positions[i, 0], positions[i, 1] = float(st[0]), float(st[1])
         time_constants[i], accel_max[i] = vehicle.speed_time_constant_s, vehicle.accel_max_mps2
-        poses = frame._plan_poses
+        poses = frame.last_plan_poses
         if poses is not None:
             length = poses[0].shape[0]
             plans_xy[i, :length], plans_course[i, :length] = poses[0], poses[1]
             plan_lengths[i] = length
         visible = obs.obstacles
-        times = frame._step_times.get(dt)
-        if times is None:
-            times = frame._step_times[dt] = dt * np.arange(1, N + 1)
         step_times.append(dt)
         if visible.radii_m.shape[0]:
-            obstacle_blocks.append(visible.predicted_positions(times).reshape(-1, 2))
+            obstacle_blocks.append(
+                visible.predicted_positions(frame.horizon_times(dt)).reshape(-1, 2))
             radius_blocks.append(visible.radii_m)
         starts[i + 1] = starts[i] + N * visible.radii_m.shape[0]
         reach[i], margins[i] = vehicle.footprint_radius_m, cfg.safety_margin_m
@@ -128,29 +121,15 @@ def _inputs(mpc: LateralMpc, obs: Observation, i: int, points: np.ndarray,
             frame_values: np.ndarray, stations: np.ndarray, r_d: np.ndarray, vx: np.ndarray,
             G: np.ndarray, h: np.ndarray, ds: float, n_intervals: int, dt: float
             ) -> tuple[MpcInputs, dict[str, Any]]:
-    """Member ``i``'s QP data from the batched arithmetic: what
-    :meth:`~pipeline.loop.controller.frames.PathFrame.inputs_about` does after its kernels."""
+    """Member ``i``'s QP data from the batched arithmetic: its path (its rows of the padded
+    arrays) and :meth:`~pipeline.loop.controller.frames.PathFrame.finish_inputs`."""
     frame = mpc.frame
     assert isinstance(frame, PathFrame)
-    N = mpc.horizon
-    st = obs.plant_state
     path = ReferencePath(points[i, :n_intervals + 1], headings[i, :n_intervals + 1],
                          curvature[i, :n_intervals], beyond[i, :n_intervals], ds)
-    s0, d0, heading0 = frame_values[i].tolist()
-    member_stations, member_r_d, member_vx = stations[i], r_d[i], vx[i]
-    frame._speeds = member_vx
-    model = frame.bank.at(sum(member_vx.tolist()) / member_vx.shape[0], dt)
-    heading_error = (float(st[2]) - heading0 + pi) % (2.0 * pi) - pi
-    x0 = np.array([d0, st[4], heading_error, st[5], st[6]])
-    refs = frame.bank.gains(model)[:, None] * member_r_d[None, :]
-    first = obs.frame.to_line(path.points_m[1])
-    log = {"y_ref_m": first[1], "psi_ref_rad": path.headings_rad[1] - obs.frame.heading_rad,
-           "path_beyond_limit": bool(np.count_nonzero(
-               path.beyond_limit[:int(np.ceil(member_stations[-1] / path.ds_m - 1e-9))])),
-           "path_curvature_1_per_m": path.curvature_1_per_m[0], "r_d_rad_s": member_r_d[0]}
-    frame.record = ("path", path, member_stations, dt)
-    return MpcInputs(x0, model, np.zeros(N), refs[2], G[i], h[i], member_r_d, refs[3],
-                     refs[4]), log
+    _, d0, heading0 = frame_values[i].tolist()
+    return frame.finish_inputs(obs, path, dt, (d0, heading0), stations[i], r_d[i], vx[i],
+                               G[i], h[i])
 
 
 def _after_steps(controllers: Sequence[LateralMpc], steps: Sequence[ControlStep],
@@ -166,7 +145,7 @@ def _after_steps(controllers: Sequence[LateralMpc], steps: Sequence[ControlStep]
     if not solved:
         return
     n = len(solved)
-    widest = max(mpc_path(controllers[i]).n_intervals for i in solved)
+    widest = max(frames[i].record[1].n_intervals for i in solved)
     m = steps[solved[0]].predicted_states.shape[1]  # type: ignore[union-attr]
     points, headings = np.zeros((n, widest + 1, 2)), np.zeros((n, widest + 1))
     curvature, ds = np.zeros((n, widest)), np.empty(n)
@@ -183,13 +162,9 @@ def _after_steps(controllers: Sequence[LateralMpc], steps: Sequence[ControlStep]
         states = steps[i].predicted_states
         assert states is not None
         stations[row], lateral[row], heading_error[row] = member_stations, states[0], states[2]
-        vy[row], vx[row] = states[1], frame._speeds
+        vy[row], vx[row] = states[1], frame.predicted_speeds
     xy, course = kernels.plan_poses_rows(points, headings, curvature, ds, n_intervals,
                                          stations, lateral, heading_error, vy, vx)
     for row, i in enumerate(solved):
         frames[i].plan_poses((xy[row], course[row]))  # type: ignore[union-attr]
 
-
-def mpc_path(mpc: LateralMpc) -> ReferencePath:
-    """The reference path of ``mpc``'s last step (its frame's record)."""
-    return mpc.frame.record[1]
