@@ -36,6 +36,7 @@ __all__ = ["FamilyResult", "RunResult", "compare", "compose", "simulate", "simul
 #: frame (the default), the fixed frame, the baseline, and the Appendix-A track.
 WARM_RUNS: tuple[tuple[str, ...], ...] = (
     (), ("controller.frame=fixed",), ("method=baseline",), ("controller.path_reference=pursuit",),
+    ("controller.backend=daqp",),  # the tune's backend: DAQP's batched caller (daqp_rows)
     ("experiment=kinematic", "planner=improved", "hydra.mode=RUN"))
 
 

@@ -18,7 +18,11 @@ by CPython in a single run and by numba in the family runner's workers.
   :func:`halfplane_kernel` its collision half-planes
   (:func:`pipeline.loop.controller.references.lateral_side_halfplane_arrays`), and
   :func:`path_frame_rows_kernel`, :func:`plan_poses_rows_kernel` the same for every lateral MPC
-  the lockstep engine steps at once (:mod:`pipeline.loop.controller.path_rows`).
+  the lockstep engine steps at once (:mod:`pipeline.loop.controller.path_rows`);
+* :func:`daqp_rows_kernel` is :func:`pipeline.loop.controller.daqp_rows.daqp_condensed_rows`,
+  their QPs condensed and solved on each member's kept DAQP workspace (DAQP's C functions
+  called by address: this one has no CPython twin, a member stepped alone fills the same
+  workspace from numpy, :class:`pipeline.loop.controller.lateral_backends.DaqpCondensedQp`).
 
 Compiled without fast-math, they do the same operations in the same order on the same C
 library's ``atan2``, ``tanh``, ``exp``, ``cos`` and ``sin``, so they give the same bits (the
@@ -43,7 +47,7 @@ from numba import njit
 from numba.extending import overload
 
 from pipeline.loop import model, planner
-from pipeline.loop.controller import path, path_rows, prediction_check, references
+from pipeline.loop.controller import daqp_rows, path, path_rows, prediction_check, references
 from pipeline.loop.kernels import Kernels
 
 
@@ -99,10 +103,11 @@ check_record_kernel = _jit(prediction_check.check_record_arrays)
 halfplane_kernel = _jit(references.lateral_side_halfplane_arrays)
 path_frame_rows_kernel = _jit(path_rows.path_frame_rows)
 plan_poses_rows_kernel = _jit(path_rows.plan_poses_rows)
+daqp_rows_kernel = _jit(daqp_rows.daqp_condensed_rows)
 
 #: The compiled set (immutable: a named tuple of numba's dispatchers).
 COMPILED_KERNELS = Kernels(True, single_track_rk4, apf_rollout_kernel, reference_kernel,
                            chase_path_kernel, rollout_path_kernel, frame_step_kernel,
                            plan_poses_kernel,
                            check_record_kernel, single_track_rk4_rows, halfplane_kernel,
-                           path_frame_rows_kernel, plan_poses_rows_kernel)
+                           path_frame_rows_kernel, plan_poses_rows_kernel, daqp_rows_kernel)

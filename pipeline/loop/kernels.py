@@ -46,6 +46,10 @@ class Kernels(NamedTuple):
     path_frame_rows, plan_poses_rows : callable
         :func:`pipeline.loop.controller.path_rows.path_frame_rows` and ``plan_poses_rows``:
         the path frame of the lateral MPCs the lockstep engine steps at once.
+    daqp_rows : callable or None
+        :func:`pipeline.loop.controller.daqp_rows.daqp_condensed_rows`: their QPs condensed
+        and solved by DAQP's C interface (compiled only: it calls C by address; None in
+        CPython's set, whose members step alone).
     """
 
     compiled: bool
@@ -61,6 +65,7 @@ class Kernels(NamedTuple):
     halfplanes: Callable[..., Any]
     path_frame_rows: Callable[..., Any]
     plan_poses_rows: Callable[..., Any]
+    daqp_rows: Callable[..., Any] | None
 
     def prepare(self, values: object) -> KernelValues:
         """``values`` as this set's callables take them: a contiguous float array for numba, a

@@ -21,4 +21,4 @@ PYTHON_KERNELS = Kernels(False, single_track_rk4, apf_rollout_arrays, reference_
                          chase_path_arrays, rollout_path_arrays, frame_step_arrays,
                          plan_poses_arrays,
                          check_record_arrays, single_track_rk4_rows,
-                         lateral_side_halfplane_arrays, path_frame_rows, plan_poses_rows)
+                         lateral_side_halfplane_arrays, path_frame_rows, plan_poses_rows, None)

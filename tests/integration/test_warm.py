@@ -60,8 +60,9 @@ def test_a_wrong_argument_is_one_line(args):
 
 def test_kernels_only_puts_every_kernel_in_numbas_cache(tmp_path):
     """``--kernels-only`` (the other core's half of make install: ``api.warm_compiled_kernels``)
-    leaves each of the eleven loop kernels the runs call (a lone member's and the lockstep
-    engine's batched ones: the plants' rows, the path frames' and plans' rows) and the
+    leaves each of the twelve loop kernels the runs call (a lone member's and the lockstep
+    engine's batched ones: the plants' rows, the path frames' and plans' rows, DAQP's batched
+    caller) and the
     ledgers' bootstrap kernels compiled in an empty numba cache (NUMBA_CACHE_DIR), and compiles
     no project module list of its own. (One warm run for both checks: each compiles every
     kernel, about 20 s.)"""
@@ -78,5 +79,5 @@ def test_kernels_only_puts_every_kernel_in_numbas_cache(tmp_path):
                        "compiled.walsh_medians", "compiled._count_at_most",
                        "compiled._order_statistic", "path.plan_poses_arrays",
                        "prediction_check.check_record_arrays", "path_rows.path_frame_rows",
-                       "path_rows.plan_poses_rows"}, indexed
-    assert len(list(tmp_path.rglob("*.nbc"))) >= 14  # the compiled code beside each index
+                       "path_rows.plan_poses_rows", "daqp_rows.daqp_condensed_rows"}, indexed
+    assert len(list(tmp_path.rglob("*.nbc"))) >= 15  # the compiled code beside each index

@@ -197,8 +197,9 @@ def test_engine_steps_every_member_once_per_step(make_config):
 
 def test_default_lateral_mpcs_share_one_path_frame_call_per_step(make_config):
     """The members whose controller is the default statement have their path frames computed
-    in one compiled call per step (and their plans' poses in another), the others (the fixed
-    frame here) step alone: every member's run is still its run alone."""
+    in one compiled call per step (and their plans' poses in another, their DAQP QPs in a
+    third), the others (the fixed frame here) step alone: every member's run is still its run
+    alone."""
     runs = _members(make_config, ["method=improved", "controller.backend=daqp"], 3) \
         + _members(make_config, ["method=baseline", "controller.frame=fixed"], 2)
     cache = QpCache(compiled_kernels=True)
@@ -211,11 +212,19 @@ def test_default_lateral_mpcs_share_one_path_frame_call_per_step(make_config):
         rows.append(targets.shape[0])
         return kernels.path_frame_rows(targets, *args)
 
-    counted = kernels._replace(path_frame_rows=path_frame_rows)
+    solved = []
+
+    def daqp_rows(functions, workspaces, *args):
+        solved.append(workspaces.shape[0])
+        return kernels.daqp_rows(functions, workspaces, *args)
+
+    counted = kernels._replace(path_frame_rows=path_frame_rows, daqp_rows=daqp_rows)
     together = simulate_members(runs, cache, counted)
     lengths = [len(result.trajectory) for result in together[:3]]
-    # one call per step while two or more default members run (a lone one steps alone)
+    # one call per step while two or more default members run (a lone one steps alone); their
+    # DAQP QPs in one call of the compiled caller on the same steps
     assert rows and set(rows) <= {2, 3}
+    assert solved == rows
     assert len(rows) == sum(sum(length > k + 1 for length in lengths) >= 2
                             for k in range(max(lengths)))
     for (cfg, scenario), engine in zip(runs, together, strict=True):

@@ -133,8 +133,6 @@ class LateralMpc:
             U = solution.value("U").reshape(-1)
             plan = U @ self.blocking
             if isfinite(sum(plan.tolist())):
-                plan = plan[None, :]
-                self.fallback.accept(plan)
                 # the eliminated states, for the log and the slack: X = free + Gamma U
                 predicted = data.free + data.prediction.gamma @ U
                 states = np.concatenate([inputs.x0[:, None], predicted.T], axis=1)
@@ -146,9 +144,22 @@ class LateralMpc:
                 if np.count_nonzero(gain) or np.count_nonzero(bound):
                     lateral = states[0, 1:][:, None]
                     slack = (bound - gain * lateral).max()
-                return ControlStep(plan[:, 0].copy(), plan, states, solution.status,
-                                   solution.iterations, solution.solve_time_s, "none",
-                                   float(max(slack, 0.0)), log or {})
+                return self.accepted(plan, states, solution, slack, log)
+        return self.fall_back(inputs, solution, log)
+
+    def accepted(self, plan: np.ndarray, states: np.ndarray, solution: QpSolution,
+                 slack: float, log: dict[str, Any] | None) -> ControlStep:
+        """The step of a solved QP: its plan (``U`` blocked, shape (N,)), the predicted
+        states (5, N + 1) and the slack the plan needs."""
+        plan = plan[None, :]
+        self.fallback.accept(plan)
+        return ControlStep(plan[:, 0].copy(), plan, states, solution.status,
+                           solution.iterations, solution.solve_time_s, "none",
+                           float(max(slack, 0.0)), log or {})
+
+    def fall_back(self, inputs: MpcInputs, solution: QpSolution,
+                  log: dict[str, Any] | None) -> ControlStep:
+        """The step of a failed solve (:class:`~pipeline.loop.controller.base.PlanFallback`)."""
         delta = inputs.x0[4] if np.isfinite(inputs.x0[4]) else 0.0
         rate_max = self.vehicle.steering_rate_max_rad_s
         ts = self.sample_time_s

@@ -33,6 +33,7 @@ one :class:`~pipeline.loop.controller.lateral_backends.DaqpCondensedQp` hands DA
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -222,6 +223,18 @@ class CondensedPrediction:
                    steering_gamma_w, chol_inv.ravel(order="F"),
                    steering_gamma_w.ravel(order="F"),
                    fortran(disturbance_map.reshape(-1, n)))
+
+    @cached_property
+    def pack(self) -> np.ndarray:
+        """The maps the compiled DAQP caller reads, in one contiguous array (its layout:
+        :func:`pipeline.loop.controller.daqp_rows.pack_offsets`; each matrix in the order it
+        has here, so a view of the pack is the same matrix to BLAS)."""
+        return np.concatenate([self.free_map.ravel(order="F"),
+                               self.disturbance_map.ravel(order="F"), self.cost_root,
+                               self.cost_index.astype(float), self.root_weights,
+                               np.ascontiguousarray(self.gamma).ravel(),
+                               self.gradient_map.ravel(order="F"),
+                               np.ascontiguousarray(self.hessian_u).ravel()])
 
     def free_response(self, x0: np.ndarray, disturbance: np.ndarray) -> np.ndarray:
         """States at steps 1..N with ``U = 0`` (shape (N, 5)); ``disturbance`` is (5, N)."""

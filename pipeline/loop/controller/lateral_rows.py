@@ -14,7 +14,9 @@ tests hold the two equal bit for bit). Any other controller steps alone.
 
 from __future__ import annotations
 
+import time
 from collections.abc import Sequence
+from math import isfinite
 from typing import Any
 
 import numpy as np
@@ -22,8 +24,10 @@ import numpy as np
 from pipeline.loop.controller.base import ControlStep, Observation
 from pipeline.loop.controller.frames import PathFrame
 from pipeline.loop.controller.lateral import LateralMpc
+from pipeline.loop.controller.lateral_backends import DaqpCondensedQp
 from pipeline.loop.controller.lateral_qp import MpcInputs
 from pipeline.loop.controller.path import ReferencePath
+from pipeline.loop.controller.qp import NON_FINITE_DATA, QpSolution
 from pipeline.loop.kernels import Kernels
 
 __all__ = ["batch_key", "lateral_steps"]
@@ -102,13 +106,32 @@ def lateral_steps(controllers: Sequence[LateralMpc], observations: Sequence[Obse
         targets, line_cos_sin, extend, kappa, ds, n_intervals, positions, speeds, speed_refs,
         vy_gains, steps_s, N, time_constants, accel_max, plans_xy, plans_course, plan_lengths,
         obstacles, starts, radii, M, reach, margins, activation, constrained)
-    steps, inputs_of = [], []
+    inputs_of, logs = [], []
     for i, (mpc, obs) in enumerate(zip(controllers, observations, strict=True)):
         inputs, log = _inputs(mpc, obs, i, points, headings, curvature, beyond, frame_values,
                               stations, r_d, vx, G, h, float(ds[i]), int(n_intervals[i]),
                               step_times[i])
-        steps.append(mpc.solve(inputs, log))
         inputs_of.append(inputs)
+        logs.append(log)
+    steps: list[ControlStep | None] = [None] * n
+    native = [i for i, (mpc, inputs) in enumerate(zip(controllers, inputs_of, strict=True))
+              if kernels.daqp_rows is not None and _native_daqp(mpc)
+              and isfinite(sum(inputs.x0.tolist()))]
+    if native:
+        for i, step in zip(native, _daqp_steps([controllers[i] for i in native],
+                                               [inputs_of[i] for i in native],
+                                               [logs[i] for i in native], kernels),
+                           strict=True):
+            steps[i] = step
+    for i, mpc in enumerate(controllers):
+        if steps[i] is None:
+            steps[i] = mpc.solve(inputs_of[i], logs[i])
+    return _finish(controllers, inputs_of, [s for s in steps if s is not None], kernels)
+
+
+def _finish(controllers: Sequence[LateralMpc], inputs_of: Sequence[MpcInputs],
+            steps: list[ControlStep], kernels: Kernels) -> list[ControlStep]:
+    """After the solves: the frames' plans (:func:`_after_steps`) and the records."""
     _after_steps(controllers, steps, kernels)
     for mpc, inputs, step in zip(controllers, inputs_of, steps, strict=True):
         mpc.keep_record(inputs, step.predicted_states[0] if step.predicted_states is not None
@@ -168,3 +191,110 @@ def _after_steps(controllers: Sequence[LateralMpc], steps: Sequence[ControlStep]
     for row, i in enumerate(solved):
         frames[i].plan_poses((xy[row], course[row]))  # type: ignore[union-attr]
 
+
+
+def _native_daqp(mpc: LateralMpc) -> bool:
+    """Whether ``mpc`` solves on a kept native DAQP workspace (backend ``daqp``, the DAQP
+    release whose structures we know, no road rows)."""
+    qp = mpc.qp
+    return isinstance(qp, DaqpCondensedQp) and qp.native is not None \
+        and qp.s.max_obstacles == mpc.cfg.max_obstacles
+
+
+def _daqp_steps(controllers: Sequence[LateralMpc], inputs_of: Sequence[MpcInputs],
+                logs: Sequence[dict[str, Any]], kernels: Kernels) -> list[ControlStep]:
+    """:meth:`LateralMpc.solve <pipeline.loop.controller.lateral.LateralMpc.solve>` of each
+    member (finite measured state, native DAQP) with the condensing, DAQP's calls and the
+    plan's read-out of all of them in one compiled call
+    (:func:`~pipeline.loop.controller.daqp_rows.daqp_condensed_rows`); each member's solve
+    time is the call's time over the members (what its share cost)."""
+    from pipeline.loop.controller.daqp_rows import pack_offsets
+
+    assert kernels.daqp_rows is not None
+    n = len(controllers)
+    first = controllers[0]
+    N, nc, M = first.horizon, first.cfg.control_horizon, first.cfg.max_obstacles
+    # members of other move counts (a tune's trials) are solved in calls of their own
+    if any(mpc.cfg.control_horizon != nc for mpc in controllers):
+        groups: dict[int, list[int]] = {}
+        for i, mpc in enumerate(controllers):
+            groups.setdefault(mpc.cfg.control_horizon, []).append(i)
+        out: list[ControlStep | None] = [None] * n
+        for members in groups.values():
+            for i, step in zip(members, _daqp_steps([controllers[i] for i in members],
+                                                    [inputs_of[i] for i in members],
+                                                    [logs[i] for i in members], kernels),
+                               strict=True):
+                out[i] = step
+        return [step for step in out if step is not None]
+    qps = [mpc.qp for mpc in controllers]
+    predictions = [mpc.prediction(inputs.model) for mpc, inputs in
+                   zip(controllers, inputs_of, strict=True)]
+    workspaces = np.empty((n, 5), dtype=np.int64)
+    packs = np.empty(n, dtype=np.int64)
+    blockings, x0s = np.empty((n, nc, N)), np.empty((n, 5))
+    disturbances, disturbed = np.empty((n, N)), np.empty(n, dtype=np.bool_)
+    y_refs, psi_refs = np.empty((n, N)), np.empty((n, N))
+    r_refs, delta_refs = np.zeros((n, N)), np.zeros((n, N))
+    has_r, has_delta = np.zeros(n, dtype=np.bool_), np.zeros(n, dtype=np.bool_)
+    gains, bounds = np.empty((n, N, M)), np.empty((n, N, M))
+    steering_max, hessian_new = np.empty(n), np.empty(n, dtype=np.bool_)
+    iter_limits = np.empty(n, dtype=np.int64)
+    for i, (mpc, qp, prediction, inputs) in enumerate(zip(controllers, qps, predictions,
+                                                          inputs_of, strict=True)):
+        assert isinstance(qp, DaqpCondensedQp) and qp.native is not None
+        workspaces[i, :4] = qp.native.addresses
+        workspaces[i, 4] = qp.native.ready[0]
+        packs[i] = prediction.pack.ctypes.data
+        blockings[i], x0s[i] = mpc.blocking, inputs.x0
+        disturbances[i] = inputs.disturbance_rad_s
+        disturbed[i] = bool(np.count_nonzero(inputs.disturbance_rad_s))
+        y_refs[i], psi_refs[i] = inputs.y_ref_m, inputs.psi_ref_rad
+        if inputs.r_ref_rad_s is not None:
+            r_refs[i], has_r[i] = inputs.r_ref_rad_s, True
+        if inputs.delta_ref_rad is not None:
+            delta_refs[i], has_delta[i] = inputs.delta_ref_rad, True
+        gains[i], bounds[i] = inputs.constraint_gain, inputs.constraint_bound
+        steering_max[i] = qp.s.steering_max_rad
+        hessian_new[i] = prediction.hessian_u is not qp._hessian_of
+        iter_limits[i] = qp.max_iter
+    assert isinstance(qps[0], DaqpCondensedQp)
+    functions = _function_addresses(qps[0])
+    start = time.perf_counter()
+    exitflags, iterations, _, plans, states, slacks, plan_finite = kernels.daqp_rows(
+        functions, workspaces, packs, np.asarray(pack_offsets(N, nc), dtype=np.int64), nc, N,
+        M, blockings, x0s, disturbances, disturbed, y_refs, psi_refs, r_refs, has_r,
+        delta_refs, has_delta, gains, bounds, steering_max, hessian_new, iter_limits)
+    share = (time.perf_counter() - start) / n
+    steps = []
+    for i, (mpc, qp, prediction, inputs) in enumerate(zip(controllers, qps, predictions,
+                                                          inputs_of, strict=True)):
+        assert isinstance(qp, DaqpCondensedQp) and qp.native is not None
+        flag = int(exitflags[i])
+        if flag == -100:  # daqp_rows.NON_FINITE_FLAG: not solved, the workspace untouched
+            solution = QpSolution(NON_FINITE_DATA, -1, share, None)
+        else:
+            if workspaces[i, 4] and not qp.native.ready[0]:  # set up on this step
+                qp.native.ready[0] = 1
+                qp.native.check_layout()
+            qp._hessian_of = None if flag == -101 else prediction.hessian_u
+            status = "solver_error" if flag == -101 \
+                else qp.STATUS.get(flag, "solver_error")
+            solution = QpSolution(status, int(iterations[i]) if flag != -101 else -1, share,
+                                  {} if status == "optimal" else None)
+        if solution.ok and plan_finite[i]:
+            steps.append(mpc.accepted(plans[i], states[i], solution, float(slacks[i]),
+                                      logs[i]))
+        else:
+            steps.append(mpc.fall_back(inputs, solution, logs[i]))
+    return steps
+
+
+def _function_addresses(qp: DaqpCondensedQp) -> np.ndarray:
+    """DAQP's function addresses and a scratch double for its setup time (the compiled
+    caller's first argument)."""
+    assert qp.native is not None
+    functions = qp.native.functions
+    return np.array([functions.allocate_settings, functions.setup, functions.update,
+                     functions.solve, functions.free_workspace, functions.free_ldp,
+                     qp.native.setup_time.ctypes.data], dtype=np.int64)
