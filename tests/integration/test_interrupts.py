@@ -240,3 +240,40 @@ def test_a_stopped_pool_prints_nothing_from_loky_s_thread(make_config, tmp_path)
         threading.excepthook = previous
     assert [type(e).__name__ for e in raised] == ["ValueError"]
     assert not pool._futures
+
+
+class _PlantedSolver:
+    """A CasADi solver whose result's conversion to numpy fails as CasADi's did when SIGINT
+    arrived there: a SystemError caused by the interrupt (or by something else)."""
+
+    def __init__(self, cause: BaseException) -> None:
+        self.cause = cause
+
+    def __call__(self, **arguments):
+        cause = self.cause
+
+        class Result:
+            def __array__(self, dtype=None, copy=None):
+                try:
+                    raise cause
+                except BaseException as exc:
+                    raise SystemError("returned a result with an exception set") from exc
+
+        return {"x": Result()}
+
+    @staticmethod
+    def stats():
+        return {"return_status": "Solve_Succeeded", "iter_count": 3}
+
+
+def test_an_interrupt_inside_the_results_conversion_is_an_interrupt():
+    """SIGINT just after IPOPT returned, while numpy converts CasADi's result: numpy wraps the
+    interrupt in a SystemError; ipopt_solve raises the interrupt itself (seen on a loaded
+    machine in test_ctrl_c_inside_ipopt_is_an_interrupt_never_a_failed_solve), and any other
+    SystemError stays what it is."""
+    from pipeline.loop.controller.nmpc import ipopt_solve
+
+    with pytest.raises(KeyboardInterrupt):
+        ipopt_solve(_PlantedSolver(KeyboardInterrupt()))
+    with pytest.raises(SystemError):
+        ipopt_solve(_PlantedSolver(ValueError("not an interrupt")))

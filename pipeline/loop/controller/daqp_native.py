@@ -153,14 +153,12 @@ class NativeDaqp:
         result = self.result.view(np.int64)
         result[RESULT_X // 8] = address + 8 * self.offsets[5]
         result[RESULT_LAM // 8] = address + 8 * self.offsets[6]
+        #: the buffer's, problem's, result's and workspace's addresses (the compiled caller's
+        #: arguments; the arrays never move)
+        self.addresses = (address, self.problem.ctypes.data, self.result.ctypes.data,
+                          self.workspace.ctypes.data)
         weakref.finalize(self, _free, functions, self.workspace, self.ready)
 
-    @property
-    def addresses(self) -> tuple[int, int, int, int]:
-        """The buffer's, problem's, result's and workspace's addresses (the compiled
-        caller's arguments)."""
-        return (self.buffer.ctypes.data, self.problem.ctypes.data, self.result.ctypes.data,
-                self.workspace.ctypes.data)
 
     def setup(self) -> int:
         """``daqp.Model.setup`` on the data in the buffer: DAQP's default settings, the

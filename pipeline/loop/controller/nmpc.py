@@ -66,6 +66,13 @@ def ipopt_solve(solver: Any, **arguments: Any) -> tuple[str, int, float, np.ndar
             values = np.asarray(result["x"], dtype=float).ravel()
         except RuntimeError:  # CasADi raises on evaluation errors (NaN in the NLP)
             status = "error:RuntimeError"
+        except SystemError as exc:
+            # a signal while numpy converts CasADi's result: numpy reports the interrupt the
+            # conversion raised as a SystemError caused by it (seen on a loaded machine)
+            cause = exc.__cause__ or exc.__context__
+            if isinstance(cause, KeyboardInterrupt):
+                raise cause from None
+            raise
     elapsed = time.perf_counter() - began
     return status, iterations, elapsed, values
 
