@@ -9,6 +9,7 @@ import json
 import os
 import tempfile
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pandas as pd
@@ -143,11 +144,10 @@ def as_written(values: np.ndarray) -> np.ndarray:
                      for v in np.asarray(values, float).tolist()], float)
 
 
-def _csv_cells(column: pd.Series) -> list[str] | None:
+def _csv_cells(kind: str, values: list[Any]) -> list[str] | None:
     """One column's cells as pandas writes them (``%.10g`` floats, empty for missing values),
-    or None when the column needs pandas (quoting, an unusual dtype)."""
-    kind = column.dtype.kind
-    values = column.to_numpy().tolist()
+    or None when the column needs pandas (quoting, an unusual dtype); ``kind`` is its dtype's
+    kind, ``values`` its cells as Python objects."""
     if kind == "f":
         # printf's %g, the format every table was written with (byte-identical files)
         return ["" if v != v else CSV_FLOAT_FORMAT % v for v in values]
@@ -174,8 +174,14 @@ def csv_text(frame: pd.DataFrame) -> str:
     at a fraction of its cost for the plain tables the pipeline writes (floats, flags, short
     words); anything else (cells that need quoting, other dtypes) goes through pandas itself."""
     names = [str(c) for c in frame.columns]
-    columns = [_csv_cells(frame[c]) for c in frame.columns] \
-        if frame.shape[1] >= 2 and frame.columns.is_unique else [None]
+    columns: list[list[str] | None] = [None]
+    if frame.shape[1] >= 2 and frame.columns.is_unique:
+        # every cell as a Python object in one conversion (a column taken as a Series costs
+        # more than formatting it); floats, ints and flags convert to the same values
+        # ``column.to_numpy().tolist()`` gives
+        cells = frame.to_numpy(dtype=object)
+        columns = [_csv_cells(dtype.kind, cells[:, j].tolist())
+                   for j, dtype in enumerate(frame.dtypes)]
     if any(c is None for c in columns) or any(ch in n for n in names for ch in _CSV_SPECIAL):
         return frame.to_csv(index=False, float_format=CSV_FLOAT_FORMAT, lineterminator="\n")
     lines = [",".join(names)]
