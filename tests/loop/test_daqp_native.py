@@ -57,6 +57,14 @@ def test_another_daqp_release_is_refused_and_a_wrong_layout_caught(monkeypatch):
     with pytest.raises(RuntimeError, match="not laid out as DAQP 0.11.0's"):
         workspace.check_layout()
     workspace.workspace[daqp_native.WORK_N] -= 1
+    # never copied: a copy's problem would point into this workspace's buffer (daqp.Model
+    # refuses the same)
+    import copy
+    import pickle
+
+    for duplicate in (copy.deepcopy, copy.copy, pickle.dumps):
+        with pytest.raises(TypeError, match="cannot be copied"):
+            duplicate(workspace)
     daqp_native.native_daqp_functions.cache_clear()
     monkeypatch.setattr(daqp_native.metadata, "version", lambda name: "0.12.0")
     try:

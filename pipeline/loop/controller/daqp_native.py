@@ -23,7 +23,7 @@ import ctypes
 import weakref
 from functools import lru_cache
 from importlib import metadata
-from typing import NamedTuple
+from typing import Any, NamedTuple
 
 import numpy as np
 
@@ -159,6 +159,11 @@ class NativeDaqp:
                           self.workspace.ctypes.data)
         weakref.finalize(self, _free, functions, self.workspace, self.ready)
 
+
+    def __reduce__(self) -> Any:
+        """Not copied nor pickled (as ``daqp.Model`` is not): the problem structure holds this
+        object's own addresses, which a copy would share."""
+        raise TypeError("a kept DAQP workspace (NativeDaqp) cannot be copied or pickled")
 
     def setup(self) -> int:
         """``daqp.Model.setup`` on the data in the buffer: DAQP's default settings, the
