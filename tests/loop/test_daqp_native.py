@@ -106,9 +106,9 @@ def _same(a, b) -> list[str]:
 
 
 def test_members_solved_in_one_call_are_each_solved_alone(make_config):
-    """Three members' QPs through the compiled call, step after step (set-up, warm starts, a
-    speed change, a NaN bound, a tight steering limit that fails), each equal to the same
-    member's LateralMpc.solve alone: the same plan, states, status, iterations, slack and
+    """Four members' QPs through the compiled call, step after step (set-up, warm starts, a
+    speed change, a NaN bound, a tight steering limit that fails, another move count), each
+    equal to the same member's LateralMpc.solve alone: the same plan, states, status, iterations, slack and
     fallback, bit for bit."""
     from pipeline.loop.compiled import COMPILED_KERNELS
 
@@ -116,7 +116,10 @@ def test_members_solved_in_one_call_are_each_solved_alone(make_config):
             make_config(["method=baseline", "controller.backend=daqp",
                          "controller.q_lateral=3.0"]),
             make_config(["method=improved", "controller.backend=daqp",
-                         "vehicle.steering_max_rad=0.001", "controller.solver_max_iter=2"])]
+                         "vehicle.steering_max_rad=0.001", "controller.solver_max_iter=2"]),
+            # another move count in the same batch (a tune's trials): a call of its own
+            make_config(["method=improved", "controller.backend=daqp",
+                         "controller.control_horizon=5"])]
 
     def controllers():
         return [LateralMpc(c.controller, c.vehicle, c.model, c.scenario.sample_time_s,
@@ -126,12 +129,12 @@ def test_members_solved_in_one_call_are_each_solved_alone(make_config):
     rng = np.random.default_rng(7)
     statuses = set()
     for step in range(12):
-        speeds = [3.0 if step < 6 else 2.5, 3.0, 4.0]
+        speeds = [3.0 if step < 6 else 2.5, 3.0, 4.0, 3.5]
         inputs = [_inputs(mpc, rng, speed, bad_bound=(step == 4 and i == 1))
                   for i, (mpc, speed) in enumerate(zip(alone, speeds, strict=True))]
         expected = [mpc.solve(x, {}) for mpc, x in zip(alone, inputs, strict=True)]
         got = _daqp_steps(together, inputs, [{} for _ in inputs], COMPILED_KERNELS)
-        assert [_same(e, g) for e, g in zip(expected, got, strict=True)] == [[], [], []]
+        assert [_same(e, g) for e, g in zip(expected, got, strict=True)] == [[]] * len(cfgs)
         statuses |= {(e.status, e.fallback) for e in expected}
     assert ("optimal", "none") in statuses
     assert ("non_finite_data", "shifted_plan") in statuses
