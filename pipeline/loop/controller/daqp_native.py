@@ -52,6 +52,9 @@ SETTINGS_ITER_LIMIT = 44
 # and the constraint states of the last solve; the Hessian's bit when the model changed
 UPDATE_RINV, UPDATE_M, UPDATE_V, UPDATE_D, UPDATE_SENSE = 1, 2, 4, 8, 16
 UPDATE_STEP = UPDATE_M | UPDATE_V | UPDATE_D | UPDATE_SENSE
+#: the compiled caller's exit flag for data that are not finite (not solved, the workspace
+#: untouched) and for a setup that failed (DAQP's own flag is not kept)
+NON_FINITE_FLAG, SETUP_FAILED_FLAG = -100, -101
 
 
 class DaqpFunctions(NamedTuple):

@@ -29,38 +29,24 @@ from numba import carray, farray, types
 from numba.extending import intrinsic
 
 from pipeline.loop.controller.daqp_native import (
+    NON_FINITE_FLAG,
     PROBLEM_SENSE,
     RESULT_EXITFLAG,
     RESULT_ITER,
     SETTINGS_ITER_LIMIT,
+    SETUP_FAILED_FLAG,
     UPDATE_RINV,
     UPDATE_STEP,
     WORK_SENSE,
     WORK_SETTINGS,
 )
 
-__all__ = ["daqp_condensed_rows", "pack_offsets"]
+__all__ = ["daqp_condensed_rows"]
 
 
 def _intrinsic(function: Callable[..., Any]) -> Any:
     """``numba.extending.intrinsic`` (typed for mypy)."""
     return intrinsic(function)
-
-
-#: :func:`daqp_condensed_rows`' exit flag for data that are not finite (no solve)
-NON_FINITE_FLAG = -100
-#: its exit flag for a setup that failed (DAQP's flag is not kept)
-SETUP_FAILED_FLAG = -101
-
-
-def pack_offsets(horizon: int, control_horizon: int) -> tuple[int, ...]:
-    """Where each map starts in a prediction's pack, and the pack's length: ``free_map``
-    (5N x 5, F), ``disturbance_map`` (5N x N, F), ``cost_root`` (4N), ``cost_index`` (4N),
-    ``root_weights`` (4), ``gamma`` (N x 5 x Nc, C), ``gradient_map`` (Nc x 4N, F),
-    ``hessian_u`` (Nc x Nc, C)."""
-    N, nc = horizon, control_horizon
-    sizes = (25 * N, 5 * N * N, 4 * N, 4 * N, 4, 5 * N * nc, 4 * N * nc, nc * nc)
-    return tuple(int(v) for v in np.concatenate([[0], np.cumsum(sizes)]))
 
 
 @_intrinsic
@@ -183,9 +169,10 @@ def daqp_condensed_rows(functions: np.ndarray, workspaces: np.ndarray, packs: np
         Each member's :attr:`NativeDaqp.addresses` and whether it is set up (0: set it up on
         this step's data).
     packs : int64 array (n,)
-        The address of each member's prediction pack (:func:`pack_offsets`).
+        The address of each member's prediction pack
+        (:func:`~pipeline.loop.controller.lateral_qp.pack_offsets`).
     offsets : int64 array
-        :func:`pack_offsets`.
+        :func:`~pipeline.loop.controller.lateral_qp.pack_offsets`.
     n_u, horizon, slots : int
         Moves ``Nc``, horizon ``N``, obstacle slots ``M`` (all members alike).
     blockings : (n, Nc, N)
@@ -203,7 +190,8 @@ def daqp_condensed_rows(functions: np.ndarray, workspaces: np.ndarray, packs: np
     Returns
     -------
     exitflags, iterations : int64 (n,)
-        DAQP's (``NON_FINITE_FLAG``: data not finite, not solved; ``SETUP_FAILED_FLAG``).
+        DAQP's (:data:`~pipeline.loop.controller.daqp_native.NON_FINITE_FLAG`: data not
+        finite, not solved; ``SETUP_FAILED_FLAG``: the setup failed).
     moves : (n, Nc)
     plans : (n, N)
         ``U @ blocking``.

@@ -95,6 +95,14 @@ class DaqpCondensedQp:
         # the hessian_u array the workspace holds (one per speed)
         self._hessian_of: np.ndarray | None = None
 
+    def holds_hessian(self, hessian_u: np.ndarray) -> bool:
+        """Whether the workspace holds ``hessian_u`` (the same model's: no update of it)."""
+        return hessian_u is self._hessian_of
+
+    def solved_with(self, hessian_u: np.ndarray | None) -> None:
+        """Note the Hessian a solve left in the workspace (None: its setup failed)."""
+        self._hessian_of = hessian_u
+
     @property
     def set_up(self) -> bool:
         """Whether the workspace holds a problem (its first solve set it up)."""

@@ -71,6 +71,16 @@ class MpcInputs:
             else np.zeros(self.y_ref_m.shape[0])
 
 
+def pack_offsets(horizon: int, control_horizon: int) -> tuple[int, ...]:
+    """Where each map starts in a prediction's pack, and the pack's length: ``free_map``
+    (5N x 5, F), ``disturbance_map`` (5N x N, F), ``cost_root`` (4N), ``cost_index`` (4N),
+    ``root_weights`` (4), ``gamma`` (N x 5 x Nc, C), ``gradient_map`` (Nc x 4N, F),
+    ``hessian_u`` (Nc x Nc, C)."""
+    N, nc = horizon, control_horizon
+    sizes = (25 * N, 5 * N * N, 4 * N, 4 * N, 4, 5 * N * nc, 4 * N * nc, nc * nc)
+    return tuple(int(v) for v in np.concatenate([[0], np.cumsum(sizes)]))
+
+
 #: The tracking weights of an unweighted prediction (all states at 1, no rate cost).
 UNIT_TRACKING = (1.0, 1.0, 1.0, 1.0, 0.0)
 
@@ -227,8 +237,8 @@ class CondensedPrediction:
     @cached_property
     def pack(self) -> np.ndarray:
         """The maps the compiled DAQP caller reads, in one contiguous array (its layout:
-        :func:`pipeline.loop.controller.daqp_rows.pack_offsets`; each matrix in the order it
-        has here, so a view of the pack is the same matrix to BLAS)."""
+        :func:`pack_offsets`; each matrix in the order it has here, so a view of the pack is
+        the same matrix to BLAS)."""
         return np.concatenate([self.free_map.ravel(order="F"),
                                self.disturbance_map.ravel(order="F"), self.cost_root,
                                self.cost_index.astype(float), self.root_weights,

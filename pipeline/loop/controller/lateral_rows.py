@@ -22,10 +22,11 @@ from typing import Any
 import numpy as np
 
 from pipeline.loop.controller.base import ControlStep, Observation
+from pipeline.loop.controller.daqp_native import NON_FINITE_FLAG, SETUP_FAILED_FLAG
 from pipeline.loop.controller.frames import PathFrame
 from pipeline.loop.controller.lateral import LateralMpc
 from pipeline.loop.controller.lateral_backends import DaqpCondensedQp
-from pipeline.loop.controller.lateral_qp import MpcInputs
+from pipeline.loop.controller.lateral_qp import MpcInputs, pack_offsets
 from pipeline.loop.controller.path import ReferencePath
 from pipeline.loop.controller.qp import NON_FINITE_DATA, QpSolution
 from pipeline.loop.kernels import Kernels
@@ -192,7 +193,6 @@ def _after_steps(controllers: Sequence[LateralMpc], steps: Sequence[ControlStep]
         frames[i].plan_poses((xy[row], course[row]))  # type: ignore[union-attr]
 
 
-
 def _native_daqp(mpc: LateralMpc) -> bool:
     """Whether ``mpc`` solves on a kept native DAQP workspace (backend ``daqp``, the DAQP
     release whose structures we know, no road rows)."""
@@ -208,8 +208,6 @@ def _daqp_steps(controllers: Sequence[LateralMpc], inputs_of: Sequence[MpcInputs
     plan's read-out of all of them in one compiled call
     (:func:`~pipeline.loop.controller.daqp_rows.daqp_condensed_rows`); each member's solve
     time is the call's time over the members (what its share cost)."""
-    from pipeline.loop.controller.daqp_rows import pack_offsets
-
     assert kernels.daqp_rows is not None
     n = len(controllers)
     first = controllers[0]
@@ -256,7 +254,7 @@ def _daqp_steps(controllers: Sequence[LateralMpc], inputs_of: Sequence[MpcInputs
             delta_refs[i], has_delta[i] = inputs.delta_ref_rad, True
         gains[i], bounds[i] = inputs.constraint_gain, inputs.constraint_bound
         steering_max[i] = qp.s.steering_max_rad
-        hessian_new[i] = prediction.hessian_u is not qp._hessian_of
+        hessian_new[i] = not qp.holds_hessian(prediction.hessian_u)
         iter_limits[i] = qp.max_iter
     assert isinstance(qps[0], DaqpCondensedQp)
     functions = _function_addresses(qps[0])
@@ -271,16 +269,16 @@ def _daqp_steps(controllers: Sequence[LateralMpc], inputs_of: Sequence[MpcInputs
                                                           inputs_of, strict=True)):
         assert isinstance(qp, DaqpCondensedQp) and qp.native is not None
         flag = int(exitflags[i])
-        if flag == -100:  # daqp_rows.NON_FINITE_FLAG: not solved, the workspace untouched
+        if flag == NON_FINITE_FLAG:  # not solved, the workspace untouched
             solution = QpSolution(NON_FINITE_DATA, -1, share, None)
         else:
             if workspaces[i, 4] and not qp.native.ready[0]:  # set up on this step
                 qp.native.ready[0] = 1
                 qp.native.check_layout()
-            qp._hessian_of = None if flag == -101 else prediction.hessian_u
-            status = "solver_error" if flag == -101 \
-                else qp.STATUS.get(flag, "solver_error")
-            solution = QpSolution(status, int(iterations[i]) if flag != -101 else -1, share,
+            failed = flag == SETUP_FAILED_FLAG
+            qp.solved_with(None if failed else prediction.hessian_u)
+            status = "solver_error" if failed else qp.STATUS.get(flag, "solver_error")
+            solution = QpSolution(status, -1 if failed else int(iterations[i]), share,
                                   {} if status == "optimal" else None)
         if solution.ok and plan_finite[i]:
             steps.append(mpc.accepted(plans[i], states[i], solution, float(slacks[i]),
