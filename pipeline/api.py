@@ -35,8 +35,9 @@ __all__ = ["FamilyResult", "RunResult", "compare", "compose", "simulate", "simul
 #: The runs whose compiled kernels ``warm_compiled_kernels`` puts in numba's cache: the path
 #: frame (the default), the fixed frame, the baseline, and the Appendix-A track.
 WARM_RUNS: tuple[tuple[str, ...], ...] = (
-    (), ("controller.frame=fixed",), ("method=baseline",), ("controller.path_reference=pursuit",),
-    ("controller.backend=daqp",),  # the tune's backend: DAQP's batched caller (daqp_rows)
+    (), ("controller.frame=fixed",),
+    ("method=baseline", "controller.backend=daqp"),  # the tune's backend: DAQP's batched caller
+    ("controller.path_reference=pursuit",),
     ("experiment=kinematic", "planner=improved", "hydra.mode=RUN"))
 
 
