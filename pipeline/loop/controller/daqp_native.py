@@ -58,15 +58,14 @@ NON_FINITE_FLAG, SETUP_FAILED_FLAG = -100, -101
 
 
 class DaqpFunctions(NamedTuple):
-    """The C functions' addresses (for the compiled caller) and their ctypes callables."""
+    """The C functions' ctypes callables (``library``) and, for the compiled caller, their
+    addresses (``arguments``: allocate_daqp_settings, setup_daqp_main, daqp_update_ldp,
+    daqp_solve, free_daqp_workspace, free_daqp_ldp, then the address of ``setup_time``, a
+    double where DAQP writes its setup time, never read)."""
 
-    allocate_settings: int
-    setup: int
-    update: int
-    solve: int
-    free_workspace: int
-    free_ldp: int
     library: ctypes.CDLL
+    arguments: np.ndarray
+    setup_time: np.ndarray
 
 
 @lru_cache(maxsize=1)
@@ -93,17 +92,19 @@ def native_daqp_functions() -> DaqpFunctions | None:
     handles[3].argtypes, handles[3].restype = [pointer, pointer], None
     handles[4].argtypes, handles[4].restype = [pointer], None
     handles[5].argtypes, handles[5].restype = [pointer], None
-    addresses = [ctypes.cast(h, ctypes.c_void_p).value or 0 for h in handles]
-    return DaqpFunctions(addresses[0], addresses[1], addresses[2], addresses[3], addresses[4],
-                         addresses[5], library)
+    setup_time = np.zeros(1)
+    arguments = np.array([ctypes.cast(h, ctypes.c_void_p).value or 0 for h in handles]
+                         + [setup_time.ctypes.data], dtype=np.int64)
+    return DaqpFunctions(library, arguments, setup_time)
 
 
 def _free(functions: DaqpFunctions, workspace: np.ndarray, ready: np.ndarray) -> None:
     """Free what DAQP allocated in a workspace that was set up (its settings, LDP and
     iterates), as ``daqp.Model`` does when it is dropped."""
     if ready[0]:
-        functions.library.free_daqp_workspace(workspace.ctypes.data)
-        functions.library.free_daqp_ldp(workspace.ctypes.data)
+        address = workspace.ctypes.data
+        functions.library.free_daqp_workspace(address)
+        functions.library.free_daqp_ldp(address)
     ready[0] = 0
 
 
@@ -144,8 +145,6 @@ class NativeDaqp:
         self.workspace = np.zeros(WORKSPACE_BYTES, dtype=np.uint8)
         #: [1] once set up (DAQP's allocations are then freed with the workspace)
         self.ready = np.zeros(1, dtype=np.int64)
-        #: where DAQP writes its setup time (not read)
-        self.setup_time = np.zeros(1)
         ints, pointers = self.problem.view(np.int32), self.problem.view(np.int64)
         ints[PROBLEM_N // 4], ints[PROBLEM_M // 4], ints[PROBLEM_MS // 4] = n, m, n
         address = self.buffer.ctypes.data
@@ -162,7 +161,6 @@ class NativeDaqp:
                           self.workspace.ctypes.data)
         weakref.finalize(self, _free, functions, self.workspace, self.ready)
 
-
     def __reduce__(self) -> Any:
         """Not copied nor pickled (as ``daqp.Model`` is not): the problem structure holds this
         object's own addresses, which a copy would share."""
@@ -172,14 +170,13 @@ class NativeDaqp:
         """``daqp.Model.setup`` on the data in the buffer: DAQP's default settings, the
         setup, then the iteration limit; DAQP's setup flag (negative: failed, not set up)."""
         library = self.functions.library
-        work = self.workspace.ctypes.data
+        _, problem, _, work = self.addresses
         if self.ready[0]:
             library.free_daqp_workspace(work)
             library.free_daqp_ldp(work)
             self.ready[0] = 0
         library.allocate_daqp_settings(work)
-        flag = int(library.setup_daqp_main(self.problem.ctypes.data, work,
-                                           self.setup_time.ctypes.data, 0))
+        flag = int(library.setup_daqp_main(problem, work, int(self.functions.arguments[6]), 0))
         if flag < 0:  # DAQP freed its settings on failure
             self.workspace[WORK_SETTINGS:WORK_SETTINGS + 8] = 0
             return flag
@@ -194,7 +191,7 @@ class NativeDaqp:
         are not :data:`DAQP_LAYOUT_VERSION`'s fails here, before any solve."""
         ints = self.workspace[:WORK_MS + 4].view(np.int32)
         qp = int(self.workspace[WORK_QP:WORK_QP + 8].view(np.int64)[0])
-        if qp != self.problem.ctypes.data or (int(ints[WORK_N // 4]), int(ints[WORK_M // 4]),
+        if qp != self.addresses[1] or (int(ints[WORK_N // 4]), int(ints[WORK_M // 4]),
                                               int(ints[WORK_MS // 4])) != (self.n, self.m,
                                                                           self.n):
             raise RuntimeError(f"DAQP's workspace is not laid out as DAQP "
@@ -203,15 +200,15 @@ class NativeDaqp:
     def update(self, hessian: bool) -> int:
         """``daqp.Model.update`` of the constraint matrix, linear cost and bounds (and the
         Hessian when ``hessian``), the constraint states of the last solve kept."""
-        problem = self.problem.view(np.int64)
-        problem[PROBLEM_SENSE // 8] = \
+        self.problem.view(np.int64)[PROBLEM_SENSE // 8] = \
             self.workspace[WORK_SENSE:WORK_SENSE + 8].view(np.int64)[0]
         mask = UPDATE_STEP | (UPDATE_RINV if hessian else 0)
-        return int(self.functions.library.daqp_update_ldp(mask, self.workspace.ctypes.data,
-                                                          self.problem.ctypes.data))
+        _, problem, _, work = self.addresses
+        return int(self.functions.library.daqp_update_ldp(mask, work, problem))
 
     def solve(self) -> tuple[int, int]:
         """``daqp.Model.solve``: DAQP's exit flag and iterations; the solution in :attr:`x`."""
-        self.functions.library.daqp_solve(self.result.ctypes.data, self.workspace.ctypes.data)
+        _, _, result, work = self.addresses
+        self.functions.library.daqp_solve(result, work)
         flags = self.result.view(np.int32)
         return int(flags[RESULT_EXITFLAG // 4]), int(flags[RESULT_ITER // 4])

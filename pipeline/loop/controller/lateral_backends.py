@@ -103,13 +103,6 @@ class DaqpCondensedQp:
         """Note the Hessian a solve left in the workspace (None: its setup failed)."""
         self._hessian_of = hessian_u
 
-    @property
-    def set_up(self) -> bool:
-        """Whether the workspace holds a problem (its first solve set it up)."""
-        if self.native is not None:
-            return bool(self.native.ready[0])
-        return self._model is not None
-
     def cost(self, data: CondensedData) -> tuple[np.ndarray, np.ndarray]:
         """``H`` and ``f`` of the cost ``0.5 z' H z + f' z`` over ``z = [U, S]``."""
         n_u = self.n_u

@@ -33,7 +33,7 @@ one :class:`~pipeline.loop.controller.lateral_backends.DaqpCondensedQp` hands DA
 from __future__ import annotations
 
 from dataclasses import dataclass
-from functools import cached_property
+from functools import cache, cached_property
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -71,6 +71,7 @@ class MpcInputs:
             else np.zeros(self.y_ref_m.shape[0])
 
 
+@cache
 def pack_offsets(horizon: int, control_horizon: int) -> tuple[int, ...]:
     """Where each map starts in a prediction's pack, and the pack's length: ``free_map``
     (5N x 5, F), ``disturbance_map`` (5N x N, F), ``cost_root`` (4N), ``cost_index`` (4N),

@@ -256,8 +256,8 @@ def _daqp_steps(controllers: Sequence[LateralMpc], inputs_of: Sequence[MpcInputs
         steering_max[i] = qp.s.steering_max_rad
         hessian_new[i] = not qp.holds_hessian(prediction.hessian_u)
         iter_limits[i] = qp.max_iter
-    assert isinstance(qps[0], DaqpCondensedQp)
-    functions = _function_addresses(qps[0])
+    assert isinstance(qps[0], DaqpCondensedQp) and qps[0].native is not None
+    functions = qps[0].native.functions.arguments
     start = time.perf_counter()
     exitflags, iterations, _, plans, states, slacks, plan_finite = kernels.daqp_rows(
         functions, workspaces, packs, np.asarray(pack_offsets(N, nc), dtype=np.int64), nc, N,
@@ -287,12 +287,3 @@ def _daqp_steps(controllers: Sequence[LateralMpc], inputs_of: Sequence[MpcInputs
             steps.append(mpc.fall_back(inputs, solution, logs[i]))
     return steps
 
-
-def _function_addresses(qp: DaqpCondensedQp) -> np.ndarray:
-    """DAQP's function addresses and a scratch double for its setup time (the compiled
-    caller's first argument)."""
-    assert qp.native is not None
-    functions = qp.native.functions
-    return np.array([functions.allocate_settings, functions.setup, functions.update,
-                     functions.solve, functions.free_workspace, functions.free_ldp,
-                     qp.native.setup_time.ctypes.data], dtype=np.int64)
