@@ -176,6 +176,9 @@ def _hash_of(data: dict) -> str:
     data["vehicle"] = VehicleConfig.hash_view(data["vehicle"])
     if data["controller"].get("collision_constraints") is True:
         data["controller"].pop("collision_constraints")  # the default, as before the key
+    data["metrics"] = dict(data["metrics"])
+    if data["metrics"].get("pass_reading") == "ahead_of_threats":
+        data["metrics"].pop("pass_reading")  # the default, as before the key
     if "road_edge_weight" in data["controller"] and data["controller"]["road_edge_weight"] is None:
         data["controller"].pop("road_edge_weight")  # no road in the MPC, as before the key
     for section in ("planner", "controller"):

@@ -210,6 +210,18 @@ INTERPRETATION_REGISTER: tuple[RegisterEntry, ...] = (
         "recovery_heading_band_rad ('goal direction' read as heading)",
         "metrics.recovery_reading, metrics.recovery_lateral_band_m"),
     RegisterEntry(
+        "C4, C5: when every threat is passed", "Table 1: 'after avoidance' (one sudden "
+        "obstacle, passed once)",
+        "once the vehicle is ahead of every obstacle that ever threatened by both radii, for "
+        "good (ahead_of_threats); among recorded pedestrians last_threat (below), since a "
+        "walker who once threatened may walk ahead of the platform for the whole crossing: "
+        "the default found a pass in 45 of 163 clean pairs (C5 on 45, C4 on 11), last_threat "
+        "C5 on 135 and C4 on 17 (improved settles after the last threat in 29 of 200)",
+        "last_threat: from the first step after which no obstacle threatens the straight "
+        "continuation any more (make pedestrians' experiments; the obstacle collided with "
+        "threatens until the run's end)",
+        "metrics.pass_reading"),
+    RegisterEntry(
         "C5: what counts as oscillation", "Table 1: 'no sharp drops or oscillations'",
         "reversals of the lateral error after the obstacle is passed, net of the manoeuvre",
         "sign_changes_whole_run (lateral error + yaw rate over the run, the out-and-back "

@@ -26,6 +26,7 @@ class MetricsConfig(FrozenAfterValidation):
     reaction_interpolation: str = "linear"
     threat_margin_m: float = 0.5
     threat_horizon_s: Optional[float] = None
+    pass_reading: str = "ahead_of_threats"
     threat_clearance_m: float = 2.0
     near_field_m: float = 2.0
     lateral_accel: str = "vy_dot_plus_vx_r"
@@ -66,6 +67,7 @@ class MetricsConfig(FrozenAfterValidation):
         choice("metrics.repulsion_need", self.repulsion_need,
                ("threat_or_near", "threat", "clearance_band"))
         choice("metrics.recovery_reading", self.recovery_reading, ("lateral", "heading"))
+        choice("metrics.pass_reading", self.pass_reading, ("ahead_of_threats", "last_threat"))
         choice("metrics.oscillation", self.oscillation,
                 ("net_reversals_after_pass", "sign_changes_whole_run"))
         choice("metrics.collision_check", self.collision_check, ("continuous", "sampled"))

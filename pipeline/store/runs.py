@@ -395,6 +395,20 @@ def member_trajectories(folder: Path):
             raise RunFolderError(f"{member}: unreadable ({type(exc).__name__})") from None
 
 
+def member_settings(folder: Path, index: int) -> ExperimentConfig:
+    """The settings member ``index`` of a family was run with (its ``config.yaml``; a member
+    of a family whose members differ beyond their obstacles, e.g. crossings among walkers,
+    has its own start and goal). Not checked against the manifest here: read it after
+    :func:`member_trajectories` has checked the member. :class:`RunFolderError` when the
+    settings cannot be read."""
+    member = Path(folder) / f"member_{int(index):04d}"
+    try:
+        text = (member / "config.yaml").read_text()
+    except OSError as exc:
+        raise RunFolderError(f"{member}: unreadable ({type(exc).__name__})") from None
+    return _settings(member, text)[0]
+
+
 def read_family(folder: Path, members: bool = True, settings: bool = True) -> FamilyRecord:
     """Read a trusted family folder; :class:`RunFolderError` (with the reason) otherwise.
 

@@ -256,6 +256,42 @@ def test_recovery_reading_switches_between_lateral_and_heading_settling():
     assert heading["recovery_time_s"] != lateral["recovery_time_s"]
 
 
+def walker_who_walks_ahead() -> pd.DataFrame:
+    """A vehicle at 3 m/s along y = 0 and a walker ahead of it on its line at 1 m/s (a threat:
+    the vehicle closes on it), who steps aside to y = 4 m between t = 2 and 3 s and then walks
+    on at 5 m/s: the threat ends at t = 2 s, yet the vehicle is never ahead of the walker."""
+    t = np.round(np.arange(0.0, 8.0 + 1e-9, 0.1), 10)
+    frame = synthetic(t, 3.0 * t, np.zeros(t.size))
+    frame["obs0_x_m"] = np.where(t <= 2.0, 9.0 + t, np.where(t <= 3.0, 11.0, 11.0 + 5.0 * (t - 3.0)))
+    frame["obs0_y_m"] = np.clip(4.0 * (t - 2.0), 0.0, 4.0)
+    frame["obs0_radius_m"], frame["obs0_visible"] = 0.3, True
+    return frame
+
+
+def test_pass_reading_last_threat_passes_a_walker_who_stays_ahead():
+    frame = walker_who_walks_ahead()
+    ahead = metrics_json(frame, CTX, MetricsConfig())
+    last = metrics_json(frame, CTX, MetricsConfig(pass_reading="last_threat"))
+    assert ahead["threatened"] is True and last["threatened"] is True
+    # never ahead of the walker: never passed, so no recovery and no oscillation count
+    assert ahead["obstacle_passed_time_s"] is None
+    assert ahead["recovered"] is False and ahead["oscillation_count"] is None
+    # up to t = 1.9 s the walker walks the line at 1 m/s (a threat); from the row of t = 2.0 s
+    # on it steps aside at 4 m/s (its logged velocity, forward differences), and at constant
+    # velocity it is 6.7 m aside when the vehicle reaches its x: no threat from 2.0 s on
+    assert last["obstacle_passed_time_s"] == pytest.approx(2.0, abs=1e-9)
+    # the vehicle never left its line: settled at once, no reversal
+    assert last["recovered"] is True and last["recovery_time_s"] == 0.0
+    assert last["oscillation_count"] == 0
+
+
+def test_pass_reading_last_threat_never_passes_an_obstacle_collided_with():
+    frame = walker_who_walks_ahead()
+    frame["obs0_x_m"], frame["obs0_y_m"] = 12.0, 0.0  # standing on the line: driven through
+    last = metrics_json(frame, CTX, MetricsConfig(pass_reading="last_threat"))
+    assert last["collision"] is True and last["obstacle_passed_time_s"] is None
+
+
 def test_a_wider_recovery_band_settles_sooner():
     frame = out_and_back(0.4, 0)
     narrow = metrics_json(frame, CTX, MetricsConfig(recovery_lateral_band_m=0.1))
@@ -270,6 +306,7 @@ READING_VALUES = {
     "reaction_steering_band_rad": [0.02], "reaction_lateral_band_m": [0.1],
     "reaction_obstacle": ["first_visible"], "reaction_interpolation": ["sample"],
     "threat_margin_m": [0.25, 1.0], "threat_horizon_s": [3.0, 2.0],
+    "pass_reading": ["last_threat"],
     "threat_clearance_m": [1.0], "near_field_m": [1.0, 3.0], "lateral_accel": ["vx_r"],
     "smoothness_window": ["whole_run"], "repulsion_need": ["threat", "clearance_band"],
     "repulsion_onset_force": [0.5], "recovery_lateral_band_m": [0.15, 0.4],

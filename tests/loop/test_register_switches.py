@@ -46,6 +46,7 @@ SWITCH_TESTS = {
     "scenario.n_steps": "here",
     "metrics.near_field_m": "test_metrics", "metrics.repulsion_onset_force": "test_metrics",
     "metrics.recovery_reading": "test_metrics", "metrics.recovery_lateral_band_m": "test_metrics",
+    "metrics.pass_reading": "test_metrics",
     "metrics.reaction_obstacle": "test_metrics", "metrics.reaction_interpolation":
     "test_metrics", "metrics.threat_margin_m": "here", "metrics.threat_horizon_s": "here",
     "metrics.lateral_accel": "test_metrics", "metrics.smoothness_window": "here",

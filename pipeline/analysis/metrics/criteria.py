@@ -83,7 +83,9 @@ def threat_block(sig: Signals, tracks: list[ObstacleTrack], context: TrajectoryC
     (:func:`threat_horizon`); an obstacle the vehicle collides with (``colliding``) threatened
     by definition, so a collision never comes with "nothing threatened". The obstacle is passed
     when the vehicle is ahead of every obstacle that ever threatened (every visible one when
-    none did) by both radii, for good."""
+    none did) by both radii, for good; with ``pass_reading = "last_threat"`` (among walkers, who
+    may walk ahead of the vehicle for the whole run) from the first row after which no obstacle
+    threatens any more (the first appearance when none ever did)."""
     t, n = sig.t, len(sig.t)
     horizon = threat_horizon(sig, thresholds)
     ttc = np.full((n, len(tracks)), np.inf)
@@ -103,7 +105,9 @@ def threat_block(sig: Signals, tracks: list[ObstacleTrack], context: TrajectoryC
     ever = [j for j in range(len(tracks)) if threat_now[:, j].any() or j == threatening] or \
         [j for j in range(len(tracks)) if np.isfinite(appear[j])]
     passed_time = float("nan")
-    if ever:
+    if thresholds.pass_reading == "last_threat":
+        passed_time = _last_threat_passed(t, threat_now, appear, colliding)
+    elif ever:
         behind = np.ones(n, dtype=bool)
         for j in ever:
             ox = (tracks[j].position - sig.start) @ sig.line
@@ -123,6 +127,21 @@ def threat_block(sig: Signals, tracks: list[ObstacleTrack], context: TrajectoryC
                    obstacle_passed_time_s=passed_time)
     return block, ThreatGeometry(ttc, threat_now, appear, first_visible, threatening,
                                  passed_time)
+
+
+def _last_threat_passed(t: np.ndarray, threat_now: np.ndarray, appear: list[float],
+                        colliding: int | None) -> float:
+    """``pass_reading = "last_threat"``: the time of the first row after the last one on which
+    any obstacle threatened (NaN when one threatens on the last row); the first obstacle's
+    appearance when none ever threatened (NaN when none appeared). The obstacle a run collided
+    with (``colliding``) threatens until the run's end: never passed (NaN)."""
+    if colliding is not None:
+        return float("nan")
+    rows = np.nonzero(threat_now.any(axis=1))[0] if threat_now.size else np.zeros(0, int)
+    if rows.size == 0:
+        first = min(appear, default=np.inf)
+        return float(first) if np.isfinite(first) else float("nan")
+    return float(t[rows[-1] + 1]) if rows[-1] + 1 < len(t) else float("nan")
 
 
 def reaction_block(sig: Signals, geo: ThreatGeometry, thresholds: MetricsConfig) -> Reaction:
@@ -396,7 +415,7 @@ def solver_blocks(tr: pd.DataFrame) -> tuple[SolverIterations | None, Fallbacks 
 #: :func:`compute_metrics_readings` shares a criterion's result between readings on.
 SAFETY_READS = ("collision_check", "attribution_steering_samples", "attribution_switch_samples",
                 "attribution_extra_s")
-THREAT_READS = SAFETY_READS + ("threat_margin_m", "threat_horizon_s")
+THREAT_READS = SAFETY_READS + ("threat_margin_m", "threat_horizon_s", "pass_reading")
 RECOVERY_READS = THREAT_READS + ("recovery_reading", "recovery_lateral_band_m",
                                  "recovery_heading_band_rad", "recovery_heading_stop_m")
 REACTION_READS = THREAT_READS + ("reaction_obstacle", "reaction_interpolation",

@@ -22,6 +22,7 @@ from pipeline.store.runs import (
     RunFolderError,
     family_timing,
     member_folders,
+    member_settings,
     member_trajectories,
     read_family,
 )
@@ -211,11 +212,13 @@ def rescore_family(folder: Path, readings: list[MetricsConfig], out_dir: Path) -
         todo.append(metrics)
     if not todo:
         return 0
-    context = trajectory_context(family.settings)
     rows: list[list[dict]] = [[] for _ in todo]
     reads = 0
     for index, trajectory, previous in member_trajectories(folder):
         reads += 1
+        # each member's own settings: a family's members may differ beyond their obstacles
+        # (crossings among walkers each have their start and goal)
+        context = trajectory_context(member_settings(folder, index))
         keep = {k: previous.get(k) for k in ("method", "scenario", "track", "config_hash")}
         # every reading of this member in one pass (what no reading changes, computed once)
         for block, scored in zip(rows, compute_metrics_readings(trajectory, context, todo), strict=True):
