@@ -371,8 +371,9 @@ INTERPRETATION_REGISTER: tuple[RegisterEntry, ...] = (
         "along the road: the point route_lookahead_m ahead on the route's lanelet centreline "
         "(the shortest lanelet path to the goal's lanelet). On the public files it trades: at "
         "20 m ZAM_Tjunction's improved reaches the goal (133 -> 60 steps off the road) but "
-        "US101-23_1's baseline no longer does; at 40 m the junction's turn is missed again; no "
-        "road-edge constraint in the MPC",
+        "US101-23_1's baseline no longer does; at 40 m the junction's turn is missed again (no "
+        "road-edge constraint in the MPC then). With the road's edges, at 10 m: the junction "
+        "50 -> 0 steps off the road, US101-23_1 0 -> 99",
         "scenario.commonroad.route_lookahead_m"),
     RegisterEntry(
         "Success on a CommonRoad file (a choice we add)", "-",
@@ -440,3 +441,34 @@ INTERPRETATION_REGISTER: tuple[RegisterEntry, ...] = (
         "constant speed",
         "-", "(none: the methods and tracks make euro-ncap runs)"),
 )
+
+
+#: The opening of ``docs/register.md`` (:func:`register_markdown`).
+REGISTER_PAGE_OPENING = (
+    "# The interpretation register\n\n"
+    "Back to the [README](../README.md).\n\n"
+    "Every place where the paper is ambiguous, the reading this reproduction chose, the "
+    "alternatives, and the config key that flips it. The report's own register (the section "
+    "\"Interpretation register\" of its appendix page, `appendix.html`) lists the same entries "
+    "with the value each run used; this page is written from `pipeline/register.py`, the one "
+    "source of both (`python -m pipeline.register > docs/register.md`).\n\n"
+    "| topic | the paper says | our default reading | alternatives | config key |\n"
+    "|---|---|---|---|---|\n")
+
+
+def register_markdown(entries: tuple[RegisterEntry, ...] = INTERPRETATION_REGISTER) -> str:
+    """``docs/register.md``: :data:`REGISTER_PAGE_OPENING` and one table row per entry (a
+    ``|`` inside a cell escaped)."""
+
+    def cell(text: str) -> str:
+        return text.replace("|", "\\|")
+
+    rows = [f"| {cell(e.topic)} | {cell(e.paper_says)} | {cell(e.default)} | "
+            f"{cell(e.alternatives)} | `{e.config_key}` |\n" for e in entries]
+    return REGISTER_PAGE_OPENING + "".join(rows)
+
+
+if __name__ == "__main__":
+    import sys
+
+    sys.stdout.write(register_markdown())

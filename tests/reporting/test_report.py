@@ -247,3 +247,17 @@ def test_report_figure_jobs_switch(tmp_path, make_config, monkeypatch):
         assert (tmp_path / "serial" / "figures" / name).read_bytes() == \
             (tmp_path / "forked" / "figures" / name).read_bytes()
     assert report_main([str(runs), "--out", str(tmp_path / "bad"), "--figure-jobs", "0"]) == 2
+
+
+def test_the_register_page_is_the_register_itself():
+    """docs/register.md is written from pipeline/register.py (``python -m pipeline.register``):
+    it once lacked ten entries and stated two older readings."""
+    from pathlib import Path
+
+    from pipeline.register import register_markdown
+
+    page = (Path(__file__).resolve().parents[2] / "docs" / "register.md").read_text()
+    assert page == register_markdown()
+    rows = [line for line in page.splitlines() if line.startswith("| ") and "---" not in line]
+    assert len(rows) == len(INTERPRETATION_REGISTER) + 1  # the header
+    assert "| `metrics.pass_reading` |" in page and "\\|d\\|" in page  # a cell's | escaped
