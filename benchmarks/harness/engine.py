@@ -3,7 +3,6 @@ closed loop, metrics and run folder) per CPU-second."""
 
 from __future__ import annotations
 
-import dataclasses
 import tempfile
 import time
 from pathlib import Path
@@ -29,8 +28,10 @@ def bench_engine(n_members: int = 200, repeats: int = 3) -> dict:
 
     cfg = compose_config(["method=improved", "scenario=family", "controller.backend=daqp",
                           f"scenario.family.size={n_members}"])
-    members = [dataclasses.replace(cfg, scenario=member)
-               for member in family_members(cfg.scenario, cfg.vehicle.footprint_radius_m)]
+    scenarios = family_members(cfg.scenario, cfg.vehicle.footprint_radius_m)
+    # as run_family hands them to its workers: each with its config hash
+    members = [cfg.with_member(member, config_hash) for member, config_hash
+               in zip(scenarios, cfg.member_config_hashes(scenarios), strict=True)]
     cache = QpCache(compiled_kernels=True)
     engine_cpu, loop_cpu = [], []
     with tempfile.TemporaryDirectory() as tmp:

@@ -144,10 +144,17 @@ def model_speed_mps(speed_mps: float, floor_mps: float, grid_mps: float) -> floa
 
 
 def vehicle_key(vehicle: VehicleConfig) -> tuple[Any, ...]:
-    """A hashable identity of the vehicle's parameters (for caches of its models)."""
+    """A hashable identity of the vehicle's parameters (for caches of its models); kept with
+    a validated (read-only) vehicle, which a run asks for it several times."""
     from dataclasses import asdict
 
-    return tuple(sorted((k, repr(v)) for k, v in asdict(vehicle).items()))
+    memo = vehicle.__dict__.get("_vehicle_key_memo")
+    if memo is not None:
+        return memo
+    key = tuple(sorted((k, repr(v)) for k, v in asdict(vehicle).items()))
+    if vehicle.__dict__.get("_frozen", False):
+        object.__setattr__(vehicle, "_vehicle_key_memo", key)
+    return key
 
 
 @dataclass

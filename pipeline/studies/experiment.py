@@ -321,7 +321,6 @@ def _members_to_run(cfg: ExperimentConfig, members: list, out_dir: Path,
     """The metrics of the members already complete (same config hash) or restored from
     ``member_cache``, by index, the ``(index, config, folder)`` of those still to run, and
     how many came from where."""
-    import dataclasses
 
     metrics_by_index: dict[int, dict] = {}
     pending = []
@@ -330,7 +329,7 @@ def _members_to_run(cfg: ExperimentConfig, members: list, out_dir: Path,
         "config_yaml", {})
     hashes = cfg.member_config_hashes(members)
     for i, member in enumerate(members):
-        member_cfg = dataclasses.replace(cfg, scenario=member)
+        member_cfg = cfg.with_member(member, hashes[i])
         folder = out_dir / f"member_{i:04d}"
         reason = check(folder, "run", hashes[i])
         if reason is None:
