@@ -95,3 +95,34 @@ def test_ledger_over_a_small_family(small_family):
         assert len(differences[(row["claim"], "baseline")]) == row["n_pairs"]
     counts = outcome_counts(small_family)
     assert [c["scenarios"] for c in counts] == [4, 4]
+
+
+def test_a_workers_task_frees_the_last_tasks_cyclic_garbage_before_freezing():
+    """_run_chunk moves what is alive into the collector's permanent generation (gc.freeze,
+    so loky's collect after each task is cheap); cyclic garbage of the task before was frozen
+    with it and never freed (a default tune's workers grew past loky's memory guard). A
+    planted cycle must be gone after the next task starts, with the collector's own
+    thresholds switched off."""
+    import gc
+    import weakref
+
+    from pipeline.loop.controller import QpCache
+    from pipeline.studies.experiment import _run_chunk
+
+    class Node:
+        pass
+
+    was_enabled = gc.isenabled()
+    gc.disable()
+    try:
+        node = Node()
+        node.self = node  # a cycle: refcounting alone never frees it
+        alive = weakref.ref(node)
+        del node
+        assert alive() is not None
+        assert _run_chunk([], QpCache()) == []
+        assert alive() is None
+    finally:
+        gc.unfreeze()
+        if was_enabled:
+            gc.enable()
