@@ -326,7 +326,6 @@ def _members_to_run(cfg: ExperimentConfig, members: list, out_dir: Path,
     """The metrics of the members already complete (same config hash) or restored from
     ``member_cache``, by index, the ``(index, config, folder)`` of those still to run, and
     how many came from where."""
-
     metrics_by_index: dict[int, dict] = {}
     pending = []
     counts = MemberCounts()
