@@ -45,6 +45,8 @@ def test_the_report_judges_the_pedestrian_family_overall_and_per_scene(make_conf
         assert row["scenarios"] == 6
     html = (out / "index.html").read_text()
     assert 'id="pedestrians"' in html and "ends at its first contact" in html
+    # a family with the scenario family's reading of "passed" says nothing more about it
+    assert "metrics.pass_reading" not in html[html.index('id="pedestrians"'):]
     # the field's metrics lead the section: every column the issue names, both methods
     metrics = pd.read_csv(out / "tables" / "pedestrians_metrics.csv")
     assert {"family", "track", "method", "crossings", "success_rate", "collision_rate",

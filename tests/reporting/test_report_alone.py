@@ -22,6 +22,8 @@ def test_pedestrian_families_alone_make_a_page_with_their_section(make_config, t
     html = (out / "index.html").read_text()
     assert 'id="pedestrians"' in html and 'id="pedestrians-metrics"' in html
     assert "make reproduce writes them" in html  # the sections it cannot show, and how
+    # make pedestrians' reading of "passed" (C4, C5) is said beside its ledger
+    assert "<code>metrics.pass_reading=last_threat</code>" in html
     metrics = pd.read_csv(out / "tables" / "pedestrians_metrics.csv")
     assert sorted(metrics["method"]) == ["baseline", "improved"]
     assert set(metrics["crossings"]) == {4}

@@ -190,7 +190,9 @@ def pedestrians_section(inputs: ReportInputs, verdicts: Verdicts, figures: Figur
         "vehicle_radius_m": settings_cfg.vehicle.footprint_radius_m if settings_cfg else None,
         "max_obstacles": getattr(settings_cfg.controller, "max_obstacles", None)
         if settings_cfg else None,
-        "personal_space_m": ped.personal_space_m}
+        "personal_space_m": ped.personal_space_m,
+        # C4's and C5's clock: when every walker counts as passed (register)
+        "pass_reading": settings_cfg.metrics.pass_reading if settings_cfg else None}
     scene_sizes = tuple((s, int((judged.tables[treatment]["scene"] == s).sum()))
                         for s in judged.scenes)
     collisions = tuple([{"scene": "all", **c} for c in judged.counts]
