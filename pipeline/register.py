@@ -242,7 +242,10 @@ INTERPRETATION_REGISTER: tuple[RegisterEntry, ...] = (
         "claims); the interval is the test: a direction exactly when it excludes 0; the "
         "Wilcoxon signed-rank test shown beside it; C1-C5 on pairs where neither collided, "
         "margins per claim (Methods section)",
-        "median / intervals at 1 - alpha (none) / sign test / all pairs / other margins",
+        "median / intervals at 1 - alpha (none) / sign test / all pairs / unsettled_last (C1 "
+        "and C4 also on the pairs where a run's clock started and its event never came before "
+        "the run ended, that run ranked last: among walkers improved rarely settles after the "
+        "last threat) / other margins",
         "claims.estimator, claims.interval_adjustment, claims.test, claims.pairs, "
         "claims.catalogue"),
     RegisterEntry(

@@ -266,7 +266,7 @@ class ClaimsConfig(FrozenAfterValidation):
         choice("claims.interval_adjustment", self.interval_adjustment, ("bonferroni", "none"))
         choice("claims.estimator", self.estimator, ("hodges_lehmann", "median"))
         choice("claims.test", self.test, ("wilcoxon", "sign"))
-        choice("claims.pairs", self.pairs, ("neither_collided", "all"))
+        choice("claims.pairs", self.pairs, ("neither_collided", "all", "unsettled_last"))
         choice("claims.c2_window", self.c2_window, ("own", "common"))
         choice("claims.common_window", self.common_window, ("union", "intersection"))
         at_least("claims.tie_tolerance", self.tie_tolerance, 0.0)

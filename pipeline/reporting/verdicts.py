@@ -145,6 +145,10 @@ class PedestrianVerdicts:
     #: and where a platform standing still is touched, and each method's collision rate on
     #: the crossings where standing still is safe
     difficulty: dict = field(default_factory=dict)
+    #: C1 and C4 of the whole family's ledger again with a run whose clock started and whose
+    #: event never came ranked last (``claims.pairs=unsettled_last``, at each row's level and
+    #: margin): one dict per row (:func:`_unsettled_last`)
+    unsettled_last: tuple[dict, ...] = ()
 
     def frame(self) -> pd.DataFrame:
         """Every ledger as one table, ``family`` and ``scene`` columns first (``all``: the
@@ -515,7 +519,35 @@ def _pedestrians(family: FamilyInputs, cfg: ClaimsConfig, name: str = "default"
     return PedestrianVerdicts(present, comparisons, ledger, by_scene,
                               tuple(outcome_counts(tables)), scene_counts, tables, about,
                               metrics, _difficulty(settings, info,
-                                                   {m: tables[m] for m in methods}))
+                                                   {m: tables[m] for m in methods}),
+                              _unsettled_last(ledger, tables, own, name))
+
+
+def _unsettled_last(ledger: Ledger, tables: dict[str, pd.DataFrame], cfg: ClaimsConfig,
+                    family: str) -> tuple[dict, ...]:
+    """The rows of ``ledger`` whose metric has a clock (C1's reaction, C4's recovery) judged
+    again with ``pairs="unsettled_last"`` at the row's level and margin: among walkers a run
+    often passes every threat and never settles before it ends, and the default leaves every
+    such pair out (C4 on 17 of 200 crossings)."""
+    from pipeline.analysis.claims.statistics import CLOCKED_EVENTS, compare, judge
+
+    rows = []
+    for row in ledger.rows:
+        if row.claim.primary_metric not in CLOCKED_EVENTS:
+            continue
+        pair = (tables[ledger.treatment], tables[row.comparison])
+        result = compare(*pair, row.claim, cfg, pairs="unsettled_last",
+                         level=row.result.ci_level, margin=row.margin)
+        outcome, _ = judge(result, row.margin, cfg, row.claim)
+        rows.append({"family": family, "claim": row.claim.claim_id,
+                     "comparison": row.comparison, "metric": row.claim.primary_metric,
+                     "outcome": str(outcome), "outcome_default": str(row.outcome),
+                     "estimate_stand_in": result.estimate, "ci_low": result.ci_low,
+                     "ci_high": result.ci_high, "ci_level": result.ci_level,
+                     "n_better": result.n_better, "n_tied": result.n_tied,
+                     "n_worse": result.n_worse, "pairs": result.n_pairs,
+                     "pairs_default": row.result.n_pairs})
+    return tuple(rows)
 
 
 def _difficulty(settings: Any, info: dict, tables: dict[str, pd.DataFrame]) -> dict:

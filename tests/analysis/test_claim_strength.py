@@ -125,6 +125,43 @@ def test_worst_rank_pairs_rank_a_collision_below_every_run():
     assert higher["d"].iloc[1] == pytest.approx(-(-1.0 - 1.5))
 
 
+def test_unsettled_last_ranks_a_run_that_never_settled_below_every_settled_run():
+    """C4 by hand (recovery_time_s, lower is better), six pairs: both settled (pair 0);
+    improved passed every threat and never settled (pair 1); the baseline did (pair 2); both
+    did (pair 3, a tie); improved never passed, so its clock never started (pair 4: missing,
+    not ranked); the baseline collided (pair 5: left out, as with neither_collided). Worst
+    value 3.0 + range 2.0 = 5.0 stands in for a run that never settled."""
+    nan = np.nan
+    improved = pd.DataFrame({
+        "scenario": [f"s{k}" for k in range(6)],
+        "recovery_time_s": [1.0, nan, 2.0, nan, nan, 1.5],
+        "obstacle_passed_time_s": [4.0, 4.0, 4.0, 4.0, nan, 4.0],
+        "recovered": [True, False, True, False, False, True],
+        "collision": [False] * 6})
+    control = pd.DataFrame({
+        "scenario": [f"s{k}" for k in range(6)],
+        "recovery_time_s": [3.0, 2.5, nan, nan, 1.0, 2.0],
+        "obstacle_passed_time_s": [4.0, 4.0, 4.0, 4.0, 4.0, 4.0],
+        "recovered": [True, True, False, False, True, True],
+        "collision": [False, False, False, False, False, True]})
+    claim = BY_ID["C4"]
+    last = paired_differences(improved, control, claim, "unsettled_last")
+    assert list(last["scenario"]) == ["s0", "s1", "s2", "s3", "s4"]
+    np.testing.assert_allclose(last["d"], [1.0 - 3.0, 5.0 - 2.5, 2.0 - 5.0, 0.0, nan])
+    # the default drops every pair with a run that did not settle
+    default = paired_differences(improved, control, claim, "neither_collided")
+    assert np.isfinite(default["d"]).sum() == 1
+    result = compare(improved, control, claim, ClaimsConfig(n_resamples=999),
+                     pairs="unsettled_last", level=LEVEL)
+    assert (result.n_pairs, result.n_missing) == (4, 1)
+    assert (result.n_better, result.n_tied, result.n_worse) == (2, 1, 1)
+    # a metric without a clock (C2) is judged as with neither_collided
+    jerk = improved.assign(lateral_jerk_rms_mps3=[1.0] * 6)
+    jerk_c = control.assign(lateral_jerk_rms_mps3=[2.0] * 6)
+    assert paired_differences(jerk, jerk_c, BY_ID["C2"], "unsettled_last")["d"].tolist() == \
+        paired_differences(jerk, jerk_c, BY_ID["C2"], "neither_collided")["d"].tolist()
+
+
 def _ledger(treated_shift: float, n: int, seed: int, comparison: str) -> Ledger:
     rng = np.random.default_rng(seed)
     control = rng.normal(1.0, 0.3, n)

@@ -24,6 +24,22 @@ def test_pedestrian_families_alone_make_a_page_with_their_section(make_config, t
     assert "make reproduce writes them" in html  # the sections it cannot show, and how
     # make pedestrians' reading of "passed" (C4, C5) is said beside its ledger
     assert "<code>metrics.pass_reading=last_threat</code>" in html
+    # C1 and C4 again with the runs that never reacted or settled ranked last (oracle: the
+    # paired differences of the two tables by that rule)
+    from pipeline.analysis.claims.catalogue import ALL_CLAIMS
+    from pipeline.analysis.claims.statistics import paired_differences
+
+    last = pd.read_csv(out / "tables" / "claims_pedestrians_unsettled_last.csv")
+    assert sorted(last["claim"]) == ["C1", "C4"] and set(last["comparison"]) == {"baseline"}
+    tables = {m: pd.read_csv(root / "pedestrians" / m / "family_metrics.csv")
+              for m in ("baseline", "improved")}
+    for claim in (c for c in ALL_CLAIMS if c.claim_id in ("C1", "C4")):
+        d = paired_differences(tables["improved"], tables["baseline"], claim,
+                               "unsettled_last")["d"]
+        row = last[last["claim"] == claim.claim_id].iloc[0]
+        assert row["pairs"] == int(d.notna().sum())
+        assert (row["n_better"], row["n_worse"]) == (int((d < 0).sum()), int((d > 0).sum()))
+    assert 'id="pedestrians-unsettled-last"' in html
     metrics = pd.read_csv(out / "tables" / "pedestrians_metrics.csv")
     assert sorted(metrics["method"]) == ["baseline", "improved"]
     assert set(metrics["crossings"]) == {4}

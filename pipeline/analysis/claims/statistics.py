@@ -362,7 +362,13 @@ def newcombe_paired_interval(n_both: int, n_first_only: int, n_second_only: int,
     return float(p1 - p2 - delta), float(p1 - p2 + epsilon)
 
 
-PAIRS = ("neither_collided", "all", "worst_rank")
+PAIRS = ("neither_collided", "all", "worst_rank", "unsettled_last")
+
+#: Metrics whose clock can start and whose event may never come before the run ends: the
+#: column of the clock's start and the flag that says the event came (``pairs=
+#: "unsettled_last"``; the tune's censoring reads the same columns, pipeline.analysis.objectives)
+CLOCKED_EVENTS = {"reaction_delay_s": ("threat_appear_time_s", "reacted"),
+                  "recovery_time_s": ("obstacle_passed_time_s", "recovered")}
 
 
 def paired_differences(improved: pd.DataFrame, comparison: pd.DataFrame, claim: Claim,
@@ -378,9 +384,18 @@ def paired_differences(improved: pd.DataFrame, comparison: pd.DataFrame, claim: 
     method collided counts for the other and a pair where both did ties (the ranking of
     composite outcomes in clinical trials, where the worst event ranks last). Its ``d`` is a
     rank-preserving stand-in: its sign and its pairs' order mean something, its size does not.
+    ``pairs="unsettled_last"`` keeps the pairs where neither collided and, for a metric of
+    :data:`CLOCKED_EVENTS` (C1's reaction, C4's recovery), ranks a run whose clock started and
+    whose event never came before the run ended (never settled after the pass) worse than
+    every run whose event came, the same stand-in (two such runs tie); a run whose clock never
+    started stays missing.
     """
     key = claim.primary_metric
     cols = ["scenario", key] + (["collision"] if key != "collision" else [])
+    clocked = CLOCKED_EVENTS.get(key) if pairs == "unsettled_last" else None
+    if clocked is not None and not set(clocked) <= set(improved) & set(comparison):
+        clocked = None  # tables without the clock's columns: nothing to rank
+    cols += list(clocked or ())
     merged = improved[cols].merge(comparison[cols], on="scenario", suffixes=("_i", "_c"))
     i = pd.to_numeric(merged[f"{key}_i"], errors="coerce").to_numpy(float)
     c = pd.to_numeric(merged[f"{key}_c"], errors="coerce").to_numpy(float)
@@ -390,19 +405,35 @@ def paired_differences(improved: pd.DataFrame, comparison: pd.DataFrame, claim: 
     else:
         merged["collision_i"] = merged["collision_i"].astype(bool)
         merged["collision_c"] = merged["collision_c"].astype(bool)
+    last_i = last_c = None
     if pairs == "worst_rank" and not claim.is_rate:
-        collided_i = merged["collision_i"].to_numpy(bool)
-        collided_c = merged["collision_c"].to_numpy(bool)
-        seen = np.concatenate([i[np.isfinite(i)], c[np.isfinite(c)]])
-        span = max(float(np.ptp(seen)), 1.0) if seen.size else 1.0
-        worst = (float(seen.max()) + span if claim.lower_is_better
-                 else float(seen.min()) - span) if seen.size else sign
-        i, c = np.where(collided_i, worst, i), np.where(collided_c, worst, c)
+        last_i = merged["collision_i"].to_numpy(bool)
+        last_c = merged["collision_c"].to_numpy(bool)
+    if clocked is not None:
+        start, flag = clocked
+        last_i, last_c = (
+            np.isnan(values) & np.isfinite(pd.to_numeric(merged[f"{start}_{side}"],
+                                                         errors="coerce").to_numpy(float))
+            & ~merged[f"{flag}_{side}"].astype(bool).to_numpy()
+            for values, side in ((i, "i"), (c, "c")))
+    if last_i is not None and last_c is not None:
+        worst = _worse_than_every(i, c, claim.lower_is_better)
+        i, c = np.where(last_i, worst, i), np.where(last_c, worst, c)
         merged[f"{key}_i"], merged[f"{key}_c"] = i, c
     merged["d"] = sign * (i - c)
-    if pairs == "neither_collided" and not claim.is_rate:
+    if pairs in ("neither_collided", "unsettled_last") and not claim.is_rate:
         merged = merged[~(merged["collision_i"] | merged["collision_c"])]
     return merged
+
+
+def _worse_than_every(i: np.ndarray, c: np.ndarray, lower_is_better: bool) -> float:
+    """A value worse than every finite value of both methods by their range (at least 1 in
+    the metric's units): the stand-in of a run ranked last."""
+    seen = np.concatenate([i[np.isfinite(i)], c[np.isfinite(c)]])
+    if not seen.size:
+        return 1.0 if lower_is_better else -1.0
+    span = max(float(np.ptp(seen)), 1.0)
+    return float(seen.max()) + span if lower_is_better else float(seen.min()) - span
 
 
 @dataclass(frozen=True)

@@ -54,6 +54,8 @@ class PedestriansSection:
     variant_outcomes: tuple[dict, ...] = ()
     #: the fewest pairs any of C1-C5 rests on in the default family
     fewest_pairs: int | None = None
+    #: C1 and C4 of the default family with a run that never reacted or settled ranked last
+    unsettled_last: tuple[dict, ...] = ()
 
 
 def _verdict_rows(judged: PedestrianVerdicts) -> tuple[dict, ...]:
@@ -225,4 +227,4 @@ def pedestrians_section(inputs: ReportInputs, verdicts: Verdicts, figures: Figur
         info.get("seed", "?"), scene_sizes, settings, _verdict_rows(judged),
         tuple(ledger_groups(judged.ledger)), collisions, _members(judged, methods),
         figure, sentence, tuple(damaged), metrics, families, variant_outcomes,
-        min(pairs) if pairs else None)
+        min(pairs) if pairs else None, judged.unsettled_last)
