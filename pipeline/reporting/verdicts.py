@@ -529,11 +529,12 @@ def _unsettled_last(ledger: Ledger, tables: dict[str, pd.DataFrame], cfg: Claims
     again with ``pairs="unsettled_last"`` at the row's level and margin: among walkers a run
     often passes every threat and never settles before it ends, and the default leaves every
     such pair out (C4 on 17 of 200 crossings)."""
-    from pipeline.analysis.claims.statistics import CLOCKED_EVENTS, compare, judge
+    from pipeline.analysis.claims.statistics import compare, judge
+    from pipeline.analysis.objectives import CENSORED_AT_RUN_END
 
     rows = []
     for row in ledger.rows:
-        if row.claim.primary_metric not in CLOCKED_EVENTS:
+        if row.claim.primary_metric not in CENSORED_AT_RUN_END:
             continue
         pair = (tables[ledger.treatment], tables[row.comparison])
         result = compare(*pair, row.claim, cfg, pairs="unsettled_last",

@@ -14,6 +14,7 @@ import numpy as np
 import pandas as pd
 
 from pipeline.analysis.claims.catalogue import Claim, Outcome
+from pipeline.analysis.objectives import CENSORED_AT_RUN_END
 from pipeline.analysis.settings import ClaimsConfig
 
 
@@ -364,12 +365,6 @@ def newcombe_paired_interval(n_both: int, n_first_only: int, n_second_only: int,
 
 PAIRS = ("neither_collided", "all", "worst_rank", "unsettled_last")
 
-#: Metrics whose clock can start and whose event may never come before the run ends: the
-#: column of the clock's start and the flag that says the event came (``pairs=
-#: "unsettled_last"``; the tune's censoring reads the same columns, pipeline.analysis.objectives)
-CLOCKED_EVENTS = {"reaction_delay_s": ("threat_appear_time_s", "reacted"),
-                  "recovery_time_s": ("obstacle_passed_time_s", "recovered")}
-
 
 def paired_differences(improved: pd.DataFrame, comparison: pd.DataFrame, claim: Claim,
                        pairs: str = "all") -> pd.DataFrame:
@@ -385,14 +380,15 @@ def paired_differences(improved: pd.DataFrame, comparison: pd.DataFrame, claim: 
     composite outcomes in clinical trials, where the worst event ranks last). Its ``d`` is a
     rank-preserving stand-in: its sign and its pairs' order mean something, its size does not.
     ``pairs="unsettled_last"`` keeps the pairs where neither collided and, for a metric of
-    :data:`CLOCKED_EVENTS` (C1's reaction, C4's recovery), ranks a run whose clock started and
+    :data:`~pipeline.analysis.objectives.CENSORED_AT_RUN_END` (C1's reaction, C4's recovery: the
+    columns the tune's censoring reads), ranks a run whose clock started and
     whose event never came before the run ended (never settled after the pass) worse than
     every run whose event came, the same stand-in (two such runs tie); a run whose clock never
     started stays missing.
     """
     key = claim.primary_metric
     cols = ["scenario", key] + (["collision"] if key != "collision" else [])
-    clocked = CLOCKED_EVENTS.get(key) if pairs == "unsettled_last" else None
+    clocked = CENSORED_AT_RUN_END.get(key) if pairs == "unsettled_last" else None
     if clocked is not None and not set(clocked) <= set(improved) & set(comparison):
         clocked = None  # tables without the clock's columns: nothing to rank
     cols += list(clocked or ())
