@@ -30,6 +30,9 @@ REPORT      ?= reports/latest
 PYTEST_ARGS ?=
 PYTEST_JOBS ?= auto
 INSTALLER   ?= uv
+# WARM=no: make install without its warm step (the bytecode and numba caches; the install test,
+# which checks the packages alone, while tests/integration/test_warm.py checks the warm step)
+WARM        ?= yes
 
 SWEEP       ?= obstacle_speed
 MULTIVERSE  ?= default
@@ -97,8 +100,10 @@ $(STAMP): pyproject.toml constraints.txt
 	  $(PY) -m pip install --quiet --no-compile -c constraints.txt -e ".[test]"; \
 	fi
 	$(PY) -m compileall -q pipeline hydra_plugins examples > /dev/null
-	@$(PY) -m pipeline.warm --no-kernels & bytecode=$$!; \
-	  $(PY) -m pipeline.warm --kernels-only; kernels=$$?; wait $$bytecode && exit $$kernels
+	@if [ "$(WARM)" = yes ]; then \
+	  $(PY) -m pipeline.warm --no-kernels & bytecode=$$!; \
+	  $(PY) -m pipeline.warm --kernels-only; kernels=$$?; wait $$bytecode && exit $$kernels; \
+	fi
 	touch $(STAMP)
 
 install: $(STAMP)  ## create .venv and install the project with pinned versions

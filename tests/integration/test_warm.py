@@ -5,6 +5,7 @@ numba's cache; a wrong argument is one line and exit 2."""
 from __future__ import annotations
 
 import importlib.util
+import json
 import os
 import subprocess
 import sys
@@ -58,26 +59,58 @@ def test_a_wrong_argument_is_one_line(args):
     assert "Traceback" not in proc.stderr
 
 
-def test_kernels_only_puts_every_kernel_in_numbas_cache(tmp_path):
+#: Run in a fresh process: ``pipeline.warm --kernels-only`` (its ``main``), then every kernel of
+#: the two kernel modules as numba holds it: its cache's class and index file, its signatures
+#: (what this process compiled or loaded from the cache).
+_INSPECT_WARM = """
+import json
+from pathlib import Path
+from numba.core.dispatcher import Dispatcher
+from pipeline.warm import main
+status = main(["--kernels-only"])
+import pipeline.analysis.claims.compiled as claims_kernels
+import pipeline.loop.compiled as loop_kernels
+kernels = {}
+for module in (loop_kernels, claims_kernels):
+    for value in vars(module).values():
+        if isinstance(value, Dispatcher):
+            index = Path(str(value._cache._cache_file._index_path))
+            kernels[index.name.split("-")[0]] = {
+                "cache": type(value._cache).__name__, "index": index.is_file(),
+                "signatures": len(value.signatures)}
+print(json.dumps({"status": status, "kernels": kernels}))
+"""
+
+#: The kernels the runs call (a lone member's and the lockstep engine's batched ones: the
+#: plants' rows, the path frames' and plans' rows, DAQP's batched caller; the ledgers'
+#: bootstrap), and the two the bootstrap's kernel compiles into itself.
+RUN_KERNELS = {"model.single_track_rk4_rows", "planner.apf_rollout_arrays",
+               "references.lateral_side_halfplane_arrays", "references.reference_arrays",
+               "path.chase_path_arrays", "path.rollout_path_arrays", "path.frame_step_arrays",
+               "compiled.walsh_medians", "path.plan_poses_arrays",
+               "prediction_check.check_record_arrays", "path_rows.path_frame_rows",
+               "path_rows.plan_poses_rows", "daqp_rows.daqp_condensed_rows"}
+CALLEES = {"compiled._count_at_most", "compiled._order_statistic"}
+
+
+def test_kernels_only_puts_every_kernel_in_numbas_cache():
     """``--kernels-only`` (the other core's half of make install: ``api.warm_compiled_kernels``)
-    leaves each of the twelve loop kernels the runs call (a lone member's and the lockstep
-    engine's batched ones: the plants' rows, the path frames' and plans' rows, DAQP's batched
-    caller) and the
-    ledgers' bootstrap kernels compiled in an empty numba cache (NUMBA_CACHE_DIR), and compiles
-    no project module list of its own. (One warm run for both checks: each compiles every
-    kernel, about 20 s.)"""
-    env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path)}
-    proc = subprocess.run([sys.executable, "-m", "pipeline.warm", "--kernels-only"], env=env,
-                          capture_output=True, text=True, check=False)
+    compiles or loads each kernel the runs call, every one with numba's on-disk cache and its
+    index file there, and compiles no project module list of its own. Run on the checkout's own
+    cache (warm after make install: about 4 s, where an empty cache compiles every kernel in
+    about 25 s, as make install does): a kernel the warm step stops calling has no signature in
+    the warm process, and one numba cannot cache has no cache or no index file."""
+    proc = subprocess.run([sys.executable, "-c", _INSPECT_WARM], capture_output=True,
+                          text=True, check=False, cwd=Path(__file__).resolve().parents[2])
     assert proc.returncode == 0, proc.stderr
-    assert "numba kernels" in proc.stdout and "compiled the bytecode" not in proc.stdout
-    indexed = {p.name.split("-")[0] for p in tmp_path.rglob("*.nbi")}
-    assert indexed == {"model.single_track_rk4_rows", "planner.apf_rollout_arrays",
-                       "references.lateral_side_halfplane_arrays",
-                       "references.reference_arrays", "path.chase_path_arrays",
-                       "path.rollout_path_arrays", "path.frame_step_arrays",
-                       "compiled.walsh_medians", "compiled._count_at_most",
-                       "compiled._order_statistic", "path.plan_poses_arrays",
-                       "prediction_check.check_record_arrays", "path_rows.path_frame_rows",
-                       "path_rows.plan_poses_rows", "daqp_rows.daqp_condensed_rows"}, indexed
-    assert len(list(tmp_path.rglob("*.nbc"))) >= 15  # the compiled code beside each index
+    said, inspected = proc.stdout.strip().splitlines()[-2:]
+    assert said == "pipeline.warm: put the numba kernels in numba's cache"
+    report = json.loads(inspected)
+    kernels = report["kernels"]
+    assert report["status"] == 0
+    warmed = {name for name, k in kernels.items() if k["signatures"]}
+    assert warmed == RUN_KERNELS, warmed ^ RUN_KERNELS
+    # the plant's lone step compiled is kept (its rows call it); no run calls it alone
+    assert set(kernels) == RUN_KERNELS | CALLEES | {"model.single_track_rk4"}
+    assert {name for name, k in kernels.items() if k["cache"] != "FunctionCache"} == set()
+    assert {name for name in RUN_KERNELS | CALLEES if not kernels[name]["index"]} == set()
