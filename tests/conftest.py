@@ -21,18 +21,18 @@ CONF_DIR = Path(__file__).resolve().parents[1] / "conf"
 os.environ["PIPELINE_MEMBER_CACHE"] = "off"
 
 #: Test files with whole runs in them, longest first (their tests' summed times in a `make test`
-#: run's junit report on a 2-core machine, 2026-12-06). `make test` hands whole files to its
+#: run's junit report on a 2-core machine, 2026-12-06, after this session's cuts). `make test` hands whole files to its
 #: workers (``--dist loadfile``) in collection order; starting the longest first keeps one
 #: worker from running a long file alone at the end.
-LONGEST_FILES_FIRST = ("test_install.py", "test_tune_pruning.py", "test_apf_alone.py",
-                       "test_processes.py", "test_bench_quick.py", "test_tune.py",
-                       "test_warm.py", "test_multiverse.py", "test_report_browser.py",
-                       "test_tune_workers.py", "test_scenario_sources.py", "test_sweeps.py",
-                       "test_extensions.py", "test_run_records.py",
-                       "test_tune_store_sources.py", "test_peers_report.py",
-                       "test_engine.py", "test_hardening.py", "test_features.py",
-                       "test_report.py", "test_robustness.py", "test_pins.py",
-                       "test_properties.py")
+LONGEST_FILES_FIRST = ("test_install.py", "test_apf_alone.py", "test_bench_quick.py",
+                       "test_tune.py", "test_processes.py", "test_multiverse.py",
+                       "test_extensions.py", "test_scenario_sources.py", "test_run_records.py",
+                       "test_report_browser.py", "test_tune_pruning.py", "test_sweeps.py",
+                       "test_tune_workers.py", "test_peers_report.py", "test_report.py",
+                       "test_report_damaged_member.py", "test_tune_peers.py",
+                       "test_multiverse_worlds.py", "test_features.py", "test_interrupts.py",
+                       "test_settings_travel.py", "test_warm.py", "test_compose_sections.py",
+                       "test_engine.py", "test_bad_config.py", "test_tune_store_sources.py")
 
 
 #: The integration tier (marker ``integration``): the files of ``tests/integration/``, whole

@@ -60,3 +60,13 @@ def test_the_integration_marker_is_the_integration_folder(tmp_path):
 def test_every_test_file_stands_in_a_stage_folder():
     assert not list(TESTS.glob("test_*.py"))
     assert {p.parent.name for p in TESTS.rglob("test_*.py")} == FOLDERS
+
+
+def test_the_longest_files_first_are_test_files_of_the_suite():
+    """The order ``make test`` starts its files in names files that exist, once each (a
+    renamed file would silently fall back to collection order)."""
+    from tests.conftest import LONGEST_FILES_FIRST
+
+    names = [p.name for p in TESTS.rglob("test_*.py")]
+    assert len(set(LONGEST_FILES_FIRST)) == len(LONGEST_FILES_FIRST) >= 10
+    assert [n for n in LONGEST_FILES_FIRST if names.count(n) != 1] == []

@@ -159,17 +159,6 @@ def test_a_changed_space_is_another_study(tmp_path):
     assert Path(path).is_file()
 
 
-def _tune(folder: Path, *extra: str):
-    import subprocess
-    import sys
-
-    command = [sys.executable, "-m", "pipeline.tune", "--space", "quick", "--set",
-               "replicates=1", "--set", "heldout_size=8", "--set", "max_trials=4",
-               "--out", str(folder), *extra]
-    return subprocess.run(command, cwd=Path(__file__).resolve().parents[2],
-                          capture_output=True, text=True, timeout=600)
-
-
 def no_trial_lost_or_run_twice(folder: Path) -> None:
     """Every trial asked was told once (numbers 0..n-1, all complete); every member of every
     family was simulated exactly once over all rungs and families."""
@@ -188,28 +177,6 @@ def no_trial_lost_or_run_twice(folder: Path) -> None:
     summary = json.loads((folder / "summary.json").read_text())
     members = {p.parent for p in (folder / "runs").rglob("member_*/manifest.json")}
     assert summary["members"]["simulated"] == len(members)
-
-
-def test_one_worker_and_two_tune_the_same_and_lose_nothing(tmp_path):
-    one = _tune(tmp_path / "one", "scenario.family.n_jobs=1")
-    assert one.returncode == 0, one.stderr[-2000:]
-    two = _tune(tmp_path / "two", "scenario.family.n_jobs=2")
-    assert two.returncode == 0, two.stderr[-2000:]
-    # the same trials, values and verdicts (the held-out folders' names carry n_jobs)
-    for name in ("trials.csv", "ledger_tuned.csv", "settings_outcomes.csv"):
-        a, b = (tmp_path / "one" / name).read_text(), (tmp_path / "two" / name).read_text()
-        assert a == b, f"{name} differs:\n" + "\n".join(
-            f"{x}\n{y}" for x, y in zip(a.splitlines(), b.splitlines(), strict=False) if x != y)
-    for folder in ("one", "two"):
-        no_trial_lost_or_run_twice(tmp_path / folder)
-    # the coordinator's CPU per trial: measured with two workers (the members ran on them:
-    # a few to tens of ms, far below a trial's members, 6 x 25-35 ms at the least); not with
-    # one, whose members ran in the coordinator
-    import json
-
-    measured = [json.loads((tmp_path / f / "summary.json").read_text())[
-        "coordinator_ms_per_trial"] for f in ("one", "two")]
-    assert measured[0] is None and 0.5 < measured[1] < 150.0, measured
 
 
 def test_members_at_equal_hypervolume_are_read_off_the_two_tunes(tmp_path):
@@ -241,12 +208,19 @@ def test_members_at_equal_hypervolume_are_read_off_the_two_tunes(tmp_path):
         out["pruning_note"]
 
 
-def test_studies_side_by_side_tune_as_one_after_the_other(tmp_path, monkeypatch):
-    """Every study's batches at once on one pool (the local default) against each study's
-    batches one after the other (what SLURM runs, Runner.local false): the same trials, values
-    and verdicts over two replicates and both methods, nothing lost or run twice. And the
-    switch is real: the side-by-side run interleaves the studies' trials (a trial of replicate
-    1 completes before replicate 0's last), the other does not."""
+def test_side_by_side_on_two_workers_tunes_as_one_after_the_other_on_one(tmp_path,
+                                                                          monkeypatch):
+    """Every study's batches at once on one pool of two workers (the local default) against
+    each study's batches one after the other (what SLURM runs, Runner.local false) with the
+    members in the coordinator (scenario.family.n_jobs=1): the same trials, values and
+    verdicts over two replicates and both methods, nothing lost or run twice in either. The
+    switches are real: the side-by-side run interleaves the studies' trials (a trial of
+    replicate 1 completes before replicate 0's last), the other does not; the coordinator's
+    CPU per trial is measured with two workers (a few to tens of ms, far below a trial's
+    members, 6 x 25-35 ms at the least), not with one, whose members ran in the coordinator.
+    (One pair of tunes for both invariances: each alone is its own pair.)"""
+    import json
+
     from pipeline.config import CONF_DIR
     from pipeline.studies.tune import load_tune_space, run_tuning
     from pipeline.studies.tune.search import Runner
@@ -262,12 +236,13 @@ def test_studies_side_by_side_tune_as_one_after_the_other(tmp_path, monkeypatch)
         return [name for name, _ in sorted(trials, key=lambda e: (e[1].datetime_complete,
                                                                   e[1]._trial_id))]
 
-    run_tuning(space, tmp_path / "together", [], log=lambda _: None)
+    run_tuning(space, tmp_path / "together", ["scenario.family.n_jobs=2"], log=lambda _: None)
     monkeypatch.setattr(Runner, "local", property(lambda self: False))
-    run_tuning(space, tmp_path / "apart", [], log=lambda _: None)
+    run_tuning(space, tmp_path / "apart", ["scenario.family.n_jobs=1"], log=lambda _: None)
     for name in ("trials.csv", "ledger_tuned.csv", "settings_outcomes.csv"):
-        assert (tmp_path / "together" / name).read_text() == \
-            (tmp_path / "apart" / name).read_text(), name
+        a, b = (tmp_path / "together" / name).read_text(), (tmp_path / "apart" / name).read_text()
+        assert a == b, f"{name} differs:\n" + "\n".join(
+            f"{x}\n{y}" for x, y in zip(a.splitlines(), b.splitlines(), strict=False) if x != y)
     for folder in ("together", "apart"):
         no_trial_lost_or_run_twice(tmp_path / folder)
 
@@ -277,3 +252,6 @@ def test_studies_side_by_side_tune_as_one_after_the_other(tmp_path, monkeypatch)
 
     assert interleaved(completion_order(tmp_path / "together"))
     assert not interleaved(completion_order(tmp_path / "apart"))
+    measured = [json.loads((tmp_path / f / "summary.json").read_text())[
+        "coordinator_ms_per_trial"] for f in ("apart", "together")]
+    assert measured[0] is None and 0.5 < measured[1] < 150.0, measured
