@@ -319,11 +319,12 @@ def test_a_planted_source_runs_a_family_through_run_and_the_report(tmp_path):
     env = {**os.environ, "PYTHONPATH": str(tmp_path / "mod"), "PIPELINE_MEMBER_CACHE": "off"}
     search = f"hydra.searchpath=[file://{tmp_path / 'conf'}]"
     runs = tmp_path / "runs"
-    for method in ("improved", "baseline"):
-        for kind, extra in (("family", []), ("paper", ["scenario.family=null"])):
-            proc = _run(["pipeline.run", search, f"method={method}", "scenario=gate", *extra,
-                         f"hydra.run.dir={runs / kind / method}"], env)
-            assert proc.returncode == 0, proc.stderr[-2000:]
+    for kind, extra in (("family", []), ("paper", ["scenario.family=null"])):
+        # both methods in one multirun, each in its own folder (runs/<kind>/<method>)
+        proc = _run(["pipeline.run", "-m", search, "method=improved,baseline", "scenario=gate",
+                     *extra, f"hydra.sweep.dir={runs / kind}", "hydra.sweep.subdir=${planner.name}"],
+                    env)
+        assert proc.returncode == 0, proc.stderr[-2000:]
     # the planted rule, computed here: member i from default_rng([0, i, 57])
     expected = {}
     for i in range(6):
