@@ -193,7 +193,10 @@ def _column(frame: pd.DataFrame, name: str) -> np.ndarray:
 def _flag(frame: pd.DataFrame, name: str) -> np.ndarray:
     if name not in frame:
         return np.zeros(len(frame), bool)
-    return frame[name].map(lambda v: str(v).strip().lower() in ("true", "1", "1.0")).to_numpy()
+    column = frame[name]
+    if column.dtype == bool:  # read_csv's True/False column: the same flags, without a map
+        return column.to_numpy()
+    return column.map(lambda v: str(v).strip().lower() in ("true", "1", "1.0")).to_numpy()
 
 
 def method_data(trajectory: pd.DataFrame, horizon: dict[str, np.ndarray] | None,
@@ -397,9 +400,11 @@ def experiment_members(run_root: Path) -> dict[str, list[int]]:
 
 def data_script(key: str, payload: dict) -> str:
     """A member's data file: the payload as gzip-compressed, base64-encoded JSON assigned to
-    ``window.__explorerData[key]`` (the same bytes for the same payload)."""
+    ``window.__explorerData[key]`` (the same bytes for the same payload). gzip's fastest level:
+    a walker crossing's 1.5 MB of JSON packs in 11 ms to 436 kB, against 73 ms to 356 kB at
+    level 6 (the browser inflates either in milliseconds)."""
     text = json.dumps(payload, separators=(",", ":"), allow_nan=False)
-    packed = base64.b64encode(gzip.compress(text.encode(), compresslevel=6, mtime=0)).decode()
+    packed = base64.b64encode(gzip.compress(text.encode(), compresslevel=1, mtime=0)).decode()
     return ("(window.__explorerData = window.__explorerData || {})"
             f"[{json.dumps(key)}] = \"{packed}\";\n")
 

@@ -220,3 +220,19 @@ def test_a_study_of_tracks_shows_each_track_as_an_experiment(small_reproduce, tm
     assert member_data(root, "euro_ncap-kinematic", 0) is None
     assert '"euro_ncap-lateral":{"methods":["baseline","improved"]' in \
         (out / "explorer.html").read_text()
+
+
+def test_a_flag_column_reads_the_same_as_booleans_and_as_text():
+    """read_csv's boolean column (the fast path) and the same flags as text, with a missing
+    cell and the spellings a CSV writer may use, give the same flags."""
+    import pandas as pd
+
+    from pipeline.reporting.explorer import _flag
+
+    flags = [True, False, True, True, False]
+    as_bool = pd.DataFrame({"obs0_visible": flags})
+    as_text = pd.DataFrame({"obs0_visible": ["True", "false", " 1", "1.0", np.nan]})
+    assert as_bool["obs0_visible"].dtype == bool and as_text["obs0_visible"].dtype != bool
+    assert _flag(as_bool, "obs0_visible").tolist() == flags
+    assert _flag(as_text, "obs0_visible").tolist() == flags
+    assert _flag(as_bool, "obs1_visible").tolist() == [False] * 5
