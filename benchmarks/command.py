@@ -51,6 +51,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--quick", action="store_true",
                         help="a minute or so: N=10 and 1 obstacle, fewer repeats and members, "
                              "no install or tune measurement")
+    parser.add_argument("--smoke", action="store_true",
+                        help="with --quick: each measurement at its smallest size, every figure "
+                             "still written, none worth reading (the test suite's run)")
     parser.add_argument("--family-size", type=int, default=200)
 
 
@@ -77,8 +80,10 @@ def _bench(args) -> int:
         raise CommandError(f"error: --out={args.out} is invalid; allowed: a folder (new, or "
                            "one the benchmark wrote before), not a file")
     refuse_other_record(args.out, ("bench",))
+    if args.smoke and not args.quick:
+        raise CommandError("error: --smoke is invalid without --quick; allowed: --quick --smoke")
     result = study.run_benchmark(args.out, args.steps, args.repeats, args.quick,
-                                 args.family_size)
+                                 args.family_size, args.smoke)
     save_figure(bench_scaling_figure(result.lateral), written(result.folder), SCALING_STEM)
     summary = result.summary
     print(json.dumps({key: summary.get(key) for key in HEADLINE}, indent=1))

@@ -17,10 +17,12 @@ Everything runs in one process, methods interleaved on identical inputs, each re
 Results: ``reports/bench/bench.csv`` (every sample), ``bench_summary.json`` and
 ``scaling.png/svg``. No timing is asserted anywhere in the tests.
 
-``quick`` (``python -m pipeline.bench --quick``, a minute or so on two cores; the test suite runs
-it): N = 10 and one obstacle, fewer repeats and members, and neither of the two measurements
-that take minutes: ``make install`` into two fresh venvs (``install_over_pip``) and a small
-tune (``tune_core_utilisation``), whose keys are then None with ``quick_note`` saying so.
+``quick`` (``python -m pipeline.bench --quick``, a minute or so on two cores): N = 10 and one
+obstacle, fewer repeats and members, and neither of the two measurements that take minutes:
+``make install`` into two fresh venvs (``install_over_pip``) and a small tune
+(``tune_core_utilisation``), whose keys are then None with ``quick_note`` saying so.
+``--quick --smoke`` runs each quick measurement at its smallest size (the test suite's run: every
+figure written, none worth reading).
 """
 
 from __future__ import annotations
@@ -66,28 +68,30 @@ NOT_QUICK = {"install_over_pip": None, "tune_core_utilisation": None,
 
 
 def run_benchmark(out: Path, steps: int = 40, repeats: int = 3, quick: bool = False,
-                  family_size: int = 200) -> BenchResult:
+                  family_size: int = 200, smoke: bool = False) -> BenchResult:
     """The benchmark (see the module docstring), on one BLAS thread as the closed loop runs
     (OpenBLAS's idle threads would otherwise spin and inflate every CPU time): its result
     written into ``out`` and returned (with the lateral table, the command's scaling
-    figure's data)."""
+    figure's data). ``smoke`` (with ``quick``): each quick measurement at its smallest size,
+    every figure still measured, none worth reading (the test suite's run of the harness)."""
     from threadpoolctl import threadpool_limits
 
     with threadpool_limits(limits=1, user_api="blas"):
-        return _measure(Path(out), steps, repeats, quick, family_size)
+        return _measure(Path(out), steps, repeats, quick, family_size, smoke and quick)
 
 
-def _measure(out: Path, steps: int, repeats: int, quick: bool, family_size: int
-             ) -> BenchResult:
+def _measure(out: Path, steps: int, repeats: int, quick: bool, family_size: int,
+             smoke: bool = False) -> BenchResult:
     """:func:`run_benchmark` inside its thread limit."""
     horizons = (10,) if quick else (10, 20, 30, 50)
     counts = (1,) if quick else (1, 3, 5)
     lateral = pd.DataFrame(bench_lateral(horizons, counts, steps, repeats))
     peers = pd.DataFrame(bench_peers(10 if quick else 20))
     kinematic = pd.DataFrame(bench_kinematic(steps))
-    closed_loop = bench_closed_loop(3 if quick else 7)
-    closed_loop_python = bench_closed_loop(3 if quick else 7, compiled_kernels=False)
-    closed_loop_daqp = bench_closed_loop(3 if quick else 7, backend="daqp")
+    loops = 1 if smoke else 3 if quick else 7
+    closed_loop = bench_closed_loop(loops)
+    closed_loop_python = bench_closed_loop(loops, compiled_kernels=False)
+    closed_loop_daqp = bench_closed_loop(loops, backend="daqp")
     pipeline_figures = bench_pipeline(8 if quick else family_size,
                                       8 if quick else 40)
     summary = summarize(lateral, peers, kinematic, pipeline_figures, closed_loop)
@@ -97,13 +101,15 @@ def _measure(out: Path, steps: int, repeats: int, quick: bool, family_size: int
         closed_loop_python["outside_qp_us_per_step"] / closed_loop_python["qp_us_per_step"]
     summary["outside_qp_over_qp_daqp"] = \
         closed_loop_daqp["outside_qp_us_per_step"] / closed_loop_daqp["qp_us_per_step"]
-    member = bench_family_member(n_members=4 if quick else 8)
-    member_daqp = bench_family_member("daqp", n_members=4 if quick else 8)
+    members, member_repeats = (2, 1) if smoke else (4 if quick else 8, 3)
+    member = bench_family_member(n_members=members, repeats=member_repeats)
+    member_daqp = bench_family_member("daqp", n_members=members, repeats=member_repeats)
     summary["family_member"] = {"default": member, "daqp": member_daqp}
     summary["family_member_over_sparse_floor"] = member["family_member_over_sparse_floor"]
     summary["family_member_over_sparse_floor_daqp"] = \
         member_daqp["family_member_over_sparse_floor"]
-    summary["engine"] = bench_engine(24 if quick else family_size, 2 if quick else 3)
+    engine_size = (8, 1) if smoke else (24, 2) if quick else (family_size, 3)
+    summary["engine"] = bench_engine(*engine_size)
     summary["engine_members_per_cpu_s_over_member_loop"] = \
         summary["engine"]["engine_members_per_cpu_s_over_member_loop"]
     path_rows = bench_path_frame(steps, repeats)
@@ -112,12 +118,12 @@ def _measure(out: Path, steps: int, repeats: int, quick: bool, family_size: int
         summary["path_frame"]["step_over_sparse_floor_path"]
     summary["step_over_sparse_floor_path_daqp"] = \
         summary["path_frame"]["step_over_sparse_floor_path_daqp"]
-    summary["named_peers"] = bench_named_peers(2 if quick else 5)
+    summary["named_peers"] = bench_named_peers(1 if smoke else 2 if quick else 5)
     summary.update({key: value for key, value in summary["named_peers"].items()
                     if key.startswith("peer_step_over_")})
     summary.update(bench_multiverse_reads())
     summary.update(measure_member_cache_reuse())
-    summary.update(measure_coordinator())
+    summary.update(measure_coordinator(8 if smoke else 24))
     if quick:
         summary.update(NOT_QUICK)
     else:
@@ -128,6 +134,7 @@ def _measure(out: Path, steps: int, repeats: int, quick: bool, family_size: int
         summary["coordinator_ms_per_trial_default_space"] = \
             small_tune["coordinator_ms_per_trial"]
     summary["quick"] = quick
+    summary["smoke"] = smoke
     layout = OutputsLayout.load(Path("outputs"))
     summary.update(pruning_comparison(layout.folder("tune"), layout.folder("tune_unpruned")))
     summary["outside_qp_over_qp"] = closed_loop["outside_qp_us_per_step"] \

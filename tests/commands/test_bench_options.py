@@ -40,3 +40,12 @@ def test_an_out_that_is_a_file_is_one_line_before_any_measurement(tmp_path, caps
         f"error: --out={out} is invalid; allowed: a folder (new, or one the benchmark wrote "
         "before), not a file"]
     assert out.read_text() == "keep me"
+
+
+def test_smoke_without_quick_is_one_line_before_any_measurement(tmp_path, capsys):
+    """``--smoke`` shrinks the quick run only: without ``--quick`` exit 2 with one line."""
+    out = tmp_path / "bench"
+    assert main(["--smoke", "--out", str(out)]) == 2
+    assert capsys.readouterr().err.strip().splitlines() == [
+        "error: --smoke is invalid without --quick; allowed: --quick --smoke"]
+    assert not out.exists()

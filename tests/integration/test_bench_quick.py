@@ -1,7 +1,7 @@
-"""``python -m pipeline.bench --quick`` (issue 58, item 7): the reduced benchmark runs to its
-end from the checkout's root, about a minute on two cores, and writes ``bench_summary.json``
-into ``--out`` with every figure a quick run measures a finite number (the ratios over a floor
-positive), the two it leaves out None with the reason. It once ended ``make bench`` in a
+"""``python -m pipeline.bench --quick --smoke`` (issue 58, item 7): the reduced benchmark, each
+measurement at its smallest size, runs to its end from the checkout's root and writes
+``bench_summary.json`` into ``--out`` with every figure a quick run measures a finite number (the
+ratios over a floor positive), the two it leaves out None with the reason. It once ended ``make bench`` in a
 traceback after 26 minutes; no timing is asserted."""
 
 from __future__ import annotations
@@ -19,12 +19,12 @@ ROOT = Path(__file__).resolve().parents[2]
 
 def test_the_quick_bench_writes_every_figure_it_measures(tmp_path):
     out = tmp_path / "bench"
-    proc = subprocess.run([sys.executable, "-m", "pipeline.bench", "--quick", "--out", str(out)],
-                          capture_output=True, text=True, timeout=900, cwd=ROOT)
+    proc = subprocess.run([sys.executable, "-m", "pipeline.bench", "--quick", "--smoke", "--out",
+                           str(out)], capture_output=True, text=True, timeout=900, cwd=ROOT)
     assert proc.returncode == 0, proc.stderr[-3000:]
     assert "Traceback" not in proc.stderr
     summary = json.loads((out / "bench_summary.json").read_text())
-    assert summary["quick"] is True
+    assert summary["quick"] is True and summary["smoke"] is True
     missing = [key for key in QUICK_KEYS if key not in summary]
     assert missing == []
     not_finite = {key: summary[key] for key in QUICK_KEYS
