@@ -230,8 +230,10 @@ verify: reproduce  ## rerun `make reproduce` and compare with reports/reference/
 	$(APF) verify $(RUNS) reports/reference
 
 test: lint $(STAMP)  ## lint and type-check, then run the test suite on every core (PYTEST_JOBS=auto; excludes tests marked slow or slurm; FAST=1 also the integration tier)
-	@# one test file per worker at a time (--dist loadfile), so a file's shared runs are made once
-	PIPELINE_MEMBER_CACHE=off $(PY) -m pytest -m "not slow and not slurm$(if $(FAST), and not integration,)" -n $(PYTEST_JOBS) --dist loadfile $(PYTEST_ARGS)
+	@# one test file per worker at a time (--dist loadfile), so a file's shared runs are made once;
+	@# in the order tests/conftest.py gives them, the longest first (xdist would otherwise reorder
+	@# the files by their number of tests and leave a long file of few tests for the end)
+	PIPELINE_MEMBER_CACHE=off $(PY) -m pytest -m "not slow and not slurm$(if $(FAST), and not integration,)" -n $(PYTEST_JOBS) --dist loadfile --no-loadscope-reorder $(PYTEST_ARGS)
 
 lint: $(STAMP)  ## ruff (pyflakes, bugbear, isort, pyupgrade, simplify, complexity) and mypy, as configured in pyproject.toml
 	$(PY) -m ruff check pipeline tests hydra_plugins examples benchmarks

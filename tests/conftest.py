@@ -21,9 +21,10 @@ CONF_DIR = Path(__file__).resolve().parents[1] / "conf"
 os.environ["PIPELINE_MEMBER_CACHE"] = "off"
 
 #: Test files with whole runs in them, longest first (their tests' summed times in a `make test`
-#: run's junit report on a 2-core machine, 2026-12-06, after this session's cuts). `make test` hands whole files to its
-#: workers (``--dist loadfile``) in collection order; starting the longest first keeps one
-#: worker from running a long file alone at the end.
+#: run's junit report on a 2-core machine, 2026-12-06). `make test` hands whole files to its
+#: workers (``--dist loadfile``) in collection order (``--no-loadscope-reorder``: xdist's default
+#: reorders the files by their number of tests); starting the longest first keeps one worker
+#: from running a long file alone at the end.
 LONGEST_FILES_FIRST = ("test_install.py", "test_apf_alone.py", "test_bench_quick.py",
                        "test_tune.py", "test_processes.py", "test_multiverse.py",
                        "test_extensions.py", "test_scenario_sources.py", "test_run_records.py",
