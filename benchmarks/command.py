@@ -76,12 +76,12 @@ def _bench(args) -> int:
         if not low <= value <= high:
             raise CommandError(f"error: --{key.replace('_', '-')}={value} is invalid; allowed: "
                                f"an integer in [{low}, {high}]")
+    if args.smoke and not args.quick:
+        raise CommandError("error: --smoke is invalid without --quick; allowed: --quick --smoke")
     if args.out.exists() and not args.out.is_dir():
         raise CommandError(f"error: --out={args.out} is invalid; allowed: a folder (new, or "
                            "one the benchmark wrote before), not a file")
     refuse_other_record(args.out, ("bench",))
-    if args.smoke and not args.quick:
-        raise CommandError("error: --smoke is invalid without --quick; allowed: --quick --smoke")
     result = study.run_benchmark(args.out, args.steps, args.repeats, args.quick,
                                  args.family_size, args.smoke)
     save_figure(bench_scaling_figure(result.lateral), written(result.folder), SCALING_STEM)
