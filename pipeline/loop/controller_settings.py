@@ -346,6 +346,9 @@ class KinematicMpcSettings(_MpcSchema):
     input_weights: List[float] = field(default_factory=lambda: [0.1, 0.1])
     input_rate_weights: List[float] = field(default_factory=lambda: [0.01, 0.01])
     accel_bounds_mps2: List[float] = field(default_factory=lambda: [-3.0, 3.0])
+    #: bounds on the predicted speed (m/s), or None: Appendix A's nlmpc bounds only the inputs,
+    #: so its plan may reverse or exceed the platform's top speed (register)
+    speed_bounds_mps: Optional[List[float]] = None
     ltv_iterations: int = 1
     reference_alignment: str = "literal"
 
@@ -359,6 +362,23 @@ class KinematicMpcSettings(_MpcSchema):
         if not self.accel_bounds_mps2[0] < self.accel_bounds_mps2[1]:
             raise ConfigError("controller.accel_bounds_mps2", list(self.accel_bounds_mps2),
                               "[low, high] with low < high")
+        if self.speed_bounds_mps is not None:
+            pair("controller.speed_bounds_mps", self.speed_bounds_mps)
+            low, high = (float(v) for v in self.speed_bounds_mps)
+            between("controller.speed_bounds_mps[0]", low, -50.0, 50.0)
+            between("controller.speed_bounds_mps[1]", high, -50.0, 50.0)
+            if not low < high:
+                raise ConfigError("controller.speed_bounds_mps", list(self.speed_bounds_mps),
+                                  "[low, high] with low < high, or null")
+            if not self.accel_bounds_mps2[0] <= 0.0 <= self.accel_bounds_mps2[1]:
+                raise ConfigError("controller.accel_bounds_mps2", list(self.accel_bounds_mps2),
+                                  "[low, high] with low <= 0 <= high when "
+                                  "controller.speed_bounds_mps is set (holding the speed keeps "
+                                  "its rows feasible)")
+            if self.backend == "nmpc":
+                raise ConfigError("controller.speed_bounds_mps", list(self.speed_bounds_mps),
+                                  "null with controller.backend=nmpc (the nonlinear MPC has "
+                                  "no speed rows)")
         integer_in("controller.ltv_iterations", self.ltv_iterations, 1, 50)
         choice("controller.reference_alignment", self.reference_alignment,
                tuple(ReferenceAlignment))

@@ -143,8 +143,9 @@ class MemberLoop:
                                                           self.disc_offsets)
         if scenario.senses:  # a sensor range (recorded pedestrians), occlusion (CommonRoad)
             snapshot = scenario.sense(snapshot, state[:2], self.reach)
-        row, along, lateral, psi, e_psi = _pose_row(time_s, state, self.frame, self.line,
-                                                    snapshot, self.obstacle_names)
+        row, along, lateral, psi, e_psi = _pose_row(time_s, state, self.frame, self.line)
+        self.log.put_obstacles(k, self.obstacle_names, snapshot.positions_m, snapshot.radii_m,
+                               snapshot.visible)
         ending = "contact" if contact else _termination(state, along, self.goal_line_x,
                                                         scenario, k)
         if ending is not None:

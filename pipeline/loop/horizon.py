@@ -17,7 +17,7 @@ constrain). The lateral MPC's half-plane in path coordinates (``e_y >= b`` at a 
 
 from __future__ import annotations
 
-from math import atan2, cos, sin
+from math import cos, sin
 from typing import Any
 
 import numpy as np
@@ -82,12 +82,6 @@ def halfplane_from_path(point_x: float, point_y: float, path_heading_rad: float,
     ``gain < 0``."""
     a = path_heading_rad + (0.5 * np.pi if gain > 0.0 else -0.5 * np.pi)
     return a, cos(a) * point_x + sin(a) * point_y
-
-
-def halfplane_from_normal(nx: float, ny: float, h: float) -> tuple[float, float]:
-    """The global half-plane ``(a, c)`` of ``nx x + ny y >= h`` (normal of any length)."""
-    norm = (nx * nx + ny * ny) ** 0.5
-    return atan2(ny, nx), h / norm
 
 
 def lateral_horizon_view(records: list[Any], rows: int, horizon: int, slots: int
@@ -164,10 +158,13 @@ def kinematic_horizon_view(records: list[Any], halfplanes: dict[int, tuple[Any, 
         planes = halfplanes.get(k)
         if planes is None:
             continue
-        gx, gy, h = planes
-        for i, j in zip(*np.nonzero(np.abs(gx) + np.abs(gy)), strict=True):
-            if i < horizon and j < slots:
-                normal[k, i, j], offset[k, i, j] = halfplane_from_normal(
-                    float(gx[i, j]), float(gy[i, j]), float(h[i, j]))
+        gx, gy, h = (np.asarray(part)[:horizon, :slots] for part in planes)
+        # each row in use as (the normal's angle, the boundary's distance along it)
+        used = (np.abs(gx) + np.abs(gy)) != 0.0
+        if used.any():
+            n, m = gx.shape
+            nx, ny = gx[used], gy[used]
+            normal[k, :n, :m][used] = np.arctan2(ny, nx)
+            offset[k, :n, :m][used] = h[used] / np.sqrt(nx * nx + ny * ny)
     return {"plan_xy_m": plan, "prediction_step_s": np.full(rows, step_s),
             "constraint_normal_rad": normal, "constraint_offset_m": offset}

@@ -466,17 +466,19 @@ def kinematic_plant_step(state: np.ndarray, control_input: np.ndarray, wheelbase
     h = dt_s / substeps
     half, sixth = 0.5 * h, h / 6.0
     accel, delta = float(control_input[0]), float(control_input[1])
-
-    def rates(X: float, Y: float, theta: float, v: float
-              ) -> tuple[float, float, float, float]:
-        return (v * cos(theta), v * sin(theta), v / wheelbase_m * tan(delta), accel)
-
-    x = [float(v) for v in state]
+    tan_delta = tan(delta)
+    X, Y, theta, v = (float(value) for value in state)
+    # the four stages written out on scalars (rates: v cos th, v sin th, v / L tan d, a)
     for _ in range(substeps):
-        k1 = rates(*x)
-        k2 = rates(*[xi + half * ki for xi, ki in zip(x, k1, strict=True)])
-        k3 = rates(*[xi + half * ki for xi, ki in zip(x, k2, strict=True)])
-        k4 = rates(*[xi + h * ki for xi, ki in zip(x, k3, strict=True)])
-        x = [xi + sixth * (a1 + 2 * a2 + 2 * a3 + a4)
-             for xi, a1, a2, a3, a4 in zip(x, k1, k2, k3, k4, strict=True)]
-    return np.array(x)
+        x1, y1, t1 = v * cos(theta), v * sin(theta), v / wheelbase_m * tan_delta
+        th2, v2 = theta + half * t1, v + half * accel
+        x2, y2, t2 = v2 * cos(th2), v2 * sin(th2), v2 / wheelbase_m * tan_delta
+        th3, v3 = theta + half * t2, v + half * accel
+        x3, y3, t3 = v3 * cos(th3), v3 * sin(th3), v3 / wheelbase_m * tan_delta
+        th4, v4 = theta + h * t3, v + h * accel
+        x4, y4, t4 = v4 * cos(th4), v4 * sin(th4), v4 / wheelbase_m * tan_delta
+        X = X + sixth * (x1 + 2 * x2 + 2 * x3 + x4)
+        Y = Y + sixth * (y1 + 2 * y2 + 2 * y3 + y4)
+        theta = theta + sixth * (t1 + 2 * t2 + 2 * t3 + t4)
+        v = v + sixth * (accel + 2 * accel + 2 * accel + accel)
+    return np.array([X, Y, theta, v])

@@ -161,6 +161,30 @@ class TrajectoryLog:
         self.n_rows = n_rows
         self.columns: dict[str, np.ndarray] = {}
         self.rows = 0
+        #: the obstacles' columns as blocks, one column per obstacle (:meth:`put_obstacles`)
+        self._obstacle_blocks: tuple[np.ndarray, ...] | None = None
+
+    def put_obstacles(self, k: int, names: list[tuple[Any, ...]], positions_m: np.ndarray,
+                      radii_m: np.ndarray, visible: np.ndarray) -> None:
+        """Row ``k``'s obstacle columns (``names[j]``: obstacle ``j``'s x, y, radius and
+        visibility columns), one assignment per field for every obstacle: the columns are
+        views of one block per field (among walkers, 50 obstacles are 200 columns)."""
+        blocks = self._obstacle_blocks
+        if blocks is None:
+            n = len(names)
+            blocks = (np.full((self.n_rows, n), np.nan), np.full((self.n_rows, n), np.nan),
+                      np.full((self.n_rows, n), np.nan), np.zeros((self.n_rows, n), dtype=bool))
+            for j, column_names in enumerate(names):
+                for name, block in zip(column_names, blocks, strict=True):
+                    self.columns[name] = block[:, j]
+            self._obstacle_blocks = blocks
+        n = positions_m.shape[0]
+        if n > blocks[0].shape[1] or radii_m.shape[0] != n or visible.shape[0] != n:
+            raise ValueError(f"{n} obstacles logged where the log has {blocks[0].shape[1]}")
+        xs, ys, radii, seen = blocks
+        xs[k, :n], ys[k, :n] = positions_m[:, 0], positions_m[:, 1]
+        radii[k, :n], seen[k, :n] = radii_m, visible
+        self.rows = max(self.rows, k + 1)
 
     def put(self, k: int, values: dict[str, Any]) -> None:
         columns = self.columns
@@ -305,11 +329,11 @@ def _anchor_due(scenario: Scenario, unanchored: np.ndarray, time_s: float,
 
 
 def _pose_row(time_s: float, state: np.ndarray, frame: LineFrame,
-              line: tuple[float, float, float, float], snapshot: ObstacleSnapshot,
-              obstacle_names: list[tuple[Any, ...]]
+              line: tuple[float, float, float, float]
               ) -> tuple[dict[str, Any], float, float, float, float]:
-    """A step's log row so far (time, pose, line-frame errors, obstacles); and the vehicle's
-    place along and across the line, its heading and its heading error to the line."""
+    """A step's log row so far (time, pose, line-frame errors; the obstacles' columns go in
+    by :meth:`TrajectoryLog.put_obstacles`); and the vehicle's place along and across the
+    line, its heading and its heading error to the line."""
     origin_x, origin_y, c_line, s_line = line
     X, Y, psi = float(state[0]), float(state[1]), float(state[2])
     dx, dy = X - origin_x, Y - origin_y
@@ -317,11 +341,6 @@ def _pose_row(time_s: float, state: np.ndarray, frame: LineFrame,
     e_psi = atan2(sin(psi - frame.heading_rad), cos(psi - frame.heading_rad))
     row = {"time_s": time_s, "X_m": X, "Y_m": Y, "psi_rad": psi, "e_y_m": lateral,
            "e_psi_rad": e_psi}
-    for j, ((ox, oy), radius, seen) in enumerate(zip(snapshot.positions_m.tolist(),
-                                                     snapshot.radii_m.tolist(),
-                                                     snapshot.visible.tolist(), strict=True)):
-        names = obstacle_names[j]
-        row[names[0]], row[names[1]], row[names[2]], row[names[3]] = ox, oy, radius, seen
     return row, along, lateral, psi, e_psi
 
 

@@ -91,8 +91,9 @@ def _closed_loop(cfg: LoopSettings, scenario: Scenario, qp_cache: QpCache | None
         contact = end_at_contact and _in_contact(state, snapshot, vehicle_radius, disc_offsets)
         if senses:  # a sensor range (recorded pedestrians), occlusion (CommonRoad)
             snapshot = scenario.sense(snapshot, state[:2], reach)
-        row, along, lateral, psi, e_psi = _pose_row(time_s, state, frame, line, snapshot,
-                                                    obstacle_names)
+        row, along, lateral, psi, e_psi = _pose_row(time_s, state, frame, line)
+        log.put_obstacles(k, obstacle_names, snapshot.positions_m, snapshot.radii_m,
+                          snapshot.visible)
         ending = "contact" if contact else _termination(state, along, goal_line_x, scenario, k)
         if ending is not None:
             termination = ending

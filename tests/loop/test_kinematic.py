@@ -291,3 +291,148 @@ def test_the_horizons_linearization_is_kinematic_jacobians_bit_for_bit(make_conf
             A, B, c = kinematic_jacobians(states[:, k], plan[:, k], L_m, TS)
             assert np.array_equal(A, As[k]) and np.array_equal(B, Bs[k]) \
                 and np.array_equal(c, offsets[:, k])
+
+
+def test_speed_bounds_keep_the_plan_between_stop_and_top_speed(make_config):
+    """controller.speed_bounds_mps: a reference running away behind the vehicle makes the
+    unbounded plan reverse beyond the robot's top speed; make pedestrians' [-1.67, 1.67] caps
+    the reversing at 1.67 m/s, and [0, 1.67] (no reversing) keeps every predicted speed at or
+    above 0, on the kept Clarabel and on CVXPY (a second statement of the same QP), which
+    agree; at 1.6 m/s a reference far ahead is chased at 1.67 m/s at most."""
+    pedestrians = ["experiment=pedestrians", "planner=improved"]
+    cfg = make_config(pedestrians)
+    vehicle = cfg.vehicle
+    assert list(cfg.controller.speed_bounds_mps) == [-1.67, 1.67]
+    free = make_config([*pedestrians, "controller.speed_bounds_mps=null"]).controller
+    N = cfg.controller.horizon
+    k = np.arange(1, N + 1)
+    empty = np.zeros((N, 0, 2))
+    x0 = np.array([0.0, 0.0, 0.0, -1.0])
+    behind = np.vstack([-0.3 * k ** 1.5, np.zeros(N)])  # away at up to 9.5 m/s
+    unbounded = KinematicLtvMpc(free, vehicle, TS).solve(x0, np.zeros(2), behind, empty,
+                                                        np.zeros(0))
+    assert unbounded.status == "optimal" and unbounded.predicted_states[3].min() < -2.0
+    capped = KinematicLtvMpc(cfg.controller, vehicle, TS).solve(x0, np.zeros(2), behind, empty,
+                                                               np.zeros(0))
+    assert capped.status == "optimal"
+    assert capped.predicted_states[3, 1:].min() >= -1.67 - 1e-6
+    assert capped.predicted_states[3, 1:].min() < -1.66  # it does press against the bound
+    steps = []
+    x0 = np.array([0.0, 0.0, 0.0, 0.5])
+    for backend in ("clarabel_direct", "cvxpy"):
+        ctrl = make_config([*pedestrians, "controller.speed_bounds_mps=[0.0,1.67]",
+                            f"controller.backend={backend}"]).controller
+        step = KinematicLtvMpc(ctrl, vehicle, TS).solve(x0, np.zeros(2), behind, empty,
+                                                        np.zeros(0))
+        assert step.status == "optimal"
+        assert step.predicted_states[3, 1:].min() >= -1e-6
+        steps.append(step)
+    np.testing.assert_allclose(steps[0].command, steps[1].command, atol=1e-5)
+    ahead = np.vstack([3.0 * k, np.zeros(N)])
+    fast = KinematicLtvMpc(cfg.controller, vehicle, TS).solve(
+        np.array([0.0, 0.0, 0.0, 1.6]), np.zeros(2), ahead, empty, np.zeros(0))
+    assert fast.status == "optimal"
+    assert fast.predicted_states[3, 1:].max() <= 1.67 + 1e-6
+    assert fast.predicted_states[3, 1:].max() > 1.66
+
+
+def test_speed_bounds_widen_to_hold_a_measured_speed_outside_them(make_config):
+    """A measured speed outside the bounds (a fallback's braking step, solver tolerance) never
+    makes the speed rows infeasible: they widen to [min(low, v0), max(high, v0)], and the plan
+    moves back toward the bounds."""
+    cfg = make_config(["experiment=pedestrians", "planner=improved",
+                       "controller.speed_bounds_mps=[0.0,1.67]"])
+    mpc = KinematicLtvMpc(cfg.controller, cfg.vehicle, TS)
+    assert mpc.speed_rows(-0.4) == (-0.4, 1.67)
+    assert mpc.speed_rows(2.0) == (0.0, 2.0)
+    assert mpc.speed_rows(1.0) == (0.0, 1.67)
+    N = cfg.controller.horizon
+    k = np.arange(1, N + 1)
+    reference = np.vstack([0.1 * k, np.zeros(N)])
+    step = mpc.solve(np.array([0.0, 0.0, 0.0, -0.4]), np.zeros(2), reference,
+                     np.zeros((N, 0, 2)), np.zeros(0))
+    assert step.status == "optimal" and step.fallback == "none"
+    assert step.predicted_states[3, 1:].min() >= -0.4 - 1e-6
+    assert step.command[0] > 0.0  # it accelerates out of reversing
+
+
+@pytest.mark.parametrize(("overrides", "key"), [
+    (["controller.speed_bounds_mps=[1.0,0.5]"], "controller.speed_bounds_mps"),
+    (["controller.speed_bounds_mps=[0.0]"], "controller.speed_bounds_mps"),
+    (["controller.speed_bounds_mps=[0.0,100.0]"], r"controller.speed_bounds_mps\[1\]"),
+    (["controller.backend=nmpc"], "controller.speed_bounds_mps"),
+    (["controller.accel_bounds_mps2=[0.5,3.0]"], "controller.accel_bounds_mps2"),
+])
+def test_speed_bounds_refused_with_the_key_and_the_allowed_range(make_config, overrides, key):
+    """Bad speed bounds, or ones a backend cannot state, are refused naming the key."""
+    from pipeline.errors import ConfigError
+
+    with pytest.raises(ConfigError, match=key):
+        make_config(["experiment=pedestrians", *overrides])
+
+
+def test_speed_bounds_null_leave_the_config_hash_as_before_the_key(make_config):
+    """The key's default (null: Appendix A's unbounded speed) is not part of the hash, so every
+    run written before the key keeps its member-cache entry; a set bound is."""
+    from pipeline.config import _hash_of
+
+    cfg = make_config(["experiment=kinematic"])
+    assert cfg.controller.speed_bounds_mps is None
+    before_the_key = cfg.to_dict()
+    del before_the_key["controller"]["speed_bounds_mps"]
+    assert cfg.config_hash() == _hash_of(before_the_key)
+    bounded = make_config(["experiment=kinematic", "controller.speed_bounds_mps=[0.0,3.0]"])
+    assert bounded.config_hash() != cfg.config_hash()
+
+
+def _halfplanes_one_obstacle_at_a_time(states, reference, predicted, radii, vehicle, ctrl):
+    """kinematic_halfplanes for an ego of one disc as it was written before it took every
+    obstacle at once: one obstacle's columns per pass (the oracle)."""
+    from pipeline.loop.controller.references import constrains, radial_normals
+
+    N, M = reference.shape[1], ctrl.max_obstacles
+    Gx, Gy, h = np.zeros((N, M)), np.zeros((N, M)), np.zeros((N, M))
+    for j in range(min(predicted.shape[1], M)):
+        obstacle = predicted[:, j, :]
+        if not constrains(float(np.linalg.norm(obstacle[0] - states[:2, 0])), ctrl):
+            continue
+        backup = radial_normals(states[:2, 1:].T, obstacle, np.array([0.0, 1.0])[None, :])
+        normal = radial_normals(reference.T, obstacle, backup)
+        reach = radii[j] + vehicle.footprint_radius_m + ctrl.safety_margin_m
+        Gx[:, j], Gy[:, j] = normal[:, 0], normal[:, 1]
+        h[:, j] = np.sum(normal * obstacle, axis=1) + reach
+    return Gx, Gy, h
+
+
+@pytest.mark.parametrize("n_walkers", [0, 1, 7, 50, 60])
+def test_every_walkers_halfplanes_at_once_equal_one_at_a_time(make_config, n_walkers):
+    """The half-planes of all obstacles at once are, bit for bit, those of one obstacle at a
+    time: walkers near and beyond the activation distance, a reference point on a walker's
+    centre (the rollout's normal), a rollout on it too (the fixed (0, 1)), a walker of unknown
+    position (NaN: constrained, its rows NaN), more walkers than slots (the nearest 50 kept)."""
+    from pipeline.loop.controller.references import kinematic_halfplanes
+
+    cfg = make_config(["experiment=pedestrians", "planner=improved"])
+    ctrl, vehicle = cfg.controller, cfg.vehicle
+    N = ctrl.horizon
+    rng = np.random.default_rng(n_walkers)
+    states = np.vstack([np.cumsum(rng.uniform(0.0, 0.15, (2, N + 1)), axis=1),
+                        rng.uniform(-1.0, 1.0, (1, N + 1)), rng.uniform(0.0, 1.5, (1, N + 1))])
+    reference = states[:2, 1:] + rng.normal(0.0, 0.2, (2, N))
+    predicted = rng.uniform(-15.0, 15.0, (N, n_walkers, 2))
+    if n_walkers >= 7:
+        predicted[:, 1, :] = reference.T              # the reference on the centre
+        predicted[:, 2, :] = reference.T
+        reference[:, 3] = states[:2, 4]               # and the rollout too, at one step
+        predicted[3, 2, :] = reference[:, 3]
+        predicted[:, 4, :] = np.nan                   # unknown
+        predicted[:, 5, :] = states[:2, 0] + np.array([12.0, 0.0])  # at the activation edge
+    radii = rng.uniform(0.2, 0.4, n_walkers)
+    got = kinematic_halfplanes(states, reference, predicted, radii, vehicle, ctrl)
+    want = _halfplanes_one_obstacle_at_a_time(states, reference, predicted, radii, vehicle,
+                                              ctrl)
+    for a, b in zip(got, want, strict=True):
+        np.testing.assert_array_equal(a, b)
+    used = np.count_nonzero(np.any(want[0] != 0.0, axis=0))
+    if n_walkers >= 7:
+        assert 0 < used < min(n_walkers, ctrl.max_obstacles)  # some near, some far

@@ -84,6 +84,7 @@ SWITCH_TESTS = {
     "scenario.commonroad.occlusion": "test_commonroad",
     "scenario.commonroad.route_lookahead_m": "test_commonroad",
     "controller.road_edge_weight": "test_road",
+    "controller.speed_bounds_mps": "test_kinematic",
     **{f"scenario.source.params.{key}": "test_euro_ncap" for key in (
         "cases", "ego_speeds_kmh", "speed_tolerance_kmh", "child_speed_kmh",
         "adult_far_speed_kmh", "cyclist_speed_kmh", "near_start_m", "lead_time_s",

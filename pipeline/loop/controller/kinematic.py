@@ -47,6 +47,9 @@ class KinematicQpStructure:
     slack_weights: tuple[Any, ...]
     accel_bounds_mps2: tuple[Any, ...]
     steering_max_rad: float
+    #: whether the predicted speed has rows ``low <= v_k <= high`` (their values are
+    #: parameters: :meth:`KinematicLtvMpc.speed_rows`)
+    speed_bounded: bool = False
 
     @classmethod
     def of(cls, c: KinematicMpcSettings,
@@ -54,7 +57,8 @@ class KinematicQpStructure:
         return cls(c.horizon, c.control_horizon, c.max_obstacles, c.input_hold,
                    tuple(c.output_weights), tuple(c.input_weights), tuple(c.input_rate_weights),
                    (c.slack_weight_linear, c.slack_weight_quadratic),
-                   tuple(c.accel_bounds_mps2), vehicle.steering_max_rad)
+                   tuple(c.accel_bounds_mps2), vehicle.steering_max_rad,
+                   c.speed_bounds_mps is not None)
 
 
 def build_kinematic_problem(s: KinematicQpStructure) -> tuple[cp.Problem, list[Any], dict[str, Any]]:
@@ -96,21 +100,30 @@ def build_kinematic_problem(s: KinematicQpStructure) -> tuple[cp.Problem, list[A
                    cp.multiply(Gx, px) + cp.multiply(Gy, py) + S >= h]
     constraints += [X[:, k + 1] == A[k] @ X[:, k] + B[k] @ u_seq[:, k] + c[:, k]
                     for k in range(N)]
+    parameters = [x0, u_prev, ref, c, *A, *B, Gx, Gy, h]
+    if s.speed_bounded:
+        speed_low, speed_high = cp.Parameter(name="speed_low"), cp.Parameter(name="speed_high")
+        constraints += [X[3, 1:] >= speed_low, X[3, 1:] <= speed_high]
+        parameters += [speed_low, speed_high]
     problem = cp.Problem(cp.Minimize(cost), constraints)
     if not problem.is_dcp(dpp=True):
         raise RuntimeError("kinematic LTV-MPC is not DPP; it would recompile every step")
-    return problem, [x0, u_prev, ref, c, *A, *B, Gx, Gy, h], {"X": X, "U": U}
+    return problem, parameters, {"X": X, "U": U}
 
 
 def kinematic_theta(x0: np.ndarray, u_prev: np.ndarray, reference: np.ndarray,
                     offsets: np.ndarray, As: np.ndarray, Bs: np.ndarray, Gx: np.ndarray,
-                    Gy: np.ndarray, h: np.ndarray) -> np.ndarray:
+                    Gy: np.ndarray, h: np.ndarray,
+                    speed_rows: tuple[float, float] | None = None) -> np.ndarray:
     """The LTV-QP's parameters stacked as ``theta`` (the order of
-    :func:`build_kinematic_problem`'s list, each column-major)."""
-    return np.concatenate(
-        [x0, u_prev, reference.ravel(order="F"), offsets.ravel(order="F")]
-        + [A.ravel(order="F") for A in As] + [B.ravel(order="F") for B in Bs]
-        + [Gx.ravel(order="F"), Gy.ravel(order="F"), h.ravel(order="F")])
+    :func:`build_kinematic_problem`'s list, each column-major); ``speed_rows`` the speed
+    rows' bounds where the problem has them."""
+    blocks = [x0, u_prev, reference.ravel(order="F"), offsets.ravel(order="F")] \
+        + [A.ravel(order="F") for A in As] + [B.ravel(order="F") for B in Bs] \
+        + [Gx.ravel(order="F"), Gy.ravel(order="F"), h.ravel(order="F")]
+    if speed_rows is not None:
+        blocks.append(np.asarray(speed_rows, dtype=float))
+    return np.concatenate(blocks)
 
 
 class KinematicTrack:
@@ -281,6 +294,19 @@ class KinematicLtvMpc(KinematicTrack):
             offsets[:, k] = states[:, k + 1] - As[k] @ states[:, k] - Bs[k] @ plan[:, k]
         return states, As, Bs, offsets
 
+    def speed_rows(self, speed_mps: float) -> tuple[float, float] | None:
+        """The predicted speed's bounds this step, or None without ``speed_bounds_mps``:
+        ``[min(low, v0), max(high, v0)]``, so that a measured speed outside the bounds (a
+        fallback's step, the solver's tolerance) never makes the rows infeasible: holding the
+        speed (zero acceleration, inside ``accel_bounds_mps2``) always meets them, and the
+        Euler model's speed row is the plant's own (``v' = a``), so from inside the bounds the
+        plant stays inside."""
+        bounds = self.cfg.speed_bounds_mps
+        if bounds is None:
+            return None
+        low, high = (float(b) for b in bounds)
+        return min(low, speed_mps), max(high, speed_mps)
+
     def _qp_for(self, Gx: np.ndarray, Gy: np.ndarray, h: np.ndarray) -> tuple[Any, int]:
         """The QP with the fewest slots (of :data:`SLOT_BUCKETS` and ``max_obstacles``) that
         holds every slot these half-planes use, and that number (compiled once, on first
@@ -345,7 +371,8 @@ class KinematicLtvMpc(KinematicTrack):
                                                  self.vehicle, self.cfg)
                 qp, slots = self._qp_for(Gx, Gy, h)
                 solution = qp.solve(kinematic_theta(x0, u_prev, reference, offsets, As, Bs,
-                                                    Gx[:, :slots], Gy[:, :slots], h[:, :slots]))
+                                                    Gx[:, :slots], Gy[:, :slots], h[:, :slots],
+                                                    self.speed_rows(float(x0[3]))))
                 status = solution.status
                 total_iters += max(solution.iterations, 0)
                 total_time += solution.solve_time_s

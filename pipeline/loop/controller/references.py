@@ -304,6 +304,13 @@ def kinematic_halfplanes(predicted_states: np.ndarray, reference_m: np.ndarray,
     Gx, Gy, h = np.zeros((N, M)), np.zeros((N, M)), np.zeros((N, M))
     n_obs = predicted_obstacles_m.shape[1] if predicted_obstacles_m.ndim == 3 else 0
     discs = vehicle.footprint_offsets_m if vehicle.footprint_discs > 1 else None
+    if discs is None:
+        # one disc: every obstacle's columns at once (among walkers up to 50 of them), the
+        # same elementwise operations as the loop below, so the same numbers
+        _one_disc_halfplanes(predicted_states, reference_m,
+                             predicted_obstacles_m[:, :min(n_obs, M), :], radii_m, vehicle,
+                             controller, (Gx, Gy, h))
+        return Gx, Gy, h
     for j in range(min(n_obs, M)):
         obstacle = predicted_obstacles_m[:, j, :]
         if not constrains(float(np.linalg.norm(obstacle[0] - predicted_states[:2, 0])),
@@ -325,3 +332,41 @@ def kinematic_halfplanes(predicted_states: np.ndarray, reference_m: np.ndarray,
         Gx[:, j], Gy[:, j] = normal[:, 0], normal[:, 1]
         h[:, j] = np.sum(normal * obstacle, axis=1) + reach
     return Gx, Gy, h
+
+
+def _one_disc_halfplanes(predicted_states: np.ndarray, reference_m: np.ndarray,
+                         obstacles_m: np.ndarray, radii_m: np.ndarray, vehicle: VehicleConfig,
+                         controller: KinematicMpcSettings,
+                         out: tuple[np.ndarray, np.ndarray, np.ndarray]) -> None:
+    """:func:`kinematic_halfplanes`' columns for an ego of one disc, every obstacle of
+    ``obstacles_m`` (N, m, 2) at once, into ``out`` (``Gx, Gy, h``, their first ``m``
+    columns): the activation test on each obstacle's first predicted centre
+    (:func:`constrains`), the normals from the predicted centre to the reference point (to the
+    rollout where the reference sits on the centre, else ``(0, 1)``) and ``h = n . o + R``."""
+    m = obstacles_m.shape[1]
+    if m == 0 or not controller.collision_constraints:
+        return
+    Gx, Gy, h = out
+    start = obstacles_m[0] - predicted_states[:2, 0]
+    distance = np.sqrt(np.einsum("ij,ij->i", start, start))
+    # constrains(): within the activation distance (a NaN distance: constrained)
+    active = np.flatnonzero(~(distance > controller.constraint_activation_m))
+    if active.size == 0:
+        return
+    obstacles = obstacles_m[:, active, :]
+    backup = _radial_normals_3d(predicted_states[:2, 1:].T[:, None, :], obstacles,
+                                np.array([0.0, 1.0]))
+    normal = _radial_normals_3d(reference_m.T[:, None, :], obstacles, backup)
+    reach = radii_m[active] + vehicle.footprint_radius_m + controller.safety_margin_m
+    Gx[:, active], Gy[:, active] = normal[:, :, 0], normal[:, :, 1]
+    h[:, active] = np.sum(normal * obstacles, axis=2) + reach
+
+
+def _radial_normals_3d(points_m: np.ndarray, centres_m: np.ndarray,
+                       fallback: np.ndarray) -> np.ndarray:
+    """:func:`radial_normals` for many obstacles: ``points_m`` (N, 1, 2) against
+    ``centres_m`` (N, m, 2), shape (N, m, 2)."""
+    diff = points_m - centres_m
+    dist = np.linalg.norm(diff, axis=2)
+    return np.where(dist[:, :, None] > _NORMAL_EPS_M,
+                    diff / np.maximum(dist, _NORMAL_EPS_M)[:, :, None], fallback)
