@@ -69,16 +69,25 @@ def crowd_metrics(table: pd.DataFrame, level: float = 0.95, seed: int = 0) -> di
     ``<name>_low`` and ``<name>_high`` (its interval at ``level``).
 
     Success is reaching the goal without a contact; a timeout neither (the run's last step
-    came first); time to goal and the path ratio (path length over the straight start-goal
+    came first); an avoidable collision one whose ``collision_avoidable`` is true (the
+    published label: :mod:`pipeline.analysis.unavoidable`; NaN without the column); time to goal
+    and the path ratio (path length over the straight start-goal
     line) are read on the successful runs; the minimum distance is the closest surface gap to
     any walker (m; negative: a contact)."""
     collided = _flags(table, "collision")
+    # a contact that is not unavoidable (collision_avoidable: as the report's inputs publish
+    # it, a manoeuvre from the walker's appearance or another method on the same crossing
+    # avoided it; an unavoidable one is mostly a walker whose recorded track begins on or
+    # against the platform, met by every method)
+    avoidable = collided & _flags(table, "collision_avoidable")
     reached = _flags(table, "goal_reached")
     success = reached & ~collided
     timeout = ~reached & ~collided
     out: dict[str, Any] = {"crossings": int(len(table))}
     for name, value in (("success_rate", _rate(success, level)),
                         ("collision_rate", _rate(collided, level)),
+                        ("collision_avoidable_rate", _rate(avoidable, level)
+                         if "collision_avoidable" in table else (float("nan"),) * 3),
                         ("timeout_rate", _rate(timeout, level)),
                         ("time_to_goal_median_s", _median(
                             table["time_to_goal_s"].to_numpy(float)[success], level)),

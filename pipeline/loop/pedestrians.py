@@ -140,6 +140,22 @@ class RecordedTrackMotion:
         velocities = (ahead - here) / self.step_s
         return positions, velocities, present
 
+    def positions_over(self, times_s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """:meth:`states_at`'s positions (T, n, 2) and presence (T, n) at every time of
+        ``times_s`` at once (the same operations, element for element)."""
+        n = self.counts.shape[0]
+        last = (self.counts - 1).astype(float)[None, :]
+        u = (np.asarray(times_s, float)[:, None] - self.first_s[None, :]) / self.step_s
+        nearest = np.rint(u)
+        u = np.where(np.abs(u - nearest) * self.step_s < SAMPLE_TOLERANCE_S, nearest, u)
+        present = (u >= 0.0) & (u <= last)
+        u = np.clip(u, 0.0, last)
+        i = np.minimum(np.floor(u), np.maximum(last - 1.0, 0.0)).astype(int)
+        frac = (u - i)[:, :, None]
+        rows = np.arange(n)[None, :]
+        here, ahead = self.positions_m[rows, i], self.positions_m[rows, i + 1]
+        return (1.0 - frac) * here + frac * ahead, present
+
 
 def scene_path(cfg: PedestrianConfig, scene: str) -> Path:
     """The track file of ``scene``: ``<data_dir>/<scene>.txt.gz``, else ``.txt``."""
@@ -507,20 +523,16 @@ def crossing_difficulty(cfg: ScenarioConfig, vehicle_radius_m: float) -> Crossin
     direction = (goal - start) / max(length, 1e-12)
     arrive_s = length / float(cfg.speed_mps)
     reach = vehicle_radius_m + ped.radius_m
-    meets = touched = False
-    for k in range(int(cfg.n_steps) + 1):
-        time_s = k * float(cfg.sample_time_s)
-        positions, _, present = motion.states_at(time_s)
-        if not present.any():
-            continue
-        here = positions[present]
-        if time_s <= arrive_s and not meets:
-            on_line = start + min(float(cfg.speed_mps) * time_s, length) * direction
-            meets = bool(np.min(np.hypot(*(here - on_line).T)) < reach)
-        if not touched:
-            touched = bool(np.min(np.hypot(*(here - start).T)) < reach)
-        if meets and touched:
-            break
+    # every step of the run at once: the walkers present then, the platform on the line
+    # (until it arrives) and standing at the start
+    times = np.arange(int(cfg.n_steps) + 1) * float(cfg.sample_time_s)
+    positions, present = motion.positions_over(times)
+    on_line = start + np.minimum(float(cfg.speed_mps) * times, length)[:, None] * direction
+    to_line = np.hypot(positions[:, :, 0] - on_line[:, None, 0],
+                       positions[:, :, 1] - on_line[:, None, 1])
+    to_start = np.hypot(positions[:, :, 0] - start[0], positions[:, :, 1] - start[1])
+    meets = bool(np.any(present & (to_line < reach) & (times <= arrive_s)[:, None]))
+    touched = bool(np.any(present & (to_start < reach)))
     return CrossingDifficulty(meets, touched)
 
 

@@ -164,7 +164,7 @@ def pedestrian_metrics_frame(judged) -> pd.DataFrame:
     method, the crowd-navigation metrics with their intervals, after the family's description
     (``family, track, platform, draw, walkers``) and its difficulty from the recording alone
     (``straight_line_meets_share, standing_touched_share``, and the method's collision rate on
-    the crossings where standing still is safe)."""
+    the crossings where standing still is safe, all contacts and the avoidable ones)."""
     rows = []
     for family in judged:
         if family.metrics is None:
@@ -178,7 +178,9 @@ def pedestrian_metrics_frame(judged) -> pd.DataFrame:
                          "straight_line_meets_share": hard.get("straight_line_meets_share"),
                          "standing_touched_share": hard.get("standing_touched_share"),
                          "collision_rate_standing_safe":
-                             hard.get(f"collision_rate_standing_safe_{method}")})
+                             hard.get(f"collision_rate_standing_safe_{method}"),
+                         "collision_rate_standing_safe_avoidable":
+                             hard.get(f"collision_rate_standing_safe_avoidable_{method}")})
     return pd.DataFrame(rows)
 
 

@@ -585,6 +585,13 @@ def _difficulty(settings: Any, info: dict, tables: dict[str, pd.DataFrame]) -> d
         hits = rows["collision"].map(lambda v: str(v).lower() in ("true", "1", "1.0"))
         out[f"collision_rate_standing_safe_{method}"] = float(hits.mean()) if len(rows) \
             else float("nan")
+        # of those, the avoidable contacts (the published label: a manoeuvre from the
+        # walker's appearance or another method on the crossing avoided it)
+        rate = float("nan")
+        if len(rows) and "collision_avoidable" in rows:
+            rate = float((hits & rows["collision_avoidable"].map(
+                lambda v: str(v).lower() in ("true", "1", "1.0"))).mean())
+        out[f"collision_rate_standing_safe_avoidable_{method}"] = rate
     return out
 
 

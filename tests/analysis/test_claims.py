@@ -105,6 +105,32 @@ def test_fast_hodges_lehmann_on_resamples_equals_the_direct_one():
     np.testing.assert_array_equal(hodges_lehmann_on(sample)(other), hodges_lehmann(other))
 
 
+@pytest.mark.parametrize("seed", [1, 2])
+def test_the_walsh_medians_bootstrap_on_positions_is_the_one_on_values(monkeypatch, seed):
+    """The paired bootstrap of the Hodges-Lehmann estimate resamples the sample's positions
+    and looks their values up: the same interval, method and Monte-Carlo bands, bit for bit, as
+    the bootstrap of the values themselves (scipy.stats.bootstrap, BCa and percentile), on
+    samples with ties and with one value far out."""
+    from pipeline.analysis.claims import statistics
+    from pipeline.analysis.claims.statistics import bootstrap_interval, hodges_lehmann_on
+
+    rng = np.random.default_rng(seed)
+    sample = np.round(rng.normal(size=83), 1)
+    sample[5] = 40.0
+    cfg = ClaimsConfig(n_resamples=999)
+    statistic = hodges_lehmann_on(sample)
+    positions, of_positions = statistics.on_positions(statistic, sample)
+    np.testing.assert_array_equal(of_positions(positions), statistic(sample))
+    by_positions = bootstrap_interval(sample, statistic, cfg, 0.95)
+    monkeypatch.setattr(statistics, "on_positions", lambda statistic, sample: None)
+    by_values = bootstrap_interval(sample, statistic, cfg, 0.95)
+    assert by_positions == by_values and by_values.method == "BCa"
+    # a statistic that is not the Walsh median of this sample resamples the values
+    monkeypatch.undo()
+    assert statistics.on_positions(hodges_lehmann_on(sample[:-1] + 0.05), sample) is None
+    assert statistics.on_positions(np.median, sample) is None
+
+
 def test_wilcoxon_pvalue_is_scipys_own_and_enumerates_all_at_once(monkeypatch):
     """Oracle: ``scipy.stats.wilcoxon(zero_method="pratt")``, equal to the last bit, on small
     samples with zeros and ties (where SciPy enumerates every sign flip one by one), without

@@ -135,6 +135,16 @@ def test_the_rates_intervals_are_clopper_pearson_and_the_medians_order_statistic
     assert (m["collision_rate"], m["collision_rate_low"], m["collision_rate_high"]) == \
         pytest.approx((0.15, low, high))
     assert m["success_rate"] == 15 / 20 and m["timeout_rate"] == 2 / 20
+    # without the reachability check's column no avoidable rate is made up
+    assert np.isnan(m["collision_avoidable_rate"])
+    # two of the three contacts avoidable from the walker's appearance (a flag on a run
+    # without a contact does not count)
+    flagged = crowd_metrics(table.assign(collision_avoidable=[True, False, True] + [True]
+                                         + [False] * 16))
+    low, high = stats.beta.ppf(0.025, 2, 19), stats.beta.ppf(0.975, 3, 18)
+    assert (flagged["collision_avoidable_rate"], flagged["collision_avoidable_rate_low"],
+            flagged["collision_avoidable_rate_high"]) == pytest.approx((0.1, low, high))
+    assert flagged["collision_rate"] == m["collision_rate"]
     assert (m["min_distance_median_m"], m["min_distance_median_m_low"],
             m["min_distance_median_m_high"]) == pytest.approx((9.5, 5.0, 14.0))
     assert m["time_to_goal_median_s"] == pytest.approx(np.median(np.arange(3.0, 18.0)))
@@ -242,3 +252,24 @@ def test_reactive_walkers_step_aside_where_replayed_ones_walk_through(make_confi
         assert last is not None and abs(last[0] - (-5.0 + 0.4 * 25)) < 1.0 + (
             0 if walkers == "replayed" else 0.5)
     assert gaps["replayed"] < -0.55 and gaps["reactive"] > gaps["replayed"] + 0.4
+
+
+def test_the_walkers_at_every_step_at_once_are_those_of_each_step(make_config):
+    """RecordedTrackMotion.positions_over (crossing_difficulty's every step at once) gives,
+    bit for bit, each step's states_at positions and presence: before a track's first sample,
+    between samples, on them and after its last, on a recorded scene."""
+    from pipeline.loop.pedestrians import load_scene, pedestrians_near
+
+    cfg = make_config(["experiment=pedestrians"]).scenario
+    ped = cfg.pedestrians
+    tracks = load_scene(ped, ped.scenes[0])
+    which = pedestrians_near(tracks, np.array([0.0, 0.0]), np.array([10.0, 0.0]), 30.0,
+                             60.0, 1e6)[:40]
+    motion = tracks.motion(which, 30.0)
+    times = np.arange(0, 601) * 0.1 - 5.0
+    positions, present = motion.positions_over(times)
+    for k, time_s in enumerate(times):
+        one, _, seen = motion.states_at(float(time_s))
+        np.testing.assert_array_equal(positions[k], one)
+        np.testing.assert_array_equal(present[k], seen)
+    assert present.any() and not present.all()

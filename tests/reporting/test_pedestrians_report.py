@@ -6,6 +6,7 @@ link to the scenario explorer."""
 
 from __future__ import annotations
 
+import numpy as np
 import pandas as pd
 
 SMALL = ["scenario=pedestrians", "scenario.family.size=6", "scenario.family.n_jobs=1"]
@@ -57,6 +58,14 @@ def test_the_report_judges_the_pedestrian_family_overall_and_per_scene(make_conf
         row = metrics[metrics["method"] == method].iloc[0]
         assert row["crossings"] == 6
         assert row["collision_rate"] == table["collision"].astype(bool).mean()
+        # the avoidable ones: a contact the run's own reachability check calls avoidable, or
+        # that the other method did not have on the same crossing (the published label)
+        hit = {m: t["collision"].astype(bool).to_numpy() for m, t in tables.items()}
+        avoidable = hit[method] & (table["collision_avoidable"].astype(bool).to_numpy()
+                                   | ~np.logical_and.reduce(list(hit.values())))
+        assert row["collision_avoidable_rate"] == avoidable.mean()
+        assert 0.0 <= row["collision_rate_standing_safe_avoidable"] \
+            <= row["collision_rate_standing_safe"]
     assert html.index('id="pedestrians-metrics"') < html.index('id="pedestrians-verdicts"')
     for index in range(6):
         assert f'href="explorer.html#pedestrians/{index}"' in html

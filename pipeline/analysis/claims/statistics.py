@@ -72,6 +72,43 @@ class WalshMedian:
                              self.second).reshape(batch_shape)
 
 
+@dataclass(frozen=True)
+class WalshMedianOfPositions:
+    """A :class:`WalshMedian` read on the positions of its sample instead of its values: a
+    resample of positions ``i`` (floats, as a bootstrap hands data) is the resample
+    ``sample[i]`` of values. The bootstrap of the positions draws the same indices from the
+    same generator as the bootstrap of the values (they depend only on the sample's size), so
+    every resample's estimate, the jackknife's and the interval are the same numbers; each
+    position's distinct value is looked up instead of searched for."""
+
+    median: WalshMedian
+    codes: np.ndarray
+
+    def __call__(self, positions: Any, axis: int = -1) -> Any:
+        from pipeline.analysis.claims.compiled import walsh_medians
+
+        index = self.codes[np.moveaxis(np.asarray(positions), axis, -1).astype(np.intp)]
+        batch_shape, n = index.shape[:-1], index.shape[-1]
+        if n == 0:
+            return hodges_lehmann(np.zeros(batch_shape + (0,)), axis=-1)
+        m = self.median
+        return walsh_medians(np.ascontiguousarray(index.reshape(-1, n), dtype=np.int64),
+                             m.values, m.walsh, m.first, m.second).reshape(batch_shape)
+
+
+def on_positions(statistic: Statistic, sample: np.ndarray
+                 ) -> tuple[np.ndarray, Statistic] | None:
+    """``(positions, statistic of positions)`` when ``statistic`` is the :class:`WalshMedian`
+    of ``sample`` (the bootstrap then resamples positions), else None."""
+    if not isinstance(statistic, WalshMedian) or statistic.values.size == 0:
+        return None
+    codes = np.searchsorted(statistic.values, sample)
+    if codes.size and (codes.max() >= statistic.values.size
+                       or not np.array_equal(statistic.values[codes], sample)):
+        return None
+    return np.arange(sample.size, dtype=float), WalshMedianOfPositions(statistic, codes)
+
+
 def hodges_lehmann_on(sample: np.ndarray) -> WalshMedian:
     """:func:`hodges_lehmann` specialised to resamples of ``sample`` (:class:`WalshMedian`):
     the same numbers, about ten times faster than a cumulative sum over every Walsh average
@@ -159,13 +196,16 @@ def bootstrap_interval(d: np.ndarray, statistic: Statistic, cfg: ClaimsConfig,
         return BootstrapInterval(float("nan"), float("nan"), "none")
     if np.ptp(d) == 0.0:
         return BootstrapInterval(float(d[0]), float(d[0]), "degenerate", resamples)
+    # the Walsh median resamples the sample's positions (the same draws, looked up, not
+    # searched for: the same numbers)
+    data, resampled_statistic = on_positions(statistic, d) or (d, statistic)
     for method in ("BCa", "percentile"):
         with np.errstate(all="ignore"):
             import warnings
 
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore")
-                result = stats.bootstrap((d,), statistic, n_resamples=resamples,
+                result = stats.bootstrap((data,), resampled_statistic, n_resamples=resamples,
                                          confidence_level=level, method=method, vectorized=True,
                                          axis=-1, batch=200,
                                          random_state=np.random.default_rng(cfg.seed))
