@@ -294,6 +294,18 @@ def stop_on_signals() -> Callable[[], None]:
     return restore
 
 
+def leave_interrupts_to(parent_pid: int | None) -> None:
+    """In a worker process (any process but ``parent_pid``; nothing with None): ignore SIGINT,
+    so that a Ctrl-C to the process group stops the command alone, which stops its workers
+    (joblib's loky kills their tree). A worker interrupted itself inside IPOPT or on its way
+    out once printed "Fatal Python error" into the command's one line."""
+    import os
+    import signal
+
+    if parent_pid is not None and os.getpid() != parent_pid:
+        signal.signal(signal.SIGINT, signal.SIG_IGN)
+
+
 def signal_received() -> int | None:
     """The signal the current :class:`SignalStop` has received (None: none, or no handler of
     ours is installed)."""

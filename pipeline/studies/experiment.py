@@ -10,6 +10,7 @@ from __future__ import annotations
 import functools
 import gc
 import logging
+import os
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -220,11 +221,15 @@ COMPILED_KERNELS_MIN_MEMBERS = 50
 
 
 def _run_chunk(jobs: list[tuple[int, ExperimentConfig, Path]], qp_cache: QpCache,
-               member_cache: MemberCache | None = None, record_horizon: bool = True
-               ) -> list[tuple[int, dict]]:
+               member_cache: MemberCache | None = None, record_horizon: bool = True,
+               parent_pid: int | None = None) -> list[tuple[int, dict]]:
     """Run a few family members in one worker, stepped together (:func:`run_members`), all
     with the compiled QP shipped in ``qp_cache`` (so a worker compiles nothing), and publish
-    each new one to ``member_cache`` (``record_horizon``: :func:`run_experiment`'s)."""
+    each new one to ``member_cache`` (``record_horizon``: :func:`run_experiment`'s); a worker
+    leaves Ctrl-C to ``parent_pid`` (:func:`~pipeline.errors.leave_interrupts_to`)."""
+    from pipeline.errors import leave_interrupts_to
+
+    leave_interrupts_to(parent_pid)
     # loky's worker runs a full gc.collect() after each task (about 0.1 s here, over the ~250k
     # objects of numpy, scipy, cvxpy, numba...); what is alive when a task starts lives for the
     # whole worker (its imports, the kernels), so it is moved out of the collector's scans.
@@ -293,7 +298,8 @@ def run_family(cfg: ExperimentConfig, out_dir: Path, progress: bool = True,
     _prepare_cache(cfg, cache, len(pending))
     chunks = _chunks(pending, family.n_jobs)
     results = Parallel(n_jobs=family.n_jobs, return_as="generator_unordered")(
-        delayed(_run_chunk)(chunk, cache, member_cache, record_horizon) for chunk in chunks)
+        delayed(_run_chunk)(chunk, cache, member_cache, record_horizon, os.getpid())
+        for chunk in chunks)
     with Progress(len(members), f"{cfg.method_name} family", "scenario",
                   initial=len(metrics_by_index), disable=not progress) as bar:
         try:

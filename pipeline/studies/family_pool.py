@@ -16,6 +16,7 @@ setting asked twice) waits for it and is then read back.
 from __future__ import annotations
 
 import concurrent.futures
+import os
 from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -205,7 +206,7 @@ class FamilyPool:
                     future.set_exception(exc)
             else:
                 future = self.executor.submit(_run_chunk, chunk, shipped, self.member_cache,
-                                              record_horizon)
+                                              record_horizon, os.getpid())
             self._futures[future] = folder
 
     def _finish(self, state: _Family) -> None:

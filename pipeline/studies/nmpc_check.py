@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import dataclasses
 import logging
+import os
 import time
 from pathlib import Path
 
@@ -81,11 +82,14 @@ def _pair(cfg_linear, cfg_nmpc, scenario_cfg, cache) -> dict:
             "metrics_ltv": runs["linear"][1].to_json(), "metrics_nmpc": runs["nmpc"][1].to_json()}
 
 
-def _run_chunk(jobs: list[tuple]) -> list[dict]:
+def _run_chunk(jobs: list[tuple], parent_pid: int | None = None) -> list[dict]:
     """A few pairs in one worker, with one cache for its compiled problems (the nonlinear
-    program is built once per worker)."""
+    program is built once per worker); a worker leaves Ctrl-C to ``parent_pid``
+    (:func:`~pipeline.errors.leave_interrupts_to`)."""
+    from pipeline.errors import leave_interrupts_to
     from pipeline.loop.controller import QpCache
 
+    leave_interrupts_to(parent_pid)
     cache = QpCache()
     out = []
     for track, method, name, cfg_linear, cfg_nmpc, scenario_cfg in jobs:
@@ -194,7 +198,7 @@ def _agreement(compose, out_dir: Path, n_members: int, log, tracks: tuple[str, .
     done = 0
     chunks = _chunks(jobs, n_jobs)
     for part in Parallel(n_jobs=n_jobs, return_as="generator_unordered")(
-            delayed(_run_chunk)(chunk) for chunk in chunks):
+            delayed(_run_chunk)(chunk, os.getpid()) for chunk in chunks):
         rows.extend(part)
         done += len(part)
         log(f"nmpc-check: {done} of {len(jobs)} runs under both controllers")

@@ -277,3 +277,35 @@ def test_an_interrupt_inside_the_results_conversion_is_an_interrupt():
         ipopt_solve(_PlantedSolver(KeyboardInterrupt()))
     with pytest.raises(SystemError):
         ipopt_solve(_PlantedSolver(ValueError("not an interrupt")))
+
+
+def test_workers_leave_ctrl_c_to_the_command():
+    """A family's or the NMPC check's worker ignores SIGINT (the command alone stops on a
+    Ctrl-C to the process group, and its workers are killed): in a process other than the
+    named parent the handler becomes SIG_IGN; in the parent, or with no parent named, it is
+    left as it was. Oracle: the handler a forked child reports."""
+    from joblib import Parallel, delayed
+
+    from pipeline.errors import leave_interrupts_to
+
+    before = signal.getsignal(signal.SIGINT)
+    leave_interrupts_to(os.getpid())
+    leave_interrupts_to(None)
+    assert signal.getsignal(signal.SIGINT) is before
+
+    ignored = Parallel(n_jobs=2)(delayed(_sigint_ignored_after)(pid, leave)
+                                 for pid, leave in ((os.getpid(), True), (None, False)))
+    assert ignored == [True, False]
+
+
+def _sigint_ignored_after(parent_pid, leave):
+    """In a joblib worker: whether SIGINT is ignored after leave_interrupts_to(parent_pid)
+    (the handler put back first: a reused worker may have run the other case)."""
+    from pipeline.errors import leave_interrupts_to
+
+    signal.signal(signal.SIGINT, signal.default_int_handler)
+    if leave:
+        leave_interrupts_to(parent_pid)
+    else:
+        leave_interrupts_to(None)
+    return signal.getsignal(signal.SIGINT) == signal.SIG_IGN
