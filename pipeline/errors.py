@@ -295,14 +295,19 @@ def stop_on_signals() -> Callable[[], None]:
 
 
 def leave_interrupts_to(parent_pid: int | None) -> None:
-    """In a worker process (any process but ``parent_pid``; nothing with None): ignore SIGINT,
-    so that a Ctrl-C to the process group stops the command alone, which stops its workers
-    (joblib's loky kills their tree). A worker interrupted itself inside IPOPT or on its way
-    out once printed "Fatal Python error" into the command's one line."""
+    """In a worker process (any process but ``parent_pid``, in its main thread; nothing with
+    None): ignore SIGINT, so that a Ctrl-C to the process group stops the command alone,
+    which stops its workers (joblib's loky kills their tree). A worker interrupted itself
+    inside IPOPT or on its way out once printed "Fatal Python error" into the command's one
+    line."""
     import os
     import signal
+    import threading
 
-    if parent_pid is not None and os.getpid() != parent_pid:
+    # a task run in a thread (a Dask worker's) cannot set a handler, and its process is the
+    # cluster's to stop
+    if parent_pid is not None and os.getpid() != parent_pid \
+            and threading.current_thread() is threading.main_thread():
         signal.signal(signal.SIGINT, signal.SIG_IGN)
 
 
