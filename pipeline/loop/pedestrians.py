@@ -124,17 +124,7 @@ class RecordedTrackMotion:
         the linear interpolation; the velocity is the current segment's (the one starting at
         a sample time; the last segment's at the last sample; zero for a one-sample track).
         """
-        n = self.counts.shape[0]
-        last = (self.counts - 1).astype(float)
-        u = (time_s - self.first_s) / self.step_s
-        nearest = np.rint(u)
-        u = np.where(np.abs(u - nearest) * self.step_s < SAMPLE_TOLERANCE_S, nearest, u)
-        present = (u >= 0.0) & (u <= last)
-        u = np.clip(u, 0.0, last)
-        i = np.minimum(np.floor(u), np.maximum(last - 1.0, 0.0)).astype(int)
-        frac = (u - i)[:, None]
-        rows = np.arange(n)
-        here, ahead = self.positions_m[rows, i], self.positions_m[rows, i + 1]
+        here, ahead, frac, present = self._segments(time_s)
         # (1 - f) a + f b: exactly a at f = 0 and exactly b at f = 1 (a sample is replayed)
         positions = (1.0 - frac) * here + frac * ahead
         velocities = (ahead - here) / self.step_s
@@ -143,18 +133,23 @@ class RecordedTrackMotion:
     def positions_over(self, times_s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """:meth:`states_at`'s positions (T, n, 2) and presence (T, n) at every time of
         ``times_s`` at once (the same operations, element for element)."""
-        n = self.counts.shape[0]
-        last = (self.counts - 1).astype(float)[None, :]
-        u = (np.asarray(times_s, float)[:, None] - self.first_s[None, :]) / self.step_s
+        here, ahead, frac, present = self._segments(np.asarray(times_s, float)[:, None])
+        return (1.0 - frac) * here + frac * ahead, present
+
+    def _segments(self, time_s: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """Each pedestrian's segment at ``time_s`` (a number, or times broadcast against the
+        pedestrians: shape (T, 1)): its start and end samples, the fraction along it (a
+        trailing axis of 1) and whether the pedestrian is present."""
+        last = (self.counts - 1).astype(float)
+        u = (time_s - self.first_s) / self.step_s
         nearest = np.rint(u)
         u = np.where(np.abs(u - nearest) * self.step_s < SAMPLE_TOLERANCE_S, nearest, u)
         present = (u >= 0.0) & (u <= last)
         u = np.clip(u, 0.0, last)
         i = np.minimum(np.floor(u), np.maximum(last - 1.0, 0.0)).astype(int)
-        frac = (u - i)[:, :, None]
-        rows = np.arange(n)[None, :]
-        here, ahead = self.positions_m[rows, i], self.positions_m[rows, i + 1]
-        return (1.0 - frac) * here + frac * ahead, present
+        rows = np.arange(self.counts.shape[0])
+        return (self.positions_m[rows, i], self.positions_m[rows, i + 1], (u - i)[..., None],
+                present)
 
 
 def scene_path(cfg: PedestrianConfig, scene: str) -> Path:

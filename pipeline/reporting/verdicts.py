@@ -556,6 +556,7 @@ def _difficulty(settings: Any, info: dict, tables: dict[str, pd.DataFrame]) -> d
     member, drawn again: the family's base is its first member's scenario with the family's
     name, seed and size from ``family.json`` and no drawn scene) and each method's collision
     rate on the crossings where a platform standing still is not touched."""
+    from pipeline.analysis.tally import optional_flags
     from pipeline.loop.pedestrians import crossing_difficulty
     from pipeline.loop.scenario import family_members
     from pipeline.loop.settings import FamilyConfig
@@ -587,11 +588,9 @@ def _difficulty(settings: Any, info: dict, tables: dict[str, pd.DataFrame]) -> d
             else float("nan")
         # of those, the avoidable contacts (the published label: a manoeuvre from the
         # walker's appearance or another method on the crossing avoided it)
-        rate = float("nan")
-        if len(rows) and "collision_avoidable" in rows:
-            rate = float((hits & rows["collision_avoidable"].map(
-                lambda v: str(v).lower() in ("true", "1", "1.0"))).mean())
-        out[f"collision_rate_standing_safe_avoidable_{method}"] = rate
+        out[f"collision_rate_standing_safe_avoidable_{method}"] = \
+            float((hits & optional_flags(rows, "collision_avoidable").eq(True)).mean()) \
+            if len(rows) and "collision_avoidable" in rows else float("nan")
     return out
 
 
