@@ -18,6 +18,7 @@ import numpy as np
 import pandas as pd
 
 from pipeline.analysis.claims.ledger import Ledger, family_ledger
+from pipeline.analysis.claims.memo import IntervalMemo
 from pipeline.analysis.settings import ClaimsConfig
 
 
@@ -115,10 +116,11 @@ def valid_in_both(treatment: pd.DataFrame, control: pd.DataFrame) -> set[Any]:
 
 
 def valid_scenario_ledgers(tables: dict[str, pd.DataFrame], claims: ClaimsConfig,
-                           treatment: str,
-                           comparisons: tuple[str, ...]) -> dict[str, tuple[Ledger, int]]:
+                           treatment: str, comparisons: tuple[str, ...],
+                           memo: IntervalMemo | None = None) -> dict[str, tuple[Ledger, int]]:
     """Per comparison: the claims ledger on the scenarios where both methods' models held
-    (:func:`valid_in_both`), and how many scenarios that is."""
+    (:func:`valid_in_both`), and how many scenarios that is (intervals recalled from
+    ``memo`` where it holds them)."""
     out = {}
     for comparison in comparisons:
         if treatment not in tables or comparison not in tables:
@@ -127,6 +129,6 @@ def valid_scenario_ledgers(tables: dict[str, pd.DataFrame], claims: ClaimsConfig
         subset = {m: tables[m][tables[m]["scenario"].isin(keep)]
                   for m in (treatment, comparison)}
         ledger = family_ledger(subset, claims, None, treatment, (comparison,),
-                               sensitivity=False) if keep else Ledger((), treatment)
+                               sensitivity=False, memo=memo) if keep else Ledger((), treatment)
         out[comparison] = (ledger, len(keep))
     return out

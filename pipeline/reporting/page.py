@@ -42,6 +42,7 @@ from pipeline.reporting.style import FigureStyle
 from pipeline.reporting.tables import write_tables
 from pipeline.reporting.verdicts import Verdicts, beyond_bound_shares
 from pipeline.store.files import write_text_atomic
+from pipeline.store.interval_memo import INTERVAL_MEMO, load_interval_memo, save_interval_memo
 from pipeline.store.runs import Skipped
 
 log = logging.getLogger("pipeline.reporting")
@@ -85,7 +86,13 @@ def build_report(run_root: Path, out_dir: Path, command: str,
     inputs = ReportInputs.load(run_root, sweep_dirs, bench_dir, multiverse_dir, tune_dir,
                                treatment, controls, skipped)
     log.info("report: the ledgers (bootstrap intervals) (%.0f s)", time.perf_counter() - started)
-    verdicts = Verdicts.compute(inputs)
+    # the intervals an earlier build of this folder computed for the same differences and
+    # settings come back from its memo (the same numbers); `make verify` computes them all
+    memo = load_interval_memo(out_dir / INTERVAL_MEMO)
+    verdicts = Verdicts.compute(inputs, memo=memo)
+    save_interval_memo(out_dir / INTERVAL_MEMO, memo)
+    log.info("report: %d bootstrap results recalled from the last build, %d computed",
+             memo.hits, memo.misses)
     write_tables(inputs, verdicts, out_dir / "tables")
     style = style or FigureStyle()
     # figures drawn in forked children beside the sections (the writer waits for them before

@@ -17,6 +17,7 @@ import pandas as pd
 
 from pipeline.analysis.ablation import ablation_effects, ablation_roles, interpretation_flips
 from pipeline.analysis.claims import (
+    IntervalMemo,
     Ledger,
     LedgerRow,
     adjust_answer,
@@ -236,42 +237,48 @@ class Verdicts:
     pedestrian_variants: tuple[PedestrianVerdicts, ...] = ()
 
     @classmethod
-    def compute(cls, inputs: ReportInputs, claims: ClaimsConfig | None = None) -> Verdicts:
-        """Every ledger of ``inputs``, judged with ``claims`` (the inputs' by default)."""
+    def compute(cls, inputs: ReportInputs, claims: ClaimsConfig | None = None,
+                memo: IntervalMemo | None = None) -> Verdicts:
+        """Every ledger of ``inputs``, judged with ``claims`` (the inputs' by default), the
+        bootstrap results recalled from ``memo`` where it holds them (the same numbers:
+        :class:`~pipeline.analysis.claims.memo.IntervalMemo`) and kept in it."""
         cfg = claims or inputs.claims
         if inputs.lateral is None:  # a page of sweeps or of families alone
-            return cls(cfg, pedestrians=_pedestrians(inputs.pedestrians, cfg)
+            return cls(cfg, pedestrians=_pedestrians(inputs.pedestrians, cfg, memo=memo)
                        if inputs.pedestrians is not None else None,
                        pedestrian_variants=tuple(
                            judged for name, variant in inputs.pedestrian_variants.items()
-                           if (judged := _pedestrians(variant, cfg, name)) is not None))
+                           if (judged := _pedestrians(variant, cfg, name, memo)) is not None))
         paper = track_claims(inputs.lateral, cfg)
         kinematic = track_claims(inputs.kinematic, cfg, comparable_only=True) \
             if inputs.kinematic is not None else None
-        family = _family(inputs.family, cfg, inputs.lateral.metrics(), paper_ledger=True) \
+        family = _family(inputs.family, cfg, inputs.lateral.metrics(), paper_ledger=True,
+                         memo=memo) \
             if inputs.family is not None and inputs.family.judgeable(cfg) else None
         # C2 on a common window is read on the lateral family (whose runs' jerk is read);
         # every other ledger reads each run's own window
         own = dataclasses.replace(cfg, c2_window="own")
-        kinematic_family = _family(inputs.kinematic_family, own, None, paper_ledger=False) \
+        kinematic_family = _family(inputs.kinematic_family, own, None, paper_ledger=False,
+                                   memo=memo) \
             if inputs.kinematic is not None and inputs.kinematic_family is not None \
             and inputs.kinematic_family.judgeable(cfg) else None
         effects, roles = None, ablation_roles(inputs.ablation, own)
         if roles[1] in inputs.ablation and roles[0] in inputs.ablation:
             effects = ablation_effects(inputs.ablation, own)
-        apf_alone = _apf_alone(inputs.apf_alone, cfg, family, inputs.family) \
+        apf_alone = _apf_alone(inputs.apf_alone, cfg, family, inputs.family, memo) \
             if inputs.apf_alone is not None and inputs.apf_alone.judgeable(cfg) else None
         peers = tuple(judged for judged in (
-            _peers("lateral", inputs.family, inputs.peers, cfg),
-            _peers("kinematic", inputs.kinematic_family, inputs.kinematic_peers, cfg))
+            _peers("lateral", inputs.family, inputs.peers, cfg, memo),
+            _peers("kinematic", inputs.kinematic_family, inputs.kinematic_peers, cfg, memo))
             if judged is not None)
-        pedestrians = _pedestrians(inputs.pedestrians, cfg) \
+        pedestrians = _pedestrians(inputs.pedestrians, cfg, memo=memo) \
             if inputs.pedestrians is not None else None
         pedestrian_variants = tuple(judged for name, variant in inputs.pedestrian_variants.items()
-                                    if (judged := _pedestrians(variant, cfg, name)) is not None)
-        nmpc = _nmpc(inputs.nmpc_family, family, cfg) \
+                                    if (judged := _pedestrians(variant, cfg, name, memo))
+                                    is not None)
+        nmpc = _nmpc(inputs.nmpc_family, family, cfg, memo) \
             if inputs.nmpc_family is not None and inputs.nmpc_family.judgeable(cfg) else None
-        validity = _validity(inputs.family, inputs, own) if inputs.family is not None \
+        validity = _validity(inputs.family, inputs, own, memo) if inputs.family is not None \
             and family is not None else None
         if validity is not None and nmpc is not None:
             validity = dataclasses.replace(validity, nmpc=nmpc.ledger)
@@ -346,15 +353,15 @@ def _windows_after(windows: C2Windows | None, new: dict[str, Ledger]) -> C2Windo
                                common=common if windows.common else ())
 
 
-def _nmpc(nmpc: FamilyInputs, family: FamilyVerdicts | None, cfg: ClaimsConfig
-          ) -> NmpcVerdicts:
+def _nmpc(nmpc: FamilyInputs, family: FamilyVerdicts | None, cfg: ClaimsConfig,
+          memo: IntervalMemo | None = None) -> NmpcVerdicts:
     """The nonlinear MPC's ledger (:class:`NmpcVerdicts`): the treatment against the controls
     present, C2 on each run's own window; the linear MPC's share of steps beyond its model's
     bound per method from the default family's tables (``share_steps_beyond_bound``)."""
     own = dataclasses.replace(cfg, c2_window="own")
     tables = {m: nmpc.primary[m] for m in ordered(nmpc.primary)}
     comparisons = tuple(c for c in cfg.controls if c in tables)
-    ledger = family_ledger(tables, own, None, cfg.treatment, comparisons)
+    ledger = family_ledger(tables, own, None, cfg.treatment, comparisons, memo=memo)
     beyond = beyond_bound_shares(family, cfg)
     judge = any(share > cfg.nmpc_judge_share for share in beyond.values())
     return NmpcVerdicts(ledger, tuple(outcome_counts(tables)), beyond, judge)
@@ -403,7 +410,7 @@ def track_claims(runs: TrackRuns, cfg: ClaimsConfig, comparable_only: bool = Fal
 
 
 def _family(family: FamilyInputs, cfg: ClaimsConfig, paper_metrics: dict | None,
-            paper_ledger: bool) -> FamilyVerdicts:
+            paper_ledger: bool, memo: IntervalMemo | None = None) -> FamilyVerdicts:
     """The lateral family's ledger (with the paper scenario's column, the all-pairs
     sensitivity and C2 on both windows), or the Appendix-A track's (without them)."""
     tables = {m: family.primary[m] for m in ordered(family.primary)} if paper_ledger \
@@ -414,18 +421,19 @@ def _family(family: FamilyInputs, cfg: ClaimsConfig, paper_metrics: dict | None,
     if jerks is None:  # C2 on a common window cannot be read: said in C2Windows' note
         cfg = dataclasses.replace(cfg, c2_window="own")
     ledger = family_ledger(tables, cfg, paper_metrics, cfg.treatment, tuple(cfg.controls),
-                           sensitivity=paper_ledger, jerks=jerks)
+                           sensitivity=paper_ledger, jerks=jerks, memo=memo)
     counts = outcome_counts({m: family.tables[m] for m in ordered(family.tables)}
                             if family.tables else tables) if paper_ledger else ()
     apf = family_ledger(tables, dataclasses.replace(cfg, c2_window="own"), None, "baseline",
-                        ("mpc_no_apf",), sensitivity=False) \
+                        ("mpc_no_apf",), sensitivity=False, memo=memo) \
         if "baseline" in tables and "mpc_no_apf" in tables else None
-    windows = _c2_windows(tables, cfg, ledger, jerks, asked) if paper_ledger else None
+    windows = _c2_windows(tables, cfg, ledger, jerks, asked, memo) if paper_ledger else None
     return FamilyVerdicts(tables, ledger, tuple(counts), apf, windows)
 
 
 def _c2_windows(tables: dict[str, pd.DataFrame], cfg: ClaimsConfig, ledger: Ledger,
-                jerks: dict | None, asked: str) -> C2Windows:
+                jerks: dict | None, asked: str, memo: IntervalMemo | None = None
+                ) -> C2Windows:
     """C2's rows under each window reading (:class:`C2Windows`): the ledger's, and those of
     the whole ledger under the other reading (its Holm adjustment over every claim)."""
     ledger_rows = tuple(row for row in ledger if row.claim_id == "C2")
@@ -438,7 +446,7 @@ def _c2_windows(tables: dict[str, pd.DataFrame], cfg: ClaimsConfig, ledger: Ledg
     other = "common" if cfg.c2_window == "own" else "own"
     other_ledger = family_ledger(tables, dataclasses.replace(cfg, c2_window=other), None,
                                  cfg.treatment, tuple(c for c in cfg.controls if c in tables),
-                                 sensitivity=False, jerks=jerks)
+                                 sensitivity=False, jerks=jerks, memo=memo)
     other_rows = tuple(row for row in other_ledger if row.claim_id == "C2")
     by_reading = {cfg.c2_window: ledger_rows, other: other_rows}
     return C2Windows(cfg.common_window, cfg.c2_window, by_reading["own"],
@@ -446,7 +454,7 @@ def _c2_windows(tables: dict[str, pd.DataFrame], cfg: ClaimsConfig, ledger: Ledg
 
 
 def _peers(track: str, default: FamilyInputs | None, peers: FamilyInputs | None,
-           cfg: ClaimsConfig) -> PeerVerdicts | None:
+           cfg: ClaimsConfig, memo: IntervalMemo | None = None) -> PeerVerdicts | None:
     """The treatment (its default family on ``track``) against each peer of ``peers``, when
     both are there and drawn with the same seed, the peer's family no larger than the
     treatment's (member i is the same scenario in both: a smaller family pairs with the
@@ -472,13 +480,13 @@ def _peers(track: str, default: FamilyInputs | None, peers: FamilyInputs | None,
     tables = {cfg.treatment: treated[treated["scenario"].isin(shared)],
               **{m: peers.primary[m] for m in names}}
     ledger = family_ledger(tables, dataclasses.replace(cfg, c2_window="own"), None,
-                           cfg.treatment, names, sensitivity=False)
+                           cfg.treatment, names, sensitivity=False, memo=memo)
     ledger = ledger.without_claims(force_claims(cfg))
     return PeerVerdicts(track, names, ledger, tuple(outcome_counts(tables)))
 
 
-def _pedestrians(family: FamilyInputs, cfg: ClaimsConfig, name: str = "default"
-                 ) -> PedestrianVerdicts | None:
+def _pedestrians(family: FamilyInputs, cfg: ClaimsConfig, name: str = "default",
+                 memo: IntervalMemo | None = None) -> PedestrianVerdicts | None:
     """The pedestrian ledgers (:class:`PedestrianVerdicts`) of the family ``name`` (default,
     or a variant's); None without the treatment and a control. The scene of each member is
     read from its name (``scene_of``), the scenes from the family's settings."""
@@ -499,10 +507,11 @@ def _pedestrians(family: FamilyInputs, cfg: ClaimsConfig, name: str = "default"
         tables[method] = table
     comparisons = tuple(c for c in cfg.controls if c in tables and c != cfg.treatment)
     present = tuple(s for s in scenes if any((t["scene"] == s).any() for t in tables.values()))
-    ledger = family_ledger(tables, own, None, cfg.treatment, comparisons, sensitivity=False)
+    ledger = family_ledger(tables, own, None, cfg.treatment, comparisons, sensitivity=False,
+                           memo=memo)
     by_scene = tuple((scene, family_ledger({m: t[t["scene"] == scene] for m, t in
                                             tables.items()}, own, None, cfg.treatment,
-                                           comparisons, sensitivity=False))
+                                           comparisons, sensitivity=False, memo=memo))
                      for scene in present)
     scene_counts = tuple({"scene": scene, **row} for scene in present
                          for row in outcome_counts({m: t[t["scene"] == scene]
@@ -520,11 +529,11 @@ def _pedestrians(family: FamilyInputs, cfg: ClaimsConfig, name: str = "default"
                               tuple(outcome_counts(tables)), scene_counts, tables, about,
                               metrics, _difficulty(settings, info,
                                                    {m: tables[m] for m in methods}),
-                              _unsettled_last(ledger, tables, own, name))
+                              _unsettled_last(ledger, tables, own, name, memo))
 
 
 def _unsettled_last(ledger: Ledger, tables: dict[str, pd.DataFrame], cfg: ClaimsConfig,
-                    family: str) -> tuple[dict, ...]:
+                    family: str, memo: IntervalMemo | None = None) -> tuple[dict, ...]:
     """The rows of ``ledger`` whose metric has a clock (C1's reaction, C4's recovery) judged
     again with ``pairs="unsettled_last"`` at the row's level and margin: among walkers a run
     often passes every threat and never settles before it ends, and the default leaves every
@@ -538,7 +547,7 @@ def _unsettled_last(ledger: Ledger, tables: dict[str, pd.DataFrame], cfg: Claims
             continue
         pair = (tables[ledger.treatment], tables[row.comparison])
         result = compare(*pair, row.claim, cfg, pairs="unsettled_last",
-                         level=row.result.ci_level, margin=row.margin)
+                         level=row.result.ci_level, margin=row.margin, memo=memo)
         outcome, _ = judge(result, row.margin, cfg, row.claim)
         rows.append({"family": family, "claim": row.claim.claim_id,
                      "comparison": row.comparison, "metric": row.claim.primary_metric,
@@ -595,7 +604,8 @@ def _difficulty(settings: Any, info: dict, tables: dict[str, pd.DataFrame]) -> d
 
 
 def _apf_alone(family: FamilyInputs, cfg: ClaimsConfig, default: FamilyVerdicts | None,
-               default_inputs: FamilyInputs | None) -> ApfAloneVerdicts:
+               default_inputs: FamilyInputs | None, memo: IntervalMemo | None = None
+               ) -> ApfAloneVerdicts:
     """The ledger without the MPC's half-planes, judged as the default one (the same
     :func:`family_ledger`, settings, C2 window and all-pairs sensitivity; no paper-scenario column:
     the paper scenario runs with them), plus ``mpc_no_apf`` as a comparison: what the
@@ -609,7 +619,8 @@ def _apf_alone(family: FamilyInputs, cfg: ClaimsConfig, default: FamilyVerdicts 
         else None
     if jerks is None:
         cfg = dataclasses.replace(cfg, c2_window="own")
-    ledger = family_ledger(tables, cfg, None, cfg.treatment, comparisons, jerks=jerks)
+    ledger = family_ledger(tables, cfg, None, cfg.treatment, comparisons, jerks=jerks,
+                           memo=memo)
 
     def drawn(info: dict[str, dict]) -> set[tuple]:
         return {(i.get("size"), i.get("seed")) for i in info.values()}
@@ -649,15 +660,16 @@ def _readings(kinematic: TrackRuns, readings: dict[str, list[LabelledRun]], cfg:
     return tuple(columns) if len(columns) >= 2 else ()
 
 
-def _validity(family: FamilyInputs, inputs: ReportInputs, cfg: ClaimsConfig
-              ) -> ValidityVerdicts:
+def _validity(family: FamilyInputs, inputs: ReportInputs, cfg: ClaimsConfig,
+              memo: IntervalMemo | None = None) -> ValidityVerdicts:
     tables = family.primary
     comparisons = tuple(c for c in cfg.controls if c in tables)
     default = family_ledger(tables, cfg, None, cfg.treatment, comparisons,
-                            sensitivity=False) if cfg.treatment in tables else None
-    valid = valid_scenario_ledgers(tables, cfg, cfg.treatment, comparisons)
+                            sensitivity=False, memo=memo) if cfg.treatment in tables else None
+    valid = valid_scenario_ledgers(tables, cfg, cfg.treatment, comparisons, memo)
     other_frame = inputs.validity.other_frame if inputs.validity is not None else ()
     other_tables = {str(f.info.get("method")): f.table for f in other_frame}
     other = family_ledger(other_tables, cfg, None, cfg.treatment, comparisons,
-                          sensitivity=False) if cfg.treatment in other_tables else None
+                          sensitivity=False, memo=memo) if cfg.treatment in other_tables \
+        else None
     return ValidityVerdicts(comparisons, default, valid, other)

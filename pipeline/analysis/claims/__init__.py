@@ -34,6 +34,7 @@ from pipeline.analysis.claims.ledger import (
                                                 outcome_counts,
                                                 single_scenario_outcome,
 )
+from pipeline.analysis.claims.memo import IntervalMemo
 from pipeline.analysis.claims.multiplicity import adjust_answer, claim_level
 from pipeline.analysis.claims.statistics import (
                                                 PAIRS,
@@ -69,4 +70,4 @@ __all__ = ["Claim", "CLAIMS", "SAFETY", "ALL_CLAIMS", "FORCE_CLAIMS", "claims_of
            "claims_table", "LEDGER_COLUMNS", "LedgerRow", "Ledger", "family_ledger",
            "outcome_counts", "COMMON_C2_METRIC", "WINDOW_RULES", "common_window",
            "common_window_claim", "common_window_pairs", "common_window_tables",
-           "adjust_answer", "claim_level"]
+           "adjust_answer", "claim_level", "IntervalMemo"]

@@ -14,6 +14,7 @@ import numpy as np
 import pandas as pd
 
 from pipeline.analysis.claims.catalogue import ALL_CLAIMS, Claim, Outcome, claims_of
+from pipeline.analysis.claims.memo import IntervalMemo
 from pipeline.analysis.claims.statistics import PairedResult, compare, holm, interval_level, judge
 from pipeline.analysis.claims.windows import common_window_claim, common_window_tables
 from pipeline.analysis.metrics.results import LateralJerk
@@ -192,7 +193,8 @@ def family_ledger(tables: dict[str, pd.DataFrame], cfg: ClaimsConfig,
                   paper_metrics: dict[str, dict[str, Any]] | None = None,
                   improved: str = "improved",
                   comparisons: tuple[str, ...] = ("baseline", "baseline_matched"),
-                  sensitivity: bool = True, jerks: Jerks | None = None) -> Ledger:
+                  sensitivity: bool = True, jerks: Jerks | None = None,
+                  memo: IntervalMemo | None = None) -> Ledger:
     """Claims ledger over a scenario family: C0-C5 against each comparison present.
 
     Parameters
@@ -212,6 +214,9 @@ def family_ledger(tables: dict[str, pd.DataFrame], cfg: ClaimsConfig,
         Each run's lateral jerk: with ``cfg.c2_window = "common"`` C2 is judged on a window
         common to both runs of each pair (:mod:`pipeline.analysis.claims.windows`), which
         needs them.
+    memo : IntervalMemo, optional
+        Bootstrap results by their inputs (:func:`~pipeline.analysis.claims.statistics.
+        compare`): the same ledger, its intervals recalled where the memo holds them.
 
     Returns
     -------
@@ -228,12 +233,12 @@ def family_ledger(tables: dict[str, pd.DataFrame], cfg: ClaimsConfig,
     level = interval_level(cfg, len(cfg.entries))
     for comparison in [c for c in comparisons if c in tables]:
         pair = _pair_tables(tables, improved, comparison, cfg, jerks)
-        block = [(claim, compare(*pair[claim.claim_id], claim, cfg, level=level))
+        block = [(claim, compare(*pair[claim.claim_id], claim, cfg, level=level, memo=memo))
                  for claim in _claims_read(cfg)]
         adjusted = holm([r.p_value for _, r in block])
         for (claim, result), p_holm in zip(block, adjusted, strict=True):
             rows.append(_ledger_row(claim, comparison, result, p_holm, pair[claim.claim_id],
-                                    cfg, paper_metrics, improved, sensitivity))
+                                    cfg, paper_metrics, improved, sensitivity, memo))
     return Ledger(tuple(rows), improved)
 
 
@@ -268,7 +273,8 @@ def _pair_tables(tables: dict[str, pd.DataFrame], improved: str, comparison: str
 def _ledger_row(claim: Claim, comparison: str, result: PairedResult, p_holm: float,
                 pair: tuple[pd.DataFrame, pd.DataFrame], cfg: ClaimsConfig,
                 paper_metrics: dict[str, Any] | None,
-                improved: str, sensitivity: bool) -> LedgerRow:
+                improved: str, sensitivity: bool, memo: IntervalMemo | None = None
+                ) -> LedgerRow:
     margin = float(cfg.margins[claim.claim_id])
     if result.n_pairs < cfg.min_pairs:
         # too few pairs: no interval is reported, so none can seem to disagree with the outcome
@@ -291,7 +297,8 @@ def _ledger_row(claim: Claim, comparison: str, result: PairedResult, p_holm: flo
         worst, estimate_worst = outcome, result.estimate
     elif sensitivity:
         other = "worst_rank" if cfg.pairs == "neither_collided" else "neither_collided"
-        sens = compare(*pair, claim, cfg, pairs=other, level=result.ci_level, margin=margin)
+        sens = compare(*pair, claim, cfg, pairs=other, level=result.ci_level, margin=margin,
+                       memo=memo)
         # the sensitivity reads its interval at the row's level: a check, not a claim
         worst, _ = judge(sens, margin, cfg, claim)
         estimate_worst = sens.estimate

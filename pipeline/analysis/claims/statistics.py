@@ -14,6 +14,7 @@ import numpy as np
 import pandas as pd
 
 from pipeline.analysis.claims.catalogue import Claim, Outcome
+from pipeline.analysis.claims.memo import IntervalMemo
 from pipeline.analysis.objectives import CENSORED_AT_RUN_END
 from pipeline.analysis.settings import ClaimsConfig
 
@@ -523,7 +524,7 @@ class PairedResult:
 
 def compare(improved: pd.DataFrame, comparison: pd.DataFrame, claim: Claim, cfg: ClaimsConfig,
             pairs: str | None = None, level: float | None = None,
-            margin: float | None = None) -> PairedResult:
+            margin: float | None = None, memo: IntervalMemo | None = None) -> PairedResult:
     """One claim, one comparison: estimate, interval (at ``level``, by default
     ``1 - claims.alpha``; a ledger passes :func:`interval_level`), test, probability of
     improvement, counts (before the Holm adjustment and the outcome).
@@ -532,6 +533,9 @@ def compare(improved: pd.DataFrame, comparison: pd.DataFrame, claim: Claim, cfg:
     claim's margin by default) within an end's Monte-Carlo band is drawn again with
     ``claims.n_resamples_refine`` resamples; if a threshold is still within a band the result
     is marked ``at_resolution`` (:func:`judge` then reads the interval widened by its bands).
+    With ``memo`` the bootstrap results come from it where it holds them for the same
+    differences and settings (:class:`~pipeline.analysis.claims.memo.IntervalMemo`; the same
+    numbers), and what is computed is kept in it.
     """
     from scipy import stats
 
@@ -566,20 +570,53 @@ def compare(improved: pd.DataFrame, comparison: pd.DataFrame, claim: Claim, cfg:
         estimate = float(_estimator(cfg.estimator)(d)) if d.size else float("nan")
         statistic = _estimator(cfg.estimator, d)
         threshold = float(cfg.margins[claim.claim_id]) if margin is None else float(margin)
-        interval = bootstrap_interval(d, statistic, cfg, level)
+        interval = _recalled_interval(memo, d, statistic, cfg, level, cfg.n_resamples)
         if within_resolution(interval, threshold) \
                 and cfg.n_resamples_refine > interval.n_resamples:
-            interval = bootstrap_interval(d, statistic, cfg, level, cfg.n_resamples_refine)
+            interval = _recalled_interval(memo, d, statistic, cfg, level,
+                                          cfg.n_resamples_refine)
         low, high, method = interval.low, interval.high, interval.method
         p_value = paired_test(d, cfg) if d.size else float("nan")
         resolution = (interval.n_resamples, interval.low_mc, interval.high_mc,
                       within_resolution(interval, threshold))
-    pi, pi_low, pi_high = probability_of_improvement(d, cfg, level)
+    pi, pi_low, pi_high = _recalled_improvement(memo, d, cfg, level)
     if claim.is_rate:
         resolution = (0, 0.0, 0.0, False)
     return PairedResult(int(d.size), int(d_all.size - d.size), better, tied, worse, estimate,
                         low, high, method, p_value, pi, pi_low, pi_high, n_floor, floor, d,
                         level, *resolution)
+
+
+def _recalled_interval(memo: IntervalMemo | None, d: np.ndarray, statistic: Statistic,
+                       cfg: ClaimsConfig, level: float, n_resamples: int) -> BootstrapInterval:
+    """:func:`bootstrap_interval`, from ``memo`` where it holds it (kept there otherwise)."""
+    if memo is None:
+        return bootstrap_interval(d, statistic, cfg, level, n_resamples)
+    key = memo.key("bootstrap_interval", d, cfg, level, n_resamples)
+    values = memo.recall(key)
+    if values is not None:  # of the kind's types (checked): the same numbers
+        low, high, method, resamples, low_mc, high_mc = values
+        return BootstrapInterval(float(low), float(high), str(method), int(resamples),
+                                 float(low_mc), float(high_mc))
+    interval = bootstrap_interval(d, statistic, cfg, level, n_resamples)
+    memo.keep(key, [float(interval.low), float(interval.high), str(interval.method),
+                    int(interval.n_resamples), float(interval.low_mc),
+                    float(interval.high_mc)])
+    return interval
+
+
+def _recalled_improvement(memo: IntervalMemo | None, d: np.ndarray, cfg: ClaimsConfig,
+                          level: float) -> tuple[float, float, float]:
+    """:func:`probability_of_improvement`, from ``memo`` where it holds it."""
+    if memo is None:
+        return probability_of_improvement(d, cfg, level)
+    key = memo.key("probability_of_improvement", d, cfg, level)
+    values = memo.recall(key)
+    if values is not None:
+        return float(values[0]), float(values[1]), float(values[2])
+    result = probability_of_improvement(d, cfg, level)
+    memo.keep(key, [float(v) for v in result])
+    return result
 
 
 def decision_interval(result: PairedResult) -> tuple[float, float]:
