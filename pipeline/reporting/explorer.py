@@ -190,6 +190,28 @@ def _column(frame: pd.DataFrame, name: str) -> np.ndarray:
     return np.full(len(frame), np.nan)
 
 
+def _columns(frame: pd.DataFrame, names: list[str]) -> np.ndarray:
+    """:func:`_column` of each of ``names`` as the columns of one ``(rows, names)`` array (a
+    numeric column converted as it is, any other through ``pd.to_numeric``: the same
+    numbers)."""
+    out = np.full((len(frame), len(names)), np.nan)
+    for k, name in enumerate(names):
+        if name not in frame:
+            continue
+        column = frame[name]
+        out[:, k] = column.to_numpy(float) if column.dtype.kind in "fiub" \
+            else pd.to_numeric(column, errors="coerce").to_numpy(float)
+    return out
+
+
+def _flags(frame: pd.DataFrame, names: list[str]) -> np.ndarray:
+    """:func:`_flag` of each of ``names`` as the columns of one ``(rows, names)`` array."""
+    out = np.zeros((len(frame), len(names)), bool)
+    for k, name in enumerate(names):
+        out[:, k] = _flag(frame, name)
+    return out
+
+
 def _flag(frame: pd.DataFrame, name: str) -> np.ndarray:
     if name not in frame:
         return np.zeros(len(frame), bool)
@@ -213,22 +235,29 @@ def method_data(trajectory: pd.DataFrame, horizon: dict[str, np.ndarray] | None,
                  "psi": _ints(_column(trajectory, "psi_rad"), 1000),
                  "delta": _ints(_column(trajectory, "delta_rad"), 1000),
                  "ey": _ints(_column(trajectory, "e_y_m"), 100)}
-    clearance = np.full(n, np.inf)
+    # every obstacle's columns at once (a crowd logs 50 slots: 200 columns)
+    slots = obstacle_indices(trajectory.columns)
+    ox = _columns(trajectory, [obstacle_column(j, "x_m") for j in slots])
+    oy = _columns(trajectory, [obstacle_column(j, "y_m") for j in slots])
+    radius = _columns(trajectory, [obstacle_column(j, "radius_m") for j in slots])
+    seen = _flags(trajectory, [obstacle_column(j, "visible") for j in slots])
+    gap = np.hypot(x[:, None] - ox, y[:, None] - oy) - radius - footprint_m
+    # the least gap to a seen obstacle (min is exact: the same number in any order)
+    clearance = np.min(np.where(seen & np.isfinite(gap), gap, np.inf), axis=1, initial=np.inf)
+    xs, ys, flags = _ints(ox.T, 100), _ints(oy.T, 100), seen.T.astype(np.int64).tolist()
+    # the predictions' obstacle velocities by slot (the horizon's slots may be fewer)
+    velocity = horizon.get("obstacle_velocity_mps") if horizon is not None else None
+    with_velocity = 0 if velocity is None else int(velocity.shape[1])
+    vxs = _ints(velocity[:n, :, 0].T, 100) if velocity is not None and with_velocity else []
+    vys = _ints(velocity[:n, :, 1].T, 100) if velocity is not None and with_velocity else []
     obstacles = []
-    for j in obstacle_indices(trajectory.columns):
-        ox = _column(trajectory, obstacle_column(j, "x_m"))
-        oy = _column(trajectory, obstacle_column(j, "y_m"))
-        radius = _column(trajectory, obstacle_column(j, "radius_m"))
-        seen = _flag(trajectory, obstacle_column(j, "visible"))
-        gap = np.hypot(x - ox, y - oy) - radius - footprint_m
-        clearance = np.where(seen & np.isfinite(gap), np.minimum(clearance, gap), clearance)
-        entry = {"x": _ints(ox, 100), "y": _ints(oy, 100),
-                 "r": _ints([np.nanmax(radius) if np.isfinite(radius).any() else 0.0], 100)[0],
-                 "vis": [int(v) for v in seen.tolist()]}
-        if horizon is not None and "obstacle_velocity_mps" in horizon \
-                and j < horizon["obstacle_velocity_mps"].shape[1]:
-            velocity = horizon["obstacle_velocity_mps"][:n, j]
-            entry["vx"], entry["vy"] = _ints(velocity[:, 0], 100), _ints(velocity[:, 1], 100)
+    for k, j in enumerate(slots):
+        column = radius[:, k]
+        entry = {"x": xs[k], "y": ys[k],
+                 "r": _ints([np.nanmax(column) if np.isfinite(column).any() else 0.0], 100)[0],
+                 "vis": flags[k]}
+        if j < with_velocity:
+            entry["vx"], entry["vy"] = vxs[j], vys[j]
         obstacles.append(entry)
     out["clear"] = _ints(np.where(np.isfinite(clearance), clearance, np.nan), 100)
     out["obs"] = obstacles

@@ -236,3 +236,74 @@ def test_a_flag_column_reads_the_same_as_booleans_and_as_text():
     assert _flag(as_bool, "obs0_visible").tolist() == flags
     assert _flag(as_text, "obs0_visible").tolist() == flags
     assert _flag(as_bool, "obs1_visible").tolist() == [False] * 5
+
+
+def _method_data_obstacles_one_at_a_time(trajectory, horizon, footprint_m):
+    """The obstacles' part of method_data as it was written before every obstacle was read at
+    once: one obstacle after the other (the oracle)."""
+    import pandas as pd
+
+    from pipeline.loop.trajectory import obstacle_column, obstacle_indices
+    from pipeline.reporting.explorer import _flag, _ints
+
+    def column(name):
+        if name in trajectory:
+            return pd.to_numeric(trajectory[name], errors="coerce").to_numpy(float)
+        return np.full(len(trajectory), np.nan)
+
+    n = len(trajectory)
+    x, y = column("X_m"), column("Y_m")
+    clearance = np.full(n, np.inf)
+    obstacles = []
+    for j in obstacle_indices(trajectory.columns):
+        ox, oy = column(obstacle_column(j, "x_m")), column(obstacle_column(j, "y_m"))
+        radius = column(obstacle_column(j, "radius_m"))
+        seen = _flag(trajectory, obstacle_column(j, "visible"))
+        gap = np.hypot(x - ox, y - oy) - radius - footprint_m
+        clearance = np.where(seen & np.isfinite(gap), np.minimum(clearance, gap), clearance)
+        entry = {"x": _ints(ox, 100), "y": _ints(oy, 100),
+                 "r": _ints([np.nanmax(radius) if np.isfinite(radius).any() else 0.0], 100)[0],
+                 "vis": [int(v) for v in seen.tolist()]}
+        if horizon is not None and "obstacle_velocity_mps" in horizon \
+                and j < horizon["obstacle_velocity_mps"].shape[1]:
+            velocity = horizon["obstacle_velocity_mps"][:n, j]
+            entry["vx"], entry["vy"] = _ints(velocity[:, 0], 100), _ints(velocity[:, 1], 100)
+        obstacles.append(entry)
+    return _ints(np.where(np.isfinite(clearance), clearance, np.nan), 100), obstacles
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_every_obstacle_read_at_once_is_each_obstacle_read_alone(seed):
+    """method_data's obstacles (all columns at once) against the loop over obstacles it
+    replaced: index gaps, NaN and absent cells, a text column, a flag column as text, an
+    obstacle never seen, fewer velocity slots in the horizon than obstacles."""
+    import pandas as pd
+
+    from pipeline.reporting.explorer import method_data
+
+    rng = np.random.default_rng(seed)
+    n = 25
+    frame = {"time_s": np.arange(n) * 0.1, "X_m": rng.normal(0, 3, n), "Y_m": rng.normal(0, 3, n)}
+    for j in (0, 1, 3, 4, 7):  # gaps: 2, 5 and 6 absent
+        frame[f"obs{j}_x_m"] = rng.normal(0, 3, n)
+        frame[f"obs{j}_y_m"] = rng.normal(0, 3, n)
+        frame[f"obs{j}_radius_m"] = np.full(n, 0.3 + 0.1 * j)
+        frame[f"obs{j}_visible"] = rng.random(n) < 0.7
+    frame["obs1_x_m"][rng.random(n) < 0.3] = np.nan
+    frame["obs3_radius_m"][:] = np.nan
+    frame["obs4_visible"][:] = False
+    trajectory = pd.DataFrame(frame)
+    trajectory["obs7_x_m"] = [f"{v}" if i % 3 else "" for i, v in
+                              enumerate(trajectory["obs7_x_m"])]  # text, a missing cell
+    trajectory["obs0_visible"] = trajectory["obs0_visible"].map(str)
+    # 4 slots: obstacles 4 and 7 get no velocity; 8 slots (more than the 5 obstacles): all
+    few, many = rng.normal(0, 1, (n, 4, 2)), rng.normal(0, 1, (n, 8, 2))
+    few[3, 1, 0] = np.nan
+    for horizon, with_velocity in ((None, [False] * 5),
+                                   ({"obstacle_velocity_mps": few}, [True] * 3 + [False] * 2),
+                                   ({"obstacle_velocity_mps": many}, [True] * 5)):
+        got = method_data(trajectory, horizon, 0.5)
+        clear, obstacles = _method_data_obstacles_one_at_a_time(trajectory, horizon, 0.5)
+        assert json.dumps(got["obs"]) == json.dumps(obstacles)
+        assert json.dumps(got["clear"]) == json.dumps(clear)
+        assert [("vx" in o) for o in got["obs"]] == with_velocity
