@@ -48,7 +48,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "(default, paper) or a YAML file's path")
     parser.add_argument("--figure-jobs", type=int, default=None,
                         help="figures drawn at the same time, in child processes (default: the "
-                             "machine's cores; 1: one after the other here)")
+                             "machine's cores; 1: one after the other here, and the scenario "
+                             "explorer written here too)")
     parser.add_argument("--strict", action="store_true",
                         help="exit 1 when any folder was skipped (after writing the report)")
     parser.add_argument("--command", default=None,

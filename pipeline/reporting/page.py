@@ -10,8 +10,12 @@ build each section (:mod:`pipeline.reporting.sections`), render the page
 
 from __future__ import annotations
 
+import contextlib
 import logging
+import multiprocessing
 import time
+from collections.abc import Iterator
+from concurrent.futures import Future, ProcessPoolExecutor
 from pathlib import Path
 from typing import Any
 
@@ -71,20 +75,38 @@ def build_report(run_root: Path, out_dir: Path, command: str,
         How figures are written; the default when omitted.
     figure_jobs : int, optional
         Figures drawn at the same time, each in a forked child (:class:`FigureWriter`); None:
-        the machine's cores; 1: one after the other in this process. The files are the same.
+        the machine's cores; 1: one after the other in this process, and the explorer and its
+        members written here too (otherwise in a forked child beside the page, its members in
+        that child's children). The files are the same.
 
     Returns
     -------
     Path
         The HTML file.
     """
-    import matplotlib
-
     out_dir = Path(out_dir)
     started = time.perf_counter()
     skipped = skipped if skipped is not None else []
+    # read (and refused, if it must be) before anything is written
     inputs = ReportInputs.load(run_root, sweep_dirs, bench_dir, multiverse_dir, tune_dir,
                                treatment, controls, skipped)
+    # every member of every experiment, animated (explorer.html and its data beside the page):
+    # it reads the run folders alone, so it is written beside everything else (the ledgers
+    # and the page keep one core busy, the explorer's children the other)
+    alone = figure_jobs == 1  # nothing forked: the explorer and its members written here
+    with _beside(write_explorer, run_root, out_dir, None, 1 if alone else None,
+                 fork=not alone) as explorer:
+        path = _report_page(inputs, out_dir, command, skipped, style, figure_jobs, started)
+        log.info("report: the scenario explorer (%.0f s)", time.perf_counter() - started)
+        explorer.result()
+    return path
+
+
+def _report_page(inputs: ReportInputs, out_dir: Path, command: str, skipped: list[Skipped],
+                 style: FigureStyle | None, figure_jobs: int | None, started: float) -> Path:
+    """:func:`build_report` but the explorer: the ledgers, tables, figures, page, answer."""
+    import matplotlib
+
     log.info("report: the ledgers (bootstrap intervals) (%.0f s)", time.perf_counter() - started)
     # the intervals an earlier build of this folder computed for the same differences and
     # settings come back from its memo (the same numbers); `make verify` computes them all
@@ -110,10 +132,24 @@ def build_report(run_root: Path, out_dir: Path, command: str,
     # the answer in words, for the command line (make reproduce prints it at its end)
     lines = page.answer.lines
     write_text_atomic(out_dir / "answer.txt", "\n".join(lines) + "\n" if lines else "")
-    # every member of every experiment, animated (explorer.html and its data beside the page)
-    log.info("report: the scenario explorer (%.0f s)", time.perf_counter() - started)
-    write_explorer(run_root, out_dir)
     return path
+
+
+@contextlib.contextmanager
+def _beside(function, *args, fork: bool = True) -> Iterator[Future]:
+    """``function(*args)`` in a forked child while the block runs (here, first, without
+    ``fork`` or where the platform cannot fork): the block gets its future, whose ``result()``
+    re-raises what it raised; on the way out the child is waited for."""
+    if not fork or "fork" not in multiprocessing.get_all_start_methods():
+        done: Future = Future()
+        try:
+            done.set_result(function(*args))
+        except Exception as exc:  # handed over as the child's would be
+            done.set_exception(exc)
+        yield done
+        return
+    with ProcessPoolExecutor(1, mp_context=multiprocessing.get_context("fork")) as pool:
+        yield pool.submit(function, *args)
 
 
 def build_page(inputs: ReportInputs, verdicts: Verdicts, figures: Figures, command: str,

@@ -261,3 +261,29 @@ def test_the_register_page_is_the_register_itself():
     rows = [line for line in page.splitlines() if line.startswith("| ") and "---" not in line]
     assert len(rows) == len(INTERPRETATION_REGISTER) + 1  # the header
     assert "| `metrics.pass_reading` |" in page and "\\|d\\|" in page  # a cell's | escaped
+
+
+def _failing_explorer(parent_pid, run_root, out_dir, experiments=None, jobs=None):
+    import os
+
+    where = "here" if os.getpid() == parent_pid else "in a child"
+    raise ValueError(f"explorer failed {where}, jobs={jobs}")
+
+
+@pytest.mark.parametrize("figure_jobs", [1, 2])
+def test_an_explorer_that_fails_fails_the_report_after_the_page(small_reproduce, tmp_path,
+                                                                monkeypatch, figure_jobs):
+    """The explorer is written beside the page (a forked child) or here (figure_jobs 1): what
+    it raises reaches the caller either way, and the page is written all the same."""
+    import functools
+    import os
+
+    import pipeline.reporting.page as page
+
+    monkeypatch.setattr(page, "write_explorer", functools.partial(_failing_explorer,
+                                                                  os.getpid()))
+    with pytest.raises(ValueError, match="explorer failed") as failed:
+        build_report(small_reproduce, tmp_path / "report", "pytest", figure_jobs=figure_jobs)
+    assert str(failed.value) == ("explorer failed here, jobs=1" if figure_jobs == 1
+                                 else "explorer failed in a child, jobs=None")
+    assert (tmp_path / "report" / "index.html").is_file()
