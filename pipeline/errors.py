@@ -32,6 +32,13 @@ class ConfigError(ValueError):
         super().__init__(f"config error: {key}={plain_value(value)} is invalid; "
                          f"allowed: {allowed}")
 
+    def __reduce__(self):
+        # rebuilt from its three arguments (a worker's error reaches its parent as itself);
+        # a subclass with other arguments keeps the default
+        if type(self) is not ConfigError:
+            return super().__reduce__()
+        return (ConfigError, (self.key, self.value, self.allowed))
+
 
 def plain_value(value: Any, limit: int = 60) -> str:
     """A value as a person would write it: numpy scalars as plain numbers (``-0.5``, not

@@ -23,10 +23,21 @@ log = logging.getLogger("pipeline.store")
 INTERVAL_MEMO = Path(".cache") / "intervals.json"
 
 
+def environment_salt() -> str:
+    """The code version and the versions of the libraries that compute an interval (SciPy's
+    bootstrap, NumPy's generator, numba's Walsh medians): an upgrade computes them again."""
+    import numba
+    import numpy
+    import scipy
+
+    return (f"{code_version()} numpy {numpy.__version__} scipy {scipy.__version__} "
+            f"numba {numba.__version__}")
+
+
 def load_interval_memo(path: Path) -> IntervalMemo:
     """The memo kept at ``path`` (empty when absent, unreadable or of another code version),
     salted with this code's version."""
-    memo = IntervalMemo(salt=code_version())
+    memo = IntervalMemo(salt=environment_salt())
     try:
         data = json.loads(Path(path).read_text(encoding="utf-8"))
     except FileNotFoundError:

@@ -175,3 +175,23 @@ def test_a_report_built_again_recalls_every_interval_and_writes_the_same_tables(
     for table in sorted((small_report / "tables").glob("*.csv")):
         assert (again / "tables" / table.name).read_bytes() == table.read_bytes(), table.name
     assert (again / "answer.txt").read_bytes() == (small_report / "answer.txt").read_bytes()
+
+
+def test_the_salt_names_the_libraries_that_compute_an_interval_and_a_config_error_pickles():
+    """An upgrade of SciPy, NumPy or numba computes the intervals again; a ConfigError raised
+    in a forked child (the report's explorer) reaches the parent as itself."""
+    import pickle
+
+    import numba
+    import scipy
+
+    from pipeline.errors import ConfigError
+    from pipeline.store.interval_memo import environment_salt
+    from pipeline.store.manifest import code_version
+
+    salt = environment_salt()
+    assert salt.startswith(code_version()) and f"scipy {scipy.__version__}" in salt \
+        and f"numpy {np.__version__}" in salt and f"numba {numba.__version__}" in salt
+    back = pickle.loads(pickle.dumps(ConfigError("claims.seed", -1, "an integer >= 0")))
+    assert type(back) is ConfigError and (back.key, back.value) == ("claims.seed", -1)
+    assert str(back) == "config error: claims.seed=-1 is invalid; allowed: an integer >= 0"
