@@ -438,6 +438,19 @@ def data_script(key: str, payload: dict) -> str:
             f"[{json.dumps(key)}] = \"{packed}\";\n")
 
 
+def remove_explorer_temporaries(out_dir: Path) -> list[Path]:
+    """Remove the temporaries a killed explorer writer leaves in ``out_dir`` (its page's and
+    its data files', :func:`~pipeline.store.files.write_text_atomic`'s ``.<name>.*.tmp``);
+    returns them. The files it finished are whole and stay."""
+    out_dir = Path(out_dir)
+    left = list(out_dir.glob(f".{PAGE}.*.tmp"))
+    if (out_dir / DATA_FOLDER).is_dir():
+        left += list((out_dir / DATA_FOLDER).rglob(".*.tmp"))
+    for path in left:
+        path.unlink(missing_ok=True)
+    return left
+
+
 def write_explorer(run_root: Path, out_dir: Path, experiments: list[Path] | None = None,
                    jobs: int | None = None) -> ExplorerIndex:
     """Write ``out_dir/explorer.html`` and one data file per member of every experiment under

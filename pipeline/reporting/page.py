@@ -14,13 +14,13 @@ import contextlib
 import logging
 import multiprocessing
 import time
-from collections.abc import Iterator
-from concurrent.futures import Future, ProcessPoolExecutor
+from collections.abc import Callable, Iterator
+from concurrent.futures import Future
 from pathlib import Path
 from typing import Any
 
 from pipeline.reporting.contents import APPENDIX_PAGE
-from pipeline.reporting.explorer import write_explorer
+from pipeline.reporting.explorer import remove_explorer_temporaries, write_explorer
 from pipeline.reporting.figure import Figures
 from pipeline.reporting.figures import FigureWriter
 from pipeline.reporting.inputs import ReportInputs
@@ -95,7 +95,8 @@ def build_report(run_root: Path, out_dir: Path, command: str,
     # and the page keep one core busy, the explorer's children the other)
     alone = figure_jobs == 1  # nothing forked: the explorer and its members written here
     with _beside(write_explorer, run_root, out_dir, None, 1 if alone else None,
-                 fork=not alone) as explorer:
+                 fork=not alone, on_stop=lambda: remove_explorer_temporaries(out_dir)) \
+            as explorer:
         path = _report_page(inputs, out_dir, command, skipped, style, figure_jobs, started)
         log.info("report: the scenario explorer (%.0f s)", time.perf_counter() - started)
         explorer.result()
@@ -135,11 +136,72 @@ def _report_page(inputs: ReportInputs, out_dir: Path, command: str, skipped: lis
     return path
 
 
+class _Child:
+    """What a forked child (:func:`_beside`) hands back: ``result()`` waits for it and returns
+    what its function returned or raises what it raised."""
+
+    def __init__(self, receiver: Any, process: Any) -> None:
+        self._receiver = receiver
+        self._process = process
+        self.taken = False
+
+    def result(self) -> Any:
+        try:
+            succeeded, value = self._receiver.recv()
+        except EOFError:  # it died before it could answer (killed, out of memory)
+            self._process.join()
+            self.taken = True
+            raise RuntimeError(f"the report's {self._process.name} ended without an answer "
+                               f"(exit code {self._process.exitcode})") from None
+        self._process.join()
+        self.taken = True
+        if succeeded:
+            return value
+        raise value
+
+
+def _answer_from_child(function, args: tuple, sender: Any) -> None:
+    """In the child: lead a process group of its own (what it forks joins it, so
+    :func:`_stop_group` stops them all), run ``function(*args)``, send back what came of it."""
+    import os
+
+    with contextlib.suppress(OSError):
+        os.setpgid(0, 0)
+    try:
+        answer: tuple[bool, Any] = (True, function(*args))
+    except BaseException as exc:  # handed to the parent, which raises it
+        answer = (False, exc)
+    try:
+        sender.send(answer)
+    except Exception as exc:  # a result or an error that does not pickle
+        sender.send((False, RuntimeError(f"{type(answer[1]).__name__}: {answer[1]} "
+                                         f"(could not be handed over: {exc})")))
+    finally:
+        sender.close()
+
+
+def _stop_group(process: Any) -> None:
+    """Kill a child of :func:`_beside` and everything it forked (its process group), then
+    reap it."""
+    import os
+    import signal
+
+    try:
+        os.killpg(process.pid, signal.SIGKILL)
+    except OSError:  # no such group (it never led one, or it is gone): the child alone
+        process.kill()
+    process.join()
+
+
 @contextlib.contextmanager
-def _beside(function, *args, fork: bool = True) -> Iterator[Future]:
+def _beside(function, *args, fork: bool = True,
+            on_stop: Callable[[], object] | None = None) -> Iterator[Any]:
     """``function(*args)`` in a forked child while the block runs (here, first, without
-    ``fork`` or where the platform cannot fork): the block gets its future, whose ``result()``
-    re-raises what it raised; on the way out the child is waited for."""
+    ``fork`` or where the platform cannot fork): the block gets a handle whose ``result()``
+    waits for it and re-raises what it raised. A child whose result the block did not take
+    (the block raised: an error, Ctrl-C or SIGTERM as :class:`~pipeline.errors.Interrupted`)
+    is killed on the way out with everything it forked, so nothing is written after the
+    caller returns; then ``on_stop`` removes what a killed writer leaves (its temporaries)."""
     if not fork or "fork" not in multiprocessing.get_all_start_methods():
         done: Future = Future()
         try:
@@ -148,8 +210,26 @@ def _beside(function, *args, fork: bool = True) -> Iterator[Future]:
             done.set_exception(exc)
         yield done
         return
-    with ProcessPoolExecutor(1, mp_context=multiprocessing.get_context("fork")) as pool:
-        yield pool.submit(function, *args)
+    import os
+
+    context = multiprocessing.get_context("fork")
+    receiver, sender = context.Pipe(duplex=False)
+    process = context.Process(target=_answer_from_child, args=(function, args, sender),
+                              name=f"{getattr(function, '__name__', 'child')} process")
+    process.start()
+    sender.close()
+    pid = int(process.pid or 0)
+    with contextlib.suppress(OSError):  # here too, so no fork of the child escapes the group
+        os.setpgid(pid, pid)
+    child = _Child(receiver, process)
+    try:
+        yield child
+    finally:
+        if not child.taken:
+            _stop_group(process)
+            if on_stop is not None:
+                on_stop()
+        receiver.close()
 
 
 def build_page(inputs: ReportInputs, verdicts: Verdicts, figures: Figures, command: str,
