@@ -107,10 +107,18 @@ class CommonRoadScenario(Scenario):
     #: attraction pulls (``scenario.commonroad.route_lookahead_m``)
     route_m: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)))
     route_lookahead_m: float = 0.0
+    #: and how long ahead at the ego's speed (s; the farther of the two;
+    #: ``scenario.commonroad.route_lookahead_s``, 0: the distance alone)
+    route_lookahead_s: float = 0.0
 
     @property
     def follows_road(self) -> bool:
         return self.route_m.shape[0] >= 2
+
+    @property
+    def attraction_route(self) -> tuple[np.ndarray, float, float] | None:
+        return (self.route_m, self.route_lookahead_m, self.route_lookahead_s) \
+            if self.follows_road else None
 
     def attraction_goal_m(self, position_m: np.ndarray) -> np.ndarray:
         """The point :attr:`route_lookahead_m` along the route ahead of the ego's projection
@@ -401,7 +409,8 @@ def read_commonroad(cfg: ScenarioConfig) -> CommonRoadCase:
                  for lanelet in scenario.lanelet_network.lanelets)
     ours = replace(ours, sensor_range_m=cr.sensor_range_m, occluders_m=occluders,
                    occluder_of=own, route_m=route,
-                   route_lookahead_m=float(cr.route_lookahead_m or 0.0), road_polygons_m=road)
+                   route_lookahead_m=float(cr.route_lookahead_m or 0.0),
+                   route_lookahead_s=float(cr.route_lookahead_s or 0.0), road_polygons_m=road)
     return CommonRoadCase(resolved, ours, scenario, problem, ids, ego_ids, t0, digest)
 
 

@@ -89,6 +89,9 @@ class MemberLoop:
             or cfg.controller.reference_alignment == "path_speed"
         self.frame = scenario.line_frame
         self.line = _line_constants(self.frame)
+        # a road's route: a planner that follows it along its rollout gets it once (and the
+        # goal each step); any other is handed the point ahead on it each step
+        self.goal_moves = follows_route(self.planner, scenario)
         self.goal_line_x = float(self.frame.to_line(scenario.goal_m)[0])
         self.obstacle_names = [tuple(obstacle_column(j, f) for f in OBSTACLE_FIELDS)
                                for j in range(scenario.n_obstacles)]
@@ -172,8 +175,7 @@ class MemberLoop:
         if scenario.nearest_first:
             visible = visible.nearest_first(state[:2])
         position = state[:2].copy()
-        goal = scenario.attraction_goal_m(position) if scenario.follows_road \
-            else scenario.goal_m
+        goal = scenario.attraction_goal_m(position) if self.goal_moves else scenario.goal_m
         rollout = planner.rollout(position, goal, visible, self.plant.velocity(state))
         if self.planned is not None:
             self.planned.put(k, rollout, snapshot)
@@ -216,6 +218,21 @@ class MemberLoop:
                                 self.termination == "goal_line", self.termination,
                                 self.planned.arrays(controller, log.rows)
                                 if self.planned is not None else {})
+
+
+def follows_route(planner: Any, scenario: Scenario) -> bool:
+    """Hand ``scenario``'s route (:attr:`~pipeline.loop.scenario.Scenario.attraction_route`)
+    to a planner that follows it along its rollout (``follow_route``, the APF's); returns
+    whether the loop must hand the planner the point ahead on the road each step instead (a
+    planner without it, on a road)."""
+    route = scenario.attraction_route
+    follow = getattr(planner, "follow_route", None)
+    if route is None:
+        return scenario.follows_road
+    if follow is None:
+        return True
+    follow(*route)
+    return False
 
 
 def _advance_plants(members: Sequence[MemberLoop]) -> None:

@@ -27,6 +27,8 @@ from pipeline.loop.scenario import ObstacleSnapshot
 from pipeline.loop.settings import PlannerConfig
 
 _TINY = 1e-12
+#: no route to follow (:func:`apf_rollout_arrays`' ``route``)
+NO_ROUTE = np.zeros((0, 2))
 
 
 @dataclass(frozen=True)
@@ -181,9 +183,11 @@ def apf_rollout(position_m: np.ndarray, goal_m: np.ndarray, obstacles: ObstacleS
 
 def _rollout(kernels: Kernels | None, settings: ApfSettings, position_m: np.ndarray,
              goal_m: np.ndarray, obstacles: ObstacleSnapshot, horizon: int,
-             sample_time_s: float, vehicle_velocity_mps: np.ndarray | None) -> ApfRollout:
+             sample_time_s: float, vehicle_velocity_mps: np.ndarray | None,
+             route_m: np.ndarray = NO_ROUTE, route_lookahead_m: float = 0.0) -> ApfRollout:
     """:func:`apf_rollout_arrays` run by ``kernels`` (None: by CPython, as the function
-    stands); ``settings`` is :func:`apf_kernel_settings`."""
+    stands); ``settings`` is :func:`apf_kernel_settings`; ``route_m`` (P, 2; empty: none) the
+    polyline the attraction follows ``route_lookahead_m`` ahead."""
     vvx, vvy = (float(vehicle_velocity_mps[0]), float(vehicle_velocity_mps[1])) \
         if vehicle_velocity_mps is not None else (0.0, 0.0)
     if vehicle_velocity_mps is None and settings.closing_speed_on:
@@ -193,11 +197,13 @@ def _rollout(kernels: Kernels | None, settings: ApfSettings, position_m: np.ndar
     if kernels is None or not kernels.compiled:
         return ApfRollout(*kernel(
             *start, obstacles.positions_m.tolist(), obstacles.velocities_mps.tolist(),
-            settings, int(horizon), float(sample_time_s), vvx, vvy))
+            settings, int(horizon), float(sample_time_s), vvx, vvy, route_m.tolist(),
+            float(route_lookahead_m)))
     return ApfRollout(*kernel(
         *start, np.ascontiguousarray(obstacles.positions_m, dtype=float).reshape(-1, 2),
         np.ascontiguousarray(obstacles.velocities_mps, dtype=float).reshape(-1, 2), settings,
-        int(horizon), float(sample_time_s), vvx, vvy))
+        int(horizon), float(sample_time_s), vvx, vvy,
+        np.ascontiguousarray(route_m, dtype=float).reshape(-1, 2), float(route_lookahead_m)))
 
 
 def _exp_or_inf(x: float) -> float:
@@ -208,16 +214,57 @@ def _exp_or_inf(x: float) -> float:
         return inf
 
 
+def route_point_ahead(route: KernelValues, x: float, y: float, distance: float,
+                      end_x: float, end_y: float) -> tuple[float, float]:
+    """The point ``distance`` (m) along the polyline ``route`` (rows ``[x, y]``, at least two)
+    beyond the projection of ``(x, y)`` on it (the nearest point of the nearest segment, the
+    first of equals); ``(end_x, end_y)`` past its end. Scalar arithmetic, so CPython and numba
+    (:mod:`pipeline.loop.compiled`) run the same statement."""
+    best, nearest, share, before, nearest_length = inf, 0, 0.0, 0.0, 0.0
+    walked = 0.0
+    for i in range(len(route) - 1):
+        sx, sy = route[i][0], route[i][1]
+        dx, dy = route[i + 1][0] - sx, route[i + 1][1] - sy
+        length_sq = dx * dx + dy * dy
+        u = ((x - sx) * dx + (y - sy) * dy) / max(length_sq, _TINY)
+        u = min(max(u, 0.0), 1.0)
+        qx, qy = sx + u * dx - x, sy + u * dy - y
+        gap = sqrt(qx * qx + qy * qy)
+        length = sqrt(length_sq)
+        if gap < best:
+            best, nearest, share, before, nearest_length = gap, i, u, walked, length
+        walked += length
+    target = before + share * nearest_length + distance
+    if target > walked:
+        return end_x, end_y
+    walked = before
+    for i in range(nearest, len(route) - 1):
+        sx, sy = route[i][0], route[i][1]
+        dx, dy = route[i + 1][0] - sx, route[i + 1][1] - sy
+        length = sqrt(dx * dx + dy * dy)
+        if walked + length >= target and length > 0.0:
+            u = (target - walked) / length
+            return sx + u * dx, sy + u * dy
+        walked += length
+    last = len(route) - 1
+    return route[last][0], route[last][1]
+
+
 def apf_rollout_arrays(px: float, py: float, gx: float, gy: float, centres: KernelValues,  # noqa: C901
                        velocities: KernelValues, settings: ApfSettings, horizon: int,
-                       sample_time_s: float, vvx: float, vvy: float
+                       sample_time_s: float, vvx: float, vvy: float, route: KernelValues,
+                       route_lookahead: float
                        ) -> tuple[KernelValues, KernelValues, KernelValues, KernelValues,
                                   KernelValues]:
     """The rollout of :func:`apf_rollout` on plain numbers: ``path (max(Np, 1), 2), attraction
     (Np - 1, 2), repulsion (Np - 1, 2), step cap active, step minimum used (Np - 1,)``.
 
     ``centres`` and ``velocities`` are the obstacles' rows ``[x, y]`` (lists in CPython, arrays
-    compiled); ``settings`` is :func:`apf_kernel_settings`. This one statement runs in CPython
+    compiled); ``settings`` is :func:`apf_kernel_settings`. ``route`` (rows ``[x, y]``, at
+    least two; fewer: none) is a polyline the attraction follows: at every rollout point it
+    pulls towards the point ``route_lookahead`` (m) along the route beyond that point's
+    projection on it (:func:`route_point_ahead`; past the route's end the goal ``gx, gy``), so
+    the rollout follows the road through a bend instead of heading for one fixed point. This one statement runs in CPython
     (a single run) and compiled by numba (:mod:`pipeline.loop.compiled`, the family runner's
     workers): the same operations on the same C library's functions, so the same bits (the
     tests hold them equal).
@@ -238,8 +285,13 @@ def apf_rollout_arrays(px: float, py: float, gx: float, gy: float, centres: Kern
     low = np.zeros(steps, dtype=np.bool_)
     path[0, 0], path[0, 1] = px, py
     n_obstacles = len(centres)
+    along_route = len(route) >= 2
     for t in range(steps):
-        ax, ay = gx - px, gy - py
+        if along_route:
+            cx, cy = route_point_ahead(route, px, py, route_lookahead, gx, gy)
+            ax, ay = cx - px, cy - py
+        else:
+            ax, ay = gx - px, gy - py
         rx = ry = 0.0
         if n_obstacles > 0 and repulsion_on:
             # direction away from an obstacle sitting exactly at p: left normal of the goal
@@ -428,13 +480,33 @@ class ApfPlanner:
         # omitted, or compiled: the same bits)
         self._settings = apf_kernel_settings(settings)
         self._kernels = kernels
+        self._route_m, self._route_lookahead_m, self._route_lookahead_s = NO_ROUTE, 0.0, 0.0
+
+    def follow_route(self, route_m: np.ndarray, lookahead_m: float,
+                     lookahead_s: float = 0.0) -> None:
+        """Let the attraction follow ``route_m`` (P, 2; a road's centreline), pulling at every
+        rollout point towards the point ahead along it (:func:`route_point_ahead`) by the
+        farther of ``lookahead_m`` and ``lookahead_s`` at the vehicle's speed of the step;
+        the goal handed to :meth:`rollout` is where it pulls past the route's end."""
+        self._route_m = np.ascontiguousarray(route_m, dtype=float).reshape(-1, 2)
+        self._route_lookahead_m = float(lookahead_m)
+        self._route_lookahead_s = float(lookahead_s)
+
+    def route_lookahead_m(self, vehicle_velocity_mps: np.ndarray | None) -> float:
+        """The look-ahead along the route (m) at the vehicle's velocity: the farther of the
+        distance and the time at its speed (:meth:`follow_route`)."""
+        if not self._route_lookahead_s or vehicle_velocity_mps is None:
+            return self._route_lookahead_m
+        speed = float(np.hypot(vehicle_velocity_mps[0], vehicle_velocity_mps[1]))
+        return max(self._route_lookahead_m, self._route_lookahead_s * speed)
 
     def rollout(self, position_m: np.ndarray, goal_m: np.ndarray, obstacles: ObstacleSnapshot,
                 vehicle_velocity_mps: np.ndarray | None = None) -> ApfRollout:
         """The reference path (``horizon`` points from the vehicle's position) and the forces
-        behind it (:func:`apf_rollout`)."""
+        behind it (:func:`apf_rollout`; along the route :meth:`follow_route` set)."""
         return _rollout(self._kernels, self._settings, position_m, goal_m, obstacles,
-                        self.horizon, self.sample_time_s, vehicle_velocity_mps)
+                        self.horizon, self.sample_time_s, vehicle_velocity_mps,
+                        self._route_m, self.route_lookahead_m(vehicle_velocity_mps))
 
     def speed(self, position_m: np.ndarray, heading_rad: float, obstacles: ObstacleSnapshot,
               nominal_speed_mps: float, vehicle_radius_m: float,

@@ -198,6 +198,14 @@ class Scenario:
         return False
 
     @property
+    def attraction_route(self) -> tuple[np.ndarray, float, float] | None:
+        """The polyline (P, 2) the planner's attraction follows, how far ahead along it (m)
+        it pulls at least and how long ahead at the ego's speed (s), for a planner that
+        follows it along its rollout (:meth:`~pipeline.loop.planner.ApfPlanner.follow_route`);
+        None: the goal."""
+        return None
+
+    @property
     def senses(self) -> bool:
         """Whether the loop must ask :meth:`sense` what is seen (a sensor range here; a
         scenario with occluders too)."""

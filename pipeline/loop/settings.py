@@ -299,6 +299,10 @@ class CommonRoadConfig(FrozenAfterValidation):
     # centreline ahead of the ego (the route: the shortest lanelet path from the start's lanelet
     # to the goal's); None: straight towards the goal point (earlier releases)
     route_lookahead_m: Optional[float] = None
+    # and at least this long (s) ahead at the ego's speed (a pure pursuit's look-ahead time:
+    # the distance grows with the speed; the farther of the two); None: the distance alone.
+    # Without route_lookahead_m there is no route, and this has nothing to scale
+    route_lookahead_s: Optional[float] = None
     # an obstacle whose centre is this close to the planning problem's initial position at its
     # initial time step is the ego's own recording, and dropped
     ego_match_tolerance_m: float = 0.5
@@ -311,7 +315,8 @@ class CommonRoadConfig(FrozenAfterValidation):
     #: The keys added after the config hash was first pinned, with the reading from before
     #: them: everything present seen, straight to the goal (left out of the hash while held)
     BEFORE_KEYS: ClassVar[dict[str, Any]] = {"sensor_range_m": None, "occlusion": False,
-                                             "route_lookahead_m": None}
+                                             "route_lookahead_m": None,
+                                             "route_lookahead_s": None}
 
     def __post_init__(self) -> None:
         if not isinstance(self.path, str) or not self.path:
@@ -330,6 +335,8 @@ class CommonRoadConfig(FrozenAfterValidation):
             between("scenario.commonroad.sensor_range_m", self.sensor_range_m, 1.0, 1000.0)
         if self.route_lookahead_m is not None:
             between("scenario.commonroad.route_lookahead_m", self.route_lookahead_m, 1.0, 500.0)
+        if self.route_lookahead_s is not None:
+            between("scenario.commonroad.route_lookahead_s", self.route_lookahead_s, 0.1, 10.0)
         flag("scenario.commonroad.occlusion", self.occlusion)
         between("scenario.commonroad.ego_match_tolerance_m", self.ego_match_tolerance_m,
                 0.0, 10.0)

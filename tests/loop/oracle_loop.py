@@ -72,6 +72,10 @@ def _closed_loop(cfg: LoopSettings, scenario: Scenario, qp_cache: QpCache | None
     unanchored = np.full(scenario.n_obstacles, scenario.obstacle_anchor == "vehicle")
     anchoring = bool(unanchored.any())
     senses, follows_road = scenario.senses, scenario.follows_road
+    route = scenario.attraction_route
+    if route is not None and hasattr(planner, "follow_route"):
+        planner.follow_route(*route)  # the APF follows the road along its rollout itself
+        follows_road = False
     # the vehicle's reach from its logged position: its discs' farthest edge
     reach = vehicle_radius + 0.5 * cfg.vehicle.footprint_span_m
     end_at_contact = scenario.end_at_contact

@@ -575,8 +575,12 @@ def test_the_route_is_the_shortest_lanelet_path_and_the_attraction_follows_it(
     ours = case.scenario
     assert ours.follows_road
     assert ours.attraction_goal_m(np.array([5.0, 1.0])) == pytest.approx([25.0, 0.0])
-    plain = read_commonroad(make_scenario_config(path)).scenario
+    plain = read_commonroad(make_scenario_config(
+        path, "scenario.commonroad.route_lookahead_m=null",
+        "scenario.commonroad.route_lookahead_s=null")).scenario
     assert not plain.follows_road
+    assert read_commonroad(make_scenario_config(path)).scenario.attraction_route[1:] \
+        == (10.0, 2.0)  # the defaults
     assert plain.attraction_goal_m(np.array([5.0, 0.0])).tolist() == plain.goal_m.tolist()
     # no lanelet under the start: no route
     assert route_centreline(network, np.array([5.0, -20.0]), None).shape == (0, 2)

@@ -113,7 +113,8 @@ def test_overflowing_gaussian_gives_no_repulsion_in_both(make_config):
     start, goal = np.array([10.0, 0.3]), np.array([30.0, 0.0])
     expected = apf_rollout(start, goal, snap, params, 10, 0.1)
     got = apf_rollout_kernel(10.0, 0.3, 30.0, 0.0, snap.positions_m, snap.velocities_mps,
-                             apf_kernel_settings(params), 10, 0.1, 0.0, 0.0)
+                             apf_kernel_settings(params), 10, 0.1, 0.0, 0.0,
+                             np.zeros((0, 2)), 0.0)
     assert np.array_equal(got[0], expected.path_m) and np.array_equal(got[2],
                                                                        expected.repulsion)
     assert not expected.repulsion.any()
