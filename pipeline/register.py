@@ -401,6 +401,15 @@ INTERPRETATION_REGISTER: tuple[RegisterEntry, ...] = (
         "goal, two of them across the junction's corner), contact in 7 (6)",
         "scenario.commonroad.route_lookahead_m, scenario.commonroad.route_lookahead_s"),
     RegisterEntry(
+        "Steps off a CommonRoad road that count (a choice we add)", "-",
+        "those before the first contact on the true shapes (off_road_steps_before_contact: "
+        "nothing after a crash is judged, the field's convention, as the Euro NCAP outcome "
+        "reads its runs up to their first true overlap); the whole run's count "
+        "(off_road_steps) beside it in the report",
+        "the whole run's count alone (earlier releases; Guetersloh's methods leave the road "
+        "only after their contact at 1.5 s)",
+        "(none: both counts are reported)"),
+    RegisterEntry(
         "Success on a CommonRoad file (a choice we add)", "-",
         "the file's own criterion: its goal region reached (position, time step, orientation "
         "and speed intervals; CommonRoad's goal_reached) without contact on the true shapes; "

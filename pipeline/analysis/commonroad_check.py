@@ -53,7 +53,8 @@ class CommonRoadVerdicts:
     min_clearance_true_shapes_m : float
         Smallest distance between the car rectangle and an obstacle's shape (0 in contact).
     off_road_steps : int
-        Steps on which the car rectangle is not inside the union of the lanelets.
+        Steps on which the car rectangle is not inside the union of the lanelets, over the
+        whole run.
     goal_reached_commonroad : bool
     goal_time_step : int or None
         The CommonRoad time step of the last state in the goal region.
@@ -84,6 +85,10 @@ class CommonRoadVerdicts:
     #: an obstacle's shape) and the steps on which the checker's true-shape verdict equals it
     ours_true_shapes_collision_steps: int = 0
     agreement_ours_true_shapes_steps: int = 0
+    #: steps off the road before the first contact on the true shapes (the whole run without
+    #: one; -1: a result written before it): the field's convention that nothing after a
+    #: crash is judged, as the Euro NCAP outcome reads its runs up to their first true overlap
+    off_road_steps_before_contact: int = -1
 
     @property
     def ours_true_shapes_collision(self) -> bool:
@@ -205,18 +210,26 @@ def _scenario_with(scenario: Any, obstacles: list[Any]) -> Any:
     return copy
 
 
-def off_road_steps(case: CommonRoadCase, trajectory: pd.DataFrame, length_m: float,
-                   width_m: float) -> int:
-    """Steps on which the car rectangle is not inside the union of the lanelets (1 mm of
-    tolerance at the lanelets' shared edges); 0 for a file without lanelets."""
+def off_road_mask(case: CommonRoadCase, trajectory: pd.DataFrame, length_m: float,
+                  width_m: float) -> np.ndarray:
+    """Per logged step, whether the car rectangle is not inside the union of the lanelets
+    (1 mm of tolerance at the lanelets' shared edges); never for a file without lanelets."""
     from shapely.ops import unary_union
 
     lanelets = case.commonroad_scenario.lanelet_network.lanelets
     if not lanelets:
-        return 0
+        return np.zeros(len(trajectory), bool)
     road = unary_union([lanelet.polygon.shapely_object for lanelet in lanelets]).buffer(1e-3)
-    return int(sum(not road.contains(r) for r in ego_rectangles(trajectory, length_m,
-                                                                  width_m)))
+    return np.array([not road.contains(r) for r in ego_rectangles(trajectory, length_m,
+                                                                   width_m)], bool)
+
+
+def steps_before_first(flags: np.ndarray, counted: np.ndarray) -> int:
+    """How many of ``counted``'s steps come before the first step ``flags`` holds (all of
+    them when it never does)."""
+    hits = np.flatnonzero(flags)
+    end = int(hits[0]) if hits.size else len(counted)
+    return int(np.count_nonzero(counted[:end]))
 
 
 def goal_by_commonroad(case: CommonRoadCase, trajectory: pd.DataFrame
@@ -307,6 +320,7 @@ def judge_commonroad_run(case: CommonRoadCase, trajectory: pd.DataFrame, ego_rad
     true, true_clearance, ours_true = checker_colliding_shapes(case, trajectory, length_m,
                                                                width_m)
     gaps = clearance_series(ego_disc_view(trajectory, ego_offsets_m), ego_radius_m)
+    off_road = off_road_mask(case, trajectory, length_m, width_m)
     reached, goal_step, note = goal_by_commonroad(case, trajectory)
     return CommonRoadVerdicts(
         steps=len(trajectory), ours_collision_steps=int(ours.sum()),
@@ -316,7 +330,8 @@ def judge_commonroad_run(case: CommonRoadCase, trajectory: pd.DataFrame, ego_rad
         agreement_true_shapes_steps=int((ours == true).sum()),
         min_clearance_ours_m=float(np.nanmin(gaps)) if np.isfinite(gaps).any() else np.nan,
         min_clearance_true_shapes_m=true_clearance,
-        off_road_steps=off_road_steps(case, trajectory, length_m, width_m),
+        off_road_steps=int(off_road.sum()),
+        off_road_steps_before_contact=steps_before_first(ours_true, off_road),
         goal_reached_commonroad=reached, goal_time_step=goal_step, goal_note=note,
         goal_line_reached=goal_line_reached,
         ours_true_shapes_collision_steps=int(ours_true.sum()),

@@ -123,13 +123,15 @@ def run_and_log(experiment: ExperimentConfig, out_dir: Path) -> float | tuple[fl
     v, m = done.verdicts, done.run.flat()
     log.info("%s on %s (%d steps at %.3g m/s): collision ours %s, drivability checker on our "
              "discs %s (agree on %d/%d steps), on the true shapes %s (agree on %d/%d steps); "
-             "min clearance ours %.3f m, true shapes %.3f m; off the road on %d steps; goal "
+             "min clearance ours %.3f m, true shapes %.3f m; off the road on %d steps (%d before "
+             "the first contact on the true shapes); goal "
              "reached by CommonRoad's definition %s, by ours %s; success (the file's goal, no "
              "contact on the true shapes) %s -> %s", m["method"],
              m["scenario"], v.steps, done.result.summary["run"]["speed_mps"], v.ours_collision,
              v.checker_same_geometry_collision, v.agreement_same_geometry_steps, v.steps,
              v.checker_true_shapes_collision, v.agreement_true_shapes_steps, v.steps,
              v.min_clearance_ours_m, v.min_clearance_true_shapes_m, v.off_road_steps,
+             v.off_road_steps_before_contact,
              v.goal_reached_commonroad, m["termination"] == "goal_line", v.success, out_dir)
     values = objective_values(pd.DataFrame([m]), experiment.tune.objectives)
     return values[0] if len(values) == 1 else values

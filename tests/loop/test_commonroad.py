@@ -265,8 +265,9 @@ def test_our_check_and_the_drivability_checker_agree_on_planted_geometry(
     from pipeline.analysis.commonroad_check import (
         checker_colliding_discs,
         checker_colliding_shapes,
-        off_road_steps,
+        off_road_mask,
         ours_colliding,
+        steps_before_first,
     )
 
     path = write_scenario(tmp_path / "planted.xml", obstacles="parked", ego_recording=False)
@@ -288,7 +289,14 @@ def test_our_check_and_the_drivability_checker_agree_on_planted_geometry(
         case, trajectory.iloc[[3]].reset_index(drop=True), CAR_LENGTH_M, CAR_WIDTH_M)
     # (the drawn circle is a polygon through the disc's lowest point)
     assert clearance == pytest.approx(6.0 - CAR_WIDTH_M / 2 - 0.5, abs=1e-9)
-    assert off_road_steps(case, trajectory, CAR_LENGTH_M, CAR_WIDTH_M) == 1
+    off_road = off_road_mask(case, trajectory, CAR_LENGTH_M, CAR_WIDTH_M)
+    assert off_road.tolist() == [False, False, False, True, False]
+    # off the road after the first contact (pose 1) counts for the whole run only; the same
+    # poses with the off-road one first count before it too
+    assert steps_before_first(ours_true, off_road) == 0
+    first_off = [3, 0, 1, 2, 4]
+    assert steps_before_first(ours_true[first_off], off_road[first_off]) == 1
+    assert steps_before_first(np.zeros(5, bool), off_road) == 1  # no contact: the whole run
 
 
 @needs_extra

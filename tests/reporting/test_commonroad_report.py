@@ -52,7 +52,8 @@ def test_the_files_criterion_the_shapes_and_why_the_goals_differ_are_shown(tmp_p
                      "checker_same_geometry_collision": False,
                      "checker_true_shapes_collision": False,
                      "agreement_same_geometry_steps": 80, "agreement_true_shapes_steps": 80,
-                     "off_road_steps": 0, "goal_reached_commonroad": False, "success": False,
+                     "off_road_steps": 7, "off_road_steps_before_contact": 2,
+                     "goal_reached_commonroad": False, "success": False,
                      "min_clearance_true_shapes_m": 1.25,
                      "goal_disagreement": "inside the goal area on time steps 40-44, never "
                                           "within its time_step interval"}}
@@ -64,9 +65,17 @@ def test_the_files_criterion_the_shapes_and_why_the_goals_differ_are_shown(tmp_p
     assert row.scenario == "DEU_Crit-1_1_T-1 (id DEU_Test-1_1_T-1)"
     assert (row.shapes, row.success, row.min_clearance_true_shapes_m) == \
         ("cover (3 discs)", False, 1.25)
+    assert (row.off_road_steps_before_contact, row.off_road_steps) == (2, 7)
     html = environment().get_template("sections/commonroad.html.j2").render(
         commonroad=section)
     assert "never within its time_step interval" in html and ">1.25<" in html
+    assert '<td class="num">2</td><td class="num">7</td>' in html
+    # a result written before the count: shown as not known, the whole run's count beside
+    earlier = {**summary, "verdicts": {k: v for k, v in summary["verdicts"].items()
+                                       if k != "off_road_steps_before_contact"}}
+    old, = commonroad_section(SimpleNamespace(
+        commonroad=(SimpleNamespace(summary=earlier, folder=None),))).rows
+    assert (old.off_road_steps_before_contact, old.off_road_steps) == (None, 7)
 
 
 def test_a_disagreement_on_the_same_discs_is_said_and_no_runs_no_section(tmp_path):

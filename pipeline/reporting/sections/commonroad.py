@@ -41,6 +41,9 @@ class CommonRoadRow:
     #: result written before it)
     collision_ours_true_shapes: bool | None = None
     agreement_ours_true_shapes: str = ""
+    #: steps off the road before the first contact on the true shapes (None: a result
+    #: written before it)
+    off_road_steps_before_contact: int | None = None
 
 
 @dataclass(frozen=True)
@@ -97,5 +100,7 @@ def commonroad_section(inputs: Any) -> CommonRoadSection | None:
             collision_ours_true_shapes=bool(v["ours_true_shapes_collision"])
             if "ours_true_shapes_collision" in v else None,
             agreement_ours_true_shapes=f"{v['agreement_ours_true_shapes_steps']}/{steps}"
-            if "agreement_ours_true_shapes_steps" in v else ""))
+            if "agreement_ours_true_shapes_steps" in v else "",
+            off_road_steps_before_contact=int(v["off_road_steps_before_contact"])
+            if int(v.get("off_road_steps_before_contact", -1)) >= 0 else None))
     return CommonRoadSection(tuple(rows)) if rows else None
