@@ -14,6 +14,7 @@ from pipeline.loop.compiled import COMPILED_KERNELS
 from pipeline.loop.planner import ApfPlanner, route_point_ahead
 from pipeline.loop.python_kernels import PYTHON_KERNELS
 from pipeline.loop.scenario import ObstacleSnapshot
+from tests.loop.test_commonroad import needs_extra
 
 NO_OBSTACLES = ObstacleSnapshot(np.zeros((0, 2)), np.zeros((0, 2)), np.zeros(0),
                                 np.zeros(0, bool))
@@ -154,3 +155,33 @@ def test_a_look_ahead_time_out_of_range_is_one_line_naming_the_key(make_config, 
 
     with pytest.raises(ConfigError, match=message):
         make_config(["scenario=commonroad", "scenario.commonroad.path=x.xml", *overrides])
+
+
+@needs_extra
+def test_on_a_planted_road_the_engine_follows_the_route_as_the_oracle_loop(tmp_path,
+                                                                          make_config):
+    """The planted road of tests/loop/test_commonroad.py (the oncoming car in the other
+    lane): the engine and the readable per-member loop give the same run bit for bit with the
+    route default (10 m, 2 s) and straight to the goal, and the route changes the run (the
+    switch is read)."""
+    from pipeline.loop.commonroad_scenario import read_commonroad
+    from pipeline.loop.controller import QpCache
+    from pipeline.loop.engine import simulate_members
+    from tests.loop.oracle_loop import oracle_simulate
+    from tests.loop.test_commonroad import write_scenario
+
+    path = write_scenario(tmp_path / "planted.xml", obstacles="oncoming")
+    runs = {}
+    for name, extra in (("route", []), ("straight", ["scenario.commonroad.route_lookahead_m=null"])):
+        cfg = make_config(["scenario=commonroad", f"scenario.commonroad.path={path}",
+                           "scenario.commonroad.n_steps=40", *extra])
+        scenario = read_commonroad(cfg.scenario).scenario
+        engine, = simulate_members([(cfg, scenario)], QpCache(compiled_kernels=True))
+        oracle = oracle_simulate(cfg, scenario, QpCache(compiled_kernels=True))
+        assert engine.trajectory.drop(columns=[c for c in engine.trajectory.columns
+                                               if c.endswith("solve_time_s")]).equals(
+            oracle.trajectory.drop(columns=[c for c in oracle.trajectory.columns
+                                            if c.endswith("solve_time_s")]))
+        runs[name] = engine.trajectory
+    assert not np.array_equal(runs["route"]["apf_att_x"].to_numpy(),
+                              runs["straight"]["apf_att_x"].to_numpy())
