@@ -318,6 +318,37 @@ def leave_interrupts_to(parent_pid: int | None) -> None:
         signal.signal(signal.SIGINT, signal.SIG_IGN)
 
 
+@contextlib.contextmanager
+def workers_start_deaf_to_ctrl_c() -> Iterator[None]:
+    """Around a call that starts worker processes (joblib's ``Parallel`` in its generator mode,
+    which returns once the first tasks are sent): SIGINT is blocked in this thread, so the
+    workers started here, and the threads started here that start later ones (loky's
+    manager), begin with it blocked: the mask survives fork and exec (loky's resource tracker
+    starts the same way). A Ctrl-C to the process group then never reaches a worker in its
+    start-up, before :func:`leave_interrupts_to`, where it printed a traceback into the
+    command's one line; the parent stops the workers. A Ctrl-C arriving meanwhile is not lost:
+    it is raised when the block ends (at once, as without the block, when another thread of
+    this process takes it). Not for a call that does the work itself: its Ctrl-C would wait
+    for the work. Nothing outside the main thread or without ``pthread_sigmask``."""
+    import signal
+    import threading
+
+    if threading.current_thread() is not threading.main_thread() \
+            or not hasattr(signal, "pthread_sigmask"):
+        yield
+        return
+    # multiprocessing's resource tracker, started with the first worker, unblocks SIGINT in
+    # the thread that starts it (CPython 3.11's SIG_UNBLOCK, not a restore): started first
+    from multiprocessing import resource_tracker
+
+    resource_tracker.ensure_running()
+    before = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
+    try:
+        yield
+    finally:
+        signal.pthread_sigmask(signal.SIG_SETMASK, before)
+
+
 def signal_received() -> int | None:
     """The signal the current :class:`SignalStop` has received (None: none, or no handler of
     ours is installed)."""

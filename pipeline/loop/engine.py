@@ -35,6 +35,7 @@ from pipeline.loop.controller.lateral_rows import batch_key, lateral_steps
 from pipeline.loop.horizon import HorizonLog
 from pipeline.loop.kernels import Kernels
 from pipeline.loop.model import SINGLE_TRACK_CONSTANT_NAMES
+from pipeline.loop.planner import ApfPlanner
 from pipeline.loop.scenario import Scenario
 from pipeline.loop.settings import LoopSettings
 from pipeline.loop.simulate import (
@@ -222,17 +223,23 @@ class MemberLoop:
 
 def follows_route(planner: Any, scenario: Scenario) -> bool:
     """Hand ``scenario``'s route (:attr:`~pipeline.loop.scenario.Scenario.attraction_route`)
-    to a planner that follows it along its rollout (``follow_route``, the APF's); returns
-    whether the loop must hand the planner the point ahead on the road each step instead (a
-    planner without it, on a road)."""
+    to a planner that follows it along its rollout (the APF's own rollout,
+    :meth:`~pipeline.loop.planner.ApfPlanner.follow_route`); returns whether the loop must
+    hand the planner the point ahead on the road each step instead: any other planner on a
+    road, a subclass that overrides ``rollout`` too (the VO peer, a planner of one's own),
+    which would not read the route."""
     route = scenario.attraction_route
-    follow = getattr(planner, "follow_route", None)
     if route is None:
         return scenario.follows_road
-    if follow is None:
+    if not follows_route_itself(planner):
         return True
-    follow(*route)
+    planner.follow_route(*route)
     return False
+
+
+def follows_route_itself(planner: Any) -> bool:
+    """Whether ``planner``'s rollout is the APF's, which follows a route handed to it."""
+    return isinstance(planner, ApfPlanner) and type(planner).rollout is ApfPlanner.rollout
 
 
 def _advance_plants(members: Sequence[MemberLoop]) -> None:

@@ -138,26 +138,48 @@ def _report_page(inputs: ReportInputs, out_dir: Path, command: str, skipped: lis
 
 class _Child:
     """What a forked child (:func:`_beside`) hands back: ``result()`` waits for it and returns
-    what its function returned or raises what it raised."""
+    what its function returned or raises what it raised. A child that dies without answering
+    (killed, out of memory) is an error within a tenth of a second, even while a worker it
+    forked still holds its end of the pipe: the child's own exit is watched, and its group is
+    then stopped."""
 
-    def __init__(self, receiver: Any, process: Any) -> None:
-        self._receiver = receiver
-        self._process = process
+    def __init__(self, receiver: Any, process: Any, on_stop: Callable[[], object] | None
+                 ) -> None:
+        self._receiver, self._process, self._on_stop = receiver, process, on_stop
         self.taken = False
 
     def result(self) -> Any:
+        name = self._process.name
         try:
+            # the child's exit by waitpid, not by its pipes: a worker it forked holds copies
+            # of their ends and keeps them open
+            while not self._receiver.poll(0.1):
+                if not self._process.is_alive():
+                    if self._receiver.poll():  # it answered, then ended
+                        break
+                    raise EOFError
             succeeded, value = self._receiver.recv()
-        except EOFError:  # it died before it could answer (killed, out of memory)
-            self._process.join()
-            self.taken = True
-            raise RuntimeError(f"the report's {self._process.name} ended without an answer "
-                               f"(exit code {self._process.exitcode})") from None
+        except EOFError:
+            self.stop()
+            raise RuntimeError(f"the report's {name} ended without an answer (exit code "
+                               f"{self._process.exitcode})") from None
+        except Exception as exc:  # an answer that pickled but cannot be rebuilt here
+            self.stop()
+            raise RuntimeError(f"the report's {name} answered what cannot be read here: "
+                               f"{type(exc).__name__}: {exc}") from None
         self._process.join()
         self.taken = True
         if succeeded:
             return value
         raise value
+
+    def stop(self) -> None:
+        """Kill the child and everything it forked, reap it, remove what a killed writer
+        leaves (``on_stop``)."""
+        self.taken = True
+        _stop_group(self._process)
+        if self._on_stop is not None:
+            self._on_stop()
 
 
 def _answer_from_child(function, args: tuple, sender: Any) -> None:
@@ -221,14 +243,12 @@ def _beside(function, *args, fork: bool = True,
     pid = int(process.pid or 0)
     with contextlib.suppress(OSError):  # here too, so no fork of the child escapes the group
         os.setpgid(pid, pid)
-    child = _Child(receiver, process)
+    child = _Child(receiver, process, on_stop)
     try:
         yield child
     finally:
         if not child.taken:
-            _stop_group(process)
-            if on_stop is not None:
-                on_stop()
+            child.stop()
         receiver.close()
 
 

@@ -282,6 +282,7 @@ def run_family(cfg: ExperimentConfig, out_dir: Path, progress: bool = True,
     """
     from joblib import Parallel, delayed
 
+    from pipeline.errors import workers_start_deaf_to_ctrl_c
     from pipeline.studies.progress import Progress
 
     out_dir = Path(out_dir)
@@ -297,9 +298,10 @@ def run_family(cfg: ExperimentConfig, out_dir: Path, progress: bool = True,
         counts.add(here)
     _prepare_cache(cfg, cache, len(pending))
     chunks = _chunks(pending, family.n_jobs)
-    results = Parallel(n_jobs=family.n_jobs, return_as="generator_unordered")(
-        delayed(_run_chunk)(chunk, cache, member_cache, record_horizon, os.getpid())
-        for chunk in chunks)
+    with workers_start_deaf_to_ctrl_c():  # the workers start with Ctrl-C blocked
+        results = Parallel(n_jobs=family.n_jobs, return_as="generator_unordered")(
+            delayed(_run_chunk)(chunk, cache, member_cache, record_horizon, os.getpid())
+            for chunk in chunks)
     with Progress(len(members), f"{cfg.method_name} family", "scenario",
                   initial=len(metrics_by_index), disable=not progress) as bar:
         try:
@@ -418,6 +420,8 @@ def run_families_together(todo: list[tuple[ExperimentConfig, Path]],
     """
     from joblib import Parallel, delayed
 
+    from pipeline.errors import workers_start_deaf_to_ctrl_c
+
     if not todo:
         return
     cache = qp_cache if qp_cache is not None else QpCache()
@@ -449,9 +453,10 @@ def run_families_together(todo: list[tuple[ExperimentConfig, Path]],
     if not work:
         return
     chunks = _chunks(work, n_jobs)
-    results = Parallel(n_jobs=n_jobs, return_as="generator_unordered")(
-        delayed(_run_tagged_chunk)(chunk, cache, member_cache, record_horizon)
-        for chunk in chunks)
+    with workers_start_deaf_to_ctrl_c():  # the workers start with Ctrl-C blocked
+        results = Parallel(n_jobs=n_jobs, return_as="generator_unordered")(
+            delayed(_run_tagged_chunk)(chunk, cache, member_cache, record_horizon)
+            for chunk in chunks)
     _collect_blocks(results, states, left, finish)
 
 

@@ -98,11 +98,14 @@ def start_workers(n_jobs: int) -> None:
     a family's task needs, without waiting: a tune's first families then find them ready
     while this process went on opening its store and composing (a worker's start is about 2 s
     of imports, which left a core idle at the start of every tune). Nothing with one job."""
+    from pipeline.errors import workers_start_deaf_to_ctrl_c
+
     parallel, executor = _reusable_executor(n_jobs)
     try:
         if executor is not None:
-            for _ in range(max(1, int(n_jobs))):
-                executor.submit(_import_family_task)
+            with workers_start_deaf_to_ctrl_c():  # the workers start with Ctrl-C blocked
+                for _ in range(max(1, int(n_jobs))):
+                    executor.submit(_import_family_task)
     finally:
         parallel.__exit__(None, None, None)  # the workers stay for the next Parallel call
 

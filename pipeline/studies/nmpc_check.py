@@ -191,14 +191,17 @@ def _agreement(compose, out_dir: Path, n_members: int, log, tracks: tuple[str, .
     """:func:`nmpc_agreement` in its locked folder."""
     from joblib import Parallel, delayed
 
+    from pipeline.errors import workers_start_deaf_to_ctrl_c
     from pipeline.studies.experiment import _chunks
 
     jobs = [job for track in tracks for job in _jobs(compose, track, n_members)]
     rows: list[dict] = []
     done = 0
     chunks = _chunks(jobs, n_jobs)
-    for part in Parallel(n_jobs=n_jobs, return_as="generator_unordered")(
-            delayed(_run_chunk)(chunk, os.getpid()) for chunk in chunks):
+    with workers_start_deaf_to_ctrl_c():  # the workers start with Ctrl-C blocked
+        parts = Parallel(n_jobs=n_jobs, return_as="generator_unordered")(
+            delayed(_run_chunk)(chunk, os.getpid()) for chunk in chunks)
+    for part in parts:
         rows.extend(part)
         done += len(part)
         log(f"nmpc-check: {done} of {len(jobs)} runs under both controllers")

@@ -11,6 +11,7 @@ import numpy as np
 from pipeline.loop.controller import ControlStep, Observation, QpCache
 from pipeline.loop.horizon import HorizonLog
 from pipeline.loop.kernels import Kernels
+from pipeline.loop.planner import ApfPlanner
 from pipeline.loop.scenario import Scenario
 from pipeline.loop.settings import LoopSettings
 from pipeline.loop.simulate import (
@@ -73,7 +74,8 @@ def _closed_loop(cfg: LoopSettings, scenario: Scenario, qp_cache: QpCache | None
     anchoring = bool(unanchored.any())
     senses, follows_road = scenario.senses, scenario.follows_road
     route = scenario.attraction_route
-    if route is not None and hasattr(planner, "follow_route"):
+    if route is not None and isinstance(planner, ApfPlanner) \
+            and type(planner).rollout is ApfPlanner.rollout:
         planner.follow_route(*route)  # the APF follows the road along its rollout itself
         follows_road = False
     # the vehicle's reach from its logged position: its discs' farthest edge

@@ -88,7 +88,35 @@ def test_through_a_bend_the_rollout_follows_the_route(make_config, kernels):
     assert np.abs(fixed[-5:] - carrot).max() <= 1.0  # stuck at (45, 0)
 
 
-def test_without_a_route_the_rollout_is_bit_for_bit_the_goal_s(make_config):
+#: sha256 (first 16 hex) of the path, attraction and repulsion bytes of the rollout below,
+#: computed with the kernel before it took a route (commit 55ee88a), CPython and compiled alike
+ROLLOUT_BEFORE_ROUTES = {"improved": "e26b300c6b742b3f", "baseline": "a0d2ffdc909f3df7"}
+
+
+@pytest.mark.parametrize("method", sorted(ROLLOUT_BEFORE_ROUTES))
+@pytest.mark.parametrize("kernels", [PYTHON_KERNELS, COMPILED_KERNELS], ids=["cpython", "numba"])
+def test_without_a_route_the_rollout_is_the_kernels_before_routes_bit_for_bit(make_config,
+                                                                              method, kernels):
+    """Two moving obstacles, the closing-speed velocity: the same bytes as the kernel gave
+    before it took a route (pinned), with no route and with an empty one."""
+    import hashlib
+
+    settings = make_config([f"method={method}"]).planner
+    obstacles = ObstacleSnapshot(np.array([[8.0, 0.2], [14.0, -1.0]]),
+                                 np.array([[0.0, -0.5], [-1.0, 0.3]]), np.array([0.5, 0.8]),
+                                 np.ones(2, bool))
+    for route in (None, np.zeros((0, 2)), np.array([[0.0, 0.0]])):
+        planner = ApfPlanner(settings, 30, 0.1, kernels)
+        if route is not None:
+            planner.follow_route(route, 10.0, 2.0)
+        rollout = planner.rollout(np.array([1.0, 0.4]), np.array([60.0, 0.0]), obstacles,
+                                  np.array([5.0, 0.1]))
+        digest = hashlib.sha256(b"".join(np.ascontiguousarray(getattr(rollout, name)).tobytes()
+                                         for name in ("path_m", "attraction", "repulsion")))
+        assert digest.hexdigest()[:16] == ROLLOUT_BEFORE_ROUTES[method]
+
+
+def test_an_empty_route_is_no_route(make_config):
     """follow_route never called, or called with fewer than two points: the same bits."""
     start, goal = np.array([1.0, 0.4]), np.array([60.0, 0.0])
     obstacles = ObstacleSnapshot(np.array([[8.0, 0.2]]), np.array([[0.0, -0.5]]),
@@ -102,10 +130,12 @@ def test_without_a_route_the_rollout_is_bit_for_bit_the_goal_s(make_config):
             assert np.array_equal(getattr(plain, field.name), getattr(empty, field.name))
 
 
-class _PlannerOfOnesOwn(ApfPlanner):
-    """An APF without follow_route (as a planner of one's own may be)."""
+class _SubclassWithItsOwnRollout(ApfPlanner):
+    """A planner of one's own as docs/own_method.md shows it: a subclass whose rollout is its
+    own (it would never read a route handed to the APF's)."""
 
-    follow_route = None  # type: ignore[assignment]
+    def rollout(self, position_m, goal_m, obstacles, vehicle_velocity_mps=None):
+        return super().rollout(position_m, goal_m, obstacles, vehicle_velocity_mps)
 
 
 def test_the_loop_hands_the_route_to_the_apf_and_the_point_ahead_to_any_other(make_config):
@@ -118,8 +148,14 @@ def test_the_loop_hands_the_route_to_the_apf_and_the_point_ahead_to_any_other(ma
     apf = _planner(make_config, PYTHON_KERNELS)
     assert follows_route(apf, road) is False
     assert apf._route_m.tolist() == L_ROUTE.tolist() and apf._route_lookahead_m == 7.0
-    other = _PlannerOfOnesOwn(make_config(["method=improved"]).planner, 10, 0.1)
-    assert follows_route(other, road) is True
+    settings = make_config(["method=improved"]).planner
+    other = _SubclassWithItsOwnRollout(settings, 10, 0.1)
+    assert follows_route(other, road) is True and other._route_m.shape == (0, 2)
+    from pipeline.peers.velocity_obstacles import VelocityObstaclePlanner
+
+    vo = VelocityObstaclePlanner(make_config(["method=vo"]).planner, 10, 0.1)
+    assert follows_route(vo, road) is True  # the VO peer is handed the point ahead each step
+    assert follows_route(object(), road) is True
     assert follows_route(apf, SimpleNamespace(attraction_route=None, follows_road=False)) \
         is False
 

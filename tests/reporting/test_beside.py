@@ -149,3 +149,63 @@ def test_an_answer_that_does_not_pickle_is_an_error_that_names_it():
     with page._beside(_unpicklable) as child, \
             pytest.raises(RuntimeError, match="function: .* .could not be handed over"):
         child.result()
+
+
+def _worker_then_die(pid_file: Path) -> None:
+    """Forks a worker that sleeps (holding the child's end of the pipe), then dies."""
+    import multiprocessing
+
+    pool = ProcessPoolExecutor(1, mp_context=multiprocessing.get_context("fork"))
+    worker_pid = pool.submit(os.getpid).result()
+    pool.submit(time.sleep, 30)
+    pid_file.write_text(str(worker_pid))
+    os.kill(os.getpid(), signal.SIGKILL)
+
+
+def test_a_child_that_dies_while_its_worker_lives_is_an_error_at_once(tmp_path):
+    """The worker inherits the child's end of the pipe, so the pipe never ends: the child's
+    own exit is what result() sees; its group (the worker) is then killed and on_stop runs
+    (before the fix result() waited for as long as the worker lived)."""
+    stopped: list[bool] = []
+
+    def too_long(signum, frame):
+        raise TimeoutError("result() still waiting after 20 s")
+
+    previous = signal.signal(signal.SIGALRM, too_long)
+    signal.alarm(20)  # a waiting result() fails the test instead of hanging it
+    try:
+        with page._beside(_worker_then_die, tmp_path / "worker.pid",
+                          on_stop=lambda: stopped.append(True)) as child, \
+                pytest.raises(RuntimeError, match="ended without an answer .exit code -9"):
+            child.result()
+    finally:
+        signal.alarm(0)
+        signal.signal(signal.SIGALRM, previous)
+    assert stopped == [True]
+    worker = int((tmp_path / "worker.pid").read_text())
+    time.sleep(0.2)
+    assert _state(worker) in ("gone", "Z")  # killed (a zombie until its new parent reaps it)
+
+
+def _state(pid: int) -> str:
+    try:
+        status = Path(f"/proc/{pid}/status").read_text()
+    except FileNotFoundError:
+        return "gone"
+    return next(line.split()[1] for line in status.splitlines() if line.startswith("State:"))
+
+
+class _NeedsTwo(Exception):
+    def __init__(self, a, b):
+        super().__init__(f"{a} and {b}")
+
+
+def _raise_needs_two() -> None:
+    raise _NeedsTwo(1, 2)
+
+
+def test_an_answer_that_cannot_be_rebuilt_is_an_error_that_says_so():
+    """It pickles in the child but its class cannot be rebuilt from its args in the parent."""
+    with page._beside(_raise_needs_two) as child, \
+            pytest.raises(RuntimeError, match="answered what cannot be read here: TypeError"):
+        child.result()

@@ -133,6 +133,7 @@ def _rescore_families(readings: dict[Path, list[MetricsConfig]], out_dir: Path, 
     trajectories read."""
     from joblib import Parallel, delayed
 
+    from pipeline.errors import workers_start_deaf_to_ctrl_c
     from pipeline.studies.progress import Progress
 
     members = sum(len(read_family(f, members=False).table) for f in readings)
@@ -140,9 +141,11 @@ def _rescore_families(readings: dict[Path, list[MetricsConfig]], out_dir: Path, 
         "readings ...")
     reads = 0
     with Progress(len(readings), "re-scoring", "family", stream=_LogStream(log)) as bar:
-        for n_read in Parallel(n_jobs=n_jobs, return_as="generator_unordered")(
+        with workers_start_deaf_to_ctrl_c():  # the workers start with Ctrl-C blocked
+            counts = Parallel(n_jobs=n_jobs, return_as="generator_unordered")(
                 delayed(rescore_family)(folder, wanted, out_dir)
-                for folder, wanted in readings.items()):
+                for folder, wanted in readings.items())
+        for n_read in counts:
             reads += n_read
             bar.update()
     log(f"re-scoring: {reads} member trajectories read for {members} members "
