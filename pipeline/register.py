@@ -396,8 +396,8 @@ INTERPRETATION_REGISTER: tuple[RegisterEntry, ...] = (
         "off the road; 30 m misses the junction's turn); 10 m and 1.5 s (US101-23_1 24/41 "
         "steps off the road); the point ahead of the ego alone held for the whole rollout "
         "(earlier releases' reading: the rollout stops at it). On the eight public files "
-        "(docs/commonroad.md) one method at least keeps to the road in 6 of 8 files, as "
-        "straight to the goal; the file's goal is reached in 6 runs of 16 (7 straight to the "
+        "(docs/commonroad.md) one method at least keeps to the road in 6 of 8 files over the "
+        "run, as straight to the goal (7 of 8 up to the first contact under both); the file's goal is reached in 6 runs of 16 (7 straight to the "
         "goal, two of them across the junction's corner), contact in 7 (6)",
         "scenario.commonroad.route_lookahead_m, scenario.commonroad.route_lookahead_s"),
     RegisterEntry(
