@@ -397,8 +397,9 @@ INTERPRETATION_REGISTER: tuple[RegisterEntry, ...] = (
         "steps off the road); the point ahead of the ego alone held for the whole rollout "
         "(earlier releases' reading: the rollout stops at it). On the eight public files "
         "(docs/commonroad.md) one method at least keeps to the road in 6 of 8 files over the "
-        "run, as straight to the goal (7 of 8 up to the first contact under both); the file's goal is reached in 6 runs of 16 (7 straight to the "
-        "goal, two of them across the junction's corner), contact in 7 (6)",
+        "run, as straight to the goal (7 of 8 up to the first contact under both); the "
+        "file's goal is reached in 6 runs of 16 (7 straight to the goal, two of them across "
+        "the junction's corner), contact in 7 (6)",
         "scenario.commonroad.route_lookahead_m, scenario.commonroad.route_lookahead_s"),
     RegisterEntry(
         "Steps off a CommonRoad road that count (a choice we add)", "-",

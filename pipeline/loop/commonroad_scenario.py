@@ -30,7 +30,7 @@ import numpy as np
 import pandas as pd
 
 from pipeline.errors import ConfigError
-from pipeline.loop.scenario import Extra, ObstacleSnapshot, Scenario
+from pipeline.loop.scenario import Extra, ObstacleSnapshot, Scenario, route_point_ahead
 from pipeline.loop.settings import (
     MAX_RUN_STEPS,
     CommonRoadConfig,
@@ -122,12 +122,14 @@ class CommonRoadScenario(Scenario):
 
     def attraction_goal_m(self, position_m: np.ndarray) -> np.ndarray:
         """The point :attr:`route_lookahead_m` along the route ahead of the ego's projection
-        on it (:func:`point_ahead_on`); past the route's end, the goal point."""
+        on it (:func:`~pipeline.loop.scenario.route_point_ahead`); past the route's end, the
+        goal point."""
         if not self.follows_road:
             return self.goal_m
-        ahead = point_ahead_on(self.route_m, np.asarray(position_m, float),
-                               self.route_lookahead_m)
-        return self.goal_m if ahead is None else ahead
+        goal = self.goal_m
+        return np.array(route_point_ahead(self.route_m.tolist(), float(position_m[0]),
+                                          float(position_m[1]), self.route_lookahead_m,
+                                          float(goal[0]), float(goal[1])))
 
     @property
     def senses(self) -> bool:
@@ -158,26 +160,6 @@ class CommonRoadScenario(Scenario):
             + self.track_velocities_mps[:, i1] * share
         visible = self.track_present[:, i0] & (self.track_present[:, i1] | (share == 0.0))
         return ObstacleSnapshot(positions, velocities, self.obstacle_radius_m.copy(), visible)
-
-
-def point_ahead_on(polyline_m: np.ndarray, position_m: np.ndarray, distance_m: float
-                   ) -> np.ndarray | None:
-    """The point ``distance_m`` along ``polyline_m`` beyond the projection of ``position_m`` on
-    it (the nearest point of the nearest segment); None past its end."""
-    starts, ends = polyline_m[:-1], polyline_m[1:]
-    segments = ends - starts
-    lengths = np.hypot(segments[:, 0], segments[:, 1])
-    share = np.clip(np.einsum("sd,sd->s", position_m[None, :] - starts, segments)
-                    / np.maximum(lengths ** 2, 1e-12), 0.0, 1.0)
-    nearest = starts + share[:, None] * segments
-    k = int(np.argmin(np.hypot(*(nearest - position_m[None, :]).T)))
-    along = np.concatenate([[0.0], np.cumsum(lengths)])
-    target = along[k] + share[k] * lengths[k] + distance_m
-    if target > along[-1]:
-        return None
-    i = min(int(np.searchsorted(along, target, side="right")) - 1, lengths.size - 1)
-    t = (target - along[i]) / lengths[i] if lengths[i] > 0 else 0.0
-    return starts[i] + t * segments[i]
 
 
 def route_centreline(network: Any, start_m: np.ndarray, goal_m: np.ndarray | None,

@@ -46,7 +46,7 @@ from typing import Any
 from numba import njit
 from numba.extending import overload
 
-from pipeline.loop import model, planner
+from pipeline.loop import model, planner, scenario
 from pipeline.loop.controller import daqp_rows, path, path_rows, prediction_check, references
 from pipeline.loop.kernels import Kernels
 
@@ -88,7 +88,7 @@ def _same_signature(function: Callable[..., Any]) -> Callable[..., Any]:
 for _helper in (path._polyline, path._heading_at, path._curvature_at, path._project_point,
                 path._point_at, model.single_track_kinematic_substep, model.single_track_rk4,
                 path.rollout_path_arrays, path.frame_step_arrays, path.plan_poses_arrays,
-                references.lateral_side_halfplane_arrays, planner.route_point_ahead):
+                references.lateral_side_halfplane_arrays, scenario.route_point_ahead):
     overload(_helper)(_same_signature(_helper))
 
 single_track_rk4 = _jit(model.single_track_rk4)

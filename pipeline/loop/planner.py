@@ -23,7 +23,7 @@ import numpy as np
 
 from pipeline.loop.arrays import KernelValues
 from pipeline.loop.kernels import Kernels
-from pipeline.loop.scenario import ObstacleSnapshot
+from pipeline.loop.scenario import ObstacleSnapshot, route_point_ahead
 from pipeline.loop.settings import PlannerConfig
 
 _TINY = 1e-12
@@ -212,42 +212,6 @@ def _exp_or_inf(x: float) -> float:
         return exp(x)
     except OverflowError:
         return inf
-
-
-def route_point_ahead(route: KernelValues, x: float, y: float, distance: float,
-                      end_x: float, end_y: float) -> tuple[float, float]:
-    """The point ``distance`` (m) along the polyline ``route`` (rows ``[x, y]``, at least two)
-    beyond the projection of ``(x, y)`` on it (the nearest point of the nearest segment, the
-    first of equals); ``(end_x, end_y)`` past its end. Scalar arithmetic, so CPython and numba
-    (:mod:`pipeline.loop.compiled`) run the same statement."""
-    best, nearest, share, before, nearest_length = inf, 0, 0.0, 0.0, 0.0
-    walked = 0.0
-    for i in range(len(route) - 1):
-        sx, sy = route[i][0], route[i][1]
-        dx, dy = route[i + 1][0] - sx, route[i + 1][1] - sy
-        length_sq = dx * dx + dy * dy
-        u = ((x - sx) * dx + (y - sy) * dy) / max(length_sq, _TINY)
-        u = min(max(u, 0.0), 1.0)
-        qx, qy = sx + u * dx - x, sy + u * dy - y
-        gap = sqrt(qx * qx + qy * qy)
-        length = sqrt(length_sq)
-        if gap < best:
-            best, nearest, share, before, nearest_length = gap, i, u, walked, length
-        walked += length
-    target = before + share * nearest_length + distance
-    if target > walked:
-        return end_x, end_y
-    walked = before
-    for i in range(nearest, len(route) - 1):
-        sx, sy = route[i][0], route[i][1]
-        dx, dy = route[i + 1][0] - sx, route[i + 1][1] - sy
-        length = sqrt(dx * dx + dy * dy)
-        if walked + length >= target and length > 0.0:
-            u = (target - walked) / length
-            return sx + u * dx, sy + u * dy
-        walked += length
-    last = len(route) - 1
-    return route[last][0], route[last][1]
 
 
 def apf_rollout_arrays(px: float, py: float, gx: float, gy: float, centres: KernelValues,  # noqa: C901

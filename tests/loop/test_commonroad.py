@@ -558,12 +558,12 @@ def test_a_walker_behind_a_parked_car_is_seen_once_the_line_of_sight_clears(
 def test_the_point_ahead_on_a_route_is_measured_along_it():
     """An L-shaped route (0, 0) -> (10, 0) -> (10, 10): from (4, 1) (projection (4, 0)) 3 m
     ahead is (7, 0), 8 m ahead (10, 2) round the corner; past the end, None."""
-    from pipeline.loop.commonroad_scenario import point_ahead_on
+    from pipeline.loop.scenario import route_point_ahead
 
-    route = np.array([[0.0, 0.0], [10.0, 0.0], [10.0, 10.0]])
-    assert point_ahead_on(route, np.array([4.0, 1.0]), 3.0) == pytest.approx([7.0, 0.0])
-    assert point_ahead_on(route, np.array([4.0, 1.0]), 8.0) == pytest.approx([10.0, 2.0])
-    assert point_ahead_on(route, np.array([4.0, 1.0]), 17.0) is None
+    route = [[0.0, 0.0], [10.0, 0.0], [10.0, 10.0]]
+    assert route_point_ahead(route, 4.0, 1.0, 3.0, -1.0, -1.0) == pytest.approx((7.0, 0.0))
+    assert route_point_ahead(route, 4.0, 1.0, 8.0, -1.0, -1.0) == pytest.approx((10.0, 2.0))
+    assert route_point_ahead(route, 4.0, 1.0, 17.0, -1.0, -1.0) == (-1.0, -1.0)  # past the end
 
 
 @needs_extra

@@ -9,11 +9,10 @@ from dataclasses import fields, replace
 import numpy as np
 import pytest
 
-from pipeline.loop.commonroad_scenario import point_ahead_on
 from pipeline.loop.compiled import COMPILED_KERNELS
-from pipeline.loop.planner import ApfPlanner, route_point_ahead
+from pipeline.loop.planner import ApfPlanner
 from pipeline.loop.python_kernels import PYTHON_KERNELS
-from pipeline.loop.scenario import ObstacleSnapshot
+from pipeline.loop.scenario import ObstacleSnapshot, route_point_ahead
 from tests.loop.test_commonroad import needs_extra
 
 NO_OBSTACLES = ObstacleSnapshot(np.zeros((0, 2)), np.zeros((0, 2)), np.zeros(0),
@@ -21,9 +20,30 @@ NO_OBSTACLES = ObstacleSnapshot(np.zeros((0, 2)), np.zeros((0, 2)), np.zeros(0),
 L_ROUTE = np.array([[0.0, 0.0], [50.0, 0.0], [50.0, 50.0]])
 
 
+def point_ahead_on(polyline_m: np.ndarray, position_m: np.ndarray, distance_m: float
+                   ) -> np.ndarray | None:
+    """The oracle: the point ``distance_m`` along ``polyline_m`` beyond the projection of
+    ``position_m`` on it, vectorised in numpy (the pipeline's statement before the scalar one
+    replaced it); None past its end."""
+    starts, ends = polyline_m[:-1], polyline_m[1:]
+    segments = ends - starts
+    lengths = np.hypot(segments[:, 0], segments[:, 1])
+    share = np.clip(np.einsum("sd,sd->s", position_m[None, :] - starts, segments)
+                    / np.maximum(lengths ** 2, 1e-12), 0.0, 1.0)
+    nearest = starts + share[:, None] * segments
+    k = int(np.argmin(np.hypot(*(nearest - position_m[None, :]).T)))
+    along = np.concatenate([[0.0], np.cumsum(lengths)])
+    target = along[k] + share[k] * lengths[k] + distance_m
+    if target > along[-1]:
+        return None
+    i = min(int(np.searchsorted(along, target, side="right")) - 1, lengths.size - 1)
+    t = (target - along[i]) / lengths[i] if lengths[i] > 0 else 0.0
+    return starts[i] + t * segments[i]
+
+
 def test_the_point_ahead_is_the_vectorised_readings_and_the_goal_past_the_end():
-    """Against point_ahead_on (numpy, the loop's point ahead) on random polylines, points and
-    distances, CPython and compiled; past the end the given end point."""
+    """Against the vectorised oracle on random polylines, points and distances, CPython and
+    compiled; past the end the given end point."""
     from numba import njit
 
     compiled = njit(route_point_ahead)
