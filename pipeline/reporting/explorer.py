@@ -23,12 +23,14 @@ recorded still animates, without its plan and half-planes (the page says so).
 from __future__ import annotations
 
 import base64
+import functools
 import gzip
 import hashlib
 import json
 import logging
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pandas as pd
@@ -645,15 +647,20 @@ def _read_sources(path: Path) -> dict:
     return data if isinstance(data, dict) else {}
 
 
-def explorer_page(index: ExplorerIndex) -> str:
-    """The explorer's HTML: its template with the index of experiments and members."""
+@functools.lru_cache(maxsize=1)
+def _explorer_environment() -> Any:
+    """The explorer's own Jinja environment (the page's imports this module for
+    explorer_href), one per process: its template compiled once."""
     import jinja2
 
-    # its own environment (the page's imports this module for explorer_href)
-    env = jinja2.Environment(loader=jinja2.PackageLoader("pipeline.reporting", "templates"),
-                             autoescape=jinja2.select_autoescape(["html", "j2"]),
-                             undefined=jinja2.StrictUndefined)
-    return env.get_template("explorer.html.j2").render(
+    return jinja2.Environment(loader=jinja2.PackageLoader("pipeline.reporting", "templates"),
+                              autoescape=jinja2.select_autoescape(["html", "j2"]),
+                              undefined=jinja2.StrictUndefined)
+
+
+def explorer_page(index: ExplorerIndex) -> str:
+    """The explorer's HTML: its template with the index of experiments and members."""
+    return _explorer_environment().get_template("explorer.html.j2").render(
         # no "</" inside the page's script element (a folder name cannot end it)
         index_json=json.dumps(index.to_json(), separators=(",", ":")).replace("</", "<\\/"),
         data_folder=DATA_FOLDER, clips_folder=CLIPS_FOLDER,

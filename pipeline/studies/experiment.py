@@ -215,9 +215,13 @@ def config_yaml(cfg: ExperimentConfig, memo: dict | None = None) -> str:
 
 #: Members a process must have run through one cache (over all its families) before its
 #: family workers step the plant and roll out the APF with the compiled kernels of
-#: :mod:`pipeline.loop.compiled`: numba's import and cache load (about 0.8 s per worker on a
-#: 2-core machine here) pay back after about 45 members of 100 steps per worker.
-COMPILED_KERNELS_MIN_MEMBERS = 50
+#: :mod:`pipeline.loop.compiled` (the same bits). Measured on the 2-core machine
+#: (2026-12-06, default family, Clarabel): numba's import and the kernels' cache loads cost
+#: a fresh process about 0.4 CPU-s, and the compiled kernels save 32-37 ms of a member's
+#: 100 steps (80-88 ms in CPython, 48-52 ms compiled: the path frame's kernels in CPython
+#: alone cost about 0.4 ms a step), so they pay back after 11-13 members. (It was 50 when the
+#: saving was the plant's and the APF's alone, about 17 ms a member.)
+COMPILED_KERNELS_MIN_MEMBERS = 12
 
 
 def _run_chunk(jobs: list[tuple[int, ExperimentConfig, Path]], qp_cache: QpCache,

@@ -25,6 +25,7 @@ import contextlib
 import re
 from collections.abc import Iterator
 from dataclasses import dataclass
+from pathlib import Path
 
 from pipeline.errors import ConfigError
 
@@ -76,10 +77,12 @@ class Workers:
 
 
 @contextlib.contextmanager
-def dask_executor(workers: Workers) -> Iterator:
+def dask_executor(workers: Workers, log_folder: Path | None = None) -> Iterator:
     """A ``concurrent.futures`` executor over the Dask cluster ``workers`` names (started
     here for ``dask-local`` and ``dask-slurm``, and stopped on leaving), its tasks never
-    merged by their arguments (each member chunk runs once per submission)."""
+    merged by their arguments (each member chunk runs once per submission). ``dask-slurm``'s
+    jobs write their SLURM logs into ``log_folder`` (Dask's ``jobqueue.slurm.log-directory``
+    where it is set; else sbatch's default, ``slurm-<job>.out`` in the current folder)."""
     try:
         from distributed import Client, LocalCluster
     except ImportError:
@@ -97,10 +100,12 @@ def dask_executor(workers: Workers) -> Iterator:
 
             # one core and one worker per job; memory, time limit, queue and account from
             # Dask's jobqueue configuration where it has them (~/.config/dask/jobqueue.yaml)
+            logs = dask.config.get("jobqueue.slurm.log-directory", None) or log_folder
             cluster = stack.enter_context(SLURMCluster(
                 cores=1, processes=1,
                 memory=dask.config.get("jobqueue.slurm.memory", None) or "2GB",
-                walltime=dask.config.get("jobqueue.slurm.walltime", None) or "24:00:00"))
+                walltime=dask.config.get("jobqueue.slurm.walltime", None) or "24:00:00",
+                log_directory=str(logs) if logs is not None else None))
             cluster.scale(jobs=workers.count)
             client = stack.enter_context(Client(cluster))
         else:

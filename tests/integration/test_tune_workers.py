@@ -65,5 +65,9 @@ def test_dask_workers_submitted_to_slurm_tune_as_the_loky_pool(tmp_path):
         if os.environ.get("CI") == "true":
             raise RuntimeError("CI runs the SLURM tests on the cluster of .ci/slurm-cluster")
         pytest.skip("no SLURM cluster (run `make test-slurm`)")
+    before = set(Path.cwd().glob("slurm-*.out"))
     said = _same_as_loky(tmp_path, Workers.parse("dask-slurm:2"))
     assert said[0] == "families run on 2 SLURM jobs of one Dask worker each"
+    # the jobs' logs are the study's, not the current folder's (two were once committed)
+    assert len(list((tmp_path / "cluster" / "slurm_logs").glob("dask-worker-*.out"))) >= 2
+    assert set(Path.cwd().glob("slurm-*.out")) == before

@@ -134,7 +134,7 @@ def run_tuning(space: TuneSpace, out_dir: Path, overrides: list[str] | None = No
         executor = None
         if not workers.local:
             log(f"families run on {workers.describe()}")
-            executor = stack.enter_context(dask_executor(workers))
+            executor = stack.enter_context(dask_executor(workers, out_dir / "slurm_logs"))
         return _run_tuning(space, out_dir, spaces, list(overrides or []), log, executor)
 
 
