@@ -296,7 +296,6 @@ def _build(schema, data: Any, path: str):
 def _coerce(hint, value: Any, path: str):
     """``value`` as the annotated type: nested schemas built, lists element-wise, ints as
     floats where a float is declared."""
-    import dataclasses
     import typing
 
     origin, args = typing.get_origin(hint), typing.get_args(hint)
@@ -305,7 +304,7 @@ def _coerce(hint, value: Any, path: str):
             return None
         hint = next(a for a in args if a is not type(None))
         origin, args = typing.get_origin(hint), typing.get_args(hint)
-    if dataclasses.is_dataclass(hint):
+    if is_dataclass(hint):
         return _build(hint, value, path)
     if origin in (list, typing.List) and args:
         if not isinstance(value, (list, tuple)):
@@ -334,14 +333,88 @@ def to_experiment_config(cfg: Any) -> ExperimentConfig:
     """
     from omegaconf import OmegaConf
 
-    config = OmegaConf.to_object(typed_config(cfg))
+    data, composed = _composed_data(cfg)
+    built = _built_exactly(data, composed)
+    if built is not None:
+        return built
+    # anything the direct build does not take as it stands (a value of another type, a
+    # missing value, an unknown key, a range check, another kind's schema) goes OmegaConf's
+    # way, which converts it or refuses it with its message, as before
+    config = OmegaConf.to_object(_merged(data, composed))
     assert isinstance(config, ExperimentConfig)  # the structured schema's object
     return config
 
 
-def typed_config(cfg: Any) -> Any:
-    """The composed config merged into :class:`ExperimentConfig`'s structured schema (types
-    checked, interpolations resolved; ``OmegaConf.to_object`` of it runs the range checks)."""
+def _built_exactly(data: dict, composed: Any) -> ExperimentConfig | None:
+    """:class:`ExperimentConfig` built directly from the composed ``data``
+    (:func:`experiment_config_from_data`'s builder, about 1 ms) when every value already has
+    its declared type, nothing is missing and the controller's composed schema is its kind's:
+    then OmegaConf's structured merge (about 60 ms a config) would give the same object
+    (tested over every preset). None otherwise."""
+    if composed in KIND_SETTINGS.values() and composed is not controller_schema(
+            data.get("controller")):
+        return None
+    if _has_missing(data):
+        return None
+    try:
+        built = _build(ExperimentConfig, data, "")
+    except (ConfigError, TypeError, ValueError):
+        return None
+    return built if _of_declared_types(built) else None
+
+
+def _has_missing(value: Any) -> bool:
+    """Whether OmegaConf's missing value (``???``) is anywhere in ``value``."""
+    if isinstance(value, dict):
+        return any(_has_missing(v) for v in value.values())
+    if isinstance(value, list):
+        return any(_has_missing(v) for v in value)
+    return isinstance(value, str) and value == "???"
+
+
+def _of_declared_types(instance: Any) -> bool:
+    """Whether every field of the dataclass ``instance`` (recursively) holds exactly its
+    declared type: float, int (not bool), bool, str, None where optional, lists and
+    mappings of them, nested schemas; False for anything else (OmegaConf would convert it,
+    or refuse it)."""
+    schema: Any = type(instance)
+    hints, names, by_kind = _schema_fields(schema)
+    for name in names:
+        value = getattr(instance, name)
+        if name in by_kind:
+            if not (is_dataclass(value) and _of_declared_types(value)):
+                return False
+        elif not _is_declared(hints[name], value):
+            return False
+    return True
+
+
+def _is_declared(hint: Any, value: Any) -> bool:
+    import typing
+
+    origin, args = typing.get_origin(hint), typing.get_args(hint)
+    if origin is typing.Union:
+        if value is None:
+            return type(None) in args
+        rest = [a for a in args if a is not type(None)]
+        return len(rest) == 1 and _is_declared(rest[0], value)
+    if is_dataclass(hint):
+        return type(value) is hint and _of_declared_types(value)
+    if origin in (list, typing.List):
+        return type(value) is list and all(_is_declared(args[0], v) for v in value)
+    if origin in (dict, typing.Dict):
+        return type(value) is dict and all(type(k) is str for k in value) \
+            and all(_is_declared(args[1], v) for v in value.values())
+    if hint is typing.Any:
+        return True
+    if hint in (float, int, bool, str):
+        return type(value) is hint
+    return False  # a type this check does not know: OmegaConf's way
+
+
+def _composed_data(cfg: Any) -> tuple[dict, Any]:
+    """The composed config as plain data (interpolations resolved, without Hydra's own node
+    and the experiment's name) and the schema its controller section was composed with."""
     from omegaconf import OmegaConf
 
     # the hydra node is Hydra's own (some of its values exist only inside a running job)
@@ -351,13 +424,25 @@ def typed_config(cfg: Any) -> Any:
     assert isinstance(data, dict)  # a composed config is a mapping
     data.pop("hydra", None)
     data.pop("experiment", None)
+    composed = OmegaConf.get_type(cfg, "controller") if "controller" in cfg else None
+    return data, composed
+
+
+def typed_config(cfg: Any) -> Any:
+    """The composed config merged into :class:`ExperimentConfig`'s structured schema (types
+    checked, interpolations resolved; ``OmegaConf.to_object`` of it runs the range checks)."""
+    return _merged(*_composed_data(cfg))
+
+
+def _merged(data: dict, composed: Any) -> Any:
+    """:func:`typed_config` of the composed ``data`` (:func:`_composed_data`)."""
+    from omegaconf import OmegaConf
     from omegaconf.errors import ConfigKeyError
 
     schema = OmegaConf.structured(ExperimentConfig)
     # the controller section's schema is the one Hydra composed it with (its YAML's), so that
     # a kind set to another is refused by that schema, naming the file of the other kind; a
     # section composed without one is read by its kind's
-    composed = OmegaConf.get_type(cfg, "controller") if "controller" in cfg else None
     kind_schema = composed if composed in KIND_SETTINGS.values() \
         else controller_schema(data.get("controller"))
     schema.controller = OmegaConf.structured(kind_schema)
