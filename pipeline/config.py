@@ -348,28 +348,30 @@ def to_experiment_config(cfg: Any) -> ExperimentConfig:
 def _built_exactly(data: dict, composed: Any) -> ExperimentConfig | None:
     """:class:`ExperimentConfig` built directly from the composed ``data``
     (:func:`experiment_config_from_data`'s builder, about 1 ms) when every value already has
-    its declared type, nothing is missing and the controller's composed schema is its kind's:
+    its declared type, nothing is missing (in the data or as a schema's default), no string
+    holds an interpolation and the controller's composed schema is its kind's:
     then OmegaConf's structured merge (about 60 ms a config) would give the same object
     (tested over every preset). None otherwise."""
-    if composed in KIND_SETTINGS.values() and composed is not controller_schema(
-            data.get("controller")):
-        return None
-    if _has_missing(data):
+    if _needs_omegaconf(data):
         return None
     try:
+        if composed in KIND_SETTINGS.values() and composed is not controller_schema(
+                data.get("controller")):
+            return None
         built = _build(ExperimentConfig, data, "")
-    except (ConfigError, TypeError, ValueError):
+        return built if _of_declared_types(built) else None
+    except Exception:  # whatever it is, OmegaConf's way says it as before
         return None
-    return built if _of_declared_types(built) else None
 
 
-def _has_missing(value: Any) -> bool:
-    """Whether OmegaConf's missing value (``???``) is anywhere in ``value``."""
+def _needs_omegaconf(value: Any) -> bool:
+    """Whether ``value`` holds OmegaConf's missing value (``???``) or an interpolation's
+    ``${`` (one escaped in the composition: OmegaConf's merge resolves it once more)."""
     if isinstance(value, dict):
-        return any(_has_missing(v) for v in value.values())
+        return any(_needs_omegaconf(v) for v in value.values())
     if isinstance(value, list):
-        return any(_has_missing(v) for v in value)
-    return isinstance(value, str) and value == "???"
+        return any(_needs_omegaconf(v) for v in value)
+    return isinstance(value, str) and (value == "???" or "${" in value)
 
 
 def _of_declared_types(instance: Any) -> bool:
@@ -407,7 +409,9 @@ def _is_declared(hint: Any, value: Any) -> bool:
             and all(_is_declared(args[1], v) for v in value.values())
     if hint is typing.Any:
         return True
-    if hint in (float, int, bool, str):
+    if hint is str:  # a schema's default may be OmegaConf's missing value
+        return type(value) is str and value != "???"
+    if hint in (float, int, bool):
         return type(value) is hint
     return False  # a type this check does not know: OmegaConf's way
 

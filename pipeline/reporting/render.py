@@ -63,8 +63,8 @@ def environment(studies: tuple = ()) -> jinja2.Environment:
     """The report's Jinja environment: its templates (and the sections' templates of
     ``studies``, registry entries), autoescaping, strict about undefined names, the number
     filters."""
-    own = tuple(sorted((study_template(s.section.key), s.section.template.read_text())
-                       for s in studies))
+    own = tuple((study_template(s.section.key), s.section.template.read_text())
+                for s in studies)
     return _environment(own)
 
 

@@ -24,11 +24,13 @@ plain values; the modules they name are imported only when used.
 
 from __future__ import annotations
 
+import copy
 import functools
 import os
 import re
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 from pipeline.errors import ConfigError
 
@@ -124,29 +126,10 @@ def study_named(name: str) -> Study:
 
 
 def _read(path: Path) -> Study:
-    """The entry of the study file ``path``; an unchanged file (the same modification time and
-    size) is read once per process (the registry is loaded by every command, the report and
-    the layout: about 500 times in a test run)."""
-    try:
-        stat = path.stat()
-    except OSError:
-        return _parse(path)  # its own one-line refusal
-    return _read_unchanged(path, stat.st_mtime_ns, stat.st_size)
-
-
-@functools.lru_cache(maxsize=256)
-def _read_unchanged(path: Path, mtime_ns: int, size: int) -> Study:
-    """:func:`_parse` of ``path`` as it was at ``mtime_ns`` and ``size`` (the memo's key)."""
-    return _parse(path)
-
-
-def _parse(path: Path) -> Study:
     import yaml
 
     try:
-        # libyaml's parser where PyYAML has it (the same documents, about ten times faster)
-        data = yaml.load(path.read_text(), Loader=getattr(yaml, "CSafeLoader", yaml.SafeLoader)) \
-            or {}
+        data = copy.deepcopy(_yaml_of(path.read_text())) or {}
     except yaml.YAMLError as exc:
         raise ConfigError(str(path), "(not YAML)", f"a YAML mapping ({exc})"[:200]) from None
     _check_keys(path, data)
@@ -186,6 +169,16 @@ def _parse(path: Path) -> Study:
                  claims_folders=keys("claims_folders"),
                  validity_folders=keys("validity_folders"), result=text("result", TARGET),
                  section=_section(path, data.get("section")), order=order)
+
+
+@functools.lru_cache(maxsize=256)
+def _yaml_of(text: str) -> Any:
+    """``yaml.safe_load`` of a study file's text, once per process and text (the registry is
+    loaded by every command, the report and the layout: about 500 times in a test run, each
+    parsing every file); the caller gets a copy, and every check runs on each read."""
+    import yaml
+
+    return yaml.safe_load(text)
 
 
 def _check_keys(path: Path, data: object) -> None:

@@ -75,3 +75,37 @@ def test_a_missing_value_and_another_kinds_schema_are_refused_as_before():
     with pytest.raises(ConfigError) as before:
         _through_omegaconf(cfg)
     assert str(direct.value) == str(before.value)
+
+
+def _outcome(route, cfg):
+    try:
+        typed = route(cfg)
+    except Exception as exc:  # the exception is the outcome compared
+        return type(exc).__name__, str(exc).splitlines()[0]
+    return "ok", repr(typed), typed.config_hash()
+
+
+@pytest.mark.parametrize("overrides", [
+    # the first refusal named is the first bad value, whatever the controller's kind
+    ["method=improved", "vehicle.mass_kg=-1", "controller.kind=foo"],
+    ["method=improved", "controller.kind=foo"],
+    # an interpolation escaped in the composition: OmegaConf's merge resolves it once more
+    ["method=improved", "+planner.params.x='\\${planner.name}'"],
+    ["method=improved", "run.label='costs \\${nothing}'"],
+], ids=["bad value and bad kind", "bad kind", "escaped interpolation", "escaped unknown"])
+def test_what_the_direct_build_cannot_say_goes_omegaconfs_way(overrides):
+    cfg = _composed(overrides)
+    assert _outcome(to_experiment_config, cfg) == _outcome(_through_omegaconf, cfg)
+
+
+@pytest.mark.parametrize("removed", ["vehicle.source", "scenario.name", "vehicle"])
+def test_a_key_or_section_left_out_is_refused_as_before(removed):
+    # a config from a plain mapping (a run folder's, say) without a key whose default is
+    # OmegaConf's missing value, or without a whole section
+    data = OmegaConf.to_container(_composed(["method=improved"]))
+    section, _, key = removed.partition(".")
+    del_from = data[section] if key else data
+    del del_from[key or section]
+    plain = OmegaConf.create(data)
+    outcome = _outcome(to_experiment_config, plain)
+    assert outcome[0] != "ok" and outcome == _outcome(_through_omegaconf, plain)

@@ -225,3 +225,30 @@ def test_a_bad_registry_entry_is_one_line_naming_its_key(tmp_path, monkeypatch, 
     from pipeline.cli import main
 
     assert main(["--help"]) == 2
+
+
+def test_an_entry_rewritten_with_the_same_size_and_time_is_read_again(tmp_path, monkeypatch):
+    """The registry keeps each file's parse per process by its text: an entry rewritten with
+    the same size and modification time (rsync -t, two writes within one clock tick) is read
+    as it is now, and a section's template removed since is refused again."""
+    study = tmp_path / "study"
+    study.mkdir()
+    entry = study / "gates.yaml"
+    monkeypatch.setenv(ENV, str(tmp_path))
+
+    def names() -> set[str]:
+        return {s.name for s in load_studies()}
+
+    entry.write_text("name: gatesaaa\ncommand: gate_study\n")
+    stamp = entry.stat().st_mtime_ns
+    assert "gatesaaa" in names()
+    entry.write_text("name: gatesbbb\ncommand: gate_study\n")
+    os.utime(entry, ns=(stamp, stamp))
+    assert "gatesbbb" in names() and "gatesaaa" not in names()
+    (study / "t.html.j2").write_text("<p>gates</p>\n")
+    entry.write_text("name: gatesccc\ncommand: gate_study\nsection:\n  key: gates\n"
+                     "  title: Gates\n  template: t.html.j2\n  after: answer\n")
+    assert "gatesccc" in names()
+    (study / "t.html.j2").unlink()
+    with pytest.raises(ConfigError, match="template"):
+        load_studies()
