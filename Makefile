@@ -19,6 +19,11 @@ KINEMATIC_PEERS_FAMILY_SIZE ?= 25
 # experiments, where a pool of its own buys nothing and costs its start-up (measured: 43 against
 # 56 CPU-s for both); make peers runs them on both cores
 PEERS_JOBS ?= 1
+# the other families of make reproduce's nine experiments: one worker each (the parent simulates)
+# for the same reason; measured on a fresh clone, make experiment without the member cache took
+# 139 s and 259 CPU-s against 151 s and 292 CPU-s with two workers each (the members' files
+# byte-identical either way); `make run-family FAMILY_JOBS=2` runs one alone on both cores
+FAMILY_JOBS ?= 1
 # make pedestrians: the recorded-pedestrian family (ETH/UCY), not part of make reproduce
 PEDESTRIANS_FAMILY_SIZE ?= 200
 # the variants of make pedestrians (conf/experiment/pedestrians_<variant>.yaml) and their size
@@ -122,13 +127,13 @@ run-paper run-kinematic run-kinematic-readings: run-%: $(STAMP)
 	$(APF) run experiment=$(subst -,_,$*) hydra.sweep.dir=$(RUNS)/$(subst -,_,$*)
 
 run-family: $(STAMP)
-	$(APF) run experiment=family hydra.sweep.dir=$(RUNS)/family scenario.family.size=$(FAMILY_SIZE)
+	$(APF) run experiment=family hydra.sweep.dir=$(RUNS)/family scenario.family.size=$(FAMILY_SIZE) scenario.family.n_jobs=$(FAMILY_JOBS)
 
 run-frames: $(STAMP)
-	$(APF) run experiment=frames hydra.sweep.dir=$(RUNS)/frames scenario.family.size=$(FAMILY_SIZE)
+	$(APF) run experiment=frames hydra.sweep.dir=$(RUNS)/frames scenario.family.size=$(FAMILY_SIZE) scenario.family.n_jobs=$(FAMILY_JOBS)
 
 run-apf-alone: $(STAMP)
-	$(APF) run experiment=apf_alone hydra.sweep.dir=$(RUNS)/apf_alone scenario.family.size=$(FAMILY_SIZE)
+	$(APF) run experiment=apf_alone hydra.sweep.dir=$(RUNS)/apf_alone scenario.family.size=$(FAMILY_SIZE) scenario.family.n_jobs=$(FAMILY_JOBS)
 
 run-peers: $(STAMP)
 	$(APF) run experiment=peers hydra.sweep.dir=$(RUNS)/peers scenario.family.size=$(PEERS_FAMILY_SIZE) scenario.family.n_jobs=$(PEERS_JOBS)
@@ -137,7 +142,7 @@ run-kinematic-peers: $(STAMP)
 	$(APF) run experiment=kinematic_peers hydra.sweep.dir=$(RUNS)/kinematic_peers scenario.family.size=$(KINEMATIC_PEERS_FAMILY_SIZE) scenario.family.n_jobs=$(PEERS_JOBS)
 
 run-kinematic-family: $(STAMP)
-	$(APF) run experiment=kinematic_family hydra.sweep.dir=$(RUNS)/kinematic_family scenario.family.size=$(KINEMATIC_FAMILY_SIZE)
+	$(APF) run experiment=kinematic_family hydra.sweep.dir=$(RUNS)/kinematic_family scenario.family.size=$(KINEMATIC_FAMILY_SIZE) scenario.family.n_jobs=$(FAMILY_JOBS)
 
 report: $(STAMP)  ## rebuild the HTML report from existing run folders (no simulation)
 	$(APF) report $(RUNS) --out $(REPORT) --command "$(REPORT_COMMAND)"
