@@ -29,10 +29,10 @@ library's ``atan2``, ``tanh``, ``exp``, ``cos`` and ``sin``, so they give the sa
 tests hold them equal with ``==``, and whole closed loops equal). The one difference in
 semantics, an overflowing ``exp``, is bridged by an overload of ``planner._exp_or_inf``.
 
-Importing this module imports numba (about 0.2 CPU-s) and loads the kernels from numba's
-on-disk cache (about 0.2 CPU-s; about 1.5 s each the first time, when it compiles). That pays
-back after some 12 runs of 100 steps per process (the default path frame's kernels cost about
-0.4 ms a step in CPython), so the family runner turns it on
+Importing this module imports numba and loads the kernels from numba's on-disk cache (about
+1.5 s each the first time, when it compiles). That pays back only over several runs per process
+(measured: :data:`pipeline.studies.experiment.COMPILED_KERNELS_MIN_MEMBERS`), so the family
+runner turns it on
 (:attr:`pipeline.loop.controller.QpCache.compiled_kernels`) and a single run does not. They are
 handed to a run as one value, :data:`COMPILED_KERNELS` (:class:`pipeline.loop.kernels.Kernels`);
 nothing in the loop imports this module but :func:`pipeline.loop.simulate.run_kernels`.

@@ -431,8 +431,9 @@ class QpCache:
     process_local: dict[str, Any] = field(default_factory=dict)
     #: run the single-track plant and the APF rollout as compiled kernels
     #: (:mod:`pipeline.loop.compiled`, the same bits as their Python statements); set by runners
-    #: of many runs, where numba's import and cache load (about 0.4 CPU-s per process) pay back, and
-    #: shipped to their workers
+    #: of many runs, where numba's import and cache load pay back
+    #: (:data:`pipeline.studies.experiment.COMPILED_KERNELS_MIN_MEMBERS`), and shipped to
+    #: their workers
     compiled_kernels: bool = False
     #: members the family runner has planned through this cache (what ``compiled_kernels``
     #: is decided on)
