@@ -121,9 +121,9 @@ def _measure(out: Path, steps: int, repeats: int, quick: bool, family_size: int,
     summary["named_peers"] = bench_named_peers(1 if smoke else 2 if quick else 5)
     summary.update({key: value for key, value in summary["named_peers"].items()
                     if key.startswith("peer_step_over_")})
-    summary.update(bench_multiverse_reads())
+    summary.update(bench_multiverse_reads(smoke))
     summary.update(measure_member_cache_reuse())
-    summary.update(measure_coordinator(8 if smoke else 24))
+    summary.update(measure_coordinator(4 if smoke else 24))
     if quick:
         summary.update(NOT_QUICK)
     else:

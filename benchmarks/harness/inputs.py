@@ -4,6 +4,8 @@ closed-loop run recorded for it: :mod:`benchmarks.harness.sparse_floor`)."""
 
 from __future__ import annotations
 
+import copy
+import functools
 import time
 from typing import Any
 
@@ -11,14 +13,20 @@ import numpy as np
 
 
 def compose_config(overrides: list[str]):
-    """The typed experiment config Hydra composes with ``overrides``."""
+    """The typed experiment config Hydra composes with ``overrides`` (composed once per
+    process, as the bench asks for the same few lists many times; a copy each time)."""
+    return copy.deepcopy(_composed(tuple(overrides)))
+
+
+@functools.cache
+def _composed(overrides: tuple[str, ...]):
     from hydra import compose, initialize_config_dir
 
     from pipeline.config import CONF_DIR, register_configs, to_experiment_config
 
     register_configs()
     with initialize_config_dir(config_dir=str(CONF_DIR), version_base="1.3"):
-        return to_experiment_config(compose(config_name="config", overrides=overrides))
+        return to_experiment_config(compose(config_name="config", overrides=list(overrides)))
 
 
 def step_inputs(cfg, n_obstacles: int, n_steps: int, seed: int = 0) -> list:

@@ -13,21 +13,25 @@ from benchmarks.harness.inputs import compose_config
 from pipeline.store.runs import read_family
 
 
-def bench_multiverse_reads() -> dict:
+def bench_multiverse_reads(smoke: bool = False) -> dict:
     """The quick multiverse (conf/multiverse/quick.yaml) run once into a temporary folder: how
     many member trajectories its re-scoring read per member (goal 1: every metric reading of a
-    member computed in one pass)."""
+    member computed in one pass). ``smoke``: 4 members and 4 specifications (the same
+    dimensions and readings; its wall time is then not the quick space's)."""
     import contextlib
+    import dataclasses
     import io
     import tempfile
 
     from pipeline.config import CONF_DIR
     from pipeline.studies.multiverse import load_space, run_multiverse
 
+    space = load_space(CONF_DIR / "multiverse" / "quick.yaml")
+    if smoke:
+        space = dataclasses.replace(space, family_size=4, n_specifications=4)
     with tempfile.TemporaryDirectory() as tmp, contextlib.redirect_stdout(io.StringIO()):
         start = time.perf_counter()
-        result = run_multiverse(load_space(CONF_DIR / "multiverse" / "quick.yaml"), Path(tmp),
-                                log=lambda message: None)
+        result = run_multiverse(space, Path(tmp), log=lambda message: None)
         wall = time.perf_counter() - start
     return {"multiverse_member_reads_per_member": result.info.member_reads_per_member,
             "quick_multiverse_wall_s": wall}

@@ -126,6 +126,7 @@ def _freeze(python: Path) -> set[str]:
                                                           "apf-mpc-repro")}
 
 
+@pytest.mark.machine
 def test_make_install_uses_uv_and_falls_back_to_pip_with_the_same_pins(tmp_path):
     """``make install`` (INSTALLER=uv, the default) installs with uv; ``INSTALLER=pip`` with pip
     alone; both give the same distributions at the same pinned versions (WARM=no: the warm

@@ -37,6 +37,7 @@ def _same_as_loky(tmp_path: Path, workers: Workers) -> list[str]:
     return said
 
 
+@pytest.mark.machine
 def test_a_local_dask_cluster_tunes_as_the_loky_pool(tmp_path):
     said = _same_as_loky(tmp_path, Workers.parse("dask-local:2"))
     # the switch is real: the families went to the cluster (the held-out ones too)

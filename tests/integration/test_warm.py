@@ -24,6 +24,7 @@ def _cached(prefix: Path, module: str) -> bool:
     return (prefix / source.parent.relative_to("/") / f"{source.stem}.{tag}.pyc").is_file()
 
 
+@pytest.mark.machine
 def test_bytecode_is_written_for_what_the_commands_import_and_nothing_else(tmp_path):
     """With bytecode writing off in the environment (as on this machine), ``--no-kernels``
     leaves the ``.pyc`` of the project's modules and of the libraries they import lazily
@@ -93,6 +94,7 @@ RUN_KERNELS = {"model.single_track_rk4_rows", "planner.apf_rollout_arrays",
 CALLEES = {"compiled._count_at_most", "compiled._order_statistic"}
 
 
+@pytest.mark.machine
 def test_kernels_only_puts_every_kernel_in_numbas_cache():
     """``--kernels-only`` (the other core's half of make install: ``api.warm_compiled_kernels``)
     compiles or loads each kernel the runs call, every one with numba's on-disk cache and its
