@@ -70,7 +70,8 @@ def crowd_metrics(table: pd.DataFrame, level: float = 0.95, seed: int = 0) -> di
 
     Success is reaching the goal without a contact; a timeout neither (the run's last step
     came first); an avoidable collision one whose ``collision_avoidable`` is true (the
-    published label: :mod:`pipeline.analysis.unavoidable`; NaN without the column); time to goal
+    published label: :mod:`pipeline.analysis.unavoidable`; NaN without the column); a collision
+    at appearance one whose ``contact_at_appearance`` is true (NaN without it); time to goal
     and the path ratio (path length over the straight start-goal
     line) are read on the successful runs; the minimum distance is the closest surface gap to
     any walker (m; negative: a contact)."""
@@ -80,6 +81,9 @@ def crowd_metrics(table: pd.DataFrame, level: float = 0.95, seed: int = 0) -> di
     # avoided it; an unavoidable one is mostly a walker whose recorded track begins on or
     # against the platform, met by every method)
     avoidable = collided & _flags(table, "collision_avoidable")
+    # a contact at the walker's appearance: its recorded track began on or against the
+    # platform (the metrics' contact_at_appearance), seen by no planner before the contact
+    appeared = collided & _flags(table, "contact_at_appearance")
     reached = _flags(table, "goal_reached")
     success = reached & ~collided
     timeout = ~reached & ~collided
@@ -88,6 +92,8 @@ def crowd_metrics(table: pd.DataFrame, level: float = 0.95, seed: int = 0) -> di
                         ("collision_rate", _rate(collided, level)),
                         ("collision_avoidable_rate", _rate(avoidable, level)
                          if "collision_avoidable" in table else (float("nan"),) * 3),
+                        ("collision_at_appearance_rate", _rate(appeared, level)
+                         if "contact_at_appearance" in table else (float("nan"),) * 3),
                         ("timeout_rate", _rate(timeout, level)),
                         ("time_to_goal_median_s", _median(
                             table["time_to_goal_s"].to_numpy(float)[success], level)),

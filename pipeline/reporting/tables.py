@@ -164,7 +164,8 @@ def pedestrian_metrics_frame(judged) -> pd.DataFrame:
     method, the crowd-navigation metrics with their intervals, after the family's description
     (``family, track, platform, draw, walkers``) and its difficulty from the recording alone
     (``straight_line_meets_share, standing_touched_share``, and the method's collision rate on
-    the crossings where standing still is safe, all contacts and the avoidable ones)."""
+    the crossings where standing still is safe: all contacts, the avoidable ones, and those
+    with a walker seen before the contact)."""
     rows = []
     for family in judged:
         if family.metrics is None:
@@ -180,7 +181,9 @@ def pedestrian_metrics_frame(judged) -> pd.DataFrame:
                          "collision_rate_standing_safe":
                              hard.get(f"collision_rate_standing_safe_{method}"),
                          "collision_rate_standing_safe_avoidable":
-                             hard.get(f"collision_rate_standing_safe_avoidable_{method}")})
+                             hard.get(f"collision_rate_standing_safe_avoidable_{method}"),
+                         "collision_rate_standing_safe_seen":
+                             hard.get(f"collision_rate_standing_safe_seen_{method}")})
     return pd.DataFrame(rows)
 
 

@@ -600,6 +600,11 @@ def _difficulty(settings: Any, info: dict, tables: dict[str, pd.DataFrame]) -> d
         out[f"collision_rate_standing_safe_avoidable_{method}"] = \
             float((hits & optional_flags(rows, "collision_avoidable").eq(True)).mean()) \
             if len(rows) and "collision_avoidable" in rows else float("nan")
+        # and those with a walker the platform had seen (not one whose recorded track began
+        # on or against it: the metrics' contact_at_appearance)
+        out[f"collision_rate_standing_safe_seen_{method}"] = \
+            float((hits & ~optional_flags(rows, "contact_at_appearance").eq(True)).mean()) \
+            if len(rows) and "contact_at_appearance" in rows else float("nan")
     return out
 
 

@@ -117,6 +117,22 @@ def test_the_crowd_metrics_are_the_closed_forms_on_planted_trajectories():
                               context, MetricsConfig(goal_tolerance_m=0.5)).crowd
     assert head_on is not None
     assert head_on.contact_relative_speed_mps == pytest.approx(2.0, abs=1e-9)
+    # a walker seen all along, met head-on: not a contact at its appearance
+    assert head_on.contact_at_appearance is False
+    assert crowd.contact_at_appearance is False  # no contact at all
+    # a walker whose recorded track begins against the platform: logged (at its first
+    # position) but not visible until step 51, when the platform is at x = 5.1 m and the
+    # walker 0.5 m ahead of it on the line: surface gap 0.5 - 0.65 < 0, the contact comes on
+    # the step it appears; the same walker visible from step 45 on (contact at step 50, x =
+    # 5.0 m, gap 0.6 - 0.65) is one the platform saw
+    pop_in = _straight_run(walker_xy=(5.6, 0.0))
+    pop_in["obs0_visible"] = np.arange(101) >= 51
+    appeared = compute_metrics(pop_in, context, MetricsConfig(goal_tolerance_m=0.5)).crowd
+    assert appeared is not None and appeared.contact_at_appearance is True
+    assert appeared.contact_relative_speed_mps == pytest.approx(1.0, abs=1e-9)
+    seen = pop_in.assign(obs0_visible=np.arange(101) >= 45)
+    seen_crowd = compute_metrics(seen, context, MetricsConfig(goal_tolerance_m=0.5)).crowd
+    assert seen_crowd is not None and seen_crowd.contact_at_appearance is False
     # no crowd block off the pedestrians' scenarios
     plain = TrajectoryContext((0.0, 0.0), (10.0, 0.0), 0.35)
     assert compute_metrics(run, plain, MetricsConfig(goal_tolerance_m=0.5)).crowd is None
@@ -145,6 +161,15 @@ def test_the_rates_intervals_are_clopper_pearson_and_the_medians_order_statistic
     assert (flagged["collision_avoidable_rate"], flagged["collision_avoidable_rate_low"],
             flagged["collision_avoidable_rate_high"]) == pytest.approx((0.1, low, high))
     assert flagged["collision_rate"] == m["collision_rate"]
+    # one of the three contacts at a walker's appearance (a flag on a run without a contact
+    # does not count); none made up without the column
+    assert np.isnan(m["collision_at_appearance_rate"])
+    appeared = crowd_metrics(table.assign(contact_at_appearance=[False, True, False] + [True]
+                                          + [False] * 16))
+    low, high = stats.beta.ppf(0.025, 1, 20), stats.beta.ppf(0.975, 2, 19)
+    assert (appeared["collision_at_appearance_rate"],
+            appeared["collision_at_appearance_rate_low"],
+            appeared["collision_at_appearance_rate_high"]) == pytest.approx((0.05, low, high))
     assert (m["min_distance_median_m"], m["min_distance_median_m_low"],
             m["min_distance_median_m_high"]) == pytest.approx((9.5, 5.0, 14.0))
     assert m["time_to_goal_median_s"] == pytest.approx(np.median(np.arange(3.0, 18.0)))

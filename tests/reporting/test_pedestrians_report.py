@@ -66,6 +66,12 @@ def test_the_report_judges_the_pedestrian_family_overall_and_per_scene(make_conf
         assert row["collision_avoidable_rate"] == avoidable.mean()
         assert 0.0 <= row["collision_rate_standing_safe_avoidable"] \
             <= row["collision_rate_standing_safe"]
+        # the contacts at a walker's appearance, counted from the members' own flags
+        appeared = table["collision"].astype(bool).to_numpy() \
+            & table["contact_at_appearance"].astype(bool).to_numpy()
+        assert row["collision_at_appearance_rate"] == appeared.mean()
+        assert 0.0 <= row["collision_rate_standing_safe_seen"] \
+            <= row["collision_rate_standing_safe"]
     assert html.index('id="pedestrians-metrics"') < html.index('id="pedestrians-verdicts"')
     for index in range(6):
         assert f'href="explorer.html#pedestrians/{index}"' in html

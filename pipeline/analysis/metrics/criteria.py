@@ -432,7 +432,10 @@ def crowd_block(sig: Signals, tracks: list[ObstacleTrack], clearance: np.ndarray
     A step intrudes where the surface gap to the nearest visible walker is below
     ``personal_space_m``; the contact's relative speed is ``|v_platform - v_walker|`` on the
     first logged step whose gap to some walker is negative (forward differences of the logged
-    positions: the walker's as logged, the platform's ``X_m, Y_m``)."""
+    positions: the walker's as logged, the platform's ``X_m, Y_m``); the contact came at the
+    walkers' appearance when none of those walkers was visible one logged step before (or
+    the contact is on the first step). Within a walker's reach the sensor range never hides
+    it, so not visible there means not yet in the recording."""
     if context.personal_space_m is None:
         return None
     t = sig.t
@@ -441,6 +444,7 @@ def crowd_block(sig: Signals, tracks: list[ObstacleTrack], clearance: np.ndarray
     entries = int(np.count_nonzero(inside[1:] & ~inside[:-1]) + (1 if inside[:1].any() else 0))
     straight = float(np.linalg.norm(np.subtract(context.goal_m, context.start_m)))
     relative = float("nan")
+    at_appearance = False
     if safety.collision and t.size > 1:
         velocity = np.vstack([np.diff(sig.xy, axis=0) / np.diff(t)[:, None],
                               np.full((1, 2), np.nan)])
@@ -451,6 +455,7 @@ def crowd_block(sig: Signals, tracks: list[ObstacleTrack], clearance: np.ndarray
                 mine = velocity[k] if np.all(np.isfinite(velocity[k])) else velocity[k - 1]
                 relative = float(min(np.linalg.norm(mine - tracks[j].velocity[k])
                                      for j in hits))
+                at_appearance = k == 0 or not any(tracks[j].visible[k - 1] for j in hits)
                 break
     in_range = np.sum([track.visible for track in tracks], axis=0) if tracks \
         else np.zeros(t.size)
@@ -463,7 +468,8 @@ def crowd_block(sig: Signals, tracks: list[ObstacleTrack], clearance: np.ndarray
         personal_space_intrusion_share=float(inside.mean()) if inside.size else float("nan"),
         personal_space_intrusion_s=float(np.sum(dt[inside])),
         personal_space_entries=entries,
-        contact_relative_speed_mps=relative, walkers_beyond_slots_share=beyond)
+        contact_relative_speed_mps=relative, walkers_beyond_slots_share=beyond,
+        contact_at_appearance=bool(at_appearance))
 
 
 REPULSION_READS = THREAT_READS + ("repulsion_need", "near_field_m", "repulsion_onset_force",

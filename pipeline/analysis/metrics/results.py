@@ -198,8 +198,10 @@ class Crowd(_Block):
     over the straight start-goal line, the share of logged steps (and their time, s) inside a
     walker's personal space (surface gap below ``personal_space_m``) and how often it was
     entered, the speed of the platform relative to the walker at the first contact (m/s;
-    NaN without one), and the share of steps with more walkers in sensor range than the
-    controller has obstacle slots."""
+    NaN without one), whether that contact came at the walker's appearance (every walker in
+    contact then was not seen one step before: a recorded track that begins on or against
+    the platform, which no planner could have seen coming), and the share of steps with more
+    walkers in sensor range than the controller has obstacle slots."""
 
     timeout: bool
     path_ratio: float
@@ -208,6 +210,7 @@ class Crowd(_Block):
     personal_space_entries: int
     contact_relative_speed_mps: float
     walkers_beyond_slots_share: float
+    contact_at_appearance: bool = False
 
 
 @dataclass(frozen=True)
