@@ -69,7 +69,7 @@ LAUNCHER    ?= sequential
 # tune's $(MAKE) report) stamps the command typed, not "make report"
 export REPORT_COMMAND ?= make $(strip $(MAKECMDGOALS) $(MAKEOVERRIDES))
 
-.PHONY: help install lint clip reproduce experiment run-paper run-kinematic run-kinematic-readings run-family run-kinematic-family run-frames run-apf-alone run-peers run-kinematic-peers peers speed-check nmpc-family report screenshot sweep verify ablation multiverse pedestrians euro-ncap tune tune-unpruned tune-peers nmpc-check test test-machine test-slurm test-all bench install-commonroad commonroad cache-size clean-cache clean
+.PHONY: help install lint clip reproduce experiment run-paper run-kinematic run-kinematic-readings run-family run-kinematic-family run-frames run-apf-alone run-peers run-kinematic-peers run-paper-scenario peers speed-check nmpc-family report screenshot sweep verify ablation multiverse pedestrians euro-ncap tune tune-unpruned tune-peers nmpc-check test test-machine test-slurm test-all bench install-commonroad commonroad cache-size clean-cache clean
 
 help:  ## list the targets
 	@grep -E '^[a-zA-Z_-]+:.*## ' $(MAKEFILE_LIST) | awk -F':.*## ' '{printf "  %-12s %s\n", $$1, $$2}'
@@ -119,12 +119,17 @@ experiment: $(STAMP)  ## run every method on the paper scenario and on the scena
 	@# stretches (Hydra's job set-up, the compilation, the tables) in which the others use the
 	@# cores (measured: 162-166 s against 173-178 s one family after the other). Each one's
 	@# output is printed whole when it ends (-O).
-	@echo "nine experiments side by side; each one's output follows when it ends"
-	$(MAKE) --no-print-directory -j9 -O run-family run-peers run-kinematic-family run-kinematic-peers run-frames run-apf-alone run-paper run-kinematic run-kinematic-readings
+	@echo "nine experiments side by side (the paper scenario's three in one process); each one's output follows when it ends"
+	$(MAKE) --no-print-directory -j7 -O run-family run-peers run-kinematic-family run-kinematic-peers run-frames run-apf-alone run-paper-scenario
 
 # the experiments of `make experiment` (run side by side from there)
 run-paper run-kinematic run-kinematic-readings: run-%: $(STAMP)
 	$(APF) run experiment=$(subst -,_,$*) hydra.sweep.dir=$(RUNS)/$(subst -,_,$*)
+
+# the three experiments on the paper's one scenario in one process (apf-mpc run's --next: one
+# start-up instead of three, about 6 CPU-s each)
+run-paper-scenario: $(STAMP)
+	$(APF) run experiment=paper hydra.sweep.dir=$(RUNS)/paper --next experiment=kinematic hydra.sweep.dir=$(RUNS)/kinematic --next experiment=kinematic_readings hydra.sweep.dir=$(RUNS)/kinematic_readings
 
 run-family: $(STAMP)
 	$(APF) run experiment=family hydra.sweep.dir=$(RUNS)/family scenario.family.size=$(FAMILY_SIZE) scenario.family.n_jobs=$(FAMILY_JOBS)
@@ -170,12 +175,12 @@ ablation: $(STAMP)  ## which revision does what: ablations + interpretation vari
 
 pedestrians: $(STAMP)  ## improved and baseline among recorded pedestrians (ETH/UCY, docs/pedestrians.md): a sidewalk robot that can stop, and the variants (car, aimed crossings, reactive walkers; about 3 min), then the report
 	rm -rf $(RUNS)/pedestrians $(RUNS)/pedestrians_variants
-	$(APF) pedestrians --out $(RUNS)/pedestrians scenario.family.size=$(PEDESTRIANS_FAMILY_SIZE)
-	@# the variants one after the other: side by side (make -j5 -O) they took as long or longer
-	@# (the families are CPU-bound on two cores; measured 2026-12-06: 162 s against 154 s)
-	for variant in $(PEDESTRIANS_VARIANTS); do \
-	  $(APF) run experiment=pedestrians_$$variant hydra.sweep.dir=$(RUNS)/pedestrians_variants/$$variant scenario.family.size=$(PEDESTRIANS_VARIANTS_FAMILY_SIZE) || exit $$?; \
-	done
+	@# the family, then the variants one after the other in the same process (apf-mpc run's
+	@# --next: one start-up, one set of kernels and workers; the same files, byte for byte, as
+	@# five processes, 33 against 53 s at 12 members each, measured 2026-12-06). Side by side
+	@# (make -j5 -O) they took as long or longer: the families are CPU-bound on two cores
+	$(APF) run experiment=pedestrians hydra.sweep.dir=$(RUNS)/pedestrians scenario.family.size=$(PEDESTRIANS_FAMILY_SIZE) \
+	  $(foreach variant,$(PEDESTRIANS_VARIANTS),--next experiment=pedestrians_$(variant) hydra.sweep.dir=$(RUNS)/pedestrians_variants/$(variant) scenario.family.size=$(PEDESTRIANS_VARIANTS_FAMILY_SIZE))
 	$(MAKE) report
 
 euro-ncap: $(STAMP)  ## the methods on Euro NCAP's AEB/LSS VRU crossings (a child from between parked cars, adults, a cyclist; both tracks and braking; docs/euro_ncap.md), then the report
