@@ -402,6 +402,23 @@ INTERPRETATION_REGISTER: tuple[RegisterEntry, ...] = (
         "the junction's corner), contact in 7 (6)",
         "scenario.commonroad.route_lookahead_m, scenario.commonroad.route_lookahead_s"),
     RegisterEntry(
+        "What a CommonRoad road is where its lanelets do not meet exactly (a choice we add)",
+        "-",
+        "the file's lanelets, each widened by lanelet_gap_m / 2 = 3 cm to every side (a "
+        "mitred buffer), so that neighbours whose shared edges leave a hairline gap are one "
+        "road, for the MPC's road rows and for the off-road count alike: USA_US101-23_1's "
+        "lanelets leave gaps of up to 3 cm (37 holes in their union), which held the ego in "
+        "its lane (the MPC's road reach ended at the gap) and counted a car over a lane "
+        "marking as off the road",
+        "the lanelets as they are (lanelet_gap_m = 0; earlier releases): on the eight public "
+        "files (docs/commonroad.md) US101-23_1 then has 4 / 2 steps off the road before "
+        "contact (improved / baseline, every one over a gap between lanelets) and improved "
+        "touches a car; with the widened road 0 / 0, no contact, and the baseline reaches the "
+        "file's goal; US101-3_1, where a faster car cuts in from behind, becomes a contact "
+        "for both (one step on the true shapes; 1.2-1.4 m clear when held in the lane), "
+        "US101-3_3's baseline no contact: 7 contacts of 16 runs either way, 7 goals against 6",
+        "scenario.commonroad.lanelet_gap_m"),
+    RegisterEntry(
         "Steps off a CommonRoad road that count (a choice we add)", "-",
         "those before the first contact on the true shapes (off_road_steps_before_contact: "
         "nothing after a crash is judged, the field's convention, as the Euro NCAP outcome "

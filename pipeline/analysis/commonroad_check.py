@@ -212,14 +212,17 @@ def _scenario_with(scenario: Any, obstacles: list[Any]) -> Any:
 
 def off_road_mask(case: CommonRoadCase, trajectory: pd.DataFrame, length_m: float,
                   width_m: float) -> np.ndarray:
-    """Per logged step, whether the car rectangle is not inside the union of the lanelets
-    (1 mm of tolerance at the lanelets' shared edges); never for a file without lanelets."""
+    """Per logged step, whether the car rectangle is not inside the road: the union of the
+    lanelets as the MPC has them (each widened by ``scenario.commonroad.lanelet_gap_m / 2``,
+    :func:`~pipeline.loop.commonroad_scenario.road_polygons`), with 1 mm of tolerance; never
+    for a file without lanelets."""
+    from shapely.geometry import Polygon
     from shapely.ops import unary_union
 
-    lanelets = case.commonroad_scenario.lanelet_network.lanelets
-    if not lanelets:
+    polygons = case.scenario.road_polygons_m
+    if not polygons:
         return np.zeros(len(trajectory), bool)
-    road = unary_union([lanelet.polygon.shapely_object for lanelet in lanelets]).buffer(1e-3)
+    road = unary_union([Polygon(vertices).buffer(0) for vertices in polygons]).buffer(1e-3)
     return np.array([not road.contains(r) for r in ego_rectangles(trajectory, length_m,
                                                                    width_m)], bool)
 

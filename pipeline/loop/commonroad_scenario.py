@@ -384,16 +384,38 @@ def read_commonroad(cfg: ScenarioConfig) -> CommonRoadCase:
                              for g in problem.goal.state_list)
         route = route_centreline(scenario.lanelet_network, start,
                                  goal if has_goal_point else None)
-    # the road as its lanelets' polygons (left bound, then the right bound backwards): what
-    # the lateral MPC keeps the ego on with controller.road_edge_weight
-    road = tuple(np.vstack([np.asarray(lanelet.left_vertices, float),
-                            np.asarray(lanelet.right_vertices, float)[::-1]])
-                 for lanelet in scenario.lanelet_network.lanelets)
+    # the road as its lanelets' polygons: what the lateral MPC keeps the ego on with
+    # controller.road_edge_weight, and what the off-road check measures against
+    road = road_polygons(scenario.lanelet_network, float(cr.lanelet_gap_m))
     ours = replace(ours, sensor_range_m=cr.sensor_range_m, occluders_m=occluders,
                    occluder_of=own, route_m=route,
                    route_lookahead_m=float(cr.route_lookahead_m or 0.0),
                    route_lookahead_s=float(cr.route_lookahead_s or 0.0), road_polygons_m=road)
     return CommonRoadCase(resolved, ours, scenario, problem, ids, ego_ids, t0, digest)
+
+
+def road_polygons(network: Any, gap_m: float = 0.0) -> tuple[np.ndarray, ...]:
+    """The road as one polygon per lanelet (vertices (P, 2), closed implicitly): its left
+    bound, then its right bound backwards; with ``gap_m`` > 0 each widened by ``gap_m / 2``
+    to every side (a mitred buffer: straight edges stay straight), so that neighbours whose
+    shared edges do not meet exactly overlap (``scenario.commonroad.lanelet_gap_m``)."""
+    polygons = [np.vstack([np.asarray(lanelet.left_vertices, float),
+                           np.asarray(lanelet.right_vertices, float)[::-1]])
+                for lanelet in network.lanelets]
+    if gap_m <= 0.0:
+        return tuple(polygons)
+    from shapely.geometry import Polygon
+
+    widened = []
+    for vertices in polygons:
+        shape = Polygon(vertices)
+        if not shape.is_valid:  # a bound that crosses itself: its valid area
+            shape = shape.buffer(0)
+        grown = shape.buffer(gap_m / 2.0, join_style="mitre", mitre_limit=2.0)
+        if grown.geom_type != "Polygon":  # pieces: the largest (a valid lanelet has one)
+            grown = max(grown.geoms, key=lambda piece: piece.area)
+        widened.append(np.asarray(grown.exterior.coords, float)[:-1])
+    return tuple(widened)
 
 
 @dataclass(frozen=True)

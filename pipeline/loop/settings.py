@@ -303,6 +303,12 @@ class CommonRoadConfig(FrozenAfterValidation):
     # the distance grows with the speed; the farther of the two); None: the distance alone.
     # Without route_lookahead_m there is no route, and this has nothing to scale
     route_lookahead_s: Optional[float] = None
+    # the road is the file's lanelets, each widened by half this (m) to either side, so that
+    # neighbours whose shared edges do not meet exactly are one road: USA_US101-23_1's
+    # lanelets leave gaps of up to 3 cm between them, which the MPC's road rows read as the
+    # road's edge (the ego held in one lane) and the off-road check as off the road (a car
+    # over a lane marking); 0: the lanelets as they are (earlier releases)
+    lanelet_gap_m: float = 0.0
     # an obstacle whose centre is this close to the planning problem's initial position at its
     # initial time step is the ego's own recording, and dropped
     ego_match_tolerance_m: float = 0.5
@@ -316,7 +322,8 @@ class CommonRoadConfig(FrozenAfterValidation):
     #: them: everything present seen, straight to the goal (left out of the hash while held)
     BEFORE_KEYS: ClassVar[dict[str, Any]] = {"sensor_range_m": None, "occlusion": False,
                                              "route_lookahead_m": None,
-                                             "route_lookahead_s": None}
+                                             "route_lookahead_s": None,
+                                             "lanelet_gap_m": 0.0}
 
     def __post_init__(self) -> None:
         if not isinstance(self.path, str) or not self.path:
@@ -338,6 +345,7 @@ class CommonRoadConfig(FrozenAfterValidation):
         if self.route_lookahead_s is not None:
             between("scenario.commonroad.route_lookahead_s", self.route_lookahead_s, 0.1, 10.0)
         flag("scenario.commonroad.occlusion", self.occlusion)
+        between("scenario.commonroad.lanelet_gap_m", self.lanelet_gap_m, 0.0, 0.5)
         between("scenario.commonroad.ego_match_tolerance_m", self.ego_match_tolerance_m,
                 0.0, 10.0)
         if self.speed_mps is not None:

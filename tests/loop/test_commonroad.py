@@ -622,3 +622,42 @@ def test_the_route_changes_lane_to_reach_a_goal_in_the_other_lane():
     assert (left[1:, 0] >= left[:-1, 0] - 1e-9).all()   # never back along the road
     right = route_centreline(network, np.array([5.0, 0.0]), np.array([90.0, 0.0]))
     assert right[-1] == pytest.approx([100.0, 0.0]) and np.allclose(right[:, 1], 0.0)
+
+
+@needs_extra
+def test_lanelets_with_a_hairline_gap_are_one_road_once_widened():
+    """Two lanelets side by side, y in [0, 3.5] and [-3.52, -0.02]: a 2 cm gap between their
+    edges (USA_US101-23_1's lanelets leave up to 3 cm). As they are, the MPC's road reach
+    along the normal at (50, 1.75) is the upper lanelet alone (low -1.75, high 1.75: the ego
+    held in its lane) and a 4.5 x 1.8 car at (50, 0), over the gap, is off the road; each
+    widened by lanelet_gap_m / 2 = 3 cm (``scenario.commonroad.lanelet_gap_m=0.06``), the
+    reach is the whole road (low -(1.75 + 3.52 + 0.03), high 1.75 + 0.03) and that car is on
+    it. A car at (50, 3.0) reaches y = 3.9, over the top edge, either way; one at (50, 1.75)
+    is inside the upper lanelet either way."""
+    from types import SimpleNamespace
+
+    from commonroad.scenario.lanelet import Lanelet, LaneletNetwork
+
+    from pipeline.analysis.commonroad_check import off_road_mask
+    from pipeline.loop.commonroad_scenario import road_polygons
+    from pipeline.loop.controller.road import road_interval
+
+    xs = np.linspace(0.0, 100.0, 11)
+
+    def line(y: float) -> np.ndarray:
+        return np.stack([xs, np.full(xs.size, y)], 1)
+
+    network = LaneletNetwork.create_from_lanelet_list([
+        Lanelet(line(3.5), line(1.75), line(0.0), 1),
+        Lanelet(line(-0.02), line(-1.77), line(-3.52), 2)])
+    station, normal = np.array([[50.0, 1.75]]), np.array([[0.0, 1.0]])
+    low, high, _, _ = road_interval(station, normal, road_polygons(network, 0.0))
+    assert (low[0], high[0]) == pytest.approx((-1.75, 1.75), abs=1e-9)
+    low, high, _, _ = road_interval(station, normal, road_polygons(network, 0.06))
+    assert (low[0], high[0]) == pytest.approx((-(1.75 + 3.52 + 0.03), 1.75 + 0.03), abs=1e-9)
+    poses = pd.DataFrame({"X_m": [50.0, 50.0, 50.0], "Y_m": [0.0, 1.75, 3.0],
+                          "psi_rad": [0.0, 0.0, 0.0]})
+    for gap, expected in ((0.0, [True, False, True]), (0.06, [False, False, True])):
+        case = SimpleNamespace(scenario=SimpleNamespace(
+            road_polygons_m=road_polygons(network, gap)))
+        assert off_road_mask(case, poses, CAR_LENGTH_M, CAR_WIDTH_M).tolist() == expected, gap
