@@ -115,7 +115,8 @@ install: $(STAMP)  ## create .venv and install the project with pinned versions
 
 experiment: $(STAMP)  ## run every method on the paper scenario and on the scenario family
 	rm -rf $(RUNS)/paper $(RUNS)/kinematic $(RUNS)/kinematic_readings $(RUNS)/kinematic_family $(RUNS)/family $(RUNS)/frames $(RUNS)/apf_alone $(RUNS)/peers $(RUNS)/kinematic_peers  # rebuilt; members come back from the member cache only for the same code and settings
-	@# all nine experiments side by side, the longest first: each family's parent has serial
+	@# the nine experiments side by side (seven jobs: the paper scenario's three share one
+	@# process), the longest first: each family's parent has serial
 	@# stretches (Hydra's job set-up, the compilation, the tables) in which the others use the
 	@# cores (measured: 162-166 s against 173-178 s one family after the other). Each one's
 	@# output is printed whole when it ends (-O).
@@ -241,19 +242,14 @@ bench: $(STAMP)  ## benchmark the controller step vs the Clarabel floor and the 
 verify: reproduce  ## rerun `make reproduce` and compare with reports/reference/ (tolerances in pipeline/studies/verify.py)
 	$(APF) verify $(RUNS) reports/reference
 
-test: $(STAMP)  ## lint and type-check beside the test suite on every core (PYTEST_JOBS=auto; excludes tests marked slow, slurm or machine; FAST=1 also the integration tier)
+test: $(STAMP)  ## lint and type-check (make lint, run as a test) and the test suite on every core (PYTEST_JOBS=auto; excludes tests marked slow, slurm or machine; FAST=1 also the integration tier)
 	@# one test file per worker at a time (--dist loadfile), so a file's shared runs are made once;
 	@# in the order tests/conftest.py gives them, the longest first (xdist would otherwise reorder
 	@# the files by their number of tests and leave a long file of few tests for the end).
-	@# make lint runs beside the tests, its output after theirs: mypy alone took 25 s of one core
-	@# on a fresh clone before the first test started, and the suite leaves about a tenth of the
-	@# two cores idle (measured 2026-12-06: 1,325 CPU-s in 745 s)
-	@lint_log=$$(mktemp); ( $(MAKE) --no-print-directory lint > $$lint_log 2>&1 ) & lint=$$!; \
-	echo 'PIPELINE_MEMBER_CACHE=off $(PY) -m pytest -m "$(TEST_MARKERS)" -n $(PYTEST_JOBS) --dist loadfile --no-loadscope-reorder $(PYTEST_ARGS)'; \
-	PIPELINE_MEMBER_CACHE=off $(PY) -m pytest -m "$(TEST_MARKERS)" -n $(PYTEST_JOBS) --dist loadfile --no-loadscope-reorder $(PYTEST_ARGS); tests=$$?; \
-	wait $$lint; linted=$$?; cat $$lint_log; rm -f $$lint_log; \
-	if [ $$linted -ne 0 ]; then echo "make test: make lint failed (its output above)"; exit $$linted; fi; \
-	exit $$tests
+	@# make lint is a test (tests/commands/test_lint.py, started first): it runs beside the
+	@# others on one worker (mypy alone took 25 s of one core on a fresh clone before the first
+	@# test started), and a lint failure is one of pytest's failures, named in its summary
+	PIPELINE_MEMBER_CACHE=off $(PY) -m pytest -m "$(TEST_MARKERS)" -n $(PYTEST_JOBS) --dist loadfile --no-loadscope-reorder $(PYTEST_ARGS)
 
 # make test's selection: every test but the slow ones, the SLURM ones (make test-slurm) and the
 # machine's (make test-machine); FAST=1 leaves out the integration tier too

@@ -178,6 +178,8 @@ def main() -> None:
 
 #: Between two runs' overrides on one command line (``apf-mpc run A... --next B...``)
 NEXT_RUN = "--next"
+#: The overrides that name a run's folder; each run joined by ``--next`` names its own
+OWN_FOLDER_KEYS = ("hydra.run.dir", "hydra.sweep.dir")
 
 
 def command(argv: list[str], prog: str = "apf-mpc run") -> int:
@@ -189,9 +191,11 @@ def command(argv: list[str], prog: str = "apf-mpc run") -> int:
 
     ``--next`` starts another run in the same process, after the one before it has ended
     (its imports, compiled kernels and family workers are the earlier run's: a run of a
-    60-member family costs about 5 s less than in a process of its own); the first run that
-    does not exit 0 ends the command with its exit code, and the runs after it are not
-    started (as ``cmd1 && cmd2``)."""
+    60-member family costs about 5 s less than in a process of its own); each run names its
+    own folder (``hydra.run.dir`` or ``hydra.sweep.dir``: Hydra's default is named by the
+    second, which two runs of one process can share); the first run that does not exit 0
+    ends the command with its exit code, and the runs after it are not started (as
+    ``cmd1 && cmd2``)."""
     runs: list[list[str]] = [[]]
     for arg in argv:
         if arg == NEXT_RUN:
@@ -201,6 +205,15 @@ def command(argv: list[str], prog: str = "apf-mpc run") -> int:
     if len(runs) > 1 and not all(runs):
         print(f"error: {NEXT_RUN} is invalid here; allowed: between two runs' overrides "
               f"({prog} A=1 {NEXT_RUN} B=2), each run with at least one", file=sys.stderr)
+        return 2
+    # Hydra's default folders are named by the second the run starts: two runs of one
+    # process could share one and overwrite each other's files
+    unnamed = [i + 1 for i, overrides in enumerate(runs) if len(runs) > 1 and not any(
+        o.split("=", 1)[0].lstrip("+~") in OWN_FOLDER_KEYS for o in overrides)]
+    if unnamed:
+        print(f"error: {NEXT_RUN} is invalid without each run's own folder (run "
+              f"{', '.join(map(str, unnamed))} has none); allowed: hydra.run.dir=<folder> "
+              "(hydra.sweep.dir=<folder> for a sweep) in every run", file=sys.stderr)
         return 2
     for overrides in runs:
         code = _one_command(overrides, prog)

@@ -24,9 +24,10 @@ os.environ["PIPELINE_MEMBER_CACHE"] = "off"
 #: run's junit report on a 2-core machine, 2026-12-06). `make test` hands whole files to its
 #: workers (``--dist loadfile``) in collection order (``--no-loadscope-reorder``: xdist's default
 #: reorders the files by their number of tests); starting the longest first keeps one worker
-#: from running a long file alone at the end.
-LONGEST_FILES_FIRST = ("test_install.py", "test_apf_alone.py", "test_bench_quick.py",
-                       "test_tune.py", "test_processes.py", "test_multiverse.py",
+#: from running a long file alone at the end. ``make lint`` (test_lint.py) goes first: the
+#: other worker starts the longest file meanwhile.
+LONGEST_FILES_FIRST = ("test_lint.py", "test_install.py", "test_apf_alone.py",
+                       "test_bench_quick.py", "test_tune.py", "test_processes.py", "test_multiverse.py",
                        "test_extensions.py", "test_scenario_sources.py", "test_run_records.py",
                        "test_report_browser.py", "test_tune_pruning.py", "test_sweeps.py",
                        "test_tune_workers.py", "test_peers_report.py", "test_report.py",

@@ -116,6 +116,21 @@ def crowd_metrics(table: pd.DataFrame, level: float = 0.95, seed: int = 0) -> di
     return out
 
 
+def collision_rates(table: pd.DataFrame) -> tuple[float, float, float]:
+    """A method's collision rate over the rows of ``table`` (a family table's crossings, e.g.
+    those where standing still is safe): every contact; the avoidable ones
+    (``collision_avoidable`` true); those with a walker seen before the contact (not
+    ``contact_at_appearance``). NaN without rows, the last two NaN without their column."""
+    if not len(table):
+        return float("nan"), float("nan"), float("nan")
+    hits = _flags(table, "collision")
+    avoidable = float((hits & _flags(table, "collision_avoidable")).mean()) \
+        if "collision_avoidable" in table else float("nan")
+    seen = float((hits & ~_flags(table, "contact_at_appearance")).mean()) \
+        if "contact_at_appearance" in table else float("nan")
+    return float(hits.mean()), avoidable, seen
+
+
 def crowd_metrics_table(families: list[tuple[dict[str, Any], dict[str, pd.DataFrame]]],
                         level: float = 0.95, seed: int = 0) -> pd.DataFrame:
     """``tables/pedestrians_metrics.csv``: one row per family and method; ``families`` holds,

@@ -564,8 +564,9 @@ def _difficulty(settings: Any, info: dict, tables: dict[str, pd.DataFrame]) -> d
     """The family's difficulty from the recording alone (``crossing_difficulty`` of each
     member, drawn again: the family's base is its first member's scenario with the family's
     name, seed and size from ``family.json`` and no drawn scene) and each method's collision
-    rate on the crossings where a platform standing still is not touched."""
-    from pipeline.analysis.tally import optional_flags
+    rate on the crossings where a platform standing still is not touched
+    (:func:`~pipeline.analysis.crowd.collision_rates`)."""
+    from pipeline.analysis.crowd import collision_rates
     from pipeline.loop.pedestrians import crossing_difficulty
     from pipeline.loop.scenario import family_members
     from pipeline.loop.settings import FamilyConfig
@@ -591,20 +592,13 @@ def _difficulty(settings: Any, info: dict, tables: dict[str, pd.DataFrame]) -> d
                      [judged[n].standing_touched for n in names])),
                  "standing_safe_crossings": len(safe)}
     for method, table in tables.items():
-        rows = table[table["scenario"].astype(str).isin(safe)]
-        hits = rows["collision"].map(lambda v: str(v).lower() in ("true", "1", "1.0"))
-        out[f"collision_rate_standing_safe_{method}"] = float(hits.mean()) if len(rows) \
-            else float("nan")
-        # of those, the avoidable contacts (the published label: a manoeuvre from the
-        # walker's appearance or another method on the crossing avoided it)
-        out[f"collision_rate_standing_safe_avoidable_{method}"] = \
-            float((hits & optional_flags(rows, "collision_avoidable").eq(True)).mean()) \
-            if len(rows) and "collision_avoidable" in rows else float("nan")
-        # and those with a walker the platform had seen (not one whose recorded track began
-        # on or against it: the metrics' contact_at_appearance)
-        out[f"collision_rate_standing_safe_seen_{method}"] = \
-            float((hits & ~optional_flags(rows, "contact_at_appearance").eq(True)).mean()) \
-            if len(rows) and "contact_at_appearance" in rows else float("nan")
+        # every contact; the avoidable ones (the published label: a manoeuvre from the
+        # walker's appearance or another method on the crossing avoided it); those with a
+        # walker the platform had seen (not one whose recorded track began on or against it)
+        (out[f"collision_rate_standing_safe_{method}"],
+         out[f"collision_rate_standing_safe_avoidable_{method}"],
+         out[f"collision_rate_standing_safe_seen_{method}"]) = \
+            collision_rates(table[table["scenario"].astype(str).isin(safe)])
     return out
 
 

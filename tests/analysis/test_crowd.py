@@ -130,6 +130,12 @@ def test_the_crowd_metrics_are_the_closed_forms_on_planted_trajectories():
     appeared = compute_metrics(pop_in, context, MetricsConfig(goal_tolerance_m=0.5)).crowd
     assert appeared is not None and appeared.contact_at_appearance is True
     assert appeared.contact_relative_speed_mps == pytest.approx(1.0, abs=1e-9)
+    # a contact on the first step (a run that ends there logs one row): at appearance, its
+    # relative speed unknown (no second row to difference)
+    first = compute_metrics(_straight_run(walker_xy=(0.2, 0.0)).iloc[:1], context,
+                            MetricsConfig(goal_tolerance_m=0.5)).crowd
+    assert first is not None and first.contact_at_appearance is True
+    assert math.isnan(first.contact_relative_speed_mps)
     seen = pop_in.assign(obs0_visible=np.arange(101) >= 45)
     seen_crowd = compute_metrics(seen, context, MetricsConfig(goal_tolerance_m=0.5)).crowd
     assert seen_crowd is not None and seen_crowd.contact_at_appearance is False
@@ -175,6 +181,23 @@ def test_the_rates_intervals_are_clopper_pearson_and_the_medians_order_statistic
     assert m["time_to_goal_median_s"] == pytest.approx(np.median(np.arange(3.0, 18.0)))
     assert m["intrusion_time_share"] == pytest.approx(0.1)
     assert m["intrusion_time_share_low"] < 0.1 < m["intrusion_time_share_high"]
+
+
+def test_the_collision_rates_where_standing_is_safe_count_from_the_flags():
+    """Planted: 8 crossings, contacts on 4 (rows 0-3); of those rows 1 and 2 avoidable, row 3
+    at a walker's appearance (and row 5's flag, on a run without a contact, counts for
+    nothing): all 4/8, avoidable 2/8, with a walker seen before 3/8 (rows 0-2). Without the
+    columns the last two are NaN, and without rows all three."""
+    from pipeline.analysis.crowd import collision_rates
+
+    table = pd.DataFrame({"collision": [True] * 4 + [False] * 4,
+                          "collision_avoidable": [False, True, True, False] + [True] * 4,
+                          "contact_at_appearance": [False, False, False, True, False, True,
+                                                    False, False]})
+    assert collision_rates(table) == (0.5, 0.25, 0.375)
+    everything, avoidable, seen = collision_rates(table[["collision"]])
+    assert everything == 0.5 and np.isnan(avoidable) and np.isnan(seen)
+    assert all(np.isnan(collision_rates(table.iloc[:0])))
 
 
 def test_scene_draws_start_and_goal_where_someone_walked(make_config):

@@ -50,3 +50,17 @@ def test_next_without_a_run_on_each_side_is_one_line(tmp_path, capsys, argv):
     lines = [line for line in capsys.readouterr().err.splitlines() if line.strip()]
     assert lines == [f"error: {NEXT_RUN} is invalid here; allowed: between two runs' overrides "
                      f"(apf-mpc run A=1 {NEXT_RUN} B=2), each run with at least one"]
+
+
+def test_joined_runs_each_name_their_folder(tmp_path, capsys, monkeypatch):
+    """Hydra's default folder is named by the second the run starts: two runs of one process
+    started within a second would share it (a reviewer's five joined runs left three folders,
+    exit 0). A run without hydra.run.dir or hydra.sweep.dir is refused before any runs."""
+    monkeypatch.chdir(tmp_path)
+    assert command(["method=improved", *CHEAP, f"hydra.run.dir={tmp_path / 'a'}", NEXT_RUN,
+                    "method=baseline", *CHEAP]) == 2
+    lines = [line for line in capsys.readouterr().err.splitlines() if line.strip()]
+    assert lines == [f"error: {NEXT_RUN} is invalid without each run's own folder (run 2 has "
+                     "none); allowed: hydra.run.dir=<folder> (hydra.sweep.dir=<folder> for a "
+                     "sweep) in every run"]
+    assert not any(tmp_path.iterdir())  # nothing ran

@@ -24,12 +24,14 @@ def pytest_collection_modifyitems(items):
     with open(os.environ["TIER_PROBE_OUT"], "w") as out:
         for item in items:
             marked = item.get_closest_marker("integration") is not None
-            out.write(f"{item.nodeid.split('::')[0]}\\t{int(marked)}\\n")
+            machine = item.get_closest_marker("machine") is not None
+            out.write(f"{item.nodeid}\\t{int(marked)}\\t{int(machine)}\\n")
 '''
 
 
-def _collected(tmp_path: Path) -> dict[str, set[bool]]:
-    """Each test file and the integration marks of its tests, as pytest collects them."""
+def _collected(tmp_path: Path) -> tuple[dict[str, set[bool]], set[str]]:
+    """Each test file and the integration marks of its tests, as pytest collects them; and
+    the tests marked machine."""
     (tmp_path / "tier_probe.py").write_text(PROBE)
     out = tmp_path / "collected.tsv"
     env = {**__import__("os").environ, "TIER_PROBE_OUT": str(out),
@@ -39,14 +41,17 @@ def _collected(tmp_path: Path) -> dict[str, set[bool]]:
                           capture_output=True, text=True, timeout=300, cwd=TESTS.parent, env=env)
     assert proc.returncode == 0, proc.stdout[-2000:] + proc.stderr[-2000:]
     marks: dict[str, set[bool]] = {}
+    machine: set[str] = set()
     for line in out.read_text().splitlines():
-        path, marked = line.split("\t")
-        marks.setdefault(path, set()).add(marked == "1")
-    return marks
+        node, marked, on_machine = line.split("\t")
+        marks.setdefault(node.split("::")[0], set()).add(marked == "1")
+        if on_machine == "1":
+            machine.add(node)
+    return marks, machine
 
 
 def test_the_integration_marker_is_the_integration_folder(tmp_path):
-    marks = _collected(tmp_path)
+    marks, machine = _collected(tmp_path)
     marked = {path for path, m in marks.items() if True in m}
     expected = {f"tests/integration/{p.name}" for p in (TESTS / "integration").glob("test_*.py")
                 if "def test_" in p.read_text()}
@@ -55,6 +60,24 @@ def test_the_integration_marker_is_the_integration_folder(tmp_path):
     assert all(marks[path] == {True} for path in expected)
     unmarked = {path for path, m in marks.items() if m == {False}}
     assert {f.split("/")[1] for f in unmarked} == FOLDERS - {"integration"}
+    # the machine tier: make install into fresh venvs, its warm step, a local Dask cluster
+    # (integration tests all); make test leaves it out, make test-machine runs it
+    assert {node.split("::")[0] for node in machine} == {
+        "tests/integration/test_install.py", "tests/integration/test_warm.py",
+        "tests/integration/test_tune_workers.py"}
+    assert len(machine) == 4
+    selection = {target: subprocess.run(["make", "-n", "--no-print-directory", target],
+                                         cwd=TESTS.parent, capture_output=True, text=True,
+                                         env=_without_make_flags()).stdout
+                 for target in ("test", "test-machine")}
+    assert '-m "not slow and not slurm and not machine"' in selection["test"]
+    assert '-m "machine and not slurm"' in selection["test-machine"]
+
+
+def _without_make_flags() -> dict[str, str]:
+    import os
+
+    return {k: v for k, v in os.environ.items() if k not in ("MAKEFLAGS", "MFLAGS", "MAKELEVEL")}
 
 
 def test_every_test_file_stands_in_a_stage_folder():

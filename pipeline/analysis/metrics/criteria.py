@@ -445,7 +445,7 @@ def crowd_block(sig: Signals, tracks: list[ObstacleTrack], clearance: np.ndarray
     straight = float(np.linalg.norm(np.subtract(context.goal_m, context.start_m)))
     relative = float("nan")
     at_appearance = False
-    if safety.collision and t.size > 1:
+    if safety.collision and t.size > 0:  # a contact on the first logged step: a log of one row
         velocity = np.vstack([np.diff(sig.xy, axis=0) / np.diff(t)[:, None],
                               np.full((1, 2), np.nan)])
         for k in range(t.size):
