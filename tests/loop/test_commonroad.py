@@ -661,3 +661,19 @@ def test_lanelets_with_a_hairline_gap_are_one_road_once_widened():
         case = SimpleNamespace(scenario=SimpleNamespace(
             road_polygons_m=road_polygons(network, gap)))
         assert off_road_mask(case, poses, CAR_LENGTH_M, CAR_WIDTH_M).tolist() == expected, gap
+
+
+@needs_extra
+def test_the_key_widens_the_road_the_scenario_hands_the_mpc(tmp_path, make_scenario_config):
+    """scenario.commonroad.lanelet_gap_m reaches the scenario's road: the planted lanelet
+    (y in [-3.5, 3.5], x in [0, 150]) as it is at 0, 3 cm wider to every side at the default
+    0.06 (its bounding box)."""
+    path = write_scenario(tmp_path / "planted.xml")
+    exact = read_commonroad(make_scenario_config(path, "scenario.commonroad.lanelet_gap_m=0"))
+    widened = read_commonroad(make_scenario_config(path))
+    (road_exact,) = exact.scenario.road_polygons_m
+    (road_widened,) = widened.scenario.road_polygons_m
+    assert road_exact.min(axis=0) == pytest.approx([0.0, -3.5], abs=1e-12)
+    assert road_exact.max(axis=0) == pytest.approx([150.0, 3.5], abs=1e-12)
+    assert road_widened.min(axis=0) == pytest.approx([-0.03, -3.53], abs=1e-9)
+    assert road_widened.max(axis=0) == pytest.approx([150.03, 3.53], abs=1e-9)

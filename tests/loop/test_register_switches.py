@@ -84,6 +84,7 @@ SWITCH_TESTS = {
     "scenario.commonroad.occlusion": "test_commonroad",
     "scenario.commonroad.route_lookahead_m": "test_commonroad",
     "scenario.commonroad.route_lookahead_s": "test_route_attraction",
+    "scenario.commonroad.lanelet_gap_m": "test_commonroad",
     "controller.road_edge_weight": "test_road",
     "controller.speed_bounds_mps": "test_kinematic",
     **{f"scenario.source.params.{key}": "test_euro_ncap" for key in (
