@@ -208,9 +208,9 @@ def command(argv: list[str], prog: str = "apf-mpc run") -> int:
         return 2
     # Hydra's default folders are named by the second the run starts: two runs of one
     # process could share one and overwrite each other's files
-    unnamed = [i + 1 for i, overrides in enumerate(runs) if len(runs) > 1 and not any(
+    unnamed = [i + 1 for i, overrides in enumerate(runs) if not any(
         o.split("=", 1)[0].lstrip("+~") in OWN_FOLDER_KEYS for o in overrides)]
-    if unnamed:
+    if len(runs) > 1 and unnamed:
         print(f"error: {NEXT_RUN} is invalid without each run's own folder (run "
               f"{', '.join(map(str, unnamed))} has none); allowed: hydra.run.dir=<folder> "
               "(hydra.sweep.dir=<folder> for a sweep) in every run", file=sys.stderr)
