@@ -28,9 +28,10 @@ def _members(make_config, overrides, size):
 
 def _differences(engine, oracle, atol: float = 0.0) -> list[str]:
     """What differs between two runs (empty: the same run): bit for bit, or within ``atol`` in
-    every number (the cvxpy backend, whose one compiled problem is shared by all members: its
-    solves differ from one order of calls to another by about 1e-22, solver noise on values
-    that are 0)."""
+    every number (the cvxpy backend, whose compiled problems are shared by all members: its
+    solves differ from one order of calls to another by solver noise, about 1e-22 on values
+    that are 0, up to 3e-11 rad/s in a steering rate since each step solves the statement of
+    the obstacle slots it uses)."""
     found = []
     if (engine.termination, engine.goal_reached) != (oracle.termination, oracle.goal_reached):
         found.append(f"ending {engine.termination} vs {oracle.termination}")
@@ -80,7 +81,7 @@ def test_members_stepped_together_are_each_member_alone(make_config, overrides, 
     together = simulate_members(runs, cache)
     for (cfg, scenario), engine in zip(runs, together, strict=True):
         oracle = oracle_simulate(cfg, scenario, QpCache(compiled_kernels=compiled))
-        atol = 1e-12 if getattr(cfg.controller, "backend", "") == "cvxpy" else 0.0
+        atol = 1e-9 if getattr(cfg.controller, "backend", "") == "cvxpy" else 0.0
         assert _differences(engine, oracle, atol) == []
 
 

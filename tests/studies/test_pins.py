@@ -24,7 +24,10 @@ APF rollout itself as the lateral MPC's reference (issue 56: controller.path_ref
 new keys change the hash, every lateral number moves) with the answer's statistics (issue 56:
 9,999 resamples and their Monte-Carlo resolution, the worst-rank sensitivity, the answer-wide
 Holm gate: new ledger columns); one schema per controller kind (issue 57: a run's controller
-section holds its kind's keys only, so every hash changes; no pinned number moves).
+section holds its kind's keys only, so every hash changes; no pinned number moves); each step of
+the lateral MPC solves the statement of the obstacle slots it uses (issue 58: the same QP
+without the empty rows' slacks, Clarabel's iterates differ, fewer of them; the numbers move at
+the solver's tolerance).
 """
 
 from __future__ import annotations

@@ -30,13 +30,17 @@ class CompiledCondensedQp:
     ----------
     compiled : DirectQp or CvxpyQp
         The compiled statement (shared through the ``QpCache``).
+    slots : int, optional
+        The statement's obstacle slots when it has fewer than the data (the first ``slots``
+        are handed to it, :meth:`CondensedData.theta`); all of them by default.
     """
 
-    def __init__(self, compiled: DirectQp | CvxpyQp) -> None:
+    def __init__(self, compiled: DirectQp | CvxpyQp, slots: int | None = None) -> None:
         self.compiled = compiled
+        self.slots = slots
 
     def solve(self, data: CondensedData) -> QpSolution:
-        solution = self.compiled.solve(data.theta())
+        solution = self.compiled.solve(data.theta(self.slots))
         if solution.values is None:
             return solution
         W = np.asarray(solution.values["W"], float).reshape(-1)

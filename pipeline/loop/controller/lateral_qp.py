@@ -12,7 +12,11 @@ The QP over ``N`` steps::
          G_kj y_k + s_kj >= h_kj,  s >= 0   (soft half-plane per obstacle slot j and step k)
 
 The model matrices are parameters, so one compiled problem serves every speed (velocity
-planning) and every scenario; unused obstacle slots get rows that cannot bind.
+planning) and every scenario; unused obstacle slots get rows that cannot bind. A step solves
+the statement of the fewest slots that holds its half-planes (:func:`slots_used`; the
+controller keeps one per count, :attr:`LateralMpc.qp_by_slots
+<pipeline.loop.controller.lateral.LateralMpc.qp_by_slots>`): with no obstacle within reach,
+the 3-variable QP of the moves alone.
 
 The QP is stated condensed (``controller.formulation=condensed``, its one value): the states
 are eliminated, ``X = free response + Gamma U`` with the prediction matrices of the model's
@@ -276,21 +280,25 @@ def build_condensed_lateral_problem(s: LateralQpStructure) -> tuple[cp.Problem, 
     chol_rhs = cp.Parameter(Nc, name="cost_cholesky_rhs")
     gamma_d = cp.Parameter((N, Nc), name="steering_gamma_w")
     free_d = cp.Parameter(N, name="steering_free")
-    gamma_h = cp.Parameter((N * M, Nc), name="halfplane_gamma_w")
-    bound_h = cp.Parameter(N * M, name="halfplane_free_bound")
     W = cp.Variable(Nc, name="W")
-    S = cp.Variable(N * M, name="slack")
     rate, steering = s.steering_rate_max_rad_s, s.steering_max_rad
-    cost = cp.sum_squares(W) + 2 * chol_rhs @ W + w1 * cp.sum(S) + w2 * cp.sum_squares(S)
+    cost = cp.sum_squares(W) + 2 * chol_rhs @ W
     moves = chol_inv @ W
     steering_angle = gamma_d @ W
     constraints = [moves <= rate, -moves <= rate,
-                   steering_angle <= steering - free_d, -steering_angle <= steering + free_d,
-                   gamma_h @ W + S >= bound_h, S >= 0]
+                   steering_angle <= steering - free_d, -steering_angle <= steering + free_d]
+    parameters = [chol_inv, chol_rhs, gamma_d, free_d]
+    if M:  # no slot, no half-plane (the statement of a step whose half-planes are all empty)
+        gamma_h = cp.Parameter((N * M, Nc), name="halfplane_gamma_w")
+        bound_h = cp.Parameter(N * M, name="halfplane_free_bound")
+        S = cp.Variable(N * M, name="slack")
+        cost = cost + w1 * cp.sum(S) + w2 * cp.sum_squares(S)
+        constraints += [gamma_h @ W + S >= bound_h, S >= 0]
+        parameters += [gamma_h, bound_h]
     problem = cp.Problem(cp.Minimize(cost), constraints)
     if not problem.is_dcp(dpp=True):
         raise RuntimeError("condensed lateral MPC is not DPP; it would recompile every step")
-    return problem, [chol_inv, chol_rhs, gamma_d, free_d, gamma_h, bound_h], {"W": W}
+    return problem, parameters, {"W": W}
 
 
 @dataclass(frozen=True)
@@ -333,14 +341,34 @@ class CondensedData:
         """(Nc,) ``r = R^-T gamma_w' free_w`` (computed on each access: a backend asks once)."""
         return self.prediction.chol_rhs_map @ self.free_w
 
-    def theta(self) -> np.ndarray:
+    def theta(self, slots: int | None = None) -> np.ndarray:
         """The parameter vector of :func:`build_condensed_lateral_problem` (its order, column-
-        major): the rows that multiply ``U`` taken to ``W = R U``."""
+        major): the rows that multiply ``U`` taken to ``W = R U``; ``slots``: the statement's
+        number of obstacle slots, the first ``slots`` of these data's (all by default; the
+        rest must be empty rows, :func:`slots_used`)."""
         prediction = self.prediction
-        return np.concatenate([prediction.chol_inv_flat, self.chol_rhs,
-                               prediction.steering_gamma_w_flat, self.free_d,
-                               (self.gamma_h @ prediction.chol_inv).ravel(order="F"),
-                               self.bound_h])
+        head = [prediction.chol_inv_flat, self.chol_rhs, prediction.steering_gamma_w_flat,
+                self.free_d]
+        n = self.free_d.shape[0]
+        all_slots = self.bound_h.shape[0] // n if n else 0
+        slots = all_slots if slots is None else slots
+        if slots == 0:
+            return np.concatenate(head)
+        gamma_h, bound_h = self.gamma_h, self.bound_h
+        if slots < all_slots:  # rows k-major: step k's slots j < slots
+            gamma_h = gamma_h.reshape(n, all_slots, -1)[:, :slots].reshape(n * slots, -1)
+            bound_h = bound_h.reshape(n, all_slots)[:, :slots].ravel()
+        return np.concatenate([*head, (gamma_h @ prediction.chol_inv).ravel(order="F"),
+                               bound_h])
+
+
+def slots_used(constraint_gain: np.ndarray, constraint_bound: np.ndarray) -> int:
+    """How many of a step's obstacle slots its half-planes use: one past the last slot with a
+    row that is not ``0 y + s >= 0`` (0 when every row is empty). Slots beyond it can be left
+    out of the QP: an empty row's slack is 0 at the optimum (its cost rises with it), so the
+    smaller statement has the same solution (to the solver's tolerance)."""
+    used = np.flatnonzero(np.any((constraint_gain != 0.0) | (constraint_bound != 0.0), axis=0))
+    return int(used[-1]) + 1 if used.size else 0
 
 
 def condensed_data(prediction: CondensedPrediction, inputs: MpcInputs,
