@@ -15,7 +15,7 @@ most of it for modules no command imports. Here the process turns bytecode writi
 itself alone (``sys.dont_write_bytecode``) and imports what the commands import: every module of
 the project, the libraries they load lazily and the test tools, so exactly those are compiled,
 once. The first five steps of four runs then put the loop's kernels in numba's cache, so that a
-first ``make reproduce``'s nine experiments and their workers load them instead of compiling them
+first ``make reproduce``'s eight experiments and their workers load them instead of compiling them
 all at once.
 """
 

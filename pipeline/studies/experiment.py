@@ -162,7 +162,7 @@ def warm_compiled_kernels(configs: list[ExperimentConfig], n_steps: int = 5) -> 
     """Compile the loop's numba kernels into numba's on-disk cache (:mod:`pipeline.loop.
     compiled`) by running each config's scenario for ``n_steps`` steps with them, as a
     family's workers do: ``make install`` does it once, so that a first ``make reproduce``'s
-    nine experiments and their workers load the kernels instead of each compiling them at once
+    eight experiments and their workers load the kernels instead of each compiling them at once
     (measured on a fresh clone: 28 CPU-s)."""
     from dataclasses import replace
 
