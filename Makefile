@@ -69,7 +69,7 @@ LAUNCHER    ?= sequential
 # tune's $(MAKE) report) stamps the command typed, not "make report"
 export REPORT_COMMAND ?= make $(strip $(MAKECMDGOALS) $(MAKEOVERRIDES))
 
-.PHONY: help install lint clip reproduce experiment frames run-paper run-kinematic run-kinematic-readings run-family run-kinematic-family run-frames run-apf-alone run-peers run-kinematic-peers run-paper-scenario peers speed-check nmpc-family report screenshot sweep verify ablation multiverse pedestrians euro-ncap tune tune-unpruned tune-peers nmpc-check test test-machine test-slurm test-all bench install-commonroad commonroad cache-size clean-cache clean
+.PHONY: help install lint clip reproduce experiment frames test-integration run-paper run-kinematic run-kinematic-readings run-family run-kinematic-family run-frames run-apf-alone run-peers run-kinematic-peers run-paper-scenario peers speed-check nmpc-family report screenshot sweep verify ablation multiverse pedestrians euro-ncap tune tune-unpruned tune-peers nmpc-check test test-machine test-slurm test-all bench install-commonroad commonroad cache-size clean-cache clean
 
 help:  ## list the targets
 	@grep -E '^[a-zA-Z_-]+:.*## ' $(MAKEFILE_LIST) | awk -F':.*## ' '{printf "  %-12s %s\n", $$1, $$2}'
@@ -250,7 +250,7 @@ bench: $(STAMP)  ## benchmark the controller step vs the Clarabel floor and the 
 verify: reproduce  ## rerun `make reproduce` and compare with reports/reference/ (tolerances in pipeline/studies/verify.py)
 	$(APF) verify $(RUNS) reports/reference
 
-test: $(STAMP)  ## lint and type-check (make lint, run as a test) and the test suite on every core (PYTEST_JOBS=auto; excludes tests marked slow, slurm or machine; FAST=1 also the integration tier)
+test: $(STAMP)  ## lint and type-check (make lint, run as a test) and every stage's tests on every core (PYTEST_JOBS=auto; excludes the integration tier, make test-integration, and tests marked slow, slurm or machine)
 	@# one test file per worker at a time (--dist loadfile), so a file's shared runs are made once;
 	@# in the order tests/conftest.py gives them, the longest first (xdist would otherwise reorder
 	@# the files by their number of tests and leave a long file of few tests for the end).
@@ -259,9 +259,16 @@ test: $(STAMP)  ## lint and type-check (make lint, run as a test) and the test s
 	@# test started), and a lint failure is one of pytest's failures, named in its summary
 	PIPELINE_MEMBER_CACHE=off $(PY) -m pytest -m "$(TEST_MARKERS)" -n $(PYTEST_JOBS) --dist loadfile --no-loadscope-reorder $(PYTEST_ARGS)
 
-# make test's selection: every test but the slow ones, the SLURM ones (make test-slurm) and the
-# machine's (make test-machine); FAST=1 leaves out the integration tier too
-TEST_MARKERS = not slow and not slurm and not machine$(if $(FAST), and not integration,)
+# make test's selection: every test but the integration tier (tests/integration/: whole studies,
+# the browser, processes signalled, the wheel; make test-integration), the slow ones, the SLURM
+# ones (make test-slurm) and the machine's (make test-machine). With the integration tier make
+# test took 853-942 s on this session's machine (2026-12-07), over its ten minutes; CI runs
+# every tier
+TEST_MARKERS = not slow and not slurm and not machine and not integration
+INTEGRATION_MARKERS = integration and not slow and not slurm and not machine
+
+test-integration: $(STAMP)  ## the integration tier (tests/integration/: whole studies, the tune, the multiverse, the report in a browser, processes signalled, the wheel; CI runs it after make test)
+	PIPELINE_MEMBER_CACHE=off $(PY) -m pytest -m "$(INTEGRATION_MARKERS)" -n $(PYTEST_JOBS) --dist loadfile --no-loadscope-reorder $(PYTEST_ARGS)
 
 test-machine: $(STAMP)  ## the tests of the machine around the package: make install into fresh venvs (uv and pip), its warm step, a local Dask cluster (CI runs it after make test)
 	PIPELINE_MEMBER_CACHE=off $(PY) -m pytest -m "machine and not slurm" -n $(PYTEST_JOBS) --dist loadfile --no-loadscope-reorder $(PYTEST_ARGS)

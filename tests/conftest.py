@@ -40,7 +40,7 @@ LONGEST_FILES_FIRST = ("test_lint.py", "test_install.py", "test_apf_alone.py",
 #: The integration tier (marker ``integration``): the files of ``tests/integration/``, whole
 #: studies and the machine around the package (the wheel and make install, the tune, the
 #: multiverse, the browser, SLURM, make targets, processes signalled and plug-ins from outside
-#: the package). CI runs it; ``make test FAST=1`` leaves it out.
+#: the package). ``make test`` leaves it out, ``make test-integration`` runs it; CI runs both.
 #: The folder is the tier: a file moved there is marked, nothing else is.
 INTEGRATION_FOLDER = Path(__file__).resolve().parent / "integration"
 

@@ -1,6 +1,6 @@
 """The tiers (issue 57, item 4): the tests stand in folders by stage, and the files of
-``tests/integration/`` are the integration tier (marker ``integration``): ``make test FAST=1``
-leaves them out, CI runs them. pytest marks exactly those files' tests, and no test file stands
+``tests/integration/`` are the integration tier (marker ``integration``): ``make test`` leaves
+them out, ``make test-integration`` runs them, CI runs both. pytest marks exactly those files' tests, and no test file stands
 outside a folder."""
 
 from __future__ import annotations
@@ -69,9 +69,15 @@ def test_the_integration_marker_is_the_integration_folder(tmp_path):
     selection = {target: subprocess.run(["make", "-n", "--no-print-directory", target],
                                          cwd=TESTS.parent, capture_output=True, text=True,
                                          env=_without_make_flags()).stdout
-                 for target in ("test", "test-machine")}
-    assert '-m "not slow and not slurm and not machine"' in selection["test"]
+                 for target in ("test", "test-integration", "test-machine")}
+    assert '-m "not slow and not slurm and not machine and not integration"' in selection["test"]
+    assert '-m "integration and not slow and not slurm and not machine"' \
+        in selection["test-integration"]
     assert '-m "machine and not slurm"' in selection["test-machine"]
+    # CI runs every tier, make test first
+    ci = (TESTS.parent / ".ci" / "run").read_text()
+    order = [ci.find(f"\nmake {t}\n") for t in ("test", "test-integration", "test-machine")]
+    assert -1 not in order and order == sorted(order)
 
 
 def _without_make_flags() -> dict[str, str]:
