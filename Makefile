@@ -262,7 +262,8 @@ test: $(STAMP)  ## lint and type-check (make lint, run as a test) and every stag
 # make test's selection: every test but the integration tier (tests/integration/: whole studies,
 # the browser, processes signalled, the wheel; make test-integration), the slow ones, the SLURM
 # ones (make test-slurm) and the machine's (make test-machine). With the integration tier make
-# test took 853-942 s on this session's machine (2026-12-07), over its ten minutes; CI runs
+# test took 853-942 s on this session's machine (2026-12-07), 611 s without it (with the Hydra
+# launchers' tests, test_sweeps.py, which start processes and now stand in the tier); CI runs
 # every tier
 TEST_MARKERS = not slow and not slurm and not machine and not integration
 INTEGRATION_MARKERS = integration and not slow and not slurm and not machine
