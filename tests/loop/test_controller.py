@@ -520,6 +520,10 @@ def test_slots_used_is_one_past_the_last_slot_with_a_row():
     assert slots_used(G, h) == 1
     h[9, 2] = 0.5  # a slot whose gain is 0 but whose bound is not still binds the plan
     assert slots_used(G, h) == 3
+    # the kinematic MPC's rows (Gx, Gy, h): a slot used by its second gain alone counts
+    gy = np.zeros((10, 3))
+    gy[0, 1] = -1.0
+    assert slots_used(np.zeros((10, 3)), gy, np.zeros((10, 3))) == 2
 
 
 @pytest.mark.parametrize("backend", ["clarabel_direct", "cvxpy"])

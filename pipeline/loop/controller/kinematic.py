@@ -17,7 +17,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from pipeline.loop.controller.base import ControlStep, Observation, PlanFallback
-from pipeline.loop.controller.lateral_qp import blocking_matrix
+from pipeline.loop.controller.lateral_qp import blocking_matrix, slots_used
 from pipeline.loop.controller.qp import QpCache, QpSolution, compiled_backend
 from pipeline.loop.controller.references import kinematic_halfplanes
 from pipeline.loop.controller_settings import KinematicMpcSettings, settings_of
@@ -311,8 +311,7 @@ class KinematicLtvMpc(KinematicTrack):
         """The QP with the fewest slots (of :data:`SLOT_BUCKETS` and ``max_obstacles``) that
         holds every slot these half-planes use, and that number (compiled once, on first
         use, through the shared cache)."""
-        used = np.flatnonzero(np.any((Gx != 0.0) | (Gy != 0.0) | (h != 0.0), axis=0))
-        need = int(used[-1]) + 1 if used.size else 1
+        need = max(slots_used(Gx, Gy, h), 1)
         slots = next(b for b in self._slot_sizes if b >= need)
         qp = self._by_slots.get(slots)
         if qp is None:

@@ -362,12 +362,17 @@ class CondensedData:
                                bound_h])
 
 
-def slots_used(constraint_gain: np.ndarray, constraint_bound: np.ndarray) -> int:
-    """How many of a step's obstacle slots its half-planes use: one past the last slot with a
-    row that is not ``0 y + s >= 0`` (0 when every row is empty). Slots beyond it can be left
-    out of the QP: an empty row's slack is 0 at the optimum (its cost rises with it), so the
-    smaller statement has the same solution (to the solver's tolerance)."""
-    used = np.flatnonzero(np.any((constraint_gain != 0.0) | (constraint_bound != 0.0), axis=0))
+def slots_used(*halfplane_rows: np.ndarray) -> int:
+    """How many of a step's obstacle slots its half-planes use, given their gains and bounds
+    (each shape (N, slots): the lateral MPC's ``G, h``, the kinematic MPC's ``Gx, Gy, h``): one
+    past the last slot with a row that is not ``0 + s >= 0`` (0 when every row is empty).
+    Slots beyond it can be left out of the QP: an empty row's slack is 0 at the optimum (its
+    cost rises with it), so the smaller statement has the same solution (to the solver's
+    tolerance)."""
+    nonzero = np.zeros(halfplane_rows[0].shape, dtype=bool)
+    for rows in halfplane_rows:
+        nonzero |= rows != 0.0
+    used = np.flatnonzero(np.any(nonzero, axis=0))
     return int(used[-1]) + 1 if used.size else 0
 
 
