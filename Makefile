@@ -122,7 +122,8 @@ experiment: $(STAMP)  ## run every method on the paper scenario and on the scena
 	@# stretches (Hydra's job set-up, the compilation, the tables) in which the others use the
 	@# cores (measured: 162-166 s against 173-178 s one family after the other). Each one's
 	@# output is printed whole when it ends (-O). The earlier frame's 600 members (make frames,
-	@# about 60 CPU-s) are not among them: make reproduce kept to its three minutes without them
+	@# about 60 CPU-s) are not among them: make reproduce took 244 s with them on the machine of
+	@# 2026-12-07, over its three minutes (196 s without them and with the smaller QPs: still over)
 	@echo "eight experiments side by side (the paper scenario's three in one process); each one's output follows when it ends"
 	$(MAKE) --no-print-directory -j6 -O run-family run-peers run-kinematic-family run-kinematic-peers run-apf-alone run-paper-scenario
 
