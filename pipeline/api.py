@@ -45,12 +45,15 @@ def warm_compiled_kernels() -> None:
     """Compile the closed loop's numba kernels into numba's on-disk cache, a few steps of each
     of :data:`WARM_RUNS` (``make install`` calls it: a first ``make reproduce`` then loads them
     in every experiment and worker instead of compiling them in each at once), and the
-    ledgers' bootstrap kernel (:mod:`pipeline.analysis.claims.compiled`)."""
+    ledgers' bootstrap kernel (:mod:`pipeline.analysis.claims.compiled`) and the collision
+    oracle's search (:mod:`pipeline.analysis.metrics.compiled`)."""
     from pipeline.analysis.claims.compiled import warm_kernel
+    from pipeline.analysis.metrics.compiled import warm_kernel as warm_reach
     from pipeline.studies.experiment import warm_compiled_kernels as warm
 
     warm([compose(list(overrides)) for overrides in WARM_RUNS])
     warm_kernel()  # the Hodges-Lehmann bootstrap's search (every ledger's intervals)
+    warm_reach()  # the collision oracle's manoeuvres (a family member's collision)
 
 
 def compose(overrides: list[str] | None = None) -> ExperimentConfig:

@@ -22,7 +22,12 @@ by CPython in a single run and by numba in the family runner's workers.
 * :func:`daqp_rows_kernel` is :func:`pipeline.loop.controller.daqp_rows.daqp_condensed_rows`,
   their QPs condensed and solved on each member's kept DAQP workspace (DAQP's C functions
   called by address: this one has no CPython twin, a member stepped alone fills the same
-  workspace from numpy, :class:`pipeline.loop.controller.lateral_backends.DaqpCondensedQp`).
+  workspace from numpy, :class:`pipeline.loop.controller.lateral_backends.DaqpCondensedQp`);
+* :func:`direct_theta_rows_kernel` and :func:`direct_readout_rows_kernel` are
+  :func:`pipeline.loop.controller.direct_rows.direct_theta_rows` and ``direct_readout_rows``:
+  the data of their QPs on the ``clarabel_direct`` backend, and what is read from each
+  member's solution (no CPython twin either: a member stepped alone runs the numpy statement
+  of :meth:`pipeline.loop.controller.lateral.LateralMpc.solve`).
 
 Compiled without fast-math, they do the same operations in the same order on the same C
 library's ``atan2``, ``tanh``, ``exp``, ``cos`` and ``sin``, so they give the same bits (the
@@ -48,7 +53,15 @@ from numba import njit
 from numba.extending import overload
 
 from pipeline.loop import model, planner, scenario
-from pipeline.loop.controller import daqp_rows, path, path_rows, prediction_check, references
+from pipeline.loop.controller import (
+    daqp_rows,
+    direct_rows,
+    lateral_qp,
+    path,
+    path_rows,
+    prediction_check,
+    references,
+)
 from pipeline.loop.kernels import Kernels
 
 
@@ -89,7 +102,8 @@ def _same_signature(function: Callable[..., Any]) -> Callable[..., Any]:
 for _helper in (path._polyline, path._heading_at, path._curvature_at, path._project_point,
                 path._point_at, model.single_track_kinematic_substep, model.single_track_rk4,
                 path.rollout_path_arrays, path.frame_step_arrays, path.plan_poses_arrays,
-                references.lateral_side_halfplane_arrays, scenario.route_point_ahead):
+                references.lateral_side_halfplane_arrays, scenario.route_point_ahead,
+                daqp_rows.condensed_free, daqp_rows.plan_readout, lateral_qp.direct_theta_size):
     overload(_helper)(_same_signature(_helper))
 
 single_track_rk4 = _jit(model.single_track_rk4)
@@ -105,10 +119,13 @@ halfplane_kernel = _jit(references.lateral_side_halfplane_arrays)
 path_frame_rows_kernel = _jit(path_rows.path_frame_rows)
 plan_poses_rows_kernel = _jit(path_rows.plan_poses_rows)
 daqp_rows_kernel = _jit(daqp_rows.daqp_condensed_rows)
+direct_theta_rows_kernel = _jit(direct_rows.direct_theta_rows)
+direct_readout_rows_kernel = _jit(direct_rows.direct_readout_rows)
 
 #: The compiled set (immutable: a named tuple of numba's dispatchers).
 COMPILED_KERNELS = Kernels(True, single_track_rk4, apf_rollout_kernel, reference_kernel,
                            chase_path_kernel, rollout_path_kernel, frame_step_kernel,
                            plan_poses_kernel,
                            check_record_kernel, single_track_rk4_rows, halfplane_kernel,
-                           path_frame_rows_kernel, plan_poses_rows_kernel, daqp_rows_kernel)
+                           path_frame_rows_kernel, plan_poses_rows_kernel, daqp_rows_kernel,
+                           direct_theta_rows_kernel, direct_readout_rows_kernel)

@@ -50,6 +50,10 @@ class Kernels(NamedTuple):
         :func:`pipeline.loop.controller.daqp_rows.daqp_condensed_rows`: their QPs condensed
         and solved by DAQP's C interface (compiled only: it calls C by address; None in
         CPython's set, whose members step alone).
+    direct_theta_rows, direct_readout_rows : callable or None
+        :func:`pipeline.loop.controller.direct_rows.direct_theta_rows` and
+        ``direct_readout_rows``: the data and read-out of their QPs on the ``clarabel_direct``
+        backend around each member's own Clarabel solver (compiled only, as ``daqp_rows``).
     """
 
     compiled: bool
@@ -66,6 +70,8 @@ class Kernels(NamedTuple):
     path_frame_rows: Callable[..., Any]
     plan_poses_rows: Callable[..., Any]
     daqp_rows: Callable[..., Any] | None
+    direct_theta_rows: Callable[..., Any] | None = None
+    direct_readout_rows: Callable[..., Any] | None = None
 
     def prepare(self, values: object) -> KernelValues:
         """``values`` as this set's callables take them: a contiguous float array for numba, a

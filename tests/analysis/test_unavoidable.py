@@ -126,6 +126,59 @@ def test_speeding_up_counts_where_the_track_commands_the_acceleration():
     assert avoidable(frame, kinematic) is True
 
 
+
+def _planted_cases() -> list[tuple[pd.DataFrame, TrajectoryContext, dict, bool]]:
+    """The planted collisions above with their answers: (table, context, metrics, avoidable)."""
+    t = np.round(np.arange(0.0, 8.0 + 1e-9, 0.1), 10)
+    corridor = trajectory(t, SPEED * t, np.full(t.size, SPEED), CORRIDOR)
+    rest_t = np.round(np.arange(0.0, 6.0 + 1e-9, 0.1), 10)
+    at_rest = trajectory(rest_t, np.zeros(rest_t.size), np.zeros(rest_t.size),
+                         [(-4.0, 0.0, 0.5, 1.0, 0.0)])
+    lateral = TrajectoryContext((0.0, 0.0), (30.0, 0.0), 1.0)
+    kinematic = dataclasses.replace(lateral, steering_rate_max_rad_s=math.inf, accel_mps2=3.0)
+    return [(corridor, STEERING_ONLY, {"attribution_switch_samples": 0}, False),
+            (corridor, STEERING_ONLY, {}, True),
+            (at_rest, lateral, {}, False),
+            (at_rest, kinematic, {}, True)]
+
+
+@pytest.mark.parametrize("case", range(4))
+def test_the_compiled_search_gives_the_vectorised_answer(monkeypatch, case):
+    """The oracle's search manoeuvre by manoeuvre, compiled (what a family's workers run, with
+    numba loaded), answers as the vectorised search on each planted collision; the compiled
+    kernel is the one called when it is chosen."""
+    from pipeline.analysis.metrics import geometry
+    from pipeline.analysis.metrics.compiled import manoeuvre_survives_kernel
+
+    frame, context, metrics, expected = _planted_cases()[case]
+    calls = []
+
+    def counted(*args):
+        calls.append(args)
+        return manoeuvre_survives_kernel(*args)
+
+    monkeypatch.setattr(geometry, "_compiled_reach", lambda: None)
+    assert avoidable(frame, context, **metrics) is expected
+    monkeypatch.setattr(geometry, "_compiled_reach", lambda: counted)
+    assert avoidable(frame, context, **metrics) is expected
+    assert len(calls) == 1
+    # the statement itself in CPython (slow: only the few constant manoeuvres)
+    if metrics.get("attribution_switch_samples") == 0:
+        assert geometry.manoeuvre_survives(*calls[0]) is expected
+
+
+def test_the_compiled_search_is_chosen_where_numba_is_loaded(monkeypatch):
+    """numba already loaded (a family's workers): the compiled search; not loaded (a single
+    run): the vectorised one, which costs less than loading numba."""
+    import sys
+
+    from pipeline.analysis.metrics import geometry
+    from pipeline.analysis.metrics.compiled import manoeuvre_survives_kernel
+
+    assert geometry._compiled_reach() is manoeuvre_survives_kernel  # imported above: loaded
+    monkeypatch.delitem(sys.modules, "numba")
+    assert geometry._compiled_reach() is None
+
 def test_the_oracle_uses_each_tracks_actuators(make_config):
     """Appendix A commands [a, delta] (delta held over a sample, a in the controller's bounds);
     the lateral track commands a steering rate and its speed follows the planner."""

@@ -12,7 +12,7 @@ import pytest
 from pipeline.loop.controller import QpCache, daqp_native
 from pipeline.loop.controller.lateral import LateralMpc
 from pipeline.loop.controller.lateral_qp import MpcInputs
-from pipeline.loop.controller.lateral_rows import _daqp_steps
+from pipeline.loop.controller.lateral_rows import _by_move_count, _daqp_steps, _direct_steps
 from pipeline.loop.scenario import build_scenario
 from pipeline.loop.simulate import simulate
 
@@ -76,11 +76,16 @@ def test_another_daqp_release_is_refused_and_a_wrong_layout_caught(monkeypatch):
 
 
 def _inputs(mpc: LateralMpc, rng: np.random.Generator, speed: float,
-            bad_bound: bool = False) -> MpcInputs:
+            bad_bound: bool = False, used: int = 2) -> MpcInputs:
+    """One step's data with half-planes in the first ``used`` slots (0-3)."""
     N, M = mpc.horizon, mpc.cfg.max_obstacles
     gain, bound = np.zeros((N, M)), np.zeros((N, M))
-    gain[:, 0], bound[:, 0] = 1.0, rng.uniform(-0.5, 1.2, N)   # y >= h: an obstacle
-    gain[4:, 1], bound[4:, 1] = -1.0, rng.uniform(-2.0, -0.5, N - 4)
+    if used >= 1:
+        gain[:, 0], bound[:, 0] = 1.0, rng.uniform(-0.5, 1.2, N)   # y >= h: an obstacle
+    if used >= 2:
+        gain[4:, 1], bound[4:, 1] = -1.0, rng.uniform(-2.0, -0.5, N - 4)
+    if used >= 3:  # the third slot alone on its last steps (the second left empty there)
+        gain[7:, 2], bound[7:, 2] = 1.0, rng.uniform(-0.2, 0.4, N - 7)
     if bad_bound:
         bound[3, 0] = np.nan
     disturbance = rng.normal(0.0, 0.02, N) if rng.random() < 0.5 else np.zeros(N)
@@ -133,8 +138,58 @@ def test_members_solved_in_one_call_are_each_solved_alone(make_config):
         inputs = [_inputs(mpc, rng, speed, bad_bound=(step == 4 and i == 1))
                   for i, (mpc, speed) in enumerate(zip(alone, speeds, strict=True))]
         expected = [mpc.solve(x, {}) for mpc, x in zip(alone, inputs, strict=True)]
-        got = _daqp_steps(together, inputs, [{} for _ in inputs], COMPILED_KERNELS)
+        got = _by_move_count(_daqp_steps, together, inputs, [{} for _ in inputs],
+                             COMPILED_KERNELS)
         assert [_same(e, g) for e, g in zip(expected, got, strict=True)] == [[]] * len(cfgs)
+        statuses |= {(e.status, e.fallback) for e in expected}
+    assert ("optimal", "none") in statuses
+    assert ("non_finite_data", "shifted_plan") in statuses
+    assert any(status not in ("optimal", "non_finite_data") for status, _ in statuses)
+
+
+def test_clarabel_members_in_two_calls_are_each_solved_alone(make_config):
+    """The ``clarabel_direct`` members' QP data in one compiled call, each member's kept
+    Clarabel solver on the statement of the slots it uses, the read-out in another call: step
+    after step (0 to 3 slots used, a speed change, a NaN bound, a tight steering limit that
+    fails, another move count), each equal to the same member's LateralMpc.solve alone, bit for
+    bit; and the statements solved are those of the slots used."""
+    from pipeline.loop.compiled import COMPILED_KERNELS
+
+    cfgs = [make_config(["method=improved"]),
+            make_config(["method=baseline", "controller.q_lateral=3.0"]),
+            make_config(["method=improved", "vehicle.steering_max_rad=0.001",
+                         "controller.solver_max_iter=2"]),
+            make_config(["method=improved", "controller.control_horizon=5"])]
+
+    def controllers():
+        return [LateralMpc(c.controller, c.vehicle, c.model, c.scenario.sample_time_s,
+                           QpCache(compiled_kernels=True), COMPILED_KERNELS) for c in cfgs]
+
+    alone, together = controllers(), controllers()
+    sizes = []
+    for mpc in together:
+        for slots, qp in mpc.qp_by_slots.items():
+            solve = qp.compiled.solve
+
+            def counted(theta, solve=solve, slots=slots):
+                sizes.append(slots)
+                return solve(theta)
+
+            qp.compiled.solve = counted
+    rng = np.random.default_rng(11)
+    statuses = set()
+    for step in range(16):
+        speeds = [3.0 if step < 8 else 2.5, 3.0, 4.0, 3.5]
+        used = [(step + i) % 4 for i in range(len(cfgs))]
+        inputs = [_inputs(mpc, rng, speed, bad_bound=(step == 5 and i == 1), used=used[i])
+                  for i, (mpc, speed) in enumerate(zip(alone, speeds, strict=True))]
+        expected = [mpc.solve(x, {}) for mpc, x in zip(alone, inputs, strict=True)]
+        sizes.clear()
+        got = _by_move_count(_direct_steps, together, inputs, [{} for _ in inputs],
+                             COMPILED_KERNELS)
+        assert [_same(e, g) for e, g in zip(expected, got, strict=True)] == [[]] * len(cfgs)
+        assert sorted(sizes) == sorted(u for i, u in enumerate(used)
+                                       if not (step == 5 and i == 1))
         statuses |= {(e.status, e.fallback) for e in expected}
     assert ("optimal", "none") in statuses
     assert ("non_finite_data", "shifted_plan") in statuses

@@ -4,6 +4,7 @@ sampled reachability check). Definitions: :mod:`pipeline.analysis.metrics`."""
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -248,6 +249,17 @@ def collision_is_avoidable(time_s: np.ndarray, pose: np.ndarray, tracks: list[Ob
     rows = np.searchsorted(t, wanted - 1e-9, side="left")
     switches = np.unique(t[rows[rows < len(t)]])
     man = attribution_manoeuvres(context, thresholds, switches[switches < end])
+    compiled = _compiled_reach()
+    if compiled is not None:  # the same statement manoeuvre by manoeuvre, compiled
+        appear_rows = np.array([other.appear for other in tracks], dtype=np.int64)
+        return bool(compiled(
+            t, float(t[a]), x0, y0, psi0, v0, delta0, steps, dt,
+            context.steering_rate_max_rad_s * dt, context.wheelbase_m, context.vehicle_radius_m,
+            man["target_rad"], man["accel_mps2"], man["then_target_rad"],
+            man["then_accel_mps2"], man["switch_s"], appear_rows,
+            _stacked([other.position for other in tracks], (len(t), 2)),
+            _stacked([other.velocity for other in tracks], (len(t), 2)),
+            _stacked([other.radius for other in tracks], (len(t),))))
     size = man["switch_s"].size
     X, Y = np.full(size, x0), np.full(size, y0)
     psi, v, delta = np.full(size, psi0), np.full(size, v0), np.full(size, delta0)
@@ -277,3 +289,78 @@ def collision_is_avoidable(time_s: np.ndarray, pose: np.ndarray, tracks: list[Ob
             X, Y, psi, v, delta = X[ok], Y[ok], psi[ok], v[ok], delta[ok]
             man = {key: value[ok] for key, value in man.items()}
     return True
+
+
+def _stacked(arrays: list[np.ndarray], shape: tuple[int, ...]) -> np.ndarray:
+    """``arrays`` (each of ``shape``) as one contiguous float array, one row per array."""
+    if not arrays:
+        return np.zeros((0, *shape))
+    return np.ascontiguousarray(np.stack([np.asarray(a, float) for a in arrays]))
+
+
+def manoeuvre_survives(t: np.ndarray, t_appear_s: float, x0: float, y0: float, psi0: float,
+                       v0: float, delta0: float, steps: int, dt: float, rate: float,
+                       wheelbase_m: float, vehicle_radius_m: float, target: np.ndarray,
+                       accel: np.ndarray, then_target: np.ndarray, then_accel: np.ndarray,
+                       switch: np.ndarray, appear_rows: np.ndarray, positions: np.ndarray,
+                       velocities: np.ndarray, radii: np.ndarray) -> bool:
+    """:func:`collision_is_avoidable`'s search one manoeuvre at a time: whether any of the
+    manoeuvres (``target`` ... ``switch``, one entry each) keeps clear of every obstacle
+    (``appear_rows``, ``positions`` (J, n, 2), ``velocities`` (J, n, 2), ``radii`` (J, n)) on
+    every step. The same operations in the same order on each manoeuvre as the vectorised
+    search (which drops a manoeuvre at its first contact and answers False when none is left),
+    so the same answer; it stops at the first manoeuvre that survives. Written for numba
+    (:mod:`pipeline.analysis.metrics.compiled`): in CPython the vectorised search is faster."""
+    n_rows = t.shape[0]
+    n_tracks = appear_rows.shape[0]
+    # where each obstacle is on each step (the same for every manoeuvre)
+    active = np.zeros((steps + 1, n_tracks), dtype=np.bool_)
+    centre_x, centre_y = np.zeros((steps + 1, n_tracks)), np.zeros((steps + 1, n_tracks))
+    reach = np.zeros((steps + 1, n_tracks))
+    for k in range(1, steps + 1):
+        now = t_appear_s + k * dt
+        i = min(int(np.searchsorted(t, now, side="right")) - 1, n_rows - 1)
+        for j in range(n_tracks):
+            if appear_rows[j] < 0 or now < t[appear_rows[j]] - 1e-9:
+                continue
+            active[k, j] = True
+            centre_x[k, j] = positions[j, i, 0] + velocities[j, i, 0] * (now - t[i])
+            centre_y[k, j] = positions[j, i, 1] + velocities[j, i, 1] * (now - t[i])
+            reach[k, j] = radii[j, i] + vehicle_radius_m
+    for m in range(target.shape[0]):
+        x, y, psi, v, delta = x0, y0, psi0, v0, delta0
+        clear = True
+        for k in range(1, steps + 1):
+            began = t_appear_s + (k - 1) * dt
+            second = began >= switch[m] - 1e-9
+            goal = then_target[m] if second else target[m]
+            acceleration = then_accel[m] if second else accel[m]
+            delta = delta + min(max(goal - delta, -rate), rate)
+            x_next = x + dt * v * np.cos(psi)
+            y = y + dt * v * np.sin(psi)
+            x = x_next
+            psi = psi + dt * v * np.tan(delta) / wheelbase_m
+            v = max(v + acceleration * dt, 0.0)
+            for j in range(n_tracks):
+                if active[k, j] and not np.hypot(x - centre_x[k, j], y - centre_y[k, j]) \
+                        >= reach[k, j]:
+                    clear = False
+                    break
+            if not clear:
+                break
+        if clear:
+            return True
+    return False
+
+
+def _compiled_reach() -> Callable[..., bool] | None:
+    """The compiled :func:`manoeuvre_survives` where numba is already loaded in this process
+    (a family's workers, which run the loop's compiled kernels), else None: loading numba for
+    one run's check would cost it more than the vectorised search (about 25 ms)."""
+    import sys
+
+    if "numba" not in sys.modules:
+        return None
+    from pipeline.analysis.metrics.compiled import manoeuvre_survives_kernel
+
+    return manoeuvre_survives_kernel

@@ -41,7 +41,7 @@ from pipeline.loop.controller.daqp_native import (
     WORK_SETTINGS,
 )
 
-__all__ = ["daqp_condensed_rows"]
+__all__ = ["condensed_free", "daqp_condensed_rows", "plan_readout"]
 
 
 def _intrinsic(function: Callable[..., Any]) -> Any:
@@ -225,23 +225,10 @@ def daqp_condensed_rows(functions: np.ndarray, workspaces: np.ndarray, packs: np
         hessian_u = carray(_double_pointer(base_pack + 8 * offsets[7]), (nc, nc))
         x0 = x0s[i]
         # condensed_data: the free response, the weighted errors, the half-planes on U
-        if disturbed[i]:
-            free = np.dot(free_map, x0) + np.dot(disturbance_map, disturbances[i])
-        else:
-            free = np.dot(free_map, x0)
-        free_w = np.empty(4 * N)
-        for r in range(4 * N):
-            free_w[r] = cost_root[r] * free[int(cost_index[r])]
-        for k in range(N):
-            free_w[k] -= root[0] * y_refs[i, k]
-        for k in range(N):
-            free_w[N + k] -= root[1] * psi_refs[i, k]
-        if has_r[i]:
-            for k in range(N):
-                free_w[2 * N + k] -= root[2] * r_refs[i, k]
-        if has_delta[i]:
-            for k in range(N):
-                free_w[3 * N + k] -= root[3] * delta_refs[i, k]
+        free, free_w = condensed_free(free_map, disturbance_map, cost_root, cost_index, root,
+                                      x0, disturbances[i], disturbed[i], y_refs[i],
+                                      psi_refs[i], r_refs[i], has_r[i], delta_refs[i],
+                                      has_delta[i], N)
         gradient = np.dot(gradient_map, free_w)
         # DaqpCondensedQp.solve: the data in the member's buffer
         address = workspaces[i, 0]
@@ -309,31 +296,70 @@ def daqp_condensed_rows(functions: np.ndarray, workspaces: np.ndarray, packs: np
         x = buffer[a0 + rows * nv + 2 * m:a0 + rows * nv + 2 * m + nv]
         U = x[:nc].copy()
         moves[i] = U
-        # LateralMpc.solve: the plan, the eliminated states, the slack the plan needs
-        plan = np.dot(blockings[i].T, U)
-        plans[i] = plan
-        total = 0.0
+        plan_finite[i], slacks[i] = plan_readout(U, blockings[i], x0, free, gamma, gains[i],
+                                                 bounds[i], N, M, plans[i], states[i])
+    return exitflags, iterations, moves, plans, states, slacks, plan_finite
+
+
+def condensed_free(free_map: np.ndarray, disturbance_map: np.ndarray, cost_root: np.ndarray,
+                   cost_index: np.ndarray, root: np.ndarray, x0: np.ndarray,
+                   disturbance: np.ndarray, disturbed: bool, y_ref: np.ndarray,
+                   psi_ref: np.ndarray, r_ref: np.ndarray, has_r: bool,
+                   delta_ref: np.ndarray, has_delta: bool,
+                   horizon: int) -> tuple[np.ndarray, np.ndarray]:  # pragma: no cover (numba's)
+    """:func:`~pipeline.loop.controller.lateral_qp.condensed_data`'s free response (5N,) and
+    weighted free errors (4N,), statement for statement (a helper the compiled callers share)."""
+    N = horizon
+    if disturbed:
+        free = np.dot(free_map, x0) + np.dot(disturbance_map, disturbance)
+    else:
+        free = np.dot(free_map, x0)
+    free_w = np.empty(4 * N)
+    for r in range(4 * N):
+        free_w[r] = cost_root[r] * free[int(cost_index[r])]
+    for k in range(N):
+        free_w[k] -= root[0] * y_ref[k]
+    for k in range(N):
+        free_w[N + k] -= root[1] * psi_ref[k]
+    if has_r:
         for k in range(N):
-            total += plan[k]
-        plan_finite[i] = np.isfinite(total)
-        states[i, :, 0] = x0
+            free_w[2 * N + k] -= root[2] * r_ref[k]
+    if has_delta:
         for k in range(N):
-            predicted = free[5 * k:5 * k + 5] + np.dot(gamma[k], U)
-            states[i, :, k + 1] = predicted
-        binding = False
+            free_w[3 * N + k] -= root[3] * delta_ref[k]
+    return free, free_w
+
+
+def plan_readout(U: np.ndarray, blocking: np.ndarray, x0: np.ndarray, free: np.ndarray,
+                 gamma: np.ndarray, gains: np.ndarray, bounds: np.ndarray, horizon: int,
+                 slots: int, plan: np.ndarray,
+                 states: np.ndarray) -> tuple[bool, float]:  # pragma: no cover (numba's)
+    """:meth:`LateralMpc.solve <pipeline.loop.controller.lateral.LateralMpc.solve>` after the
+    QP: the plan ``U @ blocking`` into ``plan`` (N,), the measured state and ``free + gamma U``
+    into ``states`` (5, N + 1); returns whether the plan is finite and the slack it needs (0
+    where no half-plane binds). A helper the compiled callers share."""
+    N, M = horizon, slots
+    plan[:] = np.dot(blocking.T, U)
+    total = 0.0
+    for k in range(N):
+        total += plan[k]
+    states[:, 0] = x0
+    for k in range(N):
+        predicted = free[5 * k:5 * k + 5] + np.dot(gamma[k], U)
+        states[:, k + 1] = predicted
+    binding = False
+    for k in range(N):
+        for j in range(M):
+            if gains[k, j] != 0.0 or bounds[k, j] != 0.0:
+                binding = True
+    slack = 0.0
+    if binding:  # numpy's max of the rows: NaN if any is
+        slack = -np.inf
         for k in range(N):
             for j in range(M):
-                if gains[i, k, j] != 0.0 or bounds[i, k, j] != 0.0:
-                    binding = True
-        slack = 0.0
-        if binding:  # numpy's max of the rows: NaN if any is
-            slack = -np.inf
-            for k in range(N):
-                for j in range(M):
-                    value = bounds[i, k, j] - gains[i, k, j] * states[i, 0, k + 1]
-                    if np.isnan(value) or np.isnan(slack):
-                        slack = np.nan
-                    elif value > slack:
-                        slack = value
-        slacks[i] = 0.0 if slack < 0.0 else slack
-    return exitflags, iterations, moves, plans, states, slacks, plan_finite
+                value = bounds[k, j] - gains[k, j] * states[0, k + 1]
+                if np.isnan(value) or np.isnan(slack):
+                    slack = np.nan
+                elif value > slack:
+                    slack = value
+    return np.isfinite(total), 0.0 if slack < 0.0 else slack

@@ -86,6 +86,22 @@ def pack_offsets(horizon: int, control_horizon: int) -> tuple[int, ...]:
     return tuple(int(v) for v in np.concatenate([[0], np.cumsum(sizes)]))
 
 
+def direct_pack_offsets(horizon: int, control_horizon: int) -> tuple[int, ...]:
+    """Where each map starts in a prediction's :attr:`CondensedPrediction.direct_pack`, and
+    its length: ``chol_rhs_map`` (Nc x 4N, F), ``chol_inv`` (Nc x Nc, F),
+    ``steering_gamma_w_flat`` (N Nc)."""
+    N, nc = horizon, control_horizon
+    sizes = (4 * N * nc, nc * nc, N * nc)
+    return tuple(int(v) for v in np.concatenate([[0], np.cumsum(sizes)]))
+
+
+def direct_theta_size(horizon: int, control_horizon: int, slots: int) -> int:
+    """The length of the compiled statement's parameter vector with ``slots`` obstacle slots
+    (:func:`build_condensed_lateral_problem`, :meth:`CondensedData.theta`)."""
+    N, nc = horizon, control_horizon
+    return nc * nc + nc + N * nc + N + slots * (N * nc + N)
+
+
 #: The tracking weights of an unweighted prediction (all states at 1, no rate cost).
 UNIT_TRACKING = (1.0, 1.0, 1.0, 1.0, 0.0)
 
@@ -250,6 +266,14 @@ class CondensedPrediction:
                                np.ascontiguousarray(self.gamma).ravel(),
                                self.gradient_map.ravel(order="F"),
                                np.ascontiguousarray(self.hessian_u).ravel()])
+
+    @cached_property
+    def direct_pack(self) -> np.ndarray:
+        """The maps the compiled statement of the CVXPY parameters reads beside :attr:`pack`
+        (:mod:`~pipeline.loop.controller.direct_rows`; layout :func:`direct_pack_offsets`, each
+        matrix in the order it has here)."""
+        return np.concatenate([self.chol_rhs_map.ravel(order="F"),
+                               self.chol_inv.ravel(order="F"), self.steering_gamma_w_flat])
 
     def free_response(self, x0: np.ndarray, disturbance: np.ndarray) -> np.ndarray:
         """States at steps 1..N with ``U = 0`` (shape (N, 5)); ``disturbance`` is (5, N)."""

@@ -15,7 +15,7 @@ tests hold the two equal bit for bit). Any other controller steps alone.
 from __future__ import annotations
 
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from math import isfinite
 from typing import Any
 
@@ -25,10 +25,16 @@ from pipeline.loop.controller.base import ControlStep, Observation
 from pipeline.loop.controller.daqp_native import NON_FINITE_FLAG, SETUP_FAILED_FLAG
 from pipeline.loop.controller.frames import PathFrame
 from pipeline.loop.controller.lateral import LateralMpc
-from pipeline.loop.controller.lateral_backends import DaqpCondensedQp
-from pipeline.loop.controller.lateral_qp import MpcInputs, pack_offsets
+from pipeline.loop.controller.lateral_backends import CompiledCondensedQp, DaqpCondensedQp
+from pipeline.loop.controller.lateral_qp import (
+    CondensedPrediction,
+    MpcInputs,
+    direct_pack_offsets,
+    direct_theta_size,
+    pack_offsets,
+)
 from pipeline.loop.controller.path import ReferencePath
-from pipeline.loop.controller.qp import NON_FINITE_DATA, QpSolution
+from pipeline.loop.controller.qp import NON_FINITE_DATA, DirectQp, QpSolution
 from pipeline.loop.kernels import Kernels
 
 __all__ = ["batch_key", "lateral_steps"]
@@ -115,13 +121,17 @@ def lateral_steps(controllers: Sequence[LateralMpc], observations: Sequence[Obse
         inputs_of.append(inputs)
         logs.append(log)
     steps: list[ControlStep | None] = [None] * n
-    native = [i for i, (mpc, inputs) in enumerate(zip(controllers, inputs_of, strict=True))
-              if kernels.daqp_rows is not None and _native_daqp(mpc)
-              and isfinite(sum(inputs.x0.tolist()))]
-    if native:
-        for i, step in zip(native, _daqp_steps([controllers[i] for i in native],
-                                               [inputs_of[i] for i in native],
-                                               [logs[i] for i in native], kernels),
+    finite = [isfinite(sum(inputs.x0.tolist())) for inputs in inputs_of]
+    native = [i for i, mpc in enumerate(controllers)
+              if kernels.daqp_rows is not None and finite[i] and _native_daqp(mpc)]
+    direct = [i for i, mpc in enumerate(controllers)
+              if kernels.direct_theta_rows is not None and finite[i] and _direct(mpc)]
+    for chosen, solve in ((native, _daqp_steps), (direct, _direct_steps)):
+        if not chosen:
+            continue
+        for i, step in zip(chosen, _by_move_count(solve, [controllers[i] for i in chosen],
+                                                  [inputs_of[i] for i in chosen],
+                                                  [logs[i] for i in chosen], kernels),
                            strict=True):
             steps[i] = step
     for i, mpc in enumerate(controllers):
@@ -195,64 +205,143 @@ def _after_steps(controllers: Sequence[LateralMpc], steps: Sequence[ControlStep]
 
 def _native_daqp(mpc: LateralMpc) -> bool:
     """Whether ``mpc`` solves on a kept native DAQP workspace (backend ``daqp``, the DAQP
-    release whose structures we know, no road rows)."""
+    release whose structures we know, no road rows) with at least two moves (numpy's product
+    of a one-row matrix is not BLAS's, so a member of one move steps alone)."""
     qp = mpc.qp
     return isinstance(qp, DaqpCondensedQp) and qp.native is not None \
-        and qp.s.max_obstacles == mpc.cfg.max_obstacles
+        and qp.s.max_obstacles == mpc.cfg.max_obstacles and mpc.cfg.control_horizon >= 2
+
+
+def _direct(mpc: LateralMpc) -> bool:
+    """Whether ``mpc`` solves every statement on a kept Clarabel solver (backend
+    ``clarabel_direct``) with at least two moves (as :func:`_native_daqp`)."""
+    return mpc.cfg.control_horizon >= 2 and all(
+        isinstance(qp, CompiledCondensedQp) and isinstance(qp.compiled, DirectQp)
+        for qp in mpc.qp_by_slots.values())
+
+
+def _by_move_count(solve: Callable[..., list[ControlStep]], controllers: Sequence[LateralMpc],
+                   inputs_of: Sequence[MpcInputs], logs: Sequence[dict[str, Any]],
+                   kernels: Kernels) -> list[ControlStep]:
+    """``solve`` (:func:`_daqp_steps`, :func:`_direct_steps`) of ``controllers``, those of
+    other move counts (a tune's trials) in calls of their own."""
+    nc = controllers[0].cfg.control_horizon
+    if all(mpc.cfg.control_horizon == nc for mpc in controllers):
+        return solve(controllers, inputs_of, logs, kernels)
+    groups: dict[int, list[int]] = {}
+    for i, mpc in enumerate(controllers):
+        groups.setdefault(mpc.cfg.control_horizon, []).append(i)
+    out: list[ControlStep | None] = [None] * len(controllers)
+    for members in groups.values():
+        for i, step in zip(members, solve([controllers[i] for i in members],
+                                          [inputs_of[i] for i in members],
+                                          [logs[i] for i in members], kernels), strict=True):
+            out[i] = step
+    return [step for step in out if step is not None]
+
+
+def _condensing_arrays(controllers: Sequence[LateralMpc], inputs_of: Sequence[MpcInputs],
+                       predictions: Sequence[CondensedPrediction]) -> dict[str, np.ndarray]:
+    """What the compiled callers read of each member (one move count): the address of its
+    prediction's pack, its blocking, measured state, disturbance, references and half-planes
+    (the arguments of :func:`~pipeline.loop.controller.daqp_rows.daqp_condensed_rows` by
+    name)."""
+    n = len(controllers)
+    first = controllers[0]
+    N, nc, M = first.horizon, first.cfg.control_horizon, first.cfg.max_obstacles
+    arrays = {"packs": np.empty(n, dtype=np.int64), "blockings": np.empty((n, nc, N)),
+              "x0s": np.empty((n, 5)), "disturbances": np.empty((n, N)),
+              "disturbed": np.empty(n, dtype=np.bool_), "y_refs": np.empty((n, N)),
+              "psi_refs": np.empty((n, N)), "r_refs": np.zeros((n, N)),
+              "has_r": np.zeros(n, dtype=np.bool_), "delta_refs": np.zeros((n, N)),
+              "has_delta": np.zeros(n, dtype=np.bool_), "gains": np.empty((n, N, M)),
+              "bounds": np.empty((n, N, M))}
+    for i, (mpc, prediction, inputs) in enumerate(zip(controllers, predictions, inputs_of,
+                                                      strict=True)):
+        arrays["packs"][i] = prediction.pack.ctypes.data
+        arrays["blockings"][i], arrays["x0s"][i] = mpc.blocking, inputs.x0
+        arrays["disturbances"][i] = inputs.disturbance_rad_s
+        arrays["disturbed"][i] = bool(np.count_nonzero(inputs.disturbance_rad_s))
+        arrays["y_refs"][i], arrays["psi_refs"][i] = inputs.y_ref_m, inputs.psi_ref_rad
+        if inputs.r_ref_rad_s is not None:
+            arrays["r_refs"][i], arrays["has_r"][i] = inputs.r_ref_rad_s, True
+        if inputs.delta_ref_rad is not None:
+            arrays["delta_refs"][i], arrays["has_delta"][i] = inputs.delta_ref_rad, True
+        arrays["gains"][i], arrays["bounds"][i] = inputs.constraint_gain, \
+            inputs.constraint_bound
+    return arrays
+
+
+def _direct_steps(controllers: Sequence[LateralMpc], inputs_of: Sequence[MpcInputs],
+                  logs: Sequence[dict[str, Any]], kernels: Kernels) -> list[ControlStep]:
+    """:meth:`LateralMpc.solve <pipeline.loop.controller.lateral.LateralMpc.solve>` of each
+    member (finite measured state, ``clarabel_direct``, one move count): the QP data of all
+    of them in one compiled call (:func:`~pipeline.loop.controller.direct_rows.
+    direct_theta_rows`), each member's kept Clarabel solver on the statement of the slots it
+    uses (:meth:`~pipeline.loop.controller.qp.DirectQp.solve`), the read-out of all of them in
+    another call."""
+    assert kernels.direct_theta_rows is not None and kernels.direct_readout_rows is not None
+    first = controllers[0]
+    N, nc, M = first.horizon, first.cfg.control_horizon, first.cfg.max_obstacles
+    predictions = [mpc.prediction(inputs.model) for mpc, inputs in
+                   zip(controllers, inputs_of, strict=True)]
+    arrays = _condensing_arrays(controllers, inputs_of, predictions)
+    direct_packs = np.array([prediction.direct_pack.ctypes.data for prediction in predictions],
+                            dtype=np.int64)
+    offsets = np.asarray(pack_offsets(N, nc), dtype=np.int64)
+    direct_offsets = np.asarray(direct_pack_offsets(N, nc), dtype=np.int64)
+    thetas, used, frees, finite = kernels.direct_theta_rows(
+        arrays["packs"], offsets, direct_packs, direct_offsets, nc, N, M, arrays["x0s"],
+        arrays["disturbances"], arrays["disturbed"], arrays["y_refs"], arrays["psi_refs"],
+        arrays["r_refs"], arrays["has_r"], arrays["delta_refs"], arrays["has_delta"],
+        arrays["gains"], arrays["bounds"])
+    solutions, Ws = [], np.zeros((len(controllers), nc))
+    for i, mpc in enumerate(controllers):
+        slots = int(used[i])
+        qp = mpc.qp_by_slots[slots]
+        assert isinstance(qp, CompiledCondensedQp) and isinstance(qp.compiled, DirectQp)
+        if finite[i]:
+            solution = qp.compiled.solve(thetas[i, :direct_theta_size(N, nc, slots)])
+        else:  # what DirectQp.solve answers to non-finite parameters, without its clock
+            solution = QpSolution(NON_FINITE_DATA, -1, 0.0, None)
+        if solution.ok:
+            Ws[i] = np.asarray(solution.value("W"), float).reshape(-1)
+        solutions.append(solution)
+    _, plans, states, slacks, plan_finite = kernels.direct_readout_rows(
+        arrays["packs"], offsets, direct_packs, direct_offsets, nc, N, M, Ws,
+        arrays["blockings"], arrays["x0s"], frees, arrays["gains"], arrays["bounds"])
+    steps = []
+    for i, (mpc, solution) in enumerate(zip(controllers, solutions, strict=True)):
+        if solution.ok and plan_finite[i]:
+            steps.append(mpc.accepted(plans[i], states[i], solution, float(slacks[i]),
+                                      logs[i]))
+        else:
+            steps.append(mpc.fall_back(inputs_of[i], solution, logs[i]))
+    return steps
 
 
 def _daqp_steps(controllers: Sequence[LateralMpc], inputs_of: Sequence[MpcInputs],
                 logs: Sequence[dict[str, Any]], kernels: Kernels) -> list[ControlStep]:
     """:meth:`LateralMpc.solve <pipeline.loop.controller.lateral.LateralMpc.solve>` of each
-    member (finite measured state, native DAQP) with the condensing, DAQP's calls and the
-    plan's read-out of all of them in one compiled call
+    member (finite measured state, native DAQP, one move count: :func:`_by_move_count`) with
+    the condensing, DAQP's calls and the plan's read-out of all of them in one compiled call
     (:func:`~pipeline.loop.controller.daqp_rows.daqp_condensed_rows`); each member's solve
     time is the call's time over the members (what its share cost)."""
     assert kernels.daqp_rows is not None
     n = len(controllers)
     first = controllers[0]
     N, nc, M = first.horizon, first.cfg.control_horizon, first.cfg.max_obstacles
-    # members of other move counts (a tune's trials) are solved in calls of their own
-    if any(mpc.cfg.control_horizon != nc for mpc in controllers):
-        groups: dict[int, list[int]] = {}
-        for i, mpc in enumerate(controllers):
-            groups.setdefault(mpc.cfg.control_horizon, []).append(i)
-        out: list[ControlStep | None] = [None] * n
-        for members in groups.values():
-            for i, step in zip(members, _daqp_steps([controllers[i] for i in members],
-                                                    [inputs_of[i] for i in members],
-                                                    [logs[i] for i in members], kernels),
-                               strict=True):
-                out[i] = step
-        return [step for step in out if step is not None]
     qps = [mpc.qp for mpc in controllers]
     predictions = [mpc.prediction(inputs.model) for mpc, inputs in
                    zip(controllers, inputs_of, strict=True)]
+    arrays = _condensing_arrays(controllers, inputs_of, predictions)
     workspaces = np.empty((n, 5), dtype=np.int64)
-    packs = np.empty(n, dtype=np.int64)
-    blockings, x0s = np.empty((n, nc, N)), np.empty((n, 5))
-    disturbances, disturbed = np.empty((n, N)), np.empty(n, dtype=np.bool_)
-    y_refs, psi_refs = np.empty((n, N)), np.empty((n, N))
-    r_refs, delta_refs = np.zeros((n, N)), np.zeros((n, N))
-    has_r, has_delta = np.zeros(n, dtype=np.bool_), np.zeros(n, dtype=np.bool_)
-    gains, bounds = np.empty((n, N, M)), np.empty((n, N, M))
     steering_max, hessian_new = np.empty(n), np.empty(n, dtype=np.bool_)
     iter_limits = np.empty(n, dtype=np.int64)
-    for i, (mpc, qp, prediction, inputs) in enumerate(zip(controllers, qps, predictions,
-                                                          inputs_of, strict=True)):
+    for i, (qp, prediction) in enumerate(zip(qps, predictions, strict=True)):
         assert isinstance(qp, DaqpCondensedQp) and qp.native is not None
         workspaces[i, :4] = qp.native.addresses
         workspaces[i, 4] = qp.native.ready[0]
-        packs[i] = prediction.pack.ctypes.data
-        blockings[i], x0s[i] = mpc.blocking, inputs.x0
-        disturbances[i] = inputs.disturbance_rad_s
-        disturbed[i] = bool(np.count_nonzero(inputs.disturbance_rad_s))
-        y_refs[i], psi_refs[i] = inputs.y_ref_m, inputs.psi_ref_rad
-        if inputs.r_ref_rad_s is not None:
-            r_refs[i], has_r[i] = inputs.r_ref_rad_s, True
-        if inputs.delta_ref_rad is not None:
-            delta_refs[i], has_delta[i] = inputs.delta_ref_rad, True
-        gains[i], bounds[i] = inputs.constraint_gain, inputs.constraint_bound
         steering_max[i] = qp.s.steering_max_rad
         hessian_new[i] = not qp.holds_hessian(prediction.hessian_u)
         iter_limits[i] = qp.max_iter
@@ -260,9 +349,11 @@ def _daqp_steps(controllers: Sequence[LateralMpc], inputs_of: Sequence[MpcInputs
     functions = qps[0].native.functions.arguments
     start = time.perf_counter()
     exitflags, iterations, _, plans, states, slacks, plan_finite = kernels.daqp_rows(
-        functions, workspaces, packs, np.asarray(pack_offsets(N, nc), dtype=np.int64), nc, N,
-        M, blockings, x0s, disturbances, disturbed, y_refs, psi_refs, r_refs, has_r,
-        delta_refs, has_delta, gains, bounds, steering_max, hessian_new, iter_limits)
+        functions, workspaces, arrays["packs"], np.asarray(pack_offsets(N, nc), dtype=np.int64),
+        nc, N, M, arrays["blockings"], arrays["x0s"], arrays["disturbances"],
+        arrays["disturbed"], arrays["y_refs"], arrays["psi_refs"], arrays["r_refs"],
+        arrays["has_r"], arrays["delta_refs"], arrays["has_delta"], arrays["gains"],
+        arrays["bounds"], steering_max, hessian_new, iter_limits)
     share = (time.perf_counter() - start) / n
     steps = []
     for i, (mpc, qp, prediction, inputs) in enumerate(zip(controllers, qps, predictions,
