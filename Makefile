@@ -117,15 +117,16 @@ experiment: $(STAMP)  ## run every method on the paper scenario and on the scena
 	@# outputs/frames too: the fixed frame's families (make frames) are made again after it,
 	@# never shown beside a family of other code or settings
 	rm -rf $(RUNS)/paper $(RUNS)/kinematic $(RUNS)/kinematic_readings $(RUNS)/kinematic_family $(RUNS)/family $(RUNS)/frames $(RUNS)/apf_alone $(RUNS)/peers $(RUNS)/kinematic_peers  # rebuilt; members come back from the member cache only for the same code and settings
-	@# the eight experiments side by side (six jobs: the paper scenario's three share one
-	@# process), the longest first: each family's parent has serial
-	@# stretches (Hydra's job set-up, the compilation, the tables) in which the others use the
-	@# cores (measured: 162-166 s against 173-178 s one family after the other). Each one's
-	@# output is printed whole when it ends (-O). The earlier frame's 600 members (make frames,
-	@# about 60 CPU-s) are not among them: make reproduce took 244 s with them on the machine of
-	@# 2026-12-07, over its three minutes (196 s without them and with the smaller QPs: still over)
-	@echo "eight experiments side by side (the paper scenario's three in one process); each one's output follows when it ends"
-	$(MAKE) --no-print-directory -j6 -O run-family run-peers run-kinematic-family run-kinematic-peers run-apf-alone run-paper-scenario
+	@# the eight experiments in six jobs (the paper scenario's three share one process), three
+	@# at a time, the longest first: each family's parent has serial stretches (Hydra's job
+	@# set-up, the compilation, the tables) in which the others use the cores (measured: 162-166 s
+	@# against 173-178 s one family after the other). Three, not all six: on the 2-core machine
+	@# of 2026-12-07 the six jobs of make experiment took 134 s and 143 s three at a time, 133 s
+	@# and 139 s two at a time, 152 s and 147 s all six at once (about 10 % more CPU-s: six
+	@# processes thrash two cores' caches). Each one's output is printed whole when it ends
+	@# (-O). The earlier frame's 600 members (make frames, about 60 CPU-s) are not among them.
+	@echo "eight experiments in six jobs, three at a time (the paper scenario's three in one process); each one's output follows when it ends"
+	$(MAKE) --no-print-directory -j3 -O run-family run-peers run-kinematic-family run-kinematic-peers run-apf-alone run-paper-scenario
 
 frames: $(STAMP)  ## after make reproduce: the lateral MPC in its earlier frame (the state against the start-goal line) on the same 200 scenarios, for the report's "Does the MPC's model hold?" (about 1 min), then the report
 	rm -rf $(RUNS)/frames

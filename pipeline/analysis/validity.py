@@ -56,6 +56,10 @@ def _pooled(values: list[np.ndarray], q: float) -> float:
     return float(np.percentile(v, q)) if v.size else float("nan")
 
 
+#: The trajectory columns :func:`validity_row` reads.
+VALIDITY_READS = ("model_error_1s_m", "plan_error_1s_m")
+
+
 def validity_row(track: str, frame: str, method: str,
                  members: Iterable[tuple[pd.DataFrame, dict[str, Any]]]) -> ValidityRow:
     """The row of one family from its members' ``(trajectory, metrics.json mapping)``."""

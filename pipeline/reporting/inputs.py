@@ -185,6 +185,7 @@ class FamilyInputs:
         from pipeline.analysis.claims.windows import WINDOW_START
         from pipeline.analysis.metrics import lateral_jerk_signal
         from pipeline.analysis.metrics.context import trajectory_context
+        from pipeline.analysis.metrics.signals import SIGNAL_COLUMNS
         from pipeline.store.runs import member_trajectories
 
         jerks: dict[str, dict[str, LateralJerk]] = {}
@@ -198,7 +199,8 @@ class FamilyInputs:
             jerks[method] = {
                 str(metrics.get("scenario")): lateral_jerk_signal(trajectory, context,
                                                                   settings.metrics)
-                for _, trajectory, metrics in member_trajectories(Path(self.info[label]["dir"]))}
+                for _, trajectory, metrics in member_trajectories(Path(self.info[label]["dir"]),
+                                                                  SIGNAL_COLUMNS)}
         return dataclasses.replace(self, jerks=jerks)
 
 

@@ -15,7 +15,7 @@ from typing import Any
 import pandas as pd
 
 from pipeline.analysis.settings import ClaimsConfig
-from pipeline.analysis.validity import ValidityTable, validity_row
+from pipeline.analysis.validity import VALIDITY_READS, ValidityTable, validity_row
 from pipeline.config import ExperimentConfig
 from pipeline.errors import RunFolderError
 from pipeline.store.layout import OutputsLayout
@@ -259,7 +259,7 @@ def model_validity_table(layout: OutputsLayout) -> ValidityTable:
             track = "kinematic" if cfg.controller.kind == "kinematic_mpc" else "lateral"
             frame = cfg.controller.frame if track == "lateral" else "global (LTV)"
             members = ((trajectory, metrics) for _, trajectory, metrics
-                       in member_trajectories(family.folder))
+                       in member_trajectories(family.folder, VALIDITY_READS))
             rows.append(validity_row(track, frame, method, members))
     order = {"lateral": 0, "kinematic": 1}
     rows.sort(key=lambda r: (order.get(r.track, 2), r.frame != "path",

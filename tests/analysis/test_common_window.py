@@ -220,3 +220,27 @@ def test_the_multiverse_refuses_the_common_window_before_it_runs(tmp_path):
     with pytest.raises(ConfigError, match="claims.c2_window"):
         run_multiverse(space, tmp_path / "mv", ["claims.c2_window=common"])
     assert not (tmp_path / "mv" / "runs").exists()
+
+
+def test_the_jerk_read_from_the_signal_columns_alone_is_the_jerk():
+    """The report reads each member's trajectory for C2's common window with only the columns
+    the signals read (metrics.signals.SIGNAL_COLUMNS): the same jerk as from the whole table,
+    under both readings of the lateral acceleration; a column left out would change it."""
+    from builders import out_and_back
+
+    from pipeline.analysis.metrics import TrajectoryContext, lateral_jerk_signal
+    from pipeline.analysis.metrics.signals import SIGNAL_COLUMNS
+    from pipeline.config import MetricsConfig
+
+    frame = out_and_back(0.4)
+    frame["unread_column"] = np.arange(len(frame), dtype=float)
+    ctx = TrajectoryContext((0.0, 0.0), (30.0, 0.0), 1.0)
+    read = frame[[c for c in frame.columns if c in SIGNAL_COLUMNS]]
+    assert "unread_column" not in read and "vx_mps" in read
+    for reading in ("vy_dot_plus_vx_r", "vx_r"):
+        cfg = MetricsConfig(lateral_accel=reading)
+        whole, part = lateral_jerk_signal(frame, ctx, cfg), lateral_jerk_signal(read, ctx, cfg)
+        assert np.array_equal(whole.jerk_mps3, part.jerk_mps3)
+    without_vx = lateral_jerk_signal(read.drop(columns="vx_mps"), ctx, MetricsConfig())
+    assert not np.array_equal(without_vx.jerk_mps3, lateral_jerk_signal(frame, ctx,
+                                                                         MetricsConfig()).jerk_mps3)

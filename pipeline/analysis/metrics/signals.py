@@ -210,6 +210,11 @@ class Signals:
     model_heading_error: np.ndarray | None = None
 
 
+#: The trajectory columns :func:`trajectory_signals` reads (where the table has them).
+SIGNAL_COLUMNS = ("time_s", "X_m", "Y_m", "psi_rad", "vx_mps", "vy_mps", "r_rad_s", "delta_rad",
+                  "steering_rate_rad_s", "model_heading_error_rad")
+
+
 def trajectory_signals(tr: pd.DataFrame, context: TrajectoryContext) -> Signals:
     """The signals every criterion reads, from the table's columns (or the path)."""
     t = tr["time_s"].to_numpy(float)
