@@ -251,15 +251,9 @@ def collision_is_avoidable(time_s: np.ndarray, pose: np.ndarray, tracks: list[Ob
     man = attribution_manoeuvres(context, thresholds, switches[switches < end])
     compiled = _compiled_reach()
     if compiled is not None:  # the same statement manoeuvre by manoeuvre, compiled
-        appear_rows = np.array([other.appear for other in tracks], dtype=np.int64)
-        return bool(compiled(
-            t, float(t[a]), x0, y0, psi0, v0, delta0, steps, dt,
-            context.steering_rate_max_rad_s * dt, context.wheelbase_m, context.vehicle_radius_m,
-            man["target_rad"], man["accel_mps2"], man["then_target_rad"],
-            man["then_accel_mps2"], man["switch_s"], appear_rows,
-            _stacked([other.position for other in tracks], (len(t), 2)),
-            _stacked([other.velocity for other in tracks], (len(t), 2)),
-            _stacked([other.radius for other in tracks], (len(t),))))
+        return bool(compiled(t, float(t[a]), x0, y0, psi0, v0, delta0, steps, dt,
+                             context.steering_rate_max_rad_s * dt, context.wheelbase_m,
+                             context.vehicle_radius_m, *_search_arrays(man, tracks, len(t))))
     size = man["switch_s"].size
     X, Y = np.full(size, x0), np.full(size, y0)
     psi, v, delta = np.full(size, psi0), np.full(size, v0), np.full(size, delta0)
@@ -289,6 +283,17 @@ def collision_is_avoidable(time_s: np.ndarray, pose: np.ndarray, tracks: list[Ob
             X, Y, psi, v, delta = X[ok], Y[ok], psi[ok], v[ok], delta[ok]
             man = {key: value[ok] for key, value in man.items()}
     return True
+
+
+def _search_arrays(man: dict[str, np.ndarray], tracks: list[ObstacleTrack],
+                   rows: int) -> tuple[np.ndarray, ...]:
+    """The manoeuvres' and the obstacles' arrays as :func:`manoeuvre_survives` takes them."""
+    return (man["target_rad"], man["accel_mps2"], man["then_target_rad"],
+            man["then_accel_mps2"], man["switch_s"],
+            np.array([other.appear for other in tracks], dtype=np.int64),
+            _stacked([other.position for other in tracks], (rows, 2)),
+            _stacked([other.velocity for other in tracks], (rows, 2)),
+            _stacked([other.radius for other in tracks], (rows,)))
 
 
 def _stacked(arrays: list[np.ndarray], shape: tuple[int, ...]) -> np.ndarray:
