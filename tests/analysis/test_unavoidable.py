@@ -167,6 +167,38 @@ def test_the_compiled_search_gives_the_vectorised_answer(monkeypatch, case):
         assert geometry.manoeuvre_survives(*calls[0]) is expected
 
 
+
+def test_each_manoeuvre_survives_alike_compiled_and_vectorised(monkeypatch):
+    """Manoeuvre by manoeuvre (the compiled search stops at the first that survives, so the
+    final answer alone would hide a later one's error): sixty of the corridor's manoeuvres,
+    drawn with a seed, each tried alone by the vectorised and by the compiled search, give the
+    same answer; both answers occur among them."""
+    from pipeline.analysis.metrics import geometry
+    from pipeline.analysis.metrics.compiled import manoeuvre_survives_kernel
+
+    frame, context, metrics, _ = _planted_cases()[1]
+    every = {}
+    full = geometry.attribution_manoeuvres
+
+    def kept(*args):
+        every.update(full(*args))
+        return every
+
+    monkeypatch.setattr(geometry, "attribution_manoeuvres", kept)
+    monkeypatch.setattr(geometry, "_compiled_reach", lambda: None)
+    assert avoidable(frame, context, **metrics) is True
+    chosen = np.random.default_rng(5).choice(every["switch_s"].size, 60, replace=False)
+    answers = []
+    for m in chosen:
+        one = {key: value[m:m + 1].copy() for key, value in every.items()}
+        monkeypatch.setattr(geometry, "attribution_manoeuvres", lambda *args, one=one: one)
+        monkeypatch.setattr(geometry, "_compiled_reach", lambda: None)
+        vectorised = avoidable(frame, context, **metrics)
+        monkeypatch.setattr(geometry, "_compiled_reach", lambda: manoeuvre_survives_kernel)
+        answers.append((vectorised, avoidable(frame, context, **metrics)))
+    assert all(a == b for a, b in answers)
+    assert {a for a, _ in answers} == {True, False}
+
 def test_the_compiled_search_is_chosen_where_numba_is_loaded(monkeypatch):
     """numba already loaded (a family's workers): the compiled search; not loaded (a single
     run): the vectorised one, which costs less than loading numba."""

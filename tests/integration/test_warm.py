@@ -70,9 +70,10 @@ from numba.core.dispatcher import Dispatcher
 from pipeline.warm import main
 status = main(["--kernels-only"])
 import pipeline.analysis.claims.compiled as claims_kernels
+import pipeline.analysis.metrics.compiled as metrics_kernels
 import pipeline.loop.compiled as loop_kernels
 kernels = {}
-for module in (loop_kernels, claims_kernels):
+for module in (loop_kernels, claims_kernels, metrics_kernels):
     for value in vars(module).values():
         if isinstance(value, Dispatcher):
             index = Path(str(value._cache._cache_file._index_path))
@@ -83,14 +84,17 @@ print(json.dumps({"status": status, "kernels": kernels}))
 """
 
 #: The kernels the runs call (a lone member's and the lockstep engine's batched ones: the
-#: plants' rows, the path frames' and plans' rows, DAQP's batched caller; the ledgers'
-#: bootstrap), and the two the bootstrap's kernel compiles into itself.
+#: plants' rows, the path frames' and plans' rows, DAQP's batched caller, the Clarabel
+#: members' data and read-out; the ledgers' bootstrap; the collision oracle's search), and the
+#: two the bootstrap's kernel compiles into itself.
 RUN_KERNELS = {"model.single_track_rk4_rows", "planner.apf_rollout_arrays",
                "references.lateral_side_halfplane_arrays", "references.reference_arrays",
                "path.chase_path_arrays", "path.rollout_path_arrays", "path.frame_step_arrays",
                "compiled.walsh_medians", "path.plan_poses_arrays",
                "prediction_check.check_record_arrays", "path_rows.path_frame_rows",
-               "path_rows.plan_poses_rows", "daqp_rows.daqp_condensed_rows"}
+               "path_rows.plan_poses_rows", "daqp_rows.daqp_condensed_rows",
+               "direct_rows.direct_theta_rows", "direct_rows.direct_readout_rows",
+               "geometry.manoeuvre_survives"}
 CALLEES = {"compiled._count_at_most", "compiled._order_statistic"}
 
 

@@ -233,6 +233,40 @@ def test_default_lateral_mpcs_share_one_path_frame_call_per_step(make_config):
         assert _differences(engine, alone) == []
 
 
+
+def test_clarabel_members_get_their_qp_data_in_one_call_per_step(make_config):
+    """The default backend's members (clarabel_direct) have their QP data made in one compiled
+    call per step and read out in another, a member of one move steps alone: every run is
+    still its run alone."""
+    runs = _members(make_config, ["method=improved"], 3) \
+        + _members(make_config, ["method=improved", "controller.control_horizon=1"], 1)
+    cache = QpCache(compiled_kernels=True)
+    from pipeline.loop.engine import run_kernels
+
+    kernels = run_kernels(cache)
+    made, read = [], []
+
+    def direct_theta_rows(packs, *args):
+        made.append(packs.shape[0])
+        return kernels.direct_theta_rows(packs, *args)
+
+    def direct_readout_rows(packs, *args):
+        read.append(packs.shape[0])
+        return kernels.direct_readout_rows(packs, *args)
+
+    counted = kernels._replace(direct_theta_rows=direct_theta_rows,
+                               direct_readout_rows=direct_readout_rows)
+    together = simulate_members(runs, cache, counted)
+    lengths = [len(result.trajectory) for result in together]
+    # on each step where two or more of the four step together: one call with those of the
+    # three of three moves still running; the one-move member is never in it
+    active = [[length > k + 1 for length in lengths] for k in range(max(lengths))]
+    expected = [sum(now[:3]) for now in active if sum(now) >= 2 and any(now[:3])]
+    assert made == read == expected and max(made) == 3
+    for (cfg, scenario), engine in zip(runs, together, strict=True):
+        alone = oracle_simulate(cfg, scenario, QpCache(compiled_kernels=True))
+        assert _differences(engine, alone) == []
+
 def test_path_frame_rows_are_each_members_path_frame(make_config):
     """The CPython statement of the batched path frame against the compiled one and against
     each member's own path-frame step (already held equal to the loop): one batch step of

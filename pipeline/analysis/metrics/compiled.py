@@ -2,8 +2,8 @@
 :func:`~pipeline.analysis.metrics.geometry.manoeuvre_survives` as it stands, for the processes
 that have numba loaded already (a family's workers). Without fast-math, on the same C
 library's ``cos``, ``sin``, ``tan`` and ``hypot`` as numpy's: the same answer as the vectorised
-search (tests/analysis/test_unavoidable.py holds the two equal on planted cases and on a
-family's collisions).
+search (tests/analysis/test_unavoidable.py holds the two equal on planted cases, and
+manoeuvre by manoeuvre on sixty of one of them).
 """
 
 from __future__ import annotations

@@ -251,7 +251,9 @@ def collision_is_avoidable(time_s: np.ndarray, pose: np.ndarray, tracks: list[Ob
     man = attribution_manoeuvres(context, thresholds, switches[switches < end])
     compiled = _compiled_reach()
     if compiled is not None:  # the same statement manoeuvre by manoeuvre, compiled
-        return bool(compiled(t, float(t[a]), x0, y0, psi0, v0, delta0, steps, dt,
+        # a writeable copy: pandas' columns come read-only, another type to numba (a second
+        # compilation beside the one make install's warm step caches)
+        return bool(compiled(np.array(t), float(t[a]), x0, y0, psi0, v0, delta0, steps, dt,
                              context.steering_rate_max_rad_s * dt, context.wheelbase_m,
                              context.vehicle_radius_m, *_search_arrays(man, tracks, len(t))))
     size = man["switch_s"].size

@@ -205,17 +205,19 @@ def _after_steps(controllers: Sequence[LateralMpc], steps: Sequence[ControlStep]
 
 def _native_daqp(mpc: LateralMpc) -> bool:
     """Whether ``mpc`` solves on a kept native DAQP workspace (backend ``daqp``, the DAQP
-    release whose structures we know, no road rows) with at least two moves (numpy's product
-    of a one-row matrix is not BLAS's, so a member of one move steps alone)."""
+    release whose structures we know, no road rows) with at least two moves and two steps
+    (numpy's product of a one-row matrix is not BLAS's, so such a member steps alone)."""
     qp = mpc.qp
     return isinstance(qp, DaqpCondensedQp) and qp.native is not None \
-        and qp.s.max_obstacles == mpc.cfg.max_obstacles and mpc.cfg.control_horizon >= 2
+        and qp.s.max_obstacles == mpc.cfg.max_obstacles and mpc.cfg.control_horizon >= 2 \
+        and mpc.horizon >= 2
 
 
 def _direct(mpc: LateralMpc) -> bool:
     """Whether ``mpc`` solves every statement on a kept Clarabel solver (backend
-    ``clarabel_direct``) with at least two moves (as :func:`_native_daqp`)."""
-    return mpc.cfg.control_horizon >= 2 and all(
+    ``clarabel_direct``) with at least two moves and two steps (as :func:`_native_daqp`: a
+    horizon of one makes a one-row product too)."""
+    return mpc.cfg.control_horizon >= 2 and mpc.horizon >= 2 and all(
         isinstance(qp, CompiledCondensedQp) and isinstance(qp.compiled, DirectQp)
         for qp in mpc.qp_by_slots.values())
 
