@@ -215,20 +215,14 @@ def daqp_condensed_rows(functions: np.ndarray, workspaces: np.ndarray, packs: np
     plan_finite = np.zeros(n, dtype=np.bool_)
     for i in range(n):
         base_pack = packs[i]
-        free_map = farray(_double_pointer(base_pack + 8 * offsets[0]), (5 * N, 5))
-        disturbance_map = farray(_double_pointer(base_pack + 8 * offsets[1]), (5 * N, N))
-        cost_root = carray(_double_pointer(base_pack + 8 * offsets[2]), (4 * N,))
-        cost_index = carray(_double_pointer(base_pack + 8 * offsets[3]), (4 * N,))
-        root = carray(_double_pointer(base_pack + 8 * offsets[4]), (4,))
         gamma = carray(_double_pointer(base_pack + 8 * offsets[5]), (N, 5, nc))
         gradient_map = farray(_double_pointer(base_pack + 8 * offsets[6]), (nc, 4 * N))
         hessian_u = carray(_double_pointer(base_pack + 8 * offsets[7]), (nc, nc))
         x0 = x0s[i]
         # condensed_data: the free response, the weighted errors, the half-planes on U
-        free, free_w = condensed_free(free_map, disturbance_map, cost_root, cost_index, root,
-                                      x0, disturbances[i], disturbed[i], y_refs[i],
-                                      psi_refs[i], r_refs[i], has_r[i], delta_refs[i],
-                                      has_delta[i], N)
+        free, free_w = condensed_free(base_pack, offsets, x0, disturbances[i], disturbed[i],
+                                      y_refs[i], psi_refs[i], r_refs[i], has_r[i],
+                                      delta_refs[i], has_delta[i], N)
         gradient = np.dot(gradient_map, free_w)
         # DaqpCondensedQp.solve: the data in the member's buffer
         address = workspaces[i, 0]
@@ -301,15 +295,19 @@ def daqp_condensed_rows(functions: np.ndarray, workspaces: np.ndarray, packs: np
     return exitflags, iterations, moves, plans, states, slacks, plan_finite
 
 
-def condensed_free(free_map: np.ndarray, disturbance_map: np.ndarray, cost_root: np.ndarray,
-                   cost_index: np.ndarray, root: np.ndarray, x0: np.ndarray,
-                   disturbance: np.ndarray, disturbed: bool, y_ref: np.ndarray,
-                   psi_ref: np.ndarray, r_ref: np.ndarray, has_r: bool,
-                   delta_ref: np.ndarray, has_delta: bool,
+def condensed_free(pack: int, offsets: np.ndarray, x0: np.ndarray, disturbance: np.ndarray,
+                   disturbed: bool, y_ref: np.ndarray, psi_ref: np.ndarray, r_ref: np.ndarray,
+                   has_r: bool, delta_ref: np.ndarray, has_delta: bool,
                    horizon: int) -> tuple[np.ndarray, np.ndarray]:  # pragma: no cover (numba's)
     """:func:`~pipeline.loop.controller.lateral_qp.condensed_data`'s free response (5N,) and
-    weighted free errors (4N,), statement for statement (a helper the compiled callers share)."""
+    weighted free errors (4N,), statement for statement, from the maps of the prediction pack
+    at address ``pack`` (layout ``offsets``; a helper the compiled callers share)."""
     N = horizon
+    free_map = farray(_double_pointer(pack + 8 * offsets[0]), (5 * N, 5))
+    disturbance_map = farray(_double_pointer(pack + 8 * offsets[1]), (5 * N, N))
+    cost_root = carray(_double_pointer(pack + 8 * offsets[2]), (4 * N,))
+    cost_index = carray(_double_pointer(pack + 8 * offsets[3]), (4 * N,))
+    root = carray(_double_pointer(pack + 8 * offsets[4]), (4,))
     if disturbed:
         free = np.dot(free_map, x0) + np.dot(disturbance_map, disturbance)
     else:

@@ -73,20 +73,14 @@ def direct_theta_rows(packs: np.ndarray, offsets: np.ndarray, direct_packs: np.n
     finite = np.zeros(n, dtype=np.bool_)
     for i in range(n):
         base_pack = packs[i]
-        free_map = farray(_double_pointer(base_pack + 8 * offsets[0]), (5 * N, 5))
-        disturbance_map = farray(_double_pointer(base_pack + 8 * offsets[1]), (5 * N, N))
-        cost_root = carray(_double_pointer(base_pack + 8 * offsets[2]), (4 * N,))
-        cost_index = carray(_double_pointer(base_pack + 8 * offsets[3]), (4 * N,))
-        root = carray(_double_pointer(base_pack + 8 * offsets[4]), (4,))
         gamma = carray(_double_pointer(base_pack + 8 * offsets[5]), (N, 5, nc))
         direct = direct_packs[i]
         chol_rhs_map = farray(_double_pointer(direct + 8 * direct_offsets[0]), (nc, 4 * N))
         chol_inv = farray(_double_pointer(direct + 8 * direct_offsets[1]), (nc, nc))
         steering_flat = carray(_double_pointer(direct + 8 * direct_offsets[2]), (N * nc,))
-        free, free_w = condensed_free(free_map, disturbance_map, cost_root, cost_index, root,
-                                      x0s[i], disturbances[i], disturbed[i], y_refs[i],
-                                      psi_refs[i], r_refs[i], has_r[i], delta_refs[i],
-                                      has_delta[i], N)
+        free, free_w = condensed_free(base_pack, offsets, x0s[i], disturbances[i],
+                                      disturbed[i], y_refs[i], psi_refs[i], r_refs[i], has_r[i],
+                                      delta_refs[i], has_delta[i], N)
         frees[i] = free
         # slots_used: one past the last slot with a row that is not 0 + s >= 0
         s = 0
