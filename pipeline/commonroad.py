@@ -58,12 +58,23 @@ def run(args: argparse.Namespace) -> int:
 #: collision rows' weight, for every method whose MPC can take them (the lateral MPC in the
 #: path frame, no controller of one's own); the peers' controllers see no road.
 ROAD_EDGE_WEIGHT = 1.0
+#: The lateral MPC's steering bound by the tyres' friction at road speeds
+#: (controller.steering_friction_share), for the same methods: without it the MPC plans
+#: steering of up to 0.4 rad at 12-20 m/s, beyond what the tyres hold, and an evasive swerve
+#: ends in a skid (docs/commonroad.md, "Steering within the tyres' friction").
+STEERING_FRICTION_SHARE = 1.0
 
 
 def road_overrides(method: str, scenario: Path, overrides: list[str]) -> list[str]:
-    """``controller.road_edge_weight`` for ``method`` unless the user set it or its controller
-    cannot take it (another kind, the fixed frame, the nonlinear MPC, a plug-in)."""
-    if any(o.startswith("controller.road_edge_weight=") for o in overrides):
+    """``controller.road_edge_weight`` and ``controller.steering_friction_share`` for
+    ``method``, each unless the user set it, where its controller can take it: the lateral
+    MPC (not another kind, the nonlinear MPC or a plug-in), and for the road's rows in its
+    path frame."""
+    keys = {"controller.road_edge_weight": ROAD_EDGE_WEIGHT,
+            "controller.steering_friction_share": STEERING_FRICTION_SHARE}
+    wanted = {key: value for key, value in keys.items()
+              if not any(o.startswith(f"{key}=") for o in overrides)}
+    if not wanted:
         return []
     from pipeline import api
 
@@ -73,9 +84,11 @@ def road_overrides(method: str, scenario: Path, overrides: list[str]) -> list[st
                             *[o for o in overrides if not o.startswith("hydra")]]).controller
     except Exception:
         return []      # wrong, in its one line)
-    takes = getattr(ctrl, "kind", "") == "mpc" and getattr(ctrl, "frame", "") == "path" \
-        and not ctrl._target_ and getattr(ctrl, "backend", "") != "nmpc"
-    return [f"controller.road_edge_weight={ROAD_EDGE_WEIGHT}"] if takes else []
+    lateral_mpc = getattr(ctrl, "kind", "") == "mpc" and not ctrl._target_ \
+        and getattr(ctrl, "backend", "") != "nmpc"
+    takes = {"controller.road_edge_weight": lateral_mpc and getattr(ctrl, "frame", "") == "path",
+             "controller.steering_friction_share": lateral_mpc}
+    return [f"{key}={value}" for key, value in wanted.items() if takes[key]]
 
 
 if __name__ == "__main__":

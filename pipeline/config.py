@@ -193,6 +193,9 @@ def _hash_of(data: dict) -> str:
         data["metrics"].pop("pass_reading")  # the default, as before the key
     if "road_edge_weight" in data["controller"] and data["controller"]["road_edge_weight"] is None:
         data["controller"].pop("road_edge_weight")  # no road in the MPC, as before the key
+    if "steering_friction_share" in data["controller"] \
+            and data["controller"]["steering_friction_share"] is None:
+        data["controller"].pop("steering_friction_share")  # the paper's bound, as before the key
     if "speed_bounds_mps" in data["controller"] and data["controller"]["speed_bounds_mps"] is None:
         data["controller"].pop("speed_bounds_mps")  # no speed rows, as before the key
     for section in ("planner", "controller"):

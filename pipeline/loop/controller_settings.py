@@ -254,6 +254,12 @@ class MpcSettings(_MpcSchema):
     # road: Euro NCAP, CommonRoad), their rows scaled by this factor against the collision
     # half-planes' slack weights; null: no road in the MPC (the paper's scenario has none)
     road_edge_weight: Optional[float] = None
+    # the steering bound at road speeds (a choice we add): each step's bound is the smaller of
+    # vehicle.steering_max_rad and the steering at which a kinematic single-track at the
+    # model's speed reaches this share of the tyres' friction (v^2 tan(delta) / L = share mu g);
+    # null: vehicle.steering_max_rad at every speed (the paper's; no effect below about 7 m/s
+    # at a share of 1 on the compact car)
+    steering_friction_share: Optional[float] = None
 
     def __post_init__(self) -> None:
         self._check_mpc()
@@ -294,6 +300,19 @@ class MpcSettings(_MpcSchema):
                 raise ConfigError("controller.road_edge_weight", self.road_edge_weight,
                                   "null with controller.backend=nmpc (the nonlinear MPC has "
                                   "no road rows)")
+        if self.steering_friction_share is not None:
+            between("controller.steering_friction_share", self.steering_friction_share,
+                    0.05, 1.0)
+            if self._target_:
+                raise ConfigError("controller.steering_friction_share",
+                                  self.steering_friction_share,
+                                  "null with a controller of one's own (controller._target_ "
+                                  f"{self._target_}: its QP is its own)")
+            if self.backend == "nmpc":
+                raise ConfigError("controller.steering_friction_share",
+                                  self.steering_friction_share,
+                                  "null with controller.backend=nmpc (the nonlinear MPC's "
+                                  "tyres have the friction limit themselves)")
 
     @property
     def road_slots(self) -> int:

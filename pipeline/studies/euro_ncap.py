@@ -39,8 +39,9 @@ from pipeline.studies.results.euro_ncap import EuroNcapResult
 logger = logging.getLogger(__name__)
 
 #: The road's edges in the lateral MPC (its path frame; the peers' controllers and the
-#: kinematic MPC see no road), as on a CommonRoad road (pipeline.commonroad.ROAD_EDGE_WEIGHT).
-ROAD = "controller.road_edge_weight=1.0"
+#: kinematic MPC see no road) and its steering bound by the tyres' friction at the step's
+#: speed, as on a CommonRoad road (pipeline.commonroad.road_overrides).
+ROAD = ("controller.road_edge_weight=1.0", "controller.steering_friction_share=1.0")
 #: Braking (a reading, the protocol's tests are built for it; the paper's MPC steers at a
 #: constant speed): velocity planning by the stopping distance down to a stop at the
 #: vehicle's acceleration limit (3 m/s^2), the plant and the MPC's model handing over to the
@@ -51,10 +52,10 @@ BRAKING = ("planner.velocity_planning=true", "planner.velocity_rule=stopping_dis
 #: The methods per track: (folder name, overrides). The kinematic track's improved and
 #: baseline are Appendix A's kinematic MPC with each APF.
 TRACKS: dict[str, tuple[tuple[str, tuple[str, ...]], ...]] = {
-    "lateral": (("improved", ("method=improved", ROAD)), ("baseline", ("method=baseline", ROAD)),
+    "lateral": (("improved", ("method=improved", *ROAD)), ("baseline", ("method=baseline", *ROAD)),
                 ("mpc_dcbf", ("method=mpc_dcbf",)), ("cbf_filter", ("method=cbf_filter",))),
-    "lateral_braking": (("improved", ("method=improved", ROAD, *BRAKING)),
-                        ("baseline", ("method=baseline", ROAD, *BRAKING))),
+    "lateral_braking": (("improved", ("method=improved", *ROAD, *BRAKING)),
+                        ("baseline", ("method=baseline", *ROAD, *BRAKING))),
     "kinematic": (("improved", ("method=improved", "controller=kinematic")),
                   ("baseline", ("method=baseline", "controller=kinematic")),
                   ("mpc_dcbf", ("method=mpc_dcbf_kinematic",)),

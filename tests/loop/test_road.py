@@ -109,15 +109,19 @@ def test_the_key_hashes_as_before_when_off_and_is_refused_where_it_cannot_act(ma
 
 
 def test_a_commonroad_run_gives_the_road_to_the_methods_whose_mpc_takes_it(tmp_path):
-    """apf-mpc commonroad: the lateral MPC in the path frame gets the road's edges; the peers'
-    own controllers, the fixed frame and a user's explicit setting do not get it added."""
-    from pipeline.commonroad import ROAD_EDGE_WEIGHT, road_overrides
+    """apf-mpc commonroad: the lateral MPC in the path frame gets the road's edges and the
+    steering bound by the tyres' friction; the peers' own controllers get neither, the fixed
+    frame the bound alone, and a user's explicit setting is never added to."""
+    from pipeline.commonroad import ROAD_EDGE_WEIGHT, STEERING_FRICTION_SHARE, road_overrides
 
     path = tmp_path / "any.xml"
     road = [f"controller.road_edge_weight={ROAD_EDGE_WEIGHT}"]
-    assert road_overrides("improved", path, []) == road
-    assert road_overrides("baseline", path, []) == road
+    friction = [f"controller.steering_friction_share={STEERING_FRICTION_SHARE}"]
+    assert road_overrides("improved", path, []) == road + friction
+    assert road_overrides("baseline", path, []) == road + friction
     assert road_overrides("mpc_dcbf", path, []) == []
     assert road_overrides("cbf_filter", path, []) == []
-    assert road_overrides("improved", path, ["controller.frame=fixed"]) == []
-    assert road_overrides("improved", path, ["controller.road_edge_weight=3"]) == []
+    assert road_overrides("improved", path, ["controller.frame=fixed"]) == friction
+    assert road_overrides("improved", path, ["controller.road_edge_weight=3"]) == friction
+    assert road_overrides("improved", path, ["controller.steering_friction_share=0.5"]) == road
+    assert road_overrides("improved", path, ["controller.backend=nmpc"]) == []

@@ -36,6 +36,7 @@ from pipeline.loop.controller.lateral_qp import (
     blocking_matrix,
     build_condensed_lateral_problem,
     condensed_data,
+    friction_steering_bound_rad,
     slots_used,
 )
 from pipeline.loop.controller.prediction_check import PredictionRecord, prediction_check
@@ -131,7 +132,7 @@ class LateralMpc:
         key = ("lateral_predictions", vehicle_key(vehicle), self.sample_time_s,
                self.model_cfg.b2_heading_entry, self.model_cfg.speed_grid_mps,
                controller.horizon, controller.control_horizon, controller.input_hold,
-               self.weights.tracking)
+               self.weights.tracking, controller.steering_friction_share)
         self._predictions: dict[tuple[Any, ...], CondensedPrediction] = \
             qp_cache.memo(key, dict) if qp_cache is not None else {}
         self.fallback = PlanFallback(controller.horizon)
@@ -142,8 +143,12 @@ class LateralMpc:
         key = (model.speed_mps, model.sample_time_s)
         entry = self._predictions.get(key)
         if entry is None or entry.model is not model:
-            entry = self._predictions[key] = CondensedPrediction.of(model, self.blocking,
-                                                                   self.weights.tracking)
+            share = self.cfg.steering_friction_share
+            bound = None if share is None \
+                else friction_steering_bound_rad(self.vehicle, share, model.speed_mps)
+            entry = self._predictions[key] = CondensedPrediction.of(
+                model, self.blocking, self.weights.tracking, self.vehicle.steering_max_rad,
+                bound)
         return entry
 
     def solve(self, inputs: MpcInputs, log: dict[str, Any] | None = None) -> ControlStep:

@@ -126,8 +126,12 @@ class DaqpCondensedQp:
         A[N:, :n_u] = data.gamma_h
         upper, lower = self._upper, self._lower
         base = n_u + n_s
-        upper[base:base + N] = self._dmax - data.free_d
-        lower[base:base + N] = -self._dmax - data.free_d
+        # the steering bound at the model's speed where it is tighter than the statement's
+        # (controller.steering_friction_share)
+        bound = data.prediction.steering_bound_rad
+        dmax = self._dmax if bound is None else bound
+        upper[base:base + N] = dmax - data.free_d
+        lower[base:base + N] = -dmax - data.free_d
         lower[base + N:] = data.bound_h
         if not (np.isfinite(data.hessian_u).all() and np.isfinite(f).all()
                 and np.isfinite(A).all() and np.isfinite(lower).all()):

@@ -181,6 +181,14 @@ class CondensedPrediction:
         0..N-1: the free response is ``free_map @ x0 + disturbance_map @ r_d``.
     gradient_map : ndarray, shape (Nc, 4 N)
         ``2 gamma_w'``: the cost's gradient in ``U`` is ``gradient_map @ free_w``.
+    steering_bound_rad : float or None
+        The steering bound at this model's speed where it is tighter than the statement's
+        (``controller.steering_friction_share``, :func:`friction_steering_bound_rad`); None:
+        the statement's ``vehicle.steering_max_rad``.
+    steering_scale : float
+        The statement's bound over ``steering_bound_rad`` (1 without one): the compiled
+        statement states ``|delta_k| <= bound`` as its own rows with the steering angle's
+        response and free value multiplied by this (:meth:`CondensedData.theta`).
     """
 
     model: LateralModel
@@ -199,12 +207,17 @@ class CondensedPrediction:
     chol_inv_flat: np.ndarray
     steering_gamma_w_flat: np.ndarray
     disturbance_map: np.ndarray
+    steering_bound_rad: float | None = None
+    steering_scale: float = 1.0
 
     @classmethod
     def of(cls, model: LateralModel, blocking: np.ndarray,
-           tracking: tuple[float, ...] = UNIT_TRACKING) -> CondensedPrediction:
+           tracking: tuple[float, ...] = UNIT_TRACKING, steering_max_rad: float | None = None,
+           steering_bound_rad: float | None = None) -> CondensedPrediction:
         """Build the maps of ``model``; ``tracking``: :attr:`LateralWeights.tracking`
-        ``(q_y, q_psi, q_r, q_d, r_u)``."""
+        ``(q_y, q_psi, q_r, q_d, r_u)``; ``steering_bound_rad``: a steering bound at this
+        speed below the statement's ``steering_max_rad`` (None, or not below it: the
+        statement's)."""
         from scipy.linalg import cholesky, solve_triangular
 
         Ad, Bd = model.Ad, model.Bd[:, 0]
@@ -248,12 +261,20 @@ class CondensedPrediction:
         cost_index = (5 * np.arange(n)[None, :] + np.array(COST_STATES)[:, None]).ravel()
         cost_root = np.repeat(root, n)
         steering_gamma_w = gamma[:, 4, :] @ chol_inv
+        scale = 1.0
+        if steering_bound_rad is not None and steering_max_rad is not None \
+                and steering_bound_rad < steering_max_rad:
+            scale = float(steering_max_rad) / float(steering_bound_rad)
+        else:
+            steering_bound_rad = None
         return cls(model, gamma, fortran(powers.reshape(-1, 5)), fortran(gamma_w),
                    root, 2.0 * half_hessian, chol, fortran(chol_rhs_map),
                    fortran(2.0 * gamma_w.T), chol_inv, cost_index, cost_root,
                    steering_gamma_w, chol_inv.ravel(order="F"),
-                   steering_gamma_w.ravel(order="F"),
-                   fortran(disturbance_map.reshape(-1, n)))
+                   (steering_gamma_w * scale if scale != 1.0 else steering_gamma_w
+                    ).ravel(order="F"),
+                   fortran(disturbance_map.reshape(-1, n)),
+                   None if steering_bound_rad is None else float(steering_bound_rad), scale)
 
     @cached_property
     def pack(self) -> np.ndarray:
@@ -371,8 +392,13 @@ class CondensedData:
         number of obstacle slots, the first ``slots`` of these data's (all by default; the
         rest must be empty rows, :func:`slots_used`)."""
         prediction = self.prediction
+        # a bound tighter than the statement's: both steering rows multiplied by the scale
+        # (c |gamma_d W + free_d| <= delta_max is |gamma_d W + free_d| <= delta_max / c; the
+        # flat response is stored scaled)
+        free_d = self.free_d if prediction.steering_scale == 1.0 \
+            else self.free_d * prediction.steering_scale
         head = [prediction.chol_inv_flat, self.chol_rhs, prediction.steering_gamma_w_flat,
-                self.free_d]
+                free_d]
         n = self.free_d.shape[0]
         all_slots = self.bound_h.shape[0] // n if n else 0
         slots = all_slots if slots is None else slots
@@ -384,6 +410,25 @@ class CondensedData:
             bound_h = bound_h.reshape(n, all_slots)[:, :slots].ravel()
         return np.concatenate([*head, (gamma_h @ prediction.chol_inv).ravel(order="F"),
                                bound_h])
+
+
+def friction_steering_bound_rad(vehicle: VehicleConfig, share: float | None,
+                                speed_mps: float) -> float:
+    """The lateral MPC's steering bound at ``speed_mps`` (``controller.steering_friction_share``):
+    ``min(steering_max, atan(share mu g L / v^2))``, the steering at which a kinematic
+    single-track's lateral acceleration ``v^2 tan(delta) / L`` reaches ``share`` times the
+    tyres' friction ``mu g`` (``vehicle.tire_friction``); ``vehicle.steering_max_rad`` when
+    ``share`` is None."""
+    from math import atan
+
+    from pipeline.loop.model import GRAVITY_MPS2
+
+    steering_max = float(vehicle.steering_max_rad)
+    if share is None:
+        return steering_max
+    speed = max(abs(float(speed_mps)), 1e-6)
+    return min(steering_max, atan(float(share) * float(vehicle.tire_friction) * GRAVITY_MPS2
+                                  * float(vehicle.wheelbase_m) / speed ** 2))
 
 
 def slots_used(*halfplane_rows: np.ndarray) -> int:

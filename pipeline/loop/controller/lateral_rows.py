@@ -44,7 +44,7 @@ def batch_key(controller: object, kernels: Kernels) -> tuple[Any, ...] | None:
     """The key of the members whose lateral MPCs :func:`lateral_steps` steps together (the
     same horizon and obstacle slots), or None where ``controller`` steps alone: another
     controller, a frame, path, reference or half-plane rule other than the default's, an ego
-    of several discs, the road's rows, CPython's kernels."""
+    of several discs, the road's rows, a steering bound by the speed, CPython's kernels."""
     if type(controller) is not LateralMpc or not kernels.compiled:
         return None
     frame, cfg = controller.frame, controller.cfg
@@ -52,7 +52,7 @@ def batch_key(controller: object, kernels: Kernels) -> tuple[Any, ...] | None:
             or cfg.heading_reference != "path_slope" \
             or cfg.path_state_reference != "steady_state" or cfg.road_edge_weight is not None \
             or cfg.halfplane_normal != "lateral_side" or controller.vehicle.footprint_discs != 1 \
-            or cfg.horizon < 1:
+            or cfg.steering_friction_share is not None or cfg.horizon < 1:
         return None
     return ("lateral_rows", cfg.horizon, cfg.max_obstacles)
 
