@@ -202,18 +202,21 @@ def _single_track_constants(vehicle: VehicleConfig) -> tuple[float, ...]:
 SINGLE_TRACK_CONSTANT_NAMES = (
     "mass_kg", "yaw_inertia_kg_m2", "cg_to_front_m", "cg_to_rear_m", "cornering_front_n_per_rad",
     "cornering_rear_n_per_rad", "force_limit_front_n", "force_limit_rear_n",
-    "speed_time_constant_s", "accel_max_mps2", "steering_max_rad", "kinematic_below_mps")
+    "speed_time_constant_s", "accel_max_mps2", "steering_max_rad", "kinematic_below_mps",
+    "brake_max_mps2")
 
 
 def single_track_constants(vehicle: VehicleConfig) -> tuple[float, ...]:
     """The plant's constants as :func:`single_track_rk4` takes them (order
     :data:`SINGLE_TRACK_CONSTANT_NAMES`): those of :func:`_single_track_constants`, then the
-    speed loop's time constant and acceleration limit and the steering bound."""
+    speed loop's time constant and acceleration limit, the steering bound, the hand-over speed
+    and the braking limit."""
     return tuple(float(c) for c in _single_track_constants(vehicle)) + (
         float(vehicle.speed_time_constant_s), float(vehicle.accel_max_mps2),
         float(vehicle.steering_max_rad),
         float(vehicle.kinematic_below_mps) if vehicle.kinematic_below_mps is not None
-        else -math.inf)  # off: no speed is below it
+        else -math.inf,  # off: no speed is below it
+        vehicle.braking_limit_mps2)
 
 
 def plant_derivative(state: np.ndarray, steering_rate_rad_s: float, speed_target_mps: float,
@@ -239,7 +242,7 @@ def plant_derivative(state: np.ndarray, steering_rate_rad_s: float, speed_target
     fy_front = lim_f * np.tanh(cf * slip_front / lim_f)
     fy_rear = lim_r * np.tanh(cr * slip_rear / lim_r)
     accel = np.clip((speed_target_mps - vx) / vehicle.speed_time_constant_s,
-                    -vehicle.accel_max_mps2, vehicle.accel_max_mps2)
+                    -vehicle.braking_limit_mps2, vehicle.accel_max_mps2)
     rate = steering_rate_rad_s
     if (delta >= vehicle.steering_max_rad and rate > 0) or (delta <= -vehicle.steering_max_rad
                                                            and rate < 0):
@@ -288,7 +291,7 @@ def single_track_rk4(state: KernelValues, constants: KernelValues, rate_cmd: flo
     ----------
     state : sequence of 7 floats
         ``[X, Y, psi, vx, vy, r, delta]`` (a list in CPython, an array compiled).
-    constants : sequence of 11 floats
+    constants : sequence of 13 floats
         :func:`single_track_constants` (a tuple in CPython, an array compiled).
 
     Returns
@@ -299,7 +302,7 @@ def single_track_rk4(state: KernelValues, constants: KernelValues, rate_cmd: flo
     m, iz, a, b = constants[0], constants[1], constants[2], constants[3]
     cf, cr, lim_f, lim_r = constants[4], constants[5], constants[6], constants[7]
     tau, acc_max, d_max = constants[8], constants[9], constants[10]
-    kinematic_below, wheelbase = constants[11], a + b
+    kinematic_below, brake_max, wheelbase = constants[11], constants[12], a + b
     # the steering rate is cut to 0 at the steering bound (the same rule in every stage)
     rate_at_upper = rate_cmd if rate_cmd <= 0 else 0.0
     rate_at_lower = rate_cmd if rate_cmd >= 0 else 0.0
@@ -312,7 +315,8 @@ def single_track_rk4(state: KernelValues, constants: KernelValues, rate_cmd: flo
             # below the hand-over speed: the kinematic single-track (no tyre slip; the tyre
             # law's 1/vx stiffness would need ever smaller steps), vy and r held to the steering
             kinematic_substep = single_track_kinematic_substep(
-                X, Y, psi, vx, delta, rate_cmd, target, tau, acc_max, d_max, b, wheelbase, h)
+                X, Y, psi, vx, delta, rate_cmd, target, tau, acc_max, d_max, b, wheelbase, h,
+                brake_max)
             X, Y, psi, vx = kinematic_substep[0], kinematic_substep[1], kinematic_substep[2], \
                 kinematic_substep[3]
             vy, r, delta = kinematic_substep[4], kinematic_substep[5], kinematic_substep[6]
@@ -330,7 +334,7 @@ def single_track_rk4(state: KernelValues, constants: KernelValues, rate_cmd: flo
             fy_front = lim_f * tanh(cf * (d - atan2(v + a * w, u_safe)) / lim_f)
             fy_rear = lim_r * tanh(cr * -atan2(v - b * w, u_safe) / lim_r)
             accel = (target - u) / tau
-            accel = acc_max if accel > acc_max else (-acc_max if accel < -acc_max else accel)
+            accel = acc_max if accel > acc_max else (-brake_max if accel < -brake_max else accel)
             k6 = rate_at_upper if d >= d_max else (rate_at_lower if d <= -d_max else rate_cmd)
             cos_d, cos_p, sin_p = cos(d), cos(p), sin(p)
             k0, k1, k2 = u * cos_p - v * sin_p, u * sin_p + v * cos_p, w
@@ -362,7 +366,7 @@ def single_track_rk4_rows(states: np.ndarray, constants: np.ndarray, rates_cmd: 
     Parameters
     ----------
     states : ndarray, shape (n, 7)
-    constants : ndarray, shape (n, 12)
+    constants : ndarray, shape (n, 13)
         :func:`single_track_constants` of each row's vehicle.
     rates_cmd, targets, dt_s : ndarray, shape (n,)
     substeps : ndarray of int, shape (n,)
@@ -379,12 +383,14 @@ def single_track_rk4_rows(states: np.ndarray, constants: np.ndarray, rates_cmd: 
 
 def single_track_kinematic_substep(X: float, Y: float, psi: float, vx: float, delta: float,
                                    rate_cmd: float, target: float, tau: float, acc_max: float,
-                                   d_max: float, b: float, wheelbase: float, h: float
+                                   d_max: float, b: float, wheelbase: float, h: float,
+                                   brake_max: float
                                    ) -> tuple[float, float, float, float, float, float, float]:
     """One RK4 substep of :func:`single_track_rk4` below the hand-over speed: the kinematic
     single-track about the centre of gravity (side slip ``beta = atan(b tan delta / L)``,
     yaw rate ``vx tan delta / L``), the same speed loop and steering actuator; returns
-    ``X, Y, psi, vx, vy, r, delta`` with ``vy = vx tan beta`` and ``r`` the kinematic ones."""
+    ``X, Y, psi, vx, vy, r, delta`` with ``vy = vx tan beta`` and ``r`` the kinematic ones
+    (``brake_max``: the speed loop's braking limit)."""
     rate_at_upper = rate_cmd if rate_cmd <= 0 else 0.0
     rate_at_lower = rate_cmd if rate_cmd >= 0 else 0.0
     s0 = s1 = s2 = s3 = s6 = 0.0
@@ -395,7 +401,7 @@ def single_track_kinematic_substep(X: float, Y: float, psi: float, vx: float, de
         step = fraction * h
         p, u, d = psi + step * k2, vx + step * k3, delta + step * k6
         accel = (target - u) / tau
-        accel = acc_max if accel > acc_max else (-acc_max if accel < -acc_max else accel)
+        accel = acc_max if accel > acc_max else (-brake_max if accel < -brake_max else accel)
         k6 = rate_at_upper if d >= d_max else (rate_at_lower if d <= -d_max else rate_cmd)
         tan_d = tan(d)
         side = atan2(b * tan_d, wheelbase)

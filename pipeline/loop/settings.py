@@ -66,6 +66,10 @@ class VehicleConfig(FrozenAfterValidation):
     # (planner.speed_floor_mps down to 0); None: the dynamic model at every speed, floored at
     # min_model_speed_mps (earlier releases)
     kinematic_below_mps: Optional[float] = None
+    # the plant's braking limit (m/s^2, a deceleration) where it is not accel_max_mps2: a
+    # passenger car brakes at 8-9 m/s^2 and accelerates at about 3 (Appendix A bounds a in
+    # [-3, 3]); None: accel_max_mps2 both ways (the paper's, earlier releases)
+    brake_max_mps2: Optional[float] = None
 
     #: Physical range of each parameter (a road vehicle, from a cart to a truck).
     BOUNDS = {"mass_kg": (10.0, 1e5), "yaw_inertia_kg_m2": (1.0, 1e7),
@@ -85,6 +89,8 @@ class VehicleConfig(FrozenAfterValidation):
         if self.kinematic_below_mps is not None:
             between("vehicle.kinematic_below_mps", self.kinematic_below_mps,
                     self.min_model_speed_mps, 20.0)
+        if self.brake_max_mps2 is not None:
+            between("vehicle.brake_max_mps2", self.brake_max_mps2, 1e-3, 50.0)
         if self.footprint_discs == 1 and self.footprint_span_m != 0.0:
             raise ConfigError("vehicle.footprint_span_m", self.footprint_span_m,
                               "0 with vehicle.footprint_discs=1 (one disc spans nothing)")
@@ -93,7 +99,8 @@ class VehicleConfig(FrozenAfterValidation):
     #: The keys added after the config hash was first pinned, with the reading from before
     #: them (left out of the hash while they hold it: :meth:`hash_view`)
     BEFORE_KEYS: ClassVar[dict[str, Any]] = {"footprint_discs": 1, "footprint_span_m": 0.0,
-                                             "kinematic_below_mps": None}
+                                             "kinematic_below_mps": None,
+                                             "brake_max_mps2": None}
 
     @staticmethod
     def hash_view(data: dict[str, Any]) -> dict[str, Any]:
@@ -111,6 +118,11 @@ class VehicleConfig(FrozenAfterValidation):
     @property
     def wheelbase_m(self) -> float:
         return self.cg_to_front_m + self.cg_to_rear_m
+
+    @property
+    def braking_limit_mps2(self) -> float:
+        """The plant's braking limit: ``brake_max_mps2``, else ``accel_max_mps2``."""
+        return float(self.accel_max_mps2 if self.brake_max_mps2 is None else self.brake_max_mps2)
 
 
 @dataclass

@@ -21,8 +21,10 @@ from pipeline.loop.scenario import ObstacleSnapshot, build_scenario, family_memb
 from pipeline.loop.simulate import SingleTrackPlant, simulate
 
 
-def test_compiled_plant_gives_step_plants_bits(make_config):
-    vehicle = make_config().vehicle
+@pytest.mark.parametrize("overrides", [[], ["vehicle.brake_max_mps2=8",
+                                              "vehicle.kinematic_below_mps=2"]])
+def test_compiled_plant_gives_step_plants_bits(make_config, overrides):
+    vehicle = make_config(overrides).vehicle
     constants = np.array(single_track_constants(vehicle))
     assert constants.shape == (len(SINGLE_TRACK_CONSTANT_NAMES),)
     rng = np.random.default_rng(7)
@@ -228,7 +230,7 @@ def test_compiled_frame_step_and_check_give_the_same_bits():
         settings = (ds, 14, float(rng.normal(0, 0.1)), float(rng.normal(0, 0.1)),
                     float(rng.uniform(1, 4)), float(rng.uniform(1, 4)),
                     float(rng.normal(1, 0.2)), float(rng.choice([0.1, 0.2])), 10, 0.5, 3.0,
-                    float(rng.choice([0.05, 0.2, 5.0])))
+                    float(rng.choice([3.0, 8.0])), float(rng.choice([0.05, 0.2, 5.0])))
         fast = frame_step_kernel(points, headings, curvature, *settings, plan_xy, plan_course,
                                  obstacles)
         plain = frame_step_arrays(points.tolist(), headings.tolist(), curvature.tolist(),

@@ -286,8 +286,9 @@ def test_path_frame_rows_are_each_members_path_frame(make_config):
     plan_lengths = np.array([0, N + 1, 0])
     args = (targets, np.tile([1.0, 0.0], (n, 1)), np.array([True, True, False]),
             np.full(n, 0.2), np.array([0.3, 0.25, 0.5]), np.array([12, 14, 11]),
-            targets[:, 0].copy(), np.array([3.0, 2.5, 5.0]), np.array([3.0, 3.0, 4.0]),
+            targets[:, 0].copy(), np.array([3.0, 2.5, 5.0]), np.array([3.0, 3.0, 1.0]),
             np.full(n, 0.1), np.array([0.1, 0.1, 0.12]), N, np.full(n, 0.5), np.full(n, 2.0),
+            np.array([2.0, 6.0, 2.5]),  # braking limits (the third member brakes at its own)
             plans_xy, plans_course, plan_lengths, obstacles, starts, radii, M,
             np.full(n, 0.9), np.full(n, 0.2), np.full(n, 12.0), np.array([True, True, True]))
     fast = COMPILED_KERNELS.path_frame_rows(*args)
@@ -301,7 +302,7 @@ def test_path_frame_rows_are_each_members_path_frame(make_config):
         assert np.array_equal(fast[0][i, :m + 1], p) and np.array_equal(fast[3][i, :m], bd)
         s0, d0, h0, st, rd, vx, s_o, d_o = COMPILED_KERNELS.frame_step(
             p, hd, cv, float(args[4][i]), m, *targets[i, 0], float(args[7][i]),
-            float(args[8][i]), 0.1, float(args[10][i]), N, 0.5, 2.0, 0.2,
+            float(args[8][i]), 0.1, float(args[10][i]), N, 0.5, 2.0, float(args[14][i]), 0.2,
             plans_xy[i, :plan_lengths[i]], plans_course[i, :plan_lengths[i]],
             obstacles[starts[i]:starts[i + 1]])
         assert np.array_equal(fast[4][i], [s0, d0, h0]) and np.array_equal(fast[5][i], st)

@@ -87,6 +87,7 @@ SWITCH_TESTS = {
     "scenario.commonroad.lanelet_gap_m": "test_commonroad",
     "controller.road_edge_weight": "test_road",
     "controller.steering_friction_share": "test_steering_friction",
+    "vehicle.brake_max_mps2": "test_brake_limit",
     "controller.speed_bounds_mps": "test_kinematic",
     **{f"scenario.source.params.{key}": "test_euro_ncap" for key in (
         "cases", "ego_speeds_kmh", "speed_tolerance_kmh", "child_speed_kmh",

@@ -1,9 +1,10 @@
 """The lateral MPC's steering bound by the tyres' friction (``controller.steering_friction_share``,
 a choice we add for road speeds): the bound against its closed form, the QP's predicted steering
 within it on both backends (Clarabel's statement with its rows scaled, DAQP's bounds), no bit
-changed where it does not bind, and on a planted road a car parked in the lane 30 m ahead at
-12 m/s: without the bound the evasive swerve ends in a skid off the road, with it the car keeps
-to the road, and with the braking reading it stops short of the parked car."""
+changed where it does not bind, and on a planted road a car parked in the lane ahead: at
+12 m/s and 30 m, without the bound the evasive swerve ends in a skid off the road, with it the
+car keeps to the road, and with the braking reading it stops short of the parked car; at
+20 m/s and 33 m braking stops short only with a car's braking (``vehicle.brake_max_mps2``)."""
 
 from __future__ import annotations
 
@@ -119,14 +120,14 @@ def test_a_share_out_of_range_is_one_line_naming_the_key(make_config, overrides,
 
 
 needs_extra = pytest.mark.skipif(commonroad_missing() is not None, reason=INSTALL_HINT)
-SPEED_MPS, GAP_M = 12.0, 30.0
 
 
-def write_parked_car_road(path: Path, lanes: int = 2) -> Path:
+def write_parked_car_road(path: Path, lanes: int = 2, speed_mps: float = 12.0,
+                          gap_m: float = 30.0) -> Path:
     """A straight road along x (the ego's lane y in [-3.5, 0], with ``lanes=2`` a second lane
-    y in [0, 3.5] beside it), a 4.5 x 1.8 m car parked in the ego's lane with its rear 30 m
-    ahead of the ego's start (10, -1.75) at 12 m/s heading along x, the goal a rectangle in
-    the ego's lane near x = 180."""
+    y in [0, 3.5] beside it), a 4.5 x 1.8 m car parked in the ego's lane with its rear
+    ``gap_m`` ahead of the ego's start (10, -1.75) at ``speed_mps`` heading along x, the goal a
+    rectangle in the ego's lane near x = 180."""
     from commonroad.common.file_writer import CommonRoadFileWriter, OverwriteExistingFile
     from commonroad.common.util import Interval
     from commonroad.geometry.shape import Rectangle
@@ -154,12 +155,12 @@ def write_parked_car_road(path: Path, lanes: int = 2) -> Path:
     start_x = 10.0
     scenario.add_objects(StaticObstacle(
         10, ObstacleType.PARKED_VEHICLE, Rectangle(4.5, 1.8),
-        InitialState(position=np.array([start_x + GAP_M + 2.25, -1.75]), orientation=0.0,
+        InitialState(position=np.array([start_x + gap_m + 2.25, -1.75]), orientation=0.0,
                      velocity=0.0, time_step=0)))
     goal = GoalRegion([CustomState(position=Rectangle(8.0, 3.5, center=np.array([180.0, -1.75])),
                                    time_step=Interval(0, 174))])
     problem = PlanningProblem(100, InitialState(
-        position=np.array([start_x, -1.75]), orientation=0.0, velocity=SPEED_MPS, time_step=0,
+        position=np.array([start_x, -1.75]), orientation=0.0, velocity=speed_mps, time_step=0,
         yaw_rate=0.0, slip_angle=0.0), goal)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
@@ -203,4 +204,30 @@ def test_a_car_parked_in_the_lane_ahead_at_road_speed(tmp_path, make_config):
     assert braking["checker_true_shapes_collision"] is False
     assert braking["ours_collision"] is False and braking["off_road_steps"] == 0
     assert braking["min_clearance_true_shapes_m"] > 0.5
+
+
+@needs_extra
+@pytest.mark.filterwarnings("ignore::DeprecationWarning")
+def test_at_20_mps_a_car_parked_33_m_ahead_is_stopped_short_of_only_with_a_cars_brakes(
+        tmp_path, make_config):
+    """A stop from 20 m/s needs 67 m at 3 m/s^2 (Appendix A's bound) and 25 m at 8: with the
+    braking reading the car hits the parked one at 3 m/s^2 and stops short of it when its
+    plant brakes at up to 8 (``vehicle.brake_max_mps2``), the rule still planning at 3."""
+    from pipeline.commonroad import road_overrides
+    from pipeline.studies.commonroad import run_commonroad
+    from pipeline.studies.results.commonroad import CommonRoadResult
+
+    path = write_parked_car_road(tmp_path / "ZAM_Parked-2.xml", speed_mps=20.0, gap_m=33.0)
+    road = road_overrides("improved", path, [])
+
+    def verdicts(name: str, overrides: list[str]) -> dict:
+        cfg = make_config(["experiment=commonroad", f"scenario.commonroad.path={path}",
+                           "method=improved", *road, *BRAKING, *overrides])
+        run_commonroad(cfg, tmp_path / name)
+        return CommonRoadResult.load(tmp_path / name).summary["verdicts"]
+
+    assert verdicts("paper_brakes", [])["checker_true_shapes_collision"] is True
+    car = verdicts("car_brakes", ["vehicle.brake_max_mps2=8"])
+    assert car["checker_true_shapes_collision"] is False and car["ours_collision"] is False
+    assert car["off_road_steps"] == 0 and car["min_clearance_true_shapes_m"] > 0.3
 

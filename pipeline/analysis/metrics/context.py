@@ -22,7 +22,8 @@ def trajectory_context(cfg: Any) -> TrajectoryContext:
     # limit); on the Appendix-A track (its plugins included) a steering angle and an
     # acceleration, both held over a sample, within the controller's bounds
     kinematic = cfg.controller.kind == "kinematic_mpc"
-    low, high = cfg.controller.accel_bounds_mps2 if kinematic else (-v.accel_max_mps2, 0.0)
+    low, high = cfg.controller.accel_bounds_mps2 if kinematic \
+        else (-v.braking_limit_mps2, 0.0)
     return TrajectoryContext((start[0], start[1]), (goal[0], goal[1]),
                              v.footprint_radius_m, cfg.model.validity_heading_rad,
                              tyre_linear_limit=_tyre_limit(cfg.model.tyre_linear_tolerance),

@@ -217,7 +217,7 @@ class PathFrame:
         settings = (path.ds_m, path.n_intervals, float(st[0]), float(st[1]), speed,
                     float(obs.speed_ref_mps), float(gains[1]), dt, N,
                     vehicle.speed_time_constant_s, vehicle.accel_max_mps2,
-                    self.curvature_limit_1_per_m())
+                    vehicle.braking_limit_mps2, self.curvature_limit_1_per_m())
         prepare = kernels.prepare
         s0, d0, heading0, stations, r_d, vx, s_o, d_o = kernels.frame_step(
             prepare(path.points_m), prepare(path.headings_rad),

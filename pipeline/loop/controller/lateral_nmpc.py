@@ -61,11 +61,12 @@ def single_track_ode(ca: Any, x: Any, rate: Any, speed_target: Any,
     constraint of the program, not a cut of the rate)."""
     # the dynamic plant (its hand-over to the kinematic one below a speed is not modelled)
     m, iz, a, b, cf, cr, lim_f, lim_r, tau, acc_max = constants[:10]
+    brake_max = constants[12] if len(constants) > 12 else acc_max
     vx, vy, r, delta, psi = x[3], x[4], x[5], x[6], x[2]
     vx_safe = ca.fmax(vx, 0.1)
     fy_front = lim_f * ca.tanh(cf * (delta - ca.atan2(vy + a * r, vx_safe)) / lim_f)
     fy_rear = lim_r * ca.tanh(cr * -ca.atan2(vy - b * r, vx_safe) / lim_r)
-    accel = ca.fmin(ca.fmax((speed_target - vx) / tau, -acc_max), acc_max)
+    accel = ca.fmin(ca.fmax((speed_target - vx) / tau, -brake_max), acc_max)
     return ca.vertcat(vx * ca.cos(psi) - vy * ca.sin(psi), vx * ca.sin(psi) + vy * ca.cos(psi),
                       r, accel + vy * r, (fy_front * ca.cos(delta) + fy_rear) / m - vx * r,
                       (a * fy_front * ca.cos(delta) - b * fy_rear) / iz, rate)

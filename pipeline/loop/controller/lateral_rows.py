@@ -69,6 +69,7 @@ def lateral_steps(controllers: Sequence[LateralMpc], observations: Sequence[Obse
     kappa, ds, speeds, speed_refs = np.empty(n), np.empty(n), np.empty(n), np.empty(n)
     vy_gains, steps_s, n_intervals = np.empty(n), np.empty(n), np.empty(n, dtype=np.int64)
     positions, time_constants, accel_max = np.empty((n, 2)), np.empty(n), np.empty(n)
+    brake_max = np.empty(n)
     plans_xy, plans_course = np.zeros((n, N + 1, 2)), np.zeros((n, N + 1))
     plan_lengths = np.zeros(n, dtype=np.int64)
     reach, margins, activation = np.empty(n), np.empty(n), np.empty(n)
@@ -90,6 +91,7 @@ def lateral_steps(controllers: Sequence[LateralMpc], observations: Sequence[Obse
         vy_gains[i] = float(frame.bank.gains(frame.bank.at(speed))[1])
         positions[i, 0], positions[i, 1] = float(st[0]), float(st[1])
         time_constants[i], accel_max[i] = vehicle.speed_time_constant_s, vehicle.accel_max_mps2
+        brake_max[i] = vehicle.braking_limit_mps2
         poses = frame.last_plan_poses
         if poses is not None:
             length = poses[0].shape[0]
@@ -111,8 +113,8 @@ def lateral_steps(controllers: Sequence[LateralMpc], observations: Sequence[Obse
     (points, headings, curvature, beyond, frame_values, stations, r_d, vx, obstacle_s,
      obstacle_d, G, h) = kernels.path_frame_rows(
         targets, line_cos_sin, extend, kappa, ds, n_intervals, positions, speeds, speed_refs,
-        vy_gains, steps_s, N, time_constants, accel_max, plans_xy, plans_course, plan_lengths,
-        obstacles, starts, radii, M, reach, margins, activation, constrained)
+        vy_gains, steps_s, N, time_constants, accel_max, brake_max, plans_xy, plans_course,
+        plan_lengths, obstacles, starts, radii, M, reach, margins, activation, constrained)
     inputs_of, logs = [], []
     for i, (mpc, obs) in enumerate(zip(controllers, observations, strict=True)):
         inputs, log = _inputs(mpc, obs, i, points, headings, curvature, beyond, frame_values,

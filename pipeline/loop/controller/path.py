@@ -497,7 +497,8 @@ def steady_state_gains(model: LateralModel) -> np.ndarray:
 def frame_step_arrays(points: KernelValues, headings: KernelValues, curvature: KernelValues,
                       ds: float, n: int, px: float, py: float, speed: float, speed_ref: float,
                       vy_gain: float, ts: float, n_steps: int, time_constant: float,
-                      accel_max: float, kappa_max: float, plan_xy: KernelValues,
+                      accel_max: float, brake_max: float, kappa_max: float,
+                      plan_xy: KernelValues,
                       plan_course: KernelValues, obstacles: KernelValues) -> tuple[Any, ...]:
     """One step's path-frame data on plain numbers: the vehicle's path coordinates, where it
     will be along the path at each step, the yaw rate the path then demands, and each obstacle
@@ -507,7 +508,7 @@ def frame_step_arrays(points: KernelValues, headings: KernelValues, curvature: K
     its pose).
 
     The stations follow the plant's speed loop (first order towards ``speed_ref`` with the
-    vehicle's time constant and acceleration limit) plus its ``vy r`` term (in a turn the
+    vehicle's time constant, acceleration and braking limits) plus its ``vy r`` term (in a turn the
     body's forward speed grows: ``vx' = a + vy r``), ``vy r`` taken at the path's steady state
     (``vy = vy_gain r_d``, ``r = r_d``, the yaw rate at most ``kappa_max`` times the speed: a
     path that turns faster than the vehicle can, as the rollout itself may, does not make the
@@ -544,7 +545,7 @@ def frame_step_arrays(points: KernelValues, headings: KernelValues, curvature: K
                 e += 2.0 * pi
             error[i] = e
     decay = 1.0 - exp(-ts / time_constant)
-    limit = accel_max * ts
+    limit, brake_limit = accel_max * ts, brake_max * ts
     s0, d0 = _project_point(px, py, points, headings, ds, n)
     heading0 = _heading_at(s0, headings, curvature, ds, n)
     r_d = np.zeros(N)
@@ -568,7 +569,8 @@ def frame_step_arrays(points: KernelValues, headings: KernelValues, curvature: K
             along[k] = value
             if k < N:
                 change = (speed_ref - v) * decay
-                change = -limit if change < -limit else (limit if change > limit else change)
+                change = -brake_limit if change < -brake_limit \
+                    else (limit if change > limit else change)
                 v = v + change + ts * vy * rate
                 v = v if v > 0.0 else 0.0
         for k in range(N):

@@ -25,7 +25,8 @@ def path_frame_rows(targets: np.ndarray, line_cos_sin: np.ndarray, extend: np.nd
                     kappa_max: np.ndarray, ds: np.ndarray, n_intervals: np.ndarray,
                     positions: np.ndarray, speeds: np.ndarray, speed_refs: np.ndarray,
                     vy_gains: np.ndarray, steps_s: np.ndarray, n_steps: int,
-                    time_constants: np.ndarray, accel_max: np.ndarray, plans_xy: np.ndarray,
+                    time_constants: np.ndarray, accel_max: np.ndarray, brake_max: np.ndarray,
+                    plans_xy: np.ndarray,
                     plans_course: np.ndarray, plan_lengths: np.ndarray, obstacles: np.ndarray,
                     obstacle_starts: np.ndarray, radii: np.ndarray, n_slots: int,
                     vehicle_reach: np.ndarray, margins: np.ndarray, activation: np.ndarray,
@@ -40,7 +41,8 @@ def path_frame_rows(targets: np.ndarray, line_cos_sin: np.ndarray, extend: np.nd
     line_cos_sin : ndarray, shape (n, 2)
         Each start-goal line's unit direction.
     extend : ndarray of bool, shape (n,)
-    kappa_max, ds, speeds, speed_refs, vy_gains, steps_s, time_constants, accel_max : (n,)
+    kappa_max, ds, speeds, speed_refs, vy_gains, steps_s, time_constants, accel_max, brake_max
+        Each ``(n,)``.
     n_intervals : ndarray of int, shape (n,)
         Each path's intervals (the padded outputs hold ``max(n_intervals)``).
     positions : ndarray, shape (n, 2)
@@ -90,7 +92,8 @@ def path_frame_rows(targets: np.ndarray, line_cos_sin: np.ndarray, extend: np.nd
         length = plan_lengths[i]
         s0, d0, heading0, st, rd, v, s_o, d_o = frame_step_arrays(
             p, hd, cv, ds[i], m, positions[i, 0], positions[i, 1], speeds[i], speed_refs[i],
-            vy_gains[i], steps_s[i], n_steps, time_constants[i], accel_max[i], kappa_max[i],
+            vy_gains[i], steps_s[i], n_steps, time_constants[i], accel_max[i], brake_max[i],
+            kappa_max[i],
             plans_xy[i, :length], plans_course[i, :length], obstacles[first:last])
         frame[i, 0], frame[i, 1], frame[i, 2] = s0, d0, heading0
         stations[i], r_d[i], vx[i] = st, rd, v
