@@ -46,10 +46,16 @@ def test_the_bound_is_the_steering_at_which_the_lateral_acceleration_reaches_the
     assert friction_steering_bound_rad(vehicle, 1.0, meet * 1.01) < steering_max
 
 
-def _swerve(make_config, backend: str, share: float | None, speed_mps: float = 12.0):
-    """One step of the lateral MPC at ``speed_mps`` asked to move 3 m sideways at once (the
-    reference 3 m to the left over the whole horizon): the predicted steering angles and the
-    step's bound."""
+#: A state already turning (offset, heading error, yaw rate, steering 0.05 rad): the steering
+#: rows' free response is not zero, so both halves of the scaled rows count
+TURNING = np.array([0.2, 0.0, 0.03, 0.02, 0.05])
+
+
+def _swerve(make_config, backend: str, share: float | None, speed_mps: float = 12.0,
+            x0: np.ndarray = TURNING):
+    """One step of the lateral MPC at ``speed_mps`` from ``x0`` asked to move 3 m sideways at
+    once (the reference 3 m to the left over the whole horizon): the predicted steering
+    angles, the step's bound and the plan."""
     overrides = [f"controller.backend={backend}"]
     if share is not None:
         overrides.append(f"controller.steering_friction_share={share}")
@@ -57,7 +63,7 @@ def _swerve(make_config, backend: str, share: float | None, speed_mps: float = 1
     mpc = LateralMpc(cfg.controller, cfg.vehicle, cfg.model, 0.1, QpCache())
     model = build_lateral_model(cfg.vehicle, speed_mps, 0.1)
     N = cfg.controller.horizon
-    inputs = make_inputs(model, cfg.controller, np.zeros(5), np.full(N, 3.0), np.zeros(N))
+    inputs = make_inputs(model, cfg.controller, x0, np.full(N, 3.0), np.zeros(N))
     step = mpc.solve(inputs)
     assert step.fallback == "none" and step.status == "optimal"
     bound = friction_steering_bound_rad(cfg.vehicle, share, speed_mps)
@@ -66,22 +72,69 @@ def _swerve(make_config, backend: str, share: float | None, speed_mps: float = 1
 
 @pytest.mark.parametrize("backend", ["clarabel_direct", "daqp", "cvxpy"])
 def test_every_predicted_steering_angle_stays_within_the_bound(make_config, backend):
-    """At 12 m/s the bound is 0.15 rad; a swerve the unbounded MPC plans with up to 0.4 rad
-    (the planted effect) keeps every predicted angle within it, the bound binding."""
+    """At 12 m/s the bound is 0.15 rad; a swerve the unbounded MPC plans with 0.25 rad from
+    a turning state (the planted effect) keeps every predicted angle within it, the bound
+    binding."""
     free, steering_max, _ = _swerve(make_config, backend, None)
-    assert np.max(np.abs(free)) > 0.3  # what the bound then cuts
+    assert np.max(np.abs(free)) > 0.2  # what the bound then cuts
     angles, bound, _ = _swerve(make_config, backend, 1.0)
     assert bound == pytest.approx(0.152, abs=2e-3) and bound < steering_max
     assert np.max(np.abs(angles)) <= bound + 1e-6
     assert np.max(np.abs(angles)) >= bound - 1e-4  # binding
 
 
-def test_the_backends_agree_on_the_bounded_qp(make_config):
+@pytest.mark.parametrize("steering_now", [0.05, -0.08])
+def test_the_backends_agree_on_the_bounded_qp(make_config, steering_now):
     """Clarabel (its statement's steering rows scaled) and DAQP (its bounds set to the bound)
-    reach the same plan: two solvers, one QP."""
-    _, _, clarabel = _swerve(make_config, "clarabel_direct", 1.0, 15.0)
-    _, _, daqp = _swerve(make_config, "daqp", 1.0, 15.0)
+    reach the same plan from a turning state: two solvers, one QP."""
+    x0 = TURNING.copy()
+    x0[4] = steering_now
+    _, _, clarabel = _swerve(make_config, "clarabel_direct", 1.0, 15.0, x0)
+    _, _, daqp = _swerve(make_config, "daqp", 1.0, 15.0, x0)
     assert np.allclose(clarabel, daqp, atol=1e-5)
+
+
+@pytest.mark.parametrize("backend", ["clarabel_direct", "daqp"])
+def test_steering_beyond_the_bound_comes_down_at_its_rate_instead_of_failing(make_config,
+                                                                             backend):
+    """At 15 m/s the bound is 0.098 rad; a car steering 0.3 rad now (its speed rose since)
+    cannot be within it at the next step (1 rad/s for 0.1 s). The bound then is relaxed to
+    what the rate allows, ``max(bound, 0.3 - 0.1 k)``: the QP keeps a plan (no fallback), the
+    steering comes down at the full rate and is within the bound from the third step on."""
+    from pipeline.loop.controller.lateral_qp import steering_bounds_from
+
+    x0 = TURNING.copy()
+    x0[4] = 0.3
+    angles, bound, _ = _swerve(make_config, backend, 1.0, 15.0, x0)
+    relaxed = steering_bounds_from(bound, 0.3, 1.0, 0.1, angles.size)
+    assert relaxed[0] == pytest.approx(0.2) and relaxed[1] == pytest.approx(0.1)
+    assert np.all(np.abs(angles) <= relaxed + 1e-6)
+    assert angles[0] == pytest.approx(0.2, abs=1e-6)  # down at the full rate
+    assert np.max(np.abs(angles[2:])) <= bound + 1e-6
+    assert steering_bounds_from(bound, 0.05, 1.0, 0.1, 10) is None
+    assert steering_bounds_from(bound, bound + 0.09, 1.0, 0.1, 10) is None  # one step away
+
+
+def test_a_member_with_the_bound_never_steps_in_a_compiled_batch(make_config):
+    """The compiled batches state the vehicle's steering bound alone: a controller with the
+    share steps alone (no batch key), and controllers of different shares sharing one cache
+    get their own predictions."""
+    from pipeline.loop.compiled import COMPILED_KERNELS
+    from pipeline.loop.controller.lateral_rows import batch_key
+
+    cache = QpCache()
+    plain_cfg = make_config()
+    shared_cfg = make_config(["controller.steering_friction_share=1.0"])
+    plain = LateralMpc(plain_cfg.controller, plain_cfg.vehicle, plain_cfg.model, 0.1, cache,
+                       COMPILED_KERNELS)
+    shared = LateralMpc(shared_cfg.controller, shared_cfg.vehicle, shared_cfg.model, 0.1, cache,
+                        COMPILED_KERNELS)
+    assert batch_key(plain, COMPILED_KERNELS) is not None
+    assert batch_key(shared, COMPILED_KERNELS) is None
+    model = build_lateral_model(plain_cfg.vehicle, 15.0, 0.1)
+    assert plain.prediction(model).steering_bound_rad is None
+    assert shared.prediction(model).steering_bound_rad == pytest.approx(
+        friction_steering_bound_rad(shared_cfg.vehicle, 1.0, 15.0))
 
 
 def test_where_the_bound_does_not_bind_no_bit_changes(make_config):
@@ -111,6 +164,7 @@ def test_where_the_bound_does_not_bind_no_bit_changes(make_config):
     (["controller.steering_friction_share=0"], "[0.05, 1.0]"),
     (["controller.steering_friction_share=1.5"], "[0.05, 1.0]"),
     (["controller.steering_friction_share=1.0", "controller.backend=nmpc"], "nmpc"),
+    (["method=mpc_dcbf", "controller.steering_friction_share=1.0"], "of one's own"),
 ])
 def test_a_share_out_of_range_is_one_line_naming_the_key(make_config, overrides, fragment):
     with pytest.raises(ConfigError) as refusal:

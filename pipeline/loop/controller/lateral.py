@@ -38,6 +38,7 @@ from pipeline.loop.controller.lateral_qp import (
     condensed_data,
     friction_steering_bound_rad,
     slots_used,
+    steering_bounds_from,
 )
 from pipeline.loop.controller.prediction_check import PredictionRecord, prediction_check
 from pipeline.loop.controller.qp import QpCache, QpSolution, compiled_backend
@@ -156,7 +157,16 @@ class LateralMpc:
         solution = QpSolution("not_solved", -1, 0.0, None)
         data = None
         if isfinite(sum(inputs.x0.tolist())):  # inf or nan anywhere makes the sum non-finite
-            data = condensed_data(self.prediction(inputs.model), inputs, self.weights)
+            prediction = self.prediction(inputs.model)
+            data = condensed_data(prediction, inputs, self.weights)
+            if prediction.steering_bound_rad is not None:
+                # the steering now beyond the friction bound: it may come down at its rate
+                bounds = steering_bounds_from(
+                    prediction.steering_bound_rad, float(inputs.x0[4]),
+                    self.vehicle.steering_rate_max_rad_s, inputs.model.sample_time_s,
+                    self.horizon)
+                if bounds is not None:
+                    data = replace(data, steering_bounds_rad=bounds)
             solution = self.qp_for(inputs).solve(data)
         if solution.ok and data is not None:
             U = solution.value("U").reshape(-1)

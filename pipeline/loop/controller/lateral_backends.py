@@ -129,7 +129,8 @@ class DaqpCondensedQp:
         # the steering bound at the model's speed where it is tighter than the statement's
         # (controller.steering_friction_share)
         bound = data.prediction.steering_bound_rad
-        dmax = self._dmax if bound is None else bound
+        dmax = self._dmax if bound is None else (
+            bound if data.steering_bounds_rad is None else data.steering_bounds_rad)
         upper[base:base + N] = dmax - data.free_d
         lower[base:base + N] = -dmax - data.free_d
         lower[base + N:] = data.bound_h

@@ -360,6 +360,10 @@ class CondensedData:
     gamma_h: np.ndarray     # (N M, Nc) half-plane rows folded onto U
     bound_h: np.ndarray     # (N M,) their bounds
     free: np.ndarray        # (N, 5) free response
+    #: each step's steering bound where the prediction's friction bound
+    #: (:attr:`CondensedPrediction.steering_bound_rad`) is relaxed, the steering now beyond it
+    #: (:func:`steering_bounds_from`); None: the prediction's bound at every step
+    steering_bounds_rad: np.ndarray | None = None
 
     @property
     def gamma_w(self) -> np.ndarray:
@@ -394,11 +398,16 @@ class CondensedData:
         prediction = self.prediction
         # a bound tighter than the statement's: both steering rows multiplied by the scale
         # (c |gamma_d W + free_d| <= delta_max is |gamma_d W + free_d| <= delta_max / c; the
-        # flat response is stored scaled)
-        free_d = self.free_d if prediction.steering_scale == 1.0 \
-            else self.free_d * prediction.steering_scale
-        head = [prediction.chol_inv_flat, self.chol_rhs, prediction.steering_gamma_w_flat,
-                free_d]
+        # flat response is stored scaled), each row by its own where the bounds differ by step
+        steering_flat, free_d = prediction.steering_gamma_w_flat, self.free_d
+        if self.steering_bounds_rad is not None and prediction.steering_bound_rad is not None:
+            scales = prediction.steering_bound_rad * prediction.steering_scale \
+                / self.steering_bounds_rad
+            steering_flat = (prediction.steering_gamma_w * scales[:, None]).ravel(order="F")
+            free_d = self.free_d * scales
+        elif prediction.steering_scale != 1.0:
+            free_d = self.free_d * prediction.steering_scale
+        head = [prediction.chol_inv_flat, self.chol_rhs, steering_flat, free_d]
         n = self.free_d.shape[0]
         all_slots = self.bound_h.shape[0] // n if n else 0
         slots = all_slots if slots is None else slots
@@ -429,6 +438,22 @@ def friction_steering_bound_rad(vehicle: VehicleConfig, share: float | None,
     speed = max(abs(float(speed_mps)), 1e-6)
     return min(steering_max, atan(float(share) * float(vehicle.tire_friction) * GRAVITY_MPS2
                                   * float(vehicle.wheelbase_m) / speed ** 2))
+
+
+def steering_bounds_from(bound_rad: float, steering_now_rad: float, rate_max_rad_s: float,
+                         step_s: float, horizon: int) -> np.ndarray | None:
+    """Each predicted step's steering bound when the steering now is beyond ``bound_rad``
+    (the friction bound fell with a rising speed, or the step's model speed rose): the
+    steering may come down at the actuator's rate, ``max(bound, |delta_0| - k rate dt)`` at
+    step ``k = 1..N``, so the QP keeps a plan (the rows at ``bound`` would ask for more than
+    the rate allows). None where the first step can be within the bound (``|delta_0| - rate
+    dt <= bound``: the bound at every step, the same statement bit for bit)."""
+    excess = abs(float(steering_now_rad))
+    per_step = float(rate_max_rad_s) * float(step_s)
+    if not excess - per_step > bound_rad:  # NaN too: the solve then reports non-finite data
+        return None
+    steps = np.arange(1, horizon + 1)
+    return np.maximum(bound_rad, excess - steps * per_step)
 
 
 def slots_used(*halfplane_rows: np.ndarray) -> int:

@@ -250,6 +250,10 @@ def _condensing_arrays(controllers: Sequence[LateralMpc], inputs_of: Sequence[Mp
     prediction's pack, its blocking, measured state, disturbance, references and half-planes
     (the arguments of :func:`~pipeline.loop.controller.daqp_rows.daqp_condensed_rows` by
     name)."""
+    if any(prediction.steering_bound_rad is not None for prediction in predictions):
+        # the compiled statements know the vehicle's steering bound alone (batch_key keeps a
+        # member with controller.steering_friction_share out of the batches)
+        raise RuntimeError("a member with a steering bound by friction in a compiled batch")
     n = len(controllers)
     first = controllers[0]
     N, nc, M = first.horizon, first.cfg.control_horizon, first.cfg.max_obstacles
