@@ -43,13 +43,14 @@ logger = logging.getLogger(__name__)
 #: speed, as on a CommonRoad road (pipeline.commonroad.road_overrides).
 ROAD = ("controller.road_edge_weight=1.0", "controller.steering_friction_share=1.0")
 #: Braking (a reading, the protocol's tests are built for it; the paper's MPC steers at a
-#: constant speed): velocity planning by the stopping distance down to a stop, planned at
-#: 3 m/s^2 (Appendix A's acceleration bound), by a car that brakes at up to 8 m/s^2 (a
-#: passenger car's full braking on dry asphalt, below the tyres' mu g = 8.8; the plant's
-#: acceleration stays at 3), the plant and the MPC's model handing over to the kinematic
-#: single-track below 2 m/s (as CommonRoad's braking reading).
-BRAKING = ("planner.velocity_planning=true", "planner.velocity_rule=stopping_distance",
-           "planner.speed_floor_mps=0", "planner.braking_decel_mps2=3.0",
+#: constant speed): Section 3.1's velocity planning as the register reads it
+#: (predicted_clearance: the fastest speed whose constant-velocity prediction of every
+#: obstacle keeps the clearance along the APF's path) down to a stop, planned at 6 m/s^2 by a
+#: car that brakes at up to 8 (a passenger car's full braking on dry asphalt, below the tyres'
+#: mu g = 8.8; its acceleration stays at Appendix A's 3), the plant and the MPC's model
+#: handing over to the kinematic single-track below 2 m/s (as CommonRoad's braking reading).
+BRAKING = ("planner.velocity_planning=true", "planner.velocity_rule=predicted_clearance",
+           "planner.speed_floor_mps=0", "planner.braking_decel_mps2=6.0",
            "planner.stop_margin_m=1.0", "vehicle.kinematic_below_mps=2.0",
            "vehicle.brake_max_mps2=8.0")
 #: The methods per track: (folder name, overrides). The kinematic track's improved and
