@@ -61,7 +61,7 @@ def single_track_ode(ca: Any, x: Any, rate: Any, speed_target: Any,
     constraint of the program, not a cut of the rate)."""
     # the dynamic plant (its hand-over to the kinematic one below a speed is not modelled)
     m, iz, a, b, cf, cr, lim_f, lim_r, tau, acc_max = constants[:10]
-    brake_max = constants[12] if len(constants) > 12 else acc_max
+    brake_max = constants[12]  # single_track_constants' braking limit
     vx, vy, r, delta, psi = x[3], x[4], x[5], x[6], x[2]
     vx_safe = ca.fmax(vx, 0.1)
     fy_front = lim_f * ca.tanh(cf * (delta - ca.atan2(vy + a * r, vx_safe)) / lim_f)
