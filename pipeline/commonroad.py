@@ -63,32 +63,48 @@ ROAD_EDGE_WEIGHT = 1.0
 #: steering of up to 0.4 rad at 12-20 m/s, beyond what the tyres hold, and an evasive swerve
 #: ends in a skid (docs/commonroad.md, "Steering within the tyres' friction").
 STEERING_FRICTION_SHARE = 1.0
+#: The keys by which a user chooses the speed rule themselves: given any of them, a run gets
+#: none of the road's braking (``planner.velocity_planning=false`` is the paper's constant
+#: speed).
+SPEED_RULE_KEYS = ("planner.velocity_planning", "planner.velocity_rule")
+
+
+def _given(key: str, overrides: list[str]) -> bool:
+    return any(o.startswith(f"{key}=") for o in overrides)
 
 
 def road_overrides(method: str, scenario: Path, overrides: list[str]) -> list[str]:
-    """``controller.road_edge_weight`` and ``controller.steering_friction_share`` for
-    ``method``, each unless the user set it, where its controller can take it: the lateral
-    MPC (not another kind, the nonlinear MPC or a plug-in), and for the road's rows in its
-    path frame."""
-    keys = {"controller.road_edge_weight": ROAD_EDGE_WEIGHT,
-            "controller.steering_friction_share": STEERING_FRICTION_SHARE}
-    wanted = {key: value for key, value in keys.items()
-              if not any(o.startswith(f"{key}=") for o in overrides)}
+    """The road's settings for ``method``, each unless the user set it, where its controller
+    can take them (the lateral MPC: not another kind, the nonlinear MPC or a plug-in):
+    ``controller.road_edge_weight`` (in the path frame), ``controller.steering_friction_share``
+    and braking from every obstacle's prediction (:data:`~pipeline.studies.euro_ncap.BRAKING`,
+    the Euro NCAP braking track's, for the project's own planner; none when the user chose
+    the speed rule by a key of :data:`SPEED_RULE_KEYS`)."""
+    from pipeline.studies.euro_ncap import BRAKING
+
+    keys: dict[str, object] = {"controller.road_edge_weight": ROAD_EDGE_WEIGHT,
+                               "controller.steering_friction_share": STEERING_FRICTION_SHARE}
+    braking = {} if any(_given(key, overrides) for key in SPEED_RULE_KEYS) else \
+        dict(item.split("=", 1) for item in BRAKING)
+    wanted = {key: value for key, value in {**keys, **braking}.items()
+              if not _given(key, overrides)}
     if not wanted:
         return []
     from pipeline import api
 
     try:
-        ctrl = api.compose(["experiment=commonroad", f"method={method}",
-                            f"scenario.commonroad.path={scenario}",
-                            *[o for o in overrides if not o.startswith("hydra")]]).controller
+        cfg = api.compose(["experiment=commonroad", f"method={method}",
+                           f"scenario.commonroad.path={scenario}",
+                           *[o for o in overrides if not o.startswith("hydra")]])
     except Exception:
         return []      # wrong, in its one line)
+    ctrl = cfg.controller
     lateral_mpc = getattr(ctrl, "kind", "") == "mpc" and not ctrl._target_ \
         and getattr(ctrl, "backend", "") != "nmpc"
     takes = {"controller.road_edge_weight": lateral_mpc and getattr(ctrl, "frame", "") == "path",
              "controller.steering_friction_share": lateral_mpc}
-    return [f"{key}={value}" for key, value in wanted.items() if takes[key]]
+    brakes = lateral_mpc and not getattr(cfg.planner, "_target_", None)
+    return [f"{key}={value}" for key, value in wanted.items() if takes.get(key, brakes)]
 
 
 if __name__ == "__main__":

@@ -1,19 +1,19 @@
-"""A CommonRoad run judged twice: by our own check and by CommonRoad's drivability checker.
+"""A CommonRoad run judged twice: by our own checks and by CommonRoad's drivability checker.
 
-Our check (:func:`~pipeline.analysis.metrics.geometry.clearance_series`) sees what our methods
-see: the ego as its discs (``vehicle.footprint_radius_m`` at ``vehicle.footprint_discs``
-centres along its heading; under ``obstacle_disc=cover`` its rectangle's cover) and each
-obstacle as its discs. The
-drivability checker (commonroad-drivability-checker, an independent C++ collision library) is
-asked twice at every logged step:
+A run's verdict is our own check on the true shapes: the ego as its car rectangle
+(``vehicle_type``'s length and width, centred on the logged position along the logged heading)
+and each obstacle as the file's shape at that time step, in contact where shapely's polygon
+distance (GEOS, a library independent of the checker's) is 0. The drivability checker
+(commonroad-drivability-checker, an independent C++ collision library) is asked the same at
+every logged step, and its verdict must equal ours on every step.
 
-* on the same geometry (the ego's disc against the obstacles' discs as logged): where it and our
-  check disagree, one of the two checks is wrong;
-* on the true shapes (the ego as its car rectangle, ``vehicle_type``'s length and width, centred
-  on the logged position along the logged heading; the obstacles as the file's shapes at that
-  time step): where this verdict differs from our disc check, the disc is the reason; beside
-  it our own check on the same true shapes (shapely's polygon distance 0, GEOS: a library
-  independent of the checker's), which the checker's must equal on every step.
+Beside it, what our methods see (:func:`~pipeline.analysis.metrics.geometry.clearance_series`,
+``ours_collision_steps``): the ego as its discs (``vehicle.footprint_radius_m`` at
+``vehicle.footprint_discs`` centres along its heading; under ``obstacle_disc=cover`` its
+rectangle's cover) and each obstacle as its discs, checked by the drivability checker too on
+the same geometry: where it and our disc check disagree, one of the two checks is wrong. Where
+the discs and the true shapes differ, the discs are the reason: a cover holds its rectangle,
+so it sees contact a few steps longer.
 
 Beside the verdicts: the clearance between the true shapes (shapely's polygon distance; a
 circle at its full radius, not at the half radius of commonroad-io's own shapely circle), the

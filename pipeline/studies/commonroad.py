@@ -121,16 +121,17 @@ def run_and_log(experiment: ExperimentConfig, out_dir: Path) -> float | tuple[fl
     for several)."""
     done = run_commonroad(experiment, out_dir)
     v, m = done.verdicts, done.run.flat()
-    log.info("%s on %s (%d steps at %.3g m/s): collision ours %s, drivability checker on our "
-             "discs %s (agree on %d/%d steps), on the true shapes %s (agree on %d/%d steps); "
-             "min clearance ours %.3f m, true shapes %.3f m; off the road on %d steps (%d before "
-             "the first contact on the true shapes); goal "
-             "reached by CommonRoad's definition %s, by ours %s; success (the file's goal, no "
-             "contact on the true shapes) %s -> %s", m["method"],
-             m["scenario"], v.steps, done.result.summary["run"]["speed_mps"], v.ours_collision,
-             v.checker_same_geometry_collision, v.agreement_same_geometry_steps, v.steps,
-             v.checker_true_shapes_collision, v.agreement_true_shapes_steps, v.steps,
-             v.min_clearance_ours_m, v.min_clearance_true_shapes_m, v.off_road_steps,
+    log.info("%s on %s (%d steps at %.3g m/s): collision on the true shapes, ours %s (%d steps), "
+             "the drivability checker's %s (agree on %d/%d steps); the MPC's discs %s (%d "
+             "steps; the checker on them agrees on %d/%d steps); min clearance, true shapes "
+             "%.3f m, discs %.3f m; off the road on %d steps (%d before the first contact on "
+             "the true shapes); goal reached by CommonRoad's definition %s, by ours %s; "
+             "success (the file's goal, no contact on the true shapes) %s -> %s", m["method"],
+             m["scenario"], v.steps, done.result.summary["run"]["speed_mps"],
+             v.ours_true_shapes_collision, v.ours_true_shapes_collision_steps,
+             v.checker_true_shapes_collision, v.agreement_ours_true_shapes_steps, v.steps,
+             v.ours_collision, v.ours_collision_steps, v.agreement_same_geometry_steps, v.steps,
+             v.min_clearance_true_shapes_m, v.min_clearance_ours_m, v.off_road_steps,
              v.off_road_steps_before_contact,
              v.goal_reached_commonroad, m["termination"] == "goal_line", v.success, out_dir)
     values = objective_values(pd.DataFrame([m]), experiment.tune.objectives)

@@ -64,6 +64,7 @@ SWITCH_TESTS = {
     "controller.path_curvature_clip": "test_path_frame",
     "controller.path_state_reference": "test_path_frame",
     "controller.horizon_reach_m": "test_path_frame", "planner.velocity_rule": "test_path_frame",
+    "planner.velocity_planning": "test_planner",
     "claims.interval_adjustment": "test_outcome_interval",
     "tune.convergence_tolerance": "test_tune_convergence",
     "tune.convergence_window": "test_tune_convergence",

@@ -109,19 +109,33 @@ def test_the_key_hashes_as_before_when_off_and_is_refused_where_it_cannot_act(ma
 
 
 def test_a_commonroad_run_gives_the_road_to_the_methods_whose_mpc_takes_it(tmp_path):
-    """apf-mpc commonroad: the lateral MPC in the path frame gets the road's edges and the
-    steering bound by the tyres' friction; the peers' own controllers get neither, the fixed
-    frame the bound alone, and a user's explicit setting is never added to."""
+    """apf-mpc commonroad: the lateral MPC in the path frame gets the road's edges, the
+    steering bound by the tyres' friction and braking from every obstacle's prediction (the
+    Euro NCAP braking track's keys); the peers' own controllers get none, the fixed frame no
+    edges; a user's explicit setting is never added to, and a user who chose the speed rule
+    gets no braking."""
     from pipeline.commonroad import ROAD_EDGE_WEIGHT, STEERING_FRICTION_SHARE, road_overrides
+    from pipeline.studies.euro_ncap import BRAKING
 
     path = tmp_path / "any.xml"
     road = [f"controller.road_edge_weight={ROAD_EDGE_WEIGHT}"]
     friction = [f"controller.steering_friction_share={STEERING_FRICTION_SHARE}"]
-    assert road_overrides("improved", path, []) == road + friction
-    assert road_overrides("baseline", path, []) == road + friction
+    braking = list(BRAKING)
+    assert "planner.velocity_rule=predicted_clearance" in braking \
+        and "planner.speed_floor_mps=0" in braking
+    assert road_overrides("improved", path, []) == road + friction + braking
+    assert road_overrides("baseline", path, []) == road + friction + braking
     assert road_overrides("mpc_dcbf", path, []) == []
     assert road_overrides("cbf_filter", path, []) == []
-    assert road_overrides("improved", path, ["controller.frame=fixed"]) == friction
-    assert road_overrides("improved", path, ["controller.road_edge_weight=3"]) == friction
-    assert road_overrides("improved", path, ["controller.steering_friction_share=0.5"]) == road
+    assert road_overrides("improved", path, ["controller.frame=fixed"]) == friction + braking
+    assert road_overrides("improved", path, ["controller.road_edge_weight=3"]) == \
+        friction + braking
+    assert road_overrides("improved", path, ["controller.steering_friction_share=0.5"]) == \
+        road + braking
     assert road_overrides("improved", path, ["controller.backend=nmpc"]) == []
+    # the paper's constant speed, or another rule: none of the braking keys
+    for chosen in ("planner.velocity_planning=false", "planner.velocity_rule=stopping_distance"):
+        assert road_overrides("baseline", path, [chosen]) == road + friction
+    # one braking key set by the user: the others still come
+    assert road_overrides("improved", path, ["vehicle.brake_max_mps2=6"]) == \
+        road + friction + [b for b in braking if not b.startswith("vehicle.brake_max_mps2=")]

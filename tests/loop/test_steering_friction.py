@@ -224,28 +224,28 @@ def write_parked_car_road(path: Path, lanes: int = 2, speed_mps: float = 12.0,
     return path
 
 
-#: the braking reading: Section 3.1's velocity planning from the obstacles' predictions down to
-#: a stop, planned at 6 m/s^2 (the Euro NCAP braking track's)
-BRAKING = ["planner.velocity_planning=true", "planner.velocity_rule=predicted_clearance",
-           "planner.speed_floor_mps=0", "planner.braking_decel_mps2=6",
-           "vehicle.kinematic_below_mps=2"]
+#: the paper's constant speed: a command line that sets the speed rule gets none of the road's
+#: braking (pipeline.commonroad.road_overrides)
+CONSTANT_SPEED = ["planner.velocity_planning=false"]
 
 
 @needs_extra
 @pytest.mark.filterwarnings("ignore::DeprecationWarning")
 def test_a_car_parked_in_the_lane_ahead_at_road_speed(tmp_path, make_config):
-    """The road's settings of ``apf-mpc commonroad`` (the road's edges and the friction bound)
-    keep improved on the road past the parked car (it passes by steering alone, touching it
-    at 12 m/s: the paper's MPC does not brake); without the friction bound its swerve at up
-    to 0.4 rad skids, and it leaves the road for most of the run; with the braking reading it
-    stops short of the car."""
+    """The road's settings of ``apf-mpc commonroad``: with its braking (the default) improved
+    stops short of the car parked in its lane; at the paper's constant speed the road's edges
+    and the friction bound keep it on the road past the car (it passes by steering alone,
+    touching it at 12 m/s), and without the friction bound its swerve at up to 0.4 rad skids
+    and it leaves the road for most of the run."""
     from pipeline.commonroad import road_overrides
     from pipeline.studies.commonroad import run_commonroad
     from pipeline.studies.results.commonroad import CommonRoadResult
 
     path = write_parked_car_road(tmp_path / "ZAM_Parked-1.xml")
     road = road_overrides("improved", path, [])
-    assert "controller.steering_friction_share=1.0" in road
+    steering = road_overrides("improved", path, CONSTANT_SPEED) + CONSTANT_SPEED
+    assert "controller.steering_friction_share=1.0" in steering
+    assert "planner.velocity_rule=predicted_clearance" in road
 
     def verdicts(name: str, overrides: list[str]) -> dict:
         cfg = make_config(["experiment=commonroad", f"scenario.commonroad.path={path}",
@@ -253,11 +253,12 @@ def test_a_car_parked_in_the_lane_ahead_at_road_speed(tmp_path, make_config):
         run_commonroad(cfg, tmp_path / name)
         return CommonRoadResult.load(tmp_path / name).summary["verdicts"]
 
-    bounded = verdicts("bounded", road)
+    bounded = verdicts("bounded", steering)
     assert bounded["off_road_steps"] <= 5 and bounded["goal_line_reached"]
-    unbounded = verdicts("unbounded", [o for o in road if "friction" not in o])
+    assert bounded["ours_true_shapes_collision"] is True
+    unbounded = verdicts("unbounded", [o for o in steering if "friction" not in o])
     assert unbounded["off_road_steps"] > 50 and not unbounded["goal_line_reached"]
-    braking = verdicts("braking", road + BRAKING)
+    braking = verdicts("braking", road)
     assert braking["checker_true_shapes_collision"] is False
     assert braking["ours_collision"] is False and braking["off_road_steps"] == 0
     assert braking["min_clearance_true_shapes_m"] > 0.5
@@ -268,24 +269,25 @@ def test_a_car_parked_in_the_lane_ahead_at_road_speed(tmp_path, make_config):
 def test_at_20_mps_a_car_parked_33_m_ahead_is_stopped_short_of_only_with_a_cars_brakes(
         tmp_path, make_config):
     """A stop from 20 m/s needs 67 m at 3 m/s^2 (Appendix A's bound) and 25 m at 8: with the
-    braking reading (planned at 6) the car hits the parked one when its plant brakes at 3
+    road's braking (planned at 6) the car hits the parked one when its plant brakes at 3
     (``vehicle.brake_max_mps2`` null: its acceleration limit) and stops short of it when it
-    brakes at up to 8."""
+    brakes at up to 8 (the road's default)."""
     from pipeline.commonroad import road_overrides
     from pipeline.studies.commonroad import run_commonroad
     from pipeline.studies.results.commonroad import CommonRoadResult
 
     path = write_parked_car_road(tmp_path / "ZAM_Parked-2.xml", speed_mps=20.0, gap_m=33.0)
-    road = road_overrides("improved", path, [])
 
     def verdicts(name: str, overrides: list[str]) -> dict:
         cfg = make_config(["experiment=commonroad", f"scenario.commonroad.path={path}",
-                           "method=improved", *road, *BRAKING, *overrides])
+                           "method=improved", *road_overrides("improved", path, overrides),
+                           *overrides])
         run_commonroad(cfg, tmp_path / name)
         return CommonRoadResult.load(tmp_path / name).summary["verdicts"]
 
-    assert verdicts("paper_brakes", [])["checker_true_shapes_collision"] is True
-    car = verdicts("car_brakes", ["vehicle.brake_max_mps2=8"])
+    assert verdicts("paper_brakes", ["vehicle.brake_max_mps2=null"])[
+        "checker_true_shapes_collision"] is True
+    car = verdicts("car_brakes", [])
     assert car["checker_true_shapes_collision"] is False and car["ours_collision"] is False
     assert car["off_road_steps"] == 0 and car["min_clearance_true_shapes_m"] > 0.3
 

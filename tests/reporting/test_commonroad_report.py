@@ -36,7 +36,48 @@ def test_the_section_lists_every_run_with_both_verdicts(tmp_path):
     html = environment().get_template("sections/commonroad.html.j2").render(
         commonroad=section)
     assert html.count("<tr><th scope=\"row\">ZAM_Planted-1</th>") == 2
-    assert "agreed on every" in html and "77/80" in html
+    assert "agreed on every" in html and "(80/80)" in html
+
+
+def test_the_verdict_is_ours_on_the_true_shapes_and_the_discs_stand_beside_it(tmp_path):
+    """A run whose covers touched for 5 steps while the true shapes stayed apart: its verdict
+    is no collision, the discs' 5 steps shown beside it and counted among the runs whose disc
+    steps differ; a result written before the true-shape check keeps the disc verdict."""
+    verdicts = {"steps": 80, "ours_collision": True, "ours_collision_steps": 5,
+                "ours_true_shapes_collision": False, "ours_true_shapes_collision_steps": 0,
+                "agreement_ours_true_shapes_steps": 80,
+                "checker_same_geometry_collision": True,
+                "checker_true_shapes_collision": False,
+                "agreement_same_geometry_steps": 80, "agreement_true_shapes_steps": 75,
+                "off_road_steps": 0, "goal_reached_commonroad": True, "success": True}
+    touching = {**verdicts, "ours_true_shapes_collision": True,
+                "ours_true_shapes_collision_steps": 5, "checker_true_shapes_collision": True,
+                "success": False}
+    for method, v in (("improved", verdicts), ("baseline", touching)):
+        summary = {"file": {"benchmark_id": "ZAM_Planted-1", "obstacles": 1},
+                   "run": {"method": method, "speed_mps": 10.0, "goal_reached_ours": True},
+                   "verdicts": v}
+        CommonRoadResult(summary).write(tmp_path / "ZAM_Planted-1" / method,
+                                        lambda path: path.write_text("<x/>"))
+    section = commonroad_section(SimpleNamespace(
+        commonroad=tuple(CommonRoadResult.load_all(tmp_path))))
+    assert [(r.method, r.collision, r.collision_ours, r.contact_steps_true_shapes,
+             r.contact_steps_discs) for r in section.rows] == \
+        [("baseline", True, True, 5, 5), ("improved", False, True, 0, 5)]
+    assert section.disc_steps_differ == (1, 2) and section.true_shapes_agree_everywhere
+    html = environment().get_template("sections/commonroad.html.j2").render(
+        commonroad=section)
+    assert "<td>no (0; 80/80)</td><td>no</td><td>yes (5)</td>" in html
+    assert "other steps in contact than the true shapes in 1 of 2 runs" in html
+    earlier = {**verdicts}
+    for key in ("ours_true_shapes_collision", "ours_true_shapes_collision_steps",
+                "agreement_ours_true_shapes_steps", "ours_collision_steps"):
+        earlier.pop(key)
+    old, = commonroad_section(SimpleNamespace(commonroad=(SimpleNamespace(
+        summary={"file": {"benchmark_id": "x", "obstacles": 1},
+                 "run": {"method": "improved", "goal_reached_ours": True},
+                 "verdicts": earlier}, folder=None),))).rows
+    assert (old.collision, old.contact_steps_discs) == (True, None)
 
 
 def test_the_files_criterion_the_shapes_and_why_the_goals_differ_are_shown(tmp_path):

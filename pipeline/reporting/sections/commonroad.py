@@ -1,6 +1,6 @@
 """'CommonRoad scenarios': one row per run of ``make commonroad`` (``outputs/commonroad``), with
-our collision verdict beside the drivability checker's, the road and the goal (shown only;
-never judged in the ledgers)."""
+our collision verdict (our own check on the true shapes) beside the drivability checker's, the
+MPC's discs beside both, the road and the goal (shown only; never judged in the ledgers)."""
 
 from __future__ import annotations
 
@@ -44,6 +44,16 @@ class CommonRoadRow:
     #: steps off the road before the first contact on the true shapes (None: a result
     #: written before it)
     off_road_steps_before_contact: int | None = None
+    #: steps in contact on the true shapes (ours) and by the discs (None: written before it)
+    contact_steps_true_shapes: int | None = None
+    contact_steps_discs: int | None = None
+
+    @property
+    def collision(self) -> bool:
+        """The run's verdict: our own check on the true shapes (the disc check for a result
+        written before it)."""
+        return self.collision_ours if self.collision_ours_true_shapes is None \
+            else self.collision_ours_true_shapes
 
 
 @dataclass(frozen=True)
@@ -59,6 +69,15 @@ class CommonRoadSection:
             return None
         return all(r.agreement_ours_true_shapes.split("/")[0]
                    == r.agreement_ours_true_shapes.split("/")[1] for r in rows)
+
+    @property
+    def disc_steps_differ(self) -> tuple[int, int]:
+        """Runs whose steps in contact by the MPC's discs differ from those on the true shapes,
+        of the runs that have both counts (the covers' bulge: a cover holds its rectangle)."""
+        rows = [r for r in self.rows if r.contact_steps_true_shapes is not None
+                and r.contact_steps_discs is not None]
+        return (sum(r.contact_steps_discs != r.contact_steps_true_shapes for r in rows),
+                len(rows))
 
     @property
     def discs_agree_everywhere(self) -> bool:
@@ -102,5 +121,9 @@ def commonroad_section(inputs: Any) -> CommonRoadSection | None:
             agreement_ours_true_shapes=f"{v['agreement_ours_true_shapes_steps']}/{steps}"
             if "agreement_ours_true_shapes_steps" in v else "",
             off_road_steps_before_contact=int(v["off_road_steps_before_contact"])
-            if int(v.get("off_road_steps_before_contact", -1)) >= 0 else None))
+            if int(v.get("off_road_steps_before_contact", -1)) >= 0 else None,
+            contact_steps_true_shapes=int(v["ours_true_shapes_collision_steps"])
+            if "ours_true_shapes_collision_steps" in v else None,
+            contact_steps_discs=int(v["ours_collision_steps"])
+            if "ours_collision_steps" in v else None))
     return CommonRoadSection(tuple(rows)) if rows else None
