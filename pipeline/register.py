@@ -244,8 +244,9 @@ INTERPRETATION_REGISTER: tuple[RegisterEntry, ...] = (
         "margins per claim (Methods section)",
         "median / intervals at 1 - alpha (none) / sign test / all pairs / unsettled_last (C1 "
         "and C4 also on the pairs where a run's clock started and its event never came before "
-        "the run ended, that run ranked last: among walkers improved rarely settles after the "
-        "last threat) / other margins",
+        "the run ended, that run ranked last: make pedestrians' rule, since among walkers "
+        "improved rarely settles after the last threat and the default leaves C4 on 17 of 200 "
+        "crossings; its ledgers show the default beside) / other margins",
         "claims.estimator, claims.interval_adjustment, claims.test, claims.pairs, "
         "claims.catalogue"),
     RegisterEntry(

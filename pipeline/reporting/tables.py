@@ -151,8 +151,8 @@ def _ledgers(inputs: ReportInputs, verdicts: Verdicts, table_dir: Path) -> None:
             table_dir / "pedestrians_collisions.csv", index=False)
         pedestrian_metrics_frame(walkers).to_csv(table_dir / "pedestrians_metrics.csv",
                                                 index=False)
-        pd.DataFrame([row for j in walkers for row in j.unsettled_last]).to_csv(
-            table_dir / "claims_pedestrians_unsettled_last.csv", index=False)
+        pd.DataFrame([row for j in walkers for row in j.other_pairs]).to_csv(
+            table_dir / "claims_pedestrians_other_pairs.csv", index=False)
     if verdicts.validity is not None and inputs.validity is not None and has_validity(inputs):
         inputs.validity.table.to_frame().to_csv(table_dir / "model_validity.csv", index=False)
         pd.DataFrame(verdicts.validity.rows()).to_csv(table_dir / "claims_model_validity.csv",

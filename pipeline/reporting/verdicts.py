@@ -146,10 +146,10 @@ class PedestrianVerdicts:
     #: and where a platform standing still is touched, and each method's collision rate on
     #: the crossings where standing still is safe
     difficulty: dict = field(default_factory=dict)
-    #: C1 and C4 of the whole family's ledger again with a run whose clock started and whose
-    #: event never came ranked last (``claims.pairs=unsettled_last``, at each row's level and
-    #: margin): one dict per row (:func:`_unsettled_last`)
-    unsettled_last: tuple[dict, ...] = ()
+    #: C1 and C4 of the whole family's ledger again by the other rule of their pairs
+    #: (``unsettled_last`` beside ``neither_collided`` and the reverse, at each row's level and
+    #: margin): one dict per row (:func:`_other_pairs`)
+    other_pairs: tuple[dict, ...] = ()
 
     def frame(self) -> pd.DataFrame:
         """Every ledger as one table, ``family`` and ``scene`` columns first (``all``: the
@@ -495,7 +495,11 @@ def _pedestrians(family: FamilyInputs, cfg: ClaimsConfig, name: str = "default",
 
     if not family.judgeable(cfg):
         return None
-    own = dataclasses.replace(cfg, c2_window="own")
+    # the pairs rule the family was made with (make pedestrians': unsettled_last), C2 on
+    # each run's own window
+    made_with = family.settings.get(cfg.treatment) or next(iter(family.settings.values()), None)
+    pairs = made_with.claims.pairs if made_with is not None else cfg.pairs
+    own = dataclasses.replace(cfg, c2_window="own", pairs=pairs)
     scenes: list[str] = []
     for settings in family.settings.values():
         ped = settings.scenario.pedestrians
@@ -529,34 +533,38 @@ def _pedestrians(family: FamilyInputs, cfg: ClaimsConfig, name: str = "default",
                               tuple(outcome_counts(tables)), scene_counts, tables, about,
                               metrics, _difficulty(settings, info,
                                                    {m: tables[m] for m in methods}),
-                              _unsettled_last(ledger, tables, own, name, memo))
+                              _other_pairs(ledger, tables, own, name, memo))
 
 
-def _unsettled_last(ledger: Ledger, tables: dict[str, pd.DataFrame], cfg: ClaimsConfig,
+def _other_pairs(ledger: Ledger, tables: dict[str, pd.DataFrame], cfg: ClaimsConfig,
                     family: str, memo: IntervalMemo | None = None) -> tuple[dict, ...]:
     """The rows of ``ledger`` whose metric has a clock (C1's reaction, C4's recovery) judged
-    again with ``pairs="unsettled_last"`` at the row's level and margin: among walkers a run
-    often passes every threat and never settles before it ends, and the default leaves every
-    such pair out (C4 on 17 of 200 crossings)."""
+    again by the other rule of their pairs, at the row's level and margin: ``unsettled_last``
+    beside a ledger of the pairs where neither collided, and ``neither_collided`` beside one
+    of ``unsettled_last`` (make pedestrians'). Among walkers a run often passes every threat
+    and never settles before it ends; ``neither_collided`` leaves every such pair out (C4 on
+    17 of 200 crossings), ``unsettled_last`` ranks that run last."""
     from pipeline.analysis.claims.statistics import compare, judge
     from pipeline.analysis.objectives import CENSORED_AT_RUN_END
 
+    other = "neither_collided" if cfg.pairs == "unsettled_last" else "unsettled_last"
     rows = []
     for row in ledger.rows:
         if row.claim.primary_metric not in CENSORED_AT_RUN_END:
             continue
         pair = (tables[ledger.treatment], tables[row.comparison])
-        result = compare(*pair, row.claim, cfg, pairs="unsettled_last",
+        result = compare(*pair, row.claim, cfg, pairs=other,
                          level=row.result.ci_level, margin=row.margin, memo=memo)
         outcome, _ = judge(result, row.margin, cfg, row.claim)
         rows.append({"family": family, "claim": row.claim.claim_id,
                      "comparison": row.comparison, "metric": row.claim.primary_metric,
-                     "outcome": str(outcome), "outcome_default": str(row.outcome),
-                     "estimate_stand_in": result.estimate, "ci_low": result.ci_low,
+                     "pairs_rule": other, "outcome": str(outcome),
+                     "pairs_rule_ledger": cfg.pairs, "outcome_ledger": str(row.outcome),
+                     "estimate": result.estimate, "ci_low": result.ci_low,
                      "ci_high": result.ci_high, "ci_level": result.ci_level,
                      "n_better": result.n_better, "n_tied": result.n_tied,
                      "n_worse": result.n_worse, "pairs": result.n_pairs,
-                     "pairs_default": row.result.n_pairs})
+                     "pairs_ledger": row.result.n_pairs})
     return tuple(rows)
 
 

@@ -24,22 +24,29 @@ def test_pedestrian_families_alone_make_a_page_with_their_section(make_config, t
     assert "make reproduce writes them" in html  # the sections it cannot show, and how
     # make pedestrians' reading of "passed" (C4, C5) is said beside its ledger
     assert "<code>metrics.pass_reading=last_threat</code>" in html
-    # C1 and C4 again with the runs that never reacted or settled ranked last (oracle: the
-    # paired differences of the two tables by that rule)
+    # C1 and C4 with the runs that never reacted or settled ranked last (make pedestrians'
+    # claims.pairs), the scenario family's rule beside them (oracle: the paired differences of
+    # the two tables by each rule)
     from pipeline.analysis.claims.catalogue import ALL_CLAIMS
     from pipeline.analysis.claims.statistics import paired_differences
 
-    last = pd.read_csv(out / "tables" / "claims_pedestrians_unsettled_last.csv")
-    assert sorted(last["claim"]) == ["C1", "C4"] and set(last["comparison"]) == {"baseline"}
+    ledger = pd.read_csv(out / "tables" / "claims_ledger_pedestrians.csv")
+    other = pd.read_csv(out / "tables" / "claims_pedestrians_other_pairs.csv")
+    assert sorted(other["claim"]) == ["C1", "C4"] and set(other["comparison"]) == {"baseline"}
+    assert set(other["pairs_rule"]) == {"neither_collided"}
+    assert set(other["pairs_rule_ledger"]) == {"unsettled_last"}
     tables = {m: pd.read_csv(root / "pedestrians" / m / "family_metrics.csv")
               for m in ("baseline", "improved")}
+    whole = ledger[(ledger["scene"] == "all") & (ledger["comparison"] == "baseline")]
     for claim in (c for c in ALL_CLAIMS if c.claim_id in ("C1", "C4")):
-        d = paired_differences(tables["improved"], tables["baseline"], claim,
-                               "unsettled_last")["d"]
-        row = last[last["claim"] == claim.claim_id].iloc[0]
-        assert row["pairs"] == int(d.notna().sum())
-        assert (row["n_better"], row["n_worse"]) == (int((d < 0).sum()), int((d > 0).sum()))
-    assert 'id="pedestrians-unsettled-last"' in html
+        for rule, rows, column in (("unsettled_last", whole, "pairs"),
+                                   ("neither_collided", other, "pairs")):
+            d = paired_differences(tables["improved"], tables["baseline"], claim, rule)["d"]
+            row = rows[rows["claim"] == claim.claim_id].iloc[0]
+            assert row[column] == int(d.notna().sum())
+            assert (row["n_better"], row["n_worse"]) == (int((d < 0).sum()),
+                                                         int((d > 0).sum()))
+    assert 'id="pedestrians-other-pairs"' in html and "claims.pairs=unsettled_last" in html
     metrics = pd.read_csv(out / "tables" / "pedestrians_metrics.csv")
     assert sorted(metrics["method"]) == ["baseline", "improved"]
     assert set(metrics["crossings"]) == {4}

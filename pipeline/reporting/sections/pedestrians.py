@@ -54,8 +54,9 @@ class PedestriansSection:
     variant_outcomes: tuple[dict, ...] = ()
     #: the fewest pairs any of C1-C5 rests on in the default family
     fewest_pairs: int | None = None
-    #: C1 and C4 of the default family with a run that never reacted or settled ranked last
-    unsettled_last: tuple[dict, ...] = ()
+    #: C1 and C4 of the default family by the other rule of their pairs (:func:`~pipeline.
+    #: reporting.verdicts._other_pairs`)
+    other_pairs: tuple[dict, ...] = ()
 
 
 def _verdict_rows(judged: PedestrianVerdicts) -> tuple[dict, ...]:
@@ -194,7 +195,9 @@ def pedestrians_section(inputs: ReportInputs, verdicts: Verdicts, figures: Figur
         if settings_cfg else None,
         "personal_space_m": ped.personal_space_m,
         # C4's and C5's clock: when every walker counts as passed (register)
-        "pass_reading": settings_cfg.metrics.pass_reading if settings_cfg else None}
+        "pass_reading": settings_cfg.metrics.pass_reading if settings_cfg else None,
+        # the pairs C1-C5 rest on (register: claims.pairs)
+        "pairs_rule": settings_cfg.claims.pairs if settings_cfg else None}
     scene_sizes = tuple((s, int((judged.tables[treatment]["scene"] == s).sum()))
                         for s in judged.scenes)
     collisions = tuple([{"scene": "all", **c} for c in judged.counts]
@@ -227,4 +230,4 @@ def pedestrians_section(inputs: ReportInputs, verdicts: Verdicts, figures: Figur
         info.get("seed", "?"), scene_sizes, settings, _verdict_rows(judged),
         tuple(ledger_groups(judged.ledger)), collisions, _members(judged, methods),
         figure, sentence, tuple(damaged), metrics, families, variant_outcomes,
-        min(pairs) if pairs else None, judged.unsettled_last)
+        min(pairs) if pairs else None, judged.other_pairs)
