@@ -48,7 +48,8 @@ ROAD = ("controller.road_edge_weight=1.0", "controller.steering_friction_share=1
 #: obstacle keeps the clearance along the APF's path) down to a stop, planned at 6 m/s^2 by a
 #: car that brakes at up to 8 (a passenger car's full braking on dry asphalt, below the tyres'
 #: mu g = 8.8; its acceleration stays at Appendix A's 3), the plant and the MPC's model
-#: handing over to the kinematic single-track below 2 m/s (as CommonRoad's braking reading).
+#: handing over to the kinematic single-track below 2 m/s (the road's default under
+#: ``apf-mpc commonroad``: pipeline.commonroad.road_overrides).
 BRAKING = ("planner.velocity_planning=true", "planner.velocity_rule=predicted_clearance",
            "planner.speed_floor_mps=0", "planner.braking_decel_mps2=6.0",
            "planner.stop_margin_m=1.0", "vehicle.kinematic_below_mps=2.0",
