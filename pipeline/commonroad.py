@@ -63,10 +63,14 @@ ROAD_EDGE_WEIGHT = 1.0
 #: steering of up to 0.4 rad at 12-20 m/s, beyond what the tyres hold, and an evasive swerve
 #: ends in a skid (docs/commonroad.md, "Steering within the tyres' friction").
 STEERING_FRICTION_SHARE = 1.0
-#: The keys by which a user chooses the speed rule themselves: given any of them, a run gets
-#: none of the road's braking (``planner.velocity_planning=false`` is the paper's constant
-#: speed).
-SPEED_RULE_KEYS = ("planner.velocity_planning", "planner.velocity_rule")
+#: The key by which a user turns the road's braking off as a whole
+#: (``planner.velocity_planning=false`` is the paper's constant speed); any other braking key
+#: the user sets replaces the road's value of that key alone.
+BRAKING_SWITCH = "planner.velocity_planning"
+#: A braking key left to the user where they set the key it rests on: the floor of 0 needs the
+#: kinematic hand-over below ``vehicle.kinematic_below_mps`` (the lateral model's 1/v terms
+#: forbid a stop without it).
+RESTS_ON = {"planner.speed_floor_mps": "vehicle.kinematic_below_mps"}
 
 
 def _given(key: str, overrides: list[str]) -> bool:
@@ -78,16 +82,17 @@ def road_overrides(method: str, scenario: Path, overrides: list[str]) -> list[st
     can take them (the lateral MPC: not another kind, the nonlinear MPC or a plug-in):
     ``controller.road_edge_weight`` (in the path frame), ``controller.steering_friction_share``
     and braking from every obstacle's prediction (:data:`~pipeline.studies.euro_ncap.BRAKING`,
-    the Euro NCAP braking track's, for the project's own planner; none when the user chose
-    the speed rule by a key of :data:`SPEED_RULE_KEYS`)."""
+    the Euro NCAP braking track's, for the project's own planner; none when the user sets
+    :data:`BRAKING_SWITCH`, and none of :data:`RESTS_ON`'s keys whose base the user set)."""
     from pipeline.studies.euro_ncap import BRAKING
 
     keys: dict[str, object] = {"controller.road_edge_weight": ROAD_EDGE_WEIGHT,
                                "controller.steering_friction_share": STEERING_FRICTION_SHARE}
-    braking = {} if any(_given(key, overrides) for key in SPEED_RULE_KEYS) else \
+    braking = {} if _given(BRAKING_SWITCH, overrides) else \
         dict(item.split("=", 1) for item in BRAKING)
     wanted = {key: value for key, value in {**keys, **braking}.items()
-              if not _given(key, overrides)}
+              if not _given(key, overrides)
+              and not (key in RESTS_ON and _given(RESTS_ON[key], overrides))}
     if not wanted:
         return []
     from pipeline import api

@@ -485,7 +485,8 @@ INTERPRETATION_REGISTER: tuple[RegisterEntry, ...] = (
         "Braking on a CommonRoad road (a choice we add; the paper's car holds its speed)",
         "a constant speed (Section 3.1's velocity planning is not used in the paper's runs)",
         "apf-mpc commonroad gives the methods of the lateral MPC the Euro NCAP braking track's "
-        "keys unless the command line sets the speed rule: Section 3.1's velocity planning as "
+        "keys (each unless the command line sets it; none with planner.velocity_planning "
+        "given): Section 3.1's velocity planning as "
         "the register reads it (planner.velocity_rule = predicted_clearance, every "
         "obstacle's prediction, behind included), down to a stop (planner.speed_floor_mps = "
         "0), planned at planner.braking_decel_mps2 = 6 by a car that brakes at "
@@ -495,7 +496,8 @@ INTERPRETATION_REGISTER: tuple[RegisterEntry, ...] = (
         "ZAM_Tjunction, where it was not); the planted parked cars 30-33 m ahead at 12-20 m/s "
         "are stopped short of by 4.7-5.1 m (at a constant speed both methods hit them)",
         "planner.velocity_planning=false: the paper's constant speed; "
-        "planner.velocity_rule=stopping_distance: the earlier braking reading",
+        "planner.velocity_rule=stopping_distance: the earlier rule, the other braking keys "
+        "kept",
         "planner.velocity_planning, planner.velocity_rule"),
     RegisterEntry(
         "The Euro NCAP tests (a choice we add; the paper's sudden obstacle is what they test)",

@@ -97,8 +97,9 @@ class CommonRoadVerdicts:
     @property
     def success(self) -> bool:
         """The file's criterion: its goal region reached (position, time, orientation and speed
-        intervals) without touching anything on the true shapes."""
-        return self.goal_reached_commonroad and not self.checker_true_shapes_collision
+        intervals) without touching anything on the true shapes, by the run's verdict (our own
+        check on the true shapes, which the checker's must equal on every step)."""
+        return self.goal_reached_commonroad and not self.ours_true_shapes_collision
 
     @property
     def ours_collision(self) -> bool:

@@ -150,6 +150,8 @@ class PedestrianVerdicts:
     #: (``unsettled_last`` beside ``neither_collided`` and the reverse, at each row's level and
     #: margin): one dict per row (:func:`_other_pairs`)
     other_pairs: tuple[dict, ...] = ()
+    #: the pairs rule of :attr:`ledger` (``claims.pairs`` of the treatment's family)
+    pairs_rule: str = "neither_collided"
 
     def frame(self) -> pd.DataFrame:
         """Every ledger as one table, ``family`` and ``scene`` columns first (``all``: the
@@ -495,9 +497,10 @@ def _pedestrians(family: FamilyInputs, cfg: ClaimsConfig, name: str = "default",
 
     if not family.judgeable(cfg):
         return None
-    # the pairs rule the family was made with (make pedestrians': unsettled_last), C2 on
-    # each run's own window
-    made_with = family.settings.get(cfg.treatment) or next(iter(family.settings.values()), None)
+    # the pairs rule the treatment's family was made with (make pedestrians': unsettled_last),
+    # C2 on each run's own window
+    label = family.label_of(cfg.treatment)
+    made_with = family.settings.get(label) if label is not None else None
     pairs = made_with.claims.pairs if made_with is not None else cfg.pairs
     own = dataclasses.replace(cfg, c2_window="own", pairs=pairs)
     scenes: list[str] = []
@@ -533,7 +536,7 @@ def _pedestrians(family: FamilyInputs, cfg: ClaimsConfig, name: str = "default",
                               tuple(outcome_counts(tables)), scene_counts, tables, about,
                               metrics, _difficulty(settings, info,
                                                    {m: tables[m] for m in methods}),
-                              _other_pairs(ledger, tables, own, name, memo))
+                              _other_pairs(ledger, tables, own, name, memo), pairs)
 
 
 def _other_pairs(ledger: Ledger, tables: dict[str, pd.DataFrame], cfg: ClaimsConfig,

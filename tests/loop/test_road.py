@@ -108,7 +108,8 @@ def test_the_key_hashes_as_before_when_off_and_is_refused_where_it_cannot_act(ma
             and fragment in str(refusal.value)
 
 
-def test_a_commonroad_run_gives_the_road_to_the_methods_whose_mpc_takes_it(tmp_path):
+def test_a_commonroad_run_gives_the_road_to_the_methods_whose_mpc_takes_it(tmp_path,
+                                                                           make_config):
     """apf-mpc commonroad: the lateral MPC in the path frame gets the road's edges, the
     steering bound by the tyres' friction and braking from every obstacle's prediction (the
     Euro NCAP braking track's keys); the peers' own controllers get none, the fixed frame no
@@ -121,8 +122,6 @@ def test_a_commonroad_run_gives_the_road_to_the_methods_whose_mpc_takes_it(tmp_p
     road = [f"controller.road_edge_weight={ROAD_EDGE_WEIGHT}"]
     friction = [f"controller.steering_friction_share={STEERING_FRICTION_SHARE}"]
     braking = list(BRAKING)
-    assert "planner.velocity_rule=predicted_clearance" in braking \
-        and "planner.speed_floor_mps=0" in braking
     assert road_overrides("improved", path, []) == road + friction + braking
     assert road_overrides("baseline", path, []) == road + friction + braking
     assert road_overrides("mpc_dcbf", path, []) == []
@@ -133,9 +132,19 @@ def test_a_commonroad_run_gives_the_road_to_the_methods_whose_mpc_takes_it(tmp_p
     assert road_overrides("improved", path, ["controller.steering_friction_share=0.5"]) == \
         road + braking
     assert road_overrides("improved", path, ["controller.backend=nmpc"]) == []
-    # the paper's constant speed, or another rule: none of the braking keys
-    for chosen in ("planner.velocity_planning=false", "planner.velocity_rule=stopping_distance"):
-        assert road_overrides("baseline", path, [chosen]) == road + friction
-    # one braking key set by the user: the others still come
-    assert road_overrides("improved", path, ["vehicle.brake_max_mps2=6"]) == \
-        road + friction + [b for b in braking if not b.startswith("vehicle.brake_max_mps2=")]
+    # the paper's constant speed: none of the braking keys
+    assert road_overrides("baseline", path, ["planner.velocity_planning=false"]) == \
+        road + friction
+    # one braking key set by the user (another rule, another brake): the others still come
+    for key, value in (("planner.velocity_rule", "stopping_distance"),
+                       ("vehicle.brake_max_mps2", "6")):
+        assert road_overrides("improved", path, [f"{key}={value}"]) == \
+            road + friction + [b for b in braking if not b.startswith(f"{key}=")]
+    # no hand-over to the kinematic model: no floor of 0 either (the default floor stays, and
+    # the run composes)
+    without_handover = ["vehicle.kinematic_below_mps=null"]
+    added = road_overrides("improved", path, without_handover)
+    assert not any(a.startswith(("planner.speed_floor_mps=", "vehicle.kinematic_below_mps="))
+                   for a in added)
+    make_config(["experiment=commonroad", f"scenario.commonroad.path={path}",
+                 "method=improved", *added, *without_handover])

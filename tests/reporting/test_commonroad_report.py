@@ -128,3 +128,23 @@ def test_a_disagreement_on_the_same_discs_is_said_and_no_runs_no_section(tmp_pat
         commonroad=section)
     assert "disagreed on some" in html and "79/80" in html
     assert commonroad_section(SimpleNamespace(commonroad=())) is None
+
+
+def test_success_is_the_files_goal_without_contact_by_our_true_shape_verdict():
+    """A run whose covers touched for 3 steps while the true shapes stayed apart reached the
+    file's goal: success; a contact on the true shapes, or no goal, is none."""
+    from pipeline.analysis.commonroad_check import CommonRoadVerdicts
+
+    def verdicts(true_steps: int, goal: bool) -> CommonRoadVerdicts:
+        return CommonRoadVerdicts(
+            steps=40, ours_collision_steps=3, checker_same_geometry_collision_steps=3,
+            checker_true_shapes_collision_steps=true_steps, agreement_same_geometry_steps=40,
+            agreement_true_shapes_steps=37, min_clearance_ours_m=-0.1,
+            min_clearance_true_shapes_m=0.2 if not true_steps else 0.0, off_road_steps=0,
+            goal_reached_commonroad=goal, goal_time_step=30, goal_note="",
+            ours_true_shapes_collision_steps=true_steps,
+            agreement_ours_true_shapes_steps=40)
+
+    assert verdicts(0, True).success and verdicts(0, True).ours_collision
+    assert not verdicts(2, True).success and not verdicts(0, False).success
+    assert verdicts(0, True).to_json()["success"] is True

@@ -196,8 +196,8 @@ def pedestrians_section(inputs: ReportInputs, verdicts: Verdicts, figures: Figur
         "personal_space_m": ped.personal_space_m,
         # C4's and C5's clock: when every walker counts as passed (register)
         "pass_reading": settings_cfg.metrics.pass_reading if settings_cfg else None,
-        # the pairs C1-C5 rest on (register: claims.pairs)
-        "pairs_rule": settings_cfg.claims.pairs if settings_cfg else None}
+        # the pairs C1-C5 rest on (register: claims.pairs): the rule the ledger used
+        "pairs_rule": judged.pairs_rule}
     scene_sizes = tuple((s, int((judged.tables[treatment]["scene"] == s).sum()))
                         for s in judged.scenes)
     collisions = tuple([{"scene": "all", **c} for c in judged.counts]
