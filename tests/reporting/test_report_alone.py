@@ -65,3 +65,30 @@ def test_peer_families_alone_are_listed_as_needing_the_scenario_family(make_conf
     html = (out / "index.html").read_text()
     assert "judged against improved on the scenario family, which is not here" in html
     assert "make reproduce writes it" in html
+
+
+def test_the_pedestrian_ledger_takes_the_pairs_rule_of_the_family_it_judges(make_config,
+                                                                              tmp_path):
+    """Two families of improved (``claims.pairs`` unsettled_last, make pedestrians', and
+    neither_collided) and a baseline made with neither_collided: the ledger judges the family
+    in improved's own folder and reads C1 and C4 by that family's rule, and the page says the
+    rule the ledger used (not the first family's, the baseline's)."""
+    from pipeline.reporting.inputs import ReportInputs
+    from pipeline.reporting.verdicts import Verdicts
+    from pipeline.studies.experiment import run_family
+
+    root = tmp_path / "outputs"
+    small = ["scenario.family.size=4", "scenario.family.n_jobs=1"]
+    for folder, overrides in (("baseline", ["planner=baseline", "claims.pairs=neither_collided"]),
+                              ("improved", ["planner=improved"]),
+                              ("improved_neither", ["planner=improved",
+                                                    "claims.pairs=neither_collided"])):
+        run_family(make_config(["experiment=pedestrians", *overrides, *small]),
+                   root / "pedestrians" / folder, progress=False, member_cache=None)
+    inputs = ReportInputs.load(root)
+    family = inputs.pedestrians
+    label = family.label_of("improved")
+    assert family.settings[label].claims.pairs == "unsettled_last"
+    judged = Verdicts.compute(inputs).pedestrians
+    assert judged is not None and judged.pairs_rule == "unsettled_last"
+    assert {row["pairs_rule_ledger"] for row in judged.other_pairs} == {"unsettled_last"}
