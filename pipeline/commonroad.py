@@ -54,15 +54,6 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
-#: The road's edges in the lateral MPC on a CommonRoad road (controller.road_edge_weight): the
-#: collision rows' weight, for every method whose MPC can take them (the lateral MPC in the
-#: path frame, no controller of one's own); the peers' controllers see no road.
-ROAD_EDGE_WEIGHT = 1.0
-#: The lateral MPC's steering bound by the tyres' friction at road speeds
-#: (controller.steering_friction_share), for the same methods: without it the MPC plans
-#: steering of up to 0.4 rad at 12-20 m/s, beyond what the tyres hold, and an evasive swerve
-#: ends in a skid (docs/commonroad.md, "Steering within the tyres' friction").
-STEERING_FRICTION_SHARE = 1.0
 #: The key by which a user turns the road's braking off as a whole
 #: (``planner.velocity_planning=false`` is the paper's constant speed); any other braking key
 #: the user sets replaces the road's value of that key alone.
@@ -80,14 +71,15 @@ def _given(key: str, overrides: list[str]) -> bool:
 def road_overrides(method: str, scenario: Path, overrides: list[str]) -> list[str]:
     """The road's settings for ``method``, each unless the user set it, where its controller
     can take them (the lateral MPC: not another kind, the nonlinear MPC or a plug-in):
-    ``controller.road_edge_weight`` (in the path frame), ``controller.steering_friction_share``
-    and braking from every obstacle's prediction (:data:`~pipeline.studies.euro_ncap.BRAKING`,
-    the Euro NCAP braking track's, for the project's own planner; none when the user sets
-    :data:`BRAKING_SWITCH`, and none of :data:`RESTS_ON`'s keys whose base the user set)."""
-    from pipeline.studies.euro_ncap import BRAKING
+    ``controller.road_edge_weight`` (in the path frame) and
+    ``controller.steering_friction_share`` (:data:`~pipeline.studies.euro_ncap.ROAD`), and
+    braking from every obstacle's prediction (:data:`~pipeline.studies.euro_ncap.BRAKING`,
+    the Euro NCAP braking track's) for the project's own planner: none when the user sets
+    :data:`BRAKING_SWITCH`, and none of :data:`RESTS_ON`'s keys whose base the user set."""
+    # the road's settings as the Euro NCAP tests take them (one statement of their values)
+    from pipeline.studies.euro_ncap import BRAKING, ROAD
 
-    keys: dict[str, object] = {"controller.road_edge_weight": ROAD_EDGE_WEIGHT,
-                               "controller.steering_friction_share": STEERING_FRICTION_SHARE}
+    keys = dict(item.split("=", 1) for item in ROAD)
     braking = {} if _given(BRAKING_SWITCH, overrides) else \
         dict(item.split("=", 1) for item in BRAKING)
     wanted = {key: value for key, value in {**keys, **braking}.items()

@@ -38,10 +38,18 @@ from pipeline.studies.results.euro_ncap import EuroNcapResult
 
 logger = logging.getLogger(__name__)
 
-#: The road's edges in the lateral MPC (its path frame; the peers' controllers and the
-#: kinematic MPC see no road) and its steering bound by the tyres' friction at the step's
-#: speed, as on a CommonRoad road (pipeline.commonroad.road_overrides).
-ROAD = ("controller.road_edge_weight=1.0", "controller.steering_friction_share=1.0")
+#: The road's edges in the lateral MPC on a road (controller.road_edge_weight): the collision
+#: rows' weight, for every method whose MPC can take them (the lateral MPC in the path frame,
+#: no controller of one's own); the peers' controllers and the kinematic MPC see no road.
+ROAD_EDGE_WEIGHT = 1.0
+#: The lateral MPC's steering bound by the tyres' friction at road speeds
+#: (controller.steering_friction_share), for the same methods: without it the MPC plans
+#: steering of up to 0.4 rad at 12-20 m/s, beyond what the tyres hold, and an evasive swerve
+#: ends in a skid (docs/commonroad.md, "Steering within the tyres' friction").
+STEERING_FRICTION_SHARE = 1.0
+#: Both, as these tests and a CommonRoad road (pipeline.commonroad.road_overrides) take them.
+ROAD = (f"controller.road_edge_weight={ROAD_EDGE_WEIGHT}",
+        f"controller.steering_friction_share={STEERING_FRICTION_SHARE}")
 #: Braking (a reading, the protocol's tests are built for it; the paper's MPC steers at a
 #: constant speed): Section 3.1's velocity planning as the register reads it
 #: (predicted_clearance: the fastest speed whose constant-velocity prediction of every

@@ -113,10 +113,10 @@ def test_a_commonroad_run_gives_the_road_to_the_methods_whose_mpc_takes_it(tmp_p
     """apf-mpc commonroad: the lateral MPC in the path frame gets the road's edges, the
     steering bound by the tyres' friction and braking from every obstacle's prediction (the
     Euro NCAP braking track's keys); the peers' own controllers get none, the fixed frame no
-    edges; a user's explicit setting is never added to, and a user who chose the speed rule
-    gets no braking."""
-    from pipeline.commonroad import ROAD_EDGE_WEIGHT, STEERING_FRICTION_SHARE, road_overrides
-    from pipeline.studies.euro_ncap import BRAKING
+    edges; a user's explicit setting is never added to, and a user who turns velocity
+    planning off gets no braking."""
+    from pipeline.commonroad import road_overrides
+    from pipeline.studies.euro_ncap import BRAKING, ROAD_EDGE_WEIGHT, STEERING_FRICTION_SHARE
 
     path = tmp_path / "any.xml"
     road = [f"controller.road_edge_weight={ROAD_EDGE_WEIGHT}"]
