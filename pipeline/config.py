@@ -188,6 +188,8 @@ def _hash_of(data: dict) -> str:
     data["vehicle"] = VehicleConfig.hash_view(data["vehicle"])
     if data["controller"].get("collision_constraints") is True:
         data["controller"].pop("collision_constraints")  # the default, as before the key
+    if data["controller"].get("solver_refinement") is True:
+        data["controller"].pop("solver_refinement")  # Clarabel's default, as before the key
     data["metrics"] = dict(data["metrics"])
     if data["metrics"].get("pass_reading") == "ahead_of_threats":
         data["metrics"].pop("pass_reading")  # the default, as before the key

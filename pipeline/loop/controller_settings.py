@@ -191,6 +191,10 @@ class _MpcSchema(_ControllerSchema):
     # avoids the obstacle is the reference alone ("APF by itself", make reproduce)
     collision_constraints: bool = True
     solver_max_iter: int = 200
+    # Clarabel's iterative refinement of each KKT solve (its default, on); off: about a third
+    # cheaper per QP and no less accurate at the optimum, but a run's last digits change and
+    # a chaotic run carries them on (docs/performance.md); clarabel_direct and cvxpy only
+    solver_refinement: bool = True
 
     def _check_mpc(self) -> None:
         """The common checks; the control horizon, slots and iterations; the backend and which
@@ -210,6 +214,11 @@ class _MpcSchema(_ControllerSchema):
                     "constraint_activation_m"):
             at_least(f"controller.{key}", getattr(self, key), 0.0)
         flag("controller.collision_constraints", self.collision_constraints)
+        flag("controller.solver_refinement", self.solver_refinement)
+        if self.backend == "daqp" and self.solver_refinement is not True:
+            raise ConfigError("controller.solver_refinement", self.solver_refinement,
+                              "true with controller.backend=daqp (Clarabel's refinement; "
+                              "false only with clarabel_direct or cvxpy)")
         choice("controller.input_hold", self.input_hold, tuple(InputHold))
 
 

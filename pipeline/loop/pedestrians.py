@@ -98,11 +98,14 @@ class SceneTracks:
 
         return cKDTree(self.recorded_points_m)
 
-    def motion(self, which: np.ndarray, window_start_s: float) -> RecordedTrackMotion:
-        """The pedestrians ``which`` (indices) on a clock whose 0 is ``window_start_s``."""
+    def motion(self, which: np.ndarray, window_start_s: float,
+               extension_s: float = 0.0) -> RecordedTrackMotion:
+        """The pedestrians ``which`` (indices) on a clock whose 0 is ``window_start_s``, each
+        track extended by ``extension_s`` at both ends (:class:`RecordedTrackMotion`)."""
         which = np.asarray(which, dtype=int)
         return RecordedTrackMotion(self.first_s[which] - window_start_s, self.step_s,
-                                   self.counts[which], self.positions_m[which])
+                                   self.counts[which], self.positions_m[which],
+                                   float(extension_s))
 
 
 @dataclass(frozen=True)
@@ -116,6 +119,9 @@ class RecordedTrackMotion:
     step_s: float
     counts: np.ndarray
     positions_m: np.ndarray
+    #: each track goes on this long (s) before its first and after its last sample, straight
+    #: at its first (last) segment's velocity (a one-sample track stands); 0: none
+    extension_s: float = 0.0
 
     def states_at(self, time_s: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Positions (n, 2), velocities (n, 2) and presence (n,) at ``time_s``.
@@ -125,16 +131,24 @@ class RecordedTrackMotion:
         a sample time; the last segment's at the last sample; zero for a one-sample track).
         """
         here, ahead, frac, present = self._segments(time_s)
-        # (1 - f) a + f b: exactly a at f = 0 and exactly b at f = 1 (a sample is replayed)
-        positions = (1.0 - frac) * here + frac * ahead
-        velocities = (ahead - here) / self.step_s
-        return positions, velocities, present
+        return self._along(here, ahead, frac), (ahead - here) / self.step_s, present
 
     def positions_over(self, times_s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """:meth:`states_at`'s positions (T, n, 2) and presence (T, n) at every time of
         ``times_s`` at once (the same operations, element for element)."""
         here, ahead, frac, present = self._segments(np.asarray(times_s, float)[:, None])
-        return (1.0 - frac) * here + frac * ahead, present
+        return self._along(here, ahead, frac), present
+
+    def _along(self, here: np.ndarray, ahead: np.ndarray, frac: np.ndarray) -> np.ndarray:
+        """The position a fraction ``frac`` along each segment from ``here`` to ``ahead``."""
+        # (1 - f) a + f b: exactly a at f = 0 and exactly b at f = 1 (a sample is replayed)
+        between = (1.0 - frac) * here + frac * ahead
+        if self.extension_s <= 0.0:
+            return between
+        # an extended end: on from its end sample (a standing walker stays exactly there)
+        step = ahead - here
+        return np.where(frac < 0.0, here + frac * step,
+                        np.where(frac > 1.0, ahead + (frac - 1.0) * step, between))
 
     def _segments(self, time_s: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """Each pedestrian's segment at ``time_s`` (a number, or times broadcast against the
@@ -144,12 +158,47 @@ class RecordedTrackMotion:
         u = (time_s - self.first_s) / self.step_s
         nearest = np.rint(u)
         u = np.where(np.abs(u - nearest) * self.step_s < SAMPLE_TOLERANCE_S, nearest, u)
-        present = (u >= 0.0) & (u <= last)
-        u = np.clip(u, 0.0, last)
-        i = np.minimum(np.floor(u), np.maximum(last - 1.0, 0.0)).astype(int)
+        ahead = self.extension_s / self.step_s
+        present = (u >= -ahead) & (u <= last + ahead)
+        # before the first (after the last) sample: the first (last) segment extended, its
+        # fraction below 0 (above 1)
+        u = np.clip(u, -ahead, last + ahead)
+        i = np.clip(np.floor(u), 0.0, np.maximum(last - 1.0, 0.0)).astype(int)
         rows = np.arange(self.counts.shape[0])
         return (self.positions_m[rows, i], self.positions_m[rows, i + 1], (u - i)[..., None],
                 present)
+
+
+@dataclass(frozen=True)
+class SteppedTrackMotion:
+    """A :class:`RecordedTrackMotion` read at every step time of a run at once (the same
+    operations, element for element, as each step's :meth:`RecordedTrackMotion.states_at`):
+    the loop's one call per step becomes a row's copy. A time that is not one of
+    ``times_s`` exactly is answered by the tracks themselves."""
+
+    tracks: RecordedTrackMotion
+    times_s: np.ndarray
+    sample_time_s: float
+    positions_m: np.ndarray
+    velocities_mps: np.ndarray
+    present: np.ndarray
+
+    @classmethod
+    def of(cls, tracks: RecordedTrackMotion, sample_time_s: float,
+           n_steps: int) -> SteppedTrackMotion:
+        """The tracks at ``k * sample_time_s`` for k = 0..n_steps (the loop's step times)."""
+        times = np.arange(int(n_steps) + 1) * float(sample_time_s)
+        here, ahead, frac, present = tracks._segments(times[:, None])
+        return cls(tracks, times, float(sample_time_s), tracks._along(here, ahead, frac),
+                   (ahead - here) / tracks.step_s, present)
+
+    def states_at(self, time_s: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """:meth:`RecordedTrackMotion.states_at`, from the table at a step time."""
+        k = int(round(time_s / self.sample_time_s)) if math.isfinite(time_s) else -1
+        if 0 <= k < self.times_s.size and self.times_s[k] == time_s:
+            return self.positions_m[k].copy(), self.velocities_mps[k].copy(), \
+                self.present[k].copy()
+        return self.tracks.states_at(time_s)
 
 
 def scene_path(cfg: PedestrianConfig, scene: str) -> Path:
@@ -306,13 +355,15 @@ def _rows_and_lines(path: Path) -> tuple[np.ndarray, np.ndarray]:
 
 
 def pedestrians_near(tracks: SceneTracks, start_m: np.ndarray, goal_m: np.ndarray,
-                     window_start_s: float, duration_s: float, corridor_m: float) -> np.ndarray:
+                     window_start_s: float, duration_s: float, corridor_m: float,
+                     extension_s: float = 0.0) -> np.ndarray:
     """Indices of the pedestrians present in the window whose samples in it come within
-    ``corridor_m`` of the start-goal segment (nearest first by that distance)."""
+    ``corridor_m`` of the start-goal segment (nearest first by that distance); a track
+    extended by ``extension_s`` at both ends is present ``extension_s`` longer each way."""
     t = tracks.first_s[:, None] + np.arange(tracks.positions_m.shape[1])[None, :] \
         * tracks.step_s
-    inside = (t >= window_start_s - tracks.step_s) & (t <= window_start_s + duration_s
-                                                      + tracks.step_s) \
+    inside = (t >= window_start_s - tracks.step_s - extension_s) \
+        & (t <= window_start_s + duration_s + tracks.step_s + extension_s) \
         & (np.arange(tracks.positions_m.shape[1])[None, :] < tracks.counts[:, None])
     gap = segment_distance(tracks.positions_m, start_m, goal_m)
     gap = np.where(inside, gap, np.inf).min(axis=1)
@@ -385,7 +436,8 @@ def draw_pedestrian_member(base: ScenarioConfig, index: int,
         window = float(rng.uniform(tracks.start_s, tracks.end_s - duration))
         heading = float(rng.uniform(-np.pi, np.pi))
         pick = float(rng.uniform())
-        everyone = tracks.motion(np.arange(tracks.counts.size), window)
+        everyone = tracks.motion(np.arange(tracks.counts.size), window,
+                                   ped.track_extension_s)
         mid, _, present = everyone.states_at(half / speed)
         if not present.any():
             continue
@@ -431,7 +483,8 @@ def _draw_from_scene(base: ScenarioConfig, index: int, tracks: SceneTracks,
         gaps, _ = tracks.walkable.query(np.array([start, goal]))
         if np.max(gaps) > ped.walkable_radius_m:
             continue
-        everyone = tracks.motion(np.arange(tracks.counts.size), window)
+        everyone = tracks.motion(np.arange(tracks.counts.size), window,
+                                   ped.track_extension_s)
         if not _start_is_free(everyone, start, vehicle_radius_m, ped):
             continue
         return _drawn_member(base, index, tracks, start, goal, heading, speed, window)
@@ -491,8 +544,9 @@ def recorded_motion(cfg: ScenarioConfig) -> tuple[RecordedTrackMotion, int]:
     tracks = load_scene(ped, ped.scene)
     which = pedestrians_near(tracks, np.asarray(cfg.start_xy_m, float),
                              np.asarray(cfg.goal_xy_m, float), ped.window_start_s,
-                             cfg.n_steps * cfg.sample_time_s, ped.corridor_m)
-    return tracks.motion(which, ped.window_start_s), int(which.size)
+                             cfg.n_steps * cfg.sample_time_s, ped.corridor_m,
+                             ped.track_extension_s)
+    return tracks.motion(which, ped.window_start_s, ped.track_extension_s), int(which.size)
 
 
 @dataclass(frozen=True)
@@ -538,7 +592,9 @@ def pedestrian_scenario(cfg: ScenarioConfig) -> Scenario:
     assert ped is not None
     recorded, n = recorded_motion(cfg)
     start_positions, _, _ = recorded.states_at(0.0)
-    motion: ObstacleMotion = recorded
+    # replayed: every step's walkers at once (the loop asks at k * sample_time_s)
+    motion: ObstacleMotion = SteppedTrackMotion.of(recorded, float(cfg.sample_time_s),
+                                                   int(cfg.n_steps))
     if ped.walkers == "reactive":
         from pipeline.loop.social_force import SocialForceMotion, SocialForceSettings
 

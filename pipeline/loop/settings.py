@@ -427,6 +427,10 @@ class PedestrianConfig(FrozenAfterValidation):
     #: the metrics count an intrusion into a walker's personal space where the surface gap
     #: is below this (m; Francis et al. 2023 and CrowdNav's discomfort distance: 0.2-0.5 m)
     personal_space_m: float = 0.5
+    #: each recorded track goes on this long (s) before its first and after its last sample,
+    #: straight at its first (last) segment's velocity: a walker walks into and out of the
+    #: recorded area instead of appearing (vanishing) at its edge; 0: the recording as it is
+    track_extension_s: float = 0.0
     #: a member's drawn scene and the recording time at its t = 0 (null in the family's base)
     scene: Optional[str] = None
     window_start_s: Optional[float] = None
@@ -436,7 +440,8 @@ class PedestrianConfig(FrozenAfterValidation):
     BEFORE_KEYS = {"draw": "aimed", "walkable_radius_m": 1.0, "end_at_contact": False,
                    "walkers": "replayed", "social_tau_s": 0.5, "social_lookahead_s": 2.0,
                    "social_strength_mps2": 2.1, "social_range_m": 0.3,
-                   "social_max_speed_factor": 1.3, "personal_space_m": 0.5}
+                   "social_max_speed_factor": 1.3, "personal_space_m": 0.5,
+                   "track_extension_s": 0.0}
 
     def __post_init__(self) -> None:
         key = "scenario.pedestrians"
@@ -482,6 +487,7 @@ class PedestrianConfig(FrozenAfterValidation):
         between(f"{key}.social_range_m", self.social_range_m, 0.01, 10.0)
         between(f"{key}.social_max_speed_factor", self.social_max_speed_factor, 1.0, 5.0)
         between(f"{key}.personal_space_m", self.personal_space_m, 0.0, 10.0)
+        between(f"{key}.track_extension_s", self.track_extension_s, 0.0, 10.0)
 
 
 @dataclass

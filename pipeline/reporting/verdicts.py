@@ -516,10 +516,12 @@ def _pedestrians(family: FamilyInputs, cfg: ClaimsConfig, name: str = "default",
     present = tuple(s for s in scenes if any((t["scene"] == s).any() for t in tables.values()))
     ledger = family_ledger(tables, own, None, cfg.treatment, comparisons, sensitivity=False,
                            memo=memo)
+    # by scene for the default family alone: a variant's 40-60 crossings leave 10-15 a scene,
+    # too few for a ledger of their own (and the report's time is make pedestrians')
     by_scene = tuple((scene, family_ledger({m: t[t["scene"] == scene] for m, t in
                                             tables.items()}, own, None, cfg.treatment,
                                            comparisons, sensitivity=False, memo=memo))
-                     for scene in present)
+                     for scene in present) if name == "default" else ()
     scene_counts = tuple({"scene": scene, **row} for scene in present
                          for row in outcome_counts({m: t[t["scene"] == scene]
                                                     for m, t in tables.items()}))
@@ -573,26 +575,42 @@ def _other_pairs(ledger: Ledger, tables: dict[str, pd.DataFrame], cfg: ClaimsCon
 
 def _difficulty(settings: Any, info: dict, tables: dict[str, pd.DataFrame]) -> dict:
     """The family's difficulty from the recording alone (``crossing_difficulty`` of each
-    member, drawn again: the family's base is its first member's scenario with the family's
-    name, seed and size from ``family.json`` and no drawn scene) and each method's collision
+    member, as its metrics recorded it; for run folders written before they did, each member
+    drawn again: the family's base is its first member's scenario with the family's name,
+    seed and size from ``family.json`` and no drawn scene) and each method's collision
     rate on the crossings where a platform standing still is not touched
     (:func:`~pipeline.analysis.crowd.collision_rates`)."""
     from pipeline.analysis.crowd import collision_rates
-    from pipeline.loop.pedestrians import crossing_difficulty
+    from pipeline.loop.pedestrians import CrossingDifficulty, crossing_difficulty
     from pipeline.loop.scenario import family_members
     from pipeline.loop.settings import FamilyConfig
 
     radius = settings.vehicle.footprint_radius_m
     member, ped = settings.scenario, settings.scenario.pedestrians
-    if ped is None or "seed" not in info or "size" not in info:
+    first = next(iter(tables.values()))
+    def flag(value: Any) -> bool | None:  # a CSV's True/False, None where not recorded
+        word = str(value).lower()
+        return True if word in ("true", "1", "1.0") else False if word in ("false", "0", "0.0") \
+            else None
+
+    recorded = {str(n): CrossingDifficulty(meets, touched) for n, meets, touched
+                in zip(first["scenario"], map(flag, first["straight_line_meets"]),
+                       map(flag, first["standing_touched"]), strict=True)
+                if meets is not None and touched is not None} \
+        if {"straight_line_meets", "standing_touched"} <= set(first.columns) else {}
+    if len(recorded) == len(first):
+        judged = recorded  # each run's metrics hold its crossing's difficulty
+    elif ped is None or "seed" not in info or "size" not in info:
         return {}
-    base = dataclasses.replace(
-        member, name=str(info.get("scenario", "pedestrians")),
-        family=FamilyConfig(seed=int(info["seed"]), size=int(info["size"])),
-        pedestrians=dataclasses.replace(ped, scene=None, window_start_s=None))
-    members = family_members(base, radius)
-    judged = {m.name: crossing_difficulty(m, radius) for m in members}
-    names = [n for n in next(iter(tables.values()))["scenario"].astype(str) if n in judged]
+    else:
+        # run folders written before the metrics held it: the members drawn again
+        base = dataclasses.replace(
+            member, name=str(info.get("scenario", "pedestrians")),
+            family=FamilyConfig(seed=int(info["seed"]), size=int(info["size"])),
+            pedestrians=dataclasses.replace(ped, scene=None, window_start_s=None))
+        judged = {m.name: crossing_difficulty(m, radius)
+                  for m in family_members(base, radius)}
+    names = [n for n in first["scenario"].astype(str) if n in judged]
     if not names:
         return {}
     safe = {n for n in names if not judged[n].standing_touched}

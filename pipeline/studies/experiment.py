@@ -10,6 +10,7 @@ from __future__ import annotations
 import functools
 import gc
 import logging
+import math
 import os
 from dataclasses import dataclass
 from pathlib import Path
@@ -254,11 +255,28 @@ def _run_chunk(jobs: list[tuple[int, ExperimentConfig, Path]], qp_cache: QpCache
     return done
 
 
-def _chunks(items: list, n_workers: int, per_worker: int = 4) -> list[list]:
-    """Split ``items`` into about ``per_worker`` chunks per worker, interleaved so that every
-    chunk holds early and late members alike (balanced load)."""
-    n = max(1, min(len(items), n_workers * per_worker))
-    return [items[i::n] for i in range(n) if items[i::n]]
+def _chunks(items: list, n_workers: int, per_worker: int = 4, smallest: int = 2
+            ) -> list[list]:
+    """Split ``items`` into chunks for ``n_workers`` workers, interleaved so that every chunk
+    holds early and late members alike (balanced load).
+
+    One worker: ``per_worker`` chunks. Several: guided sizes, each chunk a ``1 / (2
+    n_workers)`` share of the members left (at least ``smallest``), so that the workers, which
+    take the chunks in order, start on large ones and end on small ones and no worker idles
+    long while another finishes the family's last chunk. With equal chunks a 200-member family
+    among walkers ended on one worker for a 25-member chunk: 54-59 s against 46 s guided
+    (2026-12-07, the same members back to back). A member's run does not depend on its
+    chunk (the engine steps each as alone)."""
+    n = max(1, min(len(items), max(n_workers, 1) * per_worker))
+    if n_workers <= 1:
+        return [items[i::n] for i in range(n) if items[i::n]]
+    interleaved = [item for i in range(n) for item in items[i::n]]
+    chunks, start = [], 0
+    while start < len(interleaved):
+        size = max(smallest, math.ceil((len(interleaved) - start) / (2 * n_workers)))
+        chunks.append(interleaved[start:start + size])
+        start += size
+    return chunks
 
 
 def run_family(cfg: ExperimentConfig, out_dir: Path, progress: bool = True,

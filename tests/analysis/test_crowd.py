@@ -84,6 +84,45 @@ def test_a_crossings_difficulty_is_read_from_the_recording_alone(make_config, tm
     assert crossing_difficulty(touched.scenario, radius).standing_touched is True
 
 
+def test_each_runs_metrics_carry_its_crossings_difficulty_and_the_report_reads_them(
+        make_config, tmp_path):
+    """The planted crossing above (the straight line at 1 m/s meets walker 1; standing still
+    is not touched): the run's context and metrics hold crossing_difficulty's answer, and the
+    report's difficulty is read from those columns (no family to draw again: a family.json
+    without seed and size, which the earlier path needs)."""
+    from pipeline.analysis.metrics.context import trajectory_context
+    from pipeline.loop.pedestrians import crossing_difficulty
+    from pipeline.loop.scenario import build_scenario
+    from pipeline.loop.simulate import simulate
+    from pipeline.reporting.verdicts import _difficulty
+
+    rows = [(10 * k, 1, 5.0, -5.0 + 0.4 * k) for k in range(26)]
+    rows += [(10 * k, 2, 0.0, 3.0) for k in range(26)]
+    _planted_scene(tmp_path / "scene", sorted(rows))
+    cfg = _member(make_config, tmp_path / "scene", (0.0, 0.0), (10.0, 0.0), 1.0, n_steps=60)
+    judged = crossing_difficulty(cfg.scenario, cfg.vehicle.footprint_radius_m)
+    context = trajectory_context(cfg)
+    assert context.crossing == (judged.straight_line_meets, judged.standing_touched) \
+        == (True, False)
+    run = simulate(cfg, build_scenario(cfg.scenario)).trajectory
+    crowd = compute_metrics(run, context, cfg.metrics).crowd
+    assert crowd is not None and crowd.straight_line_meets is True \
+        and crowd.standing_touched is False
+    # elsewhere: no crossing, no columns' values
+    assert trajectory_context(make_config(["experiment=kinematic"])).crossing is None
+    names = ["a", "b", "c", "d"]
+    table = pd.DataFrame({"scenario": names, "collision": [True, False, True, False],
+                          "straight_line_meets": [True, True, False, "False"],
+                          "standing_touched": ["True", False, False, False]})
+    out = _difficulty(cfg, {}, {"improved": table})
+    assert out["crossings"] == 4 and out["straight_line_meets_share"] == 0.5
+    assert out["standing_touched_share"] == 0.25 and out["standing_safe_crossings"] == 3
+    assert out["collision_rate_standing_safe_improved"] == pytest.approx(1 / 3)
+    # a column not recorded for every run (folders written before it): the family drawn
+    # again, which needs the family's seed and size
+    assert _difficulty(cfg, {}, {"improved": table.assign(standing_touched=None)}) == {}
+
+
 def _straight_run(n: int = 101, walker_xy=(5.0, 0.9), walker_v=(0.0, 0.0)) -> pd.DataFrame:
     """The platform along y = 0 at 1 m/s (10 Hz), one walker (radius 0.3)."""
     t = np.arange(n) * 0.1

@@ -66,6 +66,44 @@ def test_a_recorded_track_is_replayed_exactly_at_its_sample_times(make_config, s
         assert not before[0] and not after[0]
 
 
+def test_an_extended_track_walks_in_and_out_at_its_end_segments_velocity():
+    """scenario.pedestrians.track_extension_s: a track sampled at 1.0, 1.4 and 1.8 s at
+    x = 0, 0.4, 1.0 m (1 m/s, then 1.5 m/s) extended by 1 s is present from 0.0 to 2.8 s,
+    at x = 0 - 1 m/s (1.0 - t) before its first sample and at 1.0 + 1.5 m/s (t - 1.8) after
+    its last, with those velocities; on its samples the samples themselves; without the
+    extension (the recording) it is absent outside [1.0, 1.8] s. A one-sample track at 1.0 s
+    stands exactly at its sample from 0.0 to 2.0 s."""
+    from pipeline.loop.pedestrians import RecordedTrackMotion
+
+    positions = np.array([[[0.0, 2.0], [0.4, 2.0], [1.0, 2.0]],
+                          [[5.0, 5.0], [5.0, 5.0], [5.0, 5.0]]])
+    def motion(extension_s: float) -> RecordedTrackMotion:
+        return RecordedTrackMotion(np.array([1.0, 1.0]), 0.4, np.array([3, 1]), positions,
+                                   extension_s)
+
+    extended, recorded = motion(1.0), motion(0.0)
+    for t, x, v in [(0.0, -1.0, 1.0), (0.55, -0.45, 1.0), (2.3, 1.75, 1.5), (2.8, 2.5, 1.5)]:
+        where, velocity, present = extended.states_at(t)
+        assert present[0] and present[1] == (t <= 2.0), t
+        np.testing.assert_allclose(where[0], [x, 2.0], rtol=0, atol=1e-12)
+        np.testing.assert_allclose(velocity[0], [v, 0.0], rtol=0, atol=1e-12)
+        np.testing.assert_array_equal(where[1], [5.0, 5.0])
+        np.testing.assert_array_equal(velocity[1], [0.0, 0.0])
+        assert not recorded.states_at(t)[2].any(), t
+    for t in (-0.05, 2.85):
+        assert not extended.states_at(t)[2].any(), t
+    assert not extended.states_at(2.05)[2][1]
+    for k, t in enumerate((1.0, 1.4, 1.8)):  # the samples, bit for bit, either way
+        for m in (extended, recorded):
+            assert m.states_at(t)[0][0, 0] == positions[0, k, 0]
+    # every step at once is each step alone (crossing_difficulty's path)
+    times = np.arange(-2, 40) * 0.1
+    at_once, present_at_once = extended.positions_over(times)
+    for k, t in enumerate(times):
+        np.testing.assert_array_equal(at_once[k], extended.states_at(float(t))[0])
+        np.testing.assert_array_equal(present_at_once[k], extended.states_at(float(t))[2])
+
+
 def test_constant_velocity_prediction_is_the_closed_form(make_config):
     cfg = make_config(SMALL).scenario.pedestrians
     tracks = load_scene(cfg, "crowds_zara02")
@@ -240,12 +278,23 @@ def test_a_scene_too_small_for_the_crossing_names_the_key_and_range(make_config,
     ("scenario.pedestrians.platform_speed_mps=[2.0,1.0]",
      "scenario.pedestrians.platform_speed_mps", "low <= high"),
     ("scenario.pedestrians.scenes=[]", "scenario.pedestrians.scenes", "non-empty"),
+    ("scenario.pedestrians.track_extension_s=-1", "scenario.pedestrians.track_extension_s",
+     "[0.0, 10.0]"),
+    ("controller.solver_refinement=maybe", "controller.solver_refinement", "bool"),
 ])
 def test_bad_pedestrian_settings_name_the_key_and_range(make_config, override, key, allowed):
     with pytest.raises(Exception) as caught:
         make_config(SMALL + [override])
     line, code = _line(caught.value)
     assert code == 2 and key in line and allowed in line, line
+
+
+def test_clarabels_refinement_cannot_be_switched_off_for_daqp(make_config):
+    with pytest.raises(ConfigError) as caught:
+        make_config(SMALL + ["controller.backend=daqp", "controller.solver_refinement=false"])
+    line, code = _line(caught.value)
+    assert code == 2 and "controller.solver_refinement=False" in line \
+        and "only with clarabel_direct or cvxpy" in line, line
 
 
 def test_the_command_exits_2_with_one_line_for_a_malformed_file(tmp_path):
@@ -259,3 +308,30 @@ def test_the_command_exits_2_with_one_line_for_a_malformed_file(tmp_path):
     lines = [x for x in done.stderr.splitlines() if x.strip()]
     assert len(lines) == 1 and str(tmp_path / "broken.txt") in lines[0] \
         and "line 2" in lines[0], done.stderr[-2000:]
+
+
+@pytest.mark.parametrize("extension_s", [0.0, 1.0])
+def test_every_steps_walkers_read_at_once_are_each_steps_bit_for_bit(make_config, extension_s):
+    """SteppedTrackMotion (the loop's walkers, every step time read at once) gives, bit for
+    bit, the positions, velocities and presence that RecordedTrackMotion.states_at gives at
+    each step time, with and without the track extension; a time between steps (the social
+    force's look-ahead) is the tracks' own answer."""
+    from pipeline.loop.pedestrians import SteppedTrackMotion, pedestrians_near
+
+    ped = make_config(["experiment=pedestrians"]).scenario.pedestrians
+    tracks = load_scene(ped, ped.scenes[0])
+    which = pedestrians_near(tracks, np.array([0.0, 0.0]), np.array([10.0, 0.0]), 30.0,
+                             22.0, 1e6)[:40]
+    recorded = tracks.motion(which, 30.0, extension_s)
+    stepped = SteppedTrackMotion.of(recorded, 0.1, 220)
+    assert stepped.present.any() and not stepped.present.all()
+    for k in range(221):
+        for got, want in zip(stepped.states_at(k * 0.1), recorded.states_at(k * 0.1),
+                             strict=True):
+            np.testing.assert_array_equal(got, want)
+    for t in (0.05, 3.333, 22.5, -1.0):
+        for got, want in zip(stepped.states_at(t), recorded.states_at(t), strict=True):
+            np.testing.assert_array_equal(got, want)
+    # a row handed out is a copy: the caller's edits do not reach the next step
+    stepped.states_at(1.0)[0][:] = np.nan
+    assert np.isfinite(stepped.states_at(1.0)[0]).all()

@@ -76,6 +76,8 @@ SWITCH_TESTS = {
     "scenario.pedestrians.end_at_contact": "test_crowd", "scenario.pedestrians.draw": "test_crowd",
     "scenario.pedestrians.walkable_radius_m": "test_crowd",
     "scenario.pedestrians.walkers": "test_crowd", "scenario.pedestrians.social_*": "test_crowd",
+    "scenario.pedestrians.track_extension_s": "test_pedestrians",
+    "controller.solver_refinement": "test_kinematic",
     # on CommonRoad's roads (choices we add): tests/loop/test_cover.py, test_commonroad.py
     "scenario.commonroad.obstacle_disc": "test_commonroad",
     "scenario.commonroad.cover_discs": "test_commonroad", "vehicle.footprint_discs": "test_cover",

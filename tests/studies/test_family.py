@@ -126,3 +126,20 @@ def test_a_workers_task_frees_the_last_tasks_cyclic_garbage_before_freezing():
         gc.unfreeze()
         if was_enabled:
             gc.enable()
+
+
+def test_a_familys_chunks_shrink_towards_the_end_and_hold_every_member_once():
+    """Guided chunks for two workers: each a quarter of the members left (at least 2), so the
+    last ones are small (a worker never ends alone on a large one); every member exactly once;
+    each chunk interleaved across the family (early and late members alike). One worker:
+    four interleaved chunks, as before."""
+    from pipeline.studies.experiment import _chunks
+
+    members = list(range(200))
+    chunks = _chunks(members, 2)
+    sizes = [len(c) for c in chunks]
+    assert sizes[:4] == [50, 38, 28, 21] and sizes == sorted(sizes, reverse=True)
+    assert max(sizes[-3:]) <= 2 and sorted(sum(chunks, [])) == members
+    assert min(chunks[0]) < 10 and max(chunks[0]) > 190  # early and late alike
+    assert _chunks(list(range(6)), 1) == [[0, 4], [1, 5], [2], [3]]
+    assert _chunks([], 2) == [] and _chunks([7], 2) == [[7]]

@@ -33,13 +33,26 @@ def trajectory_context(cfg: Any) -> TrajectoryContext:
                              braking_mps2=max(-float(low), 0.0), accel_mps2=max(float(high), 0.0),
                              personal_space_m=_personal_space(cfg.scenario),
                              obstacle_slots=getattr(cfg.controller, "max_obstacles", None),
-                             vehicle_offsets_m=tuple(float(c) for c in v.footprint_offsets_m))
+                             vehicle_offsets_m=tuple(float(c) for c in v.footprint_offsets_m),
+                             crossing=_crossing(cfg.scenario, v.footprint_radius_m))
 
 
 def _personal_space(scenario: Any) -> float | None:
     """The personal-space gap (m) of a scenario among walkers, else None."""
     walkers = getattr(scenario, "pedestrians", None)
     return float(walkers.personal_space_m) if walkers is not None else None
+
+
+def _crossing(scenario: Any, vehicle_radius_m: float) -> tuple[bool, bool] | None:
+    """A drawn crossing among recorded walkers: whether its straight line meets a walker and
+    whether standing still at its start is touched (the recording alone); else None."""
+    walkers = getattr(scenario, "pedestrians", None)
+    if walkers is None or walkers.scene is None or walkers.window_start_s is None:
+        return None
+    from pipeline.loop.pedestrians import crossing_difficulty
+
+    judged = crossing_difficulty(scenario, vehicle_radius_m)
+    return judged.straight_line_meets, judged.standing_touched
 
 
 @functools.lru_cache(maxsize=16)

@@ -469,7 +469,9 @@ def crowd_block(sig: Signals, tracks: list[ObstacleTrack], clearance: np.ndarray
         personal_space_intrusion_s=float(np.sum(dt[inside])),
         personal_space_entries=entries,
         contact_relative_speed_mps=relative, walkers_beyond_slots_share=beyond,
-        contact_at_appearance=bool(at_appearance))
+        contact_at_appearance=bool(at_appearance),
+        straight_line_meets=None if context.crossing is None else context.crossing[0],
+        standing_touched=None if context.crossing is None else context.crossing[1])
 
 
 REPULSION_READS = THREAT_READS + ("repulsion_need", "near_field_m", "repulsion_onset_force",

@@ -201,7 +201,10 @@ class Crowd(_Block):
     NaN without one), whether that contact came at the walker's appearance (every walker in
     contact then was not seen one step before: a recorded track that begins on or against
     the platform, which no planner could have seen coming), and the share of steps with more
-    walkers in sensor range than the controller has obstacle slots."""
+    walkers in sensor range than the controller has obstacle slots; and the crossing's
+    difficulty from the recording alone (whether the straight line at the drawn speed meets a
+    walker, whether a platform standing still at the start is touched; None where the run's
+    configuration has no drawn crossing)."""
 
     timeout: bool
     path_ratio: float
@@ -211,6 +214,8 @@ class Crowd(_Block):
     contact_relative_speed_mps: float
     walkers_beyond_slots_share: float
     contact_at_appearance: bool = False
+    straight_line_meets: bool | None = None
+    standing_touched: bool | None = None
 
 
 @dataclass(frozen=True)

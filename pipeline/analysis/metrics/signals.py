@@ -43,6 +43,11 @@ class TrajectoryContext:
     #: the ego's disc centres along its heading (m; ``vehicle.footprint_discs``): one disc at
     #: the logged position unless the ego is a covered rectangle
     vehicle_offsets_m: tuple[float, ...] = (0.0,)
+    #: among recorded walkers, the crossing's difficulty from the recording alone (whether
+    #: the straight line at the drawn speed meets a walker, whether a platform standing still
+    #: at the start is touched: :func:`pipeline.loop.pedestrians.crossing_difficulty`); None
+    #: elsewhere
+    crossing: tuple[bool, bool] | None = None
 
 
 def rms(values: np.ndarray) -> float:

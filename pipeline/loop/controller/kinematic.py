@@ -251,7 +251,7 @@ class KinematicLtvMpc(KinematicTrack):
         structure = KinematicQpStructure.of(controller, vehicle)
         self.qp, self.compile_count, self.compile_time_s = compiled_backend(
             qp_cache, "kinematic", structure, lambda: build_kinematic_problem(structure),
-            controller.backend, controller.solver_max_iter)
+            controller.backend, controller.solver_max_iter, controller.solver_refinement)
         # the QP by its number of obstacle slots: a step whose half-planes fill fewer slots
         # solves the smallest that holds them (empty slots are rows 0 + s >= 0: leaving them
         # out changes no solution; among walkers, 50 slots are mostly empty)
@@ -319,7 +319,7 @@ class KinematicLtvMpc(KinematicTrack):
             qp, count, seconds = compiled_backend(
                 self._qp_cache, "kinematic", structure,
                 lambda: build_kinematic_problem(structure), self.cfg.backend,
-                self.cfg.solver_max_iter)
+                self.cfg.solver_max_iter, self.cfg.solver_refinement)
             self.compile_count += count
             self.compile_time_s += seconds
             self._by_slots[slots] = qp

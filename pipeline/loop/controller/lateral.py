@@ -110,7 +110,7 @@ class LateralMpc:
             compiled, self.compile_count, self.compile_time_s = compiled_backend(
                 qp_cache, "lateral", structure,
                 lambda: build_condensed_lateral_problem(structure), controller.backend,
-                controller.solver_max_iter)
+                controller.solver_max_iter, controller.solver_refinement)
             self.qp = CompiledCondensedQp(compiled)
         # the compiled QP by its number of obstacle slots: a step whose half-planes fill
         # fewer slots solves the smallest statement that holds them (slots_used; most steps
@@ -125,7 +125,8 @@ class LateralMpc:
                 compiled, count, seconds = compiled_backend(
                     qp_cache, "lateral", smaller,
                     functools.partial(build_condensed_lateral_problem, smaller),
-                    controller.backend, controller.solver_max_iter)
+                    controller.backend, controller.solver_max_iter,
+                    controller.solver_refinement)
                 self.compile_count += count
                 self.compile_time_s += seconds
                 self.qp_by_slots[slots] = CompiledCondensedQp(compiled, slots)

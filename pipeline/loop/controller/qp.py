@@ -290,15 +290,17 @@ def _check_map(qp_map: AffineQpMap, prog: Any, parameters: list[Any]) -> None:
         raise RuntimeError(f"parameter-to-data map disagrees with CVXPY's ({error:.3g})")
 
 
-def clarabel_settings(max_iter: int) -> Any:
+def clarabel_settings(max_iter: int, refinement: bool = True) -> Any:
     """Clarabel's settings for a kept solver: quiet, presolve off (it would forbid in-place data
-    updates), the iteration limit."""
+    updates), the iteration limit, and its iterative refinement of each KKT solve on
+    (Clarabel's default) or off (``controller.solver_refinement``)."""
     import clarabel
 
     settings = clarabel.DefaultSettings()
     settings.verbose = False
     settings.presolve_enable = False
     settings.max_iter = int(max_iter)
+    settings.iterative_refinement_enable = bool(refinement)
     return settings
 
 
@@ -310,11 +312,14 @@ class DirectQp:
     qp_map : AffineQpMap
     max_iter : int
         Clarabel's iteration limit.
+    refinement : bool
+        Clarabel's iterative refinement (:func:`clarabel_settings`).
     """
 
-    def __init__(self, qp_map: AffineQpMap, max_iter: int) -> None:
+    def __init__(self, qp_map: AffineQpMap, max_iter: int, refinement: bool = True) -> None:
         self.map = qp_map
         self.max_iter = int(max_iter)
+        self.refinement = bool(refinement)
         self._solver: Any = None  # clarabel.DefaultSolver, made at the first solve
 
     def solve(self, theta: np.ndarray) -> QpSolution:
@@ -332,7 +337,8 @@ class DirectQp:
         try:
             if self._solver is None:
                 self._solver = clarabel.DefaultSolver(m.P, q, m.matrix_A(a), b, m.cones(),
-                                                      clarabel_settings(self.max_iter))
+                                                      clarabel_settings(self.max_iter,
+                                                                        self.refinement))
             else:
                 self._solver.update(q=q, A=a, b=b)
             solution = self._solver.solve()
@@ -356,14 +362,17 @@ class CvxpyQp:
     variables : dict
         Name -> ``cvxpy.Variable``.
     max_iter : int
+    refinement : bool
+        Clarabel's iterative refinement (:func:`clarabel_settings`).
     """
 
     def __init__(self, problem: cp.Problem, parameters: list[Any], variables: dict[str, Any],
-                 max_iter: int) -> None:
+                 max_iter: int, refinement: bool = True) -> None:
         self.problem = problem
         self.parameters = parameters
         self.variables = variables
         self.max_iter = int(max_iter)
+        self.refinement = bool(refinement)
         self.sizes = np.cumsum([p.size for p in parameters])[:-1]
         self.compile_count = 0
         self._program = None
@@ -380,7 +389,8 @@ class CvxpyQp:
             with warnings.catch_warnings():
                 # "solution may be inaccurate": the status says so and is logged per step
                 warnings.simplefilter("ignore", UserWarning)
-                self.problem.solve(solver=cp.CLARABEL, max_iter=self.max_iter)
+                self.problem.solve(solver=cp.CLARABEL, max_iter=self.max_iter,
+                                   iterative_refinement_enable=self.refinement)
         except solver_errors() as exc:
             return QpSolution(f"error:{type(exc).__name__}", -1, time.perf_counter() - start,
                               None)
@@ -466,7 +476,7 @@ class QpCache:
 
 def compiled_backend(cache: QpCache | None, name: str, structure: Hashable,
                      build: Callable[[], tuple[Any, list[Any], dict[str, Any]]], backend: str,
-                     max_iter: int
+                     max_iter: int, refinement: bool = True
                      ) -> tuple[DirectQp | CvxpyQp, int, float]:
     """The solver object of one controller, its problem taken from ``cache``.
 
@@ -483,6 +493,8 @@ def compiled_backend(cache: QpCache | None, name: str, structure: Hashable,
     backend : str
         ``clarabel_direct`` or ``cvxpy``.
     max_iter : int
+    refinement : bool
+        Clarabel's iterative refinement (:func:`clarabel_settings`).
 
     Returns
     -------
@@ -494,7 +506,9 @@ def compiled_backend(cache: QpCache | None, name: str, structure: Hashable,
     before_n, before_t = cache.compile_count, cache.compile_time_s
     if backend == "clarabel_direct":
         qp_map = cache.get((name, "map", structure), lambda: compile_affine_map(*build()))
-        qp = DirectQp(qp_map, max_iter)
+        qp = DirectQp(qp_map, max_iter, refinement)
     else:
-        qp = cache.get((name, "cvxpy", structure), lambda: CvxpyQp(*build(), max_iter=max_iter))
+        # one CVXPY problem per statement and solver settings (a problem solves with its own)
+        qp = cache.get((name, "cvxpy", structure, int(max_iter), bool(refinement)),
+                       lambda: CvxpyQp(*build(), max_iter=max_iter, refinement=refinement))
     return qp, cache.compile_count - before_n, cache.compile_time_s - before_t

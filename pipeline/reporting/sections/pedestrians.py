@@ -66,7 +66,7 @@ def _verdict_rows(judged: PedestrianVerdicts) -> tuple[dict, ...]:
         entry = {"claim": row.claim_id, "comparison": row.comparison,
                  "all": str(row.outcome), "n": row.result.n_pairs}
         for scene in judged.scenes:
-            scene_row = by_scene[scene].get(row.key)
+            scene_row = by_scene[scene].get(row.key) if scene in by_scene else None
             entry[scene] = (f"{scene_row.outcome} ({scene_row.result.n_pairs})"
                             if scene_row is not None else "—")
         rows.append(entry)
