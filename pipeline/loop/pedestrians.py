@@ -15,7 +15,7 @@ from __future__ import annotations
 import functools
 import gzip
 import math
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any, ClassVar
 
@@ -69,6 +69,9 @@ class SceneTracks:
     counts: np.ndarray
     positions_m: np.ndarray
     ids: np.ndarray
+    #: :func:`recorded_motion`'s walkers near a crossing, by the crossing (a run's scenario
+    #: and its metrics ask for the same member in one process, moments apart)
+    near: dict = field(default_factory=dict, compare=False, repr=False)
 
     @property
     def start_s(self) -> float:
@@ -542,10 +545,18 @@ def recorded_motion(cfg: ScenarioConfig) -> tuple[RecordedTrackMotion, int]:
                           "a drawn member (scene and window_start_s set): run the family "
                           "(scenario=pedestrians), not its base")
     tracks = load_scene(ped, ped.scene)
-    which = pedestrians_near(tracks, np.asarray(cfg.start_xy_m, float),
-                             np.asarray(cfg.goal_xy_m, float), ped.window_start_s,
-                             cfg.n_steps * cfg.sample_time_s, ped.corridor_m,
-                             ped.track_extension_s)
+    key = (tuple(cfg.start_xy_m), tuple(cfg.goal_xy_m), float(ped.window_start_s),
+           float(cfg.n_steps * cfg.sample_time_s), float(ped.corridor_m),
+           float(ped.track_extension_s))
+    which = tracks.near.get(key)
+    if which is None:
+        which = pedestrians_near(tracks, np.asarray(cfg.start_xy_m, float),
+                                 np.asarray(cfg.goal_xy_m, float), ped.window_start_s,
+                                 cfg.n_steps * cfg.sample_time_s, ped.corridor_m,
+                                 ped.track_extension_s)
+        if len(tracks.near) >= 1024:
+            tracks.near.clear()
+        tracks.near[key] = which
     return tracks.motion(which, ped.window_start_s, ped.track_extension_s), int(which.size)
 
 

@@ -60,8 +60,12 @@ def test_built_in_sources_draw_and_build_the_members_drawn_before_the_protocol(m
                                                                                case):
     """member(seed, i) of the scripted and the pedestrian source is member i as the code before
     the protocol drew it (its configuration), and build() makes the scenario it made (its
-    obstacles' starts, radii and places at 4.5 s, the sensor range); family_members agrees."""
-    cfg = make_config(case["overrides"])
+    obstacles' starts, radii and places at 4.5 s, the sensor range); family_members agrees.
+    Pedestrians with their tracks as recorded (track_extension_s=0, the reading they were
+    drawn with: an extended walker is present earlier, which moves an aimed draw)."""
+    walkers = any("pedestrians" in o for o in case["overrides"])
+    cfg = make_config(case["overrides"]
+                      + (["scenario.pedestrians.track_extension_s=0"] if walkers else []))
     base = cfg.scenario
     source = scenario_source(base, cfg.vehicle.footprint_radius_m)
     members = family_members(base, cfg.vehicle.footprint_radius_m)

@@ -324,7 +324,7 @@ def safety_block(tr: pd.DataFrame, sig: Signals, tracks: list[ObstacleTrack],
     avoidable = collision_is_avoidable(sig.t, pose, tracks, contact_j, contact_t, context,
                                        thresholds) if collision and contact_j >= 0 else None
     return (Safety(sampled, continuous, chosen, collision, avoidable,
-                   min_time_to_collision(tr, context.vehicle_radius_m)),
+                   min_time_to_collision(tr, context.vehicle_radius_m, tracks)),
             contact_j if collision and contact_j >= 0 else None)
 
 
@@ -515,7 +515,7 @@ def compute_metrics_readings(trajectory: pd.DataFrame, context: TrajectoryContex
     trajectory = ego_disc_view(trajectory, context.vehicle_offsets_m)
     sig = trajectory_signals(trajectory, context)
     tracks = obstacle_tracks(trajectory)
-    clearance = clearance_series(trajectory, context.vehicle_radius_m)
+    clearance = clearance_series(trajectory, context.vehicle_radius_m, tracks)
     step_cap = StepCap(float(np.nanmean(trajectory["apf_step_cap_share"].to_numpy(float)))) \
         if "apf_step_cap_share" in trajectory else None
     iterations, fallbacks = solver_blocks(trajectory)

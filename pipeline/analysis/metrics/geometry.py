@@ -46,32 +46,31 @@ def ego_disc_view(trajectory: pd.DataFrame, offsets_m: tuple[float, ...]) -> pd.
     return view
 
 
-def clearance_series(trajectory: pd.DataFrame, vehicle_radius_m: float) -> np.ndarray:
-    """Per-step clearance to the nearest visible obstacle (NaN while none is visible)."""
+def clearance_series(trajectory: pd.DataFrame, vehicle_radius_m: float,
+                     tracks: list[ObstacleTrack] | None = None) -> np.ndarray:
+    """Per-step clearance to the nearest visible obstacle (NaN while none is visible);
+    ``tracks``: the table's :func:`obstacle_tracks` when the caller has them (the same
+    numbers, without reading the obstacles' columns again)."""
     xy = float_columns(trajectory, "X_m", "Y_m")
     result = np.full(len(trajectory), np.inf)
-    for j in obstacle_indices(trajectory.columns):
-        centre = float_columns(trajectory, f"obs{j}_x_m", f"obs{j}_y_m")
-        gap = (np.linalg.norm(xy - centre, axis=1) - trajectory[f"obs{j}_radius_m"].to_numpy(float)
-               - vehicle_radius_m)
-        visible = trajectory[f"obs{j}_visible"].to_numpy(bool)
-        result = np.where(visible, np.minimum(result, gap), result)
+    for track in tracks if tracks is not None else obstacle_tracks(trajectory):
+        gap = np.linalg.norm(xy - track.position, axis=1) - track.radius - vehicle_radius_m
+        result = np.where(track.visible, np.minimum(result, gap), result)
     return np.where(np.isfinite(result), result, np.nan)
 
 
-def min_time_to_collision(trajectory: pd.DataFrame, vehicle_radius_m: float) -> float:
-    """Smallest ``clearance / closing speed`` over steps and visible obstacles while closing."""
+def min_time_to_collision(trajectory: pd.DataFrame, vehicle_radius_m: float,
+                          tracks: list[ObstacleTrack] | None = None) -> float:
+    """Smallest ``clearance / closing speed`` over steps and visible obstacles while closing;
+    ``tracks`` as for :func:`clearance_series`."""
     t = trajectory["time_s"].to_numpy(float)
     xy = float_columns(trajectory, "X_m", "Y_m")
     best = np.inf
-    for j in obstacle_indices(trajectory.columns):
-        centre = float_columns(trajectory, f"obs{j}_x_m", f"obs{j}_y_m")
-        dist = np.linalg.norm(xy - centre, axis=1)
+    for track in tracks if tracks is not None else obstacle_tracks(trajectory):
+        dist = np.linalg.norm(xy - track.position, axis=1)
         closing = -time_derivative(dist, t)
-        gap = np.maximum(dist - trajectory[f"obs{j}_radius_m"].to_numpy(float) - vehicle_radius_m,
-                         0.0)
-        visible = trajectory[f"obs{j}_visible"].to_numpy(bool)
-        ok = visible & (closing > 1e-6)
+        gap = np.maximum(dist - track.radius - vehicle_radius_m, 0.0)
+        ok = track.visible & (closing > 1e-6)
         if np.any(ok):
             best = min(best, float(np.min(gap[ok] / closing[ok])))
     return float(best) if np.isfinite(best) else float("nan")
@@ -112,16 +111,24 @@ class ObstacleTrack:
 def obstacle_tracks(trajectory: pd.DataFrame) -> list[ObstacleTrack]:
     """Every obstacle of the table as an :class:`ObstacleTrack`."""
     t = trajectory["time_s"].to_numpy(float)
+    indices = obstacle_indices(trajectory.columns)
+    if not indices:
+        return []
+    # every obstacle's columns in two selections (among walkers 50 obstacles: 200 columns,
+    # one at a time most of a run's metrics); the same values, column for column
+    numbers = trajectory[[f"obs{j}_{name}" for j in indices
+                          for name in ("x_m", "y_m", "radius_m")]].to_numpy(float)
+    flags = trajectory[[f"obs{j}_visible" for j in indices]].to_numpy(bool)
     tracks = []
-    for j in obstacle_indices(trajectory.columns):
-        pos = float_columns(trajectory, f"obs{j}_x_m", f"obs{j}_y_m")
+    for k in range(len(indices)):
+        pos = numbers[:, 3 * k:3 * k + 2].copy()
         vel = np.zeros_like(pos)
         if len(t) > 1:
             vel[:-1] = np.diff(pos, axis=0) / np.diff(t)[:, None]
             vel[-1] = vel[-2]
-        visible = trajectory[f"obs{j}_visible"].to_numpy(bool)
-        tracks.append(ObstacleTrack(pos, vel, trajectory[f"obs{j}_radius_m"].to_numpy(float),
-                                    visible, int(np.argmax(visible)) if visible.any() else -1))
+        visible = flags[:, k].copy()
+        tracks.append(ObstacleTrack(pos, vel, numbers[:, 3 * k + 2].copy(), visible,
+                                    int(np.argmax(visible)) if visible.any() else -1))
     return tracks
 
 
