@@ -71,7 +71,7 @@ class SceneTracks:
     ids: np.ndarray
     #: :func:`recorded_motion`'s walkers near a crossing, by the crossing (a run's scenario
     #: and its metrics ask for the same member in one process, moments apart)
-    near: dict = field(default_factory=dict, compare=False, repr=False)
+    near: dict[tuple[Any, ...], np.ndarray] = field(default_factory=dict, compare=False, repr=False)
 
     @property
     def start_s(self) -> float:
