@@ -137,6 +137,24 @@ def test_kinematic_backends_agree(make_config):
                                                        abs=1e-7)
 
 
+def test_a_kinematic_family_among_walkers_compiles_every_slot_size_once_in_the_parent(
+        make_config, tmp_path):
+    """The kinematic MPC with 50 slots solves the smallest of 4, 8, 16, 32 and 50 that holds
+    the slots a step uses: all five statements compiled in the family's parent, none in its
+    workers (each chunk compiled them again before: 54 compilations for 200 members)."""
+    from pipeline.loop.controller import KinematicLtvMpc
+    from pipeline.studies.experiment import run_family
+
+    cfg = make_config(["experiment=pedestrians", "planner=improved", "scenario.family.size=6",
+                       "scenario.family.n_jobs=2", "scenario.n_steps=60"])
+    cache = QpCache()
+    table = run_family(cfg, tmp_path / "fam", progress=False, qp_cache=cache)
+    timing = json.loads((tmp_path / "fam" / "timing.json").read_text())
+    assert timing["compiles"] == cache.compile_count == 5
+    assert table["compile_count"].sum() == 0
+    assert KinematicLtvMpc(cfg.controller, cfg.vehicle, 0.1, qp_cache=cache).compile_count == 0
+
+
 def test_unused_obstacle_slots_do_not_change_the_solution(make_config):
     """One compiled problem serves 1-3 obstacles: a run with one obstacle on a 3-slot problem
     equals the same run on a 1-slot problem."""

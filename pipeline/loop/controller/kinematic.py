@@ -259,6 +259,12 @@ class KinematicLtvMpc(KinematicTrack):
         self._by_slots = {structure.max_obstacles: self.qp}
         self._slot_sizes = tuple(sorted({b for b in SLOT_BUCKETS if b < structure.max_obstacles}
                                         | {structure.max_obstacles}))
+        if qp_cache is not None:
+            # every size compiled here, into the shared cache (a family's parent): its workers
+            # get them with it and compile nothing (compiled on first use, each chunk of a
+            # family among walkers compiled them again: 54 compilations for 200 members)
+            for slots in self._slot_sizes:
+                self._qp_of_size(slots)
         self.fallback = PlanFallback(controller.horizon)
         self.u_prev = np.zeros(2)
         self._steps_ahead_s = np.arange(1, controller.horizon + 1) * self.ts
@@ -313,6 +319,11 @@ class KinematicLtvMpc(KinematicTrack):
         use, through the shared cache)."""
         need = max(slots_used(Gx, Gy, h), 1)
         slots = next(b for b in self._slot_sizes if b >= need)
+        return self._qp_of_size(slots), slots
+
+    def _qp_of_size(self, slots: int) -> Any:
+        """This controller's QP of ``slots`` obstacle slots (its kept solver made at its first
+        solve), the compiled statement taken from the shared cache or compiled into it."""
         qp = self._by_slots.get(slots)
         if qp is None:
             structure = dataclasses.replace(self._structure, max_obstacles=slots)
@@ -323,7 +334,7 @@ class KinematicLtvMpc(KinematicTrack):
             self.compile_count += count
             self.compile_time_s += seconds
             self._by_slots[slots] = qp
-        return qp, slots
+        return qp
 
     def _accepted(self, plan: np.ndarray, solution: QpSolution, halfplanes: tuple[Any, ...],
                   status: str,
