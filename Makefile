@@ -28,7 +28,7 @@ FAMILY_JOBS ?= 1
 PEDESTRIANS_FAMILY_SIZE ?= 200
 # the variants of make pedestrians (conf/experiment/pedestrians_<variant>.yaml) and their size
 PEDESTRIANS_VARIANTS ?= car aimed reactive lateral
-PEDESTRIANS_VARIANTS_FAMILY_SIZE ?= 40
+PEDESTRIANS_VARIANTS_FAMILY_SIZE ?= 30
 # make euro-ncap: tests per method (the protocol's grid of 5 cases x 11 speeds, twice)
 EURO_NCAP_FAMILY_SIZE ?= 110
 REPORT      ?= reports/latest

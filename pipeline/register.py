@@ -309,11 +309,11 @@ INTERPRETATION_REGISTER: tuple[RegisterEntry, ...] = (
         "(controller.reference_alignment=path_speed; literally, improved's 0.5 m step cap drove "
         "it at 3.6-7 m/s), 50 obstacle slots, the run ended at its first contact",
         "the compact car on the lateral track with 3 slots and crossings aimed at a walker "
-        "(experiment=pedestrians_car, a row of make pedestrians: 75 % / 90 % collisions; at its "
-        "40 crossings every claim inconclusive, C1-C5 on 1-2 clean pairs); the robot "
+        "(experiment=pedestrians_car, a row of make pedestrians: 77 % / 90 % collisions; at its "
+        "30 crossings every claim inconclusive, C1-C5 on 1-2 clean pairs); the robot "
         "on the lateral track braking to a stop (experiment=pedestrians_lateral: the hand-over "
-        "to the kinematic single-track below 0.6 m/s, velocity planning to a floor of 0; 40 "
-        "crossings: 12.5 % / 35 % collisions)",
+        "to the kinematic single-track below 0.6 m/s, velocity planning to a floor of 0; 30 "
+        "crossings: 17 % / 37 % collisions)",
         "vehicle, controller, controller.reference_alignment, controller.max_obstacles, "
         "scenario.pedestrians.end_at_contact"),
     RegisterEntry(
@@ -337,8 +337,8 @@ INTERPRETATION_REGISTER: tuple[RegisterEntry, ...] = (
         "draw=scene: the midpoint a recorded position, start and goal within "
         "walkable_radius_m = 1 m of one); the straight line meets a walker on 66 % of crossings",
         "aimed: the midpoint where a walker will be when the platform arrives (the straight line "
-        "meets a walker on every crossing; experiment=pedestrians_aimed, 40 crossings: "
-        "collisions 0 % / 17.5 %; C1, C3a and C3b as in the default family, C0, C2, C4 and C5 "
+        "meets a walker on every crossing; experiment=pedestrians_aimed, 30 crossings: "
+        "collisions 0 % / 23 %; C3a and C3b as in the default family, C0, C1, C2, C4 and C5 "
         "inconclusive)",
         "scenario.pedestrians.draw, scenario.pedestrians.walkable_radius_m"),
     RegisterEntry(
@@ -346,7 +346,7 @@ INTERPRETATION_REGISTER: tuple[RegisterEntry, ...] = (
         "replayed on their recorded tracks (they never react)",
         "reactive: Helbing and Molnar's social force towards each walker's recorded position "
         "social_lookahead_s ahead, avoiding the others and the platform "
-        "(experiment=pedestrians_reactive, 40 crossings: collisions 0 % / 17.5 %; C3a, C3b and "
+        "(experiment=pedestrians_reactive, 30 crossings: collisions 0 % / 20 %; C3a, C3b and "
         "C4 as in the default family, C0, C1, C2 and C5 inconclusive)",
         "scenario.pedestrians.walkers, scenario.pedestrians.social_*"),
     RegisterEntry(

@@ -516,7 +516,7 @@ def _pedestrians(family: FamilyInputs, cfg: ClaimsConfig, name: str = "default",
     present = tuple(s for s in scenes if any((t["scene"] == s).any() for t in tables.values()))
     ledger = family_ledger(tables, own, None, cfg.treatment, comparisons, sensitivity=False,
                            memo=memo)
-    # by scene for the default family alone: a variant's 40-60 crossings leave 10-15 a scene,
+    # by scene for the default family alone: a variant's 30 crossings leave 7-8 a scene,
     # too few for a ledger of their own (and the report's time is make pedestrians')
     by_scene = tuple((scene, family_ledger({m: t[t["scene"] == scene] for m, t in
                                             tables.items()}, own, None, cfg.treatment,
