@@ -53,9 +53,12 @@ def clearance_series(trajectory: pd.DataFrame, vehicle_radius_m: float,
     numbers, without reading the obstacles' columns again)."""
     xy = float_columns(trajectory, "X_m", "Y_m")
     result = np.full(len(trajectory), np.inf)
-    for track in tracks if tracks is not None else obstacle_tracks(trajectory):
-        gap = np.linalg.norm(xy - track.position, axis=1) - track.radius - vehicle_radius_m
-        result = np.where(track.visible, np.minimum(result, gap), result)
+    # no time column needed: the positions, radii and visibility alone
+    columns = [(track.position, track.radius, track.visible) for track in tracks] \
+        if tracks is not None else _obstacle_columns(trajectory)
+    for position, radius, visible in columns:
+        gap = np.linalg.norm(xy - position, axis=1) - radius - vehicle_radius_m
+        result = np.where(visible, np.minimum(result, gap), result)
     return np.where(np.isfinite(result), result, np.nan)
 
 
@@ -108,26 +111,31 @@ class ObstacleTrack:
     appear: int
 
 
-def obstacle_tracks(trajectory: pd.DataFrame) -> list[ObstacleTrack]:
-    """Every obstacle of the table as an :class:`ObstacleTrack`."""
-    t = trajectory["time_s"].to_numpy(float)
+def _obstacle_columns(trajectory: pd.DataFrame
+                      ) -> list[tuple[np.ndarray, np.ndarray, np.ndarray]]:
+    """Every obstacle's logged positions (n, 2), radii (n,) and visibility (n,), read in two
+    selections (among walkers 50 obstacles: 200 columns, one at a time most of a run's
+    metrics); the same values, column for column."""
     indices = obstacle_indices(trajectory.columns)
     if not indices:
         return []
-    # every obstacle's columns in two selections (among walkers 50 obstacles: 200 columns,
-    # one at a time most of a run's metrics); the same values, column for column
     numbers = trajectory[[f"obs{j}_{name}" for j in indices
                           for name in ("x_m", "y_m", "radius_m")]].to_numpy(float)
     flags = trajectory[[f"obs{j}_visible" for j in indices]].to_numpy(bool)
+    return [(numbers[:, 3 * k:3 * k + 2].copy(), numbers[:, 3 * k + 2].copy(),
+             flags[:, k].copy()) for k in range(len(indices))]
+
+
+def obstacle_tracks(trajectory: pd.DataFrame) -> list[ObstacleTrack]:
+    """Every obstacle of the table as an :class:`ObstacleTrack`."""
+    t = trajectory["time_s"].to_numpy(float)
     tracks = []
-    for k in range(len(indices)):
-        pos = numbers[:, 3 * k:3 * k + 2].copy()
+    for pos, radius, visible in _obstacle_columns(trajectory):
         vel = np.zeros_like(pos)
         if len(t) > 1:
             vel[:-1] = np.diff(pos, axis=0) / np.diff(t)[:, None]
             vel[-1] = vel[-2]
-        visible = flags[:, k].copy()
-        tracks.append(ObstacleTrack(pos, vel, numbers[:, 3 * k + 2].copy(), visible,
+        tracks.append(ObstacleTrack(pos, vel, radius, visible,
                                     int(np.argmax(visible)) if visible.any() else -1))
     return tracks
 
