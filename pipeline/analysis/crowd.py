@@ -25,8 +25,16 @@ METRIC_COLUMNS = ("crossings", "success_rate", "collision_rate", "timeout_rate",
                   "intrusion_time_share")
 
 
+def flag_value(value: Any) -> bool | None:
+    """A table cell as a flag: True or False as written (``True``, ``1``, ``1.0``; ``False``,
+    ``0``, ``0.0``, any case), None where nothing was recorded (empty, NaN, anything else)."""
+    word = str(value).lower()
+    return True if word in ("true", "1", "1.0") else False if word in ("false", "0", "0.0") \
+        else None
+
+
 def _flags(table: pd.DataFrame, column: str) -> np.ndarray:
-    return table[column].map(lambda v: str(v).lower() in ("true", "1", "1.0")).to_numpy(bool) \
+    return table[column].map(lambda v: flag_value(v) is True).to_numpy(bool) \
         if column in table else np.zeros(len(table), bool)
 
 

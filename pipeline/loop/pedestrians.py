@@ -142,6 +142,12 @@ class RecordedTrackMotion:
         here, ahead, frac, present = self._segments(np.asarray(times_s, float)[:, None])
         return self._along(here, ahead, frac), present
 
+    def states_over(self, times_s: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """:meth:`states_at` at every time of ``times_s`` at once: positions (T, n, 2),
+        velocities (T, n, 2) and presence (T, n), the same operations element for element."""
+        here, ahead, frac, present = self._segments(np.asarray(times_s, float)[:, None])
+        return self._along(here, ahead, frac), (ahead - here) / self.step_s, present
+
     def _along(self, here: np.ndarray, ahead: np.ndarray, frac: np.ndarray) -> np.ndarray:
         """The position a fraction ``frac`` along each segment from ``here`` to ``ahead``."""
         # (1 - f) a + f b: exactly a at f = 0 and exactly b at f = 1 (a sample is replayed)
@@ -191,9 +197,7 @@ class SteppedTrackMotion:
            n_steps: int) -> SteppedTrackMotion:
         """The tracks at ``k * sample_time_s`` for k = 0..n_steps (the loop's step times)."""
         times = np.arange(int(n_steps) + 1) * float(sample_time_s)
-        here, ahead, frac, present = tracks._segments(times[:, None])
-        return cls(tracks, times, float(sample_time_s), tracks._along(here, ahead, frac),
-                   (ahead - here) / tracks.step_s, present)
+        return cls(tracks, times, float(sample_time_s), *tracks.states_over(times))
 
     def states_at(self, time_s: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """:meth:`RecordedTrackMotion.states_at`, from the table at a step time."""

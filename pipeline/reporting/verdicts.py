@@ -580,7 +580,7 @@ def _difficulty(settings: Any, info: dict, tables: dict[str, pd.DataFrame]) -> d
     seed and size from ``family.json`` and no drawn scene) and each method's collision
     rate on the crossings where a platform standing still is not touched
     (:func:`~pipeline.analysis.crowd.collision_rates`)."""
-    from pipeline.analysis.crowd import collision_rates
+    from pipeline.analysis.crowd import collision_rates, flag_value
     from pipeline.loop.pedestrians import CrossingDifficulty, crossing_difficulty
     from pipeline.loop.scenario import family_members
     from pipeline.loop.settings import FamilyConfig
@@ -588,14 +588,9 @@ def _difficulty(settings: Any, info: dict, tables: dict[str, pd.DataFrame]) -> d
     radius = settings.vehicle.footprint_radius_m
     member, ped = settings.scenario, settings.scenario.pedestrians
     first = next(iter(tables.values()))
-    def flag(value: Any) -> bool | None:  # a CSV's True/False, None where not recorded
-        word = str(value).lower()
-        return True if word in ("true", "1", "1.0") else False if word in ("false", "0", "0.0") \
-            else None
-
     recorded = {str(n): CrossingDifficulty(meets, touched) for n, meets, touched
-                in zip(first["scenario"], map(flag, first["straight_line_meets"]),
-                       map(flag, first["standing_touched"]), strict=True)
+                in zip(first["scenario"], map(flag_value, first["straight_line_meets"]),
+                       map(flag_value, first["standing_touched"]), strict=True)
                 if meets is not None and touched is not None} \
         if {"straight_line_meets", "standing_touched"} <= set(first.columns) else {}
     if len(recorded) == len(first):

@@ -315,8 +315,8 @@ class KinematicLtvMpc(KinematicTrack):
 
     def _qp_for(self, Gx: np.ndarray, Gy: np.ndarray, h: np.ndarray) -> tuple[Any, int]:
         """The QP with the fewest slots (of :data:`SLOT_BUCKETS` and ``max_obstacles``) that
-        holds every slot these half-planes use, and that number (compiled once, on first
-        use, through the shared cache)."""
+        holds every slot these half-planes use, and that number (every size compiled once,
+        through the shared cache: at construction when there is one, else on first use)."""
         need = max(slots_used(Gx, Gy, h), 1)
         slots = next(b for b in self._slot_sizes if b >= need)
         return self._qp_of_size(slots), slots
