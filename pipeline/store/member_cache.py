@@ -18,6 +18,9 @@ concurrent writers and on a shared file system:
   the server's byte-range locks) on ``<root>/.lock``, and cleaning holds it exclusively;
 - an entry is trusted only when its manifest matches every file (size and SHA-256), its config
   hash and its code version: a damaged entry is removed and the member simulated again;
+- a family that keeps its members' rows instead of their folders (a tune's training
+  families) takes a cached member's ``metrics.json`` alone (:meth:`MemberCache.metrics`), and
+  publishes nothing: its members have no folder to publish;
 - a restored member gets its own files (copies, reflinks where the file system makes them:
   an edit in one run folder never reaches another or the cache; entries are copies too) and
   its own ``config.yaml`` and manifest, written last, like a fresh run's;
@@ -248,6 +251,26 @@ class MemberCache:
         write_manifest(folder, "run", RUN_FILES + optional, config_hash,
                        {"member_cache": key})
         return True
+
+    def metrics(self, cfg, config_hash: str | None = None) -> dict | None:
+        """The cached member's ``metrics.json`` mapping, nothing copied (a family that keeps
+        its members' rows, not their folders), or None when the member is not cached (or its
+        entry is not trusted: removed, as for :meth:`restore`)."""
+        config_hash = config_hash or cfg.config_hash()
+        key = self.key(cfg, config_hash)
+        if key is None:
+            return None
+        entry = self.entry(key)
+        if not entry.is_dir():
+            return None
+        with self._lock():
+            if not self._trusted(entry, config_hash):
+                return None
+            try:
+                data = json.loads((entry / "metrics.json").read_text(encoding="utf-8"))
+            except (OSError, ValueError):  # removed by a cleaner after the check
+                return None
+        return data if isinstance(data, dict) else None
 
     def publish(self, cfg, folder: Path) -> bool:
         """Store the complete member folder ``folder`` (its manifest written) in the cache;

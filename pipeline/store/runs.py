@@ -4,7 +4,9 @@ A *run folder* holds ``config.yaml`` (resolved config), ``model.json``, ``trajec
 ``timing.json`` (wall-clock solve times, which differ between identical runs), ``metrics.json``
 and, written last and atomically, ``manifest.json``: every file with its size and SHA-256, the
 config hash and the code version. A *family folder* holds ``family_metrics.csv``, ``family.json``
-and its own manifest, which also lists each member folder's manifest hash. A folder is trusted
+and its own manifest, which also lists each member folder's manifest hash; a family whose
+members keep no run folder (a tune's training families) holds their ``metrics.json`` mappings
+in ``members.jsonl`` instead (:data:`MEMBER_ROWS`). A folder is trusted
 only when its manifest matches what is on disk; resume, aggregate, report and verify all go
 through :func:`check` and :func:`discover`, and every folder they pass over is listed with its
 reason (:class:`Skipped`).
@@ -257,10 +259,21 @@ def family_timing(folder: Path) -> dict:
     return data if isinstance(data, dict) else {}
 
 
+#: The ``metrics.json`` mappings of a family's members that keep no run folder of their own
+#: (a tune's training members, :attr:`~pipeline.studies.tune.space.TuneSpace.
+#: training_member_records`): one JSON object per line, ``member`` (the index) first, in member
+#: order. Listed in the family's manifest when present; JSON keeps every float exactly, so a
+#: later rung or a resumed tune takes a member's row as it took a member's ``metrics.json``.
+MEMBER_ROWS = "members.jsonl"
+
+
 def write_family(folder: Path, table: pd.DataFrame, info: dict, config_hash: str,
-                 members: list[Path], timing: dict | None = None) -> Path:
+                 members: list[Path], timing: dict | None = None,
+                 member_rows: list[dict] | None = None) -> Path:
     """Write a family folder's table, summary and (optional) process bookkeeping, then its
-    manifest (with the members' manifest hashes)."""
+    manifest (with the members' manifest hashes). ``member_rows`` (members without run
+    folders): each member's ``metrics.json`` mapping with its ``member`` index, written as
+    :data:`MEMBER_ROWS`."""
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
     clean_leftovers(folder)
@@ -270,10 +283,49 @@ def write_family(folder: Path, table: pd.DataFrame, info: dict, config_hash: str
     files: tuple[str, ...] = FAMILY_FILES
     if timing is not None:
         write_json_atomic(folder / FAMILY_TIMING, timing)
-        files = FAMILY_FILES + (FAMILY_TIMING,)
+        files = files + (FAMILY_TIMING,)
+    if member_rows is not None:
+        write_text_atomic(folder / MEMBER_ROWS, "".join(
+            _json_line(MEMBER_ROWS, row) for row in member_rows))
+        files = files + (MEMBER_ROWS,)
+    else:
+        (folder / MEMBER_ROWS).unlink(missing_ok=True)
     member_hashes = {m.name: file_entry(m / MANIFEST)["sha256"] for m in members}
     write_manifest(folder, "family", files, config_hash, {"members": member_hashes})
     return folder
+
+
+def _json_line(name: str, data: dict) -> str:
+    """One line of a JSON-lines record, NaN and infinities refused with the key that holds
+    one (as :func:`_json_text`)."""
+    key = _non_finite_key(data)
+    if key is not None:
+        raise NonFiniteResultError(
+            f"error: the run produced a non-finite value in {name} at {key} (stage: metrics); "
+            "no family record was written")
+    return json.dumps(data, allow_nan=False) + "\n"
+
+
+def read_member_rows(folder: Path) -> dict[int, dict]:
+    """The rows of :data:`MEMBER_ROWS` of a trusted family folder (whatever its config hash:
+    a later rung of a tune's trial reads the earlier rung's), by member index, each a
+    member's ``metrics.json`` mapping; {} when the folder is not a trusted family or keeps
+    no such rows (its members have run folders, or it was written before)."""
+    folder = Path(folder)
+    if check(folder, "family", members=False) is not None:
+        return {}
+    try:
+        if MEMBER_ROWS not in _read_json(folder / MANIFEST).get("files", {}):
+            return {}
+        rows = {}
+        for line in (folder / MEMBER_ROWS).read_text(encoding="utf-8").splitlines():
+            row = json.loads(line)
+            if not isinstance(row, dict) or not isinstance(row.get("member"), int):
+                return {}
+            rows[row.pop("member")] = row
+        return rows
+    except (OSError, ValueError, RunFolderError):
+        return {}
 
 
 def _read_json(path: Path) -> dict:

@@ -29,7 +29,13 @@ from pipeline.loop.simulate import SimulationResult, simulate
 from pipeline.store.files import clean_leftovers
 from pipeline.store.manifest import check
 from pipeline.store.member_cache import MemberCache, MemberCounts
-from pipeline.store.runs import RunInfo, read_metrics_json, write_family, write_run
+from pipeline.store.runs import (
+    RunInfo,
+    read_member_rows,
+    read_metrics_json,
+    write_family,
+    write_run,
+)
 
 log = logging.getLogger(__name__)
 
@@ -105,6 +111,20 @@ def _resumed(cfg: ExperimentConfig, out_dir: Path, config_hash: str) -> RunSumma
     return None
 
 
+def measure_run(cfg: ExperimentConfig, out_dir: Path, result: SimulationResult,
+                config_hash: str | None = None) -> RunSummary:
+    """A simulated run's metrics and bookkeeping, nothing written (a member whose family
+    keeps its row, :data:`~pipeline.store.runs.MEMBER_ROWS`; :func:`record_run` writes the
+    run folder as well)."""
+    config_hash = config_hash if config_hash is not None else cfg.config_hash()
+    metrics = compute_metrics(result.trajectory, trajectory_context(cfg), cfg.metrics)
+    track = "kinematic" if cfg.controller.kind == "kinematic_mpc" else "lateral"
+    info = RunInfo(method=cfg.method_name, scenario=cfg.scenario.name, track=track,
+                   config_hash=config_hash, termination=result.termination,
+                   compile_count=result.compile_count)
+    return RunSummary(Path(out_dir), metrics, info, skipped=False)
+
+
 def record_run(cfg: ExperimentConfig, out_dir: Path, result: SimulationResult,
                qp_cache: QpCache, config_hash: str | None = None) -> RunSummary:
     """A simulated run's metrics, and its run folder written (:func:`~pipeline.store.runs.
@@ -117,12 +137,8 @@ def record_run(cfg: ExperimentConfig, out_dir: Path, result: SimulationResult,
                           lambda: build_lateral_model(cfg.vehicle, cfg.scenario.speed_mps,
                                                       cfg.scenario.sample_time_s,
                                                       cfg.model.b2_heading_entry))
-    context = trajectory_context(cfg)
-    metrics = compute_metrics(result.trajectory, context, cfg.metrics)
-    track = "kinematic" if cfg.controller.kind == "kinematic_mpc" else "lateral"
-    info = RunInfo(method=cfg.method_name, scenario=cfg.scenario.name, track=track,
-                   config_hash=config_hash, termination=result.termination,
-                   compile_count=result.compile_count)
+    summary = measure_run(cfg, out_dir, result, config_hash)
+    metrics, info = summary.metrics, summary.info
     times = result.solve_times_s
     timing = {
         "solve_time_median_s": float(np.median(times)) if times.size else None,
@@ -135,14 +151,17 @@ def record_run(cfg: ExperimentConfig, out_dir: Path, result: SimulationResult,
     write_run(out_dir, config_text=config_yaml(cfg, yaml_memo), model=model.to_json(),
               trajectory=result.trajectory, timing=timing, metrics=metrics, info=info,
               horizon=result.horizon)
-    return RunSummary(out_dir, metrics, info, skipped=False)
+    return summary
 
 
 def run_members(jobs: list[tuple[ExperimentConfig, Path]], qp_cache: QpCache,
-                record_horizon: bool = True) -> list[RunSummary]:
+                record_horizon: bool = True, record_members: bool = True
+                ) -> list[RunSummary]:
     """:func:`run_experiment` for several members at once: those not already complete are
     stepped together by the lockstep engine (:func:`pipeline.loop.engine.simulate_members`),
-    then each one's metrics and folder written. Summaries in the order of ``jobs``."""
+    then each one's metrics and folder written (``record_members`` false: its metrics alone,
+    :func:`measure_run`, for a family that keeps its members' rows). Summaries in the order of
+    ``jobs``."""
     from pipeline.loop.engine import simulate_members
 
     summaries: list[RunSummary | None] = []
@@ -155,7 +174,8 @@ def run_members(jobs: list[tuple[ExperimentConfig, Path]], qp_cache: QpCache,
     results = simulate_members([(cfg, build_scenario(cfg.scenario)) for _, cfg, _, _ in todo],
                                qp_cache, record_horizon=record_horizon)
     for (position, cfg, out_dir, config_hash), result in zip(todo, results, strict=True):
-        summaries[position] = record_run(cfg, out_dir, result, qp_cache, config_hash)
+        summaries[position] = record_run(cfg, out_dir, result, qp_cache, config_hash) \
+            if record_members else measure_run(cfg, out_dir, result, config_hash)
     return [summary for summary in summaries if summary is not None]
 
 
@@ -227,11 +247,14 @@ COMPILED_KERNELS_MIN_MEMBERS = 12
 
 def _run_chunk(jobs: list[tuple[int, ExperimentConfig, Path]], qp_cache: QpCache,
                member_cache: MemberCache | None = None, record_horizon: bool = True,
-               parent_pid: int | None = None) -> list[tuple[int, dict]]:
+               parent_pid: int | None = None, record_members: bool = True
+               ) -> list[tuple[int, dict]]:
     """Run a few family members in one worker, stepped together (:func:`run_members`), all
     with the compiled QP shipped in ``qp_cache`` (so a worker compiles nothing), and publish
-    each new one to ``member_cache`` (``record_horizon``: :func:`run_experiment`'s); a worker
-    leaves Ctrl-C to ``parent_pid`` (:func:`~pipeline.errors.leave_interrupts_to`)."""
+    each new one to ``member_cache`` (``record_horizon``: :func:`run_experiment`'s;
+    ``record_members`` false: no run folder and nothing published, the metrics alone, for a
+    family that keeps its members' rows); a worker leaves Ctrl-C to ``parent_pid``
+    (:func:`~pipeline.errors.leave_interrupts_to`)."""
     from pipeline.errors import leave_interrupts_to
 
     leave_interrupts_to(parent_pid)
@@ -246,10 +269,10 @@ def _run_chunk(jobs: list[tuple[int, ExperimentConfig, Path]], qp_cache: QpCache
     gc.freeze()
     # the chunk's members stepped together by the lockstep engine
     summaries = run_members([(member_cfg, folder) for _, member_cfg, folder in jobs],
-                            qp_cache, record_horizon)
+                            qp_cache, record_horizon, record_members)
     done = []
     for (index, member_cfg, folder), summary in zip(jobs, summaries, strict=True):
-        if member_cache is not None and not summary.skipped:
+        if member_cache is not None and not summary.skipped and record_members:
             member_cache.publish(member_cfg, folder)
         done.append((index, summary.flat()))
     return done
@@ -281,8 +304,8 @@ def _chunks(items: list, n_workers: int, per_worker: int = 4, smallest: int = 2
 
 def run_family(cfg: ExperimentConfig, out_dir: Path, progress: bool = True,
                qp_cache: QpCache | None = None, member_cache: MemberCache | None = None,
-               counts: MemberCounts | None = None, record_horizon: bool = True
-               ) -> pd.DataFrame:
+               counts: MemberCounts | None = None, record_horizon: bool = True,
+               record_members: bool = True) -> pd.DataFrame:
     """Run every member of ``cfg.scenario.family`` (in parallel with joblib) for one method.
 
     The QP is compiled once, here, and handed to the workers with their members (chunks of
@@ -295,7 +318,10 @@ def run_family(cfg: ExperimentConfig, out_dir: Path, progress: bool = True,
     ``PIPELINE_MEMBER_CACHE`` names), which receives every member simulated here. Where the
     members came from is added to ``counts`` and written into the family's ``timing.json``.
     ``record_horizon``: whether new members write what each step planned
-    (:func:`run_experiment`).
+    (:func:`run_experiment`). ``record_members`` false: the members get no run folder and no
+    member-cache entry; the family keeps each one's metrics in ``members.jsonl``
+    (:data:`~pipeline.store.runs.MEMBER_ROWS`), from which a later run of the same folder
+    takes them (a tune's training families: only their metrics are ever read).
 
     Returns
     -------
@@ -315,14 +341,16 @@ def run_family(cfg: ExperimentConfig, out_dir: Path, progress: bool = True,
     cache = qp_cache if qp_cache is not None else QpCache()
     member_cache = member_cache if member_cache is not None else MemberCache.from_env()
     compiles_before = cache.compile_count
-    metrics_by_index, pending, here = _members_to_run(cfg, members, out_dir, member_cache, cache)
+    metrics_by_index, pending, here = _members_to_run(cfg, members, out_dir, member_cache, cache,
+                                                      record_members)
     if counts is not None:
         counts.add(here)
     _prepare_cache(cfg, cache, len(pending))
     chunks = _chunks(pending, family.n_jobs)
     with workers_start_deaf_to_ctrl_c():  # the workers start with Ctrl-C blocked
         results = Parallel(n_jobs=family.n_jobs, return_as="generator_unordered")(
-            delayed(_run_chunk)(chunk, cache, member_cache, record_horizon, os.getpid())
+            delayed(_run_chunk)(chunk, cache, member_cache, record_horizon, os.getpid(),
+                                record_members)
             for chunk in chunks)
     with Progress(len(members), f"{cfg.method_name} family", "scenario",
                   initial=len(metrics_by_index), disable=not progress) as bar:
@@ -338,7 +366,8 @@ def run_family(cfg: ExperimentConfig, out_dir: Path, progress: bool = True,
             raise
     table = _member_table(metrics_by_index, len(members))
     _write_family_folder(cfg, out_dir, table, len(members),
-                         cache.compile_count - compiles_before, here)
+                         cache.compile_count - compiles_before, here,
+                         None if record_members else metrics_by_index)
     return table
 
 
@@ -350,27 +379,42 @@ def _clean_family_leftovers(out_dir: Path) -> None:
 
 
 def _members_to_run(cfg: ExperimentConfig, members: list, out_dir: Path,
-                    member_cache: MemberCache | None = None, qp_cache: QpCache | None = None
+                    member_cache: MemberCache | None = None, qp_cache: QpCache | None = None,
+                    record_members: bool = True
                     ) -> tuple[dict[int, dict], list[tuple[int, ExperimentConfig, Path]],
                                MemberCounts]:
     """The metrics of the members already complete (same config hash) or restored from
     ``member_cache``, by index, the ``(index, config, folder)`` of those still to run, and
-    how many came from where."""
+    how many came from where. ``record_members`` false (a family that keeps its members'
+    rows): a member is also complete when the folder's family record holds its row (a
+    tune's earlier rung), and one in the member cache gives its metrics without a copy."""
     metrics_by_index: dict[int, dict] = {}
     pending = []
     counts = MemberCounts()
     memo = (qp_cache if qp_cache is not None else QpCache()).process_local.setdefault(
         "config_yaml", {})
     hashes = cfg.member_config_hashes(members)
+    rows = {} if record_members else read_member_rows(out_dir)
     for i, member in enumerate(members):
         member_cfg = cfg.with_member(member, hashes[i])
         folder = out_dir / f"member_{i:04d}"
+        row = rows.get(i)
+        if row is not None and row.get("config_hash") == hashes[i]:
+            metrics_by_index[i] = row
+            counts.resumed += 1
+            continue
         reason = check(folder, "run", hashes[i])
         if reason is None:
             metrics_by_index[i] = read_metrics_json(folder)
             counts.resumed += 1
             continue
-        if member_cache is not None and member_cache.restore(
+        if member_cache is not None and not record_members:
+            cached = member_cache.metrics(member_cfg, hashes[i])
+            if cached is not None:
+                metrics_by_index[i] = cached
+                counts.reused += 1
+                continue
+        elif member_cache is not None and member_cache.restore(
                 member_cfg, folder, functools.partial(config_yaml, member_cfg, memo),
                 hashes[i]):
             metrics_by_index[i] = read_metrics_json(folder)
@@ -407,8 +451,11 @@ def _member_table(metrics_by_index: dict[int, dict], n_members: int) -> pd.DataF
 
 def _write_family_folder(cfg: ExperimentConfig, out_dir: Path, table: pd.DataFrame,
                          n_members: int, parent_compiles: int,
-                         counts: MemberCounts | None = None) -> None:
-    """Write the family folder: its table, its counts and the compilations of this process."""
+                         counts: MemberCounts | None = None,
+                         member_rows: dict[int, dict] | None = None) -> None:
+    """Write the family folder: its table, its counts and the compilations of this process;
+    ``member_rows`` (members without run folders): each member's metrics by index, kept in
+    the family's ``members.jsonl`` instead of its members' folders."""
     family = cfg.scenario.family
     if family is None:
         raise ValueError(f"scenario {cfg.scenario.name} is not a family (scenario.family)")
@@ -425,6 +472,10 @@ def _write_family_folder(cfg: ExperimentConfig, out_dir: Path, table: pd.DataFra
     timing: dict[str, object] = {"compiles": parent_compiles + member_compiles}
     if counts is not None:
         timing["member_cache"] = counts.to_json()
+    if member_rows is not None:
+        write_family(out_dir, table, summary, cfg.config_hash(), [], timing=timing,
+                     member_rows=[{"member": i, **member_rows[i]} for i in range(n_members)])
+        return
     write_family(out_dir, table, summary, cfg.config_hash(),
                  [out_dir / f"member_{i:04d}" for i in range(n_members)], timing=timing)
 
@@ -433,7 +484,7 @@ def run_families_together(todo: list[tuple[ExperimentConfig, Path]],
                           qp_cache: QpCache | None = None,
                           member_cache: MemberCache | None = None,
                           counts: MemberCounts | None = None,
-                          record_horizon: bool = True) -> None:
+                          record_horizon: bool = True, record_members: bool = True) -> None:
     """Run several families' members in one pool of workers (a tuning batch: a few small
     families, one after the other, would leave the cores idle between them) and write each
     family folder as soon as its last member is in, while the others still run. Resumes and
@@ -455,7 +506,8 @@ def run_families_together(todo: list[tuple[ExperimentConfig, Path]],
         if cfg.scenario.family is None:
             raise ValueError(f"scenario {cfg.scenario.name} is not a family (scenario.family)")
         members = family_members(cfg.scenario, cfg.vehicle.footprint_radius_m)
-        done, pending, here = _members_to_run(cfg, members, Path(folder), member_cache, cache)
+        done, pending, here = _members_to_run(cfg, members, Path(folder), member_cache, cache,
+                                              record_members)
         if counts is not None:
             counts.add(here)
         _prepare_cache(cfg, cache, len(pending))
@@ -467,7 +519,8 @@ def run_families_together(todo: list[tuple[ExperimentConfig, Path]],
     def finish(k: int) -> None:
         cfg, folder, n_members, done, here, _ = states[k]
         _write_family_folder(cfg, folder, _member_table(done, n_members), n_members,
-                             compiles if k == 0 else 0, here)
+                             compiles if k == 0 else 0, here,
+                             None if record_members else done)
 
     for k, n_left in enumerate(left):
         if n_left == 0:
@@ -477,7 +530,8 @@ def run_families_together(todo: list[tuple[ExperimentConfig, Path]],
     chunks = _chunks(work, n_jobs)
     with workers_start_deaf_to_ctrl_c():  # the workers start with Ctrl-C blocked
         results = Parallel(n_jobs=n_jobs, return_as="generator_unordered")(
-            delayed(_run_tagged_chunk)(chunk, cache, member_cache, record_horizon)
+            delayed(_run_tagged_chunk)(chunk, cache, member_cache, record_horizon,
+                                       record_members)
             for chunk in chunks)
     _collect_blocks(results, states, left, finish)
 
@@ -501,7 +555,9 @@ def _collect_blocks(results, states: list, left: list[int], finish) -> None:
 
 def _run_tagged_chunk(jobs: list[tuple[int, tuple[int, ExperimentConfig, Path]]],
                       qp_cache: QpCache, member_cache: MemberCache | None,
-                      record_horizon: bool = True) -> list[tuple[int, int, dict]]:
+                      record_horizon: bool = True, record_members: bool = True
+                      ) -> list[tuple[int, int, dict]]:
     """:func:`_run_chunk` over members of several families (tagged with their family)."""
-    done = _run_chunk([job for _, job in jobs], qp_cache, member_cache, record_horizon)
+    done = _run_chunk([job for _, job in jobs], qp_cache, member_cache, record_horizon,
+                      record_members=record_members)
     return [(k, index, metrics) for (k, _), (index, metrics) in zip(jobs, done, strict=True)]

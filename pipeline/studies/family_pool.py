@@ -63,6 +63,8 @@ class _Family:
     on_done: Callable[[], None]
     #: whether its folder gets the family's record (table, summary, manifest) once complete
     record: bool = True
+    #: whether its members get run folders (else the family's record keeps their rows)
+    record_members: bool = True
     waiting: deque = field(default_factory=deque)
 
 
@@ -163,18 +165,22 @@ class FamilyPool:
 
     def submit(self, cfg: ExperimentConfig, folder: Path, on_done: Callable[[], None],
                whole_hash: str | None = None, record_horizon: bool = True,
-               record: bool = True) -> None:
+               record: bool = True, record_members: bool = True) -> None:
         """Run ``cfg``'s family into ``folder`` and call ``on_done()`` (in :meth:`wait`) once
         its members are complete; a complete folder of the same config, or of ``whole_hash``
         (the whole family of which ``cfg`` is a rung: it holds these members), is read back,
         not run. ``record_horizon``: whether its new members write what each step planned
         (:func:`~pipeline.studies.experiment.run_experiment`); ``record``: whether the folder
         gets the family's record (its table, summary and manifest; else only its members'
-        folders are written, and the table is kept for :meth:`finished_table`)."""
+        folders are written, and the table is kept for :meth:`finished_table`);
+        ``record_members`` false: its members get no run folder, the family's record keeps
+        their rows (:func:`~pipeline.studies.experiment.run_family`'s), and is then always
+        written: a later rung or a resumed trial takes the members from it."""
         folder = Path(folder)
         pending = self._families.get(folder)
         if pending is not None:  # the same folder is being written: after it
-            pending.waiting.append((cfg, on_done, whole_hash, record_horizon, record))
+            pending.waiting.append((cfg, on_done, whole_hash, record_horizon, record,
+                                    record_members))
             return
         family = cfg.scenario.family
         if family is None:
@@ -187,12 +193,13 @@ class FamilyPool:
             return
         members = family_members(cfg.scenario, cfg.vehicle.footprint_radius_m)
         metrics, todo, here = _members_to_run(cfg, members, folder, self.member_cache,
-                                              self.cache)
+                                              self.cache, record_members)
         self.counts.add(here)
         compiles_before = self.cache.compile_count
         _prepare_cache(cfg, self.cache, len(todo))
         state = _Family(cfg, folder, len(members), metrics, here, len(todo),
-                        self.cache.compile_count - compiles_before, on_done, record)
+                        self.cache.compile_count - compiles_before, on_done,
+                        record or not record_members, record_members)
         self._families[folder] = state
         if not todo:
             self._finish(state)
@@ -204,26 +211,29 @@ class FamilyPool:
                 future: concurrent.futures.Future = concurrent.futures.Future()
                 try:
                     future.set_result(_run_chunk(chunk, shipped, self.member_cache,
-                                                 record_horizon))
+                                                 record_horizon,
+                                                 record_members=record_members))
                 except Exception as exc:  # raised in wait(), as a worker's would be
                     future.set_exception(exc)
             else:
                 future = self.executor.submit(_run_chunk, chunk, shipped, self.member_cache,
-                                              record_horizon, os.getpid())
+                                              record_horizon, os.getpid(), record_members)
             self._futures[future] = folder
 
     def _finish(self, state: _Family) -> None:
         table = _member_table(state.metrics, state.n_members)
         if state.record:
             _write_family_folder(state.cfg, state.folder, table, state.n_members,
-                                 state.compiles, state.counts)
+                                 state.compiles, state.counts,
+                                 None if state.record_members else state.metrics)
         if len(self._tables) >= KEPT_TABLES:
             self._tables.pop(next(iter(self._tables)))
         self._tables[state.folder, state.cfg.config_hash()] = table
         del self._families[state.folder]
         self._ready.append(state.on_done)
-        for cfg, on_done, whole_hash, record_horizon, record in state.waiting:
-            self.submit(cfg, state.folder, on_done, whole_hash, record_horizon, record)
+        for cfg, on_done, whole_hash, record_horizon, record, record_members in state.waiting:
+            self.submit(cfg, state.folder, on_done, whole_hash, record_horizon, record,
+                        record_members)
 
     def finished_table(self, folder: Path, config_hash: str) -> pd.DataFrame | None:
         """The per-member table of the family of ``config_hash`` completed here into

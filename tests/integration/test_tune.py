@@ -306,13 +306,16 @@ def test_make_tune_quick_resumes_after_sigkill_and_feeds_the_report(tmp_path, ma
         assert len(after[f"quick-{key}-r{h['replicate']}-{h['method']}"]) == n
     assert trials["pareto"].any() and (out / "figures" / "pareto_fronts_heldout.png").is_file()
     assert (out / "figures" / "hypervolume_history.png").is_file()
-    # tune.training_horizon false: the training members keep no horizon record, the held-out
-    # members (make reproduce's, shown by the report's explorer) do
+    # tune.training_member_records false: the training members keep no run folder (their
+    # families' records keep their rows, members.jsonl), the held-out members (make
+    # reproduce's, shown by the report's explorer) keep theirs, with their horizon records
     members = {part: [p for p in (out / "runs" / part).rglob("member_*") if p.is_dir()]
                for part in ("training", "heldout")}
-    assert members["training"] and members["heldout"]
-    assert not any((p / "horizon.npz").exists() for p in members["training"])
+    assert not members["training"] and members["heldout"]
     assert all((p / "horizon.npz").is_file() for p in members["heldout"])
+    rows = list((out / "runs" / "training").rglob("members.jsonl"))
+    assert rows and all(len(p.read_text().splitlines()) == json.loads(
+        (p.parent / "family.json").read_text())["size"] for p in rows)
     tuned = pd.read_csv(out / "ledger_tuned.csv")
     assert set(tuned["comparison"]) == {"baseline", "baseline_matched"}
     assert sorted(tuned["replicate"].unique()) == [0, 1]

@@ -175,8 +175,12 @@ def no_trial_lost_or_run_twice(folder: Path) -> None:
         by_study.setdefault(study, []).append(trial.number)
     assert all(sorted(n) == list(range(len(n))) for n in by_study.values()) and by_study
     summary = json.loads((folder / "summary.json").read_text())
+    # every member simulated once: the held-out and untuned members' folders, and the rows
+    # the training families keep (a family's last record holds every member it ran)
     members = {p.parent for p in (folder / "runs").rglob("member_*/manifest.json")}
-    assert summary["members"]["simulated"] == len(members)
+    rows = sum(len(p.read_text().splitlines())
+               for p in (folder / "runs" / "training").rglob("members.jsonl"))
+    assert summary["members"]["simulated"] == len(members) + rows
 
 
 def test_members_at_equal_hypervolume_are_read_off_the_two_tunes(tmp_path):

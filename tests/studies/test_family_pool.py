@@ -109,7 +109,7 @@ def test_a_workers_exception_reaches_the_caller(tmp_path, make_config, monkeypat
     raises it, not submit (nothing hangs)."""
     import pipeline.studies.family_pool as family_pool
 
-    def broken(jobs, qp_cache, member_cache=None, record_horizon=True):
+    def broken(jobs, qp_cache, member_cache=None, record_horizon=True, **_):
         raise RuntimeError("planted failure in a worker")
 
     monkeypatch.setattr(family_pool, "_run_chunk", broken)

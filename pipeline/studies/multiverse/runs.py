@@ -37,13 +37,13 @@ def _metrics_hash(metrics: MetricsConfig) -> str:
 
 
 def _family_task(cfg, folder: str, member_cache: MemberCache | None = None,
-                 record_horizon: bool = True) -> str:
+                 record_horizon: bool = True, record_members: bool = True) -> str:
     """One family run on a cluster node (resumes by config hash like a local run, shares the
     study's member cache)."""
     from pipeline.studies.experiment import run_family
 
     run_family(cfg, Path(folder), progress=False, member_cache=member_cache,
-               record_horizon=record_horizon)
+               record_horizon=record_horizon, record_members=record_members)
     return folder
 
 
@@ -113,13 +113,16 @@ def family_reason(folder: Path, config_hash: str) -> str | None:
 
 def run_families(todo: list, out_dir: Path, log=logger.info, launcher: dict | None = None,
                  cache=None, label: str = "family runs", counts: MemberCounts | None = None,
-                 member_cache: MemberCache | None = None, record_horizon: bool = True) -> None:
+                 member_cache: MemberCache | None = None, record_horizon: bool = True,
+                 record_members: bool = True) -> None:
     """Run each ``(config, folder)`` family here (one after the other, each on its own joblib
     workers, sharing ``cache``'s compilations), or as one SLURM array when ``launcher`` holds
     ``hydra/launcher=slurm`` settings; complete families are resumed, never redone, and
     members found in ``member_cache`` (default: ``PIPELINE_MEMBER_CACHE``'s) are restored, not
     simulated. Where the members came from is added to ``counts``. ``record_horizon``: whether
-    new members write what each step planned (a tune's training members do not)."""
+    new members write what each step planned (a tune's training members do not);
+    ``record_members`` false: the members get no run folder, each family's record keeps their
+    rows (:func:`~pipeline.studies.experiment.run_family`'s)."""
     from pipeline.loop.controller import QpCache
     from pipeline.studies.experiment import run_families_together
 
@@ -127,7 +130,8 @@ def run_families(todo: list, out_dir: Path, log=logger.info, launcher: dict | No
         return
     member_cache = member_cache if member_cache is not None else MemberCache.from_env()
     if launcher is not None:
-        _run_on_slurm(todo, launcher, out_dir, log, member_cache, record_horizon)
+        _run_on_slurm(todo, launcher, out_dir, log, member_cache, record_horizon,
+                      record_members)
         if counts is not None:
             for _, folder in todo:
                 counts.add(MemberCounts.from_json(family_timing(folder).get("member_cache")))
@@ -140,7 +144,8 @@ def run_families(todo: list, out_dir: Path, log=logger.info, launcher: dict | No
         # a few families' members in one pool of workers: no idle cores between families
         for start in range(0, len(todo), FAMILIES_PER_POOL):
             group = todo[start:start + FAMILIES_PER_POOL]
-            run_families_together(group, cache, member_cache, counts, record_horizon)
+            run_families_together(group, cache, member_cache, counts, record_horizon,
+                                  record_members)
             bar.update(len(group))
 
 
@@ -167,13 +172,15 @@ class _LogStream:
 
 
 def _run_on_slurm(todo: list, launcher: dict, out_dir: Path, log,
-                  member_cache: MemberCache | None = None, record_horizon: bool = True) -> None:
+                  member_cache: MemberCache | None = None, record_horizon: bool = True,
+                  record_members: bool = True) -> None:
     """Submit the family runs as one SLURM array and wait (bounded, see pipeline.studies.slurm)."""
     from pipeline.studies.slurm import executor_for, resume_command, wait_for_tasks, wait_policy
 
     executor = executor_for(launcher, out_dir / ".submitit" / "%j")
     jobs = executor.map_array(_family_task, [c for c, _ in todo], [str(f) for _, f in todo],
-                              [member_cache] * len(todo), [record_horizon] * len(todo))
+                              [member_cache] * len(todo), [record_horizon] * len(todo),
+                              [record_members] * len(todo))
     log(f"submitted {len(jobs)} family runs to SLURM (array {jobs[0].job_id.split('_')[0]})")
     _, failed = wait_for_tasks(jobs, *wait_policy(launcher))
     if failed:

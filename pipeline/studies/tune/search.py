@@ -665,6 +665,15 @@ class Runner:
         training families with ``tune.training_horizon``."""
         return part != "training" or bool(self.space.training_horizon)
 
+    def records_members(self, part: str) -> bool:
+        """Whether new members of ``part``'s families get run folders (and member-cache
+        entries): the held-out families always (judged like make reproduce's, read by the
+        report), the training families with ``tune.training_member_records`` (or
+        ``tune.training_horizon``, which is kept in the members' folders); else a training
+        family's record keeps its members' rows, all the tune reads of them."""
+        return part != "training" or bool(self.space.training_member_records) \
+            or bool(self.space.training_horizon)
+
     @property
     def local(self) -> bool:
         """Whether families run on this machine's cores (not as SLURM arrays)."""
@@ -712,7 +721,8 @@ class Runner:
             self.log(f"{label}: {len(todo)} families on the cluster's workers")
             for cfg, folder in todo:
                 pool.submit(cfg, folder, lambda: None,
-                            record_horizon=self.records_horizon(part))
+                            record_horizon=self.records_horizon(part),
+                            record_members=self.records_members(part))
             try:
                 pool.run_until_idle()
             except BaseException:
@@ -722,7 +732,8 @@ class Runner:
         else:
             run_families(todo, self.out_dir, self.log, self.launcher, self.cache, label,
                          counts=self.counts, member_cache=self.member_cache,
-                         record_horizon=self.records_horizon(part))
+                         record_horizon=self.records_horizon(part),
+                         record_members=self.records_members(part))
         tables = [self.table(job) for job in jobs]
         # families complete before this call: their members count as already complete
         counted = {folder for _, folder in todo}
@@ -783,12 +794,15 @@ def run_studies_together(runner: Runner, studies: list[TunedStudy], rungs: Rungs
                 entry.loop.tell(batch.results())
                 start_batch(entry)
 
-        # an early rung's family record is left out (about 10 ms of the parent's time a rung:
-        # a table, a summary and a manifest written and read back); its members are written,
-        # so a resumed trial or a later rung reads them back
+        # an early rung's family record is left out when its members have run folders
+        # (about 10 ms of the parent's time a rung: a table, a summary and a manifest written
+        # and read back): a resumed trial or a later rung reads the members back; without
+        # them (tune.training_member_records false) the record keeps the members' rows and is
+        # written
         pool.submit(job.cfg, job.folder, done, job.whole_hash,
                     record_horizon=runner.records_horizon("training"),
-                    record=job.whole_hash is None)
+                    record=job.whole_hash is None,
+                    record_members=runner.records_members("training"))
 
     try:
         for entry in studies:

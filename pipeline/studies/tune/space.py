@@ -125,6 +125,13 @@ class TuneSpace:
     #: read only by the report's scenario explorer, which shows make reproduce's families, not
     #: the tune's trials): off, it saves about 7 % of a member's CPU and changes no number
     training_horizon: bool = False
+    #: whether the training families' members keep run folders (trajectory, settings, timing,
+    #: metrics) and member-cache entries: off, a training family's record keeps each member's
+    #: metrics in its ``members.jsonl`` (all the tune reads of a training member), which saves
+    #: a member's five files, their copy into the member cache, and the tune's disk (a default
+    #: tune wrote about 30,000 member folders, 2.2 GB, and as much again into the cache);
+    #: ``training_horizon`` true keeps the folders (the horizon record is one of their files)
+    training_member_records: bool = False
     track: str = "lateral"
     #: the scenarios tuned and judged on: a family of conf/scenario/ (``family``, the scripted
     #: one; ``pedestrians``, the recorded pedestrians). Where its source splits its family into
@@ -166,6 +173,7 @@ class TuneSpace:
                               f"an integer below tune.max_trials ({self.max_trials}): a longer "
                               "window can never be filled, so the tune could never converge")
         flag("tune.training_horizon", self.training_horizon)
+        flag("tune.training_member_records", self.training_member_records)
         between("tune.convergence_tolerance", self.convergence_tolerance, 0.0, 1.0)
         choice("tune.settled_test", self.settled_test, SETTLE_TESTS)
         self._check_rungs()
