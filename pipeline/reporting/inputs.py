@@ -524,13 +524,19 @@ _ALONE_SECTIONS = {
              "family, which is not here; make reproduce writes it",
     "kinematic_peers": "the methods the paper names (Appendix-A track) are judged against "
                        "improved on the Appendix-A family, which is not here; make reproduce "
-                       "writes it"}
+                       "writes it",
+    # make tune on a fresh clone: its report is written (listing what is missing) instead of
+    # make tune ending on 'no complete run folders'
+    "tune": "the fair fight (tuned vs tuned) is shown beside the answer on the scenario "
+            "family, which is not here; make reproduce writes it, then make report shows both",
+    "tune_peers": "the fair fights against the methods the paper names are shown beside the "
+                  "answer on the scenario family, which is not here; make reproduce writes it"}
 
 
 def _families_alone(layout: OutputsLayout) -> bool:
     """Whether the outputs hold something a report can show, or list, without the paper
-    scenario (``make pedestrians``, ``make peers``, ``make commonroad`` or ``make euro-ncap``
-    on a fresh clone)."""
+    scenario (``make pedestrians``, ``make peers``, ``make commonroad``, ``make euro-ncap`` or
+    ``make tune`` on a fresh clone)."""
     return any(layout.folder(section).is_dir() for section in _ALONE_SECTIONS)
 
 

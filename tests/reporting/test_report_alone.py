@@ -92,3 +92,18 @@ def test_the_pedestrian_ledger_takes_the_pairs_rule_of_the_family_it_judges(make
     judged = Verdicts.compute(inputs).pedestrians
     assert judged is not None and judged.pairs_rule == "unsettled_last"
     assert {row["pairs_rule_ledger"] for row in judged.other_pairs} == {"unsettled_last"}
+
+
+def test_a_tune_alone_makes_a_page_that_says_what_it_needs(tmp_path):
+    """make tune on a fresh clone (outputs/tune and nothing of make reproduce's): its report
+    step wrote nothing and make tune ended on 'no complete run folders'; now the page is
+    written and says that the fair fight is shown beside the answer make reproduce writes."""
+    from pipeline.reporting.page import build_report
+
+    root = tmp_path / "outputs"
+    (root / "tune").mkdir(parents=True)
+    out = tmp_path / "report"
+    build_report(root, out, "pytest", figure_jobs=1)
+    html = (out / "index.html").read_text()
+    assert "the fair fight (tuned vs tuned) is shown beside the answer" in html
+    assert "make reproduce writes them" in html
