@@ -153,27 +153,32 @@ def test_the_tunes_switch_and_its_refusal(tmp_path):
         dataclasses.replace(space, training_member_records="maybe")
 
 
-def test_the_tune_reads_a_record_less_family_exactly(tmp_path, make_config):
-    """A complete family whose record keeps its members' rows is read back by the tune
-    (Runner.table) as the very table the run handed over, every float exact (the table's CSV
-    keeps 10 digits), and a rung of it as its first rows."""
+def test_the_tune_reads_a_rungs_own_record_from_its_rows(tmp_path, make_config):
+    """A rung's own record (an early rung of a trial asked again: before the rows it had no
+    record, and its members' metrics.json gave its table) is read by the tune (Runner.table)
+    as the very table the run handed over, every float exact; a whole family's record is read
+    from its family_metrics.csv (10 digits), as before the rows, rung or not."""
     import pandas as pd
 
     from pipeline.studies.tune.search import FamilyJob, Runner
 
-    cfg = _family(make_config, 4)
-    fresh = run_family(cfg, tmp_path / "f", progress=False, member_cache=None,
+    whole = _family(make_config, 4)
+    rung = dataclasses.replace(whole, scenario=dataclasses.replace(
+        whole.scenario, family=dataclasses.replace(whole.scenario.family, size=2)))
+    fresh = run_family(rung, tmp_path / "f", progress=False, member_cache=None,
                        record_members=False)
     runner = Runner.__new__(Runner)
-    read = runner.table(FamilyJob("improved", "trial", cfg, tmp_path / "f", 0))
+    read = runner.table(FamilyJob("improved", "trial", rung, tmp_path / "f", 0,
+                                  whole.config_hash()))
     pd.testing.assert_frame_equal(read, fresh, check_exact=True)
-    rung = dataclasses.replace(cfg, scenario=dataclasses.replace(
-        cfg.scenario, family=dataclasses.replace(cfg.scenario.family, size=2)))
-    part = runner.table(FamilyJob("improved", "trial", rung, tmp_path / "f", 0,
-                                  cfg.config_hash()))
-    pd.testing.assert_frame_equal(part, fresh.iloc[:2], check_exact=True)
+    run_family(whole, tmp_path / "f", progress=False, member_cache=None, record_members=False)
     from_csv = pd.read_csv(tmp_path / "f" / "family_metrics.csv")
+    for job in (FamilyJob("improved", "trial", whole, tmp_path / "f", 0),
+                FamilyJob("improved", "trial", rung, tmp_path / "f", 0, whole.config_hash())):
+        size = job.cfg.scenario.family.size
+        pd.testing.assert_frame_equal(runner.table(job), from_csv.iloc[:size],
+                                      check_exact=True)
+    # the two differ (what reading the CSV for the rung's own record would give)
     numbers = [c for c in fresh.columns if fresh[c].dtype.kind == "f"]
-    # (what reading the CSV instead would give: some float off in its last digits)
-    assert not all(np.array_equal(from_csv[c].to_numpy(float), fresh[c].to_numpy(float),
+    assert not all(np.array_equal(from_csv[c].to_numpy(float)[:2], fresh[c].to_numpy(float),
                                   equal_nan=True) for c in numbers)

@@ -16,6 +16,7 @@ import numpy as np
 import pandas as pd
 
 from pipeline.config import ExperimentConfig
+from pipeline.store.manifest import check
 from pipeline.store.runs import read_family, read_member_rows
 from pipeline.studies.tune.pareto import HypervolumeHistory, convergence_point
 from pipeline.studies.tune.space import TRACK_OVERRIDES, TuneSpace
@@ -698,16 +699,20 @@ class Runner:
             and check(job.folder, "family", job.whole_hash, members=False) is None)
 
     def table(self, job: FamilyJob) -> pd.DataFrame:
-        """The per-member table of a complete family job (its first ``members`` members):
-        made from the rows its record keeps for members without run folders (exactly the
-        table a fresh run hands over: JSON keeps every float), else read from its
-        ``family_metrics.csv``."""
+        """The per-member table of a complete family job (its first ``members`` members),
+        read from its ``family_metrics.csv``; a rung's own record (an early rung of a
+        trial whose members keep no run folder, asked again) from the rows it keeps: the
+        very table the members' own ``metrics.json`` files gave when an early rung had no
+        record and its members were read back (JSON keeps every float; the CSV 10 digits),
+        so the tune asks what it asked before the rows."""
         from pipeline.studies.experiment import _member_table
 
         family = job.cfg.scenario.family
-        rows = read_member_rows(job.folder)
-        if rows and family is not None and all(i in rows for i in range(family.size)):
-            return _member_table({i: rows[i] for i in range(family.size)}, family.size)
+        if job.whole_hash is not None and family is not None and check(
+                job.folder, "family", job.cfg.config_hash(), members=False) is None:
+            rows = read_member_rows(job.folder)
+            if all(i in rows for i in range(family.size)):
+                return _member_table({i: rows[i] for i in range(family.size)}, family.size)
         table = read_family(job.folder, members=False, settings=False).table
         if family is not None and len(table) > family.size:  # a rung of a whole family
             table = table[table["member"] < family.size].reset_index(drop=True)
