@@ -473,8 +473,14 @@ def _write_family_folder(cfg: ExperimentConfig, out_dir: Path, table: pd.DataFra
     if counts is not None:
         timing["member_cache"] = counts.to_json()
     if member_rows is not None:
+        # rows of members beyond this family's size that the folder's record already keeps
+        # (a later rung of the same setting, written first: a trial asked again at an earlier
+        # rung) stay, so that no later rung simulates them again
+        kept = read_member_rows(out_dir)
+        rows = [{"member": i, **member_rows[i]} for i in range(n_members)] + [
+            {"member": i, **kept[i]} for i in sorted(kept) if i >= n_members]
         write_family(out_dir, table, summary, cfg.config_hash(), [], timing=timing,
-                     member_rows=[{"member": i, **member_rows[i]} for i in range(n_members)])
+                     member_rows=rows)
         return
     write_family(out_dir, table, summary, cfg.config_hash(),
                  [out_dir / f"member_{i:04d}" for i in range(n_members)], timing=timing)

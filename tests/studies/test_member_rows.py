@@ -182,3 +182,23 @@ def test_the_tune_reads_a_rungs_own_record_from_its_rows(tmp_path, make_config):
     numbers = [c for c in fresh.columns if fresh[c].dtype.kind == "f"]
     assert not all(np.array_equal(from_csv[c].to_numpy(float)[:2], fresh[c].to_numpy(float),
                                   equal_nan=True) for c in numbers)
+
+
+def test_an_earlier_rung_asked_later_keeps_the_later_rungs_rows(tmp_path, make_config):
+    """The whole family (4) is in the folder's record, then the same setting is asked at a
+    rung (2) without the whole family's hash (a trial asked again at an earlier rung while a
+    later one held the record): the rung's record keeps all four rows, so the whole family
+    asked again simulates nothing (a full tune simulated 420 members twice before)."""
+    whole = _family(make_config, 4)
+    rung = dataclasses.replace(whole, scenario=dataclasses.replace(
+        whole.scenario, family=dataclasses.replace(whole.scenario.family, size=2)))
+    run_family(whole, tmp_path / "f", progress=False, member_cache=None, record_members=False)
+    counts = MemberCounts()
+    run_family(rung, tmp_path / "f", progress=False, member_cache=None, counts=counts,
+               record_members=False)
+    assert (counts.simulated, counts.resumed) == (0, 2)
+    assert [row["member"] for row in _rows(tmp_path / "f")] == [0, 1, 2, 3]
+    counts = MemberCounts()
+    run_family(whole, tmp_path / "f", progress=False, member_cache=None, counts=counts,
+               record_members=False)
+    assert (counts.simulated, counts.resumed) == (0, 4)
