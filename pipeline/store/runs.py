@@ -306,13 +306,14 @@ def _json_line(name: str, data: dict) -> str:
     return json.dumps(data, allow_nan=False) + "\n"
 
 
-def read_member_rows(folder: Path) -> dict[int, dict]:
-    """The rows of :data:`MEMBER_ROWS` of a trusted family folder (whatever its config hash:
-    a later rung of a tune's trial reads the earlier rung's), by member index, each a
-    member's ``metrics.json`` mapping; {} when the folder is not a trusted family or keeps
-    no such rows (its members have run folders, or it was written before)."""
+def read_member_rows(folder: Path, config_hash: str | None = None) -> dict[int, dict]:
+    """The rows of :data:`MEMBER_ROWS` of a trusted family folder (of ``config_hash`` when
+    given, else whatever its config hash: a later rung of a tune's trial reads the earlier
+    rung's), by member index, each a member's ``metrics.json`` mapping; {} when the folder is
+    not such a family or keeps no such rows (its members have run folders, or it was written
+    before)."""
     folder = Path(folder)
-    if check(folder, "family", members=False) is not None:
+    if check(folder, "family", config_hash, members=False) is not None:
         return {}
     try:
         if MEMBER_ROWS not in _read_json(folder / MANIFEST).get("files", {}):

@@ -353,7 +353,7 @@ def run_family(cfg: ExperimentConfig, out_dir: Path, progress: bool = True,
                                 record_members)
             for chunk in chunks)
     with Progress(len(members), f"{cfg.method_name} family", "scenario",
-                  initial=len(metrics_by_index), disable=not progress) as bar:
+                  initial=len(members) - len(pending), disable=not progress) as bar:
         try:
             for done in results:
                 for index, metrics in done:
@@ -387,7 +387,8 @@ def _members_to_run(cfg: ExperimentConfig, members: list, out_dir: Path,
     ``member_cache``, by index, the ``(index, config, folder)`` of those still to run, and
     how many came from where. ``record_members`` false (a family that keeps its members'
     rows): a member is also complete when the folder's family record holds its row (a
-    tune's earlier rung), and one in the member cache gives its metrics without a copy."""
+    tune's earlier rung), one in the member cache gives its metrics without a copy, and the
+    record's rows beyond the family's size come along (by their indices)."""
     metrics_by_index: dict[int, dict] = {}
     pending = []
     counts = MemberCounts()
@@ -395,6 +396,10 @@ def _members_to_run(cfg: ExperimentConfig, members: list, out_dir: Path,
         "config_yaml", {})
     hashes = cfg.member_config_hashes(members)
     rows = {} if record_members else read_member_rows(out_dir)
+    # rows of members beyond this family's size (a later rung of the same setting, written
+    # first: a trial asked again at an earlier rung) are kept with it, so that its record
+    # keeps them and no later rung simulates them again
+    metrics_by_index.update((i, row) for i, row in rows.items() if i >= len(members))
     for i, member in enumerate(members):
         member_cfg = cfg.with_member(member, hashes[i])
         folder = out_dir / f"member_{i:04d}"
@@ -454,8 +459,9 @@ def _write_family_folder(cfg: ExperimentConfig, out_dir: Path, table: pd.DataFra
                          counts: MemberCounts | None = None,
                          member_rows: dict[int, dict] | None = None) -> None:
     """Write the family folder: its table, its counts and the compilations of this process;
-    ``member_rows`` (members without run folders): each member's metrics by index, kept in
-    the family's ``members.jsonl`` instead of its members' folders."""
+    ``member_rows`` (members without run folders): each member's metrics by index (and those
+    of the folder's earlier record beyond the family's size, :func:`_members_to_run`'s), kept
+    in the family's ``members.jsonl`` instead of its members' folders."""
     family = cfg.scenario.family
     if family is None:
         raise ValueError(f"scenario {cfg.scenario.name} is not a family (scenario.family)")
@@ -473,14 +479,8 @@ def _write_family_folder(cfg: ExperimentConfig, out_dir: Path, table: pd.DataFra
     if counts is not None:
         timing["member_cache"] = counts.to_json()
     if member_rows is not None:
-        # rows of members beyond this family's size that the folder's record already keeps
-        # (a later rung of the same setting, written first: a trial asked again at an earlier
-        # rung) stay, so that no later rung simulates them again
-        kept = read_member_rows(out_dir)
-        rows = [{"member": i, **member_rows[i]} for i in range(n_members)] + [
-            {"member": i, **kept[i]} for i in sorted(kept) if i >= n_members]
         write_family(out_dir, table, summary, cfg.config_hash(), [], timing=timing,
-                     member_rows=rows)
+                     member_rows=[{"member": i, **member_rows[i]} for i in sorted(member_rows)])
         return
     write_family(out_dir, table, summary, cfg.config_hash(),
                  [out_dir / f"member_{i:04d}" for i in range(n_members)], timing=timing)

@@ -692,8 +692,6 @@ class Runner:
         """Whether ``job``'s folder already holds its members: its own record, or (a rung)
         the whole family's, complete. A trial asked again after an interruption then reads
         its rung from the whole family instead of writing the rung's record over it."""
-        from pipeline.store.manifest import check
-
         return check(job.folder, "family", job.cfg.config_hash(), members=False) is None or (
             job.whole_hash is not None
             and check(job.folder, "family", job.whole_hash, members=False) is None)
@@ -708,10 +706,9 @@ class Runner:
         from pipeline.studies.experiment import _member_table
 
         family = job.cfg.scenario.family
-        if job.whole_hash is not None and family is not None and check(
-                job.folder, "family", job.cfg.config_hash(), members=False) is None:
-            rows = read_member_rows(job.folder)
-            if all(i in rows for i in range(family.size)):
+        if job.whole_hash is not None and family is not None:
+            rows = read_member_rows(job.folder, job.cfg.config_hash())
+            if rows and all(i in rows for i in range(family.size)):
                 return _member_table({i: rows[i] for i in range(family.size)}, family.size)
         table = read_family(job.folder, members=False, settings=False).table
         if family is not None and len(table) > family.size:  # a rung of a whole family
