@@ -160,7 +160,7 @@ def simulate(overrides: list[str] | None = None, *, config: ExperimentConfig | N
         record = read_run(Path(out_dir))
         return RunResult(cfg, record.trajectory, record.metrics, record.info.termination)
     result = closed_loop(cfg, build_scenario(cfg.scenario))
-    metrics = compute_metrics(result.trajectory, trajectory_context(cfg), cfg.metrics)
+    metrics = compute_metrics(result.table, trajectory_context(cfg), cfg.metrics)
     return RunResult(cfg, result.trajectory, metrics, result.termination)
 
 

@@ -212,7 +212,7 @@ class MemberLoop:
         """The finished run."""
         log, controller = self.log, self.controller
         _add_model_check(controller, log)
-        trajectory = log.frame(list(HEAD) + [c for names in self.obstacle_names for c in names]
+        trajectory = log.table(list(HEAD) + [c for names in self.obstacle_names for c in names]
                                + list(TAIL))
         return SimulationResult(trajectory, self.solve_times[:self.n_solves],
                                 controller.compile_count, controller.compile_time_s,

@@ -15,6 +15,7 @@ into preallocated arrays and becomes one DataFrame at the end.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from functools import cached_property
 from math import atan2, cos, isfinite, sin, sqrt
 from typing import Any
 
@@ -29,6 +30,7 @@ from pipeline.loop.planner import ApfPlanner, ApfRollout, make_planner
 from pipeline.loop.python_kernels import PYTHON_KERNELS
 from pipeline.loop.scenario import LineFrame, ObstacleSnapshot, Scenario
 from pipeline.loop.settings import LoopSettings
+from pipeline.loop.trajectory import TrajectoryTable
 
 
 @dataclass(frozen=True)
@@ -37,8 +39,9 @@ class SimulationResult:
 
     Attributes
     ----------
-    trajectory : pandas.DataFrame
-        One row per step (see :func:`simulate` for the columns).
+    table : TrajectoryTable
+        One row per step (see :func:`simulate` for the columns), as arrays: what the metrics
+        and the trajectory file read.
     solve_times_s : ndarray
         Wall time of each QP solve (not part of the deterministic log).
     compile_count : int
@@ -52,13 +55,19 @@ class SimulationResult:
         for the report's scenario explorer.
     """
 
-    trajectory: pd.DataFrame
+    table: TrajectoryTable
     solve_times_s: np.ndarray
     compile_count: int
     compile_time_s: float
     goal_reached: bool
     termination: str
     horizon: dict[str, np.ndarray] = field(default_factory=dict)
+
+    @cached_property
+    def trajectory(self) -> pd.DataFrame:
+        """:attr:`table` as a pandas DataFrame, built when first asked for (a tune's training
+        member, whose metrics alone are kept, never builds it)."""
+        return self.table.to_frame()
 
 
 class SingleTrackPlant:
@@ -201,10 +210,16 @@ class TrajectoryLog:
             column[k] = value
         self.rows = max(self.rows, k + 1)
 
-    def frame(self, order: list[str]) -> pd.DataFrame:
+    def table(self, order: list[str]) -> TrajectoryTable:
+        """The logged rows, the columns of ``order`` first (in that order), then the others
+        in the order they were first logged; the arrays are views of the log's."""
         names = [c for c in order if c in self.columns] \
             + [c for c in self.columns if c not in order]
-        return pd.DataFrame({c: self.columns[c][:self.rows] for c in names})
+        return TrajectoryTable({c: self.columns[c][:self.rows] for c in names}, self.rows)
+
+    def frame(self, order: list[str]) -> pd.DataFrame:
+        """:meth:`table` as a pandas DataFrame."""
+        return self.table(order).to_frame()
 
 
 def _apf_columns(rollout: ApfRollout) -> dict[str, Any]:

@@ -33,6 +33,7 @@ import pandas as pd
 from pipeline.analysis.metrics.results import RunMetrics
 from pipeline.config import ExperimentConfig, experiment_config_from_data
 from pipeline.errors import ConfigError, NonFiniteResultError, RunFolderError
+from pipeline.loop.trajectory import TrajectoryTable
 from pipeline.store.files import (
     clean_leftovers,
     csv_text,
@@ -196,7 +197,8 @@ def folder_kind(folder: Path) -> str | None:
     return None
 
 
-def write_run(folder: Path, *, config_text: str, model: dict, trajectory: pd.DataFrame,
+def write_run(folder: Path, *, config_text: str, model: dict,
+              trajectory: pd.DataFrame | TrajectoryTable,
               timing: dict, metrics: RunMetrics, info: RunInfo,
               horizon: dict | None = None) -> Path:
     """Write a complete run folder: the files, then the manifest (last, atomically).

@@ -117,7 +117,7 @@ def measure_run(cfg: ExperimentConfig, out_dir: Path, result: SimulationResult,
     keeps its row, :data:`~pipeline.store.runs.MEMBER_ROWS`; :func:`record_run` writes the
     run folder as well)."""
     config_hash = config_hash if config_hash is not None else cfg.config_hash()
-    metrics = compute_metrics(result.trajectory, trajectory_context(cfg), cfg.metrics)
+    metrics = compute_metrics(result.table, trajectory_context(cfg), cfg.metrics)
     track = "kinematic" if cfg.controller.kind == "kinematic_mpc" else "lateral"
     info = RunInfo(method=cfg.method_name, scenario=cfg.scenario.name, track=track,
                    config_hash=config_hash, termination=result.termination,
@@ -149,7 +149,7 @@ def record_run(cfg: ExperimentConfig, out_dir: Path, result: SimulationResult,
     }
     yaml_memo = qp_cache.process_local.setdefault("config_yaml", {})
     write_run(out_dir, config_text=config_yaml(cfg, yaml_memo), model=model.to_json(),
-              trajectory=result.trajectory, timing=timing, metrics=metrics, info=info,
+              trajectory=result.table, timing=timing, metrics=metrics, info=info,
               horizon=result.horizon)
     return summary
 

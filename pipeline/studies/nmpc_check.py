@@ -57,7 +57,7 @@ def _pair(cfg_linear, cfg_nmpc, scenario_cfg, cache) -> dict:
     runs = {}
     for name, cfg in (("linear", cfg_linear), ("nmpc", cfg_nmpc)):
         result = simulate(cfg, scenario, cache)
-        metrics = compute_metrics(result.trajectory, trajectory_context(cfg), cfg.metrics)
+        metrics = compute_metrics(result.table, trajectory_context(cfg), cfg.metrics)
         runs[name] = (result, metrics)
     a, b = runs["linear"][0].trajectory, runs["nmpc"][0].trajectory
     n = min(len(a), len(b)) - 1  # the last row logs the end, without an input

@@ -127,7 +127,7 @@ def _closed_loop(cfg: LoopSettings, scenario: Scenario, qp_cache: QpCache | None
         command = step.command
         state = plant.step(state, command, speed_ref)
     _add_model_check(controller, log)
-    trajectory = log.frame(list(HEAD) + [c for names in obstacle_names for c in names]
+    trajectory = log.table(list(HEAD) + [c for names in obstacle_names for c in names]
                            + list(TAIL))
     return SimulationResult(trajectory, solve_times[:n_solves], controller.compile_count,
                             controller.compile_time_s, termination == "goal_line", termination,

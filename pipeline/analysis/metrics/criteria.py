@@ -10,7 +10,6 @@ from functools import partial
 from typing import Any
 
 import numpy as np
-import pandas as pd
 
 from pipeline.analysis.metrics.geometry import (
     ObstacleTrack,
@@ -53,6 +52,7 @@ from pipeline.analysis.metrics.signals import (
     window_mask,
 )
 from pipeline.analysis.settings import MetricsConfig
+from pipeline.loop.trajectory import TrajectoryLike
 
 
 @dataclass(frozen=True)
@@ -234,7 +234,7 @@ def smoothness_block(sig: Signals, threat: Threat, geo: ThreatGeometry, recovery
         smoothness_window_start_s=start, smoothness_window_end_s=end)
 
 
-def lateral_jerk_signal(trajectory: pd.DataFrame, context: TrajectoryContext,
+def lateral_jerk_signal(trajectory: TrajectoryLike, context: TrajectoryContext,
                         thresholds: MetricsConfig) -> LateralJerk:
     """One run's lateral jerk at its log times (C2's signal, ``thresholds.lateral_accel``'s
     reading), for a window that is not the run's own (one common to both runs of a pair)."""
@@ -243,7 +243,7 @@ def lateral_jerk_signal(trajectory: pd.DataFrame, context: TrajectoryContext,
                                                      sig.t))
 
 
-def repulsion_block(tr: pd.DataFrame, sig: Signals, geo: ThreatGeometry, clearance: np.ndarray,
+def repulsion_block(tr: TrajectoryLike, sig: Signals, geo: ThreatGeometry, clearance: np.ndarray,
                     thresholds: MetricsConfig) -> Repulsion | None:
     """C3a: repulsive impulse applied while nothing threatens or is near (``repulsion_need``);
     C3b: time to contact at the onset of significant repulsion. None without APF force
@@ -304,7 +304,7 @@ def stability_block(sig: Signals, threat: Threat, geo: ThreatGeometry,
         max_lateral_deviation_m=max_abs(sig.lateral))
 
 
-def safety_block(tr: pd.DataFrame, sig: Signals, tracks: list[ObstacleTrack],
+def safety_block(tr: TrajectoryLike, sig: Signals, tracks: list[ObstacleTrack],
                  clearance: np.ndarray, context: TrajectoryContext,
                  thresholds: MetricsConfig) -> tuple[Safety, int | None]:
     """Clearance from the continuous check (sampled as the older reading), collision and
@@ -364,7 +364,7 @@ def _quantiles(values: np.ndarray) -> tuple[float, float]:
     return float(p50), float(p95)
 
 
-def validity_block(tr: pd.DataFrame, context: TrajectoryContext) -> ModelValidity | None:
+def validity_block(tr: TrajectoryLike, context: TrajectoryContext) -> ModelValidity | None:
     """:class:`ModelValidity` from the columns the loop logged (None without any of them)."""
     if "model_error_1s_m" not in tr and "tyre_slip_norm" not in tr:
         return None
@@ -392,7 +392,7 @@ def validity_block(tr: pd.DataFrame, context: TrajectoryContext) -> ModelValidit
         plan_error_1s_p50_m=plan_1[0], plan_error_1s_p95_m=plan_1[1])
 
 
-def solver_blocks(tr: pd.DataFrame) -> tuple[SolverIterations | None, Fallbacks | None]:
+def solver_blocks(tr: TrajectoryLike) -> tuple[SolverIterations | None, Fallbacks | None]:
     """Solver iterations and fallbacks (deterministic parts only; wall-clock times live in
     ``timing.json``); None without the columns."""
     iterations = fallbacks = None
@@ -479,7 +479,7 @@ REPULSION_READS = THREAT_READS + ("repulsion_need", "near_field_m", "repulsion_o
 PROGRESS_READS = ("goal_tolerance_m",)
 
 
-def compute_metrics(trajectory: pd.DataFrame, context: TrajectoryContext,
+def compute_metrics(trajectory: TrajectoryLike, context: TrajectoryContext,
                     thresholds: MetricsConfig) -> RunMetrics:
     """All Table 1 metrics of one logged run.
 
@@ -498,7 +498,7 @@ def compute_metrics(trajectory: pd.DataFrame, context: TrajectoryContext,
     return compute_metrics_readings(trajectory, context, [thresholds])[0]
 
 
-def compute_metrics_readings(trajectory: pd.DataFrame, context: TrajectoryContext,
+def compute_metrics_readings(trajectory: TrajectoryLike, context: TrajectoryContext,
                              readings: list[MetricsConfig]) -> list[RunMetrics]:
     """:func:`compute_metrics` of one logged run under each metric reading in ``readings``,
     the same numbers, in one pass: the signals, obstacle tracks, clearances, step cap and

@@ -8,19 +8,18 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
-import pandas as pd
 
 from pipeline.analysis.metrics.signals import TrajectoryContext, float_columns, time_derivative
 from pipeline.analysis.settings import MetricsConfig
-from pipeline.loop.trajectory import obstacle_indices
+from pipeline.loop.trajectory import TrajectoryLike, obstacle_indices
 
 
-def obstacle_count(trajectory: pd.DataFrame) -> int:
+def obstacle_count(trajectory: TrajectoryLike) -> int:
     """How many obstacles the table carries (their indices may have gaps)."""
     return len(obstacle_indices(trajectory.columns))
 
 
-def ego_disc_view(trajectory: pd.DataFrame, offsets_m: tuple[float, ...]) -> pd.DataFrame:
+def ego_disc_view(trajectory: TrajectoryLike, offsets_m: tuple[float, ...]) -> TrajectoryLike:
     """The logged table as the ego's logged position sees an ego of several discs along its
     heading (``vehicle.footprint_discs``, centres ``offsets_m`` ahead of the logged position):
     each obstacle's radius at each step grown by how much nearer its nearest ego disc is than
@@ -46,7 +45,7 @@ def ego_disc_view(trajectory: pd.DataFrame, offsets_m: tuple[float, ...]) -> pd.
     return view
 
 
-def clearance_series(trajectory: pd.DataFrame, vehicle_radius_m: float,
+def clearance_series(trajectory: TrajectoryLike, vehicle_radius_m: float,
                      tracks: list[ObstacleTrack] | None = None) -> np.ndarray:
     """Per-step clearance to the nearest visible obstacle (NaN while none is visible);
     ``tracks``: the table's :func:`obstacle_tracks` when the caller has them (the same
@@ -62,7 +61,7 @@ def clearance_series(trajectory: pd.DataFrame, vehicle_radius_m: float,
     return np.where(np.isfinite(result), result, np.nan)
 
 
-def min_time_to_collision(trajectory: pd.DataFrame, vehicle_radius_m: float,
+def min_time_to_collision(trajectory: TrajectoryLike, vehicle_radius_m: float,
                           tracks: list[ObstacleTrack] | None = None) -> float:
     """Smallest ``clearance / closing speed`` over steps and visible obstacles while closing;
     ``tracks`` as for :func:`clearance_series`."""
@@ -111,7 +110,7 @@ class ObstacleTrack:
     appear: int
 
 
-def _obstacle_columns(trajectory: pd.DataFrame
+def _obstacle_columns(trajectory: TrajectoryLike
                       ) -> list[tuple[np.ndarray, np.ndarray, np.ndarray]]:
     """Every obstacle's logged positions (n, 2), radii (n,) and visibility (n,), read in two
     selections (among walkers 50 obstacles: 200 columns, one at a time most of a run's
@@ -126,7 +125,7 @@ def _obstacle_columns(trajectory: pd.DataFrame
              flags[:, k].copy()) for k in range(len(indices))]
 
 
-def obstacle_tracks(trajectory: pd.DataFrame) -> list[ObstacleTrack]:
+def obstacle_tracks(trajectory: TrajectoryLike) -> list[ObstacleTrack]:
     """Every obstacle of the table as an :class:`ObstacleTrack`."""
     t = trajectory["time_s"].to_numpy(float)
     tracks = []

@@ -9,7 +9,8 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-import pandas as pd
+
+from pipeline.loop.trajectory import TrajectoryLike
 
 
 @dataclass(frozen=True)
@@ -121,7 +122,7 @@ def settling_time(time_s: np.ndarray, error: np.ndarray, band: float) -> float:
     return float(info["SettlingTime"])
 
 
-def float_columns(frame: pd.DataFrame, *names: str) -> np.ndarray:
+def float_columns(frame: TrajectoryLike, *names: str) -> np.ndarray:
     """Columns ``names`` of ``frame`` side by side as floats, shape (rows, len(names)); the
     same values as ``frame[list(names)].to_numpy(float)`` without pandas' multi-column
     selection (an index lookup and a copy of a block, ten times the cost)."""
@@ -220,7 +221,7 @@ SIGNAL_COLUMNS = ("time_s", "X_m", "Y_m", "psi_rad", "vx_mps", "vy_mps", "r_rad_
                   "steering_rate_rad_s", "model_heading_error_rad")
 
 
-def trajectory_signals(tr: pd.DataFrame, context: TrajectoryContext) -> Signals:
+def trajectory_signals(tr: TrajectoryLike, context: TrajectoryContext) -> Signals:
     """The signals every criterion reads, from the table's columns (or the path)."""
     t = tr["time_s"].to_numpy(float)
     dt = float(np.median(np.diff(t))) if t.size > 1 else float("nan")
