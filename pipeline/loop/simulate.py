@@ -9,7 +9,8 @@ Each step k (time ``t = k Ts``)::
     x         = plant.step(x, step.command, V_r)    # nonlinear single-track or kinematic plant
 
 The run ends after ``n_steps`` or when the vehicle reaches the goal line. The log is written
-into preallocated arrays and becomes one DataFrame at the end.
+into preallocated arrays, handed over as one table of arrays at the end (a DataFrame when
+asked for).
 """
 
 from __future__ import annotations
@@ -158,7 +159,8 @@ class KinematicPlant:
 
 
 class TrajectoryLog:
-    """Preallocated per-column arrays, one row per step, turned into a DataFrame once.
+    """Preallocated per-column arrays, one row per step, handed over once as a
+    :class:`~pipeline.loop.trajectory.TrajectoryTable`.
 
     Float columns start as NaN; text and flag columns hold NaN where nothing was logged
     (written as empty cells).
@@ -216,10 +218,6 @@ class TrajectoryLog:
         names = [c for c in order if c in self.columns] \
             + [c for c in self.columns if c not in order]
         return TrajectoryTable({c: self.columns[c][:self.rows] for c in names}, self.rows)
-
-    def frame(self, order: list[str]) -> pd.DataFrame:
-        """:meth:`table` as a pandas DataFrame."""
-        return self.table(order).to_frame()
 
 
 def _apf_columns(rollout: ApfRollout) -> dict[str, Any]:

@@ -96,9 +96,6 @@ class TableColumn:
         """The cells' sum."""
         return self.values.sum()
 
-    def __len__(self) -> int:
-        return int(self.values.shape[0])
-
 
 class TrajectoryTable:
     """A logged run's columns as arrays, one row per step: what the simulator hands the
@@ -113,17 +110,18 @@ class TrajectoryTable:
     Parameters
     ----------
     columns : dict of str to ndarray
-        The columns in their order, each with ``n_rows`` cells (views are fine: the table
-        never writes into them).
+        The columns in their order, each with ``n_rows`` cells. The table keeps read-only
+        views of them (as pandas' copy-on-write hands out its columns): a reader that wrote
+        into a column would change the run's log, which the trajectory file is written from
+        after the metrics, so it is refused instead.
     n_rows : int
     """
 
     def __init__(self, columns: dict[str, np.ndarray], n_rows: int) -> None:
-        for name, values in columns.items():
-            if values.shape[:1] != (n_rows,):
-                raise ValueError(f"column {name!r} has {values.shape[0]} rows, not {n_rows}")
-        self._columns = columns
         self.n_rows = n_rows
+        self._columns: dict[str, np.ndarray] = {}
+        for name, values in columns.items():
+            self[name] = values
 
     @property
     def columns(self) -> list[str]:
@@ -143,27 +141,23 @@ class TrajectoryTable:
         return TableColumn(self._columns[key])
 
     def __setitem__(self, name: str, values: np.ndarray) -> None:
-        values = np.asarray(values)
-        if values.shape[:1] != (self.n_rows,):
-            raise ValueError(f"column {name!r} has {values.shape[0]} rows, not {self.n_rows}")
-        self._columns[name] = values
+        view = np.asarray(values).view()
+        if view.shape[:1] != (self.n_rows,):
+            raise ValueError(f"column {name!r} has {view.shape[0]} rows, not {self.n_rows}")
+        view.flags.writeable = False
+        self._columns[name] = view
 
     def copy(self) -> TrajectoryTable:
         """A table of the same columns whose assignments leave this one as it is."""
         return TrajectoryTable(dict(self._columns), self.n_rows)
 
     def arrays(self) -> dict[str, np.ndarray]:
-        """The columns by name, in order (the arrays themselves: read, do not write)."""
+        """The columns by name, in order (the table's read-only views)."""
         return dict(self._columns)
 
     def to_frame(self) -> pd.DataFrame:
         """The table as a pandas DataFrame (its own copy of the cells)."""
         return pd.DataFrame(self._columns)
-
-    @classmethod
-    def from_frame(cls, frame: pd.DataFrame) -> TrajectoryTable:
-        """The columns of ``frame`` (a run's trajectory read back, a scored one)."""
-        return cls({str(name): frame[name].to_numpy() for name in frame.columns}, len(frame))
 
 
 #: What the metrics and the trajectory file read: a logged table or a DataFrame of its columns

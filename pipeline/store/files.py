@@ -176,26 +176,25 @@ def csv_text(frame: pd.DataFrame | TrajectoryTable) -> str:
     words); anything else (cells that need quoting, other dtypes) goes through pandas itself.
     A simulated run's :class:`~pipeline.loop.trajectory.TrajectoryTable` is written from its
     arrays (the bytes of its DataFrame's, without building one)."""
+    columns: list[list[str] | None] = [None]
     if isinstance(frame, TrajectoryTable):
         arrays = frame.arrays()
-        table_columns = [_csv_cells(values.dtype.kind, values.tolist())
-                         for values in arrays.values()]
-        if all(c is not None for c in table_columns) and len(arrays) >= 2 \
-                and not any(ch in n for n in arrays for ch in _CSV_SPECIAL):
-            lines = [",".join(arrays)]
-            lines.extend(",".join(row) for row in zip(*table_columns, strict=True))
-            return "\n".join(lines) + "\n"
-        frame = frame.to_frame()
-    names = [str(c) for c in frame.columns]
-    columns: list[list[str] | None] = [None]
-    if frame.shape[1] >= 2 and frame.columns.is_unique:
-        # every cell as a Python object in one conversion (a column taken as a Series costs
-        # more than formatting it); floats, ints and flags convert to the same values
-        # ``column.to_numpy().tolist()`` gives
-        cells = frame.to_numpy(dtype=object)
-        columns = [_csv_cells(dtype.kind, cells[:, j].tolist())
-                   for j, dtype in enumerate(frame.dtypes)]
+        names = list(arrays)
+        if len(arrays) >= 2:  # each column's cells from its own array
+            columns = [_csv_cells(values.dtype.kind, values.tolist())
+                       for values in arrays.values()]
+    else:
+        names = [str(c) for c in frame.columns]
+        if frame.shape[1] >= 2 and frame.columns.is_unique:
+            # every cell as a Python object in one conversion (a column taken as a Series
+            # costs more than formatting it); floats, ints and flags convert to the same
+            # values ``column.to_numpy().tolist()`` gives
+            cells = frame.to_numpy(dtype=object)
+            columns = [_csv_cells(dtype.kind, cells[:, j].tolist())
+                       for j, dtype in enumerate(frame.dtypes)]
     if any(c is None for c in columns) or any(ch in n for n in names for ch in _CSV_SPECIAL):
+        if isinstance(frame, TrajectoryTable):
+            frame = frame.to_frame()
         return frame.to_csv(index=False, float_format=CSV_FLOAT_FORMAT, lineterminator="\n")
     lines = [",".join(names)]
     lines.extend(",".join(row) for row in zip(*columns, strict=True))

@@ -93,6 +93,10 @@ def test_columns_read_as_pandas_reads_a_series():
     assert table["x"].to_numpy(float).dtype == float and table["f"].to_numpy(bool).all() \
         == frame["f"].to_numpy(bool).all()
     assert "x" in table and "y" not in table and len(table) == 5
+    # a reader cannot write into the run's log through the table (the file is written after)
+    with pytest.raises(ValueError, match="read-only"):
+        table["x"].to_numpy(float)[0] = 7.0
+    assert numbers[0] == 0.5 and numbers.flags.writeable
     copy = table.copy()
     copy["x"] = numbers * 2
     np.testing.assert_array_equal(table["x"].to_numpy(), numbers)
@@ -100,3 +104,11 @@ def test_columns_read_as_pandas_reads_a_series():
         copy["x"] = numbers[:3]
     with pytest.raises(ValueError, match="rows"):
         TrajectoryTable({"x": numbers[:2]}, 5)
+
+
+def test_a_table_that_needs_quoting_is_written_by_pandas():
+    table = TrajectoryTable({"time_s": np.array([0.0, 0.1]),
+                             "note": np.array(["a,b", np.nan], dtype=object)}, 2)
+    assert csv_text(table) == table.to_frame().to_csv(index=False, float_format="%.10g",
+                                                      lineterminator="\n") \
+        == 'time_s,note\n0,"a,b"\n0.1,\n'
