@@ -153,7 +153,10 @@ class FrozenAfterValidation:
         for f in dataclasses.fields(self):  # type: ignore[arg-type]
             value = getattr(self, f.name)
             for item in value if isinstance(value, (list, tuple)) else (value,):
-                if isinstance(item, FrozenAfterValidation):
+                # one frozen already froze everything inside it (a member's config: the
+                # family's sections, a drawn scenario)
+                if isinstance(item, FrozenAfterValidation) \
+                        and not item.__dict__.get("_frozen", False):
                     item.freeze()
         object.__setattr__(self, "_frozen", True)
         return self

@@ -380,7 +380,7 @@ def _clean_family_leftovers(out_dir: Path) -> None:
 
 def _members_to_run(cfg: ExperimentConfig, members: list, out_dir: Path,
                     member_cache: MemberCache | None = None, qp_cache: QpCache | None = None,
-                    record_members: bool = True
+                    record_members: bool = True, indices: list[int] | None = None
                     ) -> tuple[dict[int, dict], list[tuple[int, ExperimentConfig, Path]],
                                MemberCounts]:
     """The metrics of the members already complete (same config hash) or restored from
@@ -388,7 +388,10 @@ def _members_to_run(cfg: ExperimentConfig, members: list, out_dir: Path,
     how many came from where. ``record_members`` false (a family that keeps its members'
     rows): a member is also complete when the folder's family record holds its row (a
     tune's earlier rung), one in the member cache gives its metrics without a copy, and the
-    record's rows beyond the family's size come along (by their indices)."""
+    record's rows beyond the family's size come along (by their indices: :func:`rows_beyond`).
+    ``indices``: the members' indices when ``members`` is a part of the family (a worker's
+    task, :mod:`pipeline.studies.family_pool`; the rows beyond are then the record's
+    business), else ``0, 1, ...``."""
     metrics_by_index: dict[int, dict] = {}
     pending = []
     counts = MemberCounts()
@@ -396,32 +399,31 @@ def _members_to_run(cfg: ExperimentConfig, members: list, out_dir: Path,
         "config_yaml", {})
     hashes = cfg.member_config_hashes(members)
     rows = {} if record_members else read_member_rows(out_dir)
-    # rows of members beyond this family's size (a later rung of the same setting, written
-    # first: a trial asked again at an earlier rung) are kept with it, so that its record
-    # keeps them and no later rung simulates them again
-    metrics_by_index.update((i, row) for i, row in rows.items() if i >= len(members))
-    for i, member in enumerate(members):
-        member_cfg = cfg.with_member(member, hashes[i])
+    if indices is None:
+        indices = list(range(len(members)))
+        metrics_by_index.update(rows_beyond(rows, len(members)))
+    for i, member, member_hash in zip(indices, members, hashes, strict=True):
+        member_cfg = cfg.with_member(member, member_hash)
         folder = out_dir / f"member_{i:04d}"
         row = rows.get(i)
-        if row is not None and row.get("config_hash") == hashes[i]:
+        if row is not None and row.get("config_hash") == member_hash:
             metrics_by_index[i] = row
             counts.resumed += 1
             continue
-        reason = check(folder, "run", hashes[i])
+        reason = check(folder, "run", member_hash)
         if reason is None:
             metrics_by_index[i] = read_metrics_json(folder)
             counts.resumed += 1
             continue
         if member_cache is not None and not record_members:
-            cached = member_cache.metrics(member_cfg, hashes[i])
+            cached = member_cache.metrics(member_cfg, member_hash)
             if cached is not None:
                 metrics_by_index[i] = cached
                 counts.reused += 1
                 continue
         elif member_cache is not None and member_cache.restore(
                 member_cfg, folder, functools.partial(config_yaml, member_cfg, memo),
-                hashes[i]):
+                member_hash):
             metrics_by_index[i] = read_metrics_json(folder)
             counts.reused += 1
             continue
@@ -430,6 +432,13 @@ def _members_to_run(cfg: ExperimentConfig, members: list, out_dir: Path,
         pending.append((i, member_cfg, folder))
     counts.simulated = len(pending)
     return metrics_by_index, pending, counts
+
+
+def rows_beyond(rows: dict[int, dict], n_members: int) -> dict[int, dict]:
+    """The rows of a family record's members beyond ``n_members`` (a later rung of the same
+    setting, written first: a trial asked again at an earlier rung): kept with a family's
+    record, so that no later rung simulates them again."""
+    return {i: row for i, row in rows.items() if i >= n_members}
 
 
 def _prepare_cache(cfg: ExperimentConfig, cache: QpCache, n_pending: int) -> None:

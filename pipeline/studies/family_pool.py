@@ -11,6 +11,13 @@ last member comes in (:meth:`FamilyPool.wait`). Members are resumed and restored
 cache, and family folders written, exactly as :func:`~pipeline.studies.experiment.run_family`
 does (the same helpers); a family whose folder another pending family is writing (the same
 setting asked twice) waits for it and is then read back.
+
+The parent only hands out: each task is a range of a family's member indices, and the worker
+draws those members, finds which are complete or in the member cache and runs the others
+(:func:`_family_task`); a complete family's record (its table, summary, rows and manifest) is
+written by a worker too, which hands the table back (:func:`_record_family`). In a tune, the
+parent's share of that work (drawing and hashing members, checking their folders, writing the
+records) was more than half of its own CPU time per trial, which bounds a tune on many cores.
 """
 
 from __future__ import annotations
@@ -27,15 +34,17 @@ import pandas as pd
 
 from pipeline.config import ExperimentConfig
 from pipeline.loop.controller import QpCache
-from pipeline.loop.scenario import family_members
+from pipeline.loop.scenario import scenario_source
 from pipeline.store.manifest import check
 from pipeline.store.member_cache import MemberCache, MemberCounts
+from pipeline.store.runs import read_member_rows
 from pipeline.studies.experiment import (
     _member_table,
     _members_to_run,
     _prepare_cache,
     _run_chunk,
     _write_family_folder,
+    rows_beyond,
 )
 
 #: members per task handed to a worker: a member of a training family is 25-35 ms of CPU, a
@@ -66,6 +75,52 @@ class _Family:
     #: whether its members get run folders (else the family's record keeps their rows)
     record_members: bool = True
     waiting: deque = field(default_factory=deque)
+
+
+def _family_task(cfg: ExperimentConfig, folder: Path, indices: list[int], qp_cache: QpCache,
+                 member_cache: MemberCache | None, record_horizon: bool,
+                 parent_pid: int | None, record_members: bool
+                 ) -> tuple[list[tuple[int, dict]], MemberCounts]:
+    """The members ``indices`` of ``cfg``'s family, in a worker: drawn, taken where they are
+    complete in ``folder`` or in ``member_cache`` and run where not (exactly as
+    :func:`~pipeline.studies.experiment.run_family` decides for a whole family,
+    :func:`~pipeline.studies.experiment._members_to_run`, and runs,
+    :func:`~pipeline.studies.experiment._run_chunk`); each member's metrics by index, and
+    where they came from. A worker leaves Ctrl-C to ``parent_pid``."""
+    from pipeline.errors import leave_interrupts_to
+
+    leave_interrupts_to(parent_pid)
+    family = cfg.scenario.family
+    if family is None:
+        raise ValueError(f"scenario {cfg.scenario.name} is not a family (scenario.family)")
+    source = scenario_source(cfg.scenario, cfg.vehicle.footprint_radius_m)
+    members = [source.member(family.seed, i) for i in indices]
+    metrics, todo, counts = _members_to_run(cfg, members, folder, member_cache, qp_cache,
+                                            record_members, indices)
+    done = list(metrics.items())
+    if todo:
+        done.extend(_run_chunk(todo, qp_cache, member_cache, record_horizon,
+                               parent_pid=parent_pid, record_members=record_members))
+    return done, counts
+
+
+def _record_family(cfg: ExperimentConfig, folder: Path, metrics: dict[int, dict],
+                   n_members: int, compiles: int, counts: MemberCounts, keep_rows: bool,
+                   parent_pid: int | None = None) -> pd.DataFrame:
+    """A complete family's per-member table and its folder's record (:func:`~pipeline.
+    studies.experiment._write_family_folder`; ``keep_rows``: its members' rows in the record,
+    with those of the folder's earlier record beyond the family's size, for a family whose
+    members keep no run folder), in a worker; the table is handed back. A worker leaves
+    Ctrl-C to ``parent_pid``."""
+    from pipeline.errors import leave_interrupts_to
+
+    leave_interrupts_to(parent_pid)
+    table = _member_table(metrics, n_members)
+    if keep_rows:
+        metrics = {**rows_beyond(read_member_rows(folder), n_members), **metrics}
+    _write_family_folder(cfg, folder, table, n_members, compiles, counts,
+                         metrics if keep_rows else None)
+    return table
 
 
 def _snapshot(cache: QpCache) -> QpCache:
@@ -152,8 +207,14 @@ class FamilyPool:
             self._parallel, self.executor = _reusable_executor(n_jobs)
         self.cache, self.member_cache, self.counts = qp_cache, member_cache, counts
         self._futures: dict[concurrent.futures.Future, Path] = {}
+        #: the records being written by a worker (:func:`_record_family`), by family folder
+        self._records: dict[concurrent.futures.Future, Path] = {}
         self._families: dict[Path, _Family] = {}
         self._ready: deque[Callable[[], None]] = deque()
+        #: by family folder, how many of its first members a family completed here holds (a
+        #: trial's earlier rung): a later rung hands them out as one task that reads them
+        #: back, and its new members in tasks of their own, as its members still to run
+        self._complete_below: dict[Path, int] = {}
         #: the tables of the families completed here, by folder and config hash (the latest
         #: ``KEPT_TABLES``: the same family may be asked for by several settings)
         self._tables: dict[tuple[Path, str], pd.DataFrame] = {}
@@ -161,7 +222,7 @@ class FamilyPool:
     @property
     def busy(self) -> bool:
         """Whether a family is pending or a callback is still to run."""
-        return bool(self._futures or self._ready or self._families)
+        return bool(self._futures or self._records or self._ready or self._families)
 
     def submit(self, cfg: ExperimentConfig, folder: Path, on_done: Callable[[], None],
                whole_hash: str | None = None, record_horizon: bool = True,
@@ -191,41 +252,55 @@ class FamilyPool:
             self.counts.resumed += family.size
             self._ready.append(on_done)
             return
-        members = family_members(cfg.scenario, cfg.vehicle.footprint_radius_m)
-        metrics, todo, here = _members_to_run(cfg, members, folder, self.member_cache,
-                                              self.cache, record_members)
-        self.counts.add(here)
+        # the QP compiled here once (a worker compiles nothing), whichever members turn out
+        # to be complete already
         compiles_before = self.cache.compile_count
-        _prepare_cache(cfg, self.cache, len(todo))
-        state = _Family(cfg, folder, len(members), metrics, here, len(todo),
+        _prepare_cache(cfg, self.cache, family.size)
+        state = _Family(cfg, folder, family.size, {}, MemberCounts(), family.size,
                         self.cache.compile_count - compiles_before, on_done,
                         record or not record_members, record_members)
         self._families[folder] = state
-        if not todo:
-            self._finish(state)
-            return
         shipped = _snapshot(self.cache)
-        for start in range(0, len(todo), MEMBERS_PER_TASK):
-            chunk = todo[start:start + MEMBERS_PER_TASK]
+        # an earlier rung's members (complete, read back: one task without the compiled QPs,
+        # which are shipped for the members to run, MEMBERS_PER_TASK at a time)
+        known = min(self._complete_below.get(folder, 0), family.size)
+        spans = [(0, known, QpCache(compiled_kernels=self.cache.compiled_kernels))] \
+            if known else []
+        spans += [(start, min(start + MEMBERS_PER_TASK, family.size), shipped)
+                  for start in range(known, family.size, MEMBERS_PER_TASK)]
+        for start, stop, qp_cache in spans:
+            task = (cfg, folder, list(range(start, stop)), qp_cache, self.member_cache,
+                    record_horizon)
             if self.executor is None:
                 future: concurrent.futures.Future = concurrent.futures.Future()
                 try:
-                    future.set_result(_run_chunk(chunk, shipped, self.member_cache,
-                                                 record_horizon,
-                                                 record_members=record_members))
+                    future.set_result(_family_task(*task, None, record_members))
                 except Exception as exc:  # raised in wait(), as a worker's would be
                     future.set_exception(exc)
             else:
-                future = self.executor.submit(_run_chunk, chunk, shipped, self.member_cache,
-                                              record_horizon, os.getpid(), record_members)
+                future = self.executor.submit(_family_task, *task, os.getpid(),
+                                              record_members)
             self._futures[future] = folder
 
-    def _finish(self, state: _Family) -> None:
-        table = _member_table(state.metrics, state.n_members)
-        if state.record:
-            _write_family_folder(state.cfg, state.folder, table, state.n_members,
-                                 state.compiles, state.counts,
-                                 None if state.record_members else state.metrics)
+    def _complete(self, state: _Family) -> None:
+        """A family whose members are all in: its record written by a worker
+        (:func:`_record_family`; :meth:`wait` finishes it when the table comes back), or here
+        without workers or without a record."""
+        if not state.record:
+            self._finish(state, _member_table(state.metrics, state.n_members))
+            return
+        task = (state.cfg, state.folder, state.metrics, state.n_members, state.compiles,
+                state.counts, not state.record_members)
+        if self.executor is None:
+            self._finish(state, _record_family(*task))
+            return
+        self._records[self.executor.submit(_record_family, *task, os.getpid())] = state.folder
+
+    def _finish(self, state: _Family, table: pd.DataFrame) -> None:
+        """A family's table kept and its callback due; the families waiting for its folder
+        submitted again (they find it complete)."""
+        self._complete_below[state.folder] = max(self._complete_below.get(state.folder, 0),
+                                                 state.n_members)
         if len(self._tables) >= KEPT_TABLES:
             self._tables.pop(next(iter(self._tables)))
         self._tables[state.folder, state.cfg.config_hash()] = table
@@ -243,18 +318,24 @@ class FamilyPool:
     def wait(self) -> None:
         """Run the callbacks of the families that are complete; when there are none, wait
         for the next task to come in first. A worker's exception is raised here."""
-        if not self._ready and self._futures:
-            done, _ = concurrent.futures.wait(list(self._futures),
+        if not self._ready and (self._futures or self._records):
+            done, _ = concurrent.futures.wait([*self._futures, *self._records],
                                               return_when=concurrent.futures.FIRST_COMPLETED)
             for future in done:
+                if future in self._records:  # a record written, its table handed back
+                    folder = self._records.pop(future)
+                    self._finish(self._families[folder], future.result())
+                    continue
                 folder = self._futures.pop(future)
-                results = future.result()
+                results, counts = future.result()
                 state = self._families[folder]
                 for index, metrics in results:
                     state.metrics[index] = metrics
+                state.counts.add(counts)
+                self.counts.add(counts)
                 state.left -= len(results)
                 if state.left == 0:
-                    self._finish(state)
+                    self._complete(state)
         while self._ready:
             self._ready.popleft()()
 
@@ -279,9 +360,10 @@ class FamilyPool:
             _quiet_loky_threads()
             self.executor.shutdown(wait=True, kill_workers=True)
         elif self.executor is not None:  # a cluster's: its pending tasks cancelled
-            for future in self._futures:
+            for future in [*self._futures, *self._records]:
                 future.cancel()
         self._futures.clear()
+        self._records.clear()
         self.close()
 
 

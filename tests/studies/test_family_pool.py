@@ -230,3 +230,79 @@ def test_a_stopped_family_leaves_no_temporary_of_a_killed_worker(tmp_path, make_
     with pytest.raises(KeyboardInterrupt):
         experiment.run_family(cfg, out, progress=False)
     assert not left.exists() and kept.read_text() == "t\n"
+
+
+def test_the_parent_only_hands_out_members_and_records(tmp_path, make_config, monkeypatch):
+    """With workers (here a thread pool handed in as a cluster's executor would be), the
+    parent neither draws, checks nor runs a member nor writes a family's record: every call
+    of those helpers is on a worker's thread (the parent's share of a tune's CPU, measured by
+    the bench's coordinator_ms_per_trial). The folders are run_family's, byte for byte, and
+    the counts add up (one family run, then read back whole)."""
+    import threading
+    from concurrent.futures import ThreadPoolExecutor
+
+    import pipeline.studies.family_pool as family_pool
+
+    threads: dict[str, set[bool]] = {}
+
+    def on_thread(name):
+        original = getattr(family_pool, name)
+
+        def wrapped(*args, **kwargs):
+            threads.setdefault(name, set()).add(
+                threading.current_thread() is threading.main_thread())
+            return original(*args, **kwargs)
+
+        monkeypatch.setattr(family_pool, name, wrapped)
+
+    for name in ("_members_to_run", "_run_chunk", "_write_family_folder", "_member_table"):
+        on_thread(name)
+    cfg = _family(make_config, 5)
+    run_family(cfg, tmp_path / "reference", progress=False, member_cache=None)
+    counts = MemberCounts()
+    with ThreadPoolExecutor(2) as executor:
+        pool = FamilyPool(0, QpCache(), None, counts, executor)
+        pool.submit(cfg, tmp_path / "pool", lambda: None)
+        pool.run_until_idle()
+        pool.close()
+    assert threads == {name: {False} for name in ("_members_to_run", "_run_chunk",
+                                                  "_write_family_folder", "_member_table")}
+    assert (counts.simulated, counts.resumed) == (5, 0)
+    for name in ("family_metrics.csv", "family.json"):
+        assert (tmp_path / "pool" / name).read_bytes() == \
+            (tmp_path / "reference" / name).read_bytes(), name
+
+
+def test_a_later_rung_hands_out_its_new_members_as_the_tasks_of_their_own(tmp_path,
+                                                                           make_config):
+    """A trial's rung (2 members) and then its whole family (12) in one folder: the whole
+    family's earlier members are one task that reads them back, and its new members go
+    out MEMBERS_PER_TASK at a time from the first new one (the engine's batches as before
+    the workers resolved members: 8 and 2, not 6 and 4); each member simulated once."""
+    from concurrent.futures import ThreadPoolExecutor
+
+    from pipeline.studies.family_pool import MEMBERS_PER_TASK
+
+    class Recording(ThreadPoolExecutor):
+        def __init__(self) -> None:
+            super().__init__(1)
+            self.spans: list[list[int]] = []
+
+        def submit(self, fn, /, *args, **kwargs):
+            if fn.__name__ == "_family_task":
+                self.spans.append(list(args[2]))
+            return super().submit(fn, *args, **kwargs)
+
+    whole = _family(make_config, 12)
+    rung = dataclasses.replace(whole, scenario=dataclasses.replace(
+        whole.scenario, family=dataclasses.replace(whole.scenario.family, size=2)))
+    counts = MemberCounts()
+    with Recording() as executor:
+        pool = FamilyPool(0, QpCache(), None, counts, executor)
+        pool.submit(rung, tmp_path / "f", lambda: pool.submit(whole, tmp_path / "f",
+                                                              lambda: None))
+        pool.run_until_idle()
+        pool.close()
+    assert MEMBERS_PER_TASK == 8
+    assert executor.spans == [[0, 1], [0, 1], list(range(2, 10)), [10, 11]]
+    assert (counts.simulated, counts.resumed) == (12, 2)

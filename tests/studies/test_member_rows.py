@@ -202,3 +202,26 @@ def test_an_earlier_rung_asked_later_keeps_the_later_rungs_rows(tmp_path, make_c
     run_family(whole, tmp_path / "f", progress=False, member_cache=None, counts=counts,
                record_members=False)
     assert (counts.simulated, counts.resumed) == (0, 4)
+
+
+@pytest.mark.parametrize("n_jobs", [1, 2])
+def test_an_earlier_rung_in_the_pool_keeps_the_later_rungs_rows(tmp_path, make_config, n_jobs):
+    """As above, through the tune's pool, whose record is written by a worker (n_jobs=2) or
+    here (1): the rung's record keeps the whole family's four rows, read by the record's
+    writer, and the whole family asked again simulates nothing."""
+    whole = _family(make_config, 4)
+    rung = dataclasses.replace(whole, scenario=dataclasses.replace(
+        whole.scenario, family=dataclasses.replace(whole.scenario.family, size=2)))
+    counts = MemberCounts()
+    pool = FamilyPool(n_jobs, QpCache(), None, counts)
+    pool.submit(whole, tmp_path / "f", lambda: None, record_members=False)
+    pool.run_until_idle()
+    assert (counts.simulated, counts.resumed) == (4, 0)
+    pool.submit(rung, tmp_path / "f", lambda: None, record_members=False)
+    pool.run_until_idle()
+    assert (counts.simulated, counts.resumed) == (4, 2)
+    assert [row["member"] for row in _rows(tmp_path / "f")] == [0, 1, 2, 3]
+    pool.submit(whole, tmp_path / "f", lambda: None, record_members=False)
+    pool.run_until_idle()
+    pool.close()
+    assert (counts.simulated, counts.resumed) == (4, 6)
