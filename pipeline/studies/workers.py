@@ -13,9 +13,10 @@ latency per unit (``hydra/launcher=slurm`` runs a rung as an array job: seconds 
 - ``dask-slurm:N``: ``N`` SLURM jobs of one Dask worker each (dask-jobqueue's
   ``SLURMCluster``, submitted with ``sbatch`` from here; each worker stays for the whole study).
 
-One coordinator per study asks, tells and writes the family records; the workers only simulate
-members into the output folder (a folder every worker must reach: on a cluster, a shared file
-system) and return their metrics, as joblib's workers do. The numbers do not depend on where the
+One coordinator per study asks, tells and hands out each family's members by index; the workers
+draw them, read back those already complete, simulate the others into the output folder (a
+folder every worker must reach: on a cluster, a shared file system), write each complete
+family's record there and return the metrics and tables, as joblib's workers do. The numbers do not depend on where the
 members ran (tested: the same trials on a local Dask cluster as on the loky pool).
 """
 

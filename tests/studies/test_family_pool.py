@@ -233,7 +233,7 @@ def test_a_stopped_family_leaves_no_temporary_of_a_killed_worker(tmp_path, make_
 
 
 def test_the_parent_only_hands_out_members_and_records(tmp_path, make_config, monkeypatch):
-    """With workers (here a thread pool handed in as a cluster's executor would be), the
+    """With workers (here a thread handed in as a cluster's executor would be), the
     parent neither draws, checks nor runs a member nor writes a family's record: every call
     of those helpers is on a worker's thread (the parent's share of a tune's CPU, measured by
     the bench's coordinator_ms_per_trial). The folders are run_family's, byte for byte, and
@@ -260,7 +260,9 @@ def test_the_parent_only_hands_out_members_and_records(tmp_path, make_config, mo
     cfg = _family(make_config, 5)
     run_family(cfg, tmp_path / "reference", progress=False, member_cache=None)
     counts = MemberCounts()
-    with ThreadPoolExecutor(2) as executor:
+    # one thread: a thread pool shares the shipped cache (its kept QP workspaces) between
+    # its tasks, which processes never do
+    with ThreadPoolExecutor(1) as executor:
         pool = FamilyPool(0, QpCache(), None, counts, executor)
         pool.submit(cfg, tmp_path / "pool", lambda: None)
         pool.run_until_idle()
@@ -299,10 +301,59 @@ def test_a_later_rung_hands_out_its_new_members_as_the_tasks_of_their_own(tmp_pa
     counts = MemberCounts()
     with Recording() as executor:
         pool = FamilyPool(0, QpCache(), None, counts, executor)
+        # the rung with its whole family's hash, as the tune submits it
         pool.submit(rung, tmp_path / "f", lambda: pool.submit(whole, tmp_path / "f",
-                                                              lambda: None))
+                                                              lambda: None),
+                    whole.config_hash())
         pool.run_until_idle()
         pool.close()
     assert MEMBERS_PER_TASK == 8
     assert executor.spans == [[0, 1], [0, 1], list(range(2, 10)), [10, 11]]
     assert (counts.simulated, counts.resumed) == (12, 2)
+
+
+def test_another_setting_in_a_folder_is_not_taken_for_its_earlier_rung(tmp_path, make_config):
+    """A family of one setting completed into a folder, then another setting's family into
+    the same folder: the first one's members are not taken for the second's earlier rung (the
+    pool knows a rung by its whole family, not by its folder), so the second's members go out
+    as members to run, with the compiled QPs (its table is run_family's, byte for byte: a
+    member run in a task without them compiled, and its compile_count said so)."""
+    first = make_config(["method=improved", "scenario=family", "scenario.family.size=3",
+                         "scenario.family.n_jobs=1"])
+    second = make_config(["method=baseline", "scenario=family", "scenario.family.size=3",
+                          "scenario.family.n_jobs=1"])
+    run_family(second, tmp_path / "reference", progress=False, member_cache=None)
+    counts = MemberCounts()
+    pool = FamilyPool(1, QpCache(), None, counts)
+    pool.submit(first, tmp_path / "f", lambda: None)
+    pool.run_until_idle()
+    pool.submit(second, tmp_path / "f", lambda: None)
+    pool.run_until_idle()
+    pool.close()
+    assert (counts.simulated, counts.resumed) == (6, 0)
+    assert (tmp_path / "f" / "family_metrics.csv").read_bytes() == \
+        (tmp_path / "reference" / "family_metrics.csv").read_bytes()
+
+
+def test_a_workers_warning_reaches_the_parents_log(tmp_path, make_config, caplog):
+    """A damaged member found by a worker (its metrics edited after its manifest) is run
+    again, and the warning that says so is logged in the parent, where the tune's log is
+    (a worker's own log reaches no user: a Dask worker's, loky's stderr)."""
+    import logging
+
+    cfg = _family(make_config, 3)
+    pool = FamilyPool(2, QpCache(), None, MemberCounts())
+    pool.submit(cfg, tmp_path / "f", lambda: None)
+    pool.run_until_idle()
+    (tmp_path / "f" / "manifest.json").unlink()
+    metrics = tmp_path / "f" / "member_0001" / "metrics.json"
+    metrics.write_text(metrics.read_text().replace("{", "{ ", 1))
+    counts = MemberCounts()
+    pool = FamilyPool(2, QpCache(), None, counts)
+    with caplog.at_level(logging.WARNING, logger="pipeline.studies.experiment"):
+        pool.submit(cfg, tmp_path / "f", lambda: None)
+        pool.run_until_idle()
+    pool.close()
+    assert (counts.simulated, counts.resumed) == (1, 2)
+    assert any("re-running" in r.getMessage() and "member_0001" in r.getMessage()
+               for r in caplog.records)
