@@ -93,8 +93,11 @@ def _time_repeat(case: LateralCase, rep: int) -> list[dict]:
     through_cvxpy = []
     for inputs, *_ in case.steps:
         solved, wall, _ = timed_call(lambda: case.cvxpy.solve(inputs))  # noqa: B023 (called at once, in this iteration)
-        stats = case.cvxpy.qp.compiled.problem.solver_stats
-        through_cvxpy.append((solved, wall, float(stats.solve_time or np.nan)))
+        # the statement of the slots this step used (with no obstacle the 0-slot one: the
+        # statement of every slot, case.cvxpy.qp, was never solved and has no stats)
+        stats = case.cvxpy.qp_for(inputs).compiled.problem.solver_stats
+        through_cvxpy.append((solved, wall, float(stats.solve_time or np.nan)
+                              if stats is not None else np.nan))
     rows = []
     for k, (inputs, apf_s, apf_python_s) in enumerate(case.steps):
         # every method timed on this QP, in an order that rotates from QP to QP:

@@ -100,19 +100,22 @@ def _family_task(cfg: ExperimentConfig, folder: Path, indices: list[int], qp_cac
     source = scenario_source(cfg.scenario, cfg.vehicle.footprint_radius_m)
     members = [source.member(family.seed, i) for i in indices]
     # what the members' checks warn of (a damaged member run again) goes back to the parent's
-    # log: a worker's own goes nowhere a user reads (a Dask worker's log, loky's stderr)
+    # log, and only there: a worker's own goes nowhere a user reads (a Dask worker's log,
+    # loky's stderr), and a task run in the parent (one job) would log it twice
     warnings = _Warnings()
     logger = logging.getLogger(_members_to_run.__module__)
     logger.addHandler(warnings)
+    propagate, logger.propagate = logger.propagate, False
     try:
         metrics, todo, counts = _members_to_run(cfg, members, folder, member_cache, qp_cache,
                                                 record_members, indices)
+        done = list(metrics.items())
+        if todo:
+            done.extend(_run_chunk(todo, qp_cache, member_cache, record_horizon,
+                                   parent_pid=parent_pid, record_members=record_members))
     finally:
         logger.removeHandler(warnings)
-    done = list(metrics.items())
-    if todo:
-        done.extend(_run_chunk(todo, qp_cache, member_cache, record_horizon,
-                               parent_pid=parent_pid, record_members=record_members))
+        logger.propagate = propagate
     return done, counts, warnings.messages
 
 

@@ -335,25 +335,33 @@ def test_another_setting_in_a_folder_is_not_taken_for_its_earlier_rung(tmp_path,
         (tmp_path / "reference" / "family_metrics.csv").read_bytes()
 
 
-def test_a_workers_warning_reaches_the_parents_log(tmp_path, make_config, caplog):
+def test_a_workers_warnings_reach_the_parents_log(tmp_path, make_config, caplog):
     """A damaged member found by a worker (its metrics edited after its manifest) is run
-    again, and the warning that says so is logged in the parent, where the tune's log is
-    (a worker's own log reaches no user: a Dask worker's, loky's stderr)."""
+    again, and the warnings that say so are logged in the parent, where the tune's log is (a
+    worker's own log reaches no user: a Dask worker's, loky's stderr): the same ones with two
+    worker processes as with one job, where the tasks run in the parent."""
     import logging
+    import shutil
 
     cfg = _family(make_config, 3)
-    pool = FamilyPool(2, QpCache(), None, MemberCounts())
+    pool = FamilyPool(1, QpCache(), None, MemberCounts())
     pool.submit(cfg, tmp_path / "f", lambda: None)
     pool.run_until_idle()
     (tmp_path / "f" / "manifest.json").unlink()
     metrics = tmp_path / "f" / "member_0001" / "metrics.json"
     metrics.write_text(metrics.read_text().replace("{", "{ ", 1))
-    counts = MemberCounts()
-    pool = FamilyPool(2, QpCache(), None, counts)
-    with caplog.at_level(logging.WARNING, logger="pipeline.studies.experiment"):
-        pool.submit(cfg, tmp_path / "f", lambda: None)
-        pool.run_until_idle()
-    pool.close()
-    assert (counts.simulated, counts.resumed) == (1, 2)
-    assert any("re-running" in r.getMessage() and "member_0001" in r.getMessage()
-               for r in caplog.records)
+    shutil.copytree(tmp_path / "f", tmp_path / "g")
+    said = {}
+    for n_jobs, folder in ((1, tmp_path / "f"), (2, tmp_path / "g")):
+        counts = MemberCounts()
+        pool = FamilyPool(n_jobs, QpCache(), None, counts)
+        caplog.clear()
+        with caplog.at_level(logging.WARNING, logger="pipeline.studies.experiment"):
+            pool.submit(cfg, folder, lambda: None)
+            pool.run_until_idle()
+        pool.close()
+        assert (counts.simulated, counts.resumed) == (1, 2)
+        said[n_jobs] = [r.getMessage().replace(str(folder), "F") for r in caplog.records
+                        if r.name == "pipeline.studies.experiment"]
+    assert said[1] and all("re-running F/member_0001" in message for message in said[1])
+    assert said[2] == said[1]
