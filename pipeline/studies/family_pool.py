@@ -293,11 +293,11 @@ class FamilyPool:
         # an earlier rung's members (complete: read back in one task; a member found damaged
         # there runs in it all the same), then MEMBERS_PER_TASK at a time
         known = min(self._complete_below.get((folder, state.whole), 0), family.size)
-        starts = ([0] if known else []) + list(range(known, family.size, MEMBERS_PER_TASK))
-        for start in starts:
-            stop = known if start == 0 and known else min(start + MEMBERS_PER_TASK, family.size)
-            task = (cfg, folder, list(range(start, stop)), shipped, self.member_cache,
-                    record_horizon)
+        spans = ([range(known)] if known else []) + [
+            range(start, min(start + MEMBERS_PER_TASK, family.size))
+            for start in range(known, family.size, MEMBERS_PER_TASK)]
+        for span in spans:
+            task = (cfg, folder, list(span), shipped, self.member_cache, record_horizon)
             if self.executor is None:
                 future: concurrent.futures.Future = concurrent.futures.Future()
                 try:

@@ -16,8 +16,9 @@ latency per unit (``hydra/launcher=slurm`` runs a rung as an array job: seconds 
 One coordinator per study asks, tells and hands out each family's members by index; the workers
 draw them, read back those already complete, simulate the others into the output folder (a
 folder every worker must reach: on a cluster, a shared file system), write each complete
-family's record there and return the metrics and tables, as joblib's workers do. The numbers do not depend on where the
-members ran (tested: the same trials on a local Dask cluster as on the loky pool).
+family's record there and return the metrics and tables, as joblib's workers do. The numbers
+do not depend on where the members ran (tested: the same trials on a local Dask cluster as on
+the loky pool).
 """
 
 from __future__ import annotations
