@@ -38,6 +38,10 @@ WARM_RUNS: tuple[tuple[str, ...], ...] = (
     (), ("controller.frame=fixed",),
     ("method=baseline", "controller.backend=daqp"),  # the tune's backend: DAQP's batched caller
     ("controller.path_reference=pursuit",),
+    # a speed rule: outside the engine's groups (pipeline/loop/lateral_group.py), the lateral
+    # MPCs' batched path frame and solves of pipeline/loop/controller/lateral_rows.py
+    ("planner.velocity_planning=true",),
+    ("planner.velocity_planning=true", "controller.backend=daqp"),
     ("experiment=kinematic", "planner=improved", "hydra.mode=RUN"))
 
 

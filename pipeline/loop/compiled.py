@@ -52,7 +52,7 @@ from typing import Any
 from numba import njit
 from numba.extending import overload
 
-from pipeline.loop import model, planner, scenario
+from pipeline.loop import group_rows, model, planner, scenario
 from pipeline.loop.controller import (
     daqp_rows,
     direct_rows,
@@ -103,7 +103,12 @@ for _helper in (path._polyline, path._heading_at, path._curvature_at, path._proj
                 path._point_at, model.single_track_kinematic_substep, model.single_track_rk4,
                 path.rollout_path_arrays, path.frame_step_arrays, path.plan_poses_arrays,
                 references.lateral_side_halfplane_arrays, scenario.route_point_ahead,
-                daqp_rows.condensed_free, daqp_rows.plan_readout, lateral_qp.direct_theta_size):
+                daqp_rows.condensed_free, daqp_rows.plan_readout, lateral_qp.direct_theta_size,
+                planner.apf_rollout_arrays, path_rows.path_frame_rows, path_rows.plan_poses_rows,
+                daqp_rows.daqp_condensed_rows, group_rows._tyre_slip, group_rows._plant_columns,
+                group_rows._settings_of, group_rows._status_code, group_rows._finite_members,
+                group_rows._qp_arrays, direct_rows.direct_theta_rows,
+                direct_rows.direct_readout_rows):
     overload(_helper)(_same_signature(_helper))
 
 single_track_rk4 = _jit(model.single_track_rk4)
@@ -121,6 +126,12 @@ plan_poses_rows_kernel = _jit(path_rows.plan_poses_rows)
 daqp_rows_kernel = _jit(daqp_rows.daqp_condensed_rows)
 direct_theta_rows_kernel = _jit(direct_rows.direct_theta_rows)
 direct_readout_rows_kernel = _jit(direct_rows.direct_readout_rows)
+observe_plan_rows_kernel = _jit(group_rows.observe_plan_rows)
+frame_rows_kernel = _jit(group_rows.frame_rows)
+solve_rows_kernel = _jit(group_rows.solve_rows)
+apply_rows_kernel = _jit(group_rows.apply_rows)
+theta_rows_kernel = _jit(group_rows.theta_rows)
+readout_rows_kernel = _jit(group_rows.readout_rows)
 
 #: The compiled set (immutable: a named tuple of numba's dispatchers).
 COMPILED_KERNELS = Kernels(True, single_track_rk4, apf_rollout_kernel, reference_kernel,
@@ -128,4 +139,6 @@ COMPILED_KERNELS = Kernels(True, single_track_rk4, apf_rollout_kernel, reference
                            plan_poses_kernel,
                            check_record_kernel, single_track_rk4_rows, halfplane_kernel,
                            path_frame_rows_kernel, plan_poses_rows_kernel, daqp_rows_kernel,
-                           direct_theta_rows_kernel, direct_readout_rows_kernel)
+                           direct_theta_rows_kernel, direct_readout_rows_kernel,
+                           observe_plan_rows_kernel, frame_rows_kernel, solve_rows_kernel,
+                           apply_rows_kernel, theta_rows_kernel, readout_rows_kernel)

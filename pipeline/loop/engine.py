@@ -273,8 +273,22 @@ def step_members(members: Sequence[MemberLoop]) -> list[SimulationResult]:
     """Step ``members`` together until each has ended; their results in the same order.
 
     A member that ends (goal line, last step, contact, a non-finite state) leaves the batch at
-    that step; the others go on."""
-    active = list(members)
+    that step; the others go on. The members of the default statement go as groups of arrays
+    (:class:`~pipeline.loop.lateral_group.LateralGroup`, one per
+    :func:`~pipeline.loop.lateral_group.group_key`), the others through their own loops."""
+    from pipeline.loop.lateral_group import LateralGroup, group_key
+
+    groups: dict[tuple[Any, ...], list[MemberLoop]] = {}
+    others = []
+    for member in members:
+        key = group_key(member)
+        if key is None:
+            others.append(member)
+        else:
+            groups.setdefault(key, []).append(member)
+    for group in groups.values():
+        LateralGroup(group).run()
+    active = others
     k = 0
     while active:
         active = [member for member in active if member.observe(k)]

@@ -54,6 +54,10 @@ class Kernels(NamedTuple):
         :func:`pipeline.loop.controller.direct_rows.direct_theta_rows` and
         ``direct_readout_rows``: the data and read-out of their QPs on the ``clarabel_direct``
         backend around each member's own Clarabel solver (compiled only, as ``daqp_rows``).
+    observe_plan_rows, frame_rows, solve_rows, apply_rows, theta_rows, readout_rows : callable or None
+        :mod:`pipeline.loop.group_rows`: the whole step of the members the engine steps as
+        one group of arrays (:mod:`pipeline.loop.lateral_group`; compiled only: None in
+        CPython's set, whose members step through their own loops).
     """
 
     compiled: bool
@@ -72,6 +76,12 @@ class Kernels(NamedTuple):
     daqp_rows: Callable[..., Any] | None
     direct_theta_rows: Callable[..., Any] | None = None
     direct_readout_rows: Callable[..., Any] | None = None
+    observe_plan_rows: Callable[..., Any] | None = None
+    frame_rows: Callable[..., Any] | None = None
+    solve_rows: Callable[..., Any] | None = None
+    apply_rows: Callable[..., Any] | None = None
+    theta_rows: Callable[..., Any] | None = None
+    readout_rows: Callable[..., Any] | None = None
 
     def prepare(self, values: object) -> KernelValues:
         """``values`` as this set's callables take them: a contiguous float array for numba, a

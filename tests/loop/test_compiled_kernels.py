@@ -267,10 +267,12 @@ def test_compiled_frame_step_and_check_give_the_same_bits():
 @pytest.mark.parametrize("method", ["improved", "baseline"])
 def test_closed_loop_with_kernels_is_the_closed_loop_without(make_config, method, frame):
     """A run with the compiled kernels, counted, against the run with CPython's: every step
-    through the compiled plant, rollout and references (the path frame's rollout path, or the
-    fixed frame's interpolation), the same trajectory bit for bit; the cache's flag chooses
-    them."""
-    calls = {"plant": 0, "rollout": 0, "references": 0, "rollout_path": 0}
+    through the compiled plant, rollout and references (the fixed frame's interpolation), or,
+    in the path frame (the default statement), through the compiled calls of the engine's
+    group (pipeline/loop/lateral_group.py: its rollout, path and plant inside them), the same
+    trajectory bit for bit; the cache's flag chooses them."""
+    calls = {"plant": 0, "rollout": 0, "references": 0, "rollout_path": 0, "observed": 0,
+             "applied": 0}
 
     def counting(name, kernel):
         def wrapped(*args):
@@ -283,7 +285,15 @@ def test_closed_loop_with_kernels_is_the_closed_loop_without(make_config, method
         calls["plant"] += states.shape[0]
         return COMPILED_KERNELS.plant_rk4_rows(states, *args)
 
+    def counting_members(name, kernel):
+        def wrapped(k, members, *args):
+            calls[name] += members.shape[0]
+            return kernel(k, members, *args)
+        return wrapped
+
     counted = COMPILED_KERNELS._replace(
+        observe_plan_rows=counting_members("observed", COMPILED_KERNELS.observe_plan_rows),
+        apply_rows=counting_members("applied", COMPILED_KERNELS.apply_rows),
         plant_rk4=counting("plant", COMPILED_KERNELS.plant_rk4), plant_rk4_rows=counting_rows,
         apf_rollout=counting("rollout", COMPILED_KERNELS.apf_rollout),
         references=counting("references", COMPILED_KERNELS.references),
@@ -299,9 +309,12 @@ def test_closed_loop_with_kernels_is_the_closed_loop_without(make_config, method
         assert calls == before  # the default: CPython's
         fast = simulate(member_cfg, scenario, QpCache(), counted)
         steps = len(fast.trajectory) - 1
-        assert calls["plant"] - before["plant"] == steps
-        assert calls["rollout"] - before["rollout"] == steps
-        assert calls[references] - before[references] == steps
+        grouped = frame == "path"
+        assert calls["observed"] - before["observed"] == (steps + 1 if grouped else 0)
+        assert calls["applied"] - before["applied"] == (steps if grouped else 0)
+        assert calls["plant"] - before["plant"] == (0 if grouped else steps)
+        assert calls["rollout"] - before["rollout"] == (0 if grouped else steps)
+        assert calls[references] - before[references] == (0 if grouped else steps)
         assert fast.trajectory.equals(plain.trajectory)
         # the flag a family runner sets chooses the compiled set
         flagged = simulate(member_cfg, scenario, QpCache(compiled_kernels=True))

@@ -175,8 +175,10 @@ def test_batched_plant_is_the_plant_row_by_row(make_config):
 def test_engine_steps_every_member_once_per_step(make_config):
     """The lockstep: at step k every member still running is observed and controlled once,
     a member that has ended is never called again, and the plants of the compiled members
-    are stepped in one call per step."""
-    runs = _members(make_config, ["method=improved", "controller.backend=daqp"], 4)
+    are stepped in one call per step (members outside the engine's groups, whose own loops
+    it steps: velocity planning on)."""
+    runs = _members(make_config, ["method=improved", "controller.backend=daqp",
+                                  "planner.velocity_planning=true"], 4)
     cache = QpCache(compiled_kernels=True)
     from pipeline.loop.engine import run_kernels
 
@@ -200,8 +202,10 @@ def test_default_lateral_mpcs_share_one_path_frame_call_per_step(make_config):
     """The members whose controller is the default statement have their path frames computed
     in one compiled call per step (and their plans' poses in another, their DAQP QPs in a
     third), the others (the fixed frame here) step alone: every member's run is still its run
-    alone."""
-    runs = _members(make_config, ["method=improved", "controller.backend=daqp"], 3) \
+    alone. (Members outside the engine's groups, pipeline/loop/lateral_group.py, whose own
+    loops it steps: velocity planning on.)"""
+    runs = _members(make_config, ["method=improved", "controller.backend=daqp",
+                                  "planner.velocity_planning=true"], 3) \
         + _members(make_config, ["method=baseline", "controller.frame=fixed"], 2)
     cache = QpCache(compiled_kernels=True)
     from pipeline.loop.engine import run_kernels
@@ -237,8 +241,9 @@ def test_default_lateral_mpcs_share_one_path_frame_call_per_step(make_config):
 def test_clarabel_members_get_their_qp_data_in_one_call_per_step(make_config):
     """The default backend's members (clarabel_direct) have their QP data made in one compiled
     call per step and read out in another, a member of one move steps alone: every run is
-    still its run alone."""
-    runs = _members(make_config, ["method=improved"], 3) \
+    still its run alone. (Members outside the engine's groups, whose own loops it steps:
+    velocity planning on.)"""
+    runs = _members(make_config, ["method=improved", "planner.velocity_planning=true"], 3) \
         + _members(make_config, ["method=improved", "controller.control_horizon=1"], 1)
     cache = QpCache(compiled_kernels=True)
     from pipeline.loop.engine import run_kernels
