@@ -108,7 +108,7 @@ for _helper in (path._polyline, path._heading_at, path._curvature_at, path._proj
                 daqp_rows.daqp_condensed_rows, group_rows._tyre_slip, group_rows._plant_columns,
                 group_rows._settings_of, group_rows._status_code, group_rows._finite_members,
                 group_rows._qp_arrays, direct_rows.direct_theta_rows,
-                direct_rows.direct_readout_rows):
+                direct_rows.direct_readout_rows, prediction_check.check_record_arrays):
     overload(_helper)(_same_signature(_helper))
 
 single_track_rk4 = _jit(model.single_track_rk4)
@@ -132,6 +132,7 @@ solve_rows_kernel = _jit(group_rows.solve_rows)
 apply_rows_kernel = _jit(group_rows.apply_rows)
 theta_rows_kernel = _jit(group_rows.theta_rows)
 readout_rows_kernel = _jit(group_rows.readout_rows)
+check_rows_kernel = _jit(group_rows.check_rows)
 
 #: The compiled set (immutable: a named tuple of numba's dispatchers).
 COMPILED_KERNELS = Kernels(True, single_track_rk4, apf_rollout_kernel, reference_kernel,
@@ -141,4 +142,5 @@ COMPILED_KERNELS = Kernels(True, single_track_rk4, apf_rollout_kernel, reference
                            path_frame_rows_kernel, plan_poses_rows_kernel, daqp_rows_kernel,
                            direct_theta_rows_kernel, direct_readout_rows_kernel,
                            observe_plan_rows_kernel, frame_rows_kernel, solve_rows_kernel,
-                           apply_rows_kernel, theta_rows_kernel, readout_rows_kernel)
+                           apply_rows_kernel, theta_rows_kernel, readout_rows_kernel,
+                           check_rows_kernel)

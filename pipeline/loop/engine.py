@@ -118,6 +118,9 @@ class MemberLoop:
         self.reacting = scenario.obstacle_motion \
             if hasattr(scenario.obstacle_motion, "react") else None
         self.counts_solves = cfg.controller.kind != "pure_pursuit"
+        #: whether the log already holds the model check (a group's member: computed from the
+        #: group's arrays, :mod:`~pipeline.loop.lateral_group`)
+        self.model_checked = False
         #: this step's pending observation (set by observe, used by plan) and plan (set by
         #: plan, used by apply)
         self._pending: tuple[Any, ...] | None = None
@@ -211,7 +214,8 @@ class MemberLoop:
     def result(self) -> SimulationResult:
         """The finished run."""
         log, controller = self.log, self.controller
-        _add_model_check(controller, log)
+        if not self.model_checked:
+            _add_model_check(controller, log)
         trajectory = log.table(list(HEAD) + [c for names in self.obstacle_names for c in names]
                                + list(TAIL))
         return SimulationResult(trajectory, self.solve_times[:self.n_solves],

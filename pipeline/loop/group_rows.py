@@ -17,7 +17,9 @@ the same order on the same numbers (so the same bits: the tests hold the two equ
   DAQP workspace (:func:`~pipeline.loop.controller.daqp_rows.daqp_condensed_rows`), the plan
   accepted or the fallback taken (:class:`~pipeline.loop.controller.base.PlanFallback`), the
   plans' poses (:func:`~pipeline.loop.controller.path_rows.plan_poses_rows`), the step's
-  record and log columns, and the plant's step (:func:`pipeline.loop.model.single_track_rk4`).
+  record and log columns, and the plant's step (:func:`pipeline.loop.model.single_track_rk4`);
+* :func:`check_rows`: at a member's end, each step's prediction checked against what the plant
+  then did, from the records' arrays.
 
 Between the calls the group's driver looks up, in Python, what depends on caches of Python
 objects (the prediction step, a model and its condensed prediction by speed): the calls hand
@@ -35,6 +37,7 @@ import numpy as np
 from pipeline.loop.controller.daqp_rows import daqp_condensed_rows
 from pipeline.loop.controller.direct_rows import direct_readout_rows, direct_theta_rows
 from pipeline.loop.controller.path_rows import path_frame_rows, plan_poses_rows
+from pipeline.loop.controller.prediction_check import check_record_arrays
 from pipeline.loop.model import single_track_rk4
 from pipeline.loop.planner import ApfSettings, apf_rollout_arrays
 
@@ -624,3 +627,29 @@ def apply_rows(k: int, members: np.ndarray, horizon: int, states: np.ndarray,  #
         rate = rate if rate < limit else limit
         states[i] = single_track_rk4(state, plant_constants[i], rate, row[C_SPEED_REF],
                                      sample_times[i], substeps[i])
+
+
+def check_rows(points: np.ndarray, headings: np.ndarray, curvature: np.ndarray,
+               sizes: np.ndarray, scalars: np.ndarray, stations: np.ndarray, x0s: np.ndarray,
+               Ad: np.ndarray, Bd: np.ndarray, Ed: np.ndarray, plans: np.ndarray,
+               n_records: int, xy: np.ndarray, psi: np.ndarray, delta: np.ndarray,
+               half: int, one: int, ts: float) -> np.ndarray:  # pragma: no cover (numba's)
+    """:func:`~pipeline.loop.controller.prediction_check.prediction_check` of one member's
+    first ``n_records`` records, from the group's record arrays (row ``k``: the path of
+    ``sizes[k]`` intervals, ``scalars[k]``: its arc, the prediction step, whether the plan was
+    accepted; the model's ``Ad``, ``Bd``, ``Ed`` columns at the log's sample time ``ts``) and
+    the log's ``xy``, ``psi``, ``delta``: the check's columns, one row per log row (NaN where
+    none)."""
+    rows = xy.shape[0]
+    out = np.full((rows, 5), np.nan)
+    no_plan = np.zeros(0)
+    for k in range(min(n_records, rows)):
+        last = k + one if k + one < rows - 1 else rows - 1
+        K = sizes[k]
+        plan = plans[k] if scalars[k, 2] != 0.0 else no_plan
+        a, b, c, d, e = check_record_arrays(
+            points[k, :K + 1], headings[k, :K + 1], curvature[k, :K], scalars[k, 0], K,
+            stations[k], scalars[k, 1], x0s[k], Ad[k], Bd[k], Ed[k], plan, xy, psi, delta, k,
+            last, half, one, ts)
+        out[k, 0], out[k, 1], out[k, 2], out[k, 3], out[k, 4] = a, b, c, d, e
+    return out

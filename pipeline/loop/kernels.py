@@ -54,7 +54,7 @@ class Kernels(NamedTuple):
         :func:`pipeline.loop.controller.direct_rows.direct_theta_rows` and
         ``direct_readout_rows``: the data and read-out of their QPs on the ``clarabel_direct``
         backend around each member's own Clarabel solver (compiled only, as ``daqp_rows``).
-    observe_plan_rows, frame_rows, solve_rows, apply_rows, theta_rows, readout_rows : callable or None
+    observe_plan_rows, frame_rows, solve_rows, apply_rows, theta_rows, readout_rows, check_rows : callable or None
         :mod:`pipeline.loop.group_rows`: the whole step of the members the engine steps as
         one group of arrays (:mod:`pipeline.loop.lateral_group`; compiled only: None in
         CPython's set, whose members step through their own loops).
@@ -82,6 +82,7 @@ class Kernels(NamedTuple):
     apply_rows: Callable[..., Any] | None = None
     theta_rows: Callable[..., Any] | None = None
     readout_rows: Callable[..., Any] | None = None
+    check_rows: Callable[..., Any] | None = None
 
     def prepare(self, values: object) -> KernelValues:
         """``values`` as this set's callables take them: a contiguous float array for numba, a

@@ -41,7 +41,7 @@ from pipeline.loop.controller.lateral_qp import (
 )
 from pipeline.loop.controller.lateral_rows import _direct, _native_daqp
 from pipeline.loop.controller.path import ReferencePath
-from pipeline.loop.controller.prediction_check import PredictionRecord
+from pipeline.loop.controller.prediction_check import MODEL_CHECK_COLUMNS, PredictionRecord
 from pipeline.loop.controller.qp import NON_FINITE_DATA, QpSolution
 from pipeline.loop.planner import ApfPlanner, apf_kernel_settings
 from pipeline.loop.scenario import Scenario
@@ -78,15 +78,40 @@ def group_key(member: Any) -> tuple[Any, ...] | None:
     return ("lateral_group", backend, cfg.horizon, cfg.max_obstacles, cfg.control_horizon)
 
 
+class _RecordModels:
+    """The models the group's prediction records keep (each at the log's sample time), one row
+    each: the records hold their rows, and the model check reads ``Ad`` and the ``Bd``, ``Ed``
+    columns of all of them stacked."""
+
+    def __init__(self) -> None:
+        self.models: list[Any] = []
+        self._rows: dict[int, int] = {}
+
+    def row(self, model: Any) -> int:
+        row = self._rows.get(id(model))
+        if row is None:
+            row = self._rows[id(model)] = len(self.models)
+            self.models.append(model)
+        return row
+
+    def stacked(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """``Ad (U, 5, 5)``, ``Bd[:, 0] (U, 5)``, ``Ed[:, 0] (U, 5)`` of the ``U`` models."""
+        if not self.models:
+            return np.zeros((0, 5, 5)), np.zeros((0, 5)), np.zeros((0, 5))
+        return (np.array([m.Ad for m in self.models], dtype=float),
+                np.array([m.Bd[:, 0] for m in self.models], dtype=float),
+                np.array([m.Ed[:, 0] for m in self.models], dtype=float))
+
+
 class _MemberLookups:
     """What a member's step reads from caches of Python objects, by integer key: the
     prediction step of a slow-speed key, the lateral-velocity gain of a speed key, and the
     model (its condensed prediction's pack, Hessian and steady-state gains, the model its
     record keeps) of a mean-speed key and step."""
 
-    def __init__(self, mpc: LateralMpc, direct: bool) -> None:
+    def __init__(self, mpc: LateralMpc, direct: bool, table: _RecordModels) -> None:
         frame = mpc.frame
-        self.direct = direct
+        self.direct, self.table = direct, table
         assert isinstance(frame, PathFrame)
         self.mpc, self.frame, self.bank = mpc, frame, frame.bank
         self.floor = frame.vehicle.min_model_speed_mps
@@ -123,8 +148,8 @@ class _MemberLookups:
         return gain
 
     def model(self, key: int, dt: float) -> tuple[Any, ...]:
-        """``(pack address, hessian_u, steady-state gains, record's model, address of the
-        clarabel_direct statement's pack or 0)``."""
+        """``(pack address, hessian_u, steady-state gains, the record's model's row in the
+        group's table, address of the clarabel_direct statement's pack or 0)``."""
         entry = self.models.get((key, dt))
         if entry is None:
             bank, mpc = self.bank, self.mpc
@@ -135,7 +160,7 @@ class _MemberLookups:
             direct = prediction.direct_pack.ctypes.data if self.direct else 0
             entry = self.models[(key, dt)] = (prediction.pack.ctypes.data,
                                               prediction.hessian_u, bank.gains(model),
-                                              record_model, direct)
+                                              self.table.row(record_model), direct)
         return entry
 
 
@@ -164,7 +189,9 @@ class LateralGroup:
         #: Clarabel solver between the compiled data and read-out)
         self.backend = group_key(first)[1]  # type: ignore[index]
         direct = self.backend == "clarabel_direct"
-        self.lookups = [_MemberLookups(m.controller, direct) for m in self.members]
+        self.record_models = _RecordModels()
+        self.lookups = [_MemberLookups(m.controller, direct, self.record_models)
+                        for m in self.members]
         #: the log's solver statuses by code (the fixed ones, then those met here)
         self.status_names = list(rows.STATUS_CODES)
         self.status_codes = {name: code for code, name in enumerate(self.status_names)}
@@ -250,7 +277,7 @@ class LateralGroup:
         self.plans_xy, self.plans_course = np.zeros((n, N + 1, 2)), np.zeros((n, N + 1))
         self.plan_lengths = np.zeros(n, dtype=np.int64)
         self.solve_times, self.n_solves = np.zeros((n, R)), np.zeros(n, dtype=np.int64)
-        self.record_models: list[list[Any]] = [[None] * R for _ in range(n)]
+        self.record_model_rows = np.zeros((n, R), dtype=np.int64)
         self.record_width = 0
         self.record_points, self.record_headings = np.zeros((n, R, 1, 2)), np.zeros((n, R, 1))
         self.record_curvature = np.zeros((n, R, 0))
@@ -305,8 +332,9 @@ class LateralGroup:
                 break
             self._step(k, active)
             k += 1
+        stacked = self.record_models.stacked()
         for i, member in enumerate(self.members):
-            self._hand_over(i, member)
+            self._hand_over(i, member, stacked)
 
     def _step(self, k: int, active: np.ndarray) -> None:
         """Step ``k`` of the members ``active`` after their observation."""
@@ -334,13 +362,13 @@ class LateralGroup:
         gains = np.empty((n, 5))
         hessian_new = np.empty(n, dtype=np.bool_)
         hessians = []
-        held, records = self.held, self.record_models
+        held, record_rows = self.held, self.record_model_rows
         for r, (i, key, dt) in enumerate(zip(members, mean_keys.tolist(), steps, strict=True)):
-            pack, hessian, model_gains, record_model, direct = lookups[i].model(key, dt)
+            pack, hessian, model_gains, model_row, direct = lookups[i].model(key, dt)
             packs[r], direct_packs[r], gains[r] = pack, direct, model_gains
             hessian_new[r] = hessian is not held[i]
             hessians.append(hessian)
-            records[i][k] = record_model
+            record_rows[i, k] = model_row
         if self.backend == "daqp":
             codes, iterations, ok, plans, predicted, slacks, plan_finite, solve_s = \
                 self._daqp(active, members, packs, x0s, r_d, gains, G, h, hessian_new, hessians)
@@ -427,11 +455,15 @@ class LateralGroup:
             self.blockings, x0s, frees, G, h)
         return codes, iterations, ok, plans, predicted, slacks, plan_finite, solve_s
 
-    def _hand_over(self, i: int, member: Any) -> None:
-        """Member ``i``'s run into its :class:`~pipeline.loop.engine.MemberLoop`: the log, the
-        prediction records, the solve times, the termination, the state its loop leaves."""
+    def _hand_over(self, i: int, member: Any,
+                   models: tuple[np.ndarray, np.ndarray, np.ndarray]) -> None:
+        """Member ``i``'s run into its :class:`~pipeline.loop.engine.MemberLoop`: the log with
+        its model check (:func:`~pipeline.loop.group_rows.check_rows` on ``models``, the
+        record models' stacked matrices), the solve times, the termination, the state its
+        loop leaves; the prediction records and the horizon record where it keeps one."""
         last = int(self.ended_at[i])
-        member.log = self._log_of(i, member, last)
+        member.log = log = self._log_of(i, member, last)
+        self._model_check(i, member, last, log, models)
         member.termination = rows.TERMINATIONS[int(self.terminations[i])]
         member.state = self.states[i].copy()
         count = int(self.n_solves[i])
@@ -440,14 +472,40 @@ class LateralGroup:
         mpc = member.controller
         if isinstance(mpc.qp, DaqpCondensedQp):
             mpc.qp.solved_with(self.held[i])
-        mpc.records = [self._record(i, k) for k in range(last)]
         if member.planned is not None and last:
+            # the explorer's view of each step's plan reads the records
+            mpc.records = [self._record(i, k) for k in range(last)]
             # MemberLoop.plan's HorizonLog.put of each stepped row: the rollout, the
             # obstacles' velocities
             planned = member.planned
             planned.apf_path_m = np.full((planned.n_rows, self.N, 2), np.nan)
             planned.apf_path_m[:last] = self.rollouts[i, :last]
             planned.obstacle_velocity_mps[:last] = member.scenario.obstacle_velocity_mps
+
+    def _model_check(self, i: int, member: Any, last: int, log: TrajectoryLog,
+                     models: tuple[np.ndarray, np.ndarray, np.ndarray]) -> None:
+        """:func:`pipeline.loop.simulate._add_model_check` of member ``i`` from the group's
+        arrays (its result then skips it)."""
+        rows_logged = log.rows
+        if rows_logged:
+            mpc = member.controller
+            ts = mpc.sample_time_s
+            one, half = int(round(1.0 / ts)), int(round(0.5 / ts))
+            columns = log.columns
+            xy = np.ascontiguousarray(np.column_stack([columns["X_m"][:rows_logged],
+                                                       columns["Y_m"][:rows_logged]]))
+            psi = np.ascontiguousarray(columns["psi_rad"][:rows_logged], dtype=float)
+            delta = np.ascontiguousarray(columns["delta_rad"][:rows_logged], dtype=float)
+            which = self.record_model_rows[i, :last]
+            Ad, Bd, Ed = models
+            out = self.kernels.check_rows(
+                self.record_points[i], self.record_headings[i], self.record_curvature[i],
+                self.record_sizes[i], self.record_scalars[i], self.record_stations[i],
+                self.record_x0[i], Ad[which], Bd[which], Ed[which], self.record_plan[i], last,
+                xy, psi, delta, half, one, ts)
+            for column, name in enumerate(MODEL_CHECK_COLUMNS):
+                columns[name] = out[:, column]
+        member.model_checked = True
 
     def _log_of(self, i: int, member: Any, last: int) -> TrajectoryLog:
         """Member ``i``'s log of rows ``0 .. last`` as :class:`TrajectoryLog` holds it (the
@@ -499,8 +557,9 @@ class LateralGroup:
         path = ReferencePath(self.record_points[i, k, :K + 1], self.record_headings[i, k, :K + 1],
                              self.record_curvature[i, k, :K], self.record_beyond[i, k, :K], ds)
         plan = self.record_plan[i, k] if accepted else None
+        model = self.record_models.models[int(self.record_model_rows[i, k])]
         return PredictionRecord(("path", path, self.record_stations[i, k], dt),
-                                self.record_x0[i, k], self.record_models[i][k],
+                                self.record_x0[i, k], model,
                                 self.record_r_d[i, k], plan, self.record_G[i, k],
                                 self.record_h[i, k], self.record_xy[i, k] if accepted else None)
 
