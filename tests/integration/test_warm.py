@@ -85,8 +85,9 @@ print(json.dumps({"status": status, "kernels": kernels}))
 
 #: The kernels the runs call (a lone member's and the lockstep engine's batched ones: the
 #: plants' rows, the path frames' and plans' rows, DAQP's batched caller, the Clarabel
-#: members' data and read-out; the ledgers' bootstrap; the collision oracle's search), and the
-#: two the bootstrap's kernel compiles into itself.
+#: members' data and read-out; the calls of the engine's groups, pipeline/loop/group_rows.py;
+#: the ledgers' bootstrap; the collision oracle's search), and the two the bootstrap's kernel
+#: compiles into itself.
 RUN_KERNELS = {"model.single_track_rk4_rows", "planner.apf_rollout_arrays",
                "references.lateral_side_halfplane_arrays", "references.reference_arrays",
                "path.chase_path_arrays", "path.rollout_path_arrays", "path.frame_step_arrays",
@@ -94,7 +95,9 @@ RUN_KERNELS = {"model.single_track_rk4_rows", "planner.apf_rollout_arrays",
                "prediction_check.check_record_arrays", "path_rows.path_frame_rows",
                "path_rows.plan_poses_rows", "daqp_rows.daqp_condensed_rows",
                "direct_rows.direct_theta_rows", "direct_rows.direct_readout_rows",
-               "geometry.manoeuvre_survives"}
+               "geometry.manoeuvre_survives", "group_rows.observe_plan_rows",
+               "group_rows.frame_rows", "group_rows.solve_rows", "group_rows.apply_rows",
+               "group_rows.theta_rows", "group_rows.readout_rows", "group_rows.check_rows"}
 CALLEES = {"compiled._count_at_most", "compiled._order_statistic"}
 
 
