@@ -157,3 +157,27 @@ def test_which_members_join_a_group(make_config, overrides, grouped):
     member = MemberLoop(cfg, scenario, cache, run_kernels(cache))
     assert (group_key(member) is not None) is grouped
     assert group_key(MemberLoop(cfg, scenario, QpCache(), run_kernels(QpCache()))) is None
+
+
+def test_a_group_of_odd_members_is_each_member_alone(make_config):
+    """In one group: a member without obstacles, one of another sample time (and so another
+    number of steps), one without a horizon reach (the prediction step is the sample time),
+    beside a default one: each its run alone."""
+    runs = _members(make_config, ["method=improved", "controller.backend=daqp"], 2)
+    cfg, scenario = runs[1]
+    empty = (cfg, replace(scenario, obstacle_start_m=np.zeros((0, 2)),
+                          obstacle_velocity_mps=np.zeros((0, 2)),
+                          obstacle_radius_m=np.zeros(0), obstacle_appear_s=np.zeros(0)))
+    finer = _members(make_config, ["method=improved", "controller.backend=daqp",
+                                   "scenario.sample_time_s=0.05", "scenario.n_steps=240"], 1,
+                     first=2)
+    unreached = _members(make_config, ["method=improved", "controller.backend=daqp",
+                                       "controller.horizon_reach_m=null"], 1, first=3)
+    odd = [runs[0], empty, *finer, *unreached]
+    cache = QpCache(compiled_kernels=True)
+    kernels, calls = _counted(cache)
+    together = simulate_members(odd, cache, kernels)
+    assert calls[0] == 4
+    assert not any(c.startswith("obs") for c in together[1].trajectory.columns)
+    assert len(together[2].trajectory) > len(together[0].trajectory)
+    _assert_each_alone(odd, together)
