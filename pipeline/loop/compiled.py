@@ -106,7 +106,8 @@ for _helper in (path._polyline, path._heading_at, path._curvature_at, path._proj
                 daqp_rows.condensed_free, daqp_rows.plan_readout, lateral_qp.direct_theta_size,
                 planner.apf_rollout_arrays, path_rows.path_frame_rows, path_rows.plan_poses_rows,
                 daqp_rows.daqp_condensed_rows, group_rows._tyre_slip, group_rows._plant_columns,
-                group_rows._settings_of, group_rows._status_code, group_rows._finite_members,
+                group_rows._settings_of, group_rows._status_code, group_rows._grid_key,
+                group_rows._as_int, group_rows._finite_members,
                 group_rows._qp_arrays, direct_rows.direct_theta_rows,
                 direct_rows.direct_readout_rows, prediction_check.check_record_arrays):
     overload(_helper)(_same_signature(_helper))

@@ -92,6 +92,31 @@ def _plant_columns(log: np.ndarray, state: np.ndarray, constants: np.ndarray) ->
     log[C_SLIP] = _tyre_slip(state, constants)
 
 
+#: The largest grid index kept as an integer key (well inside int64 and exact in a double)
+_LARGEST_KEY = 1.0e15
+
+
+def _grid_key(speed_mps: float, grid_mps: float) -> int:
+    """``round(speed / grid)`` (half to even, as Python's ``round`` of a float), the integer
+    key of a speed on the model grid (:func:`pipeline.loop.model.model_speed_mps`); -1 where
+    it is no integer key (beyond :data:`_LARGEST_KEY`, or not a number): the driver then
+    reads the speed itself."""
+    quotient = speed_mps / grid_mps
+    if not quotient < _LARGEST_KEY:
+        return -1
+    return int(np.rint(quotient))
+
+
+def _as_int(value: float) -> int:
+    """``int(value)`` of an integral float, refusing what Python's ``int`` refuses (compiled,
+    a cast of NaN or infinity would give any integer silently)."""
+    if np.isnan(value):
+        raise ValueError("cannot convert float NaN to integer")
+    if np.isinf(value):
+        raise OverflowError("cannot convert float infinity to integer")
+    return int(value)
+
+
 def _settings_of(row: np.ndarray) -> ApfSettings:
     """:class:`~pipeline.loop.planner.ApfSettings` from its row of numbers (the driver's
     ``apf_settings``: the named tuple's fields in order, the switches as 0/1)."""
@@ -214,8 +239,8 @@ def observe_plan_rows(k: int, members: np.ndarray, states: np.ndarray,
         speed = state[3] if state[3] > floor else floor
         slow = speed if speed < speed_ref else speed_ref
         slow = slow if slow > floor else floor
-        speed_keys[i, 0] = np.int64(np.rint(slow / grid))
-        speed_keys[i, 1] = np.int64(np.rint((speed if speed > floor else floor) / grid))
+        speed_keys[i, 0] = _grid_key(slow, grid)
+        speed_keys[i, 1] = _grid_key(speed if speed > floor else floor, grid)
     return going
 
 
@@ -238,8 +263,9 @@ def frame_rows(members: np.ndarray, states: np.ndarray, nominal_speeds: np.ndarr
     arithmetic: the measured state as errors from the path and row ``k``'s log values.
 
     Returns :func:`path_frame_rows`' arrays (one row per member of ``members``, in its order),
-    then ``x0s (n, 5)``, the path arcs ``ds``, their ``n_intervals`` and the model-grid index
-    of each member's mean predicted speed (the model :meth:`finish_inputs` predicts with)."""
+    then ``x0s (n, 5)``, the path arcs ``ds``, their ``n_intervals``, the model-grid index
+    of each member's mean predicted speed (the model :meth:`finish_inputs` predicts with;
+    :func:`_grid_key`) and that speed."""
     n = members.shape[0]
     N = horizon
     targets = np.empty((n, N, 2))
@@ -267,7 +293,7 @@ def frame_rows(members: np.ndarray, states: np.ndarray, nominal_speeds: np.ndarr
         dt = steps_s[i]
         far = speed_ref if speed_ref > speed else speed
         far = far + accel_max[i] * dt
-        ds[r], n_intervals[r] = speed * dt, np.int64(np.ceil(N * far / speed)) + 1
+        ds[r], n_intervals[r] = speed * dt, _as_int(np.ceil(N * far / speed)) + 1
         targets[r] = rollouts[i, k]
         cos_sin[r, 0], cos_sin[r, 1] = line_cos_sin[i, 0], line_cos_sin[i, 1]
         extends[r], kappa[r] = extend[i], kappa_max[i]
@@ -297,7 +323,7 @@ def frame_rows(members: np.ndarray, states: np.ndarray, nominal_speeds: np.ndarr
                           lengths, obstacles, starts, radii, slots, reach, margin, active,
                           constraining)
     x0s = np.empty((n, 5))
-    mean_keys = np.empty(n, dtype=np.int64)
+    mean_keys, means = np.empty(n, dtype=np.int64), np.empty(n)
     for r in range(n):
         i = members[r]
         state = states[i]
@@ -307,7 +333,8 @@ def frame_rows(members: np.ndarray, states: np.ndarray, nominal_speeds: np.ndarr
             total += vx[r, c]
         mean = total / (N + 1)
         floor = speed_floors[i]
-        mean_keys[r] = np.int64(np.rint((mean if mean > floor else floor) / grids[i]))
+        means[r] = mean
+        mean_keys[r] = _grid_key(mean if mean > floor else floor, grids[i])
         d0, heading0 = frame[r, 1], frame[r, 2]
         heading_error = (state[2] - heading0 + pi) % (2.0 * pi) - pi
         x0s[r, 0], x0s[r, 1], x0s[r, 2], x0s[r, 3], x0s[r, 4] = \
@@ -320,7 +347,7 @@ def frame_rows(members: np.ndarray, states: np.ndarray, nominal_speeds: np.ndarr
         else:
             row[C_YREF] = -line_cos_sin[i, 1] * px + line_cos_sin[i, 0] * py
         row[C_PSIREF] = headings[r, 1] - lines[i, 4]
-        stop = int(np.ceil(stations[r, N] / ds[r] - 1e-9))
+        stop = _as_int(np.ceil(stations[r, N] / ds[r] - 1e-9))
         m = n_intervals[r]
         stop = stop if stop >= 0 else (m + stop if m + stop > 0 else 0)
         stop = stop if stop < m else m
@@ -330,7 +357,7 @@ def frame_rows(members: np.ndarray, states: np.ndarray, nominal_speeds: np.ndarr
         row[C_BEYOND] = 1.0 if any_beyond else 0.0
         row[C_CURV], row[C_RD] = curvature[r, 0], r_d[r, 0]
     return (points, headings, curvature, beyond, frame, stations, r_d, vx, G, h, x0s, ds,
-            n_intervals, mean_keys)
+            n_intervals, mean_keys, means)
 
 
 #: :func:`solve_rows`' exit flag of a member whose measured state is not finite (not solved,

@@ -147,21 +147,37 @@ class _MemberLookups:
             gain = self.vy_gains[key] = float(bank.gains(bank.at(self.model_speed(key)))[1])
         return gain
 
+    def off_grid(self, speed_mps: float, speed_ref_mps: float) -> tuple[float, float]:
+        """The prediction step and the vy gain of a measured speed whose grid index is no
+        integer key (beyond about 1e14 m/s, or not a number), as
+        :meth:`PathFrame.step_geometry` reads them (uncached)."""
+        frame, bank = self.frame, self.bank
+        speed = max(speed_mps, frame.vehicle.min_model_speed_mps)
+        return (frame.prediction_step(speed, speed_ref_mps),
+                float(bank.gains(bank.at(speed))[1]))
+
+    def model_at(self, mean_mps: float, dt: float) -> tuple[Any, ...]:
+        """:meth:`model` of a mean speed whose grid index is no integer key (uncached)."""
+        return self._entry(self.bank.at(mean_mps, dt))
+
     def model(self, key: int, dt: float) -> tuple[Any, ...]:
         """``(pack address, hessian_u, steady-state gains, the record's model's row in the
         group's table, address of the clarabel_direct statement's pack or 0)``."""
         entry = self.models.get((key, dt))
         if entry is None:
-            bank, mpc = self.bank, self.mpc
-            model = bank.at(self.model_speed(key), dt)
-            prediction = mpc.prediction(model)
-            record_model = model if model.sample_time_s == mpc.sample_time_s \
-                else mpc.models.at_speed(model.speed_mps)
-            direct = prediction.direct_pack.ctypes.data if self.direct else 0
-            entry = self.models[(key, dt)] = (prediction.pack.ctypes.data,
-                                              prediction.hessian_u, bank.gains(model),
-                                              self.table.row(record_model), direct)
+            entry = self.models[(key, dt)] = self._entry(
+                self.bank.at(self.model_speed(key), dt))
         return entry
+
+    def _entry(self, model: Any) -> tuple[Any, ...]:
+        """:meth:`model`'s entry of ``model``."""
+        mpc = self.mpc
+        prediction = mpc.prediction(model)
+        record_model = model if model.sample_time_s == mpc.sample_time_s \
+            else mpc.models.at_speed(model.speed_mps)
+        direct = prediction.direct_pack.ctypes.data if self.direct else 0
+        return (prediction.pack.ctypes.data, prediction.hessian_u, self.bank.gains(model),
+                self.table.row(record_model), direct)
 
 
 class LateralGroup:
@@ -262,12 +278,16 @@ class LateralGroup:
         self.theta_size = {slots: direct_theta_size(N, self.nc, slots) for slots in range(M + 1)}
         self.held: list[Any] = [getattr(m.controller.qp, "_hessian_of", None)
                                 for m in self.members]
-        # the loop's state and what it writes
+        # the loop's state and what it writes: the arrays by row (the log's and the records')
+        # hold ROWS_AT_FIRST rows and grow as the runs go on (_ensure_rows), so that a long step
+        # budget costs the rows run, not the rows allowed
+        self.capacity = min(R, ROWS_AT_FIRST)
+        C = self.capacity
         self.terminations = np.zeros(n, dtype=np.int64)
-        self.log = np.full((n, R, rows.N_LOG_COLUMNS), np.nan)
-        self.obstacle_log = np.full((n, R, J, 3), np.nan)
-        self.visible_log = np.zeros((n, R, J), dtype=np.bool_)
-        self.rollouts = np.zeros((n, R, N, 2))
+        self.log = np.full((n, C, rows.N_LOG_COLUMNS), np.nan)
+        self.obstacle_log = np.full((n, C, J, 3), np.nan)
+        self.visible_log = np.zeros((n, C, J), dtype=np.bool_)
+        self.rollouts = np.zeros((n, C, N, 2))
         self.visible_positions, self.visible_velocities = f((n, J, 2)), f((n, J, 2))
         self.visible_radii, self.visible_counts = f((n, J)), np.zeros(n, dtype=np.int64)
         self.speed_keys = np.zeros((n, 2), dtype=np.int64)
@@ -276,26 +296,40 @@ class LateralGroup:
         self.has_plan = np.zeros(n, dtype=np.bool_)
         self.plans_xy, self.plans_course = np.zeros((n, N + 1, 2)), np.zeros((n, N + 1))
         self.plan_lengths = np.zeros(n, dtype=np.int64)
-        self.solve_times, self.n_solves = np.zeros((n, R)), np.zeros(n, dtype=np.int64)
-        self.record_model_rows = np.zeros((n, R), dtype=np.int64)
+        self.solve_times, self.n_solves = np.zeros((n, C)), np.zeros(n, dtype=np.int64)
+        self.record_model_rows = np.zeros((n, C), dtype=np.int64)
         self.record_width = 0
-        self.record_points, self.record_headings = np.zeros((n, R, 1, 2)), np.zeros((n, R, 1))
-        self.record_curvature = np.zeros((n, R, 0))
-        self.record_beyond = np.zeros((n, R, 0), dtype=np.bool_)
+        self.record_points, self.record_headings = np.zeros((n, C, 1, 2)), np.zeros((n, C, 1))
+        self.record_curvature = np.zeros((n, C, 0))
+        self.record_beyond = np.zeros((n, C, 0), dtype=np.bool_)
         self._grow_records(4 * N)
-        self.record_sizes = np.zeros((n, R), dtype=np.int64)
-        self.record_scalars = np.zeros((n, R, 3))
-        self.record_stations, self.record_x0 = np.zeros((n, R, N + 1)), np.zeros((n, R, 5))
-        self.record_r_d, self.record_plan = np.zeros((n, R, N)), np.zeros((n, R, N + 1))
-        self.record_G, self.record_h = np.zeros((n, R, N, M)), np.zeros((n, R, N, M))
-        self.record_xy = np.zeros((n, R, N + 1, 2))
+        self.record_sizes = np.zeros((n, C), dtype=np.int64)
+        self.record_scalars = np.zeros((n, C, 3))
+        self.record_stations, self.record_x0 = np.zeros((n, C, N + 1)), np.zeros((n, C, 5))
+        self.record_r_d, self.record_plan = np.zeros((n, C, N)), np.zeros((n, C, N + 1))
+        self.record_G, self.record_h = np.zeros((n, C, N, M)), np.zeros((n, C, N, M))
+        self.record_xy = np.zeros((n, C, N + 1, 2))
         self.ended_at = np.full(n, -1, dtype=np.int64)
+
+    def _ensure_rows(self, k: int) -> None:
+        """The arrays by row long enough for row ``k`` (doubled, at most the group's rows)."""
+        if k < self.capacity:
+            return
+        old = self.capacity
+        self.capacity = min(max(2 * old, k + 1), self.rows)
+        for name in _BY_ROW:
+            array = getattr(self, name)
+            fill = np.nan if name in ("log", "obstacle_log") else 0
+            grown = np.full((array.shape[0], self.capacity) + array.shape[2:], fill,
+                            dtype=array.dtype)
+            grown[:, :old] = array
+            setattr(self, name, grown)
 
     def _grow_records(self, width: int) -> None:
         """The record buffers of the paths wide enough for ``width`` intervals."""
         if width <= self.record_width:
             return
-        n, R = len(self.members), self.rows
+        n, R = len(self.members), self.capacity
         old = self.record_width
         grown = (np.zeros((n, R, width + 1, 2)), np.zeros((n, R, width + 1)),
                  np.zeros((n, R, width)), np.zeros((n, R, width), dtype=np.bool_))
@@ -315,6 +349,7 @@ class LateralGroup:
         active = np.arange(len(self.members), dtype=np.int64)
         k = 0
         while active.size:
+            self._ensure_rows(k)
             going = kernels.observe_plan_rows(
                 k, active, self.states, self.sample_times, self.last_steps, self.lines,
                 self.goal_line_x, self.goal_tolerance, self.goals, self.obstacle_starts,
@@ -345,12 +380,15 @@ class LateralGroup:
         for i in members:
             lookup = lookups[i]
             slow, speed = keys[i].tolist()
-            dt = lookup.step(slow)
+            if slow < 0 or speed < 0:  # a speed off the grid's integer keys
+                dt, gain = lookup.off_grid(float(self.states[i, 3]),
+                                           float(self.nominal_speeds[i]))
+            else:
+                dt, gain = lookup.step(slow), lookup.vy_gain(speed)
             steps.append(dt)
-            self.steps_s[i] = dt
-            self.vy_gains[i] = lookup.vy_gain(speed)
+            self.steps_s[i], self.vy_gains[i] = dt, gain
         (points, headings, curvature, beyond, frame, stations, r_d, vx, G, h, x0s, ds,
-         n_intervals, mean_keys) = kernels.frame_rows(
+         n_intervals, mean_keys, means) = kernels.frame_rows(
             active, self.states, self.nominal_speeds, self.steps_s, self.speed_floors,
             self.accel_max, self.N, self.rollouts, k, self.line_cos_sin, self.lines,
             self.extend, self.kappa, self.vy_gains, self.time_constants, self.brake_max,
@@ -364,7 +402,8 @@ class LateralGroup:
         hessians = []
         held, record_rows = self.held, self.record_model_rows
         for r, (i, key, dt) in enumerate(zip(members, mean_keys.tolist(), steps, strict=True)):
-            pack, hessian, model_gains, model_row, direct = lookups[i].model(key, dt)
+            pack, hessian, model_gains, model_row, direct = lookups[i].model(key, dt) \
+                if key >= 0 else lookups[i].model_at(float(means[r]), dt)
             packs[r], direct_packs[r], gains[r] = pack, direct, model_gains
             hessian_new[r] = hessian is not held[i]
             hessians.append(hessian)
@@ -563,6 +602,14 @@ class LateralGroup:
                                 self.record_r_d[i, k], plan, self.record_G[i, k],
                                 self.record_h[i, k], self.record_xy[i, k] if accepted else None)
 
+
+#: The group's arrays by row (:meth:`LateralGroup._ensure_rows`)
+_BY_ROW = ("log", "obstacle_log", "visible_log", "rollouts", "solve_times", "record_model_rows",
+           "record_points", "record_headings", "record_curvature", "record_beyond",
+           "record_sizes", "record_scalars", "record_stations", "record_x0", "record_r_d",
+           "record_plan", "record_G", "record_h", "record_xy")
+#: The rows the group's arrays hold at first (a family run's are about 100 to 300)
+ROWS_AT_FIRST = 512
 
 #: The log columns of a run's last row (:func:`pipeline.loop.simulate._add_end_columns`): a run
 #: that ends at its first step has no others

@@ -181,3 +181,51 @@ def test_a_group_of_odd_members_is_each_member_alone(make_config):
     assert not any(c.startswith("obs") for c in together[1].trajectory.columns)
     assert len(together[2].trajectory) > len(together[0].trajectory)
     _assert_each_alone(odd, together)
+
+
+def test_a_long_step_budget_costs_the_rows_run(make_config):
+    """A group of members allowed 20,000 steps that end after a few dozen: the group's arrays
+    grow with the rows run (twice, at most), not with the budget; each run is its run alone."""
+    from pipeline.loop.lateral_group import ROWS_AT_FIRST, LateralGroup
+
+    runs = _members(make_config, ["method=improved", "controller.backend=daqp",
+                                  "scenario.n_steps=20000"], 2)
+    cache = QpCache(compiled_kernels=True)
+    members = [MemberLoop(cfg, scenario, cache, run_kernels(cache)) for cfg, scenario in runs]
+    group = LateralGroup(members)
+    group.run()
+    assert group.capacity == ROWS_AT_FIRST and group.log.shape[1] == ROWS_AT_FIRST
+    results = [member.result() for member in members]
+    assert all(len(r.trajectory) < ROWS_AT_FIRST for r in results)
+    _assert_each_alone(runs, results)
+
+
+def test_rows_beyond_the_first_arrays_are_each_member_alone(make_config, monkeypatch):
+    """The group's arrays grown while members run (room for 8 rows at first): each run is its
+    run alone."""
+    import pipeline.loop.lateral_group as lateral_group
+
+    monkeypatch.setattr(lateral_group, "ROWS_AT_FIRST", 8)
+    runs = _members(make_config, ["method=improved", "controller.backend=daqp"], 3)
+    cache = QpCache(compiled_kernels=True)
+    kernels, calls = _counted(cache)
+    together = simulate_members(runs, cache, kernels)
+    assert calls and all(len(r.trajectory) > 32 for r in together)
+    _assert_each_alone(runs, together)
+
+
+def test_an_obstacle_that_is_not_a_number_fails_as_alone(make_config):
+    """A scenario whose obstacle velocity is not a number (a source of one's own may hand
+    one): the group stops on the error the member's own loop raises (the model of a speed
+    that is not a number), not on a run driven by its fallbacks."""
+    (cfg, scenario), = _members(make_config, ["method=improved", "controller.backend=daqp"], 1)
+    velocities = scenario.obstacle_velocity_mps.copy()
+    velocities[0] = np.nan
+    broken = replace(scenario, obstacle_velocity_mps=velocities)
+    with pytest.raises(ValueError) as alone:
+        oracle_simulate(cfg, broken, QpCache(compiled_kernels=True))
+    cache = QpCache(compiled_kernels=True)
+    kernels, calls = _counted(cache)
+    with pytest.raises(ValueError) as grouped:
+        simulate_members([(cfg, broken)], cache, kernels)
+    assert calls and str(grouped.value) == str(alone.value)
