@@ -229,3 +229,17 @@ def test_an_obstacle_that_is_not_a_number_fails_as_alone(make_config):
     with pytest.raises(ValueError) as grouped:
         simulate_members([(cfg, broken)], cache, kernels)
     assert calls and str(grouped.value) == str(alone.value)
+
+
+def test_a_speed_off_the_grids_keys_is_read_as_alone(make_config):
+    """A member started at 1e25 m/s (its model speeds beyond the grid's integer keys: the
+    driver reads them with the frame's own functions) beside a default one: each its run
+    alone."""
+    runs = _members(make_config, ["method=improved", "controller.backend=daqp"], 2)
+    cfg, scenario = runs[1]
+    fast = (cfg, replace(scenario, initial_speed_mps=1e25))
+    cache = QpCache(compiled_kernels=True)
+    kernels, calls = _counted(cache)
+    together = simulate_members([runs[0], fast], cache, kernels)
+    assert calls[0] == 2 and together[1].trajectory["vx_mps"].iloc[0] == 1e25
+    _assert_each_alone([runs[0], fast], together)
