@@ -162,9 +162,8 @@ def observe_plan_rows(k: int, members: np.ndarray, states: np.ndarray,
         count = 0
         for j in range(n_obs):
             elapsed = time_s - obstacle_appear[i, j]
-            elapsed = elapsed if elapsed > 0.0 else 0.0
-            if np.isnan(time_s - obstacle_appear[i, j]):
-                elapsed = np.nan
+            if elapsed <= 0.0:  # np.maximum(elapsed, 0): NaN stays NaN
+                elapsed = 0.0
             ox = obstacle_starts[i, j, 0] + elapsed * obstacle_velocities[i, j, 0]
             oy = obstacle_starts[i, j, 1] + elapsed * obstacle_velocities[i, j, 1]
             seen = time_s + 1e-9 >= obstacle_appear[i, j]

@@ -6,20 +6,20 @@ A member joins a group (:func:`group_key`) when every stage of its loop is the d
 the compiled calls state: a scripted scenario (constant-velocity obstacles from their
 appearance, no sensor range, no anchoring, no contact ending, no road), the APF's own rollout
 towards a fixed goal without velocity planning, the path frame's lateral MPC on the rollout
-(:func:`~pipeline.loop.controller.lateral_rows.batch_key`) on a kept native DAQP workspace
-(:func:`~pipeline.loop.controller.lateral_rows._native_daqp`), the compiled single-track
-plant, and no horizon record. Every other member steps through
-:class:`~pipeline.loop.engine.MemberLoop` as before.
+(:func:`~pipeline.loop.controller.lateral_rows.batch_key`) on a kept native DAQP workspace or
+kept Clarabel solvers (``clarabel_direct``) with two moves or more, and the compiled
+single-track plant. Every other member steps through :class:`~pipeline.loop.engine.MemberLoop`
+as before.
 
 The group holds each member's state, its last plan (for the fallback) and its plan's poses
 (for the next step's stations) in arrays, writes its log and its prediction records into
-arrays, and hands each member's :class:`~pipeline.loop.engine.MemberLoop` its log, records,
-solve times and termination at the end, so that :meth:`MemberLoop.result
-<pipeline.loop.engine.MemberLoop.result>` gives the run (the model check, the table) as
-before. Between the calls it looks up in Python what comes from caches of Python objects:
-the prediction step of a speed, the model of a speed and step and its condensed prediction
-(a few dictionary reads per member and step). Every number is the one the member's own loop
-gives (the same statements in the same order; the tests hold them equal bit for bit).
+arrays, and hands each member's :class:`~pipeline.loop.engine.MemberLoop` its log with the
+model check, its solve times and termination, and where it keeps one its horizon record, at
+the end, so that :meth:`MemberLoop.result <pipeline.loop.engine.MemberLoop.result>` gives the
+run as before. Between the calls it looks up in Python what comes from caches of Python
+objects: the prediction step of a speed, the model of a speed and step and its condensed
+prediction (a few dictionary reads per member and step). Every number is the one the member's
+own loop gives (the same statements in the same order; the tests hold them equal bit for bit).
 """
 
 from __future__ import annotations
@@ -51,8 +51,8 @@ __all__ = ["LateralGroup", "group_key"]
 
 
 def group_key(member: Any) -> tuple[Any, ...] | None:
-    """The key of the members a :class:`LateralGroup` steps together (the same horizon,
-    obstacle slots and moves), or None where ``member`` (a
+    """The key of the members a :class:`LateralGroup` steps together (the same backend,
+    horizon, obstacle slots and moves), or None where ``member`` (a
     :class:`~pipeline.loop.engine.MemberLoop`) steps through its own loop (see the module
     docstring)."""
     kernels, mpc, scenario = member.kernels, member.controller, member.scenario
@@ -126,18 +126,12 @@ class _MemberLookups:
         return round(max(key * self.grid, self.floor), 6)
 
     def step(self, key: int) -> float:
-        """:meth:`PathFrame.prediction_step` at a slower speed of grid index ``key``."""
+        """:meth:`PathFrame.prediction_step` at a slower speed of grid index ``key`` (a
+        speed on the grid is its own model speed)."""
         dt = self.steps.get(key)
         if dt is None:
-            frame = self.frame
-            reach = frame.cfg.horizon_reach_m
-            if reach is None:
-                dt = frame.sample_time_s
-            else:
-                stretched = reach / (frame.horizon * self.model_speed(key))
-                dt = frame.sample_time_s if stretched <= frame.sample_time_s \
-                    else round(stretched, 6)
-            self.steps[key] = dt
+            speed = self.model_speed(key)
+            dt = self.steps[key] = self.frame.prediction_step(speed, speed)
         return dt
 
     def vy_gain(self, key: int) -> float:
