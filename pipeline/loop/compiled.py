@@ -103,7 +103,7 @@ for _helper in (path._polyline, path._heading_at, path._curvature_at, path._proj
                 path._point_at, model.single_track_kinematic_substep, model.single_track_rk4,
                 path.rollout_path_arrays, path.frame_step_arrays, path.plan_poses_arrays,
                 references.lateral_side_halfplane_arrays, scenario.route_point_ahead,
-                daqp_rows.condensed_free, daqp_rows.plan_readout, lateral_qp.direct_theta_size,
+                daqp_rows.condensed_free, daqp_rows.plan_readout, daqp_rows.slots_in_use, lateral_qp.direct_theta_size,
                 planner.apf_rollout_arrays, path_rows.path_frame_rows, path_rows.plan_poses_rows,
                 daqp_rows.daqp_condensed_rows, group_rows._tyre_slip, group_rows._plant_columns,
                 group_rows._settings_of, group_rows._status_code, group_rows._grid_key,

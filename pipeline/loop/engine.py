@@ -23,6 +23,7 @@ the readable per-member loop kept in ``tests/loop/oracle_loop.py``).
 
 from __future__ import annotations
 
+import functools
 import inspect
 import sys
 from collections.abc import Sequence
@@ -322,6 +323,15 @@ def _control(members: Sequence[MemberLoop]) -> None:
             member.apply(step)
 
 
+@functools.lru_cache(maxsize=1)
+def _threadpool_controller(n_modules: int) -> Any:
+    """threadpoolctl's controller of this process's libraries when ``n_modules`` modules are
+    loaded (the key: another import may load another BLAS)."""
+    from threadpoolctl import ThreadpoolController
+
+    return ThreadpoolController()
+
+
 def simulate_members(runs: Sequence[tuple[LoopSettings, Scenario]],
                      qp_cache: QpCache | None = None, kernels: Kernels | None = None,
                      record_horizon: bool = True) -> list[SimulationResult]:
@@ -346,16 +356,12 @@ def simulate_members(runs: Sequence[tuple[LoopSettings, Scenario]],
     list of SimulationResult
         In the order of ``runs``.
     """
-    from threadpoolctl import ThreadpoolController
-
-    # the controller (a scan of the loaded libraries, ~2 ms) is kept in the cache's
-    # process-local part, so a family's workers pay it once; it is built again whenever
-    # modules were imported since (a new module may have loaded another BLAS)
     qp_cache = qp_cache if qp_cache is not None else QpCache()
-    modules, threads = qp_cache.process_local.get("threadpool_controller", (-1, None))
-    if modules != len(sys.modules):
-        threads = ThreadpoolController()
-        qp_cache.process_local["threadpool_controller"] = (len(sys.modules), threads)
+    # one controller per process (a scan of the loaded libraries, ~2 ms), built again whenever
+    # modules were imported since (a new module may have loaded another BLAS): not in the
+    # cache's process-local part, which a worker's task receives empty with each cache shipped
+    # to it (the scan was 6-7 % of a tune's worker time)
+    threads = _threadpool_controller(len(sys.modules))
     kernels = kernels if kernels is not None else run_kernels(qp_cache)
     with threads.limit(limits=1, user_api="blas"):
         members = [MemberLoop(cfg, scenario, qp_cache, kernels, record_horizon)

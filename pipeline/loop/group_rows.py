@@ -424,24 +424,26 @@ def solve_rows(functions: np.ndarray, workspaces: np.ndarray, members: np.ndarra
     """The QPs of ``members`` on their kept DAQP workspaces (row ``r`` of the per-step arrays
     is member ``members[r]`` of the group's): :func:`~pipeline.loop.controller.daqp_rows.
     daqp_condensed_rows` for those whose measured state is finite (the others
-    :data:`NOT_SOLVED_FLAG`); each member's workspace flag (set up) is kept in
-    ``workspaces``. Returns ``exitflags``, the log's status codes and iterations, whether
-    each solution is one to accept (``optimal``), and the plans, predicted states, slacks and
-    whether each plan is finite: one row per member of ``members``."""
+    :data:`NOT_SOLVED_FLAG`); each member's workspaces (one per statement's slots, shape
+    (members, slots + 1, 5)) keep their flags (set up) in ``workspaces``; ``hessian_new``
+    (rows, slots + 1): whether each statement's workspace must take the step's Hessian.
+    Returns ``exitflags``, the log's status codes and iterations, whether each solution is one
+    to accept (``optimal``), the plans, predicted states, slacks, whether each plan is finite
+    and the slots of the statement solved (-1: none): one row per member of ``members``."""
     n, N, M = members.shape[0], horizon, slots
     (chosen, packs_in, blocks, starts, disturbances, disturbed, y_refs, psi_refs, r_refs,
      present, delta_refs, gains, bounds) = _qp_arrays(members, packs, n_u, N, M, blockings,
                                                       x0s, r_d, model_gains, G, h)
     count = chosen.shape[0]
-    spaces = np.empty((count, 5), dtype=np.int64)
+    spaces = np.empty((count, M + 1, 5), dtype=np.int64)
     limits = np.empty(count, dtype=np.int64)
-    dmax, fresh = np.empty(count), np.empty(count, dtype=np.bool_)
+    dmax, fresh = np.empty(count), np.empty((count, M + 1), dtype=np.bool_)
     for q in range(count):
         r = chosen[q]
         i = members[r]
         spaces[q], limits[q] = workspaces[i], iter_limits[i]
         dmax[q], fresh[q] = steering_max[i], hessian_new[r]
-    flags_in, iterations_in, _, plans_in, states_in, slacks_in, finite_in = \
+    flags_in, iterations_in, _, plans_in, states_in, slacks_in, finite_in, used_in = \
         daqp_condensed_rows(functions, spaces, packs_in, offsets, n_u, N, M, blocks, starts,
                             disturbances, disturbed, y_refs, psi_refs, r_refs, present,
                             delta_refs, present, gains, bounds, dmax, fresh, limits)
@@ -451,9 +453,11 @@ def solve_rows(functions: np.ndarray, workspaces: np.ndarray, members: np.ndarra
     ok = np.zeros(n, dtype=np.bool_)
     plans, states = np.zeros((n, N)), np.zeros((n, 5, N + 1))
     slacks, plan_finite = np.zeros(n), np.zeros(n, dtype=np.bool_)
+    used = np.full(n, -1, dtype=np.int64)
     for q in range(count):
         r = chosen[q]
-        workspaces[members[r], 4] = spaces[q, 4]
+        workspaces[members[r], :, 4] = spaces[q, :, 4]
+        used[r] = used_in[q]
         flag = flags_in[q]
         exitflags[r] = flag
         codes[r] = _status_code(flag)
@@ -462,7 +466,7 @@ def solve_rows(functions: np.ndarray, workspaces: np.ndarray, members: np.ndarra
             iterations[r] = iterations_in[q]
         plans[r], states[r] = plans_in[q], states_in[q]
         slacks[r], plan_finite[r] = slacks_in[q], finite_in[q]
-    return exitflags, codes, iterations, ok, plans, states, slacks, plan_finite
+    return exitflags, codes, iterations, ok, plans, states, slacks, plan_finite, used
 
 
 def theta_rows(members: np.ndarray, packs: np.ndarray, offsets: np.ndarray,

@@ -223,7 +223,8 @@ class LateralGroup:
         self.reach, self.margins, self.activation = f(n), f(n), f(n)
         self.constrained = np.empty(n, dtype=np.bool_)
         self.rate_max = f(n)
-        self.workspaces = np.zeros((n, 5), dtype=np.int64)
+        #: each member's kept DAQP workspace of every statement, by its obstacle slots
+        self.workspaces = np.zeros((n, self.M + 1, 5), dtype=np.int64)
         self.blockings = f((n, self.nc, N))
         self.steering_max, self.iter_limits = f(n), np.empty(n, dtype=np.int64)
         for i, member in enumerate(self.members):
@@ -261,8 +262,9 @@ class LateralGroup:
             self.rate_max[i] = vehicle.steering_rate_max_rad_s
             self.blockings[i] = mpc.blocking
             if isinstance(qp, DaqpCondensedQp) and qp.native is not None:
-                self.workspaces[i, :4] = qp.native.addresses
-                self.workspaces[i, 4] = qp.native.ready[0]
+                for slots, kept in mpc.qp_by_slots.items():
+                    self.workspaces[i, slots, :4] = kept.native.addresses
+                    self.workspaces[i, slots, 4] = kept.native.ready[0]
                 self.steering_max[i], self.iter_limits[i] = qp.s.steering_max_rad, qp.max_iter
         native = getattr(mpc0.qp, "native", None)
         self.functions = native.functions.arguments if native is not None and not direct \
@@ -270,8 +272,10 @@ class LateralGroup:
         self.offsets = np.asarray(pack_offsets(N, self.nc), dtype=np.int64)
         self.direct_offsets = np.asarray(direct_pack_offsets(N, self.nc), dtype=np.int64)
         self.theta_size = {slots: direct_theta_size(N, self.nc, slots) for slots in range(M + 1)}
-        self.held: list[Any] = [getattr(m.controller.qp, "_hessian_of", None)
-                                for m in self.members]
+        #: the Hessian each member's workspace of each statement holds (DAQP; None: none)
+        self.held: list[list[Any]] = [
+            [getattr(m.controller.qp_by_slots.get(slots), "_hessian_of", None)
+             for slots in range(M + 1)] for m in self.members]
         # the loop's state and what it writes: the arrays by row (the log's and the records')
         # hold ROWS_AT_FIRST rows and grow as the runs go on (_ensure_rows), so that a long step
         # budget costs the rows run, not the rows allowed
@@ -392,14 +396,14 @@ class LateralGroup:
         n = active.size
         packs, direct_packs = np.empty(n, dtype=np.int64), np.empty(n, dtype=np.int64)
         gains = np.empty((n, 5))
-        hessian_new = np.empty(n, dtype=np.bool_)
+        hessian_new = np.empty((n, self.M + 1), dtype=np.bool_)
         hessians = []
         held, record_rows = self.held, self.record_model_rows
         for r, (i, key, dt) in enumerate(zip(members, mean_keys.tolist(), steps, strict=True)):
             pack, hessian, model_gains, model_row, direct = lookups[i].model(key, dt) \
                 if key >= 0 else lookups[i].model_at(float(means[r]), dt)
             packs[r], direct_packs[r], gains[r] = pack, direct, model_gains
-            hessian_new[r] = hessian is not held[i]
+            hessian_new[r] = [hessian is not kept for kept in held[i]]
             hessians.append(hessian)
             record_rows[i, k] = model_row
         if self.backend == "daqp":
@@ -428,7 +432,7 @@ class LateralGroup:
         member's solve time is the call's time over the members it solved (what its share
         cost)."""
         start = time.perf_counter()
-        exitflags, codes, iterations, ok, plans, predicted, slacks, plan_finite = \
+        exitflags, codes, iterations, ok, plans, predicted, slacks, plan_finite, used = \
             self.kernels.solve_rows(self.functions, self.workspaces, active, packs,
                                     self.offsets, self.nc, self.N, self.M, self.blockings, x0s,
                                     r_d, gains, G, h, self.steering_max, hessian_new,
@@ -438,15 +442,15 @@ class LateralGroup:
         solved = [flag != rows.NOT_SOLVED_FLAG for flag in flags]
         share = elapsed / max(sum(solved), 1)
         held = self.held
-        for r, (i, flag) in enumerate(zip(members, flags, strict=True)):
+        for r, (i, flag, slots) in enumerate(zip(members, flags, used.tolist(), strict=True)):
             if flag == rows.NOT_SOLVED_FLAG or flag == rows.NON_FINITE_FLAG:
                 continue
-            if self.workspaces[i, 4]:
-                native = self.members[i].controller.qp.native
+            if self.workspaces[i, slots, 4]:
+                native = self.members[i].controller.qp_by_slots[slots].native
                 if not native.ready[0]:  # set up on this step
                     native.ready[0] = 1
                     native.check_layout()
-            held[i] = None if flag == rows.SETUP_FAILED_FLAG else hessians[r]
+            held[i][slots] = None if flag == rows.SETUP_FAILED_FLAG else hessians[r]
         solve_s = np.where(solved, share, 0.0)
         return codes, iterations, ok, plans, predicted, slacks, plan_finite, solve_s
 
@@ -504,7 +508,8 @@ class LateralGroup:
         member.n_solves = count
         mpc = member.controller
         if isinstance(mpc.qp, DaqpCondensedQp):
-            mpc.qp.solved_with(self.held[i])
+            for slots, qp in mpc.qp_by_slots.items():
+                qp.solved_with(self.held[i][slots])
         if member.planned is not None and last:
             # the explorer's view of each step's plan reads the records
             mpc.records = [self._record(i, k) for k in range(last)]

@@ -357,6 +357,61 @@ def test_daqp_backend_solves_the_same_qps_as_clarabel(make_config, overrides, me
         assert cost(data, a.values["U"]) <= cost(data, b.values["U"]) * (1 + 1e-6) + 1e-9
 
 
+def test_daqp_solves_the_statement_of_the_slots_a_step_uses(make_config, monkeypatch):
+    """DAQP, as Clarabel, solves the statement of the fewest obstacle slots that holds a
+    step's half-planes (``LateralMpc.qp_for``: most steps of a family member use none and
+    solve the 3-variable QP): on every QP of a member whose slacks bind, the statement of the
+    slots used gives the full statement's moves (1e-9 rad/s: the same optimum, DAQP's
+    rounding), steps of every size occur, and the closed loop (alone and stepped in a group)
+    set up the workspace of the statement without slots."""
+    import dataclasses
+
+    import pipeline.loop.controller.lateral_backends as backends
+    import pipeline.loop.controller.lateral_qp as lateral_qp
+    from pipeline.loop.controller import QpCache
+    from pipeline.loop.controller.lateral import LateralMpc
+    from pipeline.loop.engine import MemberLoop, step_members
+    from pipeline.loop.scenario import build_scenario, family_members
+    from pipeline.loop.simulate import run_kernels, simulate
+
+    cfg = make_config(["method=improved", "scenario=family", "scenario.family.size=12",
+                       "controller.backend=daqp"])
+    cfg = dataclasses.replace(cfg, scenario=family_members(
+        cfg.scenario, cfg.vehicle.footprint_radius_m)[0])
+    captured = _capture_condensed_data(monkeypatch)
+    simulate(cfg, build_scenario(cfg.scenario))
+    s = lateral_qp.LateralQpStructure.of(cfg.controller, cfg.vehicle)
+    N, M, nc = s.horizon, s.max_obstacles, s.control_horizon
+    full = backends.DaqpCondensedQp(s, 200)
+    sized = {k: backends.DaqpCondensedQp(dataclasses.replace(s, max_obstacles=k), 200, M)
+             for k in range(M + 1)}
+    assert [sized[k].native.n for k in range(M + 1)] == [nc + N * k for k in range(M + 1)]
+    seen = set()
+    for data in captured:
+        k = lateral_qp.slots_used(data.gamma_h.reshape(N, M, nc).any(axis=2),
+                                  data.bound_h.reshape(N, M))
+        seen.add(k)
+        a, b = full.solve(data), sized[k].solve(data)
+        assert a.status == b.status == "optimal"
+        np.testing.assert_allclose(b.values["U"], a.values["U"], rtol=0, atol=1e-9)
+    assert 0 in seen and max(seen) >= 1
+    # the closed loop's own statements: each member alone (CPython's kernels: qp_for), in the
+    # engine's batched DAQP call (a speed rule keeps members out of the groups) and in a group
+    for compiled, overrides in ((False, []), (True, ["planner.velocity_planning=true"]),
+                                (True, [])):
+        member_cfg = make_config(["method=improved", "controller.backend=daqp", *overrides])
+        cache = QpCache(compiled_kernels=compiled)
+        members = [MemberLoop(member_cfg, build_scenario(member_cfg.scenario), cache,
+                              run_kernels(cache), False) for _ in range(2)]
+        step_members(members)
+        for member in members:
+            mpc = member.controller
+            assert isinstance(mpc, LateralMpc)
+            ready = [int(mpc.qp_by_slots[k].native.ready[0]) for k in range(M + 1)]
+            # the statement without slots and one with the obstacle's
+            assert ready[0] == 1 and any(ready[1:]), (compiled, overrides, ready)
+
+
 def test_daqp_iteration_limit_and_bad_data_take_the_fallback(make_config):
     """A DAQP solve stopped by its iteration limit is 'user_limit' and non-finite data never
     reach it: both take the shifted-plan / safe-input fallback, as with Clarabel."""

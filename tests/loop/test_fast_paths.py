@@ -345,8 +345,9 @@ def test_plain_float_lateral_reference_equals_np_interp(make_config, beyond):
 
 
 def test_the_kept_blas_limit_covers_every_blas_the_loop_has_loaded():
-    """simulate() keeps threadpoolctl's controller in the cache (a library scan per run cost
-    ~2 ms); once a run has loaded what the loop needs (scipy.linalg's BLAS among them, imported
+    """simulate() keeps threadpoolctl's controller for the process (a library scan per run cost
+    ~2 ms), also across caches unpickled in a worker (each task's cache arrives with an empty
+    process-local part: the scan was rebuilt for every task); once a run has loaded what the loop needs (scipy.linalg's BLAS among them, imported
     only when a prediction is first built), the next run's limit covers every BLAS library
     loaded in the process, as a fresh scan would. In a fresh interpreter, where nothing else
     has loaded those libraries first."""
@@ -364,16 +365,21 @@ register_configs()
 with initialize_config_dir(config_dir=str(CONF_DIR), version_base="1.3"):
     cfg = to_experiment_config(compose(config_name="config", overrides=["method=improved",
                                                                         "controller.backend=daqp"]))
+import pickle
+import sys
+from pipeline.loop import engine
 cache = QpCache()
-for _ in range(2):
+for _ in range(3):  # the first run imports what builds a prediction: a new scan after it
     simulate(cfg, build_scenario(cfg.scenario), cache)
-kept = {c.filepath for c in cache.process_local["threadpool_controller"][1].lib_controllers}
+    cache = pickle.loads(pickle.dumps(cache))  # as a worker's next task receives it
+info = engine._threadpool_controller.cache_info()
+kept = {c.filepath for c in engine._threadpool_controller(len(sys.modules)).lib_controllers}
 blas = {i["filepath"] for i in threadpool_info() if i["user_api"] == "blas"}
-print(len(blas), sorted(blas - kept))
+print(len(blas), info.hits, sorted(blas - kept))
 """
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                          check=True).stdout.split()
-    assert int(out[0]) >= 2 and out[1:] == ["[]"]
+    assert int(out[0]) >= 2 and int(out[1]) >= 1 and out[2:] == ["[]"]
 
 
 def test_line_frame_at_heading_zero_gives_the_rotations_values():

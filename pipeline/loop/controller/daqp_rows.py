@@ -41,7 +41,7 @@ from pipeline.loop.controller.daqp_native import (
     WORK_SETTINGS,
 )
 
-__all__ = ["condensed_free", "daqp_condensed_rows", "plan_readout"]
+__all__ = ["condensed_free", "daqp_condensed_rows", "plan_readout", "slots_in_use"]
 
 
 def _intrinsic(function: Callable[..., Any]) -> Any:
@@ -165,16 +165,18 @@ def daqp_condensed_rows(functions: np.ndarray, workspaces: np.ndarray, packs: np
     functions : int64 array (7,)
         :class:`~pipeline.loop.controller.daqp_native.DaqpFunctions`' addresses and that of a
         double for DAQP's setup time.
-    workspaces : int64 array (n, 5)
+    workspaces : int64 array (n, M + 1, 5)
         Each member's :attr:`NativeDaqp.addresses` and whether it is set up (0: set it up on
-        this step's data).
+        this step's data), by the statement's obstacle slots (``LateralMpc.qp_by_slots``):
+        each member solves the statement of the slots its half-planes use
+        (:func:`~pipeline.loop.controller.lateral_qp.slots_used`, as ``LateralMpc.qp_for``).
     packs : int64 array (n,)
         The address of each member's prediction pack
         (:func:`~pipeline.loop.controller.lateral_qp.pack_offsets`).
     offsets : int64 array
         :func:`~pipeline.loop.controller.lateral_qp.pack_offsets`.
     n_u, horizon, slots : int
-        Moves ``Nc``, horizon ``N``, obstacle slots ``M`` (all members alike).
+        Moves ``Nc``, horizon ``N``, obstacle slots ``M`` of the data (all members alike).
     blockings : (n, Nc, N)
     x0s : (n, 5)
     disturbances, disturbed : (n, N), bool (n,)
@@ -183,8 +185,8 @@ def daqp_condensed_rows(functions: np.ndarray, workspaces: np.ndarray, packs: np
     gains, bounds : (n, N, M)
         The half-planes ``G``, ``h``.
     steering_max : (n,)
-    hessian_new : bool (n,)
-        The member's Hessian is not the one its workspace holds.
+    hessian_new : bool (n, M + 1)
+        The member's Hessian is not the one the workspace of that many slots holds.
     iter_limits : int64 (n,)
 
     Returns
@@ -200,12 +202,12 @@ def daqp_condensed_rows(functions: np.ndarray, workspaces: np.ndarray, packs: np
     slacks : (n,)
         The slack the plan needs (0 where no half-plane binds).
     plan_finite : bool (n,)
+    used : int64 (n,)
+        The slots of the statement each member solved.
     """
     n = x0s.shape[0]
     N, nc, M = horizon, n_u, slots
-    nv = nc + N * M
-    rows = N + N * M
-    m = nv + rows
+    used = np.zeros(n, dtype=np.int64)
     exitflags = np.zeros(n, dtype=np.int64)
     iterations = np.full(n, -1, dtype=np.int64)
     moves = np.zeros((n, nc))
@@ -224,8 +226,15 @@ def daqp_condensed_rows(functions: np.ndarray, workspaces: np.ndarray, packs: np
                                       y_refs[i], psi_refs[i], r_refs[i], has_r[i],
                                       delta_refs[i], has_delta[i], N)
         gradient = np.dot(gradient_map, free_w)
+        # LateralMpc.qp_for: the statement of the slots used
+        S = slots_in_use(gains[i], bounds[i], N, M)
+        used[i] = S
+        space = workspaces[i, S]
+        nv = nc + N * S
+        rows = N + N * S
+        m = nv + rows
         # DaqpCondensedQp.solve: the data in the member's buffer
-        address = workspaces[i, 0]
+        address = space[0]
         buffer = carray(_double_pointer(address), (nv * nv + nv + rows * nv + 3 * m + nv,))
         H = buffer[:nv * nv].reshape((nv, nv))
         f = buffer[nv * nv:nv * nv + nv]
@@ -249,11 +258,11 @@ def daqp_condensed_rows(functions: np.ndarray, workspaces: np.ndarray, packs: np
             lower[base + k] = -dmax - free[5 * k + 4]
         for k in range(N):
             y_free = free[5 * k]
-            for j in range(M):
+            for j in range(S):
                 g = gains[i, k, j]
                 for c in range(nc):
-                    A[N + k * M + j, c] = g * gamma[k, 0, c]
-                lower[base + N + k * M + j] = bounds[i, k, j] - g * y_free
+                    A[N + k * S + j, c] = g * gamma[k, 0, c]
+                lower[base + N + k * S + j] = bounds[i, k, j] - g * y_free
         for r in range(nv):
             finite = finite and np.isfinite(f[r])
         for r in range(rows):
@@ -264,8 +273,8 @@ def daqp_condensed_rows(functions: np.ndarray, workspaces: np.ndarray, packs: np
         if not finite:
             exitflags[i] = NON_FINITE_FLAG
             continue
-        problem, result, work = workspaces[i, 1], workspaces[i, 2], workspaces[i, 3]
-        if workspaces[i, 4] == 0:
+        problem, result, work = space[1], space[2], space[3]
+        if space[4] == 0:
             # daqp.Model.setup: default settings, the setup, then the iteration limit
             _call_pointer(functions[0], work)
             flag = _call_setup(functions[1], problem, work, functions[6], np.int32(0))
@@ -273,13 +282,13 @@ def daqp_condensed_rows(functions: np.ndarray, workspaces: np.ndarray, packs: np
                 _store(work + WORK_SETTINGS, np.int64(0))
                 exitflags[i] = SETUP_FAILED_FLAG
                 continue
-            workspaces[i, 4] = 1
+            space[4] = 1
             _store(_load_int64(work + WORK_SETTINGS) + SETTINGS_ITER_LIMIT,
                    np.int32(iter_limits[i]))
         else:
             # daqp.Model.update: the constraint states of the last solve kept
             _store(problem + PROBLEM_SENSE, _load_int64(work + WORK_SENSE))
-            mask = UPDATE_STEP | (UPDATE_RINV if hessian_new[i] else 0)
+            mask = UPDATE_STEP | (UPDATE_RINV if hessian_new[i, S] else 0)
             _call_update(functions[2], np.int32(mask), work, problem)
         _call_pointers(functions[3], result, work)
         exitflag = _load_int32(result + RESULT_EXITFLAG)
@@ -292,7 +301,21 @@ def daqp_condensed_rows(functions: np.ndarray, workspaces: np.ndarray, packs: np
         moves[i] = U
         plan_finite[i], slacks[i] = plan_readout(U, blockings[i], x0, free, gamma, gains[i],
                                                  bounds[i], N, M, plans[i], states[i])
-    return exitflags, iterations, moves, plans, states, slacks, plan_finite
+    return exitflags, iterations, moves, plans, states, slacks, plan_finite, used
+
+
+def slots_in_use(gains: np.ndarray, bounds: np.ndarray, horizon: int,
+                 slots: int) -> int:  # pragma: no cover (numba's)
+    """:func:`~pipeline.loop.controller.lateral_qp.slots_used` of one member's half-planes
+    ``gains``, ``bounds`` (N, M): one past the last slot with a row that is not ``0 y + s >=
+    0`` (NaN is not 0). A helper the compiled callers share."""
+    used = 0
+    for j in range(slots):
+        for k in range(horizon):
+            if gains[k, j] != 0.0 or bounds[k, j] != 0.0:
+                used = j + 1
+                break
+    return used
 
 
 def condensed_free(pack: int, offsets: np.ndarray, x0: np.ndarray, disturbance: np.ndarray,

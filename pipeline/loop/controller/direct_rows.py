@@ -24,7 +24,12 @@ from __future__ import annotations
 import numpy as np
 from numba import carray, farray
 
-from pipeline.loop.controller.daqp_rows import _double_pointer, condensed_free, plan_readout
+from pipeline.loop.controller.daqp_rows import (
+    _double_pointer,
+    condensed_free,
+    plan_readout,
+    slots_in_use,
+)
 from pipeline.loop.controller.lateral_qp import direct_theta_size
 
 __all__ = ["direct_readout_rows", "direct_theta_rows"]
@@ -82,13 +87,7 @@ def direct_theta_rows(packs: np.ndarray, offsets: np.ndarray, direct_packs: np.n
                                       disturbed[i], y_refs[i], psi_refs[i], r_refs[i], has_r[i],
                                       delta_refs[i], has_delta[i], N)
         frees[i] = free
-        # slots_used: one past the last slot with a row that is not 0 + s >= 0
-        s = 0
-        for j in range(M):
-            for k in range(N):
-                if gains[i, k, j] != 0.0 or bounds[i, k, j] != 0.0:
-                    s = j + 1
-                    break
+        s = slots_in_use(gains[i], bounds[i], N, M)  # slots_used
         used[i] = s
         # CondensedData.theta(s): [R^-1 (F), r, gamma_d R^-1 (F), free_d, gamma_h R^-1 (F),
         # bound_h], the half-plane rows k-major over the first s slots

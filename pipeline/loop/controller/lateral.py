@@ -77,9 +77,9 @@ class LateralMpc:
     records : list of PredictionRecord
         What each step predicted with (:meth:`model_check`).
     qp_by_slots : dict
-        The QP by its number of obstacle slots (:meth:`qp_for`): on Clarabel and CVXPY one
-        statement for each count up to ``max_obstacles`` (its ``qp`` the largest); on DAQP
-        the one statement.
+        The QP by its number of obstacle slots (:meth:`qp_for`): one statement for each count
+        up to ``max_obstacles`` (its ``qp`` the largest; on DAQP each with its kept
+        workspace).
     """
 
     def __init__(self, controller: MpcSettings, vehicle: VehicleConfig,
@@ -102,24 +102,30 @@ class LateralMpc:
         structure = LateralQpStructure.of(controller, vehicle)
         self.weights = structure.weights
         self.qp: LateralQp
+        #: the QP by its number of obstacle slots (qp_for): a step whose half-planes fill
+        #: fewer slots solves the smallest statement that holds them (slots_used; most steps
+        #: have no obstacle within reach and solve the 3-variable QP: on Clarabel about a
+        #: third of the 33-variable one's time, on DAQP a fifth)
+        self.qp_by_slots: dict[int, LateralQp] = {}
         if controller.backend == "daqp":
-            # no compilation: the condensed data go to the solver as numpy matrices
-            self.qp, self.compile_count, self.compile_time_s = \
-                DaqpCondensedQp(structure, controller.solver_max_iter), 0, 0.0
+            # no compilation: the condensed data go to the solver as numpy matrices; one kept
+            # workspace per statement
+            self.qp_by_slots = {
+                slots: DaqpCondensedQp(replace(structure, max_obstacles=slots),
+                                       controller.solver_max_iter, structure.max_obstacles)
+                for slots in range(structure.max_obstacles + 1)}
+            self.qp = self.qp_by_slots[structure.max_obstacles]
+            self.compile_count, self.compile_time_s = 0, 0.0
         else:
             compiled, self.compile_count, self.compile_time_s = compiled_backend(
                 qp_cache, "lateral", structure,
                 lambda: build_condensed_lateral_problem(structure), controller.backend,
                 controller.solver_max_iter, controller.solver_refinement)
             self.qp = CompiledCondensedQp(compiled)
-        # the compiled QP by its number of obstacle slots: a step whose half-planes fill
-        # fewer slots solves the smallest statement that holds them (slots_used; most steps
-        # have no obstacle within reach and solve the 3-variable QP, about a third of the
-        # 33-variable one's time on Clarabel); DAQP's statement has one size
-        # (every size compiled here, through the shared cache: a family's workers get them
-        # with it and compile nothing; about 20 ms each)
-        self.qp_by_slots: dict[int, LateralQp] = {structure.max_obstacles: self.qp}
+        # every size compiled here, through the shared cache: a family's workers get them
+        # with it and compile nothing; about 20 ms each
         if isinstance(self.qp, CompiledCondensedQp):
+            self.qp_by_slots[structure.max_obstacles] = self.qp
             for slots in range(structure.max_obstacles):
                 smaller = replace(structure, max_obstacles=slots)
                 compiled, count, seconds = compiled_backend(
@@ -189,10 +195,7 @@ class LateralMpc:
 
     def qp_for(self, inputs: MpcInputs) -> LateralQp:
         """The QP of the fewest obstacle slots that holds every half-plane of ``inputs``
-        (:func:`~pipeline.loop.controller.lateral_qp.slots_used`); DAQP's statement for every
-        step."""
-        if isinstance(self.qp, DaqpCondensedQp):
-            return self.qp
+        (:func:`~pipeline.loop.controller.lateral_qp.slots_used`)."""
         return self.qp_by_slots[slots_used(inputs.constraint_gain, inputs.constraint_bound)]
 
     def accepted(self, plan: np.ndarray, states: np.ndarray, solution: QpSolution,

@@ -60,17 +60,33 @@ class DaqpCondensedQp:
     NativeDaqp`, DAQP's C interface: the lockstep engine solves the QPs of many members in one
     compiled call on these same workspaces, :mod:`~pipeline.loop.controller.daqp_rows`);
     ``daqp.Model`` where the installed DAQP is not the release whose structures we know.
+
+    Parameters
+    ----------
+    structure : LateralQpStructure
+        The statement: its ``max_obstacles`` slots (``S`` has ``N`` of them per slot).
+    max_iter : int
+        DAQP's iteration limit.
+    data_slots : int, optional
+        The obstacle slots of the data it is handed (the controller's; the structure's by
+        default): a statement of fewer slots takes the first ``structure.max_obstacles`` of
+        them (the others must be empty rows, :func:`~pipeline.loop.controller.lateral_qp.
+        slots_used`), as the Clarabel statements by slots do.
     """
 
     #: DAQP exit flags mapped to the status words the log uses (CVXPY's)
     STATUS = {1: "optimal", 2: "optimal", -1: "infeasible", -2: "solver_error",
               -3: "unbounded", -4: "user_limit", -5: "solver_error", -6: "solver_error"}
 
-    def __init__(self, structure: LateralQpStructure, max_iter: int) -> None:
+    def __init__(self, structure: LateralQpStructure, max_iter: int,
+                 data_slots: int | None = None) -> None:
         from pipeline.loop.controller.daqp_native import NativeDaqp, native_daqp_functions
 
         self.s = structure
         N, Nc, M = structure.horizon, structure.control_horizon, structure.max_obstacles
+        #: the statement's obstacle slots and those of the data it is handed
+        self.slots = M
+        self.data_slots = M if data_slots is None else int(data_slots)
         self.n_u, self.n_s, self.N = Nc, N * M, N
         n = Nc + N * M
         self.max_iter = int(max_iter)
@@ -123,7 +139,12 @@ class DaqpCondensedQp:
         H, f = self.cost(data)
         A = self._A
         A[:N, :n_u] = data.gamma_d
-        A[N:, :n_u] = data.gamma_h
+        gamma_h, bound_h = data.gamma_h, data.bound_h
+        if self.slots < self.data_slots:  # rows k-major: step k's slots j < slots
+            M, S = self.data_slots, self.slots
+            gamma_h = gamma_h.reshape(N, M, n_u)[:, :S].reshape(N * S, n_u)
+            bound_h = bound_h.reshape(N, M)[:, :S].ravel()
+        A[N:, :n_u] = gamma_h
         upper, lower = self._upper, self._lower
         base = n_u + n_s
         # the steering bound at the model's speed where it is tighter than the statement's
@@ -133,7 +154,7 @@ class DaqpCondensedQp:
             bound if data.steering_bounds_rad is None else data.steering_bounds_rad)
         upper[base:base + N] = dmax - data.free_d
         lower[base:base + N] = -dmax - data.free_d
-        lower[base + N:] = data.bound_h
+        lower[base + N:] = bound_h
         if not (np.isfinite(data.hessian_u).all() and np.isfinite(f).all()
                 and np.isfinite(A).all() and np.isfinite(lower).all()):
             return QpSolution(NON_FINITE_DATA, -1, time.perf_counter() - start, None)

@@ -339,24 +339,27 @@ def _daqp_steps(controllers: Sequence[LateralMpc], inputs_of: Sequence[MpcInputs
     n = len(controllers)
     first = controllers[0]
     N, nc, M = first.horizon, first.cfg.control_horizon, first.cfg.max_obstacles
-    qps = [mpc.qp for mpc in controllers]
     predictions = [mpc.prediction(inputs.model) for mpc, inputs in
                    zip(controllers, inputs_of, strict=True)]
     arrays = _condensing_arrays(controllers, inputs_of, predictions)
-    workspaces = np.empty((n, 5), dtype=np.int64)
-    steering_max, hessian_new = np.empty(n), np.empty(n, dtype=np.bool_)
+    # each member's workspace of every statement (by its slots: LateralMpc.qp_for's choice is
+    # made in the compiled call)
+    workspaces = np.empty((n, M + 1, 5), dtype=np.int64)
+    steering_max, hessian_new = np.empty(n), np.empty((n, M + 1), dtype=np.bool_)
     iter_limits = np.empty(n, dtype=np.int64)
-    for i, (qp, prediction) in enumerate(zip(qps, predictions, strict=True)):
-        assert isinstance(qp, DaqpCondensedQp) and qp.native is not None
-        workspaces[i, :4] = qp.native.addresses
-        workspaces[i, 4] = qp.native.ready[0]
-        steering_max[i] = qp.s.steering_max_rad
-        hessian_new[i] = not qp.holds_hessian(prediction.hessian_u)
-        iter_limits[i] = qp.max_iter
-    assert isinstance(qps[0], DaqpCondensedQp) and qps[0].native is not None
-    functions = qps[0].native.functions.arguments
+    for i, (mpc, prediction) in enumerate(zip(controllers, predictions, strict=True)):
+        for slots, qp in mpc.qp_by_slots.items():
+            assert isinstance(qp, DaqpCondensedQp) and qp.native is not None
+            workspaces[i, slots, :4] = qp.native.addresses
+            workspaces[i, slots, 4] = qp.native.ready[0]
+            hessian_new[i, slots] = not qp.holds_hessian(prediction.hessian_u)
+        steering_max[i] = mpc.qp.s.steering_max_rad  # type: ignore[attr-defined]
+        iter_limits[i] = mpc.qp.max_iter  # type: ignore[attr-defined]
+    first_qp = first.qp
+    assert isinstance(first_qp, DaqpCondensedQp) and first_qp.native is not None
+    functions = first_qp.native.functions.arguments
     start = time.perf_counter()
-    exitflags, iterations, _, plans, states, slacks, plan_finite = kernels.daqp_rows(
+    exitflags, iterations, _, plans, states, slacks, plan_finite, used = kernels.daqp_rows(
         functions, workspaces, arrays["packs"], np.asarray(pack_offsets(N, nc), dtype=np.int64),
         nc, N, M, arrays["blockings"], arrays["x0s"], arrays["disturbances"],
         arrays["disturbed"], arrays["y_refs"], arrays["psi_refs"], arrays["r_refs"],
@@ -364,14 +367,15 @@ def _daqp_steps(controllers: Sequence[LateralMpc], inputs_of: Sequence[MpcInputs
         arrays["bounds"], steering_max, hessian_new, iter_limits)
     share = (time.perf_counter() - start) / n
     steps = []
-    for i, (mpc, qp, prediction, inputs) in enumerate(zip(controllers, qps, predictions,
-                                                          inputs_of, strict=True)):
+    for i, (mpc, prediction, inputs, slots) in enumerate(zip(
+            controllers, predictions, inputs_of, used.tolist(), strict=True)):
+        qp = mpc.qp_by_slots[slots]
         assert isinstance(qp, DaqpCondensedQp) and qp.native is not None
         flag = int(exitflags[i])
         if flag == NON_FINITE_FLAG:  # not solved, the workspace untouched
             solution = QpSolution(NON_FINITE_DATA, -1, share, None)
         else:
-            if workspaces[i, 4] and not qp.native.ready[0]:  # set up on this step
+            if workspaces[i, slots, 4] and not qp.native.ready[0]:  # set up on this step
                 qp.native.ready[0] = 1
                 qp.native.check_layout()
             failed = flag == SETUP_FAILED_FLAG
