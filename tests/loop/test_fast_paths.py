@@ -430,3 +430,37 @@ def test_config_yaml_from_kept_sections_is_the_whole_dump(make_config):
             assert config_yaml(c, memo) == whole and config_yaml(c, memo) == whole
             seen += 1
     assert seen == 14 and "beta: 0.123" in whole
+
+
+def test_a_workers_next_cache_finds_the_models_its_last_task_built(make_config):
+    """A worker's tasks each receive the QP cache anew (unpickled): the tables of values that
+    are pure functions of their key (the lateral models by speed, their condensed predictions)
+    are the process's, so the next task's cache holds the same model objects the last task
+    built, and a member run on it gives the same log bit for bit as on a fresh cache. A cache
+    made here (not unpickled) keeps its own tables."""
+    import pickle
+
+    from pipeline.loop.controller import QpCache
+    from pipeline.loop.scenario import build_scenario
+    from pipeline.loop.simulate import simulate
+
+    cfg = make_config(["method=improved", "controller.backend=daqp",
+                       "scenario.speed_mps=7.25"])  # a speed no other test's tables hold
+    parent = QpCache()
+    parent.memo(("a pure table", 1), dict)  # the parent's tables travel empty
+    first, second = (pickle.loads(pickle.dumps(parent)) for _ in range(2))
+    run_first = simulate(cfg, build_scenario(cfg.scenario), first)
+    models = {k: v for k, v in first.memos.items() if k[0] == "lateral_models"}
+    assert models and all(v for v in models.values())
+    run_second = simulate(cfg, build_scenario(cfg.scenario), second)
+    for key, table in models.items():
+        assert second.memos[key] is table  # the same table, the same model objects
+    first.memos[("a pure table", 1)]["x"] = 1
+    assert second.memos[("a pure table", 1)] == {"x": 1}
+    alone = simulate(cfg, build_scenario(cfg.scenario), QpCache())
+    for run in (run_first, run_second):
+        for name in ("X_m", "Y_m", "steering_rate_rad_s", "solver_iterations"):
+            np.testing.assert_array_equal(run.trajectory[name].to_numpy(),
+                                          alone.trajectory[name].to_numpy())
+    own = QpCache()
+    assert own.memo(("a pure table", 1), dict) == {}  # not the process's

@@ -21,6 +21,7 @@ module state.
 
 from __future__ import annotations
 
+import functools
 import time
 import warnings
 from collections.abc import Callable, Hashable
@@ -450,9 +451,15 @@ class QpCache:
     members_planned: int = 0
 
     def memo(self, key: Hashable, build: Callable[[], Any]) -> Any:
-        """The value stored under ``key``, built once (not counted as a compilation)."""
+        """The value stored under ``key``, built once (not counted as a compilation). In a
+        cache a worker received (unpickled), a value not shipped with it is this process's
+        (:func:`_process_memo`): a worker's tasks each receive the cache anew, and the values
+        kept here are pure functions of their key (the models by speed, their condensed
+        predictions), so its next task finds what its last one built (a task of 8 DAQP
+        members spent about 12 % of its closed loops building them again)."""
         if key not in self.memos:
-            self.memos[key] = build()
+            self.memos[key] = _process_memo(key, build) if self.__dict__.get("_unpickled") \
+                else build()
         return self.memos[key]
 
     def get(self, key: Hashable, build: Callable[[], Any]) -> Any:
@@ -472,6 +479,39 @@ class QpCache:
 
     def __setstate__(self, state: dict[str, Any]) -> None:
         self.__dict__.update(state)
+        self.__dict__["_unpickled"] = True
+        # the tables shipped with the cache (the parent's, often still empty) become this
+        # process's (memo), their entries added where the process has none yet
+        memos = {}
+        for key, value in self.memos.items():
+            if isinstance(value, dict):
+                table = _process_memo(key, dict)
+                for name, entry in value.items():
+                    table.setdefault(name, entry)
+                memos[key] = table
+            else:
+                memos[key] = _process_memo(key, functools.partial(_same, value))
+        self.memos = memos
+
+
+@functools.lru_cache(maxsize=128)
+def _process_memo_value(key: Hashable) -> list[Any]:
+    """A holder of this process's value of memo ``key`` (empty until built): the tables of the
+    caches its worker tasks receive (:meth:`QpCache.memo`), at most 128 keys (a tune's trials
+    of other tracking weights each have their own predictions)."""
+    return []
+
+
+def _same(value: Any) -> Any:
+    return value
+
+
+def _process_memo(key: Hashable, build: Callable[[], Any]) -> Any:
+    """This process's value of memo ``key``, built once."""
+    holder = _process_memo_value(key)
+    if not holder:
+        holder.append(build())
+    return holder[0]
 
 
 def compiled_backend(cache: QpCache | None, name: str, structure: Hashable,
