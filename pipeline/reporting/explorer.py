@@ -28,7 +28,7 @@ import gzip
 import hashlib
 import json
 import logging
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -46,6 +46,7 @@ from pipeline.store.runs import (
     read_horizon,
     read_run,
     read_run_trajectory,
+    run_scenario_data,
 )
 
 log = logging.getLogger("pipeline.reporting")
@@ -303,6 +304,23 @@ class MethodSettings:
                    # a plug-in's class (a peer's), else the built-in kind
                    str(cfg.controller._target_ or cfg.controller.kind).rsplit(".", 1)[-1])
 
+    def for_member(self, run_folder: Path) -> MethodSettings:
+        """These settings with the scenario of the run in ``run_folder`` (its name, start,
+        goal and sample time: a family's members differ in their scenario alone, and a drawn
+        pedestrian crossing has its own start and goal), read from its ``config.yaml`` as
+        written instead of typing every member's settings again (that was a sixth of the
+        explorer's time); :class:`RunFolderError` when they cannot be read."""
+        scenario = run_scenario_data(run_folder)
+        try:
+            start, goal = scenario["start_xy_m"], scenario["goal_xy_m"]
+            return replace(
+                self, start=(float(start[0]), float(start[1])),
+                goal=(float(goal[0]), float(goal[1])),
+                sample_time_s=float(scenario["sample_time_s"]), scenario=str(scenario["name"]))
+        except (KeyError, IndexError, TypeError, ValueError) as exc:
+            raise RunFolderError(f"{run_folder}: settings in config.yaml cannot be read "
+                                 f"(scenario: {type(exc).__name__})") from None
+
 
 #: The numbers the explorer shows beside a member's scenes: each claim's primary metric (the
 #: package's catalogue, C0's collision first) and the least clearance.
@@ -379,11 +397,11 @@ def member_payload(experiment: str, member: int, runs: dict[str, Path],
             trajectory, metrics = read_run_trajectory(folder)
             # the member's own scenario (its name, start and goal: a drawn pedestrian crossing
             # has its own), read from its first readable run
-            own = MethodSettings.of(folder) if first is None else None
+            cfg = settings[method]
+            own = cfg.for_member(folder) if first is None else None
         except RunFolderError as exc:
             log.warning("explorer: %s", exc)
             continue
-        cfg = settings[method]
         first = first or own
         data = method_data(trajectory, read_horizon(folder), cfg.footprint_m)
         # its colour in every experiment and in the report: the method's (a companion run,

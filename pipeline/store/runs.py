@@ -474,6 +474,27 @@ def member_settings(folder: Path, index: int) -> ExperimentConfig:
     return _settings(member, text)[0]
 
 
+def run_scenario_data(folder: Path) -> dict:
+    """The ``scenario`` section of a run's ``config.yaml`` as written (a mapping, not the
+    typed settings: a reader of many members of one family, which differ in their scenario
+    alone, types the family's settings once and reads each member's scenario here). Not
+    checked against the manifest here: read it after the run's check. :class:`RunFolderError`
+    when it cannot be read."""
+    import yaml
+
+    path = Path(folder) / "config.yaml"
+    try:
+        data = yaml.load(path.read_text(encoding="utf-8"),
+                         Loader=getattr(yaml, "CSafeLoader", yaml.SafeLoader))
+    except (OSError, ValueError, yaml.YAMLError) as exc:
+        raise RunFolderError(f"{folder}: settings in config.yaml cannot be read "
+                             f"({type(exc).__name__})") from None
+    scenario = data.get("scenario") if isinstance(data, dict) else None
+    if not isinstance(scenario, dict):
+        raise RunFolderError(f"{folder}: settings in config.yaml cannot be read (no scenario)")
+    return scenario
+
+
 def read_family(folder: Path, members: bool = True, settings: bool = True) -> FamilyRecord:
     """Read a trusted family folder; :class:`RunFolderError` (with the reason) otherwise.
 
