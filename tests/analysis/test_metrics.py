@@ -418,3 +418,30 @@ def test_each_criterion_reads_only_the_settings_it_is_shared_on(closed_loop_runs
     for name, fields_read in read.items():
         assert fields_read, name  # the recorder saw the criterion's reads
         assert fields_read <= set(declared[name]), (name, fields_read - set(declared[name]))
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_time_derivative_is_numpys_gradient_bit_for_bit(seed):
+    """``time_derivative`` writes out ``np.gradient``'s statements for a 1-D signal: the same
+    bits (the oracle is numpy itself) on uniform and uneven clocks, repeated time stamps,
+    signals with NaN and infinities, two and three samples; other shapes are numpy's."""
+    from pipeline.analysis.metrics.signals import time_derivative
+
+    rng = np.random.default_rng(seed)
+    for n in (2, 3, 7, 101):
+        values = rng.normal(0.0, 3.0, n)
+        if seed % 2:
+            values[rng.integers(0, n, 2)] = [np.nan, np.inf]
+        clocks = [np.arange(n) * 0.1, np.arange(n) * 0.05 + 3.0,
+                  np.cumsum(rng.uniform(0.01, 0.2, n)), np.round(np.arange(n) * 0.1, 1)]
+        uneven = np.cumsum(rng.uniform(0.0, 0.2, n))
+        uneven[n // 2] = uneven[n // 2 - 1]  # a repeated stamp: numpy's inf and NaN
+        clocks.append(uneven)
+        for t in clocks:
+            with np.errstate(all="ignore"):
+                got, want = time_derivative(values, t), np.gradient(values, t)
+            assert got.dtype == want.dtype and got.shape == want.shape
+            assert np.array_equal(got.view(np.uint64), want.view(np.uint64)), (n, t)
+    with pytest.raises(ValueError):
+        time_derivative(np.ones(4), np.arange(3.0))  # numpy's own refusal
+    assert np.isnan(time_derivative(np.ones(1), np.zeros(1))).all()
