@@ -383,7 +383,7 @@ def test_daqp_solves_the_statement_of_the_slots_a_step_uses(make_config, monkeyp
     s = lateral_qp.LateralQpStructure.of(cfg.controller, cfg.vehicle)
     N, M, nc = s.horizon, s.max_obstacles, s.control_horizon
     full = backends.DaqpCondensedQp(s, 200)
-    sized = {k: backends.DaqpCondensedQp(dataclasses.replace(s, max_obstacles=k), 200, M)
+    sized = {k: backends.DaqpCondensedQp(dataclasses.replace(s, max_obstacles=k), 200)
              for k in range(M + 1)}
     assert [sized[k].native.n for k in range(M + 1)] == [nc + N * k for k in range(M + 1)]
     seen = set()

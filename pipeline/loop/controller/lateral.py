@@ -112,7 +112,7 @@ class LateralMpc:
             # workspace per statement
             self.qp_by_slots = {
                 slots: DaqpCondensedQp(replace(structure, max_obstacles=slots),
-                                       controller.solver_max_iter, structure.max_obstacles)
+                                       controller.solver_max_iter)
                 for slots in range(structure.max_obstacles + 1)}
             self.qp = self.qp_by_slots[structure.max_obstacles]
             self.compile_count, self.compile_time_s = 0, 0.0

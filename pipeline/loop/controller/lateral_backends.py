@@ -64,29 +64,22 @@ class DaqpCondensedQp:
     Parameters
     ----------
     structure : LateralQpStructure
-        The statement: its ``max_obstacles`` slots (``S`` has ``N`` of them per slot).
+        The statement: its ``max_obstacles`` slots (``S`` has ``N`` of them per slot); data of
+        more slots are handed its first ones (:meth:`CondensedData.halfplane_rows`: the others
+        must be empty rows), as the Clarabel statements by slots take them.
     max_iter : int
         DAQP's iteration limit.
-    data_slots : int, optional
-        The obstacle slots of the data it is handed (the controller's; the structure's by
-        default): a statement of fewer slots takes the first ``structure.max_obstacles`` of
-        them (the others must be empty rows, :func:`~pipeline.loop.controller.lateral_qp.
-        slots_used`), as the Clarabel statements by slots do.
     """
 
     #: DAQP exit flags mapped to the status words the log uses (CVXPY's)
     STATUS = {1: "optimal", 2: "optimal", -1: "infeasible", -2: "solver_error",
               -3: "unbounded", -4: "user_limit", -5: "solver_error", -6: "solver_error"}
 
-    def __init__(self, structure: LateralQpStructure, max_iter: int,
-                 data_slots: int | None = None) -> None:
+    def __init__(self, structure: LateralQpStructure, max_iter: int) -> None:
         from pipeline.loop.controller.daqp_native import NativeDaqp, native_daqp_functions
 
         self.s = structure
         N, Nc, M = structure.horizon, structure.control_horizon, structure.max_obstacles
-        #: the statement's obstacle slots and those of the data it is handed
-        self.slots = M
-        self.data_slots = M if data_slots is None else int(data_slots)
         self.n_u, self.n_s, self.N = Nc, N * M, N
         n = Nc + N * M
         self.max_iter = int(max_iter)
@@ -139,11 +132,7 @@ class DaqpCondensedQp:
         H, f = self.cost(data)
         A = self._A
         A[:N, :n_u] = data.gamma_d
-        gamma_h, bound_h = data.gamma_h, data.bound_h
-        if self.slots < self.data_slots:  # rows k-major: step k's slots j < slots
-            M, S = self.data_slots, self.slots
-            gamma_h = gamma_h.reshape(N, M, n_u)[:, :S].reshape(N * S, n_u)
-            bound_h = bound_h.reshape(N, M)[:, :S].ravel()
+        gamma_h, bound_h = data.halfplane_rows(self.s.max_obstacles)
         A[N:, :n_u] = gamma_h
         upper, lower = self._upper, self._lower
         base = n_u + n_s

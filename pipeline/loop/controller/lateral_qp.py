@@ -390,6 +390,18 @@ class CondensedData:
         """(Nc,) ``r = R^-T gamma_w' free_w`` (computed on each access: a backend asks once)."""
         return self.prediction.chol_rhs_map @ self.free_w
 
+    def halfplane_rows(self, slots: int) -> tuple[np.ndarray, np.ndarray]:
+        """``gamma_h`` and ``bound_h`` of the first ``slots`` obstacle slots (rows k-major:
+        step k's slots j < slots), for a statement of fewer slots than these data (the rest
+        must be empty rows, :func:`slots_used`); the arrays themselves when all of them."""
+        n = self.free_d.shape[0]
+        all_slots = self.bound_h.shape[0] // n if n else 0
+        if slots >= all_slots:
+            return self.gamma_h, self.bound_h
+        moves = self.gamma_h.shape[1]
+        gamma_h = self.gamma_h.reshape(n, all_slots, moves)[:, :slots].reshape(n * slots, moves)
+        return gamma_h, self.bound_h.reshape(n, all_slots)[:, :slots].ravel()
+
     def theta(self, slots: int | None = None) -> np.ndarray:
         """The parameter vector of :func:`build_condensed_lateral_problem` (its order, column-
         major): the rows that multiply ``U`` taken to ``W = R U``; ``slots``: the statement's
@@ -408,15 +420,10 @@ class CondensedData:
         elif prediction.steering_scale != 1.0:
             free_d = self.free_d * prediction.steering_scale
         head = [prediction.chol_inv_flat, self.chol_rhs, steering_flat, free_d]
-        n = self.free_d.shape[0]
-        all_slots = self.bound_h.shape[0] // n if n else 0
-        slots = all_slots if slots is None else slots
         if slots == 0:
             return np.concatenate(head)
-        gamma_h, bound_h = self.gamma_h, self.bound_h
-        if slots < all_slots:  # rows k-major: step k's slots j < slots
-            gamma_h = gamma_h.reshape(n, all_slots, -1)[:, :slots].reshape(n * slots, -1)
-            bound_h = bound_h.reshape(n, all_slots)[:, :slots].ravel()
+        gamma_h, bound_h = (self.gamma_h, self.bound_h) if slots is None \
+            else self.halfplane_rows(slots)
         return np.concatenate([*head, (gamma_h @ prediction.chol_inv).ravel(order="F"),
                                bound_h])
 

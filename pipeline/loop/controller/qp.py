@@ -438,7 +438,7 @@ class QpCache:
     #: workers with the cache, never counted as compilations
     memos: dict[Hashable, Any] = field(default_factory=dict)
 
-    #: objects bound to this process (e.g. threadpoolctl's controller): never pickled
+    #: objects bound to this process (e.g. the members' YAML by section): never pickled
     process_local: dict[str, Any] = field(default_factory=dict)
     #: run the single-track plant and the APF rollout as compiled kernels
     #: (:mod:`pipeline.loop.compiled`, the same bits as their Python statements); set by runners
